@@ -1,0 +1,54 @@
+"""``selfas-graph`` command line: a table of subcommands, each in its own module.
+
+Exit codes: 0 success, 2 bad input (scenario, arguments, files), 3 numerical
+failure of a run, 130 interrupted.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from .._version import __version__
+
+#: subcommand -> (module, one-line help)
+COMMANDS = {
+    "simulate": ("selfas_graph.cli.simulate", "run a scenario and write an HDF5 run file"),
+}
+
+EXIT_USAGE = 2
+EXIT_NUMERICAL = 3
+
+
+class CliError(Exception):
+    """A user error the CLI reports in one line with exit code 2 (no traceback)."""
+
+
+def build_parser():
+    parser = argparse.ArgumentParser(prog="selfas-graph", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"selfas-graph {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name, (module, help_text) in COMMANDS.items():
+        mod = importlib.import_module(module)
+        p = sub.add_parser(name, help=help_text, description=mod.__doc__)
+        mod.add_arguments(p)
+        p.set_defaults(_run=mod.run)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args._run(args) or 0)
+    except CliError as exc:
+        print(f"selfas-graph {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print(f"selfas-graph {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,185 @@
+"""Run a scenario: ``selfas-graph simulate SCENARIO [-o OUT] [--set key=value ...] [--t-end T] [--dry-run]``.
+
+Validates the scenario and the output path before anything is written, runs
+with a progress bar on a terminal (plain periodic lines otherwise), writes an
+HDF5 run file and prints a summary.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shlex
+import sys
+import time
+from pathlib import Path
+
+from .._version import __version__
+from ..io.h5md import RunWriter
+from ..io.scenario import ScenarioError, load_scenario
+from ..model.simulation import NumericalFailure, Simulation
+from ..model.state import PlacementError
+from ..parallel import world
+from .main import EXIT_NUMERICAL, CliError
+
+
+def add_arguments(p):
+    p.add_argument("scenario", help="scenario file (TOML), e.g. scenarios/quick.toml")
+    p.add_argument("-o", "--output", help="output HDF5 file (default: output.file, or SCENARIO name with .h5)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scenario value, e.g. --set integrator.dt=5e-4 (repeatable)")
+    p.add_argument("--t-end", type=float, help="simulated end time (overrides run.t_end)")
+    p.add_argument("--dry-run", action="store_true", help="validate and place the rods, print the plan, write nothing")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.add_argument("--progress", choices=("auto", "bar", "lines", "none"), default="auto",
+                   help="progress display (auto: a bar on a terminal, periodic lines otherwise)")
+
+
+def _fmt_time(seconds):
+    seconds = max(0, int(seconds))
+    h, rem = divmod(seconds, 3600)
+    m, s = divmod(rem, 60)
+    return f"{h}h{m:02d}m{s:02d}s" if h else f"{m}m{s:02d}s"
+
+
+class _Lines:
+    """Plain progress lines, at most one every ``period`` wall seconds (and at the end)."""
+
+    def __init__(self, stream, period=10.0):
+        self.stream, self.period = stream, period
+        self.t0 = time.perf_counter()
+        self.last = -1e9
+
+    def __call__(self, sim, done, total):
+        now = time.perf_counter()
+        if now - self.last < self.period and done < total:
+            return
+        self.last = now
+        rate = done / max(now - self.t0, 1e-9)
+        eta = (total - done) / rate if rate > 0 else 0
+        print(f"t = {sim.state.time:.4g} / {sim.params.run.t_end:.4g}  step {sim.state.step}  "
+              f"{100 * done / max(total, 1):5.1f}%  {rate:.0f} steps/s  ETA {_fmt_time(eta)}",
+              file=self.stream, flush=True)
+
+    def close(self):
+        pass
+
+
+class _Bar:
+    def __init__(self, total, t_end):
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=total, unit="step", dynamic_ncols=True, file=sys.stderr,
+                        bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}, {rate_fmt}] {postfix}")
+        self.t_end = t_end
+        self.n = 0
+
+    def __call__(self, sim, done, total):
+        self.bar.update(done - self.n)
+        self.n = done
+        self.bar.set_postfix_str(f"t={sim.state.time:.4g}/{self.t_end:.4g}", refresh=False)
+
+    def close(self):
+        self.bar.close()
+
+
+def run(args):
+    try:
+        scenario = load_scenario(args.scenario, overrides=args.overrides, t_end=args.t_end)
+    except ScenarioError as exc:
+        raise CliError(str(exc)) from None
+    p = scenario.params
+    out = Path(args.output) if args.output else scenario.output_path
+    if not args.dry_run:
+        if out.exists() and not args.force:
+            raise CliError(f"output file {out} exists; pass --force to overwrite it or -o to choose another name")
+        if out.exists() and out.is_dir():
+            raise CliError(f"output path {out} is a directory")
+        parent = out.parent if str(out.parent) else Path(".")
+        if not parent.is_dir():
+            raise CliError(f"the folder {parent} of the output file does not exist")
+        if not os.access(parent, os.W_OK):
+            raise CliError(f"the folder {parent} of the output file is not writable")
+    try:
+        sim = Simulation.from_scenario(scenario)
+    except PlacementError as exc:
+        raise CliError(str(exc)) from None
+
+    import numba
+
+    n_steps = sim.steps_for(p.run.t_end - sim.state.time)
+    plan = {
+        "scenario": str(args.scenario), "rods": p.rods.count, "terms": p.forces.active(),
+        "dt": p.integrator.dt, "t_end": p.run.t_end, "steps": n_steps,
+        "frames": n_steps // max(1, round(p.output.interval / p.integrator.dt)) + 1,
+        "output": str(out), "threads": numba.get_num_threads(), "mpi_ranks": world.size,
+        **{k: v for k, v in sim.force_field.describe().items() if k != "terms"},
+    }
+    if world.rank == 0:
+        print(f"selfas-graph {__version__}: {p.scenario.name}: {p.rods.count} rods, terms "
+              f"{', '.join(plan['terms']) or 'none'}; dt = {p.integrator.dt:g}, t_end = {p.run.t_end:g} "
+              f"({n_steps} steps); {plan['threads']} threads x {world.size} ranks", flush=True)
+    if args.dry_run:
+        if world.rank == 0:
+            print("dry run: placement succeeded, nothing written")
+            print(json.dumps(plan, indent=2))
+        return 0
+
+    writer = None
+    if world.rank == 0:
+        provenance = {
+            "scenario_text": scenario.text,
+            "scenario_path": str(args.scenario),
+            "overrides": json.dumps(list(scenario.overrides)),
+            "parameters_json": json.dumps(p.to_dict()),
+            "derived_json": json.dumps(sim.force_field.describe()),
+            "version": __version__,
+            "command_line": shlex.join(sys.argv),
+            "seed": p.scenario.seed,
+            "mpi_ranks": world.size,
+            "numba_threads": numba.get_num_threads(),
+        }
+        writer = RunWriter(out, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
+                           overwrite=args.force, velocities=p.output.velocities)
+    mode = args.progress
+    if mode == "auto":
+        mode = "bar" if sys.stderr.isatty() else "lines"
+    reporter = None
+    if world.rank == 0 and mode != "none":
+        reporter = _Bar(n_steps, p.run.t_end) if mode == "bar" else _Lines(sys.stderr)
+    try:
+        summary = sim.run(writer=writer, progress=reporter)
+    except NumericalFailure as exc:
+        if reporter:
+            reporter.close()
+        if writer:
+            writer.close(status=f"failed: {exc}")
+        print(f"selfas-graph simulate: {exc}", file=sys.stderr)
+        print(f"frames up to the last output interval are in {out}", file=sys.stderr)
+        return EXIT_NUMERICAL
+    except KeyboardInterrupt:
+        if reporter:
+            reporter.close()
+        if writer:
+            writer.close(status="interrupted")
+        raise
+    if reporter:
+        reporter.close()
+    if writer:
+        writer.set_attrs(wall_seconds=summary.wall_seconds, steps_done=summary.steps)
+        writer.close(status="finished")
+    if world.rank == 0:
+        _print_summary(summary, out, sim)
+    return 0
+
+
+def _print_summary(s, out, sim):
+    rel = s.energy_balance / s.energy_scale if s.energy_scale > 0 else float("nan")
+    lines = [
+        f"done: {s.steps} steps, t = {s.t_start:.4g} -> {s.t_end:.4g} in {_fmt_time(s.wall_seconds)} "
+        f"({s.steps_per_second:.0f} steps/s, {1e3 / max(s.steps_per_second, 1e-9):.2f} ms/step)",
+        f"  max bond-length error after constraint: {s.max_bond_error:.3g}",
+        f"  energy balance E - E0 - W: {s.energy_balance:.3g} ({rel:.2g} of kinetic energy + |work|)",
+        f"  contacts (tip pairs closer than r*): {sim.contact_count()}",
+        f"  output: {out} ({s.frames} frames)",
+    ]
+    print("\n".join(lines))

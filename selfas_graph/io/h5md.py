@@ -1,0 +1,243 @@
+"""HDF5 output after the H5MD convention (https://www.nongnu.org/h5md/), and its reader.
+
+Layout of a run file::
+
+    /h5md                       attrs version=[1, 1]; groups author, creator
+    /particles/tips/box         attrs dimension=3, boundary=[none, none, none]
+    /particles/tips/position    step (n,), time (n,), value (n, n_tips, 3)
+    /particles/tips/velocity    step, time, value (if output.velocities)
+    /particles/tips/charge      (n_tips,) magnetic charge (time-independent)
+    /particles/tips/rod         (n_tips,) rod index of each tip (tip k belongs to rod k // 2)
+    /particles/rods/charge      (n_rods,) electric charge Z_i
+    /observables/<name>         step, time, value: one row per saved frame
+    /observables/bond_error_per_step   step, value: the largest bond error of every step
+    /parameters/selfas_graph    attrs: scenario_text, parameters_json, version, command_line,
+                                seed, mpi_ranks, numba_threads, created, status
+
+Only one process writes. Every frame is followed by a flush, so a run that is
+killed keeps everything up to its last saved frame. ``status`` is "running"
+until the run ends, then "finished" or "failed: <reason>".
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+H5MD_VERSION = (1, 1)
+
+
+class OutputExistsError(FileExistsError):
+    """The output file exists and overwriting was not asked for."""
+
+
+class RunFileError(ValueError):
+    """A file that is not a readable selfas-graph run."""
+
+
+def _growable(group, name, shape, dtype):
+    return group.create_dataset(name, shape=(0,) + shape, maxshape=(None,) + shape, dtype=dtype,
+                                chunks=(max(1, min(1024, 2 ** 20 // max(1, int(np.prod(shape)) * 8))),) + shape)
+
+
+def _append(ds, value):
+    n = ds.shape[0]
+    value = np.asarray(value)
+    k = 1 if value.shape == ds.shape[1:] else value.shape[0]
+    ds.resize(n + k, axis=0)
+    ds[n:n + k] = value
+    return n
+
+
+class RunWriter:
+    """Writes frames and observables of one run.
+
+    Parameters
+    ----------
+    path : path-like
+    n_tips : int
+    tip_charge : (n_tips,) float64
+    rod_charge : (n_rods,) float64
+    provenance : dict
+        Strings and numbers stored as attributes of ``/parameters/selfas_graph``.
+    overwrite : bool
+        Replace an existing file; otherwise :class:`OutputExistsError`.
+    velocities : bool
+        Save velocities with each frame.
+    """
+
+    def __init__(self, path, n_tips, tip_charge, rod_charge, provenance, overwrite=False, velocities=True):
+        self.path = Path(path)
+        if self.path.exists() and not overwrite:
+            raise OutputExistsError(f"output file {self.path} exists; pass --force to overwrite it or -o to choose another")
+        if not self.path.parent.exists():
+            raise FileNotFoundError(f"the folder of the output file {self.path} does not exist")
+        self.f = h5py.File(self.path, "w", libver="latest")
+        f = self.f
+        h = f.create_group("h5md")
+        h.attrs["version"] = np.array(H5MD_VERSION, dtype=np.int32)
+        h.create_group("author").attrs["name"] = provenance.get("author", os.environ.get("USER", "unknown"))
+        c = h.create_group("creator")
+        c.attrs["name"] = "selfas-graph"
+        c.attrs["version"] = provenance.get("version", "")
+        tips = f.create_group("particles/tips")
+        box = tips.create_group("box")
+        box.attrs["dimension"] = 3
+        box.attrs["boundary"] = np.array([b"none"] * 3)
+        tips.create_dataset("charge", data=np.asarray(tip_charge, dtype=np.float64))
+        tips.create_dataset("rod", data=np.arange(n_tips, dtype=np.int64) // 2)
+        f.create_group("particles/rods").create_dataset("charge", data=np.asarray(rod_charge, dtype=np.float64))
+        self._elements = {}
+        for name in ("position",) + (("velocity",) if velocities else ()):
+            g = tips.create_group(name)
+            self._elements[name] = (_growable(g, "step", (), "<i8"), _growable(g, "time", (), "<f8"),
+                                    _growable(g, "value", (n_tips, 3), "<f8"))
+        self._obs = {}
+        self.observables = f.create_group("observables")
+        g = self.observables.create_group("bond_error_per_step")
+        self._per_step = (_growable(g, "step", (), "<i8"), _growable(g, "value", (), "<f8"))
+        p = f.create_group("parameters/selfas_graph")
+        for key, value in provenance.items():
+            p.attrs[key] = value
+        p.attrs["status"] = "running"
+        p.attrs["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+        self.n_frames = 0
+        f.flush()
+
+    def write_frame(self, step, t, position, velocity, observables: dict):
+        """Append one frame (positions, velocities, observables) and flush to disk."""
+        for name, arr in (("position", position), ("velocity", velocity)):
+            if name in self._elements:
+                s, tt, v = self._elements[name]
+                _append(s, step)
+                _append(tt, t)
+                _append(v, arr)
+        for name, value in observables.items():
+            value = np.asarray(value, dtype=np.float64)
+            if name not in self._obs:
+                g = self.observables.create_group(name)
+                self._obs[name] = (_growable(g, "step", (), "<i8"), _growable(g, "time", (), "<f8"),
+                                   _growable(g, "value", value.shape, "<f8"))
+            s, tt, v = self._obs[name]
+            _append(s, step)
+            _append(tt, t)
+            _append(v, value)
+        self.n_frames += 1
+
+    def write_per_step(self, steps, values):
+        """Append a per-step series (the bond error of every step since the last call)."""
+        if len(steps):
+            _append(self._per_step[0], np.asarray(steps, dtype=np.int64))
+            _append(self._per_step[1], np.asarray(values, dtype=np.float64))
+
+    def set_attrs(self, **attrs):
+        for k, v in attrs.items():
+            self.f["parameters/selfas_graph"].attrs[k] = v
+
+    def flush(self):
+        self.f.flush()
+
+    def close(self, status="finished"):
+        if self.f:
+            self.set_attrs(status=status)
+            self.f.close()
+            self.f = None
+
+
+class RunFile:
+    """Read-only access to a run file, without any simulation objects.
+
+    Parameters
+    ----------
+    path : path-like
+
+    Raises
+    ------
+    RunFileError
+        If the file is missing, not HDF5, or not written by selfas-graph.
+    """
+
+    def __init__(self, path):
+        self.path = Path(path)
+        if not self.path.exists():
+            raise RunFileError(f"{self.path}: no such file")
+        try:
+            self.f = h5py.File(self.path, "r")
+        except OSError as exc:
+            raise RunFileError(f"{self.path}: not a readable HDF5 file ({exc})") from None
+        if "parameters/selfas_graph" not in self.f or "particles/tips/position/value" not in self.f:
+            self.f.close()
+            raise RunFileError(f"{self.path}: an HDF5 file, but not a selfas-graph run (no /particles/tips/position)")
+        self.meta = dict(self.f["parameters/selfas_graph"].attrs)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self):
+        self.f.close()
+
+    @property
+    def parameters(self) -> dict:
+        return json.loads(self.meta["parameters_json"])
+
+    @property
+    def scenario_text(self) -> str:
+        return self.meta["scenario_text"]
+
+    @property
+    def n_frames(self) -> int:
+        return self.f["particles/tips/position/value"].shape[0]
+
+    @property
+    def time(self) -> np.ndarray:
+        return self.f["particles/tips/position/time"][:]
+
+    @property
+    def step(self) -> np.ndarray:
+        return self.f["particles/tips/position/step"][:]
+
+    def frame_index(self, frame=None, t=None) -> int:
+        """Index of a frame given by number (negative counts from the end) or nearest time."""
+        n = self.n_frames
+        if n == 0:
+            raise RunFileError(f"{self.path}: the run has no saved frames")
+        if t is not None:
+            return int(np.argmin(np.abs(self.time - t)))
+        k = -1 if frame is None else int(frame)
+        if not -n <= k < n:
+            raise RunFileError(f"{self.path}: frame {k} out of range; the file has frames 0..{n - 1}")
+        return k % n
+
+    def position(self, frame=-1) -> np.ndarray:
+        return self.f["particles/tips/position/value"][self.frame_index(frame)]
+
+    def velocity(self, frame=-1) -> np.ndarray:
+        if "particles/tips/velocity" not in self.f:
+            raise RunFileError(f"{self.path}: velocities were not saved (output.velocities = false)")
+        return self.f["particles/tips/velocity/value"][self.frame_index(frame)]
+
+    @property
+    def tip_charge(self) -> np.ndarray:
+        return self.f["particles/tips/charge"][:]
+
+    @property
+    def rod_charge(self) -> np.ndarray:
+        return self.f["particles/rods/charge"][:]
+
+    def observable_names(self):
+        return sorted(self.f["observables"].keys())
+
+    def observable(self, name):
+        """(time, value) arrays of a per-frame observable, or (step, value) for per-step series."""
+        if name not in self.f["observables"]:
+            raise RunFileError(f"{self.path}: no observable {name!r}; present: {', '.join(self.observable_names())}")
+        g = self.f["observables"][name]
+        x = g["time"][:] if "time" in g else g["step"][:]
+        return x, g["value"][:]

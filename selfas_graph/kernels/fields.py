@@ -1,0 +1,92 @@
+"""One-body terms: fields of fixed sources acting on tips (MODEL.md terms 5 and 8)."""
+import math
+
+from ._jit import inline, njit_parallel, prange
+from .laws import wall_potential, wall_push
+
+
+@inline
+def plasma_field_at(px, py, x0, y0, radius, current):
+    """Field of a straight plasma current along +z through (x0, y0) (MODEL.md term 5).
+
+    Uniform current density inside ``radius``: ``B = 2 I rho / R^2 phi_hat``
+    inside and ``2 I / rho phi_hat`` outside, with ``phi_hat = (-y', x', 0) / rho``.
+    Returns (Bx, By); Bz = 0. Finite on the axis (B = 0 there).
+    """
+    dx = px - x0
+    dy = py - y0
+    rho2 = dx * dx + dy * dy
+    r2 = radius * radius
+    if rho2 <= r2:
+        c = 2.0 * current / r2
+    else:
+        c = 2.0 * current / rho2
+    return -c * dy, c * dx
+
+
+@njit_parallel
+def plasma_field(point, x0, y0, radius, current, out):
+    """Plasma-filament field at points.
+
+    Parameters
+    ----------
+    point : (m, 3) float64
+    x0, y0, radius, current : float
+        Axis position, radius R_plas and total current I_plas along +z.
+    out : (m, 3) float64
+        Overwritten with B at each point.
+    """
+    for k in prange(point.shape[0]):
+        bx, by = plasma_field_at(point[k, 0], point[k, 1], x0, y0, radius, current)
+        out[k, 0] = bx
+        out[k, 1] = by
+        out[k, 2] = 0.0
+
+
+@njit_parallel
+def plasma_force_on_tips(position, charge, x0, y0, radius, current, out):
+    """``F_k = q_k B_plas(x_k)`` (MODEL.md term 5 on tips); ``out`` (n_tips, 3) overwritten."""
+    for k in prange(position.shape[0]):
+        bx, by = plasma_field_at(position[k, 0], position[k, 1], x0, y0, radius, current)
+        out[k, 0] = charge[k] * bx
+        out[k, 1] = charge[k] * by
+        out[k, 2] = 0.0
+
+
+@njit_parallel
+def electrode_walls(position, velocity, z_cathode, z_anode, rstar, kappa, k_br, out_push, out_brake):
+    """Electrode planes at ``z_cathode < z_anode`` acting on tips (MODEL.md term 8).
+
+    A tip at distance ``h < r*`` from a plane (measured towards the gap, so h < 0
+    beyond the plane) is pushed back into the gap with ``kappa (r* - h) / r*^3``
+    and braked with ``-k_br v`` (once per plane it touches).
+
+    Parameters
+    ----------
+    position, velocity : (n_tips, 3) float64
+    z_cathode, z_anode : float
+    rstar, kappa, k_br : float
+    out_push, out_brake : (n_tips, 3) float64
+        Overwritten with the elastic and the friction parts.
+    """
+    for k in prange(position.shape[0]):
+        z = position[k, 2]
+        h_low = z - z_cathode
+        h_high = z_anode - z
+        push = wall_push(h_low, rstar, kappa) - wall_push(h_high, rstar, kappa)
+        touching = (1.0 if h_low < rstar else 0.0) + (1.0 if h_high < rstar else 0.0)
+        out_push[k, 0] = 0.0
+        out_push[k, 1] = 0.0
+        out_push[k, 2] = push
+        for d in range(3):
+            out_brake[k, d] = -k_br * touching * velocity[k, d]
+
+
+@njit_parallel
+def electrode_energy(position, z_cathode, z_anode, rstar, kappa):
+    """Elastic energy of the electrode walls (potential of the push in :func:`electrode_walls`)."""
+    total = 0.0
+    for k in prange(position.shape[0]):
+        z = position[k, 2]
+        total += wall_potential(z - z_cathode, rstar, kappa) + wall_potential(z_anode - z, rstar, kappa)
+    return total

@@ -1,0 +1,133 @@
+"""Short-range pair terms over a neighbour list (MODEL.md terms 2 and 6).
+
+Neighbour lists are in compressed-row form and hold both directions of every
+pair: the neighbours of point ``k`` are ``index[start[k]:start[k + 1]]``. Each
+parallel iteration writes only its own row (gather). The list may hold pairs
+beyond the interaction range (a Verlet skin); the kernels test the distance.
+"""
+from ._jit import njit_parallel, prange
+from .laws import yukawa_force_over_r, yukawa_potential
+
+
+@njit_parallel
+def tip_brake(position, velocity, start, index, rstar, k_br, out):
+    """Friction between tips of different rods closer than r* (MODEL.md term 2, paper Eq. 12).
+
+    ``F_k -= k_br (v_k - v_l)`` for every neighbour l with ``|x_k - x_l| < r*``.
+
+    Parameters
+    ----------
+    position, velocity : (n_tips, 3) float64
+    start : (n_tips + 1,) int64
+    index : (n_pairs * 2,) int64
+        Tip neighbour list (tips of the same rod excluded by the caller).
+    rstar, k_br : float
+        Range of the brake and its coefficient (units m / t0).
+    out : (n_tips, 3) float64
+        Overwritten with the brake force on each tip.
+    """
+    n = position.shape[0]
+    rs2 = rstar * rstar
+    for k in prange(n):
+        fx = 0.0
+        fy = 0.0
+        fz = 0.0
+        for j in range(start[k], start[k + 1]):
+            l = index[j]
+            dx = position[k, 0] - position[l, 0]
+            dy = position[k, 1] - position[l, 1]
+            dz = position[k, 2] - position[l, 2]
+            if dx * dx + dy * dy + dz * dz < rs2:
+                fx -= k_br * (velocity[k, 0] - velocity[l, 0])
+                fy -= k_br * (velocity[k, 1] - velocity[l, 1])
+                fz -= k_br * (velocity[k, 2] - velocity[l, 2])
+        out[k, 0] = fx
+        out[k, 1] = fy
+        out[k, 2] = fz
+
+
+@njit_parallel
+def close_pair_count(position, start, index, radius):
+    """Number of distinct pairs in the list closer than ``radius`` (each pair once)."""
+    n = position.shape[0]
+    r2max = radius * radius
+    total = 0
+    for k in prange(n):
+        c = 0
+        for j in range(start[k], start[k + 1]):
+            l = index[j]
+            if l > k:
+                dx = position[k, 0] - position[l, 0]
+                dy = position[k, 1] - position[l, 1]
+                dz = position[k, 2] - position[l, 2]
+                if dx * dx + dy * dy + dz * dz < r2max:
+                    c += 1
+        total += c
+    return total
+
+
+@njit_parallel
+def yukawa_centres(centre, rod_charge, start, index, screening, cutoff, out):
+    """Screened electric repulsion between rod centres (MODEL.md term 6).
+
+    ``F_i = sum_j Z_i Z_j exp(-r/R_D) (1/r^2 + 1/(R_D r)) r_hat_ij`` over neighbours
+    with ``r < cutoff``.
+
+    Parameters
+    ----------
+    centre : (n_rods, 3) float64
+        Rod centres.
+    rod_charge : (n_rods,) float64
+        Electric charge Z_i of each rod.
+    start, index : int64 arrays
+        Rod neighbour list (compressed rows, both directions).
+    screening, cutoff : float
+        Screening length R_D and the cut-off radius.
+    out : (n_rods, 3) float64
+        Overwritten with the force on each rod centre.
+    """
+    n = centre.shape[0]
+    rc2 = cutoff * cutoff
+    for i in prange(n):
+        fx = 0.0
+        fy = 0.0
+        fz = 0.0
+        for j in range(start[i], start[i + 1]):
+            l = index[j]
+            dx = centre[i, 0] - centre[l, 0]
+            dy = centre[i, 1] - centre[l, 1]
+            dz = centre[i, 2] - centre[l, 2]
+            r2 = dx * dx + dy * dy + dz * dz
+            if r2 < rc2:
+                g = yukawa_force_over_r(r2, rod_charge[i] * rod_charge[l], screening)
+                fx += g * dx
+                fy += g * dy
+                fz += g * dz
+        out[i, 0] = fx
+        out[i, 1] = fy
+        out[i, 2] = fz
+
+
+@njit_parallel
+def yukawa_energy(centre, rod_charge, start, index, screening, cutoff):
+    """Energy of :func:`yukawa_centres`, shifted to zero at the cut-off so it is continuous.
+
+    Each pair is counted once. Returns a float.
+    """
+    n = centre.shape[0]
+    rc2 = cutoff * cutoff
+    total = 0.0
+    for i in prange(n):
+        acc = 0.0
+        for j in range(start[i], start[i + 1]):
+            l = index[j]
+            if l > i:
+                dx = centre[i, 0] - centre[l, 0]
+                dy = centre[i, 1] - centre[l, 1]
+                dz = centre[i, 2] - centre[l, 2]
+                r2 = dx * dx + dy * dy + dz * dz
+                if r2 < rc2:
+                    zz = rod_charge[i] * rod_charge[l]
+                    acc += yukawa_potential(r2, zz, screening) - yukawa_potential(rc2, zz, screening)
+        total += acc
+    return total

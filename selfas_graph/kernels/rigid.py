@@ -1,0 +1,111 @@
+"""Rigid massless bond between the two tips of each rod (paper Eqs. 5-9, 14-15; MODEL.md section 4).
+
+Derivation of the exact bond force. With ``r12 = x_a - x_b``, ``v12 = v_a - v_b``,
+equal tip masses m, and external forces F_a, F_b, the tips move as
+``m a_a = F_a - A r12`` and ``m a_b = F_b + A r12`` (paper Eqs. 5-6). Then
+``d2 r12/dt2 = G - (2 A / m) r12`` with ``G = (F_a - F_b) / m``. Keeping
+``|r12|`` constant needs ``(r12, v12) = 0`` at all times, whose time derivative is
+``(d2 r12/dt2, r12) + |v12|^2 = 0``. Solving for A:
+
+    A = mu ((G, r12) + |v12|^2) / |r12|^2,   mu = m / 2.
+
+The paper's Eq. (9) drops ``|v12|^2`` (it imposes ``(d2 r12/dt2, r12) = 0``);
+that variant is kept as ``exact=False`` for comparison. Masses are 1 (reduced units).
+"""
+import math
+
+from ._jit import njit_parallel, prange
+
+
+@njit_parallel
+def bond_acceleration(force, velocity, position, exact, out):
+    """Tip accelerations with the rigid-bond force added.
+
+    Parameters
+    ----------
+    force : (n_tips, 3) float64
+        Total external force on each tip (centre forces already shared by mass).
+    velocity, position : (n_tips, 3) float64
+    exact : bool
+        True for the exact bond force, False for the paper's Eq. (9).
+    out : (n_tips, 3) float64
+        Overwritten with the accelerations (unit masses).
+    """
+    n_rods = position.shape[0] // 2
+    for i in prange(n_rods):
+        a = 2 * i
+        b = a + 1
+        g_r = 0.0
+        v2 = 0.0
+        r2 = 0.0
+        for d in range(3):
+            r = position[a, d] - position[b, d]
+            v = velocity[a, d] - velocity[b, d]
+            g_r += (force[a, d] - force[b, d]) * r
+            v2 += v * v
+            r2 += r * r
+        if not exact:
+            v2 = 0.0
+        lam = 0.5 * (g_r + v2) / r2
+        for d in range(3):
+            r = position[a, d] - position[b, d]
+            out[a, d] = force[a, d] - lam * r
+            out[b, d] = force[b, d] + lam * r
+
+
+@njit_parallel
+def bond_length_error(position):
+    """Largest ``| |x_a - x_b| - 1 |`` over all rods."""
+    n_rods = position.shape[0] // 2
+    worst = 0.0
+    for i in prange(n_rods):
+        a = 2 * i
+        r2 = 0.0
+        for d in range(3):
+            r = position[a, d] - position[a + 1, d]
+            r2 += r * r
+        worst = max(worst, abs(math.sqrt(r2) - 1.0))
+    return worst
+
+
+@njit_parallel
+def constrain_bonds(position, velocity, project, correct_velocity):
+    """Restore the rigid bonds after an integration step, in place.
+
+    ``project``: move both tips along the axis, about the rod centre, so that
+    ``|r12| = 1`` (the paper leaves positions uncorrected). ``correct_velocity``:
+    paper Eqs. (14-15), ``v_a += c r12``, ``v_b -= c r12`` with c chosen so that
+    ``(v12, r12) = 0``; equal masses share it, so momentum is unchanged.
+
+    Parameters
+    ----------
+    position, velocity : (n_tips, 3) float64, modified in place
+    project, correct_velocity : bool
+    """
+    n_rods = position.shape[0] // 2
+    for i in prange(n_rods):
+        a = 2 * i
+        b = a + 1
+        r2 = 0.0
+        for d in range(3):
+            r = position[a, d] - position[b, d]
+            r2 += r * r
+        if project:
+            s = 0.5 * (1.0 / math.sqrt(r2) - 1.0)
+            for d in range(3):
+                r = position[a, d] - position[b, d]
+                position[a, d] += s * r
+                position[b, d] -= s * r
+            r2 = 0.0
+            for d in range(3):
+                r = position[a, d] - position[b, d]
+                r2 += r * r
+        if correct_velocity:
+            vr = 0.0
+            for d in range(3):
+                vr += (velocity[a, d] - velocity[b, d]) * (position[a, d] - position[b, d])
+            c = -0.5 * vr / r2
+            for d in range(3):
+                r = position[a, d] - position[b, d]
+                velocity[a, d] += c * r
+                velocity[b, d] -= c * r

@@ -1,0 +1,60 @@
+"""Event records: what changed in the contact network, and when.
+
+An event is one row ``(step, time, kind, a, b)``. ``kind`` is one of the
+integer codes below; ``a`` and ``b`` are ids whose meaning depends on the kind:
+
+==================  ======================  =====================================
+kind                a                       b
+==================  ======================  =====================================
+TIP_CONTACT         tip k                   tip l (k < l)
+TIP_RELEASE         tip k                   tip l (k < l)
+CONDUCTOR_CONTACT   tip k                   conductor id (see ``CONDUCTOR_*``)
+CONDUCTOR_RELEASE   tip k                   conductor id
+SHORT_CIRCUIT       number of filament rods -1
+OPEN_CIRCUIT        -1                      -1
+==================  ======================  =====================================
+
+Tips are numbered ``2 i`` (tip a, magnetic charge +q_i) and ``2 i + 1``
+(tip b, -q_i) for rod ``i`` (MODEL.md section 2).
+
+SHORT_CIRCUIT is emitted when the network goes from carrying no current-carrying
+filament to carrying one (a conducting path now joins two conductor contacts at
+different potentials); OPEN_CIRCUIT when the last such path is broken
+(MODEL.md section 5).
+"""
+import numpy as np
+
+TIP_CONTACT = 1
+TIP_RELEASE = 2
+CONDUCTOR_CONTACT = 3
+CONDUCTOR_RELEASE = 4
+SHORT_CIRCUIT = 5
+OPEN_CIRCUIT = 6
+
+KIND_NAMES = {
+    TIP_CONTACT: "tip_contact",
+    TIP_RELEASE: "tip_release",
+    CONDUCTOR_CONTACT: "conductor_contact",
+    CONDUCTOR_RELEASE: "conductor_release",
+    SHORT_CIRCUIT: "short_circuit",
+    OPEN_CIRCUIT: "open_circuit",
+}
+
+#: conductor ids. Case (i): the two electrode planes. Case (ii): the fixed
+#: current filament, whose potential varies along z (MODEL.md section 6).
+CONDUCTOR_CATHODE = 0
+CONDUCTOR_ANODE = 1
+CONDUCTOR_FILAMENT = 2
+CONDUCTOR_NAMES = {
+    CONDUCTOR_CATHODE: "cathode",
+    CONDUCTOR_ANODE: "anode",
+    CONDUCTOR_FILAMENT: "filament",
+}
+
+#: numpy dtype of one event record, as stored in HDF5
+EVENT_DTYPE = np.dtype([("step", "<i8"), ("time", "<f8"), ("kind", "<i4"), ("a", "<i8"), ("b", "<i8")])
+
+
+def event_array(rows):
+    """Pack an iterable of ``(step, time, kind, a, b)`` tuples into an ``EVENT_DTYPE`` array."""
+    return np.array([tuple(r) for r in rows], dtype=EVENT_DTYPE)

@@ -1,0 +1,331 @@
+"""The force field: which terms of MODEL.md section 3 are on, and how each is computed.
+
+A :class:`ForceField` is built from the scenario's ``[forces]`` tables; only
+the listed terms are constructed, so a term the scene does not use costs
+nothing (no buffer, no kernel call, no neighbour list). Each term writes its
+force into its own *channel* buffer; the field sums the channels and, for the
+non-conservative channels, the power ``sum_k F_k . v_k`` that the integrator
+turns into work. Conservative channels report a potential energy instead.
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+
+import numpy as np
+
+from ..kernels import fields as kf
+from ..kernels import pairs as kp
+from ..kernels import tips as kt
+from .neighbours import NeighbourList
+from .params import Parameters
+
+
+def yukawa_cutoff(z_max: float, screening: float, tolerance: float) -> float:
+    """Distance beyond which ``z_max^2 exp(-r/R_D) (1/r^2 + 1/(R_D r)) < tolerance``.
+
+    The force magnitude decreases monotonically in r, so bisection on
+    ``[1e-6, 1e6]`` finds the crossing to 1e-12 relative. Returns 0 if no charge.
+    """
+    if z_max <= 0.0:
+        return 0.0
+
+    def f(r):
+        return z_max * z_max * math.exp(-r / screening) * (1.0 / r ** 2 + 1.0 / (screening * r)) - tolerance
+
+    lo, hi = 1e-6, 1e6
+    if f(lo) < 0.0:
+        return lo
+    for _ in range(200):
+        mid = math.sqrt(lo * hi)
+        if f(mid) > 0.0:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo < 1e-12 * hi:
+            break
+    return hi
+
+
+class _Term:
+    """One force term. ``channels``: list of (channel name, conservative?)."""
+
+    channels: list = []
+    name = ""
+
+    def compute(self, ff, out):  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def energy(self, ff):
+        return None
+
+
+class TipMagnetic(_Term):
+    name = "tip_magnetic"
+    channels = [("tip_magnetic", True)]
+
+    def __init__(self, p: Parameters, state):
+        self.rstar = p.rods.rstar
+        self.kappa = p.rods.tip_stiffness
+
+    def compute(self, ff, out):
+        x, y, z = ff.soa()
+        kt.tip_tip_direct(x, y, z, ff.tip_charge, self.rstar, self.kappa, out["tip_magnetic"])
+
+    def energy(self, ff):
+        x, y, z = ff.soa()
+        return {"tip_magnetic": kt.tip_tip_energy(x, y, z, ff.tip_charge, self.rstar, self.kappa)}
+
+
+class TipBrake(_Term):
+    name = "tip_brake"
+    channels = [("tip_brake", False)]
+
+    def __init__(self, p, state):
+        self.rstar = p.rods.rstar
+        self.k = p.forces.tip_brake.coefficient
+
+    def compute(self, ff, out):
+        nl = ff.tip_neighbours()
+        kp.tip_brake(ff.position, ff.velocity, nl.start, nl.index, self.rstar, self.k, out["tip_brake"])
+
+
+class AmbientBrake(_Term):
+    name = "ambient_brake"
+    channels = [("ambient_brake", False)]
+
+    def __init__(self, p, state):
+        self.k = p.forces.ambient_brake.coefficient
+
+    def compute(self, ff, out):
+        np.multiply(ff.velocity, -self.k, out=out["ambient_brake"])
+
+
+class UniformField(_Term):
+    name = "uniform_field"
+    channels = [("uniform_field", True)]
+
+    def __init__(self, p, state):
+        self.B = np.array(p.forces.uniform_field.B, dtype=np.float64)
+
+    def compute(self, ff, out):
+        np.multiply(ff.tip_charge[:, None], self.B[None, :], out=out["uniform_field"])
+
+    def energy(self, ff):
+        return {"uniform_field": -float(ff.tip_charge @ (ff.position @ self.B))}
+
+
+class PlasmaFilament(_Term):
+    name = "plasma_filament"
+    channels = [("plasma_filament", False)]
+
+    def __init__(self, p, state):
+        pf = p.forces.plasma_filament
+        self.args = (float(pf.axis[0]), float(pf.axis[1]), pf.radius, pf.current)
+
+    def compute(self, ff, out):
+        kf.plasma_force_on_tips(ff.position, ff.tip_charge, *self.args, out["plasma_filament"])
+
+
+class Yukawa(_Term):
+    name = "yukawa"
+    channels = [("yukawa", True)]
+
+    def __init__(self, p, state):
+        y = p.forces.yukawa
+        self.screening = y.screening_length
+        zmax = float(np.abs(state.rod_charge).max(initial=0.0))
+        self.cutoff = yukawa_cutoff(zmax, y.screening_length, y.tolerance)
+
+    def compute(self, ff, out):
+        nl = ff.centre_neighbours()
+        f = ff.buffer("yukawa_centre", ff.n_rods)
+        kp.yukawa_centres(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.cutoff, f)
+        _share_by_mass(f, out["yukawa"])
+
+    def energy(self, ff):
+        nl = ff.centre_neighbours()
+        return {"yukawa": kp.yukawa_energy(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.cutoff)}
+
+
+class ElectricField(_Term):
+    name = "electric_field"
+    channels = [("electric_field", True)]
+
+    def __init__(self, p, state):
+        self.E = np.array(p.forces.electric_field.E, dtype=np.float64)
+
+    def compute(self, ff, out):
+        _share_by_mass(ff.rod_charge[:, None] * self.E[None, :], out["electric_field"])
+
+    def energy(self, ff):
+        return {"electric_field": -float(ff.rod_charge @ (ff.centre() @ self.E))}
+
+
+class Electrodes(_Term):
+    name = "electrodes"
+    channels = [("electrodes", True), ("electrode_brake", False)]
+
+    def __init__(self, p, state):
+        gap = p.forces.electrodes.gap
+        self.z = (-0.5 * gap, 0.5 * gap)
+        self.rstar = p.rods.rstar
+        self.kappa = p.rods.tip_stiffness
+        self.k = p.forces.tip_brake.coefficient if p.forces.tip_brake is not None else 0.0
+
+    def compute(self, ff, out):
+        kf.electrode_walls(ff.position, ff.velocity, self.z[0], self.z[1], self.rstar, self.kappa, self.k,
+                           out["electrodes"], out["electrode_brake"])
+
+    def energy(self, ff):
+        return {"electrodes": kf.electrode_energy(ff.position, self.z[0], self.z[1], self.rstar, self.kappa)}
+
+
+def _share_by_mass(centre_force, tip_out):
+    """A force on a rod centre goes half to each tip (equal masses; paper Eqs. 5-6)."""
+    tip_out[0::2] = 0.5 * centre_force
+    tip_out[1::2] = 0.5 * centre_force
+
+
+TERM_CLASSES = {cls.name: cls for cls in (TipMagnetic, TipBrake, AmbientBrake, UniformField,
+                                         PlasmaFilament, Yukawa, ElectricField, Electrodes)}
+
+
+class ForceField:
+    """The force terms of one scene, with their buffers and neighbour lists.
+
+    Parameters
+    ----------
+    params : Parameters
+    state : State
+        Supplies the per-tip and per-rod constants (charges) and the sizes.
+    timing : bool
+        Accumulate wall time per term in ``self.seconds`` (for benchmarks).
+
+    Attributes
+    ----------
+    terms : list of the active term objects, MODEL.md order
+    channels : list of (name, conservative)
+    calls : Counter of kernel evaluations per term (tests count these)
+    """
+
+    def __init__(self, params: Parameters, state, timing: bool = False):
+        self.params = params
+        self.tip_charge = state.tip_charge
+        self.rod_charge = state.rod_charge
+        self.n_tips = state.n_tips
+        self.n_rods = state.n_rods
+        self.terms = [TERM_CLASSES[name](params, state) for name in params.forces.active()]
+        self.channels = [c for t in self.terms for c in t.channels]
+        self.nonconservative = [name for name, cons in self.channels if not cons]
+        self.conservative = [name for name, cons in self.channels if cons]
+        self.out = {name: np.zeros((self.n_tips, 3)) for name, _ in self.channels}
+        self.total = np.zeros((self.n_tips, 3))
+        self.calls = Counter()
+        self.timing = timing
+        self.seconds = Counter()
+        self._buffers = {}
+        skin = params.neighbours.skin
+        self._tip_nl = None
+        self._centre_nl = None
+        self._tip_range = params.rods.rstar
+        for t in self.terms:
+            if isinstance(t, Yukawa) and t.cutoff > 0.0:
+                self._centre_nl = NeighbourList(t.cutoff, skin)
+        self._skin = skin
+        self.position = None
+        self.velocity = None
+
+    # -- lazily computed views of the current (position, velocity) ---------------------------------
+    def _bind(self, position, velocity):
+        self.position = position
+        self.velocity = velocity
+        self._soa = None
+        self._centre = None
+
+    def soa(self):
+        if self._soa is None:
+            self._soa = tuple(np.ascontiguousarray(self.position[:, d]) for d in range(3))
+        return self._soa
+
+    def centre(self):
+        if self._centre is None:
+            self._centre = 0.5 * (self.position[0::2] + self.position[1::2])
+        return self._centre
+
+    def buffer(self, name, rows):
+        buf = self._buffers.get(name)
+        if buf is None or buf.shape[0] != rows:
+            buf = self._buffers[name] = np.zeros((rows, 3))
+        return buf
+
+    def tip_neighbours(self, extra_range: float = 0.0) -> NeighbourList:
+        """Tip pairs of different rods closer than ``max(r*, extra_range)`` (plus skin)."""
+        cutoff = max(self._tip_range, extra_range)
+        if self._tip_nl is None or self._tip_nl.cutoff < cutoff:
+            self._tip_nl = NeighbourList(cutoff, self._skin, exclude_same_rod=True)
+        self._tip_nl.update(self.position)
+        return self._tip_nl
+
+    def centre_neighbours(self) -> NeighbourList:
+        self._centre_nl.update(self.centre())
+        return self._centre_nl
+
+    # -- evaluation -------------------------------------------------------------------------------
+    def evaluate(self, position, velocity, power=None):
+        """Total force on every tip at (position, velocity).
+
+        Parameters
+        ----------
+        position, velocity : (n_tips, 3) float64
+        power : (len(nonconservative),) float64, optional
+            Filled with ``sum_k F_k . v_k`` of each non-conservative channel.
+
+        Returns
+        -------
+        (n_tips, 3) float64
+            The summed force (a buffer owned by the field; copy it to keep it).
+        """
+        self._bind(position, velocity)
+        for t in self.terms:
+            t0 = time.perf_counter() if self.timing else 0.0
+            t.compute(self, self.out)
+            self.calls[t.name] += 1
+            if self.timing:
+                self.seconds[t.name] += time.perf_counter() - t0
+        total = self.total
+        total.fill(0.0)
+        for name, _ in self.channels:
+            total += self.out[name]
+        if power is not None:
+            for j, name in enumerate(self.nonconservative):
+                power[j] = np.einsum("ij,ij->", self.out[name], velocity)
+        return total
+
+    def potential_energy(self, position) -> dict:
+        """Potential energy of each conservative channel at ``position``."""
+        self._bind(position, np.zeros_like(position) if self.velocity is None else self.velocity)
+        energy = {}
+        for t in self.terms:
+            e = t.energy(self)
+            if e:
+                energy.update(e)
+        return energy
+
+    def dominant_channel(self, rows) -> str:
+        """Name of the channel with the largest force on the given tips (for failure diagnoses)."""
+        best, name = -1.0, "none"
+        for ch, _ in self.channels:
+            m = float(np.abs(self.out[ch][rows]).max(initial=0.0))
+            if m > best:
+                best, name = m, ch
+        return name
+
+    def describe(self) -> dict:
+        """Resolved settings derived from the parameters (e.g. the Yukawa cut-off radius)."""
+        d = {"terms": [t.name for t in self.terms]}
+        for t in self.terms:
+            if isinstance(t, Yukawa):
+                d["yukawa_cutoff"] = t.cutoff
+        return d

@@ -1,0 +1,202 @@
+"""Frozen parameter objects of a simulation, and the schema of scenario files.
+
+Each dataclass field carries its documentation and its admissible range in
+``metadata``; :mod:`selfas_graph.io.scenario` walks these classes to validate a
+TOML scenario, so defaults, types, ranges and docs are written once, here.
+All values are in the reduced units of MODEL.md section 1.
+
+Optional sections (the force terms, the circuit) default to ``None``: a term
+whose table is absent from the scenario is not computed at all.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+
+def spec(default, doc, *, ge=None, gt=None, lt=None, le=None, choices=None, length=None, factory=None):
+    """A dataclass field with validation metadata (used by the scenario loader)."""
+    meta = dict(doc=doc, ge=ge, gt=gt, lt=lt, le=le, choices=choices, length=length)
+    if factory is not None:
+        return field(default_factory=factory, metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class ChargeDistribution:
+    """How a per-rod charge is drawn (MODEL.md section 8)."""
+
+    distribution: str = spec(
+        "constant",
+        "constant (every rod gets `value`), uniform (uniform in (low, high)), "
+        "two_level (`high` for a fraction `high_fraction` of the rods, `low` for the rest), "
+        "magnetic (electric charge only: Z_i equals the rod's magnetic charge)",
+        choices=("constant", "uniform", "two_level", "magnetic"),
+    )
+    value: float = spec(1.0, "charge of every rod when distribution = constant", ge=0.0)
+    low: float = spec(2.0 / 3.0, "lower bound (uniform) or common value (two_level)", ge=0.0)
+    high: float = spec(2.0, "upper bound (uniform) or rare value (two_level)", ge=0.0)
+    high_fraction: float = spec(1.0 / 3.0, "fraction of rods with the `high` value (two_level)", ge=0.0, le=1.0)
+
+
+@dataclass(frozen=True)
+class RodParams:
+    count: int = spec(300, "number of rods", ge=0)
+    magnetic_charge: ChargeDistribution = spec(None, "tip magnetic charge q_i (units Z_M0 e)", factory=ChargeDistribution)
+    electric_charge: ChargeDistribution = spec(
+        None, "electric charge Z_i of the rod centre (units Z_M0 e)",
+        factory=lambda: ChargeDistribution(distribution="magnetic"),
+    )
+    diameter: float = spec(0.06, "rod diameter D (inverse aspect ratio D/L)", gt=0.0, lt=0.5)
+    transition_radius: Optional[float] = spec(
+        None, "r*, below which the tip law has its soft core (default: the diameter)", gt=0.0, lt=0.5
+    )
+    tip_stiffness: float = spec(1.0, "kappa, elastic stiffness of the tip core and of the electrode walls", ge=0.0)
+
+    @property
+    def rstar(self) -> float:
+        return self.diameter if self.transition_radius is None else self.transition_radius
+
+
+@dataclass(frozen=True)
+class PlacementParams:
+    box: tuple = spec(
+        None, "[[xmin, xmax], [ymin, ymax], [zmin, zmax]] holding both tips of every rod at t = 0",
+        factory=lambda: ((-5.0, 5.0), (-5.0, 5.0), (-5.0, 5.0)),
+    )
+    min_tip_distance: Optional[float] = spec(
+        None, "no two tips of different rods start closer than this (default 4 r*)", ge=0.0
+    )
+    max_attempts: int = spec(2000, "random draws tried per rod before placement gives up", ge=1)
+
+
+@dataclass(frozen=True)
+class TipMagnetic:
+    """Term 1: tip-tip magnetic Coulomb force with a soft core (no parameters beyond the rods')."""
+
+
+@dataclass(frozen=True)
+class TipBrake:
+    coefficient: float = spec(100.0, "k_br, friction between tips closer than r* (units m/t0)", ge=0.0)
+
+
+@dataclass(frozen=True)
+class AmbientBrake:
+    coefficient: float = spec(1.5, "M_br, friction of every tip with the ambient medium (units m/t0)", ge=0.0)
+
+
+@dataclass(frozen=True)
+class UniformField:
+    B: tuple = spec(None, "uniform magnetic field (Bx, By, Bz) in units B0", length=3, factory=lambda: (0.0, 0.0, 0.5))
+
+
+@dataclass(frozen=True)
+class PlasmaFilament:
+    radius: float = spec(6.0, "R_plas, radius of the uniform current channel", gt=0.0)
+    current: float = spec(7.5, "I_plas, total current along +z (units J0)")
+    axis: tuple = spec(None, "(x0, y0) of the channel axis", length=2, factory=lambda: (0.0, 0.0))
+
+
+@dataclass(frozen=True)
+class Yukawa:
+    screening_length: float = spec(1.0, "R_D, screening length of the rod charges", gt=0.0)
+    tolerance: float = spec(
+        1e-4, "the force is cut off where Z_max^2 times its magnitude falls below this (units F_M0); "
+        "an accuracy knob", gt=0.0, lt=1.0,
+    )
+
+
+@dataclass(frozen=True)
+class ElectricField:
+    E: tuple = spec(None, "uniform electric field (Ex, Ey, Ez) acting on rod charges", length=3, factory=lambda: (0.0, 0.0, 0.0))
+
+
+@dataclass(frozen=True)
+class Electrodes:
+    gap: float = spec(17.9, "distance dZ between the cathode plane z = -dZ/2 and the anode plane z = +dZ/2", gt=0.0)
+
+
+@dataclass(frozen=True)
+class ForceParams:
+    """The force terms of MODEL.md section 3; a term whose table is absent is off."""
+
+    tip_magnetic: Optional[TipMagnetic] = spec(None, "term 1: tip-tip magnetic force")
+    tip_brake: Optional[TipBrake] = spec(None, "term 2: brake between touching tips")
+    ambient_brake: Optional[AmbientBrake] = spec(None, "term 3: brake in the ambient medium")
+    uniform_field: Optional[UniformField] = spec(None, "term 4: uniform external magnetic field")
+    plasma_filament: Optional[PlasmaFilament] = spec(None, "term 5: field of a plasma current filament")
+    yukawa: Optional[Yukawa] = spec(None, "term 6: screened electric repulsion of rod charges")
+    electric_field: Optional[ElectricField] = spec(None, "term 7: uniform electric field on rod charges")
+    electrodes: Optional[Electrodes] = spec(None, "term 8: electrode walls (case (i))")
+
+    def active(self):
+        """Names of the terms that are on, in MODEL.md order."""
+        return [f.name for f in dataclasses.fields(self) if getattr(self, f.name) is not None]
+
+
+@dataclass(frozen=True)
+class IntegratorParams:
+    dt: float = spec(1e-3, "time step (units t0); an accuracy knob", gt=0.0)
+    bond_force: str = spec("exact", "rigid-bond force: exact (MODEL.md section 4) or paper (Eq. 9 as printed)",
+                           choices=("exact", "paper"))
+    velocity_correction: bool = spec(True, "apply the paper's velocity correction, Eqs. (14-15), after each step")
+    position_projection: bool = spec(True, "restore each bond length to 1 about the rod centre after each step")
+
+
+@dataclass(frozen=True)
+class NeighbourParams:
+    skin: float = spec(0.3, "Verlet skin of the neighbour lists; rebuilt when a point moved more than skin/2", gt=0.0)
+
+
+@dataclass(frozen=True)
+class RunParams:
+    t_end: float = spec(10.0, "simulated time at which the run stops (units t0)", gt=0.0)
+
+
+@dataclass(frozen=True)
+class OutputParams:
+    interval: float = spec(1.0, "simulated time between saved frames; data are flushed to disk at each", gt=0.0)
+    file: Optional[str] = spec(None, "output HDF5 path (default: the scenario file name with .h5, in the working directory)")
+    velocities: bool = spec(True, "save tip velocities with every frame")
+
+
+@dataclass(frozen=True)
+class ScenarioInfo:
+    name: str = spec("unnamed", "short name of the scene")
+    description: str = spec("", "what the scene is and where its parameters come from")
+    seed: int = spec(1, "seed of every random draw (charges, placement)", ge=0)
+
+
+@dataclass(frozen=True)
+class Parameters:
+    """Everything a run needs, resolved and frozen."""
+
+    scenario: ScenarioInfo = spec(None, "name, description and seed", factory=ScenarioInfo)
+    rods: RodParams = spec(None, "the rods", factory=RodParams)
+    placement: PlacementParams = spec(None, "initial placement", factory=PlacementParams)
+    forces: ForceParams = spec(None, "force terms (a term not listed is not computed)", factory=ForceParams)
+    integrator: IntegratorParams = spec(None, "time integration", factory=IntegratorParams)
+    neighbours: NeighbourParams = spec(None, "neighbour lists", factory=NeighbourParams)
+    run: RunParams = spec(None, "run length", factory=RunParams)
+    output: OutputParams = spec(None, "output file", factory=OutputParams)
+
+    @property
+    def min_tip_distance(self) -> float:
+        d = self.placement.min_tip_distance
+        return 4.0 * self.rods.rstar if d is None else d
+
+    def to_dict(self) -> dict:
+        """Plain nested dict (tuples as lists), e.g. for JSON provenance."""
+        return _plain(dataclasses.asdict(self))
+
+
+def _plain(obj):
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return repr(obj)
+    return obj

@@ -1,0 +1,249 @@
+"""The simulation: state + force field + integrator, and the run loop.
+
+:class:`Simulation` is the object a script or notebook drives::
+
+    from selfas_graph import load_scenario, Simulation
+    sim = Simulation.from_scenario(load_scenario("scenarios/quick.toml"))
+    sim.run(t_end=5.0)
+    sim.observables()["energy_balance"]
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..kernels.pairs import close_pair_count
+from .forces import ForceField
+from .integrator import AdamsBashforth4
+from .params import Parameters
+from .state import State, random_state
+
+#: a bond whose length is off by more than this after a step is broken: no
+#: corrector recovers it meaningfully (typical per-step errors are < 1e-6)
+BOND_BREAK = 0.05
+#: a tip moving more than this (in rod lengths) in one step means the step is
+#: far beyond stability: the tip core (width r* ~ 0.06) is crossed in one step
+MAX_STEP_DISPLACEMENT = 0.25
+
+
+class NumericalFailure(RuntimeError):
+    """The run went numerically wrong; the message is a diagnosis."""
+
+    def __init__(self, message, step, rods=()):
+        super().__init__(message)
+        self.step = step
+        self.rods = list(rods)
+
+
+@dataclass
+class RunSummary:
+    steps: int = 0
+    wall_seconds: float = 0.0
+    t_start: float = 0.0
+    t_end: float = 0.0
+    max_bond_error: float = 0.0
+    energy_balance: float = float("nan")
+    energy_scale: float = float("nan")
+    frames: int = 0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def steps_per_second(self):
+        return self.steps / self.wall_seconds if self.wall_seconds > 0 else float("inf")
+
+
+class Simulation:
+    """Rigid magnetized rods under the scene's force terms.
+
+    One call of :meth:`step` does, in this order::
+
+        forces (tips, centres, external fields)
+        -> Adams-Bashforth update -> bond constraint (positions, velocities)
+        -> health check (NaN, broken bond, runaway step)
+
+    and :meth:`run` adds, after each step, the observers on their triggers
+    (progress callback; a frame with observables every ``output.interval``).
+
+    Parameters
+    ----------
+    params : Parameters
+    state : State, optional
+        Initial state; default: the random placement of MODEL.md section 8.
+    timing : bool
+        Record wall time per force term (``force_field.seconds``).
+    """
+
+    def __init__(self, params: Parameters, state: State | None = None, timing: bool = False):
+        self.params = params
+        self.state = random_state(params) if state is None else state
+        self.force_field = ForceField(params, self.state, timing=timing)
+        ip = params.integrator
+        self.integrator = AdamsBashforth4(self.force_field, ip.dt, exact_bond=ip.bond_force == "exact",
+                                          project=ip.position_projection, correct_velocity=ip.velocity_correction)
+        self.max_bond_error = 0.0
+        self._energy0 = None
+
+    @classmethod
+    def from_scenario(cls, scenario, **kw):
+        return cls(scenario.params, **kw)
+
+    @property
+    def dt(self) -> float:
+        return self.integrator.dt
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, n: int = 1) -> None:
+        """Advance by ``n`` steps (raises :class:`NumericalFailure` on breakdown)."""
+        if self._energy0 is None:
+            self._record_initial_energy()
+        for _ in range(n):
+            self.integrator.step(self.state)
+            self._check()
+
+    def _check(self):
+        st, integ = self.state, self.integrator
+        err = integ.bond_error_before
+        self.max_bond_error = max(self.max_bond_error, integ.bond_error_after)
+        x, v = st.position, st.velocity
+        vmax = float(np.abs(v).max(initial=0.0))
+        if math.isfinite(err) and err < BOND_BREAK and vmax * self.dt < MAX_STEP_DISPLACEMENT and math.isfinite(vmax):
+            return
+        self._fail(err, vmax)
+
+    def _fail(self, err, vmax):
+        st = self.state
+        x, v = st.position, st.velocity
+        bad_tip = ~np.isfinite(x).all(axis=1) | ~np.isfinite(v).all(axis=1)
+        speed = np.linalg.norm(np.nan_to_num(v, nan=np.inf), axis=1)
+        if bad_tip.any():
+            what = "a non-finite position or velocity (NaN or inf)"
+            tips = np.flatnonzero(bad_tip)
+        elif not err < BOND_BREAK:
+            what = f"a broken rigid bond (length error {err:.3g} > {BOND_BREAK})"
+            r = np.linalg.norm(x[0::2] - x[1::2], axis=1)
+            tips = 2 * np.argsort(-np.abs(r - 1.0))[:5]
+        else:
+            what = f"a runaway step (a tip moved {vmax * self.dt:.3g} rod lengths in one step)"
+            tips = np.argsort(-speed)[:5]
+        rods = sorted(set(int(k) // 2 for k in tips[:10]))
+        dominant = self.force_field.dominant_channel(np.asarray(tips[:10]))
+        cause = (f"largest force on them from the '{dominant}' term" if dominant != "none"
+                 else "no force term is on, so the integrator alone is at fault")
+        msg = (f"numerical failure at step {st.step} (t = {st.time:.6g}): {what}; rods involved: "
+               f"{rods[:10]}; {cause}. "
+               f"The time step integrator.dt = {self.dt:g} is the likely cause: try a smaller one "
+               f"(the stiff parts are the tip core and the brakes inside r*).")
+        raise NumericalFailure(msg, st.step, rods)
+
+    # ------------------------------------------------------------------ observables
+    def energies(self) -> dict:
+        """Kinetic and potential energy of each conservative term (unit tip masses)."""
+        st = self.state
+        e = {"kinetic": 0.5 * float(np.einsum("ij,ij->", st.velocity, st.velocity))}
+        e.update(self.force_field.potential_energy(st.position))
+        return e
+
+    def _record_initial_energy(self):
+        """E(0) - W(0), the reference of the energy balance, taken before the first step."""
+        self._energy0 = sum(self.energies().values()) - float(self.integrator.work.sum())
+
+    def observables(self) -> dict:
+        """Scalars and small vectors describing the current state (one row per saved frame)."""
+        st = self.state
+        obs = {}
+        energy = self.energies()
+        for k, v in energy.items():
+            obs[f"energy/{k}"] = v
+        total = sum(energy.values())
+        work = dict(zip(self.force_field.nonconservative, self.integrator.work))
+        for k, w in work.items():
+            obs[f"work/{k}"] = w
+        if self._energy0 is None:
+            self._energy0 = total - sum(work.values())
+        # E(t) - E(0) - W(t): zero up to the integration error (MODEL.md section 3: brakes
+        # and the plasma field do work, tracked per channel by the integrator)
+        obs["energy_total"] = total
+        obs["energy_balance"] = total - sum(work.values()) - self._energy0
+        obs["momentum"] = st.velocity.sum(axis=0)
+        obs["bond_error"] = self.integrator.bond_error_before
+        obs["contacts"] = float(self.contact_count())
+        return obs
+
+    def contact_count(self) -> int:
+        """Number of tip pairs of different rods closer than r*."""
+        nl = self.force_field
+        nl._bind(self.state.position, self.state.velocity)
+        tnl = nl.tip_neighbours()
+        return int(close_pair_count(self.state.position, tnl.start, tnl.index, self.params.rods.rstar))
+
+    # ------------------------------------------------------------------ run loop
+    def steps_for(self, duration: float) -> int:
+        """Number of steps that cover ``duration`` (rounded to the nearest step)."""
+        return int(round(duration / self.dt))
+
+    def run(self, t_end=None, writer=None, progress=None, progress_every=None) -> RunSummary:
+        """Run from the current time to ``t_end`` (default ``run.t_end``).
+
+        Parameters
+        ----------
+        t_end : float, optional
+        writer : RunWriter-like, optional
+            Receives a frame at the start (if it has none yet), every
+            ``output.interval`` of simulated time (nearest step), and at the end.
+        progress : callable(sim, done, total), optional
+            Called every ``progress_every`` steps (default: about 200 times a run).
+
+        Returns
+        -------
+        RunSummary
+        """
+        t_end = self.params.run.t_end if t_end is None else t_end
+        n_steps = max(0, self.steps_for(t_end - self.state.time))
+        every = max(1, int(round(self.params.output.interval / self.dt)))
+        pevery = progress_every or max(1, n_steps // 200)
+        summary = RunSummary(t_start=self.state.time)
+        bond_steps = np.empty(every, dtype=np.int64)
+        bond_vals = np.empty(every)
+        nb = 0
+        if writer is not None and writer.n_frames == 0:
+            self._write(writer, [], [])
+        t0 = time.perf_counter()
+        obs = None
+        done = 0
+        try:
+            for i in range(1, n_steps + 1):
+                self.step()
+                if writer is not None:
+                    # frames fall on absolute steps that are multiples of `every`, so at most
+                    # `every` steps pass between two frames
+                    bond_steps[nb] = self.state.step
+                    bond_vals[nb] = self.integrator.bond_error_before
+                    nb += 1
+                    if self.state.step % every == 0 or i == n_steps:
+                        obs = self._write(writer, bond_steps[:nb], bond_vals[:nb])
+                        nb = 0
+                if progress is not None and (i % pevery == 0 or i == n_steps):
+                    progress(self, i, n_steps)
+                done = i
+        finally:
+            summary.steps = done
+            summary.wall_seconds = time.perf_counter() - t0
+        summary.t_end = self.state.time
+        summary.max_bond_error = self.max_bond_error
+        obs = obs if obs is not None else self.observables()
+        summary.energy_balance = float(obs["energy_balance"])
+        summary.energy_scale = float(abs(obs["energy/kinetic"]) + sum(abs(v) for k, v in obs.items()
+                                                                    if k.startswith("work/")))
+        summary.frames = writer.n_frames if writer is not None else 0
+        return summary
+
+    def _write(self, writer, steps, values):
+        st = self.state
+        obs = self.observables()
+        writer.write_per_step(steps, values)
+        writer.write_frame(st.step, st.time, st.position, st.velocity, obs)
+        writer.flush()
+        return obs

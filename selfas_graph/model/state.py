@@ -1,0 +1,166 @@
+"""The state of the rods (struct of arrays) and its random initial placement."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .params import ChargeDistribution, Parameters
+
+
+class PlacementError(ValueError):
+    """The initial placement could not be made (too dense, or the box too small)."""
+
+
+@dataclass
+class State:
+    """Positions and velocities of all tips, and the per-rod constants.
+
+    Rod ``i`` has tip a at row ``2 i`` (magnetic charge ``+q_i``) and tip b at row
+    ``2 i + 1`` (``-q_i``); unit tip masses and unit rod length (MODEL.md section 2).
+
+    Attributes
+    ----------
+    position, velocity : (n_tips, 3) float64
+    tip_charge : (n_tips,) float64
+        Magnetic charge of each tip.
+    rod_charge : (n_rods,) float64
+        Electric charge Z_i of each rod.
+    step : int
+    time : float
+    """
+
+    position: np.ndarray
+    velocity: np.ndarray
+    tip_charge: np.ndarray
+    rod_charge: np.ndarray
+    step: int = 0
+    time: float = 0.0
+
+    @property
+    def n_tips(self) -> int:
+        return self.position.shape[0]
+
+    @property
+    def n_rods(self) -> int:
+        return self.position.shape[0] // 2
+
+    def centre(self) -> np.ndarray:
+        """Rod centres, (n_rods, 3)."""
+        return 0.5 * (self.position[0::2] + self.position[1::2])
+
+    def copy(self) -> "State":
+        return State(self.position.copy(), self.velocity.copy(), self.tip_charge.copy(),
+                     self.rod_charge.copy(), self.step, self.time)
+
+    @classmethod
+    def from_rods(cls, centre, axis, magnetic_charge, electric_charge, velocity=None):
+        """Build a state from rod centres and unit axes ``s = x_b - x_a``.
+
+        Parameters
+        ----------
+        centre, axis : (n_rods, 3) float64
+        magnetic_charge, electric_charge : (n_rods,) float64
+        velocity : (n_tips, 3) float64, optional (default zero)
+        """
+        centre = np.asarray(centre, dtype=np.float64).reshape(-1, 3)
+        axis = np.asarray(axis, dtype=np.float64).reshape(-1, 3)
+        axis = axis / np.linalg.norm(axis, axis=1)[:, None]
+        n = centre.shape[0]
+        position = np.empty((2 * n, 3))
+        position[0::2] = centre - 0.5 * axis
+        position[1::2] = centre + 0.5 * axis
+        q = np.asarray(magnetic_charge, dtype=np.float64).reshape(n)
+        tip_charge = np.empty(2 * n)
+        tip_charge[0::2] = q
+        tip_charge[1::2] = -q
+        v = np.zeros_like(position) if velocity is None else np.array(velocity, dtype=np.float64).reshape(2 * n, 3)
+        return cls(position, v, tip_charge, np.asarray(electric_charge, dtype=np.float64).reshape(n).copy())
+
+
+def draw_charges(dist: ChargeDistribution, n: int, rng, magnetic=None) -> np.ndarray:
+    """Per-rod charges from a distribution (MODEL.md section 8).
+
+    ``two_level`` gives exactly ``round(high_fraction * n)`` rods the high value,
+    at random positions in the rod list.
+    """
+    if dist.distribution == "constant":
+        return np.full(n, dist.value)
+    if dist.distribution == "uniform":
+        return rng.uniform(dist.low, dist.high, n)
+    if dist.distribution == "two_level":
+        out = np.full(n, dist.low)
+        out[rng.permutation(n)[: int(round(dist.high_fraction * n))]] = dist.high
+        return out
+    if dist.distribution == "magnetic":
+        return np.array(magnetic, dtype=np.float64)
+    raise ValueError(f"unknown charge distribution {dist.distribution!r}")
+
+
+def random_state(params: Parameters, rng=None) -> State:
+    """Random initial state of MODEL.md section 8, all from ``params.scenario.seed``.
+
+    Charges are drawn first, then the rods one by one: centre uniform in the box,
+    axis uniform on the sphere, accepted when both tips lie in the box and no tip
+    is closer than ``min_tip_distance`` to a tip of an accepted rod. Velocities zero.
+
+    Raises
+    ------
+    PlacementError
+        If a rod cannot be placed in ``placement.max_attempts`` draws.
+    """
+    rng = np.random.default_rng(params.scenario.seed) if rng is None else rng
+    n = params.rods.count
+    q = draw_charges(params.rods.magnetic_charge, n, rng)
+    z = draw_charges(params.rods.electric_charge, n, rng, magnetic=q)
+    box = np.array(params.placement.box, dtype=np.float64)
+    lo, hi = box[:, 0], box[:, 1]
+    dmin = params.min_tip_distance
+    cell = max(dmin, 1e-9)
+    grid: dict[tuple, list] = {}
+    centre = np.empty((n, 3))
+    axis = np.empty((n, 3))
+    accepted_tips = np.empty((2 * n, 3))
+
+    def clear(p):
+        if dmin <= 0.0:
+            return True
+        c = np.floor(p / cell).astype(np.int64)
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                for dz in (-1, 0, 1):
+                    for t in grid.get((c[0] + dx, c[1] + dy, c[2] + dz), ()):
+                        d = accepted_tips[t] - p
+                        if d @ d < dmin * dmin:
+                            return False
+        return True
+
+    batch = 64
+    for i in range(n):
+        placed = False
+        tries = 0
+        while not placed and tries < params.placement.max_attempts:
+            m = min(batch, params.placement.max_attempts - tries)
+            cs = rng.uniform(lo, hi, (m, 3))
+            ax = rng.normal(size=(m, 3))
+            ax /= np.linalg.norm(ax, axis=1)[:, None]
+            for j in range(m):
+                tries += 1
+                ta, tb = cs[j] - 0.5 * ax[j], cs[j] + 0.5 * ax[j]
+                if (ta < lo).any() or (ta > hi).any() or (tb < lo).any() or (tb > hi).any():
+                    continue
+                if clear(ta) and clear(tb):
+                    centre[i], axis[i] = cs[j], ax[j]
+                    for k, p in ((2 * i, ta), (2 * i + 1, tb)):
+                        accepted_tips[k] = p
+                        key = tuple(np.floor(p / cell).astype(np.int64))
+                        grid.setdefault(key, []).append(k)
+                    placed = True
+                    break
+        if not placed:
+            raise PlacementError(
+                f"placed only {i} of {n} rods: no free spot found in {params.placement.max_attempts} draws "
+                f"(placement.max_attempts); use fewer rods (rods.count), a larger box (placement.box) or a smaller "
+                f"placement.min_tip_distance (now {dmin:g})"
+            )
+    return State.from_rods(centre, axis, q, z)

@@ -1,0 +1,125 @@
+"""Every engine kernel equals its reference (tests/reference.py) on random configurations.
+
+Tolerance: rtol 1e-12 on each component, with an absolute floor of 1e-12 times
+the largest component, since sums of many terms of both signs can cancel to
+well below their size (the round-off is relative to the terms, not the sum).
+"""
+import numpy as np
+import pytest
+
+import reference as ref
+from conftest import random_rods
+from selfas_graph.kernels import fields as kf
+from selfas_graph.kernels import integrate as ki
+from selfas_graph.kernels import pairs as kp
+from selfas_graph.kernels import rigid as kr
+from selfas_graph.kernels import tips as kt
+from selfas_graph.model.neighbours import NeighbourList
+
+RSTAR, KAPPA = 0.06, 1.0
+
+
+def close(actual, expected):
+    scale = np.abs(expected).max(initial=0.0)
+    np.testing.assert_allclose(actual, expected, rtol=1e-12, atol=1e-12 * scale)
+
+
+@pytest.fixture
+def state(rng):
+    s = random_rods(40, rng, box=3.0)
+    # force some tips into each other's cores, and one pair exactly on top of each other
+    s.position[5] = s.position[40] + [0.02, 0.0, 0.01]
+    s.position[7] = s.position[50] + [0.0, 0.03, 0.0]
+    s.position[9] = s.position[60]
+    s.velocity[:] = rng.normal(size=s.velocity.shape)
+    return s
+
+
+def test_tip_tip_direct(state):
+    out = np.empty_like(state.position)
+    x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
+    kt.tip_tip_direct(x, y, z, state.tip_charge, RSTAR, KAPPA, out)
+    close(out, ref.tip_tip_force(state.position, state.tip_charge, RSTAR, KAPPA))
+
+
+def test_tip_tip_energy(state):
+    x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
+    e = kt.tip_tip_energy(x, y, z, state.tip_charge, RSTAR, KAPPA)
+    assert e == pytest.approx(ref.tip_tip_energy(state.position, state.tip_charge, RSTAR, KAPPA), rel=1e-12)
+
+
+def test_tip_brake(state):
+    nl = NeighbourList(RSTAR, 0.2, exclude_same_rod=True)
+    nl.build(state.position)
+    out = np.empty_like(state.position)
+    kp.tip_brake(state.position, state.velocity, nl.start, nl.index, RSTAR, 100.0, out)
+    expected = ref.tip_brake(state.position, state.velocity, RSTAR, 100.0)
+    assert np.abs(expected).max() > 0  # the fixture has tips in contact
+    close(out, expected)
+
+
+@pytest.mark.parametrize("cutoff", [0.7, 2.0, 100.0])
+def test_yukawa(state, cutoff):
+    c = state.centre()
+    nl = NeighbourList(cutoff, 0.3)
+    nl.build(c)
+    out = np.empty_like(c)
+    kp.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, cutoff, out)
+    close(out, ref.yukawa_force(c, state.rod_charge, 0.8, cutoff))
+    e = kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, cutoff)
+    assert e == pytest.approx(ref.yukawa_energy(c, state.rod_charge, 0.8, cutoff), rel=1e-12)
+
+
+def test_plasma(state):
+    out = np.empty_like(state.position)
+    args = (0.3, -0.2, 1.1, 7.5)
+    kf.plasma_field(state.position, *args, out)
+    close(out, ref.plasma_field(state.position, *args))
+    kf.plasma_force_on_tips(state.position, state.tip_charge, *args, out)
+    close(out, state.tip_charge[:, None] * ref.plasma_field(state.position, *args))
+
+
+def test_electrode_walls(state):
+    z_lo, z_hi = state.position[:, 2].min() + 0.03, state.position[:, 2].max() - 0.05
+    push, brake = np.empty_like(state.position), np.empty_like(state.position)
+    kf.electrode_walls(state.position, state.velocity, z_lo, z_hi, RSTAR, KAPPA, 100.0, push, brake)
+    ep, eb = ref.electrode_walls(state.position, state.velocity, z_lo, z_hi, RSTAR, KAPPA, 100.0)
+    assert np.abs(ep).max() > 0
+    close(push, ep)
+    close(brake, eb)
+
+
+@pytest.mark.parametrize("exact", [True, False])
+def test_bond_acceleration(state, rng, exact):
+    force = rng.normal(size=state.position.shape)
+    out = np.empty_like(force)
+    kr.bond_acceleration(force, state.velocity, state.position, exact, out)
+    close(out, ref.bond_acceleration(force, state.velocity, state.position, exact))
+
+
+@pytest.mark.parametrize("project", [True, False])
+@pytest.mark.parametrize("correct", [True, False])
+def test_constrain_bonds(state, rng, project, correct):
+    x = state.position + 1e-3 * rng.normal(size=state.position.shape)
+    v = state.velocity.copy()
+    ex, ev = ref.constrain_bonds(x, v, project, correct)
+    kr.constrain_bonds(x, v, project, correct)
+    close(x, ex)
+    close(v, ev)
+
+
+def test_ab4_update(rng):
+    y, d0, d1, d2, d3 = (rng.normal(size=(50, 3)) for _ in range(5))
+    out = np.empty_like(y)
+    ki.ab4_update(y, d0, d1, d2, d3, 0.01, out)
+    close(out, y + 0.01 / 24 * (55 * d0 - 59 * d1 + 37 * d2 - 9 * d3))
+
+
+def test_close_pair_count(state):
+    nl = NeighbourList(RSTAR, 0.3, exclude_same_rod=True)
+    nl.build(state.position)
+    n = kp.close_pair_count(state.position, nl.start, nl.index, RSTAR)
+    d = np.linalg.norm(state.position[:, None] - state.position[None], axis=-1)
+    rod = np.arange(len(d)) // 2
+    brute = np.triu((d < RSTAR) & (rod[:, None] != rod[None, :]), 1).sum()
+    assert n == brute >= 3

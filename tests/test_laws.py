@@ -1,0 +1,89 @@
+"""The scalar force laws of MODEL.md section 3 (terms 1, 6, 8) against their formulas."""
+import math
+
+import numpy as np
+import pytest
+
+from selfas_graph.kernels.laws import (tip_force_over_r, tip_potential, wall_potential, wall_push,
+                                       yukawa_force_over_r, yukawa_potential)
+
+RSTAR = 0.06
+
+
+@pytest.mark.parametrize("r", [0.07, 0.5, 1.0, 3.7, 25.0])
+@pytest.mark.parametrize("p", [-2.0, -1.0, 0.5, 4.0])
+def test_coulomb_outside_core(r, p):
+    """Outside r* the tip law is Coulomb's: f = p / r^2, U = p / r (term 1)."""
+    # 1e-14: one division and one sqrt of round-off
+    assert tip_force_over_r(r * r, p, RSTAR, 1.0) * r == pytest.approx(p / r**2, rel=1e-14)
+    assert tip_potential(r * r, p, RSTAR, 1.0) == pytest.approx(p / r, rel=1e-14)
+
+
+@pytest.mark.parametrize("p", [-1.0, 1.0, -3.0])
+@pytest.mark.parametrize("kappa", [0.0, 1.0, 5.0])
+def test_inner_branch_continuous_at_rstar(p, kappa):
+    """Force and potential are continuous at r* (the core adds 0 there)."""
+    eps = 1e-9
+    for law in (tip_force_over_r, tip_potential):
+        inside = law((RSTAR * (1 - eps)) ** 2, p, RSTAR, kappa)
+        outside = law((RSTAR * (1 + eps)) ** 2, p, RSTAR, kappa)
+        # a jump would be O(1/r*^2) ~ 300; continuity leaves O(eps / r*^2)
+        assert inside == pytest.approx(outside, rel=1e-7)
+
+
+def test_inner_branch_bounded_at_zero():
+    """At r -> 0 the force stays finite (|f| -> kappa / r*^2) and is 0 at r = 0 exactly, never NaN."""
+    kappa, p = 1.0, -1.0
+    for r in (1e-3, 1e-8, 1e-150):
+        f = tip_force_over_r(r * r, p, RSTAR, kappa) * r
+        assert math.isfinite(f)
+        # f(r) = p r / r*^3 + kappa (r* - r) / r*^3, which tends to kappa / r*^2 as r -> 0
+        assert f == pytest.approx((p * r + kappa * (RSTAR - r)) / RSTAR**3, rel=1e-12)
+        assert abs(f) <= kappa / RSTAR**2 * (1 + 1e-12)
+    assert tip_force_over_r(0.0, p, RSTAR, kappa) == 0.0
+    assert math.isfinite(tip_potential(0.0, p, RSTAR, kappa))
+
+
+def test_opposite_tips_rest_at_half_rstar():
+    """Two opposite tips with |q1 q2| = 1 and kappa = 1 rest at r = r*/2 (MODEL.md term 1)."""
+    r = RSTAR / 2
+    # the force there is a difference of two terms of size 1/(2 r*^2) ~ 140: round-off 1e-12
+    assert abs(tip_force_over_r(r * r, -1.0, RSTAR, 1.0) * r) < 1e-12
+    # and it is a minimum of U: the force points back to r*/2 from both sides
+    assert tip_force_over_r((0.4 * RSTAR) ** 2, -1.0, RSTAR, 1.0) > 0
+    assert tip_force_over_r((0.6 * RSTAR) ** 2, -1.0, RSTAR, 1.0) < 0
+
+
+def _central_difference(u, r, h):
+    return -(u(r + h) - u(r - h)) / (2 * h)
+
+
+@pytest.mark.parametrize("r", [0.01, 0.03, 0.059, 0.061, 0.2, 1.0, 4.0])
+def test_tip_force_is_minus_gradient(r):
+    """f = -dU/dr for term 1 on both branches (central differences)."""
+    p, kappa = -1.3, 2.0
+    h = 1e-6 * max(r, RSTAR)
+    numeric = _central_difference(lambda s: tip_potential(s * s, p, RSTAR, kappa), r, h)
+    # central difference error O(h^2 U''') plus round-off U/h * 1e-16: both < 1e-7 relative here
+    assert tip_force_over_r(r * r, p, RSTAR, kappa) * r == pytest.approx(numeric, rel=1e-6)
+
+
+@pytest.mark.parametrize("r", [0.1, 0.5, 1.0, 2.5, 7.0])
+@pytest.mark.parametrize("screening", [0.6, 1.0, 2.4])
+def test_yukawa_force_is_minus_gradient(r, screening):
+    """Term 6: f = Z Z exp(-r/R_D)(1/r^2 + 1/(R_D r)) = -dU/dr with U = Z Z exp(-r/R_D)/r."""
+    zz = 1.7
+    numeric = _central_difference(lambda s: yukawa_potential(s * s, zz, screening), r, 1e-6 * r)
+    analytic = zz * math.exp(-r / screening) * (1 / r**2 + 1 / (screening * r))
+    assert yukawa_force_over_r(r * r, zz, screening) * r == pytest.approx(analytic, rel=1e-14)
+    assert analytic == pytest.approx(numeric, rel=1e-7)  # central-difference truncation ~1e-10
+
+
+@pytest.mark.parametrize("h", [-0.02, 0.0, 0.01, 0.05, 0.0599, 0.1])
+def test_wall_push_is_minus_gradient(h):
+    """Term 8: the wall push kappa (r* - h)/r*^3 is -dU/dh and vanishes for h >= r*."""
+    kappa = 1.5
+    numeric = _central_difference(lambda s: wall_potential(s, RSTAR, kappa), h, 1e-7)
+    assert wall_push(h, RSTAR, kappa) == pytest.approx(numeric, rel=1e-6, abs=1e-6)
+    if h >= RSTAR:
+        assert wall_push(h, RSTAR, kappa) == 0.0
