@@ -197,7 +197,8 @@ _INVALID = object()
 
 
 def _describe(value):
-    text = repr(value)
+    """The value as the user wrote it (TOML spelling for booleans) and its type."""
+    text = ("true" if value else "false") if isinstance(value, bool) else repr(value)
     if len(text) > 60:
         text = text[:57] + "..."
     return f"{text} ({type(value).__name__})"

@@ -1,0 +1,117 @@
+"""``selfas-graph simulate``: output layout, protection of existing files, exit codes."""
+import shutil
+import subprocess
+
+import h5py
+import numpy as np
+import pytest
+
+from selfas_graph import RunFile
+from selfas_graph.cli.main import main
+
+TINY = """
+[scenario]
+name = "tiny"
+seed = 3
+[rods]
+count = 8
+[placement]
+box = [[-2, 2], [-2, 2], [-1.9, 1.9]]
+[forces.tip_magnetic]
+[forces.tip_brake]
+[forces.ambient_brake]
+[forces.uniform_field]
+[forces.yukawa]
+[forces.electrodes]
+gap = 3.8
+[integrator]
+dt = 1e-3
+[run]
+t_end = 0.05
+[output]
+interval = 0.01
+"""
+
+
+@pytest.fixture
+def scenario(tmp_path):
+    path = tmp_path / "tiny.toml"
+    path.write_text(TINY)
+    return path
+
+
+def test_simulate_writes_h5md_run(scenario, tmp_path, capsys):
+    out = tmp_path / "run.h5"
+    assert main(["simulate", str(scenario), "-o", str(out), "--progress", "lines"]) == 0
+    text = capsys.readouterr().out
+    assert "done: 50 steps" in text and "max bond-length error" in text and "energy balance" in text
+    with h5py.File(out, "r") as f:
+        assert tuple(f["h5md"].attrs["version"]) == (1, 1)
+        assert f["h5md/creator"].attrs["name"] == "selfas-graph"
+        assert "name" in f["h5md/author"].attrs
+        pos = f["particles/tips/position"]
+        assert pos["value"].shape == (6, 16, 3)  # frames at t = 0, 0.01, ..., 0.05
+        np.testing.assert_array_equal(pos["step"][:], [0, 10, 20, 30, 40, 50])
+        np.testing.assert_allclose(pos["time"][:], [0, 0.01, 0.02, 0.03, 0.04, 0.05], atol=1e-12)
+        assert f["particles/tips/velocity/value"].shape == (6, 16, 3)
+        for name in ("energy/kinetic", "energy/tip_magnetic", "work/tip_brake", "energy_balance",
+                     "bond_error", "momentum", "contacts"):
+            assert f[f"observables/{name}/value"].shape[0] == 6, name
+        assert f["observables/bond_error_per_step/value"].shape == (50,)
+        meta = f["parameters/selfas_graph"].attrs
+        assert meta["status"] == "finished" and meta["seed"] == 3
+        assert "[forces.tip_brake]" in meta["scenario_text"]
+        for key in ("parameters_json", "version", "command_line", "mpi_ranks", "numba_threads"):
+            assert key in meta
+    with RunFile(out) as run:
+        assert run.n_frames == 6 and run.parameters["rods"]["count"] == 8
+        assert np.isfinite(run.position(-1)).all()
+
+
+def test_existing_output_is_never_overwritten_without_force(scenario, tmp_path, capsys):
+    out = tmp_path / "precious.h5"
+    out.write_bytes(b"results of last week")
+    assert main(["simulate", str(scenario), "-o", str(out)]) == 2
+    assert "exists; pass --force" in capsys.readouterr().err
+    assert out.read_bytes() == b"results of last week"
+    assert main(["simulate", str(scenario), "-o", str(out), "--force", "--progress", "none"]) == 0
+    with RunFile(out) as run:
+        assert run.n_frames == 6
+
+
+def test_bad_scenario_exits_2_and_writes_nothing(scenario, tmp_path, capsys):
+    out = tmp_path / "run.h5"
+    code = main(["simulate", str(scenario), "-o", str(out), "--set", "integrator.dt=0"])
+    assert code == 2
+    assert "integrator.dt: 0.0 is out of range; valid: > 0" in capsys.readouterr().err
+    assert not out.exists()
+    assert main(["simulate", str(tmp_path / "missing.toml")]) == 2
+    assert main(["simulate", str(scenario), "-o", str(tmp_path / "no" / "dir" / "x.h5")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_dry_run_writes_nothing(scenario, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["simulate", str(scenario), "--dry-run", "--t-end", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "dry run" in out and '"steps": 2000' in out
+    assert not list(tmp_path.glob("*.h5"))
+
+
+def test_numerical_failure_exits_3_with_diagnosis_and_no_nan_in_file(scenario, tmp_path, capsys):
+    out = tmp_path / "run.h5"
+    code = main(["simulate", str(scenario), "-o", str(out), "--set", "integrator.dt=0.05",
+                 "--set", "output.interval=0.05", "--t-end", "100", "--progress", "none"])
+    assert code == 3
+    err = capsys.readouterr().err
+    assert "numerical failure at step" in err and "integrator.dt = 0.05" in err
+    with h5py.File(out, "r") as f:
+        assert f["parameters/selfas_graph"].attrs["status"].startswith("failed")
+        assert np.isfinite(f["particles/tips/position/value"][:]).all()
+
+
+def test_console_script_installed():
+    exe = shutil.which("selfas-graph")
+    assert exe, "the selfas-graph console script is not on PATH (pip install -e .)"
+    res = subprocess.run([exe, "--version"], capture_output=True, text=True, timeout=60)
+    assert res.returncode == 0 and "selfas-graph" in res.stdout
