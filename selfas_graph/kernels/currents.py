@@ -1,0 +1,392 @@
+"""Kernels for the rod currents: their magnetic field and the Lorentz force on them.
+
+MODEL.md section 3, terms 9 and 10, in reduced units (MODEL.md section 1): the field
+of an infinite straight current J at distance d is ``2 J / d``, the force on a current
+element is ``J dl x B`` and the force on a magnetic tip is ``q B``.
+
+Layout (MODEL.md section 2): rod ``i`` has tip a at row ``2 i`` and tip b at row
+``2 i + 1`` of ``position``; its axis is ``s_i = x_b - x_a`` and its current ``J_i``
+is positive when it flows from tip a to tip b.
+
+Only the rods listed in ``active_rod`` (the rods that carry a current after the last
+circuit solve) are visited, so rods without current cost nothing. The caller (model
+layer) validates shapes and indices: numba does not bounds-check, and
+``active_rod`` must hold distinct rod indices in ``[0, n_rods)``.
+
+Glossary of the short symbols used inside the kernels:
+
+=========  ==================================================================
+``A, B``   segment ends (tip a and tip b of a rod)
+``s``      segment vector ``B - A``
+``a, b``   ``x - A`` and ``x - B`` for the field point ``x``
+``c``      ``s x a``; ``|c| = |s| rho`` with rho the distance of x to the line
+``w``      wire radius, ``D / 2`` (MODEL.md term 9)
+``t, wt``  Gauss-Legendre nodes and weights on ``[0, 1]``
+``J``      rod current
+=========  ==================================================================
+"""
+import operator
+
+import numpy as np
+
+from ._jit import inline, njit_parallel, prange
+
+
+# --------------------------------------------------------------------------------------
+# scalar law
+# --------------------------------------------------------------------------------------
+#
+# Derivation of the segment field (MODEL.md term 9).
+#
+# Biot-Savart in reduced units: dB = J dl x r / |r|^3, with r = x - x' (this is the
+# normalisation that gives 2 J / d for an infinite wire). Along the segment
+# x' = A + u s_hat, u in [0, |s|], dl = s_hat du, so dl x r = s_hat x a for every u:
+# the direction is fixed, c_hat = (s x a) / |s x a|. With rho the distance of x to the
+# line and u0 = s_hat . a the position of the foot of the perpendicular,
+#     |B| = J rho int_0^|s| du / (rho^2 + (u0 - u)^2)^(3/2)
+#         = (J / rho) [ (u0 - u) / sqrt(rho^2 + (u0 - u)^2) ]_{u=|s|}^{u=0}
+#         = (J / rho) (s_hat . a / |a| - s_hat . b / |b|)      (cos(theta_1) - cos(theta_2)).
+# Using |c| = |s| rho to remove rho and s_hat:
+#     B = J c (s.a/|a| - s.b/|b|) / |c|^2.
+# An infinite wire has bracket -> 2 and gives |B| = 2 J / rho, as required.
+#
+# Regularisation: |c|^2 = |s|^2 rho^2 is replaced by |s|^2 (rho^2 + w^2). The field then
+# behaves as 2 J rho / (rho^2 + w^2) near the wire (at most J / w, reached at rho = w)
+# instead of diverging as 2 J / rho; far away it is the w = 0 field times
+# rho^2 / (rho^2 + w^2), i.e. a relative change w^2 / (rho^2 + w^2) ~ (w / rho)^2.
+#
+# Degenerate points: on a segment end (|a| = 0 or |b| = 0) the bracket is 0/0 while
+# c = 0 exactly; the w > 0 field tends to zero there (c -> 0, denominator -> w^2 |s|^2),
+# so the law returns exactly zero. With w = 0 a point on the segment's line has
+# denominator 0: outside the segment the true Biot-Savart field is zero (dl x r = 0),
+# on the segment itself it is undefined; the law returns zero in both cases, so the
+# result is always finite. A zero-length segment also gives zero.
+
+
+@inline
+def segment_field(px, py, pz, ax, ay, az, bx, by, bz, current, wire_radius):
+    """Magnetic field at point x of a straight finite segment A -> B carrying ``current``.
+
+    MODEL.md section 3, term 9 (regularised Biot-Savart law of a finite wire)::
+
+        s = B - A,  a = x - A,  b = x - B,
+        B_seg = J (s x a) (s.a/|a| - s.b/|b|) / (|s x a|^2 + w^2 |s|^2)
+
+    See the derivation in the comment above this function. Returns exactly zero when
+    x is on an end of the segment (|a| = 0 or |b| = 0: the limit of the w > 0 field)
+    or when the denominator vanishes (w = 0 and x on the segment's line, or a
+    zero-length segment), so the result is always finite.
+
+    Parameters
+    ----------
+    px, py, pz : float
+        Field point x.
+    ax, ay, az : float
+        Start A of the segment (tip a of a rod).
+    bx, by, bz : float
+        End B of the segment (tip b of a rod).
+    current : float
+        Current J, positive when it flows from A to B (reduced units, J0).
+    wire_radius : float
+        Wire radius w >= 0 (D / 2 in MODEL.md term 9) that keeps the field finite
+        near the wire; w = 0 gives the bare line-current field.
+
+    Returns
+    -------
+    (Bx, By, Bz) : tuple of float
+        Field at x, in reduced units (B0).
+    """
+    sx = bx - ax
+    sy = by - ay
+    sz = bz - az
+    a_x = px - ax
+    a_y = py - ay
+    a_z = pz - az
+    b_x = px - bx
+    b_y = py - by
+    b_z = pz - bz
+    na = np.sqrt(a_x * a_x + a_y * a_y + a_z * a_z)
+    nb = np.sqrt(b_x * b_x + b_y * b_y + b_z * b_z)
+    # c = s x a
+    cx = sy * a_z - sz * a_y
+    cy = sz * a_x - sx * a_z
+    cz = sx * a_y - sy * a_x
+    ss = sx * sx + sy * sy + sz * sz
+    den = cx * cx + cy * cy + cz * cz + wire_radius * wire_radius * ss
+    if na == 0.0 or nb == 0.0 or den == 0.0:
+        return 0.0, 0.0, 0.0
+    bracket = (sx * a_x + sy * a_y + sz * a_z) / na - (sx * b_x + sy * b_y + sz * b_z) / nb
+    f = current * bracket / den
+    return f * cx, f * cy, f * cz
+
+
+@inline
+def _active_rod_field(px, py, pz, skip_rod, position, active_rod, current, wire_radius):
+    """Sum of ``segment_field`` over the active rods at point x, skipping one rod.
+
+    The one loop over sources shared by ``rod_current_field`` and
+    ``current_force_on_tips`` (MODEL.md term 9).
+
+    Parameters
+    ----------
+    px, py, pz : float
+        Field point x.
+    skip_rod : int
+        Rod whose own segment is left out (-1: none).
+    position : ndarray, shape (n_tips, 3), float64
+        Tip positions.
+    active_rod : ndarray, shape (n_active,), int64
+        Rods that carry a current; only these are summed.
+    current : ndarray, shape (n_rods,), float64
+        Rod currents J (a -> b positive).
+    wire_radius : float
+        Wire radius w (MODEL.md term 9).
+
+    Returns
+    -------
+    (Bx, By, Bz) : tuple of float
+        Total field of the active rods' currents at x.
+    """
+    fx = 0.0
+    fy = 0.0
+    fz = 0.0
+    for r in range(active_rod.shape[0]):
+        j = active_rod[r]
+        if j == skip_rod:
+            continue
+        ia = 2 * j
+        ib = 2 * j + 1
+        gx, gy, gz = segment_field(
+            px, py, pz,
+            position[ia, 0], position[ia, 1], position[ia, 2],
+            position[ib, 0], position[ib, 1], position[ib, 2],
+            current[j], wire_radius,
+        )
+        fx += gx
+        fy += gy
+        fz += gz
+    return fx, fy, fz
+
+
+# --------------------------------------------------------------------------------------
+# loops
+# --------------------------------------------------------------------------------------
+
+
+@njit_parallel
+def rod_current_field(point, exclude_rod, position, active_rod, current, wire_radius, out):
+    """Field of the active rods' currents at arbitrary points (MODEL.md term 9 / 10).
+
+    ``out[p] = sum over active rods j != exclude_rod[p] of B_seg(point[p]; j)``.
+    Used for the field at the Lorentz quadrature points (excluding the rod the point
+    belongs to) and for diagnostics (B_z of the rod currents, MODEL.md section 7).
+    Parallel over points; each point writes only its own row.
+
+    Parameters
+    ----------
+    point : ndarray, shape (m, 3), float64
+        Field points.
+    exclude_rod : ndarray, shape (m,), int64
+        For each point, the rod whose own segment is skipped (-1: none).
+    position : ndarray, shape (n_tips, 3), float64
+        Tip positions (rod i: rows 2 i and 2 i + 1).
+    active_rod : ndarray, shape (n_active,), int64
+        Distinct indices of the rods with nonzero current; only these are summed.
+        May be empty.
+    current : ndarray, shape (n_rods,), float64
+        Rod currents J, positive from tip a to tip b.
+    wire_radius : float
+        Wire radius w = D / 2 (MODEL.md term 9).
+    out : ndarray, shape (m, 3), float64
+        Overwritten with the total field at each point (reduced units, B0).
+    """
+    for p in prange(point.shape[0]):
+        fx, fy, fz = _active_rod_field(
+            point[p, 0], point[p, 1], point[p, 2], exclude_rod[p],
+            position, active_rod, current, wire_radius,
+        )
+        out[p, 0] = fx
+        out[p, 1] = fy
+        out[p, 2] = fz
+
+
+@njit_parallel
+def current_force_on_tips(position, charge, active_rod, current, wire_radius, out):
+    """Force of the rod currents' field on the magnetic tips, ADDED to ``out`` (term 9).
+
+    ``out[k] += charge[k] * sum over active rods j != k // 2 of B_seg(x_k; j)``:
+    a tip feels every current-carrying rod except its own. ``out`` is accumulated into,
+    not overwritten, so that the force field can sum its terms in one array. Parallel
+    over tips; each tip writes only its own row.
+
+    Parameters
+    ----------
+    position : ndarray, shape (n_tips, 3), float64
+        Tip positions (rod i: rows 2 i and 2 i + 1).
+    charge : ndarray, shape (n_tips,), float64
+        Magnetic charge of each tip (+q_i on tip a, -q_i on tip b).
+    active_rod : ndarray, shape (n_active,), int64
+        Distinct indices of the rods with nonzero current; only these are summed.
+        May be empty (then ``out`` is unchanged).
+    current : ndarray, shape (n_rods,), float64
+        Rod currents J, positive from tip a to tip b.
+    wire_radius : float
+        Wire radius w = D / 2 (MODEL.md term 9).
+    out : ndarray, shape (n_tips, 3), float64
+        Tip forces; the term-9 force is added to it (reduced units, F_M0).
+    """
+    if active_rod.shape[0] == 0:
+        return
+    for k in prange(position.shape[0]):
+        q = charge[k]
+        if q == 0.0:
+            continue
+        fx, fy, fz = _active_rod_field(
+            position[k, 0], position[k, 1], position[k, 2], k // 2,
+            position, active_rod, current, wire_radius,
+        )
+        out[k, 0] += q * fx
+        out[k, 1] += q * fy
+        out[k, 2] += q * fz
+
+
+@njit_parallel
+def quadrature_points(position, active_rod, gl_t, out):
+    """Gauss-Legendre points ``x_a + t s`` along each active rod (MODEL.md term 10).
+
+    Row order is rod-major: ``out[r * n_gl + g]`` is node ``gl_t[g]`` of rod
+    ``active_rod[r]``. Parallel over active rods; each writes its own ``n_gl`` rows.
+
+    Parameters
+    ----------
+    position : ndarray, shape (n_tips, 3), float64
+        Tip positions (rod i: rows 2 i and 2 i + 1).
+    active_rod : ndarray, shape (n_active,), int64
+        Indices of the rods carrying a current. May be empty.
+    gl_t : ndarray, shape (n_gl,), float64
+        Quadrature nodes on [0, 1] (see ``gauss_legendre_01``).
+    out : ndarray, shape (n_active * n_gl, 3), float64
+        Overwritten with the quadrature points.
+    """
+    n_gl = gl_t.shape[0]
+    for r in prange(active_rod.shape[0]):
+        j = active_rod[r]
+        ia = 2 * j
+        ib = 2 * j + 1
+        for g in range(n_gl):
+            t = gl_t[g]
+            row = r * n_gl + g
+            for d in range(3):
+                out[row, d] = position[ia, d] + t * (position[ib, d] - position[ia, d])
+
+
+@njit_parallel
+def lorentz_force_on_rods(position, active_rod, current, field, gl_t, gl_w, out):
+    """Lorentz force on the rod currents, shared between the tips, ADDED to ``out``.
+
+    MODEL.md section 3, term 10::
+
+        F_i = J_i int_0^1 s_i x B_tot(x_a + t s_i) dt
+            ~ sum_g J_i w_g (s_i x B_g)
+
+    The element ``dF_g = J_i w_g (s_i x B_g)`` goes ``(1 - t_g)`` to tip a and ``t_g``
+    to tip b. This keeps the total force, and also the torque: about the rod centre
+    x_c, ``(x_a - x_c) x (1 - t) dF + (x_b - x_c) x t dF = (t - 1/2) s x dF``, which is
+    the torque of dF applied at ``x_a + t s``. Parallel over active rods; each rod
+    writes only its own two tips (``active_rod`` entries must be distinct).
+
+    Parameters
+    ----------
+    position : ndarray, shape (n_tips, 3), float64
+        Tip positions (rod i: rows 2 i and 2 i + 1).
+    active_rod : ndarray, shape (n_active,), int64
+        Distinct indices of the rods carrying a current. May be empty.
+    current : ndarray, shape (n_rods,), float64
+        Rod currents J, positive from tip a to tip b.
+    field : ndarray, shape (n_active * n_gl, 3), float64
+        Total field B_tot at the quadrature points, rod-major as produced by
+        ``quadrature_points`` (uniform + plasma + external objects + other rods'
+        currents, summed by the caller).
+    gl_t : ndarray, shape (n_gl,), float64
+        Quadrature nodes on [0, 1].
+    gl_w : ndarray, shape (n_gl,), float64
+        Quadrature weights on [0, 1] (sum to 1).
+    out : ndarray, shape (n_tips, 3), float64
+        Tip forces; the term-10 force is added to it (reduced units, F_M0).
+    """
+    n_gl = gl_t.shape[0]
+    for r in prange(active_rod.shape[0]):
+        j = active_rod[r]
+        ia = 2 * j
+        ib = 2 * j + 1
+        sx = position[ib, 0] - position[ia, 0]
+        sy = position[ib, 1] - position[ia, 1]
+        sz = position[ib, 2] - position[ia, 2]
+        cur = current[j]
+        fax = 0.0
+        fay = 0.0
+        faz = 0.0
+        fbx = 0.0
+        fby = 0.0
+        fbz = 0.0
+        for g in range(n_gl):
+            row = r * n_gl + g
+            f_x = field[row, 0]
+            f_y = field[row, 1]
+            f_z = field[row, 2]
+            cw = cur * gl_w[g]
+            # dF = J w (s x B)
+            dx = cw * (sy * f_z - sz * f_y)
+            dy = cw * (sz * f_x - sx * f_z)
+            dz = cw * (sx * f_y - sy * f_x)
+            t = gl_t[g]
+            u = 1.0 - t
+            fax += u * dx
+            fay += u * dy
+            faz += u * dz
+            fbx += t * dx
+            fby += t * dy
+            fbz += t * dz
+        out[ia, 0] += fax
+        out[ia, 1] += fay
+        out[ia, 2] += faz
+        out[ib, 0] += fbx
+        out[ib, 1] += fby
+        out[ib, 2] += fbz
+
+
+# --------------------------------------------------------------------------------------
+# plain Python helper
+# --------------------------------------------------------------------------------------
+
+
+def gauss_legendre_01(n):
+    """Nodes and weights of the n-point Gauss-Legendre rule on [0, 1].
+
+    The rule integrates polynomials of degree <= 2 n - 1 exactly (term 10's
+    accuracy knob, MODEL.md section 3).
+
+    Parameters
+    ----------
+    n : int
+        Number of nodes, >= 1.
+
+    Returns
+    -------
+    t : ndarray, shape (n,), float64
+        Nodes in (0, 1), increasing.
+    w : ndarray, shape (n,), float64
+        Weights, positive, summing to 1.
+
+    Raises
+    ------
+    ValueError
+        If ``n < 1``.
+    """
+    n = operator.index(n)
+    if n < 1:
+        raise ValueError(f"Gauss-Legendre quadrature needs at least 1 node, got n = {n}")
+    x, w = np.polynomial.legendre.leggauss(n)
+    t = np.ascontiguousarray(0.5 * (x + 1.0), dtype=np.float64)
+    w = np.ascontiguousarray(0.5 * w, dtype=np.float64)
+    return t, w
