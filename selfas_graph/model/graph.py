@@ -1,0 +1,699 @@
+"""The connectivity graph of rods and contacts, and its topology (MODEL.md section 5).
+
+Two layers:
+
+* :func:`classify_rods` -- arrays in, :class:`Topology` out: which rods are free,
+  in clusters, dead ends or current-carrying filaments, and which structure each
+  rod belongs to.
+* :class:`ConnectivityGraph` -- the connectivity *state*: a networkx graph changed
+  by contact events only (never rebuilt per step), with :meth:`~ConnectivityGraph.topology`
+  and :meth:`~ConnectivityGraph.solve` (nodal analysis, :mod:`.circuit`).
+
+Topology rule
+-------------
+Tips joined by ideal contacts form one merged electrical node; rods are edges
+between merged nodes. Each conductor contact carries a *key*: contacts with the
+same key are one attachment (case (i): all anode contacts share the anode's key,
+all cathode contacts the cathode's; case (ii): every filament contact has its
+own key, since the filament potential varies along it). Each key becomes one
+attachment node joined to the merged nodes holding its contacts, and a virtual
+node X is joined to every attachment node. A rod is **FILAMENT** iff it lies on a
+simple path between two *different* attachment nodes, i.e. iff its edge lies on a
+cycle through X, i.e. iff it is in a biconnected component that contains X
+(``networkx.biconnected_component_edges``). Merging same-key contacts first is
+what keeps a loop from the anode back to the anode from counting as a filament.
+
+A balanced bridge rod is FILAMENT (it lies on such a path) although its current
+is zero; the circuit solve reports the current, this module the topology.
+
+Structures are the connected components of rods joined by tip-tip contacts;
+conductors do **not** join structures (two aggregates that both touch the anode
+are two structures). A rod with no contact at all is FREE and has no structure.
+"""
+from __future__ import annotations
+
+import dataclasses
+import operator
+from collections.abc import Callable, Iterable, Mapping
+
+import networkx as nx
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from selfas_graph.model import events as ev
+from selfas_graph.model.circuit import (
+    CircuitSolution,
+    _as_count,
+    _as_index_array,
+    merge_tips,
+    solve_circuit,
+)
+
+__all__ = [
+    "FREE",
+    "CLUSTER",
+    "DEAD_END",
+    "FILAMENT",
+    "ROLE_NAMES",
+    "Topology",
+    "classify_rods",
+    "ConnectivityGraph",
+]
+
+#: rod roles (``Topology.role``)
+FREE = 0  #: no contacts at all
+CLUSTER = 1  #: stuck to other rods; the structure touches no conductor
+DEAD_END = 2  #: in a structure touching a conductor, on no path between different attachments
+FILAMENT = 3  #: on a path between conductor attachments of different potential
+ROLE_NAMES = {FREE: "free", CLUSTER: "cluster", DEAD_END: "dead_end", FILAMENT: "filament"}
+
+
+# --------------------------------------------------------------------------- topology
+@dataclasses.dataclass(frozen=True, eq=False)
+class Topology:
+    """Roles of the rods and the structures they form (arrays are read-only).
+
+    Attributes
+    ----------
+    role : (n_rods,) int8
+        FREE, CLUSTER, DEAD_END or FILAMENT.
+    structure : (n_rods,) int64
+        Structure id of each rod, ``-1`` for free rods. Ids are ``0 .. n_structures-1``.
+    structure_size : (n_structures,) int64
+        Number of rods in each structure.
+    largest_structure : int
+        Id of the structure with the most rods (lowest id on ties), -1 if none.
+    n_filament, n_dead_end, n_cluster, n_free : int
+        Number of rods with each role.
+    has_short_circuit : bool
+        ``n_filament > 0``: a conducting path joins two different conductor attachments.
+    """
+
+    role: np.ndarray
+    structure: np.ndarray
+    structure_size: np.ndarray
+    largest_structure: int
+    n_filament: int
+    n_dead_end: int
+    n_cluster: int
+    n_free: int
+    has_short_circuit: bool
+
+    @property
+    def n_structures(self) -> int:
+        """Number of structures (connected aggregates of at least one rod with a contact)."""
+        return int(self.structure_size.shape[0])
+
+
+def _frozen(arr: np.ndarray) -> np.ndarray:
+    arr.setflags(write=False)
+    return arr
+
+
+def classify_rods(n_rods, tip_contacts, conductor_tip, conductor_node_key) -> Topology:
+    """Classify rods as free, cluster, dead end or filament (MODEL.md section 5).
+
+    Parameters
+    ----------
+    n_rods : int
+        Number of rods; rod ``i`` has tips ``2 i`` and ``2 i + 1``.
+    tip_contacts : (m, 2) int64
+        Pairs of tips in contact.
+    conductor_tip : (k,) int64
+        Tips touching a conductor, one entry per contact.
+    conductor_node_key : (k,) int64
+        Attachment key of each conductor contact: contacts with equal keys are one
+        attachment (case (i): the conductor id; case (ii) filament: a key unique
+        to the contact).
+
+    Returns
+    -------
+    Topology
+
+    Notes
+    -----
+    Cost: two ``connected_components`` calls on all rods, and
+    ``networkx.biconnected_component_edges`` only on the components that touch at
+    least two different attachment keys (no other component can hold a filament).
+    """
+    n_rods = _as_count(n_rods, "n_rods")
+    n_tips = 2 * n_rods
+    tip_contacts = _as_index_array(tip_contacts, "tip_contacts", 2, n_tips)
+    conductor_tip = _as_index_array(conductor_tip, "conductor_tip", 1, n_tips)
+    key = _as_index_array(conductor_node_key, "conductor_node_key", 1, None)
+    if key.shape != conductor_tip.shape:
+        raise ValueError(
+            f"conductor_node_key has shape {key.shape}, conductor_tip has shape "
+            f"{conductor_tip.shape}: one key per conductor contact"
+        )
+
+    n_nodes, node_of_tip = merge_tips(n_tips, tip_contacts)
+    u = node_of_tip[0::2]
+    v = node_of_tip[1::2]
+
+    touched = np.zeros(n_tips, dtype=bool)
+    touched[tip_contacts.ravel()] = True
+    touched[conductor_tip] = True
+    free = ~(touched[0::2] | touched[1::2])
+
+    # components of merged nodes joined by rods (self-loop rods are harmless here)
+    adj = sp.coo_matrix((np.ones(n_rods, dtype=np.int32), (u, v)), shape=(n_nodes, n_nodes)).tocsr()
+    n_comp, comp = connected_components(adj, directed=False)
+    rod_comp = comp[u]
+
+    # structures: components holding at least one non-free rod, renumbered 0..S-1
+    structure = np.full(n_rods, -1, dtype=np.int64)
+    comp_ids, inverse = np.unique(rod_comp[~free], return_inverse=True)
+    structure[~free] = inverse
+    structure_size = np.bincount(inverse, minlength=comp_ids.shape[0]).astype(np.int64)
+    largest = int(np.argmax(structure_size)) if structure_size.size else -1
+
+    # components touching a conductor, and those touching >= 2 different keys
+    cnode = node_of_tip[conductor_tip]
+    ccomp = comp[cnode]
+    comp_touch = np.zeros(n_comp, dtype=bool)
+    comp_touch[ccomp] = True
+    key_values, key_index = np.unique(key, return_inverse=True)
+    n_keys = key_values.shape[0]
+    comp_key = np.unique(ccomp * max(n_keys, 1) + key_index)  # distinct (component, key)
+    n_keys_of_comp = np.bincount(comp_key // max(n_keys, 1), minlength=n_comp)
+    candidate = n_keys_of_comp >= 2
+
+    filament = np.zeros(n_rods, dtype=bool)
+    if candidate.any():
+        filament = _filament_rods(n_nodes, u, v, comp, candidate, cnode, key_index, n_keys)
+
+    role = np.full(n_rods, CLUSTER, dtype=np.int8)
+    role[comp_touch[rod_comp]] = DEAD_END
+    role[filament] = FILAMENT
+    role[free] = FREE
+    counts = np.bincount(role, minlength=4)
+    return Topology(
+        role=_frozen(role),
+        structure=_frozen(structure),
+        structure_size=_frozen(structure_size),
+        largest_structure=largest,
+        n_filament=int(counts[FILAMENT]),
+        n_dead_end=int(counts[DEAD_END]),
+        n_cluster=int(counts[CLUSTER]),
+        n_free=int(counts[FREE]),
+        has_short_circuit=bool(counts[FILAMENT] > 0),
+    )
+
+
+def _filament_rods(n_nodes, u, v, comp, candidate, cnode, key_index, n_keys) -> np.ndarray:
+    """Rods in a biconnected component with the virtual node X (see module docstring).
+
+    Auxiliary simple graph H: merged nodes ``0 .. n_nodes-1`` of the candidate
+    components, attachment of key ``j`` as node ``n_nodes + j``, X as node
+    ``n_nodes + n_keys``; edges are the rods, the contacts (merged node ->
+    attachment) and X -> attachment. Edges are coded ``lo * stride + hi``.
+
+    Parallel rods collapse to one edge of H. That is exact: two parallel rods
+    share the block of their common edge (or form a block of their own, which
+    cannot contain X). Self-loop rods are never filament.
+
+    Two exact reductions run before networkx, in numpy/scipy (they cut the
+    graph networkx walks to its cyclic skeleton). Leaf peeling: an edge to a
+    node of degree 1 (not X) is a bridge, a block without X; peeling layer by
+    layer leaves the 2-core. Series reduction: a node w != X of degree 2
+    in H, with edges (a, w) and (w, b), lies on a cycle through X only if that
+    cycle uses both edges, so both edges are in X's block or neither is, and
+    the same holds for the single edge (a, b) that replaces them. A maximal
+    chain of degree-2 nodes is therefore replaced by one edge between its two
+    end nodes; if both ends are the same node the chain and that node form a
+    cycle that is a block of its own, filament iff the node is X (a single rod
+    or chain touching two attachments); a closed ring of degree-2 nodes touches
+    nothing.
+    """
+    x_node = n_nodes + n_keys
+    n_h = x_node + 1
+    stride = np.int64(n_h)
+    rod_in = candidate[comp[u]] & (u != v)
+    rod_code = np.minimum(u, v) * stride + np.maximum(u, v)
+    att_in = candidate[comp[cnode]]
+    att_code = cnode[att_in] * stride + (n_nodes + key_index[att_in])
+    keys_used = np.unique(key_index[att_in]) + n_nodes
+    # unique edges of H; attachment < X, so (attachment, X) is (lo, hi)
+    code = np.unique(np.concatenate([rod_code[rod_in], att_code, keys_used * stride + x_node]))
+    p, q = code // stride, code % stride
+
+    # ---- leaf peeling (the 2-core of H): a node of degree 1 other than X ends a
+    # bridge, a block without X; dangling trees go layer by layer
+    core = np.ones(code.shape[0], dtype=bool)
+    live = np.arange(code.shape[0])
+    while live.size:
+        deg = np.bincount(p[live], minlength=n_h) + np.bincount(q[live], minlength=n_h)
+        leaf = deg == 1
+        leaf[x_node] = False
+        drop = leaf[p[live]] | leaf[q[live]]
+        if not drop.any():
+            break
+        core[live[drop]] = False
+        live = live[~drop]
+
+    # ---- series reduction: label chains of degree-2 nodes with scipy components
+    code_all = code
+    p, q, code = p[core], q[core], code[core]
+    deg = np.bincount(p, minlength=n_h) + np.bincount(q, minlength=n_h)
+    two = deg == 2
+    two[x_node] = False
+    inner = two[p] & two[q]
+    n_inner = int(inner.sum())
+    _, label = connected_components(
+        sp.coo_matrix((np.ones(n_inner, dtype=np.int32), (p[inner], q[inner])), shape=(n_h, n_h)),
+        directed=False,
+    )
+    w = np.where(two[p], p, q)  # a degree-2 end of the edge, if it has one
+    in_chain = two[p] | two[q]
+    chain = np.where(in_chain, label[w], -1)
+    # end edges (exactly one degree-2 end): each chain has two, or none if it is a ring
+    end = two[p] ^ two[q]
+    end_chain = chain[end]
+    end_node = np.where(two[p], q, p)[end]
+    order = np.argsort(end_chain, kind="stable")
+    end_chain, end_node = end_chain[order], end_node[order]
+    assert np.array_equal(end_chain[0::2], end_chain[1::2]), "a chain of degree-2 nodes has two ends"
+    chain_id = end_chain[0::2]
+    a, b = end_node[0::2], end_node[1::2]
+    # a == b: the chain closes a cycle through that one node, a block of its own,
+    # which contains X only if that node is X
+    open_chain = a != b
+    x_loop = chain_id[(a == b) & (a == x_node)]
+    chain_id = chain_id[open_chain]
+    chain_code = np.minimum(a, b)[open_chain] * stride + np.maximum(a, b)[open_chain]
+
+    reduced = np.unique(np.concatenate([code[~in_chain], chain_code]))
+    graph = nx.Graph()
+    graph.add_edges_from(zip((reduced // stride).tolist(), (reduced % stride).tolist()))
+
+    # flatten the blocks with a block id, then keep the blocks that contain X
+    block_lo: list[int] = []
+    block_hi: list[int] = []
+    block_id: list[int] = []
+    for bid, block in enumerate(nx.biconnected_component_edges(graph)):
+        for e0, e1 in block:
+            block_lo.append(e0)
+            block_hi.append(e1)
+        block_id.extend([bid] * len(block))
+    e0 = np.asarray(block_lo, dtype=np.int64)
+    e1 = np.asarray(block_hi, dtype=np.int64)
+    bid = np.asarray(block_id, dtype=np.int64)
+    in_x = np.isin(bid, np.unique(bid[(e0 == x_node) | (e1 == x_node)]))
+    x_codes = np.minimum(e0[in_x], e1[in_x]) * stride + np.maximum(e0[in_x], e1[in_x])
+
+    # ---- back to the edges of H, then to the rods
+    chain_in_x = np.zeros(n_h, dtype=bool)
+    chain_in_x[chain_id] = np.isin(chain_code, x_codes)
+    chain_in_x[x_loop] = True
+    edge_in_x = np.zeros(code_all.shape[0], dtype=bool)
+    edge_in_x[core] = np.where(in_chain, chain_in_x[np.maximum(chain, 0)], np.isin(code, x_codes))
+    where = np.minimum(np.searchsorted(code_all, rod_code), code_all.shape[0] - 1)
+    return rod_in & edge_in_x[where]
+
+
+# --------------------------------------------------------------------------- state
+_DERIVED_KINDS = (ev.SHORT_CIRCUIT, ev.OPEN_CIRCUIT)
+
+
+class ConnectivityGraph:
+    """Connectivity state of the rods: a networkx graph changed by events only.
+
+    Nodes are tips ``0 .. n_tips-1`` (ints), ``("conductor", c)`` for a conductor
+    with a fixed potential (electrodes, case (i)), and ``("contact", k, c)`` for
+    each contact of tip ``k`` with a conductor whose potential is given per
+    contact (the case (ii) filament). Edges carry ``kind="rod"`` (one resistor per
+    rod, added at construction) or ``kind="contact"`` (ideal). Potentials are the
+    ``potential`` attribute of the conductor / contact node.
+
+    Parameters
+    ----------
+    n_rods : int
+        Number of rods.
+    conductor_potential : dict[int, float | None]
+        Conductor id (``events.CONDUCTOR_*``) -> fixed potential (units R0 J0), or
+        ``None`` when the potential is given per contact (``-delta_J0 z``).
+        Conductors not listed are unknown and rejected.
+
+    Notes
+    -----
+    Beside the networkx graph the object keeps insertion-ordered dicts of the
+    contacts, an index (not a second state: every change goes through the methods
+    below, which update both) that makes :meth:`arrays` cost a few ms for 10^5
+    contacts instead of an O(edges) walk over networkx's adjacency.
+    """
+
+    def __init__(self, n_rods: int, conductor_potential: Mapping[int, float | None]):
+        self.n_rods = _as_count(n_rods, "n_rods")
+        self.n_tips = 2 * self.n_rods
+        self._fixed: dict[int, float] = {}
+        self._per_contact: set[int] = set()
+        for c, pot in dict(conductor_potential).items():
+            c = self._conductor_id(c)
+            if pot is None:
+                self._per_contact.add(c)
+            else:
+                pot = float(pot)
+                if not np.isfinite(pot):
+                    raise ValueError(f"conductor {c} potential must be finite, got {pot}")
+                self._fixed[c] = pot
+        self.graph = nx.Graph()
+        self.graph.add_nodes_from(range(self.n_tips))
+        self.graph.add_edges_from(
+            ((2 * i, 2 * i + 1) for i in range(self.n_rods)), kind="rod"
+        )
+        for c, pot in self._fixed.items():
+            self.graph.add_node(("conductor", c), potential=pot)
+        self._tip_contact: dict[tuple[int, int], None] = {}
+        self._conductor_contact: dict[tuple[int, int], float] = {}
+        self._topology: Topology | None = None
+        self._arrays: dict[str, np.ndarray] | None = None
+        self.changed = True  # nothing solved yet
+
+    # ------------------------------------------------------------------ validation
+    @staticmethod
+    def _conductor_id(c) -> int:
+        try:
+            return operator.index(c)
+        except TypeError:
+            raise ValueError(f"conductor id must be an integer, got {c!r}") from None
+
+    def _tip(self, k, name: str = "tip") -> int:
+        try:
+            k = operator.index(k)
+        except TypeError:
+            raise ValueError(f"{name} must be an integer, got {k!r}") from None
+        if not 0 <= k < self.n_tips:
+            raise ValueError(f"{name} {k} out of range [0, {self.n_tips})")
+        return k
+
+    def _tip_pair(self, k, l) -> tuple[int, int]:
+        k, l = self._tip(k), self._tip(l)
+        if k // 2 == l // 2:
+            raise ValueError(
+                f"tips {k} and {l} are the two tips of rod {k // 2}: a rod cannot touch itself"
+            )
+        return (k, l) if k < l else (l, k)
+
+    def _known_conductor(self, c) -> int:
+        c = self._conductor_id(c)
+        if c not in self._fixed and c not in self._per_contact:
+            known = sorted(self._fixed) + sorted(self._per_contact)
+            name = ev.CONDUCTOR_NAMES.get(c, "?")
+            raise ValueError(f"unknown conductor {c} ({name}); this graph has conductors {known}")
+        return c
+
+    def _conductor_node(self, k: int, c: int):
+        return ("conductor", c) if c in self._fixed else ("contact", k, c)
+
+    def _touch(self) -> None:
+        self.changed = True
+        self._topology = None
+        self._arrays = None
+
+    # ------------------------------------------------------------------ mutations
+    def add_tip_contact(self, k, l) -> None:
+        """Tips ``k`` and ``l`` (of different rods) come into contact.
+
+        Raises ValueError for a tip out of range, the two tips of one rod, or a
+        contact that already exists (an event stream never repeats a contact).
+        """
+        k, l = self._tip_pair(k, l)
+        if (k, l) in self._tip_contact:
+            raise ValueError(f"tips {k} and {l} are already in contact")
+        self.graph.add_edge(k, l, kind="contact")
+        self._tip_contact[(k, l)] = None
+        self._touch()
+
+    def remove_tip_contact(self, k, l) -> None:
+        """Tips ``k`` and ``l`` release. Raises ValueError if they are not in contact."""
+        k, l = self._tip_pair(k, l)
+        if (k, l) not in self._tip_contact:
+            raise ValueError(f"cannot release tips {k} and {l}: they are not in contact")
+        self.graph.remove_edge(k, l)
+        del self._tip_contact[(k, l)]
+        self._touch()
+
+    def add_conductor_contact(self, k, c, potential: float | None = None) -> None:
+        """Tip ``k`` touches conductor ``c``.
+
+        For a conductor with a per-contact potential, ``potential`` is the
+        contact's potential (``-delta_J0 z``); ``None`` leaves it unset (NaN)
+        until :meth:`set_contact_potential`, and :meth:`solve` refuses unset
+        potentials. For a fixed-potential conductor ``potential`` must be None or
+        equal to the conductor's potential.
+        """
+        k = self._tip(k)
+        c = self._known_conductor(c)
+        if (k, c) in self._conductor_contact:
+            raise ValueError(f"tip {k} already touches conductor {c} ({ev.CONDUCTOR_NAMES.get(c, '?')})")
+        if c in self._fixed:
+            if potential is not None and float(potential) != self._fixed[c]:
+                raise ValueError(
+                    f"conductor {c} has fixed potential {self._fixed[c]}; "
+                    f"cannot give contact of tip {k} potential {potential}"
+                )
+            pot = self._fixed[c]
+        else:
+            pot = np.nan if potential is None else self._finite(potential, k, c)
+            self.graph.add_node(("contact", k, c), potential=pot)
+        self.graph.add_edge(k, self._conductor_node(k, c), kind="contact")
+        self._conductor_contact[(k, c)] = pot
+        self._touch()
+
+    def remove_conductor_contact(self, k, c) -> None:
+        """Tip ``k`` leaves conductor ``c``. Raises ValueError if it does not touch it."""
+        k = self._tip(k)
+        c = self._known_conductor(c)
+        if (k, c) not in self._conductor_contact:
+            raise ValueError(
+                f"cannot release tip {k} from conductor {c} ({ev.CONDUCTOR_NAMES.get(c, '?')}): "
+                "it does not touch it"
+            )
+        node = self._conductor_node(k, c)
+        if c in self._fixed:
+            self.graph.remove_edge(k, node)
+        else:
+            self.graph.remove_node(node)
+        del self._conductor_contact[(k, c)]
+        self._touch()
+
+    def set_contact_potential(self, k, c, potential: float) -> None:
+        """Set the potential of tip ``k``'s contact with per-contact conductor ``c``.
+
+        Case (ii): the caller updates ``-delta_J0 z`` as contact heights move.
+        Marks the graph changed (the currents must be solved again) but not the
+        topology.
+        """
+        k = self._tip(k)
+        c = self._known_conductor(c)
+        if c in self._fixed:
+            raise ValueError(f"conductor {c} has a fixed potential; it has no per-contact potential")
+        if (k, c) not in self._conductor_contact:
+            raise ValueError(f"tip {k} does not touch conductor {c}")
+        pot = self._finite(potential, k, c)
+        self.graph.nodes[("contact", k, c)]["potential"] = pot
+        self._conductor_contact[(k, c)] = pot
+        self.changed = True
+        self._arrays = None
+
+    @staticmethod
+    def _finite(potential, k, c) -> float:
+        pot = float(potential)
+        if not np.isfinite(pot):
+            raise ValueError(f"potential of tip {k} on conductor {c} must be finite, got {pot}")
+        return pot
+
+    # ------------------------------------------------------------------ events
+    def apply(
+        self,
+        events: Iterable,
+        contact_potential: Callable[[int, int], float] | None = None,
+    ) -> list[tuple]:
+        """Apply a batch of contact events and return the derived circuit events.
+
+        Parameters
+        ----------
+        events : EVENT_DTYPE array or iterable of ``(step, time, kind, a, b)``
+            TIP_CONTACT / TIP_RELEASE (a, b = tips), CONDUCTOR_CONTACT /
+            CONDUCTOR_RELEASE (a = tip, b = conductor id). SHORT_CIRCUIT and
+            OPEN_CIRCUIT rows are derived data and are skipped, so a recorded log
+            can be replayed as is.
+        contact_potential : callable ``(tip, conductor) -> float``, optional
+            Potential of a new contact with a per-contact conductor; without it
+            such contacts start unset (see :meth:`add_conductor_contact`).
+
+        Returns
+        -------
+        list of ``(step, time, kind, a, b)`` tuples
+            ``[(step, time, SHORT_CIRCUIT, n_filament, -1)]`` if the batch made the
+            network go from no filament to a filament,
+            ``[(step, time, OPEN_CIRCUIT, -1, -1)]`` for the reverse, else ``[]``;
+            step and time are those of the batch's last row. The comparison is
+            between the graph before and after the batch (the topology before is
+            the cached one in a run driven by ``apply``, so it costs nothing).
+
+        Raises
+        ------
+        ValueError
+            For an invalid row (unknown kind or any error of the methods above).
+            The batch is then rolled back: the graph is as before the call.
+        """
+        short_before = self.topology().has_short_circuit
+        undo: list[Callable[[], None]] = []
+        last = None
+        try:
+            for row in events:
+                step, time, kind, a, b = (row[i] for i in range(5))
+                kind = int(kind)
+                last = (int(step), float(time))
+                if kind == ev.TIP_CONTACT:
+                    self.add_tip_contact(a, b)
+                    undo.append(lambda a=a, b=b: self.remove_tip_contact(a, b))
+                elif kind == ev.TIP_RELEASE:
+                    self.remove_tip_contact(a, b)
+                    undo.append(lambda a=a, b=b: self.add_tip_contact(a, b))
+                elif kind == ev.CONDUCTOR_CONTACT:
+                    c = self._known_conductor(b)
+                    pot = None
+                    if contact_potential is not None and c in self._per_contact:
+                        pot = contact_potential(int(a), c)
+                    self.add_conductor_contact(a, c, pot)
+                    undo.append(lambda a=a, c=c: self.remove_conductor_contact(a, c))
+                elif kind == ev.CONDUCTOR_RELEASE:
+                    c = self._known_conductor(b)
+                    tip = self._tip(a)
+                    old = self._conductor_contact.get((tip, c))
+                    self.remove_conductor_contact(a, c)
+                    old = None if c in self._fixed or old is None or np.isnan(old) else old
+                    undo.append(lambda a=a, c=c, old=old: self.add_conductor_contact(a, c, old))
+                elif kind in _DERIVED_KINDS:
+                    continue
+                else:
+                    raise ValueError(f"unknown event kind {kind} in row {tuple(row)}")
+        except Exception:
+            for fn in reversed(undo):
+                fn()
+            raise
+        if last is None or not undo:
+            return []
+        topo = self.topology()
+        if topo.has_short_circuit == short_before:
+            return []
+        step, time = last
+        if topo.has_short_circuit:
+            return [(step, time, ev.SHORT_CIRCUIT, topo.n_filament, -1)]
+        return [(step, time, ev.OPEN_CIRCUIT, -1, -1)]
+
+    # ------------------------------------------------------------------ queries
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The contacts as arrays (for HDF5 and for the solvers).
+
+        Returns
+        -------
+        dict with
+            ``tip_contacts`` (m, 2) int64, rows ``(k, l)`` with ``k < l``, sorted;
+            ``conductor_tip`` (k,) int64, ``conductor_id`` (k,) int64 and
+            ``conductor_potential`` (k,) float64 (NaN where a per-contact potential
+            is unset), sorted by (tip, conductor).
+        """
+        if self._arrays is None:
+            if self._tip_contact:
+                tc = np.array(list(self._tip_contact), dtype=np.int64)
+                tc = tc[np.lexsort((tc[:, 1], tc[:, 0]))]
+            else:
+                tc = np.zeros((0, 2), dtype=np.int64)
+            if self._conductor_contact:
+                kc = np.array(list(self._conductor_contact), dtype=np.int64)
+                pot = np.fromiter(self._conductor_contact.values(), dtype=np.float64)
+                order = np.lexsort((kc[:, 1], kc[:, 0]))
+                kc, pot = kc[order], pot[order]
+            else:
+                kc = np.zeros((0, 2), dtype=np.int64)
+                pot = np.zeros(0)
+            self._arrays = {
+                "tip_contacts": _frozen(tc),
+                "conductor_tip": _frozen(np.ascontiguousarray(kc[:, 0])),
+                "conductor_id": _frozen(np.ascontiguousarray(kc[:, 1])),
+                "conductor_potential": _frozen(pot),
+            }
+        return dict(self._arrays)
+
+    def conductor_node_key(self, arrays: dict[str, np.ndarray] | None = None) -> np.ndarray:
+        """Attachment key of each conductor contact of :meth:`arrays` (see :func:`classify_rods`).
+
+        Fixed-potential conductor ``c`` -> ``c``; per-contact conductors -> a key
+        unique to the contact, above every conductor id.
+        """
+        arrays = self.arrays() if arrays is None else arrays
+        cid = arrays["conductor_id"]
+        base = max(list(self._fixed) + list(self._per_contact) + [-1]) + 1
+        per = np.isin(cid, np.fromiter(self._per_contact, dtype=np.int64, count=len(self._per_contact)))
+        return np.where(per, base + np.arange(cid.shape[0]), cid).astype(np.int64)
+
+    def topology(self) -> Topology:
+        """Roles and structures of the current graph (cached until the next contact change)."""
+        if self._topology is None:
+            arr = self.arrays()
+            self._topology = classify_rods(
+                self.n_rods, arr["tip_contacts"], arr["conductor_tip"], self.conductor_node_key(arr)
+            )
+        return self._topology
+
+    def solve(self) -> CircuitSolution:
+        """Potentials and rod currents of the current graph; clears :attr:`changed`.
+
+        Raises ValueError if a per-contact potential is unset.
+        """
+        arr = self.arrays()
+        pot = arr["conductor_potential"]
+        if np.isnan(pot).any():
+            i = np.flatnonzero(np.isnan(pot))
+            pairs = list(zip(arr["conductor_tip"][i].tolist(), arr["conductor_id"][i].tolist()))
+            raise ValueError(f"unset contact potential for (tip, conductor) {pairs[:10]}")
+        sol = solve_circuit(self.n_tips, arr["tip_contacts"], arr["conductor_tip"], pot)
+        self.changed = False
+        return sol
+
+    @property
+    def has_short_circuit(self) -> bool:
+        """Whether a filament joins two different conductor attachments now."""
+        return self.topology().has_short_circuit
+
+    # ------------------------------------------------------------------ rebuild
+    @classmethod
+    def from_arrays(
+        cls,
+        n_rods: int,
+        conductor_potential: Mapping[int, float | None],
+        arrays: Mapping[str, np.ndarray],
+    ) -> "ConnectivityGraph":
+        """Rebuild a graph from :meth:`arrays` output (e.g. read back from HDF5).
+
+        Per-contact potentials are taken from ``arrays["conductor_potential"]``
+        (NaN = unset); for fixed-potential conductors the ``conductor_potential``
+        mapping given here wins over the stored value.
+        """
+        g = cls(n_rods, conductor_potential)
+        tc = _as_index_array(arrays["tip_contacts"], "tip_contacts", 2, g.n_tips)
+        ct = _as_index_array(arrays["conductor_tip"], "conductor_tip", 1, g.n_tips)
+        cid = _as_index_array(arrays["conductor_id"], "conductor_id", 1, None)
+        pot = np.asarray(arrays["conductor_potential"], dtype=np.float64).reshape(-1)
+        if not (ct.shape == cid.shape == pot.shape):
+            raise ValueError(
+                "conductor_tip, conductor_id and conductor_potential must have one entry per "
+                f"contact, got shapes {ct.shape}, {cid.shape}, {pot.shape}"
+            )
+        for k, l in tc.tolist():
+            g.add_tip_contact(k, l)
+        for k, c, p in zip(ct.tolist(), cid.tolist(), pot.tolist()):
+            per = c in g._per_contact
+            g.add_conductor_contact(k, c, p if per and not np.isnan(p) else None)
+        return g
+
+    def __repr__(self) -> str:
+        return (
+            f"ConnectivityGraph(n_rods={self.n_rods}, tip_contacts={len(self._tip_contact)}, "
+            f"conductor_contacts={len(self._conductor_contact)}, changed={self.changed})"
+        )
