@@ -14,6 +14,7 @@ from .._version import __version__
 #: subcommand -> (module, one-line help)
 COMMANDS = {
     "simulate": ("selfas_graph.cli.simulate", "run a scenario and write an HDF5 run file"),
+    "topology": ("selfas_graph.cli.topology", "structures, filaments, currents and events of a saved frame"),
 }
 
 EXIT_USAGE = 2

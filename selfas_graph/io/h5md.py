@@ -13,6 +13,16 @@ Layout of a run file::
     /observables/bond_error_per_step   step, value: the largest bond error of every step
     /parameters/selfas_graph    attrs: scenario_text, parameters_json, version, command_line,
                                 seed, mpi_ranks, numba_threads, created, status
+    /events                     (n_events,) records (step, time, kind, a, b); attrs kind_names
+    /graph                      the connectivity graph at every saved frame (if contacts are on):
+        step, time                  (n_frames,)
+        tip_contacts                (sum m_f, 2) tip pairs in contact; tip_contacts_count (n_frames,)
+        conductor_tip, conductor_id, conductor_potential
+                                    (sum k_f,) tip-conductor contacts; conductor_contacts_count (n_frames,)
+        role                        (n_frames, n_rods) int8: 0 free, 1 cluster, 2 dead end, 3 filament
+        current                     (n_frames, n_rods) rod currents J_i (units J0), 0 without a circuit
+        potential                   (n_frames, n_tips) tip potentials (units R0 J0), NaN if floating
+        attrs conductor_ids, conductor_potentials, role_names
 
 Only one process writes. Every frame is followed by a flush, so a run that is
 killed keeps everything up to its last saved frame. ``status`` is "running"
@@ -28,6 +38,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from ..model.events import CONDUCTOR_NAMES, EVENT_DTYPE, KIND_NAMES
+
 H5MD_VERSION = (1, 1)
 
 
@@ -39,9 +51,11 @@ class RunFileError(ValueError):
     """A file that is not a readable selfas-graph run."""
 
 
-def _growable(group, name, shape, dtype):
+def _growable(group, name, shape, dtype, compress=False):
+    rows = max(1, min(1024, 2 ** 20 // max(1, int(np.prod(shape)) * 8)))
+    extra = dict(compression="gzip", compression_opts=4, shuffle=True) if compress else {}
     return group.create_dataset(name, shape=(0,) + shape, maxshape=(None,) + shape, dtype=dtype,
-                                chunks=(max(1, min(1024, 2 ** 20 // max(1, int(np.prod(shape)) * 8))),) + shape)
+                                chunks=(rows,) + shape, **extra)
 
 
 def _append(ds, value):
@@ -133,6 +147,57 @@ class RunWriter:
         if len(steps):
             _append(self._per_step[0], np.asarray(steps, dtype=np.int64))
             _append(self._per_step[1], np.asarray(values, dtype=np.float64))
+
+    def write_events(self, rows):
+        """Append event rows ``(step, time, kind, a, b)``."""
+        if "events" not in self.f:
+            ds = self.f.create_dataset("events", shape=(0,), maxshape=(None,), dtype=EVENT_DTYPE, chunks=(4096,))
+            ds.attrs["kind_names"] = json.dumps({int(k): v for k, v in KIND_NAMES.items()})
+            ds.attrs["conductor_names"] = json.dumps({int(k): v for k, v in CONDUCTOR_NAMES.items()})
+        if len(rows):
+            _append(self.f["events"], np.array([tuple(r) for r in rows], dtype=EVENT_DTYPE))
+
+    def write_graph(self, step, t, arrays, role, current, potential, conductor_potential):
+        """Append the graph state of one frame.
+
+        Parameters
+        ----------
+        arrays : dict from ``ConnectivityGraph.arrays()``
+        role : (n_rods,) int8
+        current : (n_rods,) float64
+        potential : (n_tips,) float64
+        conductor_potential : dict conductor id -> fixed potential (None if per contact)
+        """
+        if "graph" not in self.f:
+            g = self.f.create_group("graph")
+            g.attrs["conductor_ids"] = np.array(sorted(conductor_potential), dtype=np.int64)
+            g.attrs["conductor_potentials"] = np.array(
+                [np.nan if conductor_potential[c] is None else conductor_potential[c] for c in sorted(conductor_potential)])
+            g.attrs["role_names"] = json.dumps({0: "free", 1: "cluster", 2: "dead_end", 3: "filament"})
+            _growable(g, "step", (), "<i8")
+            _growable(g, "time", (), "<f8")
+            _growable(g, "tip_contacts", (2,), "<i8")
+            _growable(g, "tip_contacts_count", (), "<i8")
+            for name, dt in (("conductor_tip", "<i8"), ("conductor_id", "<i8"), ("conductor_potential", "<f8")):
+                _growable(g, name, (), dt)
+            _growable(g, "conductor_contacts_count", (), "<i8")
+            _growable(g, "role", role.shape, "i1", compress=True)
+            _growable(g, "current", current.shape, "<f8", compress=True)
+            _growable(g, "potential", potential.shape, "<f8", compress=True)
+        g = self.f["graph"]
+        _append(g["step"], step)
+        _append(g["time"], t)
+        tc = arrays["tip_contacts"]
+        if len(tc):
+            _append(g["tip_contacts"], tc)
+        _append(g["tip_contacts_count"], len(tc))
+        if len(arrays["conductor_tip"]):
+            for name in ("conductor_tip", "conductor_id", "conductor_potential"):
+                _append(g[name], arrays[name])
+        _append(g["conductor_contacts_count"], len(arrays["conductor_tip"]))
+        _append(g["role"], role)
+        _append(g["current"], current)
+        _append(g["potential"], potential)
 
     def set_attrs(self, **attrs):
         for k, v in attrs.items():
@@ -231,8 +296,58 @@ class RunFile:
     def rod_charge(self) -> np.ndarray:
         return self.f["particles/rods/charge"][:]
 
+    @property
+    def has_graph(self) -> bool:
+        return "graph/step" in self.f and self.f["graph/step"].shape[0] > 0
+
+    def events(self, until_step=None) -> np.ndarray:
+        """Event records (structured array, fields step, time, kind, a, b), optionally up to a step."""
+        if "events" not in self.f:
+            return np.zeros(0, dtype=EVENT_DTYPE)
+        e = self.f["events"][:]
+        return e if until_step is None else e[e["step"] <= until_step]
+
+    def graph_frame_index(self, frame=None, t=None) -> int:
+        if not self.has_graph:
+            raise RunFileError(f"{self.path}: the file has no graph data (the run had contacts.enabled = false, "
+                               f"or was written before any frame)")
+        n = self.f["graph/step"].shape[0]
+        if t is not None:
+            return int(np.argmin(np.abs(self.f["graph/time"][:] - t)))
+        k = -1 if frame is None else int(frame)
+        if not -n <= k < n:
+            raise RunFileError(f"{self.path}: frame {k} out of range; the file has frames 0..{n - 1}")
+        return k % n
+
+    def graph(self, frame=None, t=None) -> dict:
+        """The graph state of one frame: contact arrays, roles, currents, potentials, step and time."""
+        k = self.graph_frame_index(frame, t)
+        g = self.f["graph"]
+        tc_count = g["tip_contacts_count"][:]
+        cc_count = g["conductor_contacts_count"][:]
+        t0, t1 = int(tc_count[:k].sum()), int(tc_count[:k + 1].sum())
+        c0, c1 = int(cc_count[:k].sum()), int(cc_count[:k + 1].sum())
+        ids = g.attrs["conductor_ids"]
+        pots = g.attrs["conductor_potentials"]
+        return {
+            "frame": k,
+            "step": int(g["step"][k]),
+            "time": float(g["time"][k]),
+            "tip_contacts": g["tip_contacts"][t0:t1].reshape(-1, 2),
+            "conductor_tip": g["conductor_tip"][c0:c1],
+            "conductor_id": g["conductor_id"][c0:c1],
+            "conductor_potential": g["conductor_potential"][c0:c1],
+            "role": g["role"][k],
+            "current": g["current"][k],
+            "potential": g["potential"][k],
+            "conductors": {int(c): (None if np.isnan(p) else float(p)) for c, p in zip(ids, pots)},
+        }
+
     def observable_names(self):
-        return sorted(self.f["observables"].keys())
+        """Names of all observables, nested ones as ``group/name`` (e.g. ``energy/kinetic``)."""
+        names = []
+        self.f["observables"].visit(lambda name: names.append(name[:-len("/value")]) if name.endswith("/value") else None)
+        return sorted(names)
 
     def observable(self, name):
         """(time, value) arrays of a per-frame observable, or (step, value) for per-step series."""

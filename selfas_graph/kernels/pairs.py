@@ -131,3 +131,66 @@ def yukawa_energy(centre, rod_charge, start, index, screening, cutoff):
                     acc += yukawa_potential(r2, zz, screening) - yukawa_potential(rc2, zz, screening)
         total += acc
     return total
+
+
+@njit_parallel
+def _close_counts(position, start, index, radius, counts):
+    n = position.shape[0]
+    r2max = radius * radius
+    for k in prange(n):
+        c = 0
+        for j in range(start[k], start[k + 1]):
+            l = index[j]
+            if l > k:
+                dx = position[k, 0] - position[l, 0]
+                dy = position[k, 1] - position[l, 1]
+                dz = position[k, 2] - position[l, 2]
+                if dx * dx + dy * dy + dz * dz < r2max:
+                    c += 1
+        counts[k] = c
+
+
+@njit_parallel
+def _close_fill(position, start, index, radius, offset, out):
+    n = position.shape[0]
+    r2max = radius * radius
+    for k in prange(n):
+        c = offset[k]
+        for j in range(start[k], start[k + 1]):
+            l = index[j]
+            if l > k:
+                dx = position[k, 0] - position[l, 0]
+                dy = position[k, 1] - position[l, 1]
+                dz = position[k, 2] - position[l, 2]
+                if dx * dx + dy * dy + dz * dz < r2max:
+                    out[c, 0] = k
+                    out[c, 1] = l
+                    c += 1
+
+
+def close_pairs(position, start, index, radius):
+    """All listed pairs ``(k, l)``, ``k < l``, closer than ``radius``, sorted by (k, l).
+
+    Two passes (count, then fill at prefix-sum offsets) keep the parallel loop a
+    gather with no shared counter and no fixed capacity to overflow.
+
+    Parameters
+    ----------
+    position : (n, 3) float64
+    start, index : int64 arrays, the compressed-row neighbour list
+    radius : float
+
+    Returns
+    -------
+    (m, 2) int64
+    """
+    import numpy as np
+
+    n = position.shape[0]
+    counts = np.zeros(n, dtype=np.int64)
+    _close_counts(position, start, index, radius, counts)
+    offset = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(counts, out=offset[1:])
+    out = np.empty((offset[-1], 2), dtype=np.int64)
+    _close_fill(position, start, index, radius, offset, out)
+    return out

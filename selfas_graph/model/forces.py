@@ -15,6 +15,7 @@ from collections import Counter
 
 import numpy as np
 
+from ..kernels import currents as kc
 from ..kernels import fields as kf
 from ..kernels import pairs as kp
 from ..kernels import tips as kt
@@ -182,14 +183,72 @@ class Electrodes(_Term):
         return {"electrodes": kf.electrode_energy(ff.position, self.z[0], self.z[1], self.rstar, self.kappa)}
 
 
+class CurrentField(_Term):
+    """Term 9: q_k times the field of all other rods' currents. No kernel call while no rod carries current."""
+
+    name = "current_field"
+    channels = [("current_field", False)]
+
+    def __init__(self, p, state):
+        self.w = 0.5 * p.rods.diameter
+
+    def compute(self, ff, out):
+        f = out["current_field"]
+        f.fill(0.0)
+        if len(ff.active_rod):
+            kc.current_force_on_tips(ff.position, ff.tip_charge, ff.active_rod, ff.current, self.w, f)
+            ff.calls[self.name] += 1
+
+
+class CurrentLorentz(_Term):
+    """Term 10: J_i s_i x B_tot on current-carrying rods, by Gauss-Legendre quadrature along each rod.
+
+    B_tot = uniform field (if term 4 is on) + plasma filament (if term 5 is on) + the
+    currents of all other rods. Only current-carrying rods are visited.
+    """
+
+    name = "current_lorentz"
+    channels = [("current_lorentz", False)]
+
+    def __init__(self, p, state):
+        self.t, self.wt = kc.gauss_legendre_01(p.forces.current_lorentz.quadrature_points)
+        self.w = 0.5 * p.rods.diameter
+        f = p.forces
+        self.B = np.array(f.uniform_field.B, dtype=np.float64) if f.uniform_field is not None else None
+        pf = f.plasma_filament
+        self.plasma = (float(pf.axis[0]), float(pf.axis[1]), pf.radius, pf.current) if pf is not None else None
+
+    def compute(self, ff, out):
+        f = out["current_lorentz"]
+        f.fill(0.0)
+        active = ff.active_rod
+        if not len(active):
+            return
+        ng = len(self.t)
+        pts = ff.buffer("gl_points", len(active) * ng)
+        kc.quadrature_points(ff.position, active, self.t, pts)
+        field = ff.buffer("gl_field", len(active) * ng)
+        kc.rod_current_field(pts, np.repeat(active, ng), ff.position, active, ff.current, self.w, field)
+        if self.B is not None:
+            field += self.B
+        if self.plasma is not None:
+            extra = ff.buffer("gl_plasma", len(pts))
+            kf.plasma_field(pts, *self.plasma, extra)
+            field += extra
+        kc.lorentz_force_on_rods(ff.position, active, ff.current, field, self.t, self.wt, f)
+        ff.calls[self.name] += 1
+
+
 def _share_by_mass(centre_force, tip_out):
     """A force on a rod centre goes half to each tip (equal masses; paper Eqs. 5-6)."""
     tip_out[0::2] = 0.5 * centre_force
     tip_out[1::2] = 0.5 * centre_force
 
 
-TERM_CLASSES = {cls.name: cls for cls in (TipMagnetic, TipBrake, AmbientBrake, UniformField,
-                                         PlasmaFilament, Yukawa, ElectricField, Electrodes)}
+TERM_CLASSES = {cls.name: cls for cls in (TipMagnetic, TipBrake, AmbientBrake, UniformField, PlasmaFilament,
+                                         Yukawa, ElectricField, Electrodes, CurrentField, CurrentLorentz)}
+#: terms that count their own kernel calls (only when a rod carries current)
+_SELF_COUNTING = ("current_field", "current_lorentz")
 
 
 class ForceField:
@@ -236,6 +295,19 @@ class ForceField:
         self._skin = skin
         self.position = None
         self.velocity = None
+        self.current = np.zeros(self.n_rods)
+        self.active_rod = np.zeros(0, dtype=np.int64)
+
+    def set_currents(self, current):
+        """Rod currents from the last circuit solve, (n_rods,) float64; used from the next evaluation on.
+
+        Rods whose current is exactly zero are left out of the current kernels.
+        """
+        current = np.ascontiguousarray(current, dtype=np.float64)
+        if current.shape != (self.n_rods,):
+            raise ValueError(f"currents must have shape ({self.n_rods},), got {current.shape}")
+        self.current = current
+        self.active_rod = np.flatnonzero(current != 0.0).astype(np.int64)
 
     # -- lazily computed views of the current (position, velocity) ---------------------------------
     def _bind(self, position, velocity):
@@ -260,13 +332,22 @@ class ForceField:
             buf = self._buffers[name] = np.zeros((rows, 3))
         return buf
 
-    def tip_neighbours(self, extra_range: float = 0.0) -> NeighbourList:
-        """Tip pairs of different rods closer than ``max(r*, extra_range)`` (plus skin)."""
-        cutoff = max(self._tip_range, extra_range)
-        if self._tip_nl is None or self._tip_nl.cutoff < cutoff:
-            self._tip_nl = NeighbourList(cutoff, self._skin, exclude_same_rod=True)
-        self._tip_nl.update(self.position)
+    def tip_neighbours(self, position=None) -> NeighbourList:
+        """Tip pairs of different rods closer than the tip range (plus skin), up to date for ``position``.
+
+        The range is r*, or the contact release radius once :meth:`extend_tip_range`
+        was called, so that the brake and the contact search share one list.
+        """
+        if self._tip_nl is None:
+            self._tip_nl = NeighbourList(self._tip_range, self._skin, exclude_same_rod=True)
+        self._tip_nl.update(self.position if position is None else position)
         return self._tip_nl
+
+    def extend_tip_range(self, radius: float) -> None:
+        """Make the tip neighbour list cover ``radius`` (the contact release radius)."""
+        if radius > self._tip_range:
+            self._tip_range = float(radius)
+            self._tip_nl = None
 
     def centre_neighbours(self) -> NeighbourList:
         self._centre_nl.update(self.centre())
@@ -291,7 +372,8 @@ class ForceField:
         for t in self.terms:
             t0 = time.perf_counter() if self.timing else 0.0
             t.compute(self, self.out)
-            self.calls[t.name] += 1
+            if t.name not in _SELF_COUNTING:
+                self.calls[t.name] += 1
             if self.timing:
                 self.seconds[t.name] += time.perf_counter() - t0
         total = self.total

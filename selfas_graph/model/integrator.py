@@ -53,6 +53,8 @@ class AdamsBashforth4:
         self.hist_p = np.zeros((4, n_ch))
         self.head = -1
         self.count = 0
+        #: (step, time) from which time is counted as time0 + (step - step0) dt, free of summed round-off
+        self.time_origin = (0, 0.0)
         self.work = np.zeros(n_ch)
         self.bond_error_before = 0.0
         self.bond_error_after = 0.0
@@ -92,7 +94,7 @@ class AdamsBashforth4:
         else:
             self.bond_error_after = self.bond_error_before
         state.step += 1
-        state.time += self.dt
+        state.time = self.time_origin[1] + (state.step - self.time_origin[0]) * self.dt
 
     def _rk4(self, x, v, v1, a1, p1):
         dt = self.dt

@@ -119,6 +119,18 @@ class Electrodes:
 
 
 @dataclass(frozen=True)
+class CurrentField:
+    """Term 9: the Biot-Savart field of rod currents on tips (wire radius D/2, MODEL.md term 9)."""
+
+
+@dataclass(frozen=True)
+class CurrentLorentz:
+    quadrature_points: int = spec(
+        4, "Gauss-Legendre points along each rod for the Lorentz force on its current; an accuracy knob", ge=1
+    )
+
+
+@dataclass(frozen=True)
 class ForceParams:
     """The force terms of MODEL.md section 3; a term whose table is absent is off."""
 
@@ -130,6 +142,9 @@ class ForceParams:
     yukawa: Optional[Yukawa] = spec(None, "term 6: screened electric repulsion of rod charges")
     electric_field: Optional[ElectricField] = spec(None, "term 7: uniform electric field on rod charges")
     electrodes: Optional[Electrodes] = spec(None, "term 8: electrode walls (case (i))")
+    current_field: Optional[CurrentField] = spec(None, "term 9: field of rod currents on tips (needs [circuit])")
+    current_lorentz: Optional[CurrentLorentz] = spec(
+        None, "term 10: Lorentz force on rod currents from all fields (needs [circuit])")
 
     def active(self):
         """Names of the terms that are on, in MODEL.md order."""
@@ -143,6 +158,26 @@ class IntegratorParams:
                            choices=("exact", "paper"))
     velocity_correction: bool = spec(True, "apply the paper's velocity correction, Eqs. (14-15), after each step")
     position_projection: bool = spec(True, "restore each bond length to 1 about the rod centre after each step")
+    energy_tolerance: float = spec(
+        0.1, "stop the run when the energy balance |E - E0 - W| exceeds this fraction of the energy turned over "
+        "(kinetic energy + |work| of every non-conservative term), checked every output interval; the usual "
+        "sign of a time step past the stability limit of the brakes", gt=0.0)
+    restart_on_events: bool = spec(
+        False, "restart the Adams-Bashforth history (three RK4 steps) after a contact event or a new circuit "
+        "solution, when forces jump", )
+
+
+@dataclass(frozen=True)
+class ContactParams:
+    enabled: bool = spec(True, "detect tip and electrode contacts and record them as events")
+    release_factor: float = spec(
+        1.5, "a contact is released when the tips are farther apart than release_factor * r* (hysteresis)", ge=1.0)
+
+
+@dataclass(frozen=True)
+class CircuitParams:
+    delta_J0: float = spec(
+        2.23, "bias parameter delta_J0 = U L / (R0 J0 dZ) (paper Eq. 1); electrode potentials +-delta_J0 dZ / 2", ge=0.0)
 
 
 @dataclass(frozen=True)
@@ -179,6 +214,8 @@ class Parameters:
     forces: ForceParams = spec(None, "force terms (a term not listed is not computed)", factory=ForceParams)
     integrator: IntegratorParams = spec(None, "time integration", factory=IntegratorParams)
     neighbours: NeighbourParams = spec(None, "neighbour lists", factory=NeighbourParams)
+    contacts: ContactParams = spec(None, "contact detection and events", factory=ContactParams)
+    circuit: Optional[CircuitParams] = spec(None, "circuit solve between the electrodes (off when absent)")
     run: RunParams = spec(None, "run length", factory=RunParams)
     output: OutputParams = spec(None, "output file", factory=OutputParams)
 

@@ -16,7 +16,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..kernels.pairs import close_pair_count
+from . import events as ev
+from .contacts import ContactTracker
 from .forces import ForceField
+from .graph import ConnectivityGraph
 from .integrator import AdamsBashforth4
 from .params import Parameters
 from .state import State, random_state
@@ -60,12 +63,16 @@ class Simulation:
 
     One call of :meth:`step` does, in this order::
 
-        forces (tips, centres, external fields)
+        forces (tips, centres, external fields, currents from the last solve)
         -> Adams-Bashforth update -> bond constraint (positions, velocities)
         -> health check (NaN, broken bond, runaway step)
+        -> contact search -> events -> graph update
+        -> circuit solve if the graph changed (the currents act from the next step on)
 
     and :meth:`run` adds, after each step, the observers on their triggers
-    (progress callback; a frame with observables every ``output.interval``).
+    (progress callback; a frame with observables, events and the graph state
+    every ``output.interval``). Contacts present in the initial state are
+    recorded as events of step 0 when the simulation is built.
 
     Parameters
     ----------
@@ -83,8 +90,31 @@ class Simulation:
         ip = params.integrator
         self.integrator = AdamsBashforth4(self.force_field, ip.dt, exact_bond=ip.bond_force == "exact",
                                           project=ip.position_projection, correct_velocity=ip.velocity_correction)
+        self.integrator.time_origin = (self.state.step, self.state.time)
         self.max_bond_error = 0.0
         self._energy0 = None
+        #: every event so far, as (step, time, kind, a, b) rows in order
+        self.events = []
+        self.short_circuit_time = None
+        self.solution = None
+        self.contacts = None
+        self.graph = None
+        cp = params.contacts
+        el = params.forces.electrodes
+        if cp.enabled:
+            rstar = params.rods.rstar
+            self.force_field.extend_tip_range(cp.release_factor * rstar)
+            planes = (-0.5 * el.gap, 0.5 * el.gap) if el is not None else None
+            self.contacts = ContactTracker(self.state.n_tips, rstar, cp.release_factor * rstar, planes)
+            conductors = {}
+            if el is not None:
+                bias = params.circuit.delta_J0 if params.circuit is not None else 0.0
+                half = 0.5 * bias * el.gap + 0.0  # + 0.0: no negative zero without a bias
+                conductors = {ev.CONDUCTOR_CATHODE: -half + 0.0, ev.CONDUCTOR_ANODE: half}
+            #: conductor id -> fixed potential (units R0 J0), MODEL.md section 6
+            self.conductor_potential = conductors
+            self.graph = ConnectivityGraph(self.state.n_rods, conductors)
+            self._update_contacts()
 
     @classmethod
     def from_scenario(cls, scenario, **kw):
@@ -102,6 +132,24 @@ class Simulation:
         for _ in range(n):
             self.integrator.step(self.state)
             self._check()
+            if self.contacts is not None:
+                self._update_contacts()
+
+    def _update_contacts(self):
+        st = self.state
+        rows = self.contacts.update(st.position, self.force_field.tip_neighbours(st.position), st.step, st.time)
+        if not rows:
+            return
+        rows += self.graph.apply(rows)
+        self.events.extend(rows)
+        for r in rows:
+            if r[2] == ev.SHORT_CIRCUIT and self.short_circuit_time is None:
+                self.short_circuit_time = r[1]
+        if self.params.circuit is not None and self.graph.changed:
+            self.solution = self.graph.solve()
+            self.force_field.set_currents(self.solution.current)
+        if self.params.integrator.restart_on_events:
+            self.integrator.reset_history()
 
     def _check(self):
         st, integ = self.state, self.integrator
@@ -170,13 +218,26 @@ class Simulation:
         obs["momentum"] = st.velocity.sum(axis=0)
         obs["bond_error"] = self.integrator.bond_error_before
         obs["contacts"] = float(self.contact_count())
+        if self.graph is not None:
+            topo = self.graph.topology()
+            obs["rods/filament"] = topo.n_filament
+            obs["rods/dead_end"] = topo.n_dead_end
+            obs["rods/cluster"] = topo.n_cluster
+            obs["rods/free"] = topo.n_free
+            obs["largest_structure"] = int(topo.structure_size[topo.largest_structure]) if topo.largest_structure >= 0 else 0
+            obs["events"] = len(self.events)
+            obs["short_circuit"] = float(topo.has_short_circuit)
+        if self.params.circuit is not None:
+            sol = self.solution
+            obs["total_current"] = sol.total_current if sol is not None else 0.0
+            obs["effective_resistance"] = sol.effective_resistance if sol is not None else float("inf")
         return obs
 
     def contact_count(self) -> int:
-        """Number of tip pairs of different rods closer than r*."""
-        nl = self.force_field
-        nl._bind(self.state.position, self.state.velocity)
-        tnl = nl.tip_neighbours()
+        """Number of tip pairs of different rods in contact (closer than r*, or still held by hysteresis)."""
+        if self.contacts is not None:
+            return self.contacts.n_contacts
+        tnl = self.force_field.tip_neighbours(self.state.position)
         return int(close_pair_count(self.state.position, tnl.start, tnl.index, self.params.rods.rstar))
 
     # ------------------------------------------------------------------ run loop
@@ -216,6 +277,8 @@ class Simulation:
         try:
             for i in range(1, n_steps + 1):
                 self.step()
+                if self.state.step % every == 0 and writer is None:
+                    self._check_energy(self.observables())
                 if writer is not None:
                     # frames fall on absolute steps that are multiples of `every`, so at most
                     # `every` steps pass between two frames
@@ -235,8 +298,7 @@ class Simulation:
         summary.max_bond_error = self.max_bond_error
         obs = obs if obs is not None else self.observables()
         summary.energy_balance = float(obs["energy_balance"])
-        summary.energy_scale = float(abs(obs["energy/kinetic"]) + sum(abs(v) for k, v in obs.items()
-                                                                    if k.startswith("work/")))
+        summary.energy_scale = self.energy_scale(obs)
         summary.frames = writer.n_frames if writer is not None else 0
         return summary
 
@@ -245,5 +307,40 @@ class Simulation:
         obs = self.observables()
         writer.write_per_step(steps, values)
         writer.write_frame(st.step, st.time, st.position, st.velocity, obs)
+        if self.graph is not None:
+            done = getattr(writer, "events_written", 0)
+            writer.write_events(self.events[done:])
+            writer.events_written = len(self.events)
+            sol = self.solution
+            writer.write_graph(st.step, st.time, self.graph.arrays(), self.graph.topology().role,
+                               sol.current if sol is not None else np.zeros(st.n_rods),
+                               sol.potential if sol is not None else np.full(st.n_tips, np.nan),
+                               self.conductor_potential)
         writer.flush()
+        self._check_energy(obs)
         return obs
+
+    def energy_scale(self, obs) -> float:
+        """Energy turned over so far: kinetic energy plus |work| of every non-conservative channel."""
+        return abs(obs["energy/kinetic"]) + sum(abs(v) for k, v in obs.items() if k.startswith("work/"))
+
+    def _check_energy(self, obs):
+        """Stop when the energy balance is off by more than ``integrator.energy_tolerance`` of the scale.
+
+        Brakes stiffer than the step can follow make the AB4 step pump energy into the
+        contact modes that the brake then dissipates: positions and bonds stay sane, but
+        the balance E - E0 - W grows to the size of the dissipated work.
+        """
+        tol = self.params.integrator.energy_tolerance
+        scale = self.energy_scale(obs)
+        err = abs(obs["energy_balance"])
+        if scale > 0 and err > tol * scale:
+            st = self.state
+            works = sorted(((abs(v), k[5:]) for k, v in obs.items() if k.startswith("work/")), reverse=True)
+            top = works[0][1] if works else "none"
+            raise NumericalFailure(
+                f"numerical failure at step {st.step} (t = {st.time:.6g}): the energy balance is off by {err:.3g}, "
+                f"{err / scale:.0%} of the energy turned over ({scale:.3g}; integrator.energy_tolerance = {tol:g}); "
+                f"the largest work is done by the '{top}' term. The time step integrator.dt = {self.dt:g} is likely "
+                f"past the stability limit of the stiff contact terms (tip brake k_br, tip core): try half of it.",
+                st.step)
