@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.pairs import close_pairs
+from ..kernels.pairs import close_pair_count, close_pairs
 from . import events as ev
 
 
@@ -67,8 +67,16 @@ class ContactTracker:
                 for k, l in self.pairs[gone]:
                     rows.append((step, time, ev.TIP_RELEASE, int(k), int(l)))
                 self.pairs = self.pairs[~gone]
-        # new contacts: listed pairs closer than r* that are not in contact yet
-        close = close_pairs(position, neighbours.start, neighbours.index, self.rstar)
+        # new contacts: listed pairs closer than r* that are not in contact yet. Fast path for
+        # the common step without news: if the number of close pairs equals the number of
+        # current contacts closer than r*, every close pair is already a contact.
+        n_close = close_pair_count(position, neighbours.start, neighbours.index, self.rstar)
+        if len(self.pairs):
+            d = position[self.pairs[:, 0]] - position[self.pairs[:, 1]]
+            n_known = int((np.einsum("ij,ij->i", d, d) < self.rstar ** 2).sum())
+        else:
+            n_known = 0
+        close = close_pairs(position, neighbours.start, neighbours.index, self.rstar) if n_close > n_known else ()
         if len(close):
             keys = self._keys(close)
             new = ~np.isin(keys, self._keys(self.pairs), assume_unique=True)
