@@ -91,7 +91,8 @@ def run(args):
     r = data["rods"]
     lines = [
         f"{data['file']}: frame {data['frame']} of 0..{data['frames'] - 1}, step {data['step']}, t = {data['time']:.6g}",
-        "conductors: " + (", ".join(f"{k} psi = {v:+.6g}" for k, v in data["conductors"].items()) or "none"),
+        "conductors: " + (", ".join(f"{k} psi = {v:+.6g}" if v is not None else f"{k} psi = -delta_J0 z per contact"
+                                    for k, v in data["conductors"].items()) or "none"),
         f"rods: {r['total']} = {r['filament']} in current-carrying filaments + {r['dead_end']} dead ends + "
         f"{r['cluster']} in floating clusters + {r['free']} free",
         f"structures: {len(data['structures'])} (largest: {data['largest_structure']} rods)",

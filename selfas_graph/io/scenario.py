@@ -343,8 +343,9 @@ def check_consistency(p: P.Parameters):
         if zlo < -el.gap / 2 - 1e-12 or zhi > el.gap / 2 + 1e-12:
             out.append(f"placement.box: the z range [{zlo:g}, {zhi:g}] reaches beyond the electrodes at "
                        f"z = +-{el.gap / 2:g} (forces.electrodes.gap = {el.gap:g}); rods must start between them")
-    if p.circuit is not None and el is None:
-        out.append("circuit: the circuit needs electrodes to apply its bias; add a [forces.electrodes] table")
+    if p.circuit is not None and el is None and p.forces.external_filament is None:
+        out.append("circuit: the circuit needs a conductor to apply its bias: add [forces.electrodes] (case (i)) "
+                   "or [forces.external_filament] (case (ii))")
     for term in ("current_field", "current_lorentz"):
         if getattr(p.forces, term) is not None and p.circuit is None:
             out.append(f"forces.{term}: rod currents come from the circuit solve; add a [circuit] table "

@@ -28,9 +28,12 @@ class ContactTracker:
         Contact and release distances (release_radius >= rstar).
     electrodes : (z_cathode, z_anode) or None
         Electrode planes of case (i).
+    filament_radius : float or None
+        Radius w of the case (ii) filament on the z axis: a tip touches it within
+        ``r* + w`` of the axis and leaves it beyond ``release_radius + w``.
     """
 
-    def __init__(self, n_tips, rstar, release_radius, electrodes=None):
+    def __init__(self, n_tips, rstar, release_radius, electrodes=None, filament_radius=None):
         self.n_tips = n_tips
         self.rstar = float(rstar)
         self.release = float(release_radius)
@@ -38,6 +41,8 @@ class ContactTracker:
         self.pairs = np.zeros((0, 2), dtype=np.int64)  # sorted by key k * n_tips + l, k < l
         self.on_cathode = np.zeros(n_tips, dtype=bool)
         self.on_anode = np.zeros(n_tips, dtype=bool)
+        self.filament_radius = filament_radius
+        self.on_filament = np.zeros(n_tips, dtype=bool)
 
     def _keys(self, pairs):
         return pairs[:, 0] * self.n_tips + pairs[:, 1]
@@ -86,10 +91,16 @@ class ContactTracker:
                     rows.append((step, time, ev.TIP_CONTACT, int(k), int(l)))
                 merged = np.concatenate([self.pairs, added])
                 self.pairs = merged[np.argsort(self._keys(merged), kind="stable")]
+        surfaces = []
         if self.electrodes is not None:
             z = position[:, 2]
-            for flags, h, cid in ((self.on_cathode, z - self.electrodes[0], ev.CONDUCTOR_CATHODE),
-                                  (self.on_anode, self.electrodes[1] - z, ev.CONDUCTOR_ANODE)):
+            surfaces += [(self.on_cathode, z - self.electrodes[0], ev.CONDUCTOR_CATHODE),
+                         (self.on_anode, self.electrodes[1] - z, ev.CONDUCTOR_ANODE)]
+        if self.filament_radius is not None:
+            rho = np.hypot(position[:, 0], position[:, 1])
+            surfaces.append((self.on_filament, rho - self.filament_radius, ev.CONDUCTOR_FILAMENT))
+        if surfaces:
+            for flags, h, cid in surfaces:
                 leave = flags & (h > self.release)
                 touch = ~flags & (h < self.rstar)
                 for k in np.flatnonzero(leave):

@@ -16,6 +16,7 @@ from collections import Counter
 import numpy as np
 
 from ..kernels import currents as kc
+from ..kernels import external as kx
 from ..kernels import fields as kf
 from ..kernels import pairs as kp
 from ..kernels import tips as kt
@@ -183,6 +184,56 @@ class Electrodes(_Term):
         return {"electrodes": kf.electrode_energy(ff.position, self.z[0], self.z[1], self.rstar, self.kappa)}
 
 
+class ExternalFilament(_Term):
+    """Term 11: q_k B of the fixed filament on the z axis (not conservative: the field circles the axis)."""
+
+    name = "external_filament"
+    channels = [("external_filament", False)]
+
+    def __init__(self, p, state):
+        f = p.forces.external_filament
+        self.current, self.w = f.current, 0.5 * f.diameter
+
+    def compute(self, ff, out):
+        kx.filament_force_on_tips(ff.position, ff.tip_charge, self.current, self.w, out["external_filament"])
+
+
+class ExternalDipole(_Term):
+    """Term 11: the dipole's end monopoles on tips (tip law and brake) and its screened line charge on rods."""
+
+    name = "external_dipole"
+    channels = [("external_monopoles", True), ("external_monopole_brake", False), ("external_line_charge", True)]
+
+    def __init__(self, p, state):
+        d = p.forces.external_dipole
+        self.source, self.source_charge = external_monopoles(d)
+        self.rstar, self.kappa = p.rods.rstar, p.rods.tip_stiffness
+        self.k = p.forces.tip_brake.coefficient if p.forces.tip_brake is not None else 0.0
+        self.line = (-0.5 * d.length, 0.5 * d.length, d.line_charge, d.screening_length, d.radius)
+        self.nodes, self.weights = kc.gauss_legendre_01(d.quadrature_points)
+
+    def compute(self, ff, out):
+        kx.monopoles_on_tips(ff.position, ff.velocity, ff.tip_charge, self.source, self.source_charge, self.rstar,
+                             self.kappa, self.k, out["external_monopoles"], out["external_monopole_brake"])
+        f = ff.buffer("line_centre", ff.n_rods)
+        kx.line_yukawa_on_centres(ff.centre(), ff.rod_charge, *self.line, self.nodes, self.weights, f)
+        _share_by_mass(f, out["external_line_charge"])
+
+    def energy(self, ff):
+        return {
+            "external_monopoles": kx.monopoles_energy(ff.position, ff.tip_charge, self.source, self.source_charge,
+                                                      self.rstar, self.kappa),
+            "external_line_charge": kx.line_yukawa_energy(ff.centre(), ff.rod_charge, *self.line, self.nodes,
+                                                          self.weights),
+        }
+
+
+def external_monopoles(d):
+    """Positions (2, 3) and charges (2,) of the external dipole's end monopoles (moment along +z)."""
+    source = np.array([[0.0, 0.0, 0.5 * d.length], [0.0, 0.0, -0.5 * d.length]])
+    return source, np.array([d.magnetic_charge, -d.magnetic_charge])
+
+
 class CurrentField(_Term):
     """Term 9: q_k times the field of all other rods' currents. No kernel call while no rod carries current."""
 
@@ -204,7 +255,8 @@ class CurrentLorentz(_Term):
     """Term 10: J_i s_i x B_tot on current-carrying rods, by Gauss-Legendre quadrature along each rod.
 
     B_tot = uniform field (if term 4 is on) + plasma filament (if term 5 is on) + the
-    currents of all other rods. Only current-carrying rods are visited.
+    external filament and dipole monopoles (if term 11 is on) + the currents of all
+    other rods. Only current-carrying rods are visited.
     """
 
     name = "current_lorentz"
@@ -217,6 +269,10 @@ class CurrentLorentz(_Term):
         self.B = np.array(f.uniform_field.B, dtype=np.float64) if f.uniform_field is not None else None
         pf = f.plasma_filament
         self.plasma = (float(pf.axis[0]), float(pf.axis[1]), pf.radius, pf.current) if pf is not None else None
+        ef = f.external_filament
+        self.filament = (ef.current, 0.5 * ef.diameter) if ef is not None else None
+        self.monopoles = external_monopoles(f.external_dipole) if f.external_dipole is not None else None
+        self.rstar = p.rods.rstar
 
     def compute(self, ff, out):
         f = out["current_lorentz"]
@@ -231,9 +287,15 @@ class CurrentLorentz(_Term):
         kc.rod_current_field(pts, np.repeat(active, ng), ff.position, active, ff.current, self.w, field)
         if self.B is not None:
             field += self.B
+        extra = ff.buffer("gl_extra", len(pts))
         if self.plasma is not None:
-            extra = ff.buffer("gl_plasma", len(pts))
             kf.plasma_field(pts, *self.plasma, extra)
+            field += extra
+        if self.filament is not None:
+            kx.filament_field(pts, *self.filament, extra)
+            field += extra
+        if self.monopoles is not None:
+            kx.monopole_field(pts, *self.monopoles, self.rstar, extra)
             field += extra
         kc.lorentz_force_on_rods(ff.position, active, ff.current, field, self.t, self.wt, f)
         ff.calls[self.name] += 1
@@ -246,7 +308,8 @@ def _share_by_mass(centre_force, tip_out):
 
 
 TERM_CLASSES = {cls.name: cls for cls in (TipMagnetic, TipBrake, AmbientBrake, UniformField, PlasmaFilament,
-                                         Yukawa, ElectricField, Electrodes, CurrentField, CurrentLorentz)}
+                                         Yukawa, ElectricField, Electrodes, ExternalFilament, ExternalDipole,
+                                         CurrentField, CurrentLorentz)}
 #: terms that count their own kernel calls (only when a rod carries current)
 _SELF_COUNTING = ("current_field", "current_lorentz")
 

@@ -131,6 +131,28 @@ class CurrentLorentz:
 
 
 @dataclass(frozen=True)
+class ExternalFilament:
+    """Term 11, case (ii): a fixed straight current filament on the z axis, also a conductor."""
+
+    current: float = spec(10.0, "J_ext, current along +z (units J0)")
+    diameter: float = spec(0.18, "D_ext; its field is 2 J rho / (rho^2 + (D_ext/2)^2) and tips touch it "
+                                 "within r* + D_ext/2 of the axis", gt=0.0)
+
+
+@dataclass(frozen=True)
+class ExternalDipole:
+    """Term 11, case (ii): a fixed large dipole centred on the z axis at z = 0."""
+
+    magnetic_charge: float = spec(10.0, "Z_Mext: +Z_Mext at z = +length/2 and -Z_Mext at z = -length/2 "
+                                        "(moment along +z, co-directed with B_ext)")
+    length: float = spec(20.0, "L_ext", gt=0.0)
+    line_charge: float = spec(3.2, "lambda_ext, electric charge per unit length along the dipole")
+    screening_length: float = spec(2.4, "R_Dext, screening length of the line charge", gt=0.0)
+    radius: float = spec(0.09, "radius of the line charge (softens it on the axis; D_ext/2 in the paper's scene)", gt=0.0)
+    quadrature_points: int = spec(32, "Gauss-Legendre points of the line-charge integral; an accuracy knob", ge=1)
+
+
+@dataclass(frozen=True)
 class ForceParams:
     """The force terms of MODEL.md section 3; a term whose table is absent is off."""
 
@@ -142,6 +164,8 @@ class ForceParams:
     yukawa: Optional[Yukawa] = spec(None, "term 6: screened electric repulsion of rod charges")
     electric_field: Optional[ElectricField] = spec(None, "term 7: uniform electric field on rod charges")
     electrodes: Optional[Electrodes] = spec(None, "term 8: electrode walls (case (i))")
+    external_filament: Optional[ExternalFilament] = spec(None, "term 11: fixed current filament on the z axis (case (ii))")
+    external_dipole: Optional[ExternalDipole] = spec(None, "term 11: fixed large dipole with a screened line charge (case (ii))")
     current_field: Optional[CurrentField] = spec(None, "term 9: field of rod currents on tips (needs [circuit])")
     current_lorentz: Optional[CurrentLorentz] = spec(
         None, "term 10: Lorentz force on rod currents from all fields (needs [circuit])")
@@ -177,7 +201,11 @@ class ContactParams:
 @dataclass(frozen=True)
 class CircuitParams:
     delta_J0: float = spec(
-        2.23, "bias parameter delta_J0 = U L / (R0 J0 dZ) (paper Eq. 1); electrode potentials +-delta_J0 dZ / 2", ge=0.0)
+        2.23, "bias parameter delta_J0 = U L / (R0 J0 dZ) (paper Eq. 1); electrode potentials +-delta_J0 dZ / 2, "
+        "filament potential -delta_J0 z", ge=0.0)
+    height_tolerance: float = spec(
+        0.01, "case (ii): re-solve the circuit when a tip touching the filament has moved this far along z since the "
+        "last solve (its potential is -delta_J0 z); an accuracy knob", gt=0.0)
 
 
 @dataclass(frozen=True)

@@ -105,12 +105,18 @@ class Simulation:
             rstar = params.rods.rstar
             self.force_field.extend_tip_range(cp.release_factor * rstar)
             planes = (-0.5 * el.gap, 0.5 * el.gap) if el is not None else None
-            self.contacts = ContactTracker(self.state.n_tips, rstar, cp.release_factor * rstar, planes)
+            fil = params.forces.external_filament
+            w_fil = 0.5 * fil.diameter if fil is not None else None
+            self.contacts = ContactTracker(self.state.n_tips, rstar, cp.release_factor * rstar, planes, w_fil)
+            self.bias = params.circuit.delta_J0 if params.circuit is not None else 0.0
             conductors = {}
             if el is not None:
-                bias = params.circuit.delta_J0 if params.circuit is not None else 0.0
-                half = 0.5 * bias * el.gap + 0.0  # + 0.0: no negative zero without a bias
+                half = 0.5 * self.bias * el.gap + 0.0  # + 0.0: no negative zero without a bias
                 conductors = {ev.CONDUCTOR_CATHODE: -half + 0.0, ev.CONDUCTOR_ANODE: half}
+            if fil is not None:
+                conductors[ev.CONDUCTOR_FILAMENT] = None  # psi = -delta_J0 z per contact (MODEL.md section 6)
+            self._filament_tip = np.zeros(0, dtype=np.int64)
+            self._filament_z = np.zeros(0)
             #: conductor id -> fixed potential (units R0 J0), MODEL.md section 6
             self.conductor_potential = conductors
             self.graph = ConnectivityGraph(self.state.n_rods, conductors)
@@ -135,21 +141,44 @@ class Simulation:
             if self.contacts is not None:
                 self._update_contacts()
 
+    def _filament_potential(self, tip, conductor):
+        """Potential of a tip touching the case (ii) filament: -delta_J0 z (MODEL.md section 6)."""
+        return -self.bias * float(self.state.position[tip, 2])
+
     def _update_contacts(self):
         st = self.state
         rows = self.contacts.update(st.position, self.force_field.tip_neighbours(st.position), st.step, st.time)
-        if not rows:
+        moved = self._filament_heights_moved()
+        if not rows and not moved:
             return
-        rows += self.graph.apply(rows)
-        self.events.extend(rows)
-        for r in rows:
-            if r[2] == ev.SHORT_CIRCUIT and self.short_circuit_time is None:
-                self.short_circuit_time = r[1]
+        if rows:
+            rows += self.graph.apply(rows, contact_potential=self._filament_potential)
+            self.events.extend(rows)
+            for r in rows:
+                if r[2] == ev.SHORT_CIRCUIT and self.short_circuit_time is None:
+                    self.short_circuit_time = r[1]
         if self.params.circuit is not None and self.graph.changed:
             self.solution = self.graph.solve()
             self.force_field.set_currents(self.solution.current)
+            arr = self.graph.arrays()
+            on_fil = arr["conductor_id"] == ev.CONDUCTOR_FILAMENT
+            self._filament_tip = arr["conductor_tip"][on_fil]
+            self._filament_z = st.position[self._filament_tip, 2].copy()
         if self.params.integrator.restart_on_events:
             self.integrator.reset_history()
+
+    def _filament_heights_moved(self) -> bool:
+        """Case (ii): update the potentials of filament contacts that moved along z by more than
+        ``circuit.height_tolerance`` since the last solve; True if any did."""
+        if not len(self._filament_tip) or self.params.circuit is None:
+            return False
+        z = self.state.position[self._filament_tip, 2]
+        moved = np.abs(z - self._filament_z) > self.params.circuit.height_tolerance
+        if not moved.any():
+            return False
+        for k in self._filament_tip[moved]:
+            self.graph.set_contact_potential(int(k), ev.CONDUCTOR_FILAMENT, self._filament_potential(int(k), None))
+        return True
 
     def _check(self):
         st, integ = self.state, self.integrator
