@@ -9,21 +9,26 @@ from __future__ import annotations
 import json
 import os
 import shlex
+import signal
 import sys
 import time
 from pathlib import Path
 
 from .._version import __version__
-from ..io.h5md import RunWriter
-from ..io.scenario import ScenarioError, load_scenario
-from ..model.simulation import NumericalFailure, Simulation
+from ..io.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
+from ..io.h5md import RunFileError, RunWriter
+from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
+from ..model.simulation import NumericalFailure, RunInterrupted, Simulation
 from ..model.state import PlacementError
 from ..parallel import world
 from .main import EXIT_NUMERICAL, CliError
 
 
 def add_arguments(p):
-    p.add_argument("scenario", help="scenario file (TOML), e.g. scenarios/quick.toml")
+    p.add_argument("scenario", nargs="?", help="scenario file (TOML), e.g. scenarios/quick.toml")
+    p.add_argument("--resume", metavar="RUN_OR_CHECKPOINT",
+                   help="continue an interrupted run from RUN.h5 (its RUN.checkpoint.h5) or a checkpoint file; "
+                        "only --t-end may change")
     p.add_argument("-o", "--output", help="output HDF5 file (default: output.file, or SCENARIO name with .h5)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scenario value, e.g. --set integrator.dt=5e-4 (repeatable)")
@@ -82,14 +87,82 @@ class _Bar:
         self.bar.close()
 
 
-def run(args):
+class Checkpointer:
+    """Writes the simulation's snapshot to a checkpoint file every ``interval`` wall seconds (0: only on demand)."""
+
+    def __init__(self, path, interval, meta):
+        self.path, self.interval, self.meta = Path(path), float(interval), meta
+        self.last = time.monotonic()
+        self.written = 0
+
+    def due(self):
+        return self.interval > 0 and time.monotonic() - self.last >= self.interval
+
+    def write(self, sim):
+        write_checkpoint(self.path, sim.snapshot(), {**self.meta, "step": sim.state.step})
+        self.last = time.monotonic()
+        self.written += 1
+
+
+class _StopFlag:
+    """Set by SIGTERM / SIGINT so that the run stops after the current step with a checkpoint."""
+
+    def __init__(self):
+        self.signum = None
+
+    def __call__(self):
+        return self.signum is not None
+
+    def install(self):
+        self.old = {}
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            self.old[sig] = signal.signal(sig, self._handle)
+
+    def _handle(self, signum, frame):
+        self.signum = signum
+
+    def restore(self):
+        for sig, handler in self.old.items():
+            signal.signal(sig, handler)
+
+
+def _load_resume(args):
+    """(scenario, snapshot, run file, checkpoint file) of a run to continue."""
+    if args.scenario or args.overrides:
+        raise CliError("--resume continues a run exactly: give no SCENARIO and no --set (only --t-end may change)")
+    src = Path(args.resume)
+    ckpt = src if src.name.endswith(".checkpoint.h5") else checkpoint_path(src)
     try:
-        scenario = load_scenario(args.scenario, overrides=args.overrides, t_end=args.t_end)
+        snap, meta = read_checkpoint(ckpt)
+    except CheckpointError as exc:
+        raise CliError(f"cannot resume: {exc}") from None
+    try:
+        scenario = scenario_from_text(meta["scenario_text"], overrides=json.loads(meta["overrides"]), t_end=args.t_end)
     except ScenarioError as exc:
-        raise CliError(str(exc)) from None
-    p = scenario.params
-    out = Path(args.output) if args.output else scenario.output_path
-    if not args.dry_run:
+        raise CliError(f"cannot resume: the checkpoint's scenario no longer validates: {exc}") from None
+    out = Path(args.output) if args.output else Path(meta["run_file"])
+    return scenario, snap, out, ckpt
+
+
+def run(args):
+    snap = None
+    if args.resume:
+        scenario, snap, out, ckpt = _load_resume(args)
+        p = scenario.params
+    else:
+        if not args.scenario:
+            raise CliError("give a SCENARIO file, or --resume RUN.h5 to continue a run")
+        try:
+            scenario = load_scenario(args.scenario, overrides=args.overrides, t_end=args.t_end)
+        except ScenarioError as exc:
+            raise CliError(str(exc)) from None
+        p = scenario.params
+        out = Path(args.output) if args.output else scenario.output_path
+        ckpt = checkpoint_path(out)
+    if snap is not None:
+        if not out.exists():
+            raise CliError(f"cannot resume: the run file {out} does not exist (give it with -o)")
+    elif not args.dry_run:
         if out.exists() and not args.force:
             raise CliError(f"output file {out} exists; pass --force to overwrite it or -o to choose another name")
         if out.exists() and out.is_dir():
@@ -100,7 +173,7 @@ def run(args):
         if not os.access(parent, os.W_OK):
             raise CliError(f"the folder {parent} of the output file is not writable")
     try:
-        sim = Simulation.from_scenario(scenario)
+        sim = Simulation.from_scenario(scenario) if snap is None else Simulation.from_snapshot(p, snap)
     except PlacementError as exc:
         raise CliError(str(exc)) from None
 
@@ -125,7 +198,15 @@ def run(args):
         return 0
 
     writer = None
-    if world.rank == 0:
+    checkpointer = None
+    if world.rank == 0 and snap is not None:
+        try:
+            writer = RunWriter.reopen(out, int(snap["step"]))
+        except RunFileError as exc:
+            raise CliError(f"cannot resume: {exc}") from None
+        print(f"resuming at step {int(snap['step'])} (t = {float(snap['time']):.6g}) from {ckpt}; "
+              f"{writer.n_frames} frames kept in {out}", flush=True)
+    elif world.rank == 0:
         provenance = {
             "scenario_text": scenario.text,
             "scenario_path": str(args.scenario),
@@ -140,14 +221,30 @@ def run(args):
         }
         writer = RunWriter(out, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
                            overwrite=args.force, velocities=p.output.velocities)
+    if world.rank == 0:
+        checkpointer = Checkpointer(ckpt, p.output.checkpoint_interval, {
+            "format_note": "selfas-graph checkpoint; continue with selfas-graph simulate --resume",
+            "scenario_text": scenario.text, "overrides": json.dumps(list(scenario.overrides)),
+            "run_file": str(out.resolve()), "version": __version__})
     mode = args.progress
     if mode == "auto":
         mode = "bar" if sys.stderr.isatty() else "lines"
     reporter = None
     if world.rank == 0 and mode != "none":
         reporter = _Bar(n_steps, p.run.t_end) if mode == "bar" else _Lines(sys.stderr)
+    stop = _StopFlag()
+    stop.install()
     try:
-        summary = sim.run(writer=writer, progress=reporter)
+        summary = sim.run(writer=writer, progress=reporter, checkpointer=checkpointer, stop=stop)
+    except RunInterrupted as exc:
+        if reporter:
+            reporter.close()
+        if writer:
+            writer.close(status=f"interrupted at step {exc.step}")
+        name = signal.Signals(stop.signum).name
+        print(f"selfas-graph simulate: {name} received: stopped at step {exc.step} (t = {sim.state.time:.6g}); "
+              f"checkpoint {ckpt}; continue with: selfas-graph simulate --resume {out}", file=sys.stderr)
+        return 128 + stop.signum
     except NumericalFailure as exc:
         if reporter:
             reporter.close()
@@ -162,6 +259,8 @@ def run(args):
         if writer:
             writer.close(status="interrupted")
         raise
+    finally:
+        stop.restore()
     if reporter:
         reporter.close()
     if writer:
@@ -180,6 +279,6 @@ def _print_summary(s, out, sim):
         f"  max bond-length error after constraint: {s.max_bond_error:.3g}",
         f"  energy balance E - E0 - W: {s.energy_balance:.3g} ({rel:.2g} of kinetic energy + |work|)",
         f"  contacts (tip pairs closer than r*): {sim.contact_count()}",
-        f"  output: {out} ({s.frames} frames)",
+        f"  output: {out} ({s.frames} frames); checkpoint {checkpoint_path(out)}",
     ]
     print("\n".join(lines))

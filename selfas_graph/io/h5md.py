@@ -67,6 +67,11 @@ def _append(ds, value):
     return n
 
 
+def _truncate(ds, n):
+    if ds.shape[0] > n:
+        ds.resize(n, axis=0)
+
+
 class RunWriter:
     """Writes frames and observables of one run.
 
@@ -121,6 +126,67 @@ class RunWriter:
         p.attrs["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
         self.n_frames = 0
         f.flush()
+
+    @classmethod
+    def reopen(cls, path, step):
+        """Open an existing run file to continue it after ``step``: every row written for a
+        later step (frames, observables, events, graph, per-step series) is removed first.
+        """
+        self = cls.__new__(cls)
+        self.path = Path(path)
+        try:
+            self.f = h5py.File(self.path, "r+")
+        except OSError as exc:
+            raise RunFileError(f"{self.path}: cannot reopen the run file to continue it ({exc})") from None
+        f = self.f
+        if "particles/tips/position/step" not in f:
+            f.close()
+            raise RunFileError(f"{self.path}: not a selfas-graph run file")
+
+        def keep(steps):
+            return int(np.searchsorted(steps[:], step, side="right"))
+
+        self._elements = {}
+        for name in ("position", "velocity"):
+            if f"particles/tips/{name}" in f:
+                g = f[f"particles/tips/{name}"]
+                n = keep(g["step"])
+                for ds in (g["step"], g["time"], g["value"]):
+                    _truncate(ds, n)
+                self._elements[name] = (g["step"], g["time"], g["value"])
+        self.n_frames = f["particles/tips/position/step"].shape[0]
+        self.observables = f["observables"]
+        self._obs = {}
+
+        def visit(name, obj):
+            if isinstance(obj, h5py.Group) and "value" in obj and name != "bond_error_per_step":
+                n = keep(obj["step"])
+                for ds in obj.values():
+                    _truncate(ds, n)
+                self._obs[name] = (obj["step"], obj["time"], obj["value"])
+
+        self.observables.visititems(visit)
+        g = self.observables["bond_error_per_step"]
+        n = keep(g["step"])
+        _truncate(g["step"], n)
+        _truncate(g["value"], n)
+        self._per_step = (g["step"], g["value"])
+        if "events" in f:
+            _truncate(f["events"], keep(f["events"]["step"]) if f["events"].shape[0] else 0)
+        self.events_written = f["events"].shape[0] if "events" in f else 0
+        if "graph" in f:
+            g = f["graph"]
+            n = keep(g["step"])
+            m = int(g["tip_contacts_count"][:n].sum())
+            k = int(g["conductor_contacts_count"][:n].sum())
+            for name in ("step", "time", "tip_contacts_count", "conductor_contacts_count", "role", "current", "potential"):
+                _truncate(g[name], n)
+            _truncate(g["tip_contacts"], m)
+            for name in ("conductor_tip", "conductor_id", "conductor_potential"):
+                _truncate(g[name], k)
+        f["parameters/selfas_graph"].attrs["status"] = "running"
+        f.flush()
+        return self
 
     def write_frame(self, step, t, position, velocity, observables: dict):
         """Append one frame (positions, velocities, observables) and flush to disk."""

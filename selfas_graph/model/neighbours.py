@@ -35,6 +35,11 @@ class NeighbourList:
         self._reference = None
         self.n_builds = 0
 
+    @property
+    def reference(self):
+        """Positions of the last build (None before the first): with them a list is rebuilt identically."""
+        return self._reference
+
     def update(self, points: np.ndarray) -> bool:
         """Rebuild if needed for ``points`` (n, 3); returns True if rebuilt."""
         ref = self._reference

@@ -223,6 +223,9 @@ class OutputParams:
     interval: float = spec(1.0, "simulated time between saved frames; data are flushed to disk at each", gt=0.0)
     file: Optional[str] = spec(None, "output HDF5 path (default: the scenario file name with .h5, in the working directory)")
     velocities: bool = spec(True, "save tip velocities with every frame")
+    checkpoint_interval: float = spec(
+        900.0, "wall-clock seconds between checkpoints (RUN.checkpoint.h5); one is also written at the end and "
+        "on SIGTERM/SIGINT; 0 writes only those", ge=0.0)
 
 
 @dataclass(frozen=True)

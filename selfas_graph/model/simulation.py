@@ -32,6 +32,14 @@ BOND_BREAK = 0.05
 MAX_STEP_DISPLACEMENT = 0.25
 
 
+class RunInterrupted(Exception):
+    """The run was asked to stop (a signal); a checkpoint was written if a checkpointer was given."""
+
+    def __init__(self, step):
+        super().__init__(f"interrupted at step {step}")
+        self.step = step
+
+
 class NumericalFailure(RuntimeError):
     """The run went numerically wrong; the message is a diagnosis."""
 
@@ -83,7 +91,8 @@ class Simulation:
         Record wall time per force term (``force_field.seconds``).
     """
 
-    def __init__(self, params: Parameters, state: State | None = None, timing: bool = False):
+    def __init__(self, params: Parameters, state: State | None = None, timing: bool = False,
+                 detect_initial_contacts: bool = True):
         self.params = params
         self.state = random_state(params) if state is None else state
         self.force_field = ForceField(params, self.state, timing=timing)
@@ -125,6 +134,84 @@ class Simulation:
     @classmethod
     def from_scenario(cls, scenario, **kw):
         return cls(scenario.params, **kw)
+
+    # ------------------------------------------------------------------ exact restart
+    def snapshot(self) -> dict:
+        """Everything the next step depends on, as a flat dict of numpy arrays and scalars.
+
+        :meth:`from_snapshot` rebuilds a simulation whose next steps are bitwise those of
+        this one (same thread count): state, derivative history, work, neighbour-list
+        build positions, contacts, graph, currents, events and the energy reference.
+        """
+        st, it, ff = self.state, self.integrator, self.force_field
+        snap = {
+            "position": st.position.copy(), "velocity": st.velocity.copy(),
+            "tip_charge": st.tip_charge.copy(), "rod_charge": st.rod_charge.copy(),
+            "step": st.step, "time": st.time,
+            "hist_v": it.hist_v.copy(), "hist_a": it.hist_a.copy(), "hist_p": it.hist_p.copy(),
+            "head": it.head, "count": it.count, "work": it.work.copy(),
+            "time_origin_step": it.time_origin[0], "time_origin_time": it.time_origin[1],
+            "bond_error_before": it.bond_error_before, "bond_error_after": it.bond_error_after,
+            "max_bond_error": self.max_bond_error,
+            "energy0": np.nan if self._energy0 is None else self._energy0,
+            "current": ff.current.copy(),
+            "events": np.array([tuple(r) for r in self.events], dtype=ev.EVENT_DTYPE),
+            "short_circuit_time": np.nan if self.short_circuit_time is None else self.short_circuit_time,
+        }
+        for name, nl in (("tip_nl", ff._tip_nl), ("centre_nl", ff._centre_nl)):
+            if nl is not None and nl.reference is not None:
+                snap[f"{name}_reference"] = nl.reference.copy()
+                snap[f"{name}_builds"] = nl.n_builds
+        if self.contacts is not None:
+            c = self.contacts
+            snap.update(contact_pairs=c.pairs.copy(), on_cathode=c.on_cathode.copy(), on_anode=c.on_anode.copy(),
+                        on_filament=c.on_filament.copy(), filament_tip=self._filament_tip.copy(),
+                        filament_z=self._filament_z.copy(), has_solution=self.solution is not None)
+            for k, v in self.graph.arrays().items():
+                snap[f"graph_{k}"] = v.copy()
+        return snap
+
+    @classmethod
+    def from_snapshot(cls, params: Parameters, snap: dict, timing: bool = False) -> "Simulation":
+        """Rebuild a simulation from :meth:`snapshot` (see there)."""
+        state = State(np.array(snap["position"]), np.array(snap["velocity"]), np.array(snap["tip_charge"]),
+                      np.array(snap["rod_charge"]), int(snap["step"]), float(snap["time"]))
+        sim = cls(params, state=state, timing=timing, detect_initial_contacts=False)
+        it, ff = sim.integrator, sim.force_field
+        it.hist_v[:], it.hist_a[:], it.hist_p[:] = snap["hist_v"], snap["hist_a"], snap["hist_p"]
+        it.head, it.count = int(snap["head"]), int(snap["count"])
+        it.work[:] = snap["work"]
+        it.time_origin = (int(snap["time_origin_step"]), float(snap["time_origin_time"]))
+        it.bond_error_before = float(snap["bond_error_before"])
+        it.bond_error_after = float(snap["bond_error_after"])
+        sim.max_bond_error = float(snap["max_bond_error"])
+        e0 = float(snap["energy0"])
+        sim._energy0 = None if math.isnan(e0) else e0
+        sct = float(snap["short_circuit_time"])
+        sim.short_circuit_time = None if math.isnan(sct) else sct
+        sim.events = [tuple(r.item()) for r in np.asarray(snap["events"])]
+        ff._bind(state.position, state.velocity)
+        if "tip_nl_reference" in snap:
+            nl = ff.tip_neighbours(snap["tip_nl_reference"])
+            nl.build(np.array(snap["tip_nl_reference"]))
+            nl.n_builds = int(snap["tip_nl_builds"])
+        if "centre_nl_reference" in snap and ff._centre_nl is not None:
+            ff._centre_nl.build(np.array(snap["centre_nl_reference"]))
+            ff._centre_nl.n_builds = int(snap["centre_nl_builds"])
+        if sim.contacts is not None:
+            c = sim.contacts
+            c.pairs = np.array(snap["contact_pairs"], dtype=np.int64).reshape(-1, 2)
+            c.on_cathode[:], c.on_anode[:], c.on_filament[:] = snap["on_cathode"], snap["on_anode"], snap["on_filament"]
+            sim._filament_tip = np.array(snap["filament_tip"], dtype=np.int64)
+            sim._filament_z = np.array(snap["filament_z"], dtype=np.float64)
+            arrays = {k[len("graph_"):]: np.array(v) for k, v in snap.items() if k.startswith("graph_")}
+            sim.graph = ConnectivityGraph.from_arrays(state.n_rods, sim.conductor_potential, arrays)
+            if bool(snap["has_solution"]) and params.circuit is not None:
+                # the solve is a pure function of the graph arrays, so this is the solution the
+                # interrupted run held; the currents in use are restored as saved
+                sim.solution = sim.graph.solve()
+        ff.set_currents(np.array(snap["current"], dtype=np.float64))
+        return sim
 
     @property
     def dt(self) -> float:
@@ -274,7 +361,8 @@ class Simulation:
         """Number of steps that cover ``duration`` (rounded to the nearest step)."""
         return int(round(duration / self.dt))
 
-    def run(self, t_end=None, writer=None, progress=None, progress_every=None) -> RunSummary:
+    def run(self, t_end=None, writer=None, progress=None, progress_every=None, checkpointer=None,
+            stop=None) -> RunSummary:
         """Run from the current time to ``t_end`` (default ``run.t_end``).
 
         Parameters
@@ -285,6 +373,12 @@ class Simulation:
             ``output.interval`` of simulated time (nearest step), and at the end.
         progress : callable(sim, done, total), optional
             Called every ``progress_every`` steps (default: about 200 times a run).
+        checkpointer : object with ``due() -> bool`` and ``write(sim)``, optional
+            Asked after every step; when due, the writer's pending per-step rows and
+            events are flushed and a checkpoint is written. One is also written at the end.
+        stop : callable() -> bool, optional
+            Checked after every step; when true, pending data are flushed, a checkpoint
+            is written and :class:`RunInterrupted` is raised.
 
         Returns
         -------
@@ -295,11 +389,11 @@ class Simulation:
         every = max(1, int(round(self.params.output.interval / self.dt)))
         pevery = progress_every or max(1, n_steps // 200)
         summary = RunSummary(t_start=self.state.time)
-        bond_steps = np.empty(every, dtype=np.int64)
-        bond_vals = np.empty(every)
-        nb = 0
+        self._pending = (np.empty(every, dtype=np.int64), np.empty(every), [0])
+        if self._energy0 is None:
+            self._record_initial_energy()
         if writer is not None and writer.n_frames == 0:
-            self._write(writer, [], [])
+            self._write(writer)
         t0 = time.perf_counter()
         obs = None
         done = 0
@@ -311,18 +405,25 @@ class Simulation:
                 if writer is not None:
                     # frames fall on absolute steps that are multiples of `every`, so at most
                     # `every` steps pass between two frames
-                    bond_steps[nb] = self.state.step
-                    bond_vals[nb] = self.integrator.bond_error_before
-                    nb += 1
+                    steps, values, nb = self._pending
+                    steps[nb[0]] = self.state.step
+                    values[nb[0]] = self.integrator.bond_error_before
+                    nb[0] += 1
                     if self.state.step % every == 0 or i == n_steps:
-                        obs = self._write(writer, bond_steps[:nb], bond_vals[:nb])
-                        nb = 0
+                        obs = self._write(writer)
                 if progress is not None and (i % pevery == 0 or i == n_steps):
                     progress(self, i, n_steps)
                 done = i
+                if stop is not None and stop():
+                    self._checkpoint(writer, checkpointer)
+                    raise RunInterrupted(self.state.step)
+                if checkpointer is not None and checkpointer.due():
+                    self._checkpoint(writer, checkpointer)
         finally:
             summary.steps = done
             summary.wall_seconds = time.perf_counter() - t0
+        if checkpointer is not None:
+            self._checkpoint(writer, checkpointer)
         summary.t_end = self.state.time
         summary.max_bond_error = self.max_bond_error
         obs = obs if obs is not None else self.observables()
@@ -331,15 +432,33 @@ class Simulation:
         summary.frames = writer.n_frames if writer is not None else 0
         return summary
 
-    def _write(self, writer, steps, values):
-        st = self.state
-        obs = self.observables()
-        writer.write_per_step(steps, values)
-        writer.write_frame(st.step, st.time, st.position, st.velocity, obs)
+    def _flush_pending(self, writer):
+        """Hand the per-step rows and events not yet written to the writer."""
+        if writer is None:
+            return
+        steps, values, nb = getattr(self, "_pending", (None, None, [0]))
+        if nb[0]:
+            writer.write_per_step(steps[:nb[0]], values[:nb[0]])
+            nb[0] = 0
         if self.graph is not None:
             done = getattr(writer, "events_written", 0)
             writer.write_events(self.events[done:])
             writer.events_written = len(self.events)
+
+    def _checkpoint(self, writer, checkpointer):
+        if checkpointer is None:
+            return
+        self._flush_pending(writer)
+        if writer is not None:
+            writer.flush()
+        checkpointer.write(self)
+
+    def _write(self, writer):
+        st = self.state
+        obs = self.observables()
+        self._flush_pending(writer)
+        writer.write_frame(st.step, st.time, st.position, st.velocity, obs)
+        if self.graph is not None:
             sol = self.solution
             writer.write_graph(st.step, st.time, self.graph.arrays(), self.graph.topology().role,
                                sol.current if sol is not None else np.zeros(st.n_rods),
