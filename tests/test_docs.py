@@ -1,0 +1,195 @@
+"""The documentation cannot drift from the code.
+
+- docs/scenarios.md is exactly what tools/scenario_docs.py renders from the schema;
+- every scenario key that a page in docs/ names (``section.key`` in backticks) exists in the
+  schema of :mod:`selfas_graph.model.params`;
+- every ``tests/<file>.py::<name>`` reference names an existing test function, and every
+  ``selfas_graph/<module>.py::<name>`` reference an existing function, class or constant.
+"""
+import ast
+import dataclasses
+import importlib.util
+import re
+import sys
+import typing
+from pathlib import Path
+
+import pytest
+
+from selfas_graph.io.scenario import scenario_from_text
+from selfas_graph.model import params as P
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCS = ROOT / "docs"
+DOC_PAGES = sorted(DOCS.glob("*.md"))
+REGENERATE = "run `python tools/scenario_docs.py` to regenerate docs/scenarios.md"
+
+
+@pytest.fixture(scope="module")
+def tool():
+    """tools/scenario_docs.py, imported from its path (tools/ is not a package)."""
+    name = "_selfas_tools_scenario_docs"
+    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / "scenario_docs.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # dataclasses look their module up while the file executes
+    try:
+        spec.loader.exec_module(module)
+        yield module
+    finally:
+        sys.modules.pop(name, None)
+
+
+def _backticked(text):
+    """Contents of the inline code spans of a markdown text (fenced blocks left out)."""
+    text = re.sub(r"^```.*?^```", "", text, flags=re.S | re.M)
+    return re.findall(r"`([^`\n]+)`", text)
+
+
+# ----------------------------------------------------------------------------- scenarios.md
+
+def test_scenarios_md_is_up_to_date(tool):
+    """docs/scenarios.md equals render(): the reference lists the schema as it is now."""
+    path = DOCS / "scenarios.md"
+    assert path.exists(), f"docs/scenarios.md is missing; {REGENERATE}"
+    assert path.read_text(encoding="utf-8") == tool.render(), f"docs/scenarios.md is out of date; {REGENERATE}"
+
+
+def test_check_flag_reports_a_stale_file(tool, tmp_path, monkeypatch, capsys):
+    """``--check`` exits 0 on an up-to-date file and 1, with the command to run, on a stale one."""
+    out = tmp_path / "docs" / "scenarios.md"
+    monkeypatch.setattr(tool, "ROOT", tmp_path)
+    monkeypatch.setattr(tool, "OUTPUT", out)
+    assert tool.main(["--check"]) == 1  # missing
+    assert tool.main([]) == 0 and out.read_text(encoding="utf-8") == tool.render()
+    assert tool.main(["--check"]) == 0
+    out.write_text(tool.render() + "\nhand edit\n", encoding="utf-8")
+    capsys.readouterr()
+    assert tool.main(["--check"]) == 1
+    assert "python tools/scenario_docs.py" in capsys.readouterr().err
+
+
+def test_example_scenario_in_scenarios_md_loads():
+    """The example at the top of docs/scenarios.md is a valid scenario."""
+    text = (DOCS / "scenarios.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"^```toml\n(.*?)^```", text, flags=re.S | re.M)
+    assert blocks, "docs/scenarios.md has no ```toml example"
+    for block in blocks:
+        scenario_from_text(block)
+
+
+# ----------------------------------------------------------------------------- scenario keys
+
+def _schema_paths(cls=P.Parameters, prefix=""):
+    """Every table and key path of the scenario schema, walking the parameter dataclasses."""
+    out = set()
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        path = f"{prefix}{f.name}"
+        out.add(path)
+        tp = hints[f.name]
+        if typing.get_origin(tp) is typing.Union:
+            tp = next(a for a in typing.get_args(tp) if a is not type(None))
+        if dataclasses.is_dataclass(tp):
+            out |= _schema_paths(tp, path + ".")
+    return out
+
+
+SCHEMA = _schema_paths()
+SECTIONS = {f.name for f in dataclasses.fields(P.Parameters)}
+KEY_LIKE = re.compile(r"^[A-Za-z_]\w*(\.[A-Za-z_]\w*)+$")
+
+
+def _key_mentions(text):
+    """Backticked strings that look like scenario keys: ``forces.yukawa.tolerance``,
+    ``[forces.yukawa]``, ``--set forces.yukawa=false``; the first part must be a section."""
+    found = []
+    for span in _backticked(text):
+        candidate = span.strip()
+        if candidate.startswith("--set "):
+            candidate = candidate[len("--set "):]
+        candidate = candidate.split("=")[0].strip().strip("[]")
+        if KEY_LIKE.match(candidate) and candidate.split(".")[0] in SECTIONS:
+            found.append(candidate)
+    return found
+
+
+def test_model_md_names_scenario_keys():
+    """The check below is not vacuous: docs/model.md names scenario keys in backticks."""
+    assert len(_key_mentions((DOCS / "model.md").read_text(encoding="utf-8"))) > 20
+
+
+@pytest.mark.parametrize("page", DOC_PAGES, ids=lambda p: p.name)
+def test_every_key_named_in_the_docs_exists(page):
+    """Every ``section.key`` in backticks in a docs page is a key or table of the scenario schema."""
+    missing = sorted({k for k in _key_mentions(page.read_text(encoding="utf-8")) if k not in SCHEMA})
+    assert not missing, f"docs/{page.name} names scenario keys that do not exist: {missing}"
+
+
+# ----------------------------------------------------------------------------- code references
+
+def _defined_names(path: Path):
+    """Top-level functions, classes and assigned names of a module, and ``Class.method`` names."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    names = set()
+    for node in tree.body:
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            names.add(node.name)
+        elif isinstance(node, ast.ClassDef):
+            names.add(node.name)
+            for item in node.body:
+                if isinstance(item, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    names.add(f"{node.name}.{item.name}")
+        elif isinstance(node, ast.Assign):
+            names |= {t.id for t in node.targets if isinstance(t, ast.Name)}
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            names.add(node.target.id)
+    return names
+
+
+def _test_functions(path: Path):
+    """Names of the test functions of a test module (module level and in classes)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and node.name.startswith("test"):
+            names.add(node.name)
+    return names
+
+
+TEST_REF = re.compile(r"tests/([\w/]+\.py)::(\w+)")
+CODE_REF = re.compile(r"(selfas_graph/[\w/]+\.py)::([\w.]+)")
+
+
+def test_model_md_cites_tests():
+    """The check below is not vacuous: docs/model.md cites tests as tests/<file>.py::<name>."""
+    assert len(TEST_REF.findall((DOCS / "model.md").read_text(encoding="utf-8"))) > 50
+
+
+@pytest.mark.parametrize("page", DOC_PAGES, ids=lambda p: p.name)
+def test_every_cited_test_exists(page):
+    """Every ``tests/<file>.py::<name>`` in a docs page names an existing test function."""
+    bad = []
+    cache = {}
+    for file, name in TEST_REF.findall(page.read_text(encoding="utf-8")):
+        path = ROOT / "tests" / file
+        if not path.is_file():
+            bad.append(f"tests/{file}::{name} (no such file)")
+            continue
+        if file not in cache:
+            cache[file] = _test_functions(path)
+        if name not in cache[file]:
+            bad.append(f"tests/{file}::{name}")
+    assert not bad, f"docs/{page.name} cites tests that do not exist: {sorted(set(bad))}"
+
+
+@pytest.mark.parametrize("page", DOC_PAGES, ids=lambda p: p.name)
+def test_every_cited_function_exists(page):
+    """Every ``selfas_graph/<module>.py::<name>`` in a docs page names an existing definition."""
+    bad = []
+    for file, name in CODE_REF.findall(page.read_text(encoding="utf-8")):
+        path = ROOT / file
+        if not path.is_file():
+            bad.append(f"{file}::{name} (no such file)")
+        elif name.rstrip(".") not in _defined_names(path):
+            bad.append(f"{file}::{name}")
+    assert not bad, f"docs/{page.name} names code that does not exist: {sorted(set(bad))}"
