@@ -73,6 +73,16 @@ def analyse(run: RunFile, frame=None, t=None) -> dict:
     }
 
 
+def _finite_or_null(obj):
+    if isinstance(obj, float):
+        return obj if np.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite_or_null(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_finite_or_null(v) for v in obj]
+    return obj
+
+
 def _fmt(x, unit=""):
     if x is None:
         return "n/a (no circuit)"
@@ -80,13 +90,16 @@ def _fmt(x, unit=""):
 
 
 def run(args):
+    if args.time is not None and not np.isfinite(args.time):
+        raise CliError(f"--time {args.time} names no frame; give a finite simulated time")
     try:
         with RunFile(args.run) as f:
             data = analyse(f, frame=args.frame, t=args.time)
     except RunFileError as exc:
         raise CliError(str(exc)) from None
     if args.json:
-        print(json.dumps(data, indent=1))
+        # strict JSON for scripts: an infinite resistance (no current) is written as null
+        print(json.dumps(_finite_or_null(data), indent=1, allow_nan=False))
         return 0
     r = data["rods"]
     lines = [

@@ -296,10 +296,15 @@ class RunFile:
         self.path = Path(path)
         if not self.path.exists():
             raise RunFileError(f"{self.path}: no such file")
+        if self.path.is_dir():
+            raise RunFileError(f"{self.path}: a directory, not a run file")
         try:
             self.f = h5py.File(self.path, "r")
         except OSError as exc:
-            raise RunFileError(f"{self.path}: not a readable HDF5 file ({exc})") from None
+            reason = " ".join(str(exc).split())  # h5py's messages can span lines
+            if "lock" in reason.lower():
+                reason += "; is a run still writing it? (set HDF5_USE_FILE_LOCKING=FALSE to read it anyway)"
+            raise RunFileError(f"{self.path}: not a readable HDF5 file ({reason})") from None
         if "parameters/selfas_graph" not in self.f or "particles/tips/position/value" not in self.f:
             self.f.close()
             raise RunFileError(f"{self.path}: an HDF5 file, but not a selfas-graph run (no /particles/tips/position)")
