@@ -95,7 +95,9 @@ class RunWriter:
             raise OutputExistsError(f"output file {self.path} exists; pass --force to overwrite it or -o to choose another")
         if not self.path.parent.exists():
             raise FileNotFoundError(f"the folder of the output file {self.path} does not exist")
-        self.f = h5py.File(self.path, "w", libver="latest")
+        # default (earliest) format on purpose: the "latest" superblock carries a writer flag that a
+        # killed run leaves set, after which HDF5 refuses to open the file without h5clear
+        self.f = h5py.File(self.path, "w")
         f = self.f
         h = f.create_group("h5md")
         h.attrs["version"] = np.array(H5MD_VERSION, dtype=np.int32)
