@@ -1,0 +1,262 @@
+"""Cost of contact detection and events, and of a topology update plus circuit solve.
+
+Usage::
+
+    python tools/bench_events.py [--scenario scenarios/fig2.toml] [--settle 2000] [--steps 300]
+                                 [--sizes 1000 10000 100000] [--batch 10 1000] [--repeat 3]
+
+(a) Per-step overhead of contact detection and events when no event happens, on the
+    Fig. 2 scene (1200 rods, all its terms). The scene first runs ``--settle`` steps
+    so that contacts exist, then, from that same state, three measurements:
+
+    * ``in the run``: the wall time of the contact update of each step (tip
+      neighbour list check + close-pair count + release check + electrode planes,
+      and on steps with events the graph update and circuit solve), recorded while
+      the full scene runs; the median over steps without an event is the number
+      to compare with the 5 % goal;
+    * ``tracker alone``: ``ContactTracker.update`` repeated on the settled positions,
+      where nothing changes;
+    * ``frozen A/B``: velocities set to zero and every force off except a weak ambient
+      brake (and the electrode walls, which define the planes), so nothing moves and
+      no event happens; steps with ``contacts.enabled``
+      true minus false, against a full Fig. 2 step;
+    * ``Fig. 2 A/B``: the full scene with contacts on minus off, stepped alternately
+      (the tip list then also grows from r* to 1.5 r* for the brake; events happen).
+
+    Percentages are of the median full step without an event.
+
+    The goal is an overhead under 5 % of a full step.
+
+(b) ``ConnectivityGraph`` on networks of 10^3, 10^4, 10^5 rods (cross-linked chains
+    spanning two electrodes, dangling rods and 20 % free rods: the ``chains`` network
+    of ``tools/bench_circuit.py``): the graph holds the network minus a batch of tip
+    contacts; timed are ``apply`` of that batch as TIP_CONTACT events (graph mutation
+    plus the topology it needs to detect a short circuit), ``topology()`` (cached by
+    then), and ``solve()``. Fresh ``classify_rods`` time is shown for reference.
+    Best of ``--repeat``; the batch is released (untimed) between repeats.
+
+Prints markdown tables.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tools"))
+
+from bench_circuit import chain_network  # noqa: E402
+from selfas_graph import Simulation, load_scenario  # noqa: E402
+from selfas_graph.model import events as ev  # noqa: E402
+from selfas_graph.model.graph import ConnectivityGraph  # noqa: E402
+from selfas_graph.model.params import AmbientBrake, ForceParams  # noqa: E402
+
+
+# --------------------------------------------------------------------------- (a)
+def _with(params, contacts=None, forces=None):
+    """A copy of frozen parameters with the contact switch and/or the force terms replaced."""
+    p = params
+    if contacts is not None:
+        p = dataclasses.replace(p, contacts=dataclasses.replace(p.contacts, enabled=contacts))
+    if forces is not None:
+        p = dataclasses.replace(p, forces=forces)
+    return p
+
+
+def _interleaved(sims, steps, warmup=5):
+    """Per-step wall times (s) of several simulations stepped in turn, (steps, len(sims)).
+
+    Stepping them alternately exposes them to the same machine load (the medians of
+    separate runs drift by ~0.1 ms on a shared 2-core machine).
+    """
+    for sim in sims:
+        sim.step(warmup)
+    times = np.empty((steps, len(sims)))
+    for i in range(steps):
+        for j, sim in enumerate(sims):
+            t0 = time.perf_counter()
+            sim.step()
+            times[i, j] = time.perf_counter() - t0
+    return times
+
+
+def _record_contact_updates(sim):
+    """Wrap ``sim._update_contacts`` to record (seconds, events produced) of every call."""
+    record = []
+    inner = sim._update_contacts
+
+    def timed():
+        n = len(sim.events)
+        t0 = time.perf_counter()
+        inner()
+        record.append((time.perf_counter() - t0, len(sim.events) - n))
+
+    sim._update_contacts = timed
+    return record
+
+
+def contact_overhead(scenario_path, settle, steps):
+    sc = load_scenario(scenario_path)
+    params = sc.params
+    sim = Simulation(params)
+    t0 = time.perf_counter()
+    sim.step(settle)
+    settle_s = time.perf_counter() - t0
+    settled = sim.state.copy()
+    n_contacts = sim.contacts.n_contacts
+
+    # full Fig. 2 steps, contacts on and off, from the same state, interleaved
+    on = Simulation(params, state=settled.copy())
+    off = Simulation(_with(params, contacts=False), state=settled.copy())
+    on.step(5)
+    record = _record_contact_updates(on)
+    full = _interleaved([on, off], steps, warmup=0)
+    rec = np.array(record)
+    quiet = rec[:, 1] == 0
+    step_on, step_off = np.median(full, axis=0)
+    step_on_quiet = float(np.median(full[quiet, 0]))
+    upd_quiet = float(np.median(rec[quiet, 0]))
+    upd_event = float(np.median(rec[~quiet, 0])) if (~quiet).any() else float("nan")
+    n_event_steps = int((~quiet).sum())
+    n_events = int(rec[:, 1].sum())
+    mean_upd = float(rec[:, 0].mean())
+
+    # the tracker alone on the settled positions: after the first call nothing changes
+    st = on.state
+    ff, tracker = on.force_field, on.contacts
+    tracker.update(st.position, ff.tip_neighbours(st.position), st.step, st.time)
+    reps = max(200, 5 * steps)
+    times = np.empty(reps)
+    for i in range(reps):
+        t0 = time.perf_counter()
+        rows = tracker.update(st.position, ff.tip_neighbours(st.position), st.step, st.time)
+        times[i] = time.perf_counter() - t0
+        assert not rows, "the tracker found an event on unchanged positions"
+    tracker_alone = float(np.median(times))
+
+    # frozen A/B: nothing moves, no event can happen. The electrode walls stay on: the
+    # tracker takes its planes from them (they only push tips closer than r* to a plane,
+    # by less than r*, far from any release)
+    frozen = ForceParams(ambient_brake=AmbientBrake(coefficient=1e-3), electrodes=params.forces.electrodes)
+    fsims = []
+    for enabled in (True, False):
+        state = settled.copy()
+        state.velocity[:] = 0.0
+        fsims.append(Simulation(_with(params, contacts=enabled, forces=frozen), state=state))
+    before = len(fsims[0].events)
+    frozen_on, frozen_off = np.median(_interleaved(fsims, steps), axis=0)
+    assert len(fsims[0].events) == before, "an event happened in the frozen scene"
+
+    ms = 1e3
+    pct = 100.0 / step_on_quiet
+    print(f"\n(a) contact detection + events, {params.rods.count} rods of {scenario_path}; "
+          f"{numba.get_num_threads()} numba threads; after {settle} settling steps (t = {sim.state.time:g}, "
+          f"{settle_s:.1f} s): {n_contacts} contacts, {len(sim.events)} events so far. "
+          f"Medians over {steps} steps; a full step without an event (contacts on) = "
+          f"{ms * step_on_quiet:.3f} ms is the 100 %.\n")
+    print("| measurement | ms/step | % of a full step |")
+    print("|---|---|---|")
+    print(f"| full Fig. 2 step, contacts on (all {steps} steps) | {ms * step_on:.3f} | {pct * step_on:.1f} % |")
+    print(f"| full Fig. 2 step, contacts off, interleaved with the above | {ms * step_off:.3f} | "
+          f"{pct * step_off:.1f} % |")
+    print(f"| difference on - off (includes the tip list grown to 1.5 r* for the brake) | "
+          f"{ms * (step_on - step_off):.3f} | {pct * (step_on - step_off):.1f} % |")
+    print(f"| difference on (steps without an event) - off | {ms * (step_on_quiet - step_off):.3f} | "
+          f"{pct * (step_on_quiet - step_off):.1f} % |")
+    print(f"| contact search + events in the run, steps without an event ({int(quiet.sum())} steps) | "
+          f"{ms * upd_quiet:.3f} | **{pct * upd_quiet:.2f} %** |")
+    print(f"| ContactTracker.update alone on unchanged positions | {ms * tracker_alone:.3f} | "
+          f"{pct * tracker_alone:.2f} % |")
+    print(f"| frozen scene (v = 0, weak ambient brake): step with contacts on - off | "
+          f"{ms * (frozen_on - frozen_off):.3f} | {pct * (frozen_on - frozen_off):.2f} % |")
+    print(f"| (for comparison) contacts + graph + topology + solve on steps with events "
+          f"({n_event_steps} steps, {n_events} events) | {ms * upd_event:.3f} | {pct * upd_event:.1f} % |")
+    print(f"| (for comparison) mean over all steps, events included | {ms * mean_upd:.3f} | "
+          f"{pct * mean_upd:.1f} % |")
+
+
+# --------------------------------------------------------------------------- (b)
+def _graph_of(n_rods, tc, ct, cid, pot, hold_back):
+    """A ConnectivityGraph of the network without the tip contacts ``hold_back`` (row indices)."""
+    cond = {ev.CONDUCTOR_CATHODE: float(pot[cid == ev.CONDUCTOR_CATHODE][0]),
+            ev.CONDUCTOR_ANODE: float(pot[cid == ev.CONDUCTOR_ANODE][0])}
+    keep = np.ones(len(tc), dtype=bool)
+    keep[hold_back] = False
+    arrays = {"tip_contacts": tc[keep], "conductor_tip": ct, "conductor_id": cid, "conductor_potential": pot}
+    return ConnectivityGraph.from_arrays(n_rods, cond, arrays)
+
+
+def graph_update(sizes, batches, repeat, seed):
+    rng = np.random.default_rng(seed)
+    print(f"\n(b) ConnectivityGraph: apply a batch of TIP_CONTACT events, topology(), solve(); "
+          f"chains network of tools/bench_circuit.py; best of {repeat}\n")
+    print("| rods | contacts | events in batch | build graph (s) | apply + topology (ms) | topology() after (ms) "
+          "| solve (ms) | total (ms) | fresh classify_rods (ms) | filament rods |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for n in sizes:
+        n_rods, tc, ct, cid, pot = chain_network(n, rng)
+        for batch in batches:
+            batch = min(batch, len(tc))
+            pick = rng.choice(len(tc), size=batch, replace=False)
+            t0 = time.perf_counter()
+            graph = _graph_of(n_rods, tc, ct, cid, pot, pick)
+            graph.topology()
+            graph.solve()
+            build = time.perf_counter() - t0
+            add = [(1, 0.1, ev.TIP_CONTACT, int(k), int(l)) for k, l in tc[pick]]
+            release = [(2, 0.2, ev.TIP_RELEASE, int(k), int(l)) for k, l in tc[pick]]
+            best = dict(apply=np.inf, topo=np.inf, solve=np.inf, total=np.inf, fresh=np.inf)
+            for _ in range(repeat):
+                t0 = time.perf_counter()
+                graph.apply(add)
+                t1 = time.perf_counter()
+                topo = graph.topology()
+                t2 = time.perf_counter()
+                sol = graph.solve()
+                t3 = time.perf_counter()
+                graph._topology = None  # a fresh classification of the same graph, for reference
+                t4 = time.perf_counter()
+                graph.topology()
+                t5 = time.perf_counter()
+                for key, value in (("apply", t1 - t0), ("topo", t2 - t1), ("solve", t3 - t2),
+                                   ("total", t3 - t0), ("fresh", t5 - t4)):
+                    best[key] = min(best[key], value)
+                graph.apply(release)
+                graph.topology()
+            assert sol.kirchhoff_residual < 1e-9 * max(1.0, sol.total_current)
+            print(f"| {n_rods} | {len(tc) + len(ct)} | {batch} | {build:.2f} | {1e3 * best['apply']:.1f} | "
+                  f"{1e3 * best['topo']:.3f} | {1e3 * best['solve']:.1f} | {1e3 * best['total']:.1f} | "
+                  f"{1e3 * best['fresh']:.1f} | {topo.n_filament} |")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "fig2.toml"))
+    ap.add_argument("--settle", type=int, default=2000, help="steps run before measuring (a), to form contacts")
+    ap.add_argument("--steps", type=int, default=300, help="timed steps per measurement in (a)")
+    ap.add_argument("--sizes", type=int, nargs="+", default=[1000, 10_000, 100_000])
+    ap.add_argument("--batch", type=int, nargs="+", default=[10, 1000], help="events per batch in (b)")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--skip-a", action="store_true")
+    ap.add_argument("--skip-b", action="store_true")
+    args = ap.parse_args(argv)
+    print(f"python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}, "
+          f"{os.cpu_count()} CPUs, {numba.get_num_threads()} numba threads")
+    if not args.skip_a:
+        contact_overhead(args.scenario, args.settle, args.steps)
+    if not args.skip_b:
+        graph_update(args.sizes, args.batch, args.repeat, args.seed)
+
+
+if __name__ == "__main__":
+    main()
