@@ -15,6 +15,7 @@ from .._version import __version__
 COMMANDS = {
     "simulate": ("selfas_graph.cli.simulate", "run a scenario and write an HDF5 run file"),
     "topology": ("selfas_graph.cli.topology", "structures, filaments, currents and events of a saved frame"),
+    "plot": ("selfas_graph.cli.plot", "figures of a saved run: snapshot, density, field, flux, timeline (PNG)"),
 }
 
 EXIT_USAGE = 2

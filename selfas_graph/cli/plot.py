@@ -1,0 +1,355 @@
+"""Figures of a saved run: ``selfas-graph plot RUN.h5 --kind KIND [--frame K | --time T] [-o FILE.png]``.
+
+Kinds, after the paper's figures (MODEL.md section 7):
+
+* ``snapshot`` -- the rods in 3-D: current-carrying filaments blue, dead ends within
+  the filament networks red (the dead-end rods of structures that hold filament
+  rods), the rest grey (Figs. 2, 8); with more than 3000 rods the largest structure
+  is red instead of the dead ends (Fig. 6). Electrode planes are translucent rectangles.
+* ``density``  -- rods per unit volume vs distance r from the z axis, averaged over
+  z between the electrodes (or over the rods' extent) and azimuth: total (green),
+  in current-carrying filaments (blue), in the largest structure (red) (Figs. 3, 7, 9).
+* ``field``    -- B_z of the rod currents only vs r, averaged over azimuth, one
+  curve per plane (``--planes``; default the two electrode planes and z = 0, Fig. 4).
+* ``flux``     -- flux of that B_z through discs of radius R, in units of
+  Phi_0 = 4 pi (Fig. 5), or of an external dipole's flux with ``--z-mext`` (Fig. 11).
+* ``timeline`` -- rods in filaments and total current vs time, the short-circuit
+  time marked.
+
+The output goes next to the run file as ``RUN_KIND_frameK.png`` (``RUN_timeline.png``
+for the timeline) unless ``-o`` says otherwise; an existing file is kept unless
+``--force``. Needs matplotlib (``pip install "selfas-graph[plot]"``); draws headless.
+"""
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import numpy as np
+
+from ..analysis import bz_profile, flux_through_disc, radial_density, rod_centres, timeline
+from ..io.h5md import RunFile, RunFileError
+from ..model.graph import DEAD_END, FILAMENT, ConnectivityGraph
+from .main import CliError
+
+KINDS = ("snapshot", "density", "field", "flux", "timeline")
+#: kinds that need the graph data (contacts, roles, currents) of the run
+NEEDS_GRAPH = ("field", "flux", "timeline")
+#: above this many rods a snapshot colours the largest structure instead of dead ends (paper Fig. 6)
+LARGE_RUN = 3000
+
+# the paper's colours
+FILAMENT_COLOUR = "blue"
+DEAD_END_COLOUR = "red"
+LARGEST_COLOUR = "red"
+TOTAL_COLOUR = "green"
+OTHER_COLOUR = (0.55, 0.55, 0.55)
+ELECTRODE_COLOUR = (0.85, 0.65, 0.15)
+
+
+def add_arguments(p):
+    p.add_argument("run", help="run file written by selfas-graph simulate")
+    p.add_argument("--kind", choices=KINDS, default="snapshot", help="which figure (default: snapshot)")
+    which = p.add_mutually_exclusive_group()
+    which.add_argument("--frame", type=int, help="frame number (negative counts from the end; default: last)")
+    which.add_argument("--time", type=float, help="the frame nearest to this simulated time")
+    p.add_argument("-o", "--output", help="PNG file to write (default: RUN_KIND_frameK.png next to the run file)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.add_argument("--planes", type=float, nargs="+", metavar="Z",
+                   help="planes z = const for field and flux (default: the electrode planes and z = 0, "
+                        "or the lowest tip, 0 and the highest tip without electrodes)")
+    p.add_argument("--r-max", type=float,
+                   help="largest radius of the profiles (default: the farthest rod from the axis)")
+    p.add_argument("--bins", type=int, default=30, help="radial shells of the density profile (default 30)")
+    p.add_argument("--n-phi", type=int,
+                   help="azimuthal samples of the field average (default: one per wire radius of arc "
+                        "on the largest circle, at least 64)")
+    p.add_argument("--z-mext", type=float,
+                   help="flux in units of an external dipole's flux 4 pi Z_Mext instead of Phi_0 = 4 pi")
+    p.add_argument("--dpi", type=int, default=150, help="resolution of the PNG (default 150)")
+
+
+def _matplotlib():
+    """Import matplotlib lazily (the package works without it) and pick the headless backend."""
+    try:
+        import matplotlib
+    except ImportError:
+        raise CliError('plotting needs matplotlib: pip install "selfas-graph[plot]"') from None
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    return Figure
+
+
+def _output_path(args, run_path: Path, frame: int) -> Path:
+    if args.output:
+        out = Path(args.output)
+    elif args.kind == "timeline":
+        out = run_path.with_name(f"{run_path.stem}_timeline.png")
+    else:
+        out = run_path.with_name(f"{run_path.stem}_{args.kind}_frame{frame}.png")
+    if out.is_dir():
+        raise CliError(f"output path {out} is a directory")
+    if out.exists() and not args.force:
+        raise CliError(f"output file {out} exists; pass --force to overwrite it or -o to choose another name")
+    if not out.parent.exists():
+        raise CliError(f"the folder {out.parent} of the output file does not exist")
+    return out
+
+
+class _Frame:
+    """One saved frame's arrays: positions, and the graph state of the same step if saved."""
+
+    def __init__(self, run: RunFile, frame=None, t=None):
+        self.index = run.frame_index(frame=frame, t=t)
+        self.time = float(run.time[self.index])
+        self.step = int(run.step[self.index])
+        self.position = run.position(self.index)
+        self.n_rods = self.position.shape[0] // 2
+        params = run.parameters
+        self.wire_radius = 0.5 * float(params["rods"]["diameter"])
+        electrodes = (params.get("forces") or {}).get("electrodes")
+        self.gap = float(electrodes["gap"]) if electrodes else None
+        self.graph = None
+        if run.has_graph:
+            steps = run.f["graph/step"][:]
+            match = np.flatnonzero(steps == self.step)
+            if match.size:
+                self.graph = run.graph(frame=int(match[0]))
+
+    def require_graph(self, run: RunFile, kind: str):
+        if self.graph is None:
+            if not run.has_graph:
+                run.graph_frame_index(self.index)  # raises the reader's explanation
+            raise RunFileError(f"{run.path}: no graph data saved at frame {self.index} (step {self.step}), "
+                               f"which the {kind} plot needs")
+
+    @property
+    def role(self):
+        return None if self.graph is None else self.graph["role"]
+
+    @functools.cached_property
+    def topology(self):
+        """Structures of the frame (rebuilt from the saved contact arrays), None without graph data."""
+        if self.graph is None:
+            return None
+        return ConnectivityGraph.from_arrays(self.n_rods, self.graph["conductors"], self.graph).topology()
+
+    @property
+    def structure(self):
+        return None if self.topology is None else self.topology.structure
+
+    @property
+    def largest_mask(self):
+        topo = self.topology
+        if topo is None or topo.largest_structure < 0:
+            return np.zeros(self.n_rods, dtype=bool)
+        return topo.structure == topo.largest_structure
+
+
+def _title(run: RunFile, frame: _Frame, what: str) -> str:
+    return f"{run.path.name}: {what}, frame {frame.index}, t = {frame.time:.4g} $t_0$"
+
+
+# --------------------------------------------------------------------------- kinds
+def _snapshot(fig, run, frame, args):
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
+    from matplotlib.lines import Line2D
+
+    ax = fig.add_subplot(projection="3d")
+    seg = frame.position.reshape(frame.n_rods, 2, 3)
+    role = frame.role
+    large = frame.n_rods > LARGE_RUN
+    groups = []  # (mask, colour, width, label)
+    if role is None:
+        groups.append((np.ones(frame.n_rods, dtype=bool), OTHER_COLOUR, 0.8, "rods (no graph data)"))
+    else:
+        fil = role == FILAMENT
+        if large:
+            red, red_label = frame.largest_mask, "largest structure"
+            fil = fil & ~red
+        else:
+            # the paper's red: "dead ends within the network of short-circuited filaments", i.e.
+            # DEAD_END rods of a structure that holds filament rods; dead ends of structures that
+            # touch only one electrode stay grey
+            networks = np.unique(frame.structure[role == FILAMENT])
+            red = (role == DEAD_END) & np.isin(frame.structure, networks)
+            red_label = "dead ends of filament networks"
+        rest = ~(fil | red)
+        groups += [(rest, OTHER_COLOUR, 0.6, "other rods"),
+                   (fil, FILAMENT_COLOUR, 1.6, "current-carrying filaments"),
+                   (red, DEAD_END_COLOUR if not large else LARGEST_COLOUR, 1.6, red_label)]
+    handles = []
+    for mask, colour, width, label in groups:
+        alpha = 0.45 if colour is OTHER_COLOUR and role is not None else 1.0
+        if mask.any():
+            ax.add_collection3d(Line3DCollection(seg[mask], colors=[colour], linewidths=width, alpha=alpha))
+        handles.append(Line2D([], [], color=colour, lw=2, alpha=alpha, label=f"{label} ({int(mask.sum())})"))
+    lo, hi = frame.position.min(axis=0), frame.position.max(axis=0)
+    if frame.gap is not None:
+        lo[2], hi[2] = min(lo[2], -frame.gap / 2), max(hi[2], frame.gap / 2)
+        x0, x1, y0, y1 = lo[0] - 0.5, hi[0] + 0.5, lo[1] - 0.5, hi[1] + 0.5
+        for z, name in ((-frame.gap / 2, "cathode"), (frame.gap / 2, "anode")):
+            rect = [[(x0, y0, z), (x1, y0, z), (x1, y1, z), (x0, y1, z)]]
+            ax.add_collection3d(Poly3DCollection(rect, facecolors=[ELECTRODE_COLOUR], edgecolors=[ELECTRODE_COLOUR],
+                                                 alpha=0.15))
+        handles.append(Line2D([], [], color=ELECTRODE_COLOUR, lw=6, alpha=0.4,
+                              label=f"electrodes z = $\\pm${frame.gap / 2:g} L"))
+    span = np.maximum(hi - lo, 1e-6)
+    pad = 0.02 * span.max()
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_zlim(lo[2] - pad, hi[2] + pad)
+    ax.set_box_aspect(tuple(span + 2 * pad))
+    ax.set_xlabel("x (L)")
+    ax.set_ylabel("y (L)")
+    ax.set_zlabel("z (L)")
+    ax.legend(handles=handles, loc="upper left", fontsize="small")
+    ax.set_title(_title(run, frame, f"{frame.n_rods} rods"), fontsize="medium")
+
+
+def _r_max(args, points):
+    if args.r_max is not None:
+        if not args.r_max > 0:
+            raise CliError(f"--r-max must be > 0, got {args.r_max}")
+        return float(args.r_max)
+    r = float(np.hypot(points[:, 0], points[:, 1]).max()) if len(points) else 0.0
+    return r if r > 0 else 1.0
+
+
+def _density(fig, run, frame, args):
+    ax = fig.add_subplot()
+    centre = rod_centres(frame.position)
+    if frame.gap is not None:
+        z_range = (-frame.gap / 2, frame.gap / 2)
+    else:
+        z_range = (float(centre[:, 2].min()), float(centre[:, 2].max()))
+        if z_range[1] <= z_range[0]:
+            z_range = (z_range[0] - 0.5, z_range[0] + 0.5)
+    if args.bins < 1:
+        raise CliError(f"--bins must be >= 1, got {args.bins}")
+    r_max = _r_max(args, centre)
+    curves = [("total", None, TOTAL_COLOUR)]
+    if frame.role is not None:
+        curves += [("in current-carrying filaments", frame.role == FILAMENT, FILAMENT_COLOUR),
+                   ("in the largest structure", frame.largest_mask, LARGEST_COLOUR)]
+    for label, mask, colour in curves:
+        edges, dens = radial_density(centre, r_max, args.bins, z_range, mask=mask)
+        n = len(centre) if mask is None else int(mask.sum())
+        ax.plot(0.5 * (edges[1:] + edges[:-1]), dens, "-o", ms=3, color=colour, label=f"{label} ({n} rods)")
+    ax.set_xlim(0, r_max)
+    ax.set_ylim(bottom=0)
+    ax.set_xlabel("distance from the z axis r (L)")
+    ax.set_ylabel("rod density (rods / $L^3$)")
+    ax.legend(fontsize="small")
+    note = "" if frame.role is not None else " (no graph data: total only)"
+    ax.set_title(_title(run, frame, "radial density") + note
+                 + f"\naveraged over {z_range[0]:.3g} $\\leq$ z $\\leq$ {z_range[1]:.3g} L and azimuth",
+                 fontsize="medium")
+
+
+def _planes(args, frame):
+    if args.planes:
+        return sorted(args.planes)
+    if frame.gap is not None:
+        return [-frame.gap / 2, 0.0, frame.gap / 2]
+    z = frame.position[:, 2]
+    return [float(z.min()), 0.0, float(z.max())]
+
+
+def _plane_colours(planes):
+    """The paper's blue / black / red for three planes (lowest to highest); a colormap otherwise."""
+    if len(planes) == 3:
+        return ["blue", "black", "red"]
+    if len(planes) <= 2:
+        return ["blue", "red"][:len(planes)]
+    import matplotlib
+
+    cmap = matplotlib.colormaps["coolwarm"]
+    return [cmap(i / (len(planes) - 1)) for i in range(len(planes))]
+
+
+def _field_or_flux(fig, run, frame, args):
+    frame.require_graph(run, args.kind)
+    if args.n_phi is not None and args.n_phi < 1:
+        raise CliError(f"--n-phi must be >= 1, got {args.n_phi}")
+    if args.z_mext is not None and not (np.isfinite(args.z_mext) and args.z_mext != 0):
+        raise CliError(f"--z-mext must be a nonzero number, got {args.z_mext}")
+    current = frame.graph["current"]
+    r_max = _r_max(args, frame.position)
+    planes = _planes(args, frame)
+    ax = fig.add_subplot()
+    if args.kind == "field":
+        r = np.linspace(0.0, r_max, 201)
+    else:
+        r = np.linspace(0.0, r_max, 101)
+    for z, colour in zip(planes, _plane_colours(planes)):
+        if args.kind == "field":
+            y = bz_profile(r, z, frame.position, None, current, frame.wire_radius, n_phi=args.n_phi)
+        else:
+            y = flux_through_disc(r, z, frame.position, None, current, frame.wire_radius, n_phi=args.n_phi,
+                                  z_mext=args.z_mext)
+        ax.plot(r, y, color=colour, label=f"plane z = {z:.4g} L")
+    ax.axhline(0.0, color="0.7", lw=0.8, zorder=0)
+    ax.set_xlim(0, r_max)
+    n_active = int(np.count_nonzero(current))
+    note = f"{n_active} rods carry current" if n_active else "no rod carries current (no short circuit yet)"
+    if args.kind == "field":
+        ax.set_xlabel("distance from the z axis r (L)")
+        ax.set_ylabel("$B_z$ of the rod currents ($B_0$), azimuthal mean")
+        ax.set_title(_title(run, frame, "$B_z$ of the rod currents") + f"\n{note}", fontsize="medium")
+    else:
+        ax.set_xlabel("disc radius R (L)")
+        if args.z_mext is None:
+            unit = "$\\Phi_0 = 4\\pi B_0 L^2$"
+        else:
+            unit = f"$4\\pi Z_{{Mext}}$, $Z_{{Mext}}$ = {args.z_mext:g}"
+        ax.set_ylabel(f"flux of the rod currents' $B_z$ (units of {unit})")
+        ax.set_title(_title(run, frame, "magnetic flux through discs") + f"\n{note}", fontsize="medium")
+    ax.legend(fontsize="small")
+
+
+def _timeline(fig, run, frame, args):
+    if "rods/filament" not in run.observable_names():
+        raise CliError(f"{run.path}: no 'rods/filament' observable, which the timeline plot needs")
+    t, n_fil = run.observable("rods/filament")
+    total = run.observable("total_current")[1] if "total_current" in run.observable_names() else None
+    tl = timeline(t, n_fil, total, run.events())
+    ax = fig.add_subplot()
+    lines = ax.plot(tl.time, tl.n_filament, "-o", ms=3, color=FILAMENT_COLOUR, label="rods in filaments")
+    ax.set_xlabel("time t ($t_0$)")
+    ax.set_ylabel("rods in current-carrying filaments", color=FILAMENT_COLOUR)
+    ax.set_ylim(bottom=0)
+    if tl.total_current is not None:
+        ax2 = ax.twinx()
+        lines += ax2.plot(tl.time, tl.total_current, "-s", ms=3, color="black", label="total current")
+        ax2.set_ylabel("total current ($J_0$)")
+        ax2.set_ylim(bottom=min(0.0, float(np.nanmin(tl.total_current))))
+    if tl.short_circuit_time is not None:
+        lines.append(ax.axvline(tl.short_circuit_time, color=DEAD_END_COLOUR, ls="--",
+                                label=f"short circuit, t = {tl.short_circuit_time:.4g}"))
+    ax.legend(handles=lines, loc="upper left", fontsize="small")
+    sc = ("no short circuit" if tl.short_circuit_time is None
+          else f"short circuit at t = {tl.short_circuit_time:.4g} $t_0$")
+    ax.set_title(f"{run.path.name}: filaments over time ({sc})", fontsize="medium")
+
+
+DRAW = {"snapshot": _snapshot, "density": _density, "field": _field_or_flux, "flux": _field_or_flux,
+        "timeline": _timeline}
+
+
+def run(args):
+    Figure = _matplotlib()
+    try:
+        with RunFile(args.run) as f:
+            frame = _Frame(f, frame=args.frame, t=args.time)
+            if args.kind in NEEDS_GRAPH:
+                frame.require_graph(f, args.kind)
+            out = _output_path(args, f.path, frame.index)
+            fig = Figure(figsize=(8.0, 7.0) if args.kind == "snapshot" else (7.0, 5.0), layout="constrained")
+            DRAW[args.kind](fig, f, frame, args)
+    except RunFileError as exc:
+        raise CliError(str(exc)) from None
+    fig.savefig(out, dpi=args.dpi, format="png")
+    print(f"wrote {out}")
+    return 0

@@ -1,0 +1,129 @@
+"""``selfas-graph plot``: every kind writes a PNG, files are protected, errors are one line (exit 2).
+
+One small run of ``scenarios/quick.toml`` up to t = 2 (past its short circuit near
+t = 1.3, so there are filaments, dead ends and currents) is made once for the module.
+"""
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("matplotlib")
+
+from selfas_graph.cli.main import main  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def run_file(tmp_path_factory):
+    out = tmp_path_factory.mktemp("plot") / "quick.h5"
+    rc = main(["simulate", str(REPO / "scenarios" / "quick.toml"), "-o", str(out), "--t-end", "2",
+               "--progress", "none"])
+    assert rc == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def no_graph_run(tmp_path_factory):
+    """A run without contacts: positions only, no graph data (a few steps)."""
+    out = tmp_path_factory.mktemp("plot_nograph") / "nograph.h5"
+    rc = main(["simulate", str(REPO / "scenarios" / "quick.toml"), "-o", str(out), "--t-end", "0.01",
+               "--progress", "none", "--set", "contacts.enabled=false"])
+    assert rc == 0
+    return out
+
+
+def is_png(path):
+    data = Path(path).read_bytes()
+    return data[:8] == PNG_SIGNATURE and len(data) > 1000
+
+
+@pytest.mark.parametrize("kind", ["snapshot", "density", "field", "flux", "timeline"])
+def test_every_kind_writes_a_png(run_file, tmp_path, kind, capsys):
+    """Each figure kind of the paper (MODEL.md section 7) renders headless to a non-empty PNG."""
+    out = tmp_path / f"{kind}.png"
+    assert main(["plot", str(run_file), "--kind", kind, "-o", str(out)]) == 0
+    assert is_png(out)
+    assert str(out) in capsys.readouterr().out
+
+
+def test_large_run_snapshot_colours_the_largest_structure(run_file, tmp_path, monkeypatch, capsys):
+    """Above LARGE_RUN rods the snapshot colours the largest structure red (paper Fig. 6); the
+    threshold is lowered here so that the 300-rod run takes that branch."""
+    from selfas_graph.cli import plot
+
+    monkeypatch.setattr(plot, "LARGE_RUN", 100)
+    out = tmp_path / "large.png"
+    assert main(["plot", str(run_file), "--kind", "snapshot", "-o", str(out)]) == 0
+    assert is_png(out)
+
+
+def test_options_planes_time_and_dipole_units(run_file, tmp_path):
+    """--planes, --time, --n-phi and --z-mext are accepted and still give PNGs."""
+    out = tmp_path / "flux.png"
+    assert main(["plot", str(run_file), "--kind", "flux", "--time", "1.6", "--planes", "-1", "1",
+                 "--n-phi", "128", "--z-mext", "10", "-o", str(out)]) == 0
+    assert is_png(out)
+
+
+def test_default_name_and_no_overwrite_without_force(run_file, capsys):
+    """The default output is RUN_kind_frameK.png next to the run (K the resolved frame index, here
+    frame -4 -> 1 of 0..4); an existing file is kept unless --force."""
+    out = run_file.with_name(f"{run_file.stem}_density_frame1.png")
+    assert main(["plot", str(run_file), "--kind", "density", "--frame", "-4"]) == 0
+    assert is_png(out)
+    before = out.read_bytes()
+    out.write_bytes(b"keep me")
+    capsys.readouterr()
+    assert main(["plot", str(run_file), "--kind", "density", "--frame", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "exists" in err and "--force" in err and len(err.strip().splitlines()) == 1
+    assert out.read_bytes() == b"keep me"
+    assert main(["plot", str(run_file), "--kind", "density", "--frame", "1", "--force"]) == 0
+    assert out.read_bytes() == before
+
+
+def test_missing_file_is_a_clear_error(tmp_path, capsys):
+    """A run file that does not exist: exit 2, one line naming the file."""
+    missing = tmp_path / "nothere.h5"
+    assert main(["plot", str(missing), "--kind", "snapshot"]) == 2
+    err = capsys.readouterr().err
+    assert "no such file" in err and str(missing) in err and len(err.strip().splitlines()) == 1
+
+
+def test_not_a_run_file_is_a_clear_error(tmp_path, capsys):
+    """A file that is not HDF5: exit 2 with the reader's explanation."""
+    bad = tmp_path / "bad.h5"
+    bad.write_text("not hdf5")
+    assert main(["plot", str(bad)]) == 2
+    assert "not a readable HDF5 file" in capsys.readouterr().err
+
+
+def test_frame_out_of_range_is_a_clear_error(run_file, tmp_path, capsys):
+    """--frame beyond the saved frames (0..4): exit 2, the valid range in the message, nothing written."""
+    out = tmp_path / "x.png"
+    assert main(["plot", str(run_file), "--kind", "field", "--frame", "99", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "frame 99 out of range" in err and "0..4" in err
+    assert not out.exists()
+
+
+def test_kinds_that_need_the_graph_say_so(no_graph_run, tmp_path, capsys):
+    """Without graph data, field, flux and timeline fail with exit 2 and the reason; snapshot and
+    density still draw (all rods grey / total density only)."""
+    for kind in ("field", "flux", "timeline"):
+        assert main(["plot", str(no_graph_run), "--kind", kind, "-o", str(tmp_path / f"{kind}.png")]) == 2
+        assert "no graph data" in capsys.readouterr().err
+    for kind in ("snapshot", "density"):
+        out = tmp_path / f"{kind}.png"
+        assert main(["plot", str(no_graph_run), "--kind", kind, "-o", str(out)]) == 0
+        assert is_png(out)
+
+
+def test_missing_matplotlib_names_the_extra(run_file, tmp_path, monkeypatch, capsys):
+    """Without matplotlib the command says which extra to install (exit 2)."""
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # makes `import matplotlib` raise ImportError
+    assert main(["plot", str(run_file), "-o", str(tmp_path / "x.png")]) == 2
+    assert 'pip install "selfas-graph[plot]"' in capsys.readouterr().err
