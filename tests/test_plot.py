@@ -30,7 +30,8 @@ def no_graph_run(tmp_path_factory):
     """A run without contacts: positions only, no graph data (a few steps)."""
     out = tmp_path_factory.mktemp("plot_nograph") / "nograph.h5"
     rc = main(["simulate", str(REPO / "scenarios" / "quick.toml"), "-o", str(out), "--t-end", "0.01",
-               "--progress", "none", "--set", "contacts.enabled=false"])
+               "--progress", "none", "--set", "contacts.enabled=false",
+               "--set", "circuit=false", "--set", "forces.current_field=false", "--set", "forces.current_lorentz=false"])
     assert rc == 0
     return out
 

@@ -86,6 +86,14 @@ def test_box_beyond_electrodes_and_empty_range():
     assert "the x range [3, -3] is empty" in problems(GOOD.replace("[[-3, 3], [-3", "[[3, -3], [-3"))
 
 
+def test_circuit_needs_contacts_and_a_conductor():
+    assert "with contacts.enabled = false it can never close" in problems(
+        GOOD + "[circuit]\ndelta_J0 = 1.0\n[contacts]\nenabled = false\n")
+    assert "the circuit needs a conductor" in problems(GOOD.replace("[forces.electrodes]\ngap = 6.0\n", "")
+                                                      .replace("[-3, 3]]", "[-3, 3]]") + "[circuit]\n")
+    assert "rod currents come from the circuit solve" in problems(GOOD + "[forces.current_field]\n")
+
+
 def test_output_interval_shorter_than_dt():
     msg = problems(GOOD + "[integrator]\ndt = 0.01\n[output]\ninterval = 0.001\n")
     assert "output.interval = 0.001 is shorter than integrator.dt = 0.01" in msg

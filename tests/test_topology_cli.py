@@ -40,10 +40,10 @@ def chain_state():
 def write_run(path, contacts=True):
     """Run the chain to T_END and write it as ``simulate`` does; returns the Simulation."""
     state = chain_state()
+    extra = {"circuit": {"delta_J0": DELTA_J0}} if contacts else {}  # a circuit needs contacts
     sim = simulation(state, forces={"tip_magnetic": {}, "tip_brake": {}, "ambient_brake": {},
                                     "electrodes": {"gap": GAP}},
-                     circuit={"delta_J0": DELTA_J0}, integrator={"dt": DT},
-                     contacts={"enabled": contacts}, output={"interval": INTERVAL})
+                     integrator={"dt": DT}, contacts={"enabled": contacts}, output={"interval": INTERVAL}, **extra)
     provenance = {
         "scenario_text": "# hand-built chain of three rods (tests/test_topology_cli.py)",
         "parameters_json": json.dumps(sim.params.to_dict()),

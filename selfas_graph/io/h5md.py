@@ -347,6 +347,8 @@ class RunFile:
         if n == 0:
             raise RunFileError(f"{self.path}: the run has no saved frames")
         if t is not None:
+            if not np.isfinite(t):
+                raise RunFileError(f"time {t} names no frame; give a finite simulated time")
             return int(np.argmin(np.abs(self.time - t)))
         k = -1 if frame is None else int(frame)
         if not -n <= k < n:
@@ -386,6 +388,8 @@ class RunFile:
                                f"or was written before any frame)")
         n = self.f["graph/step"].shape[0]
         if t is not None:
+            if not np.isfinite(t):
+                raise RunFileError(f"time {t} names no frame; give a finite simulated time")
             return int(np.argmin(np.abs(self.f["graph/time"][:] - t)))
         k = -1 if frame is None else int(frame)
         if not -n <= k < n:

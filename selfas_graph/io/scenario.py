@@ -346,6 +346,9 @@ def check_consistency(p: P.Parameters):
     if p.circuit is not None and el is None and p.forces.external_filament is None:
         out.append("circuit: the circuit needs a conductor to apply its bias: add [forces.electrodes] (case (i)) "
                    "or [forces.external_filament] (case (ii))")
+    if p.circuit is not None and not p.contacts.enabled:
+        out.append("circuit: the circuit is built from contacts; with contacts.enabled = false it can never close "
+                   "(remove [circuit] or enable contacts)")
     for term in ("current_field", "current_lorentz"):
         if getattr(p.forces, term) is not None and p.circuit is None:
             out.append(f"forces.{term}: rod currents come from the circuit solve; add a [circuit] table "
