@@ -5,7 +5,9 @@ pair: the neighbours of point ``k`` are ``index[start[k]:start[k + 1]]``. Each
 parallel iteration writes only its own row (gather). The list may hold pairs
 beyond the interaction range (a Verlet skin); the kernels test the distance.
 """
-from ._jit import njit_parallel, prange
+import math
+
+from ._jit import njit, njit_parallel, prange
 from .laws import yukawa_force_over_r, yukawa_potential
 
 
@@ -194,3 +196,29 @@ def close_pairs(position, start, index, radius):
     out = np.empty((offset[-1], 2), dtype=np.int64)
     _close_fill(position, start, index, radius, offset, out)
     return out
+
+
+@njit
+def brake_pairs_exact(velocity, pairs, k_br, dt):
+    """Exact brake of each listed tip pair over ``dt``, pair after pair (a Shardlow-type splitting).
+
+    For one pair of unit masses, ``dv_k/dt = -k_br (v_k - v_l)`` and the opposite for l keep
+    the mean velocity and damp the difference as ``exp(-2 k_br t)``; applying this exact
+    solution to each pair in turn is stable for any dt, keeps momentum, and never adds
+    energy. Pairs are processed in the given (sorted) order, so the result is deterministic.
+
+    Parameters
+    ----------
+    velocity : (n_tips, 3) float64, modified in place
+    pairs : (m, 2) int64
+    k_br, dt : float
+    """
+    decay = math.exp(-2.0 * k_br * dt)
+    for j in range(pairs.shape[0]):
+        k = pairs[j, 0]
+        l = pairs[j, 1]
+        for d in range(3):
+            mean = 0.5 * (velocity[k, d] + velocity[l, d])
+            half = 0.5 * (velocity[k, d] - velocity[l, d]) * decay
+            velocity[k, d] = mean + half
+            velocity[l, d] = mean - half

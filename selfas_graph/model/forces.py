@@ -62,6 +62,18 @@ class _Term:
     def energy(self, ff):
         return None
 
+    def split(self, ff, dt):
+        """Apply this term's stiff brake exactly over ``dt`` (``integrator.brake = "split"``).
+
+        Modifies ``ff.velocity`` in place and returns {channel: work done}; the work is the
+        change of kinetic energy of the tips it touched, exactly.
+        """
+        return {}
+
+
+def _kinetic(velocity, tips):
+    return 0.5 * float(np.einsum("ij,ij->", velocity[tips], velocity[tips]))
+
 
 class TipMagnetic(_Term):
     name = "tip_magnetic"
@@ -87,10 +99,24 @@ class TipBrake(_Term):
     def __init__(self, p, state):
         self.rstar = p.rods.rstar
         self.k = p.forces.tip_brake.coefficient
+        self.split_mode = p.integrator.brake == "split"
 
     def compute(self, ff, out):
+        if self.split_mode:
+            out["tip_brake"].fill(0.0)
+            return
         nl = ff.tip_neighbours()
         kp.tip_brake(ff.position, ff.velocity, nl.start, nl.index, self.rstar, self.k, out["tip_brake"])
+
+    def split(self, ff, dt):
+        nl = ff.tip_neighbours()
+        pairs = kp.close_pairs(ff.position, nl.start, nl.index, self.rstar)
+        if not len(pairs):
+            return {}
+        tips = np.unique(pairs)
+        before = _kinetic(ff.velocity, tips)
+        kp.brake_pairs_exact(ff.velocity, pairs, self.k, dt)
+        return {"tip_brake": _kinetic(ff.velocity, tips) - before}
 
 
 class AmbientBrake(_Term):
@@ -175,10 +201,22 @@ class Electrodes(_Term):
         self.rstar = p.rods.rstar
         self.kappa = p.rods.tip_stiffness
         self.k = p.forces.tip_brake.coefficient if p.forces.tip_brake is not None else 0.0
+        self.split_mode = p.integrator.brake == "split"
 
     def compute(self, ff, out):
-        kf.electrode_walls(ff.position, ff.velocity, self.z[0], self.z[1], self.rstar, self.kappa, self.k,
+        k = 0.0 if self.split_mode else self.k
+        kf.electrode_walls(ff.position, ff.velocity, self.z[0], self.z[1], self.rstar, self.kappa, k,
                            out["electrodes"], out["electrode_brake"])
+
+    def split(self, ff, dt):
+        z = ff.position[:, 2]
+        touching = (z - self.z[0] < self.rstar).astype(np.float64) + (self.z[1] - z < self.rstar)
+        tips = np.flatnonzero(touching)
+        if not len(tips) or self.k == 0.0:
+            return {}
+        before = _kinetic(ff.velocity, tips)
+        ff.velocity[tips] *= np.exp(-self.k * touching[tips] * dt)[:, None]  # dv/dt = -n k v, exactly
+        return {"electrode_brake": _kinetic(ff.velocity, tips) - before}
 
     def energy(self, ff):
         return {"electrodes": kf.electrode_energy(ff.position, self.z[0], self.z[1], self.rstar, self.kappa)}
@@ -211,10 +249,22 @@ class ExternalDipole(_Term):
         self.k = p.forces.tip_brake.coefficient if p.forces.tip_brake is not None else 0.0
         self.line = (-0.5 * d.length, 0.5 * d.length, d.line_charge, d.screening_length, d.radius)
         self.nodes, self.weights = kc.gauss_legendre_01(d.quadrature_points)
+        self.split_mode = p.integrator.brake == "split"
 
     def compute(self, ff, out):
+        k = 0.0 if self.split_mode else self.k
         kx.monopoles_on_tips(ff.position, ff.velocity, ff.tip_charge, self.source, self.source_charge, self.rstar,
-                             self.kappa, self.k, out["external_monopoles"], out["external_monopole_brake"])
+                             self.kappa, k, out["external_monopoles"], out["external_monopole_brake"])
+
+    def split(self, ff, dt):
+        d2 = ((ff.position[:, None, :] - self.source[None, :, :]) ** 2).sum(axis=-1)
+        touching = (d2 < self.rstar ** 2).sum(axis=1).astype(np.float64)
+        tips = np.flatnonzero(touching)
+        if not len(tips) or self.k == 0.0:
+            return {}
+        before = _kinetic(ff.velocity, tips)
+        ff.velocity[tips] *= np.exp(-self.k * touching[tips] * dt)[:, None]
+        return {"external_monopole_brake": _kinetic(ff.velocity, tips) - before}
         f = ff.buffer("line_centre", ff.n_rods)
         kx.line_yukawa_on_centres(ff.centre(), ff.rod_charge, *self.line, self.nodes, self.weights, f)
         _share_by_mass(f, out["external_line_charge"])
@@ -447,6 +497,16 @@ class ForceField:
             for j, name in enumerate(self.nonconservative):
                 power[j] = np.einsum("ij,ij->", self.out[name], velocity)
         return total
+
+    def split_brakes(self, position, velocity, dt, work):
+        """``integrator.brake = "split"``: apply every stiff brake exactly over ``dt`` (velocity in place).
+
+        ``work`` (len(nonconservative),) is incremented by each brake's work.
+        """
+        self._bind(position, velocity)
+        for t in self.terms:
+            for channel, w in t.split(self, dt).items():
+                work[self.nonconservative.index(channel)] += w
 
     def potential_energy(self, position) -> dict:
         """Potential energy of each conservative channel at ``position``."""

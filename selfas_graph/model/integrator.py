@@ -8,8 +8,10 @@ the force per unit mass plus the rigid-bond force. One step:
    ``y_{n+1} = y_n + dt/24 (55 f_n - 59 f_{n-1} + 37 f_{n-2} - 9 f_{n-3})``;
    otherwise a classical RK4 step (self-starting: the first three steps, and the
    first three after :meth:`reset_history`);
-3. bond constraint: position projection and velocity correction (each optional);
-4. the work of each non-conservative channel advances with the same weights as
+3. with ``integrator.brake = "split"``, the stiff brakes (left out of step 2) act on
+   the velocities through their exact solution over dt, pair after pair;
+4. bond constraint: position projection and velocity correction (each optional);
+5. the work of each non-conservative channel advances with the same weights as
    the positions (AB4 or RK4), so the energy balance ``E(t) - E(0) - W(t)``
    measures only the integration error.
 
@@ -39,12 +41,13 @@ class AdamsBashforth4:
         Apply the position projection / the velocity correction after each step.
     """
 
-    def __init__(self, force_field, dt, exact_bond=True, project=True, correct_velocity=True):
+    def __init__(self, force_field, dt, exact_bond=True, project=True, correct_velocity=True, split_brakes=False):
         self.ff = force_field
         self.dt = float(dt)
         self.exact_bond = bool(exact_bond)
         self.project = bool(project)
         self.correct_velocity = bool(correct_velocity)
+        self.split_brakes = bool(split_brakes)
         n = force_field.n_tips
         n_ch = len(force_field.nonconservative)
         # ring buffers of derivatives; slot (head - j) % 4 holds f_{n-j}
@@ -87,6 +90,8 @@ class AdamsBashforth4:
             ab4_update(v, ha[slots[0]], ha[slots[1]], ha[slots[2]], ha[slots[3]], self.dt, v)
         else:
             self._rk4(x, v, self.hist_v[h], self.hist_a[h], self.hist_p[h])
+        if self.split_brakes:
+            self.ff.split_brakes(x, v, self.dt, self.work)
         self.bond_error_before = bond_length_error(x)
         if self.project or self.correct_velocity:
             constrain_bonds(x, v, self.project, self.correct_velocity)

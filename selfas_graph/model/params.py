@@ -182,6 +182,10 @@ class IntegratorParams:
                            choices=("exact", "paper"))
     velocity_correction: bool = spec(True, "apply the paper's velocity correction, Eqs. (14-15), after each step")
     position_projection: bool = spec(True, "restore each bond length to 1 about the rod centre after each step")
+    brake: str = spec(
+        "explicit", "how the stiff contact brakes (tip brake, electrode and monopole brakes) are integrated: "
+        "explicit (a force in the Adams-Bashforth step) or split (solved exactly pair by pair after each step, "
+        "stable for any dt; first order in dt for the brakes' effect)", choices=("explicit", "split"))
     energy_tolerance: float = spec(
         0.1, "stop the run when the energy balance |E - E0 - W| exceeds this fraction of the energy turned over "
         "(kinetic energy + |work| of every non-conservative term), checked every output interval; the usual "

@@ -98,7 +98,8 @@ class Simulation:
         self.force_field = ForceField(params, self.state, timing=timing)
         ip = params.integrator
         self.integrator = AdamsBashforth4(self.force_field, ip.dt, exact_bond=ip.bond_force == "exact",
-                                          project=ip.position_projection, correct_velocity=ip.velocity_correction)
+                                          project=ip.position_projection, correct_velocity=ip.velocity_correction,
+                                          split_brakes=ip.brake == "split")
         self.integrator.time_origin = (self.state.step, self.state.time)
         self.max_bond_error = 0.0
         self._energy0 = None
