@@ -9,7 +9,7 @@ from selfas_graph.model.state import State
 
 def params(**sections):
     """Parameters from keyword sections, e.g. ``params(forces={"tip_magnetic": {}})``."""
-    raw = {"rods": {"count": 0}}
+    raw = {"rods": {"count": 1}}
     for k, v in sections.items():
         raw.setdefault(k, {}).update(v) if isinstance(v, dict) and k in raw else raw.__setitem__(k, v)
     return parameters_from_dict(raw)

@@ -59,6 +59,11 @@ def test_out_of_range(line, key, valid):
     assert f"{key}: " in msg and "out of range" in msg and valid in msg
 
 
+def test_zero_rods_is_an_error():
+    """A scene without rods has nothing to simulate: a clear error, not a crash in the writer."""
+    assert "rods.count: 0 is out of range; valid: >= 1" in problems(GOOD.replace("count = 10", "count = 0"))
+
+
 def test_rstar_at_or_above_half_rod_length():
     msg = problems(GOOD.replace("count = 10", "count = 10\ntransition_radius = 0.5"))
     assert "rods.transition_radius: 0.5 is out of range; valid: > 0 and < 0.5" in msg

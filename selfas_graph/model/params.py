@@ -43,7 +43,7 @@ class ChargeDistribution:
 
 @dataclass(frozen=True)
 class RodParams:
-    count: int = spec(300, "number of rods", ge=0)
+    count: int = spec(300, "number of rods (a scene needs at least one)", ge=1)
     magnetic_charge: ChargeDistribution = spec(None, "tip magnetic charge q_i (units Z_M0 e)", factory=ChargeDistribution)
     electric_charge: ChargeDistribution = spec(
         None, "electric charge Z_i of the rod centre (units Z_M0 e)",
