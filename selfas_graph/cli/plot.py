@@ -108,8 +108,13 @@ class _Frame:
         self.n_rods = self.position.shape[0] // 2
         params = run.parameters
         self.wire_radius = 0.5 * float(params["rods"]["diameter"])
-        electrodes = (params.get("forces") or {}).get("electrodes")
+        forces = params.get("forces") or {}
+        electrodes = forces.get("electrodes")
         self.gap = float(electrodes["gap"]) if electrodes else None
+        dipole = forces.get("external_dipole")
+        #: case (ii): (Z_Mext, L_ext) of the external dipole, drawn and used as the flux unit
+        self.dipole = (float(dipole["magnetic_charge"]), float(dipole["length"])) if dipole else None
+        self.external_filament = forces.get("external_filament") is not None
         self.graph = None
         if run.has_graph:
             steps = run.f["graph/step"][:]
@@ -195,6 +200,16 @@ def _snapshot(fig, run, frame, args):
                                                  alpha=0.15))
         handles.append(Line2D([], [], color=ELECTRODE_COLOUR, lw=6, alpha=0.4,
                               label=f"electrodes z = $\\pm${frame.gap / 2:g} L"))
+    if frame.dipole is not None or frame.external_filament:
+        if frame.dipole is not None:
+            half = frame.dipole[1] / 2
+            ax.plot([0, 0], [0, 0], [-half, half], color="black", lw=3)
+            handles.append(Line2D([], [], color="black", lw=3,
+                                  label=f"external dipole, $Z_{{Mext}}$ = {frame.dipole[0]:g}"))
+            lo[2], hi[2] = min(lo[2], -half), max(hi[2], half)
+        if frame.external_filament:
+            ax.plot([0, 0], [0, 0], [lo[2], hi[2]], color="black", lw=0.8, ls="--")
+            handles.append(Line2D([], [], color="black", lw=0.8, ls="--", label="current filament (z axis)"))
     span = np.maximum(hi - lo, 1e-6)
     pad = 0.02 * span.max()
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
@@ -275,6 +290,8 @@ def _field_or_flux(fig, run, frame, args):
         raise CliError(f"--n-phi must be >= 1, got {args.n_phi}")
     if args.z_mext is not None and not (np.isfinite(args.z_mext) and args.z_mext != 0):
         raise CliError(f"--z-mext must be a nonzero number, got {args.z_mext}")
+    if args.z_mext is None and frame.dipole is not None and args.kind == "flux":
+        args.z_mext = frame.dipole[0]  # case (ii): flux in units of the dipole's 4 pi Z_Mext (paper Fig. 11)
     current = frame.graph["current"]
     r_max = _r_max(args, frame.position)
     planes = _planes(args, frame)
