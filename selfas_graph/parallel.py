@@ -38,3 +38,16 @@ def _make_world():
 
 
 world = _make_world()
+
+
+def fit_threads_to_cores(world=world):
+    """Give each rank ``cores // ranks`` numba threads (at least 1) unless NUMBA_NUM_THREADS is set.
+
+    Ranks times threads then fit the machine instead of oversubscribing it. Returns the count.
+    """
+    import numba
+
+    if world.size > 1 and "NUMBA_NUM_THREADS" not in os.environ:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        numba.set_num_threads(max(1, min(numba.config.NUMBA_NUM_THREADS, cores // world.size)))
+    return numba.get_num_threads()

@@ -20,7 +20,7 @@ from ..io.h5md import RunFileError, RunWriter
 from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
 from ..model.simulation import NumericalFailure, RunInterrupted, Simulation
 from ..model.state import PlacementError
-from ..parallel import world
+from ..parallel import fit_threads_to_cores, world
 from .main import EXIT_NUMERICAL, CliError
 
 
@@ -179,6 +179,7 @@ def run(args):
 
     import numba
 
+    fit_threads_to_cores()
     n_steps = sim.steps_for(p.run.t_end - sim.state.time)
     plan = {
         "scenario": str(args.scenario), "rods": p.rods.count, "terms": p.forces.active(),
