@@ -26,9 +26,11 @@ OUTPUT = ROOT / "docs" / "scenarios.md"
 REGENERATE = "python tools/scenario_docs.py"
 
 try:
+    from selfas_graph.io.scenario import unwrap_optional
     from selfas_graph.model import params as P
 except ImportError:  # run from a checkout without `pip install -e .`
     sys.path.insert(0, str(ROOT))
+    from selfas_graph.io.scenario import unwrap_optional
     from selfas_graph.model import params as P
 
 
@@ -54,14 +56,6 @@ class Section:
     optional: bool
     keys: list = dataclasses.field(default_factory=list)
     tables: list = dataclasses.field(default_factory=list)
-
-
-def _unwrap_optional(tp):
-    if typing.get_origin(tp) is typing.Union:
-        args = [a for a in typing.get_args(tp) if a is not type(None)]
-        if len(args) == 1:
-            return args[0], True
-    return tp, False
 
 
 def _class_doc(cls) -> str:
@@ -166,7 +160,7 @@ def walk(cls=None, prefix="", instance=None, intro="", optional=False) -> Sectio
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):
         path = f"{prefix}.{f.name}" if prefix else f.name
-        tp, is_optional = _unwrap_optional(hints[f.name])
+        tp, is_optional = unwrap_optional(hints[f.name])
         meta = f.metadata
         value = getattr(instance, f.name)
         doc = meta.get("doc", "")

@@ -148,7 +148,8 @@ def _type_name(tp):
     return {int: "an integer", float: "a number", bool: "true or false", str: "a string"}.get(tp, str(tp))
 
 
-def _unwrap_optional(tp):
+def unwrap_optional(tp):
+    """``(T, True)`` for ``Optional[T]``, else ``(tp, False)``; shared with tools/scenario_docs.py."""
     if typing.get_origin(tp) is typing.Union:
         args = [a for a in typing.get_args(tp) if a is not type(None)]
         if len(args) == 1:
@@ -171,7 +172,7 @@ def _build(cls, raw, prefix, problems):
         if name not in raw:
             continue
         path = prefix + name
-        tp, optional = _unwrap_optional(hints[name])
+        tp, optional = unwrap_optional(hints[name])
         value = raw[name]
         if dataclasses.is_dataclass(tp):
             if optional and value is False:

@@ -7,8 +7,17 @@ beyond the interaction range (a Verlet skin); the kernels test the distance.
 """
 import math
 
-from ._jit import njit, njit_parallel, prange
+from ._jit import inline, njit, njit_parallel, prange
 from .laws import yukawa_force_over_r, yukawa_potential
+
+
+@inline
+def _closer(position, k, l, r2max):
+    """True when points k and l are closer than sqrt(r2max)."""
+    dx = position[k, 0] - position[l, 0]
+    dy = position[k, 1] - position[l, 1]
+    dz = position[k, 2] - position[l, 2]
+    return dx * dx + dy * dy + dz * dz < r2max
 
 
 @njit_parallel
@@ -58,12 +67,8 @@ def close_pair_count(position, start, index, radius):
         c = 0
         for j in range(start[k], start[k + 1]):
             l = index[j]
-            if l > k:
-                dx = position[k, 0] - position[l, 0]
-                dy = position[k, 1] - position[l, 1]
-                dz = position[k, 2] - position[l, 2]
-                if dx * dx + dy * dy + dz * dz < r2max:
-                    c += 1
+            if l > k and _closer(position, k, l, r2max):
+                c += 1
         total += c
     return total
 
@@ -143,12 +148,8 @@ def _close_counts(position, start, index, radius, counts):
         c = 0
         for j in range(start[k], start[k + 1]):
             l = index[j]
-            if l > k:
-                dx = position[k, 0] - position[l, 0]
-                dy = position[k, 1] - position[l, 1]
-                dz = position[k, 2] - position[l, 2]
-                if dx * dx + dy * dy + dz * dz < r2max:
-                    c += 1
+            if l > k and _closer(position, k, l, r2max):
+                c += 1
         counts[k] = c
 
 
@@ -160,14 +161,10 @@ def _close_fill(position, start, index, radius, offset, out):
         c = offset[k]
         for j in range(start[k], start[k + 1]):
             l = index[j]
-            if l > k:
-                dx = position[k, 0] - position[l, 0]
-                dy = position[k, 1] - position[l, 1]
-                dz = position[k, 2] - position[l, 2]
-                if dx * dx + dy * dy + dz * dz < r2max:
-                    out[c, 0] = k
-                    out[c, 1] = l
-                    c += 1
+            if l > k and _closer(position, k, l, r2max):
+                out[c, 0] = k
+                out[c, 1] = l
+                c += 1
 
 
 def close_pairs(position, start, index, radius):
