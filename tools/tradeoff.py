@@ -1,0 +1,179 @@
+"""Speed-accuracy trade of every accuracy knob of a scene, against a tight reference run.
+
+Usage: python tools/tradeoff.py SCENARIO [--from T0] [--t 0.5] [--knob NAME ...] [--json OUT] [--plot OUT.png]
+
+The scene is first run at its defaults to ``--from T0`` (e.g. past the short circuit, so
+that the current knobs matter); every run then branches from that state with a fresh
+Adams-Bashforth start. For each knob, the scene is run for a further time ``--t`` at several
+settings around its default, one knob changed at a time, and compared with a reference
+run in which every knob is at its tightest setting (all measured in this run):
+
+- cost: milliseconds per step and per unit of simulated time (the quantity users pay);
+- error: the largest position difference from the reference at time t (before the
+  dynamics' own divergence amplifies it much, t should be short), the largest bond
+  error, the energy balance |E - E0 - W| relative to the energy turned over, and the
+  contact events that differ from the reference (formed or missed, by tip pair).
+
+Knobs: integrator.dt, integrator.brake (explicit/split), forces.yukawa.tolerance,
+forces.current_lorentz.quadrature_points, integrator.bond_force (exact/paper),
+integrator.position_projection. Prints a markdown table and writes JSON and a plot of
+error against cost, one curve per knob.
+"""
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from selfas_graph import NumericalFailure, Simulation, load_scenario  # noqa: E402
+from selfas_graph.model import events as ev  # noqa: E402
+
+#: knob -> (settings to sweep, tightest setting used by the reference); a setting the
+#: scene cannot use (e.g. a Yukawa tolerance without Yukawa) is skipped
+KNOBS = {
+    "integrator.dt": ([2e-3, 1e-3, 5e-4, 2.5e-4], 1.25e-4),
+    "integrator.brake": (["explicit", "split"], "explicit"),
+    "forces.yukawa.tolerance": ([1e-2, 1e-3, 1e-4, 1e-5], 1e-7),
+    "forces.current_lorentz.quadrature_points": ([1, 2, 4, 8], 16),
+    "integrator.bond_force": (["paper", "exact"], "exact"),
+    "integrator.position_projection": ([False, True], True),
+}
+
+
+def _toml(value):
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return f'"{value}"'
+    return repr(value)
+
+
+def _applicable(scenario, knob):
+    node = scenario.params
+    for part in knob.split(".")[:-1]:
+        node = getattr(node, part, None)
+        if node is None:
+            return False
+    return True
+
+
+def run_once(path, overrides, duration, snap):
+    """One branch from snapshot ``snap`` for ``duration``; positions, new events and cost, or the failure."""
+    sc = load_scenario(path, overrides=overrides)
+    sim = Simulation.from_snapshot(sc.params, snap)
+    sim.integrator.reset_history()  # the history was taken with the base dt; start afresh with RK4
+    n_old = len(sim.events)
+    t_start, step_start = sim.state.time, sim.state.step
+    t0 = time.perf_counter()
+    try:
+        sim.run(t_end=t_start + duration)
+    except NumericalFailure as exc:
+        return {"failed": str(exc).split(";")[0]}
+    wall = time.perf_counter() - t0
+    obs = sim.observables()
+    t_end = duration
+    contacts = {(int(r[3]), int(r[4])) for r in sim.events[n_old:] if r[2] == ev.TIP_CONTACT}
+    return {
+        "position": sim.state.position.copy(), "contacts": contacts,
+        "ms_per_step": 1e3 * wall / max(sim.state.step - step_start, 1),
+        "s_per_time": wall / t_end,
+        "bond_error": sim.max_bond_error,
+        "energy_balance": abs(obs["energy_balance"]) / max(sim.energy_scale(obs), 1e-300),
+    }
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scenario")
+    ap.add_argument("--from", dest="t0", type=float, default=0.0, help="branch all runs from this time (default 0)")
+    ap.add_argument("--t", type=float, default=0.5, help="simulated time of each run (default 0.5)")
+    ap.add_argument("--knob", nargs="+", choices=sorted(KNOBS), help="only these knobs (default: all that apply)")
+    ap.add_argument("--json", help="write all results to this JSON file")
+    ap.add_argument("--plot", help="write the error-cost plot to this PNG file")
+    args = ap.parse_args(argv)
+    if not args.t > 0:
+        ap.error("--t must be positive")
+    base = load_scenario(args.scenario)
+    knobs = [k for k in (args.knob or KNOBS) if _applicable(base, k)]
+    sim0 = Simulation.from_scenario(base)
+    if args.t0 > 0:
+        sim0.run(t_end=args.t0)
+    snap = sim0.snapshot()
+    run_once(args.scenario, [], min(args.t, 0.01), snap)  # warm-up: compile every kernel before timing
+    tight = [f"{k}={_toml(KNOBS[k][1])}" for k in knobs]
+    print(f"branch point t = {sim0.state.time:g} ({len(sim0.force_field.active_rod)} rods carry current); "
+          f"reference: {', '.join(tight)}; each run {args.t} t0", flush=True)
+    ref = run_once(args.scenario, tight, args.t, snap)
+    if "failed" in ref:
+        sys.exit(f"the reference run failed: {ref['failed']}")
+    rows = []
+    for knob in knobs:
+        default = eval(f"base.params.{knob}")  # noqa: S307 - a dotted attribute path of our own
+        for value in KNOBS[knob][0]:
+            res = run_once(args.scenario, [f"{knob}={_toml(value)}"], args.t, snap)
+            row = {"knob": knob, "value": value, "default": value == default}
+            if "failed" in res:
+                row["failed"] = res["failed"]
+            else:
+                diff = np.abs(res["position"] - ref["position"]).max()
+                row.update(ms_per_step=res["ms_per_step"], s_per_time=res["s_per_time"],
+                           position_error=float(diff), bond_error=res["bond_error"],
+                           energy_balance=res["energy_balance"],
+                           events_missed=len(ref["contacts"] - res["contacts"]),
+                           events_extra=len(res["contacts"] - ref["contacts"]))
+            rows.append(row)
+            print(_fmt_row(row), flush=True)
+    print("\n| knob | setting | ms/step | s per t0 | position error | bond error | energy balance | contacts missed/extra |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(_fmt_row(r, markdown=True))
+    print(f"\nreference ({len(ref['contacts'])} contacts formed): {ref['ms_per_step']:.2f} ms/step, "
+          f"{ref['s_per_time']:.1f} s per t0")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"scenario": args.scenario, "t": args.t, "reference": tight,
+                                               "rows": rows}, indent=1))
+    if args.plot:
+        _plot(rows, args.plot)
+
+
+def _fmt_row(r, markdown=False):
+    setting = f"{r['value']}" + (" (default)" if r["default"] else "")
+    if "failed" in r:
+        cells = [r["knob"], setting, "failed: " + r["failed"], "", "", "", "", ""]
+    else:
+        cells = [r["knob"], setting, f"{r['ms_per_step']:.2f}", f"{r['s_per_time']:.1f}", f"{r['position_error']:.2e}",
+                 f"{r['bond_error']:.1e}", f"{r['energy_balance']:.1e}", f"{r['events_missed']}/{r['events_extra']}"]
+    return ("| " + " | ".join(cells) + " |") if markdown else "  ".join(cells)
+
+
+def _plot(rows, out):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 5))
+    for knob in dict.fromkeys(r["knob"] for r in rows):
+        pts = [(r["s_per_time"], max(r["position_error"], 1e-16), r["value"]) for r in rows
+               if r["knob"] == knob and "failed" not in r]
+        if pts:
+            x, y, labels = zip(*pts)
+            ax.loglog(x, y, "o-", label=knob)
+            for xi, yi, lab in pts:
+                ax.annotate(str(lab), (xi, yi), fontsize=7, xytext=(3, 3), textcoords="offset points")
+    ax.set_xlabel("cost: wall seconds per unit of simulated time")
+    ax.set_ylabel("largest position difference from the reference")
+    ax.set_title("speed-accuracy trade, one curve per knob")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
