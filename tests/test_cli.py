@@ -108,6 +108,11 @@ def test_numerical_failure_exits_3_with_diagnosis_and_no_nan_in_file(scenario, t
     with h5py.File(out, "r") as f:
         assert f["parameters/selfas_graph"].attrs["status"].startswith("failed")
         assert np.isfinite(f["particles/tips/position/value"][:]).all()
+    # the failed state is kept aside for inspection, with the diagnosis
+    from selfas_graph.io.checkpoint import read_checkpoint
+
+    snap, meta = read_checkpoint(tmp_path / "run.failure.h5")
+    assert "numerical failure" in meta["failure"] and snap["position"].shape == (16, 3)
 
 
 def test_console_script_installed():

@@ -249,10 +249,16 @@ def run(args):
     except NumericalFailure as exc:
         if reporter:
             reporter.close()
+        failure = out.with_name(out.stem + ".failure.h5")
         if writer:
+            sim._flush_pending(writer)
             writer.close(status=f"failed: {exc}")
+            # the failed state (possibly NaN) goes to its own file for inspection, never into the run file
+            write_checkpoint(failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step,
+                                                       "failure": str(exc)})
         print(f"selfas-graph simulate: {exc}", file=sys.stderr)
-        print(f"frames up to the last output interval are in {out}", file=sys.stderr)
+        print(f"frames up to the last output interval are in {out}; the failed state is in {failure} "
+              f"(read it with selfas_graph.io.checkpoint.read_checkpoint)", file=sys.stderr)
         return EXIT_NUMERICAL
     except KeyboardInterrupt:
         if reporter:
