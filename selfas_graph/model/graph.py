@@ -344,7 +344,9 @@ class ConnectivityGraph:
     contacts instead of an O(edges) walk over networkx's adjacency.
     """
 
-    def __init__(self, n_rods: int, conductor_potential: Mapping[int, float | None]):
+    def __init__(self, n_rods: int, conductor_potential: Mapping[int, float | None], solver: str = "auto"):
+        #: linear solver of :meth:`solve` ("auto", "direct" or "cg"; see circuit.solve_circuit)
+        self.solver = solver
         self.n_rods = _as_count(n_rods, "n_rods")
         self.n_tips = 2 * self.n_rods
         self._fixed: dict[int, float] = {}
@@ -652,7 +654,7 @@ class ConnectivityGraph:
             i = np.flatnonzero(np.isnan(pot))
             pairs = list(zip(arr["conductor_tip"][i].tolist(), arr["conductor_id"][i].tolist()))
             raise ValueError(f"unset contact potential for (tip, conductor) {pairs[:10]}")
-        sol = solve_circuit(self.n_tips, arr["tip_contacts"], arr["conductor_tip"], pot)
+        sol = solve_circuit(self.n_tips, arr["tip_contacts"], arr["conductor_tip"], pot, solver=self.solver)
         self.changed = False
         return sol
 

@@ -207,6 +207,10 @@ class CircuitParams:
     delta_J0: float = spec(
         2.23, "bias parameter delta_J0 = U L / (R0 J0 dZ) (paper Eq. 1); electrode potentials +-delta_J0 dZ / 2, "
         "filament potential -delta_J0 z", ge=0.0)
+    solver: str = spec(
+        "auto", "linear solver of the nodal equations: direct (sparse LU), cg (conjugate gradients to round-off, "
+        "falls back to direct), auto (direct up to 50000 unknowns, cg above; measured in docs/performance.md)",
+        choices=("auto", "direct", "cg"))
     height_tolerance: float = spec(
         0.01, "case (ii): re-solve the circuit when a tip touching the filament has moved this far along z since the "
         "last solve (its potential is -delta_J0 z); an accuracy knob", gt=0.0)

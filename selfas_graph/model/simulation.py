@@ -129,7 +129,8 @@ class Simulation:
             self._filament_z = np.zeros(0)
             #: conductor id -> fixed potential (units R0 J0), MODEL.md section 6
             self.conductor_potential = conductors
-            self.graph = ConnectivityGraph(self.state.n_rods, conductors)
+            solver = params.circuit.solver if params.circuit is not None else "auto"
+            self.graph = ConnectivityGraph(self.state.n_rods, conductors, solver=solver)
             self._update_contacts()
 
     @classmethod
@@ -207,6 +208,7 @@ class Simulation:
             sim._filament_z = np.array(snap["filament_z"], dtype=np.float64)
             arrays = {k[len("graph_"):]: np.array(v) for k, v in snap.items() if k.startswith("graph_")}
             sim.graph = ConnectivityGraph.from_arrays(state.n_rods, sim.conductor_potential, arrays)
+            sim.graph.solver = params.circuit.solver if params.circuit is not None else "auto"
             if bool(snap["has_solution"]) and params.circuit is not None:
                 # the solve is a pure function of the graph arrays, so this is the solution the
                 # interrupted run held; the currents in use are restored as saved
