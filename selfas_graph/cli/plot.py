@@ -56,7 +56,8 @@ def add_arguments(p):
     p.add_argument("-o", "--output", help="PNG file to write (default: RUN_KIND_frameK.png next to the run file)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.add_argument("--planes", type=float, nargs="+", metavar="Z",
-                   help="planes z = const for field and flux (default: the electrode planes and z = 0, "
+                   help="planes z = const for field and flux (default: the electrode planes and z = 0; in case (ii) "
+                        "z = +-(L_ext/2 - 0.02) and 0 as in Figs. 10-11; otherwise "
                         "or the lowest tip, 0 and the highest tip without electrodes)")
     p.add_argument("--r-max", type=float,
                    help="largest radius of the profiles (default: the farthest rod from the axis)")
@@ -268,6 +269,10 @@ def _planes(args, frame):
         return sorted(args.planes)
     if frame.gap is not None:
         return [-frame.gap / 2, 0.0, frame.gap / 2]
+    if frame.dipole is not None:
+        # paper Figs. 10-11: planes just inside the dipole's ends (z = +-9.98 for L_ext = 20)
+        half = frame.dipole[1] / 2 - 0.02
+        return [-half, 0.0, half]
     z = frame.position[:, 2]
     return [float(z.min()), 0.0, float(z.max())]
 
