@@ -58,7 +58,7 @@ def add_arguments(p):
     p.add_argument("--planes", type=float, nargs="+", metavar="Z",
                    help="planes z = const for field and flux (default: the electrode planes and z = 0; in case (ii) "
                         "z = +-(L_ext/2 - 0.02) and 0 as in Figs. 10-11; otherwise "
-                        "or the lowest tip, 0 and the highest tip without electrodes)")
+                        "the lowest tip, 0 and the highest tip)")
     p.add_argument("--r-max", type=float,
                    help="largest radius of the profiles (default: the farthest rod from the axis)")
     p.add_argument("--bins", type=int, default=30, help="radial shells of the density profile (default 30)")
