@@ -26,16 +26,19 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import sys
 import time
+from pathlib import Path
 
 import networkx
+import numpy as np
 import scipy
 
-import numpy as np
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from selfas_graph.model.circuit import solve_circuit
-from selfas_graph.model.events import CONDUCTOR_ANODE, CONDUCTOR_CATHODE
-from selfas_graph.model.graph import classify_rods
+from selfas_graph.model.circuit import solve_circuit  # noqa: E402
+from selfas_graph.model.events import CONDUCTOR_ANODE, CONDUCTOR_CATHODE  # noqa: E402
+from selfas_graph.model.graph import classify_rods  # noqa: E402
 
 
 def _junction_contacts(junction_of_tip: np.ndarray) -> np.ndarray:
