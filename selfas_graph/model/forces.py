@@ -255,6 +255,9 @@ class ExternalDipole(_Term):
         k = 0.0 if self.split_mode else self.k
         kx.monopoles_on_tips(ff.position, ff.velocity, ff.tip_charge, self.source, self.source_charge, self.rstar,
                              self.kappa, k, out["external_monopoles"], out["external_monopole_brake"])
+        f = ff.buffer("line_centre", ff.n_rods)
+        kx.line_yukawa_on_centres(ff.centre(), ff.rod_charge, *self.line, self.nodes, self.weights, f)
+        _share_by_mass(f, out["external_line_charge"])
 
     def split(self, ff, dt):
         d2 = ((ff.position[:, None, :] - self.source[None, :, :]) ** 2).sum(axis=-1)
@@ -265,9 +268,6 @@ class ExternalDipole(_Term):
         before = _kinetic(ff.velocity, tips)
         ff.velocity[tips] *= np.exp(-self.k * touching[tips] * dt)[:, None]
         return {"external_monopole_brake": _kinetic(ff.velocity, tips) - before}
-        f = ff.buffer("line_centre", ff.n_rods)
-        kx.line_yukawa_on_centres(ff.centre(), ff.rod_charge, *self.line, self.nodes, self.weights, f)
-        _share_by_mass(f, out["external_line_charge"])
 
     def energy(self, ff):
         return {
