@@ -360,16 +360,32 @@ DRAW = {"snapshot": _snapshot, "density": _density, "field": _field_or_flux, "fl
         "timeline": _timeline}
 
 
+def _check_options(args):
+    if not 10 <= args.dpi <= 1200:
+        raise CliError(f"--dpi must be between 10 and 1200, got {args.dpi}")
+    if args.r_max is not None and not (np.isfinite(args.r_max) and args.r_max > 0):
+        raise CliError(f"--r-max must be a finite number > 0, got {args.r_max}")
+    if args.planes and not all(np.isfinite(z) for z in args.planes):
+        raise CliError(f"--planes must be finite numbers, got {args.planes}")
+    if args.time is not None and not np.isfinite(args.time):
+        raise CliError(f"--time {args.time} names no frame; give a finite simulated time")
+
+
 def run(args):
+    _check_options(args)
     Figure = _matplotlib()
     try:
         with RunFile(args.run) as f:
-            frame = _Frame(f, frame=args.frame, t=args.time)
-            if args.kind in NEEDS_GRAPH:
-                frame.require_graph(f, args.kind)
-            out = _output_path(args, f.path, frame.index)
-            fig = Figure(figsize=(8.0, 7.0) if args.kind == "snapshot" else (7.0, 5.0), layout="constrained")
-            DRAW[args.kind](fig, f, frame, args)
+            try:
+                frame = _Frame(f, frame=args.frame, t=args.time)
+                if args.kind in NEEDS_GRAPH:
+                    frame.require_graph(f, args.kind)
+                out = _output_path(args, f.path, frame.index)
+                fig = Figure(figsize=(8.0, 7.0) if args.kind == "snapshot" else (7.0, 5.0), layout="constrained")
+                DRAW[args.kind](fig, f, frame, args)
+            except (KeyError, IndexError, TypeError, AttributeError) as exc:
+                # a file with the run layout but inconsistent contents (foreign or damaged)
+                raise RunFileError(f"{f.path}: inconsistent run data ({type(exc).__name__}: {exc})") from None
     except RunFileError as exc:
         raise CliError(str(exc)) from None
     fig.savefig(out, dpi=args.dpi, format="png")

@@ -14,9 +14,11 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from .._version import __version__
 from ..io.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
-from ..io.h5md import RunFileError, RunWriter
+from ..io.h5md import RunFile, RunFileError, RunWriter
 from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
 from ..model.simulation import NumericalFailure, RunInterrupted, Simulation
 from ..model.state import PlacementError
@@ -131,6 +133,9 @@ def _load_resume(args):
     if args.scenario or args.overrides:
         raise CliError("--resume continues a run exactly: give no SCENARIO and no --set (only --t-end may change)")
     src = Path(args.resume)
+    if src.name in ("", ".", "..") or src.is_dir():
+        raise CliError(f"--resume {args.resume}: give a run file (RUN.h5) or its checkpoint (RUN.checkpoint.h5), "
+                       f"not a folder")
     ckpt = src if src.name.endswith(".checkpoint.h5") else checkpoint_path(src)
     try:
         snap, meta = read_checkpoint(ckpt)
@@ -141,7 +146,30 @@ def _load_resume(args):
     except ScenarioError as exc:
         raise CliError(f"cannot resume: the checkpoint's scenario no longer validates: {exc}") from None
     out = Path(args.output) if args.output else Path(meta["run_file"])
+    _check_output_name(out)
+    if args.t_end is not None and args.t_end < float(snap["time"]):
+        raise CliError(f"--t-end (run.t_end) {args.t_end:g} is before the checkpoint's time {float(snap['time']):.6g}; "
+                       f"give a later end time")
+    # the run file must be this run's, checked read-only before anything in it is changed
+    try:
+        with RunFile(out) as run_file:
+            n_tips = run_file.f["particles/tips/position/value"].shape[1]
+            same = n_tips == np.asarray(snap["position"]).shape[0] and run_file.scenario_text == meta["scenario_text"]
+            steps = run_file.step
+    except RunFileError as exc:
+        raise CliError(f"cannot resume into {out}: {exc}") from None
+    if not same:
+        raise CliError(f"cannot resume: {out} is not the run of checkpoint {ckpt} (different scenario or rod count)")
+    if not len(steps) or steps[0] > int(snap["step"]):
+        raise CliError(f"cannot resume: {out} has no frame at or before the checkpoint's step {int(snap['step'])}")
     return scenario, snap, out, ckpt
+
+
+def _check_output_name(out: Path):
+    if "\x00" in str(out):
+        raise CliError(f"the output path {str(out)!r} contains a NUL character")
+    if out.name in ("", ".", "..") or out.is_dir():
+        raise CliError(f"the output path {out} names a folder, not a file; give a file name such as run.h5")
 
 
 def run(args):
@@ -158,7 +186,11 @@ def run(args):
             raise CliError(str(exc)) from None
         p = scenario.params
         out = Path(args.output) if args.output else scenario.output_path
+        _check_output_name(out)
         ckpt = checkpoint_path(out)
+        if not args.dry_run and ckpt.exists() and not args.force:
+            raise CliError(f"checkpoint file {ckpt} exists (from an earlier run?); pass --force to overwrite it, "
+                           f"or --resume {out} to continue that run")
     if snap is not None:
         if not out.exists():
             raise CliError(f"cannot resume: the run file {out} does not exist (give it with -o)")

@@ -94,7 +94,11 @@ def run(args):
         raise CliError(f"--time {args.time} names no frame; give a finite simulated time")
     try:
         with RunFile(args.run) as f:
-            data = analyse(f, frame=args.frame, t=args.time)
+            try:
+                data = analyse(f, frame=args.frame, t=args.time)
+            except (KeyError, IndexError, TypeError, ValueError) as exc:
+                # a file with the run layout but inconsistent contents (foreign or damaged)
+                raise RunFileError(f"{f.path}: inconsistent graph data ({type(exc).__name__}: {exc})") from None
     except RunFileError as exc:
         raise CliError(str(exc)) from None
     if args.json:

@@ -71,9 +71,16 @@ def read_checkpoint(path) -> tuple[dict, dict]:
     with f:
         if f.attrs.get("format") != FORMAT:
             raise CheckpointError(f"{path}: not a selfas-graph checkpoint (expected format {FORMAT!r})")
-        g = f["snapshot"]
-        snap = {k: v for k, v in g.attrs.items()}
-        for k in g:
-            snap[k] = g[k][()]
-        meta = dict(f["meta"].attrs)
+        try:
+            g = f["snapshot"]
+            snap = {k: v for k, v in g.attrs.items()}
+            for k in g:
+                snap[k] = g[k][()]
+            meta = dict(f["meta"].attrs)
+        except (KeyError, TypeError, OSError) as exc:
+            raise CheckpointError(f"{path}: an incomplete or damaged checkpoint ({exc})") from None
+    missing = [k for k in ("position", "velocity", "step", "time", "hist_v", "hist_a") if k not in snap]
+    missing += [k for k in ("scenario_text", "overrides", "run_file") if k not in meta]
+    if missing:
+        raise CheckpointError(f"{path}: an incomplete checkpoint (missing {', '.join(missing)})")
     return snap, meta

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import time
 from pathlib import Path
 
@@ -51,11 +52,16 @@ class RunFileError(ValueError):
     """A file that is not a readable selfas-graph run."""
 
 
-def _growable(group, name, shape, dtype, compress=False):
+def _growable(group, name, shape, dtype):
+    """A dataset growing along its first axis, in uncompressed chunks of about 1 MiB.
+
+    No compression on purpose: a compressed chunk is rewritten whole at every append, so a
+    kill during that write can leave it undecodable, losing frames written long before; an
+    uncompressed chunk is appended in place (seen in tests/test_restart.py's kill test).
+    """
     rows = max(1, min(1024, 2 ** 20 // max(1, int(np.prod(shape)) * 8)))
-    extra = dict(compression="gzip", compression_opts=4, shuffle=True) if compress else {}
     return group.create_dataset(name, shape=(0,) + shape, maxshape=(None,) + shape, dtype=dtype,
-                                chunks=(rows,) + shape, **extra)
+                                chunks=(rows,) + shape)
 
 
 def _append(ds, value):
@@ -249,9 +255,9 @@ class RunWriter:
             for name, dt in (("conductor_tip", "<i8"), ("conductor_id", "<i8"), ("conductor_potential", "<f8")):
                 _growable(g, name, (), dt)
             _growable(g, "conductor_contacts_count", (), "<i8")
-            _growable(g, "role", role.shape, "i1", compress=True)
-            _growable(g, "current", current.shape, "<f8", compress=True)
-            _growable(g, "potential", potential.shape, "<f8", compress=True)
+            _growable(g, "role", role.shape, "i1")
+            _growable(g, "current", current.shape, "<f8")
+            _growable(g, "potential", potential.shape, "<f8")
         g = self.f["graph"]
         _append(g["step"], step)
         _append(g["time"], t)
@@ -304,13 +310,21 @@ class RunFile:
             self.f = h5py.File(self.path, "r")
         except OSError as exc:
             reason = " ".join(str(exc).split())  # h5py's messages can span lines
-            if "lock" in reason.lower():
+            if re.search(r"\block", reason.lower()) or "already open for write" in reason.lower():
                 reason += "; is a run still writing it? (set HDF5_USE_FILE_LOCKING=FALSE to read it anyway)"
             raise RunFileError(f"{self.path}: not a readable HDF5 file ({reason})") from None
-        if "parameters/selfas_graph" not in self.f or "particles/tips/position/value" not in self.f:
+        required = ("parameters/selfas_graph", "particles/tips/position/value", "particles/tips/position/step",
+                    "particles/tips/position/time", "particles/tips/charge", "particles/rods/charge", "observables")
+        missing = [name for name in required if not isinstance(self.f.get(name), (h5py.Dataset, h5py.Group))]
+        if missing or "parameters_json" not in self.f["parameters/selfas_graph"].attrs:
             self.f.close()
-            raise RunFileError(f"{self.path}: an HDF5 file, but not a selfas-graph run (no /particles/tips/position)")
+            raise RunFileError(f"{self.path}: an HDF5 file, but not a selfas-graph run "
+                               f"(missing {', '.join(missing) or 'parameters_json'})")
         self.meta = dict(self.f["parameters/selfas_graph"].attrs)
+        n = self.f["particles/tips/position/value"].shape
+        if len(n) != 3 or n[2] != 3 or self.f["particles/tips/position/step"].shape[0] != n[0]:
+            self.f.close()
+            raise RunFileError(f"{self.path}: the positions are not laid out as (frames, tips, 3)")
 
     def __enter__(self):
         return self
@@ -371,9 +385,14 @@ class RunFile:
     def rod_charge(self) -> np.ndarray:
         return self.f["particles/rods/charge"][:]
 
+    _GRAPH = ("step", "time", "tip_contacts", "tip_contacts_count", "conductor_tip", "conductor_id",
+              "conductor_potential", "conductor_contacts_count", "role", "current", "potential")
+
     @property
     def has_graph(self) -> bool:
-        return "graph/step" in self.f and self.f["graph/step"].shape[0] > 0
+        g = self.f.get("graph")
+        return (isinstance(g, h5py.Group) and all(isinstance(g.get(n), h5py.Dataset) for n in self._GRAPH)
+                and g["step"].shape[0] > 0)
 
     def events(self, until_step=None) -> np.ndarray:
         """Event records (structured array, fields step, time, kind, a, b), optionally up to a step."""

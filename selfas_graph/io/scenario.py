@@ -87,6 +87,8 @@ def scenario_from_text(text, path=None, overrides=(), t_end=None) -> Scenario:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError([f"not valid TOML: {exc}"], source=path) from None
+    except RecursionError:
+        raise ScenarioError(["not valid TOML: arrays or tables nested too deeply"], source=path) from None
     overrides = tuple(overrides)
     problems = []
     for item in overrides:
@@ -130,6 +132,8 @@ def _apply_override(raw, item):
         value = tomllib.loads(f"v = {value_text.strip()}")["v"]
     except tomllib.TOMLDecodeError:
         value = value_text.strip()
+    except RecursionError:
+        return [f"--set {key}: the value is nested too deeply"]
     node = raw
     for i, name in enumerate(parts[:-1]):
         nxt = node.get(name)
@@ -319,10 +323,15 @@ def check_consistency(p: P.Parameters):
             out.append(f"placement.box: the {name} range [{lo:g}, {hi:g}] is empty; write [low, high] with low < high")
     if out:
         return out
+    # coordinates beyond 1e6 rod lengths overflow squared distances in the neighbour search
+    # long before they mean anything physical
+    if any(abs(v) > 1e6 for pair in box for v in pair):
+        return out + ["placement.box: coordinates must lie within +-1e6 rod lengths"]
     ext = [box[d][1] - box[d][0] for d in range(3)]
     if rods.count > 0 and math.sqrt(sum(e * e for e in ext)) <= 1.0:
         out.append(f"placement.box: a rod of length 1 cannot fit in a box of size "
                    f"{ext[0]:g} x {ext[1]:g} x {ext[2]:g}; make the box larger")
+        return out
     dmin = p.min_tip_distance
     volume = ext[0] * ext[1] * ext[2]
     # random sequential packing of spheres jams near a volume fraction of 0.38;
@@ -354,6 +363,11 @@ def check_consistency(p: P.Parameters):
         if getattr(p.forces, term) is not None and p.circuit is None:
             out.append(f"forces.{term}: rod currents come from the circuit solve; add a [circuit] table "
                        f"(with delta_J0) or remove this term")
+    # a run of more than 1e12 steps cannot finish; its step count would also overflow
+    for name, length in (("run.t_end", p.run.t_end), ("output.interval", p.output.interval)):
+        if length / p.integrator.dt > 1e12:
+            out.append(f"{name} / integrator.dt = {length / p.integrator.dt:.3g} steps; at most 1e12 are possible "
+                       f"(make integrator.dt larger or {name} smaller)")
     if p.output.interval < p.integrator.dt:
         out.append(f"output.interval = {p.output.interval:g} is shorter than integrator.dt = {p.integrator.dt:g}")
     return out

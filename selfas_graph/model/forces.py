@@ -167,12 +167,17 @@ class Yukawa(_Term):
         self.cutoff = yukawa_cutoff(zmax, y.screening_length, y.tolerance)
 
     def compute(self, ff, out):
+        if self.cutoff == 0.0:  # no rod is charged: the term is zero
+            out["yukawa"].fill(0.0)
+            return
         nl = ff.centre_neighbours()
         f = ff.buffer("yukawa_centre", ff.n_rods)
         kp.yukawa_centres(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.cutoff, f)
         _share_by_mass(f, out["yukawa"])
 
     def energy(self, ff):
+        if self.cutoff == 0.0:
+            return {"yukawa": 0.0}
         nl = ff.centre_neighbours()
         return {"yukawa": kp.yukawa_energy(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.cutoff)}
 

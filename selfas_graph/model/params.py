@@ -43,7 +43,8 @@ class ChargeDistribution:
 
 @dataclass(frozen=True)
 class RodParams:
-    count: int = spec(300, "number of rods (a scene needs at least one)", ge=1)
+    # 10^7 rods hold about 2 GB per float64 array of tips: the practical ceiling of one machine
+    count: int = spec(300, "number of rods (a scene needs at least one)", ge=1, le=10_000_000)
     magnetic_charge: ChargeDistribution = spec(None, "tip magnetic charge q_i (units Z_M0 e)", factory=ChargeDistribution)
     electric_charge: ChargeDistribution = spec(
         None, "electric charge Z_i of the rod centre (units Z_M0 e)",
@@ -67,7 +68,7 @@ class PlacementParams:
         factory=lambda: ((-5.0, 5.0), (-5.0, 5.0), (-5.0, 5.0)),
     )
     min_tip_distance: Optional[float] = spec(
-        None, "no two tips of different rods start closer than this (default 4 r*)", ge=0.0
+        None, "no two tips of different rods start closer than this (default 4 r*)", ge=0.0, le=100.0
     )
     max_attempts: int = spec(2000, "random draws tried per rod before placement gives up", ge=1)
 
@@ -126,8 +127,8 @@ class CurrentField:
 @dataclass(frozen=True)
 class CurrentLorentz:
     quadrature_points: int = spec(
-        4, "Gauss-Legendre points along each rod for the Lorentz force on its current; an accuracy knob", ge=1
-    )
+        4, "Gauss-Legendre points along each rod for the Lorentz force on its current; an accuracy knob",
+        ge=1, le=1000)
 
 
 @dataclass(frozen=True)
@@ -149,7 +150,8 @@ class ExternalDipole:
     line_charge: float = spec(3.2, "lambda_ext, electric charge per unit length along the dipole")
     screening_length: float = spec(2.4, "R_Dext, screening length of the line charge", gt=0.0)
     radius: float = spec(0.09, "radius of the line charge (softens it on the axis; D_ext/2 in the paper's scene)", gt=0.0)
-    quadrature_points: int = spec(32, "Gauss-Legendre points of the line-charge integral; an accuracy knob", ge=1)
+    quadrature_points: int = spec(32, "Gauss-Legendre points of the line-charge integral; an accuracy knob",
+                                  ge=1, le=1000)
 
 
 @dataclass(frozen=True)
@@ -218,7 +220,8 @@ class CircuitParams:
 
 @dataclass(frozen=True)
 class NeighbourParams:
-    skin: float = spec(0.3, "Verlet skin of the neighbour lists; rebuilt when a point moved more than skin/2", gt=0.0)
+    skin: float = spec(0.3, "Verlet skin of the neighbour lists; rebuilt when a point moved more than skin/2",
+                       gt=0.0, le=100.0)
 
 
 @dataclass(frozen=True)
@@ -240,7 +243,7 @@ class OutputParams:
 class ScenarioInfo:
     name: str = spec("unnamed", "short name of the scene")
     description: str = spec("", "what the scene is and where its parameters come from")
-    seed: int = spec(1, "seed of every random draw (charges, placement)", ge=0)
+    seed: int = spec(1, "seed of every random draw (charges, placement)", ge=0, le=2**63 - 1)
 
 
 @dataclass(frozen=True)

@@ -403,7 +403,8 @@ class Simulation:
         every = max(1, int(round(self.params.output.interval / self.dt)))
         pevery = progress_every or max(1, n_steps // 200)
         summary = RunSummary(t_start=self.state.time)
-        self._pending = (np.empty(every, dtype=np.int64), np.empty(every), [0])
+        rows = min(every, n_steps) + 1  # an output interval longer than the run needs no larger buffer
+        self._pending = (np.empty(rows, dtype=np.int64), np.empty(rows), [0])
         if self._energy0 is None:
             self._record_initial_energy()
         if writer is not None and writer.n_frames == 0:
