@@ -124,3 +124,19 @@ def test_one_rod_runs():
     sim.run(t_end=1.0)
     obs = sim.observables()
     assert _finite(sim) and abs(obs["energy_balance"]) < 1e-9 * max(1.0, sim.energy_scale(obs))
+
+
+def test_dead_end_rods_get_exactly_zero_current():
+    """A dangling rod on a current-carrying chain gets exactly 0 (not round-off) and stays out of the kernels."""
+    state, gap = _chain(4)
+    # a fifth rod hanging sideways from the top tip of the second rod (tip 3, at z = 0)
+    junction = state.position[3].copy()
+    extra = State.from_rods([junction + [0.5 + 0.01, 0.0, 0.0]], [[1.0, 0.0, 0.0]], [1.0], [0.0])
+    both = State(np.vstack([state.position, extra.position]), np.zeros((10, 3)),
+                 np.concatenate([state.tip_charge, extra.tip_charge]), np.zeros(5))
+    sim = simulation(both, forces={"tip_magnetic": {}, "electrodes": {"gap": gap}, "current_field": {}},
+                     circuit={"delta_J0": 2.0})
+    role = sim.graph.topology().role
+    assert list(role) == [FILAMENT] * 4 + [2]  # the dangling rod is a dead end
+    assert sim.force_field.current[4] == 0.0
+    assert 4 not in sim.force_field.active_rod and len(sim.force_field.active_rod) == 4
