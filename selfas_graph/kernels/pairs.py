@@ -7,6 +7,8 @@ beyond the interaction range (a Verlet skin); the kernels test the distance.
 """
 import math
 
+import numpy as np
+
 from ._jit import inline, njit, njit_parallel, prange
 from .laws import yukawa_force_over_r, yukawa_potential
 
@@ -55,22 +57,6 @@ def tip_brake(position, velocity, start, index, rstar, k_br, out):
         out[k, 0] = fx
         out[k, 1] = fy
         out[k, 2] = fz
-
-
-@njit_parallel
-def close_pair_count(position, start, index, radius):
-    """Number of distinct pairs in the list closer than ``radius`` (each pair once)."""
-    n = position.shape[0]
-    r2max = radius * radius
-    total = 0
-    for k in prange(n):
-        c = 0
-        for j in range(start[k], start[k + 1]):
-            l = index[j]
-            if l > k and _closer(position, k, l, r2max):
-                c += 1
-        total += c
-    return total
 
 
 @njit_parallel
@@ -167,6 +153,13 @@ def _close_fill(position, start, index, radius, offset, out):
                 c += 1
 
 
+def close_pair_count(position, start, index, radius):
+    """Number of distinct pairs in the list closer than ``radius`` (each pair once)."""
+    counts = np.zeros(position.shape[0], dtype=np.int64)
+    _close_counts(position, start, index, radius, counts)
+    return int(counts.sum())
+
+
 def close_pairs(position, start, index, radius):
     """All listed pairs ``(k, l)``, ``k < l``, closer than ``radius``, sorted by (k, l).
 
@@ -183,8 +176,6 @@ def close_pairs(position, start, index, radius):
     -------
     (m, 2) int64
     """
-    import numpy as np
-
     n = position.shape[0]
     counts = np.zeros(n, dtype=np.int64)
     _close_counts(position, start, index, radius, counts)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -59,7 +59,6 @@ class RunSummary:
     energy_balance: float = float("nan")
     energy_scale: float = float("nan")
     frames: int = 0
-    extra: dict = field(default_factory=dict)
 
     @property
     def steps_per_second(self):
