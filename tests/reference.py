@@ -51,7 +51,20 @@ def tip_brake(position, velocity, rstar, k_br):
     return out
 
 
-def yukawa_force(centre, z, screening, cutoff):
+def _yukawa_f(r, zz, screening, core):
+    """Term 6 magnitude; inside the core radius it falls linearly, f(r_c) r / r_c."""
+    if r < core:
+        return _yukawa_f(core, zz, screening, 0.0) * r / core
+    return zz * math.exp(-r / screening) * (1 / r**2 + 1 / (screening * r))
+
+
+def _yukawa_u(r, zz, screening, core):
+    if r < core:
+        return _yukawa_u(core, zz, screening, 0.0) + _yukawa_f(core, zz, screening, 0.0) * (core**2 - r**2) / (2 * core)
+    return zz * math.exp(-r / screening) / r
+
+
+def yukawa_force(centre, z, screening, cutoff, core=0.0):
     n = len(centre)
     out = np.zeros((n, 3))
     for i in range(n):
@@ -59,21 +72,19 @@ def yukawa_force(centre, z, screening, cutoff):
             d = centre[i] - centre[j]
             r = np.linalg.norm(d)
             if i != j and r < cutoff:
-                out[i] += z[i] * z[j] * math.exp(-r / screening) * (1 / r**2 + 1 / (screening * r)) * d / r
+                out[i] += _yukawa_f(r, z[i] * z[j], screening, core) * d / r
     return out
 
 
-def yukawa_energy(centre, z, screening, cutoff):
-    def u(r, zz):
-        return zz * math.exp(-r / screening) / r
-
+def yukawa_energy(centre, z, screening, cutoff, core=0.0):
     n = len(centre)
     total = 0.0
     for i in range(n):
         for j in range(i + 1, n):
             r = np.linalg.norm(centre[i] - centre[j])
             if r < cutoff:
-                total += u(r, z[i] * z[j]) - u(cutoff, z[i] * z[j])
+                zz = z[i] * z[j]
+                total += _yukawa_u(r, zz, screening, core) - _yukawa_u(cutoff, zz, screening, core)
     return total
 
 

@@ -59,15 +59,18 @@ def test_tip_brake(state):
 
 
 @pytest.mark.parametrize("cutoff", [0.7, 2.0, 100.0])
-def test_yukawa(state, cutoff):
+@pytest.mark.parametrize("core", [0.0, 0.3])
+def test_yukawa(state, cutoff, core):
+    """Term 6 neighbour kernel against the all-pairs reference, with and without the core
+    (core 0.3 is large enough that several pairs of the fixture fall inside it)."""
     c = state.centre()
     nl = NeighbourList(cutoff, 0.3)
     nl.build(c)
     out = np.empty_like(c)
-    kp.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, cutoff, out)
-    close(out, ref.yukawa_force(c, state.rod_charge, 0.8, cutoff))
-    e = kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, cutoff)
-    assert e == pytest.approx(ref.yukawa_energy(c, state.rod_charge, 0.8, cutoff), rel=1e-12)
+    kp.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, core, cutoff, out)
+    close(out, ref.yukawa_force(c, state.rod_charge, 0.8, cutoff, core))
+    e = kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, core, cutoff)
+    assert e == pytest.approx(ref.yukawa_energy(c, state.rod_charge, 0.8, cutoff, core), rel=1e-12)
 
 
 def test_plasma(state):

@@ -73,10 +73,32 @@ def test_tip_force_is_minus_gradient(r):
 def test_yukawa_force_is_minus_gradient(r, screening):
     """Term 6: f = Z Z exp(-r/R_D)(1/r^2 + 1/(R_D r)) = -dU/dr with U = Z Z exp(-r/R_D)/r."""
     zz = 1.7
-    numeric = _central_difference(lambda s: yukawa_potential(s * s, zz, screening), r, 1e-6 * r)
+    numeric = _central_difference(lambda s: yukawa_potential(s * s, zz, screening, 0.0), r, 1e-6 * r)
     analytic = zz * math.exp(-r / screening) * (1 / r**2 + 1 / (screening * r))
-    assert yukawa_force_over_r(r * r, zz, screening) * r == pytest.approx(analytic, rel=1e-14)
+    assert yukawa_force_over_r(r * r, zz, screening, 0.0) * r == pytest.approx(analytic, rel=1e-14)
     assert analytic == pytest.approx(numeric, rel=1e-7)  # central-difference truncation ~1e-10
+
+
+@pytest.mark.parametrize("r", [0.0, 0.01, 0.03, 0.0599, 0.0601, 0.2])
+def test_yukawa_core_is_bounded_continuous_and_minus_gradient(r):
+    """Term 6 with core radius a = 0.06: f = f(a) r / a inside (bounded, zero at r = 0),
+    the bare law outside, f = -dU/dr on both sides, and f and U continuous at a."""
+    zz, screening, core = 4.0, 1.0, 0.06
+    f_core = zz * math.exp(-core / screening) * (1 / core**2 + 1 / (screening * core))
+    f = yukawa_force_over_r(r * r, zz, screening, core) * r
+    expected = f_core * r / core if r < core else zz * math.exp(-r / screening) * (1 / r**2 + 1 / (screening * r))
+    assert f == pytest.approx(expected, rel=1e-14, abs=1e-300)
+    assert abs(f) <= f_core * (1 + 1e-14)
+    if r > 0.0:
+        h = 1e-6 * r
+        numeric = _central_difference(lambda s: yukawa_potential(s * s, zz, screening, core), r, h)
+        assert f == pytest.approx(numeric, rel=1e-6)  # truncation O(h^2) and round-off U/h * 1e-16 < 1e-7
+    for rc in (core,):  # continuity at the core radius, to round-off
+        below, above = rc * (1 - 1e-12), rc * (1 + 1e-12)
+        assert yukawa_force_over_r(below**2, zz, screening, core) * below == pytest.approx(
+            yukawa_force_over_r(above**2, zz, screening, core) * above, rel=1e-9)
+        assert yukawa_potential(below**2, zz, screening, core) == pytest.approx(
+            yukawa_potential(above**2, zz, screening, core), rel=1e-9)
 
 
 @pytest.mark.parametrize("h", [-0.02, 0.0, 0.01, 0.05, 0.0599, 0.1])

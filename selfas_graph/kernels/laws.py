@@ -57,23 +57,37 @@ def tip_potential(r2, p, rstar, kappa):
 
 
 @inline
-def yukawa_force_over_r(r2, zz, screening):
+def yukawa_force_over_r(r2, zz, screening, core):
     """Screened electric repulsion between rod centres (MODEL.md term 6), divided by r.
 
     ``f(r) = Z_i Z_j exp(-r/R_D) (1/r^2 + 1/(R_D r))``, the negative derivative of
-    ``U = Z_i Z_j exp(-r/R_D) / r``. ``r = 0`` gives 0 (direction undefined).
+    ``U = Z_i Z_j exp(-r/R_D) / r``, for ``r >= a``. Inside the core radius ``a``
+    (``forces.yukawa.core_radius``; 0 means no core) the force falls linearly to zero,
+    ``f(r) = f(a) r / a``, as for a point charge inside a uniformly charged ball of radius a
+    (the same softening as the tip law, term 1): two rods of diameter
+    D cannot bring their centres closer than about D, and without the core two crossing
+    rods feel an unbounded 1/r^2 force. Clamping r^2 to a^2 gives exactly this,
+    because the returned factor is f/r. ``r = 0`` without a core gives 0.
     """
-    if r2 == 0.0:
+    rr = max(r2, core * core)
+    if rr == 0.0:
         return 0.0
-    r = math.sqrt(r2)
-    return zz * math.exp(-r / screening) * (1.0 / r2 + 1.0 / (screening * r)) / r
+    r = math.sqrt(rr)
+    return zz * math.exp(-r / screening) * (1.0 / rr + 1.0 / (screening * r)) / r
 
 
 @inline
-def yukawa_potential(r2, zz, screening):
-    """``U = Z_i Z_j exp(-r/R_D) / r`` (MODEL.md term 6)."""
-    r = math.sqrt(r2)
-    return zz * math.exp(-r / screening) / r
+def yukawa_potential(r2, zz, screening, core):
+    """Potential of :func:`yukawa_force_over_r`: ``U = Z_i Z_j exp(-r/R_D) / r`` for ``r >= a``.
+
+    Inside the core ``U = U(a) + f(a) (a^2 - r^2) / (2 a)``, continuous at a.
+    """
+    if r2 >= core * core:
+        r = math.sqrt(r2)
+        return zz * math.exp(-r / screening) / r
+    ec = math.exp(-core / screening)
+    g = zz * ec * (1.0 / (core * core) + 1.0 / (screening * core)) / core  # f(a) / a
+    return zz * ec / core + 0.5 * g * (core * core - r2)
 
 
 @inline

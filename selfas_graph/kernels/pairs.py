@@ -60,11 +60,11 @@ def tip_brake(position, velocity, start, index, rstar, k_br, out):
 
 
 @njit_parallel
-def yukawa_centres(centre, rod_charge, start, index, screening, cutoff, out):
+def yukawa_centres(centre, rod_charge, start, index, screening, core, cutoff, out):
     """Screened electric repulsion between rod centres (MODEL.md term 6).
 
     ``F_i = sum_j Z_i Z_j exp(-r/R_D) (1/r^2 + 1/(R_D r)) r_hat_ij`` over neighbours
-    with ``r < cutoff``.
+    with ``r < cutoff``, softened inside the core radius (see ``laws.yukawa_force_over_r``).
 
     Parameters
     ----------
@@ -74,8 +74,8 @@ def yukawa_centres(centre, rod_charge, start, index, screening, cutoff, out):
         Electric charge Z_i of each rod.
     start, index : int64 arrays
         Rod neighbour list (compressed rows, both directions).
-    screening, cutoff : float
-        Screening length R_D and the cut-off radius.
+    screening, core, cutoff : float
+        Screening length R_D, core radius r_c (0: none) and the cut-off radius.
     out : (n_rods, 3) float64
         Overwritten with the force on each rod centre.
     """
@@ -92,7 +92,7 @@ def yukawa_centres(centre, rod_charge, start, index, screening, cutoff, out):
             dz = centre[i, 2] - centre[l, 2]
             r2 = dx * dx + dy * dy + dz * dz
             if r2 < rc2:
-                g = yukawa_force_over_r(r2, rod_charge[i] * rod_charge[l], screening)
+                g = yukawa_force_over_r(r2, rod_charge[i] * rod_charge[l], screening, core)
                 fx += g * dx
                 fy += g * dy
                 fz += g * dz
@@ -102,7 +102,7 @@ def yukawa_centres(centre, rod_charge, start, index, screening, cutoff, out):
 
 
 @njit_parallel
-def yukawa_energy(centre, rod_charge, start, index, screening, cutoff):
+def yukawa_energy(centre, rod_charge, start, index, screening, core, cutoff):
     """Energy of :func:`yukawa_centres`, shifted to zero at the cut-off so it is continuous.
 
     Each pair is counted once. Returns a float.
@@ -121,7 +121,7 @@ def yukawa_energy(centre, rod_charge, start, index, screening, cutoff):
                 r2 = dx * dx + dy * dy + dz * dz
                 if r2 < rc2:
                     zz = rod_charge[i] * rod_charge[l]
-                    acc += yukawa_potential(r2, zz, screening) - yukawa_potential(rc2, zz, screening)
+                    acc += yukawa_potential(r2, zz, screening, core) - yukawa_potential(rc2, zz, screening, core)
         total += acc
     return total
 

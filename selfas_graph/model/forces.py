@@ -163,6 +163,7 @@ class Yukawa(_Term):
     def __init__(self, p, state):
         y = p.forces.yukawa
         self.screening = y.screening_length
+        self.core = y.core_radius
         zmax = float(np.abs(state.rod_charge).max(initial=0.0))
         self.cutoff = yukawa_cutoff(zmax, y.screening_length, y.tolerance)
 
@@ -172,14 +173,15 @@ class Yukawa(_Term):
             return
         nl = ff.centre_neighbours()
         f = ff.buffer("yukawa_centre", ff.n_rods)
-        kp.yukawa_centres(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.cutoff, f)
+        kp.yukawa_centres(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.core, self.cutoff, f)
         _share_by_mass(f, out["yukawa"])
 
     def energy(self, ff):
         if self.cutoff == 0.0:
             return {"yukawa": 0.0}
         nl = ff.centre_neighbours()
-        return {"yukawa": kp.yukawa_energy(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.cutoff)}
+        return {"yukawa": kp.yukawa_energy(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.core,
+                                          self.cutoff)}
 
 
 class ElectricField(_Term):

@@ -107,6 +107,11 @@ class Yukawa:
         1e-4, "the force is cut off where Z_max^2 times its magnitude falls below this (units F_M0); "
         "an accuracy knob", gt=0.0, lt=1.0,
     )
+    core_radius: float = spec(
+        0.0, "a: inside this centre distance the force falls linearly to zero (a point charge "
+        "inside a charged ball; rods of diameter D cannot bring their centres much closer than D); 0 = the bare law of "
+        "MODEL.md term 6, unbounded for crossing rods", ge=0.0,
+    )
 
 
 @dataclass(frozen=True)
