@@ -85,18 +85,29 @@ def merged_labels(n_tips, tip_contacts):
     return label
 
 
+def attached_labels(n_rods, tip_contacts, conductor_tip, key):
+    """Electrical node of each tip: its merged node, or ``("att", k)`` when the merged node
+    touches conductors of exactly one key k (ideal contacts pin it to that conductor)."""
+    m = merged_labels(2 * n_rods, tip_contacts).tolist()
+    keys = defaultdict(set)
+    for t, k in zip(np.asarray(conductor_tip).tolist(), np.asarray(key).tolist()):
+        keys[m[t]].add(k)
+    return [("att", next(iter(keys[x]))) if len(keys[x]) == 1 else x for x in m]
+
+
 def brute_force_filament(n_rods, tip_contacts, conductor_tip, key):
     """Rods on some simple path between two different attachments: enumerate all paths.
 
     The definition of MODEL.md section 5 taken literally, on a MultiGraph (parallel
     rods are separate edges); exponential, so only for small graphs.
     """
-    m = merged_labels(2 * n_rods, tip_contacts)
+    m = attached_labels(n_rods, tip_contacts, conductor_tip, key)
     g = nx.MultiGraph()
     for i in range(n_rods):
         g.add_edge(m[2 * i], m[2 * i + 1], key=("rod", i))
     for j, (t, k) in enumerate(zip(np.asarray(conductor_tip).tolist(), np.asarray(key).tolist())):
-        g.add_edge(m[t], ("att", k), key=("contact", j))
+        if m[t] != ("att", k):
+            g.add_edge(m[t], ("att", k), key=("contact", j))
     atts = sorted({("att", k) for k in np.asarray(key).tolist()})
     on_path = np.zeros(n_rods, dtype=bool)
     for a1, a2 in combinations(atts, 2):
@@ -109,11 +120,12 @@ def brute_force_filament(n_rods, tip_contacts, conductor_tip, key):
 
 def rule_filament(n_rods, tip_contacts, conductor_tip, key):
     """The biconnected-component rule applied literally with networkx (no reductions)."""
-    m = merged_labels(2 * n_rods, tip_contacts).tolist()
+    m = attached_labels(n_rods, tip_contacts, conductor_tip, key)
     g = nx.Graph()
     g.add_edges_from((m[2 * i], m[2 * i + 1]) for i in range(n_rods) if m[2 * i] != m[2 * i + 1])
     for t, k in zip(np.asarray(conductor_tip).tolist(), np.asarray(key).tolist()):
-        g.add_edge(m[t], ("att", k))
+        if m[t] != ("att", k):
+            g.add_edge(m[t], ("att", k))
         g.add_edge(("att", k), "X")
     in_x = set()
     if "X" in g:
@@ -204,6 +216,25 @@ def test_structure_touching_one_electrode_twice_is_dead_end():
     assert np.all(t.role == DEAD_END) and not t.has_short_circuit
     sol = g.solve()
     assert np.all(sol.current == 0.0) and sol.total_current == 0.0
+
+
+def test_loop_pinned_at_one_electrode_is_dead_end_even_where_it_leads_on():
+    """A loop whose two ends both touch the cathode carries nothing, even though its far end
+    is a junction from which a rod leads on to the anode.
+
+    Rods 0 and 1 run cathode -> x -> y, and y touches the cathode too; rod 2 runs y -> anode.
+    Contacts are ideal, so y sits at the cathode's potential: rods 0 and 1 have both ends
+    pinned there (DEAD_END, zero current); rod 2 alone carries delta_J0 (a one-rod chain).
+    """
+    g = ConnectivityGraph(3, {C: -DELTA / 2, A: DELTA / 2})
+    g.add_conductor_contact(0, C)
+    g.add_tip_contact(1, 2)
+    g.add_tip_contact(3, 4)
+    g.add_conductor_contact(3, C)
+    g.add_conductor_contact(5, A)
+    np.testing.assert_array_equal(g.topology().role, [DEAD_END, DEAD_END, FILAMENT])
+    sol = g.solve()
+    np.testing.assert_allclose(sol.current, [0.0, 0.0, -DELTA], atol=TOL)
 
 
 def test_floating_ring_is_cluster_with_nan_potential():

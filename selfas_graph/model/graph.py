@@ -16,12 +16,17 @@ between merged nodes. Each conductor contact carries a *key*: contacts with the
 same key are one attachment (case (i): all anode contacts share the anode's key,
 all cathode contacts the cathode's; case (ii): every filament contact has its
 own key, since the filament potential varies along it). Each key becomes one
-attachment node joined to the merged nodes holding its contacts, and a virtual
-node X is joined to every attachment node. A rod is **FILAMENT** iff it lies on a
-simple path between two *different* attachment nodes, i.e. iff its edge lies on a
-cycle through X, i.e. iff it is in a biconnected component that contains X
-(``networkx.biconnected_component_edges``). Merging same-key contacts first is
-what keeps a loop from the anode back to the anode from counting as a filament.
+attachment node. Contacts with conductors are ideal like tip contacts, so a merged
+node that touches exactly one key *is* that attachment node (its tips sit at the
+conductor's potential); a merged node touching several keys is joined to each of
+them. A virtual node X is joined to every attachment node. A rod is **FILAMENT**
+iff it lies on a simple path between two *different* attachment nodes, i.e. iff its
+edge lies on a cycle through X, i.e. iff it is in a biconnected component that
+contains X (``networkx.biconnected_component_edges``). Merging same-key contacts is
+what keeps a loop from the anode back to the anode from counting as a filament,
+also when the loop's far end touches the anode at a junction that leads on to the
+cathode: both ends of such a loop are pinned at the anode's potential, and no
+current flows in it.
 
 A balanced bridge rod is FILAMENT (it lies on such a path) although its current
 is zero; the circuit solve reports the current, this module the topology.
@@ -207,8 +212,10 @@ def _filament_rods(n_nodes, u, v, comp, candidate, cnode, key_index, n_keys) -> 
 
     Auxiliary simple graph H: merged nodes ``0 .. n_nodes-1`` of the candidate
     components, attachment of key ``j`` as node ``n_nodes + j``, X as node
-    ``n_nodes + n_keys``; edges are the rods, the contacts (merged node ->
-    attachment) and X -> attachment. Edges are coded ``lo * stride + hi``.
+    ``n_nodes + n_keys``; a merged node that touches exactly one key is replaced by
+    that key's attachment node. Edges are the rods, the contacts of merged nodes that
+    touch two or more keys (merged node -> attachment) and X -> attachment. Edges are
+    coded ``lo * stride + hi``.
 
     Parallel rods collapse to one edge of H. That is exact: two parallel rods
     share the block of their common edge (or form a block of their own, which
@@ -230,10 +237,23 @@ def _filament_rods(n_nodes, u, v, comp, candidate, cnode, key_index, n_keys) -> 
     x_node = n_nodes + n_keys
     n_h = x_node + 1
     stride = np.int64(n_h)
-    rod_in = candidate[comp[u]] & (u != v)
-    rod_code = np.minimum(u, v) * stride + np.maximum(u, v)
     att_in = candidate[comp[cnode]]
-    att_code = cnode[att_in] * stride + (n_nodes + key_index[att_in])
+    # contacts are ideal, so a merged node touching exactly one attachment key is that
+    # attachment electrically: it becomes the attachment node itself. A path through it
+    # then ends there, and a loop that leaves an electrode and comes back to it (both ends
+    # pinned at the same potential, no current) is a cycle through that attachment alone.
+    # Nodes touching two or more keys keep one edge to each attachment.
+    node_key = np.unique(cnode[att_in] * np.int64(n_keys) + key_index[att_in])  # distinct (node, key)
+    nk_node, nk_key = node_key // n_keys, node_key % n_keys
+    keys_per_node = np.bincount(nk_node, minlength=n_nodes)
+    rep = np.arange(n_nodes, dtype=np.int64)
+    single = keys_per_node[nk_node] == 1
+    rep[nk_node[single]] = n_nodes + nk_key[single]
+    ru, rv = rep[u], rep[v]
+    rod_in = candidate[comp[u]] & (ru != rv)
+    rod_code = np.minimum(ru, rv) * stride + np.maximum(ru, rv)
+    multi = keys_per_node[nk_node] >= 2
+    att_code = nk_node[multi] * stride + (n_nodes + nk_key[multi])
     keys_used = np.unique(key_index[att_in]) + n_nodes
     # unique edges of H; attachment < X, so (attachment, X) is (lo, hi)
     code = np.unique(np.concatenate([rod_code[rod_in], att_code, keys_used * stride + x_node]))
