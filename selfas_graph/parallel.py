@@ -1,17 +1,30 @@
 """The MPI edge: ``world`` is the MPI communicator under ``mpiexec`` and a one-rank stub otherwise.
 
 mpi4py is imported here and nowhere else, and only when the process was started
-by an MPI launcher (so a serial run needs no MPI at all). Rank 0 writes files;
-every rank runs the same deterministic model, so events and the graph agree.
+by an MPI launcher (so a serial run needs no MPI at all). Rank 0 writes files.
+
+Decomposition (replicated data, split force targets): every rank holds every
+position and velocity. The expensive force terms compute only the rows of a
+contiguous block of rods (:class:`RowBlocks`: the rods' centres, their tips, the
+quadrature points of their currents); :meth:`RowBlocks.gather_tip_rows` then
+copies every other rank's rows in, so that all ranks hold the same force arrays,
+bit for bit. Integration, contacts, events, graph and circuit run identically on
+every rank; partial energies are combined by :meth:`RowBlocks.sum`, whose result
+does not depend on the order in which the parts arrive.
 """
 from __future__ import annotations
 
+import math
 import os
+
+import numpy as np
 
 _LAUNCHER_VARS = ("PMI_SIZE", "PMI_RANK", "OMPI_COMM_WORLD_SIZE", "MPI_LOCALNRANKS", "HYDRA_CONTROL_FD")
 
 
 class _SerialWorld:
+    """The one-rank stand-in for an MPI communicator (the lowercase, pickle-based calls used here)."""
+
     rank = 0
     size = 1
 
@@ -21,6 +34,9 @@ class _SerialWorld:
     def allreduce(self, value, op=None):
         return value
 
+    def allgather(self, value):
+        return [value]
+
     def Barrier(self):
         pass
 
@@ -28,13 +44,16 @@ class _SerialWorld:
         raise SystemExit(code)
 
 
+SERIAL = _SerialWorld()
+
+
 def _make_world():
     if not any(v in os.environ for v in _LAUNCHER_VARS):
-        return _SerialWorld()
+        return SERIAL
     from mpi4py import MPI
 
     comm = MPI.COMM_WORLD
-    return comm if comm.Get_size() > 1 else _SerialWorld()
+    return comm if comm.Get_size() > 1 else SERIAL
 
 
 world = _make_world()
@@ -51,3 +70,88 @@ def fit_threads_to_cores(world=world):
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
         numba.set_num_threads(max(1, min(numba.config.NUMBA_NUM_THREADS, cores // world.size)))
     return numba.get_num_threads()
+
+
+def any_rank(flag: bool, comm=None) -> bool:
+    """True on every rank if ``flag`` is true on any rank (a collective call: every rank must make it)."""
+    comm = world if comm is None else comm
+    if comm.size == 1:
+        return bool(flag)
+    return comm.allreduce(int(bool(flag))) > 0
+
+
+class RowBlocks:
+    """Rods split into contiguous blocks, one per rank: the force targets this rank computes.
+
+    Rank ``r`` owns rods ``bounds[r] <= i < bounds[r + 1]`` (block sizes differ by at most
+    one) and their tips ``2 bounds[r] <= k < 2 bounds[r + 1]``. With one rank the block is
+    everything and no method communicates.
+
+    Parameters
+    ----------
+    n_rods : int
+    comm : communicator or the serial stub, optional
+        Default: the one-rank stub (a serial run), not :data:`world`; the command line
+        passes :data:`world` explicitly.
+
+    Attributes
+    ----------
+    rods : (lo, hi) rod rows of this rank
+    tips : (lo, hi) tip rows of this rank, ``(2 lo, 2 hi)``
+    """
+
+    def __init__(self, n_rods: int, comm=None):
+        self.comm = SERIAL if comm is None else comm
+        self.size, self.rank = self.comm.size, self.comm.rank
+        self.n_rods = int(n_rods)
+        self.bounds = np.array([(self.n_rods * r) // self.size for r in range(self.size + 1)], dtype=np.int64)
+        lo, hi = int(self.bounds[self.rank]), int(self.bounds[self.rank + 1])
+        self.rods = (lo, hi)
+        self.tips = (2 * lo, 2 * hi)
+        self._buffers = {}
+
+    @property
+    def serial(self) -> bool:
+        return self.size == 1
+
+    def gather_tip_rows(self, arrays) -> None:
+        """Copy every other rank's block of tip rows into each (n_tips, 3) float64 array, in place.
+
+        Each rank has filled rows ``tips[0]:tips[1]`` of every array; afterwards every rank holds
+        all rows, bit for bit the same everywhere. One ``Allgatherv`` carries all the arrays.
+        """
+        if self.size == 1 or not arrays:
+            return
+        k = len(arrays)
+        lo, hi = self.tips
+        rows = 2 * np.diff(self.bounds)
+        counts = 3 * k * rows
+        displs = np.concatenate(([0], np.cumsum(counts)[:-1]))
+        send = self._buffer("send", (k, hi - lo, 3))
+        for c, a in enumerate(arrays):
+            send[c] = a[lo:hi]
+        recv = self._buffer("recv", (int(counts.sum()),))
+        self.comm.Allgatherv(send, [recv, (counts.tolist(), displs.tolist())])
+        for r in range(self.size):
+            if r == self.rank:
+                continue
+            rlo, rhi = 2 * int(self.bounds[r]), 2 * int(self.bounds[r + 1])
+            block = recv[displs[r]:displs[r] + counts[r]].reshape(k, rhi - rlo, 3)
+            for c, a in enumerate(arrays):
+                a[rlo:rhi] = block[c]
+
+    def sum(self, value: float) -> float:
+        """The sum of every rank's ``value``, the same float on every rank (a collective call).
+
+        ``math.fsum`` rounds the exact sum once, so the result does not depend on the order of
+        the parts. With one rank, ``value`` itself.
+        """
+        if self.size == 1:
+            return value
+        return math.fsum(self.comm.allgather(float(value)))
+
+    def _buffer(self, name, shape):
+        buf = self._buffers.get(name)
+        if buf is None or buf.shape != shape:
+            buf = self._buffers[name] = np.empty(shape)
+        return buf

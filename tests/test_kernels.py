@@ -38,13 +38,13 @@ def state(rng):
 def test_tip_tip_direct(state):
     out = np.empty_like(state.position)
     x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
-    kt.tip_tip_direct(x, y, z, state.tip_charge, RSTAR, KAPPA, out)
+    kt.tip_tip_direct(x, y, z, state.tip_charge, RSTAR, KAPPA, 0, len(x), out)
     close(out, ref.tip_tip_force(state.position, state.tip_charge, RSTAR, KAPPA))
 
 
 def test_tip_tip_energy(state):
     x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
-    e = kt.tip_tip_energy(x, y, z, state.tip_charge, RSTAR, KAPPA)
+    e = kt.tip_tip_energy(x, y, z, state.tip_charge, RSTAR, KAPPA, 0, len(x))
     assert e == pytest.approx(ref.tip_tip_energy(state.position, state.tip_charge, RSTAR, KAPPA), rel=1e-12)
 
 
@@ -64,9 +64,9 @@ def test_yukawa(state, cutoff):
     nl = NeighbourList(cutoff, 0.3)
     nl.build(c)
     out = np.empty_like(c)
-    kp.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, cutoff, out)
+    kp.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, cutoff, 0, len(c), out)
     close(out, ref.yukawa_force(c, state.rod_charge, 0.8, cutoff))
-    e = kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, cutoff)
+    e = kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, cutoff, 0, len(c))
     assert e == pytest.approx(ref.yukawa_energy(c, state.rod_charge, 0.8, cutoff), rel=1e-12)
 
 
@@ -123,3 +123,44 @@ def test_close_pair_count(state):
     rod = np.arange(len(d)) // 2
     brute = np.triu((d < RSTAR) & (rod[:, None] != rod[None, :]), 1).sum()
     assert n == brute >= 3
+
+
+# ----------------------------------------------------------------------------- row ranges
+BLOCKS = [(0, 7, 8, 80), (0, 1, 79, 80), (0, 26, 53, 80)]  # tip bounds; 80 tips = 40 rods
+
+
+@pytest.mark.parametrize("bounds", BLOCKS)
+def test_row_ranges_do_not_change_a_row(state, bounds):
+    """Forces computed block by block equal the one-block result bit for bit (what lets MPI ranks agree).
+
+    Each row's sum runs over the same sources in the same order whatever ``lo, hi`` are,
+    including in the ``reassoc``/``contract`` tip-tip kernel, whose vectorised reduction
+    depends on the source count only. Energies over consecutive row blocks add up to the
+    one-block energy to round-off (the parts are summed in another order: rel 1e-13).
+    """
+    x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
+    n = len(x)
+    full = np.full((n, 3), np.nan)
+    kt.tip_tip_direct(x, y, z, state.tip_charge, RSTAR, KAPPA, 0, n, full)
+    parts = np.full((n, 3), np.nan)
+    energy = []
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        kt.tip_tip_direct(x, y, z, state.tip_charge, RSTAR, KAPPA, lo, hi, parts)
+        energy.append(kt.tip_tip_energy(x, y, z, state.tip_charge, RSTAR, KAPPA, lo, hi))
+    np.testing.assert_array_equal(parts, full)
+    assert sum(energy) == pytest.approx(kt.tip_tip_energy(x, y, z, state.tip_charge, RSTAR, KAPPA, 0, n), rel=1e-13)
+
+    c = state.centre()
+    nl = NeighbourList(2.0, 0.3)
+    nl.build(c)
+    m = len(c)
+    full = np.full((m, 3), np.nan)
+    kp.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, 2.0, 0, m, full)
+    parts = np.full((m, 3), np.nan)
+    energy = []
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        kp.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, 2.0, lo // 2, hi // 2, parts)
+        energy.append(kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, 2.0, lo // 2, hi // 2))
+    np.testing.assert_array_equal(parts, full)
+    assert sum(energy) == pytest.approx(kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, 2.0, 0, m),
+                                        rel=1e-13)

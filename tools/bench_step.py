@@ -59,7 +59,7 @@ def main():
         reps = max(3, steps // 4)
         t0 = time.perf_counter()
         for _ in range(reps):
-            tip_tip_direct(x, y, z, sim.state.tip_charge, sc.params.rods.rstar, 1.0, out)
+            tip_tip_direct(x, y, z, sim.state.tip_charge, sc.params.rods.rstar, 1.0, 0, len(x), out)
         direct = (time.perf_counter() - t0) / reps
         pairs = (2 * n) ** 2 / direct / threads
         evals = ff.calls["tip_magnetic"] / max(1, sim.state.step)

@@ -60,7 +60,7 @@ def tip_brake(position, velocity, start, index, rstar, k_br, out):
 
 
 @njit_parallel
-def yukawa_centres(centre, rod_charge, start, index, screening, cutoff, out):
+def yukawa_centres(centre, rod_charge, start, index, screening, cutoff, lo, hi, out):
     """Screened electric repulsion between rod centres (MODEL.md term 6).
 
     ``F_i = sum_j Z_i Z_j exp(-r/R_D) (1/r^2 + 1/(R_D r)) r_hat_ij`` over neighbours
@@ -76,12 +76,13 @@ def yukawa_centres(centre, rod_charge, start, index, screening, cutoff, out):
         Rod neighbour list (compressed rows, both directions).
     screening, cutoff : float
         Screening length R_D and the cut-off radius.
+    lo, hi : int
+        Target rods, ``0 <= lo <= hi <= n_rods``; a row does not depend on the range.
     out : (n_rods, 3) float64
-        Overwritten with the force on each rod centre.
+        Rows ``lo:hi`` overwritten with the force on those rod centres; other rows untouched.
     """
-    n = centre.shape[0]
     rc2 = cutoff * cutoff
-    for i in prange(n):
+    for i in prange(lo, hi):
         fx = 0.0
         fy = 0.0
         fz = 0.0
@@ -102,15 +103,15 @@ def yukawa_centres(centre, rod_charge, start, index, screening, cutoff, out):
 
 
 @njit_parallel
-def yukawa_energy(centre, rod_charge, start, index, screening, cutoff):
+def yukawa_energy(centre, rod_charge, start, index, screening, cutoff, lo, hi):
     """Energy of :func:`yukawa_centres`, shifted to zero at the cut-off so it is continuous.
 
-    Each pair is counted once. Returns a float.
+    Pairs ``(i, l)`` with ``lo <= i < hi`` and ``l > i``: over ``0, n_rods`` each pair is counted
+    once, and the sums over consecutive ranges add up to it. Returns a float.
     """
-    n = centre.shape[0]
     rc2 = cutoff * cutoff
     total = 0.0
-    for i in prange(n):
+    for i in prange(lo, hi):
         acc = 0.0
         for j in range(start[i], start[i + 1]):
             l = index[j]

@@ -10,8 +10,8 @@ from .laws import tip_force_over_r, tip_potential
 
 
 @njit_parallel_sum
-def tip_tip_direct(x, y, z, charge, rstar, kappa, out):
-    """Force of all other rods' tips on every tip, by direct summation.
+def tip_tip_direct(x, y, z, charge, rstar, kappa, lo, hi, out):
+    """Force of all other rods' tips on the tips ``lo <= k < hi``, by direct summation.
 
     Parameters
     ----------
@@ -21,11 +21,15 @@ def tip_tip_direct(x, y, z, charge, rstar, kappa, out):
         Magnetic charge of each tip (+q_i for tip a, -q_i for tip b).
     rstar, kappa : float
         Transition radius r* and core stiffness of the tip law.
+    lo, hi : int
+        Target rows, ``0 <= lo <= hi <= n_tips``. Each row's sum runs over all tips in the
+        same order whatever the range, so a row does not depend on ``lo, hi`` (bit for bit).
     out : (n_tips, 3) float64
-        Overwritten with the force on each tip. Parallel over tips (gather).
+        Rows ``lo:hi`` overwritten with the force on those tips; other rows untouched.
+        Parallel over tips (gather).
     """
     n = x.shape[0]
-    for k in prange(n):
+    for k in prange(lo, hi):
         rod = k // 2
         xk = x[k]
         yk = y[k]
@@ -49,14 +53,16 @@ def tip_tip_direct(x, y, z, charge, rstar, kappa, out):
 
 
 @njit_parallel_sum
-def tip_tip_energy(x, y, z, charge, rstar, kappa):
-    """Total tip-tip potential energy, each pair of tips of different rods once.
+def tip_tip_energy(x, y, z, charge, rstar, kappa, lo, hi):
+    """Tip-tip potential energy of the pairs ``(k, l)``, ``lo <= k < hi``, ``l`` a tip of a later rod.
 
-    Parameters as :func:`tip_tip_direct`. Returns a float.
+    With ``lo, hi = 0, n_tips`` every pair of tips of different rods is counted once; the
+    sums over consecutive ranges add up to it. Parameters as :func:`tip_tip_direct`.
+    Returns a float.
     """
     n = x.shape[0]
     total = 0.0
-    for k in prange(n):
+    for k in prange(lo, hi):
         acc = 0.0
         for l in range(k - (k % 2) + 2, n):
             dx = x[k] - x[l]
