@@ -9,12 +9,11 @@ contiguous block of rods (:class:`RowBlocks`: the rods' centres, their tips, the
 quadrature points of their currents); :meth:`RowBlocks.gather_tip_rows` then
 copies every other rank's rows in, so that all ranks hold the same force arrays,
 bit for bit. Integration, contacts, events, graph and circuit run identically on
-every rank; partial energies are combined by :meth:`RowBlocks.sum`, whose result
-does not depend on the order in which the parts arrive.
+every rank. Energies are gathered the same way as one value per row and summed
+on every rank over all rows, so they do not depend on the number of ranks either.
 """
 from __future__ import annotations
 
-import math
 import os
 
 import numpy as np
@@ -114,41 +113,34 @@ class RowBlocks:
     def serial(self) -> bool:
         return self.size == 1
 
-    def gather_tip_rows(self, arrays) -> None:
-        """Copy every other rank's block of tip rows into each (n_tips, 3) float64 array, in place.
+    def gather_rows(self, arrays, rows_per_rod=2) -> None:
+        """Copy every other rank's block of rows into each array, in place (a collective call).
 
-        Each rank has filled rows ``tips[0]:tips[1]`` of every array; afterwards every rank holds
-        all rows, bit for bit the same everywhere. One ``Allgatherv`` carries all the arrays.
+        Each rank has filled its own rows of every array: ``rows_per_rod * lo`` to
+        ``rows_per_rod * hi`` (2 for tip arrays, 1 for rod arrays). Afterwards every rank
+        holds all rows, bit for bit the same everywhere. All arrays are float64 with equal
+        shapes ``(rows_per_rod * n_rods, ...)``; one ``Allgatherv`` carries them all.
         """
         if self.size == 1 or not arrays:
             return
         k = len(arrays)
-        lo, hi = self.tips
-        rows = 2 * np.diff(self.bounds)
-        counts = 3 * k * rows
+        width = int(np.prod(arrays[0].shape[1:], dtype=np.int64))
+        bounds = rows_per_rod * self.bounds
+        lo, hi = int(bounds[self.rank]), int(bounds[self.rank + 1])
+        counts = k * width * np.diff(bounds)
         displs = np.concatenate(([0], np.cumsum(counts)[:-1]))
-        send = self._buffer("send", (k, hi - lo, 3))
+        send = self._buffer(("send", k, width), (k, hi - lo, width))
         for c, a in enumerate(arrays):
-            send[c] = a[lo:hi]
-        recv = self._buffer("recv", (int(counts.sum()),))
+            send[c] = a[lo:hi].reshape(hi - lo, width)
+        recv = self._buffer(("recv", k, width), (int(counts.sum()),))
         self.comm.Allgatherv(send, [recv, (counts.tolist(), displs.tolist())])
         for r in range(self.size):
             if r == self.rank:
                 continue
-            rlo, rhi = 2 * int(self.bounds[r]), 2 * int(self.bounds[r + 1])
-            block = recv[displs[r]:displs[r] + counts[r]].reshape(k, rhi - rlo, 3)
+            rlo, rhi = int(bounds[r]), int(bounds[r + 1])
+            block = recv[displs[r]:displs[r] + counts[r]].reshape(k, rhi - rlo, width)
             for c, a in enumerate(arrays):
-                a[rlo:rhi] = block[c]
-
-    def sum(self, value: float) -> float:
-        """The sum of every rank's ``value``, the same float on every rank (a collective call).
-
-        ``math.fsum`` rounds the exact sum once, so the result does not depend on the order of
-        the parts. With one rank, ``value`` itself.
-        """
-        if self.size == 1:
-            return value
-        return math.fsum(self.comm.allgather(float(value)))
+                a[rlo:rhi] = block[c].reshape(a[rlo:rhi].shape)
 
     def _buffer(self, name, shape):
         buf = self._buffers.get(name)

@@ -44,7 +44,9 @@ def test_tip_tip_direct(state):
 
 def test_tip_tip_energy(state):
     x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
-    e = kt.tip_tip_energy(x, y, z, state.tip_charge, RSTAR, KAPPA, 0, len(x))
+    rows = np.empty(len(x))
+    kt.tip_tip_energy(x, y, z, state.tip_charge, RSTAR, KAPPA, 0, len(x), rows)
+    e = rows.sum()
     assert e == pytest.approx(ref.tip_tip_energy(state.position, state.tip_charge, RSTAR, KAPPA), rel=1e-12)
 
 
@@ -66,7 +68,9 @@ def test_yukawa(state, cutoff):
     out = np.empty_like(c)
     kp.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, cutoff, 0, len(c), out)
     close(out, ref.yukawa_force(c, state.rod_charge, 0.8, cutoff))
-    e = kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, cutoff, 0, len(c))
+    rows = np.empty(len(c))
+    kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, cutoff, 0, len(c), rows)
+    e = rows.sum()
     assert e == pytest.approx(ref.yukawa_energy(c, state.rod_charge, 0.8, cutoff), rel=1e-12)
 
 
@@ -131,36 +135,32 @@ BLOCKS = [(0, 7, 8, 80), (0, 1, 79, 80), (0, 26, 53, 80)]  # tip bounds; 80 tips
 
 @pytest.mark.parametrize("bounds", BLOCKS)
 def test_row_ranges_do_not_change_a_row(state, bounds):
-    """Forces computed block by block equal the one-block result bit for bit (what lets MPI ranks agree).
+    """Forces and per-row energies computed block by block equal the one-block result bit for bit.
 
-    Each row's sum runs over the same sources in the same order whatever ``lo, hi`` are,
-    including in the ``reassoc``/``contract`` tip-tip kernel, whose vectorised reduction
-    depends on the source count only. Energies over consecutive row blocks add up to the
-    one-block energy to round-off (the parts are summed in another order: rel 1e-13).
+    This is what lets MPI ranks agree with a serial run: each row's sum runs over the same
+    sources in the same order whatever ``lo, hi`` are, including in the ``reassoc``/``contract``
+    tip-tip kernels, whose vectorised reduction depends on the source count only.
     """
     x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
     n = len(x)
-    full = np.full((n, 3), np.nan)
-    kt.tip_tip_direct(x, y, z, state.tip_charge, RSTAR, KAPPA, 0, n, full)
-    parts = np.full((n, 3), np.nan)
-    energy = []
-    for lo, hi in zip(bounds[:-1], bounds[1:]):
-        kt.tip_tip_direct(x, y, z, state.tip_charge, RSTAR, KAPPA, lo, hi, parts)
-        energy.append(kt.tip_tip_energy(x, y, z, state.tip_charge, RSTAR, KAPPA, lo, hi))
-    np.testing.assert_array_equal(parts, full)
-    assert sum(energy) == pytest.approx(kt.tip_tip_energy(x, y, z, state.tip_charge, RSTAR, KAPPA, 0, n), rel=1e-13)
-
     c = state.centre()
+    m = len(c)
     nl = NeighbourList(2.0, 0.3)
     nl.build(c)
-    m = len(c)
-    full = np.full((m, 3), np.nan)
-    kp.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, 2.0, 0, m, full)
-    parts = np.full((m, 3), np.nan)
-    energy = []
-    for lo, hi in zip(bounds[:-1], bounds[1:]):
-        kp.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, 2.0, lo // 2, hi // 2, parts)
-        energy.append(kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, 2.0, lo // 2, hi // 2))
-    np.testing.assert_array_equal(parts, full)
-    assert sum(energy) == pytest.approx(kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, 2.0, 0, m),
-                                        rel=1e-13)
+    q, zc, s, i = state.tip_charge, state.rod_charge, nl.start, nl.index
+
+    def blockwise(kernel, shape, bounds):
+        out = np.full(shape, np.nan)
+        for lo, hi in zip(bounds[:-1], bounds[1:]):
+            kernel(lo, hi, out)
+        return out
+
+    rod_bounds = [b // 2 for b in bounds]
+    cases = [  # (kernel of (lo, hi, out), output shape, block bounds)
+        (lambda lo, hi, out: kt.tip_tip_direct(x, y, z, q, RSTAR, KAPPA, lo, hi, out), (n, 3), bounds),
+        (lambda lo, hi, out: kt.tip_tip_energy(x, y, z, q, RSTAR, KAPPA, lo, hi, out), (n,), bounds),
+        (lambda lo, hi, out: kp.yukawa_centres(c, zc, s, i, 0.8, 2.0, lo, hi, out), (m, 3), rod_bounds),
+        (lambda lo, hi, out: kp.yukawa_energy(c, zc, s, i, 0.8, 2.0, lo, hi, out), (m,), rod_bounds),
+    ]
+    for kernel, shape, blocks in cases:
+        np.testing.assert_array_equal(blockwise(kernel, shape, blocks), blockwise(kernel, shape, [0, shape[0]]))

@@ -103,14 +103,14 @@ def yukawa_centres(centre, rod_charge, start, index, screening, cutoff, lo, hi, 
 
 
 @njit_parallel
-def yukawa_energy(centre, rod_charge, start, index, screening, cutoff, lo, hi):
-    """Energy of :func:`yukawa_centres`, shifted to zero at the cut-off so it is continuous.
+def yukawa_energy(centre, rod_charge, start, index, screening, cutoff, lo, hi, out):
+    """Energy of :func:`yukawa_centres` by rows, shifted to zero at the cut-off so it is continuous.
 
-    Pairs ``(i, l)`` with ``lo <= i < hi`` and ``l > i``: over ``0, n_rods`` each pair is counted
-    once, and the sums over consecutive ranges add up to it. Returns a float.
+    ``out[i]`` (rows ``lo:hi`` of an (n_rods,) float64 array) sums the pairs ``(i, l)`` with
+    ``l > i``, so that summed over all rows each pair is counted once. One value per row
+    keeps the total independent of how rows are split over threads or ranks.
     """
     rc2 = cutoff * cutoff
-    total = 0.0
     for i in prange(lo, hi):
         acc = 0.0
         for j in range(start[i], start[i + 1]):
@@ -123,8 +123,7 @@ def yukawa_energy(centre, rod_charge, start, index, screening, cutoff, lo, hi):
                 if r2 < rc2:
                     zz = rod_charge[i] * rod_charge[l]
                     acc += yukawa_potential(r2, zz, screening) - yukawa_potential(rc2, zz, screening)
-        total += acc
-    return total
+        out[i] = acc
 
 
 @njit_parallel

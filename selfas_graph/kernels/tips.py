@@ -53,15 +53,15 @@ def tip_tip_direct(x, y, z, charge, rstar, kappa, lo, hi, out):
 
 
 @njit_parallel_sum
-def tip_tip_energy(x, y, z, charge, rstar, kappa, lo, hi):
-    """Tip-tip potential energy of the pairs ``(k, l)``, ``lo <= k < hi``, ``l`` a tip of a later rod.
+def tip_tip_energy(x, y, z, charge, rstar, kappa, lo, hi, out):
+    """Tip-tip potential energy by rows: ``out[k]`` sums the pairs of tip k with the tips of later rods.
 
-    With ``lo, hi = 0, n_tips`` every pair of tips of different rods is counted once; the
-    sums over consecutive ranges add up to it. Parameters as :func:`tip_tip_direct`.
-    Returns a float.
+    Summed over all rows, ``out`` gives the total energy with each pair of tips of different
+    rods counted once. Parameters as :func:`tip_tip_direct`; ``out`` is (n_tips,) float64,
+    rows ``lo:hi`` overwritten. One value per row (no reduction across rows) keeps the
+    total independent of how rows are split over threads or ranks.
     """
     n = x.shape[0]
-    total = 0.0
     for k in prange(lo, hi):
         acc = 0.0
         for l in range(k - (k % 2) + 2, n):
@@ -69,5 +69,4 @@ def tip_tip_energy(x, y, z, charge, rstar, kappa, lo, hi):
             dy = y[k] - y[l]
             dz = z[k] - z[l]
             acc += tip_potential(dx * dx + dy * dy + dz * dz, charge[k] * charge[l], rstar, kappa)
-        total += acc
-    return total
+        out[k] = acc

@@ -11,8 +11,9 @@ The expensive terms (tip-tip sum, Yukawa, the two current terms) compute only th
 rows of the field's :class:`~selfas_graph.parallel.RowBlocks` block of rods and say
 so through :meth:`_Term.blocked`; :meth:`ForceField.evaluate` then fills in the other
 ranks' rows, so every channel is complete on every rank. With one rank the block
-is every rod and nothing is communicated. Their energies are partial sums over
-the block, combined by :meth:`RowBlocks.sum`.
+is every rod and nothing is communicated. Their energies are computed as one value
+per row, gathered the same way and summed over all rows on every rank: the same
+float whatever the number of ranks.
 """
 from __future__ import annotations
 
@@ -106,7 +107,10 @@ class TipMagnetic(_Term):
     def energy(self, ff):
         x, y, z = ff.soa()
         lo, hi = ff.blocks.tips
-        return {"tip_magnetic": ff.blocks.sum(kt.tip_tip_energy(x, y, z, ff.tip_charge, self.rstar, self.kappa, lo, hi))}
+        e = np.empty(ff.n_tips)
+        kt.tip_tip_energy(x, y, z, ff.tip_charge, self.rstar, self.kappa, lo, hi, e)
+        ff.blocks.gather_rows([e], rows_per_rod=2)
+        return {"tip_magnetic": float(e.sum())}
 
 
 class TipBrake(_Term):
@@ -201,8 +205,10 @@ class Yukawa(_Term):
             return {"yukawa": 0.0}
         nl = ff.centre_neighbours()
         lo, hi = ff.blocks.rods
-        return {"yukawa": ff.blocks.sum(kp.yukawa_energy(ff.centre(), ff.rod_charge, nl.start, nl.index,
-                                                         self.screening, self.cutoff, lo, hi))}
+        e = np.empty(ff.n_rods)
+        kp.yukawa_energy(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.cutoff, lo, hi, e)
+        ff.blocks.gather_rows([e], rows_per_rod=1)
+        return {"yukawa": float(e.sum())}
 
 
 class ElectricField(_Term):
@@ -539,7 +545,7 @@ class ForceField:
             blocked.extend(t.blocked(self))
         if not self.blocks.serial:
             t0 = time.perf_counter() if self.timing else 0.0
-            self.blocks.gather_tip_rows([self.out[name] for name in blocked])
+            self.blocks.gather_rows([self.out[name] for name in blocked], rows_per_rod=2)
             if self.timing:
                 self.seconds["gather"] += time.perf_counter() - t0
         total = self.total
