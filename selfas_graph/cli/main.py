@@ -72,4 +72,8 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    # `python -m selfas_graph.cli.main`: call the package's module, whose CliError the
+    # subcommands raise (this file's own copy, __main__, has a different CliError class)
+    from selfas_graph.cli.main import main as package_main
+
+    sys.exit(package_main())
