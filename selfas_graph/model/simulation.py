@@ -71,7 +71,9 @@ class Simulation:
 
     One call of :meth:`step` does, in this order::
 
-        forces (tips, centres, external fields, currents from the last solve)
+        forces (tips, centres, external fields, currents from the last solve;
+                with several MPI ranks each computes the rows of its block of rods
+                in the expensive terms, and the blocks are exchanged)
         -> Adams-Bashforth update -> bond constraint (positions, velocities)
         -> health check (NaN, broken bond, runaway step)
         -> contact search -> events -> graph update
