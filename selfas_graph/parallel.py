@@ -1,17 +1,29 @@
 """The MPI edge: ``world`` is the MPI communicator under ``mpiexec`` and a one-rank stub otherwise.
 
 mpi4py is imported here and nowhere else, and only when the process was started
-by an MPI launcher (so a serial run needs no MPI at all). Rank 0 writes files;
-every rank runs the same deterministic model, so events and the graph agree.
+by an MPI launcher (so a serial run needs no MPI at all). Rank 0 writes files.
+
+Decomposition (replicated data, split force targets): every rank holds every
+position and velocity. The expensive force terms compute only the rows of a
+contiguous block of rods (:class:`RowBlocks`: the rods' centres, their tips, the
+quadrature points of their currents); :meth:`RowBlocks.gather_tip_rows` then
+copies every other rank's rows in, so that all ranks hold the same force arrays,
+bit for bit. Integration, contacts, events, graph and circuit run identically on
+every rank. Energies are gathered the same way as one value per row and summed
+on every rank over all rows, so they do not depend on the number of ranks either.
 """
 from __future__ import annotations
 
 import os
 
+import numpy as np
+
 _LAUNCHER_VARS = ("PMI_SIZE", "PMI_RANK", "OMPI_COMM_WORLD_SIZE", "MPI_LOCALNRANKS", "HYDRA_CONTROL_FD")
 
 
 class _SerialWorld:
+    """The one-rank stand-in for an MPI communicator (the lowercase, pickle-based calls used here)."""
+
     rank = 0
     size = 1
 
@@ -21,6 +33,9 @@ class _SerialWorld:
     def allreduce(self, value, op=None):
         return value
 
+    def allgather(self, value):
+        return [value]
+
     def Barrier(self):
         pass
 
@@ -28,13 +43,16 @@ class _SerialWorld:
         raise SystemExit(code)
 
 
+SERIAL = _SerialWorld()
+
+
 def _make_world():
     if not any(v in os.environ for v in _LAUNCHER_VARS):
-        return _SerialWorld()
+        return SERIAL
     from mpi4py import MPI
 
     comm = MPI.COMM_WORLD
-    return comm if comm.Get_size() > 1 else _SerialWorld()
+    return comm if comm.Get_size() > 1 else SERIAL
 
 
 world = _make_world()
@@ -51,3 +69,81 @@ def fit_threads_to_cores(world=world):
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
         numba.set_num_threads(max(1, min(numba.config.NUMBA_NUM_THREADS, cores // world.size)))
     return numba.get_num_threads()
+
+
+def any_rank(flag: bool, comm=None) -> bool:
+    """True on every rank if ``flag`` is true on any rank (a collective call: every rank must make it)."""
+    comm = world if comm is None else comm
+    if comm.size == 1:
+        return bool(flag)
+    return comm.allreduce(int(bool(flag))) > 0
+
+
+class RowBlocks:
+    """Rods split into contiguous blocks, one per rank: the force targets this rank computes.
+
+    Rank ``r`` owns rods ``bounds[r] <= i < bounds[r + 1]`` (block sizes differ by at most
+    one) and their tips ``2 bounds[r] <= k < 2 bounds[r + 1]``. With one rank the block is
+    everything and no method communicates.
+
+    Parameters
+    ----------
+    n_rods : int
+    comm : communicator or the serial stub, optional
+        Default: the one-rank stub (a serial run), not :data:`world`; the command line
+        passes :data:`world` explicitly.
+
+    Attributes
+    ----------
+    rods : (lo, hi) rod rows of this rank
+    tips : (lo, hi) tip rows of this rank, ``(2 lo, 2 hi)``
+    """
+
+    def __init__(self, n_rods: int, comm=None):
+        self.comm = SERIAL if comm is None else comm
+        self.size, self.rank = self.comm.size, self.comm.rank
+        self.n_rods = int(n_rods)
+        self.bounds = np.array([(self.n_rods * r) // self.size for r in range(self.size + 1)], dtype=np.int64)
+        lo, hi = int(self.bounds[self.rank]), int(self.bounds[self.rank + 1])
+        self.rods = (lo, hi)
+        self.tips = (2 * lo, 2 * hi)
+        self._buffers = {}
+
+    @property
+    def serial(self) -> bool:
+        return self.size == 1
+
+    def gather_rows(self, arrays, rows_per_rod=2) -> None:
+        """Copy every other rank's block of rows into each array, in place (a collective call).
+
+        Each rank has filled its own rows of every array: ``rows_per_rod * lo`` to
+        ``rows_per_rod * hi`` (2 for tip arrays, 1 for rod arrays). Afterwards every rank
+        holds all rows, bit for bit the same everywhere. All arrays are float64 with equal
+        shapes ``(rows_per_rod * n_rods, ...)``; one ``Allgatherv`` carries them all.
+        """
+        if self.size == 1 or not arrays:
+            return
+        k = len(arrays)
+        width = int(np.prod(arrays[0].shape[1:], dtype=np.int64))
+        bounds = rows_per_rod * self.bounds
+        lo, hi = int(bounds[self.rank]), int(bounds[self.rank + 1])
+        counts = k * width * np.diff(bounds)
+        displs = np.concatenate(([0], np.cumsum(counts)[:-1]))
+        send = self._buffer(("send", k, width), (k, hi - lo, width))
+        for c, a in enumerate(arrays):
+            send[c] = a[lo:hi].reshape(hi - lo, width)
+        recv = self._buffer(("recv", k, width), (int(counts.sum()),))
+        self.comm.Allgatherv(send, [recv, (counts.tolist(), displs.tolist())])
+        for r in range(self.size):
+            if r == self.rank:
+                continue
+            rlo, rhi = int(bounds[r]), int(bounds[r + 1])
+            block = recv[displs[r]:displs[r] + counts[r]].reshape(k, rhi - rlo, width)
+            for c, a in enumerate(arrays):
+                a[rlo:rhi] = block[c].reshape(a[rlo:rhi].shape)
+
+    def _buffer(self, name, shape):
+        buf = self._buffers.get(name)
+        if buf is None or buf.shape != shape:
+            buf = self._buffers[name] = np.empty(shape)
+        return buf

@@ -38,13 +38,15 @@ def state(rng):
 def test_tip_tip_direct(state):
     out = np.empty_like(state.position)
     x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
-    kt.tip_tip_direct(x, y, z, state.tip_charge, RSTAR, KAPPA, out)
+    kt.tip_tip_direct(x, y, z, state.tip_charge, RSTAR, KAPPA, 0, len(x), out)
     close(out, ref.tip_tip_force(state.position, state.tip_charge, RSTAR, KAPPA))
 
 
 def test_tip_tip_energy(state):
     x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
-    e = kt.tip_tip_energy(x, y, z, state.tip_charge, RSTAR, KAPPA)
+    rows = np.empty(len(x))
+    kt.tip_tip_energy(x, y, z, state.tip_charge, RSTAR, KAPPA, 0, len(x), rows)
+    e = rows.sum()
     assert e == pytest.approx(ref.tip_tip_energy(state.position, state.tip_charge, RSTAR, KAPPA), rel=1e-12)
 
 
@@ -67,9 +69,11 @@ def test_yukawa(state, cutoff, core):
     nl = NeighbourList(cutoff, 0.3)
     nl.build(c)
     out = np.empty_like(c)
-    kp.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, core, cutoff, out)
+    kp.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, core, cutoff, 0, len(c), out)
     close(out, ref.yukawa_force(c, state.rod_charge, 0.8, cutoff, core))
-    e = kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, core, cutoff)
+    rows = np.empty(len(c))
+    kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, core, cutoff, 0, len(c), rows)
+    e = rows.sum()
     assert e == pytest.approx(ref.yukawa_energy(c, state.rod_charge, 0.8, cutoff, core), rel=1e-12)
 
 
@@ -126,3 +130,40 @@ def test_close_pair_count(state):
     rod = np.arange(len(d)) // 2
     brute = np.triu((d < RSTAR) & (rod[:, None] != rod[None, :]), 1).sum()
     assert n == brute >= 3
+
+
+# ----------------------------------------------------------------------------- row ranges
+BLOCKS = [(0, 7, 8, 80), (0, 1, 79, 80), (0, 26, 53, 80)]  # tip bounds; 80 tips = 40 rods
+
+
+@pytest.mark.parametrize("bounds", BLOCKS)
+def test_row_ranges_do_not_change_a_row(state, bounds):
+    """Forces and per-row energies computed block by block equal the one-block result bit for bit.
+
+    This is what lets MPI ranks agree with a serial run: each row's sum runs over the same
+    sources in the same order whatever ``lo, hi`` are, including in the ``reassoc``/``contract``
+    tip-tip kernels, whose vectorised reduction depends on the source count only.
+    """
+    x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
+    n = len(x)
+    c = state.centre()
+    m = len(c)
+    nl = NeighbourList(2.0, 0.3)
+    nl.build(c)
+    q, zc, s, i = state.tip_charge, state.rod_charge, nl.start, nl.index
+
+    def blockwise(kernel, shape, bounds):
+        out = np.full(shape, np.nan)
+        for lo, hi in zip(bounds[:-1], bounds[1:]):
+            kernel(lo, hi, out)
+        return out
+
+    rod_bounds = [b // 2 for b in bounds]
+    cases = [  # (kernel of (lo, hi, out), output shape, block bounds)
+        (lambda lo, hi, out: kt.tip_tip_direct(x, y, z, q, RSTAR, KAPPA, lo, hi, out), (n, 3), bounds),
+        (lambda lo, hi, out: kt.tip_tip_energy(x, y, z, q, RSTAR, KAPPA, lo, hi, out), (n,), bounds),
+        (lambda lo, hi, out: kp.yukawa_centres(c, zc, s, i, 0.8, 0.3, 2.0, lo, hi, out), (m, 3), rod_bounds),
+        (lambda lo, hi, out: kp.yukawa_energy(c, zc, s, i, 0.8, 0.3, 2.0, lo, hi, out), (m,), rod_bounds),
+    ]
+    for kernel, shape, blocks in cases:
+        np.testing.assert_array_equal(blockwise(kernel, shape, blocks), blockwise(kernel, shape, [0, shape[0]]))

@@ -160,7 +160,7 @@ def test_current_force_on_tips_matches_oracle(seed, w):
     n_tips = len(position)
     base = np.random.default_rng(seed).normal(size=(n_tips, 3))
     out = base.copy()
-    current_force_on_tips(position, charge, active, current, w, out)
+    current_force_on_tips(position, charge, active, current, w, 0, len(position), out)
     ref = ref_field(position, np.arange(n_tips) // 2, position, active, current, w)
     ref = base + charge[:, None] * ref
     # see test_rod_current_field_matches_oracle; base is O(1) so round-off of it too
@@ -441,8 +441,8 @@ def test_inactive_rods_contribute_nothing():
 
     out_sub = np.zeros_like(position)
     out_all = np.zeros_like(position)
-    current_force_on_tips(position, charge, subset, current, 0.03, out_sub)
-    current_force_on_tips(position, charge, all_rods, masked, 0.03, out_all)
+    current_force_on_tips(position, charge, subset, current, 0.03, 0, len(position), out_sub)
+    current_force_on_tips(position, charge, all_rods, masked, 0.03, 0, len(position), out_all)
     np.testing.assert_allclose(out_sub, out_all, rtol=1e-13, atol=1e-15)
 
 
@@ -455,7 +455,7 @@ def test_empty_active_list():
 
     base = np.random.default_rng(72).normal(size=position.shape)
     out = base.copy()
-    current_force_on_tips(position, charge, EMPTY, current, 0.03, out)
+    current_force_on_tips(position, charge, EMPTY, current, 0.03, 0, len(position), out)
     assert np.array_equal(out, base)
 
     t, wts = gauss_legendre_01(4)
@@ -484,7 +484,7 @@ def test_tip_force_skips_own_rod():
     charge = np.array([1.0, -1.0, 1.5, -1.5])
     current = np.array([2.0, 0.0])
     out = np.zeros_like(position)
-    current_force_on_tips(position, charge, np.array([0], dtype=np.int64), current, 0.03, out)
+    current_force_on_tips(position, charge, np.array([0], dtype=np.int64), current, 0.03, 0, len(position), out)
     assert np.all(out[:2] == 0.0)
     for k in (2, 3):
         expected = charge[k] * ref_segment_field(position[k], position[0], position[1], 2.0, 0.03)

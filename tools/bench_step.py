@@ -1,14 +1,21 @@
 """Step benchmark: milliseconds per full step for the Fig. 2 scene and a 6000-rod variant.
 
 Usage: python tools/bench_step.py [--rods 1200 6000] [--steps 200] [--scenario scenarios/fig2.toml]
+       mpiexec -n 2 python tools/bench_step.py ...   (the force rows split over the ranks; rank 0 prints)
+       python tools/bench_step.py --compare ...      (1 rank x 1 thread, 2 ranks x 1 thread and
+                                                      1 rank x 2 threads, in one table)
 
 For each size it builds the scene (all its force terms, random placement), takes
 warm-up steps (numba compilation, neighbour lists), then times ``--steps`` steps and
 prints ms/step, steps/s, the cost of each force term, and, as the reference measured
 in the same run, the tip-tip direct sum alone: its tip pairs per second per core
-and the ratio of a full step to it.
+and the ratio of a full step to it. Under ``mpiexec`` the per-term times are rank 0's,
+and ``gather`` is the time its force rows take to reach the other ranks.
 """
 import argparse
+import json
+import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -21,6 +28,10 @@ sys.path.insert(0, str(ROOT))
 
 from selfas_graph import Simulation, load_scenario  # noqa: E402
 from selfas_graph.kernels.tips import tip_tip_direct  # noqa: E402
+from selfas_graph.parallel import world  # noqa: E402
+
+#: (label, ranks, numba threads) of ``--compare``
+CONFIGS = [("1 rank x 1 thread", 1, 1), ("2 ranks x 1 thread", 2, 1), ("1 rank x 2 threads", 1, 2)]
 
 
 def scene(path, n_rods):
@@ -39,41 +50,81 @@ def main():
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "fig2.toml"))
     ap.add_argument("--rods", type=int, nargs="+", default=[1200, 6000])
     ap.add_argument("--steps", type=int, default=200)
+    ap.add_argument("--compare", action="store_true",
+                    help="run 1 rank x 1 thread, 2 ranks x 1 thread and 1 rank x 2 threads; print one table")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="with --compare: run the configurations this many times in turn and keep each one's "
+                         "fastest (the machine is shared: the minimum is the least disturbed run)")
+    ap.add_argument("--json", action="store_true", help="print only a JSON line of ms/step per size (rank 0)")
     args = ap.parse_args()
+    if args.compare:
+        return compare(args)
+    say = print if world.rank == 0 and not args.json else (lambda *a, **k: None)
     threads = numba.get_num_threads()
-    print(f"numba threads: {threads}; scenario {args.scenario}")
+    say(f"numba threads: {threads} x {world.size} MPI ranks; scenario {args.scenario}")
     rows = []
     for n in args.rods:
         sc = scene(args.scenario, n)
-        sim = Simulation.from_scenario(sc, timing=True)
+        sim = Simulation.from_scenario(sc, timing=True, comm=world)
         sim.step(10)
         ff = sim.force_field
         ff.seconds.clear()
         steps = max(10, args.steps if n <= 2000 else args.steps // 4)
+        world.Barrier()
         t0 = time.perf_counter()
         sim.step(steps)
+        world.Barrier()
         per_step = (time.perf_counter() - t0) / steps
-        # reference in the same run: the tip-tip direct sum alone on the same positions
+        # reference in the same run: the tip-tip direct sum alone on the same positions (rank 0, all rows)
         x, y, z = (np.ascontiguousarray(sim.state.position[:, d]) for d in range(3))
         out = np.empty_like(sim.state.position)
         reps = max(3, steps // 4)
         t0 = time.perf_counter()
-        for _ in range(reps):
-            tip_tip_direct(x, y, z, sim.state.tip_charge, sc.params.rods.rstar, 1.0, out)
+        if world.rank == 0:
+            for _ in range(reps):
+                tip_tip_direct(x, y, z, sim.state.tip_charge, sc.params.rods.rstar, 1.0, 0, len(x), out)
         direct = (time.perf_counter() - t0) / reps
+        world.Barrier()
         pairs = (2 * n) ** 2 / direct / threads
         evals = ff.calls["tip_magnetic"] / max(1, sim.state.step)
-        print(f"\n{n} rods: {per_step * 1e3:.2f} ms/step ({1 / per_step:.0f} steps/s); "
-              f"tip-tip direct sum alone {direct * 1e3:.2f} ms = {pairs / 1e9:.2f}e9 tip pairs/s/core; "
-              f"step / direct-sum ratio {per_step / direct:.2f}")
+        say(f"\n{n} rods: {per_step * 1e3:.2f} ms/step ({1 / per_step:.0f} steps/s); "
+            f"tip-tip direct sum alone {direct * 1e3:.2f} ms = {pairs / 1e9:.2f}e9 tip pairs/s/core; "
+            f"step / direct-sum ratio {per_step / direct:.2f}")
         for name, sec in sorted(ff.seconds.items(), key=lambda kv: -kv[1]):
-            print(f"    {name:16s} {sec / steps * 1e3:8.3f} ms/step")
-        print(f"    (force evaluations per step: {evals:.2f}; Yukawa cut-off {ff.describe().get('yukawa_cutoff', 0):.2f})")
+            say(f"    {name:16s} {sec / steps * 1e3:8.3f} ms/step")
+        say(f"    (force evaluations per step: {evals:.2f}; Yukawa cut-off {ff.describe().get('yukawa_cutoff', 0):.2f})")
         rows.append((n, per_step * 1e3, 1 / per_step, direct * 1e3, pairs / 1e9))
-    print("\n| rods | ms/step | steps/s | tip-tip direct alone (ms) | 1e9 tip pairs/s/core |")
-    print("|---|---|---|---|---|")
+    if args.json:
+        if world.rank == 0:
+            print(json.dumps({str(n): ms for n, ms, *_ in rows}))
+        return
+    say("\n| rods | ms/step | steps/s | tip-tip direct alone (ms) | 1e9 tip pairs/s/core |")
+    say("|---|---|---|---|---|")
     for n, ms, sps, d, gp in rows:
-        print(f"| {n} | {ms:.2f} | {sps:.0f} | {d:.2f} | {gp:.2f} |")
+        say(f"| {n} | {ms:.2f} | {sps:.0f} | {d:.2f} | {gp:.2f} |")
+
+
+def compare(args):
+    """Run this tool once per entry of CONFIGS (under mpiexec for several ranks) and tabulate ms/step."""
+    mpiexec = Path(sys.executable).parent / "mpiexec"
+    base = [sys.executable, str(Path(__file__).resolve()), "--json", "--steps", str(args.steps),
+            "--scenario", args.scenario, "--rods", *map(str, args.rods)]
+    results = [{} for _ in CONFIGS]
+    for _ in range(args.repeat):
+        for best, (label, ranks, threads) in zip(results, CONFIGS):
+            env = {**os.environ, "NUMBA_NUM_THREADS": str(threads)}
+            cmd = base if ranks == 1 else [str(mpiexec if mpiexec.exists() else "mpiexec"), "-n", str(ranks), *base]
+            res = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
+            got = json.loads(res.stdout.strip().splitlines()[-1])
+            print(f"{label}: {got}", file=sys.stderr, flush=True)
+            for n, ms in got.items():
+                best[n] = min(ms, best.get(n, float("inf")))
+    print("| rods | " + " | ".join(f"{label} (ms/step)" for label, _, _ in CONFIGS)
+          + " | speed-up, 2 ranks | speed-up, 2 threads |")
+    print("|---" * (len(CONFIGS) + 3) + "|")
+    for n in args.rods:
+        ms = [r[str(n)] for r in results]
+        print(f"| {n} | " + " | ".join(f"{m:.2f}" for m in ms) + f" | {ms[0] / ms[1]:.2f} | {ms[0] / ms[2]:.2f} |")
 
 
 if __name__ == "__main__":

@@ -1,7 +1,9 @@
 """``selfas-graph`` command line: a table of subcommands, each in its own module.
 
 Exit codes: 0 success, 2 bad input (scenario, arguments, files), 3 numerical
-failure of a run, 130 interrupted.
+failure of a run, 130 interrupted. Under ``mpiexec`` every rank exits with the
+same code and only rank 0 prints the error; an unexpected error on one rank
+aborts them all (no rank is left waiting for the others).
 """
 from __future__ import annotations
 
@@ -40,12 +42,15 @@ def build_parser():
 
 
 def main(argv=None) -> int:
+    from ..parallel import world
+
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return int(args._run(args) or 0)
     except CliError as exc:
-        print(f"selfas-graph {args.command}: error: {exc}", file=sys.stderr)
+        if world.rank == 0:
+            print(f"selfas-graph {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print(f"selfas-graph {args.command}: interrupted", file=sys.stderr)
@@ -56,7 +61,19 @@ def main(argv=None) -> int:
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except Exception:
+        if world.size == 1:
+            raise
+        import traceback
+
+        traceback.print_exc()
+        sys.stderr.flush()
+        world.Abort(1)
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    # `python -m selfas_graph.cli.main`: call the package's module, whose CliError the
+    # subcommands raise (this file's own copy, __main__, has a different CliError class)
+    from selfas_graph.cli.main import main as package_main
+
+    sys.exit(package_main())

@@ -3,6 +3,11 @@
 Validates the scenario and the output path before anything is written, runs
 with a progress bar on a terminal (plain periodic lines otherwise), writes an
 HDF5 run file and prints a summary.
+
+Under ``mpiexec -n P`` the ranks share the force work (``selfas_graph.parallel``).
+Rank 0 alone checks the input and the files, prints, and writes the run file,
+checkpoints and failure snapshots; it sends its verdict to the other ranks, so
+that every rank stops together, with one message and the serial exit code.
 """
 from __future__ import annotations
 
@@ -18,7 +23,7 @@ import numpy as np
 
 from .._version import __version__
 from ..io.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
-from ..io.h5md import RunFile, RunFileError, RunWriter
+from ..io.h5md import NullWriter, RunFile, RunFileError, RunWriter
 from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
 from ..model.simulation import NumericalFailure, RunInterrupted, Simulation
 from ..model.state import PlacementError
@@ -107,12 +112,25 @@ class Checkpointer:
 
 
 class _StopFlag:
-    """Set by SIGTERM / SIGINT so that the run stops after the current step with a checkpoint."""
+    """Set by SIGTERM / SIGINT so that the run stops after the current step with a checkpoint.
 
-    def __init__(self):
+    Under MPI the ranks agree on stopping (a collective call, made every ``every`` steps so
+    that it costs nothing next to a step): all stop after the same step, with the signal
+    number that rank 0 or any other rank received.
+    """
+
+    def __init__(self, every=10):
         self.signum = None
+        self.every = every
+        self.calls = 0
 
     def __call__(self):
+        if world.size == 1:
+            return self.signum is not None
+        self.calls += 1
+        if self.calls % self.every:
+            return False
+        self.signum = max(world.allgather(self.signum or 0)) or None
         return self.signum is not None
 
     def install(self):
@@ -172,11 +190,41 @@ def _check_output_name(out: Path):
         raise CliError(f"the output path {out} names a folder, not a file; give a file name such as run.h5")
 
 
-def run(args):
+class _PeerFailed(SystemExit):
+    """Rank 0 failed with an unexpected error (it prints the traceback): the other ranks exit quietly."""
+
+
+def _on_root(fn, share=True):
+    """Call ``fn()`` on rank 0 only; every rank returns its result (``share``) or raises the same CliError.
+
+    What rank 0 alone can find out (files, the output folder, a checkpoint) is decided once,
+    so the ranks cannot disagree; without ``share`` the other ranks get None (e.g. for an
+    open file). Serially this is ``fn()``.
+    """
+    if world.size == 1:
+        return fn()
+    result, status = None, ("ok", None)
+    if world.rank == 0:
+        try:
+            result = fn()
+        except CliError as exc:
+            status = ("error", str(exc))
+        except BaseException:
+            world.bcast((("crash", None), None), root=0)
+            raise
+    status, shared = world.bcast((status, result if share else None), root=0)
+    if status[0] == "error":
+        raise CliError(status[1])
+    if status[0] == "crash":
+        raise _PeerFailed(1)
+    return result if world.rank == 0 else shared
+
+
+def _prepare(args):
+    """(scenario, snapshot or None, output path, checkpoint path), every input and file checked."""
     snap = None
     if args.resume:
         scenario, snap, out, ckpt = _load_resume(args)
-        p = scenario.params
     else:
         if not args.scenario:
             raise CliError("give a SCENARIO file, or --resume RUN.h5 to continue a run")
@@ -184,7 +232,6 @@ def run(args):
             scenario = load_scenario(args.scenario, overrides=args.overrides, t_end=args.t_end)
         except ScenarioError as exc:
             raise CliError(str(exc)) from None
-        p = scenario.params
         out = Path(args.output) if args.output else scenario.output_path
         _check_output_name(out)
         ckpt = checkpoint_path(out)
@@ -204,8 +251,15 @@ def run(args):
             raise CliError(f"the folder {parent} of the output file does not exist")
         if not os.access(parent, os.W_OK):
             raise CliError(f"the folder {parent} of the output file is not writable")
+    return scenario, snap, out, ckpt
+
+
+def run(args):
+    scenario, snap, out, ckpt = _on_root(lambda: _prepare(args))
+    p = scenario.params
     try:
-        sim = Simulation.from_scenario(scenario) if snap is None else Simulation.from_snapshot(p, snap)
+        sim = (Simulation.from_scenario(scenario, comm=world) if snap is None
+               else Simulation.from_snapshot(p, snap, comm=world))
     except PlacementError as exc:
         raise CliError(str(exc)) from None
 
@@ -230,16 +284,15 @@ def run(args):
             print(json.dumps(plan, indent=2))
         return 0
 
-    writer = None
-    checkpointer = None
-    if world.rank == 0 and snap is not None:
-        try:
-            writer = RunWriter.reopen(out, int(snap["step"]))
-        except RunFileError as exc:
-            raise CliError(f"cannot resume: {exc}") from None
-        print(f"resuming at step {int(snap['step'])} (t = {float(snap['time']):.6g}) from {ckpt}; "
-              f"{writer.n_frames} frames kept in {out}", flush=True)
-    elif world.rank == 0:
+    def open_writer():
+        if snap is not None:
+            try:
+                writer = RunWriter.reopen(out, int(snap["step"]))
+            except RunFileError as exc:
+                raise CliError(f"cannot resume: {exc}") from None
+            print(f"resuming at step {int(snap['step'])} (t = {float(snap['time']):.6g}) from {ckpt}; "
+                  f"{writer.n_frames} frames kept in {out}", flush=True)
+            return writer
         provenance = {
             "scenario_text": scenario.text,
             "scenario_path": str(args.scenario),
@@ -252,8 +305,19 @@ def run(args):
             "mpi_ranks": world.size,
             "numba_threads": numba.get_num_threads(),
         }
-        writer = RunWriter(out, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
-                           overwrite=args.force, velocities=p.output.velocities)
+        try:
+            return RunWriter(out, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
+                             overwrite=args.force, velocities=p.output.velocities)
+        except OSError as exc:
+            raise CliError(f"cannot write the output file {out}: {exc}") from None
+
+    writer = _on_root(open_writer, share=False)
+    checkpointer = None
+    if world.size > 1:
+        # the other ranks take the frames' calls too (their energies are sums over all ranks)
+        n_frames = world.bcast(writer.n_frames if writer is not None else 0, root=0)
+        if world.rank != 0:
+            writer = NullWriter(n_frames)
     if world.rank == 0:
         checkpointer = Checkpointer(ckpt, p.output.checkpoint_interval, {
             "format_note": "selfas-graph checkpoint; continue with selfas-graph simulate --resume",
@@ -275,13 +339,16 @@ def run(args):
         if writer:
             writer.close(status=f"interrupted at step {exc.step}")
         name = signal.Signals(stop.signum).name
-        print(f"selfas-graph simulate: {name} received: stopped at step {exc.step} (t = {sim.state.time:.6g}); "
-              f"checkpoint {ckpt}; continue with: selfas-graph simulate --resume {out}", file=sys.stderr)
+        if world.rank == 0:
+            print(f"selfas-graph simulate: {name} received: stopped at step {exc.step} (t = {sim.state.time:.6g}); "
+                  f"checkpoint {ckpt}; continue with: selfas-graph simulate --resume {out}", file=sys.stderr)
         return 128 + stop.signum
     except NumericalFailure as exc:
         if reporter:
             reporter.close()
         failure = out.with_name(out.stem + ".failure.h5")
+        if world.rank != 0:  # every rank fails at the same step (same state); rank 0 reports it
+            return EXIT_NUMERICAL
         if writer:
             sim._flush_pending(writer)
             writer.close(status=f"failed: {exc}")

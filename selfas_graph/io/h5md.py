@@ -287,6 +287,40 @@ class RunWriter:
             self.f = None
 
 
+class NullWriter:
+    """Takes every call a :class:`RunWriter` takes and keeps nothing: the writer of MPI ranks other than 0.
+
+    With it every rank makes the same calls in the run loop, in particular the frames'
+    observables, whose energies are sums over all ranks. ``n_frames`` counts like the
+    real writer's, starting from rank 0's count.
+    """
+
+    def __init__(self, n_frames=0):
+        self.n_frames = int(n_frames)
+        self.events_written = 0
+
+    def write_frame(self, step, t, position, velocity, observables):
+        self.n_frames += 1
+
+    def write_per_step(self, steps, values):
+        pass
+
+    def write_events(self, rows):
+        pass
+
+    def write_graph(self, step, t, arrays, role, current, potential, conductor_potential):
+        pass
+
+    def set_attrs(self, **attrs):
+        pass
+
+    def flush(self):
+        pass
+
+    def close(self, status="finished"):
+        pass
+
+
 class RunFile:
     """Read-only access to a run file, without any simulation objects.
 

@@ -211,8 +211,8 @@ def rod_current_field(point, exclude_rod, position, active_rod, current, wire_ra
 
 
 @njit_parallel
-def current_force_on_tips(position, charge, active_rod, current, wire_radius, out):
-    """Force of the rod currents' field on the magnetic tips, ADDED to ``out`` (term 9).
+def current_force_on_tips(position, charge, active_rod, current, wire_radius, lo, hi, out):
+    """Force of the rod currents' field on the magnetic tips ``lo <= k < hi``, ADDED to ``out`` (term 9).
 
     ``out[k] += charge[k] * sum over active rods j != k // 2 of B_seg(x_k; j)``:
     a tip feels every current-carrying rod except its own. ``out`` is accumulated into,
@@ -232,12 +232,14 @@ def current_force_on_tips(position, charge, active_rod, current, wire_radius, ou
         Rod currents J, positive from tip a to tip b.
     wire_radius : float
         Wire radius w = D / 2 (MODEL.md term 9).
+    lo, hi : int
+        Target tips, ``0 <= lo <= hi <= n_tips``; a row does not depend on the range.
     out : ndarray, shape (n_tips, 3), float64
-        Tip forces; the term-9 force is added to it (reduced units, F_M0).
+        Tip forces; the term-9 force is added to rows ``lo:hi`` (reduced units, F_M0).
     """
     if active_rod.shape[0] == 0:
         return
-    for k in prange(position.shape[0]):
+    for k in prange(lo, hi):
         q = charge[k]
         if q == 0.0:
             continue

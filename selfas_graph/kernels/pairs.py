@@ -60,7 +60,7 @@ def tip_brake(position, velocity, start, index, rstar, k_br, out):
 
 
 @njit_parallel
-def yukawa_centres(centre, rod_charge, start, index, screening, core, cutoff, out):
+def yukawa_centres(centre, rod_charge, start, index, screening, core, cutoff, lo, hi, out):
     """Screened electric repulsion between rod centres (MODEL.md term 6).
 
     ``F_i = sum_j Z_i Z_j exp(-r/R_D) (1/r^2 + 1/(R_D r)) r_hat_ij`` over neighbours
@@ -75,13 +75,14 @@ def yukawa_centres(centre, rod_charge, start, index, screening, core, cutoff, ou
     start, index : int64 arrays
         Rod neighbour list (compressed rows, both directions).
     screening, core, cutoff : float
-        Screening length R_D, core radius r_c (0: none) and the cut-off radius.
+        Screening length R_D, core radius a (0: none) and the cut-off radius.
+    lo, hi : int
+        Target rods, ``0 <= lo <= hi <= n_rods``; a row does not depend on the range.
     out : (n_rods, 3) float64
-        Overwritten with the force on each rod centre.
+        Rows ``lo:hi`` overwritten with the force on those rod centres; other rows untouched.
     """
-    n = centre.shape[0]
     rc2 = cutoff * cutoff
-    for i in prange(n):
+    for i in prange(lo, hi):
         fx = 0.0
         fy = 0.0
         fz = 0.0
@@ -102,15 +103,15 @@ def yukawa_centres(centre, rod_charge, start, index, screening, core, cutoff, ou
 
 
 @njit_parallel
-def yukawa_energy(centre, rod_charge, start, index, screening, core, cutoff):
-    """Energy of :func:`yukawa_centres`, shifted to zero at the cut-off so it is continuous.
+def yukawa_energy(centre, rod_charge, start, index, screening, core, cutoff, lo, hi, out):
+    """Energy of :func:`yukawa_centres` by rows, shifted to zero at the cut-off so it is continuous.
 
-    Each pair is counted once. Returns a float.
+    ``out[i]`` (rows ``lo:hi`` of an (n_rods,) float64 array) sums the pairs ``(i, l)`` with
+    ``l > i``, so that summed over all rows each pair is counted once. One value per row
+    keeps the total independent of how rows are split over threads or ranks.
     """
-    n = centre.shape[0]
     rc2 = cutoff * cutoff
-    total = 0.0
-    for i in prange(n):
+    for i in prange(lo, hi):
         acc = 0.0
         for j in range(start[i], start[i + 1]):
             l = index[j]
@@ -122,8 +123,7 @@ def yukawa_energy(centre, rod_charge, start, index, screening, core, cutoff):
                 if r2 < rc2:
                     zz = rod_charge[i] * rod_charge[l]
                     acc += yukawa_potential(r2, zz, screening, core) - yukawa_potential(rc2, zz, screening, core)
-        total += acc
-    return total
+        out[i] = acc
 
 
 @njit_parallel

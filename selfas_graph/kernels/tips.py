@@ -10,8 +10,8 @@ from .laws import tip_force_over_r, tip_potential
 
 
 @njit_parallel_sum
-def tip_tip_direct(x, y, z, charge, rstar, kappa, out):
-    """Force of all other rods' tips on every tip, by direct summation.
+def tip_tip_direct(x, y, z, charge, rstar, kappa, lo, hi, out):
+    """Force of all other rods' tips on the tips ``lo <= k < hi``, by direct summation.
 
     Parameters
     ----------
@@ -21,11 +21,15 @@ def tip_tip_direct(x, y, z, charge, rstar, kappa, out):
         Magnetic charge of each tip (+q_i for tip a, -q_i for tip b).
     rstar, kappa : float
         Transition radius r* and core stiffness of the tip law.
+    lo, hi : int
+        Target rows, ``0 <= lo <= hi <= n_tips``. Each row's sum runs over all tips in the
+        same order whatever the range, so a row does not depend on ``lo, hi`` (bit for bit).
     out : (n_tips, 3) float64
-        Overwritten with the force on each tip. Parallel over tips (gather).
+        Rows ``lo:hi`` overwritten with the force on those tips; other rows untouched.
+        Parallel over tips (gather).
     """
     n = x.shape[0]
-    for k in prange(n):
+    for k in prange(lo, hi):
         rod = k // 2
         xk = x[k]
         yk = y[k]
@@ -49,19 +53,20 @@ def tip_tip_direct(x, y, z, charge, rstar, kappa, out):
 
 
 @njit_parallel_sum
-def tip_tip_energy(x, y, z, charge, rstar, kappa):
-    """Total tip-tip potential energy, each pair of tips of different rods once.
+def tip_tip_energy(x, y, z, charge, rstar, kappa, lo, hi, out):
+    """Tip-tip potential energy by rows: ``out[k]`` sums the pairs of tip k with the tips of later rods.
 
-    Parameters as :func:`tip_tip_direct`. Returns a float.
+    Summed over all rows, ``out`` gives the total energy with each pair of tips of different
+    rods counted once. Parameters as :func:`tip_tip_direct`; ``out`` is (n_tips,) float64,
+    rows ``lo:hi`` overwritten. One value per row (no reduction across rows) keeps the
+    total independent of how rows are split over threads or ranks.
     """
     n = x.shape[0]
-    total = 0.0
-    for k in prange(n):
+    for k in prange(lo, hi):
         acc = 0.0
         for l in range(k - (k % 2) + 2, n):
             dx = x[k] - x[l]
             dy = y[k] - y[l]
             dz = z[k] - z[l]
             acc += tip_potential(dx * dx + dy * dy + dz * dz, charge[k] * charge[l], rstar, kappa)
-        total += acc
-    return total
+        out[k] = acc

@@ -6,6 +6,14 @@ nothing (no buffer, no kernel call, no neighbour list). Each term writes its
 force into its own *channel* buffer; the field sums the channels and, for the
 non-conservative channels, the power ``sum_k F_k . v_k`` that the integrator
 turns into work. Conservative channels report a potential energy instead.
+
+The expensive terms (tip-tip sum, Yukawa, the two current terms) compute only the
+rows of the field's :class:`~selfas_graph.parallel.RowBlocks` block of rods and say
+so through :meth:`_Term.blocked`; :meth:`ForceField.evaluate` then fills in the other
+ranks' rows, so every channel is complete on every rank. With one rank the block
+is every rod and nothing is communicated. Their energies are computed as one value
+per row, gathered the same way and summed over all rows on every rank: the same
+float whatever the number of ranks.
 """
 from __future__ import annotations
 
@@ -20,6 +28,7 @@ from ..kernels import external as kx
 from ..kernels import fields as kf
 from ..kernels import pairs as kp
 from ..kernels import tips as kt
+from ..parallel import RowBlocks
 from .neighbours import NeighbourList
 from .params import Parameters
 
@@ -62,6 +71,10 @@ class _Term:
     def energy(self, ff):
         return None
 
+    def blocked(self, ff):
+        """Channels whose last ``compute`` filled only the rows of ``ff.blocks`` (default: none)."""
+        return ()
+
     def split(self, ff, dt):
         """Apply this term's stiff brake exactly over ``dt`` (``integrator.brake = "split"``).
 
@@ -85,11 +98,19 @@ class TipMagnetic(_Term):
 
     def compute(self, ff, out):
         x, y, z = ff.soa()
-        kt.tip_tip_direct(x, y, z, ff.tip_charge, self.rstar, self.kappa, out["tip_magnetic"])
+        lo, hi = ff.blocks.tips
+        kt.tip_tip_direct(x, y, z, ff.tip_charge, self.rstar, self.kappa, lo, hi, out["tip_magnetic"])
+
+    def blocked(self, ff):
+        return ("tip_magnetic",)
 
     def energy(self, ff):
         x, y, z = ff.soa()
-        return {"tip_magnetic": kt.tip_tip_energy(x, y, z, ff.tip_charge, self.rstar, self.kappa)}
+        lo, hi = ff.blocks.tips
+        e = np.empty(ff.n_tips)
+        kt.tip_tip_energy(x, y, z, ff.tip_charge, self.rstar, self.kappa, lo, hi, e)
+        ff.blocks.gather_rows([e], rows_per_rod=2)
+        return {"tip_magnetic": float(e.sum())}
 
 
 class TipBrake(_Term):
@@ -173,15 +194,24 @@ class Yukawa(_Term):
             return
         nl = ff.centre_neighbours()
         f = ff.buffer("yukawa_centre", ff.n_rods)
-        kp.yukawa_centres(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.core, self.cutoff, f)
-        _share_by_mass(f, out["yukawa"])
+        lo, hi = ff.blocks.rods
+        kp.yukawa_centres(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.core, self.cutoff,
+                          lo, hi, f)
+        _share_by_mass(f[lo:hi], out["yukawa"][2 * lo:2 * hi])
+
+    def blocked(self, ff):
+        return ("yukawa",) if self.cutoff > 0.0 else ()
 
     def energy(self, ff):
         if self.cutoff == 0.0:
             return {"yukawa": 0.0}
         nl = ff.centre_neighbours()
-        return {"yukawa": kp.yukawa_energy(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.core,
-                                          self.cutoff)}
+        lo, hi = ff.blocks.rods
+        e = np.empty(ff.n_rods)
+        kp.yukawa_energy(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.core, self.cutoff,
+                         lo, hi, e)
+        ff.blocks.gather_rows([e], rows_per_rod=1)
+        return {"yukawa": float(e.sum())}
 
 
 class ElectricField(_Term):
@@ -304,8 +334,12 @@ class CurrentField(_Term):
         f = out["current_field"]
         f.fill(0.0)
         if len(ff.active_rod):
-            kc.current_force_on_tips(ff.position, ff.tip_charge, ff.active_rod, ff.current, self.w, f)
+            lo, hi = ff.blocks.tips
+            kc.current_force_on_tips(ff.position, ff.tip_charge, ff.active_rod, ff.current, self.w, lo, hi, f)
             ff.calls[self.name] += 1
+
+    def blocked(self, ff):
+        return ("current_field",) if len(ff.active_rod) else ()
 
 
 class CurrentLorentz(_Term):
@@ -313,7 +347,8 @@ class CurrentLorentz(_Term):
 
     B_tot = uniform field (if term 4 is on) + plasma filament (if term 5 is on) + the
     external filament and dipole monopoles (if term 11 is on) + the currents of all
-    other rods. Only current-carrying rods are visited.
+    other rods. Only current-carrying rods are visited, and of them only those in the
+    field's block of rods (the field at their points still sums over every current).
     """
 
     name = "current_lorentz"
@@ -337,11 +372,16 @@ class CurrentLorentz(_Term):
         active = ff.active_rod
         if not len(active):
             return
+        ff.calls[self.name] += 1
+        # active_rod is sorted (set_currents), so the rods of this block are one slice of it
+        mine = active[np.searchsorted(active, ff.blocks.rods[0]):np.searchsorted(active, ff.blocks.rods[1])]
+        if not len(mine):
+            return
         ng = len(self.t)
-        pts = ff.buffer("gl_points", len(active) * ng)
-        kc.quadrature_points(ff.position, active, self.t, pts)
-        field = ff.buffer("gl_field", len(active) * ng)
-        kc.rod_current_field(pts, np.repeat(active, ng), ff.position, active, ff.current, self.w, field)
+        pts = ff.buffer("gl_points", len(mine) * ng)
+        kc.quadrature_points(ff.position, mine, self.t, pts)
+        field = ff.buffer("gl_field", len(mine) * ng)
+        kc.rod_current_field(pts, np.repeat(mine, ng), ff.position, active, ff.current, self.w, field)
         if self.B is not None:
             field += self.B
         extra = ff.buffer("gl_extra", len(pts))
@@ -354,8 +394,10 @@ class CurrentLorentz(_Term):
         if self.monopoles is not None:
             kx.monopole_field(pts, *self.monopoles, self.rstar, extra)
             field += extra
-        kc.lorentz_force_on_rods(ff.position, active, ff.current, field, self.t, self.wt, f)
-        ff.calls[self.name] += 1
+        kc.lorentz_force_on_rods(ff.position, mine, ff.current, field, self.t, self.wt, f)
+
+    def blocked(self, ff):
+        return ("current_lorentz",) if len(ff.active_rod) else ()
 
 
 def _share_by_mass(centre_force, tip_out):
@@ -381,6 +423,9 @@ class ForceField:
         Supplies the per-tip and per-rod constants (charges) and the sizes.
     timing : bool
         Accumulate wall time per term in ``self.seconds`` (for benchmarks).
+    blocks : RowBlocks, optional
+        The rods whose rows this process computes in the expensive terms (default: all of
+        them, a serial run).
 
     Attributes
     ----------
@@ -389,8 +434,11 @@ class ForceField:
     calls : Counter of kernel evaluations per term (tests count these)
     """
 
-    def __init__(self, params: Parameters, state, timing: bool = False):
+    def __init__(self, params: Parameters, state, timing: bool = False, blocks: RowBlocks | None = None):
         self.params = params
+        self.blocks = RowBlocks(state.n_rods) if blocks is None else blocks
+        if self.blocks.n_rods != state.n_rods:
+            raise ValueError(f"the row blocks cover {self.blocks.n_rods} rods, the state has {state.n_rods}")
         self.tip_charge = state.tip_charge
         self.rod_charge = state.rod_charge
         self.n_tips = state.n_tips
@@ -489,6 +537,7 @@ class ForceField:
             The summed force (a buffer owned by the field; copy it to keep it).
         """
         self._bind(position, velocity)
+        blocked = []
         for t in self.terms:
             t0 = time.perf_counter() if self.timing else 0.0
             t.compute(self, self.out)
@@ -496,6 +545,12 @@ class ForceField:
                 self.calls[t.name] += 1
             if self.timing:
                 self.seconds[t.name] += time.perf_counter() - t0
+            blocked.extend(t.blocked(self))
+        if not self.blocks.serial:
+            t0 = time.perf_counter() if self.timing else 0.0
+            self.blocks.gather_rows([self.out[name] for name in blocked], rows_per_rod=2)
+            if self.timing:
+                self.seconds["gather"] += time.perf_counter() - t0
         total = self.total
         total.fill(0.0)
         for name, _ in self.channels:

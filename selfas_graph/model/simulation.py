@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..kernels.pairs import close_pair_count
+from ..parallel import RowBlocks
 from . import events as ev
 from .contacts import ContactTracker
 from .forces import ForceField
@@ -70,7 +71,9 @@ class Simulation:
 
     One call of :meth:`step` does, in this order::
 
-        forces (tips, centres, external fields, currents from the last solve)
+        forces (tips, centres, external fields, currents from the last solve;
+                with several MPI ranks each computes the rows of its block of rods
+                in the expensive terms, and the blocks are exchanged)
         -> Adams-Bashforth update -> bond constraint (positions, velocities)
         -> health check (NaN, broken bond, runaway step)
         -> contact search -> events -> graph update
@@ -88,13 +91,17 @@ class Simulation:
         Initial state; default: the random placement of MODEL.md section 8.
     timing : bool
         Record wall time per force term (``force_field.seconds``).
+    comm : MPI communicator or the serial stub, optional
+        Ranks that share the force work (``selfas_graph.parallel.world`` under ``mpiexec``;
+        default: none, a serial run). Every rank must then make the same calls; each
+        ends every step with the same state, bit for bit.
     """
 
     def __init__(self, params: Parameters, state: State | None = None, timing: bool = False,
-                 detect_initial_contacts: bool = True):
+                 detect_initial_contacts: bool = True, comm=None):
         self.params = params
         self.state = random_state(params) if state is None else state
-        self.force_field = ForceField(params, self.state, timing=timing)
+        self.force_field = ForceField(params, self.state, timing=timing, blocks=RowBlocks(self.state.n_rods, comm))
         ip = params.integrator
         self.integrator = AdamsBashforth4(self.force_field, ip.dt, exact_bond=ip.bond_force == "exact",
                                           project=ip.position_projection, correct_velocity=ip.velocity_correction,
@@ -173,11 +180,11 @@ class Simulation:
         return snap
 
     @classmethod
-    def from_snapshot(cls, params: Parameters, snap: dict, timing: bool = False) -> "Simulation":
+    def from_snapshot(cls, params: Parameters, snap: dict, timing: bool = False, comm=None) -> "Simulation":
         """Rebuild a simulation from :meth:`snapshot` (see there)."""
         state = State(np.array(snap["position"]), np.array(snap["velocity"]), np.array(snap["tip_charge"]),
                       np.array(snap["rod_charge"]), int(snap["step"]), float(snap["time"]))
-        sim = cls(params, state=state, timing=timing, detect_initial_contacts=False)
+        sim = cls(params, state=state, timing=timing, detect_initial_contacts=False, comm=comm)
         it, ff = sim.integrator, sim.force_field
         it.hist_v[:], it.hist_a[:], it.hist_p[:] = snap["hist_v"], snap["hist_a"], snap["hist_p"]
         it.head, it.count = int(snap["head"]), int(snap["count"])
