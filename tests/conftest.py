@@ -7,6 +7,38 @@ from selfas_graph.model.simulation import Simulation
 from selfas_graph.model.state import State
 
 
+#: 60 rods between electrodes 2 apart with every term of Fig. 2 but the plasma field: tip
+#: contacts from step 91 and a short circuit at step 567 (then 4 terms carry current and the
+#: Lorentz term runs), within its 1200 steps; the scene of the restart and MPI contract tests
+SMALL_CIRCUIT_SCENE = """
+[scenario]
+name = "small_circuit"
+seed = 3
+[rods]
+count = 60
+[placement]
+box = [[-2.0, 2.0], [-2.0, 2.0], [-1.0, 1.0]]
+[forces.tip_magnetic]
+[forces.tip_brake]
+[forces.ambient_brake]
+[forces.uniform_field]
+[forces.yukawa]
+[forces.electrodes]
+gap = 2.0
+[forces.current_field]
+[forces.current_lorentz]
+[circuit]
+delta_J0 = 2.0
+[integrator]
+dt = 5e-4
+[run]
+t_end = 0.6
+[output]
+interval = 0.05
+checkpoint_interval = 0
+"""
+
+
 def params(**sections):
     """Parameters from keyword sections, e.g. ``params(forces={"tip_magnetic": {}})``."""
     raw = {"rods": {"count": 1}}

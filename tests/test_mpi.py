@@ -21,6 +21,7 @@ import h5py
 import numpy as np
 import pytest
 
+from conftest import SMALL_CIRCUIT_SCENE
 from selfas_graph.model import events as ev
 
 pytestmark = pytest.mark.mpi
@@ -34,36 +35,7 @@ pytest.importorskip("mpi4py", reason="mpi4py is not installed")
 #: seconds for one launch: the 1200-step scene takes 2-6 s; longer means a hang
 TIMEOUT = 90
 
-#: 60 rods between electrodes 2 apart with every term of Fig. 2 but the plasma field: tip
-#: contacts from step 91 and a short circuit at step 567 (then 4 terms carry current and the
-#: Lorentz term runs), within the 1200 steps (the scene of tests/test_restart.py)
-SCENE = """
-[scenario]
-name = "mpi"
-seed = 3
-[rods]
-count = 60
-[placement]
-box = [[-2.0, 2.0], [-2.0, 2.0], [-1.0, 1.0]]
-[forces.tip_magnetic]
-[forces.tip_brake]
-[forces.ambient_brake]
-[forces.uniform_field]
-[forces.yukawa]
-[forces.electrodes]
-gap = 2.0
-[forces.current_field]
-[forces.current_lorentz]
-[circuit]
-delta_J0 = 2.0
-[integrator]
-dt = 5e-4
-[run]
-t_end = 0.6
-[output]
-interval = 0.05
-checkpoint_interval = 0
-"""
+SCENE = SMALL_CIRCUIT_SCENE
 
 
 def _launch(ranks, args, cwd):

@@ -16,34 +16,9 @@ from selfas_graph.io.h5md import RunWriter
 from selfas_graph.io.scenario import scenario_from_text
 from selfas_graph.model import events as ev
 from selfas_graph.model.simulation import RunInterrupted, Simulation
+from conftest import SMALL_CIRCUIT_SCENE
 
-SCENE = """
-[scenario]
-name = "restart"
-seed = 3
-[rods]
-count = 60
-[placement]
-box = [[-2.0, 2.0], [-2.0, 2.0], [-1.0, 1.0]]
-[forces.tip_magnetic]
-[forces.tip_brake]
-[forces.ambient_brake]
-[forces.uniform_field]
-[forces.yukawa]
-[forces.electrodes]
-gap = 2.0
-[forces.current_field]
-[forces.current_lorentz]
-[circuit]
-delta_J0 = 2.0
-[integrator]
-dt = 5e-4
-[run]
-t_end = 0.6
-[output]
-interval = 0.05
-checkpoint_interval = 0
-"""
+SCENE = SMALL_CIRCUIT_SCENE
 
 
 def _datasets(path):
