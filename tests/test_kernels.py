@@ -42,6 +42,17 @@ def test_tip_tip_direct(state):
     close(out, ref.tip_tip_force(state.position, state.tip_charge, RSTAR, KAPPA))
 
 
+def test_tip_tip_direct_rows(state, rng):
+    """The direct sum restricted to some target rows equals those rows of the full sum."""
+    x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
+    full = np.empty_like(state.position)
+    kt.tip_tip_direct(x, y, z, state.tip_charge, RSTAR, KAPPA, full)
+    row = rng.choice(len(x), 17, replace=False)
+    out = np.empty((len(row), 3))
+    kt.tip_tip_direct_rows(x, y, z, state.tip_charge, RSTAR, KAPPA, row, out)
+    close(out, full[row])
+
+
 def test_tip_tip_energy(state):
     x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
     e = kt.tip_tip_energy(x, y, z, state.tip_charge, RSTAR, KAPPA)

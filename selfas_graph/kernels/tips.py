@@ -65,3 +65,44 @@ def tip_tip_energy(x, y, z, charge, rstar, kappa):
             acc += tip_potential(dx * dx + dy * dy + dz * dz, charge[k] * charge[l], rstar, kappa)
         total += acc
     return total
+
+
+@njit_parallel_sum
+def tip_tip_direct_rows(x, y, z, charge, rstar, kappa, row, out):
+    """Force of all other rods' tips on the tips listed in ``row``, by direct summation.
+
+    The same sum as :func:`tip_tip_direct` restricted to some targets: an oracle
+    for large systems, where the full direct sum is too slow.
+
+    Parameters
+    ----------
+    x, y, z, charge, rstar, kappa :
+        As :func:`tip_tip_direct`.
+    row : (n_rows,) int64
+        Target tip numbers, each in ``[0, n_tips)`` (checked by the caller).
+    out : (n_rows, 3) float64
+        Overwritten: ``out[j]`` is the force on tip ``row[j]``.
+    """
+    n = x.shape[0]
+    for j in prange(row.shape[0]):
+        k = row[j]
+        rod = k // 2
+        xk = x[k]
+        yk = y[k]
+        zk = z[k]
+        qk = charge[k]
+        fx = 0.0
+        fy = 0.0
+        fz = 0.0
+        for l in range(n):
+            dx = xk - x[l]
+            dy = yk - y[l]
+            dz = zk - z[l]
+            g = tip_force_over_r(dx * dx + dy * dy + dz * dz, qk * charge[l], rstar, kappa)
+            g = 0.0 if l // 2 == rod else g
+            fx += g * dx
+            fy += g * dy
+            fz += g * dz
+        out[j, 0] = fx
+        out[j, 1] = fy
+        out[j, 2] = fz
