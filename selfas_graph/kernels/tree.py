@@ -46,12 +46,17 @@ group's bounding box, ``b < theta d_min`` (Barnes-Hut opening angle measured
 with the cell radius) and ``d_min > b + r*``: then no source tip of the cell is
 within r* of any target, so every pair inside the soft core is summed exactly
 with :func:`tip_force_over_r`. Leaves that are not accepted are summed exactly
-with the same law, skipping the target's own rod. The accepted cells' moments
-and the near tips are copied into contiguous buffers per group, so both inner
-loops run over structure-of-arrays data without branches and vectorise. When
-the target's rod partner lies in an accepted cell, its exact pair force is
-subtracted (the multipole included it). ``theta = 0`` accepts no cell and gives
-the direct sum.
+with the same law, skipping the target's own rod: their tips are copied into
+one contiguous buffer per group and each target runs one long branch-free
+reduction over it, like the direct sum. Each accepted cell is applied to all
+targets of the group in one loop over the group's tips (vectorised across
+targets; the cell's moments are read once). When the target's rod partner lies
+in an accepted cell, its exact pair force is subtracted (the multipole included
+it). ``theta = 0`` accepts no cell and gives the direct sum.
+
+Measured on 2 cores (tools/bench_tree.py, docs/performance.md), the
+accepted-cell loop costs about 2 ns per cell and target with octupoles, the
+near loop about 0.6 ns per tip pair, as the direct sum.
 
 Parallel over groups; a group writes only the rows of its own tips (gather).
 A target's force depends only on the tree, not on which rows are asked for, so
@@ -70,11 +75,15 @@ KEY_BITS = 21
 #: stored moments per cell: M, P (3), Q (5 independent), O (7 independent)
 N_MOMENT = 16
 
-# Defaults measured with tools/bench_tree.py (see its docstring for the table).
-LEAF_SIZE = 16
-GROUP_SIZE = 32
+# Defaults from tools/bench_tree.py (docs/performance.md): the fastest setting
+# with median relative error <= 1e-3 in a uniform rod gas at 1e4 and 1e5 rods,
+# the hardest of the measured configurations (in aggregates the contact forces
+# dominate and the relative error is 30 times smaller). Octupoles reach that
+# error 1.4 (1e4 rods) to 1.7 (1e5) times faster than quadrupoles.
+LEAF_SIZE = 64
+GROUP_SIZE = 128
 ORDER = 3
-THETA = 0.5
+THETA = 0.4
 #: far-field targets are padded to a multiple of this (the vector width of
 #: AVX-512 doubles); measured at 1e5 rods: 1.13 to 1.28 times faster than no
 #: padding, padding to 16 or 32 gained less (1.08) or lost (0.88)
@@ -408,9 +417,9 @@ def evaluate_groups(x, y, z, charge, rod, index, rank, start, end, nxt, box, cen
                     moment, group, order, theta, rstar, kappa, lo, hi, out):
     """Tip-tip force on the tips with original number in [lo, hi) by the tree.
 
-    One walk per target group; each accepted cell or near tip is applied to all
-    targets of the group in a loop over the group's contiguous tips, which
-    vectorises across targets and reads the cell's moments once.
+    One walk per target group (module docstring): near leaves are summed exactly
+    over a contiguous copy of their tips, accepted cells are applied to all the
+    group's targets in a loop vectorised across targets.
 
     Parameters
     ----------
@@ -650,7 +659,9 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None):
         Transition radius r* and core stiffness of the tip law.
     theta : float
         Opening angle in [0, 1): a cell is used as a multipole when its radius is
-        below ``theta`` times its distance to the target group; 0 gives the direct sum.
+        below ``theta`` times its distance to the target group; 0 gives the direct
+        sum. ``THETA`` (0.4) gives a median relative error near 5e-4 in a uniform
+        rod gas with the default knobs (docs/performance.md).
     out : (n_tips, 3) float64, C-contiguous
         Rows ``lo:hi`` (original tip numbers) are overwritten; others untouched.
     lo, hi : int
