@@ -160,8 +160,9 @@ def test_near_pairs_exact():
 
 
 def test_row_range_bitwise(chains):
-    """Rows [0, m) and [m, n) computed separately equal [0, n) at once bitwise, and rows
-    outside a range are untouched (a caller may split targets over MPI ranks)."""
+    """Rows evaluated in several ranges (of odd lengths, so that targets sit at other
+    places in the kernel's vector blocks) equal one evaluation of all rows bitwise,
+    and rows outside a range are untouched (a caller may split targets over MPI ranks)."""
     t = build_tip_tree(*chains)
     n = len(chains[0])
     whole = np.empty((n, 3))
@@ -169,8 +170,9 @@ def test_row_range_bitwise(chains):
     parts = np.full((n, 3), np.nan)
     m = n // 3 + 1
     evaluate_tip_tree(t, RSTAR, KAPPA, 0.5, parts, 0, m)
-    assert np.isnan(parts[m:]).all()
-    evaluate_tip_tree(t, RSTAR, KAPPA, 0.5, parts, m, n)
+    assert np.isnan(parts[m:]).all() and not np.isnan(parts[:m]).any()
+    for lo, hi in ((m, m + 1), (m + 1, n - 3), (n - 3, n)):
+        evaluate_tip_tree(t, RSTAR, KAPPA, 0.5, parts, lo, hi)
     assert np.array_equal(parts, whole)
 
 
