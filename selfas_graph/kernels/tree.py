@@ -64,8 +64,8 @@ computed (half the rows cost 0.55 of all rows at 1e5 rods: the walks are not
 shared out), and a target's force depends only on the tree, not on which rows
 are asked for, so row ranges evaluated separately equal one evaluation bitwise.
 Rows are tip numbers, which are in no spatial order: a caller that splits rows
-over MPI ranks gets every group walked on every rank. Splitting by
-``TipTree.index`` (Morton order) instead would share the walks out too.
+over MPI ranks gets every group walked on every rank (a split in Morton order,
+``TipTree.index``, would share the walks out too; the kernel takes tip numbers).
 """
 import math
 from typing import NamedTuple
