@@ -42,6 +42,17 @@ def test_tip_tip_direct(state):
     close(out, ref.tip_tip_force(state.position, state.tip_charge, RSTAR, KAPPA))
 
 
+def test_tip_tip_direct_rows(state, rng):
+    """The direct sum restricted to some target rows equals those rows of the full sum."""
+    x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
+    full = np.empty_like(state.position)
+    kt.tip_tip_direct(x, y, z, state.tip_charge, RSTAR, KAPPA, 0, len(x), full)
+    row = rng.choice(len(x), 17, replace=False)
+    out = np.empty((len(row), 3))
+    kt.tip_tip_direct_rows(x, y, z, state.tip_charge, RSTAR, KAPPA, row, out)
+    np.testing.assert_array_equal(out, full[row])  # the same loop, so the same bits
+
+
 def test_tip_tip_energy(state):
     x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
     rows = np.empty(len(x))

@@ -36,3 +36,6 @@ njit_parallel_sum = numba.njit(parallel=True, fastmath=_SUM_FLAGS, **_COMMON)
 inline = numba.njit(inline="always", fastmath=False, **_COMMON)
 inline_sum = numba.njit(inline="always", fastmath=_SUM_FLAGS, **_COMMON)
 prange = numba.prange
+#: iterations handed to a thread at a time in the next prange loop (0: equal static
+#: blocks, numba's default); callable inside kernels, returns the previous value
+set_parallel_chunksize = numba.set_parallel_chunksize

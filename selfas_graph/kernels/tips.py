@@ -5,8 +5,32 @@ rod do not interact (their bond is rigid). Positions come as three separate
 coordinate arrays (structure of arrays) so that the inner loop vectorises;
 the "same rod" pair is removed by a select, not a branch.
 """
-from ._jit import njit_parallel_sum, prange
+from ._jit import inline_sum, njit_parallel_sum, prange
 from .laws import tip_force_over_r, tip_potential
+
+
+@inline_sum
+def _force_on_tip(k, x, y, z, charge, rstar, kappa):
+    """Force on tip k from every tip of the other rods (the loop of the direct sums)."""
+    n = x.shape[0]
+    rod = k // 2
+    xk = x[k]
+    yk = y[k]
+    zk = z[k]
+    qk = charge[k]
+    fx = 0.0
+    fy = 0.0
+    fz = 0.0
+    for l in range(n):
+        dx = xk - x[l]
+        dy = yk - y[l]
+        dz = zk - z[l]
+        g = tip_force_over_r(dx * dx + dy * dy + dz * dz, qk * charge[l], rstar, kappa)
+        g = 0.0 if l // 2 == rod else g
+        fx += g * dx
+        fy += g * dy
+        fz += g * dz
+    return fx, fy, fz
 
 
 @njit_parallel_sum
@@ -28,25 +52,8 @@ def tip_tip_direct(x, y, z, charge, rstar, kappa, lo, hi, out):
         Rows ``lo:hi`` overwritten with the force on those tips; other rows untouched.
         Parallel over tips (gather).
     """
-    n = x.shape[0]
     for k in prange(lo, hi):
-        rod = k // 2
-        xk = x[k]
-        yk = y[k]
-        zk = z[k]
-        qk = charge[k]
-        fx = 0.0
-        fy = 0.0
-        fz = 0.0
-        for l in range(n):
-            dx = xk - x[l]
-            dy = yk - y[l]
-            dz = zk - z[l]
-            g = tip_force_over_r(dx * dx + dy * dy + dz * dz, qk * charge[l], rstar, kappa)
-            g = 0.0 if l // 2 == rod else g
-            fx += g * dx
-            fy += g * dy
-            fz += g * dz
+        fx, fy, fz = _force_on_tip(k, x, y, z, charge, rstar, kappa)
         out[k, 0] = fx
         out[k, 1] = fy
         out[k, 2] = fz
@@ -70,3 +77,26 @@ def tip_tip_energy(x, y, z, charge, rstar, kappa, lo, hi, out):
             dz = z[k] - z[l]
             acc += tip_potential(dx * dx + dy * dy + dz * dz, charge[k] * charge[l], rstar, kappa)
         out[k] = acc
+
+
+@njit_parallel_sum
+def tip_tip_direct_rows(x, y, z, charge, rstar, kappa, row, out):
+    """Force of all other rods' tips on the tips listed in ``row``, by direct summation.
+
+    The same sum as :func:`tip_tip_direct` restricted to some targets: an oracle
+    for large systems, where the full direct sum is too slow.
+
+    Parameters
+    ----------
+    x, y, z, charge, rstar, kappa :
+        As :func:`tip_tip_direct`.
+    row : (n_rows,) int64
+        Target tip numbers, each in ``[0, n_tips)`` (checked by the caller).
+    out : (n_rows, 3) float64
+        Overwritten: ``out[j]`` is the force on tip ``row[j]``.
+    """
+    for j in prange(row.shape[0]):
+        fx, fy, fz = _force_on_tip(row[j], x, y, z, charge, rstar, kappa)
+        out[j, 0] = fx
+        out[j, 1] = fy
+        out[j, 2] = fz
