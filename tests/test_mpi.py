@@ -99,6 +99,17 @@ def test_ranks_give_the_serial_run_bit_for_bit(scene, ranks):
     _assert_same_run(scene / out, scene / "serial.h5")
 
 
+def test_tree_on_two_ranks_gives_the_serial_tree_run_bit_for_bit(scene):
+    """With the tip-tip force by the multipole tree, 2 ranks equal 1 rank bit for bit: every
+    rank builds the same tree and a target's force does not depend on the rows asked for."""
+    tree = ["--set", "forces.tip_magnetic.method=tree", "--t-end", "0.3"]
+    serial = _launch(0, ["scene.toml", "-o", "tree1.h5", *tree], scene)
+    assert serial.returncode == 0, serial.stderr
+    res = _launch(2, ["scene.toml", "-o", "tree2.h5", *tree], scene)
+    assert res.returncode == 0, res.stderr
+    _assert_same_run(scene / "tree2.h5", scene / "tree1.h5")
+
+
 def test_resume_on_other_rank_counts_gives_the_serial_run(scene):
     """A run to t = 0.3 on 2 ranks, resumed to t = 0.6 on 3 ranks, equals the serial run to 0.6.
 

@@ -28,6 +28,7 @@ from ..kernels import external as kx
 from ..kernels import fields as kf
 from ..kernels import pairs as kp
 from ..kernels import tips as kt
+from ..kernels import tree as ktree
 from ..parallel import RowBlocks
 from .neighbours import NeighbourList
 from .params import Parameters
@@ -95,10 +96,24 @@ class TipMagnetic(_Term):
     def __init__(self, p: Parameters, state):
         self.rstar = p.rods.rstar
         self.kappa = p.rods.tip_stiffness
+        tm = p.forces.tip_magnetic
+        self.tree = tm.method == "tree" or (tm.method == "auto" and state.n_rods >= tm.tree_above)
+        self.theta = tm.opening_angle
 
     def compute(self, ff, out):
         x, y, z = ff.soa()
         lo, hi = ff.blocks.tips
+        if self.tree:
+            try:
+                tree = ktree.build_tip_tree(x, y, z, ff.tip_charge)
+            except ValueError:
+                if np.isfinite(ff.position).all():
+                    raise
+                # NaN or inf positions: no tree can place them; the direct sum passes them on
+                # to the forces, where the run's health check stops with a diagnosis
+            else:
+                ktree.evaluate_tip_tree(tree, self.rstar, self.kappa, self.theta, out["tip_magnetic"], lo, hi)
+                return
         kt.tip_tip_direct(x, y, z, ff.tip_charge, self.rstar, self.kappa, lo, hi, out["tip_magnetic"])
 
     def blocked(self, ff):
@@ -593,6 +608,8 @@ class ForceField:
         """Resolved settings derived from the parameters (e.g. the Yukawa cut-off radius)."""
         d = {"terms": [t.name for t in self.terms]}
         for t in self.terms:
+            if isinstance(t, TipMagnetic):
+                d["tip_magnetic_sum"] = f"tree (opening angle {t.theta:g})" if t.tree else "direct"
             if isinstance(t, Yukawa):
                 d["yukawa_cutoff"] = t.cutoff
         return d

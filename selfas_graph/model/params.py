@@ -75,7 +75,19 @@ class PlacementParams:
 
 @dataclass(frozen=True)
 class TipMagnetic:
-    """Term 1: tip-tip magnetic Coulomb force with a soft core (no parameters beyond the rods')."""
+    """Term 1: tip-tip magnetic Coulomb force with a soft core, summed directly or by a multipole tree."""
+
+    method: str = spec(
+        "auto", "how the force is summed: direct (all tip pairs, exact), tree (octupole octree; pairs "
+        "within r* always exact; error set by opening_angle), auto (the tree above tree_above rods)",
+        choices=("auto", "direct", "tree"))
+    opening_angle: float = spec(
+        0.4, "tree: a cell acts as a multipole when its radius is below this times its distance; an "
+        "accuracy knob (0.4: median relative force error 3e-4 to 8e-4 in a uniform rod gas, "
+        "docs/performance.md)", gt=0.0, lt=1.0)
+    tree_above: int = spec(
+        2000, "auto: use the tree from this many rods on (measured: the tree costs what the direct sum "
+        "does near 500 rods and half of it at 2000-3000, docs/performance.md)", ge=1)
 
 
 @dataclass(frozen=True)
