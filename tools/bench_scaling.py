@@ -1,0 +1,164 @@
+"""Scaling benchmark: milliseconds per full step of the Fig. 2 scene from 10^3 to 10^5 rods.
+
+Usage: python tools/bench_scaling.py [--rods 1200 6000 24000 100000] [--method direct tree]
+                                     [--json OUT.json] [--plot OUT.png --from-json A.json B.json ...]
+       mpiexec -n 2 python tools/bench_scaling.py ...   (force rows split over 2 ranks; rank 0 prints)
+
+For each size the Fig. 2 scene is scaled as in tools/bench_step.py (the box grows in x and y,
+so the density and the electrode gap stay the paper's) and every Fig. 2 term is on, at the
+scene's default accuracy. For each way of summing the tip-tip force (``direct``, ``tree``)
+it takes warm-up steps (compilation, neighbour lists), then times steps and prints ms per
+full step and the share of the tip-tip term. Beside each tree row: the tree's median and
+99th-percentile relative tip-force error against the direct sum on the same positions
+(on a random sample of 2000 tips above 2000 rods). Ratios are printed against two
+references: the direct sum measured in the same run, and the per-step figures of the
+fastest peer measured on this 2-core machine (``PEER_MS``; OpenMM 8.6, CPU platform, PME at
+a 1e-4 tolerance, one full step of rods with opposite tip charges).
+
+``--plot`` draws ms per step against rods on log-log axes from one or more JSON files
+written by ``--json`` (e.g. one run on 1 rank and one under ``mpiexec -n 2``), with the
+peer's figures and an N log N guide.
+"""
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tools"))
+
+from bench_step import scene  # noqa: E402
+from selfas_graph import Simulation, load_scenario  # noqa: E402
+from selfas_graph.kernels.tips import tip_tip_direct_rows  # noqa: E402
+from selfas_graph.kernels.tree import THETA, tip_tip_tree  # noqa: E402
+from selfas_graph.parallel import world  # noqa: E402
+
+#: ms per full step of the fastest peer (OpenMM 8.6 CPU, PME), measured on the same 2-core machine
+PEER_MS = {1200: 4.4, 6000: 18.0, 24000: 72.0, 100000: 360.0}
+#: sampled target tips for the tree's error above 2000 rods (the direct rows cost O(sample x N))
+SAMPLE = 2000
+
+
+def tree_error(sim, theta, rng):
+    """Median and 99th percentile of |F_tree - F_direct| / |F_direct| over (sampled) tips."""
+    x, y, z = (np.ascontiguousarray(sim.state.position[:, d]) for d in range(3))
+    q = sim.force_field.tip_charge
+    rstar, kappa = sim.params.rods.rstar, sim.params.rods.tip_stiffness
+    n = x.shape[0]
+    rows = np.arange(n) if n <= 2 * SAMPLE else np.sort(rng.choice(n, SAMPLE, replace=False))
+    direct = np.empty((rows.shape[0], 3))
+    tip_tip_direct_rows(x, y, z, q, rstar, kappa, rows.astype(np.int64), direct)
+    tree = np.empty((n, 3))
+    tip_tip_tree(x, y, z, q, rstar, kappa, theta, tree)
+    err = np.linalg.norm(tree[rows] - direct, axis=1) / np.linalg.norm(direct, axis=1)
+    return float(np.median(err)), float(np.percentile(err, 99))
+
+
+def measure(path, n_rods, method, steps):
+    """One size and method: ms per full step and ms of the tip-tip term per step (rank 0's)."""
+    sc = load_scenario(path, overrides=list(scene(path, n_rods).overrides) + [f"forces.tip_magnetic.method={method}"])
+    sim = Simulation.from_scenario(sc, timing=True, comm=world)
+    sim.step(3)  # compilation, neighbour lists, the RK4 start
+    ff = sim.force_field
+    ff.seconds.clear()
+    world.Barrier()
+    t0 = time.perf_counter()
+    sim.step(steps)
+    world.Barrier()
+    ms = 1e3 * (time.perf_counter() - t0) / steps
+    return sim, ms, 1e3 * ff.seconds["tip_magnetic"] / steps
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "fig2.toml"))
+    ap.add_argument("--rods", type=int, nargs="+", default=[1200, 6000, 24000, 100000])
+    ap.add_argument("--method", nargs="+", choices=["direct", "tree"], default=["direct", "tree"])
+    ap.add_argument("--step-seconds", type=float, default=20.0,
+                    help="time about this long per size and method (at least 2 steps, at most 200)")
+    ap.add_argument("--json", help="write the rows to this JSON file (rank 0)")
+    ap.add_argument("--plot", help="draw ms/step against rods from --from-json files into this PNG")
+    ap.add_argument("--from-json", nargs="+", default=[], help="JSON files of earlier runs for --plot")
+    args = ap.parse_args(argv)
+    if args.plot:
+        return plot(args.from_json or ([args.json] if args.json else []), args.plot)
+    say = print if world.rank == 0 else (lambda *a, **k: None)
+    import numba
+
+    say(f"{world.size} MPI rank(s) x {numba.get_num_threads()} numba threads; scenario {args.scenario}; "
+        f"tree opening angle {THETA} (the default)")
+    rng = np.random.default_rng(0)
+    rows = []
+    for n in args.rods:
+        direct_ms = None
+        for method in args.method:
+            # a first short timing decides how many steps fill --step-seconds
+            sim, ms, tip_ms = measure(args.scenario, n, method, 2)
+            steps = int(min(200, max(2, args.step_seconds * 1e3 / max(ms, 1e-3))))
+            if steps > 2:
+                sim, ms, tip_ms = measure(args.scenario, n, method, steps)
+            row = {"rods": n, "method": method, "ranks": world.size, "threads": numba.get_num_threads(),
+                   "ms_per_step": ms, "tip_ms_per_step": tip_ms, "steps": steps}
+            if method == "direct":
+                direct_ms = ms
+            if method == "tree" and world.rank == 0:
+                row["median_error"], row["p99_error"] = tree_error(sim, THETA, rng)
+            if direct_ms is not None:
+                row["vs_direct"] = direct_ms / ms
+            if n in PEER_MS:
+                row["vs_peer"] = ms / PEER_MS[n]
+            rows.append(row)
+            say(_fmt(row), flush=True)
+    say("\n| rods | tip-tip sum | ranks x threads | ms per step | tip-tip share | tree median / p99 error "
+        "| speed-up over direct | ratio to the fastest peer |")
+    say("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        say(_fmt(r, markdown=True))
+    if args.json and world.rank == 0:
+        Path(args.json).write_text(json.dumps({"scenario": args.scenario, "rows": rows}, indent=1))
+
+
+def _fmt(r, markdown=False):
+    err = f"{r['median_error']:.1e} / {r['p99_error']:.1e}" if "median_error" in r else ""
+    cells = [str(r["rods"]), r["method"], f"{r['ranks']} x {r['threads']}", f"{r['ms_per_step']:.1f}",
+             f"{r['tip_ms_per_step'] / r['ms_per_step']:.0%}", err,
+             f"{r['vs_direct']:.2f}" if "vs_direct" in r else "",
+             f"{r['vs_peer']:.2f}" if "vs_peer" in r else ""]
+    return ("| " + " | ".join(cells) + " |") if markdown else "  ".join(cells)
+
+
+def plot(files, out):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 5))
+    for f in files:
+        rows = json.loads(Path(f).read_text())["rows"]
+        for method in ("direct", "tree"):
+            pts = sorted((r["rods"], r["ms_per_step"]) for r in rows if r["method"] == method)
+            if pts:
+                r0 = next(r for r in rows if r["method"] == method)
+                x, y = zip(*pts)
+                ax.loglog(x, y, "o-" if method == "tree" else "s--",
+                          label=f"{method}, {r0['ranks']} rank(s) x {r0['threads']} thread(s)")
+    px, py = zip(*sorted(PEER_MS.items()))
+    ax.loglog(px, py, "k^:", label="fastest peer (OpenMM 8.6 CPU, PME), same machine")
+    n = np.array([1e3, 1e5])
+    ax.loglog(n, py[0] * (n * np.log(n)) / (px[0] * np.log(px[0])), color="grey", lw=0.8, label="N log N")
+    ax.set_xlabel("rods")
+    ax.set_ylabel("ms per full step (all Fig. 2 terms)")
+    ax.set_title("cost of a step against system size")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out, dpi=120)
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
