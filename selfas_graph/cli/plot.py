@@ -132,7 +132,8 @@ class _Frame:
 
     @property
     def role(self):
-        return None if self.graph is None else self.graph["role"]
+        """Rod roles by the current topology rule from the saved contacts, None without graph data."""
+        return None if self.topology is None else self.topology.role
 
     @functools.cached_property
     def topology(self):

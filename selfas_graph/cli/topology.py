@@ -32,7 +32,9 @@ def analyse(run: RunFile, frame=None, t=None) -> dict:
     n_rods = g["role"].shape[0]
     graph = ConnectivityGraph.from_arrays(n_rods, g["conductors"], g)
     topo = graph.topology()
-    role, current = g["role"], g["current"]
+    # roles by the current topology rule from the saved contacts (the stored roles are what
+    # the run used; they differ only for files written before a change of the rule)
+    role, current = topo.role, g["current"]
     structures = []
     for sid in np.argsort(-topo.structure_size, kind="stable"):
         rods = np.flatnonzero(topo.structure == sid)
