@@ -11,20 +11,15 @@ import pytest
 
 from selfas_graph.kernels.tips import tip_tip_direct
 from selfas_graph.kernels.tree import build_tip_tree, evaluate_tip_tree, tip_tip_tree
+from selfas_graph.model.state import State
 
 RSTAR, KAPPA = 0.06, 1.0
 
 
 def rods_to_tips(centre, axis, q):
     """SoA tips (x, y, z, charge) of unit rods; tip a = centre - axis/2 carries +q."""
-    axis = axis / np.linalg.norm(axis, axis=1)[:, None]
-    pos = np.empty((2 * len(centre), 3))
-    pos[0::2] = centre - axis / 2
-    pos[1::2] = centre + axis / 2
-    charge = np.empty(2 * len(centre))
-    charge[0::2] = q
-    charge[1::2] = -q
-    return (*(np.ascontiguousarray(pos[:, d]) for d in range(3)), charge)
+    state = State.from_rods(centre, axis, q, np.zeros(len(q)))
+    return (*(np.ascontiguousarray(state.position[:, d]) for d in range(3)), state.tip_charge)
 
 
 def uniform_rods(n_rods, rng, density=0.19):

@@ -38,19 +38,15 @@ sys.path.insert(0, str(ROOT))
 
 from selfas_graph.kernels.tips import tip_tip_direct, tip_tip_direct_rows  # noqa: E402
 from selfas_graph.kernels.tree import build_tip_tree, evaluate_tip_tree  # noqa: E402
+from selfas_graph.model.state import State  # noqa: E402
 
 RSTAR, KAPPA, DENSITY = 0.06, 1.0, 0.19
 
 
 def tips_of(centre, axis, q):
-    axis = axis / np.linalg.norm(axis, axis=1)[:, None]
-    pos = np.empty((2 * len(centre), 3))
-    pos[0::2] = centre - axis / 2
-    pos[1::2] = centre + axis / 2
-    charge = np.empty(2 * len(centre))
-    charge[0::2] = q
-    charge[1::2] = -q
-    return (*(np.ascontiguousarray(pos[:, d]) for d in range(3)), charge)
+    """SoA tips (x, y, z, charge) of unit rods with tip charges +q, -q."""
+    state = State.from_rods(centre, axis, q, np.zeros(len(q)))
+    return (*(np.ascontiguousarray(state.position[:, d]) for d in range(3)), state.tip_charge)
 
 
 def uniform(n_rods, rng):
@@ -195,8 +191,11 @@ def main():
     for config in args.config:
         rows = [(n, b[0]) for c, n, b in summary if c == config and b is not None]
         cross = crossover([r[0] for r in rows], [r[1] for r in rows])
-        text = "not reached" if cross is None else (cross if isinstance(cross, str) else f"about {cross:.0f}")
-        print(f"crossover ({config}): the tree is faster than the direct sum from {text} rods")
+        if cross is None:
+            print(f"crossover ({config}): the tree is not faster than the direct sum at the sizes measured")
+        else:
+            text = cross if isinstance(cross, str) else f"about {cross:.0f}"
+            print(f"crossover ({config}): the tree is faster than the direct sum from {text} rods")
 
 
 if __name__ == "__main__":
