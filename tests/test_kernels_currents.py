@@ -309,6 +309,18 @@ def test_segment_field_degenerate_points_are_finite():
     assert np.all(got == 0.0)
 
 
+def test_nan_position_passes_through_to_the_field():
+    """The degenerate cases are selects, not branches: a NaN coordinate (a run gone wrong)
+    must still give a NaN field, not a silent zero, so that the health check sees it."""
+    got = np.array(segment_field(np.nan, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.5, 0.03))
+    assert np.isnan(got).any()
+    position = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [np.nan, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    out = np.zeros((4, 3))
+    current_force_on_tips(position, np.array([1.0, -1.0, 1.0, -1.0]), np.array([0], dtype=np.int64),
+                          np.array([2.0, 0.0]), 0.03, 0, 4, out)
+    assert np.isnan(out[2]).any() and np.all(np.isfinite(out[3]))
+
+
 # ------------------------------------------------------------------------------------
 # physics of the Lorentz force
 # ------------------------------------------------------------------------------------
