@@ -18,7 +18,7 @@ few tens of nodes converges fast (the number of nodes is an accuracy knob).
 """
 import math
 
-from ._jit import inline, njit_parallel, prange
+from ._jit import inline, njit_parallel, njit_rows, prange
 from .laws import tip_force_over_r, tip_potential
 
 
@@ -32,7 +32,7 @@ def filament_field_at(px, py, current, w):
     return -c * py, c * px
 
 
-@njit_parallel
+@njit_rows
 def filament_field(point, current, w, out):
     """Filament field at points (m, 3); ``out`` (m, 3) overwritten."""
     for k in prange(point.shape[0]):
@@ -42,7 +42,7 @@ def filament_field(point, current, w, out):
         out[k, 2] = 0.0
 
 
-@njit_parallel
+@njit_rows
 def filament_force_on_tips(position, charge, current, w, out):
     """``F_k = q_k B_fil(x_k)``; ``out`` (n_tips, 3) overwritten."""
     for k in prange(position.shape[0]):
@@ -52,7 +52,7 @@ def filament_force_on_tips(position, charge, current, w, out):
         out[k, 2] = 0.0
 
 
-@njit_parallel
+@njit_rows
 def monopoles_on_tips(position, velocity, charge, source, source_charge, rstar, kappa, k_br, out_force, out_brake):
     """Fixed magnetic monopoles acting on tips with the tip law and brake of terms 1-2.
 
@@ -106,7 +106,7 @@ def monopoles_energy(position, charge, source, source_charge, rstar, kappa):
     return total
 
 
-@njit_parallel
+@njit_rows
 def monopole_field(point, source, source_charge, rstar, out):
     """Magnetic field of fixed monopoles at points: ``Q d / r^3``, ``Q d / r*^3`` inside r* (a smeared charge)."""
     for k in prange(point.shape[0]):
@@ -126,7 +126,7 @@ def monopole_field(point, source, source_charge, rstar, out):
         out[k, 2] = bz
 
 
-@njit_parallel
+@njit_rows
 def line_yukawa_on_centres(centre, rod_charge, z1, z2, lam, screening, w, nodes, weights, out):
     """Screened repulsion of a line charge on the z axis from z1 to z2 on rod centres (see module docstring).
 

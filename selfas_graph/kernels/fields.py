@@ -1,7 +1,7 @@
 """One-body terms: fields of fixed sources acting on tips (MODEL.md terms 5 and 8)."""
 import math
 
-from ._jit import inline, njit_parallel, prange
+from ._jit import inline, njit_parallel, njit_rows, prange
 from .laws import wall_potential, wall_push
 
 
@@ -24,7 +24,7 @@ def plasma_field_at(px, py, x0, y0, radius, current):
     return -c * dy, c * dx
 
 
-@njit_parallel
+@njit_rows
 def plasma_field(point, x0, y0, radius, current, out):
     """Plasma-filament field at points.
 
@@ -43,7 +43,7 @@ def plasma_field(point, x0, y0, radius, current, out):
         out[k, 2] = 0.0
 
 
-@njit_parallel
+@njit_rows
 def plasma_force_on_tips(position, charge, x0, y0, radius, current, out):
     """``F_k = q_k B_plas(x_k)`` (MODEL.md term 5 on tips); ``out`` (n_tips, 3) overwritten."""
     for k in prange(position.shape[0]):
@@ -53,7 +53,7 @@ def plasma_force_on_tips(position, charge, x0, y0, radius, current, out):
         out[k, 2] = 0.0
 
 
-@njit_parallel
+@njit_rows
 def electrode_walls(position, velocity, z_cathode, z_anode, rstar, kappa, k_br, out_push, out_brake):
     """Electrode planes at ``z_cathode < z_anode`` acting on tips (MODEL.md term 8).
 

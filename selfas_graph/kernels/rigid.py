@@ -14,10 +14,10 @@ that variant is kept as ``exact=False`` for comparison. Masses are 1 (reduced un
 """
 import math
 
-from ._jit import njit_parallel, prange
+from ._jit import njit_rows, prange
 
 
-@njit_parallel
+@njit_rows
 def bond_acceleration(force, velocity, position, exact, out):
     """Tip accelerations with the rigid-bond force added.
 
@@ -53,7 +53,7 @@ def bond_acceleration(force, velocity, position, exact, out):
             out[b, d] = force[b, d] + lam * r
 
 
-@njit_parallel
+@njit_rows
 def bond_length_error(position):
     """Largest ``| |x_a - x_b| - 1 |`` over all rods."""
     n_rods = position.shape[0] // 2
@@ -68,7 +68,7 @@ def bond_length_error(position):
     return worst
 
 
-@njit_parallel
+@njit_rows
 def constrain_bonds(position, velocity, project, correct_velocity):
     """Restore the rigid bonds after an integration step, in place.
 
