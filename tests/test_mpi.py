@@ -110,6 +110,17 @@ def test_tree_on_two_ranks_gives_the_serial_tree_run_bit_for_bit(scene):
     _assert_same_run(scene / "tree2.h5", scene / "tree1.h5")
 
 
+def test_multiple_time_stepping_on_two_ranks_gives_the_serial_run_bit_for_bit(scene):
+    """With the slow forces held between full evaluations, 2 ranks equal 1 rank bit for bit: the
+    fast part is computed whole on every rank, the slow part only on full steps and gathered."""
+    mts = ["--set", "integrator.slow_every=4", "--t-end", "0.3"]
+    serial = _launch(0, ["scene.toml", "-o", "mts1.h5", *mts], scene)
+    assert serial.returncode == 0, serial.stderr
+    res = _launch(2, ["scene.toml", "-o", "mts2.h5", *mts], scene)
+    assert res.returncode == 0, res.stderr
+    _assert_same_run(scene / "mts2.h5", scene / "mts1.h5")
+
+
 def test_resume_on_other_rank_counts_gives_the_serial_run(scene):
     """A run to t = 0.3 on 2 ranks, resumed to t = 0.6 on 3 ranks, equals the serial run to 0.6.
 

@@ -1,7 +1,7 @@
 """Speed-accuracy trade of every accuracy knob of a scene, against a tight reference run.
 
-Usage: python tools/tradeoff.py SCENARIO [--from T0] [--t 0.5] [--knob NAME ...] [--set KEY=VALUE ...]
-       [--json OUT] [--plot OUT.png]
+Usage: python tools/tradeoff.py SCENARIO [--from T0] [--checkpoint FILE] [--t 0.5] [--knob NAME ...]
+       [--set KEY=VALUE ...] [--json OUT] [--plot OUT.png]
 
 The scene is first run at its defaults to ``--from T0`` (e.g. past the short circuit, so
 that the current knobs matter); every run then branches from that state with a fresh
@@ -20,7 +20,9 @@ shows the error of its own knob (all measured in this run):
 Knobs: integrator.dt, integrator.brake (explicit/split), integrator.restart_on_events
 (against a run at dt = 1.25e-4), forces.yukawa.tolerance, forces.yukawa.core_radius (against
 the bare law: what the core changes), forces.current_lorentz.quadrature_points,
-integrator.bond_force (exact/paper), integrator.position_projection. Prints a markdown table and writes JSON and a plot of
+integrator.bond_force (exact/paper), integrator.position_projection, integrator.slow_every
+(multiple time stepping, against evaluating every force every step) and integrator.fast_range
+(with ``--set integrator.slow_every=K``; also against no splitting). Prints a markdown table and writes JSON and a plot of
 error against cost, one curve per knob.
 """
 import argparse
@@ -35,6 +37,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from selfas_graph import NumericalFailure, Simulation, load_scenario  # noqa: E402
+from selfas_graph.io.checkpoint import read_checkpoint  # noqa: E402
 from selfas_graph.model import events as ev  # noqa: E402
 
 #: knob -> (settings to sweep, the reference run's overrides); a setting the scene cannot use
@@ -50,6 +53,9 @@ KNOBS = {
     "forces.current_lorentz.quadrature_points": ([1, 2, 4, 8], {"forces.current_lorentz.quadrature_points": 16}),
     "integrator.bond_force": (["paper", "exact"], {"integrator.bond_force": "exact"}),
     "integrator.position_projection": ([False, True], {"integrator.position_projection": True}),
+    "integrator.slow_every": ([1, 2, 4, 8, 16], {"integrator.slow_every": 1}),
+    # only with slow_every > 1 in the base (--set integrator.slow_every=8): each range against no splitting
+    "integrator.fast_range": ([2.0, 3.0, 4.0, 6.0], {"integrator.slow_every": 1}),
 }
 
 
@@ -66,6 +72,8 @@ def _overrides(values):
 
 
 def _applicable(scenario, knob):
+    if knob == "integrator.fast_range" and scenario.params.integrator.slow_every == 1:
+        return False  # the range splits nothing without multiple time stepping
     node = scenario.params
     for part in knob.split(".")[:-1]:
         node = getattr(node, part, None)
@@ -104,6 +112,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenario")
     ap.add_argument("--from", dest="t0", type=float, default=0.0, help="branch all runs from this time (default 0)")
+    ap.add_argument("--checkpoint", help="branch from this checkpoint file (e.g. a long run past the short circuit) "
+                                         "instead of a fresh start; --from then runs on from its time")
     ap.add_argument("--t", type=float, default=0.5, help="simulated time of each run (default 0.5)")
     ap.add_argument("--knob", nargs="+", choices=sorted(KNOBS), help="only these knobs (default: all that apply)")
     ap.add_argument("--set", dest="base_set", action="append", default=[], metavar="KEY=VALUE",
@@ -115,8 +125,11 @@ def main(argv=None):
         ap.error("--t must be positive")
     base = load_scenario(args.scenario, overrides=args.base_set)
     knobs = [k for k in (args.knob or KNOBS) if _applicable(base, k)]
-    sim0 = Simulation.from_scenario(base)
-    if args.t0 > 0:
+    if args.checkpoint:
+        sim0 = Simulation.from_snapshot(base.params, read_checkpoint(args.checkpoint)[0])
+    else:
+        sim0 = Simulation.from_scenario(base)
+    if args.t0 > sim0.state.time:
         sim0.run(t_end=args.t0)
     snap = sim0.snapshot()
     run_once(args.scenario, args.base_set, min(args.t, 0.01), snap)  # warm-up: compile every kernel before timing

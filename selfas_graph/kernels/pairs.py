@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-from ._jit import inline, njit, njit_parallel, njit_parallel_sum, prange
+from ._jit import inline, njit, njit_parallel, njit_parallel_sum, njit_rows, prange
 from .laws import yukawa_force_over_r, yukawa_potential
 
 
@@ -130,7 +130,7 @@ def yukawa_energy(centre, rod_charge, start, index, screening, core, cutoff, lo,
         out[i] = acc
 
 
-@njit_parallel
+@njit_rows
 def _close_counts(position, start, index, radius, counts):
     n = position.shape[0]
     r2max = radius * radius
@@ -143,7 +143,7 @@ def _close_counts(position, start, index, radius, counts):
         counts[k] = c
 
 
-@njit_parallel
+@njit_rows
 def _close_fill(position, start, index, radius, offset, out):
     n = position.shape[0]
     r2max = radius * radius

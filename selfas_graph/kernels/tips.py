@@ -5,7 +5,9 @@ rod do not interact (their bond is rigid). Positions come as three separate
 coordinate arrays (structure of arrays) so that the inner loop vectorises;
 the "same rod" pair is removed by a select, not a branch.
 """
-from ._jit import inline_sum, njit_parallel_sum, prange
+import math
+
+from ._jit import inline, inline_sum, njit_parallel_sum, njit_rows, prange
 from .laws import tip_force_over_r, tip_potential
 
 
@@ -100,3 +102,62 @@ def tip_tip_direct_rows(x, y, z, charge, rstar, kappa, row, out):
         out[j, 0] = fx
         out[j, 1] = fy
         out[j, 2] = fz
+
+
+@inline
+def fast_switch(r2, r_in, r_out):
+    """Share of a tip pair's force counted as fast in multiple time stepping (``integrator.slow_every``).
+
+    ``S = 1`` for ``r <= r_in``, ``S = 0`` for ``r >= r_out``, and the smoothstep
+    ``1 - s^2 (3 - 2 s)``, ``s = (r - r_in) / (r_out - r_in)``, in between: S and dS/dr are
+    continuous, so neither the fast nor the slow part jumps when a pair crosses the range.
+    """
+    if r2 <= r_in * r_in:
+        return 1.0
+    if r2 >= r_out * r_out:
+        return 0.0
+    s = (math.sqrt(r2) - r_in) / (r_out - r_in)
+    return 1.0 - s * s * (3.0 - 2.0 * s)
+
+
+@njit_rows
+def tip_tip_fast(position, charge, start, index, rstar, kappa, r_in, r_out, out):
+    """Fast part ``S(r) f(r)`` of the tip-tip force (MODEL.md term 1) over a tip neighbour list.
+
+    Multiple time stepping splits each pair's force as ``S f + (1 - S) f`` with the switch
+    :func:`fast_switch`; this kernel sums the first part, which holds the stiff core and the
+    steep Coulomb attraction of tips about to touch, and is evaluated every step.
+
+    Parameters
+    ----------
+    position : (n_tips, 3) float64
+    charge : (n_tips,) float64
+    start, index : int64 arrays
+        Compressed-row tip neighbour list (both directions, tips of one rod excluded,
+        covering at least ``r_out``).
+    rstar, kappa : float
+        Transition radius and core stiffness of the tip law.
+    r_in, r_out : float
+        Range of the switch, ``r_in < r_out``.
+    out : (n_tips, 3) float64
+        Overwritten with the fast force on each tip.
+    """
+    n = position.shape[0]
+    for k in prange(n):
+        fx = 0.0
+        fy = 0.0
+        fz = 0.0
+        for j in range(start[k], start[k + 1]):
+            l = index[j]
+            dx = position[k, 0] - position[l, 0]
+            dy = position[k, 1] - position[l, 1]
+            dz = position[k, 2] - position[l, 2]
+            r2 = dx * dx + dy * dy + dz * dz
+            if r2 < r_out * r_out:
+                g = tip_force_over_r(r2, charge[k] * charge[l], rstar, kappa) * fast_switch(r2, r_in, r_out)
+                fx += g * dx
+                fy += g * dy
+                fz += g * dz
+        out[k, 0] = fx
+        out[k, 1] = fy
+        out[k, 2] = fz

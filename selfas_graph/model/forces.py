@@ -61,10 +61,16 @@ def yukawa_cutoff(z_max: float, screening: float, tolerance: float) -> float:
 
 
 class _Term:
-    """One force term. ``channels``: list of (channel name, conservative?)."""
+    """One force term. ``channels``: list of (channel name, conservative?).
+
+    ``slow``: with multiple time stepping (``integrator.slow_every > 1``) the term is
+    evaluated only on full evaluations and its force held in between (the smooth, costly
+    long-range sums); other terms are evaluated every step.
+    """
 
     channels: list = []
     name = ""
+    slow = False
 
     def compute(self, ff, out):  # pragma: no cover - interface
         raise NotImplementedError
@@ -90,8 +96,12 @@ def _kinetic(velocity, tips):
 
 
 class TipMagnetic(_Term):
+    """Term 1. Slow as a whole; with multiple time stepping the force field adds back the fast
+    part of the close pairs at every evaluation (:meth:`fast`)."""
+
     name = "tip_magnetic"
     channels = [("tip_magnetic", True)]
+    slow = True
 
     def __init__(self, p: Parameters, state):
         self.rstar = p.rods.rstar
@@ -118,6 +128,11 @@ class TipMagnetic(_Term):
 
     def blocked(self, ff):
         return ("tip_magnetic",)
+
+    def fast(self, ff, r_in, r_out, out):
+        """The fast part of the force, pairs closer than ``r_out`` switched off smoothly from ``r_in`` on."""
+        nl = ff.tip_neighbours()
+        kt.tip_tip_fast(ff.position, ff.tip_charge, nl.start, nl.index, self.rstar, self.kappa, r_in, r_out, out)
 
     def energy(self, ff):
         x, y, z = ff.soa()
@@ -195,6 +210,7 @@ class PlasmaFilament(_Term):
 class Yukawa(_Term):
     name = "yukawa"
     channels = [("yukawa", True)]
+    slow = True
 
     def __init__(self, p, state):
         y = p.forces.yukawa
@@ -341,6 +357,7 @@ class CurrentField(_Term):
 
     name = "current_field"
     channels = [("current_field", False)]
+    slow = True
 
     def __init__(self, p, state):
         self.w = 0.5 * p.rods.diameter
@@ -368,6 +385,7 @@ class CurrentLorentz(_Term):
 
     name = "current_lorentz"
     channels = [("current_lorentz", False)]
+    slow = True
 
     def __init__(self, p, state):
         self.t, self.wt = kc.gauss_legendre_01(p.forces.current_lorentz.quadrature_points)
@@ -480,6 +498,20 @@ class ForceField:
         self.velocity = None
         self.current = np.zeros(self.n_rods)
         self.active_rod = np.zeros(0, dtype=np.int64)
+        # multiple time stepping (integrator.slow_every > 1): the slow terms' channels keep their
+        # last full evaluation; the tip term's far part is kept apart from its fast close pairs
+        ip = params.integrator
+        self.multiple_time_stepping = ip.slow_every > 1
+        #: True when the held slow forces are out of date (currents changed): the next evaluation is full
+        self.slow_stale = True
+        self._tip_term = next((t for t in self.terms if isinstance(t, TipMagnetic)), None)
+        if self.multiple_time_stepping and self._tip_term is not None:
+            rstar = params.rods.rstar
+            self.fast_range = ((ip.fast_range - 1.0) * rstar, ip.fast_range * rstar)
+            self.extend_tip_range(self.fast_range[1])
+            self.tip_far = np.zeros((self.n_tips, 3))
+            self._tip_fast = np.zeros((self.n_tips, 3))
+        self.slow_channels = [c for t in self.terms if t.slow for c, _ in t.channels]
 
     def set_currents(self, current):
         """Rod currents from the last circuit solve, (n_rods,) float64; used from the next evaluation on.
@@ -491,6 +523,7 @@ class ForceField:
             raise ValueError(f"currents must have shape ({self.n_rods},), got {current.shape}")
         self.current = current
         self.active_rod = np.flatnonzero(current != 0.0).astype(np.int64)
+        self.slow_stale = True
 
     # -- lazily computed views of the current (position, velocity) ---------------------------------
     def _bind(self, position, velocity):
@@ -537,7 +570,7 @@ class ForceField:
         return self._centre_nl
 
     # -- evaluation -------------------------------------------------------------------------------
-    def evaluate(self, position, velocity, power=None):
+    def evaluate(self, position, velocity, power=None, full=True):
         """Total force on every tip at (position, velocity).
 
         Parameters
@@ -545,6 +578,10 @@ class ForceField:
         position, velocity : (n_tips, 3) float64
         power : (len(nonconservative),) float64, optional
             Filled with ``sum_k F_k . v_k`` of each non-conservative channel.
+        full : bool
+            With multiple time stepping: False evaluates only the fast terms and the fast
+            part of the tip-tip force, and adds the slow forces held from the last full
+            evaluation. Ignored (always full) without it.
 
         Returns
         -------
@@ -552,8 +589,12 @@ class ForceField:
             The summed force (a buffer owned by the field; copy it to keep it).
         """
         self._bind(position, velocity)
+        mts = self.multiple_time_stepping
+        full = full or not mts
         blocked = []
         for t in self.terms:
+            if t.slow and not full:
+                continue
             t0 = time.perf_counter() if self.timing else 0.0
             t.compute(self, self.out)
             if t.name not in _SELF_COUNTING:
@@ -566,6 +607,20 @@ class ForceField:
             self.blocks.gather_rows([self.out[name] for name in blocked], rows_per_rod=2)
             if self.timing:
                 self.seconds["gather"] += time.perf_counter() - t0
+        if mts:
+            if full:
+                self.slow_stale = False
+            if self._tip_term is not None:
+                t0 = time.perf_counter() if self.timing else 0.0
+                fast = self._tip_fast
+                self._tip_term.fast(self, *self.fast_range, fast)
+                tip = self.out["tip_magnetic"]
+                if full:
+                    np.subtract(tip, fast, out=self.tip_far)
+                else:
+                    np.add(self.tip_far, fast, out=tip)
+                if self.timing:
+                    self.seconds["tip_magnetic_fast"] += time.perf_counter() - t0
         total = self.total
         total.fill(0.0)
         for name, _ in self.channels:
@@ -574,6 +629,24 @@ class ForceField:
             for j, name in enumerate(self.nonconservative):
                 power[j] = np.einsum("ij,ij->", self.out[name], velocity)
         return total
+
+    def held_forces(self) -> dict:
+        """The slow forces held between full evaluations (multiple time stepping), by name.
+
+        With them and the state, a resumed run continues bit for bit (``Simulation.snapshot``).
+        """
+        if not self.multiple_time_stepping:
+            return {}
+        held = {name: self.out[name] for name in self.slow_channels}
+        if self._tip_term is not None:
+            held["tip_far"] = self.tip_far
+        return held
+
+    def restore_held_forces(self, held: dict, stale: bool) -> None:
+        """Put back what :meth:`held_forces` returned (copies are taken)."""
+        for name, arr in self.held_forces().items():
+            arr[:] = held[name]
+        self.slow_stale = bool(stale)
 
     def split_brakes(self, position, velocity, dt, work):
         """``integrator.brake = "split"``: apply every stiff brake exactly over ``dt`` (velocity in place).

@@ -8,6 +8,9 @@ the force per unit mass plus the rigid-bond force. One step:
    ``y_{n+1} = y_n + dt/24 (55 f_n - 59 f_{n-1} + 37 f_{n-2} - 9 f_{n-3})``;
    otherwise a classical RK4 step (self-starting: the first three steps, and the
    first three after :meth:`reset_history`);
+   With ``integrator.slow_every = K > 1`` (multiple time stepping) the slow forces
+   in ``a_n`` (far tip pairs, Yukawa, rod-current terms) are evaluated on every K-th
+   step and held constant in between; the stiff short-range forces are fresh every step;
 3. with ``integrator.brake = "split"``, the stiff brakes (left out of step 2) act on
    the velocities through their exact solution over dt, pair after pair;
 4. bond constraint: position projection and velocity correction (each optional);
@@ -41,13 +44,15 @@ class AdamsBashforth4:
         Apply the position projection / the velocity correction after each step.
     """
 
-    def __init__(self, force_field, dt, exact_bond=True, project=True, correct_velocity=True, split_brakes=False):
+    def __init__(self, force_field, dt, exact_bond=True, project=True, correct_velocity=True, split_brakes=False,
+                 slow_every=1):
         self.ff = force_field
         self.dt = float(dt)
         self.exact_bond = bool(exact_bond)
         self.project = bool(project)
         self.correct_velocity = bool(correct_velocity)
         self.split_brakes = bool(split_brakes)
+        self.slow_every = int(slow_every)
         n = force_field.n_tips
         n_ch = len(force_field.nonconservative)
         # ring buffers of derivatives; slot (head - j) % 4 holds f_{n-j}
@@ -68,9 +73,13 @@ class AdamsBashforth4:
         """Forget the derivative history; the next three steps are RK4 again."""
         self.count = 0
 
-    def acceleration(self, position, velocity, out, power):
-        """Tip accelerations (forces plus rigid bonds) at (position, velocity)."""
-        force = self.ff.evaluate(position, velocity, power)
+    def acceleration(self, position, velocity, out, power, full=True):
+        """Tip accelerations (forces plus rigid bonds) at (position, velocity).
+
+        ``full=False``: the slow forces are those held from the last full evaluation
+        (multiple time stepping, see :meth:`step`).
+        """
+        force = self.ff.evaluate(position, velocity, power, full=full)
         bond_acceleration(force, velocity, position, self.exact_bond, out)
         return out
 
@@ -80,7 +89,11 @@ class AdamsBashforth4:
         self.head = (self.head + 1) % 4
         h = self.head
         self.hist_v[h] = v
-        self.acceleration(x, v, self.hist_a[h], self.hist_p[h])
+        # multiple time stepping: the slow forces are evaluated on every slow_every-th step (counted
+        # from step 0, so a resumed run keeps the pattern), in the self-starting RK4 steps, and
+        # after the currents changed; in between they are held
+        full = state.step % self.slow_every == 0 or self.count < 3 or self.ff.slow_stale
+        self.acceleration(x, v, self.hist_a[h], self.hist_p[h], full=full)
         self.count = min(self.count + 1, 4)
         if self.count == 4:
             slots = [(h - j) % 4 for j in range(4)]

@@ -212,6 +212,13 @@ class IntegratorParams:
     restart_on_events: bool = spec(
         False, "restart the Adams-Bashforth history (three RK4 steps) after a contact event or a new circuit "
         "solution, when forces jump", )
+    slow_every: int = spec(
+        1, "multiple time stepping: evaluate the slow forces (tip-tip pairs beyond fast_range, the Yukawa sum, the "
+        "rod-current terms 9 and 10) every this many steps and hold them in between, while the stiff short-range "
+        "forces are evaluated every step; 1 evaluates everything every step; an accuracy knob", ge=1, le=1000)
+    fast_range: float = spec(
+        3.0, "with slow_every > 1: tip pairs closer than (fast_range - 1) r* count as fast, pairs beyond "
+        "fast_range r* as slow, with a smooth switch in between; an accuracy knob", ge=2.0, le=100.0)
 
 
 @dataclass(frozen=True)
