@@ -142,32 +142,43 @@ def test_new_currents_force_a_full_evaluation(rng):
 
 def test_error_vanishes_as_the_slow_interval_shrinks():
     """Position difference from K = 1 after 0.05 t0 (the violent start of a random scene, before
-    contacts amplify every difference): growing with K, and for K = 2 below the difference that
-    halving the time step makes (measured: 4.8e-5 against 1.7e-4; K = 4: 1.4e-4, K = 8: 3.0e-4)."""
+    contacts amplify every difference), with the default fast range. Held forces err to first
+    order in K dt (measured for K = 2, 4, 8, 16: 2.8e-5, 8.3e-5, 1.8e-4, 3.4e-4), below the
+    difference that halving the time step makes (1.7e-4) at K = 2; extrapolated ones to second
+    order (2.4e-6, 1.4e-5, 6.9e-5, 2.7e-4)."""
     t = 0.05
-    runs = {}
-    for k in (1, 2, 4, 8):
-        sim = _sim(k)
-        sim.run(t_end=t)
-        runs[k] = sim.state.position.copy()
+    base = _sim(1)
+    base.run(t_end=t)
+    err = {}
+    for extrapolate in ("false", "true"):
+        for k in (2, 4, 8):
+            sim = _sim(k, **{"integrator.slow_extrapolation": extrapolate})
+            sim.run(t_end=t)
+            err[extrapolate, k] = float(np.abs(sim.state.position - base.state.position).max())
     half = _sim(1, **{"integrator.dt": 5e-4})
     half.run(t_end=t)
-    err = {k: float(np.abs(runs[k] - runs[1]).max()) for k in (2, 4, 8)}
-    assert err[2] < err[4] < err[8]
-    assert err[2] < float(np.abs(half.state.position - runs[1]).max()), err
+    for mode in ("false", "true"):
+        assert err[mode, 2] < err[mode, 4] < err[mode, 8]
+    assert err["false", 2] < float(np.abs(half.state.position - base.state.position).max()), err
+    for k in (2, 4, 8):
+        assert err["true", k] < err["false", k], err
+    assert err["true", 4] > 3 * err["true", 2], err  # second order: 4x expected, 6x measured
 
 
-def test_checkpoint_between_full_evaluations_resumes_bit_for_bit(tmp_path):
-    """Interrupted at a step that is not a multiple of K, the held forces travel in the checkpoint."""
+@pytest.mark.parametrize("extrapolate", ["false", "true"])
+def test_checkpoint_between_full_evaluations_resumes_bit_for_bit(tmp_path, extrapolate):
+    """Interrupted at a step that is not a multiple of K, the held forces (and the extrapolation's
+    bases and rates) travel in the checkpoint."""
     n1, n2 = 23, 30
-    whole = _sim(4)
+    extra = {"integrator.slow_extrapolation": extrapolate}
+    whole = _sim(4, **extra)
     whole.step(n1 + n2)
-    first = _sim(4)
+    first = _sim(4, **extra)
     first.step(n1)
     path = tmp_path / "c.h5"
     write_checkpoint(path, first.snapshot(), {"scenario_text": "", "overrides": "[]", "run_file": "x", "version": "t"})
     snap, _ = read_checkpoint(path)
-    assert any(key.startswith("held_") for key in snap)
+    assert any(key.startswith("mts_held_") for key in snap)
     second = Simulation.from_snapshot(first.params, snap)
     second.step(n2)
     np.testing.assert_array_equal(second.state.position, whole.state.position)

@@ -33,9 +33,10 @@ def test_pair_brake_keeps_momentum_and_never_adds_energy(rng):
     spread0 = np.abs(v - v.mean(axis=0)).max()
     spread = spread0
     for _ in range(5):
-        brake_pairs_exact(v, pairs, 1e4, 1.0)  # k dt = 1e4: far past any explicit limit
+        work = brake_pairs_exact(v, pairs, 1e4, 1.0)  # k dt = 1e4: far past any explicit limit
         e = 0.5 * (v * v).sum()
         assert e <= e0 + 1e-12
+        assert work == pytest.approx(e - e0, rel=1e-12, abs=1e-13)  # the returned work is the energy change
         e0 = e
         new_spread = np.abs(v - v.mean(axis=0)).max()
         assert new_spread < spread

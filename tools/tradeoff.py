@@ -53,9 +53,10 @@ KNOBS = {
     "forces.current_lorentz.quadrature_points": ([1, 2, 4, 8], {"forces.current_lorentz.quadrature_points": 16}),
     "integrator.bond_force": (["paper", "exact"], {"integrator.bond_force": "exact"}),
     "integrator.position_projection": ([False, True], {"integrator.position_projection": True}),
-    "integrator.slow_every": ([1, 2, 4, 8, 16], {"integrator.slow_every": 1}),
+    "integrator.slow_every": ([1, 2, 4, 8, 16, 32], {"integrator.slow_every": 1}),
+    "integrator.slow_extrapolation": ([False, True], {"integrator.slow_every": 1}),
     # only with slow_every > 1 in the base (--set integrator.slow_every=8): each range against no splitting
-    "integrator.fast_range": ([2.0, 3.0, 4.0, 6.0], {"integrator.slow_every": 1}),
+    "integrator.fast_range": ([2.0, 3.0, 4.0, 6.0, 8.0, 12.0], {"integrator.slow_every": 1}),
 }
 
 

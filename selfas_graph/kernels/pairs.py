@@ -204,13 +204,25 @@ def brake_pairs_exact(velocity, pairs, k_br, dt):
     velocity : (n_tips, 3) float64, modified in place
     pairs : (m, 2) int64
     k_br, dt : float
+
+    Returns
+    -------
+    float
+        The work done: the change of kinetic energy (unit masses), summed pair by pair,
+        ``-(1 - decay^2) |v_k - v_l|^2 / 4`` for each pair as met.
     """
     decay = math.exp(-2.0 * k_br * dt)
+    work = 0.0
     for j in range(pairs.shape[0]):
         k = pairs[j, 0]
         l = pairs[j, 1]
+        rel2 = 0.0
         for d in range(3):
+            diff = velocity[k, d] - velocity[l, d]
+            rel2 += diff * diff
             mean = 0.5 * (velocity[k, d] + velocity[l, d])
-            half = 0.5 * (velocity[k, d] - velocity[l, d]) * decay
+            half = 0.5 * diff * decay
             velocity[k, d] = mean + half
             velocity[l, d] = mean - half
+        work -= 0.25 * (1.0 - decay * decay) * rel2
+    return work

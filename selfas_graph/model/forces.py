@@ -164,10 +164,7 @@ class TipBrake(_Term):
         pairs = kp.close_pairs(ff.position, nl.start, nl.index, self.rstar)
         if not len(pairs):
             return {}
-        tips = np.unique(pairs)
-        before = _kinetic(ff.velocity, tips)
-        kp.brake_pairs_exact(ff.velocity, pairs, self.k, dt)
-        return {"tip_brake": _kinetic(ff.velocity, tips) - before}
+        return {"tip_brake": kp.brake_pairs_exact(ff.velocity, pairs, self.k, dt)}
 
 
 class AmbientBrake(_Term):
@@ -501,6 +498,7 @@ class ForceField:
         # multiple time stepping (integrator.slow_every > 1): the slow terms' channels keep their
         # last full evaluation; the tip term's far part is kept apart from its fast close pairs
         ip = params.integrator
+        self.slow_every = ip.slow_every
         self.multiple_time_stepping = ip.slow_every > 1
         #: True when the held slow forces are out of date (currents changed): the next evaluation is full
         self.slow_stale = True
@@ -511,7 +509,13 @@ class ForceField:
             self.extend_tip_range(self.fast_range[1])
             self.tip_far = np.zeros((self.n_tips, 3))
             self._tip_fast = np.zeros((self.n_tips, 3))
-        self.slow_channels = [c for t in self.terms if t.slow for c, _ in t.channels]
+        self.slow_channels = [c for t in self.terms if t.slow and not isinstance(t, TipMagnetic)
+                              for c, _ in t.channels]
+        self.extrapolate = self.multiple_time_stepping and ip.slow_extrapolation
+        if self.extrapolate:
+            self._base = {k: np.zeros_like(v) for k, v in self.held_forces().items()}
+            self._rate = {k: np.zeros_like(v) for k, v in self.held_forces().items()}
+            self._base_step = None
 
     def set_currents(self, current):
         """Rod currents from the last circuit solve, (n_rods,) float64; used from the next evaluation on.
@@ -524,6 +528,8 @@ class ForceField:
         self.current = current
         self.active_rod = np.flatnonzero(current != 0.0).astype(np.int64)
         self.slow_stale = True
+        if getattr(self, "extrapolate", False):
+            self._base_step = None  # the current forces jump: no rate across the change
 
     # -- lazily computed views of the current (position, velocity) ---------------------------------
     def _bind(self, position, velocity):
@@ -570,7 +576,7 @@ class ForceField:
         return self._centre_nl
 
     # -- evaluation -------------------------------------------------------------------------------
-    def evaluate(self, position, velocity, power=None, full=True):
+    def evaluate(self, position, velocity, power=None, full=True, step=None):
         """Total force on every tip at (position, velocity).
 
         Parameters
@@ -610,17 +616,19 @@ class ForceField:
         if mts:
             if full:
                 self.slow_stale = False
+            fast = None
             if self._tip_term is not None:
                 t0 = time.perf_counter() if self.timing else 0.0
                 fast = self._tip_fast
                 self._tip_term.fast(self, *self.fast_range, fast)
-                tip = self.out["tip_magnetic"]
                 if full:
-                    np.subtract(tip, fast, out=self.tip_far)
-                else:
-                    np.add(self.tip_far, fast, out=tip)
+                    np.subtract(self.out["tip_magnetic"], fast, out=self.tip_far)
                 if self.timing:
                     self.seconds["tip_magnetic_fast"] += time.perf_counter() - t0
+            if self.extrapolate:
+                self._extrapolate(full, step)
+            if fast is not None and not full:
+                np.add(self.tip_far, fast, out=self.out["tip_magnetic"])
         total = self.total
         total.fill(0.0)
         for name, _ in self.channels:
@@ -630,11 +638,30 @@ class ForceField:
                 power[j] = np.einsum("ij,ij->", self.out[name], velocity)
         return total
 
-    def held_forces(self) -> dict:
-        """The slow forces held between full evaluations (multiple time stepping), by name.
+    def _extrapolate(self, full, step):
+        """Linear extrapolation of the held slow forces from the last two full evaluations at step starts."""
+        held = self.held_forces()
+        if full:
+            prev = self._base_step
+            gap = None if (prev is None or step is None) else step - prev
+            for key, arr in held.items():
+                base, rate = self._base[key], self._rate[key]
+                if gap is not None and 0 < gap <= 2 * self.slow_every:
+                    np.subtract(arr, base, out=rate)
+                    rate /= gap
+                else:
+                    rate.fill(0.0)
+                base[:] = arr
+            self._base_step = step
+        elif self._base_step is not None and step is not None:
+            age = step - self._base_step
+            for key, arr in held.items():
+                np.multiply(self._rate[key], age, out=arr)
+                arr += self._base[key]
 
-        With them and the state, a resumed run continues bit for bit (``Simulation.snapshot``).
-        """
+    def held_forces(self) -> dict:
+        """The slow forces held between full evaluations (multiple time stepping), by name
+        (the slow channels and ``tip_far``, the tip-tip force less its fast part); views, not copies."""
         if not self.multiple_time_stepping:
             return {}
         held = {name: self.out[name] for name in self.slow_channels}
@@ -642,11 +669,35 @@ class ForceField:
             held["tip_far"] = self.tip_far
         return held
 
-    def restore_held_forces(self, held: dict, stale: bool) -> None:
-        """Put back what :meth:`held_forces` returned (copies are taken)."""
-        for name, arr in self.held_forces().items():
-            arr[:] = held[name]
-        self.slow_stale = bool(stale)
+    def mts_state(self) -> dict:
+        """What the next evaluations depend on besides the state (multiple time stepping), as copies:
+        held forces, the stale flag and, with extrapolation, its bases and rates. Empty without it."""
+        if not self.multiple_time_stepping:
+            return {}
+        snap = {f"mts_held_{k}": v.copy() for k, v in self.held_forces().items()}
+        snap["mts_stale"] = bool(self.slow_stale)
+        if self.extrapolate:
+            snap.update({f"mts_base_{k}": v.copy() for k, v in self._base.items()})
+            snap.update({f"mts_rate_{k}": v.copy() for k, v in self._rate.items()})
+            snap["mts_base_step"] = -1 if self._base_step is None else int(self._base_step)
+        return snap
+
+    def restore_mts_state(self, snap: dict) -> bool:
+        """Put back what :meth:`mts_state` returned; False (and the next evaluation full) when ``snap``
+        was taken with other settings (e.g. a checkpoint of a run without multiple time stepping)."""
+        mine = self.mts_state()
+        if not mine or set(mine) - set(snap):
+            return False
+        for k, v in self.held_forces().items():
+            v[:] = snap[f"mts_held_{k}"]
+        self.slow_stale = bool(snap["mts_stale"])
+        if self.extrapolate:
+            for k in self._base:
+                self._base[k][:] = snap[f"mts_base_{k}"]
+                self._rate[k][:] = snap[f"mts_rate_{k}"]
+            b = int(snap["mts_base_step"])
+            self._base_step = None if b < 0 else b
+        return True
 
     def split_brakes(self, position, velocity, dt, work):
         """``integrator.brake = "split"``: apply every stiff brake exactly over ``dt`` (velocity in place).

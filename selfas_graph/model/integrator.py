@@ -73,13 +73,13 @@ class AdamsBashforth4:
         """Forget the derivative history; the next three steps are RK4 again."""
         self.count = 0
 
-    def acceleration(self, position, velocity, out, power, full=True):
+    def acceleration(self, position, velocity, out, power, full=True, step=None):
         """Tip accelerations (forces plus rigid bonds) at (position, velocity).
 
         ``full=False``: the slow forces are those held from the last full evaluation
         (multiple time stepping, see :meth:`step`).
         """
-        force = self.ff.evaluate(position, velocity, power, full=full)
+        force = self.ff.evaluate(position, velocity, power, full=full, step=step)
         bond_acceleration(force, velocity, position, self.exact_bond, out)
         return out
 
@@ -93,7 +93,7 @@ class AdamsBashforth4:
         # from step 0, so a resumed run keeps the pattern), in the self-starting RK4 steps, and
         # after the currents changed; in between they are held
         full = state.step % self.slow_every == 0 or self.count < 3 or self.ff.slow_stale
-        self.acceleration(x, v, self.hist_a[h], self.hist_p[h], full=full)
+        self.acceleration(x, v, self.hist_a[h], self.hist_p[h], full=full, step=state.step)
         self.count = min(self.count + 1, 4)
         if self.count == 4:
             slots = [(h - j) % 4 for j in range(4)]

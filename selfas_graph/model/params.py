@@ -216,8 +216,11 @@ class IntegratorParams:
         1, "multiple time stepping: evaluate the slow forces (tip-tip pairs beyond fast_range, the Yukawa sum, the "
         "rod-current terms 9 and 10) every this many steps and hold them in between, while the stiff short-range "
         "forces are evaluated every step; 1 evaluates everything every step; an accuracy knob", ge=1, le=1000)
+    slow_extrapolation: bool = spec(
+        True, "with slow_every > 1: extrapolate the slow forces linearly in time from the last two full "
+        "evaluations (second order in slow_every dt) instead of holding them constant (first order)")
     fast_range: float = spec(
-        3.0, "with slow_every > 1: tip pairs closer than (fast_range - 1) r* count as fast, pairs beyond "
+        8.0, "with slow_every > 1: tip pairs closer than (fast_range - 1) r* count as fast, pairs beyond "
         "fast_range r* as slow, with a smooth switch in between; an accuracy knob", ge=2.0, le=100.0)
 
 

@@ -166,10 +166,7 @@ class Simulation:
             "events": np.array([tuple(r) for r in self.events], dtype=ev.EVENT_DTYPE),
             "short_circuit_time": np.nan if self.short_circuit_time is None else self.short_circuit_time,
         }
-        held = ff.held_forces()
-        if held:
-            snap["slow_stale"] = ff.slow_stale
-            snap.update({f"held_{k}": v.copy() for k, v in held.items()})
+        snap.update(ff.mts_state())
         for name, nl in (("tip_nl", ff._tip_nl), ("centre_nl", ff._centre_nl)):
             if nl is not None and nl.reference is not None:
                 snap[f"{name}_reference"] = nl.reference.copy()
@@ -224,11 +221,7 @@ class Simulation:
                 # interrupted run held; the currents in use are restored as saved
                 sim.solution = sim.graph.solve()
         ff.set_currents(np.array(snap["current"], dtype=np.float64))
-        if ff.multiple_time_stepping:
-            held = {k[len("held_"):]: v for k, v in snap.items() if k.startswith("held_")}
-            if "slow_stale" in snap and set(held) == set(ff.held_forces()):
-                ff.restore_held_forces(held, snap["slow_stale"])
-            # else a checkpoint of a run without (or with other) held forces: the next step is full
+        ff.restore_mts_state(snap)  # held slow forces; without matching ones the next evaluation is full
         return sim
 
     @property
