@@ -1,7 +1,7 @@
 """Scaling benchmark: milliseconds per full step of the Fig. 2 scene from 10^3 to 10^5 rods.
 
 Usage: python tools/bench_scaling.py [--rods 1200 6000 24000 100000] [--method direct tree]
-                                     [--json OUT.json] [--plot OUT.png --from-json A.json B.json ...]
+                                     [--set KEY=VALUE ...] [--json OUT.json] [--plot OUT.png --from-json A.json B.json ...]
        mpiexec -n 2 python tools/bench_scaling.py ...   (force rows split over 2 ranks; rank 0 prints)
 
 For each size the Fig. 2 scene is scaled as in tools/bench_step.py (the box grows in x and y,
@@ -58,9 +58,15 @@ def tree_error(sim, theta, rng):
     return float(np.median(err)), float(np.percentile(err, 99))
 
 
-def measure(path, n_rods, method, steps):
-    """One size and method: ms per full step and ms of the tip-tip term per step (rank 0's)."""
-    sc = load_scenario(path, overrides=list(scene(path, n_rods).overrides) + [f"forces.tip_magnetic.method={method}"])
+def measure(path, n_rods, method, steps, extra=()):
+    """One size and method: ms per full step and ms of the tip-tip term per step (rank 0's).
+
+    With multiple time stepping (``integrator.slow_every = K``) the step count is rounded up to a
+    multiple of K, so that the time is the average over whole cycles of K steps."""
+    sc = load_scenario(path, overrides=list(scene(path, n_rods).overrides) + [f"forces.tip_magnetic.method={method}",
+                                                                              *extra])
+    k = sc.params.integrator.slow_every
+    steps = -(-steps // k) * k
     sim = Simulation.from_scenario(sc, timing=True, comm=world)
     sim.step(3)  # compilation, neighbour lists, the RK4 start
     ff = sim.force_field
@@ -80,6 +86,8 @@ def main(argv=None):
     ap.add_argument("--method", nargs="+", choices=["direct", "tree"], default=["direct", "tree"])
     ap.add_argument("--step-seconds", type=float, default=20.0,
                     help="time about this long per size and method (at least 2 steps, at most 200)")
+    ap.add_argument("--set", dest="extra", action="append", default=[], metavar="KEY=VALUE",
+                    help="change the scene for every size, e.g. --set integrator.slow_every=1 (repeatable)")
     ap.add_argument("--json", help="write the rows to this JSON file (rank 0)")
     ap.add_argument("--plot", help="draw ms/step against rods from --from-json files into this PNG")
     ap.add_argument("--from-json", nargs="+", default=[], help="JSON files of earlier runs for --plot")
@@ -90,17 +98,19 @@ def main(argv=None):
     import numba
 
     say(f"{world.size} MPI rank(s) x {numba.get_num_threads()} numba threads; scenario {args.scenario}; "
-        f"tree opening angle {THETA} (the default)")
+        f"tree opening angle {THETA} (the default)" + (f"; {' '.join(args.extra)}" if args.extra else ""))
     rng = np.random.default_rng(0)
     rows = []
     for n in args.rods:
         direct_ms = None
         for method in args.method:
             # a first short timing decides how many steps fill --step-seconds
-            sim, ms, tip_ms = measure(args.scenario, n, method, 2)
+            sim, ms, tip_ms = measure(args.scenario, n, method, 2, args.extra)
             steps = int(min(200, max(2, args.step_seconds * 1e3 / max(ms, 1e-3))))
             if steps > 2:
-                sim, ms, tip_ms = measure(args.scenario, n, method, steps)
+                sim, ms, tip_ms = measure(args.scenario, n, method, steps, args.extra)
+            k = sim.params.integrator.slow_every
+            steps = -(-steps // k) * k
             row = {"rods": n, "method": method, "ranks": world.size, "threads": numba.get_num_threads(),
                    "ms_per_step": ms, "tip_ms_per_step": tip_ms, "steps": steps}
             if method == "direct":
