@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import reference as ref
-from conftest import random_rods, simulation
+from conftest import SMALL_CIRCUIT_SCENE, random_rods, simulation
 from selfas_graph import Simulation
 from selfas_graph.io.checkpoint import read_checkpoint, write_checkpoint
 from selfas_graph.io.scenario import scenario_from_text
@@ -123,21 +123,32 @@ def test_slow_kernels_run_only_on_every_kth_step():
     assert calls["electrodes"] == 12 + steps - 3  # a fast term: every evaluation
 
 
-def test_new_currents_force_a_full_evaluation(rng):
+@pytest.mark.parametrize("extrapolate", ["false", "true"])
+def test_new_currents_refresh_the_current_terms_at_the_next_step(rng, extrapolate):
+    """After a circuit solve the current terms are recomputed at the next step, full or not, and
+    only they: the tip-tip and Yukawa sums keep their cycle."""
     s = random_rods(6, rng, box=3.0)
-    sim = simulation(s, forces={"tip_magnetic": {}, "electrodes": {"gap": 20.0}, "current_field": {}},
-                     circuit={"delta_J0": 1.0}, integrator={"slow_every": 5, "dt": 1e-3})
-    sim.step(5)  # RK4 start and step 3 (fast), step 4 (fast)
+    sim = simulation(s, forces={"tip_magnetic": {}, "electrodes": {"gap": 20.0}, "current_field": {},
+                                "current_lorentz": {}},
+                     circuit={"delta_J0": 1.0},
+                     integrator={"slow_every": 5, "dt": 1e-3, "slow_extrapolation": extrapolate == "true"})
+    sim.step(5)  # RK4 start, steps 3 and 4 fast
     ff = sim.force_field
     before = ff.calls["tip_magnetic"]
     sim.step(1)  # step 5: full anyway
     sim.step(1)  # step 6: fast
     assert ff.calls["tip_magnetic"] == before + 1
     ff.set_currents(np.linspace(0.5, 1.0, s.n_rods))
-    sim.step(1)  # step 7: the currents changed, so full
-    assert ff.calls["tip_magnetic"] == before + 2 and ff.calls["current_field"] == 1
-    sim.step(1)  # step 8: fast again; the current force is held
+    sim.step(1)  # step 7: fast, but the currents changed
+    assert ff.calls["tip_magnetic"] == before + 1
+    assert ff.calls["current_field"] == 1 and ff.calls["current_lorentz"] == 1
+    held = ff.out["current_field"].copy()
+    assert np.abs(held).max() > 0
+    sim.step(1)  # step 8: fast; the current force is held (no trend across a jump of the currents)
     assert ff.calls["current_field"] == 1
+    np.testing.assert_array_equal(ff.out["current_field"], held)
+    sim.step(2)  # step 10: full
+    assert ff.calls["current_field"] == 2 and ff.calls["tip_magnetic"] == before + 2
 
 
 def test_error_vanishes_as_the_slow_interval_shrinks():
@@ -183,3 +194,23 @@ def test_checkpoint_between_full_evaluations_resumes_bit_for_bit(tmp_path, extra
     second.step(n2)
     np.testing.assert_array_equal(second.state.position, whole.state.position)
     np.testing.assert_array_equal(second.state.velocity, whole.state.velocity)
+
+
+def test_resume_with_currents_flowing_is_bit_for_bit(tmp_path):
+    """The small circuit scene (contacts, a short circuit, currents re-solved at events) with K = 4:
+    interrupted after the short circuit at a step that is not a multiple of K, resumed from a
+    checkpoint file, it ends where the uninterrupted run ends."""
+    text = SMALL_CIRCUIT_SCENE.replace("dt = 5e-4", "dt = 5e-4\nslow_every = 4")
+    sc = scenario_from_text(text)
+    whole = Simulation.from_scenario(sc)
+    whole.step(1200)
+    assert whole.short_circuit_time is not None and whole.short_circuit_time < 0.4
+    first = Simulation.from_scenario(sc)
+    first.step(901)
+    path = tmp_path / "c.h5"
+    write_checkpoint(path, first.snapshot(), {"scenario_text": text, "overrides": "[]", "run_file": "x", "version": "t"})
+    second = Simulation.from_snapshot(sc.params, read_checkpoint(path)[0])
+    second.step(299)
+    np.testing.assert_array_equal(second.state.position, whole.state.position)
+    np.testing.assert_array_equal(second.force_field.current, whole.force_field.current)
+    assert second.events == whole.events

@@ -496,12 +496,10 @@ class ForceField:
         self.current = np.zeros(self.n_rods)
         self.active_rod = np.zeros(0, dtype=np.int64)
         # multiple time stepping (integrator.slow_every > 1): the slow terms' channels keep their
-        # last full evaluation; the tip term's far part is kept apart from its fast close pairs
+        # last evaluation; the tip term's far part is kept apart from its fast close pairs
         ip = params.integrator
         self.slow_every = ip.slow_every
         self.multiple_time_stepping = ip.slow_every > 1
-        #: True when the held slow forces are out of date (currents changed): the next evaluation is full
-        self.slow_stale = True
         self._tip_term = next((t for t in self.terms if isinstance(t, TipMagnetic)), None)
         if self.multiple_time_stepping and self._tip_term is not None:
             rstar = params.rods.rstar
@@ -511,11 +509,16 @@ class ForceField:
             self._tip_fast = np.zeros((self.n_tips, 3))
         self.slow_channels = [c for t in self.terms if t.slow and not isinstance(t, TipMagnetic)
                               for c, _ in t.channels]
+        #: slow term name -> the held arrays it refreshes (``held_forces`` keys)
+        self._slow_keys = {t.name: (["tip_far"] if isinstance(t, TipMagnetic) else [c for c, _ in t.channels])
+                           for t in self.terms if t.slow}
+        #: slow terms whose inputs changed (new currents): computed at the next evaluation, full or not
+        self.stale = set(self._slow_keys)
         self.extrapolate = self.multiple_time_stepping and ip.slow_extrapolation
         if self.extrapolate:
             self._base = {k: np.zeros_like(v) for k, v in self.held_forces().items()}
             self._rate = {k: np.zeros_like(v) for k, v in self.held_forces().items()}
-            self._base_step = None
+            self._base_step = {k: None for k in self._base}
 
     def set_currents(self, current):
         """Rod currents from the last circuit solve, (n_rods,) float64; used from the next evaluation on.
@@ -527,9 +530,8 @@ class ForceField:
             raise ValueError(f"currents must have shape ({self.n_rods},), got {current.shape}")
         self.current = current
         self.active_rod = np.flatnonzero(current != 0.0).astype(np.int64)
-        self.slow_stale = True
-        if getattr(self, "extrapolate", False):
-            self._base_step = None  # the current forces jump: no rate across the change
+        if self.multiple_time_stepping:
+            self.stale.update(n for n in ("current_field", "current_lorentz") if n in self._slow_keys)
 
     # -- lazily computed views of the current (position, velocity) ---------------------------------
     def _bind(self, position, velocity):
@@ -585,9 +587,13 @@ class ForceField:
         power : (len(nonconservative),) float64, optional
             Filled with ``sum_k F_k . v_k`` of each non-conservative channel.
         full : bool
-            With multiple time stepping: False evaluates only the fast terms and the fast
-            part of the tip-tip force, and adds the slow forces held from the last full
-            evaluation. Ignored (always full) without it.
+            With multiple time stepping: False evaluates only the fast terms, the fast part
+            of the tip-tip force and the slow terms whose inputs changed (new currents), and
+            adds the other slow forces as extrapolated (or held) from their last evaluations.
+            Ignored (always full) without it.
+        step : int, optional
+            The step this evaluation starts (None inside the RK4 stages): the clock of the
+            extrapolation.
 
         Returns
         -------
@@ -598,9 +604,12 @@ class ForceField:
         mts = self.multiple_time_stepping
         full = full or not mts
         blocked = []
+        refreshed = []
         for t in self.terms:
-            if t.slow and not full:
-                continue
+            if t.slow:
+                if not (full or t.name in self.stale):
+                    continue
+                refreshed.append(t.name)
             t0 = time.perf_counter() if self.timing else 0.0
             t.compute(self, self.out)
             if t.name not in _SELF_COUNTING:
@@ -614,20 +623,20 @@ class ForceField:
             if self.timing:
                 self.seconds["gather"] += time.perf_counter() - t0
         if mts:
-            if full:
-                self.slow_stale = False
+            self.stale.clear()
             fast = None
+            tip_fresh = "tip_magnetic" in refreshed
             if self._tip_term is not None:
                 t0 = time.perf_counter() if self.timing else 0.0
                 fast = self._tip_fast
                 self._tip_term.fast(self, *self.fast_range, fast)
-                if full:
+                if tip_fresh:
                     np.subtract(self.out["tip_magnetic"], fast, out=self.tip_far)
                 if self.timing:
                     self.seconds["tip_magnetic_fast"] += time.perf_counter() - t0
             if self.extrapolate:
-                self._extrapolate(full, step)
-            if fast is not None and not full:
+                self._extrapolate([k for name in refreshed for k in self._slow_keys[name]], full, step)
+            if fast is not None and not tip_fresh:
                 np.add(self.tip_far, fast, out=self.out["tip_magnetic"])
         total = self.total
         total.fill(0.0)
@@ -638,26 +647,28 @@ class ForceField:
                 power[j] = np.einsum("ij,ij->", self.out[name], velocity)
         return total
 
-    def _extrapolate(self, full, step):
-        """Linear extrapolation of the held slow forces from the last two full evaluations at step starts."""
-        held = self.held_forces()
-        if full:
-            prev = self._base_step
-            gap = None if (prev is None or step is None) else step - prev
-            for key, arr in held.items():
-                base, rate = self._base[key], self._rate[key]
+    def _extrapolate(self, refreshed, full, step):
+        """Linear extrapolation in time of each held slow force from its last two evaluations.
+
+        A force just ``refreshed`` becomes the new base; its rate is the difference from the
+        previous base over the steps between them when both were full evaluations at step
+        starts at most 2 K apart, else zero (after an RK4 start, or when the currents changed:
+        a jump, not a trend). The others are extrapolated to ``step``.
+        """
+        for key, arr in self.held_forces().items():
+            base, rate, prev = self._base[key], self._rate[key], self._base_step[key]
+            if key in refreshed:
+                gap = None if (prev is None or step is None or not full) else step - prev
                 if gap is not None and 0 < gap <= 2 * self.slow_every:
                     np.subtract(arr, base, out=rate)
                     rate /= gap
                 else:
                     rate.fill(0.0)
                 base[:] = arr
-            self._base_step = step
-        elif self._base_step is not None and step is not None:
-            age = step - self._base_step
-            for key, arr in held.items():
-                np.multiply(self._rate[key], age, out=arr)
-                arr += self._base[key]
+                self._base_step[key] = step if full else None
+            elif prev is not None and step is not None:
+                np.multiply(rate, step - prev, out=arr)
+                arr += base
 
     def held_forces(self) -> dict:
         """The slow forces held between full evaluations (multiple time stepping), by name
@@ -671,32 +682,33 @@ class ForceField:
 
     def mts_state(self) -> dict:
         """What the next evaluations depend on besides the state (multiple time stepping), as copies:
-        held forces, the stale flag and, with extrapolation, its bases and rates. Empty without it."""
+        held forces, the stale terms and, with extrapolation, bases, rates and their steps."""
         if not self.multiple_time_stepping:
             return {}
         snap = {f"mts_held_{k}": v.copy() for k, v in self.held_forces().items()}
-        snap["mts_stale"] = bool(self.slow_stale)
+        snap["mts_stale"] = np.array([name in self.stale for name in self._slow_keys], dtype=bool)
         if self.extrapolate:
             snap.update({f"mts_base_{k}": v.copy() for k, v in self._base.items()})
             snap.update({f"mts_rate_{k}": v.copy() for k, v in self._rate.items()})
-            snap["mts_base_step"] = -1 if self._base_step is None else int(self._base_step)
+            snap["mts_base_step"] = np.array([-1 if b is None else b for b in self._base_step.values()],
+                                             dtype=np.int64)
         return snap
 
     def restore_mts_state(self, snap: dict) -> bool:
-        """Put back what :meth:`mts_state` returned; False (and the next evaluation full) when ``snap``
-        was taken with other settings (e.g. a checkpoint of a run without multiple time stepping)."""
+        """Put back what :meth:`mts_state` returned; False (every slow term then computed at the next
+        evaluation) when ``snap`` was taken with other settings, e.g. without multiple time stepping."""
         mine = self.mts_state()
-        if not mine or set(mine) - set(snap):
+        if not mine or set(mine) - set(snap) or np.shape(snap["mts_stale"]) != mine["mts_stale"].shape:
             return False
         for k, v in self.held_forces().items():
             v[:] = snap[f"mts_held_{k}"]
-        self.slow_stale = bool(snap["mts_stale"])
+        self.stale = {name for name, flag in zip(self._slow_keys, np.asarray(snap["mts_stale"])) if flag}
         if self.extrapolate:
             for k in self._base:
                 self._base[k][:] = snap[f"mts_base_{k}"]
                 self._rate[k][:] = snap[f"mts_rate_{k}"]
-            b = int(snap["mts_base_step"])
-            self._base_step = None if b < 0 else b
+            steps = np.asarray(snap["mts_base_step"])
+            self._base_step = {k: (None if b < 0 else int(b)) for k, b in zip(self._base, steps)}
         return True
 
     def split_brakes(self, position, velocity, dt, work):

@@ -10,7 +10,8 @@ the force per unit mass plus the rigid-bond force. One step:
    first three after :meth:`reset_history`);
    With ``integrator.slow_every = K > 1`` (multiple time stepping) the slow forces
    in ``a_n`` (far tip pairs, Yukawa, rod-current terms) are evaluated on every K-th
-   step and held constant in between; the stiff short-range forces are fresh every step;
+   step and extrapolated (or held) in between; the stiff short-range forces are fresh
+   every step;
 3. with ``integrator.brake = "split"``, the stiff brakes (left out of step 2) act on
    the velocities through their exact solution over dt, pair after pair;
 4. bond constraint: position projection and velocity correction (each optional);
@@ -90,9 +91,9 @@ class AdamsBashforth4:
         h = self.head
         self.hist_v[h] = v
         # multiple time stepping: the slow forces are evaluated on every slow_every-th step (counted
-        # from step 0, so a resumed run keeps the pattern), in the self-starting RK4 steps, and
-        # after the currents changed; in between they are held
-        full = state.step % self.slow_every == 0 or self.count < 3 or self.ff.slow_stale
+        # from step 0, so a resumed run keeps the pattern) and in the self-starting RK4 steps; in
+        # between they are extrapolated (the current terms are also recomputed after new currents)
+        full = state.step % self.slow_every == 0 or self.count < 3
         self.acceleration(x, v, self.hist_a[h], self.hist_p[h], full=full, step=state.step)
         self.count = min(self.count + 1, 4)
         if self.count == 4:
