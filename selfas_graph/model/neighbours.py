@@ -60,7 +60,8 @@ class NeighbourList:
         """Rebuild if needed for ``points`` (n, 3); returns True if rebuilt."""
         ref = self._reference
         if ref is not None and ref.shape == points.shape:
-            moved2 = np.einsum("ij,ij->i", points - ref, points - ref).max(initial=0.0)
+            d = points - ref
+            moved2 = np.einsum("ij,ij->i", d, d).max(initial=0.0)
             if moved2 < (0.5 * self.skin) ** 2:
                 return False
         self.build(points)
