@@ -12,7 +12,11 @@ instead would cost 2.3 times the rest of the build (measured at 24 000 rod centr
 and made the Yukawa pair loop no faster on one core.
 
 The candidates are read from a copy of the positions in cell order, so the inner
-loop streams through memory instead of jumping between random point numbers.
+loop streams through memory instead of jumping between random point numbers, and the
+rows are visited in cell order too, so that consecutive iterations read the same cells
+(measured on one core: 130 -> 118 ms at 24 000 rod centres, 608 -> 523 ms at 10^5, and
+132 -> 95 ms for the 2 10^5 tips, whose sparse grid of 1.1e6 cells otherwise misses
+the cache at every point).
 
 Glossary: ``n`` points, ``g`` (3,) int64 cells per axis, ``h`` cell side, ``lo``
 (3,) float64 the grid's lower corner, ``cell_start`` (g0 g1 g2 + 1,) int64 and
@@ -91,14 +95,16 @@ def _visit(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, e
 @njit_parallel
 def _row_counts(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, exclude_same_rod, counts):
     none = np.empty(0, dtype=np.int64)
-    for k in prange(position.shape[0]):
+    for t in prange(position.shape[0]):
+        k = cell_point[t]  # points in cell order: neighbouring iterations read the same cells
         counts[k] = _visit(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, exclude_same_rod, k,
                            none, 0)
 
 
 @njit_parallel
 def _row_fill(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, exclude_same_rod, start, index):
-    for k in prange(position.shape[0]):
+    for t in prange(position.shape[0]):
+        k = cell_point[t]
         _visit(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, exclude_same_rod, k, index,
                start[k])
 
