@@ -1,6 +1,8 @@
 """The Verlet neighbour list holds every pair within the cut-off, before and after moves."""
 import numpy as np
+import pytest
 
+from selfas_graph.kernels.cells import neighbour_rows
 from selfas_graph.model.neighbours import NeighbourList
 
 
@@ -42,3 +44,94 @@ def test_compressed_rows_symmetric(rng):
     for k in range(100):
         for l in nl.index[nl.start[k]:nl.start[k + 1]]:
             assert k in nl.index[nl.start[l]:nl.start[l + 1]]
+
+
+# -- the cell-list build (kernels/cells.py) against the brute-force pair set -------------------------
+
+def rows(start, index):
+    """The compressed rows as a set of ordered pairs; also checks no row lists a point twice."""
+    out = set()
+    for k in range(len(start) - 1):
+        row = index[start[k]:start[k + 1]].tolist()
+        assert len(set(row)) == len(row)
+        out |= {(k, l) for l in row}
+    return out
+
+
+def both_ways(pairs):
+    return pairs | {(l, k) for k, l in pairs}
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 3])
+def test_cell_rows_few_points(n):
+    """0 and 1 points have no pairs; 2 and 3 points at hand-placed distances give exactly the close ones."""
+    x = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.0], [0.0, 0.0, 2.0]])[:n]
+    start, index = neighbour_rows(x, 1.0)
+    assert start.shape == (n + 1,) and start[0] == 0 and start[-1] == len(index)
+    expected = {(0, 1)} if n >= 2 else set()
+    assert rows(start, index) == both_ways(expected)
+
+
+def test_cell_rows_two_points_of_one_rod():
+    """The two tips of one rod are no pair with exclude_same_rod; tips of different rods are."""
+    x = np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]])
+    assert rows(*neighbour_rows(x, 1.0, exclude_same_rod=True)) == both_ways({(0, 2), (1, 2)})
+    assert rows(*neighbour_rows(x, 1.0)) == both_ways({(0, 1), (0, 2), (1, 2)})
+
+
+@pytest.mark.parametrize("exclude", [False, True])
+@pytest.mark.parametrize("box, radius", [(5.0, 0.6), (1.0, 2.0), (1e-3, 0.5), (50.0, 0.3)])
+def test_cell_rows_equal_brute_force(rng, box, radius, exclude):
+    """Same pair set as all-pairs distances: several cells per axis, all points in one cell, sparse points."""
+    x = rng.uniform(-box, box, (300, 3))
+    assert rows(*neighbour_rows(x, radius, exclude)) == both_ways(brute_pairs(x, radius, exclude))
+
+
+def test_cell_rows_flat_and_coincident_points(rng):
+    """Points in a plane (one cell thick), on a line, and on top of each other are all found."""
+    x = rng.uniform(0, 4, (200, 3))
+    x[:, 2] = 0.0
+    x[100:, 1] = 1.0
+    x[150:160] = x[150]
+    assert rows(*neighbour_rows(x, 0.7)) == both_ways(brute_pairs(x, 0.7, False))
+
+
+def test_cell_rows_points_far_apart(rng):
+    """Clusters 1e12 apart: the grid is capped (memory stays O(n)) and every close pair is still found."""
+    x = np.concatenate([rng.uniform(0, 1, (50, 3)), rng.uniform(0, 1, (50, 3)) + 1e12])
+    start, index = neighbour_rows(x, 0.4, max_cells=64)
+    assert rows(start, index) == both_ways(brute_pairs(x, 0.4, False))
+
+
+def test_cell_rows_independent_of_grid_and_deterministic(rng):
+    """A coarser grid (cap on the cells) gives the same pairs; the same positions give identical rows."""
+    x = rng.uniform(0, 6, (400, 3))
+    a = neighbour_rows(x, 0.5)
+    b = neighbour_rows(x.copy(), 0.5)
+    c = neighbour_rows(x, 0.5, max_cells=8)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
+    assert rows(*a) == rows(*c)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, 1e200])
+def test_build_with_broken_positions_lists_nothing(rng, bad):
+    """A NaN, inf or absurdly far point does not crash the build; the list is empty until the run stops."""
+    x = rng.uniform(0, 1, (20, 3))
+    x[3, 1] = bad
+    nl = NeighbourList(0.5, 0.1)
+    nl.build(x)
+    assert nl.start.shape == (21,) and len(nl.index) == 0 and nl.pairs.shape == (0, 2)
+
+
+def test_pairs_sorted_once_each(rng):
+    """``pairs`` holds each listed pair once, k < l, sorted by (k, l), and follows a rebuild."""
+    x = rng.uniform(0, 2, (80, 3))
+    nl = NeighbourList(0.5, 0.1)
+    nl.build(x)
+    p = nl.pairs
+    assert set(map(tuple, p.tolist())) == brute_pairs(x, 0.6, False)
+    assert (p[:, 0] < p[:, 1]).all()
+    np.testing.assert_array_equal(p, p[np.lexsort((p[:, 1], p[:, 0]))])
+    nl.build(x[:10])
+    assert set(map(tuple, nl.pairs.tolist())) == brute_pairs(x[:10], 0.6, False)

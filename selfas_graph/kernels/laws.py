@@ -8,6 +8,7 @@ kernels and the gradient tests. Sources are MODEL.md section 3 (term numbers).
 import math
 
 from ._jit import inline, inline_sum
+from .expo import exp_nonpositive
 
 
 @inline_sum
@@ -68,12 +69,20 @@ def yukawa_force_over_r(r2, zz, screening, core):
     D cannot bring their centres closer than about D, and without the core two crossing
     rods feel an unbounded 1/r^2 force. Clamping r^2 to a^2 gives exactly this,
     because the returned factor is f/r. ``r = 0`` without a core gives 0.
+
+    The exponential is :func:`.expo.exp_nonpositive` (within 2 ulp of ``math.exp``) and
+    ``r = 0`` is a select, not a branch, so that the neighbour loop vectorises: measured
+    at 24 000 rods (5.0e6 directed pairs) on one core of the 2-core machine, the pair loop
+    of ``pairs.yukawa_centres`` went from 9.0 to 7.5 ns per pair (the same loop with the
+    exponential left out takes 4.1: the rest is the gathers of the neighbours' centres).
+    Results differ from those with ``math.exp`` by at most 2e-16 of the largest force.
     """
     rr = max(r2, core * core)
-    if rr == 0.0:
-        return 0.0
-    r = math.sqrt(rr)
-    return zz * math.exp(-r / screening) * (1.0 / rr + 1.0 / (screening * r)) / r
+    zero = rr == 0.0  # NaN is not zero: it propagates
+    rs = 1.0 if zero else rr
+    r = math.sqrt(rs)
+    f = zz * exp_nonpositive(-r / screening) * (1.0 / rs + 1.0 / (screening * r)) / r
+    return 0.0 if zero else f
 
 
 @inline
@@ -84,8 +93,8 @@ def yukawa_potential(r2, zz, screening, core):
     """
     if r2 >= core * core:
         r = math.sqrt(r2)
-        return zz * math.exp(-r / screening) / r
-    ec = math.exp(-core / screening)
+        return zz * exp_nonpositive(-r / screening) / r
+    ec = exp_nonpositive(-core / screening)
     g = zz * ec * (1.0 / (core * core) + 1.0 / (screening * core)) / core  # f(a) / a
     return zz * ec / core + 0.5 * g * (core * core - r2)
 

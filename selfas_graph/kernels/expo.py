@@ -1,0 +1,73 @@
+"""An exponential that vectorises: ``exp(x)`` for ``x <= 0`` to within 2 ulp of ``math.exp``.
+
+numba lowers ``math.exp`` to a call into libm, and LLVM cannot vectorise a loop that
+calls it without Intel's SVML (absent on the 2-core machine, and not something to
+depend on). Written out in arithmetic, the exponential vectorises with the loop around
+it. Derivation (Cody and Waite's range reduction):
+
+``exp(x) = 2^n exp(r)``, ``n = round(x / ln 2)``, ``r = x - n ln 2`` with ``|r| <= ln 2 / 2``,
+where ``n ln 2`` is subtracted in two parts (``LN2_HI`` has its low 11 bits zero, so
+``n LN2_HI`` is exact for ``|n| < 2^11``). ``exp(r)`` is its Taylor series to degree
+13, whose remainder ``|r|^14 / 14! < 5e-18`` is below half an ulp; Horner's rule
+adds at most about 1 ulp. ``2^n`` is made from the bits of a double; for results
+below the smallest normal double it is applied as two factors so that each stays
+normal (the product then rounds once, into the subnormals, like libm).
+
+Special values: ``exp(0) = 1``; ``x < -745.2`` gives 0 (the true value is below half
+the smallest subnormal); NaN gives NaN. Meant for ``x <= 0``: positive ``x`` is
+computed the same way but only up to ``x < 709`` (no overflow handling).
+"""
+from numba.core import types
+from numba.extending import intrinsic
+
+from ._jit import inline
+
+LOG2E = 1.4426950408889634
+LN2_HI = 6.93147180369123816490e-01  # ln 2 rounded to 32 significant bits
+LN2_LO = 1.90821492927058770002e-10  # ln 2 - LN2_HI
+
+
+@intrinsic
+def _double_from_bits(typingctx, bits):
+    """The double whose IEEE bits are the int64 ``bits`` (a register move, vectorisable)."""
+    sig = types.float64(types.int64)
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], context.get_value_type(types.float64))
+
+    return sig, codegen
+
+
+@inline
+def _pow2(m):
+    """``2^m`` for an integer ``-1022 <= m <= 1023``, from its bits."""
+    return _double_from_bits((m + 1023) << 52)
+
+
+@inline
+def exp_nonpositive(x):
+    """``exp(x)`` for ``x <= 0``, within 2 ulp of ``math.exp`` (module docstring)."""
+    # NaN fails every comparison: it keeps its value here and is clamped below only in t
+    x = -745.2 if x < -745.2 else x
+    t = -x * LOG2E + 0.5
+    t = t if t < 1076.0 else 1076.0  # also catches NaN, so that n is a defined integer
+    t = t if t > -1023.0 else -1023.0
+    n = int(t) if t >= 0.0 else int(t) - 1  # floor(t) = round(-x / ln 2)
+    r = (x + n * LN2_HI) + n * LN2_LO  # x - (-n) ln 2
+    p = 1.0 / 6227020800.0
+    p = p * r + 1.0 / 479001600.0
+    p = p * r + 1.0 / 39916800.0
+    p = p * r + 1.0 / 3628800.0
+    p = p * r + 1.0 / 362880.0
+    p = p * r + 1.0 / 40320.0
+    p = p * r + 1.0 / 5040.0
+    p = p * r + 1.0 / 720.0
+    p = p * r + 1.0 / 120.0
+    p = p * r + 1.0 / 24.0
+    p = p * r + 1.0 / 6.0
+    p = p * r + 0.5
+    p = p * r + 1.0
+    p = p * r + 1.0
+    # exp(x) = p 2^(-n), as two normal factors 2^(-h) 2^(-(n - h)) with h = n // 2
+    h = n >> 1
+    return p * _pow2(-h) * _pow2(h - n)
