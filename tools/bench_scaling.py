@@ -112,6 +112,7 @@ def main(argv=None):
             k = sim.params.integrator.slow_every
             steps = -(-steps // k) * k
             row = {"rods": n, "method": method, "ranks": world.size, "threads": numba.get_num_threads(),
+                   "slow_every": k,
                    "ms_per_step": ms, "tip_ms_per_step": tip_ms, "steps": steps}
             if method == "direct":
                 direct_ms = ms
@@ -156,13 +157,15 @@ def plot(files, out):
                 r0 = next(r for r in rows if r["method"] == method)
                 x, y = zip(*pts)
                 ax.loglog(x, y, "o-" if method == "tree" else "s--",
-                          label=f"{method}, {r0['ranks']} rank(s) x {r0['threads']} thread(s)")
+                          label=f"{method}, {r0['ranks']} rank(s) x {r0['threads']} thread(s)"
+                          + (f", slow sums every {r0['slow_every']} steps" if r0.get("slow_every", 1) > 1
+                             else ", every term every step"))
     px, py = zip(*sorted(PEER_MS.items()))
     ax.loglog(px, py, "k^:", label="fastest peer (OpenMM 8.6 CPU, PME), same machine")
     n = np.array([1e3, 1e5])
     ax.loglog(n, py[0] * (n * np.log(n)) / (px[0] * np.log(px[0])), color="grey", lw=0.8, label="N log N")
     ax.set_xlabel("rods")
-    ax.set_ylabel("ms per full step (all Fig. 2 terms)")
+    ax.set_ylabel("ms per step (all Fig. 2 terms)")
     ax.set_title("cost of a step against system size")
     ax.legend(fontsize=8)
     fig.tight_layout()

@@ -1,13 +1,14 @@
 """Why a network drifts outwards: radial forces on the rods of a run's last frame, by term.
 
-Usage: python tools/radial_forces.py RUN.h5
+Usage: python tools/radial_forces.py RUN.h5 [--frames 20]
 
-Prints the median distance of rod centres from the z axis at a few frames, then, for the last
-frame (velocities set to zero, the saved currents on the current-carrying rods), the mean and
-median radial component (positive outwards) of each force term summed over a rod's two tips,
-over the current-carrying rods and over all rods, and the Lorentz force of the plasma field
-and of B_ext alone on the rod currents (field taken at the rod centre). Used for the Fig. 2
-runs in docs/results.md.
+Prints the median distance of rod centres from the z axis at a few frames, then, averaged over
+the last frames (velocities set to zero, the saved currents on the current-carrying rods), the
+mean radial component (positive outwards) of each force term summed over a rod's two tips, over
+the current-carrying rods and over all rods, with the Lorentz force of the plasma field and of
+B_ext alone on the rod currents (field taken at the rod centre). Rods jiggle in their contacts,
+so one frame's contact forces are noisy; the standard error over frames says how much. Used for
+the Fig. 2 runs in docs/results.md.
 """
 import sys
 from pathlib import Path
@@ -33,49 +34,70 @@ def _axis_frame(x):
     return c, rho, rhat, phi
 
 
-def main(path):
+def radial_parts(params, x, role, current):
+    """{name: radial force per rod (n_rods,)} at positions ``x`` with zero velocities (see the docstring)."""
+    state = random_state(params)
+    state.position[:] = x
+    state.velocity[:] = 0.0
+    fil = role == FILAMENT
+    ff = ForceField(params, state)
+    ff.set_currents(np.where(fil, current, 0.0))
+    ff.evaluate(state.position, state.velocity)
+    _, rho, rhat, phi = _axis_frame(x)
+    parts = {}
+    for name, f in ff.out.items():
+        if np.any(f):
+            parts[name] = ((f[0::2] + f[1::2])[:, :2] * rhat).sum(1)
+    s = x[1::2] - x[0::2]  # from tip a to tip b, the sense of a positive current
+    J = np.where(fil, current, 0.0)
+    forces = params.forces
+    if forces.plasma_filament is not None:
+        pf = forces.plasma_filament
+        b = np.where(rho < pf.radius, 2 * pf.current * rho / pf.radius**2, 2 * pf.current / rho)
+        parts["Lorentz, plasma field alone"] = ((J[:, None] * np.cross(s, b[:, None] * phi))[:, :2] * rhat).sum(1)
+    if forces.uniform_field is not None:
+        bz = np.broadcast_to(np.array(forces.uniform_field.B), s.shape)
+        parts["Lorentz, B_ext alone"] = ((J[:, None] * np.cross(s, bz))[:, :2] * rhat).sum(1)
+    return parts
+
+
+def main(path, frames):
     with RunFile(path) as rf:
         times = rf.time
         n = len(times)
         for fr in sorted({0, n // 40, n // 20, n // 10, n // 5, n // 2, n - 1}):
             _, rho, _, _ = _axis_frame(rf.position(fr))
             print(f"t = {times[fr]:7.1f}: median distance of rod centres from the axis {np.median(rho):6.2f} L")
-        g = rf.graph(frame=-1)
+        params = scenario_from_text(rf.scenario_text).params
+        rows = {}
+        for fr in range(max(0, n - frames), n):
+            g = rf.graph(frame=fr)
+            fil = g["role"] == FILAMENT
+            for name, rad in radial_parts(params, rf.position(fr), g["role"], g["current"]).items():
+                rows.setdefault(name, []).append((rad[fil].mean(), rad.mean()))
+        last = rf.graph(frame=-1)
         x = rf.position(-1)
-        text = rf.scenario_text
-    params = scenario_from_text(text).params
-    state = random_state(params)
-    state.position[:] = x
-    state.velocity[:] = 0.0
-    fil = g["role"] == FILAMENT
-    ff = ForceField(params, state)
-    ff.set_currents(np.where(fil, g["current"], 0.0))
-    ff.evaluate(state.position, state.velocity)
-    _, rho, rhat, phi = _axis_frame(x)
+    fil = last["role"] == FILAMENT
+    _, rho, _, _ = _axis_frame(x)
     print(f"last frame: {fil.sum()} rods in current-carrying filaments, median distance {np.median(rho[fil]):.2f} L")
-    print("radial force per rod (+ outwards)      filament rods: mean   median | all rods: mean")
-
-    def show(name, per_rod):
-        rad = (per_rod[:, :2] * rhat).sum(1)
-        print(f"  {name:34s} {rad[fil].mean():+9.4f} {np.median(rad[fil]):+9.4f} | {rad.mean():+9.4f}")
-
-    for name, f in ff.out.items():
-        show(name, f[0::2] + f[1::2])
-    s = x[1::2] - x[0::2]  # from tip a to tip b, the sense of a positive current
-    J = np.where(fil, g["current"], 0.0)
-    forces = params.forces
-    if forces.plasma_filament is not None:
-        pf = forces.plasma_filament
-        b = np.where(rho < pf.radius, 2 * pf.current * rho / pf.radius**2, 2 * pf.current / rho)
-        show("Lorentz, plasma field alone", J[:, None] * np.cross(s, b[:, None] * phi))
-    if forces.uniform_field is not None:
-        bz = np.broadcast_to(np.array(forces.uniform_field.B), s.shape)
-        show("Lorentz, B_ext alone", J[:, None] * np.cross(s, bz))
-    print(f"sum of J s_z over the filament rods: {float((J * s[:, 2])[fil].sum()):+.3f} "
+    m = len(next(iter(rows.values())))
+    print(f"radial force per rod (+ outwards), mean over the last {m} frames +- its standard error over the frames")
+    print(f"  {'term':34s} {'filament rods':>20s} {'all rods':>20s}")
+    for name, vals in rows.items():
+        v = np.array(vals)
+        err = v.std(axis=0, ddof=1) / np.sqrt(len(v)) if len(v) > 1 else np.full(2, np.nan)
+        print(f"  {name:34s} {v[:, 0].mean():+9.4f} +- {err[0]:.4f} {v[:, 1].mean():+9.4f} +- {err[1]:.4f}")
+    s = x[1::2] - x[0::2]
+    J = np.where(fil, last["current"], 0.0)
+    print(f"sum of J s_z over the filament rods (last frame): {float((J * s[:, 2])[fil].sum()):+.3f} "
           "(negative: the network current runs along -z)")
 
 
 if __name__ == "__main__":
-    if len(sys.argv) != 2:
-        sys.exit(__doc__.splitlines()[2])
-    main(sys.argv[1])
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run", help="run file (HDF5)")
+    ap.add_argument("--frames", type=int, default=20, help="average over this many last frames (default 20)")
+    a = ap.parse_args()
+    main(a.run, a.frames)
