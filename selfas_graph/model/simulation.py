@@ -321,7 +321,7 @@ class Simulation:
         msg = (f"numerical failure at step {st.step} (t = {st.time:.6g}): {what}; rods involved: "
                f"{rods[:10]}; {cause}. "
                f"The time step integrator.dt = {self.dt:g} is the likely cause: try a smaller one "
-               f"(the stiff parts are the tip core and the brakes inside r*).")
+               f"(the stiff parts are the tip core and the brakes inside r*){self._slow_hint()}.")
         raise NumericalFailure(msg, st.step, rods)
 
     # ------------------------------------------------------------------ observables
@@ -491,6 +491,14 @@ class Simulation:
         self._check_energy(obs)
         return obs
 
+    def _slow_hint(self) -> str:
+        """With multiple time stepping, the other suspect of a failure (appended to its message)."""
+        k = self.params.integrator.slow_every
+        if k <= 1:
+            return ""
+        return (f"; or the slow forces, evaluated every integrator.slow_every = {k} steps, change too much "
+                f"in between: try a smaller slow_every (8 or 16 in the shipped scenes)")
+
     def energy_scale(self, obs) -> float:
         """Energy turned over so far: kinetic energy plus |work| of every non-conservative channel."""
         return abs(obs["energy/kinetic"]) + sum(abs(v) for k, v in obs.items() if k.startswith("work/"))
@@ -513,5 +521,6 @@ class Simulation:
                 f"numerical failure at step {st.step} (t = {st.time:.6g}): the energy balance is off by {err:.3g}, "
                 f"{err / scale:.0%} of the energy turned over ({scale:.3g}; integrator.energy_tolerance = {tol:g}); "
                 f"the largest work is done by the '{top}' term. The time step integrator.dt = {self.dt:g} is likely "
-                f"past the stability limit of the stiff contact terms (tip brake k_br, tip core): try half of it.",
+                f"past the stability limit of the stiff contact terms (tip brake k_br, tip core): try half of it"
+                f"{self._slow_hint()}.",
                 st.step)
