@@ -224,3 +224,30 @@ def test_rows_kernels_serial_and_parallel_builds_agree_bit_for_bit(rng):
         for u, w in zip(a, b):
             if isinstance(u, np.ndarray):
                 np.testing.assert_array_equal(u, w, err_msg=kernel.__name__)
+
+
+def test_cached_kernels_are_dropped_when_any_kernel_source_changed(tmp_path):
+    """numba checks a cached kernel only against its own file; the package keeps a digest of all
+    kernel sources beside the cache and drops the cache when it differs (a law edited in laws.py
+    must not leave pairs.py's old machine code in use)."""
+    from selfas_graph.kernels._jit import DIGEST_FILE, drop_stale_cache, sources_digest
+
+    src = tmp_path / "src"
+    src.mkdir()
+    (src / "laws.py").write_text("def f(x):\n    return x\n")
+    (src / "pairs.py").write_text("from .laws import f\n")
+    before = sources_digest(src)
+    (src / "laws.py").write_text("def f(x):\n    return 2 * x\n")
+    after = sources_digest(src)
+    assert before != after
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    (cache / DIGEST_FILE).write_text(before + "\n")
+    for name in ("pairs.yukawa-62.py311.nbi", "pairs.yukawa-62.py311.1.nbc", "keep.txt"):
+        (cache / name).write_text("x")
+    assert drop_stale_cache(cache, before) == 0  # same sources: the cache stays
+    assert drop_stale_cache(cache, after) == 2  # changed: both cache files go, other files stay
+    assert sorted(p.name for p in cache.iterdir()) == sorted([DIGEST_FILE, "keep.txt"])
+    assert (cache / DIGEST_FILE).read_text().strip() == after
+    assert drop_stale_cache(cache, after) == 0
+    assert drop_stale_cache(tmp_path / "missing", after) == 0  # no folder yet: nothing to drop, no error

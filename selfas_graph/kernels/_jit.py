@@ -13,8 +13,10 @@ structure-of-arrays input (3.4e9 tip pairs/s); the result differs from the
 strict one by at most 4e-15 relative (tests hold it to 1e-12).
 """
 import functools
+import hashlib
 import os
 import types
+from pathlib import Path
 
 # numba's OpenMP threading layer lets idle workers spin; with as many threads as
 # cores the spinning workers compete with the Python thread that launches the
@@ -28,6 +30,65 @@ import numba  # noqa: E402
 
 #: cache compiled kernels on disk so that a second CLI run starts in seconds
 _COMMON = dict(cache=True, nogil=True, error_model="numpy")
+
+#: name of the file, beside the cached kernels, that holds the digest of the sources they came from
+DIGEST_FILE = "selfas_graph_kernel_sources.sha1"
+
+
+def sources_digest(folder=None) -> str:
+    """SHA-1 of every kernel module's source (names and bytes, in name order)."""
+    folder = Path(__file__).resolve().parent if folder is None else Path(folder)
+    h = hashlib.sha1()
+    for f in sorted(folder.glob("*.py")):
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def drop_stale_cache(cache_dir, digest) -> int:
+    """Delete the cached kernels in ``cache_dir`` unless they were compiled from sources with ``digest``.
+
+    numba checks a cached kernel only against the file that defines it, not against the laws it
+    inlines from other modules (``laws.py``, ``expo.py``): after an update of those alone, the
+    old machine code would be loaded silently. A digest of all kernel sources, kept beside the
+    cache, catches that; on a mismatch every cached kernel of this package is dropped and
+    compiled again. Returns the number of files deleted. Errors (a read-only or vanished
+    folder, another process deleting at the same time) are ignored: numba then compiles afresh
+    or caches elsewhere.
+    """
+    cache_dir = Path(cache_dir)
+    stamp = cache_dir / DIGEST_FILE
+    try:
+        if stamp.read_text().strip() == digest:
+            return 0
+    except OSError:
+        pass
+    dropped = 0
+    for f in list(cache_dir.glob("*.nbi")) + list(cache_dir.glob("*.nbc")):
+        try:
+            f.unlink()
+            dropped += 1
+        except OSError:
+            pass
+    try:
+        cache_dir.mkdir(parents=True, exist_ok=True)
+        stamp.write_text(digest + "\n")
+    except OSError:
+        pass
+    return dropped
+
+
+def _kernel_cache_dir():
+    """The folder numba caches this package's kernels in (in the source tree, or user-wide if that
+    is read-only, or under NUMBA_CACHE_DIR), as numba itself locates it for a kernel here."""
+    probe = numba.njit(cache=True)(lambda: 0)
+    return Path(probe._cache._cache_path)
+
+
+try:
+    drop_stale_cache(_kernel_cache_dir(), sources_digest())
+except Exception:  # noqa: BLE001 - numba internals differ between versions; the check is a safeguard
+    pass
 _SUM_FLAGS = {"reassoc", "contract"}
 
 njit = numba.njit(fastmath=False, **_COMMON)
