@@ -71,6 +71,8 @@ class _Term:
     channels: list = []
     name = ""
     slow = False
+    #: the term reads the rod currents: new currents make its held force stale
+    uses_currents = False
 
     def compute(self, ff, out):  # pragma: no cover - interface
         raise NotImplementedError
@@ -355,6 +357,7 @@ class CurrentField(_Term):
     name = "current_field"
     channels = [("current_field", False)]
     slow = True
+    uses_currents = True
 
     def __init__(self, p, state):
         self.w = 0.5 * p.rods.diameter
@@ -383,6 +386,7 @@ class CurrentLorentz(_Term):
     name = "current_lorentz"
     channels = [("current_lorentz", False)]
     slow = True
+    uses_currents = True
 
     def __init__(self, p, state):
         self.t, self.wt = kc.gauss_legendre_01(p.forces.current_lorentz.quadrature_points)
@@ -507,8 +511,6 @@ class ForceField:
             self.extend_tip_range(self.fast_range[1])
             self.tip_far = np.zeros((self.n_tips, 3))
             self._tip_fast = np.zeros((self.n_tips, 3))
-        self.slow_channels = [c for t in self.terms if t.slow and not isinstance(t, TipMagnetic)
-                              for c, _ in t.channels]
         #: slow term name -> the held arrays it refreshes (``held_forces`` keys)
         self._slow_keys = {t.name: (["tip_far"] if isinstance(t, TipMagnetic) else [c for c, _ in t.channels])
                            for t in self.terms if t.slow}
@@ -531,7 +533,7 @@ class ForceField:
         self.current = current
         self.active_rod = np.flatnonzero(current != 0.0).astype(np.int64)
         if self.multiple_time_stepping:
-            self.stale.update(n for n in ("current_field", "current_lorentz") if n in self._slow_keys)
+            self.stale.update(t.name for t in self.terms if t.slow and t.uses_currents)
 
     # -- lazily computed views of the current (position, velocity) ---------------------------------
     def _bind(self, position, velocity):
@@ -675,10 +677,8 @@ class ForceField:
         (the slow channels and ``tip_far``, the tip-tip force less its fast part); views, not copies."""
         if not self.multiple_time_stepping:
             return {}
-        held = {name: self.out[name] for name in self.slow_channels}
-        if self._tip_term is not None:
-            held["tip_far"] = self.tip_far
-        return held
+        return {key: (self.tip_far if key == "tip_far" else self.out[key])
+                for keys in self._slow_keys.values() for key in keys}
 
     def mts_state(self) -> dict:
         """What the next evaluations depend on besides the state (multiple time stepping), as copies:
