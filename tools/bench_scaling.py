@@ -63,8 +63,7 @@ def measure(path, n_rods, method, steps, extra=()):
 
     With multiple time stepping (``integrator.slow_every = K``) the step count is rounded up to a
     multiple of K, so that the time is the average over whole cycles of K steps."""
-    sc = load_scenario(path, overrides=list(scene(path, n_rods).overrides) + [f"forces.tip_magnetic.method={method}",
-                                                                              *extra])
+    sc = load_scenario(path, overrides=list(scene(path, n_rods, extra).overrides) + [f"forces.tip_magnetic.method={method}"])
     k = sc.params.integrator.slow_every
     steps = -(-steps // k) * k
     sim = Simulation.from_scenario(sc, timing=True, comm=world)

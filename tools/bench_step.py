@@ -1,6 +1,7 @@
 """Step benchmark: milliseconds per full step for the Fig. 2 scene and a 6000-rod variant.
 
 Usage: python tools/bench_step.py [--rods 1200 6000] [--steps 200] [--scenario scenarios/fig2.toml]
+                                  [--set KEY=VALUE ...]
        mpiexec -n 2 python tools/bench_step.py ...   (the force rows split over the ranks; rank 0 prints)
        python tools/bench_step.py --compare ...      (1 rank x 1 thread, 2 ranks x 1 thread and
                                                       1 rank x 2 threads, in one table)
@@ -34,14 +35,15 @@ from selfas_graph.parallel import world  # noqa: E402
 CONFIGS = [("1 rank x 1 thread", 1, 1), ("2 ranks x 1 thread", 2, 1), ("1 rank x 2 threads", 1, 2)]
 
 
-def scene(path, n_rods):
-    """The scenario with ``n_rods`` rods, the box scaled in x, y to keep the Fig. 2 density."""
-    base = load_scenario(path)
+def scene(path, n_rods, extra=()):
+    """The scenario with ``n_rods`` rods, the box scaled in x, y to keep the Fig. 2 density,
+    and the overrides ``extra`` (``KEY=VALUE`` strings)."""
+    base = load_scenario(path, overrides=extra)
     box = np.array(base.params.placement.box)
     scale = (n_rods / base.params.rods.count) ** 0.5
     xy = [[float(box[0][0] * scale), float(box[0][1] * scale)], [float(box[1][0] * scale), float(box[1][1] * scale)]]
     z = [float(v) for v in box[2]]
-    over = [f"rods.count={n_rods}", f"placement.box=[{xy[0]}, {xy[1]}, {z}]"]
+    over = [*extra, f"rods.count={n_rods}", f"placement.box=[{xy[0]}, {xy[1]}, {z}]"]
     return load_scenario(path, overrides=over)
 
 
@@ -56,6 +58,8 @@ def main():
                     help="with --compare: run the configurations this many times in turn and keep each one's "
                          "fastest (the machine is shared: the minimum is the least disturbed run)")
     ap.add_argument("--json", action="store_true", help="print only a JSON line of ms/step per size (rank 0)")
+    ap.add_argument("--set", dest="extra", action="append", default=[], metavar="KEY=VALUE",
+                    help="change the scene, e.g. --set integrator.slow_every=1 (repeatable)")
     args = ap.parse_args()
     if args.compare:
         return compare(args)
@@ -64,7 +68,7 @@ def main():
     say(f"numba threads: {threads} x {world.size} MPI ranks; scenario {args.scenario}")
     rows = []
     for n in args.rods:
-        sc = scene(args.scenario, n)
+        sc = scene(args.scenario, n, args.extra)
         sim = Simulation.from_scenario(sc, timing=True, comm=world)
         sim.step(10)
         ff = sim.force_field
@@ -108,7 +112,7 @@ def compare(args):
     """Run this tool once per entry of CONFIGS (under mpiexec for several ranks) and tabulate ms/step."""
     mpiexec = Path(sys.executable).parent / "mpiexec"
     base = [sys.executable, str(Path(__file__).resolve()), "--json", "--steps", str(args.steps),
-            "--scenario", args.scenario, "--rods", *map(str, args.rods)]
+            "--scenario", args.scenario, "--rods", *map(str, args.rods), *(a for e in args.extra for a in ("--set", e))]
     results = [{} for _ in CONFIGS]
     for _ in range(args.repeat):
         for best, (label, ranks, threads) in zip(results, CONFIGS):

@@ -20,18 +20,17 @@ sys.path.insert(0, str(ROOT))
 
 from selfas_graph.io.h5md import RunFile  # noqa: E402
 from selfas_graph.io.scenario import scenario_from_text  # noqa: E402
+from selfas_graph.kernels.fields import plasma_field  # noqa: E402
 from selfas_graph.model.forces import ForceField  # noqa: E402
 from selfas_graph.model.graph import FILAMENT  # noqa: E402
 from selfas_graph.model.state import random_state  # noqa: E402
 
 
 def _axis_frame(x):
-    """Rod centres, their distance from the z axis, and the radial and azimuthal unit vectors."""
+    """Rod centres, their distance from the z axis and the radial unit vectors (x, y)."""
     c = 0.5 * (x[0::2] + x[1::2])
     rho = np.hypot(c[:, 0], c[:, 1])
-    rhat = np.stack([c[:, 0] / rho, c[:, 1] / rho], 1)
-    phi = np.stack([-c[:, 1] / rho, c[:, 0] / rho, np.zeros_like(rho)], 1)
-    return c, rho, rhat, phi
+    return c, rho, np.stack([c[:, 0] / rho, c[:, 1] / rho], 1)
 
 
 def radial_parts(params, x, role, current):
@@ -43,7 +42,7 @@ def radial_parts(params, x, role, current):
     ff = ForceField(params, state)
     ff.set_currents(np.where(fil, current, 0.0))
     ff.evaluate(state.position, state.velocity)
-    _, rho, rhat, phi = _axis_frame(x)
+    centre, rho, rhat = _axis_frame(x)
     parts = {}
     for name, f in ff.out.items():
         if np.any(f):
@@ -53,8 +52,9 @@ def radial_parts(params, x, role, current):
     forces = params.forces
     if forces.plasma_filament is not None:
         pf = forces.plasma_filament
-        b = np.where(rho < pf.radius, 2 * pf.current * rho / pf.radius**2, 2 * pf.current / rho)
-        parts["Lorentz, plasma field alone"] = ((J[:, None] * np.cross(s, b[:, None] * phi))[:, :2] * rhat).sum(1)
+        b = np.empty_like(centre)
+        plasma_field(np.ascontiguousarray(centre), float(pf.axis[0]), float(pf.axis[1]), pf.radius, pf.current, b)
+        parts["Lorentz, plasma field alone"] = ((J[:, None] * np.cross(s, b))[:, :2] * rhat).sum(1)
     if forces.uniform_field is not None:
         bz = np.broadcast_to(np.array(forces.uniform_field.B), s.shape)
         parts["Lorentz, B_ext alone"] = ((J[:, None] * np.cross(s, bz))[:, :2] * rhat).sum(1)
@@ -66,7 +66,7 @@ def main(path, frames):
         times = rf.time
         n = len(times)
         for fr in sorted({0, n // 40, n // 20, n // 10, n // 5, n // 2, n - 1}):
-            _, rho, _, _ = _axis_frame(rf.position(fr))
+            _, rho, _ = _axis_frame(rf.position(fr))
             print(f"t = {times[fr]:7.1f}: median distance of rod centres from the axis {np.median(rho):6.2f} L")
         params = scenario_from_text(rf.scenario_text).params
         rows = {}
@@ -78,7 +78,7 @@ def main(path, frames):
         last = rf.graph(frame=-1)
         x = rf.position(-1)
     fil = last["role"] == FILAMENT
-    _, rho, _, _ = _axis_frame(x)
+    _, rho, _ = _axis_frame(x)
     print(f"last frame: {fil.sum()} rods in current-carrying filaments, median distance {np.median(rho[fil]):.2f} L")
     m = len(next(iter(rows.values())))
     print(f"radial force per rod (+ outwards), mean over the last {m} frames +- its standard error over the frames")

@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from selfas_graph import NumericalFailure, Simulation, load_scenario  # noqa: E402
-from selfas_graph.io.checkpoint import read_checkpoint  # noqa: E402
+from selfas_graph.io.checkpoint import CheckpointError, read_checkpoint  # noqa: E402
 from selfas_graph.model import events as ev  # noqa: E402
 
 #: knob -> (settings to sweep, the reference run's overrides); a setting the scene cannot use
@@ -127,7 +127,11 @@ def main(argv=None):
     base = load_scenario(args.scenario, overrides=args.base_set)
     knobs = [k for k in (args.knob or KNOBS) if _applicable(base, k)]
     if args.checkpoint:
-        sim0 = Simulation.from_snapshot(base.params, read_checkpoint(args.checkpoint)[0])
+        try:
+            snap0 = read_checkpoint(args.checkpoint)[0]
+        except CheckpointError as exc:
+            ap.error(f"--checkpoint: {exc}")
+        sim0 = Simulation.from_snapshot(base.params, snap0)
     else:
         sim0 = Simulation.from_scenario(base)
     if args.t0 > sim0.state.time:
