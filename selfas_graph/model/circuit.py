@@ -1,13 +1,18 @@
-"""Nodal analysis of the rod network: potentials and rod currents (MODEL.md section 6).
+"""Nodal analysis of the rod network: potentials and rod currents (docs/model.md section 7).
 
 Arrays in, arrays out. The caller (``graph.ConnectivityGraph.solve``) turns the
 connectivity graph into edge arrays; this module never sees networkx.
+:func:`solve_network` solves any resistor network; :func:`solve_circuit` turns
+rods and contacts into one.
 
 Model
 -----
-* Rod ``i`` is a resistor ``R0 = 1`` between its tips ``a = 2 i`` and ``b = 2 i + 1``.
-  Its current ``J_i = psi(a) - psi(b)`` is positive from tip a to tip b
-  (units J0; potentials in units R0 J0).
+* Rod ``i`` is a resistor ``R_i`` (``R0 = 1`` unless given) between its tips
+  ``a = 2 i`` and ``b = 2 i + 1``. Its current ``J_i = (psi(a) - psi(b)) / R_i`` is
+  positive from tip a to tip b (units J0; potentials in units R0 J0).
+* With ``contact_resistance`` r > 0 every contact is a resistor r: between two tips,
+  or from a tip to a node of its own held at the conductor contact's potential.
+  What follows is the ideal case, r = 0 (the default):
 * Contacts are ideal: tip-tip and tip-conductor contacts merge tips into one
   electrical node (connected components of the contact edges).
 * A merged node holding a conductor contact is a Dirichlet node with the given
@@ -23,8 +28,9 @@ Model
   every block of the interior system touches a Dirichlet node.
 
 The reduced system is ``L_II psi_I = -L_ID psi_D`` with ``L`` the graph
-Laplacian of the rods on merged nodes (parallel rods add their conductances;
-rods whose two tips are in one merged node are dropped: they carry 0).
+Laplacian of the resistors on merged nodes, weighted by their conductances
+(parallel resistors add their conductances; resistors whose two ends are in one
+merged node are dropped: they carry 0).
 """
 from __future__ import annotations
 
@@ -154,10 +160,11 @@ class CircuitSolution:
     potential : (n_tips,) float64
         Potential of each tip (units R0 J0); NaN for tips in floating components.
     current : (n_rods,) float64
-        Rod current J_i = psi(2i) - psi(2i+1) (units J0); 0 for floating rods and
-        rods whose two tips are in one merged node.
+        Rod current J_i = (psi(2i) - psi(2i+1)) / R_i (units J0); 0 for floating rods
+        and rods whose two tips are in one merged node.
     node_of_tip : (n_tips,) int64
-        Merged electrical node of each tip.
+        Merged electrical node of each tip (with resistive contacts: the tip itself;
+        the nodes ``n_tips + j`` are then the conductor contacts j).
     injected_current : (n_nodes,) float64
         Net current flowing from the network's rods out of each merged node,
         i.e. the current a conductor injects there; zero (to round-off) at
@@ -168,7 +175,7 @@ class CircuitSolution:
     supplied_power : float
         sum over conductor nodes of psi * injected current.
     dissipated_power : float
-        sum_i J_i^2 R0.
+        sum_i J_i^2 R_i, plus J^2 r over the contacts when they are resistive.
     effective_resistance : float
         (psi_max - psi_min over conductor nodes in current-carrying components)
         / total_current, units R0; ``inf`` when no current flows. In case (i)
