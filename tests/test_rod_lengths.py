@@ -210,3 +210,23 @@ def test_mixed_scene_file_loads():
     assert p.rods.length.distribution != "constant" and p.rods.resistance.per_length
     assert p.contacts.resistance > 0
     assert scenario_from_text(sc.text).params == p
+
+
+def test_run_file_keeps_lengths_and_resistances(tmp_path):
+    """The CLI writes particles/rods/length and /resistance when the scene sets them, and the
+    run file reads them back; a run of equal rods reads as ones."""
+    from selfas_graph import RunFile
+    from selfas_graph.cli.main import main
+
+    out = tmp_path / "mixed.h5"
+    assert main(["simulate", str(ROOT / "scenarios" / "quick_mixed.toml"), "-o", str(out), "--t-end", "0.01",
+                 "--progress", "none"]) == 0
+    st = random_state(load_scenario(ROOT / "scenarios" / "quick_mixed.toml").params)
+    with RunFile(out) as run:
+        np.testing.assert_array_equal(run.rod_length, st.rod_length)
+        np.testing.assert_array_equal(run.rod_resistance, st.rod_resistance)
+    plain = tmp_path / "plain.h5"
+    assert main(["simulate", str(QUICK), "-o", str(plain), "--t-end", "0.01", "--progress", "none"]) == 0
+    with RunFile(plain) as run:
+        assert "particles/rods/length" not in run.f
+        np.testing.assert_array_equal(run.rod_length, np.ones(300))
