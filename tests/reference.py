@@ -124,14 +124,15 @@ def bond_acceleration(force, velocity, position, exact):
     return out
 
 
-def constrain_bonds(position, velocity, project, correct_velocity):
+def constrain_bonds(position, velocity, project, correct_velocity, length=None):
     x, v = position.copy(), velocity.copy()
     for i in range(len(x) // 2):
         a, b = 2 * i, 2 * i + 1
+        ell = 1.0 if length is None else length[i]
         if project:
             c = 0.5 * (x[a] + x[b])
             u = (x[a] - x[b]) / np.linalg.norm(x[a] - x[b])
-            x[a], x[b] = c + 0.5 * u, c - 0.5 * u
+            x[a], x[b] = c + 0.5 * ell * u, c - 0.5 * ell * u
         if correct_velocity:
             r12 = x[a] - x[b]
             vc = -((v[a] - v[b]) @ r12) / (2 * (r12 @ r12))  # solves paper Eq. (15)

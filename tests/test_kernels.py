@@ -121,9 +121,37 @@ def test_constrain_bonds(state, rng, project, correct):
     x = state.position + 1e-3 * rng.normal(size=state.position.shape)
     v = state.velocity.copy()
     ex, ev = ref.constrain_bonds(x, v, project, correct)
-    kr.constrain_bonds(x, v, project, correct)
+    kr.constrain_bonds(x, v, project, correct, np.zeros(0))
     close(x, ex)
     close(v, ev)
+
+
+@pytest.mark.parametrize("project", [True, False])
+@pytest.mark.parametrize("correct", [True, False])
+def test_constrain_bonds_per_rod_length(state, rng, project, correct):
+    """Bonds of rods with lengths l_i are restored to l_i about the rod centre (docs/model.md section 4.3)."""
+    ell = rng.uniform(0.5, 1.5, state.n_rods)
+    x = state.position + 1e-3 * rng.normal(size=state.position.shape)
+    v = state.velocity.copy()
+    ex, ev = ref.constrain_bonds(x, v, project, correct, ell)
+    kr.constrain_bonds(x, v, project, correct, ell)
+    close(x, ex)
+    close(v, ev)
+    if project:
+        # after the projection each bond is l_i to round-off of a sqrt and a scaling (a few ulp of l_i ~ 1)
+        np.testing.assert_allclose(np.linalg.norm(x[0::2] - x[1::2], axis=1), ell, rtol=0, atol=1e-14)
+        assert kr.bond_length_error(x, ell) < 1e-14
+
+
+def test_unit_length_array_is_bit_for_bit_the_empty_one(state, rng):
+    """An array of ones and the empty array (every rod of length 1) give the same bits."""
+    x0 = state.position + 1e-3 * rng.normal(size=state.position.shape)
+    v0 = rng.normal(size=state.position.shape)
+    x1, v1, x2, v2 = x0.copy(), v0.copy(), x0.copy(), v0.copy()
+    kr.constrain_bonds(x1, v1, True, True, np.zeros(0))
+    kr.constrain_bonds(x2, v2, True, True, np.ones(state.n_rods))
+    assert np.array_equal(x1, x2) and np.array_equal(v1, v2)
+    assert kr.bond_length_error(x0, np.zeros(0)) == kr.bond_length_error(x0, np.ones(state.n_rods))
 
 
 def test_ab4_update(rng):
@@ -193,8 +221,8 @@ def _rows_kernel_cases(rng):
         (ki.ab4_update, lambda: (x, v, 2 * v, 3 * v, 4 * v, 1e-3, np.zeros((n, 3)))),
         (ki.axpy, lambda: (x, v, 0.1, np.zeros((n, 3)))),
         (kr.bond_acceleration, lambda: (v, x, x + v, True, np.zeros((n, 3)))),
-        (kr.bond_length_error, lambda: (x,)),
-        (kr.constrain_bonds, lambda: (x.copy(), v.copy(), True, True)),
+        (kr.bond_length_error, lambda: (x, np.zeros(0))),
+        (kr.constrain_bonds, lambda: (x.copy(), v.copy(), True, True, np.zeros(0))),
         (kf.plasma_field, lambda: (x, 0.1, -0.2, 1.5, 7.5, np.zeros((n, 3)))),
         (kf.plasma_force_on_tips, lambda: (x, q, 0.1, -0.2, 1.5, 7.5, np.zeros((n, 3)))),
         (kf.electrode_walls, lambda: (x, v, -1.0, 1.0, RSTAR, KAPPA, 100.0, np.zeros((n, 3)), np.zeros((n, 3)))),

@@ -266,6 +266,26 @@ selfas-graph simulate scenarios/quick.toml --set integrator.bond_force=paper
 - `--t-end T` is a shortcut for `--set run.t_end=T`.
 - From Python: `selfas_graph.load_scenario(path, overrides=["integrator.dt=5e-4"])`.
 
+## Rods that differ: lengths, resistances, contacts
+
+By default every rod has length 1 and resistance R0 = 1, and contacts are ideal (the paper's
+equal rods). Three keys change that ([model.md section 2](model.md#2-rods),
+[section 7](model.md#7-circuit)); a scene without them runs exactly as before, at the same cost.
+
+```toml
+[rods]
+length = { distribution = "uniform", low = 0.5, high = 1.5 }  # units L, the mean length: mean 1
+resistance = { value = 1.0, per_length = true }              # R_i = R0 l_i
+
+[contacts]
+resistance = 2.0                                             # r per contact, units R0; 0 = ideal
+```
+
+- `rods.length` and `rods.resistance` take a number (the same for every rod) or a table with
+  `distribution` = `constant`, `uniform` or `two_level`, as the charges do. The length law
+  must have mean 1 (L is the mean rod length, and the units are built on it).
+- `scenarios/quick_mixed.toml` is the quick scene with these three keys.
+
 ## Switching terms on and off
 
 The force terms (the `[forces.*]` tables) and `[circuit]` are optional sections. A term is **on

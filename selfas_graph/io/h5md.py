@@ -93,9 +93,13 @@ class RunWriter:
         Replace an existing file; otherwise :class:`OutputExistsError`.
     velocities : bool
         Save velocities with each frame.
+    rod_length, rod_resistance : (n_rods,) float64, optional
+        Per-rod lengths and resistances (``particles/rods/length``, ``particles/rods/resistance``),
+        written only when the scene sets them (absent: every rod has length 1 and resistance R0).
     """
 
-    def __init__(self, path, n_tips, tip_charge, rod_charge, provenance, overwrite=False, velocities=True):
+    def __init__(self, path, n_tips, tip_charge, rod_charge, provenance, overwrite=False, velocities=True,
+                 rod_length=None, rod_resistance=None):
         self.path = Path(path)
         if self.path.exists() and not overwrite:
             raise OutputExistsError(f"output file {self.path} exists; pass --force to overwrite it or -o to choose another")
@@ -117,7 +121,11 @@ class RunWriter:
         box.attrs["boundary"] = np.array([b"none"] * 3)
         tips.create_dataset("charge", data=np.asarray(tip_charge, dtype=np.float64))
         tips.create_dataset("rod", data=np.arange(n_tips, dtype=np.int64) // 2)
-        f.create_group("particles/rods").create_dataset("charge", data=np.asarray(rod_charge, dtype=np.float64))
+        rods = f.create_group("particles/rods")
+        rods.create_dataset("charge", data=np.asarray(rod_charge, dtype=np.float64))
+        for name, values in (("length", rod_length), ("resistance", rod_resistance)):
+            if values is not None:
+                rods.create_dataset(name, data=np.asarray(values, dtype=np.float64))
         self._elements = {}
         for name in ("position",) + (("velocity",) if velocities else ()):
             g = tips.create_group(name)
@@ -418,6 +426,20 @@ class RunFile:
     @property
     def rod_charge(self) -> np.ndarray:
         return self.f["particles/rods/charge"][:]
+
+    @property
+    def rod_length(self) -> np.ndarray:
+        """Length of each rod (units L); ones when the run had equal rods."""
+        if "particles/rods/length" in self.f:
+            return self.f["particles/rods/length"][:]
+        return np.ones(self.f["particles/rods/charge"].shape[0])
+
+    @property
+    def rod_resistance(self) -> np.ndarray:
+        """Resistance of each rod (units R0); ones when the run had R0 = 1 for every rod."""
+        if "particles/rods/resistance" in self.f:
+            return self.f["particles/rods/resistance"][:]
+        return np.ones(self.f["particles/rods/charge"].shape[0])
 
     _GRAPH = ("step", "time", "tip_contacts", "tip_contacts_count", "conductor_tip", "conductor_id",
               "conductor_potential", "conductor_contacts_count", "role", "current", "potential")

@@ -184,6 +184,8 @@ def _build(cls, raw, prefix, problems):
                 continue
             if optional and value is True:
                 value = {}
+            if "distribution" in fields_of(tp) and isinstance(value, (int, float)) and not isinstance(value, bool):
+                value = {"distribution": "constant", "value": value}  # a bare number: the same for every rod
             sub = _build(tp, value, path + ".", problems)
             if sub is not None:
                 kwargs[name] = sub
@@ -199,6 +201,11 @@ def _build(cls, raw, prefix, problems):
 
 
 _INVALID = object()
+
+
+def fields_of(cls):
+    """Field names of dataclass ``cls``."""
+    return [f.name for f in dataclasses.fields(cls)]
 
 
 def _describe(value):
@@ -328,8 +335,9 @@ def check_consistency(p: P.Parameters):
     if any(abs(v) > 1e6 for pair in box for v in pair):
         return out + ["placement.box: coordinates must lie within +-1e6 rod lengths"]
     ext = [box[d][1] - box[d][0] for d in range(3)]
-    if rods.count > 0 and math.sqrt(sum(e * e for e in ext)) <= 1.0:
-        out.append(f"placement.box: a rod of length 1 cannot fit in a box of size "
+    longest = rods.length.bounds()[1] if rods.length is not None else 1.0
+    if rods.count > 0 and math.sqrt(sum(e * e for e in ext)) <= longest:
+        out.append(f"placement.box: a rod of length {longest:g} cannot fit in a box of size "
                    f"{ext[0]:g} x {ext[1]:g} x {ext[2]:g}; make the box larger")
         return out
     dmin = p.min_tip_distance
@@ -347,6 +355,20 @@ def check_consistency(p: P.Parameters):
                        "use constant, uniform or two_level")
         if dist.distribution == "uniform" and dist.low > dist.high:
             out.append(f"rods.{name}: low = {dist.low:g} is above high = {dist.high:g}")
+    for name in ("length", "resistance"):
+        dist = getattr(rods, name)
+        if dist is not None and dist.distribution == "uniform" and dist.low > dist.high:
+            out.append(f"rods.{name}: low = {dist.low:g} is above high = {dist.high:g}")
+    if rods.length is not None:
+        mean = rods.length.mean()
+        if abs(mean - 1.0) > 1e-9:
+            out.append(f"rods.length: the law's mean is {mean:.12g}, not 1; lengths are in units of the mean rod "
+                       f"length L (docs/model.md section 1), so choose values with mean 1 (e.g. uniform in "
+                       f"(0.5, 1.5))")
+        shortest = rods.length.bounds()[0]
+        if shortest < rods.diameter:
+            out.append(f"rods.length: the shortest rod ({shortest:g}) is shorter than its diameter "
+                       f"rods.diameter = {rods.diameter:g}")
     el = p.forces.electrodes
     if el is not None:
         zlo, zhi = box[2]

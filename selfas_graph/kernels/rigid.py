@@ -11,6 +11,12 @@ equal tip masses m, and external forces F_a, F_b, the tips move as
 
 The paper's Eq. (9) drops ``|v12|^2`` (it imposes ``(d2 r12/dt2, r12) = 0``);
 that variant is kept as ``exact=False`` for comparison. Masses are 1 (reduced units).
+The bond force holds whatever length the bond has, so it serves rods of any length.
+
+Rod lengths. ``length`` is an ``(n_rods,)`` array of the lengths l_i the bonds keep
+(units L, docs/model.md section 2), or an empty array when every rod has length 1:
+then the kernels compute exactly what they did before per-rod lengths existed
+(``1.0 / sqrt(r2)`` and ``l_i / sqrt(r2)`` with l_i = 1 are the same float).
 """
 import math
 
@@ -54,9 +60,10 @@ def bond_acceleration(force, velocity, position, exact, out):
 
 
 @njit_rows
-def bond_length_error(position):
-    """Largest ``| |x_a - x_b| - 1 |`` over all rods."""
+def bond_length_error(position, length):
+    """Largest ``| |x_a - x_b| - l_i |`` over all rods (``length`` empty: l_i = 1)."""
     n_rods = position.shape[0] // 2
+    unit = length.shape[0] == 0
     worst = 0.0
     for i in prange(n_rods):
         a = 2 * i
@@ -64,16 +71,17 @@ def bond_length_error(position):
         for d in range(3):
             r = position[a, d] - position[a + 1, d]
             r2 += r * r
-        worst = max(worst, abs(math.sqrt(r2) - 1.0))
+        ell = 1.0 if unit else length[i]
+        worst = max(worst, abs(math.sqrt(r2) - ell))
     return worst
 
 
 @njit_rows
-def constrain_bonds(position, velocity, project, correct_velocity):
+def constrain_bonds(position, velocity, project, correct_velocity, length):
     """Restore the rigid bonds after an integration step, in place.
 
     ``project``: move both tips along the axis, about the rod centre, so that
-    ``|r12| = 1`` (the paper leaves positions uncorrected). ``correct_velocity``:
+    ``|r12| = l_i`` (the paper leaves positions uncorrected). ``correct_velocity``:
     paper Eqs. (14-15), ``v_a += c r12``, ``v_b -= c r12`` with c chosen so that
     ``(v12, r12) = 0``; equal masses share it, so momentum is unchanged.
 
@@ -81,8 +89,10 @@ def constrain_bonds(position, velocity, project, correct_velocity):
     ----------
     position, velocity : (n_tips, 3) float64, modified in place
     project, correct_velocity : bool
+    length : (n_rods,) float64, or empty for rods of length 1
     """
     n_rods = position.shape[0] // 2
+    unit = length.shape[0] == 0
     for i in prange(n_rods):
         a = 2 * i
         b = a + 1
@@ -91,7 +101,8 @@ def constrain_bonds(position, velocity, project, correct_velocity):
             r = position[a, d] - position[b, d]
             r2 += r * r
         if project:
-            s = 0.5 * (1.0 / math.sqrt(r2) - 1.0)
+            ell = 1.0 if unit else length[i]
+            s = 0.5 * (ell / math.sqrt(r2) - 1.0)
             for d in range(3):
                 r = position[a, d] - position[b, d]
                 position[a, d] += s * r

@@ -1,13 +1,18 @@
-"""Nodal analysis of the rod network: potentials and rod currents (MODEL.md section 6).
+"""Nodal analysis of the rod network: potentials and rod currents (docs/model.md section 7).
 
 Arrays in, arrays out. The caller (``graph.ConnectivityGraph.solve``) turns the
 connectivity graph into edge arrays; this module never sees networkx.
+:func:`solve_network` solves any resistor network; :func:`solve_circuit` turns
+rods and contacts into one.
 
 Model
 -----
-* Rod ``i`` is a resistor ``R0 = 1`` between its tips ``a = 2 i`` and ``b = 2 i + 1``.
-  Its current ``J_i = psi(a) - psi(b)`` is positive from tip a to tip b
-  (units J0; potentials in units R0 J0).
+* Rod ``i`` is a resistor ``R_i`` (``R0 = 1`` unless given) between its tips
+  ``a = 2 i`` and ``b = 2 i + 1``. Its current ``J_i = (psi(a) - psi(b)) / R_i`` is
+  positive from tip a to tip b (units J0; potentials in units R0 J0).
+* With ``contact_resistance`` r > 0 every contact is a resistor r: between two tips,
+  or from a tip to a node of its own held at the conductor contact's potential.
+  What follows is the ideal case, r = 0 (the default):
 * Contacts are ideal: tip-tip and tip-conductor contacts merge tips into one
   electrical node (connected components of the contact edges).
 * A merged node holding a conductor contact is a Dirichlet node with the given
@@ -23,19 +28,21 @@ Model
   every block of the interior system touches a Dirichlet node.
 
 The reduced system is ``L_II psi_I = -L_ID psi_D`` with ``L`` the graph
-Laplacian of the rods on merged nodes (parallel rods add their conductances;
-rods whose two tips are in one merged node are dropped: they carry 0).
+Laplacian of the resistors on merged nodes, weighted by their conductances
+(parallel resistors add their conductances; resistors whose two ends are in one
+merged node are dropped: they carry 0).
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import cg, splu
 
-__all__ = ["CircuitSolution", "solve_circuit", "merge_tips", "SOLVERS"]
+__all__ = ["CircuitSolution", "NetworkSolution", "solve_circuit", "solve_network", "merge_tips", "SOLVERS"]
 
 #: linear solvers for the reduced system (``solve_circuit(..., solver=...)``)
 SOLVERS = ("direct", "cg", "auto")
@@ -153,10 +160,11 @@ class CircuitSolution:
     potential : (n_tips,) float64
         Potential of each tip (units R0 J0); NaN for tips in floating components.
     current : (n_rods,) float64
-        Rod current J_i = psi(2i) - psi(2i+1) (units J0); 0 for floating rods and
-        rods whose two tips are in one merged node.
+        Rod current J_i = (psi(2i) - psi(2i+1)) / R_i (units J0); 0 for floating rods
+        and rods whose two tips are in one merged node.
     node_of_tip : (n_tips,) int64
-        Merged electrical node of each tip.
+        Merged electrical node of each tip (with resistive contacts: the tip itself;
+        the nodes ``n_tips + j`` are then the conductor contacts j).
     injected_current : (n_nodes,) float64
         Net current flowing from the network's rods out of each merged node,
         i.e. the current a conductor injects there; zero (to round-off) at
@@ -167,7 +175,7 @@ class CircuitSolution:
     supplied_power : float
         sum over conductor nodes of psi * injected current.
     dissipated_power : float
-        sum_i J_i^2 R0.
+        sum_i J_i^2 R_i, plus J^2 r over the contacts when they are resistive.
     effective_resistance : float
         (psi_max - psi_min over conductor nodes in current-carrying components)
         / total_current, units R0; ``inf`` when no current flows. In case (i)
@@ -229,68 +237,29 @@ def _solve_spd(A: sp.csc_matrix, b: np.ndarray, solver: str) -> np.ndarray:
     return _solve_direct(A, b)
 
 
-def solve_circuit(
-    n_tips, tip_contacts, conductor_tip, conductor_potential, solver: str = "direct"
-) -> CircuitSolution:
-    """Solve Kirchhoff's laws on the rod network with ideal contacts.
+def _as_resistance(value, name: str, m: int, allow_zero: bool) -> np.ndarray:
+    """Coerce per-edge resistances: a scalar or an ``(m,)`` array of finite values >= 0 (or > 0)."""
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim == 0:
+        arr = np.full(m, float(arr))
+    if arr.shape != (m,):
+        raise ValueError(f"{name} must be a number or have shape ({m},), got shape {arr.shape}")
+    bad = ~np.isfinite(arr) | (arr < 0.0) | ((arr == 0.0) if not allow_zero else False)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        want = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"{name} must be finite and {want}; entry {i} is {arr[i]}")
+    return np.ascontiguousarray(arr)
 
-    Parameters
-    ----------
-    n_tips : int
-        Number of tips, ``2 n_rods``; rod ``i`` joins tips ``2 i`` and ``2 i + 1``.
-    tip_contacts : (m, 2) int64
-        Pairs of tips in (ideal) contact.
-    conductor_tip : (k,) int64
-        Tips touching a conductor, one entry per contact.
-    conductor_potential : (k,) float64
-        Given potential of each conductor contact (units R0 J0): ``-/+ delta_J0 dZ/2``
-        for cathode/anode in case (i), ``-delta_J0 z_contact`` on the filament in
-        case (ii).
-    solver : {"direct", "cg"}
-        Linear solver of the reduced system (symmetric positive definite).
-        ``"direct"`` (default): sparse LU (SuperLU) with a symmetric minimum-degree
-        ordering, exact to round-off; fast for the branched, quasi-one-dimensional
-        networks filaments form (70 ms for 10^5 rods of cross-linked chains) but
-        0.8 s for a 10^5-rod diluted cubic lattice (``tools/bench_circuit.py``).
-        ``"cg"``: Jacobi-preconditioned conjugate gradients to a relative residual
-        ``CG_RTOL`` (round-off level): 0.14 s on that lattice, slower than
-        "direct" on chains; it falls back to the direct solver if it has not
-        converged after ``min(2 n, 2000)`` iterations.
 
-    Returns
-    -------
-    CircuitSolution
+def _potentials(n_nodes, u, v, g, is_dir, psi_dir, solver) -> np.ndarray:
+    """Node potentials of a resistor network with Dirichlet nodes (NaN where floating).
 
-    Raises
-    ------
-    ValueError
-        Odd ``n_tips``, tip index out of range, wrong shapes, non-finite potentials.
+    ``u``, ``v`` are the resistors' end nodes (``u != v``), ``g`` their conductances.
+    Only the connected components with two different Dirichlet values are solved;
+    a component with one value sits at it exactly, one with none floats (NaN).
     """
-    n_tips, tip_contacts, conductor_tip, conductor_potential = _validate(
-        n_tips, tip_contacts, conductor_tip, conductor_potential
-    )
-    if solver not in SOLVERS:
-        raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
-    n_rods = n_tips // 2
-    n_nodes, node_of_tip = merge_tips(n_tips, tip_contacts)
-
-    # Dirichlet values: mean of the given potentials of the contacts at each node
-    cnode = node_of_tip[conductor_tip]
-    count = np.bincount(cnode, minlength=n_nodes)
-    is_dir = count > 0
-    psi_dir = np.zeros(n_nodes)
-    psi_dir[is_dir] = (
-        np.bincount(cnode, weights=conductor_potential, minlength=n_nodes)[is_dir] / count[is_dir]
-    )
-
-    # rods as edges between merged nodes; rods shorted by a contact are dropped
-    u_all = node_of_tip[0::2]
-    v_all = node_of_tip[1::2]
-    keep = u_all != v_all
-    u, v = u_all[keep], v_all[keep]
     n_edges = u.shape[0]
-
-    # components of the merged-node graph; which are driven (two distinct Dirichlet values)
     adj = sp.coo_matrix((np.ones(n_edges, dtype=np.int32), (u, v)), shape=(n_nodes, n_nodes)).tocsr()
     n_comp, comp = connected_components(adj, directed=False)
     dir_nodes = np.flatnonzero(is_dir)
@@ -311,35 +280,105 @@ def solve_circuit(
     n_int = int(interior.sum())
     if n_int:
         # reduced Laplacian assembled directly from the edge list:
-        # diagonal = rod degree of the node (all rods, including those to Dirichlet
-        # nodes); off-diagonal -1 per interior-interior rod (duplicates summed);
-        # rods to a Dirichlet node move psi_D to the right-hand side.
+        # diagonal = summed conductance at the node (all resistors, including those
+        # to Dirichlet nodes); off-diagonal -g per interior-interior resistor
+        # (duplicates summed); resistors to a Dirichlet node move g psi_D to the
+        # right-hand side. With unit conductances every sum is an exact integer.
         index = np.full(n_nodes, -1, dtype=np.int64)
         index[interior] = np.arange(n_int)
         iu, iv = index[u], index[v]
-        degree = np.bincount(u, minlength=n_nodes) + np.bincount(v, minlength=n_nodes)
+        degree = np.bincount(u, weights=g, minlength=n_nodes) + np.bincount(v, weights=g, minlength=n_nodes)
         both = (iu >= 0) & (iv >= 0)
         rows = np.concatenate([np.arange(n_int), iu[both], iv[both]])
         cols = np.concatenate([np.arange(n_int), iv[both], iu[both]])
-        vals = np.concatenate(
-            [degree[interior].astype(np.float64), -np.ones(2 * int(both.sum()))]
-        )
+        vals = np.concatenate([degree[interior], -g[both], -g[both]])
         A = sp.coo_matrix((vals, (rows, cols)), shape=(n_int, n_int)).tocsc()
         u_to_d = (iu >= 0) & is_dir[v]
         v_to_d = (iv >= 0) & is_dir[u]
-        b = np.bincount(iu[u_to_d], weights=psi_dir[v[u_to_d]], minlength=n_int) + np.bincount(
-            iv[v_to_d], weights=psi_dir[u[v_to_d]], minlength=n_int
-        )
+        b = np.bincount(
+            iu[u_to_d], weights=g[u_to_d] * psi_dir[v[u_to_d]], minlength=n_int
+        ) + np.bincount(iv[v_to_d], weights=g[v_to_d] * psi_dir[u[v_to_d]], minlength=n_int)
         psi[interior] = _solve_spd(A, b, solver)
+    return psi, comp, comp_active
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class NetworkSolution:
+    """Result of :func:`solve_network` (arrays are read-only).
+
+    Attributes
+    ----------
+    potential : (n_nodes,) float64
+        Potential of each node; NaN in floating components.
+    current : (m,) float64
+        Current of each resistor from ``edges[:, 0]`` to ``edges[:, 1]``; 0 for
+        floating resistors and for resistors whose ends are joined by ideal
+        (zero-resistance) edges, NaN for the ideal edges themselves (their current
+        is not fixed by the potentials).
+    node_of : (n_nodes,) int64
+        Merged node of each node (nodes joined by ideal edges share one).
+    injected_current : (n_merged,) float64
+        Net current leaving each merged node through the resistors: the current
+        a source injects there; zero (to round-off) at nodes without a fixed potential.
+    total_current, supplied_power, dissipated_power, effective_resistance, kirchhoff_residual
+        As in :class:`CircuitSolution`; ``dissipated_power`` is sum_e J_e^2 R_e.
+    """
+
+    potential: np.ndarray
+    current: np.ndarray
+    node_of: np.ndarray
+    injected_current: np.ndarray
+    total_current: float
+    supplied_power: float
+    dissipated_power: float
+    effective_resistance: float
+    kirchhoff_residual: float
+
+
+def _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, resistance_is_one=False):
+    """Core of :func:`solve_network` on validated arrays; see there.
+
+    ``resistance_is_one``: every resistance is 1 (the default rods); the currents
+    are then the potential differences themselves, with no division.
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
+    ideal = resistance == 0.0
+    n_merged, node_of = merge_tips(n_nodes, edges[ideal])
+
+    # Dirichlet values: mean of the given potentials of the fixed nodes in each merged node
+    cnode = node_of[fixed_node]
+    count = np.bincount(cnode, minlength=n_merged)
+    is_dir = count > 0
+    psi_dir = np.zeros(n_merged)
+    psi_dir[is_dir] = (
+        np.bincount(cnode, weights=fixed_potential, minlength=n_merged)[is_dir] / count[is_dir]
+    )
+
+    # resistors as edges between merged nodes; those inside one merged node are dropped
+    res = ~ideal
+    u_all = node_of[edges[res, 0]]
+    v_all = node_of[edges[res, 1]]
+    r_all = resistance[res]
+    g_all = 1.0 / r_all
+    keep = u_all != v_all
+    psi, comp, comp_active = _potentials(
+        n_merged, u_all[keep], v_all[keep], g_all[keep], is_dir, psi_dir, solver
+    )
 
     psi0 = np.where(np.isnan(psi), 0.0, psi)
-    current = psi0[u_all] - psi0[v_all]  # exactly 0 for shorted and floating rods
-    injected = np.bincount(u_all, weights=current, minlength=n_nodes) - np.bincount(
-        v_all, weights=current, minlength=n_nodes
+    drop = psi0[u_all] - psi0[v_all]  # exactly 0 for shorted and floating resistors
+    current_res = drop if resistance_is_one else drop / r_all
+    injected = np.bincount(u_all, weights=current_res, minlength=n_merged) - np.bincount(
+        v_all, weights=current_res, minlength=n_merged
     )
+    dir_nodes = np.flatnonzero(is_dir)
     total_current = float(injected[dir_nodes][injected[dir_nodes] > 0].sum())
     supplied_power = float(np.dot(psi_dir[dir_nodes], injected[dir_nodes]))
-    dissipated_power = float(np.dot(current, current))
+    if resistance_is_one:
+        dissipated_power = float(np.dot(current_res, current_res))
+    else:
+        dissipated_power = float(np.dot(current_res, drop))
     active_dir = dir_nodes[comp_active[comp[dir_nodes]]]
     if active_dir.size and total_current > 0:
         spread = float(psi_dir[active_dir].max() - psi_dir[active_dir].min())
@@ -349,16 +388,150 @@ def solve_circuit(
     inner = ~is_dir
     kirchhoff_residual = float(np.abs(injected[inner]).max()) if inner.any() else 0.0
 
-    potential = psi[node_of_tip]
-    assert current.shape == (n_rods,)
-    return CircuitSolution(
-        potential=_frozen(potential),
+    if ideal.any():
+        current = np.full(edges.shape[0], np.nan)
+        current[res] = current_res
+    else:
+        current = current_res
+    return NetworkSolution(
+        potential=_frozen(psi[node_of]),
         current=_frozen(current),
-        node_of_tip=_frozen(node_of_tip.copy()),
+        node_of=_frozen(node_of),
         injected_current=_frozen(injected),
         total_current=total_current,
         supplied_power=supplied_power,
         dissipated_power=dissipated_power,
         effective_resistance=effective_resistance,
         kirchhoff_residual=kirchhoff_residual,
+    )
+
+
+def solve_network(n_nodes, edges, resistance, fixed_node, fixed_potential, solver: str = "direct") -> NetworkSolution:
+    """Solve Kirchhoff's laws on any network of resistors with nodes of fixed potential.
+
+    The general form of the nodal analysis of :func:`solve_circuit` (docs/model.md
+    section 7), for netlists of any origin: per-edge resistances, parallel edges
+    (multi-edges), self-loops (they carry 0), isolated nodes (potential NaN), zero
+    applied voltage (every node at it, no current).
+
+    Parameters
+    ----------
+    n_nodes : int
+        Number of nodes ``0 .. n_nodes-1``.
+    edges : (m, 2) int
+        The two nodes of each resistor.
+    resistance : float or (m,) float64
+        Resistance of each edge (units R0), finite and >= 0. An edge of resistance
+        0 is an ideal wire: its two nodes become one node, as contacts do in
+        :func:`solve_circuit`.
+    fixed_node : (k,) int
+        Nodes held at a given potential (sources); a node may be listed several
+        times, and a merged node holding different values takes their mean
+        (docs/model.md section 7, choice B3).
+    fixed_potential : (k,) float64
+        The potential of each entry of ``fixed_node`` (units R0 J0).
+    solver : {"direct", "cg", "auto"}
+        As in :func:`solve_circuit`.
+
+    Returns
+    -------
+    NetworkSolution
+    """
+    n_nodes = _as_count(n_nodes, "n_nodes")
+    edges = _as_index_array(edges, "edges", 2, n_nodes)
+    resistance = _as_resistance(resistance, "resistance", edges.shape[0], allow_zero=True)
+    fixed_node = _as_index_array(fixed_node, "fixed_node", 1, n_nodes)
+    fixed_potential = np.asarray(fixed_potential, dtype=np.float64).reshape(-1)
+    if fixed_potential.shape != fixed_node.shape:
+        raise ValueError(
+            f"fixed_potential has shape {fixed_potential.shape}, fixed_node has shape "
+            f"{fixed_node.shape}: one potential per fixed node entry"
+        )
+    if not np.all(np.isfinite(fixed_potential)):
+        raise ValueError("fixed_potential must be finite")
+    return _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver)
+
+
+def solve_circuit(
+    n_tips, tip_contacts, conductor_tip, conductor_potential, solver: str = "direct",
+    rod_resistance=None, contact_resistance: float = 0.0,
+) -> CircuitSolution:
+    """Solve Kirchhoff's laws on the rod network.
+
+    Parameters
+    ----------
+    n_tips : int
+        Number of tips, ``2 n_rods``; rod ``i`` joins tips ``2 i`` and ``2 i + 1``.
+    tip_contacts : (m, 2) int64
+        Pairs of tips in contact.
+    conductor_tip : (k,) int64
+        Tips touching a conductor, one entry per contact.
+    conductor_potential : (k,) float64
+        Given potential of each conductor contact (units R0 J0): ``-/+ delta_J0 dZ/2``
+        for cathode/anode in case (i), ``-delta_J0 z_contact`` on the filament in
+        case (ii).
+    solver : {"direct", "cg"}
+        Linear solver of the reduced system (symmetric positive definite).
+        ``"direct"`` (default): sparse LU (SuperLU) with a symmetric minimum-degree
+        ordering, exact to round-off; fast for the branched, quasi-one-dimensional
+        networks filaments form (70 ms for 10^5 rods of cross-linked chains) but
+        0.8 s for a 10^5-rod diluted cubic lattice (``tools/bench_circuit.py``).
+        ``"cg"``: Jacobi-preconditioned conjugate gradients to a relative residual
+        ``CG_RTOL`` (round-off level): 0.14 s on that lattice, slower than
+        "direct" on chains; it falls back to the direct solver if it has not
+        converged after ``min(2 n, 2000)`` iterations.
+    rod_resistance : float or (n_rods,) float64, optional
+        Resistance R_i of each rod (units R0, > 0); default 1 for every rod.
+    contact_resistance : float
+        Resistance r of every tip-tip and tip-conductor contact (units R0, >= 0).
+        0 (default): ideal contacts, tips in contact merged into one node. r > 0:
+        every contact is a resistor r, and each conductor contact joins its tip to
+        a node of its own held at the contact's potential.
+
+    Returns
+    -------
+    CircuitSolution
+
+    Raises
+    ------
+    ValueError
+        Odd ``n_tips``, tip index out of range, wrong shapes, non-finite potentials,
+        resistances not > 0 (rods) or negative (contacts).
+    """
+    n_tips, tip_contacts, conductor_tip, conductor_potential = _validate(
+        n_tips, tip_contacts, conductor_tip, conductor_potential
+    )
+    n_rods = n_tips // 2
+    unit = rod_resistance is None
+    r_rod = np.ones(n_rods) if unit else _as_resistance(rod_resistance, "rod_resistance", n_rods, allow_zero=False)
+    r_contact = float(contact_resistance)
+    if not (math.isfinite(r_contact) and r_contact >= 0.0):
+        raise ValueError(f"contact_resistance must be finite and >= 0, got {contact_resistance!r}")
+    k = conductor_tip.shape[0]
+    m = tip_contacts.shape[0]
+    # nodes: the tips, then one node per conductor contact held at its potential;
+    # edges: the rods (tips 2i, 2i+1), the tip contacts, the conductor contacts
+    edges = np.empty((n_rods + m + k, 2), dtype=np.int64)
+    edges[:n_rods, 0] = np.arange(0, n_tips, 2)
+    edges[:n_rods, 1] = np.arange(1, n_tips, 2)
+    edges[n_rods:n_rods + m] = tip_contacts
+    edges[n_rods + m:, 0] = conductor_tip
+    edges[n_rods + m:, 1] = n_tips + np.arange(k)
+    resistance = np.concatenate([r_rod, np.full(m + k, r_contact)])
+    net = _solve(
+        n_tips + k, edges, resistance, n_tips + np.arange(k), conductor_potential, solver,
+        resistance_is_one=unit and r_contact == 0.0,
+    )
+    current = net.current[:n_rods]
+    assert current.shape == (n_rods,)
+    return CircuitSolution(
+        potential=_frozen(net.potential[:n_tips].copy()),
+        current=_frozen(current.copy()),
+        node_of_tip=_frozen(net.node_of[:n_tips].copy()),
+        injected_current=net.injected_current,
+        total_current=net.total_current,
+        supplied_power=net.supplied_power,
+        dissipated_power=net.dissipated_power,
+        effective_resistance=net.effective_resistance,
+        kirchhoff_residual=net.kirchhoff_residual,
     )

@@ -51,6 +51,7 @@ from selfas_graph.model.circuit import (
     CircuitSolution,
     _as_count,
     _as_index_array,
+    _as_resistance,
     merge_tips,
     solve_circuit,
 )
@@ -344,7 +345,8 @@ class ConnectivityGraph:
     with a fixed potential (electrodes, case (i)), and ``("contact", k, c)`` for
     each contact of tip ``k`` with a conductor whose potential is given per
     contact (the case (ii) filament). Edges carry ``kind="rod"`` (one resistor per
-    rod, added at construction) or ``kind="contact"`` (ideal). Potentials are the
+    rod, added at construction) or ``kind="contact"`` (ideal, or a resistor
+    ``contact_resistance`` when that is > 0). Potentials are the
     ``potential`` attribute of the conductor / contact node.
 
     Parameters
@@ -355,6 +357,13 @@ class ConnectivityGraph:
         Conductor id (``events.CONDUCTOR_*``) -> fixed potential (units R0 J0), or
         ``None`` when the potential is given per contact (``-delta_J0 z``).
         Conductors not listed are unknown and rejected.
+    solver : str
+        Linear solver of :meth:`solve` (see ``circuit.solve_circuit``).
+    rod_resistance : (n_rods,) float64, optional
+        Resistance R_i of each rod (units R0); default R0 = 1 for every rod.
+    contact_resistance : float
+        Resistance of every contact (units R0); 0 (default) = ideal contacts.
+        The topology (:meth:`topology`) does not depend on either.
 
     Notes
     -----
@@ -364,10 +373,18 @@ class ConnectivityGraph:
     contacts instead of an O(edges) walk over networkx's adjacency.
     """
 
-    def __init__(self, n_rods: int, conductor_potential: Mapping[int, float | None], solver: str = "auto"):
+    def __init__(self, n_rods: int, conductor_potential: Mapping[int, float | None], solver: str = "auto",
+                 rod_resistance=None, contact_resistance: float = 0.0):
         #: linear solver of :meth:`solve` ("auto", "direct" or "cg"; see circuit.solve_circuit)
         self.solver = solver
         self.n_rods = _as_count(n_rods, "n_rods")
+        #: resistance of each rod (units R0), or None for R0 = 1 everywhere (circuit.solve_circuit)
+        self.rod_resistance = None if rod_resistance is None else _frozen(
+            _as_resistance(rod_resistance, "rod_resistance", self.n_rods, allow_zero=False).copy())
+        #: resistance of every contact (units R0); 0 = ideal contacts (circuit.solve_circuit)
+        self.contact_resistance = float(contact_resistance)
+        if not (np.isfinite(self.contact_resistance) and self.contact_resistance >= 0.0):
+            raise ValueError(f"contact_resistance must be finite and >= 0, got {contact_resistance!r}")
         self.n_tips = 2 * self.n_rods
         self._fixed: dict[int, float] = {}
         self._per_contact: set[int] = set()
@@ -674,7 +691,8 @@ class ConnectivityGraph:
             i = np.flatnonzero(np.isnan(pot))
             pairs = list(zip(arr["conductor_tip"][i].tolist(), arr["conductor_id"][i].tolist()))
             raise ValueError(f"unset contact potential for (tip, conductor) {pairs[:10]}")
-        sol = solve_circuit(self.n_tips, arr["tip_contacts"], arr["conductor_tip"], pot, solver=self.solver)
+        sol = solve_circuit(self.n_tips, arr["tip_contacts"], arr["conductor_tip"], pot, solver=self.solver,
+                            rod_resistance=self.rod_resistance, contact_resistance=self.contact_resistance)
         self.changed = False
         return sol
 
@@ -690,14 +708,16 @@ class ConnectivityGraph:
         n_rods: int,
         conductor_potential: Mapping[int, float | None],
         arrays: Mapping[str, np.ndarray],
+        **kwargs,
     ) -> "ConnectivityGraph":
         """Rebuild a graph from :meth:`arrays` output (e.g. read back from HDF5).
 
         Per-contact potentials are taken from ``arrays["conductor_potential"]``
         (NaN = unset); for fixed-potential conductors the ``conductor_potential``
-        mapping given here wins over the stored value.
+        mapping given here wins over the stored value. ``kwargs`` (``solver``,
+        ``rod_resistance``, ``contact_resistance``) go to the constructor.
         """
-        g = cls(n_rods, conductor_potential)
+        g = cls(n_rods, conductor_potential, **kwargs)
         tc = _as_index_array(arrays["tip_contacts"], "tip_contacts", 2, g.n_tips)
         ct = _as_index_array(arrays["conductor_tip"], "conductor_tip", 1, g.n_tips)
         cid = _as_index_array(arrays["conductor_id"], "conductor_id", 1, None)

@@ -106,10 +106,11 @@ class AdamsBashforth4:
             self._rk4(x, v, self.hist_v[h], self.hist_a[h], self.hist_p[h])
         if self.split_brakes:
             self.ff.split_brakes(x, v, self.dt, self.work)
-        self.bond_error_before = bond_length_error(x)
+        ell = state.bond_length()
+        self.bond_error_before = bond_length_error(x, ell)
         if self.project or self.correct_velocity:
-            constrain_bonds(x, v, self.project, self.correct_velocity)
-            self.bond_error_after = bond_length_error(x) if self.project else self.bond_error_before
+            constrain_bonds(x, v, self.project, self.correct_velocity, ell)
+            self.bond_error_after = bond_length_error(x, ell) if self.project else self.bond_error_before
         else:
             self.bond_error_after = self.bond_error_before
         state.step += 1

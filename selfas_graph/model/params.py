@@ -42,6 +42,50 @@ class ChargeDistribution:
 
 
 @dataclass(frozen=True)
+class LengthDistribution:
+    """Per-rod length l_i in units of the mean rod length L (docs/model.md section 2)."""
+
+    distribution: str = spec(
+        "constant", "constant (every rod has `value`), uniform (uniform in (low, high)), "
+        "two_level (`high` for a fraction `high_fraction` of the rods, `low` for the rest); "
+        "the law's mean must be 1, since L is the mean length", choices=("constant", "uniform", "two_level"))
+    value: float = spec(1.0, "length of every rod when distribution = constant (then 1)", gt=0.0)
+    low: float = spec(0.5, "lower bound (uniform) or common value (two_level)", gt=0.0)
+    high: float = spec(1.5, "upper bound (uniform) or rare value (two_level)", gt=0.0)
+    high_fraction: float = spec(0.5, "fraction of rods with the `high` value (two_level)", ge=0.0, le=1.0)
+
+    def mean(self) -> float:
+        """Mean of the law (1 for a valid scene)."""
+        if self.distribution == "constant":
+            return self.value
+        if self.distribution == "uniform":
+            return 0.5 * (self.low + self.high)
+        return (1.0 - self.high_fraction) * self.low + self.high_fraction * self.high
+
+    def bounds(self) -> tuple:
+        """(shortest, longest) length the law can give."""
+        if self.distribution == "constant":
+            return self.value, self.value
+        return min(self.low, self.high), max(self.low, self.high)
+
+
+@dataclass(frozen=True)
+class ResistanceDistribution:
+    """Per-rod resistance R_i in units of R0 (docs/model.md section 7)."""
+
+    distribution: str = spec(
+        "constant", "constant (every rod gets `value`), uniform (uniform in (low, high)), "
+        "two_level (`high` for a fraction `high_fraction` of the rods, `low` for the rest)",
+        choices=("constant", "uniform", "two_level"))
+    value: float = spec(1.0, "resistance of every rod when distribution = constant", gt=0.0)
+    low: float = spec(0.5, "lower bound (uniform) or common value (two_level)", gt=0.0)
+    high: float = spec(1.5, "upper bound (uniform) or rare value (two_level)", gt=0.0)
+    high_fraction: float = spec(0.5, "fraction of rods with the `high` value (two_level)", ge=0.0, le=1.0)
+    per_length: bool = spec(
+        False, "the drawn value is a resistance per unit length: R_i = value * l_i (l_i from rods.length)")
+
+
+@dataclass(frozen=True)
 class RodParams:
     # 10^7 rods hold about 2 GB per float64 array of tips: the practical ceiling of one machine
     count: int = spec(300, "number of rods (a scene needs at least one)", ge=1, le=10_000_000)
@@ -55,6 +99,12 @@ class RodParams:
         None, "r*, below which the tip law has its soft core (default: the diameter)", gt=0.0, lt=0.5
     )
     tip_stiffness: float = spec(1.0, "kappa, elastic stiffness of the tip core and of the electrode walls", ge=0.0)
+    length: Optional[LengthDistribution] = spec(
+        None, "length l_i of each rod in units of the mean length L, a number or a distribution table "
+        "(absent: every rod has length 1)")
+    resistance: Optional[ResistanceDistribution] = spec(
+        None, "resistance R_i of each rod in units of R0, a number or a distribution table "
+        "(absent: every rod has R0 = 1)")
 
     @property
     def rstar(self) -> float:
@@ -229,6 +279,9 @@ class ContactParams:
     enabled: bool = spec(True, "detect tip and electrode contacts and record them as events")
     release_factor: float = spec(
         1.5, "a contact is released when the tips are farther apart than release_factor * r* (hysteresis)", ge=1.0)
+    resistance: float = spec(
+        0.0, "resistance r of every tip-tip and tip-conductor contact in the circuit (units R0); 0 = ideal "
+        "contacts, tips in contact are one electrical node", ge=0.0)
 
 
 @dataclass(frozen=True)

@@ -136,7 +136,8 @@ class Simulation:
             #: conductor id -> fixed potential (units R0 J0), MODEL.md section 6
             self.conductor_potential = conductors
             solver = params.circuit.solver if params.circuit is not None else "auto"
-            self.graph = ConnectivityGraph(self.state.n_rods, conductors, solver=solver)
+            self.graph = ConnectivityGraph(self.state.n_rods, conductors, solver=solver,
+                                           rod_resistance=self.state.rod_resistance, contact_resistance=cp.resistance)
             self._update_contacts()
 
     @classmethod
@@ -166,6 +167,9 @@ class Simulation:
             "events": np.array([tuple(r) for r in self.events], dtype=ev.EVENT_DTYPE),
             "short_circuit_time": np.nan if self.short_circuit_time is None else self.short_circuit_time,
         }
+        for name in ("rod_length", "rod_resistance"):
+            if getattr(st, name) is not None:
+                snap[name] = getattr(st, name).copy()
         snap.update(ff.mts_state())
         for name, nl in (("tip_nl", ff._tip_nl), ("centre_nl", ff._centre_nl)):
             if nl is not None and nl.reference is not None:
@@ -184,7 +188,8 @@ class Simulation:
     def from_snapshot(cls, params: Parameters, snap: dict, timing: bool = False, comm=None) -> "Simulation":
         """Rebuild a simulation from :meth:`snapshot` (see there)."""
         state = State(np.array(snap["position"]), np.array(snap["velocity"]), np.array(snap["tip_charge"]),
-                      np.array(snap["rod_charge"]), int(snap["step"]), float(snap["time"]))
+                      np.array(snap["rod_charge"]), int(snap["step"]), float(snap["time"]),
+                      *(np.array(snap[k]) if k in snap else None for k in ("rod_length", "rod_resistance")))
         sim = cls(params, state=state, timing=timing, detect_initial_contacts=False, comm=comm)
         it, ff = sim.integrator, sim.force_field
         it.hist_v[:], it.hist_a[:], it.hist_p[:] = snap["hist_v"], snap["hist_a"], snap["hist_p"]
@@ -214,7 +219,9 @@ class Simulation:
             sim._filament_tip = np.array(snap["filament_tip"], dtype=np.int64)
             sim._filament_z = np.array(snap["filament_z"], dtype=np.float64)
             arrays = {k[len("graph_"):]: np.array(v) for k, v in snap.items() if k.startswith("graph_")}
-            sim.graph = ConnectivityGraph.from_arrays(state.n_rods, sim.conductor_potential, arrays)
+            sim.graph = ConnectivityGraph.from_arrays(state.n_rods, sim.conductor_potential, arrays,
+                                                      rod_resistance=state.rod_resistance,
+                                                      contact_resistance=params.contacts.resistance)
             sim.graph.solver = params.circuit.solver if params.circuit is not None else "auto"
             if bool(snap["has_solution"]) and params.circuit is not None:
                 # the solve is a pure function of the graph arrays, so this is the solution the
@@ -310,7 +317,7 @@ class Simulation:
         elif not err < BOND_BREAK:
             what = f"a broken rigid bond (length error {err:.3g} > {BOND_BREAK})"
             r = np.linalg.norm(x[0::2] - x[1::2], axis=1)
-            tips = 2 * np.argsort(-np.abs(r - 1.0))[:5]
+            tips = 2 * np.argsort(-np.abs(r - (1.0 if st.rod_length is None else st.rod_length)))[:5]
         else:
             what = f"a runaway step (a tip moved {vmax * self.dt:.3g} rod lengths in one step)"
             tips = np.argsort(-speed)[:5]

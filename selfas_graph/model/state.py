@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
@@ -17,7 +18,8 @@ class State:
     """Positions and velocities of all tips, and the per-rod constants.
 
     Rod ``i`` has tip a at row ``2 i`` (magnetic charge ``+q_i``) and tip b at row
-    ``2 i + 1`` (``-q_i``); unit tip masses and unit rod length (MODEL.md section 2).
+    ``2 i + 1`` (``-q_i``); unit tip masses and, unless ``rod_length`` is given,
+    unit rod length (docs/model.md section 2).
 
     Attributes
     ----------
@@ -28,6 +30,10 @@ class State:
         Electric charge Z_i of each rod.
     step : int
     time : float
+    rod_length : (n_rods,) float64 or None
+        Length l_i of each rod (units L, the mean length); None: every rod has length 1.
+    rod_resistance : (n_rods,) float64 or None
+        Resistance R_i of each rod (units R0); None: every rod has R0 = 1.
     """
 
     position: np.ndarray
@@ -36,6 +42,8 @@ class State:
     rod_charge: np.ndarray
     step: int = 0
     time: float = 0.0
+    rod_length: Optional[np.ndarray] = None
+    rod_resistance: Optional[np.ndarray] = None
 
     @property
     def n_tips(self) -> int:
@@ -51,35 +59,66 @@ class State:
 
     def copy(self) -> "State":
         return State(self.position.copy(), self.velocity.copy(), self.tip_charge.copy(),
-                     self.rod_charge.copy(), self.step, self.time)
+                     self.rod_charge.copy(), self.step, self.time,
+                     None if self.rod_length is None else self.rod_length.copy(),
+                     None if self.rod_resistance is None else self.rod_resistance.copy())
+
+    def bond_length(self) -> np.ndarray:
+        """The length each bond should have: ``rod_length``, or an empty array for unit rods.
+
+        The form the rigid-bond kernels take (``selfas_graph/kernels/rigid.py``).
+        """
+        return _UNIT_LENGTH if self.rod_length is None else self.rod_length
 
     @classmethod
-    def from_rods(cls, centre, axis, magnetic_charge, electric_charge, velocity=None):
-        """Build a state from rod centres and unit axes ``s = x_b - x_a``.
+    def from_rods(cls, centre, axis, magnetic_charge, electric_charge, velocity=None, length=None,
+                  resistance=None):
+        """Build a state from rod centres and axes ``s = x_b - x_a`` (normalised here).
 
         Parameters
         ----------
         centre, axis : (n_rods, 3) float64
         magnetic_charge, electric_charge : (n_rods,) float64
         velocity : (n_tips, 3) float64, optional (default zero)
+        length : (n_rods,) float64, optional
+            Rod lengths (default: every rod has length 1, ``rod_length`` None).
+        resistance : (n_rods,) float64, optional
+            Rod resistances (default: R0 = 1, ``rod_resistance`` None).
         """
         centre = np.asarray(centre, dtype=np.float64).reshape(-1, 3)
         axis = np.asarray(axis, dtype=np.float64).reshape(-1, 3)
         axis = axis / np.linalg.norm(axis, axis=1)[:, None]
         n = centre.shape[0]
         position = np.empty((2 * n, 3))
-        position[0::2] = centre - 0.5 * axis
-        position[1::2] = centre + 0.5 * axis
+        if length is None:
+            half = 0.5 * axis
+        else:
+            length = np.array(length, dtype=np.float64).reshape(n)
+            if not (np.isfinite(length).all() and (length > 0).all()):
+                raise ValueError("rod lengths must be finite and > 0")
+            half = (0.5 * length)[:, None] * axis
+        position[0::2] = centre - half
+        position[1::2] = centre + half
+        if resistance is not None:
+            resistance = np.array(resistance, dtype=np.float64).reshape(n)
+            if not (np.isfinite(resistance).all() and (resistance > 0).all()):
+                raise ValueError("rod resistances must be finite and > 0")
         q = np.asarray(magnetic_charge, dtype=np.float64).reshape(n)
         tip_charge = np.empty(2 * n)
         tip_charge[0::2] = q
         tip_charge[1::2] = -q
         v = np.zeros_like(position) if velocity is None else np.array(velocity, dtype=np.float64).reshape(2 * n, 3)
-        return cls(position, v, tip_charge, np.asarray(electric_charge, dtype=np.float64).reshape(n).copy())
+        return cls(position, v, tip_charge, np.asarray(electric_charge, dtype=np.float64).reshape(n).copy(),
+                   rod_length=length, rod_resistance=resistance)
+
+
+#: the rigid-bond kernels' sign for "every rod has length 1"
+_UNIT_LENGTH = np.zeros(0)
+_UNIT_LENGTH.setflags(write=False)
 
 
 def draw_charges(dist: ChargeDistribution, n: int, rng, magnetic=None) -> np.ndarray:
-    """Per-rod charges from a distribution (MODEL.md section 8).
+    """Per-rod values (charges, lengths, resistances) from a distribution (docs/model.md section 2).
 
     ``two_level`` gives exactly ``round(high_fraction * n)`` rods the high value,
     at random positions in the rod list.
@@ -113,6 +152,14 @@ def random_state(params: Parameters, rng=None) -> State:
     n = params.rods.count
     q = draw_charges(params.rods.magnetic_charge, n, rng)
     z = draw_charges(params.rods.electric_charge, n, rng, magnetic=q)
+    # lengths and resistances are drawn only when the scene sets them (a constant draws
+    # nothing), so scenes without them draw, and place, exactly as before
+    ell = None if params.rods.length is None else draw_charges(params.rods.length, n, rng)
+    res = None
+    if params.rods.resistance is not None:
+        res = draw_charges(params.rods.resistance, n, rng)
+        if params.rods.resistance.per_length and ell is not None:
+            res = res * ell
     box = np.array(params.placement.box, dtype=np.float64)
     lo, hi = box[:, 0], box[:, 1]
     dmin = params.min_tip_distance
@@ -146,7 +193,8 @@ def random_state(params: Parameters, rng=None) -> State:
             ax /= np.linalg.norm(ax, axis=1)[:, None]
             for j in range(m):
                 tries += 1
-                ta, tb = cs[j] - 0.5 * ax[j], cs[j] + 0.5 * ax[j]
+                half = 0.5 * ax[j] if ell is None else (0.5 * ell[i]) * ax[j]
+                ta, tb = cs[j] - half, cs[j] + half
                 if (ta < lo).any() or (ta > hi).any() or (tb < lo).any() or (tb > hi).any():
                     continue
                 if clear(ta) and clear(tb):
@@ -163,4 +211,4 @@ def random_state(params: Parameters, rng=None) -> State:
                 f"(placement.max_attempts); use fewer rods (rods.count), a larger box (placement.box) or a smaller "
                 f"placement.min_tip_distance (now {dmin:g})"
             )
-    return State.from_rods(centre, axis, q, z)
+    return State.from_rods(centre, axis, q, z, length=ell, resistance=res)
