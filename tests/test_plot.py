@@ -41,7 +41,7 @@ def is_png(path):
     return data[:8] == PNG_SIGNATURE and len(data) > 1000
 
 
-@pytest.mark.parametrize("kind", ["snapshot", "density", "field", "flux", "timeline"])
+@pytest.mark.parametrize("kind", ["snapshot", "density", "field", "flux", "timeline", "moment", "fractal", "skeleton"])
 def test_every_kind_writes_a_png(run_file, tmp_path, kind, capsys):
     """Each figure kind of the paper (MODEL.md section 7) renders headless to a non-empty PNG."""
     out = tmp_path / f"{kind}.png"
@@ -114,7 +114,7 @@ def test_frame_out_of_range_is_a_clear_error(run_file, tmp_path, capsys):
 def test_kinds_that_need_the_graph_say_so(no_graph_run, tmp_path, capsys):
     """Without graph data, field, flux and timeline fail with exit 2 and the reason; snapshot and
     density still draw (all rods grey / total density only)."""
-    for kind in ("field", "flux", "timeline"):
+    for kind in ("field", "flux", "timeline", "moment", "fractal", "skeleton"):
         assert main(["plot", str(no_graph_run), "--kind", kind, "-o", str(tmp_path / f"{kind}.png")]) == 2
         assert "no graph data" in capsys.readouterr().err
     for kind in ("snapshot", "density"):

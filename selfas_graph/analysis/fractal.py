@@ -21,7 +21,7 @@ share points), and a finite object bends the curve near both ends of the range, 
 standard error of the slope alone understates how well a dimension is known. Each fit
 therefore reports ``err = sqrt(se^2 + d^2)`` where ``se`` is the standard error of the
 least-squares slope and ``d`` the difference between the slopes fitted to the lower and the
-upper half of the range (its curvature: how much the answer depends on the range).
+upper half of the range of log x (its curvature: how much the answer depends on the range).
 For ``rg_dimension`` both are carried to D = 1 / slope. On the hand-built anchors of
 ``tests/test_claims.py`` (a chain, a square-lattice sheet, a cubic-lattice block) the
 dimensions come out 1, 2 and 3 within this uncertainty.
@@ -97,16 +97,16 @@ def log_fit(x, y):
 
 
 def _slope_uncertainty(x, y):
-    """(slope, err) with err = sqrt(se^2 + (difference of the slopes on the two halves of the range)^2)."""
+    """(slope, err) with err = sqrt(se^2 + d^2), d the difference of the slopes fitted to the points
+    below and above the middle of the range of log x (0 when either half has fewer than 2 distinct x)."""
+    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
     slope, se, _ = log_fit(x, y)
-    n = len(x)
-    half = n // 2
-    if n >= 4:
-        lo, _, _ = log_fit(x[:half + 1], y[:half + 1])
-        hi, _, _ = log_fit(x[half:], y[half:])
-        curvature = abs(hi - lo)
-    else:
-        curvature = 0.0
+    lx = np.log(x)
+    mid = 0.5 * (lx.min() + lx.max())
+    lo, hi = lx <= mid + 1e-12, lx >= mid - 1e-12
+    curvature = 0.0
+    if np.unique(x[lo]).shape[0] >= 2 and np.unique(x[hi]).shape[0] >= 2:
+        curvature = abs(log_fit(x[hi], y[hi])[0] - log_fit(x[lo], y[lo])[0])
     return slope, math.sqrt((se if math.isfinite(se) else 0.0) ** 2 + curvature ** 2)
 
 

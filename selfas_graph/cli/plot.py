@@ -15,6 +15,14 @@ Kinds, after the paper's figures (MODEL.md section 7):
   Phi_0 = 4 pi (Fig. 5), or of an external dipole's flux with ``--z-mext`` (Fig. 11).
 * ``timeline`` -- rods in filaments and total current vs time, the short-circuit
   time marked.
+* ``moment``   -- the largest structure's magnetic moment vs time: |m_q| in units of the
+  mean single-rod moment, and m_J,z of its rod currents (docs/model.md section 7a).
+* ``fractal``  -- the mass-radius and box-counting dimensions of the largest structure and
+  the R_g ~ N^(1/D) dimension over all structures vs time, with their uncertainties.
+* ``skeleton`` -- the cycle rank of the contact graph (and of the largest structure) vs time.
+
+The last three read :func:`selfas_graph.analysis.claims.claims_series` (``--every K``: every
+K-th frame; default at most 200 frames).
 
 The output goes next to the run file as ``RUN_KIND_frameK.png`` (``RUN_timeline.png``
 for the timeline) unless ``-o`` says otherwise; an existing file is kept unless
@@ -32,9 +40,11 @@ from ..io.h5md import RunFile, RunFileError
 from ..model.graph import DEAD_END, FILAMENT, ConnectivityGraph
 from .main import CliError
 
-KINDS = ("snapshot", "density", "field", "flux", "timeline")
+KINDS = ("snapshot", "density", "field", "flux", "timeline", "moment", "fractal", "skeleton")
+#: kinds drawn over time (one file per run, not per frame)
+SERIES_KINDS = ("timeline", "moment", "fractal", "skeleton")
 #: kinds that need the graph data (contacts, roles, currents) of the run
-NEEDS_GRAPH = ("field", "flux", "timeline")
+NEEDS_GRAPH = ("field", "flux", "timeline", "moment", "fractal", "skeleton")
 #: above this many rods a snapshot colours the largest structure instead of dead ends (paper Fig. 6)
 LARGE_RUN = 3000
 
@@ -68,6 +78,8 @@ def add_arguments(p):
     p.add_argument("--z-mext", type=float,
                    help="flux in units of an external dipole's flux 4 pi Z_Mext instead of Phi_0 = 4 pi")
     p.add_argument("--dpi", type=int, default=150, help="resolution of the PNG (default 150)")
+    p.add_argument("--every", type=int, metavar="K",
+                   help="moment, fractal, skeleton: every K-th frame (default: at most 200 frames)")
 
 
 def _matplotlib():
@@ -85,8 +97,8 @@ def _matplotlib():
 def _output_path(args, run_path: Path, frame: int) -> Path:
     if args.output:
         out = Path(args.output)
-    elif args.kind == "timeline":
-        out = run_path.with_name(f"{run_path.stem}_timeline.png")
+    elif args.kind in SERIES_KINDS:
+        out = run_path.with_name(f"{run_path.stem}_{args.kind}.png")
     else:
         out = run_path.with_name(f"{run_path.stem}_{args.kind}_frame{frame}.png")
     if out.is_dir():
@@ -357,8 +369,65 @@ def _timeline(fig, run, frame, args):
     ax.set_title(f"{run.path.name}: filaments over time ({sc})", fontsize="medium")
 
 
+def _series(run, args):
+    from ..analysis.claims import claims_series
+
+    every = args.every if args.every is not None else max(1, -(-run.n_frames // 200))
+    if every < 1:
+        raise CliError(f"--every must be >= 1, got {every}")
+    return claims_series(run, range(0, run.n_frames, every), loops=False)
+
+
+def _moment(fig, run, frame, args):
+    s = _series(run, args)
+    ax = fig.add_subplot()
+    lines = ax.plot(s["time"], s["largest_moment_ratio"], "-", lw=1.2, color=LARGEST_COLOUR,
+                    label="$|m_q|$ / mean rod moment")
+    ax.set_xlabel("time t ($t_0$)")
+    ax.set_ylabel("$|m_q|$ of the largest structure / mean $|q|$")
+    ax.set_ylim(bottom=0)
+    ax2 = ax.twinx()
+    lines += ax2.plot(s["time"], s["largest_moment_J_z"], "-", lw=1.2, color=FILAMENT_COLOUR,
+                      label="$m_{J,z}$ of its rod currents")
+    ax2.set_ylabel("$m_{J,z}$ of the rod currents ($J_0 L^2$)")
+    ax2.axhline(0.0, color="0.8", lw=0.8, zorder=0)
+    fig.legend(handles=lines, loc="outside upper center", ncols=2, fontsize="small", frameon=False)
+    ax.set_title("Magnetic moment of the largest structure", fontsize="medium")
+
+
+def _fractal(fig, run, frame, args):
+    s = _series(run, args)
+    ax = fig.add_subplot()
+    for key, colour, label in (("fractal_dimension", LARGEST_COLOUR, "mass-radius, largest structure"),
+                               ("box_dimension", "black", "box counting, largest structure"),
+                               ("rg_dimension", TOTAL_COLOUR, r"$R_g \sim N^{1/D}$ over all structures")):
+        y, err = s[key], s[key + "_err"]
+        ax.plot(s["time"], y, "-", lw=1.2, color=colour, label=label)
+        ax.fill_between(s["time"], y - err, y + err, color=colour, alpha=0.15, lw=0)
+    for d in (1, 2, 3):
+        ax.axhline(d, color="0.85", lw=0.8, zorder=0)
+    finite = np.concatenate([s[k][np.isfinite(s[k])] for k in ("fractal_dimension", "box_dimension", "rg_dimension")])
+    ax.set_ylim(0, max(3.5, float(finite.max()) + 0.2) if finite.size else 3.5)
+    ax.set_xlabel("time t ($t_0$)")
+    ax.set_ylabel("dimension D (bands: uncertainty)")
+    fig.legend(loc="outside upper center", ncols=3, fontsize="small", frameon=False)
+    ax.set_title("Fractal dimensions", fontsize="medium")
+
+
+def _skeleton(fig, run, frame, args):
+    s = _series(run, args)
+    ax = fig.add_subplot()
+    ax.plot(s["time"], s["cycle_rank"], "-", lw=1.2, color="black", label="contact graph")
+    ax.plot(s["time"], s["cycle_rank_largest"], "-", lw=1.2, color=LARGEST_COLOUR, label="largest structure")
+    ax.set_ylim(bottom=0)
+    ax.set_xlabel("time t ($t_0$)")
+    ax.set_ylabel("cycle rank E - V + C (independent loops)")
+    fig.legend(loc="outside upper center", ncols=2, fontsize="small", frameon=False)
+    ax.set_title("Loops of the rod network", fontsize="medium")
+
+
 DRAW = {"snapshot": _snapshot, "density": _density, "field": _field_or_flux, "flux": _field_or_flux,
-        "timeline": _timeline}
+        "timeline": _timeline, "moment": _moment, "fractal": _fractal, "skeleton": _skeleton}
 
 
 def _check_options(args):
@@ -368,6 +437,8 @@ def _check_options(args):
         raise CliError(f"--r-max must be a finite number > 0, got {args.r_max}")
     if args.planes and not all(np.isfinite(z) for z in args.planes):
         raise CliError(f"--planes must be finite numbers, got {args.planes}")
+    if args.every is not None and args.every < 1:
+        raise CliError(f"--every must be >= 1, got {args.every}")
     if args.time is not None and not np.isfinite(args.time):
         raise CliError(f"--time {args.time} names no frame; give a finite simulated time")
 
