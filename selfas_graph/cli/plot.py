@@ -433,13 +433,14 @@ def _series(run, args):
 def _moment(fig, run, frame, args):
     s = _series(run, args)
     ax = fig.add_subplot()
-    lines = ax.plot(s["time"], s["largest_moment_ratio"], "-", lw=1.2, color=LARGEST_COLOUR,
+    style = _series_style(len(s["time"]))  # markers on short series: a value between NaNs stays visible
+    lines = ax.plot(s["time"], s["largest_moment_ratio"], **style, color=LARGEST_COLOUR,
                     label="$|m_q|$ / mean rod moment")
     ax.set_xlabel("time t ($t_0$)")
     ax.set_ylabel("$|m_q|$ of the largest structure / mean $|q|$")
     ax.set_ylim(bottom=0)
     ax2 = ax.twinx()
-    lines += ax2.plot(s["time"], s["largest_moment_J_z"], "-", lw=1.2, color=FILAMENT_COLOUR,
+    lines += ax2.plot(s["time"], s["largest_moment_J_z"], **style, color=FILAMENT_COLOUR,
                       label="$m_{J,z}$ of its rod currents")
     ax2.set_ylabel("$m_{J,z}$ of the rod currents ($J_0 L^2$)")
     ax2.axhline(0.0, color="0.8", lw=0.8, zorder=0)
@@ -454,7 +455,7 @@ def _fractal(fig, run, frame, args):
                                ("box_dimension", "black", "box counting, largest structure"),
                                ("rg_dimension", TOTAL_COLOUR, r"$R_g \sim N^{1/D}$ over all structures")):
         y, err = s[key], s[key + "_err"]
-        ax.plot(s["time"], y, "-", lw=1.2, color=colour, label=label)
+        ax.plot(s["time"], y, **_series_style(len(y)), color=colour, label=label)
         ax.fill_between(s["time"], y - err, y + err, color=colour, alpha=0.15, lw=0)
     for d in (1, 2, 3):
         ax.axhline(d, color="0.85", lw=0.8, zorder=0)
@@ -469,8 +470,9 @@ def _fractal(fig, run, frame, args):
 def _skeleton(fig, run, frame, args):
     s = _series(run, args)
     ax = fig.add_subplot()
-    ax.plot(s["time"], s["cycle_rank"], "-", lw=1.2, color="black", label="contact graph")
-    ax.plot(s["time"], s["cycle_rank_largest"], "-", lw=1.2, color=LARGEST_COLOUR, label="largest structure")
+    style = _series_style(len(s["time"]))
+    ax.plot(s["time"], s["cycle_rank"], **style, color="black", label="contact graph")
+    ax.plot(s["time"], s["cycle_rank_largest"], **style, color=LARGEST_COLOUR, label="largest structure")
     ax.set_ylim(bottom=0)
     ax.set_xlabel("time t ($t_0$)")
     ax.set_ylabel("cycle rank E - V + C (independent loops)")
