@@ -152,8 +152,9 @@ def test_skeleton_of_hand_built_objects(obj, rank, lengths, degrees):
     n = len(q) // 2
     total, per = cycle_rank(n, tc)
     assert total == rank and per.tolist() == [rank]
-    ll = loop_lengths(n, tc, method="minimum")
-    assert dict(zip(*np.unique(ll, return_counts=True))) == lengths
+    for method in ("minimum", "shortest"):
+        ll = loop_lengths(n, tc, method=method)
+        assert dict(zip(*np.unique(ll, return_counts=True))) == lengths
     assert dict(zip(*np.unique(junction_degrees(n, tc), return_counts=True))) == degrees
 
 
@@ -162,6 +163,8 @@ def test_fundamental_basis_has_as_many_loops_and_parallel_rods_make_loops_of_two
     n = len(q) // 2
     total, _ = cycle_rank(n, tc)
     assert len(loop_lengths(n, tc, method="fundamental")) == total == 3 * 3 * 16 - 64 + 1
+    # the shortest loop through each edge off a spanning tree: every one a face of the lattice
+    assert loop_lengths(n, tc, method="shortest").tolist() == [4] * total
     # two rods sharing both junctions, and a free rod: one loop of two, the free rod no loop
     pos, q, tc = build([[0, 0, 0], [0, 0, 0], [5, 5, 5]], [[1, 0, 0], [1, 0, 0], [6, 5, 5]])
     assert cycle_rank(3, tc)[0] == 1 and loop_lengths(3, tc).tolist() == [2]

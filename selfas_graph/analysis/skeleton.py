@@ -10,10 +10,10 @@ junctions make a loop of two, a rod whose tips sit in one junction a loop of one
   rod with no contact), as :func:`selfas_graph.model.graph.classify_rods` numbers them.
 * :func:`cycle_rank` -- independent loops ``E - V + C`` (edges = rods, vertices = merged
   nodes, C = connected components), per structure and in total.
-* :func:`loop_lengths` -- lengths (in rods) of a cycle basis: networkx's minimum cycle
-  basis (every face of a lattice) or, for large graphs, its fundamental cycle basis
-  (depends on a spanning tree, an upper bound on the loops' lengths); loops of one and two
-  rods are counted from the multigraph. As many loops as the cycle rank.
+* :func:`loop_lengths` -- lengths (in rods) of as many loops as the cycle rank: networkx's
+  minimum cycle basis (every face of a lattice) or, for large graphs, the shortest loop
+  through each edge off a spanning tree; loops of one and two rods are counted from the
+  multigraph.
 * :func:`junction_degrees` -- tips per contact cluster (merged node of two or more tips).
 """
 from __future__ import annotations
@@ -85,17 +85,21 @@ def cycle_rank(n_rods, tip_contacts, structure=None, n_structures=None):
     return int(total), per.astype(np.int64)
 
 
-def loop_lengths(n_rods, tip_contacts, rods=None, method="auto", minimum_up_to=40):
+def loop_lengths(n_rods, tip_contacts, rods=None, method="auto", minimum_up_to=10):
     """Lengths (in rods) of a cycle basis of the contact graph of ``rods`` (default: all).
 
     Parameters
     ----------
-    method : "auto", "minimum" or "fundamental"
+    method : "auto", "minimum", "shortest" or "fundamental"
         ``minimum``: ``networkx.minimum_cycle_basis`` (the shortest independent loops; every
-        face of a lattice); ``fundamental``: ``networkx.cycle_basis`` (one loop per edge off a
-        spanning tree, quick, longer loops); ``auto``: minimum when the graph has at most
-        ``minimum_up_to`` independent loops, else fundamental (networkx's minimum basis took
-        0.35 s for 25 loops, 4 s for 64 and 34 s for 176 on this project's machine).
+        face of a lattice); ``shortest``: for each edge off a spanning tree, the shortest loop
+        through it (as many loops as the cycle rank, each as short as it can be, though not
+        always independent; every face of a lattice, fast); ``fundamental``:
+        ``networkx.cycle_basis`` (one loop per edge off a spanning tree closed through the
+        tree: quick, longer loops); ``auto``: minimum up to ``minimum_up_to`` independent
+        loops, else shortest (networkx's minimum basis took 0.35 s for 25 loops of a lattice,
+        34 s for 176, and 3.7 s for 25 loops of a 500-rod Fig. 2 network on this project's
+        machine; shortest takes milliseconds).
 
     Returns
     -------
@@ -113,14 +117,31 @@ def loop_lengths(n_rods, tip_contacts, rods=None, method="auto", minimum_up_to=4
     lengths += [2] * sum(k - 1 for k in pairs.values())  # each extra parallel rod closes a loop of two
     # the 2-core (dead-end branches pruned away) holds every loop of the simple graph
     g = nx.k_core(nx.Graph(list(pairs)), 2)
-    if method not in ("auto", "minimum", "fundamental"):
-        raise ValueError(f"method must be auto, minimum or fundamental, got {method!r}")
+    if method not in ("auto", "minimum", "shortest", "fundamental"):
+        raise ValueError(f"method must be auto, minimum, shortest or fundamental, got {method!r}")
     if method == "auto":
         rank = g.number_of_edges() - g.number_of_nodes() + nx.number_connected_components(g)
-        method = "minimum" if rank <= minimum_up_to else "fundamental"
-    basis = nx.minimum_cycle_basis(g) if method == "minimum" else nx.cycle_basis(g)
-    lengths += [len(c) for c in basis]
+        method = "minimum" if rank <= minimum_up_to else "shortest"
+    if method == "shortest":
+        lengths += _shortest_through_chords(g)
+    else:
+        basis = nx.minimum_cycle_basis(g) if method == "minimum" else nx.cycle_basis(g)
+        lengths += [len(c) for c in basis]
     return np.sort(np.array(lengths, dtype=np.int64))
+
+
+def _shortest_through_chords(g):
+    """For each edge off a spanning forest of ``g``: the length of the shortest loop through it
+    (breadth-first search between its ends with the edge removed), one per independent loop."""
+    tree = nx.minimum_spanning_tree(g)
+    out = []
+    for u, v in g.edges():
+        if tree.has_edge(u, v):
+            continue
+        g.remove_edge(u, v)
+        out.append(nx.shortest_path_length(g, u, v) + 1)
+        g.add_edge(u, v)
+    return out
 
 
 def junction_degrees(n_rods, tip_contacts):
