@@ -456,7 +456,7 @@ def _fractal(fig, run, frame, args):
                                ("rg_dimension", TOTAL_COLOUR, r"$R_g \sim N^{1/D}$ over all structures")):
         y, err = s[key], s[key + "_err"]
         ax.plot(s["time"], y, **_series_style(len(y)), color=colour, label=label)
-        ax.fill_between(s["time"], y - err, y + err, color=colour, alpha=0.15, lw=0)
+        ax.fill_between(s["time"], y - err, y + err, color=colour, alpha=0.1, lw=0)
     for d in (1, 2, 3):
         ax.axhline(d, color="0.85", lw=0.8, zorder=0)
     finite = np.concatenate([s[k][np.isfinite(s[k])] for k in ("fractal_dimension", "box_dimension", "rg_dimension")])
