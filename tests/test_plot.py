@@ -1,7 +1,7 @@
 """``selfas-graph plot``: every kind writes a PNG, files are protected, errors are one line (exit 2).
 
-One small run of ``scenarios/quick.toml`` up to t = 2 (past its short circuit near
-t = 1.3, so there are filaments, dead ends and currents) is made once for the module.
+One small run of ``scenarios/quick.toml`` up to t = 2.5 (past its short circuit at
+t = 2.01, so there are filaments, dead ends and currents) is made once for the module.
 """
 import sys
 from pathlib import Path
@@ -19,7 +19,7 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 @pytest.fixture(scope="module")
 def run_file(tmp_path_factory):
     out = tmp_path_factory.mktemp("plot") / "quick.h5"
-    rc = main(["simulate", str(REPO / "scenarios" / "quick.toml"), "-o", str(out), "--t-end", "2",
+    rc = main(["simulate", str(REPO / "scenarios" / "quick.toml"), "-o", str(out), "--t-end", "2.5",
                "--progress", "none"])
     assert rc == 0
     return out
@@ -41,7 +41,7 @@ def is_png(path):
     return data[:8] == PNG_SIGNATURE and len(data) > 1000
 
 
-@pytest.mark.parametrize("kind", ["snapshot", "density", "field", "flux", "timeline"])
+@pytest.mark.parametrize("kind", ["snapshot", "density", "field", "flux", "timeline", "moment", "fractal", "skeleton"])
 def test_every_kind_writes_a_png(run_file, tmp_path, kind, capsys):
     """Each figure kind of the paper (MODEL.md section 7) renders headless to a non-empty PNG."""
     out = tmp_path / f"{kind}.png"
@@ -71,9 +71,9 @@ def test_options_planes_time_and_dipole_units(run_file, tmp_path):
 
 def test_default_name_and_no_overwrite_without_force(run_file, capsys):
     """The default output is RUN_kind_frameK.png next to the run (K the resolved frame index, here
-    frame -4 -> 1 of 0..4); an existing file is kept unless --force."""
+    frame -5 -> 1 of 0..5); an existing file is kept unless --force."""
     out = run_file.with_name(f"{run_file.stem}_density_frame1.png")
-    assert main(["plot", str(run_file), "--kind", "density", "--frame", "-4"]) == 0
+    assert main(["plot", str(run_file), "--kind", "density", "--frame", "-5"]) == 0
     assert is_png(out)
     before = out.read_bytes()
     out.write_bytes(b"keep me")
@@ -103,18 +103,18 @@ def test_not_a_run_file_is_a_clear_error(tmp_path, capsys):
 
 
 def test_frame_out_of_range_is_a_clear_error(run_file, tmp_path, capsys):
-    """--frame beyond the saved frames (0..4): exit 2, the valid range in the message, nothing written."""
+    """--frame beyond the saved frames (0..5): exit 2, the valid range in the message, nothing written."""
     out = tmp_path / "x.png"
     assert main(["plot", str(run_file), "--kind", "field", "--frame", "99", "-o", str(out)]) == 2
     err = capsys.readouterr().err
-    assert "frame 99 out of range" in err and "0..4" in err
+    assert "frame 99 out of range" in err and "0..5" in err
     assert not out.exists()
 
 
 def test_kinds_that_need_the_graph_say_so(no_graph_run, tmp_path, capsys):
     """Without graph data, field, flux and timeline fail with exit 2 and the reason; snapshot and
     density still draw (all rods grey / total density only)."""
-    for kind in ("field", "flux", "timeline"):
+    for kind in ("field", "flux", "timeline", "moment", "fractal", "skeleton"):
         assert main(["plot", str(no_graph_run), "--kind", kind, "-o", str(tmp_path / f"{kind}.png")]) == 2
         assert "no graph data" in capsys.readouterr().err
     for kind in ("snapshot", "density"):

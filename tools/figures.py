@@ -3,8 +3,9 @@
 Usage: python tools/figures.py RUN.h5 OUTDIR [--prefix NAME]
 
 Writes NAME_snapshot_start.png (frame 0), NAME_snapshot_end.png, NAME_density.png,
-NAME_field.png, NAME_flux.png and NAME_timeline.png (last frame unless said otherwise)
-through ``selfas-graph plot``.
+NAME_field.png, NAME_flux.png and NAME_timeline.png (last frame unless said otherwise), and
+with ``--claims`` the time series NAME_moment.png, NAME_fractal.png and NAME_skeleton.png
+(docs/model.md section 7a), through ``selfas-graph plot``.
 """
 import argparse
 import sys
@@ -21,12 +22,15 @@ def main(argv=None):
     ap.add_argument("run")
     ap.add_argument("outdir")
     ap.add_argument("--prefix", help="file name prefix (default: the run file's stem)")
+    ap.add_argument("--claims", action="store_true", help="also the moment, fractal and skeleton time series")
     args = ap.parse_args(argv)
     out = Path(args.outdir)
     out.mkdir(parents=True, exist_ok=True)
     name = args.prefix or Path(args.run).stem
     jobs = [("snapshot", "0", "snapshot_start"), ("snapshot", "-1", "snapshot_end"), ("density", "-1", "density"),
             ("field", "-1", "field"), ("flux", "-1", "flux"), ("timeline", None, "timeline")]
+    if args.claims:
+        jobs += [(kind, None, kind) for kind in ("moment", "fractal", "skeleton")]
     for kind, frame, label in jobs:
         argv_ = ["plot", args.run, "--kind", kind, "-o", str(out / f"{name}_{label}.png"), "--force"]
         if frame is not None:

@@ -1,4 +1,6 @@
-"""Analysis of saved frames: the diagnostics behind the paper's figures (MODEL.md section 7).
+"""Analysis of saved frames: the diagnostics behind the paper's figures (docs/model.md section 7)
+and the measures of its claims (section 7a: :mod:`.moments`, :mod:`.fractal`, :mod:`.skeleton`,
+and :func:`.claims.frame_claims`, which reads them from a run file).
 
 Arrays in, arrays out: these functions see one frame's numpy arrays (or a run's
 observable arrays) and never open a file; reading run files is the job of

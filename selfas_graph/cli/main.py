@@ -17,7 +17,9 @@ from .._version import __version__
 COMMANDS = {
     "simulate": ("selfas_graph.cli.simulate", "run a scenario and write an HDF5 run file"),
     "topology": ("selfas_graph.cli.topology", "structures, filaments, currents and events of a saved frame"),
-    "plot": ("selfas_graph.cli.plot", "figures of a saved run: snapshot, density, field, flux, timeline (PNG)"),
+    "analyze": ("selfas_graph.cli.analyze", "magnetic moment, fractal dimensions and loops of a saved frame or series"),
+    "plot": ("selfas_graph.cli.plot", "figures of a saved run: snapshot, density, field, flux, timeline, "
+                                      "moment, fractal, skeleton (PNG)"),
 }
 
 EXIT_USAGE = 2

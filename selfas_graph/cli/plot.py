@@ -15,6 +15,14 @@ Kinds, after the paper's figures (MODEL.md section 7):
   Phi_0 = 4 pi (Fig. 5), or of an external dipole's flux with ``--z-mext`` (Fig. 11).
 * ``timeline`` -- rods in filaments and total current vs time, the short-circuit
   time marked.
+* ``moment``   -- the largest structure's magnetic moment vs time: |m_q| in units of the
+  mean single-rod moment, and m_J,z of its rod currents (docs/model.md section 7a).
+* ``fractal``  -- the mass-radius and box-counting dimensions of the largest structure and
+  the R_g ~ N^(1/D) dimension over all structures vs time, with their uncertainties.
+* ``skeleton`` -- the cycle rank of the contact graph (and of the largest structure) vs time.
+
+The last three read :func:`selfas_graph.analysis.claims.claims_series` (``--every K``: every
+K-th frame; default at most 200 frames).
 
 The output goes next to the run file as ``RUN_KIND_frameK.png`` (``RUN_timeline.png``
 for the timeline) unless ``-o`` says otherwise; an existing file is kept unless
@@ -32,9 +40,11 @@ from ..io.h5md import RunFile, RunFileError
 from ..model.graph import DEAD_END, FILAMENT, ConnectivityGraph
 from .main import CliError
 
-KINDS = ("snapshot", "density", "field", "flux", "timeline")
+KINDS = ("snapshot", "density", "field", "flux", "timeline", "moment", "fractal", "skeleton")
+#: kinds drawn over time (one file per run, not per frame)
+SERIES_KINDS = ("timeline", "moment", "fractal", "skeleton")
 #: kinds that need the graph data (contacts, roles, currents) of the run
-NEEDS_GRAPH = ("field", "flux", "timeline")
+NEEDS_GRAPH = ("field", "flux", "timeline", "moment", "fractal", "skeleton")
 #: above this many rods a snapshot colours the largest structure instead of dead ends (paper Fig. 6)
 LARGE_RUN = 3000
 
@@ -68,6 +78,8 @@ def add_arguments(p):
     p.add_argument("--z-mext", type=float,
                    help="flux in units of an external dipole's flux 4 pi Z_Mext instead of Phi_0 = 4 pi")
     p.add_argument("--dpi", type=int, default=150, help="resolution of the PNG (default 150)")
+    p.add_argument("--every", type=int, metavar="K",
+                   help="moment, fractal, skeleton: every K-th frame (default: at most 200 frames)")
 
 
 def _matplotlib():
@@ -85,8 +97,8 @@ def _matplotlib():
 def _output_path(args, run_path: Path, frame: int) -> Path:
     if args.output:
         out = Path(args.output)
-    elif args.kind == "timeline":
-        out = run_path.with_name(f"{run_path.stem}_timeline.png")
+    elif args.kind in SERIES_KINDS:
+        out = run_path.with_name(f"{run_path.stem}_{args.kind}.png")
     else:
         out = run_path.with_name(f"{run_path.stem}_{args.kind}_frame{frame}.png")
     if out.is_dir():
@@ -154,8 +166,33 @@ class _Frame:
         return topo.structure == topo.largest_structure
 
 
+def _scene(run: RunFile) -> str:
+    """The scene's name for titles (a figure names its scene and time, not its file)."""
+    name = str((run.parameters.get("scenario") or {}).get("name") or "run")
+    return {"fig2": "Fig. 2 scene", "fig6": "Fig. 6 scene", "fig8": "Fig. 8 scene"}.get(name, f"{name} scene")
+
+
 def _title(run: RunFile, frame: _Frame, what: str) -> str:
-    return f"{run.path.name}: {what}, frame {frame.index}, t = {frame.time:.4g} $t_0$"
+    return f"{_scene(run)}: {what}, t = {frame.time:.4g} $t_0$"
+
+
+def _outside_legend(fig, handles=None, ncols=2):
+    """A legend above the axes, off the data (constrained layout makes room for it)."""
+    kw = {} if handles is None else {"handles": handles}
+    fig.legend(loc="outside upper center", ncols=ncols, fontsize="small", frameon=False, **kw)
+
+
+def _num(x, fmt=".4g"):
+    """A number for a label, negative with a typographic minus sign (as the tick labels have)."""
+    return format(x, fmt).replace("-", "\N{MINUS SIGN}")
+
+
+#: a time series with more points than this is drawn as a thin line without markers
+MARKERS_UP_TO = 40
+
+
+def _series_style(n):
+    return dict(lw=1.0) if n > MARKERS_UP_TO else dict(lw=1.2, marker="o", ms=2.5)
 
 
 # --------------------------------------------------------------------------- kinds
@@ -164,6 +201,9 @@ def _snapshot(fig, run, frame, args):
     from matplotlib.lines import Line2D
 
     ax = fig.add_subplot(projection="3d")
+    # draw in the order given: the translucent electrode planes first, the rods over them (the
+    # depth sort of mplot3d would otherwise let a plane veil every rod behind it)
+    ax.computed_zorder = False
     seg = frame.position.reshape(frame.n_rods, 2, 3)
     role = frame.role
     large = frame.n_rods > LARGE_RUN
@@ -188,9 +228,10 @@ def _snapshot(fig, run, frame, args):
                    (red, DEAD_END_COLOUR if not large else LARGEST_COLOUR, 1.6, red_label)]
     handles = []
     for mask, colour, width, label in groups:
-        alpha = 0.45 if colour is OTHER_COLOUR and role is not None else 1.0
+        alpha = 0.6 if colour is OTHER_COLOUR and role is not None else 1.0
         if mask.any():
-            ax.add_collection3d(Line3DCollection(seg[mask], colors=[colour], linewidths=width, alpha=alpha))
+            ax.add_collection3d(Line3DCollection(seg[mask], colors=[colour], linewidths=width, alpha=alpha,
+                                                 zorder=2))
         handles.append(Line2D([], [], color=colour, lw=2, alpha=alpha, label=f"{label} ({int(mask.sum())})"))
     lo, hi = frame.position.min(axis=0), frame.position.max(axis=0)
     if frame.gap is not None:
@@ -199,29 +240,35 @@ def _snapshot(fig, run, frame, args):
         for z, name in ((-frame.gap / 2, "cathode"), (frame.gap / 2, "anode")):
             rect = [[(x0, y0, z), (x1, y0, z), (x1, y1, z), (x0, y1, z)]]
             ax.add_collection3d(Poly3DCollection(rect, facecolors=[ELECTRODE_COLOUR], edgecolors=[ELECTRODE_COLOUR],
-                                                 alpha=0.15))
+                                                 alpha=0.12, zorder=0))
         handles.append(Line2D([], [], color=ELECTRODE_COLOUR, lw=6, alpha=0.4,
                               label=f"electrodes z = $\\pm${frame.gap / 2:g} L"))
     if frame.dipole is not None or frame.external_filament:
         if frame.dipole is not None:
             half = frame.dipole[1] / 2
-            ax.plot([0, 0], [0, 0], [-half, half], color="black", lw=3)
+            ax.plot([0, 0], [0, 0], [-half, half], color="black", lw=3, zorder=1)
             handles.append(Line2D([], [], color="black", lw=3,
                                   label=f"external dipole, $Z_{{Mext}}$ = {frame.dipole[0]:g}"))
             lo[2], hi[2] = min(lo[2], -half), max(hi[2], half)
         if frame.external_filament:
-            ax.plot([0, 0], [0, 0], [lo[2], hi[2]], color="black", lw=0.8, ls="--")
+            ax.plot([0, 0], [0, 0], [lo[2], hi[2]], color="black", lw=0.8, ls="--", zorder=1)
             handles.append(Line2D([], [], color="black", lw=0.8, ls="--", label="current filament (z axis)"))
     span = np.maximum(hi - lo, 1e-6)
     pad = 0.02 * span.max()
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
     ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.set_zlim(lo[2] - pad, hi[2] + pad)
-    ax.set_box_aspect(tuple(span + 2 * pad))
+    # framed on the rods: the box has the scene's proportions and fills the figure, whose shape
+    # run() chooses from the same proportions (a tall case (ii) column gets a tall figure)
+    ax.set_box_aspect(tuple(span + 2 * pad), zoom=0.95)
     ax.set_xlabel("x (L)")
     ax.set_ylabel("y (L)")
     ax.set_zlabel("z (L)")
-    ax.legend(handles=handles, loc="upper left", fontsize="small")
+    # labels clear of the tick marks, so that the minus signs of negative ticks stay visible
+    ax.tick_params(axis="z", pad=6)
+    ax.tick_params(axis="x", pad=2)
+    ax.tick_params(axis="y", pad=2)
+    fig.legend(handles=handles, loc="outside lower center", ncols=2, fontsize="small", frameon=False)
     ax.set_title(_title(run, frame, f"{frame.n_rods} rods"), fontsize="medium")
 
 
@@ -253,15 +300,15 @@ def _density(fig, run, frame, args):
     for label, mask, colour in curves:
         edges, dens = radial_density(centre, r_max, args.bins, z_range, mask=mask)
         n = len(centre) if mask is None else int(mask.sum())
-        ax.plot(0.5 * (edges[1:] + edges[:-1]), dens, "-o", ms=3, color=colour, label=f"{label} ({n} rods)")
+        ax.plot(0.5 * (edges[1:] + edges[:-1]), dens, "-o", ms=2.5, lw=1.2, color=colour, label=f"{label} ({n} rods)")
     ax.set_xlim(0, r_max)
     ax.set_ylim(bottom=0)
     ax.set_xlabel("distance from the z axis r (L)")
     ax.set_ylabel("rod density (rods / $L^3$)")
-    ax.legend(fontsize="small")
+    _outside_legend(fig, ncols=3)
     note = "" if frame.role is not None else " (no graph data: total only)"
     ax.set_title(_title(run, frame, "radial density") + note
-                 + f"\naveraged over {z_range[0]:.3g} $\\leq$ z $\\leq$ {z_range[1]:.3g} L and azimuth",
+                 + f"\naveraged over {_num(z_range[0], '.3g')} $\\leq$ z $\\leq$ {_num(z_range[1], '.3g')} L and azimuth",
                  fontsize="medium")
 
 
@@ -312,7 +359,7 @@ def _field_or_flux(fig, run, frame, args):
         else:
             y = flux_through_disc(r, z, frame.position, None, current, frame.wire_radius, n_phi=args.n_phi,
                                   z_mext=args.z_mext)
-        ax.plot(r, y, color=colour, label=f"plane z = {z:.4g} L")
+        ax.plot(r, y, color=colour, label=f"plane z = {_num(z)} L")
     ax.axhline(0.0, color="0.7", lw=0.8, zorder=0)
     ax.set_xlim(0, r_max)
     n_active = int(np.count_nonzero(current))
@@ -329,7 +376,22 @@ def _field_or_flux(fig, run, frame, args):
             unit = f"$4\\pi Z_{{Mext}}$, $Z_{{Mext}}$ = {args.z_mext:g}"
         ax.set_ylabel(f"flux of the rod currents' $B_z$ (units of {unit})")
         ax.set_title(_title(run, frame, "magnetic flux through discs") + f"\n{note}", fontsize="medium")
-    ax.legend(fontsize="small")
+    _outside_legend(fig, ncols=min(len(planes), 4))
+
+
+def _figsize(kind, frame):
+    """Figure size in inches: snapshots take the proportions of the rods' extent (height over width)."""
+    if kind != "snapshot":
+        return (7.0, 5.5)
+    lo, hi = frame.position.min(axis=0), frame.position.max(axis=0)
+    width = max(float(max(hi[0] - lo[0], hi[1] - lo[1])), 1e-6)
+    height = float(hi[2] - lo[2])
+    if frame.gap is not None:
+        height = max(height, frame.gap)
+    if frame.dipole is not None:
+        height = max(height, frame.dipole[1])
+    ratio = min(max(height / width, 0.6), 2.2)
+    return (7.0, 7.0 * ratio ** 0.6 + 0.8) if ratio > 1 else (8.0, 7.0)
 
 
 def _timeline(fig, run, frame, args):
@@ -339,26 +401,87 @@ def _timeline(fig, run, frame, args):
     total = run.observable("total_current")[1] if "total_current" in run.observable_names() else None
     tl = timeline(t, n_fil, total, run.events())
     ax = fig.add_subplot()
-    lines = ax.plot(tl.time, tl.n_filament, "-o", ms=3, color=FILAMENT_COLOUR, label="rods in filaments")
+    style = _series_style(len(tl.time))
+    lines = ax.plot(tl.time, tl.n_filament, color=FILAMENT_COLOUR, label="rods in filaments", **style)
     ax.set_xlabel("time t ($t_0$)")
     ax.set_ylabel("rods in current-carrying filaments", color=FILAMENT_COLOUR)
     ax.set_ylim(bottom=0)
     if tl.total_current is not None:
         ax2 = ax.twinx()
-        lines += ax2.plot(tl.time, tl.total_current, "-s", ms=3, color="black", label="total current")
+        lines += ax2.plot(tl.time, tl.total_current, color="black", label="total current",
+                          **(style | ({"marker": "s"} if "marker" in style else {})))
         ax2.set_ylabel("total current ($J_0$)")
         ax2.set_ylim(bottom=min(0.0, float(np.nanmin(tl.total_current))))
     if tl.short_circuit_time is not None:
         lines.append(ax.axvline(tl.short_circuit_time, color=DEAD_END_COLOUR, ls="--",
                                 label=f"short circuit, t = {tl.short_circuit_time:.4g}"))
-    ax.legend(handles=lines, loc="upper left", fontsize="small")
+    _outside_legend(fig, lines, ncols=3)
     sc = ("no short circuit" if tl.short_circuit_time is None
           else f"short circuit at t = {tl.short_circuit_time:.4g} $t_0$")
-    ax.set_title(f"{run.path.name}: filaments over time ({sc})", fontsize="medium")
+    ax.set_title(f"{_scene(run)}: filaments over time ({sc})", fontsize="medium")
+
+
+def _series(run, args):
+    from ..analysis.claims import claims_series
+
+    every = args.every if args.every is not None else max(1, -(-run.n_frames // 200))
+    if every < 1:
+        raise CliError(f"--every must be >= 1, got {every}")
+    return claims_series(run, range(0, run.n_frames, every), loops=False)
+
+
+def _moment(fig, run, frame, args):
+    s = _series(run, args)
+    ax = fig.add_subplot()
+    style = _series_style(len(s["time"]))  # markers on short series: a value between NaNs stays visible
+    lines = ax.plot(s["time"], s["largest_moment_ratio"], **style, color=LARGEST_COLOUR,
+                    label="$|m_q|$ / mean rod moment")
+    ax.set_xlabel("time t ($t_0$)")
+    ax.set_ylabel("$|m_q|$ of the largest structure / mean $|q|$")
+    ax.set_ylim(bottom=0)
+    ax2 = ax.twinx()
+    lines += ax2.plot(s["time"], s["largest_moment_J_z"], **style, color=FILAMENT_COLOUR,
+                      label="$m_{J,z}$ of its rod currents")
+    ax2.set_ylabel("$m_{J,z}$ of the rod currents ($J_0 L^2$)")
+    ax2.axhline(0.0, color="0.8", lw=0.8, zorder=0)
+    _outside_legend(fig, lines, ncols=2)
+    ax.set_title(f"{_scene(run)}: magnetic moment of the largest structure", fontsize="medium")
+
+
+def _fractal(fig, run, frame, args):
+    s = _series(run, args)
+    ax = fig.add_subplot()
+    for key, colour, label in (("fractal_dimension", LARGEST_COLOUR, "mass-radius, largest structure"),
+                               ("box_dimension", "black", "box counting, largest structure"),
+                               ("rg_dimension", TOTAL_COLOUR, r"$R_g \sim N^{1/D}$ over all structures")):
+        y, err = s[key], s[key + "_err"]
+        ax.plot(s["time"], y, **_series_style(len(y)), color=colour, label=label)
+        ax.fill_between(s["time"], y - err, y + err, color=colour, alpha=0.1, lw=0)
+    for d in (1, 2, 3):
+        ax.axhline(d, color="0.85", lw=0.8, zorder=0)
+    finite = np.concatenate([s[k][np.isfinite(s[k])] for k in ("fractal_dimension", "box_dimension", "rg_dimension")])
+    ax.set_ylim(0, max(3.5, float(finite.max()) + 0.2) if finite.size else 3.5)
+    ax.set_xlabel("time t ($t_0$)")
+    ax.set_ylabel("dimension D (bands: uncertainty)")
+    _outside_legend(fig, ncols=3)
+    ax.set_title(f"{_scene(run)}: fractal dimensions", fontsize="medium")
+
+
+def _skeleton(fig, run, frame, args):
+    s = _series(run, args)
+    ax = fig.add_subplot()
+    style = _series_style(len(s["time"]))
+    ax.plot(s["time"], s["cycle_rank"], **style, color="black", label="contact graph")
+    ax.plot(s["time"], s["cycle_rank_largest"], **style, color=LARGEST_COLOUR, label="largest structure")
+    ax.set_ylim(bottom=0)
+    ax.set_xlabel("time t ($t_0$)")
+    ax.set_ylabel("cycle rank E - V + C (independent loops)")
+    _outside_legend(fig, ncols=2)
+    ax.set_title(f"{_scene(run)}: loops of the rod network", fontsize="medium")
 
 
 DRAW = {"snapshot": _snapshot, "density": _density, "field": _field_or_flux, "flux": _field_or_flux,
-        "timeline": _timeline}
+        "timeline": _timeline, "moment": _moment, "fractal": _fractal, "skeleton": _skeleton}
 
 
 def _check_options(args):
@@ -368,6 +491,8 @@ def _check_options(args):
         raise CliError(f"--r-max must be a finite number > 0, got {args.r_max}")
     if args.planes and not all(np.isfinite(z) for z in args.planes):
         raise CliError(f"--planes must be finite numbers, got {args.planes}")
+    if args.every is not None and args.every < 1:
+        raise CliError(f"--every must be >= 1, got {args.every}")
     if args.time is not None and not np.isfinite(args.time):
         raise CliError(f"--time {args.time} names no frame; give a finite simulated time")
 
@@ -382,7 +507,7 @@ def run(args):
                 if args.kind in NEEDS_GRAPH:
                     frame.require_graph(f, args.kind)
                 out = _output_path(args, f.path, frame.index)
-                fig = Figure(figsize=(8.0, 7.0) if args.kind == "snapshot" else (7.0, 5.0), layout="constrained")
+                fig = Figure(figsize=_figsize(args.kind, frame), layout="constrained")
                 DRAW[args.kind](fig, f, frame, args)
             except (KeyError, IndexError, TypeError, AttributeError) as exc:
                 # a file with the run layout but inconsistent contents (foreign or damaged)

@@ -25,6 +25,7 @@ from .._version import __version__
 from ..io.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
 from ..io.h5md import NullWriter, RunFile, RunFileError, RunWriter
 from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
+from ..model.params import plasma_current_text
 from ..model.simulation import NumericalFailure, RunInterrupted, Simulation
 from ..model.state import PlacementError
 from ..parallel import fit_threads_to_cores, world
@@ -281,6 +282,8 @@ def run(args):
     if args.dry_run:
         if world.rank == 0:
             print("dry run: placement succeeded, nothing written")
+            if plasma_current_text(p):
+                print(plasma_current_text(p))
             print(json.dumps(plan, indent=2))
         return 0
 

@@ -158,8 +158,37 @@ class UniformField:
 @dataclass(frozen=True)
 class PlasmaFilament:
     radius: float = spec(6.0, "R_plas, radius of the uniform current channel", gt=0.0)
-    current: float = spec(7.5, "I_plas, total current along +z (units J0)")
+    current: float = spec(
+        -7.5, "I_plas, total current, signed along +z (units J0): negative runs from the anode (z = +dZ/2) to "
+        "the cathode, parallel to the current of a rod filament spanning the gap, as the paper's discharge "
+        "(docs/model.md term 5)")
     axis: tuple = spec(None, "(x0, y0) of the channel axis", length=2, factory=lambda: (0.0, 0.0))
+
+
+def plasma_current_text(p: "Parameters"):
+    """One line saying which way the plasma current of ``p`` flows, or None without term 5.
+
+    Case (i) names the electrodes and whether the current is parallel to that of a rod
+    filament spanning the gap (which flows from the anode at z = +dZ/2 to the cathode
+    when the bias is positive, docs/model.md section 6).
+    """
+    pf = p.forces.plasma_filament
+    if pf is None:
+        return None
+    size = f"{abs(pf.current):g} J0"
+    if pf.current == 0.0:
+        return "plasma current 0 (the plasma filament has no field)"
+    el = p.forces.electrodes
+    if el is None:
+        return f"plasma current {size} along {'-' if pf.current < 0 else '+'}z (I_plas = {pf.current:g})"
+    half = 0.5 * el.gap
+    anode, cathode = f"the anode (z = +{half:g})", f"the cathode (z = -{half:g})"
+    text = (f"plasma current {size} from {anode} to {cathode}" if pf.current < 0
+            else f"plasma current {size} from {cathode} to {anode}")
+    if p.circuit is not None and p.circuit.delta_J0 > 0:
+        text += (", parallel to the current of a spanning filament" if pf.current < 0
+                 else ", antiparallel to the current of a spanning filament")
+    return text + f" (I_plas = {pf.current:g})"
 
 
 @dataclass(frozen=True)

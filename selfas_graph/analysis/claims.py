@@ -1,0 +1,177 @@
+"""The measures of the paper's claims for one saved frame of a run file (docs/model.md section 7a).
+
+:func:`frame_claims` reads one frame (tip positions, tip charges, tip-tip contacts and rod
+currents) from an open :class:`selfas_graph.io.h5md.RunFile` and returns plain floats, NaN
+where a measure is undefined (no contact data, too few rods, too narrow a fit range).
+:func:`claims_series` does the same for many frames. The measures themselves are the
+array functions of :mod:`.moments`, :mod:`.fractal` and :mod:`.skeleton`.
+
+Structures are rods joined by tip-tip contacts (the conductors join none), as in the
+``topology`` command; "the largest structure" is the one with the most rods.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .fractal import box_dimension, mass_radius_dimension, radius_of_gyration, rg_dimension
+from .moments import current_moment, junction_charge, monopole_moment, unpaired_charge
+from .skeleton import contact_nodes, cycle_rank, junction_degrees, loop_lengths, structures
+
+__all__ = ["CLAIM_KEYS", "claims_of_arrays", "claims_series", "frame_claims"]
+
+NAN = float("nan")
+
+#: the keys of :func:`frame_claims`, in the order the CLI prints them, with their meaning
+CLAIM_KEYS = {
+    "time": "simulated time of the frame (t0)",
+    "step": "time step of the frame",
+    "structures": "structures (rods joined by tip contacts)",
+    "largest_structure_rods": "rods in the largest structure",
+    "largest_moment_q": "|m_q| of the largest structure, m_q = sum q_k x_k (Z_M0 e L)",
+    "largest_moment_q_z": "m_q,z of the largest structure (Z_M0 e L)",
+    "largest_moment_ratio": "|m_q| of the largest structure over the mean single-rod moment (mean |q|)",
+    "largest_moment_J_z": "m_J,z of the largest structure about the z axis, m_J = 1/2 sum J x_a x x_b (J0 L^2)",
+    "moment_J_z": "m_J,z of all rod currents about the z axis (J0 L^2)",
+    "unpaired_charge_largest": "sum |q| at the free tips (no tip contact) of the largest structure (Z_M0 e)",
+    "junction_charge_largest": "sum |sum q| over the contact clusters of the largest structure (Z_M0 e)",
+    "fractal_dimension": "mass-radius dimension of the largest structure (>= 30 rods)",
+    "fractal_dimension_err": "its uncertainty",
+    "fractal_r_min": "fit range of the mass-radius dimension: smallest r (L)",
+    "fractal_r_max": "largest r (L)",
+    "rg_dimension": "D from R_g ~ N^(1/D) over the structures of the frame (>= 2 rods)",
+    "rg_dimension_err": "its uncertainty",
+    "rg_n_min": "fit range of the R_g dimension: smallest structure (rods)",
+    "rg_n_max": "largest structure (rods)",
+    "box_dimension": "box-counting dimension of the largest structure (>= 30 rods)",
+    "box_dimension_err": "its uncertainty",
+    "box_eps_min": "fit range of the box-counting dimension: smallest box (L)",
+    "box_eps_max": "largest box (L)",
+    "cycle_rank": "independent loops E - V + C of the contact graph",
+    "cycle_rank_largest": "independent loops of the largest structure",
+    "loop_length_median": "median length (rods) of the loops of a cycle basis",
+    "loop_length_max": "longest loop of that basis (rods)",
+    "junctions": "contact clusters (two or more tips in contact)",
+    "junction_degree_mean": "mean tips per contact cluster",
+    "junction_degree_max": "most tips in one contact cluster",
+}
+
+
+def _fit(prefix, fit, lo, hi, out):
+    out[prefix] = fit.value
+    out[prefix + "_err"] = fit.err
+    out[lo], out[hi] = fit.fit_range
+
+
+def claims_of_arrays(position, tip_charge, tip_contacts, current=None, loops=True) -> dict:
+    """Every measure of :data:`CLAIM_KEYS` but time and step, from one frame's arrays.
+
+    Parameters
+    ----------
+    position : (n_tips, 3) float64
+    tip_charge : (n_tips,) float64
+    tip_contacts : (m, 2) int
+        Tip pairs in contact.
+    current : (n_rods,) float64, optional
+        Rod currents (J0); None gives NaN current moments.
+    loops : bool
+        Compute the loop lengths (a cycle basis; the slowest measure).
+    """
+    position = np.asarray(position, dtype=np.float64).reshape(-1, 3)
+    tip_charge = np.asarray(tip_charge, dtype=np.float64).reshape(-1)
+    tip_contacts = np.asarray(tip_contacts, dtype=np.int64).reshape(-1, 2)
+    n_rods = position.shape[0] // 2
+    label, size = structures(n_rods, tip_contacts)
+    n_s = size.shape[0]
+    out = {"structures": float(n_s)}
+    big = int(np.argmax(size)) if n_s else -1
+    rods = np.flatnonzero(label == big) if n_s else np.zeros(0, dtype=np.int64)
+    out["largest_structure_rods"] = float(size[big]) if n_s else 0.0
+    mean_rod = float(np.abs(tip_charge[0::2]).mean()) if n_rods else NAN
+    if n_s:
+        m_q = monopole_moment(position, tip_charge, label, n_s)[big]
+        out["largest_moment_q"] = float(np.linalg.norm(m_q))
+        out["largest_moment_q_z"] = float(m_q[2])
+        out["largest_moment_ratio"] = out["largest_moment_q"] / mean_rod if mean_rod > 0 else NAN
+        out["unpaired_charge_largest"] = float(unpaired_charge(tip_charge, tip_contacts, label, n_s)[big])
+        _, node = contact_nodes(n_rods, tip_contacts)
+        out["junction_charge_largest"] = float(junction_charge(tip_charge, node, label, n_s)[big])
+    else:
+        for key in ("largest_moment_q", "largest_moment_q_z", "largest_moment_ratio", "unpaired_charge_largest",
+                    "junction_charge_largest"):
+            out[key] = NAN
+    if current is not None and n_s:
+        out["largest_moment_J_z"] = float(current_moment(position, current, label, n_s)[big, 2])
+        out["moment_J_z"] = float(current_moment(position, current, np.zeros(n_rods, dtype=np.int64), 1)[0, 2])
+    else:
+        out["largest_moment_J_z"] = NAN
+        out["moment_J_z"] = float(current_moment(position, current, np.zeros(n_rods, dtype=np.int64), 1)[0, 2]) \
+            if current is not None and n_rods else NAN
+    _fit("fractal_dimension", mass_radius_dimension(position, rods), "fractal_r_min", "fractal_r_max", out)
+    rg, rg_size = radius_of_gyration(position, label, n_s)
+    _fit("rg_dimension", rg_dimension(rg_size, rg), "rg_n_min", "rg_n_max", out)
+    _fit("box_dimension", box_dimension(position, rods), "box_eps_min", "box_eps_max", out)
+    total, per = cycle_rank(n_rods, tip_contacts, label, n_s)
+    out["cycle_rank"] = float(total)
+    out["cycle_rank_largest"] = float(per[big]) if n_s else 0.0
+    ll = loop_lengths(n_rods, tip_contacts) if loops else None
+    out["loop_length_median"] = float(np.median(ll)) if ll is not None and len(ll) else NAN
+    out["loop_length_max"] = float(ll.max()) if ll is not None and len(ll) else NAN
+    deg = junction_degrees(n_rods, tip_contacts)
+    out["junctions"] = float(len(deg))
+    out["junction_degree_mean"] = float(deg.mean()) if len(deg) else NAN
+    out["junction_degree_max"] = float(deg.max()) if len(deg) else NAN
+    return out
+
+
+def _graph_of_frame(run, k):
+    """The graph record saved with position frame ``k`` (same step), or None."""
+    if not run.has_graph:
+        return None
+    step = int(run.step[k])
+    try:
+        g = run.graph(frame=k)
+        if g["step"] == step:
+            return g
+    except Exception:  # noqa: BLE001 - fewer graph frames than position frames: look up by time
+        pass
+    g = run.graph(t=float(run.time[k]))
+    return g if g["step"] == step else None
+
+
+def frame_claims(run, frame=-1, loops=True) -> dict[str, float]:
+    """The claim measures of one frame of a run file, as floats (NaN where undefined).
+
+    Parameters
+    ----------
+    run : selfas_graph.io.h5md.RunFile
+        An open run file.
+    frame : int
+        Frame index; negative counts from the end.
+    loops : bool
+        Compute the loop lengths too.
+
+    Returns
+    -------
+    dict with the keys of :data:`CLAIM_KEYS`. A frame without contact data (a run with
+    contacts off) has only time, step and NaN for every other key.
+    """
+    k = run.frame_index(frame)
+    out = {"time": float(run.time[k]), "step": float(run.step[k])}
+    g = _graph_of_frame(run, k)
+    if g is None:
+        return out | {key: NAN for key in CLAIM_KEYS if key not in out}
+    current = np.asarray(g["current"], dtype=np.float64)
+    return out | claims_of_arrays(run.position(k), run.tip_charge, g["tip_contacts"], current, loops=loops)
+
+
+def claims_series(run, frames=None, loops=True) -> dict[str, np.ndarray]:
+    """:func:`frame_claims` of several frames (default all) as arrays, one entry per frame."""
+    frames = range(run.n_frames) if frames is None else frames
+    rows = [frame_claims(run, k, loops=loops) for k in frames]
+    return {key: np.array([r.get(key, NAN) for r in rows], dtype=np.float64) for key in CLAIM_KEYS}
+
+
+def is_nan(x) -> bool:
+    return isinstance(x, float) and math.isnan(x)
