@@ -64,10 +64,13 @@ def test_plasma_current_is_parallel_to_the_current_of_a_spanning_chain(name):
     assert sim.graph.has_short_circuit and sim.solution is not None
     current = sim.solution.current
     # every rod of a series chain carries one current, from the anode (top) to the cathode:
-    # from tip b (top) to tip a, i.e. negative; its size is the bias delta_J0 dZ over n rods
+    # from tip b (top) to tip a, i.e. negative; its size is the bias delta_J0 dZ over the
+    # chain's resistance: n rods of R0 (length 1) and, with resistive contacts of r, the
+    # n - 1 junctions and the 2 electrode contacts in series
     n = current.shape[0]
     bias = params.circuit.delta_J0 * params.forces.electrodes.gap
-    np.testing.assert_allclose(current, -bias / n, rtol=1e-12)  # the circuit's round-off
+    series = n + (n + 1) * params.contacts.resistance
+    np.testing.assert_allclose(current, -bias / series, rtol=1e-12)  # the circuit's round-off
     # field of the chain and of the plasma on a ring around the axis in the mid-plane
     phi = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
     point = np.column_stack([3.0 * np.cos(phi), 3.0 * np.sin(phi), np.zeros_like(phi)])
