@@ -205,14 +205,11 @@ def run_seed(task: dict) -> dict:
             write_checkpoint(failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step,
                                                        "failure": str(exc)})
             out["status"], out["message"] = "failed", f"{exc} (failed state in {failure})"
-        except (ScenarioError, PlacementError, CheckpointError, RunFileError, OSError) as exc:
-            out["status"], out["message"] = "error", f"{type(exc).__name__}: {exc}"
-            if writer is not None and writer.f:
-                writer.close(status=f"failed: {exc}")
         except Exception as exc:  # noqa: BLE001 - one broken seed must not lose the others; reported
+            # not a numerical failure: the file stays resumable from its last checkpoint
             out["status"], out["message"] = "error", f"{type(exc).__name__}: {exc}"
             if writer is not None and getattr(writer, "f", None):
-                writer.close(status=f"failed: {type(exc).__name__}: {exc}")
+                writer.close(status=f"error: {type(exc).__name__}: {exc}")
     if sim is not None:
         out["t"], out["steps"] = float(sim.state.time), int(sim.state.step)
     out["wall_seconds"] = time.perf_counter() - t0
@@ -225,12 +222,12 @@ def run_to_short_circuit(task: dict) -> dict:
     ``task`` holds ``text``, ``path`` (the scenario's, for messages), ``overrides`` (with
     the seed's), ``seed``, ``t_max`` and ``chunk`` (simulated time per
     :meth:`Simulation.run` call: the granularity of the stop check; results do not depend
-    on it). Returns ``status`` "short_circuit" (``time``), "censored" (none by ``t_max``),
+    on it); the task keys named in ``echo`` are copied into the result. Returns ``status`` "short_circuit" (``time``), "censored" (none by ``t_max``),
     "failed" (numerical failure at ``t_end``), "unplaceable" or "error" (``message``),
     with ``t_end``, ``steps``, ``events``, ``filament_rods``, ``wall_seconds``.
     """
     seed, t_max = task["seed"], float(task["t_max"])
-    out = {"seed": seed, "status": None, "time": None, "t_end": 0.0, "steps": 0, "events": 0, "filament_rods": 0,
+    out = {**{k: task[k] for k in task.get("echo", ())}, "seed": seed, "status": None, "time": None, "t_end": 0.0, "steps": 0, "events": 0, "filament_rods": 0,
            "wall_seconds": 0.0, "message": None}
     t0 = time.perf_counter()
     sim = None

@@ -166,8 +166,9 @@ def threads_per_job(jobs: int) -> int:
 def set_job_threads(threads=None) -> int:
     """Pool-worker initializer: ``threads`` numba threads for every run of this process.
 
-    ``NUMBA_NUM_THREADS`` is set for anything the run starts, and ``numba.set_num_threads``
-    applies it now (numba is already imported when a worker unpickles its task). With
+    Applied with ``numba.set_num_threads`` (numba is already imported when a worker
+    unpickles its task; changing ``NUMBA_NUM_THREADS`` now would make numba's next
+    configuration reload fail once its threads are running). With
     ``threads=None`` (an MPI worker rank) a user's ``NUMBA_NUM_THREADS`` wins, otherwise
     the node's cores are shared among the launcher's ranks on that node.
     """
@@ -180,7 +181,6 @@ def set_job_threads(threads=None) -> int:
             local = os.environ.get("MPI_LOCALNRANKS") or os.environ.get("OMPI_COMM_WORLD_LOCAL_SIZE") or "1"
             threads = max(1, _node_cores() // max(1, int(local)))
     threads = max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS))
-    os.environ["NUMBA_NUM_THREADS"] = str(threads)
     numba.set_num_threads(threads)
     return threads
 
@@ -194,18 +194,20 @@ class task_pool:
       and the other P - 1 ranks serve its tasks; on them the context gives ``None`` and
       ends when rank 0 leaves it. Each worker rank takes :func:`set_job_threads` threads.
     * Otherwise, with ``jobs > 1``: a ``concurrent.futures.ProcessPoolExecutor`` of
-      ``jobs`` spawned processes, each with ``cores // jobs`` numba threads.
+      ``jobs`` spawned processes, each with ``threads`` numba threads (default
+      ``cores // jobs``).
     * With ``jobs == 1``: ``None`` executor and ``serial = True``: run the tasks in this
-      process (the caller does).
+      process (the caller does), with ``threads`` numba threads if given (restored on exit).
 
     Attributes after entering: ``executor`` (or None), ``workers`` (count), ``mpi`` (bool),
     ``serial`` (bool: no executor, run here), ``threads`` (per local worker, None under MPI).
     """
 
-    def __init__(self, jobs=1):
+    def __init__(self, jobs=1, threads=None):
         self.jobs = max(1, int(jobs))
+        self._threads = threads
         self.executor, self.mpi, self.serial, self.threads, self.workers = None, False, False, None, 1
-        self._cm = None
+        self._cm = self._restore = None
 
     def __enter__(self):
         if world.size > 1:
@@ -219,12 +221,17 @@ class task_pool:
             return self
         if self.jobs == 1:
             self.serial = True
+            if self._threads is not None:
+                import numba
+
+                self._restore = numba.get_num_threads()
+                self.threads = set_job_threads(self._threads)
             return self
         import concurrent.futures
         import multiprocessing
 
         self.workers = self.jobs
-        self.threads = threads_per_job(self.jobs)
+        self.threads = threads_per_job(self.jobs) if self._threads is None else int(self._threads)
         self.executor = concurrent.futures.ProcessPoolExecutor(
             max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"),
             initializer=set_job_threads, initargs=(self.threads,))
@@ -236,6 +243,10 @@ class task_pool:
             return False
         if self.executor is not None:
             self.executor.shutdown(wait=True, cancel_futures=True)
+        if self._restore is not None:
+            import numba
+
+            numba.set_num_threads(self._restore)
         return False
 
     @property
