@@ -235,17 +235,20 @@ def run_to_short_circuit(task: dict) -> dict:
         scenario = scenario_from_text(task["text"], path=Path(task["path"]), overrides=task["overrides"], t_end=t_max)
         sim = Simulation.from_scenario(scenario)
         total = sim.steps_for(t_max)
-        stop = lambda: sim.short_circuit_time is not None  # noqa: E731
-        while sim.short_circuit_time is None and sim.state.step < total:
-            target = min(sim.state.time + task["chunk"], t_max)
-            try:
-                summary = sim.run(t_end=target, stop=stop)
-            except RunInterrupted:
-                break
-            if summary.steps == 0:  # the chunk rounds to no step: the end is reached
-                break
+        with _StopOnSignal() as signalled:
+            stop = lambda: sim.short_circuit_time is not None or signalled()  # noqa: E731
+            while sim.short_circuit_time is None and sim.state.step < total and not signalled():
+                target = min(sim.state.time + task["chunk"], t_max)
+                try:
+                    summary = sim.run(t_end=target, stop=stop)
+                except RunInterrupted:
+                    break
+                if summary.steps == 0:  # the chunk rounds to no step: the end is reached
+                    break
         if sim.short_circuit_time is not None:
             out["status"], out["time"] = "short_circuit", float(sim.short_circuit_time)
+        elif signalled():
+            out["status"], out["message"] = "interrupted", f"signal {signalled.signum} at step {sim.state.step}"
         else:
             out["status"] = "censored"
     except PlacementError as exc:
@@ -285,11 +288,12 @@ class _RaiseOnTerm:
 def run_tasks(fn: Callable[[dict], dict], tasks: list, pool, report=None, stop_statuses=("interrupted",)) -> list:
     """Run ``fn(task)`` for every task on ``pool`` (a :class:`~selfas_graph.parallel.task_pool`); results in task order.
 
-    ``report(result)`` is called as each task ends. In a serial pool the tasks run here,
-    one after the other, and a result whose ``status`` is in ``stop_statuses`` ends the
-    loop. On Ctrl-C or SIGTERM the tasks not started are cancelled and the running ones
-    are asked to stop (SIGTERM to the local workers: a seed then writes its checkpoint);
-    their results are collected. Tasks never run are None in the returned list.
+    Tasks are handed out in order, one per idle worker (none waits in a queue), and
+    ``report(result)`` is called as each ends. In a serial pool they run here, one after
+    the other. Once a result's ``status`` is in ``stop_statuses`` (a seed stopped by a
+    signal), or on Ctrl-C or SIGTERM here, no further task starts; the local workers get
+    SIGTERM (a running seed then stops after its step with a checkpoint) and the running
+    tasks' results are collected. Tasks never started are None in the returned list.
     """
     results = [None] * len(tasks)
     report = report or (lambda r: None)
@@ -300,34 +304,40 @@ def run_tasks(fn: Callable[[dict], dict], tasks: list, pool, report=None, stop_s
             if results[i].get("status") in stop_statuses:
                 break
         return results
-    futures = {}
+    waiting, running, stopping = list(range(len(tasks)))[::-1], {}, False
+
+    def collect(futures):
+        nonlocal stopping
+        for fut in futures:
+            i = running.pop(fut)
+            results[i] = _result(fut)
+            report(results[i])
+            stopping |= results[i].get("status") in stop_statuses
+
     with _RaiseOnTerm():
         try:
-            for i, task in enumerate(tasks):
-                futures[pool.executor.submit(fn, task)] = i
-            for fut in concurrent.futures.as_completed(futures):
-                results[futures[fut]] = _result(fut)
-                report(results[futures[fut]])
+            while waiting or running:
+                while waiting and not stopping and len(running) < pool.workers:
+                    i = waiting.pop()
+                    running[pool.executor.submit(fn, tasks[i])] = i
+                if not running:
+                    break
+                done, _ = concurrent.futures.wait(list(running), return_when=concurrent.futures.FIRST_COMPLETED)
+                collect(done)
         except KeyboardInterrupt:
-            for fut in futures:
-                fut.cancel()
+            stopping = True
             if not pool.mpi:
                 import multiprocessing
 
                 for child in multiprocessing.active_children():
                     child.terminate()  # SIGTERM: a running seed stops after its step with a checkpoint
-            for fut, i in futures.items():
-                if not fut.cancelled() and results[i] is None:
-                    results[i] = _result(fut)
-                    report(results[i])
+            collect(list(running))
     return results
 
 
 def _result(fut):
     try:
         return fut.result()
-    except concurrent.futures.CancelledError:
-        return None
     except Exception as exc:  # noqa: BLE001 - a worker process died (killed, out of memory): reported
         return {"status": "error", "message": f"{type(exc).__name__}: {exc}"}
 

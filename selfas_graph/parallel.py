@@ -185,6 +185,19 @@ def set_job_threads(threads=None) -> int:
     return threads
 
 
+def init_job_worker(threads=None) -> None:
+    """Initializer of a pool worker: :func:`set_job_threads`, and SIGINT and SIGTERM ignored between tasks.
+
+    A task that can stop cleanly installs its own handlers while it runs (a seed writes a
+    checkpoint); an idle worker must survive the signal, or the whole pool would break.
+    """
+    import signal
+
+    set_job_threads(threads)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
+
+
 class task_pool:
     """The executor that runs independent tasks (the seeds of an ensemble), as a context manager.
 
@@ -216,7 +229,7 @@ class task_pool:
 
             self.mpi = True
             self.workers = world.size - 1
-            self._cm = MPICommExecutor(MPI.COMM_WORLD, root=0, initializer=set_job_threads)
+            self._cm = MPICommExecutor(MPI.COMM_WORLD, root=0, initializer=init_job_worker)
             self.executor = self._cm.__enter__()
             return self
         if self.jobs == 1:
@@ -234,7 +247,7 @@ class task_pool:
         self.threads = threads_per_job(self.jobs) if self._threads is None else int(self._threads)
         self.executor = concurrent.futures.ProcessPoolExecutor(
             max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"),
-            initializer=set_job_threads, initargs=(self.threads,))
+            initializer=init_job_worker, initargs=(self.threads,))
         return self
 
     def __exit__(self, *exc):

@@ -45,7 +45,7 @@ sys.path.insert(0, str(ROOT))
 
 #: densest packing of equal spheres: tips at least d apart are spheres of diameter d that do not overlap
 _MAX_PACKING = math.pi / (3.0 * math.sqrt(2.0))
-STATUSES = ("short_circuit", "censored", "failed", "unplaceable", "error")
+STATUSES = ("short_circuit", "censored", "failed", "unplaceable", "error", "interrupted")
 
 
 # ----------------------------------------------------------------------------- statistics
@@ -204,12 +204,14 @@ def run_all(tasks, workers, report):
     # largest counts first: better balance of the slow runs over the workers
     order = sorted(range(len(tasks)), key=lambda i: -tasks[i]["count"])
     with task_pool(min(workers, len(tasks)), threads=1) as pool:
-        done = run_tasks(run_to_short_circuit, [tasks[i] for i in order], pool, report, stop_statuses=())
+        done = run_tasks(run_to_short_circuit, [tasks[i] for i in order], pool, report)
     results = [None] * len(tasks)
     for i, r in zip(order, done):
         results[i] = r if r is not None else {**{k: tasks[i][k] for k in ("count", "seed")}, "status": "error",
                                               "time": None, "t_end": 0.0, "steps": 0, "events": 0,
                                               "filament_rods": 0, "wall_seconds": 0.0, "message": "not run"}
+        if r is None:
+            results[i]["status"] = "interrupted"
     return results
 
 
@@ -236,7 +238,7 @@ def print_table(result):
               f"| {_fmt_t(d['median'], t_max)} | {_fmt_t(d['q75'], t_max)} | {d['censored']} | {d['failed']} |")
     for s in result["skipped"]:
         print(f"skipped {s['requested']['by']} {s['requested']['value']:g}: {s['reason']}")
-    bad = [r for r in result["runs"] if r["status"] in ("unplaceable", "error")]
+    bad = [r for r in result["runs"] if r["status"] in ("unplaceable", "error", "interrupted")]
     for r in bad:
         print(f"left out: {r['count']} rods, seed {r['seed']}: {r['status']}: {r['message']}")
 
@@ -337,6 +339,8 @@ def main(argv=None):
     if args.plot:
         plot(result, args.plot)
         print(f"wrote {args.plot}")
+    if any(r["status"] == "interrupted" for r in runs):
+        return 130
     return 1 if any(r["status"] == "error" for r in runs) else 0
 
 
