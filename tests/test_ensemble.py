@@ -234,3 +234,34 @@ def test_seed_file_is_what_simulate_writes(scene, tmp_path):
     with RunFile(seed_path(tmp_path / "e", 4)) as run:
         assert run.meta["command_line"] == ens.command_for(4) and run.parameters["scenario"]["seed"] == 4
     shutil.rmtree(tmp_path / "e")
+
+
+def test_sigterm_stops_the_seeds_with_checkpoints_and_a_rerun_continues(scene, tmp_path):
+    """SIGTERM to the launching process: the running seeds stop after a step with a checkpoint
+    (exit code 130, no further seed started); the same command again resumes them."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    cmd = [sys.executable, "-m", "selfas_graph.cli.main", "ensemble", str(scene), "--seeds", "3", "--jobs", "2",
+           "--t-end", "20", "-o", str(tmp_path / "e")]
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    first = [seed_path(tmp_path / "e", s) for s in (3, 4)]
+    deadline = time.monotonic() + 90  # start-up and kernel loading; a run to t = 20 takes minutes
+    while not all(p.exists() for p in first) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=90)
+    assert proc.returncode == 130, err
+    assert "rerun the same command to continue" in err and out.count("interrupted at t = ") == 2
+    assert not seed_path(tmp_path / "e", 5).exists()
+    for p in first:
+        assert checkpoint_path(p).exists()
+        with RunFile(p) as run:
+            assert run.meta["status"].startswith("interrupted at step")
+    plans = Ensemble(scene, 3, tmp_path / "e", t_end=20).plan()
+    assert [p.action for p in plans] == ["resume", "resume", "run"]
