@@ -265,3 +265,13 @@ def test_sigterm_stops_the_seeds_with_checkpoints_and_a_rerun_continues(scene, t
             assert run.meta["status"].startswith("interrupted at step")
     plans = Ensemble(scene, 3, tmp_path / "e", t_end=20).plan()
     assert [p.action for p in plans] == ["resume", "resume", "run"]
+
+
+def test_no_run_summarises_the_files_present(quick, capsys):
+    folder, _ = quick
+    assert main(["ensemble", QUICK, "--seeds", "5", "--t-end", str(T_END), "-o", str(folder), "--no-run",
+                 "--times", "0.5"]) == 0
+    out = capsys.readouterr().out
+    assert "1 to run, 0 to resume, 4 done" in out and "[1/" not in out
+    assert not seed_path(folder, 5).exists()
+    assert json.loads((folder / "summary.json").read_text())["missing"] == [str(seed_path(folder, 5))]
