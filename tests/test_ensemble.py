@@ -275,3 +275,15 @@ def test_no_run_summarises_the_files_present(quick, capsys):
     assert "1 to run, 0 to resume, 4 done" in out and "[1/" not in out
     assert not seed_path(folder, 5).exists()
     assert json.loads((folder / "summary.json").read_text())["missing"] == [str(seed_path(folder, 5))]
+
+
+def test_a_measure_is_one_more_entry(scene, tmp_path):
+    """The summary takes any list of named per-frame measures (the claim measures join this way)."""
+    from selfas_graph.ensemble import FRAME_MEASURES, Measure
+
+    Ensemble(scene, [3, 4], tmp_path, t_end=0.1).run()
+    extra = Measure("frame_time", "t0", "the frame's time", lambda f: f.time)
+    s = summarise([seed_path(tmp_path, 3), seed_path(tmp_path, 4)], [0.05, 0.1], measures=[*FRAME_MEASURES, extra])
+    m = s["measures"]["frame_time"]
+    assert m["mean"] == pytest.approx([0.05, 0.1], rel=1e-12) and m["sem"] == [0.0, 0.0] and m["n"] == [2, 2]
+    assert list(s["measures"])[-1] == "frame_time" and "| frame_time | t0 |" in format_table(s)
