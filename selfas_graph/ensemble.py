@@ -392,6 +392,11 @@ class Ensemble:
         self.seeds = [int(s) for s in seeds]
         if not self.seeds or min(self.seeds) < 0 or len(set(self.seeds)) != len(self.seeds):
             raise EnsembleError(f"seeds must be distinct integers >= 0, got {self.seeds}")
+        for s in (self.seeds[0], self.seeds[-1]):  # the seeds differ only in scenario.seed
+            try:
+                self.scenario_for(s)
+            except ScenarioError as exc:
+                raise EnsembleError(f"seed {s}: {exc}") from None
         if self.folder.exists() and not self.folder.is_dir():
             raise EnsembleError(f"the output folder {self.folder} is a file")
 
@@ -491,7 +496,7 @@ class Ensemble:
         whose files are done or failed.
         """
         plans = self.plan()
-        self.folder.mkdir(parents=True, exist_ok=True)
+        make_folder(self.folder)
         tasks = self.tasks(plans)
         if pool is None:
             with task_pool(jobs) as own:
@@ -507,6 +512,16 @@ class Ensemble:
         out.update(scenario=str(self.scenario_path), overrides=self.overrides, folder=str(self.folder),
                    seeds_requested=self.seeds, missing=[str(p) for p in paths if not p.exists()])
         return out
+
+
+def make_folder(folder) -> Path:
+    """Create ``folder`` (and its parents) if missing; EnsembleError if that is impossible."""
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise EnsembleError(f"cannot create the output folder {folder}: {exc.strerror or exc}") from None
+    return folder
 
 
 def _get(d, dotted):
@@ -747,7 +762,7 @@ def format_table(summary) -> str:
 
 def write_summary(summary, folder) -> tuple[Path, Path]:
     """Write ``summary.json`` (everything) and ``summary.csv`` (one row per measure and time) into ``folder``."""
-    folder = Path(folder)
+    folder = make_folder(folder)
     js, cs = folder / SUMMARY_JSON, folder / SUMMARY_CSV
     js.write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
     buf = io.StringIO()

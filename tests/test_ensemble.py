@@ -122,6 +122,9 @@ def test_other_parameters_are_refused(quick, capsys):
     (["--seeds", "2", "--set", "rods.cont=5"], "rods.cont"),
     (["--seeds", "2", "--times", "1,x"], "give simulated times separated by commas"),
     (["--seeds", "2", "--t-end", "0.5", "--times", "0.6"], "after the end time 0.5"),
+    (["--seeds", "2", "--first-seed", "-3"], "seeds must be distinct integers >= 0"),
+    (["--seeds", "2", "--first-seed", str(2 ** 70)], "seed 1180591620717411303424: "),
+    (["--seeds", "2", "--flux-radius", "nan"], "--flux-radius must be a positive length"),
 ])
 def test_bad_input(tmp_path, capsys, argv, message):
     """Exit code 2 (argparse's or the command's), the message names the problem, nothing is written."""
@@ -132,6 +135,14 @@ def test_bad_input(tmp_path, capsys, argv, message):
     assert rc == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "e").exists()
+
+
+def test_output_folder_that_is_a_file_is_refused(tmp_path, capsys):
+    (tmp_path / "e").write_text("precious")
+    assert main(["ensemble", QUICK, "--seeds", "1", "-o", str(tmp_path / "e")]) == 2
+    assert "the output folder" in capsys.readouterr().err and (tmp_path / "e").read_text() == "precious"
+    assert main(["ensemble", QUICK, "--seeds", "1", "-o", str(tmp_path / "e" / "sub")]) == 2
+    assert "cannot" in capsys.readouterr().err
 
 
 # ----------------------------------------------------------------------------- the small circuit scene

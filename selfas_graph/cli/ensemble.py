@@ -81,6 +81,15 @@ def run(args):
         return _run(args, pool)
 
 
+def _make(folder):
+    from ..ensemble import make_folder
+
+    try:
+        make_folder(folder)
+    except EnsembleError as exc:
+        raise CliError(str(exc)) from None
+
+
 def _run(args, pool):
     from pathlib import Path
 
@@ -115,7 +124,7 @@ def _run(args, pool):
             print(f"  seed {plan.seed}: {plan.note} (kept; --force reruns it)", flush=True)
     results = []
     if not args.no_run and count["run"] + count["resume"]:
-        folder.mkdir(parents=True, exist_ok=True)
+        _make(folder)
         tasks = ens.tasks(plans)
         done = [0]
 
@@ -138,8 +147,10 @@ def _run(args, pool):
     if summary["n_seeds"]:
         print()
         print(format_table(summary))
-        folder.mkdir(parents=True, exist_ok=True)
-        js, cs = write_summary(summary, folder)
+        try:
+            js, cs = write_summary(summary, folder)
+        except (EnsembleError, OSError) as exc:
+            raise CliError(f"cannot write the summary into {folder}: {exc}") from None
         print(f"\nwrote {js} and {cs}")
     else:
         print("no seed file to summarise")
