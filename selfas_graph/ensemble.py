@@ -673,7 +673,7 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
     Returns
     -------
     dict (JSON-ready) with ``seeds`` (per seed: path, seed, status, end time, short-circuit
-    time or None), ``short_circuit`` (:func:`~selfas_graph.analysis.ensemble_stats.censored_times`:
+    time or None; files that cannot be read are left out and listed in ``unreadable``), ``short_circuit`` (:func:`~selfas_graph.analysis.ensemble_stats.censored_times`:
     seeds without one are censored at their end time, counted, not averaged in),
     ``times`` and ``measures`` (name -> unit, doc, per time mean, sem, n, and ``values``
     per seed and time, NaN as None).
@@ -681,9 +681,14 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
     measures = FRAME_MEASURES if measures is None else measures
     times = [float(t) for t in times]
     seeds, values = [], np.full((len(measures), len(paths), len(times)), np.nan)
-    sc_t, sc_obs = [], []
+    sc_t, sc_obs, unreadable = [], [], []
     for j, path in enumerate(paths):
-        with RunFile(path) as run:
+        try:
+            run = RunFile(path)
+        except RunFileError as exc:  # e.g. still being written by a running seed: left out, named
+            unreadable.append({"path": str(path), "reason": str(exc)})
+            continue
+        with run:
             params = run.parameters
             interval = float(params["output"]["interval"])
             t_run = run.time
@@ -705,8 +710,11 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
                 frame = Frame(run, idx, params, flux_radius)
                 for m, measure in enumerate(measures):
                     values[m, j, k] = measure.fn(frame)
-    sc = censored_times(sc_t, sc_obs) if paths else None
-    out = {"version": __version__, "n_seeds": len(paths), "times": times, "t_end": t_end, "seeds": seeds,
+    keep = [j for j, p in enumerate(paths) if str(p) not in {u["path"] for u in unreadable}]
+    values = values[:, keep]
+    sc = censored_times(sc_t, sc_obs) if seeds else None
+    out = {"version": __version__, "n_seeds": len(seeds), "times": times, "t_end": t_end, "seeds": seeds,
+           "unreadable": unreadable,
            "short_circuit": None if sc is None else {k: _plain(v) for k, v in sc.items()},
            "measures": {}, "note": CLAIMS_NOTE}
     for m, measure in enumerate(measures):
@@ -755,6 +763,8 @@ def format_table(summary) -> str:
     for name, m in summary["measures"].items():
         cells = [_pm(a, b, n) for a, b, n in zip(m["mean"], m["sem"], m["n"])]
         lines.append(f"| {name} | {m['unit']} | " + " | ".join(cells) + " |")
+    for u in summary.get("unreadable", ()):
+        lines += [f"left out: {u['reason']}"]
     if summary.get("note"):
         lines += ["", f"note: {summary['note']}"]
     return "\n".join(lines)

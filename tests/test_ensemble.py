@@ -298,3 +298,12 @@ def test_a_measure_is_one_more_entry(scene, tmp_path):
     m = s["measures"]["frame_time"]
     assert m["mean"] == pytest.approx([0.05, 0.1], rel=1e-12) and m["sem"] == [0.0, 0.0] and m["n"] == [2, 2]
     assert list(s["measures"])[-1] == "frame_time" and "| frame_time | t0 |" in format_table(s)
+
+
+def test_summary_leaves_out_an_unreadable_file_by_name(scene, tmp_path):
+    Ensemble(scene, [3], tmp_path, t_end=0.1).run()
+    seed_path(tmp_path, 4).write_bytes(b"not hdf5")
+    s = summarise([seed_path(tmp_path, 3), seed_path(tmp_path, 4)], [0.1])
+    assert s["n_seeds"] == 1 and s["measures"]["median_axis_distance"]["n"] == [1]
+    assert s["unreadable"][0]["path"] == str(seed_path(tmp_path, 4))
+    assert "left out: " in format_table(s) and "not a readable HDF5 file" in format_table(s)
