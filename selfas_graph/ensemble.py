@@ -1,7 +1,7 @@
 """Ensembles: one scenario run over many seeds, one run file per seed, and statistics over the seeds.
 
-One run of a chaotic system is an anecdote (docs/model.md, "Measuring the paper's
-claims"): a claim is the mean and standard error over seeds. From Python::
+One run of a chaotic system is an anecdote (README, "Ensembles"): a claim is the mean and
+standard error over seeds. From Python::
 
     from selfas_graph.ensemble import Ensemble, format_table
     ens = Ensemble("scenarios/quick.toml", seeds=4, folder="quick_ensemble", t_end=1.0)
@@ -538,7 +538,7 @@ def default_times(t_end):
 
 
 # ----------------------------------------------------------------------------- per-frame measures
-try:  # the claim measures (docs/model.md, "Measuring the paper's claims"), where that module exists
+try:  # the claim measures (moment, fractal dimension, cycle rank), where that module exists
     from .analysis.claims import frame_claims
 except ImportError:
     frame_claims = None

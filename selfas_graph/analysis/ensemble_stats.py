@@ -1,4 +1,4 @@
-"""Statistics over the seeds of an ensemble (docs/model.md, section "Measuring the paper's claims").
+"""Statistics over the seeds of an ensemble (README, "Ensembles: a claim over many seeds").
 
 One run of a chaotic system is an anecdote: a claim is reported as the mean and the
 standard error over seeds. Arrays in, arrays out; no files:
