@@ -3,6 +3,10 @@
 mpi4py is imported here and nowhere else, and only when the process was started
 by an MPI launcher (so a serial run needs no MPI at all). Rank 0 writes files.
 
+Ensembles (independent runs, one per seed) use :class:`task_pool` instead: on one
+machine a pool of spawned processes, under an MPI launcher the ranks of
+``mpi4py.futures`` (rank 0 hands out the runs, every other rank runs them, each alone).
+
 Decomposition (replicated data, split force targets): every rank holds every
 position and velocity. The expensive force terms compute only the rows of a
 contiguous block of rods (:class:`RowBlocks`: the rods' centres, their tips, the
@@ -147,3 +151,118 @@ class RowBlocks:
         if buf is None or buf.shape != shape:
             buf = self._buffers[name] = np.empty(shape)
         return buf
+
+
+# --------------------------------------------------------------------------- ensembles
+def _node_cores() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def threads_per_job(jobs: int) -> int:
+    """Numba threads of each of ``jobs`` independent runs on one machine: ``cores // jobs``, at least 1."""
+    return max(1, _node_cores() // max(1, int(jobs)))
+
+
+def set_job_threads(threads=None) -> int:
+    """Pool-worker initializer: ``threads`` numba threads for every run of this process.
+
+    Applied with ``numba.set_num_threads`` (numba is already imported when a worker
+    unpickles its task; changing ``NUMBA_NUM_THREADS`` now would make numba's next
+    configuration reload fail once its threads are running). With
+    ``threads=None`` (an MPI worker rank) a user's ``NUMBA_NUM_THREADS`` wins, otherwise
+    the node's cores are shared among the launcher's ranks on that node.
+    """
+    import numba
+
+    if threads is None:
+        if "NUMBA_NUM_THREADS" in os.environ:
+            threads = int(os.environ["NUMBA_NUM_THREADS"])
+        else:
+            local = os.environ.get("MPI_LOCALNRANKS") or os.environ.get("OMPI_COMM_WORLD_LOCAL_SIZE") or "1"
+            threads = max(1, _node_cores() // max(1, int(local)))
+    threads = max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS))
+    numba.set_num_threads(threads)
+    return threads
+
+
+def init_job_worker(threads=None) -> None:
+    """Initializer of a pool worker: :func:`set_job_threads`, and SIGINT and SIGTERM ignored between tasks.
+
+    A task that can stop cleanly installs its own handlers while it runs (a seed writes a
+    checkpoint); an idle worker must survive the signal, or the whole pool would break.
+    """
+    import signal
+
+    set_job_threads(threads)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_IGN)
+
+
+class task_pool:
+    """The executor that runs independent tasks (the seeds of an ensemble), as a context manager.
+
+    * Under an MPI launcher (``mpiexec -n P selfas-graph ensemble ...``, or
+      ``mpiexec -n P python -m mpi4py.futures -m selfas_graph.cli.main ensemble ...``):
+      an ``mpi4py.futures.MPICommExecutor`` on ``COMM_WORLD``. Rank 0 gets the executor
+      and the other P - 1 ranks serve its tasks; on them the context gives ``None`` and
+      ends when rank 0 leaves it. Each worker rank takes :func:`set_job_threads` threads.
+    * Otherwise, with ``jobs > 1``: a ``concurrent.futures.ProcessPoolExecutor`` of
+      ``jobs`` spawned processes, each with ``threads`` numba threads (default
+      ``cores // jobs``).
+    * With ``jobs == 1``: ``None`` executor and ``serial = True``: run the tasks in this
+      process (the caller does), with ``threads`` numba threads if given (restored on exit).
+
+    Attributes after entering: ``executor`` (or None), ``workers`` (count), ``mpi`` (bool),
+    ``serial`` (bool: no executor, run here), ``threads`` (per local worker, None under MPI).
+    """
+
+    def __init__(self, jobs=1, threads=None):
+        self.jobs = max(1, int(jobs))
+        self._threads = threads
+        self.executor, self.mpi, self.serial, self.threads, self.workers = None, False, False, None, 1
+        self._cm = self._restore = None
+
+    def __enter__(self):
+        if world.size > 1:
+            from mpi4py import MPI
+            from mpi4py.futures import MPICommExecutor
+
+            self.mpi = True
+            self.workers = world.size - 1
+            self._cm = MPICommExecutor(MPI.COMM_WORLD, root=0, initializer=init_job_worker)
+            self.executor = self._cm.__enter__()
+            return self
+        if self.jobs == 1:
+            self.serial = True
+            if self._threads is not None:
+                import numba
+
+                self._restore = numba.get_num_threads()
+                self.threads = set_job_threads(self._threads)
+            return self
+        import concurrent.futures
+        import multiprocessing
+
+        self.workers = self.jobs
+        self.threads = threads_per_job(self.jobs) if self._threads is None else int(self._threads)
+        self.executor = concurrent.futures.ProcessPoolExecutor(
+            max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"),
+            initializer=init_job_worker, initargs=(self.threads,))
+        return self
+
+    def __exit__(self, *exc):
+        if self._cm is not None:
+            self._cm.__exit__(*exc)
+            return False
+        if self.executor is not None:
+            self.executor.shutdown(wait=True, cancel_futures=True)
+        if self._restore is not None:
+            import numba
+
+            numba.set_num_threads(self._restore)
+        return False
+
+    @property
+    def is_worker(self) -> bool:
+        """True on an MPI rank that served the tasks (it has nothing else to do)."""
+        return self.mpi and self.executor is None

@@ -5,6 +5,8 @@ path). One small ensemble (2 densities x 2 seeds to t = 2.2, about 30 s on 2 cor
 shared by the checks of the JSON structure, the statistics, the table and the plot; the
 same runs are repeated on 2 worker processes to check that the results do not depend on
 the number of workers; a t-max far shorter than the short circuit gives censored runs.
+The tool runs on the library's ensemble runner and statistics, whose Kaplan-Meier and
+Wilson intervals are tested on hand-made data in tests/test_ensemble_stats.py.
 """
 import importlib.util
 import json
@@ -132,13 +134,3 @@ def test_bad_inputs(tool, capsys, argv, message):
         tool.main([QUICK, *argv])
     assert exc.value.code == 2
     assert message in capsys.readouterr().err
-
-
-def test_kaplan_meier_with_early_censoring(tool):
-    # runs: events at 1 and 3, one censored at 2 (a failure), one at T = 4
-    curve = tool.kaplan_meier([1.0, 3.0], [2.0, 4.0])
-    assert curve == [(1.0, pytest.approx(0.25)), (3.0, pytest.approx(1 - 0.75 * 0.5))]
-    assert tool.km_quantile(curve, 0.5) == 3.0 and tool.km_quantile(curve, 0.75) is None
-    assert tool.kaplan_meier([], [4.0]) == []
-    lo, hi = tool.wilson(0, 4)
-    assert lo == 0.0 and 0.4 < hi < 0.5

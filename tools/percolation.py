@@ -23,154 +23,47 @@ of the short-circuit time from the Kaplan-Meier estimate of its distribution (wi
 censoring only at T these are plain order statistics of all K runs, censored runs
 counting as later than T); a quartile not reached by T is printed as ">T" (null in JSON).
 
-Runs go to W worker processes (``multiprocessing``, spawn; default W = 1, in this process).
-Every run uses one numba thread (NUMBA_NUM_THREADS=1 in the workers, ``numba.set_num_threads(1)``
-in this process), so that W processes share the cores and every number is independent of W.
-A density whose rods cannot be placed in the box (checked with the first seed before any
-run) is skipped with a message naming it.
+Runs go to W worker processes (default W = 1, in this process) through the same runner as
+``selfas-graph ensemble`` (:func:`selfas_graph.ensemble.run_tasks` on a
+:class:`selfas_graph.parallel.task_pool`; one run is
+:func:`selfas_graph.ensemble.run_to_short_circuit`), and the statistics are
+:mod:`selfas_graph.analysis.ensemble_stats`. Every run uses one numba thread, so that W
+processes share the cores and every number is independent of W. A density whose rods
+cannot be placed in the box (checked with the first seed before any run) is skipped with
+a message naming it. To keep run files and summarise other measures, run
+``selfas-graph ensemble SCENARIO --set rods.count=N`` per density instead.
 """
 import argparse
-import importlib.machinery
 import json
 import math
-import os
 import sys
 import time
-import types
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-# selfas_graph (and with it numba) is imported lazily: a spawned worker must set
-# NUMBA_NUM_THREADS before numba is imported.
-
 #: densest packing of equal spheres: tips at least d apart are spheres of diameter d that do not overlap
 _MAX_PACKING = math.pi / (3.0 * math.sqrt(2.0))
-#: 95 % two-sided normal quantile (Wilson interval of the short-circuited fraction)
-_Z95 = 1.959963984540054
-STATUSES = ("short_circuit", "censored", "failed", "unplaceable", "error")
-
-
-# ----------------------------------------------------------------------------- one run
-
-def _worker_init():
-    """Pool initializer: one numba thread per worker process (before numba is imported)."""
-    os.environ["NUMBA_NUM_THREADS"] = "1"
-
-
-def run_one(task):
-    """Run one (count, seed) to its first short circuit or to t_max; returns a JSON-ready dict.
-
-    ``task`` is a dict with keys text, path, overrides, count, seed, t_max, chunk.
-    """
-    from selfas_graph import NumericalFailure, PlacementError, Simulation, scenario_from_text
-    from selfas_graph.model.simulation import RunInterrupted
-
-    count, seed, t_max = task["count"], task["seed"], task["t_max"]
-    out = {"count": count, "seed": seed, "status": None, "time": None, "t_end": 0.0, "steps": 0,
-           "events": 0, "filament_rods": 0, "wall_seconds": 0.0, "message": None}
-    t0 = time.perf_counter()
-    sim = None
-    try:
-        over = list(task["overrides"]) + [f"scenario.seed={seed}", f"rods.count={count}", f"run.t_end={t_max!r}"]
-        scenario = scenario_from_text(task["text"], path=Path(task["path"]), overrides=over)
-        sim = Simulation.from_scenario(scenario)
-        total = sim.steps_for(t_max)
-        stop = lambda: sim.short_circuit_time is not None  # noqa: E731
-        while sim.short_circuit_time is None and sim.state.step < total:
-            target = min(sim.state.time + task["chunk"], t_max)
-            try:
-                summary = sim.run(t_end=target, stop=stop)
-            except RunInterrupted:
-                break
-            if summary.steps == 0:  # the chunk rounds to no step: the end is reached
-                break
-        if sim.short_circuit_time is not None:
-            out["status"], out["time"] = "short_circuit", float(sim.short_circuit_time)
-        else:
-            out["status"] = "censored"
-    except PlacementError as exc:
-        out["status"], out["message"] = "unplaceable", str(exc)
-    except NumericalFailure as exc:
-        out["status"], out["message"] = "failed", str(exc)
-    except Exception as exc:  # noqa: BLE001 - a bug in one run must not lose the ensemble; reported
-        out["status"], out["message"] = "error", f"{type(exc).__name__}: {exc}"
-    if sim is not None:
-        out["t_end"] = float(sim.state.time)
-        out["steps"] = int(sim.state.step)
-        out["events"] = len(sim.events)
-        if sim.graph is not None:
-            out["filament_rods"] = int(sim.graph.topology().n_filament)
-    out["wall_seconds"] = time.perf_counter() - t0
-    return out
+STATUSES = ("short_circuit", "censored", "failed", "unplaceable", "error", "interrupted")
 
 
 # ----------------------------------------------------------------------------- statistics
 
-def kaplan_meier(times, censored_at):
-    """Kaplan-Meier estimate of the distribution F(t) = P(short circuit <= t).
-
-    Parameters
-    ----------
-    times : list of float
-        Short-circuit times.
-    censored_at : list of float
-        Times at which runs without a short circuit stopped (T, or a failure's time).
-
-    Returns
-    -------
-    list of (t, F(t)) at every distinct short-circuit time, increasing. A run censored
-    at the time of a short circuit counts as still at risk then.
-    """
-    n_at_risk = len(times) + len(censored_at)
-    if not times:
-        return []
-    order = sorted(times)
-    cens = sorted(censored_at)
-    out, surv, i, j = [], 1.0, 0, 0
-    while i < len(order):
-        t = order[i]
-        while j < len(cens) and cens[j] < t:  # censored strictly before t: no longer at risk
-            j += 1
-            n_at_risk -= 1
-        d = 0
-        while i < len(order) and order[i] == t:
-            d += 1
-            i += 1
-        surv *= 1.0 - d / n_at_risk
-        n_at_risk -= d
-        out.append((t, 1.0 - surv))
-    return out
-
-
-def km_quantile(curve, q):
-    """Smallest t with F(t) >= q on a Kaplan-Meier curve, or None if not reached."""
-    for t, f in curve:
-        if f >= q - 1e-12:
-            return t
-    return None
-
-
-def wilson(m, n, z=_Z95):
-    """Wilson score interval of a binomial proportion m / n."""
-    if n == 0:
-        return (0.0, 1.0)
-    p = m / n
-    den = 1.0 + z * z / n
-    centre = (p + z * z / (2 * n)) / den
-    half = z * math.sqrt(p * (1.0 - p) / n + z * z / (4 * n * n)) / den
-    return (max(0.0, centre - half), min(1.0, centre + half))
+def _none(v):
+    return None if v is None or (isinstance(v, float) and math.isnan(v)) else float(v)
 
 
 def summarise(point, runs):
     """Statistics of one density from its runs (unplaceable and error runs left out, counted)."""
+    from selfas_graph.analysis.ensemble_stats import kaplan_meier, km_quantile, wilson_interval
+
     used = [r for r in runs if r["status"] in ("short_circuit", "censored", "failed")]
-    sc = [r["time"] for r in used if r["status"] == "short_circuit"]
-    cens = [r["t_end"] for r in used if r["status"] != "short_circuit"]
-    curve = kaplan_meier(sc, cens)
-    n, m = len(used), len(sc)
-    lo, hi = wilson(m, n)
+    times = [r["time"] if r["status"] == "short_circuit" else r["t_end"] for r in used]
+    observed = [r["status"] == "short_circuit" for r in used]
+    t, F = kaplan_meier(times, observed)
+    n, m = len(used), sum(observed)
+    lo, hi = wilson_interval(m, n)
     return {
         **point,
         "runs": n,
@@ -180,11 +73,11 @@ def summarise(point, runs):
         "excluded": len(runs) - n,
         "fraction": m / n if n else None,
         "fraction_ci95": [lo, hi] if n else None,
-        "km_fraction": curve[-1][1] if curve else 0.0,
-        "q25": km_quantile(curve, 0.25),
-        "median": km_quantile(curve, 0.5),
-        "q75": km_quantile(curve, 0.75),
-        "km": [[t, f] for t, f in curve],
+        "km_fraction": float(F[-1]) if F.size else 0.0,
+        "q25": _none(km_quantile(t, F, 0.25)),
+        "median": _none(km_quantile(t, F, 0.5)),
+        "q75": _none(km_quantile(t, F, 0.75)),
+        "km": [[float(a), float(b)] for a, b in zip(t, F)],
     }
 
 
@@ -303,66 +196,23 @@ def plan(ap, args):
 
 # ----------------------------------------------------------------------------- running
 
-def _spawn_importable():
-    """Make the worker functions importable in spawned processes.
-
-    Run as a script, spawn re-imports this file as ``__mp_main__``. Loaded from its path
-    under another name (as the tests do), the workers could not import that name: the
-    worker functions are then exposed as module ``percolation`` (an alias module in
-    sys.modules here, for pickle) with tools/ on sys.path (for the spawned processes).
-    """
-    name = __name__
-    if name == "__main__":
-        return
-    me = Path(__file__).resolve()
-    if "." not in name:
-        spec = importlib.machinery.PathFinder.find_spec(name, sys.path)
-        if spec is not None and spec.origin and Path(spec.origin).resolve() == me:
-            return
-    existing = sys.modules.get("percolation")
-    if existing is not None and Path(getattr(existing, "__file__", None) or "").resolve() != me:
-        raise RuntimeError(f"another module named 'percolation' is loaded ({existing!r}); run the tool as a script "
-                           "or with --workers 1")
-    alias = types.ModuleType("percolation")
-    alias.__file__ = str(me)
-    for fn in (_worker_init, run_one, _indexed_run):
-        fn.__module__ = "percolation"
-        setattr(alias, fn.__name__, fn)
-    sys.modules["percolation"] = alias  # what pickle looks the workers up in, here
-    if str(me.parent) not in sys.path:
-        sys.path.append(str(me.parent))  # spawned processes get sys.path and import tools/percolation.py
-
-
 def run_all(tasks, workers, report):
-    """Run every task (in this process if workers == 1); returns results in task order."""
-    results = [None] * len(tasks)
-    if workers == 1:
-        import numba
-        before = numba.get_num_threads()
-        numba.set_num_threads(1)
-        try:
-            for i, task in enumerate(tasks):
-                results[i] = run_one(task)
-                report(results[i])
-        finally:
-            numba.set_num_threads(before)
-        return results
-    import multiprocessing as mp
-    _spawn_importable()
-    ctx = mp.get_context("spawn")
+    """Run every task on ``workers`` processes (in this process if 1), one numba thread each; results in task order."""
+    from selfas_graph.ensemble import run_tasks, run_to_short_circuit
+    from selfas_graph.parallel import task_pool
+
     # largest counts first: better balance of the slow runs over the workers
     order = sorted(range(len(tasks)), key=lambda i: -tasks[i]["count"])
-    with ctx.Pool(processes=min(workers, len(tasks)), initializer=_worker_init) as pool:
-        it = pool.imap_unordered(_indexed_run, [(i, tasks[i]) for i in order])
-        for i, res in it:
-            results[i] = res
-            report(res)
+    with task_pool(min(workers, len(tasks)), threads=1) as pool:
+        done = run_tasks(run_to_short_circuit, [tasks[i] for i in order], pool, report)
+    results = [None] * len(tasks)
+    for i, r in zip(order, done):
+        results[i] = r if r is not None else {**{k: tasks[i][k] for k in ("count", "seed")}, "status": "error",
+                                              "time": None, "t_end": 0.0, "steps": 0, "events": 0,
+                                              "filament_rods": 0, "wall_seconds": 0.0, "message": "not run"}
+        if r is None:
+            results[i]["status"] = "interrupted"
     return results
-
-
-def _indexed_run(item):
-    i, task = item
-    return i, run_one(task)
 
 
 def _fmt_t(v, t_max):
@@ -388,7 +238,7 @@ def print_table(result):
               f"| {_fmt_t(d['median'], t_max)} | {_fmt_t(d['q75'], t_max)} | {d['censored']} | {d['failed']} |")
     for s in result["skipped"]:
         print(f"skipped {s['requested']['by']} {s['requested']['value']:g}: {s['reason']}")
-    bad = [r for r in result["runs"] if r["status"] in ("unplaceable", "error")]
+    bad = [r for r in result["runs"] if r["status"] in ("unplaceable", "error", "interrupted")]
     for r in bad:
         print(f"left out: {r['count']} rods, seed {r['seed']}: {r['status']}: {r['message']}")
 
@@ -447,8 +297,9 @@ def main(argv=None):
     from selfas_graph import __version__
 
     seeds = [meta["first_seed"] + k for k in range(args.seeds)]
-    tasks = [{"text": base.text, "path": str(base.path), "overrides": list(args.overrides), "count": pt["count"],
-              "seed": s, "t_max": args.t_max, "chunk": args.chunk} for pt in points for s in seeds]
+    tasks = [{"text": base.text, "path": str(base.path), "count": pt["count"], "seed": s, "echo": ("count",),
+              "overrides": [*args.overrides, f"scenario.seed={s}", f"rods.count={pt['count']}"],
+              "t_max": args.t_max, "chunk": args.chunk} for pt in points for s in seeds]
     print(f"{len(points)} densities x {len(seeds)} seeds = {len(tasks)} runs to t = {args.t_max:g} "
           f"on {args.workers} worker(s)", flush=True)
     done = [0]
@@ -488,6 +339,8 @@ def main(argv=None):
     if args.plot:
         plot(result, args.plot)
         print(f"wrote {args.plot}")
+    if any(r["status"] == "interrupted" for r in runs):
+        return 130
     return 1 if any(r["status"] == "error" for r in runs) else 0
 
 

@@ -16,10 +16,16 @@ from .diagnostics import (
     rod_centres,
     timeline,
 )
+from .ensemble_stats import censored_times, kaplan_meier, km_quantile, mean_sem, wilson_interval
 
 __all__ = [
     "Timeline",
     "auto_n_phi",
+    "censored_times",
+    "kaplan_meier",
+    "km_quantile",
+    "mean_sem",
+    "wilson_interval",
     "bz_profile",
     "disc_flux",
     "flux_through_disc",

@@ -1,0 +1,167 @@
+"""Run a scenario over many seeds and summarise them: ``selfas-graph ensemble SCENARIO --seeds N [--jobs J]``.
+
+Seeds S .. S+N-1 (S: ``--first-seed``, default the scenario's ``scenario.seed``) each go
+to their own run file ``DIR/seed_SSSS.h5``, written as ``selfas-graph simulate`` writes
+it. Seeds finished at the end time are not run again; interrupted ones (or ones
+finished at an earlier end time) continue from their checkpoint. A seed file of other
+parameters is refused (``--force`` replaces such files). Then the summary, mean and
+standard error over seeds at the chosen times, is printed and written to
+``DIR/summary.json`` and ``DIR/summary.csv`` (both rewritten from the run files on every
+call).
+
+On one machine the seeds run in ``--jobs`` processes with ``cores // jobs`` numba
+threads each. On a cluster allocation, ``mpiexec -n P selfas-graph ensemble ...`` (or
+``mpiexec -n P python -m mpi4py.futures -m selfas_graph.cli.main ensemble ...``) runs
+them on the P - 1 ranks other than rank 0, which hands them out and writes the summary.
+The Python API is :mod:`selfas_graph.ensemble`.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+from ..ensemble import Ensemble, EnsembleError, format_table, write_summary
+from ..parallel import task_pool
+from .main import EXIT_NUMERICAL, CliError
+
+
+def _times(text):
+    import argparse
+
+    try:
+        values = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: give simulated times separated by commas, e.g. 100,300,600") \
+            from None
+    if not values or not all(math.isfinite(v) and v >= 0 for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r}: give finite simulated times >= 0, separated by commas")
+    return values
+
+
+def _positive_int(text):
+    import argparse
+
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"{text} must be >= 1")
+    return v
+
+
+def add_arguments(p):
+    p.add_argument("scenario", help="scenario file (TOML), e.g. scenarios/quick.toml")
+    p.add_argument("--seeds", type=_positive_int, required=True, metavar="N", help="number of seeds")
+    p.add_argument("--first-seed", type=int, metavar="S",
+                   help="seeds S .. S+N-1 (default: the scenario's scenario.seed)")
+    p.add_argument("--jobs", type=_positive_int, default=1, metavar="J",
+                   help="seeds run at once on this machine, each with cores // J numba threads (default 1; "
+                        "under mpiexec the ranks are the workers)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a scenario value for every seed, as in simulate (repeatable)")
+    p.add_argument("--t-end", type=float, help="simulated end time of every seed (overrides run.t_end)")
+    p.add_argument("-o", "--output", metavar="DIR", help="folder of the run files and summary "
+                                                         "(default: SCENARIO name + '_ensemble'); created if missing")
+    p.add_argument("--times", type=_times, metavar="T1,T2,...",
+                   help="times of the summary (default: a quarter, half, three quarters and all of the end time)")
+    p.add_argument("--flux-radius", type=float, metavar="R",
+                   help="disc radius of the mid-plane flux (default: the placement box's half-diagonal in x-y)")
+    p.add_argument("--no-run", action="store_true", help="summarise the seed files present; run nothing")
+    p.add_argument("--force", action="store_true",
+                   help="replace seed files that cannot be reused (other parameters, failed, or incomplete without "
+                        "a checkpoint); finished ones are kept")
+
+
+def run(args):
+    with task_pool(args.jobs) as pool:
+        if pool.is_worker:
+            return 0  # an MPI rank that ran seeds for rank 0
+        return _run(args, pool)
+
+
+def _make(folder):
+    from ..ensemble import make_folder
+
+    try:
+        make_folder(folder)
+    except EnsembleError as exc:
+        raise CliError(str(exc)) from None
+
+
+def _run(args, pool):
+    from pathlib import Path
+
+    try:
+        name_source = Path(args.scenario).stem
+        folder = Path(args.output) if args.output else Path(f"{name_source}_ensemble")
+        ens = Ensemble(args.scenario, args.seeds, folder, overrides=args.overrides, t_end=args.t_end,
+                       first_seed=args.first_seed, force=args.force)
+        plans = ens.plan()
+    except EnsembleError as exc:
+        raise CliError(str(exc)) from None
+    if args.flux_radius is not None and not (math.isfinite(args.flux_radius) and args.flux_radius > 0):
+        raise CliError(f"--flux-radius must be a positive length, got {args.flux_radius}")
+    times = args.times
+    if times is not None and max(times) > ens.t_end:
+        raise CliError(f"--times {max(times):g} is after the end time {ens.t_end:g}; give times up to it")
+    count = {a: sum(p.action == a for p in plans) for a in ("run", "resume", "done", "failed")}
+    if pool.mpi:
+        where = f"{pool.workers} MPI worker ranks"
+    elif pool.serial:
+        import numba
+
+        where = f"this process ({numba.get_num_threads()} numba threads)"
+    else:
+        where = f"{pool.workers} processes x {pool.threads} numba threads"
+    p = ens.base.params
+    print(f"{p.scenario.name}: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {ens.t_end:g} in {folder}/: "
+          f"{count['run']} to run, {count['resume']} to resume, {count['done']} done, {count['failed']} failed"
+          + ("" if args.no_run else f"; on {where}"), flush=True)
+    for plan in plans:
+        if plan.action == "failed":
+            print(f"  seed {plan.seed}: {plan.note} (kept; --force reruns it)", flush=True)
+    results = []
+    if not args.no_run and count["run"] + count["resume"]:
+        _make(folder)
+        tasks = ens.tasks(plans)
+        done = [0]
+
+        def report(r):
+            done[0] += 1
+            what = {"finished": "finished", "interrupted": "interrupted", "failed": "failed", "error": "error"}.get(
+                r.get("status"), str(r.get("status")))
+            extra = f": {r['message']}" if r.get("message") else ""
+            t = f" at t = {r['t']:.6g}" if r.get("t") is not None else ""
+            print(f"[{done[0]}/{len(tasks)}] seed {r.get('seed', '?')}: {what}{t} "
+                  f"({r.get('wall_seconds', 0.0):.1f} s){extra}", flush=True)
+
+        t0 = time.perf_counter()
+        from ..ensemble import run_seed, run_tasks
+
+        results = run_tasks(run_seed, tasks, pool, report)
+        print(f"ran {sum(r is not None for r in results)} of {len(tasks)} seeds in {time.perf_counter() - t0:.1f} s",
+              flush=True)
+    summary = ens.summarise(times=times, flux_radius=args.flux_radius)
+    if summary["n_seeds"]:
+        print()
+        print(format_table(summary))
+        try:
+            js, cs = write_summary(summary, folder)
+        except (EnsembleError, OSError) as exc:
+            raise CliError(f"cannot write the summary into {folder}: {exc}") from None
+        print(f"\nwrote {js} and {cs}")
+    else:
+        print("no seed file to summarise")
+    statuses = [r.get("status") for r in results if r is not None]
+    if "interrupted" in statuses or any(r is None for r in results):
+        print(f"selfas-graph ensemble: interrupted; rerun the same command to continue "
+              f"(finished seeds are kept, interrupted ones resume from their checkpoints)", file=sys.stderr)
+        return 130
+    if "error" in statuses:
+        print("selfas-graph ensemble: some seeds stopped with an error (above)", file=sys.stderr)
+        return 1
+    if "failed" in statuses or count["failed"]:
+        return EXIT_NUMERICAL
+    return 0

@@ -1,0 +1,791 @@
+"""Ensembles: one scenario run over many seeds, one run file per seed, and statistics over the seeds.
+
+One run of a chaotic system is an anecdote (README, "Ensembles"): a claim is the mean and
+standard error over seeds. From Python::
+
+    from selfas_graph.ensemble import Ensemble, format_table
+    ens = Ensemble("scenarios/quick.toml", seeds=4, folder="quick_ensemble", t_end=1.0)
+    ens.run(jobs=2)                       # seeds 1..4 -> quick_ensemble/seed_0001.h5 ...
+    summary = ens.summarise(times=[0.5, 1.0])
+    print(format_table(summary))
+
+Seeds are ``first_seed, first_seed + 1, ...`` (``first_seed`` defaults to the scenario's
+``scenario.seed``); seed ``s`` is written to ``FOLDER/seed_{s:04d}.h5`` exactly as
+``selfas-graph simulate SCENARIO --set scenario.seed=s -o FOLDER/seed_{s:04d}.h5`` would
+write it (the same run file, checkpoint and provenance), so one seed can be inspected,
+plotted or resumed by hand.
+
+Calling :meth:`Ensemble.run` again runs only what is missing: a seed whose file is
+finished at (or beyond) the end time is kept; an interrupted one, or one finished at an
+earlier end time, is continued from its checkpoint (``RUN.checkpoint.h5``, as
+``simulate --resume``); a failed one is reported and kept. A seed file whose stored
+parameters differ from the ensemble's (other than ``run.t_end``) is refused, never reused
+or overwritten; ``force=True`` replaces the files that cannot be reused.
+
+The runs go to :class:`selfas_graph.parallel.task_pool`: ``jobs`` spawned processes on
+one machine (``cores // jobs`` numba threads each), or the ranks of an MPI launcher.
+The same runner serves ``tools/percolation.py`` (:func:`run_tasks`, :func:`run_to_short_circuit`).
+"""
+from __future__ import annotations
+
+import concurrent.futures
+import csv
+import dataclasses
+import functools
+import io
+import json
+import math
+import shlex
+import signal
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ._version import __version__
+from .analysis.claims import frame_claims
+from .analysis.diagnostics import flux_through_disc, rod_centres, timeline
+from .analysis.ensemble_stats import censored_times, mean_sem
+from .io.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
+from .io.h5md import RunFile, RunFileError, RunWriter
+from .io.scenario import ScenarioError, load_scenario, scenario_from_text
+from .model.simulation import NumericalFailure, RunInterrupted, Simulation
+from .model.state import PlacementError
+from .parallel import task_pool
+
+__all__ = ["Ensemble", "EnsembleError", "FRAME_MEASURES", "Frame", "Measure", "SeedPlan", "format_table",
+           "run_seed", "run_tasks", "run_to_short_circuit", "seed_path", "summarise", "write_summary"]
+
+#: file name of seed ``s`` in the ensemble's folder
+SEED_FILE = "seed_{:04d}.h5"
+#: parameters a seed file may differ in and still belong to the ensemble
+FREE_PARAMETERS = ("run.t_end", "output.file", "output.checkpoint_interval")
+#: summary files written into the ensemble's folder (rewritten from the run files on every call)
+SUMMARY_JSON, SUMMARY_CSV = "summary.json", "summary.csv"
+
+
+class EnsembleError(ValueError):
+    """Bad input or a seed file that cannot be used (the CLI reports it with exit code 2)."""
+
+
+def seed_path(folder, seed) -> Path:
+    """The run file of ``seed`` in ``folder``: ``folder/seed_0001.h5`` for seed 1."""
+    return Path(folder) / SEED_FILE.format(int(seed))
+
+
+def _flat(d, prefix=""):
+    out = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict) and v:
+            out.update(_flat(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+def parameter_differences(stored: dict, wanted: dict) -> list[str]:
+    """Dotted keys whose values differ between two parameter dicts, except :data:`FREE_PARAMETERS`."""
+    a, b = _flat(json.loads(json.dumps(stored))), _flat(json.loads(json.dumps(wanted)))
+    return sorted(k for k in set(a) | set(b) if k not in FREE_PARAMETERS and a.get(k) != b.get(k))
+
+
+@dataclasses.dataclass
+class SeedPlan:
+    """What :meth:`Ensemble.run` does with one seed.
+
+    ``action`` is "run" (a new file), "resume" (continue from the checkpoint to the end
+    time), "done" (finished at or beyond the end time: kept) or "failed" (the run failed
+    numerically before: kept, reported; rerun with ``force``). ``note`` says why.
+    """
+
+    seed: int
+    path: Path
+    action: str
+    note: str = ""
+
+
+# ----------------------------------------------------------------------------- one seed
+class _StopOnSignal:
+    """``stop`` hook of :meth:`Simulation.run`: true once SIGTERM or SIGINT arrived (then a checkpoint is written)."""
+
+    def __init__(self):
+        self.signum, self.old = None, {}
+
+    def __call__(self):
+        return self.signum is not None
+
+    def __enter__(self):
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            try:
+                self.old[sig] = signal.signal(sig, self._handle)
+            except ValueError:  # not the main thread: the launcher's own handling applies
+                pass
+        return self
+
+    def _handle(self, signum, frame):
+        self.signum = signum
+
+    def __exit__(self, *exc):
+        for sig, handler in self.old.items():
+            signal.signal(sig, handler)
+
+
+class _Checkpointer:
+    """Checkpoints every ``interval`` wall seconds (and at the end), in the format ``simulate --resume`` reads."""
+
+    def __init__(self, path, interval, meta):
+        self.path, self.interval, self.meta = Path(path), float(interval), meta
+        self.last = time.monotonic()
+
+    def due(self):
+        return self.interval > 0 and time.monotonic() - self.last >= self.interval
+
+    def write(self, sim):
+        write_checkpoint(self.path, sim.snapshot(), {**self.meta, "step": sim.state.step})
+        self.last = time.monotonic()
+
+
+def run_seed(task: dict) -> dict:
+    """Run (or continue) one seed of an ensemble to its end time; the pool's task function.
+
+    ``task`` holds ``seed``, ``path`` (the run file), ``action`` ("run" or "resume"),
+    ``t_end``, and for "run" also ``text``, ``scenario_path``, ``overrides`` (with the
+    seed's) and ``force``; ``command`` is recorded as the run's provenance. Never raises
+    for a failing run: returns a dict with ``status`` "finished", "interrupted",
+    "failed" (numerical failure; the failed state goes to ``SEED.failure.h5``) or "error"
+    (with ``message``), and ``t`` (simulated time reached), ``steps``, ``wall_seconds``, ``threads``.
+    """
+    import numba
+
+    path, t_end = Path(task["path"]), float(task["t_end"])
+    out = {"seed": int(task["seed"]), "path": str(path), "action": task["action"], "status": None, "t": None,
+           "steps": 0, "wall_seconds": 0.0, "threads": numba.get_num_threads(), "message": None}
+    t0 = time.perf_counter()
+    sim = writer = None
+    ckpt = checkpoint_path(path)
+    with _StopOnSignal() as stop:
+        try:
+            if task["action"] == "resume":
+                snap, meta = read_checkpoint(ckpt)
+                scenario = scenario_from_text(meta["scenario_text"], overrides=json.loads(meta["overrides"]),
+                                              t_end=t_end)
+                sim = Simulation.from_snapshot(scenario.params, snap)
+                writer = RunWriter.reopen(path, int(snap["step"]))
+            else:
+                scenario = scenario_from_text(task["text"], path=Path(task["scenario_path"]),
+                                              overrides=task["overrides"], t_end=t_end)
+                sim = Simulation.from_scenario(scenario)
+                p = scenario.params
+                provenance = {
+                    "scenario_text": scenario.text, "scenario_path": str(task["scenario_path"]),
+                    "overrides": json.dumps(list(scenario.overrides)), "parameters_json": json.dumps(p.to_dict()),
+                    "derived_json": json.dumps(sim.force_field.describe()), "version": __version__,
+                    "command_line": task.get("command", ""), "seed": p.scenario.seed, "mpi_ranks": 1,
+                    "numba_threads": numba.get_num_threads(),
+                }
+                writer = RunWriter(path, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
+                                   overwrite=bool(task.get("force")), velocities=p.output.velocities)
+                meta = {"format_note": "selfas-graph checkpoint; continue with selfas-graph simulate --resume",
+                        "scenario_text": scenario.text, "overrides": json.dumps(list(scenario.overrides)),
+                        "run_file": str(path.resolve()), "version": __version__}
+            checkpointer = _Checkpointer(ckpt, scenario.params.output.checkpoint_interval,
+                                         {k: v for k, v in meta.items() if k != "step"})
+            summary = sim.run(writer=writer, checkpointer=checkpointer, stop=stop)
+            writer.set_attrs(wall_seconds=summary.wall_seconds, steps_done=summary.steps)
+            writer.close(status="finished")
+            out["status"] = "finished"
+        except RunInterrupted as exc:
+            writer.close(status=f"interrupted at step {exc.step}")
+            out["status"], out["message"] = "interrupted", f"stopped at step {exc.step}; checkpoint {ckpt}"
+        except NumericalFailure as exc:
+            failure = path.with_name(path.stem + ".failure.h5")
+            sim._flush_pending(writer)  # the events and per-step rows up to the failure, as simulate does
+            writer.close(status=f"failed: {exc}")
+            write_checkpoint(failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step,
+                                                       "failure": str(exc)})
+            out["status"], out["message"] = "failed", f"{exc} (failed state in {failure})"
+        except Exception as exc:  # noqa: BLE001 - one broken seed must not lose the others; reported
+            # not a numerical failure: the file stays resumable from its last checkpoint
+            out["status"], out["message"] = "error", f"{type(exc).__name__}: {exc}"
+            if writer is not None and getattr(writer, "f", None):
+                writer.close(status=f"error: {type(exc).__name__}: {exc}")
+    if sim is not None:
+        out["t"], out["steps"] = float(sim.state.time), int(sim.state.step)
+    out["wall_seconds"] = time.perf_counter() - t0
+    return out
+
+
+def run_to_short_circuit(task: dict) -> dict:
+    """Run one scenario without a file until its first short circuit or ``t_max``; the percolation task.
+
+    ``task`` holds ``text``, ``path`` (the scenario's, for messages), ``overrides`` (with
+    the seed's), ``seed``, ``t_max`` and ``chunk`` (simulated time per
+    :meth:`Simulation.run` call: the granularity of the stop check; results do not depend
+    on it); the task keys named in ``echo`` are copied into the result. Returns ``status`` "short_circuit" (``time``), "censored" (none by ``t_max``),
+    "failed" (numerical failure at ``t_end``), "unplaceable" or "error" (``message``),
+    with ``t_end``, ``steps``, ``events``, ``filament_rods``, ``wall_seconds``.
+    """
+    seed, t_max = task["seed"], float(task["t_max"])
+    out = {**{k: task[k] for k in task.get("echo", ())}, "seed": seed, "status": None, "time": None, "t_end": 0.0, "steps": 0, "events": 0, "filament_rods": 0,
+           "wall_seconds": 0.0, "message": None}
+    t0 = time.perf_counter()
+    sim = None
+    try:
+        scenario = scenario_from_text(task["text"], path=Path(task["path"]), overrides=task["overrides"], t_end=t_max)
+        sim = Simulation.from_scenario(scenario)
+        total = sim.steps_for(t_max)
+        with _StopOnSignal() as signalled:
+            stop = lambda: sim.short_circuit_time is not None or signalled()  # noqa: E731
+            while sim.short_circuit_time is None and sim.state.step < total and not signalled():
+                target = min(sim.state.time + task["chunk"], t_max)
+                try:
+                    summary = sim.run(t_end=target, stop=stop)
+                except RunInterrupted:
+                    break
+                if summary.steps == 0:  # the chunk rounds to no step: the end is reached
+                    break
+        if sim.short_circuit_time is not None:
+            out["status"], out["time"] = "short_circuit", float(sim.short_circuit_time)
+        elif signalled():
+            out["status"], out["message"] = "interrupted", f"signal {signalled.signum} at step {sim.state.step}"
+        else:
+            out["status"] = "censored"
+    except PlacementError as exc:
+        out["status"], out["message"] = "unplaceable", str(exc)
+    except NumericalFailure as exc:
+        out["status"], out["message"] = "failed", str(exc)
+    except Exception as exc:  # noqa: BLE001 - a bug in one run must not lose the ensemble; reported
+        out["status"], out["message"] = "error", f"{type(exc).__name__}: {exc}"
+    if sim is not None:
+        out["t_end"], out["steps"], out["events"] = float(sim.state.time), int(sim.state.step), len(sim.events)
+        if sim.graph is not None:
+            out["filament_rods"] = int(sim.graph.topology().n_filament)
+    out["wall_seconds"] = time.perf_counter() - t0
+    return out
+
+
+# ----------------------------------------------------------------------------- the runner
+class _RaiseOnTerm:
+    """In the launching process: SIGTERM becomes KeyboardInterrupt (so the pool is wound down as on Ctrl-C)."""
+
+    def __enter__(self):
+        try:
+            self.old = signal.signal(signal.SIGTERM, self._handle)
+        except ValueError:  # not the main thread
+            self.old = None
+        return self
+
+    @staticmethod
+    def _handle(signum, frame):
+        raise KeyboardInterrupt
+
+    def __exit__(self, *exc):
+        if self.old is not None:
+            signal.signal(signal.SIGTERM, self.old)
+
+
+def run_tasks(fn: Callable[[dict], dict], tasks: list, pool, report=None, stop_statuses=("interrupted",)) -> list:
+    """Run ``fn(task)`` for every task on ``pool`` (a :class:`~selfas_graph.parallel.task_pool`); results in task order.
+
+    Tasks are handed out in order, one per idle worker (none waits in a queue), and
+    ``report(result)`` is called as each ends. In a serial pool they run here, one after
+    the other. Once a result's ``status`` is in ``stop_statuses`` (a seed stopped by a
+    signal), or on Ctrl-C or SIGTERM here, no further task starts; the local workers get
+    SIGTERM (a running seed then stops after its step with a checkpoint) and the running
+    tasks' results are collected. Tasks never started are None in the returned list.
+    """
+    results = [None] * len(tasks)
+    report = report or (lambda r: None)
+    if pool.serial:
+        for i, task in enumerate(tasks):
+            results[i] = fn(task)
+            report(results[i])
+            if results[i].get("status") in stop_statuses:
+                break
+        return results
+    waiting, running, stopping = list(range(len(tasks)))[::-1], {}, False
+
+    def collect(futures):
+        nonlocal stopping
+        for fut in futures:
+            i = running.pop(fut)
+            results[i] = _result(fut)
+            report(results[i])
+            stopping |= results[i].get("status") in stop_statuses
+
+    with _RaiseOnTerm():
+        try:
+            while waiting or running:
+                while waiting and not stopping and len(running) < pool.workers:
+                    i = waiting.pop()
+                    running[pool.executor.submit(fn, tasks[i])] = i
+                if not running:
+                    break
+                done, _ = concurrent.futures.wait(list(running), return_when=concurrent.futures.FIRST_COMPLETED)
+                collect(done)
+        except KeyboardInterrupt:
+            stopping = True
+            if not pool.mpi:
+                import multiprocessing
+
+                for child in multiprocessing.active_children():
+                    child.terminate()  # SIGTERM: a running seed stops after its step with a checkpoint
+            collect(list(running))
+    return results
+
+
+def _result(fut):
+    try:
+        return fut.result()
+    except Exception as exc:  # noqa: BLE001 - a worker process died (killed, out of memory): reported
+        return {"status": "error", "message": f"{type(exc).__name__}: {exc}"}
+
+
+# ----------------------------------------------------------------------------- the ensemble
+class Ensemble:
+    """One scenario over many seeds, each in its own run file in ``folder``.
+
+    Parameters
+    ----------
+    scenario : path-like
+        Scenario file (TOML).
+    seeds : int or sequence of int
+        A count ``N`` (seeds ``first_seed .. first_seed + N - 1``) or the seeds themselves.
+    folder : path-like
+        Where the run files and the summary go; created if missing.
+    overrides : sequence of "key=value"
+        Scenario overrides for every seed (``scenario.seed`` is the ensemble's to set).
+    t_end : float, optional
+        End time of every seed (default: the scenario's ``run.t_end``).
+    first_seed : int, optional
+        Default: the scenario's ``scenario.seed``.
+    force : bool
+        Replace the seed files that cannot be reused (other parameters, failed, or
+        incomplete without a checkpoint); files that can be reused are still kept.
+
+    Raises
+    ------
+    EnsembleError
+        Bad scenario, overrides, seeds or folder.
+    """
+
+    def __init__(self, scenario, seeds, folder, overrides=(), t_end=None, first_seed=None, force=False):
+        self.scenario_path = Path(scenario)
+        self.overrides = list(overrides)
+        self.folder = Path(folder)
+        self.force = bool(force)
+        bad = [o for o in self.overrides if o.split("=", 1)[0].strip() == "scenario.seed"]
+        if bad:
+            raise EnsembleError(f"--set {bad[0]}: the ensemble sets scenario.seed for each run; "
+                                f"choose the seeds with --first-seed")
+        try:
+            self.base = load_scenario(self.scenario_path, overrides=self.overrides, t_end=t_end)
+        except ScenarioError as exc:
+            raise EnsembleError(str(exc)) from None
+        self.t_end = float(self.base.params.run.t_end)
+        if isinstance(seeds, (int, np.integer)):
+            if seeds < 1:
+                raise EnsembleError(f"--seeds must be >= 1, got {seeds}")
+            first = self.base.params.scenario.seed if first_seed is None else int(first_seed)
+            seeds = range(first, first + int(seeds))
+        self.seeds = [int(s) for s in seeds]
+        if not self.seeds or min(self.seeds) < 0 or len(set(self.seeds)) != len(self.seeds):
+            raise EnsembleError(f"seeds must be distinct integers >= 0, got {self.seeds}")
+        for s in (self.seeds[0], self.seeds[-1]):  # the seeds differ only in scenario.seed
+            try:
+                self.scenario_for(s)
+            except ScenarioError as exc:
+                raise EnsembleError(f"seed {s}: {exc}") from None
+        if self.folder.exists() and not self.folder.is_dir():
+            raise EnsembleError(f"the output folder {self.folder} is a file")
+
+    def scenario_for(self, seed):
+        """The :class:`~selfas_graph.io.scenario.Scenario` of one seed."""
+        return scenario_from_text(self.base.text, path=self.base.path, overrides=self._overrides(seed),
+                                  t_end=self.t_end)
+
+    def _overrides(self, seed):
+        return [*self.overrides, f"scenario.seed={seed}"]
+
+    def command_for(self, seed) -> str:
+        """The ``selfas-graph simulate`` command that writes the same run file as this seed."""
+        args = ["selfas-graph", "simulate", str(self.scenario_path)]
+        for o in self._overrides(seed):
+            args += ["--set", o]
+        return shlex.join(args + ["--t-end", repr(self.t_end), "-o", str(seed_path(self.folder, seed))])
+
+    # ------------------------------------------------------------------ planning
+    def plan(self) -> list[SeedPlan]:
+        """What :meth:`run` would do with each seed, from the files in the folder (nothing is written).
+
+        Raises
+        ------
+        EnsembleError
+            A seed file that belongs to other parameters, is not a run file, or is
+            incomplete without a checkpoint (unless ``force``), listing every such seed.
+        """
+        plans, problems = [], []
+        for s in self.seeds:
+            try:
+                plans.append(self._plan_seed(s))
+            except EnsembleError as exc:
+                problems.append(str(exc))
+        if problems:
+            hint = ("; pass --force to replace them" if not self.force else "")
+            raise EnsembleError("seed files that cannot be used:\n  " + "\n  ".join(problems) + hint)
+        return plans
+
+    def _plan_seed(self, seed) -> SeedPlan:
+        path = seed_path(self.folder, seed)
+        ckpt = checkpoint_path(path)
+        if not path.exists():
+            if ckpt.exists() and not self.force:
+                raise EnsembleError(f"{ckpt} exists without its run file {path.name}")
+            return SeedPlan(seed, path, "run", "new")
+        wanted = self.scenario_for(seed).params
+        try:
+            with RunFile(path) as run:
+                stored, status = run.parameters, str(run.meta.get("status", ""))
+                t_last = float(run.time[-1]) if run.n_frames else -math.inf
+                scenario_text = run.scenario_text
+        except RunFileError as exc:
+            if self.force:
+                return SeedPlan(seed, path, "run", f"replacing: {exc}")
+            raise EnsembleError(str(exc)) from None
+        diff = parameter_differences(stored, wanted.to_dict())
+        if diff:
+            if self.force:
+                return SeedPlan(seed, path, "run", "replacing: other parameters")
+            shown = ", ".join(f"{k} = {_get(stored, k)!r} (here {_get(wanted.to_dict(), k)!r})" for k in diff[:4])
+            raise EnsembleError(f"{path} belongs to other parameters: {shown}"
+                                + (f" and {len(diff) - 4} more" if len(diff) > 4 else ""))
+        half_step = 0.5 * wanted.integrator.dt
+        if status == "finished" and t_last >= self.t_end - half_step:
+            return SeedPlan(seed, path, "done", f"finished at t = {t_last:.6g}")
+        if status.startswith("failed"):
+            if self.force:
+                return SeedPlan(seed, path, "run", "replacing a failed run")
+            return SeedPlan(seed, path, "failed", status)
+        try:
+            snap, meta = read_checkpoint(ckpt)
+            usable = meta.get("scenario_text") == scenario_text and float(snap["time"]) <= self.t_end + half_step
+        except CheckpointError:
+            usable = False
+        if usable:
+            return SeedPlan(seed, path, "resume", f"{status} at t = {t_last:.6g}; checkpoint at t = "
+                                                  f"{float(snap['time']):.6g}")
+        if self.force:
+            return SeedPlan(seed, path, "run", f"replacing: {status} at t = {t_last:.6g}, no usable checkpoint")
+        raise EnsembleError(f"{path} is {status} at t = {t_last:.6g} (end time {self.t_end:g}) and has no usable "
+                            f"checkpoint {ckpt.name} to continue from")
+
+    # ------------------------------------------------------------------ running
+    def tasks(self, plans) -> list[dict]:
+        """The :func:`run_seed` tasks of the plans that need a run."""
+        return [{"seed": p.seed, "path": str(p.path), "action": p.action, "t_end": self.t_end,
+                 "text": self.base.text, "scenario_path": str(self.base.path), "overrides": self._overrides(p.seed),
+                 "force": self.force, "command": self.command_for(p.seed)}
+                for p in plans if p.action in ("run", "resume")]
+
+    def run(self, jobs=1, report=None, pool=None) -> list[dict]:
+        """Run every seed that is not done; returns :func:`run_seed`'s results (None: never started).
+
+        ``pool`` is an entered :class:`~selfas_graph.parallel.task_pool`; by default one of
+        ``jobs`` workers is made here. The folder is created; nothing is run for seeds
+        whose files are done or failed.
+        """
+        plans = self.plan()
+        make_folder(self.folder)
+        tasks = self.tasks(plans)
+        if pool is None:
+            with task_pool(jobs) as own:
+                return run_tasks(run_seed, tasks, own, report)
+        return run_tasks(run_seed, tasks, pool, report)
+
+    def summarise(self, times=None, measures=None, flux_radius=None) -> dict:
+        """:func:`summarise` over the seed files present (default times: quarters of the end time)."""
+        paths = [seed_path(self.folder, s) for s in self.seeds]
+        times = default_times(self.t_end) if times is None else times
+        out = summarise([p for p in paths if p.exists()], times, t_end=self.t_end, measures=measures,
+                        flux_radius=flux_radius)
+        out.update(scenario=str(self.scenario_path), overrides=self.overrides, folder=str(self.folder),
+                   seeds_requested=self.seeds, missing=[str(p) for p in paths if not p.exists()])
+        return out
+
+
+def make_folder(folder) -> Path:
+    """Create ``folder`` (and its parents) if missing; EnsembleError if that is impossible."""
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise EnsembleError(f"cannot create the output folder {folder}: {exc.strerror or exc}") from None
+    return folder
+
+
+def _get(d, dotted):
+    for k in dotted.split("."):
+        if not isinstance(d, dict) or k not in d:
+            return None
+        d = d[k]
+    return d
+
+
+def default_times(t_end):
+    """The times of the summary when none are given: a quarter, half, three quarters and all of ``t_end``."""
+    return [t_end * k / 4 for k in (1, 2, 3, 4)]
+
+
+# ----------------------------------------------------------------------------- per-frame measures
+
+
+class Frame:
+    """One saved frame of a run file, with what the measures need computed once (lazily).
+
+    Attributes: ``run`` (open :class:`~selfas_graph.io.h5md.RunFile`), ``index``, ``time``,
+    ``params`` (stored parameters), ``position``, ``graph`` (dict or None), ``centres`` (rod
+    centres), ``rho`` (their distance from the plasma axis, or the z axis),
+    ``flux_radius``, ``claims`` (``frame_claims(run, index)``).
+    """
+
+    def __init__(self, run, index, params, flux_radius=None):
+        self.run, self.index, self.params = run, int(index), params
+        self.time = float(run.time[self.index])
+        self._flux_radius = flux_radius
+
+    @functools.cached_property
+    def position(self):
+        return self.run.position(self.index)
+
+    @functools.cached_property
+    def graph(self):
+        if not self.run.has_graph:
+            return None
+        g = self.run.graph(t=self.time)
+        return g if abs(g["time"] - self.time) <= 1e-9 * max(1.0, abs(self.time)) else None
+
+    @functools.cached_property
+    def centres(self):
+        return rod_centres(self.position)
+
+    @property
+    def plasma(self):
+        return self.params["forces"].get("plasma_filament")
+
+    @functools.cached_property
+    def rho(self):
+        ax = self.plasma["axis"] if self.plasma else (0.0, 0.0)
+        return np.hypot(self.centres[:, 0] - ax[0], self.centres[:, 1] - ax[1])
+
+    @property
+    def flux_radius(self):
+        """Disc radius of the mid-plane flux: given, or the half-diagonal of the placement box in x-y."""
+        if self._flux_radius is not None:
+            return float(self._flux_radius)
+        (x0, x1), (y0, y1) = self.params["placement"]["box"][:2]
+        return float(np.hypot(max(abs(x0), abs(x1)), max(abs(y0), abs(y1))))
+
+    @functools.cached_property
+    def claims(self):
+        return frame_claims(self.run, self.index)
+
+
+@dataclasses.dataclass(frozen=True)
+class Measure:
+    """A number per frame: ``fn(frame) -> float`` (NaN when it does not apply), with its unit and meaning."""
+
+    name: str
+    unit: str
+    doc: str
+    fn: Callable[[Frame], float]
+
+
+def _filament_rods(f):
+    return math.nan if f.graph is None else float(np.count_nonzero(f.graph["role"] == 3))  # 3: filament role
+
+
+def _total_current(f):
+    try:
+        t, v = f.run.observable("total_current")
+    except RunFileError:
+        return math.nan
+    k = int(np.argmin(np.abs(t - f.time)))
+    return float(v[k])
+
+
+def _inside_plasma(f):
+    return float(np.mean(f.rho < f.plasma["radius"])) if f.plasma else math.nan
+
+
+def _midplane_flux(f):
+    if f.graph is None:
+        return math.nan
+    current = np.asarray(f.graph["current"], dtype=np.float64)
+    if not np.any(current):
+        return 0.0
+    w = 0.5 * f.params["rods"]["diameter"]
+    return float(flux_through_disc([f.flux_radius], 0.0, f.position, None, current, w)[0])
+
+
+#: the per-frame measures of a summary, in table order; a new one is one more line
+FRAME_MEASURES = [
+    Measure("filament_rods", "rods", "rods in current-carrying filaments", _filament_rods),
+    Measure("total_current", "J0", "current through the circuit (observable total_current)", _total_current),
+    Measure("inside_R_plas", "fraction", "fraction of rod centres within R_plas of the plasma axis", _inside_plasma),
+    Measure("median_axis_distance", "L", "median distance of rod centres from the axis",
+            lambda f: float(np.median(f.rho))),
+    Measure("midplane_flux", "Phi_0", "flux of the rod currents' B_z through the disc z = 0 of radius flux_radius "
+            "(default: the placement box's half-diagonal)", _midplane_flux),
+]
+FRAME_MEASURES += [Measure(k, u, d, lambda f, k=k: float(f.claims[k])) for k, u, d in (
+    ("largest_structure_rods", "rods", "rods in the largest structure"),
+    ("largest_moment_ratio", "1", "largest structure's |m_q| over the mean single-rod moment"),
+    ("fractal_dimension", "1", "mass-radius dimension of the largest structure (NaN while its R_g < 3 L)"),
+    ("box_dimension", "1", "box-counting dimension of the largest structure"),
+    ("rg_dimension", "1", "R_g ~ N^(1/D) dimension over the structures of the frame"),
+    ("cycle_rank", "loops", "cycle rank of the contact graph (E - V + C)"))]
+
+
+# ----------------------------------------------------------------------------- summary
+def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict:
+    """Mean and standard error over seed files of the short-circuit time and of per-frame measures.
+
+    Parameters
+    ----------
+    paths : sequence of path-like
+        Run files, one per seed.
+    times : sequence of float
+        Simulated times; each seed's nearest saved frame within half an output interval
+        is used, a seed that has no such frame (it ended earlier) is left out there.
+    t_end : float, optional
+        Short circuits later than this count as censored at ``t_end`` (default: none).
+    measures : list of :class:`Measure`, optional
+        Default :data:`FRAME_MEASURES`.
+    flux_radius : float, optional
+        Disc radius of the mid-plane flux (see :class:`Frame`).
+
+    Returns
+    -------
+    dict (JSON-ready) with ``seeds`` (per seed: path, seed, status, end time, short-circuit
+    time or None; files that cannot be read are left out and listed in ``unreadable``), ``short_circuit`` (:func:`~selfas_graph.analysis.ensemble_stats.censored_times`:
+    seeds without one are censored at their end time, counted, not averaged in),
+    ``times`` and ``measures`` (name -> unit, doc, per time mean, sem, n, and ``values``
+    per seed and time, NaN as None).
+    """
+    measures = FRAME_MEASURES if measures is None else measures
+    times = [float(t) for t in times]
+    seeds, values = [], np.full((len(measures), len(paths), len(times)), np.nan)
+    sc_t, sc_obs, unreadable = [], [], []
+    for j, path in enumerate(paths):
+        try:
+            run = RunFile(path)
+        except RunFileError as exc:  # e.g. still being written by a running seed: left out, named
+            unreadable.append({"path": str(path), "reason": str(exc)})
+            continue
+        with run:
+            params = run.parameters
+            interval = float(params["output"]["interval"])
+            t_run = run.time
+            end = float(t_run[-1]) if t_run.size else 0.0
+            t_sc = timeline(t_run, np.zeros_like(t_run), events=run.events()).short_circuit_time
+            cens = end if t_end is None else min(end, float(t_end))
+            seen = t_sc is not None and t_sc <= cens
+            sc_t.append(t_sc if seen else cens)
+            sc_obs.append(seen)
+            seeds.append({"path": str(path), "seed": int(params["scenario"]["seed"]),
+                          "status": str(run.meta.get("status", "")), "t_end": end,
+                          "short_circuit_time": t_sc if seen else None})
+            for k, t in enumerate(times):
+                if not t_run.size:
+                    break
+                idx = int(np.argmin(np.abs(t_run - t)))
+                if abs(t_run[idx] - t) > 0.5 * interval + 1e-9:
+                    continue
+                frame = Frame(run, idx, params, flux_radius)
+                for m, measure in enumerate(measures):
+                    values[m, j, k] = measure.fn(frame)
+    keep = [j for j, p in enumerate(paths) if str(p) not in {u["path"] for u in unreadable}]
+    values = values[:, keep]
+    sc = censored_times(sc_t, sc_obs) if seeds else None
+    out = {"version": __version__, "n_seeds": len(seeds), "times": times, "t_end": t_end, "seeds": seeds,
+           "unreadable": unreadable,
+           "short_circuit": None if sc is None else {k: _plain(v) for k, v in sc.items()},
+           "measures": {}}
+    for m, measure in enumerate(measures):
+        mean, sem, n = mean_sem(values[m], axis=0)
+        out["measures"][measure.name] = {"unit": measure.unit, "doc": measure.doc, "mean": _plain(mean),
+                                         "sem": _plain(sem), "n": n.tolist(), "values": _plain(values[m])}
+    return out
+
+
+def _plain(v):
+    """JSON-ready: arrays to lists, NaN to None."""
+    if isinstance(v, np.ndarray):
+        return [_plain(x) for x in v.tolist()]
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, (float, np.floating)):
+        return None if not math.isfinite(v) else float(v)
+    if isinstance(v, np.integer):
+        return int(v)
+    return v
+
+
+def _pm(mean, sem, n):
+    if mean is None:
+        return "n/a"
+    return f"{mean:.4g} +- {sem:.2g} ({n})" if sem is not None else f"{mean:.4g} ({n})"
+
+
+def format_table(summary) -> str:
+    """The summary as a Markdown table: one row per measure, one column per time, ``mean +- sem (seeds)``."""
+    lines = []
+    sc = summary.get("short_circuit")
+    if sc:
+        f = lambda v: "not reached" if v is None else f"{v:.4g}"  # noqa: E731
+        mean = ("n/a" if sc["mean_observed"] is None else
+                f"{sc['mean_observed']:.4g}" + (f" +- {sc['sem_observed']:.2g}" if sc["sem_observed"] is not None
+                                                 else ""))
+        lines.append(f"short circuit: {sc['n_observed']} of {sc['n']} seeds "
+                     f"({sc['n_censored']} without one, censored at their end time); "
+                     f"Kaplan-Meier median {f(sc['median'])} (quartiles {f(sc['q25'])}, {f(sc['q75'])}); "
+                     f"mean over the {sc['n_observed']} that short-circuited {mean}")
+    times = summary["times"]
+    head = "| measure | unit | " + " | ".join(f"t = {t:g}" for t in times) + " |"
+    lines += ["", "mean +- standard error over seeds (seeds with a frame at that time)", "", head,
+              "|" + "---|" * (len(times) + 2)]
+    for name, m in summary["measures"].items():
+        cells = [_pm(a, b, n) for a, b, n in zip(m["mean"], m["sem"], m["n"])]
+        lines.append(f"| {name} | {m['unit']} | " + " | ".join(cells) + " |")
+    for u in summary.get("unreadable", ()):
+        lines += [f"left out: {u['reason']}"]
+    if summary.get("note"):
+        lines += ["", f"note: {summary['note']}"]
+    return "\n".join(lines)
+
+
+def write_summary(summary, folder) -> tuple[Path, Path]:
+    """Write ``summary.json`` (everything) and ``summary.csv`` (one row per measure and time) into ``folder``."""
+    folder = make_folder(folder)
+    js, cs = folder / SUMMARY_JSON, folder / SUMMARY_CSV
+    js.write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["measure", "unit", "time", "mean", "sem", "n"])
+    sc = summary.get("short_circuit")
+    if sc:
+        w.writerow(["short_circuit_time_observed", "t0", "", _csv(sc["mean_observed"]), _csv(sc["sem_observed"]),
+                    sc["n_observed"]])
+        w.writerow(["short_circuit_time_km_median", "t0", "", _csv(sc["median"]), "", sc["n"]])
+        w.writerow(["seeds_without_short_circuit", "seeds", "", sc["n_censored"], "", sc["n"]])
+    for name, m in summary["measures"].items():
+        for t, a, b, n in zip(summary["times"], m["mean"], m["sem"], m["n"]):
+            w.writerow([name, m["unit"], t, _csv(a), _csv(b), n])
+    cs.write_text(buf.getvalue())
+    return js, cs
+
+
+def _csv(v):
+    return "" if v is None else repr(v) if isinstance(v, float) else v

@@ -1,0 +1,309 @@
+"""``selfas-graph ensemble`` and :mod:`selfas_graph.ensemble`: seeds in their own files, nothing run twice.
+
+One small ensemble of the shipped quick scene (4 seeds on 2 worker processes to t = 0.5,
+about 30 s on 2 cores) is shared by the checks of the printed table, the summary files and
+the rerun that must run nothing; the resume, refusal and summary checks use the 60-rod
+circuit scene of conftest (one seed to t = 0.6 takes about 2 s).
+"""
+import csv
+import json
+import math
+import shutil
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from conftest import SMALL_CIRCUIT_SCENE
+from selfas_graph import RunFile
+from selfas_graph.analysis import rod_centres
+from selfas_graph.cli.main import main
+from selfas_graph.ensemble import Ensemble, EnsembleError, format_table, seed_path, summarise
+from selfas_graph.io.checkpoint import checkpoint_path
+from selfas_graph.model import events as ev
+
+ROOT = Path(__file__).resolve().parent.parent
+QUICK = str(ROOT / "scenarios" / "quick.toml")
+T_END = 0.5  # short: the machinery, not the physics (quick.toml short-circuits near t = 1.3)
+
+
+def _datasets(path):
+    out = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda n, o: out.__setitem__(n, o[()]) if isinstance(o, h5py.Dataset) else None)
+    return out
+
+
+def _same_run(a, b):
+    """Every dataset equal bit for bit (NaN equal to NaN: floating tips' potentials)."""
+    da, db = _datasets(a), _datasets(b)
+    assert da.keys() == db.keys()
+    return [k for k in da if not (da[k].shape == db[k].shape and np.array_equal(
+        da[k], db[k], equal_nan=da[k].dtype.kind == "f"))]
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    """4 seeds of quick.toml on 2 processes; (folder, stdout of the run)."""
+    folder = tmp_path_factory.mktemp("ens") / "quick"
+    capture = pytest.MonkeyPatch()
+    import io
+    import sys
+
+    out = io.StringIO()
+    capture.setattr(sys, "stdout", out)
+    try:
+        rc = main(["ensemble", QUICK, "--seeds", "4", "--jobs", "2", "--t-end", str(T_END), "-o", str(folder)])
+    finally:
+        capture.undo()
+    assert rc == 0, out.getvalue()
+    return folder, out.getvalue()
+
+
+def test_quick_ensemble_prints_the_summary_table(quick):
+    folder, out = quick
+    assert "seeds 1..4 to t = 0.5" in out and "4 to run, 0 to resume, 0 done" in out
+    assert "2 processes x 1 numba threads" in out
+    assert out.count("finished at t = 0.5") == 4
+    assert "short circuit: 0 of 4 seeds (4 without one, censored at their end time)" in out
+    for name in ("filament_rods", "total_current", "inside_R_plas", "median_axis_distance", "midplane_flux"):
+        assert f"| {name} |" in out
+    assert "| t = 0.125 | t = 0.25 | t = 0.375 | t = 0.5 |" in out
+    assert sorted(p.name for p in folder.glob("seed_*.h5")) == [
+        f"seed_000{s}{x}.h5" for s in (1, 2, 3, 4) for x in (".checkpoint", "")]
+
+
+def test_summary_files(quick):
+    folder, _ = quick
+    s = json.loads((folder / "summary.json").read_text())
+    assert s["n_seeds"] == 4 and s["times"] == [0.125, 0.25, 0.375, 0.5]
+    assert [d["seed"] for d in s["seeds"]] == [1, 2, 3, 4] and {d["status"] for d in s["seeds"]} == {"finished"}
+    assert s["short_circuit"]["n_censored"] == 4 and s["short_circuit"]["median"] is None
+    med = s["measures"]["median_axis_distance"]
+    assert med["n"] == [4, 4, 4, 4] and all(v is not None for v in med["sem"])
+    # the measure recomputed from the files: median distance of rod centres from the plasma axis at t = 0.5
+    per_seed = []
+    for k in (1, 2, 3, 4):
+        with RunFile(seed_path(folder, k)) as run:
+            c = rod_centres(run.position(-1))
+            per_seed.append(np.median(np.hypot(c[:, 0], c[:, 1])))
+    assert med["values"][0][3] == per_seed[0] and med["mean"][3] == pytest.approx(np.mean(per_seed), rel=1e-14)
+    assert med["sem"][3] == pytest.approx(np.std(per_seed, ddof=1) / 2, rel=1e-12)  # sem = s / sqrt(4)
+    rows = list(csv.DictReader((folder / "summary.csv").read_text().splitlines()))
+    row = [r for r in rows if r["measure"] == "median_axis_distance" and float(r["time"]) == 0.5][0]
+    assert float(row["mean"]) == med["mean"][3] and row["n"] == "4"
+    assert [r for r in rows if r["measure"] == "seeds_without_short_circuit"][0]["mean"] == "4"
+
+
+def test_rerun_runs_nothing_new(quick, capsys):
+    folder, _ = quick
+    before = {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")}
+    assert main(["ensemble", QUICK, "--seeds", "4", "--jobs", "2", "--t-end", str(T_END), "-o", str(folder),
+                 "--times", "0.5"]) == 0
+    out = capsys.readouterr().out
+    assert "0 to run, 0 to resume, 4 done" in out and "[1/" not in out and "| t = 0.5 |" in out
+    assert {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")} == before
+
+
+def test_other_parameters_are_refused(quick, capsys):
+    folder, _ = quick
+    before = {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")}
+    assert main(["ensemble", QUICK, "--seeds", "2", "--t-end", str(T_END), "-o", str(folder),
+                 "--set", "rods.count=200"]) == 2
+    err = capsys.readouterr().err
+    assert "seed_0001.h5 belongs to other parameters: rods.count = 300 (here 200)" in err and "--force" in err
+    assert {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")} == before
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--seeds", "0"], "--seeds: 0 must be >= 1"),
+    (["--seeds", "2", "--set", "scenario.seed=5"], "the ensemble sets scenario.seed"),
+    (["--seeds", "2", "--set", "rods.cont=5"], "rods.cont"),
+    (["--seeds", "2", "--times", "1,x"], "give simulated times separated by commas"),
+    (["--seeds", "2", "--t-end", "0.5", "--times", "0.6"], "after the end time 0.5"),
+    (["--seeds", "2", "--first-seed", "-3"], "seeds must be distinct integers >= 0"),
+    (["--seeds", "2", "--first-seed", str(2 ** 70)], "seed 1180591620717411303424: "),
+    (["--seeds", "2", "--flux-radius", "nan"], "--flux-radius must be a positive length"),
+])
+def test_bad_input(tmp_path, capsys, argv, message):
+    """Exit code 2 (argparse's or the command's), the message names the problem, nothing is written."""
+    try:
+        rc = main(["ensemble", QUICK, "-o", str(tmp_path / "e"), *argv])
+    except SystemExit as exc:
+        rc = exc.code
+    assert rc == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "e").exists()
+
+
+def test_output_folder_that_is_a_file_is_refused(tmp_path, capsys):
+    (tmp_path / "e").write_text("precious")
+    assert main(["ensemble", QUICK, "--seeds", "1", "-o", str(tmp_path / "e")]) == 2
+    assert "the output folder" in capsys.readouterr().err and (tmp_path / "e").read_text() == "precious"
+    assert main(["ensemble", QUICK, "--seeds", "1", "-o", str(tmp_path / "e" / "sub")]) == 2
+    assert "cannot" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- the small circuit scene
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("small")
+    (folder / "scene.toml").write_text(SMALL_CIRCUIT_SCENE)
+    return folder / "scene.toml"
+
+
+def test_an_earlier_end_is_continued_from_the_checkpoint_bit_for_bit(scene, tmp_path):
+    """Seed 3 to t = 0.3, then the ensemble to 0.6 resumes it: the file equals a direct run to 0.6."""
+    short = Ensemble(scene, [3], tmp_path / "e", t_end=0.3)
+    (r,) = short.run()
+    assert r["status"] == "finished" and r["t"] == pytest.approx(0.3)
+    full = Ensemble(scene, [3], tmp_path / "e")
+    (plan,) = full.plan()
+    assert plan.action == "resume"
+    (r,) = full.run()
+    assert r["status"] == "finished" and r["action"] == "resume"
+    direct = Ensemble(scene, [3], tmp_path / "direct")
+    direct.run()
+    assert _same_run(seed_path(tmp_path / "e", 3), seed_path(tmp_path / "direct", 3)) == []
+    assert [p.action for p in full.plan()] == ["done"]
+
+
+def test_killed_seed_resumes_and_one_without_checkpoint_is_refused(scene, tmp_path):
+    ens = Ensemble(scene, [3, 4], tmp_path, t_end=0.2)
+    ens.run()
+    for s in (3, 4):  # as after kill -9 at t = 0.2: status still "running"
+        with h5py.File(seed_path(tmp_path, s), "r+") as f:
+            f["parameters/selfas_graph"].attrs["status"] = "running"
+    checkpoint_path(seed_path(tmp_path, 4)).unlink()
+    ens = Ensemble(scene, [3, 4], tmp_path, t_end=0.3)
+    with pytest.raises(EnsembleError, match=r"seed_0004.h5 is running at t = 0.2 .* no usable checkpoint"):
+        ens.plan()
+    forced = Ensemble(scene, [3, 4], tmp_path, t_end=0.3, force=True)
+    assert [(p.seed, p.action) for p in forced.plan()] == [(3, "resume"), (4, "run")]
+    assert [r["status"] for r in forced.run()] == ["finished", "finished"]
+
+
+def test_failed_seed_is_kept_and_reported(scene, tmp_path, capsys):
+    Ensemble(scene, [3], tmp_path, t_end=0.1).run()
+    with h5py.File(seed_path(tmp_path, 3), "r+") as f:
+        f["parameters/selfas_graph"].attrs["status"] = "failed: a test"
+    before = seed_path(tmp_path, 3).read_bytes()
+    assert main(["ensemble", str(scene), "--seeds", "1", "--t-end", "0.2", "-o", str(tmp_path)]) == 3
+    out = capsys.readouterr().out
+    assert "1 failed" in out and "seed 3: failed: a test (kept; --force reruns it)" in out
+    assert seed_path(tmp_path, 3).read_bytes() == before
+
+
+def test_summary_counts_censored_short_circuits_apart(scene, tmp_path):
+    """Seeds 3 and 4 of the circuit scene: the short-circuit times from the event records,
+    censored ones (none by t_end) counted and not averaged in."""
+    ens = Ensemble(scene, [3, 4, 5], tmp_path)
+    ens.run(jobs=1)
+    s = ens.summarise(times=[0.3, 0.6])
+    sc_times = []
+    for k in (3, 4, 5):
+        with RunFile(seed_path(tmp_path, k)) as run:
+            e = run.events()
+            t = e["time"][e["kind"] == ev.SHORT_CIRCUIT] if len(e) else []
+            sc_times.append(float(t.min()) if len(t) else None)
+    seen = [t for t in sc_times if t is not None]
+    assert seen, "the circuit scene must short-circuit in at least one seed"
+    sc = s["short_circuit"]
+    assert sc["n"] == 3 and sc["n_observed"] == len(seen) and sc["n_censored"] == 3 - len(seen)
+    assert sc["mean_observed"] == pytest.approx(np.mean(seen), rel=1e-14)
+    assert [d["short_circuit_time"] for d in s["seeds"]] == sc_times
+    # no plasma filament in this scene: the R_plas measure does not apply
+    assert s["measures"]["inside_R_plas"]["mean"] == [None, None] and s["measures"]["inside_R_plas"]["n"] == [0, 0]
+    fil = s["measures"]["filament_rods"]
+    with RunFile(seed_path(tmp_path, 3)) as run:
+        t, v = run.observable("rods/filament")
+    assert fil["values"][0][1] == v[np.argmin(np.abs(t - 0.6))]
+    flux = s["measures"]["midplane_flux"]
+    assert all(math.isfinite(x) for x in flux["values"][0] if x is not None)
+    table = format_table(s)
+    assert f"short circuit: {len(seen)} of 3 seeds" in table and "| inside_R_plas | fraction | n/a | n/a |" in table
+
+
+def test_summary_leaves_out_seeds_that_ended_early(scene, tmp_path):
+    Ensemble(scene, [3], tmp_path, t_end=0.2).run()
+    Ensemble(scene, [4], tmp_path, t_end=0.4).run()
+    s = summarise([seed_path(tmp_path, 3), seed_path(tmp_path, 4)], [0.2, 0.4])
+    assert s["measures"]["median_axis_distance"]["n"] == [2, 1]
+    assert s["short_circuit"]["censored_at"] == sorted(
+        [d["t_end"] for d in s["seeds"] if d["short_circuit_time"] is None])
+
+
+def test_seed_file_is_what_simulate_writes(scene, tmp_path):
+    """A seed's file is the run of ``simulate --set scenario.seed=S``, bit for bit, but for its provenance."""
+    ens = Ensemble(scene, [4], tmp_path / "e", t_end=0.2)
+    ens.run()
+    assert main(["simulate", str(scene), "--set", "scenario.seed=4", "--t-end", "0.2", "-o",
+                 str(tmp_path / "direct.h5"), "--progress", "none"]) == 0
+    differ = _same_run(seed_path(tmp_path / "e", 4), tmp_path / "direct.h5")
+    assert differ == []
+    with RunFile(seed_path(tmp_path / "e", 4)) as run:
+        assert run.meta["command_line"] == ens.command_for(4) and run.parameters["scenario"]["seed"] == 4
+    shutil.rmtree(tmp_path / "e")
+
+
+def test_sigterm_stops_the_seeds_with_checkpoints_and_a_rerun_continues(scene, tmp_path):
+    """SIGTERM to the launching process: the running seeds stop after a step with a checkpoint
+    (exit code 130, no further seed started); the same command again resumes them."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    cmd = [sys.executable, "-m", "selfas_graph.cli.main", "ensemble", str(scene), "--seeds", "3", "--jobs", "2",
+           "--t-end", "20", "-o", str(tmp_path / "e")]
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    first = [seed_path(tmp_path / "e", s) for s in (3, 4)]
+    deadline = time.monotonic() + 90  # start-up and kernel loading; a run to t = 20 takes minutes
+    while not all(p.exists() for p in first) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=90)
+    assert proc.returncode == 130, err
+    assert "rerun the same command to continue" in err and out.count("interrupted at t = ") == 2
+    assert not seed_path(tmp_path / "e", 5).exists()
+    for p in first:
+        assert checkpoint_path(p).exists()
+        with RunFile(p) as run:
+            assert run.meta["status"].startswith("interrupted at step")
+    plans = Ensemble(scene, 3, tmp_path / "e", t_end=20).plan()
+    assert [p.action for p in plans] == ["resume", "resume", "run"]
+
+
+def test_no_run_summarises_the_files_present(quick, capsys):
+    folder, _ = quick
+    assert main(["ensemble", QUICK, "--seeds", "5", "--t-end", str(T_END), "-o", str(folder), "--no-run",
+                 "--times", "0.5"]) == 0
+    out = capsys.readouterr().out
+    assert "1 to run, 0 to resume, 4 done" in out and "[1/" not in out
+    assert not seed_path(folder, 5).exists()
+    assert json.loads((folder / "summary.json").read_text())["missing"] == [str(seed_path(folder, 5))]
+
+
+def test_a_measure_is_one_more_entry(scene, tmp_path):
+    """The summary takes any list of named per-frame measures (the claim measures join this way)."""
+    from selfas_graph.ensemble import FRAME_MEASURES, Measure
+
+    Ensemble(scene, [3, 4], tmp_path, t_end=0.1).run()
+    extra = Measure("frame_time", "t0", "the frame's time", lambda f: f.time)
+    s = summarise([seed_path(tmp_path, 3), seed_path(tmp_path, 4)], [0.05, 0.1], measures=[*FRAME_MEASURES, extra])
+    m = s["measures"]["frame_time"]
+    assert m["mean"] == pytest.approx([0.05, 0.1], rel=1e-12) and m["sem"] == [0.0, 0.0] and m["n"] == [2, 2]
+    assert list(s["measures"])[-1] == "frame_time" and "| frame_time | t0 |" in format_table(s)
+
+
+def test_summary_leaves_out_an_unreadable_file_by_name(scene, tmp_path):
+    Ensemble(scene, [3], tmp_path, t_end=0.1).run()
+    seed_path(tmp_path, 4).write_bytes(b"not hdf5")
+    s = summarise([seed_path(tmp_path, 3), seed_path(tmp_path, 4)], [0.1])
+    assert s["n_seeds"] == 1 and s["measures"]["median_axis_distance"]["n"] == [1]
+    assert s["unreadable"][0]["path"] == str(seed_path(tmp_path, 4))
+    assert "left out: " in format_table(s) and "not a readable HDF5 file" in format_table(s)
