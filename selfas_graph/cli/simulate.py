@@ -307,7 +307,8 @@ def run(args):
         }
         try:
             return RunWriter(out, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
-                             overwrite=args.force, velocities=p.output.velocities)
+                             overwrite=args.force, velocities=p.output.velocities,
+                             frame_interval=sim.frame_interval)
         except OSError as exc:
             raise CliError(f"cannot write the output file {out}: {exc}") from None
 

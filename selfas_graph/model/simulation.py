@@ -379,6 +379,11 @@ class Simulation:
         return int(close_pair_count(self.state.position, tnl.start, tnl.index, self.params.rods.rstar))
 
     # ------------------------------------------------------------------ run loop
+    @property
+    def frame_interval(self) -> float:
+        """Simulated time between saved frames: ``output.interval`` rounded to whole steps."""
+        return max(1, int(round(self.params.output.interval / self.dt))) * self.dt
+
     def steps_for(self, duration: float) -> int:
         """Number of steps that cover ``duration`` (rounded to the nearest step)."""
         return int(round(duration / self.dt))
