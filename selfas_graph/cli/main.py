@@ -18,6 +18,7 @@ COMMANDS = {
     "simulate": ("selfas_graph.cli.simulate", "run a scenario and write an HDF5 run file"),
     "topology": ("selfas_graph.cli.topology", "structures, filaments, currents and events of a saved frame"),
     "plot": ("selfas_graph.cli.plot", "figures of a saved run: snapshot, density, field, flux, timeline (PNG)"),
+    "export": ("selfas_graph.cli.export", "a run as GSD (OVITO, HOOMD-blue, MDAnalysis) or extended XYZ (ASE, OVITO)"),
 }
 
 EXIT_USAGE = 2
