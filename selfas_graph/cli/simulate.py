@@ -174,13 +174,27 @@ def _load_resume(args):
             n_tips = run_file.f["particles/tips/position/value"].shape[1]
             same = n_tips == np.asarray(snap["position"]).shape[0] and run_file.scenario_text == meta["scenario_text"]
             steps = run_file.step
+            brake = _started_brake(run_file)
     except RunFileError as exc:
         raise CliError(f"cannot resume into {out}: {exc}") from None
+    if same and brake is not None and brake != scenario.params.integrator.brake:
+        # a scene without integrator.brake, started when the default was explicit: continue as it ran
+        scenario = scenario_from_text(meta["scenario_text"], t_end=args.t_end,
+                                      overrides=json.loads(meta["overrides"]) + [f"integrator.brake={brake}"])
     if not same:
         raise CliError(f"cannot resume: {out} is not the run of checkpoint {ckpt} (different scenario or rod count)")
     if not len(steps) or steps[0] > int(snap["step"]):
         raise CliError(f"cannot resume: {out} has no frame at or before the checkpoint's step {int(snap['step'])}")
     return scenario, snap, out, ckpt
+
+
+def _started_brake(run_file):
+    """The integrator.brake a run was started with, from its resolved parameters (None if unreadable)."""
+    try:
+        brake = json.loads(run_file.meta["parameters_json"])["integrator"]["brake"]
+    except (ValueError, TypeError, KeyError, IndexError):
+        return None
+    return brake if brake in ("explicit", "split") else None
 
 
 def _check_output_name(out: Path):
@@ -266,7 +280,10 @@ def run(args):
     import numba
 
     fit_threads_to_cores()
-    n_steps = sim.steps_for(p.run.t_end - sim.state.time)
+    try:
+        n_steps = sim.steps_to(p.run.t_end)
+    except ValueError as exc:
+        raise CliError(f"run.t_end: {exc}") from None
     plan = {
         "scenario": str(args.scenario), "rods": p.rods.count, "terms": p.forces.active(),
         "dt": p.integrator.dt, "t_end": p.run.t_end, "steps": n_steps,

@@ -50,7 +50,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..model.events import CONDUCTOR_NAMES, EVENT_DTYPE, KIND_NAMES
+from ..model.events import CONDUCTOR_NAMES, EVENT_DTYPE, KIND_NAMES, named_events
 
 H5MD_VERSION = (1, 1)
 
@@ -71,6 +71,11 @@ def _fixed(text):
     """A fixed-length string (H5MD asks for them in attributes); UTF-8 bytes of at least one byte."""
     data = str(text).encode("utf-8")
     return np.array(data, dtype=f"S{max(1, len(data))}")
+
+
+#: the events' dtype in the file: ``kind`` an HDF5 enumeration of the names in KIND_NAMES
+EVENT_FILE_DTYPE = np.dtype([(name, h5py.enum_dtype({v: k for k, v in KIND_NAMES.items()}, basetype="<i4"))
+                             if name == "kind" else (name, EVENT_DTYPE[name]) for name in EVENT_DTYPE.names])
 
 
 def _set_unit(obj, unit):
@@ -285,7 +290,7 @@ class RunWriter:
     def write_events(self, rows):
         """Append event rows ``(step, time, kind, a, b)``."""
         if "events" not in self.f:
-            ds = self.f.create_dataset("events", shape=(0,), maxshape=(None,), dtype=EVENT_DTYPE, chunks=(4096,))
+            ds = self.f.create_dataset("events", shape=(0,), maxshape=(None,), dtype=EVENT_FILE_DTYPE, chunks=(4096,))
             ds.attrs["kind_names"] = json.dumps({int(k): v for k, v in KIND_NAMES.items()})
             ds.attrs["conductor_names"] = json.dumps({int(k): v for k, v in CONDUCTOR_NAMES.items()})
         if len(rows):
@@ -333,6 +338,49 @@ class RunWriter:
         _append(g["role"], role)
         _append(g["current"], current)
         _append(g["potential"], potential)
+
+    @classmethod
+    def for_simulation(cls, sim, path, overwrite=False, velocities=None, author=None):
+        """A writer for a run driven from Python: ``sim.run(t_end, writer=w)`` (in as many
+        chunks as wanted), then ``w.close()``; or ``with RunWriter.for_simulation(sim, path) as w``.
+
+        The file is the one ``selfas-graph simulate`` writes (the provenance holds the resolved
+        parameters, and the scenario text when the simulation came from a scenario), and
+        :class:`RunFile`, ``topology``, ``plot`` and ``export`` read it.
+        """
+        import shlex
+        import sys
+
+        import numba
+
+        from .._version import __version__
+
+        p = sim.params
+        scenario = getattr(sim, "scenario", None)
+        provenance = {
+            "scenario_text": scenario.text if scenario is not None else
+            "# built in Python; the resolved parameters are in parameters_json\n",
+            "scenario_path": str(scenario.path) if scenario is not None and scenario.path is not None else "",
+            "overrides": json.dumps(list(scenario.overrides) if scenario is not None else []),
+            "parameters_json": json.dumps(p.to_dict()),
+            "derived_json": json.dumps(sim.force_field.describe()),
+            "version": __version__,
+            "command_line": shlex.join(sys.argv),
+            "seed": p.scenario.seed,
+            "mpi_ranks": 1,
+            "numba_threads": numba.get_num_threads(),
+        }
+        if author is not None:
+            provenance["author"] = author
+        return cls(path, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
+                   overwrite=overwrite, velocities=p.output.velocities if velocities is None else velocities,
+                   frame_interval=sim.frame_interval)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        self.close(status="finished" if exc_type is None else f"failed: {exc}")
 
     def set_attrs(self, **attrs):
         for k, v in attrs.items():
@@ -505,8 +553,12 @@ class RunFile:
         """Event records (structured array, fields step, time, kind, a, b), optionally up to a step."""
         if "events" not in self.f:
             return np.zeros(0, dtype=EVENT_DTYPE)
-        e = self.f["events"][:]
+        e = self.f["events"][:].astype(EVENT_DTYPE)  # the kind an enumeration in newer files, integers before
         return e if until_step is None else e[e["step"] <= until_step]
+
+    def named_events(self, until_step=None) -> list:
+        """The events as :class:`selfas_graph.model.events.Event` tuples, kinds as ``EventKind``."""
+        return named_events(self.events(until_step))
 
     def graph_frame_index(self, frame=None, t=None) -> int:
         if not self.has_graph:
