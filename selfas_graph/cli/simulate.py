@@ -53,6 +53,21 @@ def _fmt_time(seconds):
     return f"{h}h{m:02d}m{s:02d}s" if h else f"{m}m{s:02d}s"
 
 
+def _status_text(sim) -> str:
+    """Contacts, conductor contacts, the short circuit and the current, for the progress display."""
+    st = sim.status()
+    parts = [f"contacts {st['contacts']}"]
+    if sim.params.forces.electrodes is not None:
+        parts.append(f"on electrodes {st['electrode_contacts']}")
+    if sim.params.forces.external_filament is not None:
+        parts.append(f"on filament {st['filament_contacts']}")
+    if sim.params.circuit is not None:
+        sc = st["short_circuit_time"]
+        parts.append(f"short circuit at t = {sc:.4g}" if sc is not None else "no short circuit")
+        parts.append(f"I = {st['total_current']:.4g} J0")
+    return ", ".join(parts)
+
+
 class _Lines:
     """Plain progress lines, at most one every ``period`` wall seconds (and at the end)."""
 
@@ -69,7 +84,7 @@ class _Lines:
         rate = done / max(now - self.t0, 1e-9)
         eta = (total - done) / rate if rate > 0 else 0
         print(f"t = {sim.state.time:.4g} / {sim.params.run.t_end:.4g}  step {sim.state.step}  "
-              f"{100 * done / max(total, 1):5.1f}%  {rate:.0f} steps/s  ETA {_fmt_time(eta)}",
+              f"{100 * done / max(total, 1):5.1f}%  {rate:.0f} steps/s  ETA {_fmt_time(eta)}  {_status_text(sim)}",
               file=self.stream, flush=True)
 
     def close(self):
@@ -88,7 +103,7 @@ class _Bar:
     def __call__(self, sim, done, total):
         self.bar.update(done - self.n)
         self.n = done
-        self.bar.set_postfix_str(f"t={sim.state.time:.4g}/{self.t_end:.4g}", refresh=False)
+        self.bar.set_postfix_str(f"t={sim.state.time:.4g}/{self.t_end:.4g}, {_status_text(sim)}", refresh=False)
 
     def close(self):
         self.bar.close()
@@ -403,6 +418,12 @@ def _print_summary(s, out, sim):
         f"  max bond-length error after constraint: {s.max_bond_error:.3g}",
         f"  energy balance E - E0 - W: {s.energy_balance:.3g} ({rel:.2g} of kinetic energy + |work|)",
         f"  contacts (tip pairs closer than r*): {sim.contact_count()}",
-        f"  output: {out} ({s.frames} frames); checkpoint {checkpoint_path(out)}",
     ]
+    st = sim.status()
+    if sim.params.circuit is not None:
+        sc = st["short_circuit_time"]
+        lines.append((f"  short circuit: the conductors were first joined at t = {sc:.6g}" if sc is not None
+                      else "  short circuit: never")
+                     + f"; at the end {st['current_rods']} rods carry current, total {st['total_current']:.4g} J0")
+    lines.append(f"  output: {out} ({s.frames} frames); checkpoint {checkpoint_path(out)}")
     print("\n".join(lines))
