@@ -108,3 +108,25 @@ def test_parse_frames(spec, frames):
 def test_parse_frames_refuses(spec):
     with pytest.raises(ExportError):
         parse_frames(spec, 4)
+
+
+def test_ovito_reads_the_exports(run):
+    """OVITO's Python module (pip install ovito: 260 MB, so not in the test extra) reads both exports:
+    the roles as particle types, the rods as bonds typed by role, the currents, time and total current."""
+    ovito_io = pytest.importorskip("ovito.io")
+    e = _expected(run)
+    for fmt in ("gsd", "xyz"):
+        assert main(["export", str(run), "--format", fmt]) == 0
+        pipeline = ovito_io.import_file(str(run.with_suffix("." + fmt)), **({"multiple_frames": True} if fmt == "xyz" else {}))
+        assert pipeline.source.num_frames == 7
+        data = pipeline.compute(6)
+        p = data.particles
+        np.testing.assert_allclose(p.positions[...], e["pos"][6], rtol=0, atol=1e-5)  # GSD: float32
+        types = {t.id: t.name for t in p.particle_types.types}
+        names = [types[i] for i in p.particle_types[...]]
+        assert names == [ROLE_TYPES[r] for r in np.repeat(e["role"][6], 2)]
+        np.testing.assert_allclose(p["current"][...], np.repeat(e["current"][6], 2), rtol=1e-6)
+        if fmt == "gsd":
+            assert p.bonds.count == 60
+            np.testing.assert_array_equal(p.bonds.topology[...], np.arange(120).reshape(60, 2))
+            assert data.attributes["time"] == pytest.approx(e["time"][6])
