@@ -79,7 +79,9 @@ def run_one(task):
         total = sim.steps_for(t_max)
         stop = lambda: sim.short_circuit_time is not None  # noqa: E731
         while sim.short_circuit_time is None and sim.state.step < total:
-            target = min(sim.state.time + task["chunk"], t_max)
+            # run() takes whole steps only: the chunk and the end rounded to steps
+            n = min(sim.steps_for(task["chunk"]), total - sim.state.step)
+            target = sim.state.time + n * sim.dt
             try:
                 summary = sim.run(t_end=target, stop=stop)
             except RunInterrupted:

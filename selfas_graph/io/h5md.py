@@ -28,7 +28,7 @@ Layout of a run file::
         potential                   (n_frames, n_tips) tip potentials (units R0 J0), NaN if floating
         attrs conductor_ids, conductor_potentials, role_names
 
-Every dimensionful dataset carries a ``unit`` attribute in the reduced units (``UNITS``), except
+Every dimensionful dataset carries a ``unit`` attribute in the reduced units (symbols above, docs/output.md), except
 the positions, velocities and their times: MDAnalysis' H5MD reader refuses any unit string
 outside its table of SI units, even with ``convert_units=False`` (docs/output.md). The
 ``particles`` group tracks creation order, so readers that take its first subgroup

@@ -257,7 +257,8 @@ class NeighbourParams:
 
 @dataclass(frozen=True)
 class RunParams:
-    t_end: float = spec(10.0, "simulated time at which the run stops (units t0)", gt=0.0)
+    t_end: float = spec(10.0, "simulated time at which the run stops (units t0); a whole number of steps "
+                        "integrator.dt from the start", gt=0.0)
 
 
 @dataclass(frozen=True)
