@@ -239,7 +239,9 @@ def run_to_short_circuit(task: dict) -> dict:
         with _StopOnSignal() as signalled:
             stop = lambda: sim.short_circuit_time is not None or signalled()  # noqa: E731
             while sim.short_circuit_time is None and sim.state.step < total and not signalled():
-                target = min(sim.state.time + task["chunk"], t_max)
+                # run() takes whole steps only: the chunk and the end rounded to steps
+                n = min(sim.steps_for(task["chunk"]), total - sim.state.step)
+                target = sim.state.time + n * sim.dt
                 try:
                     summary = sim.run(t_end=target, stop=stop)
                 except RunInterrupted:

@@ -47,7 +47,7 @@ def test_simulate_writes_h5md_run(scenario, tmp_path, capsys):
     assert "done: 50 steps" in text and "max bond-length error" in text and "energy balance" in text
     with h5py.File(out, "r") as f:
         assert tuple(f["h5md"].attrs["version"]) == (1, 1)
-        assert f["h5md/creator"].attrs["name"] == "selfas-graph"
+        assert f["h5md/creator"].attrs["name"].decode() == "selfas-graph"  # fixed-length: bytes
         assert "name" in f["h5md/author"].attrs
         pos = f["particles/tips/position"]
         assert pos["value"].shape == (6, 16, 3)  # frames at t = 0, 0.01, ..., 0.05

@@ -93,7 +93,7 @@ def run_once(path, overrides, duration, snap):
     balance0 = sim.observables()["energy_balance"]
     t0 = time.perf_counter()
     try:
-        sim.run(t_end=t_start + duration)
+        sim.run(t_end=t_start + sim.steps_for(duration) * sim.dt)  # run() takes whole steps only
     except NumericalFailure as exc:
         return {"failed": str(exc).split(";")[0]}
     wall = time.perf_counter() - t0
@@ -135,7 +135,7 @@ def main(argv=None):
     else:
         sim0 = Simulation.from_scenario(base)
     if args.t0 > sim0.state.time:
-        sim0.run(t_end=args.t0)
+        sim0.run(t_end=sim0.state.time + sim0.steps_for(args.t0 - sim0.state.time) * sim0.dt)
     snap = sim0.snapshot()
     run_once(args.scenario, args.base_set, min(args.t, 0.01), snap)  # warm-up: compile every kernel before timing
     print(f"branch point t = {sim0.state.time:g} ({len(sim0.force_field.active_rod)} rods carry current); "

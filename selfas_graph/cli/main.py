@@ -21,6 +21,7 @@ COMMANDS = {
     "plot": ("selfas_graph.cli.plot", "figures of a saved run: snapshot, density, field, flux, timeline, "
                                       "moment, fractal, skeleton (PNG)"),
     "ensemble": ("selfas_graph.cli.ensemble", "run a scenario over many seeds; mean and standard error over them"),
+    "export": ("selfas_graph.cli.export", "a run as GSD (OVITO, HOOMD-blue, MDAnalysis) or extended XYZ (ASE, OVITO)"),
 }
 
 EXIT_USAGE = 2

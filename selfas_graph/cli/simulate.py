@@ -54,6 +54,21 @@ def _fmt_time(seconds):
     return f"{h}h{m:02d}m{s:02d}s" if h else f"{m}m{s:02d}s"
 
 
+def _status_text(sim) -> str:
+    """Contacts, conductor contacts, the short circuit and the current, for the progress display."""
+    st = sim.status()
+    parts = [f"contacts {st['contacts']}"]
+    if sim.params.forces.electrodes is not None:
+        parts.append(f"on electrodes {st['electrode_contacts']}")
+    if sim.params.forces.external_filament is not None:
+        parts.append(f"on filament {st['filament_contacts']}")
+    if sim.params.circuit is not None:
+        sc = st["short_circuit_time"]
+        parts.append(f"short circuit at t = {sc:.4g}" if sc is not None else "no short circuit")
+        parts.append(f"I = {st['total_current']:.4g} J0")
+    return ", ".join(parts)
+
+
 class _Lines:
     """Plain progress lines, at most one every ``period`` wall seconds (and at the end)."""
 
@@ -70,7 +85,7 @@ class _Lines:
         rate = done / max(now - self.t0, 1e-9)
         eta = (total - done) / rate if rate > 0 else 0
         print(f"t = {sim.state.time:.4g} / {sim.params.run.t_end:.4g}  step {sim.state.step}  "
-              f"{100 * done / max(total, 1):5.1f}%  {rate:.0f} steps/s  ETA {_fmt_time(eta)}",
+              f"{100 * done / max(total, 1):5.1f}%  {rate:.0f} steps/s  ETA {_fmt_time(eta)}  {_status_text(sim)}",
               file=self.stream, flush=True)
 
     def close(self):
@@ -89,7 +104,7 @@ class _Bar:
     def __call__(self, sim, done, total):
         self.bar.update(done - self.n)
         self.n = done
-        self.bar.set_postfix_str(f"t={sim.state.time:.4g}/{self.t_end:.4g}", refresh=False)
+        self.bar.set_postfix_str(f"t={sim.state.time:.4g}/{self.t_end:.4g}, {_status_text(sim)}", refresh=False)
 
     def close(self):
         self.bar.close()
@@ -175,13 +190,27 @@ def _load_resume(args):
             n_tips = run_file.f["particles/tips/position/value"].shape[1]
             same = n_tips == np.asarray(snap["position"]).shape[0] and run_file.scenario_text == meta["scenario_text"]
             steps = run_file.step
+            brake = _started_brake(run_file)
     except RunFileError as exc:
         raise CliError(f"cannot resume into {out}: {exc}") from None
+    if same and brake is not None and brake != scenario.params.integrator.brake:
+        # a scene without integrator.brake, started when the default was explicit: continue as it ran
+        scenario = scenario_from_text(meta["scenario_text"], t_end=args.t_end,
+                                      overrides=json.loads(meta["overrides"]) + [f"integrator.brake={brake}"])
     if not same:
         raise CliError(f"cannot resume: {out} is not the run of checkpoint {ckpt} (different scenario or rod count)")
     if not len(steps) or steps[0] > int(snap["step"]):
         raise CliError(f"cannot resume: {out} has no frame at or before the checkpoint's step {int(snap['step'])}")
     return scenario, snap, out, ckpt
+
+
+def _started_brake(run_file):
+    """The integrator.brake a run was started with, from its resolved parameters (None if unreadable)."""
+    try:
+        brake = json.loads(run_file.meta["parameters_json"])["integrator"]["brake"]
+    except (ValueError, TypeError, KeyError, IndexError):
+        return None
+    return brake if brake in ("explicit", "split") else None
 
 
 def _check_output_name(out: Path):
@@ -267,7 +296,10 @@ def run(args):
     import numba
 
     fit_threads_to_cores()
-    n_steps = sim.steps_for(p.run.t_end - sim.state.time)
+    try:
+        n_steps = sim.steps_to(p.run.t_end)
+    except ValueError as exc:
+        raise CliError(f"run.t_end: {exc}") from None
     plan = {
         "scenario": str(args.scenario), "rods": p.rods.count, "terms": p.forces.active(),
         "dt": p.integrator.dt, "t_end": p.run.t_end, "steps": n_steps,
@@ -311,7 +343,8 @@ def run(args):
         try:
             return RunWriter(out, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
                              overwrite=args.force, velocities=p.output.velocities,
-                             rod_length=sim.state.rod_length, rod_resistance=sim.state.rod_resistance)
+                             rod_length=sim.state.rod_length, rod_resistance=sim.state.rod_resistance,
+                             frame_interval=sim.frame_interval)
         except OSError as exc:
             raise CliError(f"cannot write the output file {out}: {exc}") from None
 
@@ -389,6 +422,12 @@ def _print_summary(s, out, sim):
         f"  max bond-length error after constraint: {s.max_bond_error:.3g}",
         f"  energy balance E - E0 - W: {s.energy_balance:.3g} ({rel:.2g} of kinetic energy + |work|)",
         f"  contacts (tip pairs closer than r*): {sim.contact_count()}",
-        f"  output: {out} ({s.frames} frames); checkpoint {checkpoint_path(out)}",
     ]
+    st = sim.status()
+    if sim.params.circuit is not None:
+        sc = st["short_circuit_time"]
+        lines.append((f"  short circuit: the conductors were first joined at t = {sc:.6g}" if sc is not None
+                      else "  short circuit: never")
+                     + f"; at the end {st['current_rods']} rods carry current, total {st['total_current']:.4g} J0")
+    lines.append(f"  output: {out} ({s.frames} frames); checkpoint {checkpoint_path(out)}")
     print("\n".join(lines))

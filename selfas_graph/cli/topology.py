@@ -85,6 +85,18 @@ def _finite_or_null(obj):
     return obj
 
 
+def _describe(e) -> str:
+    """What the a and b columns of an event row name (docs of selfas_graph.model.events)."""
+    kind, a, b = e["kind"], e["a"], e["b"]
+    if kind in ("tip_contact", "tip_release"):
+        return f"a, b = tips (rods {a // 2} and {b // 2})"
+    if kind in ("conductor_contact", "conductor_release"):
+        return f"a = tip (rod {a // 2}), b = conductor ({ev.CONDUCTOR_NAMES.get(b, str(b))})"
+    if kind == "short_circuit":
+        return f"a = rods in current-carrying filaments ({a})"
+    return ""
+
+
 def _fmt(x, unit=""):
     if x is None:
         return "n/a (no circuit)"
@@ -141,7 +153,11 @@ def run(args):
         lines.append(f"\ndead-end rods: {' '.join(map(str, d[:30]))}" + (" ..." if len(d) > 30 else ""))
     lines.append("\nevents up to this frame: "
                  + (", ".join(f"{k} {v}" for k, v in sorted(data["event_counts"].items())) or "none"))
-    for e in data["events"][-args.events:] if args.events > 0 else []:
-        lines.append(f"  step {e['step']:>8}  t = {e['time']:<10.6g} {e['kind']:<18} {e['a']:>7} {e['b']:>7}")
+    shown = data["events"][-args.events:] if args.events > 0 else []
+    if shown:
+        lines.append(f"  {'step':>13}  {'t':<14} {'kind':<18} {'a':>7} {'b':>7}  (what a and b are)")
+    for e in shown:
+        lines.append(f"  step {e['step']:>8}  t = {e['time']:<10.6g} {e['kind']:<18} {e['a']:>7} {e['b']:>7}  "
+                     f"{_describe(e)}")
     print("\n".join(lines))
     return 0

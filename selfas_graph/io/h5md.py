@@ -1,15 +1,19 @@
-"""HDF5 output after the H5MD convention (https://www.nongnu.org/h5md/), and its reader.
+"""HDF5 output after H5MD 1.1 (https://www.nongnu.org/h5md/h5md.html), and its reader.
 
 Layout of a run file::
 
-    /h5md                       attrs version=[1, 1]; groups author, creator
+    /h5md                       attrs version=[1, 1]; groups author, creator (fixed-length strings)
+    /h5md/modules/units         attrs version=[1, 0], system="reduced" (docs/model.md section 1)
     /particles/tips/box         attrs dimension=3, boundary=[none, none, none]
     /particles/tips/position    step (n,), time (n,), value (n, n_tips, 3)
     /particles/tips/velocity    step, time, value (if output.velocities)
     /particles/tips/charge      (n_tips,) magnetic charge (time-independent)
     /particles/tips/rod         (n_tips,) rod index of each tip (tip k belongs to rod k // 2)
+    /particles/rods/box         as the tips' box (H5MD: every particles group holds one)
     /particles/rods/charge      (n_rods,) electric charge Z_i
+    /connectivity/rods          (n_rods, 2) the two tips of each rod; attr particles_group -> /particles/tips
     /observables/<name>         step, time, value: one row per saved frame
+    /observables/dt             step, time, value: simulated time between saved frames
     /observables/bond_error_per_step   step, value: the largest bond error of every step
     /parameters/selfas_graph    attrs: scenario_text, parameters_json, version, command_line,
                                 seed, mpi_ranks, numba_threads, created, status
@@ -23,6 +27,13 @@ Layout of a run file::
         current                     (n_frames, n_rods) rod currents J_i (units J0), 0 without a circuit
         potential                   (n_frames, n_tips) tip potentials (units R0 J0), NaN if floating
         attrs conductor_ids, conductor_potentials, role_names
+
+Every dimensionful dataset carries a ``unit`` attribute in the reduced units (symbols above, docs/output.md), except
+the positions, velocities and their times: MDAnalysis' H5MD reader refuses any unit string
+outside its table of SI units, even with ``convert_units=False`` (docs/output.md). The
+``particles`` group tracks creation order, so readers that take its first subgroup
+(MDAnalysis) take ``tips``. Files written before the units, ``connectivity``, the rods' box and
+``observables/dt`` existed lack them; :class:`RunFile` reads both.
 
 Only one process writes. Every frame is followed by a flush, so a run that is
 killed keeps everything up to its last saved frame. ``status`` is "running"
@@ -39,9 +50,43 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..model.events import CONDUCTOR_NAMES, EVENT_DTYPE, KIND_NAMES
+from ..model.events import CONDUCTOR_NAMES, EVENT_DTYPE, KIND_NAMES, named_events
 
 H5MD_VERSION = (1, 1)
+
+#: symbols of the reduced unit system (docs/model.md section 1; docs/output.md lists them)
+UNIT_SYSTEM = "reduced"
+LENGTH, TIME, CHARGE, ENERGY, CURRENT, POTENTIAL = "L", "t_0", "Z_M0e", "F_M0 L", "J_0", "R_0 J_0"
+
+
+def observable_unit(name):
+    """The reduced unit of an observable, or None for counts and flags."""
+    if name.startswith(("energy", "work/")):
+        return ENERGY
+    return {"momentum": "m L t_0-1", "bond_error": LENGTH, "bond_error_per_step": LENGTH, "dt": TIME,
+            "total_current": CURRENT, "effective_resistance": "R_0"}.get(name)
+
+
+def _fixed(text):
+    """A fixed-length string (H5MD asks for them in attributes); UTF-8 bytes of at least one byte."""
+    data = str(text).encode("utf-8")
+    return np.array(data, dtype=f"S{max(1, len(data))}")
+
+
+#: the events' dtype in the file: ``kind`` an HDF5 enumeration of the names in KIND_NAMES
+EVENT_FILE_DTYPE = np.dtype([(name, h5py.enum_dtype({v: k for k, v in KIND_NAMES.items()}, basetype="<i4"))
+                             if name == "kind" else (name, EVENT_DTYPE[name]) for name in EVENT_DTYPE.names])
+
+
+def _set_unit(obj, unit):
+    if unit is not None:
+        obj.attrs["unit"] = _fixed(unit)
+
+
+def _box(group):
+    box = group.create_group("box")
+    box.attrs["dimension"] = np.int32(3)
+    box.attrs["boundary"] = np.array([b"none"] * 3)
 
 
 class OutputExistsError(FileExistsError):
@@ -96,10 +141,13 @@ class RunWriter:
     rod_length, rod_resistance : (n_rods,) float64, optional
         Per-rod lengths and resistances (``particles/rods/length``, ``particles/rods/resistance``),
         written only when the scene sets them (absent: every rod has length 1 and resistance R0).
+    frame_interval : float, optional
+        Simulated time between saved frames, written with every frame as ``observables/dt``
+        (MDAnalysis reads it as its time step between frames).
     """
 
     def __init__(self, path, n_tips, tip_charge, rod_charge, provenance, overwrite=False, velocities=True,
-                 rod_length=None, rod_resistance=None):
+                 frame_interval=None, rod_length=None, rod_resistance=None):
         self.path = Path(path)
         if self.path.exists() and not overwrite:
             raise OutputExistsError(f"output file {self.path} exists; pass --force to overwrite it or -o to choose another")
@@ -111,30 +159,40 @@ class RunWriter:
         f = self.f
         h = f.create_group("h5md")
         h.attrs["version"] = np.array(H5MD_VERSION, dtype=np.int32)
-        h.create_group("author").attrs["name"] = provenance.get("author", os.environ.get("USER", "unknown"))
+        h.create_group("author").attrs["name"] = _fixed(provenance.get("author", os.environ.get("USER", "unknown")))
         c = h.create_group("creator")
-        c.attrs["name"] = "selfas-graph"
-        c.attrs["version"] = provenance.get("version", "")
-        tips = f.create_group("particles/tips")
-        box = tips.create_group("box")
-        box.attrs["dimension"] = 3
-        box.attrs["boundary"] = np.array([b"none"] * 3)
-        tips.create_dataset("charge", data=np.asarray(tip_charge, dtype=np.float64))
+        c.attrs["name"] = _fixed("selfas-graph")
+        c.attrs["version"] = _fixed(provenance.get("version", "unknown"))
+        units = h.create_group("modules/units")
+        units.attrs["version"] = np.array((1, 0), dtype=np.int32)
+        units.attrs["system"] = _fixed(UNIT_SYSTEM)
+        # creation order tracked: readers that take the first particles group take the tips
+        particles = f.create_group("particles", track_order=True)
+        tips = particles.create_group("tips")
+        _box(tips)
+        _set_unit(tips.create_dataset("charge", data=np.asarray(tip_charge, dtype=np.float64)), CHARGE)
         tips.create_dataset("rod", data=np.arange(n_tips, dtype=np.int64) // 2)
-        rods = f.create_group("particles/rods")
-        rods.create_dataset("charge", data=np.asarray(rod_charge, dtype=np.float64))
-        for name, values in (("length", rod_length), ("resistance", rod_resistance)):
+        rods = particles.create_group("rods")
+        _box(rods)
+        _set_unit(rods.create_dataset("charge", data=np.asarray(rod_charge, dtype=np.float64)), CHARGE)
+        bonds = f.create_group("connectivity").create_dataset(
+            "rods", data=np.arange(n_tips, dtype=np.int64).reshape(-1, 2))
+        bonds.attrs["particles_group"] = tips.ref
+        for name, values, unit in (("length", rod_length, LENGTH), ("resistance", rod_resistance, "R_0")):
             if values is not None:
-                rods.create_dataset(name, data=np.asarray(values, dtype=np.float64))
+                _set_unit(rods.create_dataset(name, data=np.asarray(values, dtype=np.float64)), unit)
         self._elements = {}
         for name in ("position",) + (("velocity",) if velocities else ()):
             g = tips.create_group(name)
+            # no unit attribute here: MDAnalysis refuses every unit outside its SI table
             self._elements[name] = (_growable(g, "step", (), "<i8"), _growable(g, "time", (), "<f8"),
                                     _growable(g, "value", (n_tips, 3), "<f8"))
         self._obs = {}
+        self.frame_interval = frame_interval
         self.observables = f.create_group("observables")
         g = self.observables.create_group("bond_error_per_step")
         self._per_step = (_growable(g, "step", (), "<i8"), _growable(g, "value", (), "<f8"))
+        _set_unit(self._per_step[1], LENGTH)
         p = f.create_group("parameters/selfas_graph")
         for key, value in provenance.items():
             p.attrs[key] = value
@@ -182,6 +240,7 @@ class RunWriter:
                 self._obs[name] = (obj["step"], obj["time"], obj["value"])
 
         self.observables.visititems(visit)
+        self.frame_interval = float(self._obs["dt"][2][-1]) if "dt" in self._obs and self._obs["dt"][2].shape[0] else None
         g = self.observables["bond_error_per_step"]
         n = keep(g["step"])
         _truncate(g["step"], n)
@@ -206,6 +265,8 @@ class RunWriter:
 
     def write_frame(self, step, t, position, velocity, observables: dict):
         """Append one frame (positions, velocities, observables) and flush to disk."""
+        if self.frame_interval is not None:
+            observables = {**observables, "dt": self.frame_interval}
         for name, arr in (("position", position), ("velocity", velocity)):
             if name in self._elements:
                 s, tt, v = self._elements[name]
@@ -218,6 +279,8 @@ class RunWriter:
                 g = self.observables.create_group(name)
                 self._obs[name] = (_growable(g, "step", (), "<i8"), _growable(g, "time", (), "<f8"),
                                    _growable(g, "value", value.shape, "<f8"))
+                _set_unit(self._obs[name][1], TIME)
+                _set_unit(self._obs[name][2], observable_unit(name))
             s, tt, v = self._obs[name]
             _append(s, step)
             _append(tt, t)
@@ -233,7 +296,7 @@ class RunWriter:
     def write_events(self, rows):
         """Append event rows ``(step, time, kind, a, b)``."""
         if "events" not in self.f:
-            ds = self.f.create_dataset("events", shape=(0,), maxshape=(None,), dtype=EVENT_DTYPE, chunks=(4096,))
+            ds = self.f.create_dataset("events", shape=(0,), maxshape=(None,), dtype=EVENT_FILE_DTYPE, chunks=(4096,))
             ds.attrs["kind_names"] = json.dumps({int(k): v for k, v in KIND_NAMES.items()})
             ds.attrs["conductor_names"] = json.dumps({int(k): v for k, v in CONDUCTOR_NAMES.items()})
         if len(rows):
@@ -257,15 +320,16 @@ class RunWriter:
                 [np.nan if conductor_potential[c] is None else conductor_potential[c] for c in sorted(conductor_potential)])
             g.attrs["role_names"] = json.dumps({0: "free", 1: "cluster", 2: "dead_end", 3: "filament"})
             _growable(g, "step", (), "<i8")
-            _growable(g, "time", (), "<f8")
+            _set_unit(_growable(g, "time", (), "<f8"), TIME)
             _growable(g, "tip_contacts", (2,), "<i8")
             _growable(g, "tip_contacts_count", (), "<i8")
             for name, dt in (("conductor_tip", "<i8"), ("conductor_id", "<i8"), ("conductor_potential", "<f8")):
                 _growable(g, name, (), dt)
             _growable(g, "conductor_contacts_count", (), "<i8")
             _growable(g, "role", role.shape, "i1")
-            _growable(g, "current", current.shape, "<f8")
-            _growable(g, "potential", potential.shape, "<f8")
+            _set_unit(_growable(g, "current", current.shape, "<f8"), CURRENT)
+            _set_unit(_growable(g, "potential", potential.shape, "<f8"), POTENTIAL)
+            _set_unit(g["conductor_potential"], POTENTIAL)
         g = self.f["graph"]
         _append(g["step"], step)
         _append(g["time"], t)
@@ -280,6 +344,49 @@ class RunWriter:
         _append(g["role"], role)
         _append(g["current"], current)
         _append(g["potential"], potential)
+
+    @classmethod
+    def for_simulation(cls, sim, path, overwrite=False, velocities=None, author=None):
+        """A writer for a run driven from Python: ``sim.run(t_end, writer=w)`` (in as many
+        chunks as wanted), then ``w.close()``; or ``with RunWriter.for_simulation(sim, path) as w``.
+
+        The file is the one ``selfas-graph simulate`` writes (the provenance holds the resolved
+        parameters, and the scenario text when the simulation came from a scenario), and
+        :class:`RunFile`, ``topology``, ``plot`` and ``export`` read it.
+        """
+        import shlex
+        import sys
+
+        import numba
+
+        from .._version import __version__
+
+        p = sim.params
+        scenario = getattr(sim, "scenario", None)
+        provenance = {
+            "scenario_text": scenario.text if scenario is not None else
+            "# built in Python; the resolved parameters are in parameters_json\n",
+            "scenario_path": str(scenario.path) if scenario is not None and scenario.path is not None else "",
+            "overrides": json.dumps(list(scenario.overrides) if scenario is not None else []),
+            "parameters_json": json.dumps(p.to_dict()),
+            "derived_json": json.dumps(sim.force_field.describe()),
+            "version": __version__,
+            "command_line": shlex.join(sys.argv),
+            "seed": p.scenario.seed,
+            "mpi_ranks": 1,
+            "numba_threads": numba.get_num_threads(),
+        }
+        if author is not None:
+            provenance["author"] = author
+        return cls(path, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
+                   overwrite=overwrite, velocities=p.output.velocities if velocities is None else velocities,
+                   frame_interval=sim.frame_interval)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        self.close(status="finished" if exc_type is None else f"failed: {exc}")
 
     def set_attrs(self, **attrs):
         for k, v in attrs.items():
@@ -441,6 +548,18 @@ class RunFile:
             return self.f["particles/rods/resistance"][:]
         return np.ones(self.f["particles/rods/charge"].shape[0])
 
+    @property
+    def n_tips(self) -> int:
+        return self.f["particles/tips/position/value"].shape[1]
+
+    @property
+    def bonds(self) -> np.ndarray:
+        """(n_rods, 2) the tips of each rod: ``/connectivity/rods``, or the same pairs for older files."""
+        ds = self.f.get("connectivity/rods")
+        if isinstance(ds, h5py.Dataset) and ds.shape == (self.n_tips // 2, 2):
+            return ds[:]
+        return np.arange(self.n_tips, dtype=np.int64).reshape(-1, 2)
+
     _GRAPH = ("step", "time", "tip_contacts", "tip_contacts_count", "conductor_tip", "conductor_id",
               "conductor_potential", "conductor_contacts_count", "role", "current", "potential")
 
@@ -454,8 +573,12 @@ class RunFile:
         """Event records (structured array, fields step, time, kind, a, b), optionally up to a step."""
         if "events" not in self.f:
             return np.zeros(0, dtype=EVENT_DTYPE)
-        e = self.f["events"][:]
+        e = self.f["events"][:].astype(EVENT_DTYPE)  # the kind an enumeration in newer files, integers before
         return e if until_step is None else e[e["step"] <= until_step]
+
+    def named_events(self, until_step=None) -> list:
+        """The events as :class:`selfas_graph.model.events.Event` tuples, kinds as ``EventKind``."""
+        return named_events(self.events(until_step))
 
     def graph_frame_index(self, frame=None, t=None) -> int:
         if not self.has_graph:

@@ -12,10 +12,13 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import numbers
 import tomllib
 import typing
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from ..model import params as P
 
@@ -107,14 +110,20 @@ def scenario_from_text(text, path=None, overrides=(), t_end=None) -> Scenario:
     return Scenario(params=params, text=text, path=path, overrides=overrides)
 
 
-def parameters_from_dict(raw: dict) -> P.Parameters:
+def check_parameters(params: P.Parameters) -> None:
+    """Validate parameters made in Python (``Parameters(...)``, ``dataclasses.replace``) as a
+    scenario file is validated; raises :class:`ScenarioError` with the same messages."""
+    parameters_from_dict(params.to_raw())
+
+
+def parameters_from_dict(raw: dict, source=None) -> P.Parameters:
     """Validate a nested dict (as from TOML) into :class:`Parameters`; raises :class:`ScenarioError`."""
     problems = []
     params = _build(P.Parameters, raw, "", problems)
     if not problems:
         problems += check_consistency(params)
     if problems:
-        raise ScenarioError(problems)
+        raise ScenarioError(problems, source=source)
     return params
 
 
@@ -194,10 +203,15 @@ def _build(cls, raw, prefix, problems):
         if checked is not _INVALID:
             kwargs[name] = checked
     try:
+        if cls is P.Parameters:  # validated here and by check_consistency, not a second time
+            P._unchecked.on = True
         return cls(**kwargs)
     except TypeError as exc:  # pragma: no cover - schema bug, not user error
         problems.append(f"{prefix or 'scenario'}: {exc}")
         return None
+    finally:
+        if cls is P.Parameters:
+            P._unchecked.on = False
 
 
 _INVALID = object()
@@ -223,11 +237,12 @@ def _check_number(path, value, tp, meta, problems):
             return _INVALID
         return value
     if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
             problems.append(f"{path}: expected an integer, got {_describe(value)}")
             return _INVALID
+        value = int(value)  # numpy integers from Python callers become plain ones
     elif tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
             problems.append(f"{path}: expected a number, got {_describe(value)}")
             return _INVALID
         value = float(value)

@@ -22,6 +22,9 @@ filament to carrying one (a conducting path now joins two conductor contacts at
 different potentials); OPEN_CIRCUIT when the last such path is broken
 (MODEL.md section 5).
 """
+import enum
+from typing import NamedTuple
+
 import numpy as np
 
 TIP_CONTACT = 1
@@ -39,6 +42,40 @@ KIND_NAMES = {
     SHORT_CIRCUIT: "short_circuit",
     OPEN_CIRCUIT: "open_circuit",
 }
+
+
+
+class EventKind(enum.IntEnum):
+    """Event kinds by name; each equals its integer code (``EventKind.SHORT_CIRCUIT == 5``), and
+    ``EventKind(row.kind).label`` is the name stored in run files (``kind_names``)."""
+
+    TIP_CONTACT = TIP_CONTACT
+    TIP_RELEASE = TIP_RELEASE
+    CONDUCTOR_CONTACT = CONDUCTOR_CONTACT
+    CONDUCTOR_RELEASE = CONDUCTOR_RELEASE
+    SHORT_CIRCUIT = SHORT_CIRCUIT
+    OPEN_CIRCUIT = OPEN_CIRCUIT
+
+    @property
+    def label(self) -> str:
+        return KIND_NAMES[int(self)]
+
+
+class Event(NamedTuple):
+    """One event with its kind by name (see the table at the top of this module)."""
+
+    step: int
+    time: float
+    kind: EventKind
+    a: int
+    b: int
+
+
+def named_events(rows) -> list:
+    """Event rows ``(step, time, kind, a, b)`` (a list of tuples or an ``EVENT_DTYPE`` array) as
+    :class:`Event` tuples with :class:`EventKind` kinds."""
+    return [Event(int(r[0]), float(r[1]), EventKind(int(r[2])), int(r[3]), int(r[4])) for r in rows]
+
 
 #: conductor ids. Case (i): the two electrode planes. Case (ii): the fixed
 #: current filament, whose potential varies along z (MODEL.md section 6).

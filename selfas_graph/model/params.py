@@ -12,8 +12,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 from dataclasses import dataclass, field
 from typing import Optional
+
+#: set while the scenario loader builds a Parameters it validates itself (no second check)
+_unchecked = threading.local()
 
 
 def spec(default, doc, *, ge=None, gt=None, lt=None, le=None, choices=None, length=None, factory=None):
@@ -281,7 +285,7 @@ class IntegratorParams:
     velocity_correction: bool = spec(True, "apply the paper's velocity correction, Eqs. (14-15), after each step")
     position_projection: bool = spec(True, "restore each bond length to 1 about the rod centre after each step")
     brake: str = spec(
-        "explicit", "how the stiff contact brakes (tip brake, electrode and monopole brakes) are integrated: "
+        "split", "how the stiff contact brakes (tip brake, electrode and monopole brakes) are integrated: "
         "explicit (a force in the Adams-Bashforth step) or split (solved exactly pair by pair after each step, "
         "stable for any dt; first order in dt for the brakes' effect)", choices=("explicit", "split"))
     energy_tolerance: float = spec(
@@ -335,7 +339,8 @@ class NeighbourParams:
 
 @dataclass(frozen=True)
 class RunParams:
-    t_end: float = spec(10.0, "simulated time at which the run stops (units t0)", gt=0.0)
+    t_end: float = spec(10.0, "simulated time at which the run stops (units t0); a whole number of steps "
+                        "integrator.dt from the start", gt=0.0)
 
 
 @dataclass(frozen=True)
@@ -357,7 +362,13 @@ class ScenarioInfo:
 
 @dataclass(frozen=True)
 class Parameters:
-    """Everything a run needs, resolved and frozen."""
+    """Everything a run needs, resolved, validated and frozen.
+
+    Every way of making one is validated as a scenario file is (same messages, naming the
+    key and what is valid; :class:`selfas_graph.ScenarioError` lists every problem):
+    ``Parameters()`` (the defaults), :meth:`from_dict` (nested dict as from TOML),
+    :meth:`replace` (changes to an existing one), and even ``dataclasses.replace``.
+    """
 
     scenario: ScenarioInfo = spec(None, "name, description and seed", factory=ScenarioInfo)
     rods: RodParams = spec(None, "the rods", factory=RodParams)
@@ -378,6 +389,63 @@ class Parameters:
     def to_dict(self) -> dict:
         """Plain nested dict (tuples as lists), e.g. for JSON provenance."""
         return _plain(dataclasses.asdict(self))
+
+    def __post_init__(self):
+        if getattr(_unchecked, "on", False):
+            return
+        from ..io.scenario import check_parameters  # the schema walk lives with the scenario files
+
+        check_parameters(self)
+
+    def to_raw(self) -> dict:
+        """The nested dict a scenario file would hold for these parameters (absent sections and
+        unset optional values left out): ``Parameters.from_dict(p.to_raw()) == p``."""
+        return _raw(dataclasses.asdict(self))
+
+    @classmethod
+    def from_dict(cls, raw: dict) -> "Parameters":
+        """Validate a nested dict as from TOML, e.g. ``{"rods": {"count": 50}, "forces": {"tip_magnetic": {}}}``.
+
+        Raises :class:`selfas_graph.ScenarioError` naming every invalid key.
+        """
+        from ..io.scenario import parameters_from_dict
+
+        return parameters_from_dict(raw)
+
+    def replace(self, changes: dict | None = None, /, **sections) -> "Parameters":
+        """A validated copy with changes, by dotted key or by section::
+
+            p.replace({"integrator.dt": 5e-4, "forces.yukawa": False})   # False: the term off
+            p.replace(integrator={"dt": 5e-4}, rods={"count": 50})      # merged into the section
+            p.replace(circuit={"delta_J0": 2.0})                         # True or {} switches a table on
+
+        Raises :class:`selfas_graph.ScenarioError` with the messages of a scenario file.
+        """
+        raw = self.to_raw()
+        for key, value in list((changes or {}).items()) + list(sections.items()):
+            node, parts = raw, key.split(".")
+            for name in parts[:-1]:
+                if not isinstance(node.get(name), dict):
+                    node[name] = {}
+                node = node[name]
+            old = node.get(parts[-1])
+            node[parts[-1]] = _merge(old, value) if isinstance(old, dict) and isinstance(value, dict) else value
+        return self.from_dict(raw)
+
+
+def _raw(obj):
+    if isinstance(obj, dict):
+        return {k: _raw(v) for k, v in obj.items() if v is not None}
+    if isinstance(obj, (list, tuple)):
+        return [_raw(v) for v in obj]
+    return obj
+
+
+def _merge(old: dict, new: dict) -> dict:
+    out = dict(old)
+    for k, v in new.items():
+        out[k] = _merge(out[k], v) if isinstance(out.get(k), dict) and isinstance(v, dict) else v
+    return out
 
 
 def _plain(obj):

@@ -23,7 +23,7 @@ from .forces import ForceField
 from .graph import FILAMENT, ConnectivityGraph
 from .integrator import AdamsBashforth4
 from .params import Parameters
-from .state import State, random_state
+from .state import State, StateError, random_state
 
 #: a bond whose length is off by more than this after a step is broken: no
 #: corrector recovers it meaningfully (typical per-step errors are < 1e-6)
@@ -95,11 +95,24 @@ class Simulation:
         Ranks that share the force work (``selfas_graph.parallel.world`` under ``mpiexec``;
         default: none, a serial run). Every rank must then make the same calls; each
         ends every step with the same state, bit for bit.
+    check_state : bool
+        Validate ``state`` and work on a copy of it (:meth:`State.checked`); False adopts the
+        object as it is (:meth:`from_snapshot`).
+
+    Raises
+    ------
+    StateError
+        An invalid ``state``, or one whose rod count differs from ``rods.count``.
     """
 
     def __init__(self, params: Parameters, state: State | None = None, timing: bool = False,
-                 detect_initial_contacts: bool = True, comm=None):
+                 detect_initial_contacts: bool = True, comm=None, check_state: bool = True):
         self.params = params
+        if state is not None and check_state:
+            state = state.checked()
+        if state is not None and state.n_rods != params.rods.count:
+            raise StateError(f"the state has {state.n_rods} rods but rods.count = {params.rods.count}; make them "
+                             f"agree, e.g. params.replace(rods={{'count': {state.n_rods}}})")
         self.state = random_state(params) if state is None else state
         self.force_field = ForceField(params, self.state, timing=timing, blocks=RowBlocks(self.state.n_rods, comm))
         ip = params.integrator
@@ -142,7 +155,9 @@ class Simulation:
 
     @classmethod
     def from_scenario(cls, scenario, **kw):
-        return cls(scenario.params, **kw)
+        sim = cls(scenario.params, **kw)
+        sim.scenario = scenario  # its text goes into run files written from Python
+        return sim
 
     # ------------------------------------------------------------------ exact restart
     def snapshot(self) -> dict:
@@ -190,7 +205,7 @@ class Simulation:
         state = State(np.array(snap["position"]), np.array(snap["velocity"]), np.array(snap["tip_charge"]),
                       np.array(snap["rod_charge"]), int(snap["step"]), float(snap["time"]),
                       *(np.array(snap[k]) if k in snap else None for k in ("rod_length", "rod_resistance")))
-        sim = cls(params, state=state, timing=timing, detect_initial_contacts=False, comm=comm)
+        sim = cls(params, state=state, timing=timing, detect_initial_contacts=False, comm=comm, check_state=False)
         it, ff = sim.integrator, sim.force_field
         it.hist_v[:], it.hist_a[:], it.hist_p[:] = snap["hist_v"], snap["hist_a"], snap["hist_p"]
         it.head, it.count = int(snap["head"]), int(snap["count"])
@@ -378,6 +393,21 @@ class Simulation:
             obs["effective_resistance"] = sol.effective_resistance if sol is not None else float("inf")
         return obs
 
+    def status(self) -> dict:
+        """What a progress display shows: tip contacts, tip-conductor contacts (electrodes, the
+        case (ii) filament), the time of the first short circuit (None before it), the total
+        current (J0) and the number of rods carrying current."""
+        c = self.contacts
+        sol = self.solution
+        return {
+            "contacts": self.contact_count(),
+            "electrode_contacts": int(c.on_cathode.sum() + c.on_anode.sum()) if c is not None else 0,
+            "filament_contacts": int(c.on_filament.sum()) if c is not None else 0,
+            "short_circuit_time": self.short_circuit_time,
+            "total_current": float(sol.total_current) if sol is not None else 0.0,
+            "current_rods": int(np.count_nonzero(self.force_field.current)),
+        }
+
     def contact_count(self) -> int:
         """Number of tip pairs of different rods in contact (closer than r*, or still held by hysteresis)."""
         if self.contacts is not None:
@@ -386,17 +416,45 @@ class Simulation:
         return int(close_pair_count(self.state.position, tnl.start, tnl.index, self.params.rods.rstar))
 
     # ------------------------------------------------------------------ run loop
+    @property
+    def frame_interval(self) -> float:
+        """Simulated time between saved frames: ``output.interval`` rounded to whole steps."""
+        return max(1, int(round(self.params.output.interval / self.dt))) * self.dt
+
     def steps_for(self, duration: float) -> int:
         """Number of steps that cover ``duration`` (rounded to the nearest step)."""
         return int(round(duration / self.dt))
+
+    def steps_to(self, t_end: float) -> int:
+        """Number of steps from the current time to ``t_end``, which must lie a whole number of
+        steps ahead (to round-off) and not in the past; ValueError otherwise, naming the times
+        that can be reached."""
+        t_end, t, dt = float(t_end), self.state.time, self.dt
+        if not math.isfinite(t_end):
+            raise ValueError(f"t_end = {t_end} is not a finite time")
+        x = (t_end - t) / dt
+        n = int(round(x))
+        # round-off of t_end - t: a few ulps of the step count, and no more than 1e-6 of a step below 1e10 steps
+        if abs(x - n) > 1e-6 + 4 * np.finfo(float).eps * abs(x):
+            lo = t + math.floor(x) * dt
+            raise ValueError(f"t_end = {t_end:.10g} is not a whole number of steps dt = {dt:g} from t = {t:.10g} "
+                             f"({x:.6g} steps); the nearest reachable times are {lo:.10g} and {lo + dt:.10g}")
+        if n < 0:
+            raise ValueError(f"t_end = {t_end:.10g} lies before the current time t = {t:.10g}; a run goes forward only")
+        return n
 
     def run(self, t_end=None, writer=None, progress=None, progress_every=None, checkpointer=None,
             stop=None) -> RunSummary:
         """Run from the current time to ``t_end`` (default ``run.t_end``).
 
+        Can be called again to continue in chunks (``sim.run(1.0); sim.run(2.0)`` takes the
+        steps of ``sim.run(2.0)``; a writer gets a frame at the end of each chunk).
+
         Parameters
         ----------
         t_end : float, optional
+            A whole number of steps ahead of the current time (ValueError otherwise, and for
+            a time in the past; see :meth:`steps_to`).
         writer : RunWriter-like, optional
             Receives a frame at the start (if it has none yet), every
             ``output.interval`` of simulated time (nearest step), and at the end.
@@ -414,7 +472,7 @@ class Simulation:
         RunSummary
         """
         t_end = self.params.run.t_end if t_end is None else t_end
-        n_steps = max(0, self.steps_for(t_end - self.state.time))
+        n_steps = self.steps_to(t_end)
         every = max(1, int(round(self.params.output.interval / self.dt)))
         pevery = progress_every or max(1, n_steps // 200)
         summary = RunSummary(t_start=self.state.time)

@@ -13,6 +13,16 @@ class PlacementError(ValueError):
     """The initial placement could not be made (too dense, or the box too small)."""
 
 
+class StateError(ValueError):
+    """A state that is not a valid set of rods (shapes, non-finite values, tip charges, rod lengths)."""
+
+
+#: largest |rod length - 1| a given state may have: states made by :meth:`State.from_rods` or
+#: :func:`random_state` are exact to round-off, and positions that passed through float32 (an
+#: export) are off by about 1e-6; a visibly wrong length (1.01) is refused instead of snapped
+BOND_TOLERANCE = 1e-4
+
+
 @dataclass
 class State:
     """Positions and velocities of all tips, and the per-rod constants.
@@ -69,6 +79,66 @@ class State:
         The form the rigid-bond kernels take (``selfas_graph/kernels/rigid.py``).
         """
         return _UNIT_LENGTH if self.rod_length is None else self.rod_length
+
+    def checked(self) -> "State":
+        """A validated copy in float64 arrays (the caller's arrays are never written to).
+
+        Raises
+        ------
+        StateError
+            Wrong shapes, non-finite values, a rod whose tips do not carry +q and -q
+            (docs/model.md section 2), or a rod length off 1 by more than ``BOND_TOLERANCE``.
+        """
+        def arr(name, value, shape):
+            try:
+                a = np.array(value, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise StateError(f"State.{name}: expected an array of numbers of shape {shape}") from None
+            if a.shape != shape:
+                raise StateError(f"State.{name}: shape {a.shape}, expected {shape} "
+                                 f"(rod i has tips 2i and 2i+1)")
+            if not np.isfinite(a).all():
+                raise StateError(f"State.{name}: non-finite values (NaN or inf) at rows "
+                                 f"{np.flatnonzero(~np.isfinite(a.reshape(len(a), -1)).all(axis=1))[:5].tolist()}")
+            return a
+
+        x = np.asarray(self.position)
+        if x.ndim != 2 or x.shape[1:] != (3,) or x.shape[0] < 2 or x.shape[0] % 2:
+            raise StateError(f"State.position: shape {x.shape}, expected (2 n_rods, 3) with n_rods >= 1 "
+                             f"(rod i has tips 2i and 2i+1)")
+        n = x.shape[0] // 2
+        position = arr("position", self.position, (2 * n, 3))
+        velocity = arr("velocity", self.velocity, (2 * n, 3))
+        tip_charge = arr("tip_charge", self.tip_charge, (2 * n,))
+        rod_charge = arr("rod_charge", self.rod_charge, (n,))
+        qa, qb = tip_charge[0::2], tip_charge[1::2]
+        bad = np.flatnonzero(qa != -qb)
+        if len(bad):
+            i = int(bad[0])
+            raise StateError(f"State.tip_charge: rod {i} has tip charges {qa[i]:g} and {qb[i]:g}; rod i carries +q_i "
+                             f"on tip 2i and -q_i on tip 2i+1 (docs/model.md section 2; State.from_rods builds "
+                             f"them)" + (f", {len(bad) - 1} more rods too" if len(bad) > 1 else ""))
+        extra = {}
+        for name in ("rod_length", "rod_resistance"):
+            value = getattr(self, name)
+            if value is not None:
+                extra[name] = arr(name, value, (n,))
+                if (extra[name] <= 0).any():
+                    i = int(np.flatnonzero(extra[name] <= 0)[0])
+                    raise StateError(f"State.{name}: rod {i} has {extra[name][i]:g}; every value must be > 0")
+        target = extra.get("rod_length", np.ones(n))
+        length = np.linalg.norm(position[1::2] - position[0::2], axis=1)
+        off = np.flatnonzero(np.abs(length - target) > BOND_TOLERANCE * target)
+        if len(off):
+            i = int(off[np.argmax(np.abs(length[off] - target[off]))])
+            raise StateError(f"State.position: rod {i} has length {length[i]:.6g}, not its "
+                             f"{'rod_length' if 'rod_length' in extra else 'length 1'} {target[i]:.6g} (to "
+                             f"{BOND_TOLERANCE:g} relative), {len(off)} rods are off; build the state with "
+                             f"State.from_rods (centres and axes)")
+        step, t = int(self.step), float(self.time)
+        if step < 0 or not np.isfinite(t):
+            raise StateError(f"State: step {step} and time {t} must be a step >= 0 and a finite time")
+        return State(position, velocity, tip_charge, rod_charge, step, t, **extra)
 
     @classmethod
     def from_rods(cls, centre, axis, magnetic_charge, electric_charge, velocity=None, length=None,

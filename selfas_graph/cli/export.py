@@ -1,0 +1,33 @@
+"""Export a run for viewers: ``selfas-graph export RUN.h5 --format gsd|xyz [--frames ...] [-o OUT] [--force]``.
+
+GSD (OVITO, HOOMD-blue, MDAnalysis, freud) holds the tips as particles typed by their rod's
+role, one bond per rod, the currents; extended XYZ (ASE, OVITO) the same per tip, without
+bonds. The run file is only read; the output never replaces it, and an existing output
+only with --force (docs/output.md).
+"""
+from __future__ import annotations
+
+from ..io.export import FORMATS, ExportError, export_run
+from ..io.h5md import RunFileError
+from .main import CliError
+
+
+def add_arguments(p):
+    p.add_argument("run", help="run file written by selfas-graph simulate")
+    p.add_argument("--format", choices=FORMATS, required=True, help="gsd (OVITO, HOOMD-blue, MDAnalysis) or xyz "
+                   "(extended XYZ: ASE, OVITO)")
+    p.add_argument("--frames", default="all", help="all (default), K, A:B[:S] (a Python slice) or K1,K2,... "
+                   "(negative numbers count from the end; write --frames=-1)")
+    p.add_argument("-o", "--output", help="output file (default: RUN with .gsd or .xyz)")
+    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+
+
+def run(args):
+    try:
+        path, n = export_run(args.run, args.format, out=args.output, frames=args.frames, force=args.force)
+    except (RunFileError, ExportError) as exc:
+        raise CliError(str(exc)) from None
+    except OSError as exc:
+        raise CliError(f"cannot write the export: {exc}") from None
+    print(f"wrote {path} ({n} frames, {args.format})")
+    return 0
