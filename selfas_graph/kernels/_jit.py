@@ -89,7 +89,7 @@ try:
     drop_stale_cache(_kernel_cache_dir(), sources_digest())
 except Exception:  # noqa: BLE001 - numba internals differ between versions; the check is a safeguard
     pass
-_SUM_FLAGS = {"reassoc", "contract"}
+_SUM_FLAGS = {"reassoc", "contract", "arcp"}
 
 njit = numba.njit(fastmath=False, **_COMMON)
 njit_parallel = numba.njit(parallel=True, fastmath=False, **_COMMON)
