@@ -96,9 +96,10 @@ LEAF_SIZE = 64
 GROUP_SIZE = 128
 ORDER = 3
 THETA = 0.4
-#: far-field targets are padded to a multiple of this (the vector width of
-#: AVX-512 doubles); measured at 1e5 rods: 1.13 to 1.28 times faster than no
-#: padding, padding to 16 or 32 gained less (1.08) or lost (0.88)
+#: far-field targets are padded to a multiple of this (one AVX-512 vector of
+#: doubles, two AVX2 vectors: whole vectors on both); measured at 1e5 rods on an
+#: AVX-512 machine: 1.13 to 1.28 times faster than no padding, padding to 16 or 32
+#: gained less (1.08) or lost (0.88)
 PAD = 8
 
 
