@@ -14,7 +14,9 @@ OpenMM's CPU platform, PME at rc = 6 and tolerance 1e-4, rods as +-q pairs held 
 constraint, as many threads as numba has). Every figure is printed as median [min-max] over the
 repeats; the ratio to the peer is the median of the per-repeat ratios ours / peer (each
 from a block of ours and the peer's block right after it), so a disturbance of the shared
-machine that hits both cancels. Beside each tree row: the tree's median and 99th-percentile
+machine that hits both cancels; the last column is the same ratio of the process's CPU time
+per step (both codes on the same threads), which a busy machine disturbs less than the wall
+clock (a thread that spins while it waits counts as busy). Beside each tree row: the tree's median and 99th-percentile
 relative tip-force error against the direct sum on the same positions (on a random sample of
 2000 tips above 2000 rods), and the speed-up over the direct sum measured in the same run.
 The header names the CPU and the instruction set numba compiled for (``NUMBA_CPU_NAME=haswell``
@@ -80,11 +82,13 @@ def time_block(sim, steps):
     ff = sim.force_field
     ff.seconds.clear()
     world.Barrier()
+    c0 = time.process_time()
     t0 = time.perf_counter()
     sim.step(steps)
     world.Barrier()
     ms = 1e3 * (time.perf_counter() - t0) / steps
-    return ms, 1e3 * ff.seconds["tip_magnetic"] / steps, steps
+    cpu = 1e3 * (time.process_time() - c0) / steps
+    return ms, 1e3 * ff.seconds["tip_magnetic"] / steps, steps, cpu
 
 
 def main(argv=None):
@@ -129,22 +133,26 @@ def main(argv=None):
                 peer = OpenMMPeer(sim.state.position, sim.state.tip_charge, threads)
                 say(f"peer: {peer.label}")
             # a first short block decides how many steps fill --step-seconds
-            ms, _, _ = time_block(sim, 2)
+            ms, _, _, _ = time_block(sim, 2)
             steps = int(min(200, max(2, args.step_seconds * 1e3 / max(ms, 1e-3))))
             peer_steps = None
-            ours, tips, theirs = [], [], []
+            ours, tips, theirs, ours_cpu, theirs_cpu = [], [], [], [], []
             for _ in range(max(1, args.repeat)):
-                ms, tip_ms, steps = time_block(sim, steps)
+                ms, tip_ms, steps, cpu = time_block(sim, steps)
                 ours.append(ms)
+                ours_cpu.append(cpu)
                 tips.append(tip_ms / ms)
                 if peer is not None:
                     if peer_steps is None:
-                        peer_steps = int(min(200, max(2, args.step_seconds * 1e3 / max(peer.ms_per_step(2), 1e-3))))
-                    theirs.append(peer.ms_per_step(peer_steps))
+                        peer_steps = int(min(200, max(2, args.step_seconds * 1e3 / max(peer.ms_per_step(2)[0], 1e-3))))
+                    wall, cpu = peer.ms_per_step(peer_steps)
+                    theirs.append(wall)
+                    theirs_cpu.append(cpu)
             med, text = summary(ours)
             row = {"rods": n, "method": method, "ranks": world.size, "threads": threads,
                    "slow_every": sim.params.integrator.slow_every, "steps": steps,
-                   "ms_per_step": med, "ms_all": ours, "ms_text": text, "tip_share": float(np.median(tips))}
+                   "ms_per_step": med, "ms_all": ours, "ms_text": text, "tip_share": float(np.median(tips)),
+                   "cpu_ms_all": ours_cpu}
             if method == "direct":
                 direct_ms = med
             if method == "tree" and world.rank == 0:
@@ -157,18 +165,24 @@ def main(argv=None):
                 row["peer_steps"] = peer_steps
                 ratios = [a / b for a, b in zip(ours, theirs)]
                 row["vs_peer"], row["vs_peer_text"] = summary(ratios)
+                row["peer_cpu_ms_all"] = theirs_cpu
+                row["vs_peer_cpu"] = float(np.median([a / b for a, b in zip(ours_cpu, theirs_cpu)]))
                 row["peer"] = peer.label
             rows.append(row)
             say(_fmt(row), flush=True)
+            if args.json and world.rank == 0:  # after every row, so that an interrupted run keeps its figures
+                _write(args, rows)
     say("\n| rods | tip-tip sum | ranks x threads | ms per step | tip-tip share | tree median / p99 error "
-        "| speed-up over direct | peer ms per step | ratio to the peer (ours / peer) |")
-    say("|---|---|---|---|---|---|---|---|---|")
+        "| speed-up over direct | peer ms per step | ratio to the peer (ours / peer) | ratio of CPU time |")
+    say("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         say(_fmt(r, markdown=True))
-    if args.json and world.rank == 0:
-        Path(args.json).write_text(json.dumps({"scenario": args.scenario, "machine": machine(),
-                                               "extra": args.extra, "rows": rows}, indent=1))
     return rows
+
+
+def _write(args, rows):
+    Path(args.json).write_text(json.dumps({"scenario": args.scenario, "machine": machine(),
+                                           "extra": args.extra, "rows": rows}, indent=1))
 
 
 def _fmt(r, markdown=False):
@@ -176,7 +190,8 @@ def _fmt(r, markdown=False):
     cells = [str(r["rods"]), r["method"], f"{r['ranks']} x {r['threads']}", r["ms_text"],
              f"{r['tip_share']:.0%}", err,
              f"{r['vs_direct']:.2f}" if "vs_direct" in r else "",
-             r.get("peer_text", "(no peer)"), r.get("vs_peer_text", "")]
+             r.get("peer_text", "(no peer)"), r.get("vs_peer_text", ""),
+             f"{r['vs_peer_cpu']:.2f}" if "vs_peer_cpu" in r else ""]
     return ("| " + " | ".join(cells) + " |") if markdown else "  ".join(cells)
 
 
