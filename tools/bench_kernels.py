@@ -87,8 +87,6 @@ def run(args):
     numba.set_num_threads(args.threads)
     plain = _plain()
     clock = time.process_time if args.cpu_time else time.perf_counter
-    global timed
-    timed = (lambda fn, repeat, _t=timed: _t(fn, repeat, clock))
     out_rows = []
     for n in args.rods:
         sc = scene(str(ROOT / "scenarios" / "fig2.toml"), n)
@@ -103,11 +101,11 @@ def run(args):
         tips = x.shape[0]
         if n <= args.direct_max:
             rep = args.repeat if n <= 6000 else max(2, args.repeat // 3)
-            res["direct"] = timed(lambda: tip_tip_direct(x, y, z, q, rstar, kappa, 0, tips, f), rep)
-            res["plain"] = timed(lambda: plain(x, y, z, q, f), rep)
-        res["tree build"] = timed(lambda: ktree.build_tip_tree(x, y, z, q), args.repeat)
+            res["direct"] = timed(lambda: tip_tip_direct(x, y, z, q, rstar, kappa, 0, tips, f), rep, clock)
+            res["plain"] = timed(lambda: plain(x, y, z, q, f), rep, clock)
+        res["tree build"] = timed(lambda: ktree.build_tip_tree(x, y, z, q), args.repeat, clock)
         tree = ktree.build_tip_tree(x, y, z, q)
-        res["tree eval"] = timed(lambda: ktree.evaluate_tip_tree(tree, rstar, kappa, ktree.THETA, f), args.repeat)
+        res["tree eval"] = timed(lambda: ktree.evaluate_tip_tree(tree, rstar, kappa, ktree.THETA, f), args.repeat, clock)
         ff = sim.force_field
         ff._bind(st.position, st.velocity)
         yk = next(t for t in ff.terms if t.name == "yukawa")
@@ -115,7 +113,7 @@ def run(args):
         c = ff.centre()
         fy = np.empty((n, 3))
         res["yukawa"] = timed(lambda: kp.yukawa_centres(c, st.rod_charge, nl.start, nl.index, yk.screening, yk.core,
-                                                         yk.cutoff, 0, n, fy), args.repeat)
+                                                         yk.cutoff, 0, n, fy), args.repeat, clock)
         res["yukawa_pairs"] = int(nl.start[-1])
         out_rows.append(res)
     return {"machine": machine(), "line": machine_line(), "threads": args.threads, "rows": out_rows}
