@@ -45,8 +45,8 @@ def _trunc_int32(typingctx, value):
     The conversion goes through int32 (``fptosi`` to i32, then sign extension) because
     AVX2 converts four doubles to int32 in one instruction (``vcvttpd2dq``) but has no
     packed double-to-int64 conversion (that is AVX-512DQ's ``vcvttpd2qq``): ``int(t)``
-    in int64 made LLVM convert the lanes one at a time, which, measured on the 2-core
-    AVX2 machine, was most of the cost of the Yukawa pair loop. The value is the same.
+    in int64 made LLVM convert the lanes one at a time (``vcvttsd2si``) inside the
+    vectorised Yukawa pair loop. The value is the same.
     """
     sig = types.int64(types.float64)
 

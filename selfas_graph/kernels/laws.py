@@ -24,11 +24,11 @@ def tip_force_over_r(r2, p, rstar, kappa):
     Both branches are computed and one is selected, with no jump in control
     flow, so that the all-pairs loops vectorise (see ``_jit``). One square root and one
     division per pair, the least a float64 ``1/r^3`` needs: the core's ``1 / r*^3`` is a
-    factor the loop hoists, not a second division per pair (the divider, shared by
-    division and square root, bounds these loops: on the 2-core AVX2 machine the direct
-    sum went from 2 divisions + 1 square root to 1 + 1 per pair and ran 1.5x faster,
-    docs/performance.md). Inside r* this rounds differently from dividing by ``r*^3``:
-    at most 1 ulp of the inner force.
+    factor the loop hoists, not a second division per pair (division and square root
+    share the divider, which bounds these loops; on one core of an AVX2 Zen 3 the direct
+    sum went from 0.52-0.54e9 to 0.54-0.61e9 tip pairs/s, at the edge of the spread
+    between runs, docs/performance.md). Inside r* this may round differently from
+    dividing by ``r*^3``: at most 1 ulp of the inner force.
 
     Parameters
     ----------
@@ -83,9 +83,10 @@ def yukawa_force_over_r(r2, zz, screening, core):
     of ``pairs.yukawa_centres`` went from 9.0 to 7.5 ns per pair (the same loop with the
     exponential left out takes 4.1: the rest is the gathers of the neighbours' centres).
     Results differ from those with ``math.exp`` by at most 2e-16 of the largest force.
-    One square root and one division per pair (``1 / R_D`` is loop-invariant and hoisted):
-    written with four divisions, the loop waited on the divider, which division and square
-    root share; with one it ran 1.3-1.7x faster on the 2-core AVX2 machine
+    One square root and one division per pair (``1 / R_D`` is loop-invariant and hoisted),
+    where the earlier form had four divisions: on one core of an AVX2 Zen 3, with the
+    exponential's vector conversion (``expo.py``), 9.4-9.8 against 11.0-11.6 ns per
+    listed pair at 1200 rods, within the spread between runs at 6000 and 24 000
     (docs/performance.md). The two forms round differently: a few ulp of f.
     """
     rr = max(r2, core * core)
