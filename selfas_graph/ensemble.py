@@ -186,7 +186,9 @@ def run_seed(task: dict) -> dict:
                     "numba_threads": numba.get_num_threads(),
                 }
                 writer = RunWriter(path, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
-                                   overwrite=bool(task.get("force")), velocities=p.output.velocities)
+                                   overwrite=bool(task.get("force")), velocities=p.output.velocities,
+                                   frame_interval=sim.frame_interval, rod_length=sim.state.rod_length,
+                                   rod_resistance=sim.state.rod_resistance)
                 meta = {"format_note": "selfas-graph checkpoint; continue with selfas-graph simulate --resume",
                         "scenario_text": scenario.text, "overrides": json.dumps(list(scenario.overrides)),
                         "run_file": str(path.resolve()), "version": __version__}

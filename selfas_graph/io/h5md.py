@@ -380,7 +380,8 @@ class RunWriter:
             provenance["author"] = author
         return cls(path, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
                    overwrite=overwrite, velocities=p.output.velocities if velocities is None else velocities,
-                   frame_interval=sim.frame_interval)
+                   frame_interval=sim.frame_interval, rod_length=sim.state.rod_length,
+                   rod_resistance=sim.state.rod_resistance)
 
     def __enter__(self):
         return self

@@ -5,12 +5,18 @@ parallelism and fastmath are decided once for the package.
 
 Full ``fastmath`` is off everywhere: the run loop checks forces for NaN and the
 tests check conservation laws to round-off, both of which need IEEE handling
-of NaN and inf. The all-pairs kernels use only the ``reassoc`` and ``contract``
-flags (``njit_parallel_sum``): they let LLVM vectorise the force reductions
-and keep NaN/inf semantics. Measured on the 2-core machine for the tip-tip
-direct sum at 1200 rods: 9.8 ms strict IEEE, 1.7 ms with these two flags and
-structure-of-arrays input (3.4e9 tip pairs/s); the result differs from the
-strict one by at most 4e-15 relative (tests hold it to 1e-12).
+of NaN and inf. The all-pairs kernels use only the ``reassoc``, ``contract`` and
+``arcp`` flags (``njit_parallel_sum``): the first two let LLVM vectorise the force
+reductions, the third lets it keep a loop-invariant reciprocal (``1 / r*^3``,
+``1 / R_D``) hoisted out of a pair loop instead of folding ``x * (1 / a)`` back into
+a division per pair (``reassoc`` alone does that fold); none of them touches NaN/inf
+semantics. Results differ from strict IEEE evaluation by round-off only (tests hold
+the direct sum to 1e-12 relative of a strict reference).
+
+No code path depends on the CPU: the kernels are plain loops that LLVM vectorises for
+whatever numba compiles for (``NUMBA_CPU_NAME``; the host CPU by default), 4 doubles a
+vector with AVX2, 8 with AVX-512. ``tools/bench_kernels.py --targets host haswell``
+times the hot kernels for both; docs/performance.md has the figures.
 """
 import functools
 import hashlib
@@ -89,7 +95,7 @@ try:
     drop_stale_cache(_kernel_cache_dir(), sources_digest())
 except Exception:  # noqa: BLE001 - numba internals differ between versions; the check is a safeguard
     pass
-_SUM_FLAGS = {"reassoc", "contract"}
+_SUM_FLAGS = {"reassoc", "contract", "arcp"}
 
 njit = numba.njit(fastmath=False, **_COMMON)
 njit_parallel = numba.njit(parallel=True, fastmath=False, **_COMMON)

@@ -22,7 +22,13 @@ def tip_force_over_r(r2, p, rstar, kappa):
     direction is undefined and the factor is set to 0, so the force stays finite.
 
     Both branches are computed and one is selected, with no jump in control
-    flow, so that the all-pairs loops vectorise (see ``_jit``).
+    flow, so that the all-pairs loops vectorise (see ``_jit``). One square root and one
+    division per pair, the least a float64 ``1/r^3`` needs: the core's ``1 / r*^3`` is a
+    factor the loop hoists, not a second division per pair (division and square root
+    share the divider, which bounds these loops; on one core of an AVX2 Zen 3 the direct
+    sum went from 0.52-0.54e9 to 0.54-0.61e9 tip pairs/s, at the edge of the spread
+    between runs, docs/performance.md). Inside r* this may round differently from
+    dividing by ``r*^3``: at most 1 ulp of the inner force.
 
     Parameters
     ----------
@@ -34,9 +40,10 @@ def tip_force_over_r(r2, p, rstar, kappa):
         Transition radius r* and core stiffness.
     """
     rs2 = rstar * rstar
+    inv_rs3 = 1.0 / (rs2 * rstar)  # loop-invariant: hoisted out of the pair loops
     inv_r = 1.0 / math.sqrt(max(r2, 1e-300))
     outer = p * inv_r * inv_r * inv_r
-    inner = (p + kappa * (rstar * inv_r - 1.0)) / (rs2 * rstar)
+    inner = (p + kappa * (rstar * inv_r - 1.0)) * inv_rs3
     g = outer if r2 >= rs2 else inner
     return g if r2 > 0.0 else 0.0
 
@@ -76,12 +83,19 @@ def yukawa_force_over_r(r2, zz, screening, core):
     of ``pairs.yukawa_centres`` went from 9.0 to 7.5 ns per pair (the same loop with the
     exponential left out takes 4.1: the rest is the gathers of the neighbours' centres).
     Results differ from those with ``math.exp`` by at most 2e-16 of the largest force.
+    One square root and one division per pair (``1 / R_D`` is loop-invariant and hoisted),
+    where the earlier form had four divisions: on one core of an AVX2 Zen 3, with the
+    exponential's vector conversion (``expo.py``), 9.4-9.8 against 11.0-11.6 ns per
+    listed pair at 1200 rods, within the spread between runs at 6000 and 24 000
+    (docs/performance.md). The two forms round differently: a few ulp of f.
     """
     rr = max(r2, core * core)
     zero = rr == 0.0  # NaN is not zero: it propagates
     rs = 1.0 if zero else rr
     r = math.sqrt(rs)
-    f = zz * exp_nonpositive(-r / screening) * (1.0 / rs + 1.0 / (screening * r)) / r
+    inv_r = 1.0 / r
+    inv_s = 1.0 / screening  # loop-invariant: hoisted out of the pair loop
+    f = zz * exp_nonpositive(-r * inv_s) * (inv_r * inv_r + inv_s * inv_r) * inv_r
     return 0.0 if zero else f
 
 

@@ -54,10 +54,12 @@ multiple of ``PAD``; the cell's moments are read once). When the target's rod pa
 in an accepted cell, its exact pair force is subtracted (the multipole included
 it). ``theta = 0`` accepts no cell and gives the direct sum.
 
-Measured on one core of the project's machine, the accepted-cell loop costs
+Measured on one core of an AVX-512 machine, the accepted-cell loop costs
 about 2 ns per cell and target with octupoles, the near loop about 0.6 ns per
-tip pair, as the direct sum; at the defaults and 1e5 rods the near part is the
-larger (3100 near tips against 460 accepted cells per target). Accuracy and
+tip pair, as the direct sum (about 1.7 ns on an AVX2 Zen 3 core, bound by the
+square root and division of each pair); at the defaults and 1e5 rods the near
+part is the larger (3100 near tips against 460 accepted cells per target; at
+6000 rods in the Fig. 2 scene 1980 against 150, about 80 % of the evaluation). Accuracy and
 speed against the direct sum: tools/bench_tree.py, docs/performance.md.
 
 Limits: coordinates must be finite (the front end raises on NaN or inf);
@@ -96,9 +98,10 @@ LEAF_SIZE = 64
 GROUP_SIZE = 128
 ORDER = 3
 THETA = 0.4
-#: far-field targets are padded to a multiple of this (the vector width of
-#: AVX-512 doubles); measured at 1e5 rods: 1.13 to 1.28 times faster than no
-#: padding, padding to 16 or 32 gained less (1.08) or lost (0.88)
+#: far-field targets are padded to a multiple of this (one AVX-512 vector of
+#: doubles, two AVX2 vectors: whole vectors on both); measured at 1e5 rods on an
+#: AVX-512 machine: 1.13 to 1.28 times faster than no padding, padding to 16 or 32
+#: gained less (1.08) or lost (0.88)
 PAD = 8
 
 

@@ -1,0 +1,185 @@
+"""Kernel benchmark: the hot kernels of a step, one at a time, per instruction set.
+
+Usage: python tools/bench_kernels.py [--rods 1200 6000 24000] [--repeat 7] [--threads 1]
+                                     [--targets host haswell znver3] [--json OUT.json]
+
+On the tips of the Fig. 2 scene scaled to each size (as tools/bench_step.py), it times, each
+``--repeat`` times (median [min-max] ms per call), on ``--threads`` numba threads:
+
+- ``direct``: the tip-tip direct sum (all rows), also as tip pairs per second per thread;
+- ``plain``: the same all-pairs loop reduced to a bare Coulomb law (``q_k q_l d / r^3``, no
+  soft core, no same-rod select), a reference for what the CPU does with one sqrt and one
+  division per pair (up to 6000 rods);
+- ``tree build`` and ``tree eval``: the tip tree (kernels/tree.py) at its defaults;
+- ``yukawa``: the screened rod-centre sum over the scene's neighbour list.
+
+``--cpu-time`` times by the process's CPU time instead of the wall clock: on a shared machine
+under load it counts only the cycles the kernel got (with one thread).
+
+``--targets`` runs the timings once per instruction set, each in a fresh process with
+``NUMBA_CPU_NAME`` set (``host`` leaves it unset: numba compiles for the CPU it runs on), so
+that one table shows what an AVX2 machine gets (``haswell``, ``znver3``) beside the host
+build; on an AVX-512 host, ``haswell`` is the AVX2 build. Each process prints the CPU and the
+target it compiled for.
+"""
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tools"))
+
+
+def _plain():
+    import numba
+
+    from selfas_graph.kernels._jit import _SUM_FLAGS, prange
+
+    # the package's flags, but not cached: a cache entry of a function defined in a tool loaded
+    # under another module name cannot be loaded back
+    @numba.njit(parallel=True, fastmath=_SUM_FLAGS, cache=False)
+    def plain_coulomb(x, y, z, q, out):
+        n = x.shape[0]
+        for k in prange(n):
+            fx = 0.0
+            fy = 0.0
+            fz = 0.0
+            for l in range(n):
+                dx = x[k] - x[l]
+                dy = y[k] - y[l]
+                dz = z[k] - z[l]
+                r2 = dx * dx + dy * dy + dz * dz + 1e-300
+                ir = 1.0 / np.sqrt(r2)
+                g = q[k] * q[l] * ir * ir * ir
+                fx += g * dx
+                fy += g * dy
+                fz += g * dz
+            out[k, 0] = fx
+            out[k, 1] = fy
+            out[k, 2] = fz
+
+    return plain_coulomb
+
+
+def timed(fn, repeat, clock=time.perf_counter):
+    fn()  # compile / warm
+    t = []
+    for _ in range(repeat):
+        t0 = clock()
+        fn()
+        t.append(1e3 * (clock() - t0))
+    return t
+
+
+def run(args):
+    import numba
+    from bench_peer import machine, machine_line
+    from bench_step import scene
+
+    from selfas_graph import Simulation
+    from selfas_graph.kernels import pairs as kp
+    from selfas_graph.kernels import tree as ktree
+    from selfas_graph.kernels.tips import tip_tip_direct
+
+    numba.set_num_threads(args.threads)
+    plain = _plain()
+    clock = time.process_time if args.cpu_time else time.perf_counter
+    out_rows = []
+    for n in args.rods:
+        sc = scene(str(ROOT / "scenarios" / "fig2.toml"), n)
+        sim = Simulation.from_scenario(sc)
+        st = sim.state
+        x, y, z = (np.ascontiguousarray(st.position[:, d]) for d in range(3))
+        q = st.tip_charge
+        p = sim.params
+        rstar, kappa = p.rods.rstar, p.rods.tip_stiffness
+        f = np.empty((x.shape[0], 3))
+        res = {"rods": n}
+        tips = x.shape[0]
+        if n <= args.direct_max:
+            rep = args.repeat if n <= 6000 else max(2, args.repeat // 3)
+            res["direct"] = timed(lambda: tip_tip_direct(x, y, z, q, rstar, kappa, 0, tips, f), rep, clock)
+            res["plain"] = timed(lambda: plain(x, y, z, q, f), rep, clock)
+        res["tree build"] = timed(lambda: ktree.build_tip_tree(x, y, z, q), args.repeat, clock)
+        tree = ktree.build_tip_tree(x, y, z, q)
+        res["tree eval"] = timed(lambda: ktree.evaluate_tip_tree(tree, rstar, kappa, ktree.THETA, f), args.repeat, clock)
+        ff = sim.force_field
+        ff._bind(st.position, st.velocity)
+        yk = next(t for t in ff.terms if t.name == "yukawa")
+        nl = ff.centre_neighbours()
+        c = ff.centre()
+        fy = np.empty((n, 3))
+        res["yukawa"] = timed(lambda: kp.yukawa_centres(c, st.rod_charge, nl.start, nl.index, yk.screening, yk.core,
+                                                         yk.cutoff, 0, n, fy), args.repeat, clock)
+        res["yukawa_pairs"] = int(nl.start[-1])
+        out_rows.append(res)
+    return {"machine": machine(), "line": machine_line(), "threads": args.threads, "rows": out_rows}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rods", type=int, nargs="+", default=[1200, 6000, 24000])
+    ap.add_argument("--repeat", type=int, default=7)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--cpu-time", action="store_true",
+                    help="time by the process's CPU time, not the wall clock: on a busy shared machine "
+                         "this counts only the cycles the kernel got (use with --threads 1)")
+    ap.add_argument("--direct-max", type=int, default=6000, help="time the direct sums up to this many rods")
+    ap.add_argument("--targets", nargs="+", default=["host"], help="host, or NUMBA_CPU_NAME values (haswell, znver3)")
+    ap.add_argument("--json", help="write all results to this file")
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.child:
+        print(json.dumps(run(args)))
+        return
+    results = {}
+    for target in args.targets:
+        env = dict(os.environ)
+        env.pop("NUMBA_CPU_NAME", None)
+        env.pop("NUMBA_CPU_FEATURES", None)
+        if target != "host":
+            env["NUMBA_CPU_NAME"] = target
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "--rods", *map(str, args.rods),
+               "--repeat", str(args.repeat), "--threads", str(args.threads), "--direct-max", str(args.direct_max)]
+        cmd += ["--cpu-time"] if args.cpu_time else []
+        got = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        if got.returncode:
+            print(f"{target}: failed, left out of the table:\n{got.stderr}", file=sys.stderr, flush=True)
+            continue
+        results[target] = json.loads(got.stdout.strip().splitlines()[-1])
+        print(f"{target}: {results[target]['line']}", flush=True)
+        if args.json:  # after every target, so that a failure later keeps the figures
+            Path(args.json).write_text(json.dumps(results, indent=1))
+    args.targets = [t for t in args.targets if t in results]
+    print(f"\n{'CPU' if args.cpu_time else 'wall'} ms per call on {args.threads} thread(s), median [min-max] of {args.repeat}; "
+          "direct and plain also in 1e9 tip pairs/s/thread (median)")
+    kernels = ["direct", "plain", "tree build", "tree eval", "yukawa"]
+    print("| rods | kernel | " + " | ".join(args.targets) + " |")
+    print("|---|---|" + "---|" * len(args.targets))
+    for i, n in enumerate(args.rods):
+        for k in kernels:
+            cells = []
+            for target in args.targets:
+                row = results[target]["rows"][i]
+                if k not in row:
+                    cells.append("")
+                    continue
+                v = np.array(row[k])
+                cell = f"{np.median(v):.3g} [{v.min():.3g}-{v.max():.3g}]"
+                if k in ("direct", "plain"):
+                    cell += f" ({(2 * n) ** 2 / (np.median(v) * 1e-3) / args.threads / 1e9:.2f}e9)"
+                if k == "yukawa":
+                    cell += f" ({np.median(v) * 1e6 / row['yukawa_pairs']:.1f} ns/pair)"
+                cells.append(cell)
+            print(f"| {n} | {k} | " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()

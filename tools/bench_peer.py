@@ -1,0 +1,140 @@
+"""What the benchmarks in tools/ print beside their figures: the machine, the instruction set numba
+compiled for, and a peer code timed on the same rods in the same run.
+
+``machine()`` names the CPU model (``/proc/cpuinfo``), the CPU numba compiles for (``NUMBA_CPU_NAME``
+when set, else LLVM's name of the host CPU) and its vector features: a kernel compiled for
+``haswell`` or ``znver3`` uses AVX2 at most, one compiled on an AVX-512 host for the host uses
+AVX-512.
+
+``OpenMMPeer`` is the peer of the step benchmarks: OpenMM's CPU platform (the optional ``bench``
+extra, ``pip install -e ".[bench]"``) on the same tips as the simulation, each rod two particles of
+charge +q and -q held at the rod length by a constraint, their own pair excluded, Coulomb by PME
+with a real-space cut-off ``cutoff`` (6 rod lengths, taken as nm) at Ewald error tolerance 1e-4, in
+a periodic box around the rods (at least twice the cut-off on every side), Verlet steps. It times
+the same number of tip pairs' electrostatics as the tip-tip term of a step plus a constraint
+solve; it does not know the screened rod charges, the brakes or the circuit, which the
+simulation's step carries on top. Without OpenMM, ``OpenMMPeer.available()`` is False and
+``missing()`` says how to install it.
+"""
+import os
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+#: real-space cut-off of the peer's PME, in rod lengths
+PEER_CUTOFF = 6.0
+#: the peer's Ewald error tolerance
+PEER_TOLERANCE = 1e-4
+
+
+def cpu_model() -> str:
+    """The CPU model name from /proc/cpuinfo (or what the platform module says)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def numba_target() -> dict:
+    """The CPU numba compiles for and its vector features (from numba's own code generator)."""
+    import llvmlite.binding as ll
+    import numba
+
+    name = numba.config.CPU_NAME or ll.get_host_cpu_name()
+    if numba.config.CPU_FEATURES is not None:
+        feats = numba.config.CPU_FEATURES.split(",")
+    elif numba.config.CPU_NAME:
+        feats = []  # the named CPU's own features: LLVM knows them from the name
+    else:
+        feats = [("+" if on else "-") + k for k, on in ll.get_host_cpu_features().items()]
+    vector = sorted(f[1:] for f in feats if f.startswith("+") and (f[1:].startswith(("avx", "fma", "sse4"))))
+    if not feats:
+        vector = ["(all of " + name + ")"]
+    widest = ("AVX-512" if any(v.startswith("avx512") for v in vector) else
+              "AVX2" if "avx2" in vector else "AVX" if "avx" in vector else "SSE")
+    if not feats:
+        widest = {"haswell": "AVX2", "broadwell": "AVX2", "skylake": "AVX2", "znver1": "AVX2", "znver2": "AVX2",
+                  "znver3": "AVX2", "znver4": "AVX-512", "skylake-avx512": "AVX-512", "icelake-server": "AVX-512",
+                  "sapphirerapids": "AVX-512", "x86-64": "SSE2"}.get(name, "as " + name)
+    return {"cpu_name": name, "set_by": "NUMBA_CPU_NAME" if numba.config.CPU_NAME else "host",
+            "widest": widest, "vector_features": vector, "numba": numba.__version__}
+
+
+def machine() -> dict:
+    """CPU model, core count and the numba target, for the header of a benchmark's output."""
+    return {"cpu_model": cpu_model(), "cores": os.cpu_count(), **numba_target()}
+
+
+def machine_line() -> str:
+    m = machine()
+    return (f"CPU: {m['cpu_model']} ({m['cores']} cores); numba {m['numba']} compiles for {m['cpu_name']} "
+            f"({m['set_by']}; widest vectors {m['widest']}: {' '.join(m['vector_features'])})")
+
+
+class OpenMMPeer:
+    """OpenMM CPU platform on the given tips (module docstring); ``ms_per_step(steps)`` times steps."""
+
+    @staticmethod
+    def available() -> bool:
+        try:
+            import openmm  # noqa: F401
+        except ImportError:
+            return False
+        return True
+
+    @staticmethod
+    def missing() -> str:
+        return ("peer skipped: OpenMM is not installed (pip install -e \".[bench]\" or pip install openmm); "
+                "no ratio to it is printed")
+
+    def __init__(self, position, tip_charge, threads, cutoff=PEER_CUTOFF, tolerance=PEER_TOLERANCE, dt=1e-4):
+        import openmm
+        from openmm import unit
+
+        self.version = openmm.Platform.getOpenMMVersion()
+        pos = np.asarray(position, dtype=np.float64)
+        lo, hi = pos.min(axis=0), pos.max(axis=0)
+        side = np.maximum(hi - lo + 1.0, 2.0 * cutoff + 1e-6)  # PME needs the cut-off below half a side
+        shifted = pos - lo + 0.5 * (side - (hi - lo))
+        n = pos.shape[0]
+        system = openmm.System()
+        system.setDefaultPeriodicBoxVectors(openmm.Vec3(side[0], 0, 0), openmm.Vec3(0, side[1], 0),
+                                            openmm.Vec3(0, 0, side[2]))
+        nb = openmm.NonbondedForce()
+        nb.setNonbondedMethod(openmm.NonbondedForce.PME)
+        nb.setCutoffDistance(cutoff)
+        nb.setEwaldErrorTolerance(tolerance)
+        nb.setUseDispersionCorrection(False)
+        for k in range(n):
+            system.addParticle(10.0)
+            nb.addParticle(float(tip_charge[k]), 1.0, 0.0)
+        for i in range(n // 2):
+            length = float(np.linalg.norm(pos[2 * i + 1] - pos[2 * i]))
+            system.addConstraint(2 * i, 2 * i + 1, length)
+            nb.addException(2 * i, 2 * i + 1, 0.0, 1.0, 0.0)
+        system.addForce(nb)
+        self.integrator = openmm.VerletIntegrator(dt)
+        platform_ = openmm.Platform.getPlatformByName("CPU")
+        self.context = openmm.Context(system, self.integrator, platform_, {"Threads": str(int(threads))})
+        self.context.setPositions(shifted * unit.nanometer)
+        self.label = f"OpenMM {self.version} CPU, {threads} thread(s), PME rc = {cutoff:g}, tolerance {tolerance:g}"
+        self.integrator.step(3)  # setup: neighbour grid, PME plans
+
+    def ms_per_step(self, steps):
+        """Wall-clock and process CPU ms per step over ``steps`` steps."""
+        c0 = time.process_time()
+        t0 = time.perf_counter()
+        self.integrator.step(int(steps))
+        self.context.getState(getEnergy=False)  # waits for the platform to finish
+        return 1e3 * (time.perf_counter() - t0) / steps, 1e3 * (time.process_time() - c0) / steps
+
+
+def summary(values):
+    """``median [min-max]`` of a list of figures, and the median."""
+    v = np.asarray(values, dtype=float)
+    return float(np.median(v)), f"{np.median(v):.3g} [{v.min():.3g}-{v.max():.3g}]"
