@@ -60,7 +60,8 @@ def test_the_shipped_case_i_scenes_with_a_plasma_filament_are_the_expected_ones(
 @pytest.mark.parametrize("name", CASE_I_PLASMA)
 def test_plasma_current_is_parallel_to_the_current_of_a_spanning_chain(name):
     params = load_scenario(SCENARIOS / name).params
-    sim = Simulation(params, state=spanning_chain(params))
+    chain = spanning_chain(params)
+    sim = Simulation(params.replace(rods={"count": chain.n_rods}), state=chain)
     assert sim.graph.has_short_circuit and sim.solution is not None
     current = sim.solution.current
     # every rod of a series chain carries one current, from the anode (top) to the cathode:
