@@ -88,7 +88,31 @@ def _flat(d, prefix=""):
 def parameter_differences(stored: dict, wanted: dict) -> list[str]:
     """Dotted keys whose values differ between two parameter dicts, except :data:`FREE_PARAMETERS`."""
     a, b = _flat(json.loads(json.dumps(stored))), _flat(json.loads(json.dumps(wanted)))
-    return sorted(k for k in set(a) | set(b) if k not in FREE_PARAMETERS and a.get(k) != b.get(k))
+    return sorted(k for k in set(a) | set(b)
+                  if k not in FREE_PARAMETERS and a.get(k) != b.get(k) and not _newer_key_at_default(k, a, b))
+
+
+def _newer_key_at_default(key, stored_flat, wanted_flat) -> bool:
+    """True for a key that a file of an earlier version lacks (the key came later) while the
+    wanted value is that key's default: the run used what the default means. A key of a force
+    term counts only where the stored file has that term on (an absent term is off)."""
+    if key in stored_flat or key not in wanted_flat:
+        return False
+    if key.startswith("forces."):
+        term = ".".join(key.split(".")[:2]) + "."
+        if not any(k.startswith(term) for k in stored_flat):
+            return False
+    return _DEFAULTS_FLAT().get(key, _MISSING) == wanted_flat[key]
+
+
+_MISSING = object()
+
+
+@functools.lru_cache(maxsize=1)
+def _DEFAULTS_FLAT():
+    from .model.params import Parameters
+
+    return _flat(json.loads(json.dumps(Parameters().to_dict())))
 
 
 @dataclasses.dataclass
@@ -421,19 +445,24 @@ class Ensemble:
         return shlex.join(args + ["--t-end", repr(self.t_end), "-o", str(seed_path(self.folder, seed))])
 
     # ------------------------------------------------------------------ planning
-    def plan(self) -> list[SeedPlan]:
+    def plan(self, summary_only=False) -> list[SeedPlan]:
         """What :meth:`run` would do with each seed, from the files in the folder (nothing is written).
+
+        With ``summary_only`` (nothing will run) an incomplete seed file without a usable
+        checkpoint (one still being written, say) is planned as "partial": summarised up to
+        its last frame.
 
         Raises
         ------
         EnsembleError
             A seed file that belongs to other parameters, is not a run file, or is
-            incomplete without a checkpoint (unless ``force``), listing every such seed.
+            incomplete without a checkpoint (unless ``force`` or ``summary_only``), listing
+            every such seed.
         """
         plans, problems = [], []
         for s in self.seeds:
             try:
-                plans.append(self._plan_seed(s))
+                plans.append(self._plan_seed(s, summary_only))
             except EnsembleError as exc:
                 problems.append(str(exc))
         if problems:
@@ -441,7 +470,7 @@ class Ensemble:
             raise EnsembleError("seed files that cannot be used:\n  " + "\n  ".join(problems) + hint)
         return plans
 
-    def _plan_seed(self, seed) -> SeedPlan:
+    def _plan_seed(self, seed, summary_only=False) -> SeedPlan:
         path = seed_path(self.folder, seed)
         ckpt = checkpoint_path(path)
         if not path.exists():
@@ -480,6 +509,8 @@ class Ensemble:
         if usable:
             return SeedPlan(seed, path, "resume", f"{status} at t = {t_last:.6g}; checkpoint at t = "
                                                   f"{float(snap['time']):.6g}")
+        if summary_only:
+            return SeedPlan(seed, path, "partial", f"{status} at t = {t_last:.6g}")
         if self.force:
             return SeedPlan(seed, path, "run", f"replacing: {status} at t = {t_last:.6g}, no usable checkpoint")
         raise EnsembleError(f"{path} is {status} at t = {t_last:.6g} (end time {self.t_end:g}) and has no usable "

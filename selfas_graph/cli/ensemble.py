@@ -98,7 +98,7 @@ def _run(args, pool):
         folder = Path(args.output) if args.output else Path(f"{name_source}_ensemble")
         ens = Ensemble(args.scenario, args.seeds, folder, overrides=args.overrides, t_end=args.t_end,
                        first_seed=args.first_seed, force=args.force)
-        plans = ens.plan()
+        plans = ens.plan(summary_only=args.no_run)
     except EnsembleError as exc:
         raise CliError(str(exc)) from None
     if args.flux_radius is not None and not (math.isfinite(args.flux_radius) and args.flux_radius > 0):
@@ -106,7 +106,7 @@ def _run(args, pool):
     times = args.times
     if times is not None and max(times) > ens.t_end:
         raise CliError(f"--times {max(times):g} is after the end time {ens.t_end:g}; give times up to it")
-    count = {a: sum(p.action == a for p in plans) for a in ("run", "resume", "done", "failed")}
+    count = {a: sum(p.action == a for p in plans) for a in ("run", "resume", "done", "failed", "partial")}
     if pool.mpi:
         where = f"{pool.workers} MPI worker ranks"
     elif pool.serial:
@@ -118,6 +118,7 @@ def _run(args, pool):
     p = ens.base.params
     print(f"{p.scenario.name}: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {ens.t_end:g} in {folder}/: "
           f"{count['run']} to run, {count['resume']} to resume, {count['done']} done, {count['failed']} failed"
+          + (f", {count['partial']} partial (summarised to their last frame)" if count["partial"] else "")
           + ("" if args.no_run else f"; on {where}"), flush=True)
     for plan in plans:
         if plan.action == "failed":
