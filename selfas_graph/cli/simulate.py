@@ -17,6 +17,7 @@ import shlex
 import signal
 import sys
 import time
+import uuid
 from pathlib import Path
 
 import numpy as np
@@ -146,41 +147,79 @@ class _StopFlag:
             signal.signal(sig, handler)
 
 
-def _load_resume(args):
-    """(scenario, snapshot, run file, checkpoint file) of a run to continue."""
-    if args.scenario or args.overrides:
-        raise CliError("--resume continues a run exactly: give no SCENARIO and no --set (only --t-end may change)")
+def _resume_paths(args):
+    """(checkpoint to read, run file to continue) named by ``--resume`` (and ``-o``).
+
+    ``--resume X.h5`` continues X.h5 from the checkpoint beside it, X.checkpoint.h5;
+    ``--resume X.checkpoint.h5`` continues the run file beside it that the checkpoint
+    names. Both are found relative to the path given, wherever the folder now is:
+    nothing is written to a path the user did not name or that does not sit beside it.
+    """
     src = Path(args.resume)
     if src.name in ("", ".", "..") or src.is_dir():
         raise CliError(f"--resume {args.resume}: give a run file (RUN.h5) or its checkpoint (RUN.checkpoint.h5), "
                        f"not a folder")
-    ckpt = src if src.name.endswith(".checkpoint.h5") else checkpoint_path(src)
+    if src.name.endswith(".checkpoint.h5"):
+        return src, None
+    return checkpoint_path(src), src
+
+
+def _load_resume(args):
+    """(scenario, snapshot, run file, checkpoint file read, run identity) of a run to continue."""
+    if args.scenario or args.overrides:
+        raise CliError("--resume continues a run exactly: give no SCENARIO and no --set (only --t-end may change)")
+    ckpt, out = _resume_paths(args)
     try:
         snap, meta = read_checkpoint(ckpt)
     except CheckpointError as exc:
         raise CliError(f"cannot resume: {exc}") from None
-    try:
-        scenario = scenario_from_text(meta["scenario_text"], overrides=json.loads(meta["overrides"]), t_end=args.t_end)
-    except ScenarioError as exc:
-        raise CliError(f"cannot resume: the checkpoint's scenario no longer validates: {exc}") from None
-    out = Path(args.output) if args.output else Path(meta["run_file"])
+    if out is None:
+        name = str(meta.get("run_name") or ckpt.name[:-len(".checkpoint.h5")] + ".h5")
+        if Path(name).name != name or name in (".", ".."):
+            raise CliError(f"cannot resume: {ckpt} names its run file {name!r}, which is not a file name")
+        out = ckpt.with_name(name)
+    if args.output:
+        out = Path(args.output)
     _check_output_name(out)
+    # the effective end time of the run (a --t-end given when it started) unless a new one is given
+    t_end = args.t_end
+    if t_end is None and "t_end" in meta:
+        t_end = float(meta["t_end"])
+    try:
+        scenario = scenario_from_text(meta["scenario_text"], overrides=json.loads(meta["overrides"]), t_end=t_end)
+    except (ScenarioError, ValueError, TypeError) as exc:
+        raise CliError(f"cannot resume: the checkpoint's scenario no longer validates: {exc}") from None
     if args.t_end is not None and args.t_end < float(snap["time"]):
         raise CliError(f"--t-end (run.t_end) {args.t_end:g} is before the checkpoint's time {float(snap['time']):.6g}; "
                        f"give a later end time")
+    if not out.exists():
+        raise CliError(f"cannot resume: the run file {out} of checkpoint {ckpt} does not exist "
+                       f"(give the run file with -o)")
     # the run file must be this run's, checked read-only before anything in it is changed
     try:
         with RunFile(out) as run_file:
             n_tips = run_file.f["particles/tips/position/value"].shape[1]
             same = n_tips == np.asarray(snap["position"]).shape[0] and run_file.scenario_text == meta["scenario_text"]
             steps = run_file.step
+            run_id = run_file.meta.get("run_id")
     except RunFileError as exc:
         raise CliError(f"cannot resume into {out}: {exc}") from None
+    if not run_id or run_id != meta.get("run_id"):
+        raise CliError(f"cannot resume: the checkpoint {ckpt} belongs to another run than the run file {out} "
+                       f"(run identity {meta.get('run_id') or 'none'} in the checkpoint, {run_id or 'none'} in the "
+                       f"run file); give the run file's own checkpoint")
     if not same:
         raise CliError(f"cannot resume: {out} is not the run of checkpoint {ckpt} (different scenario or rod count)")
     if not len(steps) or steps[0] > int(snap["step"]):
         raise CliError(f"cannot resume: {out} has no frame at or before the checkpoint's step {int(snap['step'])}")
-    return scenario, snap, out, ckpt
+    return scenario, snap, out, ckpt, str(run_id)
+
+
+def _same_file(a, b) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 def _check_output_name(out: Path):
@@ -224,8 +263,18 @@ def _prepare(args):
     """(scenario, snapshot or None, output path, checkpoint path), every input and file checked."""
     snap = None
     if args.resume:
-        scenario, snap, out, ckpt = _load_resume(args)
+        scenario, snap, out, read_from, run_id = _load_resume(args)
+        ckpt = checkpoint_path(out)  # new checkpoints go beside the run file continued
+        if ckpt.exists() and not _same_file(ckpt, read_from):
+            try:
+                other = read_checkpoint(ckpt)[1].get("run_id")
+            except CheckpointError:
+                other = None
+            if other != run_id:
+                raise CliError(f"cannot resume into {out}: the file {ckpt} beside it, where its checkpoints go, "
+                               f"is not a checkpoint of this run; move it away first")
     else:
+        run_id = uuid.uuid4().hex
         if not args.scenario:
             raise CliError("give a SCENARIO file, or --resume RUN.h5 to continue a run")
         try:
@@ -238,10 +287,7 @@ def _prepare(args):
         if not args.dry_run and ckpt.exists() and not args.force:
             raise CliError(f"checkpoint file {ckpt} exists (from an earlier run?); pass --force to overwrite it, "
                            f"or --resume {out} to continue that run")
-    if snap is not None:
-        if not out.exists():
-            raise CliError(f"cannot resume: the run file {out} does not exist (give it with -o)")
-    elif not args.dry_run:
+    if snap is None and not args.dry_run:
         if out.exists() and not args.force:
             raise CliError(f"output file {out} exists; pass --force to overwrite it or -o to choose another name")
         if out.exists() and out.is_dir():
@@ -251,11 +297,11 @@ def _prepare(args):
             raise CliError(f"the folder {parent} of the output file does not exist")
         if not os.access(parent, os.W_OK):
             raise CliError(f"the folder {parent} of the output file is not writable")
-    return scenario, snap, out, ckpt
+    return scenario, snap, out, ckpt, run_id
 
 
 def run(args):
-    scenario, snap, out, ckpt = _on_root(lambda: _prepare(args))
+    scenario, snap, out, ckpt, run_id = _on_root(lambda: _prepare(args))
     p = scenario.params
     try:
         sim = (Simulation.from_scenario(scenario, comm=world) if snap is None
@@ -304,6 +350,7 @@ def run(args):
             "seed": p.scenario.seed,
             "mpi_ranks": world.size,
             "numba_threads": numba.get_num_threads(),
+            "run_id": run_id,
         }
         try:
             return RunWriter(out, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
@@ -322,7 +369,8 @@ def run(args):
         checkpointer = Checkpointer(ckpt, p.output.checkpoint_interval, {
             "format_note": "selfas-graph checkpoint; continue with selfas-graph simulate --resume",
             "scenario_text": scenario.text, "overrides": json.dumps(list(scenario.overrides)),
-            "run_file": str(out.resolve()), "version": __version__})
+            "run_id": run_id, "run_name": out.name, "run_file": out.name, "t_end": float(p.run.t_end),
+            "version": __version__})
     mode = args.progress
     if mode == "auto":
         mode = "bar" if sys.stderr.isatty() else "lines"
