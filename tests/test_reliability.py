@@ -195,3 +195,203 @@ def test_a_checkpoint_write_that_fails_leaves_no_tmp_and_keeps_the_previous(fini
         C.write_checkpoint(ckpt, snap, meta)
     assert ckpt.read_bytes() == before
     assert not ckpt.with_name(ckpt.name + ".tmp").exists()
+
+
+# ----------------------------------------------------------------------------- no NaN stored
+
+def _non_finite_datasets(path):
+    """Float datasets holding NaN or inf, except those where NaN means 'none' (floating potentials,
+    the resistance of an open circuit)."""
+    allowed = {"graph/potential", "graph/conductor_potential", "observables/effective_resistance/value"}
+    bad = []
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda n, o: bad.append(n) if isinstance(o, h5py.Dataset) and o.dtype.kind == "f"
+                     and n not in allowed and not np.isfinite(o[()]).all() else None)
+    return bad
+
+
+@pytest.mark.parametrize("override, key", [
+    ("rods.magnetic_charge.value=1e308", "rods.magnetic_charge.value"),
+    ("rods.electric_charge={distribution='constant', value=1e308}", "rods.electric_charge.value"),
+    ("forces.yukawa.core_radius=1e200", "forces.yukawa.core_radius"),
+    ("forces.yukawa.screening_length=5e-324", "forces.yukawa.screening_length"),
+    ("circuit.delta_J0=1e308", "circuit.delta_J0"),
+    ("forces.uniform_field.B=[0, 0, 1e308]", "forces.uniform_field.B"),
+    ("rods.tip_stiffness=1e308", "rods.tip_stiffness"),
+    ("scenario.seed=9223372036854775808", "scenario.seed"),
+    ("rods.count=" + "9" * 5000, "rods.count"),
+    ("placement.max_attempts=" + "9" * 400, "placement.max_attempts"),
+])
+def test_values_whose_derived_quantities_overflow_are_refused(scen, tmp_path, capsys, override, key):
+    """Each used to store NaN (frame 0), finish with a NaN energy balance, or end in a traceback."""
+    out = tmp_path / "run.h5"
+    code, _, err = simulate(capsys, scen, "-o", out, f"--set={override}")
+    assert code == 2 and key in err, err
+    assert not out.exists()
+
+
+def test_the_documented_seed_range_is_enforced(scen, tmp_path, capsys):
+    assert simulate(capsys, scen, "--dry-run", f"--set=scenario.seed={2**63 - 1}")[0] == 0
+    assert simulate(capsys, scen, "--dry-run", f"--set=scenario.seed={2**63}")[0] == 2
+
+
+def test_a_line_break_inside_set_is_refused(scen, capsys):
+    """``--set $'rods.count=5\\nrods.diameter=0.1'`` used to drop the second line silently."""
+    code, _, err = simulate(capsys, scen, "--dry-run", "--set=rods.count=5\nrods.diameter=0.1")
+    assert code == 2 and "line break" in err
+
+
+@pytest.mark.parametrize("override, term", [
+    ("rods.magnetic_charge.value=1e30", "tip_magnetic"),
+    ("rods.magnetic_charge.value=1e6", "tip_magnetic"),
+    ("forces.uniform_field.B=[0, 0, 1e10]", "uniform_field"),
+    ("rods.tip_stiffness=1e20", "electrodes"),
+])
+def test_absurd_magnitudes_stop_naming_the_term_and_store_no_nan(scen, tmp_path, capsys, override, term):
+    """Absurd charges or fields used to stop with a message blaming dt and naming an unrelated term."""
+    out = tmp_path / "run.h5"
+    code, _, err = simulate(capsys, scen, "-o", out, f"--set={override}")
+    assert code == 3, err
+    assert f"'{term}' term" in err and "out of scale" in err and "likely cause" not in err
+    assert _non_finite_datasets(out) == []
+
+
+def test_the_energy_check_treats_nan_as_a_failure(scen):
+    from selfas_graph.io.scenario import load_scenario
+    from selfas_graph.model.simulation import NumericalFailure, Simulation
+
+    sim = Simulation.from_scenario(load_scenario(scen))
+    obs = sim.observables()
+    obs["energy_balance"] = np.nan
+    with pytest.raises(NumericalFailure, match="non-finite"):
+        sim._check_energy(obs)
+    obs = sim.observables()
+    obs["energy/yukawa"] = np.inf
+    with pytest.raises(NumericalFailure, match="'yukawa' term is out of scale"):
+        sim._check_energy(obs)
+
+
+def test_frame_0_is_checked_before_it_is_written(scen, tmp_path, capsys, monkeypatch):
+    """A NaN energy at the start used to be written as frame 0 before the run stopped."""
+    from selfas_graph.model.forces import ForceField
+
+    real = ForceField.potential_energy
+
+    def nan_energy(self, position):
+        e = real(self, position)
+        e["yukawa"] = np.nan
+        return e
+
+    monkeypatch.setattr(ForceField, "potential_energy", nan_energy)
+    out = tmp_path / "run.h5"
+    code, _, err = simulate(capsys, scen, "-o", out)
+    assert code == 3 and "'yukawa' term" in err
+    with h5py.File(out, "r") as f:
+        assert f["particles/tips/position/value"].shape[0] == 0
+    assert _non_finite_datasets(out) == []
+
+
+# ----------------------------------------------------------------------------- output paths
+
+def test_plot_onto_its_own_run_file_is_refused(finished, capsys):
+    """``plot run.h5 -o run.h5 --force`` used to replace the run file with a PNG."""
+    pytest.importorskip("matplotlib")
+    before = finished.read_bytes()
+    code, _, err = cli(capsys, "plot", finished, "--kind", "density", "-o", finished, "--force")
+    assert code == 2 and "input" in err
+    assert finished.read_bytes() == before
+
+
+def test_simulate_onto_its_own_scenario_is_refused(scen, capsys):
+    before = scen.read_bytes()
+    code, _, err = simulate(capsys, scen, "-o", scen, "--force")
+    assert code == 2 and "input" in err
+    assert scen.read_bytes() == before
+
+
+@pytest.mark.parametrize("command", ["simulate", "plot"])
+def test_non_regular_targets_are_refused(finished, scen, capsys, command):
+    """``-o /dev/null --force`` used to exit 0 and create /dev/null.checkpoint.h5."""
+    pytest.importorskip("matplotlib")
+    argv = (["simulate", "--progress", "none", scen] if command == "simulate"
+            else ["plot", finished, "--kind", "density"])
+    code, _, err = cli(capsys, *argv, "-o", "/dev/null", "--force")
+    assert code == 2 and "not a regular file" in err
+    import os
+
+    assert not os.path.exists("/dev/null.checkpoint.h5")
+
+
+@pytest.mark.parametrize("command", ["simulate", "plot"])
+def test_an_over_long_output_name_is_exit_2(finished, scen, tmp_path, capsys, command):
+    pytest.importorskip("matplotlib")
+    long = tmp_path / ("x" * 300 + ".h5")
+    argv = (["simulate", "--progress", "none", scen] if command == "simulate"
+            else ["plot", finished, "--kind", "density"])
+    code, _, err = cli(capsys, *argv, "-o", long)
+    assert code == 2 and "too long" in err
+
+
+@pytest.mark.parametrize("option", [["--bins", "1000000000"], ["--bins", "0"], ["--n-phi", "1000000000"],
+                                    ["--planes"] + ["0"] * 1000])
+def test_size_like_plot_options_are_bounded(finished, tmp_path, capsys, option):
+    """``plot --kind density --bins 1000000000`` used to run for minutes."""
+    pytest.importorskip("matplotlib")
+    code, _, err = cli(capsys, "plot", finished, "--kind", "field", "-o", tmp_path / "x.png", *option)
+    assert code == 2 and option[0] in err
+
+
+@pytest.mark.parametrize("damage", ["parameters_json", "string_time"])
+@pytest.mark.parametrize("command", ["plot", "topology"])
+def test_damaged_run_files_to_plot_and_topology(finished, tmp_path, capsys, damage, command):
+    pytest.importorskip("matplotlib")
+    with h5py.File(finished, "r+") as f:
+        if damage == "parameters_json":
+            f["parameters/selfas_graph"].attrs["parameters_json"] = "not json {"
+        else:
+            n = f["particles/tips/position/time"].shape[0]
+            del f["particles/tips/position/time"]
+            f["particles/tips/position/time"] = np.array([b"t"] * n)
+    argv = ["plot", finished, "--kind", "density", "-o", tmp_path / "x.png"] if command == "plot" else ["topology", finished]
+    code, _, err = cli(capsys, *argv)
+    assert code in ((0, 2) if (command, damage) == ("topology", "parameters_json") else (2,)), err
+    if code == 2:
+        assert str(finished) in err
+
+
+@pytest.mark.parametrize("damage", ["not_chunked", "events_not_compound", "steps_as_floats"])
+def test_resume_into_a_run_file_that_cannot_grow(finished, capsys, damage):
+    with h5py.File(finished, "r+") as f:
+        if damage == "not_chunked":
+            data = f["particles/tips/position/value"][()]
+            del f["particles/tips/position/value"]
+            f["particles/tips/position/value"] = data
+        elif damage == "events_not_compound":
+            del f["events"]
+            f.create_dataset("events", data=np.zeros(2), maxshape=(None,), chunks=(4,))
+        else:
+            data = f["observables/energy_total/step"][()]
+            del f["observables/energy_total/step"]
+            f.create_dataset("observables/energy_total/step", data=data.astype(float), maxshape=(None,), chunks=(4,))
+    before = finished.read_bytes()
+    code, _, err = simulate(capsys, "--resume", finished, "--t-end", "0.008")
+    assert code == 2 and "cannot be continued" in err
+    assert finished.read_bytes() == before
+
+
+def test_topology_on_a_file_a_simulation_holds_says_it_is_locked(finished, capsys):
+    import subprocess
+    import sys
+
+    holder = subprocess.Popen([sys.executable, "-c", "import h5py, sys, time; f = h5py.File(sys.argv[1], 'r+'); "
+                               "print('open', flush=True); time.sleep(60)", str(finished)],
+                              stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "open"
+        code, _, err = cli(capsys, "topology", finished)
+    finally:
+        holder.kill()
+        holder.wait()
+    if code == 0:
+        pytest.skip("HDF5 file locking is off here (HDF5_USE_FILE_LOCKING=FALSE or a file system without locks)")
+    assert code == 2 and "locked" in err and "not a readable HDF5 file" not in err

@@ -24,12 +24,13 @@ import numpy as np
 
 from .._version import __version__
 from ..io.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
-from ..io.h5md import NullWriter, RunFile, RunFileError, RunWriter
+from ..io.h5md import NullWriter, RunFile, RunFileError, RunWriter, appendable_problems
 from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
 from ..model.simulation import NumericalFailure, RunInterrupted, Simulation
 from ..model.state import PlacementError
 from ..parallel import fit_threads_to_cores, world
-from .main import EXIT_NUMERICAL, CliError
+from .main import EXIT_NUMERICAL, CliError, CliIOError
+from .paths import check_target
 
 
 def add_arguments(p):
@@ -202,8 +203,11 @@ def _load_resume(args):
             same = n_tips == np.asarray(snap["position"]).shape[0] and run_file.scenario_text == meta["scenario_text"]
             steps = run_file.step
             run_id = run_file.meta.get("run_id")
+            problems = appendable_problems(run_file.f)
     except RunFileError as exc:
         raise CliError(f"cannot resume into {out}: {exc}") from None
+    if problems:
+        raise CliError(f"cannot resume into {out}: it cannot be continued: {'; '.join(problems)}")
     if not run_id or run_id != meta.get("run_id"):
         raise CliError(f"cannot resume: the checkpoint {ckpt} belongs to another run than the run file {out} "
                        f"(run identity {meta.get('run_id') or 'none'} in the checkpoint, {run_id or 'none'} in the "
@@ -225,6 +229,8 @@ def _same_file(a, b) -> bool:
 def _check_output_name(out: Path):
     if "\x00" in str(out):
         raise CliError(f"the output path {str(out)!r} contains a NUL character")
+    if out.name not in ("", ".", ".."):
+        check_target(out, "output file", force=True)  # over-long names, devices
     if out.name in ("", ".", "..") or out.is_dir():
         raise CliError(f"the output path {out} names a folder, not a file; give a file name such as run.h5")
 
@@ -265,6 +271,8 @@ def _prepare(args):
     if args.resume:
         scenario, snap, out, read_from, run_id = _load_resume(args)
         ckpt = checkpoint_path(out)  # new checkpoints go beside the run file continued
+        check_target(out, "run file", force=True)
+        check_target(ckpt, "checkpoint file", force=True)
         if ckpt.exists() and not _same_file(ckpt, read_from):
             try:
                 other = read_checkpoint(ckpt)[1].get("run_id")
@@ -284,6 +292,8 @@ def _prepare(args):
         out = Path(args.output) if args.output else scenario.output_path
         _check_output_name(out)
         ckpt = checkpoint_path(out)
+        check_target(out, "output file", force=True, inputs=[args.scenario])
+        check_target(ckpt, "checkpoint file", force=True, inputs=[args.scenario])
         if not args.dry_run and ckpt.exists() and not args.force:
             raise CliError(f"checkpoint file {ckpt} exists (from an earlier run?); pass --force to overwrite it, "
                            f"or --resume {out} to continue that run")

@@ -78,6 +78,66 @@ def _truncate(ds, n):
         ds.resize(n, axis=0)
 
 
+def _rows_up_to(steps, step, strict=True) -> int:
+    """How many leading rows of a step column belong to a run continued after ``step``.
+
+    The rows must be at most ``step`` and increasing (strictly for frames, non-decreasing for
+    events): a row torn by a kill (its size flushed, its data not: a zero or a stale step)
+    ends the kept rows even where a binary search would skip over it.
+    """
+    s = np.asarray(steps)
+    good = s <= step
+    if len(s) > 1:
+        d = np.diff(s)
+        good[1:] &= (d > 0) if strict else (d >= 0)
+    bad = np.flatnonzero(~good)
+    return int(bad[0]) if len(bad) else len(s)
+
+
+def appendable_problems(f) -> list:
+    """What keeps an open run file from being continued: datasets that cannot grow, wrong dtypes.
+
+    Checked read-only before :meth:`RunWriter.reopen` changes anything (an empty list: none).
+    """
+    problems = []
+
+    def check(name, kind=None, dtype=None):
+        ds = f.get(name)
+        if ds is None:
+            return
+        if not isinstance(ds, h5py.Dataset):
+            problems.append(f"{name} is not a dataset")
+        elif ds.chunks is None or ds.maxshape[0] is not None or ds.ndim < 1:
+            problems.append(f"{name} is not an appendable (chunked, unlimited) dataset")
+        elif dtype is not None and ds.dtype != dtype:
+            problems.append(f"{name} has dtype {ds.dtype}, expected {np.dtype(dtype)}")
+        elif kind is not None and ds.dtype.kind not in kind:
+            problems.append(f"{name} has dtype {ds.dtype}, expected {'integers' if kind == 'iu' else 'numbers'}")
+
+    for group in ("particles/tips/position", "particles/tips/velocity"):
+        check(f"{group}/step", "iu")
+        check(f"{group}/time", "f")
+        check(f"{group}/value", "f")
+    obs = f.get("observables")
+    if isinstance(obs, h5py.Group):
+        def visit(name, obj):
+            if isinstance(obj, h5py.Group) and "value" in obj:
+                check(f"observables/{name}/step", "iu")
+                check(f"observables/{name}/value", "f")
+                if name != "bond_error_per_step":
+                    check(f"observables/{name}/time", "f")
+        obs.visititems(visit)
+    check("events", dtype=EVENT_DTYPE)
+    g = f.get("graph")
+    if isinstance(g, h5py.Group):
+        for name in ("step", "tip_contacts_count", "conductor_contacts_count", "tip_contacts", "conductor_tip",
+                     "conductor_id", "role"):
+            check(f"graph/{name}", "iu")
+        for name in ("time", "current", "potential", "conductor_potential"):
+            check(f"graph/{name}", "f")
+    return problems
+
+
 class RunWriter:
     """Writes frames and observables of one run.
 
@@ -150,15 +210,20 @@ class RunWriter:
         if "particles/tips/position/step" not in f:
             f.close()
             raise RunFileError(f"{self.path}: not a selfas-graph run file")
+        problems = appendable_problems(f)
+        if problems:
+            f.close()
+            raise RunFileError(f"{self.path}: cannot be continued: {'; '.join(problems)}")
 
-        def keep(steps):
-            return int(np.searchsorted(steps[:], step, side="right"))
+        def keep(*columns, strict=True):
+            # rows of the frames up to `step`, no more than every column of the group holds
+            return min([_rows_up_to(columns[0][:], step, strict)] + [c.shape[0] for c in columns[1:]])
 
         self._elements = {}
         for name in ("position", "velocity"):
             if f"particles/tips/{name}" in f:
                 g = f[f"particles/tips/{name}"]
-                n = keep(g["step"])
+                n = keep(g["step"], g["time"], g["value"])
                 for ds in (g["step"], g["time"], g["value"]):
                     _truncate(ds, n)
                 self._elements[name] = (g["step"], g["time"], g["value"])
@@ -168,26 +233,31 @@ class RunWriter:
 
         def visit(name, obj):
             if isinstance(obj, h5py.Group) and "value" in obj and name != "bond_error_per_step":
-                n = keep(obj["step"])
+                n = keep(obj["step"], obj["time"], obj["value"])
                 for ds in obj.values():
                     _truncate(ds, n)
                 self._obs[name] = (obj["step"], obj["time"], obj["value"])
 
         self.observables.visititems(visit)
         g = self.observables["bond_error_per_step"]
-        n = keep(g["step"])
+        n = keep(g["step"], g["value"])
         _truncate(g["step"], n)
         _truncate(g["value"], n)
         self._per_step = (g["step"], g["value"])
         if "events" in f:
-            _truncate(f["events"], keep(f["events"]["step"]) if f["events"].shape[0] else 0)
+            _truncate(f["events"], keep(f["events"].fields("step"), strict=False) if f["events"].shape[0] else 0)
         self.events_written = f["events"].shape[0] if "events" in f else 0
         if "graph" in f:
             g = f["graph"]
-            n = keep(g["step"])
+            per_frame = ("step", "time", "tip_contacts_count", "conductor_contacts_count", "role", "current", "potential")
+            n = keep(*(g[name] for name in per_frame))
             m = int(g["tip_contacts_count"][:n].sum())
             k = int(g["conductor_contacts_count"][:n].sum())
-            for name in ("step", "time", "tip_contacts_count", "conductor_contacts_count", "role", "current", "potential"):
+            if g["tip_contacts"].shape[0] < m or min(g[name].shape[0] for name in
+                                                     ("conductor_tip", "conductor_id", "conductor_potential")) < k:
+                f.close()
+                raise RunFileError(f"{self.path}: the graph data up to step {step} are incomplete (damaged file)")
+            for name in per_frame:
                 _truncate(g[name], n)
             _truncate(g["tip_contacts"], m)
             for name in ("conductor_tip", "conductor_id", "conductor_potential"):
@@ -345,7 +415,9 @@ class RunFile:
         except OSError as exc:
             reason = " ".join(str(exc).split())  # h5py's messages can span lines
             if re.search(r"\block", reason.lower()) or "already open for write" in reason.lower():
-                reason += "; is a run still writing it? (set HDF5_USE_FILE_LOCKING=FALSE to read it anyway)"
+                raise RunFileError(f"{self.path}: locked by another process, most likely a simulation still "
+                                   f"writing it (HDF5 file locking: {reason}); wait for it to end, or set "
+                                   f"HDF5_USE_FILE_LOCKING=FALSE to read it anyway") from None
             raise RunFileError(f"{self.path}: not a readable HDF5 file ({reason})") from None
         required = ("parameters/selfas_graph", "particles/tips/position/value", "particles/tips/position/step",
                     "particles/tips/position/time", "particles/tips/charge", "particles/rods/charge", "observables")
@@ -359,6 +431,12 @@ class RunFile:
         if len(n) != 3 or n[2] != 3 or self.f["particles/tips/position/step"].shape[0] != n[0]:
             self.f.close()
             raise RunFileError(f"{self.path}: the positions are not laid out as (frames, tips, 3)")
+        kinds = {name: self.f[f"particles/tips/position/{name}"].dtype.kind for name in ("step", "time", "value")}
+        if kinds["step"] not in "iu" or kinds["time"] != "f" or kinds["value"] != "f":
+            self.f.close()
+            raise RunFileError(f"{self.path}: the positions' step, time and value datasets must hold integers, "
+                               f"numbers and numbers (found dtype kinds {kinds['step']}, {kinds['time']}, "
+                               f"{kinds['value']})")
 
     def __enter__(self):
         return self

@@ -70,7 +70,7 @@ class PlacementParams:
     min_tip_distance: Optional[float] = spec(
         None, "no two tips of different rods start closer than this (default 4 r*)", ge=0.0, le=100.0
     )
-    max_attempts: int = spec(2000, "random draws tried per rod before placement gives up", ge=1)
+    max_attempts: int = spec(2000, "random draws tried per rod before placement gives up", ge=1, le=10**9)
 
 
 @dataclass(frozen=True)
