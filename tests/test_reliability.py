@@ -395,3 +395,39 @@ def test_topology_on_a_file_a_simulation_holds_says_it_is_locked(finished, capsy
     if code == 0:
         pytest.skip("HDF5 file locking is off here (HDF5_USE_FILE_LOCKING=FALSE or a file system without locks)")
     assert code == 2 and "locked" in err and "not a readable HDF5 file" not in err
+
+
+# ----------------------------------------------------------------------------- early checkpoints, end time
+
+def test_a_run_killed_in_its_first_checkpoint_interval_resumes(scen, tmp_path, capsys):
+    """With checkpoint_interval = 900 s a kill in the first 15 minutes used to leave no checkpoint."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    scen.write_text(SCENE.replace("checkpoint_interval = 0", "checkpoint_interval = 900").replace(
+        "t_end = 0.004", "t_end = 50.0"))
+    out = tmp_path / "run.h5"
+    proc = subprocess.Popen([sys.executable, "-m", "selfas_graph.cli.main", "simulate", str(scen), "-o", str(out),
+                             "--progress", "none"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.time() + 120
+    while time.time() < deadline and proc.poll() is None and not checkpoint_path(out).exists():
+        time.sleep(0.05)
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert checkpoint_path(out).exists()
+    t = float(read_checkpoint(checkpoint_path(out))[0]["time"]) + 0.004
+    code, _, err = simulate(capsys, "--resume", out, "--t-end", f"{t}")
+    assert code == 0, err
+
+
+def test_a_plain_resume_continues_to_the_end_time_given_on_the_command_line(scen, tmp_path, capsys):
+    """``--t-end`` given on the command line used to be forgotten: a plain --resume ran on to run.t_end."""
+    scen.write_text(SCENE.replace("t_end = 0.004", "t_end = 1.0"))
+    out = tmp_path / "run.h5"
+    assert simulate(capsys, scen, "-o", out, "--t-end", "0.004")[0] == 0
+    assert read_checkpoint(checkpoint_path(out))[1]["t_end"] == 0.004
+    assert simulate(capsys, "--resume", out)[0] == 0
+    assert frame_times(out)[-1] == pytest.approx(0.004)

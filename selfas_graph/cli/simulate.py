@@ -97,7 +97,12 @@ class _Bar:
 
 
 class Checkpointer:
-    """Writes the simulation's snapshot to a checkpoint file every ``interval`` wall seconds (0: only on demand)."""
+    """Writes the simulation's snapshot to a checkpoint file after the first step, then every
+    ``interval`` wall seconds (0: only on demand).
+
+    The first one comes at once so that a run killed in its first interval (900 s by default)
+    can be resumed too.
+    """
 
     def __init__(self, path, interval, meta):
         self.path, self.interval, self.meta = Path(path), float(interval), meta
@@ -105,7 +110,7 @@ class Checkpointer:
         self.written = 0
 
     def due(self):
-        return self.interval > 0 and time.monotonic() - self.last >= self.interval
+        return self.interval > 0 and (self.written == 0 or time.monotonic() - self.last >= self.interval)
 
     def write(self, sim):
         write_checkpoint(self.path, sim.snapshot(), {**self.meta, "step": sim.state.step})

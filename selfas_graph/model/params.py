@@ -262,8 +262,8 @@ class OutputParams:
     file: Optional[str] = spec(None, "output HDF5 path (default: the scenario file name with .h5, in the working directory)")
     velocities: bool = spec(True, "save tip velocities with every frame")
     checkpoint_interval: float = spec(
-        900.0, "wall-clock seconds between checkpoints (RUN.checkpoint.h5); one is also written at the end and "
-        "on SIGTERM/SIGINT; 0 writes only those", ge=0.0)
+        900.0, "wall-clock seconds between checkpoints (RUN.checkpoint.h5), the first right after the first step; "
+        "one is also written at the end and on SIGTERM/SIGINT; 0 writes only those", ge=0.0)
 
 
 @dataclass(frozen=True)
