@@ -431,3 +431,103 @@ def test_a_plain_resume_continues_to_the_end_time_given_on_the_command_line(scen
     assert read_checkpoint(checkpoint_path(out))[1]["t_end"] == 0.004
     assert simulate(capsys, "--resume", out)[0] == 0
     assert frame_times(out)[-1] == pytest.approx(0.004)
+
+
+# ----------------------------------------------------------------------------- I/O errors
+
+BIG = SCENE.replace("count = 4", "count = 200").replace(
+    "box = [[-1.5, 1.5], [-1.5, 1.5], [-1.0, 1.0]]", "box = [[-8.0, 8.0], [-8.0, 8.0], [-1.0, 1.0]]").replace(
+    "t_end = 0.004", "t_end = 0.4").replace("interval = 0.002", "interval = 0.01")
+
+
+def _run_limited(tmp_path, folder, limit=None, extra=()):
+    """``simulate`` in a subprocess (an I/O failure may leave HDF5 in a state only a process exit ends),
+    optionally under a file-size limit (RLIMIT_FSIZE: a quota that the free space does not show)."""
+    import resource
+    import signal
+    import subprocess
+    import sys
+
+    scen = tmp_path / "big.toml"
+    scen.write_text(BIG)
+
+    def lim():
+        if limit:
+            signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+            resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    return subprocess.run([sys.executable, "-m", "selfas_graph.cli.main", "simulate", str(scen), "-o",
+                           str(folder / "run.h5"), "--progress", "none", *extra],
+                          preexec_fn=lim, capture_output=True, text=True, timeout=600)
+
+
+def _check_io_failure(res, folder):
+    assert res.returncode == 4, res.stderr
+    assert "I/O error" in res.stderr and "Traceback" not in res.stderr and "--resume" in res.stderr
+    assert not [p for p in folder.iterdir() if p.name.endswith(".tmp")]
+    with h5py.File(folder / "run.h5", "r") as f:  # readable, every stored frame finite
+        assert f["parameters/selfas_graph"].attrs["status"].startswith("failed")
+        assert np.isfinite(f["particles/tips/position/value"][()]).all()
+    assert _non_finite_datasets(folder / "run.h5") == []
+    if checkpoint_path(folder / "run.h5").exists():
+        read_checkpoint(checkpoint_path(folder / "run.h5"))  # verified
+
+
+@pytest.fixture
+def small_tmpfs(tmp_path, request):
+    """A 3 MiB tmpfs (a full disk on demand; another size by indirect parametrization); skipped
+    where mounting is not allowed."""
+    import subprocess
+
+    d = tmp_path / "tmpfs"
+    d.mkdir()
+    size = getattr(request, "param", "3m")
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(d)], capture_output=True, text=True)
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({r.stderr.strip() or 'not permitted'})")
+    yield d
+    subprocess.run(["umount", "-l", str(d)], capture_output=True)
+
+
+def test_a_full_disk_ends_the_run_with_exit_4_and_intact_files(tmp_path, small_tmpfs):
+    """On a 3 MB tmpfs the run used to die with exit 139 and hundreds of h5py tracebacks."""
+    res = _run_limited(tmp_path, small_tmpfs)
+    _check_io_failure(res, small_tmpfs)
+
+
+@pytest.mark.parametrize("small_tmpfs", ["12m"], indirect=True)
+def test_a_disk_filling_during_the_run_keeps_the_last_checkpoint_and_resumes(tmp_path, small_tmpfs):
+    # 200 rods, a frame every step: the run file outgrows the 12 MiB after some 200 frames
+    import subprocess
+    import sys
+
+    (tmp_path / "big.toml").write_text(BIG.replace("t_end = 0.4", "t_end = 5.0").replace(
+        "interval = 0.01", "interval = 0.001").replace("checkpoint_interval = 0", "checkpoint_interval = 0.05"))
+    cmd = [sys.executable, "-m", "selfas_graph.cli.main", "simulate", "--progress", "none"]
+    res = subprocess.run(cmd + [str(tmp_path / "big.toml"), "-o", str(small_tmpfs / "run.h5")],
+                         capture_output=True, text=True, timeout=900)
+    _check_io_failure(res, small_tmpfs)
+    assert checkpoint_path(small_tmpfs / "run.h5").exists()
+    step = int(read_checkpoint(checkpoint_path(small_tmpfs / "run.h5"))[0]["step"])
+    assert step > 0
+    # room again (the run file moved to a larger folder): it resumes from the last good checkpoint
+    moved = tmp_path / "moved"
+    moved.mkdir()
+    for p in small_tmpfs.iterdir():
+        shutil.copy(p, moved / p.name)
+    res = subprocess.run(cmd + ["--resume", str(moved / "run.h5"), "--t-end", f"{step * 1e-3 + 0.01}"],
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+
+
+@pytest.mark.parametrize("limit", [300_000, 2_000_000, 5_000_000])
+def test_a_quota_ends_the_run_with_exit_4_and_a_readable_file(tmp_path, limit):
+    """A limit that the free space does not show (RLIMIT_FSIZE, as a quota): the run used to leave an
+    unreadable run file (its size recorded beyond what was written)."""
+    folder = tmp_path / "q"
+    folder.mkdir()
+    res = _run_limited(tmp_path, folder, limit=limit)
+    if res.returncode == 4 and not (folder / "run.h5").exists():
+        assert "cannot write the output file" in res.stderr
+        return
+    _check_io_failure(res, folder)

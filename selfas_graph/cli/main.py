@@ -33,9 +33,18 @@ class CliError(Exception):
 
 
 class CliIOError(CliError):
-    """Writing failed (full disk, quota, a vanished folder): one line, exit code 4."""
+    """Writing failed (full disk, quota, a vanished folder): one line, exit code 4.
+
+    ``hard_exit``: an HDF5 file of the process is left in a failed state, which the HDF5
+    library may crash on when the interpreter shuts down; the console command then ends at
+    once (``os._exit``) after its message, leaving the files as they were last flushed.
+    """
 
     code = EXIT_IO
+
+    def __init__(self, message, hard_exit=False):
+        super().__init__(message)
+        self.hard_exit = hard_exit
 
 
 def build_parser():
@@ -61,6 +70,12 @@ def main(argv=None) -> int:
     except CliError as exc:
         if world.rank == 0:
             print(f"selfas-graph {args.command}: error: {exc}", file=sys.stderr)
+        if getattr(exc, "hard_exit", False) and argv is None:
+            import os
+
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(exc.code)
         return exc.code
     except KeyboardInterrupt:
         print(f"selfas-graph {args.command}: interrupted", file=sys.stderr)

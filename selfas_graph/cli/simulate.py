@@ -24,7 +24,7 @@ import numpy as np
 
 from .._version import __version__
 from ..io.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
-from ..io.h5md import NullWriter, RunFile, RunFileError, RunWriter, appendable_problems
+from ..io.h5md import DiskFullError, NullWriter, RunFile, RunFileError, RunWriter, appendable_problems, is_io_error
 from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
 from ..model.simulation import NumericalFailure, RunInterrupted, Simulation
 from ..model.state import PlacementError
@@ -367,10 +367,18 @@ def run(args):
             "numba_threads": numba.get_num_threads(),
             "run_id": run_id,
         }
+        existed = out.exists()
         try:
             return RunWriter(out, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
                              overwrite=args.force, velocities=p.output.velocities)
         except OSError as exc:
+            if not existed:  # a failed run leaves no output file behind
+                try:
+                    out.unlink()
+                except OSError:
+                    pass
+            if is_io_error(exc) and not isinstance(exc, (FileNotFoundError, PermissionError, IsADirectoryError)):
+                raise CliIOError(f"cannot write the output file {out}: {' '.join(str(exc).split())}") from None
             raise CliError(f"cannot write the output file {out}: {exc}") from None
 
     writer = _on_root(open_writer, share=False)
@@ -416,8 +424,11 @@ def run(args):
             sim._flush_pending(writer)
             writer.close(status=f"failed: {exc}")
             # the failed state (possibly NaN) goes to its own file for inspection, never into the run file
-            write_checkpoint(failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step,
-                                                       "failure": str(exc)})
+            try:
+                write_checkpoint(failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step,
+                                                           "failure": str(exc)})
+            except (OSError, RuntimeError) as io:
+                print(f"selfas-graph simulate: the failed state could not be saved ({io})", file=sys.stderr)
         print(f"selfas-graph simulate: {exc}", file=sys.stderr)
         print(f"frames up to the last output interval are in {out}; the failed state is in {failure} "
               f"(read it with selfas_graph.io.checkpoint.read_checkpoint)", file=sys.stderr)
@@ -428,16 +439,62 @@ def run(args):
         if writer:
             writer.close(status="interrupted")
         raise
+    except (OSError, RuntimeError) as exc:
+        if not is_io_error(exc):
+            raise
+        if reporter:
+            reporter.close()
+        _io_failure(exc, writer, out, ckpt, checkpointer, sim)
     finally:
         stop.restore()
     if reporter:
         reporter.close()
     if writer:
-        writer.set_attrs(wall_seconds=summary.wall_seconds, steps_done=summary.steps)
-        writer.close(status="finished")
+        try:
+            writer.set_attrs(wall_seconds=summary.wall_seconds, steps_done=summary.steps)
+            writer.close(status="finished")
+        except (OSError, RuntimeError) as exc:
+            if not is_io_error(exc):
+                raise
+            _io_failure(exc, writer, out, ckpt, checkpointer, sim)
     if world.rank == 0:
         _print_summary(summary, out, sim)
     return 0
+
+
+#: run files whose HDF5 handle failed: kept referenced until the process ends
+_ABANDONED = []
+
+
+def _io_failure(exc, writer, out, ckpt, checkpointer, sim):
+    """End a run whose writing failed (full disk, quota, a vanished folder): exit code 4.
+
+    A :class:`DiskFullError` is raised before anything of the write happened, so the run file
+    is closed as usual; any other failed write leaves HDF5's handle in a failed state, which
+    is abandoned: the file keeps what its last flush wrote, and ``--resume`` drops a torn row.
+    """
+    clean = isinstance(exc, DiskFullError)
+    if not clean:
+        _ABANDONED.append(writer)  # never deallocated: HDF5 reports every failed handle it frees
+    if clean and writer:
+        try:
+            writer.close(status=f"failed: {exc.strerror or exc}")
+        except (OSError, RuntimeError):
+            clean = False
+    last = "none"
+    if ckpt.exists():
+        try:
+            last = f"{ckpt} (step {int(read_checkpoint(ckpt)[0]['step'])})"
+        except CheckpointError:
+            last = str(ckpt)
+    reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())[:300]
+    msg = (f"I/O error at step {sim.state.step} (t = {sim.state.time:.6g}) while writing: {reason}. "
+           f"The frames flushed before it are in {out}; last good checkpoint: {last}. Free some space "
+           f"(or fix the folder) and continue with: selfas-graph simulate --resume {out}")
+    if world.size > 1:
+        print(f"selfas-graph simulate: error: {msg}", file=sys.stderr, flush=True)
+        world.Abort(4)
+    raise CliIOError(msg, hard_exit=not clean) from None
 
 
 def _print_summary(s, out, sim):

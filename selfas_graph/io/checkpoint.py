@@ -73,6 +73,18 @@ def write_checkpoint(path, snapshot: dict, meta: dict) -> None:
     """
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
+    need = sum(np.asarray(v).nbytes for v in snapshot.values()) + sum(len(str(v)) for v in meta.values()) + (1 << 20)
+    try:
+        st = os.statvfs(path.parent if str(path.parent) else ".")
+        free = st.f_bavail * st.f_frsize
+    except (OSError, AttributeError):
+        free = None
+    if free is not None and free < need:
+        # refused before the temporary file exists: the previous checkpoint stays, nothing is left behind
+        from .h5md import DiskFullError
+
+        raise DiskFullError(28, f"No space left for a checkpoint ({free / 2**20:.2f} MiB free, about "
+                          f"{need / 2**20:.2f} MiB needed)", str(tmp))
     meta = {k: (v if isinstance(v, (str, int, float, np.integer, np.floating)) else json.dumps(v))
             for k, v in meta.items()}
     try:

@@ -30,6 +30,7 @@ until the run ends, then "finished" or "failed: <reason>".
 """
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
@@ -50,6 +51,32 @@ class OutputExistsError(FileExistsError):
 
 class RunFileError(ValueError):
     """A file that is not a readable selfas-graph run."""
+
+
+class DiskFullError(OSError):
+    """Too little free space for the next write; raised before anything of it is written."""
+
+
+#: free space kept beyond the largest write a frame can make (HDF5 metadata, the file system's own)
+SPACE_MARGIN = 1 << 20
+
+
+def free_bytes(folder) -> int | None:
+    """Bytes the calling user may still write in ``folder`` (None where the file system cannot tell)."""
+    try:
+        st = os.statvfs(folder if str(folder) else ".")
+    except (OSError, AttributeError):
+        return None
+    return st.f_bavail * st.f_frsize
+
+
+def is_io_error(exc) -> bool:
+    """True for a failed write of the operating system (full disk, quota, a vanished folder), as
+    raised directly (OSError with an errno) or wrapped by HDF5 (its message carries the errno)."""
+    if isinstance(exc, OSError) and exc.errno is not None:
+        return True
+    text = str(exc)
+    return isinstance(exc, (OSError, RuntimeError)) and ("errno = " in text or "write failed" in text)
 
 
 def _growable(group, name, shape, dtype):
@@ -266,8 +293,59 @@ class RunWriter:
         f.flush()
         return self
 
+    def reserve(self) -> int:
+        """Bytes the next frame may need at most: one new chunk of every growable dataset, and a margin
+        (computed again only when datasets were added)."""
+        key = (len(self._obs), "graph" in self.f, "events" in self.f)
+        if getattr(self, "_reserve", (None, 0))[0] != key:
+            # before the observables and the graph exist (frame 0), room for their first chunks too
+            first = 0 if key[0] and key[1] else 4 << 20
+            self._reserve = (key, self._chunk_bytes() + first)
+        return self._reserve[1]
+
+    def _chunk_bytes(self) -> int:
+        total = SPACE_MARGIN
+
+        def add(name, obj):
+            nonlocal total
+            if isinstance(obj, h5py.Dataset) and obj.chunks is not None:
+                total += int(np.prod(obj.chunks)) * obj.dtype.itemsize
+
+        self.f.visititems(add)
+        return total
+
+    def check_space(self):
+        """Raise :class:`DiskFullError` (nothing written) when the folder has less free space than the
+        next frame may need. Quotas the file system does not report are caught when a write fails."""
+        free = free_bytes(self.path.parent)
+        need = self.reserve()
+        if free is not None and free < need:
+            raise DiskFullError(28, f"{free / 2**20:.2f} MiB free in {self.path.parent or '.'}, "
+                                    f"the next frame may need {need / 2**20:.2f} MiB")
+        # a quota or a file-size limit does not show in the free space: ask the file system for the
+        # room (posix_fallocate), then give it back; HDF5 has written everything up to the size seen
+        try:
+            fd = os.open(self.path, os.O_WRONLY)
+        except OSError:
+            return
+        try:
+            size = os.fstat(fd).st_size
+            try:
+                os.posix_fallocate(fd, size, need)
+            except OSError as exc:
+                if exc.errno in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS, errno.ENODEV):
+                    return  # a file system without fallocate: failed writes are caught when they happen
+                raise DiskFullError(exc.errno, f"{exc.strerror}: {self.path} cannot grow by the "
+                                               f"{need / 2**20:.2f} MiB the next frame may need") from None
+            finally:
+                if os.fstat(fd).st_size != size:
+                    os.ftruncate(fd, size)
+        finally:
+            os.close(fd)
+
     def write_frame(self, step, t, position, velocity, observables: dict):
         """Append one frame (positions, velocities, observables) and flush to disk."""
+        self.check_space()
         for name, arr in (("position", position), ("velocity", velocity)):
             if name in self._elements:
                 s, tt, v = self._elements[name]
@@ -288,6 +366,7 @@ class RunWriter:
 
     def write_per_step(self, steps, values):
         """Append a per-step series (the bond error of every step since the last call)."""
+        self.check_space()
         if len(steps):
             _append(self._per_step[0], np.asarray(steps, dtype=np.int64))
             _append(self._per_step[1], np.asarray(values, dtype=np.float64))
