@@ -531,3 +531,28 @@ def test_a_quota_ends_the_run_with_exit_4_and_a_readable_file(tmp_path, limit):
         assert "cannot write the output file" in res.stderr
         return
     _check_io_failure(res, folder)
+
+
+# ----------------------------------------------------------------------------- rank and thread counts
+
+def test_one_body_energies_do_not_depend_on_the_thread_count():
+    """The electrode energy was a parallel reduction whose order followed the thread count, so the
+    2- and 3-rank files (1 thread per rank) differed from the serial one (2 threads) by 1 ulp."""
+    import numba
+
+    from selfas_graph.kernels import external as kx
+    from selfas_graph.kernels import fields as kf
+
+    rng = np.random.default_rng(5)
+    x = rng.uniform(-1.0, 1.0, (2001, 3))
+    charge = rng.uniform(0.5, 2.0, 2001)
+    source = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    nodes, weights = np.polynomial.legendre.leggauss(8)
+    results = []
+    for threads in sorted({1, numba.config.NUMBA_NUM_THREADS}):
+        numba.set_num_threads(threads)
+        results.append((kf.electrode_energy(x, -1.0, 1.0, 0.06, 1.0),
+                        kx.monopoles_energy(x, charge, source, np.array([1.0, -1.0]), 0.06, 1.0),
+                        kx.line_yukawa_energy(x, charge, -1.0, 1.0, 3.2, 2.4, 0.09, 0.5 * (nodes + 1), 0.5 * weights)))
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    assert all(r == results[0] for r in results)
