@@ -556,3 +556,66 @@ def test_one_body_energies_do_not_depend_on_the_thread_count():
                         kx.line_yukawa_energy(x, charge, -1.0, 1.0, 3.2, 2.4, 0.09, 0.5 * (nodes + 1), 0.5 * weights)))
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     assert all(r == results[0] for r in results)
+
+
+# ----------------------------------------------------------------------------- kill -9 at any moment
+
+def _all_datasets(path):
+    out = {}
+    with h5py.File(path, "r") as f:
+        f.visititems(lambda n, o: out.__setitem__(n, o[()]) if isinstance(o, h5py.Dataset) else None)
+    return out
+
+
+@pytest.mark.slow
+def test_kill_9_stress_loop_ends_with_the_uninterrupted_run(tmp_path):
+    """``kill -9`` at 24 delays from 0.05 s to 4 s after a process starts (start-up, the first
+    checkpoint and its rename, frames and their flushes, and a resuming process's truncation of
+    the run file back to its checkpoint), each next process resuming the killed one (or starting
+    again when no checkpoint exists yet): every killed run file opens, and the run completed at
+    the end equals the uninterrupted run in every dataset, bit for bit."""
+    import subprocess
+    import sys
+    import time
+
+    from conftest import SMALL_CIRCUIT_SCENE
+
+    scen = tmp_path / "s.toml"
+    scen.write_text(SMALL_CIRCUIT_SCENE.replace("t_end = 0.6", "t_end = 3.0").replace(
+        "checkpoint_interval = 0", "checkpoint_interval = 0.2"))
+    base = [sys.executable, "-m", "selfas_graph.cli.main", "simulate", "--progress", "none"]
+    full = subprocess.run(base + [str(scen), "-o", str(tmp_path / "full.h5")], capture_output=True, text=True,
+                          timeout=600)
+    assert full.returncode == 0, full.stderr
+    out = tmp_path / "cut.h5"
+    delays = [0.05 + 3.95 * ((k * 0.618034) % 1.0) for k in range(24)]  # spread over (0.05, 4) s
+    kills = 0
+    for delay in delays:
+        if checkpoint_path(out).exists():
+            cmd = base + ["--resume", str(out)]
+        else:
+            cmd = base + [str(scen), "-o", str(out), "--force"]
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        time.sleep(delay)
+        if proc.poll() is None:
+            proc.kill()
+            kills += 1
+        _, err = proc.communicate()
+        assert proc.returncode in (0, -9), err
+        if proc.returncode == 0:
+            break
+        if checkpoint_path(out).exists():
+            read_checkpoint(checkpoint_path(out))  # a complete, verified checkpoint after every kill
+            with h5py.File(out, "r") as f:  # and a readable run file
+                assert f["particles/tips/position/value"].shape[0] >= 1
+    assert kills >= 10
+    res = subprocess.run(base + ["--resume", str(out)] if checkpoint_path(out).exists()
+                         else base + [str(scen), "-o", str(out), "--force"],
+                         capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    ref, got = _all_datasets(tmp_path / "full.h5"), _all_datasets(out)
+    assert sorted(ref) == sorted(got)
+    differ = [n for n in ref if not (ref[n].shape == got[n].shape and np.array_equal(
+        ref[n], got[n], equal_nan=ref[n].dtype.kind == "f"))]
+    assert not differ, differ
+    assert not list(tmp_path.glob("*.tmp"))
