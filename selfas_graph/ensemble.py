@@ -38,6 +38,7 @@ import math
 import shlex
 import signal
 import time
+import uuid
 from pathlib import Path
 from typing import Callable
 
@@ -47,8 +48,9 @@ from ._version import __version__
 from .analysis.claims import frame_claims
 from .analysis.diagnostics import flux_through_disc, rod_centres, timeline
 from .analysis.ensemble_stats import censored_times, mean_sem
-from .io.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
-from .io.h5md import RunFile, RunFileError, RunWriter
+from .io.checkpoint import (CheckpointError, Checkpointer, checkpoint_meta, checkpoint_path, read_checkpoint,
+                            write_checkpoint)
+from .io.h5md import RunFile, RunFileError, RunWriter, run_provenance
 from .io.scenario import ScenarioError, load_scenario, scenario_from_text
 from .model.simulation import NumericalFailure, RunInterrupted, Simulation
 from .model.state import PlacementError
@@ -156,21 +158,6 @@ class _StopOnSignal:
             signal.signal(sig, handler)
 
 
-class _Checkpointer:
-    """Checkpoints every ``interval`` wall seconds (and at the end), in the format ``simulate --resume`` reads."""
-
-    def __init__(self, path, interval, meta):
-        self.path, self.interval, self.meta = Path(path), float(interval), meta
-        self.last = time.monotonic()
-
-    def due(self):
-        return self.interval > 0 and time.monotonic() - self.last >= self.interval
-
-    def write(self, sim):
-        write_checkpoint(self.path, sim.snapshot(), {**self.meta, "step": sim.state.step})
-        self.last = time.monotonic()
-
-
 def run_seed(task: dict) -> dict:
     """Run (or continue) one seed of an ensemble to its end time; the pool's task function.
 
@@ -193,6 +180,12 @@ def run_seed(task: dict) -> dict:
         try:
             if task["action"] == "resume":
                 snap, meta = read_checkpoint(ckpt)
+                with RunFile(path) as run:
+                    run_id = run.meta.get("run_id")
+                if not run_id or run_id != meta.get("run_id"):
+                    raise EnsembleError(f"the checkpoint {ckpt} belongs to another run than {path} (run identity "
+                                        f"{meta.get('run_id') or 'none'} against {run_id or 'none'})")
+                meta = {**meta, "t_end": t_end}
                 scenario = scenario_from_text(meta["scenario_text"], overrides=json.loads(meta["overrides"]),
                                               t_end=t_end)
                 sim = Simulation.from_snapshot(scenario.params, snap)
@@ -202,22 +195,16 @@ def run_seed(task: dict) -> dict:
                                               overrides=task["overrides"], t_end=t_end)
                 sim = Simulation.from_scenario(scenario)
                 p = scenario.params
-                provenance = {
-                    "scenario_text": scenario.text, "scenario_path": str(task["scenario_path"]),
-                    "overrides": json.dumps(list(scenario.overrides)), "parameters_json": json.dumps(p.to_dict()),
-                    "derived_json": json.dumps(sim.force_field.describe()), "version": __version__,
-                    "command_line": task.get("command", ""), "seed": p.scenario.seed, "mpi_ranks": 1,
-                    "numba_threads": numba.get_num_threads(),
-                }
+                run_id = uuid.uuid4().hex
+                provenance = run_provenance(sim, scenario, task.get("command", ""), run_id,
+                                            scenario_path=task["scenario_path"])
                 writer = RunWriter(path, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
                                    overwrite=bool(task.get("force")), velocities=p.output.velocities,
                                    frame_interval=sim.frame_interval, rod_length=sim.state.rod_length,
                                    rod_resistance=sim.state.rod_resistance)
-                meta = {"format_note": "selfas-graph checkpoint; continue with selfas-graph simulate --resume",
-                        "scenario_text": scenario.text, "overrides": json.dumps(list(scenario.overrides)),
-                        "run_file": str(path.resolve()), "version": __version__}
-            checkpointer = _Checkpointer(ckpt, scenario.params.output.checkpoint_interval,
-                                         {k: v for k, v in meta.items() if k != "step"})
+                meta = checkpoint_meta(scenario, run_id, path.name, t_end, __version__)
+            checkpointer = Checkpointer(ckpt, scenario.params.output.checkpoint_interval,
+                                        {k: v for k, v in meta.items() if k != "step"})
             summary = sim.run(writer=writer, checkpointer=checkpointer, stop=stop)
             writer.set_attrs(wall_seconds=summary.wall_seconds, steps_done=summary.steps)
             writer.close(status="finished")

@@ -23,8 +23,14 @@ test_hostile_files_to_plot                     40
 test_generated_plot_arguments                  15
 test_hostile_checkpoints_to_resume             50
 test_hostile_run_files_to_resume               50
+test_generated_magnitudes_in_every_numeric_key 150
+test_generated_bit_flips_in_a_checkpoint        60
+test_generated_moved_folders_and_foreign_...    20
 ==========================================  =====
-total                                        1155
+total                                        1385
+
+Disk-full, quota and kill cases run in subprocesses in ``tests/test_reliability.py`` (an I/O
+failure may leave HDF5 in a state that only a process exit ends).
 
 The number of cases that actually ran is printed at the end of the module (``hostile input:
 N generated cases``); it is at most the total above.
@@ -1013,6 +1019,143 @@ def test_hostile_run_files_to_resume(spec, t_end, workdir, capsys, real_run):
     check_contract(res, allowed=(2,))
     assert tree(d) == before
     assert real_run["run"].read_bytes() == real_run["run_bytes"]
+
+
+# --------------------------------------------------------------------------- magnitudes, checkpoints, moves
+
+def _numeric_keys():
+    """Every numeric key of the schema: (dotted path, type, field)."""
+    from selfas_graph.io.scenario import unwrap_optional
+
+    out = []
+
+    def walk(cls, prefix):
+        hints = typing.get_type_hints(cls)
+        for f in dataclasses.fields(cls):
+            tp, _ = unwrap_optional(hints[f.name])
+            if dataclasses.is_dataclass(tp):
+                walk(tp, prefix + f.name + ".")
+            elif tp in (float, int, tuple):
+                out.append((prefix + f.name, tp, f))
+
+    walk(P.Parameters, "")
+    return out
+
+
+NUMERIC_KEYS = _numeric_keys()
+#: tiny and huge magnitudes, at and beyond the documented 1e-30..1e30 and at the ends of double precision
+MAGNITUDES = ["5e-324", "1e-310", "1e-300", "1e-31", "1e-30", "1e30", "1e31", "1e200", "1e308",
+              "-1e30", "-1e308", "-5e-324"]
+
+
+def _magnitude_value(tp, f, text):
+    if tp is int:
+        return text if "e" not in text else ("1" + "0" * 40 if float(text) > 1 else "0")
+    if tp is tuple:
+        template = f.default_factory()
+        return json.dumps([[float(text)] * len(t) if isinstance(t, tuple) else float(text) for t in template])
+    return text
+
+
+@settings(max_examples=150, **HOSTILE)
+@given(key=st.sampled_from(NUMERIC_KEYS), value=st.sampled_from(MAGNITUDES))
+def test_generated_magnitudes_in_every_numeric_key(key, value, workdir, capsys):
+    """150 generated (numeric key, tiny or huge magnitude) pairs, each a real 2-step run: exit 0, 2
+    or 3 with no traceback, and a run file, if written, holds no NaN or inf."""
+    path, tp, f = key
+    CASES["magnitudes"] += 1
+    workdir = Path(tempfile.mkdtemp(dir=workdir))
+    text = _magnitude_value(tp, f, value)
+    scen = _scenario(workdir, forces={**BASE["forces"], "plasma_filament": {}, "electric_field": {}})
+    out = workdir / "out.h5"
+    res = cli(capsys, "simulate", scen, "-o", out, "--progress", "none", f"--set={path}={text}")
+    check_contract(res)
+    if res.code in (0, 3) and out.exists():
+        allowed = {"graph/potential", "graph/conductor_potential", "observables/effective_resistance/value"}
+        with h5py.File(out, "r") as h:
+            bad = []
+            h.visititems(lambda n, o: bad.append(n) if isinstance(o, h5py.Dataset) and o.dtype.kind == "f"
+                         and n not in allowed and not np.isfinite(o[()]).all() else None)
+        assert not bad, f"non-finite values stored in {bad}"
+
+
+@settings(max_examples=60, **HOSTILE)
+@given(offset=st.floats(0.0, 1.0), bit=st.integers(0, 7))
+def test_generated_bit_flips_in_a_checkpoint(offset, bit, workdir, capsys, real_run):
+    """60 checkpoints with one bit flipped anywhere: resume exits 2 with a message (or 0 where the
+    bit lies in unused bytes and the verified contents are unchanged), never a traceback, and a
+    refused checkpoint leaves the run file untouched."""
+    CASES["bit_flips"] += 1
+    workdir = Path(tempfile.mkdtemp(dir=workdir))
+    run = workdir / "run.h5"
+    run.write_bytes(real_run["run_bytes"])
+    raw = bytearray(real_run["checkpoint_bytes"])
+    k = min(int(offset * len(raw)), len(raw) - 1)
+    raw[k] ^= 1 << bit
+    (workdir / "run.checkpoint.h5").write_bytes(bytes(raw))
+    res = cli(capsys, "simulate", "--resume", run, "--progress", "none", "--t-end=0.004")
+    check_contract(res, allowed=(0, 2))
+    if res.code == 2:
+        assert run.read_bytes() == real_run["run_bytes"]
+
+
+@settings(max_examples=20, **HOSTILE)
+@given(how=st.sampled_from(["copied", "moved", "foreign", "renamed"]), via=st.sampled_from(["run", "checkpoint"]))
+def test_generated_moved_folders_and_foreign_checkpoints(how, via, workdir, capsys, real_run):
+    """20 runs whose folder was copied, moved or renamed, or whose checkpoint comes from another
+    run: a resume continues the files it was given (and nothing outside their folder), or refuses
+    a foreign checkpoint with exit 2 naming both files."""
+    CASES["moved_folders"] += 1
+    workdir = Path(tempfile.mkdtemp(dir=workdir))  # one folder per generated case
+    a = workdir / "a"
+    shutil.copytree(real_run["dir"], a)
+    outside = tree(real_run["dir"])
+    if how == "foreign":
+        res = cli(capsys, "simulate", a / "hostile.toml", "-o", a / "other.h5", "--progress", "none")
+        check_contract(res, allowed=(0,))
+        shutil.copy(a / "other.checkpoint.h5", a / "run.checkpoint.h5")
+        target = a
+    elif how == "renamed":
+        target = workdir / "b"
+        a.rename(target)
+    else:
+        target = workdir / "b"
+        (shutil.copytree if how == "copied" else shutil.move)(a, target)
+    name = "run.h5" if via == "run" else "run.checkpoint.h5"
+    before = tree(target)
+    res = cli(capsys, "simulate", "--resume", target / name, "--progress", "none", "--t-end=0.004")
+    if how == "foreign" and via == "run":
+        check_contract(res, allowed=(2,))
+        assert "another run" in res.err and str(target / "run.h5") in res.err
+        assert tree(target) == before
+    elif how == "foreign":  # the checkpoint names its own run file beside it (other.h5) and continues that
+        check_contract(res, allowed=(0,))
+        assert tree(target)["run.h5"] == before["run.h5"]
+    else:
+        check_contract(res, allowed=(0,))
+        assert sorted(tree(target)) == sorted(before)  # no file created, only these two changed
+    assert tree(real_run["dir"]) == outside
+    if how == "copied":
+        assert tree(a) == outside
+
+
+@pytest.mark.parametrize("kind", ["snapshot", "density", "timeline"])
+@pytest.mark.parametrize("how", ["same_path", "hard_link", "symlink"])
+def test_plot_onto_its_input(kind, how, workdir, capsys, real_run):
+    """``plot RUN -o RUN --force`` (also through a link): exit 2, the run file intact."""
+    pytest.importorskip("matplotlib")
+    run = workdir / "run.h5"
+    run.write_bytes(real_run["run_bytes"])
+    target = run
+    if how == "hard_link":
+        target = workdir / "link.png"
+        os.link(run, target)
+    elif how == "symlink":
+        target = workdir / "sym.png"
+        target.symlink_to(run)
+    res = cli(capsys, "plot", run, "--kind", kind, "-o", target, "--force")
+    check_contract(res, allowed=(2,))
+    assert run.read_bytes() == real_run["run_bytes"]
 
 
 # =========================================================================== bugs found, now fixed

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from selfas_graph.cli.main import main
-from selfas_graph.cli.simulate import Checkpointer
+from selfas_graph.io.checkpoint import Checkpointer
 from selfas_graph.io.checkpoint import CheckpointError, checkpoint_path, read_checkpoint
 from selfas_graph.io.h5md import RunWriter
 from selfas_graph.io.scenario import scenario_from_text

@@ -211,6 +211,9 @@ units of [docs/model.md](model.md) (lengths in rod lengths L, times in t0, field
 Loading reports every problem at once, each naming its key path and what would be valid: unknown
 keys (with a "did you mean"), wrong types, values out of range, and the rules across keys listed
 below. The command-line tool exits with code 2 on an invalid scenario and writes nothing.
+Every number (each entry of an array too) is 0 or between 1e-30 and 1e+30 in magnitude, beside
+its own range below: products of a few such numbers (q^2, B q, 1 / R_D^2, ...) stay finite in
+double precision, so no force or energy derived from a valid scenario overflows to inf or NaN.
 
 ## Example
 

@@ -1,7 +1,8 @@
 """``selfas-graph`` command line: a table of subcommands, each in its own module.
 
 Exit codes: 0 success, 2 bad input (scenario, arguments, files), 3 numerical
-failure of a run, 130 interrupted. Under ``mpiexec`` every rank exits with the
+failure of a run, 4 an I/O error while writing (full disk, quota, a vanished
+folder), 130 interrupted. Under ``mpiexec`` every rank exits with the
 same code and only rank 0 prints the error; an unexpected error on one rank
 aborts them all (no rank is left waiting for the others).
 """
@@ -26,10 +27,28 @@ COMMANDS = {
 
 EXIT_USAGE = 2
 EXIT_NUMERICAL = 3
+EXIT_IO = 4
 
 
 class CliError(Exception):
     """A user error the CLI reports in one line with exit code 2 (no traceback)."""
+
+    code = EXIT_USAGE
+
+
+class CliIOError(CliError):
+    """Writing failed (full disk, quota, a vanished folder): one line, exit code 4.
+
+    ``hard_exit``: an HDF5 file of the process is left in a failed state, which the HDF5
+    library may crash on when the interpreter shuts down; the console command then ends at
+    once (``os._exit``) after its message, leaving the files as they were last flushed.
+    """
+
+    code = EXIT_IO
+
+    def __init__(self, message, hard_exit=False):
+        super().__init__(message)
+        self.hard_exit = hard_exit
 
 
 def build_parser():
@@ -55,7 +74,13 @@ def main(argv=None) -> int:
     except CliError as exc:
         if world.rank == 0:
             print(f"selfas-graph {args.command}: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        if getattr(exc, "hard_exit", False) and argv is None:
+            import os
+
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(exc.code)
+        return exc.code
     except KeyboardInterrupt:
         print(f"selfas-graph {args.command}: interrupted", file=sys.stderr)
         return 130

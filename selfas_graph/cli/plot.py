@@ -31,6 +31,7 @@ for the timeline) unless ``-o`` says otherwise; an existing file is kept unless
 from __future__ import annotations
 
 import functools
+import os
 from pathlib import Path
 
 import numpy as np
@@ -38,11 +39,18 @@ import numpy as np
 from ..analysis import bz_profile, flux_through_disc, radial_density, rod_centres, timeline
 from ..io.h5md import RunFile, RunFileError
 from ..model.graph import DEAD_END, FILAMENT, ConnectivityGraph
-from .main import CliError
+from .main import CliError, CliIOError
+from .paths import check_target
 
 KINDS = ("snapshot", "density", "field", "flux", "timeline", "moment", "fractal", "skeleton")
 #: kinds drawn over time (one file per run, not per frame)
 SERIES_KINDS = ("timeline", "moment", "fractal", "skeleton")
+#: bounds of the size-like options: a density profile of 10^4 shells is finer than any run's
+#: rods resolve; 10^5 azimuthal samples per radius resolve a wire of radius 0.03 on a circle
+#: of radius 500; more planes than 50 do not fit one figure
+MAX_BINS = 10_000
+MAX_N_PHI = 100_000
+MAX_PLANES = 50
 #: kinds that need the graph data (contacts, roles, currents) of the run
 NEEDS_GRAPH = ("field", "flux", "timeline", "moment", "fractal", "skeleton")
 #: above this many rods a snapshot colours the largest structure instead of dead ends (paper Fig. 6)
@@ -101,10 +109,7 @@ def _output_path(args, run_path: Path, frame: int) -> Path:
         out = run_path.with_name(f"{run_path.stem}_{args.kind}.png")
     else:
         out = run_path.with_name(f"{run_path.stem}_{args.kind}_frame{frame}.png")
-    if out.is_dir():
-        raise CliError(f"output path {out} is a directory")
-    if out.exists() and not args.force:
-        raise CliError(f"output file {out} exists; pass --force to overwrite it or -o to choose another name")
+    check_target(out, "output file", force=args.force, inputs=[run_path])
     if not out.parent.exists():
         raise CliError(f"the folder {out.parent} of the output file does not exist")
     return out
@@ -487,6 +492,13 @@ DRAW = {"snapshot": _snapshot, "density": _density, "field": _field_or_flux, "fl
 def _check_options(args):
     if not 10 <= args.dpi <= 1200:
         raise CliError(f"--dpi must be between 10 and 1200, got {args.dpi}")
+    # size-like options are bounded: a figure is drawn in seconds, not minutes
+    if not 1 <= args.bins <= MAX_BINS:
+        raise CliError(f"--bins must be between 1 and {MAX_BINS}, got {args.bins}")
+    if args.n_phi is not None and not 1 <= args.n_phi <= MAX_N_PHI:
+        raise CliError(f"--n-phi must be between 1 and {MAX_N_PHI}, got {args.n_phi}")
+    if args.planes and len(args.planes) > MAX_PLANES:
+        raise CliError(f"--planes takes at most {MAX_PLANES} planes, got {len(args.planes)}")
     if args.r_max is not None and not (np.isfinite(args.r_max) and args.r_max > 0):
         raise CliError(f"--r-max must be a finite number > 0, got {args.r_max}")
     if args.planes and not all(np.isfinite(z) for z in args.planes):
@@ -509,11 +521,22 @@ def run(args):
                 out = _output_path(args, f.path, frame.index)
                 fig = Figure(figsize=_figsize(args.kind, frame), layout="constrained")
                 DRAW[args.kind](fig, f, frame, args)
-            except (KeyError, IndexError, TypeError, AttributeError) as exc:
-                # a file with the run layout but inconsistent contents (foreign or damaged)
+            except (KeyError, IndexError, TypeError, AttributeError, ValueError) as exc:
+                # a file with the run layout but inconsistent contents (foreign or damaged; a
+                # parameters_json that is not JSON is a ValueError)
                 raise RunFileError(f"{f.path}: inconsistent run data ({type(exc).__name__}: {exc})") from None
     except RunFileError as exc:
         raise CliError(str(exc)) from None
-    fig.savefig(out, dpi=args.dpi, format="png")
+    # drawn aside and renamed into place: a failed write (full disk) leaves no partial PNG
+    tmp = out.with_name(out.name + ".tmp")
+    try:
+        fig.savefig(tmp, dpi=args.dpi, format="png")
+        os.replace(tmp, out)
+    except OSError as exc:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise CliIOError(f"cannot write {out}: {exc.strerror or exc}") from None
     print(f"wrote {out}")
     return 0

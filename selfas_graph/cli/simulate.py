@@ -17,19 +17,23 @@ import shlex
 import signal
 import sys
 import time
+import uuid
 from pathlib import Path
 
 import numpy as np
 
 from .._version import __version__
-from ..io.checkpoint import CheckpointError, checkpoint_path, read_checkpoint, write_checkpoint
-from ..io.h5md import NullWriter, RunFile, RunFileError, RunWriter
+from ..io.checkpoint import (CheckpointError, Checkpointer, checkpoint_meta, checkpoint_path, read_checkpoint,
+                             write_checkpoint)
+from ..io.h5md import (DiskFullError, NullWriter, RunFile, RunFileError, RunWriter, appendable_problems, is_io_error,
+                       run_provenance)
 from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
 from ..model.params import plasma_current_text
 from ..model.simulation import NumericalFailure, RunInterrupted, Simulation
 from ..model.state import PlacementError
 from ..parallel import fit_threads_to_cores, world
-from .main import EXIT_NUMERICAL, CliError
+from .main import EXIT_NUMERICAL, CliError, CliIOError
+from .paths import check_target
 
 
 def add_arguments(p):
@@ -110,23 +114,6 @@ class _Bar:
         self.bar.close()
 
 
-class Checkpointer:
-    """Writes the simulation's snapshot to a checkpoint file every ``interval`` wall seconds (0: only on demand)."""
-
-    def __init__(self, path, interval, meta):
-        self.path, self.interval, self.meta = Path(path), float(interval), meta
-        self.last = time.monotonic()
-        self.written = 0
-
-    def due(self):
-        return self.interval > 0 and time.monotonic() - self.last >= self.interval
-
-    def write(self, sim):
-        write_checkpoint(self.path, sim.snapshot(), {**self.meta, "step": sim.state.step})
-        self.last = time.monotonic()
-        self.written += 1
-
-
 class _StopFlag:
     """Set by SIGTERM / SIGINT so that the run stops after the current step with a checkpoint.
 
@@ -162,28 +149,54 @@ class _StopFlag:
             signal.signal(sig, handler)
 
 
-def _load_resume(args):
-    """(scenario, snapshot, run file, checkpoint file) of a run to continue."""
-    if args.scenario or args.overrides:
-        raise CliError("--resume continues a run exactly: give no SCENARIO and no --set (only --t-end may change)")
+def _resume_paths(args):
+    """(checkpoint to read, run file to continue) named by ``--resume`` (and ``-o``).
+
+    ``--resume X.h5`` continues X.h5 from the checkpoint beside it, X.checkpoint.h5;
+    ``--resume X.checkpoint.h5`` continues the run file beside it that the checkpoint
+    names. Both are found relative to the path given, wherever the folder now is:
+    nothing is written to a path the user did not name or that does not sit beside it.
+    """
     src = Path(args.resume)
     if src.name in ("", ".", "..") or src.is_dir():
         raise CliError(f"--resume {args.resume}: give a run file (RUN.h5) or its checkpoint (RUN.checkpoint.h5), "
                        f"not a folder")
-    ckpt = src if src.name.endswith(".checkpoint.h5") else checkpoint_path(src)
+    if src.name.endswith(".checkpoint.h5"):
+        return src, None
+    return checkpoint_path(src), src
+
+
+def _load_resume(args):
+    """(scenario, snapshot, run file, checkpoint file read, run identity) of a run to continue."""
+    if args.scenario or args.overrides:
+        raise CliError("--resume continues a run exactly: give no SCENARIO and no --set (only --t-end may change)")
+    ckpt, out = _resume_paths(args)
     try:
         snap, meta = read_checkpoint(ckpt)
     except CheckpointError as exc:
         raise CliError(f"cannot resume: {exc}") from None
-    try:
-        scenario = scenario_from_text(meta["scenario_text"], overrides=json.loads(meta["overrides"]), t_end=args.t_end)
-    except ScenarioError as exc:
-        raise CliError(f"cannot resume: the checkpoint's scenario no longer validates: {exc}") from None
-    out = Path(args.output) if args.output else Path(meta["run_file"])
+    if out is None:
+        name = str(meta.get("run_name") or ckpt.name[:-len(".checkpoint.h5")] + ".h5")
+        if Path(name).name != name or name in (".", ".."):
+            raise CliError(f"cannot resume: {ckpt} names its run file {name!r}, which is not a file name")
+        out = ckpt.with_name(name)
+    if args.output:
+        out = Path(args.output)
     _check_output_name(out)
+    # the effective end time of the run (a --t-end given when it started) unless a new one is given
+    t_end = args.t_end
+    if t_end is None and "t_end" in meta:
+        t_end = float(meta["t_end"])
+    try:
+        scenario = scenario_from_text(meta["scenario_text"], overrides=json.loads(meta["overrides"]), t_end=t_end)
+    except (ScenarioError, ValueError, TypeError) as exc:
+        raise CliError(f"cannot resume: the checkpoint's scenario no longer validates: {exc}") from None
     if args.t_end is not None and args.t_end < float(snap["time"]):
         raise CliError(f"--t-end (run.t_end) {args.t_end:g} is before the checkpoint's time {float(snap['time']):.6g}; "
                        f"give a later end time")
+    if not out.exists():
+        raise CliError(f"cannot resume: the run file {out} of checkpoint {ckpt} does not exist "
+                       f"(give the run file with -o)")
     # the run file must be this run's, checked read-only before anything in it is changed
     try:
         with RunFile(out) as run_file:
@@ -191,17 +204,32 @@ def _load_resume(args):
             same = n_tips == np.asarray(snap["position"]).shape[0] and run_file.scenario_text == meta["scenario_text"]
             steps = run_file.step
             brake = _started_brake(run_file)
+            run_id = run_file.meta.get("run_id")
+            problems = appendable_problems(run_file.f)
     except RunFileError as exc:
         raise CliError(f"cannot resume into {out}: {exc}") from None
+    if problems:
+        raise CliError(f"cannot resume into {out}: it cannot be continued: {'; '.join(problems)}")
+    if not run_id or run_id != meta.get("run_id"):
+        raise CliError(f"cannot resume: the checkpoint {ckpt} belongs to another run than the run file {out} "
+                       f"(run identity {meta.get('run_id') or 'none'} in the checkpoint, {run_id or 'none'} in the "
+                       f"run file); give the run file's own checkpoint")
     if same and brake is not None and brake != scenario.params.integrator.brake:
         # a scene without integrator.brake, started when the default was explicit: continue as it ran
-        scenario = scenario_from_text(meta["scenario_text"], t_end=args.t_end,
+        scenario = scenario_from_text(meta["scenario_text"], t_end=t_end,
                                       overrides=json.loads(meta["overrides"]) + [f"integrator.brake={brake}"])
     if not same:
         raise CliError(f"cannot resume: {out} is not the run of checkpoint {ckpt} (different scenario or rod count)")
     if not len(steps) or steps[0] > int(snap["step"]):
         raise CliError(f"cannot resume: {out} has no frame at or before the checkpoint's step {int(snap['step'])}")
-    return scenario, snap, out, ckpt
+    return scenario, snap, out, ckpt, str(run_id)
+
+
+def _same_file(a, b) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
 
 
 def _started_brake(run_file):
@@ -216,6 +244,8 @@ def _started_brake(run_file):
 def _check_output_name(out: Path):
     if "\x00" in str(out):
         raise CliError(f"the output path {str(out)!r} contains a NUL character")
+    if out.name not in ("", ".", ".."):
+        check_target(out, "output file", force=True)  # over-long names, devices
     if out.name in ("", ".", "..") or out.is_dir():
         raise CliError(f"the output path {out} names a folder, not a file; give a file name such as run.h5")
 
@@ -254,8 +284,20 @@ def _prepare(args):
     """(scenario, snapshot or None, output path, checkpoint path), every input and file checked."""
     snap = None
     if args.resume:
-        scenario, snap, out, ckpt = _load_resume(args)
+        scenario, snap, out, read_from, run_id = _load_resume(args)
+        ckpt = checkpoint_path(out)  # new checkpoints go beside the run file continued
+        check_target(out, "run file", force=True)
+        check_target(ckpt, "checkpoint file", force=True)
+        if ckpt.exists() and not _same_file(ckpt, read_from):
+            try:
+                other = read_checkpoint(ckpt)[1].get("run_id")
+            except CheckpointError:
+                other = None
+            if other != run_id:
+                raise CliError(f"cannot resume into {out}: the file {ckpt} beside it, where its checkpoints go, "
+                               f"is not a checkpoint of this run; move it away first")
     else:
+        run_id = uuid.uuid4().hex
         if not args.scenario:
             raise CliError("give a SCENARIO file, or --resume RUN.h5 to continue a run")
         try:
@@ -265,13 +307,12 @@ def _prepare(args):
         out = Path(args.output) if args.output else scenario.output_path
         _check_output_name(out)
         ckpt = checkpoint_path(out)
+        check_target(out, "output file", force=True, inputs=[args.scenario])
+        check_target(ckpt, "checkpoint file", force=True, inputs=[args.scenario])
         if not args.dry_run and ckpt.exists() and not args.force:
             raise CliError(f"checkpoint file {ckpt} exists (from an earlier run?); pass --force to overwrite it, "
                            f"or --resume {out} to continue that run")
-    if snap is not None:
-        if not out.exists():
-            raise CliError(f"cannot resume: the run file {out} does not exist (give it with -o)")
-    elif not args.dry_run:
+    if snap is None and not args.dry_run:
         if out.exists() and not args.force:
             raise CliError(f"output file {out} exists; pass --force to overwrite it or -o to choose another name")
         if out.exists() and out.is_dir():
@@ -281,11 +322,11 @@ def _prepare(args):
             raise CliError(f"the folder {parent} of the output file does not exist")
         if not os.access(parent, os.W_OK):
             raise CliError(f"the folder {parent} of the output file is not writable")
-    return scenario, snap, out, ckpt
+    return scenario, snap, out, ckpt, run_id
 
 
 def run(args):
-    scenario, snap, out, ckpt = _on_root(lambda: _prepare(args))
+    scenario, snap, out, ckpt, run_id = _on_root(lambda: _prepare(args))
     p = scenario.params
     try:
         sim = (Simulation.from_scenario(scenario, comm=world) if snap is None
@@ -328,24 +369,22 @@ def run(args):
             print(f"resuming at step {int(snap['step'])} (t = {float(snap['time']):.6g}) from {ckpt}; "
                   f"{writer.n_frames} frames kept in {out}", flush=True)
             return writer
-        provenance = {
-            "scenario_text": scenario.text,
-            "scenario_path": str(args.scenario),
-            "overrides": json.dumps(list(scenario.overrides)),
-            "parameters_json": json.dumps(p.to_dict()),
-            "derived_json": json.dumps(sim.force_field.describe()),
-            "version": __version__,
-            "command_line": shlex.join(sys.argv),
-            "seed": p.scenario.seed,
-            "mpi_ranks": world.size,
-            "numba_threads": numba.get_num_threads(),
-        }
+        provenance = run_provenance(sim, scenario, shlex.join(sys.argv), run_id, scenario_path=args.scenario,
+                                    mpi_ranks=world.size)
+        existed = out.exists()
         try:
             return RunWriter(out, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
                              overwrite=args.force, velocities=p.output.velocities,
                              rod_length=sim.state.rod_length, rod_resistance=sim.state.rod_resistance,
                              frame_interval=sim.frame_interval)
         except OSError as exc:
+            if not existed:  # a failed run leaves no output file behind
+                try:
+                    out.unlink()
+                except OSError:
+                    pass
+            if is_io_error(exc) and not isinstance(exc, (FileNotFoundError, PermissionError, IsADirectoryError)):
+                raise CliIOError(f"cannot write the output file {out}: {' '.join(str(exc).split())}") from None
             raise CliError(f"cannot write the output file {out}: {exc}") from None
 
     writer = _on_root(open_writer, share=False)
@@ -356,10 +395,8 @@ def run(args):
         if world.rank != 0:
             writer = NullWriter(n_frames)
     if world.rank == 0:
-        checkpointer = Checkpointer(ckpt, p.output.checkpoint_interval, {
-            "format_note": "selfas-graph checkpoint; continue with selfas-graph simulate --resume",
-            "scenario_text": scenario.text, "overrides": json.dumps(list(scenario.overrides)),
-            "run_file": str(out.resolve()), "version": __version__})
+        checkpointer = Checkpointer(ckpt, p.output.checkpoint_interval,
+                                    checkpoint_meta(scenario, run_id, out.name, p.run.t_end, __version__))
     mode = args.progress
     if mode == "auto":
         mode = "bar" if sys.stderr.isatty() else "lines"
@@ -390,8 +427,11 @@ def run(args):
             sim._flush_pending(writer)
             writer.close(status=f"failed: {exc}")
             # the failed state (possibly NaN) goes to its own file for inspection, never into the run file
-            write_checkpoint(failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step,
-                                                       "failure": str(exc)})
+            try:
+                write_checkpoint(failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step,
+                                                           "failure": str(exc)})
+            except (OSError, RuntimeError) as io:
+                print(f"selfas-graph simulate: the failed state could not be saved ({io})", file=sys.stderr)
         print(f"selfas-graph simulate: {exc}", file=sys.stderr)
         print(f"frames up to the last output interval are in {out}; the failed state is in {failure} "
               f"(read it with selfas_graph.io.checkpoint.read_checkpoint)", file=sys.stderr)
@@ -402,16 +442,62 @@ def run(args):
         if writer:
             writer.close(status="interrupted")
         raise
+    except (OSError, RuntimeError) as exc:
+        if not is_io_error(exc):
+            raise
+        if reporter:
+            reporter.close()
+        _io_failure(exc, writer, out, ckpt, checkpointer, sim)
     finally:
         stop.restore()
     if reporter:
         reporter.close()
     if writer:
-        writer.set_attrs(wall_seconds=summary.wall_seconds, steps_done=summary.steps)
-        writer.close(status="finished")
+        try:
+            writer.set_attrs(wall_seconds=summary.wall_seconds, steps_done=summary.steps)
+            writer.close(status="finished")
+        except (OSError, RuntimeError) as exc:
+            if not is_io_error(exc):
+                raise
+            _io_failure(exc, writer, out, ckpt, checkpointer, sim)
     if world.rank == 0:
         _print_summary(summary, out, sim)
     return 0
+
+
+#: run files whose HDF5 handle failed: kept referenced until the process ends
+_ABANDONED = []
+
+
+def _io_failure(exc, writer, out, ckpt, checkpointer, sim):
+    """End a run whose writing failed (full disk, quota, a vanished folder): exit code 4.
+
+    A :class:`DiskFullError` is raised before anything of the write happened, so the run file
+    is closed as usual; any other failed write leaves HDF5's handle in a failed state, which
+    is abandoned: the file keeps what its last flush wrote, and ``--resume`` drops a torn row.
+    """
+    clean = isinstance(exc, DiskFullError)
+    if not clean:
+        _ABANDONED.append(writer)  # never deallocated: HDF5 reports every failed handle it frees
+    if clean and writer:
+        try:
+            writer.close(status=f"failed: {exc.strerror or exc}")
+        except (OSError, RuntimeError):
+            clean = False
+    last = "none"
+    if ckpt.exists():
+        try:
+            last = f"{ckpt} (step {int(read_checkpoint(ckpt)[0]['step'])})"
+        except CheckpointError:
+            last = str(ckpt)
+    reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())[:300]
+    msg = (f"I/O error at step {sim.state.step} (t = {sim.state.time:.6g}) while writing: {reason}. "
+           f"The frames flushed before it are in {out}; last good checkpoint: {last}. Free some space "
+           f"(or fix the folder) and continue with: selfas-graph simulate --resume {out}")
+    if world.size > 1:
+        print(f"selfas-graph simulate: error: {msg}", file=sys.stderr, flush=True)
+        world.Abort(4)
+    raise CliIOError(msg, hard_exit=not clean) from None
 
 
 def _print_summary(s, out, sim):

@@ -2,20 +2,31 @@
 
 A checkpoint is an HDF5 file holding :meth:`Simulation.snapshot` (arrays as datasets,
 scalars as attributes of ``/snapshot``) and, in ``/meta``, the scenario text and
-overrides, the run file it belongs to and the package version. It is written to
-``PATH.tmp``, flushed to disk, then renamed over ``PATH``, so a kill at any moment
-leaves either the previous checkpoint or the new one, never a torn file.
+overrides, the run's identity (``run_id``, also stored in the run file), the name of
+the run file it sits beside, the effective end time and the package version. The root
+attribute ``checksum`` is a SHA-256 of every snapshot and meta entry (name, dtype,
+shape and bytes), verified on reading: a flipped bit or an edited value is refused.
+
+It is written to ``PATH.tmp``, flushed and fsynced, then renamed over ``PATH``, so a
+kill at any moment leaves either the previous checkpoint or the new one, never a torn
+file; a write that fails (full disk) removes its ``.tmp`` and leaves the previous
+checkpoint in place.
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import time
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 FORMAT = "selfas-graph checkpoint 1"
+
+#: snapshot arrays that must hold finite numbers for a run to continue from them
+FINITE = ("position", "velocity", "hist_v", "hist_a", "hist_p", "work", "current", "tip_charge", "rod_charge")
 
 
 class CheckpointError(ValueError):
@@ -28,29 +39,101 @@ def checkpoint_path(run_path) -> Path:
     return p.with_name(p.stem + ".checkpoint.h5")
 
 
+def _digest(snapshot: dict, meta: dict) -> str:
+    """SHA-256 over every entry as stored (sorted names; dtype, shape and bytes of each value)."""
+    h = hashlib.sha256()
+    for part, items in (("snapshot", snapshot), ("meta", meta)):
+        for key in sorted(items):
+            value = items[key]
+            if isinstance(value, bytes):
+                value = value.decode("utf-8", "surrogateescape")
+            arr = np.asarray(value)
+            if arr.dtype.kind in "OUS":
+                data, kind = str(value).encode("utf-8", "surrogateescape"), "str"
+            else:
+                arr = np.ascontiguousarray(arr)
+                data, kind = arr.tobytes(), f"{arr.dtype.str}{arr.dtype.descr if arr.dtype.fields else ''}{arr.shape}"
+            h.update(f"{part}/{key}:{kind}:{len(data)}:".encode("utf-8", "surrogateescape"))
+            h.update(data)
+    return h.hexdigest()
+
+
+def _stored(value):
+    """A value as it reads back from HDF5 (attribute scalars as Python / numpy scalars)."""
+    arr = np.asarray(value)
+    if arr.ndim == 0 and arr.dtype.fields is None:
+        return arr.item()
+    return arr
+
+
 def write_checkpoint(path, snapshot: dict, meta: dict) -> None:
-    """Write ``snapshot`` and ``meta`` to ``path`` atomically (write aside, fsync, rename)."""
+    """Write ``snapshot`` and ``meta`` to ``path`` atomically (write aside, fsync, rename).
+
+    On any error (e.g. a full disk: ``OSError``) the temporary file is removed and the
+    previous checkpoint at ``path``, if any, is left as it was; the error is raised.
+    """
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
-    with h5py.File(tmp, "w") as f:
-        f.attrs["format"] = FORMAT
-        g = f.create_group("snapshot")
-        for key, value in snapshot.items():
-            arr = np.asarray(value)
-            if arr.ndim == 0 and arr.dtype.fields is None:
-                g.attrs[key] = arr.item()
-            else:
-                g.create_dataset(key, data=arr)
-        m = f.create_group("meta")
-        for key, value in meta.items():
-            m.attrs[key] = value if isinstance(value, (str, int, float)) else json.dumps(value)
-        f.flush()
-    fd = os.open(tmp, os.O_RDONLY)
+    need = sum(np.asarray(v).nbytes for v in snapshot.values()) + sum(len(str(v)) for v in meta.values()) + (1 << 20)
+    try:
+        st = os.statvfs(path.parent if str(path.parent) else ".")
+        free = st.f_bavail * st.f_frsize
+    except (OSError, AttributeError):
+        free = None
+    if free is not None and free < need:
+        # refused before the temporary file exists: the previous checkpoint stays, nothing is left behind
+        from .h5md import DiskFullError
+
+        raise DiskFullError(28, f"No space left for a checkpoint ({free / 2**20:.2f} MiB free, about "
+                          f"{need / 2**20:.2f} MiB needed)", str(tmp))
+    meta = {k: (v if isinstance(v, (str, int, float, np.integer, np.floating)) else json.dumps(v))
+            for k, v in meta.items()}
+    try:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["format"] = FORMAT
+            g = f.create_group("snapshot")
+            stored = {}
+            for key, value in snapshot.items():
+                arr = np.asarray(value)
+                if arr.ndim == 0 and arr.dtype.fields is None:
+                    g.attrs[key] = arr.item()
+                else:
+                    g.create_dataset(key, data=arr)
+            m = f.create_group("meta")
+            for key, value in meta.items():
+                m.attrs[key] = value
+            # the digest of what reads back (attributes come back as numpy scalars)
+            stored = {k: g.attrs[k] for k in g.attrs}
+            stored.update({k: g[k][()] for k in g})
+            f.attrs["checksum"] = _digest(stored, dict(m.attrs))
+            f.flush()
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise
+    _fsync_folder(path.parent)
+
+
+def _fsync_folder(folder):
+    """Make a rename in ``folder`` durable (best effort: not every file system allows it)."""
+    try:
+        fd = os.open(folder if str(folder) else ".", os.O_RDONLY)
+    except OSError:
+        return
     try:
         os.fsync(fd)
+    except OSError:
+        pass
     finally:
         os.close(fd)
-    os.replace(tmp, path)
 
 
 def read_checkpoint(path) -> tuple[dict, dict]:
@@ -69,18 +152,102 @@ def read_checkpoint(path) -> tuple[dict, dict]:
     except OSError as exc:
         raise CheckpointError(f"{path}: not a readable HDF5 file ({exc})") from None
     with f:
-        if f.attrs.get("format") != FORMAT:
-            raise CheckpointError(f"{path}: not a selfas-graph checkpoint (expected format {FORMAT!r})")
         try:
+            if f.attrs.get("format") != FORMAT:
+                raise CheckpointError(f"{path}: not a selfas-graph checkpoint (expected format {FORMAT!r})")
             g = f["snapshot"]
             snap = {k: v for k, v in g.attrs.items()}
             for k in g:
                 snap[k] = g[k][()]
             meta = dict(f["meta"].attrs)
-        except (KeyError, TypeError, OSError) as exc:
-            raise CheckpointError(f"{path}: an incomplete or damaged checkpoint ({exc})") from None
+            checksum = f.attrs.get("checksum")
+        except CheckpointError:
+            raise
+        except (KeyError, TypeError, ValueError, OSError, RuntimeError, AttributeError) as exc:
+            raise CheckpointError(f"{path}: an incomplete or damaged checkpoint ({' '.join(str(exc).split())})") from None
     missing = [k for k in ("position", "velocity", "step", "time", "hist_v", "hist_a") if k not in snap]
-    missing += [k for k in ("scenario_text", "overrides", "run_file") if k not in meta]
+    missing += [k for k in ("scenario_text", "overrides") if k not in meta]
     if missing:
         raise CheckpointError(f"{path}: an incomplete checkpoint (missing {', '.join(missing)})")
+    if checksum is None:
+        raise CheckpointError(f"{path}: the checkpoint carries no checksum, so its contents cannot be verified "
+                              f"(written by an older selfas-graph, or damaged)")
+    try:
+        ok = isinstance(checksum, str) and _digest(snap, meta) == checksum
+    except (TypeError, ValueError, UnicodeError):
+        ok = False
+    if not ok:
+        raise CheckpointError(f"{path}: the checkpoint's contents do not match its checksum "
+                              f"(the file is damaged or was edited); it cannot be resumed from")
+    check_snapshot(snap, path)
     return snap, meta
+
+
+def check_snapshot(snap: dict, path="checkpoint") -> None:
+    """Refuse a snapshot that no run can continue from: wrong dtypes or shapes, non-finite state.
+
+    Raises
+    ------
+    CheckpointError
+        Naming the entry and what it should hold.
+    """
+    from ..model.events import EVENT_DTYPE
+
+    pos = np.asarray(snap["position"])
+    if pos.dtype.kind != "f" or pos.ndim != 2 or pos.shape[1] != 3 or pos.shape[0] % 2:
+        raise CheckpointError(f"{path}: snapshot/position must be a (2 n_rods, 3) float array, "
+                              f"got {pos.dtype} {pos.shape}")
+    for key in FINITE:
+        if key not in snap:
+            continue
+        arr = np.asarray(snap[key])
+        if arr.dtype.kind not in "fiu" or arr.dtype.fields is not None:
+            raise CheckpointError(f"{path}: snapshot/{key} must hold numbers, got dtype {arr.dtype}")
+        if not np.isfinite(arr).all():
+            raise CheckpointError(f"{path}: snapshot/{key} holds non-finite values (NaN or inf); "
+                                  f"the state cannot be continued")
+    for key in ("velocity",):
+        if np.asarray(snap[key]).shape != pos.shape:
+            raise CheckpointError(f"{path}: snapshot/{key} has shape {np.asarray(snap[key]).shape}, "
+                                  f"expected {pos.shape} like the positions")
+    for key in ("step", "time"):
+        v = np.asarray(snap[key])
+        if v.ndim != 0 or v.dtype.kind not in "fiu" or not np.isfinite(v):
+            raise CheckpointError(f"{path}: snapshot/{key} must be a finite number, got {snap[key]!r}")
+    if "events" in snap:
+        ev = np.asarray(snap["events"])
+        if ev.dtype != EVENT_DTYPE or ev.ndim != 1:
+            raise CheckpointError(f"{path}: snapshot/events must be a 1-D array of event records "
+                                  f"{EVENT_DTYPE.descr}, got {ev.dtype} {ev.shape}")
+
+
+def checkpoint_meta(scenario, run_id, run_name, t_end, version) -> dict:
+    """The ``/meta`` of a run's checkpoints: what ``simulate --resume`` needs besides the
+    snapshot (the scenario text and overrides, the run identity shared with the run file,
+    the run file's name beside the checkpoint, the effective end time)."""
+    return {"format_note": "selfas-graph checkpoint; continue with selfas-graph simulate --resume",
+            "scenario_text": scenario.text, "overrides": json.dumps(list(scenario.overrides)),
+            "run_id": str(run_id), "run_name": str(run_name), "run_file": str(run_name), "t_end": float(t_end),
+            "version": version}
+
+
+class Checkpointer:
+    """Writes the simulation's snapshot to a checkpoint file after the first step, then every
+    ``interval`` wall seconds (0: only on demand).
+
+    The first one comes at once so that a run killed in its first interval (900 s by default)
+    can be resumed too.
+    """
+
+    def __init__(self, path, interval, meta):
+        self.path, self.interval, self.meta = Path(path), float(interval), meta
+        self.last = time.monotonic()
+        self.written = 0
+
+    def due(self):
+        return self.interval > 0 and (self.written == 0 or time.monotonic() - self.last >= self.interval)
+
+    def write(self, sim):
+        write_checkpoint(self.path, sim.snapshot(), {**self.meta, "step": sim.state.step})
+        self.last = time.monotonic()
+        self.written += 1

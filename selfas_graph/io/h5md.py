@@ -41,6 +41,7 @@ until the run ends, then "finished" or "failed: <reason>".
 """
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
@@ -97,6 +98,32 @@ class RunFileError(ValueError):
     """A file that is not a readable selfas-graph run."""
 
 
+class DiskFullError(OSError):
+    """Too little free space for the next write; raised before anything of it is written."""
+
+
+#: free space kept beyond the largest write a frame can make (HDF5 metadata, the file system's own)
+SPACE_MARGIN = 1 << 20
+
+
+def free_bytes(folder) -> int | None:
+    """Bytes the calling user may still write in ``folder`` (None where the file system cannot tell)."""
+    try:
+        st = os.statvfs(folder if str(folder) else ".")
+    except (OSError, AttributeError):
+        return None
+    return st.f_bavail * st.f_frsize
+
+
+def is_io_error(exc) -> bool:
+    """True for a failed write of the operating system (full disk, quota, a vanished folder), as
+    raised directly (OSError with an errno) or wrapped by HDF5 (its message carries the errno)."""
+    if isinstance(exc, OSError) and exc.errno is not None:
+        return True
+    text = str(exc)
+    return isinstance(exc, (OSError, RuntimeError)) and ("errno = " in text or "write failed" in text)
+
+
 def _growable(group, name, shape, dtype):
     """A dataset growing along its first axis, in uncompressed chunks of about 1 MiB.
 
@@ -121,6 +148,93 @@ def _append(ds, value):
 def _truncate(ds, n):
     if ds.shape[0] > n:
         ds.resize(n, axis=0)
+
+
+def _rows_up_to(steps, step, strict=True) -> int:
+    """How many leading rows of a step column belong to a run continued after ``step``.
+
+    The rows must be at most ``step`` and increasing (strictly for frames, non-decreasing for
+    events): a row torn by a kill (its size flushed, its data not: a zero or a stale step)
+    ends the kept rows even where a binary search would skip over it.
+    """
+    s = np.asarray(steps)
+    good = s <= step
+    if len(s) > 1:
+        d = np.diff(s)
+        good[1:] &= (d > 0) if strict else (d >= 0)
+    bad = np.flatnonzero(~good)
+    return int(bad[0]) if len(bad) else len(s)
+
+
+def appendable_problems(f) -> list:
+    """What keeps an open run file from being continued: datasets that cannot grow, wrong dtypes.
+
+    Checked read-only before :meth:`RunWriter.reopen` changes anything (an empty list: none).
+    """
+    problems = []
+
+    def check(name, kind=None, dtype=None):
+        ds = f.get(name)
+        if ds is None:
+            return
+        if not isinstance(ds, h5py.Dataset):
+            problems.append(f"{name} is not a dataset")
+        elif ds.chunks is None or ds.maxshape[0] is not None or ds.ndim < 1:
+            problems.append(f"{name} is not an appendable (chunked, unlimited) dataset")
+        elif dtype is not None and ds.dtype != dtype:
+            problems.append(f"{name} has dtype {ds.dtype}, expected {np.dtype(dtype)}")
+        elif kind is not None and ds.dtype.kind not in kind:
+            problems.append(f"{name} has dtype {ds.dtype}, expected {'integers' if kind == 'iu' else 'numbers'}")
+
+    for group in ("particles/tips/position", "particles/tips/velocity"):
+        check(f"{group}/step", "iu")
+        check(f"{group}/time", "f")
+        check(f"{group}/value", "f")
+    obs = f.get("observables")
+    if isinstance(obs, h5py.Group):
+        def visit(name, obj):
+            if isinstance(obj, h5py.Group) and "value" in obj:
+                check(f"observables/{name}/step", "iu")
+                check(f"observables/{name}/value", "f")
+                if name != "bond_error_per_step":
+                    check(f"observables/{name}/time", "f")
+        obs.visititems(visit)
+    check("events", dtype=EVENT_DTYPE)
+    g = f.get("graph")
+    if isinstance(g, h5py.Group):
+        for name in ("step", "tip_contacts_count", "conductor_contacts_count", "tip_contacts", "conductor_tip",
+                     "conductor_id", "role"):
+            check(f"graph/{name}", "iu")
+        for name in ("time", "current", "potential", "conductor_potential"):
+            check(f"graph/{name}", "f")
+    return problems
+
+
+def run_provenance(sim, scenario, command_line, run_id, scenario_path=None, mpi_ranks=1) -> dict:
+    """The attributes of ``/parameters/selfas_graph`` of a run file: the scenario text, path and
+    overrides (a placeholder for a scene built in Python), the resolved and derived parameters,
+    the version, the command, the seed, the ranks and threads and the run identity."""
+    import numba
+
+    from .._version import __version__
+
+    p = sim.params
+    if scenario_path is None:
+        scenario_path = scenario.path if scenario is not None and scenario.path is not None else ""
+    return {
+        "scenario_text": scenario.text if scenario is not None else
+        "# built in Python; the resolved parameters are in parameters_json\n",
+        "scenario_path": str(scenario_path),
+        "overrides": json.dumps(list(scenario.overrides) if scenario is not None else []),
+        "parameters_json": json.dumps(p.to_dict()),
+        "derived_json": json.dumps(sim.force_field.describe()),
+        "version": __version__,
+        "command_line": command_line,
+        "seed": p.scenario.seed,
+        "mpi_ranks": int(mpi_ranks),
+        "numba_threads": numba.get_num_threads(),
+        "run_id": str(run_id),
+    }
 
 
 class RunWriter:
@@ -216,15 +330,20 @@ class RunWriter:
         if "particles/tips/position/step" not in f:
             f.close()
             raise RunFileError(f"{self.path}: not a selfas-graph run file")
+        problems = appendable_problems(f)
+        if problems:
+            f.close()
+            raise RunFileError(f"{self.path}: cannot be continued: {'; '.join(problems)}")
 
-        def keep(steps):
-            return int(np.searchsorted(steps[:], step, side="right"))
+        def keep(*columns, strict=True):
+            # rows of the frames up to `step`, no more than every column of the group holds
+            return min([_rows_up_to(columns[0][:], step, strict)] + [c.shape[0] for c in columns[1:]])
 
         self._elements = {}
         for name in ("position", "velocity"):
             if f"particles/tips/{name}" in f:
                 g = f[f"particles/tips/{name}"]
-                n = keep(g["step"])
+                n = keep(g["step"], g["time"], g["value"])
                 for ds in (g["step"], g["time"], g["value"]):
                     _truncate(ds, n)
                 self._elements[name] = (g["step"], g["time"], g["value"])
@@ -234,7 +353,7 @@ class RunWriter:
 
         def visit(name, obj):
             if isinstance(obj, h5py.Group) and "value" in obj and name != "bond_error_per_step":
-                n = keep(obj["step"])
+                n = keep(obj["step"], obj["time"], obj["value"])
                 for ds in obj.values():
                     _truncate(ds, n)
                 self._obs[name] = (obj["step"], obj["time"], obj["value"])
@@ -242,19 +361,24 @@ class RunWriter:
         self.observables.visititems(visit)
         self.frame_interval = float(self._obs["dt"][2][-1]) if "dt" in self._obs and self._obs["dt"][2].shape[0] else None
         g = self.observables["bond_error_per_step"]
-        n = keep(g["step"])
+        n = keep(g["step"], g["value"])
         _truncate(g["step"], n)
         _truncate(g["value"], n)
         self._per_step = (g["step"], g["value"])
         if "events" in f:
-            _truncate(f["events"], keep(f["events"]["step"]) if f["events"].shape[0] else 0)
+            _truncate(f["events"], keep(f["events"].fields("step"), strict=False) if f["events"].shape[0] else 0)
         self.events_written = f["events"].shape[0] if "events" in f else 0
         if "graph" in f:
             g = f["graph"]
-            n = keep(g["step"])
+            per_frame = ("step", "time", "tip_contacts_count", "conductor_contacts_count", "role", "current", "potential")
+            n = keep(*(g[name] for name in per_frame))
             m = int(g["tip_contacts_count"][:n].sum())
             k = int(g["conductor_contacts_count"][:n].sum())
-            for name in ("step", "time", "tip_contacts_count", "conductor_contacts_count", "role", "current", "potential"):
+            if g["tip_contacts"].shape[0] < m or min(g[name].shape[0] for name in
+                                                     ("conductor_tip", "conductor_id", "conductor_potential")) < k:
+                f.close()
+                raise RunFileError(f"{self.path}: the graph data up to step {step} are incomplete (damaged file)")
+            for name in per_frame:
                 _truncate(g[name], n)
             _truncate(g["tip_contacts"], m)
             for name in ("conductor_tip", "conductor_id", "conductor_potential"):
@@ -263,8 +387,59 @@ class RunWriter:
         f.flush()
         return self
 
+    def reserve(self) -> int:
+        """Bytes the next frame may need at most: one new chunk of every growable dataset, and a margin
+        (computed again only when datasets were added)."""
+        key = (len(self._obs), "graph" in self.f, "events" in self.f)
+        if getattr(self, "_reserve", (None, 0))[0] != key:
+            # before the observables and the graph exist (frame 0), room for their first chunks too
+            first = 0 if key[0] and key[1] else 4 << 20
+            self._reserve = (key, self._chunk_bytes() + first)
+        return self._reserve[1]
+
+    def _chunk_bytes(self) -> int:
+        total = SPACE_MARGIN
+
+        def add(name, obj):
+            nonlocal total
+            if isinstance(obj, h5py.Dataset) and obj.chunks is not None:
+                total += int(np.prod(obj.chunks)) * obj.dtype.itemsize
+
+        self.f.visititems(add)
+        return total
+
+    def check_space(self):
+        """Raise :class:`DiskFullError` (nothing written) when the folder has less free space than the
+        next frame may need. Quotas the file system does not report are caught when a write fails."""
+        free = free_bytes(self.path.parent)
+        need = self.reserve()
+        if free is not None and free < need:
+            raise DiskFullError(28, f"{free / 2**20:.2f} MiB free in {self.path.parent or '.'}, "
+                                    f"the next frame may need {need / 2**20:.2f} MiB")
+        # a quota or a file-size limit does not show in the free space: ask the file system for the
+        # room (posix_fallocate), then give it back; HDF5 has written everything up to the size seen
+        try:
+            fd = os.open(self.path, os.O_WRONLY)
+        except OSError:
+            return
+        try:
+            size = os.fstat(fd).st_size
+            try:
+                os.posix_fallocate(fd, size, need)
+            except OSError as exc:
+                if exc.errno in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS, errno.ENODEV):
+                    return  # a file system without fallocate: failed writes are caught when they happen
+                raise DiskFullError(exc.errno, f"{exc.strerror}: {self.path} cannot grow by the "
+                                               f"{need / 2**20:.2f} MiB the next frame may need") from None
+            finally:
+                if os.fstat(fd).st_size != size:
+                    os.ftruncate(fd, size)
+        finally:
+            os.close(fd)
+
     def write_frame(self, step, t, position, velocity, observables: dict):
         """Append one frame (positions, velocities, observables) and flush to disk."""
+        self.check_space()
         if self.frame_interval is not None:
             observables = {**observables, "dt": self.frame_interval}
         for name, arr in (("position", position), ("velocity", velocity)):
@@ -289,6 +464,7 @@ class RunWriter:
 
     def write_per_step(self, steps, values):
         """Append a per-step series (the bond error of every step since the last call)."""
+        self.check_space()
         if len(steps):
             _append(self._per_step[0], np.asarray(steps, dtype=np.int64))
             _append(self._per_step[1], np.asarray(values, dtype=np.float64))
@@ -356,26 +532,10 @@ class RunWriter:
         """
         import shlex
         import sys
-
-        import numba
-
-        from .._version import __version__
+        import uuid
 
         p = sim.params
-        scenario = getattr(sim, "scenario", None)
-        provenance = {
-            "scenario_text": scenario.text if scenario is not None else
-            "# built in Python; the resolved parameters are in parameters_json\n",
-            "scenario_path": str(scenario.path) if scenario is not None and scenario.path is not None else "",
-            "overrides": json.dumps(list(scenario.overrides) if scenario is not None else []),
-            "parameters_json": json.dumps(p.to_dict()),
-            "derived_json": json.dumps(sim.force_field.describe()),
-            "version": __version__,
-            "command_line": shlex.join(sys.argv),
-            "seed": p.scenario.seed,
-            "mpi_ranks": 1,
-            "numba_threads": numba.get_num_threads(),
-        }
+        provenance = run_provenance(sim, getattr(sim, "scenario", None), shlex.join(sys.argv), uuid.uuid4().hex)
         if author is not None:
             provenance["author"] = author
         return cls(path, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
@@ -461,7 +621,9 @@ class RunFile:
         except OSError as exc:
             reason = " ".join(str(exc).split())  # h5py's messages can span lines
             if re.search(r"\block", reason.lower()) or "already open for write" in reason.lower():
-                reason += "; is a run still writing it? (set HDF5_USE_FILE_LOCKING=FALSE to read it anyway)"
+                raise RunFileError(f"{self.path}: locked by another process, most likely a simulation still "
+                                   f"writing it (HDF5 file locking: {reason}); wait for it to end, or set "
+                                   f"HDF5_USE_FILE_LOCKING=FALSE to read it anyway") from None
             raise RunFileError(f"{self.path}: not a readable HDF5 file ({reason})") from None
         required = ("parameters/selfas_graph", "particles/tips/position/value", "particles/tips/position/step",
                     "particles/tips/position/time", "particles/tips/charge", "particles/rods/charge", "observables")
@@ -475,6 +637,12 @@ class RunFile:
         if len(n) != 3 or n[2] != 3 or self.f["particles/tips/position/step"].shape[0] != n[0]:
             self.f.close()
             raise RunFileError(f"{self.path}: the positions are not laid out as (frames, tips, 3)")
+        kinds = {name: self.f[f"particles/tips/position/{name}"].dtype.kind for name in ("step", "time", "value")}
+        if kinds["step"] not in "iu" or kinds["time"] != "f" or kinds["value"] != "f":
+            self.f.close()
+            raise RunFileError(f"{self.path}: the positions' step, time and value datasets must hold integers, "
+                               f"numbers and numbers (found dtype kinds {kinds['step']}, {kinds['time']}, "
+                               f"{kinds['value']})")
 
     def __enter__(self):
         return self

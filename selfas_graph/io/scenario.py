@@ -23,6 +23,12 @@ import numpy as np
 from ..model import params as P
 
 
+#: every float of a scenario is 0 or within these magnitudes: products of up to ten of them (q^2 B / r*^3 ...)
+#: stay finite in double precision (1e30^10 = 1e300), and reciprocals of tiny ones (1 / R_D^2 ...) too
+MIN_MAGNITUDE = 1e-30
+MAX_MAGNITUDE = 1e30
+
+
 class ScenarioError(ValueError):
     """Invalid scenario or override. ``problems`` lists one message per problem."""
 
@@ -90,6 +96,8 @@ def scenario_from_text(text, path=None, overrides=(), t_end=None) -> Scenario:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError([f"not valid TOML: {exc}"], source=path) from None
+    except ValueError as exc:  # e.g. an integer of more digits than Python converts
+        raise ScenarioError([f"not a usable scenario: {exc}"], source=path) from None
     except RecursionError:
         raise ScenarioError(["not valid TOML: arrays or tables nested too deeply"], source=path) from None
     overrides = tuple(overrides)
@@ -130,6 +138,8 @@ def parameters_from_dict(raw: dict, source=None) -> P.Parameters:
 # ----------------------------------------------------------------------------- overrides
 
 def _apply_override(raw, item):
+    if "\n" in item or "\r" in item:
+        return [f"--set {item!r}: a line break inside one --set; give each key=value as its own --set"]
     if "=" not in item:
         return [f"--set {item!r}: expected key=value, e.g. integrator.dt=5e-4"]
     key, _, value_text = item.partition("=")
@@ -143,6 +153,8 @@ def _apply_override(raw, item):
         value = value_text.strip()
     except RecursionError:
         return [f"--set {key}: the value is nested too deeply"]
+    except ValueError:  # e.g. an integer of more digits than Python converts
+        return [f"--set {key}: the value {value_text.strip()[:40]!r}... is not a usable number"]
     node = raw
     for i, name in enumerate(parts[:-1]):
         nxt = node.get(name)
@@ -245,9 +257,17 @@ def _check_number(path, value, tp, meta, problems):
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
             problems.append(f"{path}: expected a number, got {_describe(value)}")
             return _INVALID
-        value = float(value)
+        try:
+            value = float(value)
+        except OverflowError:
+            value = math.inf
         if not math.isfinite(value):
             problems.append(f"{path}: expected a finite number, got {value}")
+            return _INVALID
+        if value != 0.0 and not MIN_MAGNITUDE <= abs(value) <= MAX_MAGNITUDE:
+            problems.append(f"{path}: {value!r} is out of scale; every number of a scenario is 0 or between "
+                            f"{MIN_MAGNITUDE:g} and {MAX_MAGNITUDE:g} in magnitude (reduced units, docs/model.md "
+                            f"section 1), so that the forces and energies derived from it stay finite")
             return _INVALID
     elif tp is str:
         if not isinstance(value, str):
@@ -262,12 +282,13 @@ def _check_number(path, value, tp, meta, problems):
         return value
     bounds = []
     ok = True
-    for key, op, word in (("ge", float.__ge__, ">="), ("gt", float.__gt__, ">"),
-                          ("le", float.__le__, "<="), ("lt", float.__lt__, "<")):
+    for key, op, word in (("ge", "__ge__", ">="), ("gt", "__gt__", ">"),
+                          ("le", "__le__", "<="), ("lt", "__lt__", "<")):
         b = meta.get(key)
         if b is not None:
-            bounds.append(f"{word} {b:g}")
-            ok = ok and op(float(value), float(b))
+            bounds.append(f"{word} {b:g}" if not isinstance(b, int) or abs(b) < 10**6 else f"{word} {b}")
+            # integers compare exactly (2**63 is not <= 2**63 - 1, though their floats are equal)
+            ok = ok and bool(getattr(value, op)(b) if tp is int else getattr(float(value), op)(float(b)))
     if not ok:
         problems.append(f"{path}: {value!r} is out of range; valid: {' and '.join(bounds)}")
         return _INVALID
@@ -289,9 +310,16 @@ def _check_array(path, value, template, problems):
     if not _has_shape(value, shape):
         problems.append(f"{path}: expected an array of {want} numbers, e.g. {_plain(template)}, got {_describe(value)}")
         return _INVALID
-    flat = _flatten(value)
+    try:
+        flat = _flatten(value)
+    except OverflowError:
+        flat = [math.inf]
     if not all(math.isfinite(v) for v in flat):
-        problems.append(f"{path}: every entry must be a finite number, got {value}")
+        problems.append(f"{path}: every entry must be a finite number, got {_describe(value)}")
+        return _INVALID
+    if not all(v == 0.0 or MIN_MAGNITUDE <= abs(v) <= MAX_MAGNITUDE for v in flat):
+        problems.append(f"{path}: an entry is out of scale; every number of a scenario is 0 or between "
+                        f"{MIN_MAGNITUDE:g} and {MAX_MAGNITUDE:g} in magnitude, got {_describe(value)}")
         return _INVALID
     return _to_tuple(value)
 

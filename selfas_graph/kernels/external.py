@@ -18,6 +18,8 @@ few tens of nodes converges fast (the number of nodes is an accuracy knob).
 """
 import math
 
+import numpy as np
+
 from ._jit import inline, njit_parallel, njit_rows, prange
 from .laws import tip_force_over_r, tip_potential
 
@@ -93,16 +95,21 @@ def monopoles_on_tips(position, velocity, charge, source, source_charge, rstar, 
 
 @njit_parallel
 def monopoles_energy(position, charge, source, source_charge, rstar, kappa):
-    """Potential energy of tips in the field of fixed monopoles (tip law of term 1)."""
-    total = 0.0
-    for k in prange(position.shape[0]):
+    """Potential energy of tips in the field of fixed monopoles (tip law of term 1); summed in tip
+    order after the parallel loop, so the total does not depend on the thread count."""
+    n = position.shape[0]
+    per_tip = np.empty(n)
+    for k in prange(n):
         acc = 0.0
         for j in range(source.shape[0]):
             dx = position[k, 0] - source[j, 0]
             dy = position[k, 1] - source[j, 1]
             dz = position[k, 2] - source[j, 2]
             acc += tip_potential(dx * dx + dy * dy + dz * dz, charge[k] * source_charge[j], rstar, kappa)
-        total += acc
+        per_tip[k] = acc
+    total = 0.0
+    for k in range(n):
+        total += per_tip[k]
     return total
 
 
@@ -165,9 +172,11 @@ def line_yukawa_on_centres(centre, rod_charge, z1, z2, lam, screening, w, nodes,
 
 @njit_parallel
 def line_yukawa_energy(centre, rod_charge, z1, z2, lam, screening, w, nodes, weights):
-    """Potential energy of the rod charges in the screened line charge (see module docstring)."""
-    total = 0.0
-    for i in prange(centre.shape[0]):
+    """Potential energy of the rod charges in the screened line charge (see module docstring); summed
+    in rod order after the parallel loop, so the total does not depend on the thread count."""
+    n = centre.shape[0]
+    per_rod = np.empty(n)
+    for i in prange(n):
         x = centre[i, 0]
         y = centre[i, 1]
         zp = centre[i, 2]
@@ -178,5 +187,8 @@ def line_yukawa_energy(centre, rod_charge, z1, z2, lam, screening, w, nodes, wei
         for g in range(nodes.shape[0]):
             u = u1 + (u2 - u1) * nodes[g]
             acc += weights[g] * math.exp(-rho_e * math.cosh(u) / screening)
-        total += rod_charge[i] * lam * (u2 - u1) * acc
+        per_rod[i] = rod_charge[i] * lam * (u2 - u1) * acc
+    total = 0.0
+    for i in range(n):
+        total += per_rod[i]
     return total

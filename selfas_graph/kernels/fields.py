@@ -1,6 +1,8 @@
 """One-body terms: fields of fixed sources acting on tips (MODEL.md terms 5 and 8)."""
 import math
 
+import numpy as np
+
 from ._jit import inline, njit_parallel, njit_rows, prange
 from .laws import wall_potential, wall_push
 
@@ -84,9 +86,17 @@ def electrode_walls(position, velocity, z_cathode, z_anode, rstar, kappa, k_br, 
 
 @njit_parallel
 def electrode_energy(position, z_cathode, z_anode, rstar, kappa):
-    """Elastic energy of the electrode walls (potential of the push in :func:`electrode_walls`)."""
-    total = 0.0
-    for k in prange(position.shape[0]):
+    """Elastic energy of the electrode walls (potential of the push in :func:`electrode_walls`).
+
+    One value per tip, summed in tip order afterwards: the total does not depend on the thread
+    count (a ``prange`` reduction adds per-thread partial sums, whose order does).
+    """
+    n = position.shape[0]
+    per_tip = np.empty(n)
+    for k in prange(n):
         z = position[k, 2]
-        total += wall_potential(z - z_cathode, rstar, kappa) + wall_potential(z_anode - z, rstar, kappa)
+        per_tip[k] = wall_potential(z - z_cathode, rstar, kappa) + wall_potential(z_anode - z, rstar, kappa)
+    total = 0.0
+    for k in range(n):
+        total += per_tip[k]
     return total

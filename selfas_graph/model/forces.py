@@ -732,13 +732,19 @@ class ForceField:
         return energy
 
     def dominant_channel(self, rows) -> str:
-        """Name of the channel with the largest force on the given tips (for failure diagnoses)."""
+        """Name of the channel with the largest force on the given tips (for failure diagnoses);
+        a non-finite force (NaN or inf) counts as the largest."""
+        return self.dominant_force(rows)[0]
+
+    def dominant_force(self, rows) -> tuple[str, float]:
+        """(channel, largest force component) of the channel with the largest force on the given
+        tips; NaN counts as inf. ("none", 0.0) without channels."""
         best, name = -1.0, "none"
         for ch, _ in self.channels:
-            m = float(np.abs(self.out[ch][rows]).max(initial=0.0))
+            m = float(np.nan_to_num(np.abs(self.out[ch][rows]), nan=np.inf).max(initial=0.0))
             if m > best:
                 best, name = m, ch
-        return name
+        return name, max(best, 0.0)
 
     def describe(self) -> dict:
         """Resolved settings derived from the parameters (e.g. the Yukawa cut-off radius)."""

@@ -124,7 +124,7 @@ class PlacementParams:
     min_tip_distance: Optional[float] = spec(
         None, "no two tips of different rods start closer than this (default 4 r*)", ge=0.0, le=100.0
     )
-    max_attempts: int = spec(2000, "random draws tried per rod before placement gives up", ge=1)
+    max_attempts: int = spec(2000, "random draws tried per rod before placement gives up", ge=1, le=10**9)
 
 
 @dataclass(frozen=True)
@@ -349,8 +349,8 @@ class OutputParams:
     file: Optional[str] = spec(None, "output HDF5 path (default: the scenario file name with .h5, in the working directory)")
     velocities: bool = spec(True, "save tip velocities with every frame")
     checkpoint_interval: float = spec(
-        900.0, "wall-clock seconds between checkpoints (RUN.checkpoint.h5); one is also written at the end and "
-        "on SIGTERM/SIGINT; 0 writes only those", ge=0.0)
+        900.0, "wall-clock seconds between checkpoints (RUN.checkpoint.h5), the first right after the first step; "
+        "one is also written at the end and on SIGTERM/SIGINT; 0 writes only those", ge=0.0)
 
 
 @dataclass(frozen=True)

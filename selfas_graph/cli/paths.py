@@ -1,0 +1,75 @@
+"""Checks of the files a subcommand is about to write, shared by ``simulate`` and ``plot``.
+
+A target must be a regular file or not exist yet (never a device such as /dev/null, a
+folder, a FIFO), must not be one of the command's own inputs (a scenario, a run file),
+and must have a name the file system accepts; every refusal is a :class:`CliError`
+(exit 2) naming the path and what to do.
+"""
+from __future__ import annotations
+
+import errno
+import os
+import stat
+from pathlib import Path
+
+from .main import CliError
+
+
+def same_file(a, b) -> bool:
+    """True if ``a`` and ``b`` name one existing file (hard links and symlinks included)."""
+    try:
+        return os.path.samefile(a, b)
+    except (OSError, ValueError):
+        return False
+
+
+def check_target(path, what="output file", force=False, inputs=()) -> Path:
+    """Refuse a path that cannot or must not be written; returns it as a Path.
+
+    Parameters
+    ----------
+    path : path-like
+    what : str
+        How the messages name the file ("output file", "checkpoint file").
+    force : bool
+        An existing regular file may be replaced.
+    inputs : iterable of path-like
+        Files the command reads: never a target, not even with ``force``.
+    """
+    path = Path(path)
+    if "\x00" in str(path):
+        raise CliError(f"the {what} path {str(path)!r} contains a NUL character")
+    if path.name in ("", ".", ".."):
+        raise CliError(f"the {what} path {path} names a folder, not a file; give a file name such as run.h5")
+    try:
+        st = os.stat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        st = None
+    except OSError as exc:
+        if exc.errno == errno.ENAMETOOLONG:
+            raise CliError(f"the {what} path {str(path)[:60]}... is too long for the file system "
+                           f"({len(path.name)} characters in its last name); give a shorter one") from None
+        raise CliError(f"the {what} path {path} cannot be used: {exc.strerror}") from None
+    if st is not None:
+        if stat.S_ISDIR(st.st_mode):
+            raise CliError(f"the {what} path {path} is a directory")
+        if not stat.S_ISREG(st.st_mode):
+            raise CliError(f"the {what} path {path} is not a regular file (a device, pipe or socket); "
+                           f"give the name of a file to write")
+        for source in inputs:
+            if source is not None and same_file(path, source):
+                raise CliError(f"the {what} {path} is the input {source} of this command; "
+                               f"give another name (it would be destroyed, even with --force)")
+        if not force:
+            raise CliError(f"{what} {path} exists; pass --force to overwrite it or -o to choose another name")
+    elif len(path.name.encode("utf-8", "surrogateescape")) > _name_max(path.parent):
+        raise CliError(f"the {what} name {path.name[:40]}... is too long for the file system "
+                       f"({len(path.name)} characters); give a shorter one")
+    return path
+
+
+def _name_max(folder) -> int:
+    try:
+        return os.pathconf(folder if str(folder) else ".", "PC_NAME_MAX")
+    except (OSError, ValueError):
+        return 255
