@@ -179,6 +179,8 @@ def test_killed_seed_resumes_and_one_without_checkpoint_is_refused(scene, tmp_pa
     ens = Ensemble(scene, [3, 4], tmp_path, t_end=0.3)
     with pytest.raises(EnsembleError, match=r"seed_0004.h5 is running at t = 0.2 .* no usable checkpoint"):
         ens.plan()
+    # summarising only, a file still being written (or killed) is read up to its last frame
+    assert [(p.seed, p.action) for p in ens.plan(summary_only=True)] == [(3, "resume"), (4, "partial")]
     forced = Ensemble(scene, [3, 4], tmp_path, t_end=0.3, force=True)
     assert [(p.seed, p.action) for p in forced.plan()] == [(3, "resume"), (4, "run")]
     assert [r["status"] for r in forced.run()] == ["finished", "finished"]
@@ -281,9 +283,11 @@ def test_sigterm_stops_the_seeds_with_checkpoints_and_a_rerun_continues(scene, t
 def test_no_run_summarises_the_files_present(quick, capsys):
     folder, _ = quick
     assert main(["ensemble", QUICK, "--seeds", "5", "--t-end", str(T_END), "-o", str(folder), "--no-run",
-                 "--times", "0.5"]) == 0
+                 "--times", "0.5", "--plot"]) == 0
     out = capsys.readouterr().out
     assert "1 to run, 0 to resume, 4 done" in out and "[1/" not in out
+    png = (folder / "summary.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 1000
     assert not seed_path(folder, 5).exists()
     assert json.loads((folder / "summary.json").read_text())["missing"] == [str(seed_path(folder, 5))]
 
@@ -307,3 +311,20 @@ def test_summary_leaves_out_an_unreadable_file_by_name(scene, tmp_path):
     assert s["n_seeds"] == 1 and s["measures"]["median_axis_distance"]["n"] == [1]
     assert s["unreadable"][0]["path"] == str(seed_path(tmp_path, 4))
     assert "left out: " in format_table(s) and "not a readable HDF5 file" in format_table(s)
+
+
+def test_a_file_of_an_earlier_version_matches_where_it_lacks_only_later_keys_at_their_default():
+    """Keys added after a run file was written (contacts.resistance, rods.length, ...) count as
+    equal when the wanted value is their default; not otherwise, and never for a force term
+    that the file has off."""
+    from selfas_graph.ensemble import parameter_differences
+    from selfas_graph.model.params import Parameters
+
+    wanted = Parameters().replace({"forces.yukawa": {}}).to_dict()
+    stored = json.loads(json.dumps(wanted))
+    del stored["contacts"]
+    assert parameter_differences(stored, wanted) == []
+    changed = Parameters().replace({"forces.yukawa": {}, "contacts.resistance": 2.0}).to_dict()
+    assert parameter_differences(stored, changed) == ["contacts.resistance"]
+    stored["forces"]["yukawa"] = None  # the term off in the file: its keys are real differences
+    assert "forces.yukawa.screening_length" in parameter_differences(stored, wanted)

@@ -128,3 +128,17 @@ def test_missing_matplotlib_names_the_extra(run_file, tmp_path, monkeypatch, cap
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # makes `import matplotlib` raise ImportError
     assert main(["plot", str(run_file), "-o", str(tmp_path / "x.png")]) == 2
     assert 'pip install "selfas-graph[plot]"' in capsys.readouterr().err
+
+
+def test_ensemble_summary_plot_draws_every_measure_with_its_band(tmp_path):
+    """A hand-made summary of two measures at three times, the last with one seed left."""
+    from selfas_graph.cli.main import CliError
+    from selfas_graph.cli.plot import plot_summary
+
+    summary = {"n_seeds": 3, "times": [0.0, 1.0, 2.0], "measures": {
+        "filament_rods": {"unit": "rods", "mean": [0.0, 10.0, 12.0], "sem": [0.0, 1.5, None], "n": [3, 3, 1]},
+        "cycle_rank": {"unit": "loops", "mean": [0.0, None, 4.0], "sem": [0.0, None, None], "n": [3, 3, 1]}}}
+    out = plot_summary(summary, tmp_path / "s.png", title="test")
+    assert is_png(out)
+    with pytest.raises(CliError, match="none of the measures"):
+        plot_summary(summary, tmp_path / "t.png", title="test", measures=["no_such_measure"])

@@ -69,6 +69,8 @@ def add_arguments(p):
     p.add_argument("--flux-radius", type=float, metavar="R",
                    help="disc radius of the mid-plane flux (default: the placement box's half-diagonal in x-y)")
     p.add_argument("--no-run", action="store_true", help="summarise the seed files present; run nothing")
+    p.add_argument("--plot", action="store_true",
+                   help="also draw DIR/summary.png: each measure against time, mean and a band of one standard error")
     p.add_argument("--force", action="store_true",
                    help="replace seed files that cannot be reused (other parameters, failed, or incomplete without "
                         "a checkpoint); finished ones are kept")
@@ -153,6 +155,10 @@ def _run(args, pool):
         except (EnsembleError, OSError) as exc:
             raise CliError(f"cannot write the summary into {folder}: {exc}") from None
         print(f"\nwrote {js} and {cs}")
+        if args.plot:
+            from .plot import plot_summary
+
+            print(f"wrote {plot_summary(summary, folder / 'summary.png', title=f'{p.scenario.name} ensemble')}")
     else:
         print("no seed file to summarise")
     statuses = [r.get("status") for r in results if r is not None]
