@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from conftest import SMALL_CIRCUIT_SCENE
+from runfiles import differing_datasets
 from selfas_graph import RunFile
 from selfas_graph.analysis import rod_centres
 from selfas_graph.cli.main import main
@@ -28,19 +29,7 @@ QUICK = str(ROOT / "scenarios" / "quick.toml")
 T_END = 0.5  # short: the machinery, not the physics (quick.toml short-circuits near t = 1.3)
 
 
-def _datasets(path):
-    out = {}
-    with h5py.File(path, "r") as f:
-        f.visititems(lambda n, o: out.__setitem__(n, o[()]) if isinstance(o, h5py.Dataset) else None)
-    return out
-
-
-def _same_run(a, b):
-    """Every dataset equal bit for bit (NaN equal to NaN: floating tips' potentials)."""
-    da, db = _datasets(a), _datasets(b)
-    assert da.keys() == db.keys()
-    return [k for k in da if not (da[k].shape == db[k].shape and np.array_equal(
-        da[k], db[k], equal_nan=da[k].dtype.kind == "f"))]
+_same_run = differing_datasets
 
 
 @pytest.fixture(scope="module")

@@ -6,54 +6,30 @@ selfas_graph.cli.main ensemble ...`` (mpi4py's own launcher). Each seed runs alo
 rank, so its file equals the serial ensemble's bit for bit. Each launch has a timeout: a
 hang fails the test instead of blocking the suite.
 """
-import os
-import shutil
-import subprocess
-import sys
-from pathlib import Path
 
-import h5py
-import numpy as np
 import pytest
 
 from conftest import SMALL_CIRCUIT_SCENE
+from runfiles import MPIEXEC, differing_datasets, launch
 from selfas_graph.ensemble import seed_path
 
 pytestmark = pytest.mark.mpi
 
-MPIEXEC = shutil.which("mpiexec", path=str(Path(sys.executable).parent)) or shutil.which("mpiexec")
 if MPIEXEC is None:
     pytest.skip("mpiexec not found next to the Python interpreter or on PATH (install the mpich wheel)",
                 allow_module_level=True)
 pytest.importorskip("mpi4py", reason="mpi4py is not installed")
 
-#: seconds for one launch: 2 seeds of the 60-rod scene to t = 0.2 take about 10 s; longer means a hang
-TIMEOUT = 120
 ARGS = ["scene.toml", "--seeds", "2", "--t-end", "0.2"]
 
 
 def _launch(cmd, cwd, ranks=0):
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("PMI_", "HYDRA_", "OMPI_", "MPI_"))}
-    env["NUMBA_NUM_THREADS"] = "1"
-    cmd = [sys.executable, *cmd]
-    if ranks:
-        cmd = [MPIEXEC, "-n", str(ranks), *cmd]
-    return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=TIMEOUT)
-
-
-def _datasets(path):
-    out = {}
-    with h5py.File(path, "r") as f:
-        f.visititems(lambda n, o: out.__setitem__(n, o[()]) if isinstance(o, h5py.Dataset) else None)
-    return out
+    return launch(cmd, cwd, ranks)
 
 
 def _assert_same_seeds(folder, reference):
     for s in (3, 4):
-        got, want = _datasets(seed_path(folder, s)), _datasets(seed_path(reference, s))
-        assert got.keys() == want.keys()
-        differ = [k for k in want if not (got[k].shape == want[k].shape and np.array_equal(
-            got[k], want[k], equal_nan=want[k].dtype.kind == "f"))]
+        differ = differing_datasets(seed_path(folder, s), seed_path(reference, s))
         assert not differ, f"seed {s} differs from the serial ensemble in {differ}"
 
 

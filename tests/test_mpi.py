@@ -11,57 +11,31 @@ Every launch uses one numba thread per rank (3 ranks already oversubscribe the 2
 machine); the serial run comes first and fills the numba cache, so that the ranks do
 not compile the same kernels at once.
 """
-import os
-import shutil
-import subprocess
-import sys
-from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 
 from conftest import SMALL_CIRCUIT_SCENE
+from runfiles import MPIEXEC, assert_same_run, launch
 from selfas_graph.model import events as ev
 
 pytestmark = pytest.mark.mpi
 
-MPIEXEC = shutil.which("mpiexec", path=str(Path(sys.executable).parent)) or shutil.which("mpiexec")
 if MPIEXEC is None:
     pytest.skip("mpiexec not found next to the Python interpreter or on PATH (install the mpich wheel)",
                 allow_module_level=True)
 pytest.importorskip("mpi4py", reason="mpi4py is not installed")
-
-#: seconds for one launch: the 1200-step scene takes 2-6 s; longer means a hang
-TIMEOUT = 90
 
 SCENE = SMALL_CIRCUIT_SCENE
 
 
 def _launch(ranks, args, cwd):
     """Run ``selfas-graph simulate ARGS`` serially (ranks = 0) or under ``mpiexec -n ranks``."""
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("PMI_", "HYDRA_", "OMPI_", "MPI_"))}
-    env["NUMBA_NUM_THREADS"] = "1"
-    cmd = [sys.executable, "-m", "selfas_graph.cli.main", "simulate", *args, "--progress", "none"]
-    if ranks:
-        cmd = [MPIEXEC, "-n", str(ranks), *cmd]
-    return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=TIMEOUT)
+    return launch(["-m", "selfas_graph.cli.main", "simulate", *args, "--progress", "none"], cwd, ranks)
 
 
-def _datasets(path):
-    out = {}
-    with h5py.File(path, "r") as f:
-        f.visititems(lambda n, o: out.__setitem__(n, o[()]) if isinstance(o, h5py.Dataset) else None)
-    return out
-
-
-def _assert_same_run(path, reference):
-    """Every dataset of the two run files equal bit for bit (NaN equal to NaN: floating tips' potentials)."""
-    got, want = _datasets(path), _datasets(reference)
-    assert got.keys() == want.keys()
-    differ = [k for k in want if not (got[k].shape == want[k].shape and np.array_equal(
-        got[k], want[k], equal_nan=want[k].dtype.kind == "f"))]
-    assert not differ, f"{path.name} differs from the serial run in {differ}"
+_assert_same_run = assert_same_run
 
 
 @pytest.fixture(scope="module")

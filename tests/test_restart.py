@@ -9,6 +9,7 @@ import h5py
 import numpy as np
 import pytest
 
+from runfiles import datasets
 from selfas_graph.cli.main import main
 from selfas_graph.io.checkpoint import Checkpointer
 from selfas_graph.io.checkpoint import CheckpointError, checkpoint_path, read_checkpoint
@@ -19,14 +20,6 @@ from selfas_graph.model.simulation import RunInterrupted, Simulation
 from conftest import SMALL_CIRCUIT_SCENE
 
 SCENE = SMALL_CIRCUIT_SCENE
-
-
-def _datasets(path):
-    """Every dataset of a run file except wall-clock provenance, as {name: array}."""
-    out = {}
-    with h5py.File(path, "r") as f:
-        f.visititems(lambda n, o: out.__setitem__(n, o[()]) if isinstance(o, h5py.Dataset) else None)
-    return out
 
 
 def _same(a, b):
@@ -88,7 +81,7 @@ def test_interrupted_and_resumed_run_is_bitwise_identical(reference, tmp_path, w
     assert not finished
     _, finished = _run(path, resume_from=checkpoint_path(path))
     assert finished
-    ref, got = _datasets(ref_path), _datasets(path)
+    ref, got = datasets(ref_path), datasets(path)
     assert sorted(ref) == sorted(got)
     for name in ref:
         assert _same(ref[name], got[name]), name
@@ -104,7 +97,7 @@ def test_resume_truncates_frames_written_after_the_checkpoint(reference, tmp_pat
     _run(path, resume_from=ckpt, stop_at=900)  # the file now holds frames up to step 900
     ckpt.write_bytes(saved)  # as if killed before the step-900 checkpoint replaced the step-300 one
     _run(path, resume_from=ckpt)
-    ref, got = _datasets(ref_path), _datasets(path)
+    ref, got = datasets(ref_path), datasets(path)
     for name in ref:
         assert _same(ref[name], got[name]), name
 
@@ -153,7 +146,7 @@ def test_sigterm_checkpoints_and_resume_completes(tmp_path):
     res = subprocess.run([sys.executable, "-m", "selfas_graph.cli.main", "simulate", "--resume",
                           str(tmp_path / "cut.h5"), "--progress", "none"], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
-    ref, got = _datasets(tmp_path / "full.h5"), _datasets(tmp_path / "cut.h5")
+    ref, got = datasets(tmp_path / "full.h5"), datasets(tmp_path / "cut.h5")
     for name in ref:
         assert _same(ref[name], got[name]), name
 
@@ -195,6 +188,6 @@ def test_kill_9_keeps_the_file_readable_and_resume_completes_it(tmp_path):
     if proc.returncode is None or proc.returncode != 0:
         res = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
         assert res.returncode == 0, res.stderr
-    ref, got = _datasets(tmp_path / "full.h5"), _datasets(out)
+    ref, got = datasets(tmp_path / "full.h5"), datasets(out)
     for name in ref:
         assert _same(ref[name], got[name]), name
