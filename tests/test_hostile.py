@@ -1330,6 +1330,14 @@ def test_bug_plot_infinite_r_max(kind, workdir, capsys, real_run):
     _expect_usage_error(res, "--r-max")
 
 
+@pytest.mark.parametrize("kind", ["field", "flux"])
+def test_bug_plot_huge_r_max_is_bounded(kind, workdir, capsys, real_run):
+    """--r-max 1e9 set the default azimuthal sampling to ~2e11 points per radius (minutes or
+    memory exhaustion); radii are bounded like every size-like option."""
+    res = cli(capsys, "plot", real_run["run"], "--kind", kind, "-o", workdir / "f.png", "--r-max=1e9")
+    _expect_usage_error(res, "at most 500 L")
+
+
 @pytest.mark.parametrize("kind, plane", [("field", "nan"), ("flux", "inf")])
 def test_bug_plot_nonfinite_planes(kind, plane, workdir, capsys, real_run):
     res = cli(capsys, "plot", real_run["run"], "--kind", kind, "-o", workdir / "f.png", "--planes", plane)

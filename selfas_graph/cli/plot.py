@@ -51,6 +51,9 @@ SERIES_KINDS = ("timeline", "moment", "fractal", "skeleton")
 MAX_BINS = 10_000
 MAX_N_PHI = 100_000
 MAX_PLANES = 50
+#: profiles reach at most this radius (L): the shipped scenes span tens of L, and the default
+#: azimuthal sampling at this radius is MAX_N_PHI samples for the wires of D = 0.06
+MAX_R_MAX = 500.0
 #: kinds that need the graph data (contacts, roles, currents) of the run
 NEEDS_GRAPH = ("field", "flux", "timeline", "moment", "fractal", "skeleton")
 #: above this many rods a snapshot colours the largest structure instead of dead ends (paper Fig. 6)
@@ -499,8 +502,8 @@ def _check_options(args):
         raise CliError(f"--n-phi must be between 1 and {MAX_N_PHI}, got {args.n_phi}")
     if args.planes and len(args.planes) > MAX_PLANES:
         raise CliError(f"--planes takes at most {MAX_PLANES} planes, got {len(args.planes)}")
-    if args.r_max is not None and not (np.isfinite(args.r_max) and args.r_max > 0):
-        raise CliError(f"--r-max must be a finite number > 0, got {args.r_max}")
+    if args.r_max is not None and not (np.isfinite(args.r_max) and 0 < args.r_max <= MAX_R_MAX):
+        raise CliError(f"--r-max must be a radius > 0 and at most {MAX_R_MAX:g} L, got {args.r_max}")
     if args.planes and not all(np.isfinite(z) for z in args.planes):
         raise CliError(f"--planes must be finite numbers, got {args.planes}")
     if args.every is not None and args.every < 1:
