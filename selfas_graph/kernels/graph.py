@@ -138,3 +138,63 @@ def edges_in_blocks_of(n, a, b, root):
         # the tree edge's child, or the deeper end of a non-tree edge: the larger discovery time
         out[e] = into_root_block[x] if disc[x] > disc[y] else into_root_block[y]
     return out
+
+
+@njit
+def structures(n_rods, node_of_tip, n_nodes, tip_contacts, conductor_tip, key_index):
+    """Structures of the rods and which of them touch conductors (``model/graph.py::classify_rods``).
+
+    ``node_of_tip`` (2 n_rods,) the merged node of each tip (:func:`component_labels` of the
+    tip contacts), ``tip_contacts`` (m, 2) those contacts; ``conductor_tip`` (k,) the tip of
+    each conductor contact and ``key_index`` (k,) its attachment key as an index
+    ``0 .. n_keys-1``. A rod is free if neither tip is in a tip or conductor contact.
+
+    Returns ``(comp, n_comp, free, structure, structure_size, comp_touch, candidate)``:
+    the component of each merged node (rods join merged nodes; numbered as
+    :func:`component_labels` numbers them), free rods, the structure id of each rod (-1
+    free; the components of non-free rods renumbered ``0 .. S-1`` in the order of their
+    component labels), the rods per structure, the components touching a conductor, and
+    those touching at least two different keys.
+    """
+    u = np.empty(n_rods, dtype=np.int64)
+    v = np.empty(n_rods, dtype=np.int64)
+    for i in range(n_rods):
+        u[i] = node_of_tip[2 * i]
+        v[i] = node_of_tip[2 * i + 1]
+    n_comp, comp = component_labels(n_nodes, u, v)
+    touched = np.zeros(2 * n_rods, dtype=np.bool_)
+    for j in range(tip_contacts.shape[0]):
+        touched[tip_contacts[j, 0]] = True
+        touched[tip_contacts[j, 1]] = True
+    for j in range(conductor_tip.shape[0]):
+        touched[conductor_tip[j]] = True
+    free = np.empty(n_rods, dtype=np.bool_)
+    used = np.zeros(n_comp, dtype=np.bool_)
+    for i in range(n_rods):
+        free[i] = not (touched[2 * i] or touched[2 * i + 1])
+        if not free[i]:
+            used[comp[u[i]]] = True
+    structure_of_comp = np.full(n_comp, -1, dtype=np.int64)
+    n_struct = 0
+    for c in range(n_comp):
+        if used[c]:
+            structure_of_comp[c] = n_struct
+            n_struct += 1
+    structure = np.full(n_rods, -1, dtype=np.int64)
+    structure_size = np.zeros(n_struct, dtype=np.int64)
+    for i in range(n_rods):
+        if not free[i]:
+            s = structure_of_comp[comp[u[i]]]
+            structure[i] = s
+            structure_size[s] += 1
+    comp_touch = np.zeros(n_comp, dtype=np.bool_)
+    candidate = np.zeros(n_comp, dtype=np.bool_)
+    first_key = np.full(n_comp, -1, dtype=np.int64)
+    for j in range(conductor_tip.shape[0]):
+        c = comp[node_of_tip[conductor_tip[j]]]
+        comp_touch[c] = True
+        if first_key[c] < 0:
+            first_key[c] = key_index[j]
+        elif first_key[c] != key_index[j]:
+            candidate[c] = True
+    return comp, n_comp, free, structure, structure_size, comp_touch, candidate

@@ -45,7 +45,8 @@ from collections.abc import Callable, Iterable, Mapping
 import networkx as nx
 import numpy as np
 
-from selfas_graph.kernels.graph import component_labels, edges_in_blocks_of
+from selfas_graph.kernels.graph import edges_in_blocks_of
+from selfas_graph.kernels.graph import structures as component_structures
 from selfas_graph.model import events as ev
 from selfas_graph.model.circuit import (
     CircuitSolution,
@@ -140,7 +141,7 @@ def classify_rods(n_rods, tip_contacts, conductor_tip, conductor_node_key) -> To
     Notes
     -----
     Cost: two passes of union-find over all tips and rods (the tip merge and the
-    components), and one depth-first search over the components that touch at least
+    components, :mod:`selfas_graph.kernels.graph`), and one depth-first search over the components that touch at least
     two different attachment keys (no other component can hold a filament); about
     about 1 ms per call at the Fig. 2 sizes, 5 times less than with scipy's
     ``connected_components`` and networkx (docs/performance.md, "Topology and circuit
@@ -158,39 +159,25 @@ def classify_rods(n_rods, tip_contacts, conductor_tip, conductor_node_key) -> To
         )
 
     n_nodes, node_of_tip = merge_tips(n_tips, tip_contacts)
-    u = np.ascontiguousarray(node_of_tip[0::2])
-    v = np.ascontiguousarray(node_of_tip[1::2])
-
-    touched = np.zeros(n_tips, dtype=bool)
-    touched[tip_contacts.ravel()] = True
-    touched[conductor_tip] = True
-    free = ~(touched[0::2] | touched[1::2])
-
-    # components of merged nodes joined by rods (self-loop rods are harmless here)
-    n_comp, comp = component_labels(n_nodes, u, v)
-    rod_comp = comp[u]
-
-    # structures: components holding at least one non-free rod, renumbered 0..S-1
-    structure = np.full(n_rods, -1, dtype=np.int64)
-    comp_ids, inverse = np.unique(rod_comp[~free], return_inverse=True)
-    structure[~free] = inverse
-    structure_size = np.bincount(inverse, minlength=comp_ids.shape[0]).astype(np.int64)
-    largest = int(np.argmax(structure_size)) if structure_size.size else -1
-
-    # components touching a conductor, and those touching >= 2 different keys
-    cnode = node_of_tip[conductor_tip]
-    ccomp = comp[cnode]
-    comp_touch = np.zeros(n_comp, dtype=bool)
-    comp_touch[ccomp] = True
-    key_values, key_index = np.unique(key, return_inverse=True)
+    if key.size:
+        key_values, key_index = np.unique(key, return_inverse=True)
+        key_index = key_index.astype(np.int64, copy=False)
+    else:
+        key_values, key_index = key, key
     n_keys = key_values.shape[0]
-    comp_key = np.unique(ccomp * max(n_keys, 1) + key_index)  # distinct (component, key)
-    n_keys_of_comp = np.bincount(comp_key // max(n_keys, 1), minlength=n_comp)
-    candidate = n_keys_of_comp >= 2
+    # components of merged nodes joined by rods (self-loop rods are harmless here); structures:
+    # components holding at least one non-free rod, renumbered 0..S-1; components touching a
+    # conductor, and those touching >= 2 different keys
+    comp, n_comp, free, structure, structure_size, comp_touch, candidate = component_structures(
+        n_rods, node_of_tip, n_nodes, tip_contacts, conductor_tip, key_index)
+    largest = int(np.argmax(structure_size)) if structure_size.size else -1
+    u = node_of_tip[0::2]
+    rod_comp = comp[u]
 
     filament = np.zeros(n_rods, dtype=bool)
     if candidate.any():
-        filament = _filament_rods(n_nodes, u, v, comp, candidate, cnode, key_index, n_keys)
+        filament = _filament_rods(n_nodes, u, node_of_tip[1::2], comp, candidate, node_of_tip[conductor_tip],
+                                  key_index, n_keys)
 
     role = np.full(n_rods, CLUSTER, dtype=np.int8)
     role[comp_touch[rod_comp]] = DEAD_END
