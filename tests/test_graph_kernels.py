@@ -146,3 +146,33 @@ def test_solve_circuit_node_order_unchanged():
     pot = np.where(cid == A, 1.115, -1.115)
     sol = solve_circuit(1600, tc, ct, pot)
     np.testing.assert_array_equal(sol.node_of_tip, ref.merge_tips_scipy(1600, tc)[1])
+
+
+def test_unchanged_system_is_not_factorised_again(monkeypatch):
+    """A solve whose reduced system equals the last one's returns the same bits without a new
+    factorisation; a changed system is solved afresh; the returned arrays are copies."""
+    import selfas_graph.model.circuit as circuit
+
+    rng = np.random.default_rng(11)
+    tc, ct, cid = aggregate(600, rng, loops=0.3)
+    pot = np.where(cid == A, 1.115, -1.115)
+    calls = []
+    inner = circuit._solve_spd_new
+    monkeypatch.setattr(circuit, "_solve_spd_new", lambda *a: calls.append(1) or inner(*a))
+    monkeypatch.setattr(circuit, "_last_system", None)
+    first = solve_circuit(1200, tc, ct, pot)
+    # a contact between two free rods far from any current leaves the reduced system as it is
+    free_tips = np.setdiff1d(np.arange(1200), np.concatenate([tc.ravel(), ct]))
+    free_rods = np.unique(free_tips // 2)
+    free_rods = [r for r in free_rods if 2 * r in free_tips and 2 * r + 1 in free_tips][:2]
+    extra = np.array([[2 * free_rods[0], 2 * free_rods[1]]])
+    second = solve_circuit(1200, np.concatenate([tc, extra]), ct, pot)
+    assert len(calls) == 1
+    np.testing.assert_array_equal(second.current, first.current)
+    assert second.total_current == first.total_current
+    monkeypatch.setattr(circuit, "_last_system", None)
+    fresh = solve_circuit(1200, np.concatenate([tc, extra]), ct, pot)
+    assert len(calls) == 2
+    np.testing.assert_array_equal(fresh.potential, second.potential)
+    solve_circuit(1200, tc, ct, pot * 2.0)  # another right-hand side: solved again
+    assert len(calls) == 3
