@@ -39,8 +39,10 @@ import scipy
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import reference  # noqa: E402
+from bench_peer import machine  # noqa: E402
 from selfas_graph.model import circuit  # noqa: E402
 from selfas_graph.model.circuit import solve_circuit  # noqa: E402
 from selfas_graph.model.events import CONDUCTOR_ANODE, CONDUCTOR_CATHODE  # noqa: E402
@@ -145,7 +147,9 @@ def main(argv=None):
     parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
+    m = machine()
     print(
+        f"{m['cpu_model']} ({m['widest']}, numba target {m['cpu_name']}), "
         f"python {platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, "
         f"networkx {networkx.__version__}, {os.cpu_count()} CPUs, best of {args.repeat}"
     )
