@@ -18,8 +18,11 @@ free rods that touch nothing):
   plus 20 % free rods.
 
 Columns: rods (free rods included), contacts (tip-tip plus conductor), rods in
-filaments, ``classify_rods`` time, ``solve_circuit`` time with the default direct
-solver and with ``solver="cg"``. Each time is the best of ``--repeat`` runs.
+filaments, ``classify_rods`` time, the same topology by the scipy/networkx version the
+array kernels replaced (``tests/reference.py``, the peer: results checked equal),
+``solve_circuit`` time with the default direct solver and with ``solver="cg"``. Each time is
+the best of ``--repeat`` runs; the circuit's memo of the last system is cleared before each
+solve, so every solve factorises.
 """
 from __future__ import annotations
 
@@ -35,7 +38,12 @@ import numpy as np
 import scipy
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+import reference  # noqa: E402
+from bench_peer import machine  # noqa: E402
+from selfas_graph.model import circuit  # noqa: E402
 from selfas_graph.model.circuit import solve_circuit  # noqa: E402
 from selfas_graph.model.events import CONDUCTOR_ANODE, CONDUCTOR_CATHODE  # noqa: E402
 from selfas_graph.model.graph import classify_rods  # noqa: E402
@@ -125,6 +133,7 @@ def chain_network(n_rods: int, rng: np.random.Generator, free: float = 0.2, leng
 def _best(fn, repeat):
     best, out = np.inf, None
     for _ in range(repeat):
+        circuit._last_system = None  # time a full solve, not the memo of the last one
         t0 = time.perf_counter()
         out = fn()
         best = min(best, time.perf_counter() - t0)
@@ -138,12 +147,14 @@ def main(argv=None):
     parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args(argv)
     rng = np.random.default_rng(args.seed)
+    m = machine()
     print(
+        f"{m['cpu_model']} ({m['widest']}, numba target {m['cpu_name']}), "
         f"python {platform.python_version()}, numpy {np.__version__}, scipy {scipy.__version__}, "
         f"networkx {networkx.__version__}, {os.cpu_count()} CPUs, best of {args.repeat}"
     )
     header = (
-        f"{'network':8s} {'rods':>8s} {'contacts':>9s} {'filament':>9s} {'topology ms':>12s} "
+        f"{'network':8s} {'rods':>8s} {'contacts':>9s} {'filament':>9s} {'topology ms':>12s} {'peer ms':>8s} "
         f"{'solve ms':>9s} {'cg ms':>7s} {'R_eff':>8s} {'KCL resid':>10s}"
     )
     print(header)
@@ -152,6 +163,8 @@ def main(argv=None):
         for n in args.sizes:
             n_rods, tc, ct, cid, pot = make(n, rng)
             t_topo, topo = _best(lambda: classify_rods(n_rods, tc, ct, cid), args.repeat)
+            t_peer, peer = _best(lambda: reference.classify_rods_scipy_networkx(n_rods, tc, ct, cid), args.repeat)
+            assert np.array_equal(peer.role, topo.role) and np.array_equal(peer.structure, topo.structure)
             t_solve, sol = _best(lambda: solve_circuit(2 * n_rods, tc, ct, pot), args.repeat)
             t_cg, sol_cg = _best(
                 lambda: solve_circuit(2 * n_rods, tc, ct, pot, solver="cg"), args.repeat
@@ -160,7 +173,7 @@ def main(argv=None):
             name = make.__name__.split("_")[0]
             print(
                 f"{name:8s} {n_rods:8d} {tc.shape[0] + ct.shape[0]:9d} {topo.n_filament:9d} "
-                f"{1e3 * t_topo:12.1f} {1e3 * t_solve:9.1f} {1e3 * t_cg:7.1f} "
+                f"{1e3 * t_topo:12.1f} {1e3 * t_peer:8.1f} {1e3 * t_solve:9.1f} {1e3 * t_cg:7.1f} "
                 f"{sol.effective_resistance:8.4f} "
                 f"{sol.kirchhoff_residual:10.1e}"
             )

@@ -4,6 +4,8 @@ Usage::
 
     python tools/bench_events.py [--scenario scenarios/fig2.toml] [--settle 2000] [--steps 300]
                                  [--sizes 1000 10000 100000] [--batch 10 1000] [--repeat 3]
+                                 [--checkpoint RUN.checkpoint.h5] [--run-steps 1000]
+                                 [--skip-a] [--skip-b] [--skip-c]
 
 (a) Per-step overhead of contact detection and events when no event happens, on the
     Fig. 2 scene (1200 rods, all its terms). The scene first runs ``--settle`` steps
@@ -35,6 +37,17 @@ Usage::
     then), and ``solve()``. Fresh ``classify_rods`` time is shown for reference.
     Best of ``--repeat``; the batch is released (untimed) between repeats.
 
+(c) Topology and circuit per event in the run: from the Fig. 2 scene after ``--settle``
+    steps, or from a checkpoint (``--checkpoint RUN.checkpoint.h5``, read only; e.g. a
+    late state of a Fig. 2 run, after the short circuit), ``--run-steps`` steps are run
+    with every ``classify_rods`` and ``ConnectivityGraph.solve`` call timed (thread CPU
+    time, which the other processes on a shared machine disturb little): calls per 1000
+    steps, median cost per call split into its parts (tip merge, components, filament
+    search, the rest being input checks and numpy glue), and their share of the CPU time of the steps. The graphs of the first
+    ``--peer-graphs`` calls are kept and classified again by the scipy/networkx
+    implementation the kernels replaced (``tests/reference.py``), the peer of the ratio,
+    and the two results are checked to be the same.
+
 Prints markdown tables.
 """
 from __future__ import annotations
@@ -47,14 +60,23 @@ import sys
 import time
 from pathlib import Path
 
-import numba
-import numpy as np
+os.environ.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")  # a checkpoint of a running job is read only
+
+import numba  # noqa: E402
+import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
+sys.path.insert(0, str(ROOT / "tests"))
 
+import reference  # noqa: E402
 from bench_circuit import chain_network  # noqa: E402
+from bench_peer import machine  # noqa: E402
+from selfas_graph.io.checkpoint import read_checkpoint  # noqa: E402
+from selfas_graph.io.scenario import scenario_from_text  # noqa: E402
+from selfas_graph.model import circuit  # noqa: E402
+from selfas_graph.model import graph as graph_module  # noqa: E402
 from selfas_graph import Simulation, load_scenario  # noqa: E402
 from selfas_graph.model import events as ev  # noqa: E402
 from selfas_graph.model.graph import ConnectivityGraph  # noqa: E402
@@ -216,6 +238,7 @@ def graph_update(sizes, batches, repeat, seed):
             release = [(2, 0.2, ev.TIP_RELEASE, int(k), int(l)) for k, l in tc[pick]]
             best = dict(apply=np.inf, topo=np.inf, solve=np.inf, total=np.inf, fresh=np.inf)
             for _ in range(repeat):
+                circuit._last_system = None  # time a full solve, not the memo of the last one
                 t0 = time.perf_counter()
                 graph.apply(add)
                 t1 = time.perf_counter()
@@ -238,6 +261,106 @@ def graph_update(sizes, batches, repeat, seed):
                   f"{1e3 * best['fresh']:.1f} | {topo.n_filament} |")
 
 
+# --------------------------------------------------------------------------- (c)
+def _timed(table, name, fn):
+    """``fn`` wrapped to append its thread CPU time (s) to ``table[name]``."""
+    table.setdefault(name, [])
+
+    def wrapper(*args, **kwargs):
+        t0 = time.thread_time()
+        out = fn(*args, **kwargs)
+        table[name].append(time.thread_time() - t0)
+        return out
+
+    return wrapper
+
+
+def _simulation_at(scenario_path, settle, checkpoint):
+    if checkpoint:
+        snap, meta = read_checkpoint(checkpoint)
+        import json
+
+        sc = scenario_from_text(meta["scenario_text"], overrides=json.loads(meta["overrides"]))
+        return Simulation.from_snapshot(sc.params, snap), f"checkpoint {checkpoint}"
+    sim = Simulation(load_scenario(scenario_path).params)
+    sim.step(settle)
+    return sim, f"{scenario_path} after {settle} steps"
+
+
+def events_in_run(scenario_path, settle, checkpoint, steps, peer_graphs):
+    sim, origin = _simulation_at(scenario_path, settle, checkpoint)
+    sim.step(20)  # compiled kernels, warm caches
+    calls: dict[str, list[float]] = {}
+    graphs = []
+    g = graph_module
+    saved = {name: getattr(g, name) for name in ("classify_rods", "merge_tips", "component_structures",
+                                                  "_filament_rods")}
+    solve = type(sim.graph).solve
+    inner_classify = _timed(calls, "classify_rods", saved["classify_rods"])
+
+    def classify(*args):
+        if len(graphs) < peer_graphs:
+            graphs.append(tuple(np.array(a) if isinstance(a, np.ndarray) else a for a in args))
+        return inner_classify(*args)
+
+    try:
+        g.classify_rods = classify
+        for name in ("merge_tips", "component_structures", "_filament_rods"):
+            setattr(g, name, _timed(calls, name, saved[name]))
+        type(sim.graph).solve = _timed(calls, "solve", solve)
+        n_events = len(sim.events)
+        t0 = time.process_time()
+        sim.step(steps)
+        cpu = time.process_time() - t0
+    finally:
+        for name, fn in saved.items():
+            setattr(g, name, fn)
+        type(sim.graph).solve = solve
+    topo = sim.graph.topology()
+    # the peer: the scipy/networkx classification on the same graphs, checked to agree
+    peer, ours = [], []
+    for args in graphs:
+        t0 = time.thread_time()
+        want = reference.classify_rods_scipy_networkx(*args)
+        t1 = time.thread_time()
+        got = g.classify_rods(*args)
+        t2 = time.thread_time()
+        peer.append(t1 - t0)
+        ours.append(t2 - t1)
+        for name in ("role", "structure", "structure_size"):
+            assert np.array_equal(getattr(got, name), getattr(want, name)), f"{name} differs from the peer"
+
+    def per_k(name):
+        return 1000.0 * len(calls.get(name, [])) / steps
+
+    def med(name):
+        v = calls.get(name, [])
+        return 1e3 * float(np.median(v)) if v else float("nan")
+
+    def total(name):
+        return float(np.sum(calls.get(name, [])))
+
+    n_cls = len(calls["classify_rods"])
+    print(f"\n(c) topology and circuit per event, {sim.state.n_rods} rods, from {origin}: {steps} steps "
+          f"t = {sim.state.time - steps * sim.dt:.1f} .. {sim.state.time:.1f}, "
+          f"{len(sim.events) - n_events} events, {topo.n_filament} filament / {topo.n_dead_end} dead-end / "
+          f"{topo.n_cluster} cluster rods at the end; {cpu:.2f} s CPU for the steps "
+          f"({1e3 * cpu / steps:.2f} ms/step). Thread CPU time per call, medians.\n")
+    print("| part | calls per 1000 steps | ms per call (median) | share of the steps' CPU time |")
+    print("|---|---|---|---|")
+    for name, label in (("classify_rods", "classify_rods (all of it)"),
+                        ("merge_tips", "  tip merge (merge_tips)"),
+                        ("component_structures", "  components, structures, attachments (one kernel)"),
+                        ("_filament_rods", "  filament search (blocks through X)"),
+                        ("solve", "ConnectivityGraph.solve (circuit)")):
+        calls_k = per_k(name) if name != "merge_tips" else 1000.0 * n_cls / steps
+        print(f"| {label} | {calls_k:.1f} | {med(name):.3f} | {100 * total(name) / cpu:.1f} % |")
+    if peer:
+        p, o = 1e3 * float(np.median(peer)), 1e3 * float(np.median(ours))
+        print(f"\nOn the first {len(peer)} graphs of these calls (same results checked): classify_rods "
+              f"{o:.3f} ms, the scipy/networkx version (tests/reference.py) {p:.3f} ms, ratio {p / o:.1f}x.")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "fig2.toml"))
@@ -247,15 +370,23 @@ def main(argv=None):
     ap.add_argument("--batch", type=int, nargs="+", default=[10, 1000], help="events per batch in (b)")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--checkpoint", help="(c) start from this checkpoint (read only) instead of the settled scene")
+    ap.add_argument("--run-steps", type=int, default=1000, help="steps run in (c)")
+    ap.add_argument("--peer-graphs", type=int, default=50, help="graphs of (c) classified again by the peer")
     ap.add_argument("--skip-a", action="store_true")
     ap.add_argument("--skip-b", action="store_true")
+    ap.add_argument("--skip-c", action="store_true")
     args = ap.parse_args(argv)
-    print(f"python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__}, "
-          f"{os.cpu_count()} CPUs, {numba.get_num_threads()} numba threads")
+    m = machine()
+    print(f"{m['cpu_model']} ({m['widest']}, numba target {m['cpu_name']}), python {platform.python_version()}, "
+          f"numpy {np.__version__}, numba {numba.__version__}, {os.cpu_count()} CPUs, "
+          f"{numba.get_num_threads()} numba threads")
     if not args.skip_a:
         contact_overhead(args.scenario, args.settle, args.steps)
     if not args.skip_b:
         graph_update(args.sizes, args.batch, args.repeat, args.seed)
+    if not args.skip_c:
+        events_in_run(args.scenario, args.settle, args.checkpoint, args.run_steps, args.peer_graphs)
 
 
 if __name__ == "__main__":

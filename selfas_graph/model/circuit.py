@@ -39,8 +39,9 @@ import math
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import cg, splu
+
+from selfas_graph.kernels.graph import component_labels
 
 __all__ = ["CircuitSolution", "NetworkSolution", "solve_circuit", "solve_network", "merge_tips", "SOLVERS"]
 
@@ -132,17 +133,17 @@ def merge_tips(n_tips: int, tip_contacts: np.ndarray) -> tuple[int, np.ndarray]:
     n_nodes : int
         Number of merged electrical nodes.
     node_of_tip : (n_tips,) int64
-        Merged node of each tip (``scipy.sparse.csgraph.connected_components`` labels).
+        Merged node of each tip: merged nodes are numbered in the order of their
+        smallest tip (the numbering of ``scipy.sparse.csgraph.connected_components``).
     """
     m = tip_contacts.shape[0]
     if m == 0:
         return n_tips, np.arange(n_tips, dtype=np.int64)
-    adj = sp.coo_matrix(
-        (np.ones(m, dtype=np.int32), (tip_contacts[:, 0], tip_contacts[:, 1])),
-        shape=(n_tips, n_tips),
-    ).tocsr()
-    n_nodes, labels = connected_components(adj, directed=False)
-    return int(n_nodes), labels.astype(np.int64, copy=False)
+    n_nodes, labels = component_labels(
+        n_tips, np.ascontiguousarray(tip_contacts[:, 0], dtype=np.int64),
+        np.ascontiguousarray(tip_contacts[:, 1], dtype=np.int64),
+    )
+    return int(n_nodes), labels
 
 
 # --------------------------------------------------------------------------- result
@@ -221,8 +222,31 @@ def _solve_direct(A: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
 AUTO_CG_UNKNOWNS = 50_000
 
 
+#: the last reduced system solved and its solution: ``(key, x)`` (see :func:`_solve_spd`)
+_last_system: tuple[tuple, np.ndarray] | None = None
+
+
 def _solve_spd(A: sp.csc_matrix, b: np.ndarray, solver: str) -> np.ndarray:
-    """Solve the reduced system with ``solver`` ("direct", "cg" or "auto", see :func:`solve_circuit`)."""
+    """Solve the reduced system with ``solver`` ("direct", "cg" or "auto", see :func:`solve_circuit`).
+
+    A system equal, byte for byte, to the last one solved (matrix in compressed columns,
+    right-hand side, solver) returns a copy of the last solution: the solvers are
+    deterministic, so that is the solution a new solve would give, bit for bit. In the
+    Fig. 2 run after the short circuit about half of the solves meet an unchanged system
+    (the contact events fell in structures without current), and the factorisation is
+    about half of a solve (docs/performance.md, "Topology and circuit per event").
+    """
+    global _last_system
+    key = (solver, A.shape, A.indptr.tobytes(), A.indices.tobytes(), A.data.tobytes(), b.tobytes())
+    last = _last_system
+    if last is not None and last[0] == key:
+        return last[1].copy()
+    x = _solve_spd_new(A, b, solver)
+    _last_system = (key, x.copy())
+    return x
+
+
+def _solve_spd_new(A: sp.csc_matrix, b: np.ndarray, solver: str) -> np.ndarray:
     if solver == "auto":
         solver = "cg" if A.shape[0] > AUTO_CG_UNKNOWNS else "direct"
     if solver == "cg":
@@ -259,9 +283,8 @@ def _potentials(n_nodes, u, v, g, is_dir, psi_dir, solver) -> np.ndarray:
     Only the connected components with two different Dirichlet values are solved;
     a component with one value sits at it exactly, one with none floats (NaN).
     """
-    n_edges = u.shape[0]
-    adj = sp.coo_matrix((np.ones(n_edges, dtype=np.int32), (u, v)), shape=(n_nodes, n_nodes)).tocsr()
-    n_comp, comp = connected_components(adj, directed=False)
+    n_comp, comp = component_labels(n_nodes, np.ascontiguousarray(u, dtype=np.int64),
+                                    np.ascontiguousarray(v, dtype=np.int64))
     dir_nodes = np.flatnonzero(is_dir)
     comp_lo = np.full(n_comp, np.inf)
     comp_hi = np.full(n_comp, -np.inf)

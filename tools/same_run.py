@@ -1,0 +1,112 @@
+"""Check that two run files hold the same data, bit for bit.
+
+Usage::
+
+    python tools/same_run.py RUN_A.h5 RUN_B.h5 [--ignore-attrs]
+
+Walks both HDF5 files and compares every dataset (shape, dtype and bytes; NaN equals NaN
+at the same place, since the bytes are compared) and, unless ``--ignore-attrs``, every
+attribute except those that record the wall clock or the software (``created``,
+``version``, timings: see ``VOLATILE``). Prints the differences and exits 1 if there are
+any, 0 if the files agree.
+
+Use it to show that a change to the code keeps a run's results: run the same scenario
+before and after the change (same thread count), then compare, e.g.::
+
+    selfas-graph simulate scenarios/quick.toml -o /tmp/before.h5   # on the old commit
+    selfas-graph simulate scenarios/quick.toml -o /tmp/after.h5    # on the new one
+    python tools/same_run.py /tmp/before.h5 /tmp/after.h5
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+
+import h5py
+import numpy as np
+
+#: attribute names (any group) that differ between two runs of the same scene by design
+VOLATILE = ("created", "creation_time", "date", "version", "program_version", "wall", "elapsed",
+            "steps_per_second", "hostname", "host", "cpu", "run_file", "git", "command")
+
+
+def _volatile(name: str) -> bool:
+    low = name.lower()
+    return any(v in low for v in VOLATILE)
+
+
+def _same_value(a, b) -> bool:
+    a, b = np.asarray(a), np.asarray(b)
+    if a.shape != b.shape or a.dtype != b.dtype:
+        return False
+    if a.dtype.kind == "O":
+        return all(x == y for x, y in zip(a.ravel().tolist(), b.ravel().tolist()))
+    return np.ascontiguousarray(a).tobytes() == np.ascontiguousarray(b).tobytes()
+
+
+def compare(path_a, path_b, attrs: bool = True, counts: dict | None = None) -> list[str]:
+    """Differences between two HDF5 files, as readable lines (empty if they agree).
+
+    ``counts``, if given, receives the number of datasets and attributes compared.
+    """
+    out: list[str] = []
+    counts = {} if counts is None else counts
+    counts.update(datasets=0, attributes=0)
+    with h5py.File(path_a, "r") as fa, h5py.File(path_b, "r") as fb:
+        names_a, names_b = [], []
+        fa.visit(names_a.append)
+        fb.visit(names_b.append)
+        for name in sorted(set(names_a) ^ set(names_b)):
+            out.append(f"{name}: only in {path_a if name in names_a else path_b}")
+        for name in [""] + sorted(set(names_a) & set(names_b)):
+            oa, ob = (fa[name], fb[name]) if name else (fa, fb)
+            if isinstance(oa, h5py.Dataset) != isinstance(ob, h5py.Dataset):
+                out.append(f"{name}: a dataset in one file, a group in the other")
+                continue
+            if isinstance(oa, h5py.Dataset):
+                counts["datasets"] += 1
+                if oa.shape != ob.shape or oa.dtype != ob.dtype:
+                    out.append(f"{name}: shape/dtype {oa.shape} {oa.dtype} != {ob.shape} {ob.dtype}")
+                elif not _same_value(oa[()], ob[()]):
+                    a, b = np.asarray(oa[()]), np.asarray(ob[()])
+                    detail = ""
+                    if a.dtype.kind in "fiu" and a.size:
+                        ne = ~((a == b) | (np.isnan(a) & np.isnan(b)) if a.dtype.kind == "f" else (a == b))
+                        diff = np.flatnonzero(ne.ravel())
+                        if diff.size:
+                            detail = f" ({diff.size} of {a.size} values differ, first at flat index {diff[0]})"
+                    out.append(f"{name}: data differ{detail}")
+            if attrs:
+                for key in sorted(set(oa.attrs) | set(ob.attrs)):
+                    if _volatile(key):
+                        continue
+                    counts["attributes"] += 1
+                    if key not in oa.attrs or key not in ob.attrs:
+                        out.append(f"{name or '/'}@{key}: only in one file")
+                    elif isinstance(oa.attrs[key], h5py.Reference):
+                        # object references point into their own file: compare the paths they name
+                        ra, rb = fa[oa.attrs[key]].name, fb[ob.attrs[key]].name
+                        if ra != rb:
+                            out.append(f"{name or '/'}@{key}: references {ra} != {rb}")
+                    elif not _same_value(oa.attrs[key], ob.attrs[key]):
+                        out.append(f"{name or '/'}@{key}: {oa.attrs[key]!r} != {ob.attrs[key]!r}")
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("a")
+    ap.add_argument("b")
+    ap.add_argument("--ignore-attrs", action="store_true", help="compare datasets only")
+    args = ap.parse_args(argv)
+    counts: dict = {}
+    diffs = compare(args.a, args.b, attrs=not args.ignore_attrs, counts=counts)
+    for line in diffs:
+        print(line)
+    print(f"{args.a} and {args.b}: {counts['datasets']} datasets and {counts['attributes']} attributes compared, "
+          + ("the same, bit for bit" if not diffs else f"{len(diffs)} differences"))
+    return 1 if diffs else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
