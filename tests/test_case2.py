@@ -1,4 +1,4 @@
-"""Case (ii) external objects (MODEL.md term 11, section 6): filament, dipole monopoles, line charge."""
+"""Case (ii) external objects (docs/model.md 'Term 11', 'Circuit'): filament, dipole monopoles, line charge."""
 import math
 
 import numpy as np
@@ -110,7 +110,7 @@ def _rod_on_axis(axis, centre=(0.0, 0.0, 0.0)):
 
 
 def test_rod_along_filament_touching_at_both_tips_carries_delta_times_height_difference():
-    """A rod parallel to the filament touching it with both tips: J = delta_J0 (z_b - z_a) (MODEL.md 6, case ii).
+    """A rod parallel to the filament touching it with both tips: J = delta_J0 (z_b - z_a) (docs/model.md 'Circuit', case ii).
 
     The filament potential is -delta_J0 z, so current runs up the rod like the filament's own.
     """

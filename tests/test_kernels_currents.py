@@ -1,4 +1,4 @@
-"""Tests of the rod-current kernels (MODEL.md section 3, terms 9 and 10).
+"""Tests of the rod-current kernels (docs/model.md 'Term 9', 'Term 10').
 
 The oracles below are plain numpy / Python loops written from the physics, not from
 the kernel code: the segment field in the textbook form (perpendicular foot, cosines

@@ -1,6 +1,6 @@
 """Figures of a saved run: ``selfas-graph plot RUN.h5 --kind KIND [--frame K | --time T] [-o FILE.png]``.
 
-Kinds, after the paper's figures (MODEL.md section 7):
+Kinds, after the paper's figures (docs/model.md 'Figure diagnostics'):
 
 * ``snapshot`` -- the rods in 3-D: current-carrying filaments blue, dead ends within
   the filament networks red (the dead-end rods of structures that hold filament

@@ -1,4 +1,4 @@
-"""Rigid massless bond between the two tips of each rod (paper Eqs. 5-9, 14-15; MODEL.md section 4).
+"""Rigid massless bond between the two tips of each rod (paper Eqs. 5-9, 14-15; docs/model.md 'Rigid rods and time integration').
 
 Derivation of the exact bond force. With ``r12 = x_a - x_b``, ``v12 = v_a - v_b``,
 equal tip masses m, and external forces F_a, F_b, the tips move as

@@ -1,4 +1,4 @@
-"""Contact detection with hysteresis, producing event records (MODEL.md section 5).
+"""Contact detection with hysteresis, producing event records (docs/model.md 'Contacts and events').
 
 Two tips of different rods come into contact when closer than r* and stay in
 contact until they are farther apart than ``release_radius`` (default 1.5 r*),

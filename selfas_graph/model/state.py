@@ -207,7 +207,7 @@ def draw_charges(dist: ChargeDistribution, n: int, rng, magnetic=None) -> np.nda
 
 
 def random_state(params: Parameters, rng=None) -> State:
-    """Random initial state of MODEL.md section 8, all from ``params.scenario.seed``.
+    """Random initial state of docs/model.md 'Assumptions and project choices', all from ``params.scenario.seed``.
 
     Charges are drawn first, then the rods one by one: centre uniform in the box,
     axis uniform on the sphere, accepted when both tips lie in the box and no tip
