@@ -5,13 +5,12 @@ import numpy as np
 import pytest
 from scipy import integrate
 
+import reference as ref
 from conftest import simulation
 from selfas_graph.kernels import external as kx
 from selfas_graph.kernels.currents import gauss_legendre_01
 from selfas_graph.model import events as ev
 from selfas_graph.model.state import State
-
-import reference as ref
 
 RSTAR = 0.06
 

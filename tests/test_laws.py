@@ -1,11 +1,16 @@
 """The scalar force laws of docs/model.md 'Term 1', 'Term 6', 'Term 8' against their formulas."""
 import math
 
-import numpy as np
 import pytest
 
-from selfas_graph.kernels.laws import (tip_force_over_r, tip_potential, wall_potential, wall_push,
-                                       yukawa_force_over_r, yukawa_potential)
+from selfas_graph.kernels.laws import (
+    tip_force_over_r,
+    tip_potential,
+    wall_potential,
+    wall_push,
+    yukawa_force_over_r,
+    yukawa_potential,
+)
 
 RSTAR = 0.06
 

@@ -55,6 +55,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
 from bench_circuit import chain_network  # noqa: E402
+
 from selfas_graph import Simulation, load_scenario  # noqa: E402
 from selfas_graph.model import events as ev  # noqa: E402
 from selfas_graph.model.graph import ConnectivityGraph  # noqa: E402

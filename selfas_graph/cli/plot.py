@@ -202,8 +202,8 @@ def _series_style(n):
 
 # --------------------------------------------------------------------------- kinds
 def _snapshot(fig, run, frame, args):
-    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
     from matplotlib.lines import Line2D
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
     ax = fig.add_subplot(projection="3d")
     # draw in the order given: the translucent electrode planes first, the rods over them (the

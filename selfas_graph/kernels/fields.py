@@ -1,5 +1,4 @@
 """One-body terms: fields of fixed sources acting on tips (docs/model.md 'Term 5', 'Term 8')."""
-import math
 
 import numpy as np
 

@@ -63,7 +63,6 @@ class ContactTracker:
         sorted by ids (a deterministic order).
         """
         rows = []
-        n = self.n_tips
         # releases: current contacts now farther apart than the release radius
         if len(self.pairs):
             d = position[self.pairs[:, 0]] - position[self.pairs[:, 1]]

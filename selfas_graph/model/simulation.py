@@ -312,7 +312,7 @@ class Simulation:
         st, integ = self.state, self.integrator
         err = integ.bond_error_before
         self.max_bond_error = max(self.max_bond_error, integ.bond_error_after)
-        x, v = st.position, st.velocity
+        v = st.velocity
         vmax = float(np.abs(v).max(initial=0.0))
         if math.isfinite(err) and err < BOND_BREAK and vmax * self.dt < MAX_STEP_DISPLACEMENT and math.isfinite(vmax):
             return
