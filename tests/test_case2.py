@@ -12,6 +12,9 @@ from selfas_graph.kernels.currents import gauss_legendre_01
 from selfas_graph.model import events as ev
 from selfas_graph.model.state import State
 
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
+
 RSTAR = 0.06
 
 

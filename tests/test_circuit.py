@@ -21,6 +21,9 @@ import pytest
 from selfas_graph.model.circuit import CircuitSolution, merge_tips, solve_circuit
 from selfas_graph.model.events import CONDUCTOR_ANODE, CONDUCTOR_CATHODE
 
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
+
 #: delta_J0 of the paper's Fig. 2 scene (docs/model.md 'Circuit')
 DELTA = 2.23
 #: round-off of a sparse solve on networks of <= a few hundred rods (observed ~1e-14)

@@ -27,6 +27,9 @@ from selfas_graph.model.graph import (
     classify_rods,
 )
 
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
+
 A, C, F = ev.CONDUCTOR_ANODE, ev.CONDUCTOR_CATHODE, ev.CONDUCTOR_FILAMENT
 #: delta_J0 of the paper's Fig. 2 scene
 DELTA = 2.23

@@ -16,6 +16,9 @@ from selfas_graph.kernels import rigid as kr
 from selfas_graph.kernels import tips as kt
 from selfas_graph.model.neighbours import NeighbourList
 
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
+
 RSTAR, KAPPA = 0.06, 1.0
 
 

@@ -17,6 +17,9 @@ from selfas_graph.kernels.currents import (
     segment_field,
 )
 
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
+
 # ------------------------------------------------------------------------------------
 # oracles
 # ------------------------------------------------------------------------------------

@@ -12,6 +12,9 @@ from selfas_graph.kernels.laws import (
     yukawa_potential,
 )
 
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
+
 RSTAR = 0.06
 
 
