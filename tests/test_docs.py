@@ -198,10 +198,13 @@ def test_every_cited_function_exists(page):
 # ----------------------------------------------------------------------------- citations of docs/model.md
 
 #: the form the code cites docs/model.md in: the page's path, a space and a heading of the page in
-#: single quotes, without its number or cut at its colon (``'Circuit'``, ``'Term 9'``); further
+#: single quotes (double quotes if it has an apostrophe), without its number or cut at its colon
+#: (``'Circuit'``, ``'Term 9'``); further
 #: headings may follow, separated by ``, `` or `` or ``/`` and ``
-MODEL_CITE = re.compile(r"docs/model\.md\s+('[^'\n]+'(?:(?:,\s*|\s+or\s+|\s+and\s+)'[^'\n]+')*)")
+_NAME = r"""(?:'[^'\n]+'|"[^"\n]+")"""  # in single quotes, or in double quotes when it has an apostrophe
+MODEL_CITE = re.compile(rf"docs/model\.md\s+({_NAME}(?:(?:,\s*|\s+or\s+|\s+and\s+){_NAME})*)")
 CITING_TREES = ("selfas_graph", "tools", "tests", "scenarios")
+_QUOTED = re.compile("'([^'\\n]+)'|\"([^\"\\n]+)\"")
 OLD_NAME = "MODEL" + ".md"  # the project's model text, which users do not have
 
 
@@ -232,9 +235,16 @@ def test_every_docs_model_md_section_cited_in_the_code_exists():
     bad = []
     for path in _citing_files():
         for group in MODEL_CITE.findall(path.read_text(encoding="utf-8")):
-            bad += [f"{path.relative_to(ROOT)}: '{name}'" for name in re.findall(r"'([^']+)'", group)
-                    if name not in headings]
+            names = [a or b for a, b in re.findall(_QUOTED, group)]
+            bad += [f"{path.relative_to(ROOT)}: {name!r}" for name in names if name not in headings]
     assert not bad, f"citations of docs/model.md sections that do not exist: {sorted(set(bad))}"
+
+
+def test_code_cites_docs_model_md_sections_by_name():
+    """Section numbers move when the page grows: the code names the section instead."""
+    bad = [str(p.relative_to(ROOT)) for p in _citing_files()
+           if re.search(r"docs/model\.md,? sections? \d", p.read_text(encoding="utf-8"))]
+    assert not bad, f"docs/model.md cited by section number in {bad}; cite the heading in quotes"
 
 
 def test_no_citation_of_the_project_model_text():

@@ -1,4 +1,4 @@
-"""Rods of different lengths (docs/model.md section 2): placement, rigid bonds, dynamics,
+"""Rods of different lengths (docs/model.md 'Rods'): placement, rigid bonds, dynamics,
 the scene keys, and bit-for-bit equality of equal-rod runs with the keys at their defaults."""
 import math
 from pathlib import Path

@@ -16,7 +16,7 @@ Kinds, after the paper's figures (docs/model.md 'Figure diagnostics'):
 * ``timeline`` -- rods in filaments and total current vs time, the short-circuit
   time marked.
 * ``moment``   -- the largest structure's magnetic moment vs time: |m_q| in units of the
-  mean single-rod moment, and m_J,z of its rod currents (docs/model.md section 7a).
+  mean single-rod moment, and m_J,z of its rod currents (docs/model.md "Measures of the paper's claims").
 * ``fractal``  -- the mass-radius and box-counting dimensions of the largest structure and
   the R_g ~ N^(1/D) dimension over all structures vs time, with their uncertainties.
 * ``skeleton`` -- the cycle rank of the contact graph (and of the largest structure) vs time.

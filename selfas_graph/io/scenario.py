@@ -404,7 +404,7 @@ def check_consistency(p: P.Parameters):
         mean = rods.length.mean()
         if abs(mean - 1.0) > 1e-9:
             out.append(f"rods.length: the law's mean is {mean:.12g}, not 1; lengths are in units of the mean rod "
-                       f"length L (docs/model.md section 1), so choose values with mean 1 (e.g. uniform in "
+                       f"length L (docs/model.md 'Reduced units'), so choose values with mean 1 (e.g. uniform in "
                        f"(0.5, 1.5))")
         shortest = rods.length.bounds()[0]
         if shortest < rods.diameter:

@@ -47,7 +47,7 @@ class ChargeDistribution:
 
 @dataclass(frozen=True)
 class LengthDistribution:
-    """Per-rod length l_i in units of the mean rod length L (docs/model.md section 2)."""
+    """Per-rod length l_i in units of the mean rod length L (docs/model.md 'Rods')."""
 
     distribution: str = spec(
         "constant", "constant (every rod has `value`), uniform (uniform in (low, high)), "
@@ -75,7 +75,7 @@ class LengthDistribution:
 
 @dataclass(frozen=True)
 class ResistanceDistribution:
-    """Per-rod resistance R_i in units of R0 (docs/model.md section 7)."""
+    """Per-rod resistance R_i in units of R0 (docs/model.md 'Circuit')."""
 
     distribution: str = spec(
         "constant", "constant (every rod gets `value`), uniform (uniform in (low, high)), "
@@ -174,7 +174,7 @@ def plasma_current_text(p: "Parameters"):
 
     Case (i) names the electrodes and whether the current is parallel to that of a rod
     filament spanning the gap (which flows from the anode at z = +dZ/2 to the cathode
-    when the bias is positive, docs/model.md section 6).
+    when the bias is positive, docs/model.md 'Circuit').
     """
     pf = p.forces.plasma_filament
     if pf is None:
