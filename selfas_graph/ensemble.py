@@ -48,8 +48,14 @@ from ._version import __version__
 from .analysis.claims import frame_claims
 from .analysis.diagnostics import flux_through_disc, rod_centres, timeline
 from .analysis.ensemble_stats import censored_times, mean_sem
-from .io.checkpoint import (CheckpointError, Checkpointer, checkpoint_meta, checkpoint_path, read_checkpoint,
-                            write_checkpoint)
+from .io.checkpoint import (
+    Checkpointer,
+    CheckpointError,
+    checkpoint_meta,
+    checkpoint_path,
+    read_checkpoint,
+    write_checkpoint,
+)
 from .io.h5md import RunFile, RunFileError, RunWriter, run_provenance
 from .io.scenario import ScenarioError, load_scenario, scenario_from_text
 from .model.simulation import NumericalFailure, RunInterrupted, Simulation

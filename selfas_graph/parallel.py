@@ -10,7 +10,7 @@ machine a pool of spawned processes, under an MPI launcher the ranks of
 Decomposition (replicated data, split force targets): every rank holds every
 position and velocity. The expensive force terms compute only the rows of a
 contiguous block of rods (:class:`RowBlocks`: the rods' centres, their tips, the
-quadrature points of their currents); :meth:`RowBlocks.gather_tip_rows` then
+quadrature points of their currents); :meth:`RowBlocks.gather_rows` then
 copies every other rank's rows in, so that all ranks hold the same force arrays,
 bit for bit. Integration, contacts, events, graph and circuit run identically on
 every rank. Energies are gathered the same way as one value per row and summed

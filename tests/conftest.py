@@ -6,7 +6,6 @@ from selfas_graph.io.scenario import parameters_from_dict
 from selfas_graph.model.simulation import Simulation
 from selfas_graph.model.state import State
 
-
 #: 60 rods between electrodes 2 apart with every term of Fig. 2 but the plasma field: tip
 #: contacts from step 91 and a short circuit at step 567 (then 4 terms carry current and the
 #: Lorentz term runs), within its 1200 steps; the scene of the restart and MPI contract tests

@@ -1,6 +1,6 @@
 """Slow, obviously-correct references for the engine kernels (pure numpy / Python loops).
 
-Each follows MODEL.md section 3 or 4 literally; the kernels must agree with them
+Each follows docs/model.md 'Force terms' or 'Rigid rods and time integration' literally; the kernels must agree with them
 to round-off.
 """
 import math
@@ -111,7 +111,7 @@ def electrode_walls(position, velocity, z_lo, z_hi, rstar, kappa, k_br):
 
 
 def bond_acceleration(force, velocity, position, exact):
-    """Paper Eqs. (5-6) with A from MODEL.md section 4 (exact) or paper Eq. (9)."""
+    """Paper Eqs. (5-6) with A from docs/model.md 'Rigid rods and time integration' (exact) or paper Eq. (9)."""
     out = np.empty_like(force)
     for i in range(len(position) // 2):
         a, b = 2 * i, 2 * i + 1

@@ -1,17 +1,19 @@
-"""Case (ii) external objects (MODEL.md term 11, section 6): filament, dipole monopoles, line charge."""
+"""Case (ii) external objects (docs/model.md 'Term 11', 'Circuit'): filament, dipole monopoles, line charge."""
 import math
 
 import numpy as np
 import pytest
 from scipy import integrate
 
+import reference as ref
 from conftest import simulation
 from selfas_graph.kernels import external as kx
 from selfas_graph.kernels.currents import gauss_legendre_01
 from selfas_graph.model import events as ev
 from selfas_graph.model.state import State
 
-import reference as ref
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
 
 RSTAR = 0.06
 
@@ -110,7 +112,7 @@ def _rod_on_axis(axis, centre=(0.0, 0.0, 0.0)):
 
 
 def test_rod_along_filament_touching_at_both_tips_carries_delta_times_height_difference():
-    """A rod parallel to the filament touching it with both tips: J = delta_J0 (z_b - z_a) (MODEL.md 6, case ii).
+    """A rod parallel to the filament touching it with both tips: J = delta_J0 (z_b - z_a) (docs/model.md 'Circuit', case ii).
 
     The filament potential is -delta_J0 z, so current runs up the rod like the filament's own.
     """

@@ -1,4 +1,4 @@
-"""Project choices of docs/model.md section 9 that no physics test covers otherwise."""
+"""Project choices of docs/model.md 'Assumptions and project choices' that no physics test covers otherwise."""
 import numpy as np
 
 from selfas_graph.model import events as ev

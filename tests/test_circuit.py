@@ -1,4 +1,4 @@
-"""Tests of the nodal-analysis circuit solve (MODEL.md section 6).
+"""Tests of the nodal-analysis circuit solve (docs/model.md 'Circuit').
 
 Networks are written as netlists: a list of rods, each ``(junction of tip a,
 junction of tip b)``. Tips meeting at a junction are stuck together by ideal
@@ -21,7 +21,10 @@ import pytest
 from selfas_graph.model.circuit import CircuitSolution, merge_tips, solve_circuit
 from selfas_graph.model.events import CONDUCTOR_ANODE, CONDUCTOR_CATHODE
 
-#: delta_J0 of the paper's Fig. 2 scene (MODEL.md section 8)
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
+
+#: delta_J0 of the paper's Fig. 2 scene (docs/model.md 'Circuit')
 DELTA = 2.23
 #: round-off of a sparse solve on networks of <= a few hundred rods (observed ~1e-14)
 TOL = 1e-12
@@ -65,7 +68,7 @@ def netlist(rods, anode="P", cathode="N", star=True):
 
 
 def electrode_potential(cid, voltage):
-    """Anode +voltage/2, cathode -voltage/2 (MODEL.md section 6, case (i))."""
+    """Anode +voltage/2, cathode -voltage/2 (docs/model.md 'Circuit', case (i))."""
     return np.where(cid == CONDUCTOR_ANODE, 0.5 * voltage, -0.5 * voltage)
 
 
@@ -123,7 +126,7 @@ def check_laws(sol: CircuitSolution, conductor_tip, conductor_id):
 # ------------------------------------------------------------------------------ single rods and chains
 @pytest.mark.parametrize("flip", [False, True])
 def test_single_rod_across_gap_carries_delta(flip):
-    """A rod touching both electrodes of a one-rod gap carries delta_J0 (MODEL.md 6).
+    """A rod touching both electrodes of a one-rod gap carries delta_J0 (docs/model.md 'Circuit').
 
     Potentials are +-delta_J0/2, so psi(a) - psi(b) = +-delta_J0 by orientation:
     tip a on the anode gives J = +delta_J0 (from a to b), tip a on the cathode -delta_J0.

@@ -1,4 +1,4 @@
-"""Resistor networks with unequal resistances and resistive contacts (docs/model.md section 7).
+"""Resistor networks with unequal resistances and resistive contacts (docs/model.md 'Circuit').
 
 Three ways in: :func:`solve_network` on a netlist of nodes and resistors,
 :func:`solve_circuit` on rods with ``rod_resistance`` and ``contact_resistance``,

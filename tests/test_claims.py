@@ -1,4 +1,4 @@
-"""Measures of the paper's claims on hand-built objects with known answers (docs/model.md section 7a).
+"""Measures of the paper's claims on hand-built objects with known answers (docs/model.md "Measures of the paper's claims").
 
 The objects: a straight chain, a ring, a planar square-lattice sheet, a compact cubic-lattice
 block, and a pair of rods head-to-tail and head-to-head. Tips that coincide are in contact.

@@ -1,4 +1,4 @@
-"""Figure diagnostics (MODEL.md section 7) on hand-made frames with known answers.
+"""Figure diagnostics (docs/model.md 'Figure diagnostics') on hand-made frames with known answers.
 
 Geometry used below: a *ring* is N unit rods forming a regular N-gon of
 circumradius ``a = 1 / (2 sin(pi / N))`` in a plane z = z0, each carrying J
@@ -7,7 +7,7 @@ counter-clockwise (tip a at vertex k, tip b at vertex k + 1), so B_z > 0 inside.
 Exact field of the N-gon on its axis, at height h above its plane (derivation):
 each side has half-length ``l = a sin(pi/N)`` and its line lies at distance
 ``rho = sqrt(p^2 + h^2)`` from the axis point, ``p = a cos(pi/N)`` being the
-apothem. The finite-segment law (MODEL.md term 9, wire radius w) gives a field of
+apothem. The finite-segment law (docs/model.md 'Term 9', wire radius w) gives a field of
 magnitude ``J rho (cos t1 - cos t2) / (rho^2 + w^2)`` with
 ``cos t1 - cos t2 = 2 l / sqrt(l^2 + rho^2)``, perpendicular to the side and to
 the perpendicular from the side to the point; its z component is that magnitude
@@ -149,7 +149,7 @@ def test_uniform_points_have_flat_radial_density():
 
 
 def test_rod_centres_are_tip_midpoints():
-    """Rod i's centre is the mean of rows 2 i and 2 i + 1 (MODEL.md section 2); exact."""
+    """Rod i's centre is the mean of rows 2 i and 2 i + 1 (docs/model.md 'Rods'); exact."""
     pos = np.array([[0.0, 0, 0], [1, 0, 0], [2, 2, 2], [2, 2, 3]])
     np.testing.assert_array_equal(rod_centres(pos), [[0.5, 0, 0], [2, 2, 2.5]])
 

@@ -193,3 +193,61 @@ def test_every_cited_function_exists(page):
         elif name.rstrip(".") not in _defined_names(path):
             bad.append(f"{file}::{name}")
     assert not bad, f"docs/{page.name} names code that does not exist: {sorted(set(bad))}"
+
+
+# ----------------------------------------------------------------------------- citations of docs/model.md
+
+#: the form the code cites docs/model.md in: the page's path, a space and a heading of the page in
+#: single quotes (double quotes if it has an apostrophe), without its number or cut at its colon
+#: (``'Circuit'``, ``'Term 9'``); further
+#: headings may follow, separated by ``, `` or `` or ``/`` and ``
+_NAME = r"""(?:'[^'\n]+'|"[^"\n]+")"""  # in single quotes, or in double quotes when it has an apostrophe
+MODEL_CITE = re.compile(rf"docs/model\.md\s+({_NAME}(?:(?:,\s*|\s+or\s+|\s+and\s+){_NAME})*)")
+CITING_TREES = ("selfas_graph", "tools", "tests", "scenarios")
+_QUOTED = re.compile("'([^'\\n]+)'|\"([^\"\\n]+)\"")
+OLD_NAME = "MODEL" + ".md"  # the project's model text, which users do not have
+
+
+def _model_md_headings():
+    """Headings of docs/model.md without their numbers, and the part of each before a colon."""
+    names = set()
+    for line in (DOCS / "model.md").read_text(encoding="utf-8").splitlines():
+        if line.startswith("#"):
+            title = re.sub(r"^\d+[a-z]?(\.\d+)?\.?\s+", "", line.lstrip("#").strip())
+            names |= {title, title.split(":")[0].strip()}
+    return names
+
+
+def _citing_files():
+    return sorted(p for tree in CITING_TREES for p in (ROOT / tree).rglob("*")
+                  if p.suffix in (".py", ".toml") and p.is_file())
+
+
+def test_code_cites_docs_model_md():
+    """The check below is not vacuous: the code cites docs/model.md sections by name."""
+    count = sum(len(MODEL_CITE.findall(p.read_text(encoding="utf-8"))) for p in _citing_files())
+    assert count > 50
+
+
+def test_every_docs_model_md_section_cited_in_the_code_exists():
+    """Every docs/model.md section cited in the code, tools, tests and scenes is a heading of that page."""
+    headings = _model_md_headings()
+    bad = []
+    for path in _citing_files():
+        for group in MODEL_CITE.findall(path.read_text(encoding="utf-8")):
+            names = [a or b for a, b in re.findall(_QUOTED, group)]
+            bad += [f"{path.relative_to(ROOT)}: {name!r}" for name in names if name not in headings]
+    assert not bad, f"citations of docs/model.md sections that do not exist: {sorted(set(bad))}"
+
+
+def test_code_cites_docs_model_md_sections_by_name():
+    """Section numbers move when the page grows: the code names the section instead."""
+    bad = [str(p.relative_to(ROOT)) for p in _citing_files()
+           if re.search(r"docs/model\.md,? sections? \d", p.read_text(encoding="utf-8"))]
+    assert not bad, f"docs/model.md cited by section number in {bad}; cite the heading in quotes"
+
+
+def test_no_citation_of_the_project_model_text():
+    """Code, tools, tests and scenes cite docs/model.md, never the model text users do not have."""
+    bad = [str(p.relative_to(ROOT)) for p in _citing_files() if OLD_NAME in p.read_text(encoding="utf-8")]
+    assert not bad, f"{OLD_NAME} cited in {bad}; cite docs/model.md and a heading in quotes instead"

@@ -1,4 +1,4 @@
-"""Integrator and rigid-bond dynamics: analytic motions and conservation laws (MODEL.md section 4)."""
+"""Integrator and rigid-bond dynamics: analytic motions and conservation laws (docs/model.md 'Rigid rods and time integration')."""
 import math
 
 import numpy as np

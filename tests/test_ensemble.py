@@ -14,9 +14,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from runfiles import differing_datasets
 
 from conftest import SMALL_CIRCUIT_SCENE
-from runfiles import differing_datasets
 from selfas_graph import RunFile
 from selfas_graph.analysis import rod_centres
 from selfas_graph.cli.main import main

@@ -8,9 +8,9 @@ hang fails the test instead of blocking the suite.
 """
 
 import pytest
+from runfiles import MPIEXEC, differing_datasets, launch
 
 from conftest import SMALL_CIRCUIT_SCENE
-from runfiles import MPIEXEC, differing_datasets, launch
 from selfas_graph.ensemble import seed_path
 
 pytestmark = pytest.mark.mpi

@@ -1,4 +1,4 @@
-"""Contacts, events, short circuit and currents in the run loop (MODEL.md sections 5, 6).
+"""Contacts, events, short circuit and currents in the run loop (docs/model.md 'Contacts and events', 'Circuit').
 
 Small hand-built scenes with exact expectations: two rods that meet tip to tip,
 the contact hysteresis on hand-set positions, a prepared chain of three rods that
@@ -39,7 +39,7 @@ def _two_rods(gap=0.1, **sections):
 def test_two_rods_meet_tip_to_tip_with_one_contact_event():
     """Opposite tips 0.1 apart attract and stick: one TIP_CONTACT (1, 2) at the first step closer than r*.
 
-    With |q_k q_l| = 1 the soft core rests at r*/2 (MODEL.md term 1) and the tip brake
+    With |q_k q_l| = 1 the soft core rests at r*/2 (docs/model.md 'Term 1') and the tip brake
     damps the approach, so the pair never comes back beyond the release radius 1.5 r*:
     no release afterwards, over 600 steps (measured: contact at step 27, then r within
     [0.020, 0.059], ending at 0.030).
@@ -277,7 +277,7 @@ def test_chain_currents_act_from_the_step_after_the_short_circuit(chain_run):
     Before the short-circuit step, force_field.active_rod is empty and the current
     channels are exactly zero. The solve at that step gives each rod
     J = psi(tip a) - psi(tip b) = -(delta_J0 dZ) / 3: the bias delta_J0 dZ between the
-    planes (MODEL.md section 6) over three unit resistors, negative because tip a is the
+    planes (docs/model.md 'Circuit') over three unit resistors, negative because tip a is the
     lower (cathode) end. (For a gap of exactly 3 L this is delta_J0; here dZ = 3.16.)
     Tolerance 1e-12: one sparse solve of a 4-unknown system, round-off only.
     The forces of that step were already computed, so the current channels are still
@@ -304,7 +304,7 @@ def test_chain_currents_act_from_the_step_after_the_short_circuit(chain_run):
 
 
 def test_chain_with_a_gap_of_exactly_three_rods_carries_delta_J0(chain_run):
-    """MODEL.md section 6: a straight chain of n rods spanning a gap of n L carries exactly delta_J0.
+    """docs/model.md 'Circuit': a straight chain of n rods spanning a gap of n L carries exactly delta_J0.
 
     The run's chain graph, re-solved with the electrode potentials of dZ = 3 (+-delta_J0 3/2):
     J = delta_J0 in each rod, total current delta_J0, effective resistance 3 R0.

@@ -2,9 +2,13 @@
 import math
 
 import numpy as np
+import pytest
 
 from selfas_graph.kernels._jit import njit
 from selfas_graph.kernels.expo import exp_nonpositive
+
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
 
 
 @njit

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from selfas_graph.cli.main import main
-from selfas_graph.io.export import ExportError, ROLE_TYPES, parse_frames
+from selfas_graph.io.export import ROLE_TYPES, ExportError, parse_frames
 from selfas_graph.io.h5md import RunFile
 
 #: a short circuit at frame 6: filament and dead-end rods, currents (tests/data/README.md)

@@ -1,4 +1,4 @@
-"""Tests of the connectivity graph and the rod topology (MODEL.md section 5).
+"""Tests of the connectivity graph and the rod topology (docs/model.md 'Connectivity graph and topology').
 
 Networks are netlists: rods between named junctions; tips at a junction are
 stuck by ideal contacts, tips at ``"P"`` touch the anode and at ``"N"`` the
@@ -26,6 +26,9 @@ from selfas_graph.model.graph import (
     ConnectivityGraph,
     classify_rods,
 )
+
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
 
 A, C, F = ev.CONDUCTOR_ANODE, ev.CONDUCTOR_CATHODE, ev.CONDUCTOR_FILAMENT
 #: delta_J0 of the paper's Fig. 2 scene
@@ -98,7 +101,7 @@ def attached_labels(n_rods, tip_contacts, conductor_tip, key):
 def brute_force_filament(n_rods, tip_contacts, conductor_tip, key):
     """Rods on some simple path between two different attachments: enumerate all paths.
 
-    The definition of MODEL.md section 5 taken literally, on a MultiGraph (parallel
+    The definition of docs/model.md 'Connectivity graph and topology' taken literally, on a MultiGraph (parallel
     rods are separate edges); exponential, so only for small graphs.
     """
     m = attached_labels(n_rods, tip_contacts, conductor_tip, key)
@@ -173,7 +176,7 @@ def test_single_rod_across_gap_is_filament_with_current_delta():
 
 
 def test_balanced_bridge_rod_is_filament_with_zero_current():
-    """Balanced Wheatstone bridge: the bridge rod carries 0 but is FILAMENT (MODEL.md 5)."""
+    """Balanced Wheatstone bridge: the bridge rod carries 0 but is FILAMENT (docs/model.md 'Connectivity graph and topology')."""
     g = electrode_graph([("P", "x"), ("x", "N"), ("P", "y"), ("y", "N"), ("x", "y")], DELTA * 2)
     assert np.all(g.topology().role == FILAMENT)
     sol = g.solve()

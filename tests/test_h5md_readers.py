@@ -7,10 +7,9 @@ import h5py
 import numpy as np
 import pytest
 
+from conftest import SMALL_CIRCUIT_SCENE
 from selfas_graph.cli.main import main
 from selfas_graph.io.h5md import RunFile
-
-from conftest import SMALL_CIRCUIT_SCENE
 
 DATA = Path(__file__).parent / "data"
 #: written by selfas-graph at commit 58b30f8 (before units, connectivity and observables/dt), see tests/data/README.md

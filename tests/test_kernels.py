@@ -16,6 +16,9 @@ from selfas_graph.kernels import rigid as kr
 from selfas_graph.kernels import tips as kt
 from selfas_graph.model.neighbours import NeighbourList
 
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
+
 RSTAR, KAPPA = 0.06, 1.0
 
 
@@ -129,7 +132,7 @@ def test_constrain_bonds(state, rng, project, correct):
 @pytest.mark.parametrize("project", [True, False])
 @pytest.mark.parametrize("correct", [True, False])
 def test_constrain_bonds_per_rod_length(state, rng, project, correct):
-    """Bonds of rods with lengths l_i are restored to l_i about the rod centre (docs/model.md section 4.3)."""
+    """Bonds of rods with lengths l_i are restored to l_i about the rod centre (docs/model.md 'Corrections after each step')."""
     ell = rng.uniform(0.5, 1.5, state.n_rods)
     x = state.position + 1e-3 * rng.normal(size=state.position.shape)
     v = state.velocity.copy()

@@ -1,4 +1,4 @@
-"""Tests of the rod-current kernels (MODEL.md section 3, terms 9 and 10).
+"""Tests of the rod-current kernels (docs/model.md 'Term 9', 'Term 10').
 
 The oracles below are plain numpy / Python loops written from the physics, not from
 the kernel code: the segment field in the textbook form (perpendicular foot, cosines
@@ -16,6 +16,9 @@ from selfas_graph.kernels.currents import (
     rod_current_field,
     segment_field,
 )
+
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
 
 # ------------------------------------------------------------------------------------
 # oracles

@@ -1,11 +1,19 @@
-"""The scalar force laws of MODEL.md section 3 (terms 1, 6, 8) against their formulas."""
+"""The scalar force laws of docs/model.md 'Term 1', 'Term 6', 'Term 8' against their formulas."""
 import math
 
-import numpy as np
 import pytest
 
-from selfas_graph.kernels.laws import (tip_force_over_r, tip_potential, wall_potential, wall_push,
-                                       yukawa_force_over_r, yukawa_potential)
+from selfas_graph.kernels.laws import (
+    tip_force_over_r,
+    tip_potential,
+    wall_potential,
+    wall_push,
+    yukawa_force_over_r,
+    yukawa_potential,
+)
+
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
 
 RSTAR = 0.06
 
@@ -45,7 +53,7 @@ def test_inner_branch_bounded_at_zero():
 
 
 def test_opposite_tips_rest_at_half_rstar():
-    """Two opposite tips with |q1 q2| = 1 and kappa = 1 rest at r = r*/2 (MODEL.md term 1)."""
+    """Two opposite tips with |q1 q2| = 1 and kappa = 1 rest at r = r*/2 (docs/model.md 'Term 1')."""
     r = RSTAR / 2
     # the force there is a difference of two terms of size 1/(2 r*^2) ~ 140: round-off 1e-12
     assert abs(tip_force_over_r(r * r, -1.0, RSTAR, 1.0) * r) < 1e-12

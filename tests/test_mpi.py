@@ -15,9 +15,9 @@ not compile the same kernels at once.
 import h5py
 import numpy as np
 import pytest
+from runfiles import MPIEXEC, assert_same_run, launch
 
 from conftest import SMALL_CIRCUIT_SCENE
-from runfiles import MPIEXEC, assert_same_run, launch
 from selfas_graph.model import events as ev
 
 pytestmark = pytest.mark.mpi

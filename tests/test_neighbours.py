@@ -5,6 +5,9 @@ import pytest
 from selfas_graph.kernels.cells import neighbour_rows
 from selfas_graph.model.neighbours import NeighbourList
 
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
+
 
 def brute_pairs(x, r, exclude_same_rod):
     d = np.linalg.norm(x[:, None] - x[None], axis=-1)

@@ -43,7 +43,7 @@ def is_png(path):
 
 @pytest.mark.parametrize("kind", ["snapshot", "density", "field", "flux", "timeline", "moment", "fractal", "skeleton"])
 def test_every_kind_writes_a_png(run_file, tmp_path, kind, capsys):
-    """Each figure kind of the paper (MODEL.md section 7) renders headless to a non-empty PNG."""
+    """Each figure kind of the paper (docs/model.md 'Figure diagnostics') renders headless to a non-empty PNG."""
     out = tmp_path / f"{kind}.png"
     assert main(["plot", str(run_file), "--kind", kind, "-o", str(out)]) == 0
     assert is_png(out)

@@ -7,7 +7,6 @@ the code before its fix, where it failed) and pins the behaviour now.
 """
 from __future__ import annotations
 
-import json
 import shutil
 
 import h5py

@@ -8,16 +8,15 @@ import time
 import h5py
 import numpy as np
 import pytest
-
 from runfiles import datasets
+
+from conftest import SMALL_CIRCUIT_SCENE
 from selfas_graph.cli.main import main
-from selfas_graph.io.checkpoint import Checkpointer
-from selfas_graph.io.checkpoint import CheckpointError, checkpoint_path, read_checkpoint
+from selfas_graph.io.checkpoint import Checkpointer, CheckpointError, checkpoint_path, read_checkpoint
 from selfas_graph.io.h5md import RunWriter
 from selfas_graph.io.scenario import scenario_from_text
 from selfas_graph.model import events as ev
 from selfas_graph.model.simulation import RunInterrupted, Simulation
-from conftest import SMALL_CIRCUIT_SCENE
 
 SCENE = SMALL_CIRCUIT_SCENE
 

@@ -1,17 +1,16 @@
-"""Rods of different lengths (docs/model.md section 2): placement, rigid bonds, dynamics,
+"""Rods of different lengths (docs/model.md 'Rods'): placement, rigid bonds, dynamics,
 the scene keys, and bit-for-bit equality of equal-rod runs with the keys at their defaults."""
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import simulation
 from scipy.integrate import solve_ivp
 
+from conftest import simulation
 from selfas_graph import Simulation
 from selfas_graph.io.scenario import ScenarioError, load_scenario, scenario_from_text
 from selfas_graph.model.state import State, random_state
-
 
 #: placement box of the hand-built scenes (only checked for consistency: the states are given)
 BOX = {"box": [[-3.0, 3.0]] * 3, "min_tip_distance": 0.0}

@@ -3,12 +3,11 @@ import math
 
 import numpy as np
 import pytest
+import test_restart
 
 from selfas_graph.io.scenario import scenario_from_text
 from selfas_graph.kernels.pairs import brake_pairs_exact
 from selfas_graph.model.simulation import NumericalFailure, Simulation
-
-import test_restart
 
 
 def test_pair_brake_is_the_exact_solution(rng):

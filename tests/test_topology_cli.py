@@ -17,7 +17,6 @@ from selfas_graph._version import __version__
 from selfas_graph.cli.main import main
 from selfas_graph.io.h5md import RunFile, RunWriter
 from selfas_graph.model import events as ev
-from selfas_graph.model.graph import FILAMENT
 from selfas_graph.model.state import State
 
 GAP = 3.16

@@ -41,8 +41,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import reference  # noqa: E402
 from bench_peer import machine  # noqa: E402
+
+import reference  # noqa: E402
 from selfas_graph.model import circuit  # noqa: E402
 from selfas_graph.model.circuit import solve_circuit  # noqa: E402
 from selfas_graph.model.events import CONDUCTOR_ANODE, CONDUCTOR_CATHODE  # noqa: E402

@@ -70,15 +70,16 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 sys.path.insert(0, str(ROOT / "tests"))
 
-import reference  # noqa: E402
 from bench_circuit import chain_network  # noqa: E402
 from bench_peer import machine  # noqa: E402
+
+import reference  # noqa: E402
+from selfas_graph import Simulation, load_scenario  # noqa: E402
 from selfas_graph.io.checkpoint import read_checkpoint  # noqa: E402
 from selfas_graph.io.scenario import scenario_from_text  # noqa: E402
 from selfas_graph.model import circuit  # noqa: E402
-from selfas_graph.model import graph as graph_module  # noqa: E402
-from selfas_graph import Simulation, load_scenario  # noqa: E402
 from selfas_graph.model import events as ev  # noqa: E402
+from selfas_graph.model import graph as graph_module  # noqa: E402
 from selfas_graph.model.graph import ConnectivityGraph  # noqa: E402
 from selfas_graph.model.params import AmbientBrake, ForceParams  # noqa: E402
 

@@ -40,6 +40,7 @@ sys.path.insert(0, str(ROOT / "tools"))
 
 from bench_peer import OpenMMPeer, machine, machine_line, summary  # noqa: E402
 from bench_step import scene  # noqa: E402
+
 from selfas_graph import Simulation, load_scenario  # noqa: E402
 from selfas_graph.kernels.tips import tip_tip_direct_rows  # noqa: E402
 from selfas_graph.kernels.tree import THETA, tip_tip_tree  # noqa: E402

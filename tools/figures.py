@@ -5,7 +5,7 @@ Usage: python tools/figures.py RUN.h5 OUTDIR [--prefix NAME]
 Writes NAME_snapshot_start.png (frame 0), NAME_snapshot_end.png, NAME_density.png,
 NAME_field.png, NAME_flux.png and NAME_timeline.png (last frame unless said otherwise), and
 with ``--claims`` the time series NAME_moment.png, NAME_fractal.png and NAME_skeleton.png
-(docs/model.md section 7a), through ``selfas-graph plot``.
+(docs/model.md "Measures of the paper's claims"), through ``selfas-graph plot``.
 """
 import argparse
 import sys

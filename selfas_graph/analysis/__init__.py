@@ -1,4 +1,4 @@
-"""Analysis of saved frames: the diagnostics behind the paper's figures (docs/model.md section 7)
+"""Analysis of saved frames: the diagnostics behind the paper's figures (docs/model.md 'Figure diagnostics')
 and the measures of its claims (section 7a: :mod:`.moments`, :mod:`.fractal`, :mod:`.skeleton`,
 and :func:`.claims.frame_claims`, which reads them from a run file).
 

@@ -1,4 +1,4 @@
-"""The measures of the paper's claims for one saved frame of a run file (docs/model.md section 7a).
+"""The measures of the paper's claims for one saved frame of a run file (docs/model.md "Measures of the paper's claims").
 
 :func:`frame_claims` reads one frame (tip positions, tip charges, tip-tip contacts and rod
 currents) from an open :class:`selfas_graph.io.h5md.RunFile` and returns plain floats, NaN

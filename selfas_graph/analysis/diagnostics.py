@@ -1,7 +1,7 @@
-"""Diagnostics of one frame, as in the paper's figures (MODEL.md section 7).
+"""Diagnostics of one frame, as in the paper's figures (docs/model.md 'Figure diagnostics').
 
-Functions over plain arrays (no files, no h5py), in reduced units (MODEL.md
-section 1: lengths in L, fields in B0, fluxes in B0 L^2 with Phi_0 = 4 pi):
+Functions over plain arrays (no files, no h5py), in reduced units (docs/model.md
+'Reduced units': lengths in L, fields in B0, fluxes in B0 L^2 with Phi_0 = 4 pi):
 
 * :func:`radial_density` -- rod centres per unit volume in cylindrical shells
   around the z axis (paper Figs. 3, 7, 9);
@@ -14,7 +14,7 @@ section 1: lengths in L, fields in B0, fluxes in B0 L^2 with Phi_0 = 4 pi):
 * :func:`timeline` -- rods in filaments and total current over time, and the
   short-circuit time (first SHORT_CIRCUIT event).
 
-Layout (MODEL.md section 2): rod ``i`` has tip a at row ``2 i`` and tip b at row
+Layout (docs/model.md 'Rods'): rod ``i`` has tip a at row ``2 i`` and tip b at row
 ``2 i + 1`` of ``position``; its current is positive from tip a to tip b.
 
 Accuracy of the field diagnostics
@@ -64,7 +64,7 @@ __all__ = [
     "timeline",
 ]
 
-#: magnetic flux quantum in reduced units, Phi_0 = 4 pi B0 L^2 (MODEL.md section 1)
+#: magnetic flux quantum in reduced units, Phi_0 = 4 pi B0 L^2 (docs/model.md 'Reduced units')
 PHI_0 = 4.0 * np.pi
 
 #: fewest azimuthal samples of the automatic ``n_phi`` (see the module docstring)
@@ -167,7 +167,7 @@ def rod_centres(position) -> np.ndarray:
 
 
 def radial_density(centre, r_max, n_bins, z_range, mask=None):
-    """Rods per unit volume in cylindrical shells around the z axis (MODEL.md section 7).
+    """Rods per unit volume in cylindrical shells around the z axis (docs/model.md 'Figure diagnostics').
 
     A rod counts in the shell ``r_k <= rho < r_{k+1}`` (``rho`` the distance of its
     centre to the z axis) when its centre has ``z_lo <= z <= z_hi``; the count is
@@ -226,7 +226,7 @@ def bz_profile(points_r, z_plane, position, active_rod, current, wire_radius, n_
     ``Bz(r) = (1 / n_phi) sum_k B_z(r cos phi_k, r sin phi_k, z_plane)`` with
     ``phi_k = 2 pi (k + 1/2) / n_phi``: the trapezoid rule for the azimuthal mean
     (see the module docstring for its accuracy). The field is the regularised
-    Biot-Savart field of the rod currents only (MODEL.md term 9, wire radius w),
+    Biot-Savart field of the rod currents only (docs/model.md 'Term 9', wire radius w),
     from :func:`~selfas_graph.kernels.currents.rod_current_field`; no external field,
     plasma filament or external object is included (paper Figs. 4, 10).
 
@@ -243,7 +243,7 @@ def bz_profile(points_r, z_plane, position, active_rod, current, wire_radius, n_
     current : (n_rods,) float64
         Rod currents J (units J0), positive from tip a to tip b.
     wire_radius : float
-        w = D / 2 (MODEL.md term 9); 0 gives the bare line-current field.
+        w = D / 2 (docs/model.md 'Term 9'); 0 gives the bare line-current field.
     n_phi : int, optional
         Number of azimuthal samples; default :func:`auto_n_phi` of the largest radius
         (samples at most one wire radius apart, see the module docstring).
@@ -341,7 +341,7 @@ def flux_through_disc(r_values, z_plane, position, active_rod, current, wire_rad
     """Magnetic flux of the rod currents' B_z through discs on the plane ``z = z_plane``.
 
     ``Phi(R) = int_0^R 2 pi r Bz(r) dr`` with ``Bz`` from :func:`bz_profile` and the
-    radial quadrature of :func:`disc_flux` (MODEL.md section 7, paper Figs. 5, 11).
+    radial quadrature of :func:`disc_flux` (docs/model.md 'Figure diagnostics', paper Figs. 5, 11).
     The discs are centred on the z axis with normal +z.
 
     Parameters
@@ -356,8 +356,8 @@ def flux_through_disc(r_values, z_plane, position, active_rod, current, wire_rad
     n_r, dr_max
         Radial quadrature, as in :func:`disc_flux`.
     z_mext : float, optional
-        Magnetic charge Z_Mext of an external dipole's monopole (case (ii), MODEL.md
-        term 11): the flux is then given in units of its flux ``4 pi |Z_Mext|``
+        Magnetic charge Z_Mext of an external dipole's monopole (case (ii), docs/model.md
+        'Term 11'): the flux is then given in units of its flux ``4 pi |Z_Mext|``
         (paper Fig. 11) instead of Phi_0 = 4 pi (Fig. 5).
 
     Returns
@@ -401,7 +401,7 @@ class Timeline:
 
 
 def timeline(time, n_filament, total_current=None, events=None) -> Timeline:
-    """Collect a run's filament statistics over time (MODEL.md section 7).
+    """Collect a run's filament statistics over time (docs/model.md 'Figure diagnostics').
 
     Parameters
     ----------

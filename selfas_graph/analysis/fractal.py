@@ -1,4 +1,4 @@
-"""Fractal measures of rod structures: "a trend towards a fractal skeletal structuring" (docs/model.md section 7a).
+"""Fractal measures of rod structures: "a trend towards a fractal skeletal structuring" (docs/model.md "Measures of the paper's claims").
 
 Arrays in, arrays out; rod ``i`` has tips at rows ``2 i`` and ``2 i + 1`` of ``position``.
 Every measure is a straight-line fit in log-log coordinates and returns a :class:`Fit`: the

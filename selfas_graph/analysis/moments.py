@@ -1,13 +1,13 @@
-"""Magnetic moments of structures: the paper's "bigger magnetic dipole" (docs/model.md section 7a).
+"""Magnetic moments of structures: the paper's "bigger magnetic dipole" (docs/model.md "Measures of the paper's claims").
 
-Arrays in, arrays out. Layout as everywhere (docs/model.md section 2): rod ``i`` has tip a at
+Arrays in, arrays out. Layout as everywhere (docs/model.md 'Rods'): rod ``i`` has tip a at
 row ``2 i`` (magnetic charge ``+q_i``) and tip b at row ``2 i + 1`` (``-q_i``); its current
 ``J_i`` is positive from tip a to tip b. A structure is a set of rods given by a label per rod
 (``structure[i]`` in ``0 .. n_structures - 1``, ``-1`` for a rod in no structure), as
 :func:`selfas_graph.analysis.skeleton.structures` or
 :func:`selfas_graph.model.graph.classify_rods` make them.
 
-Units (docs/model.md section 1): moments in Z_M0 e L; a rod of charge q has |m| = q.
+Units (docs/model.md 'Reduced units'): moments in Z_M0 e L; a rod of charge q has |m| = q.
 
 * :func:`monopole_moment` -- ``m_q = sum_k q_k x_k`` over the tips of each structure. The
   tips of a structure carry no net charge, so ``m_q`` does not depend on the origin; a

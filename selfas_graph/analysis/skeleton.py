@@ -1,7 +1,7 @@
-"""The skeleton of the rod network: loops and junctions (docs/model.md section 7a).
+"""The skeleton of the rod network: loops and junctions (docs/model.md "Measures of the paper's claims").
 
 Arrays in, arrays out. The contact graph is the project's connectivity graph without the
-conductors (docs/model.md section 5): tips joined by tip-tip contacts are merged into one
+conductors (docs/model.md 'Contacts and events'): tips joined by tip-tip contacts are merged into one
 junction node (:func:`selfas_graph.model.circuit.merge_tips`), and every rod is an edge
 between the merged nodes of its two tips. It is a multigraph: two rods sharing both
 junctions make a loop of two, a rod whose tips sit in one junction a loop of one.

@@ -163,8 +163,8 @@ def _run(args, pool):
         print("no seed file to summarise")
     statuses = [r.get("status") for r in results if r is not None]
     if "interrupted" in statuses or any(r is None for r in results):
-        print(f"selfas-graph ensemble: interrupted; rerun the same command to continue "
-              f"(finished seeds are kept, interrupted ones resume from their checkpoints)", file=sys.stderr)
+        print("selfas-graph ensemble: interrupted; rerun the same command to continue "
+              "(finished seeds are kept, interrupted ones resume from their checkpoints)", file=sys.stderr)
         return 130
     if "error" in statuses:
         print("selfas-graph ensemble: some seeds stopped with an error (above)", file=sys.stderr)

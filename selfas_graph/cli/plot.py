@@ -1,6 +1,6 @@
 """Figures of a saved run: ``selfas-graph plot RUN.h5 --kind KIND [--frame K | --time T] [-o FILE.png]``.
 
-Kinds, after the paper's figures (MODEL.md section 7):
+Kinds, after the paper's figures (docs/model.md 'Figure diagnostics'):
 
 * ``snapshot`` -- the rods in 3-D: current-carrying filaments blue, dead ends within
   the filament networks red (the dead-end rods of structures that hold filament
@@ -16,7 +16,7 @@ Kinds, after the paper's figures (MODEL.md section 7):
 * ``timeline`` -- rods in filaments and total current vs time, the short-circuit
   time marked.
 * ``moment``   -- the largest structure's magnetic moment vs time: |m_q| in units of the
-  mean single-rod moment, and m_J,z of its rod currents (docs/model.md section 7a).
+  mean single-rod moment, and m_J,z of its rod currents (docs/model.md "Measures of the paper's claims").
 * ``fractal``  -- the mass-radius and box-counting dimensions of the largest structure and
   the R_g ~ N^(1/D) dimension over all structures vs time, with their uncertainties.
 * ``skeleton`` -- the cycle rank of the contact graph (and of the largest structure) vs time.
@@ -205,8 +205,8 @@ def _series_style(n):
 
 # --------------------------------------------------------------------------- kinds
 def _snapshot(fig, run, frame, args):
-    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
     from matplotlib.lines import Line2D
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
     ax = fig.add_subplot(projection="3d")
     # draw in the order given: the translucent electrode planes first, the rods over them (the

@@ -23,10 +23,24 @@ from pathlib import Path
 import numpy as np
 
 from .._version import __version__
-from ..io.checkpoint import (CheckpointError, Checkpointer, checkpoint_meta, checkpoint_path, read_checkpoint,
-                             write_checkpoint)
-from ..io.h5md import (DiskFullError, NullWriter, RunFile, RunFileError, RunWriter, appendable_problems, is_io_error,
-                       run_provenance)
+from ..io.checkpoint import (
+    Checkpointer,
+    CheckpointError,
+    checkpoint_meta,
+    checkpoint_path,
+    read_checkpoint,
+    write_checkpoint,
+)
+from ..io.h5md import (
+    DiskFullError,
+    NullWriter,
+    RunFile,
+    RunFileError,
+    RunWriter,
+    appendable_problems,
+    is_io_error,
+    run_provenance,
+)
 from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
 from ..model.params import plasma_current_text
 from ..model.simulation import NumericalFailure, RunInterrupted, Simulation

@@ -1,7 +1,7 @@
 """Export a run file to the formats viewers and analysis packages open: GSD and extended XYZ.
 
 Both hold the tips as particles (tip k belongs to rod k // 2) and, per frame, each tip's
-rod role (free, cluster, dead_end, filament: docs/model.md section 6) as its type, the
+rod role (free, cluster, dead_end, filament: docs/model.md 'Connectivity graph and topology') as its type, the
 rod's current and the rod index; the GSD file also has one bond per rod, typed by the
 rod's role. Positions are in rod lengths, times in t0 (docs/output.md).
 

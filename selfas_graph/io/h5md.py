@@ -3,7 +3,7 @@
 Layout of a run file::
 
     /h5md                       attrs version=[1, 1]; groups author, creator (fixed-length strings)
-    /h5md/modules/units         attrs version=[1, 0], system="reduced" (docs/model.md section 1)
+    /h5md/modules/units         attrs version=[1, 0], system="reduced" (docs/model.md 'Reduced units')
     /particles/tips/box         attrs dimension=3, boundary=[none, none, none]
     /particles/tips/position    step (n,), time (n,), value (n, n_tips, 3)
     /particles/tips/velocity    step, time, value (if output.velocities)
@@ -55,7 +55,7 @@ from ..model.events import CONDUCTOR_NAMES, EVENT_DTYPE, KIND_NAMES, named_event
 
 H5MD_VERSION = (1, 1)
 
-#: symbols of the reduced unit system (docs/model.md section 1; docs/output.md lists them)
+#: symbols of the reduced unit system (docs/model.md 'Reduced units'; docs/output.md lists them)
 UNIT_SYSTEM = "reduced"
 LENGTH, TIME, CHARGE, ENERGY, CURRENT, POTENTIAL = "L", "t_0", "Z_M0e", "F_M0 L", "J_0", "R_0 J_0"
 

@@ -22,7 +22,6 @@ import numpy as np
 
 from ..model import params as P
 
-
 #: every float of a scenario is 0 or within these magnitudes: products of up to ten of them (q^2 B / r*^3 ...)
 #: stay finite in double precision (1e30^10 = 1e300), and reciprocals of tiny ones (1 / R_D^2 ...) too
 MIN_MAGNITUDE = 1e-30
@@ -366,7 +365,6 @@ def check_consistency(p: P.Parameters):
     """Problems that involve several keys at once. Returns a list of messages."""
     out = []
     rods, box = p.rods, p.placement.box
-    rstar = rods.rstar
     for d, name in enumerate("xyz"):
         lo, hi = box[d]
         if not lo < hi:
@@ -406,7 +404,7 @@ def check_consistency(p: P.Parameters):
         mean = rods.length.mean()
         if abs(mean - 1.0) > 1e-9:
             out.append(f"rods.length: the law's mean is {mean:.12g}, not 1; lengths are in units of the mean rod "
-                       f"length L (docs/model.md section 1), so choose values with mean 1 (e.g. uniform in "
+                       f"length L (docs/model.md 'Reduced units'), so choose values with mean 1 (e.g. uniform in "
                        f"(0.5, 1.5))")
         shortest = rods.length.bounds()[0]
         if shortest < rods.diameter:

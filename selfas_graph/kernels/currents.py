@@ -1,10 +1,10 @@
 """Kernels for the rod currents: their magnetic field and the Lorentz force on them.
 
-MODEL.md section 3, terms 9 and 10, in reduced units (MODEL.md section 1): the field
+docs/model.md 'Term 9', 'Term 10', in reduced units (docs/model.md 'Reduced units'): the field
 of an infinite straight current J at distance d is ``2 J / d``, the force on a current
 element is ``J dl x B`` and the force on a magnetic tip is ``q B``.
 
-Layout (MODEL.md section 2): rod ``i`` has tip a at row ``2 i`` and tip b at row
+Layout (docs/model.md 'Rods'): rod ``i`` has tip a at row ``2 i`` and tip b at row
 ``2 i + 1`` of ``position``; its axis is ``s_i = x_b - x_a`` and its current ``J_i``
 is positive when it flows from tip a to tip b.
 
@@ -25,7 +25,7 @@ Glossary of the short symbols used inside the kernels:
 ``s``      segment vector ``B - A``
 ``a, b``   ``x - A`` and ``x - B`` for the field point ``x``
 ``c``      ``s x a``; ``|c| = |s| rho`` with rho the distance of x to the line
-``w``      wire radius, ``D / 2`` (MODEL.md term 9)
+``w``      wire radius, ``D / 2`` (docs/model.md 'Term 9')
 ``t, wt``  Gauss-Legendre nodes and weights on ``[0, 1]``
 ``J``      rod current
 =========  ==================================================================
@@ -36,12 +36,11 @@ import numpy as np
 
 from ._jit import inline, njit, njit_parallel, njit_parallel_sum, prange
 
-
 # --------------------------------------------------------------------------------------
 # scalar law
 # --------------------------------------------------------------------------------------
 #
-# Derivation of the segment field (MODEL.md term 9).
+# Derivation of the segment field (docs/model.md 'Term 9').
 #
 # Biot-Savart in reduced units: dB = J dl x r / |r|^3, with r = x - x' (this is the
 # normalisation that gives 2 J / d for an infinite wire). Along the segment
@@ -72,7 +71,7 @@ from ._jit import inline, njit, njit_parallel, njit_parallel_sum, prange
 def segment_field(px, py, pz, ax, ay, az, bx, by, bz, current, wire_radius):
     """Magnetic field at point x of a straight finite segment A -> B carrying ``current``.
 
-    MODEL.md section 3, term 9 (regularised Biot-Savart law of a finite wire)::
+    docs/model.md 'Term 9' (regularised Biot-Savart law of a finite wire)::
 
         s = B - A,  a = x - A,  b = x - B,
         B_seg = J (s x a) (s.a/|a| - s.b/|b|) / (|s x a|^2 + w^2 |s|^2)
@@ -93,7 +92,7 @@ def segment_field(px, py, pz, ax, ay, az, bx, by, bz, current, wire_radius):
     current : float
         Current J, positive when it flows from A to B (reduced units, J0).
     wire_radius : float
-        Wire radius w >= 0 (D / 2 in MODEL.md term 9) that keeps the field finite
+        Wire radius w >= 0 (D / 2 in docs/model.md 'Term 9') that keeps the field finite
         near the wire; w = 0 gives the bare line-current field.
 
     Returns
@@ -150,7 +149,7 @@ def _active_rod_field(px, py, pz, skip_rod, seg, active_rod, wire_radius):
     """Sum of ``segment_field`` over the packed active rods at point x, skipping one rod.
 
     The one loop over sources shared by ``rod_current_field`` and
-    ``current_force_on_tips`` (MODEL.md term 9); the skipped rod is removed by a select,
+    ``current_force_on_tips`` (docs/model.md 'Term 9'); the skipped rod is removed by a select,
     so that the loop vectorises.
 
     Parameters
@@ -164,7 +163,7 @@ def _active_rod_field(px, py, pz, skip_rod, seg, active_rod, wire_radius):
     active_rod : ndarray, shape (n_active,), int64
         Rods that carry a current, in the order of ``seg``.
     wire_radius : float
-        Wire radius w (MODEL.md term 9).
+        Wire radius w (docs/model.md 'Term 9').
 
     Returns
     -------
@@ -192,11 +191,11 @@ def _active_rod_field(px, py, pz, skip_rod, seg, active_rod, wire_radius):
 
 @njit_parallel_sum
 def rod_current_field(point, exclude_rod, position, active_rod, current, wire_radius, out):
-    """Field of the active rods' currents at arbitrary points (MODEL.md term 9 / 10).
+    """Field of the active rods' currents at arbitrary points (docs/model.md 'Term 9', 'Term 10').
 
     ``out[p] = sum over active rods j != exclude_rod[p] of B_seg(point[p]; j)``.
     Used for the field at the Lorentz quadrature points (excluding the rod the point
-    belongs to) and for diagnostics (B_z of the rod currents, MODEL.md section 7).
+    belongs to) and for diagnostics (B_z of the rod currents, docs/model.md 'Figure diagnostics').
     Parallel over points; each point writes only its own row.
 
     Parameters
@@ -213,7 +212,7 @@ def rod_current_field(point, exclude_rod, position, active_rod, current, wire_ra
     current : ndarray, shape (n_rods,), float64
         Rod currents J, positive from tip a to tip b.
     wire_radius : float
-        Wire radius w = D / 2 (MODEL.md term 9).
+        Wire radius w = D / 2 (docs/model.md 'Term 9').
     out : ndarray, shape (m, 3), float64
         Overwritten with the total field at each point (reduced units, B0).
     """
@@ -248,7 +247,7 @@ def current_force_on_tips(position, charge, active_rod, current, wire_radius, lo
     current : ndarray, shape (n_rods,), float64
         Rod currents J, positive from tip a to tip b.
     wire_radius : float
-        Wire radius w = D / 2 (MODEL.md term 9).
+        Wire radius w = D / 2 (docs/model.md 'Term 9').
     lo, hi : int
         Target tips, ``0 <= lo <= hi <= n_tips``; a row does not depend on the range.
     out : ndarray, shape (n_tips, 3), float64
@@ -271,7 +270,7 @@ def current_force_on_tips(position, charge, active_rod, current, wire_radius, lo
 
 @njit_parallel
 def quadrature_points(position, active_rod, gl_t, out):
-    """Gauss-Legendre points ``x_a + t s`` along each active rod (MODEL.md term 10).
+    """Gauss-Legendre points ``x_a + t s`` along each active rod (docs/model.md 'Term 10').
 
     Row order is rod-major: ``out[r * n_gl + g]`` is node ``gl_t[g]`` of rod
     ``active_rod[r]``. Parallel over active rods; each writes its own ``n_gl`` rows.
@@ -303,7 +302,7 @@ def quadrature_points(position, active_rod, gl_t, out):
 def lorentz_force_on_rods(position, active_rod, current, field, gl_t, gl_w, out):
     """Lorentz force on the rod currents, shared between the tips, ADDED to ``out``.
 
-    MODEL.md section 3, term 10::
+    docs/model.md 'Term 10'::
 
         F_i = J_i int_0^1 s_i x B_tot(x_a + t s_i) dt
             ~ sum_g J_i w_g (s_i x B_g)
@@ -383,7 +382,7 @@ def gauss_legendre_01(n):
     """Nodes and weights of the n-point Gauss-Legendre rule on [0, 1].
 
     The rule integrates polynomials of degree <= 2 n - 1 exactly (term 10's
-    accuracy knob, MODEL.md section 3).
+    accuracy knob, docs/model.md 'Force terms').
 
     Parameters
     ----------

@@ -17,6 +17,9 @@ Special values: ``exp(0) = 1``; ``x < -745.2`` gives 0 (the true value is below 
 the smallest subnormal); NaN gives NaN. Meant for ``x <= 0``: positive ``x`` is
 computed the same way but only up to ``x < 709`` (no overflow handling).
 """
+import struct
+
+import numba
 from numba.core import types
 from numba.extending import intrinsic
 
@@ -27,35 +30,47 @@ LN2_HI = 6.93147180369123816490e-01  # ln 2 rounded to 32 significant bits
 LN2_LO = 1.90821492927058770002e-10  # ln 2 - LN2_HI
 
 
-@intrinsic
-def _double_from_bits(typingctx, bits):
-    """The double whose IEEE bits are the int64 ``bits`` (a register move, vectorisable)."""
-    sig = types.float64(types.int64)
+if numba.config.DISABLE_JIT:
+    # NUMBA_DISABLE_JIT=1 runs every kernel as Python (to step through it in a debugger); an
+    # intrinsic has no Python body, so each gets one here, with the same result bit for bit.
 
-    def codegen(context, builder, signature, args):
-        return builder.bitcast(args[0], context.get_value_type(types.float64))
+    def _double_from_bits(bits):
+        """The double whose IEEE bits are the int64 ``bits``."""
+        return struct.unpack("<d", struct.pack("<q", int(bits)))[0]
 
-    return sig, codegen
+    def _trunc_int32(value):
+        """``int(value)`` (truncation towards zero) for a double well inside the int32 range, as an int."""
+        return int(value)
 
+else:
+    @intrinsic
+    def _double_from_bits(typingctx, bits):
+        """The double whose IEEE bits are the int64 ``bits`` (a register move, vectorisable)."""
+        sig = types.float64(types.int64)
 
-@intrinsic
-def _trunc_int32(typingctx, value):
-    """``int(value)`` for a double known to lie well inside the int32 range, as an int64.
+        def codegen(context, builder, signature, args):
+            return builder.bitcast(args[0], context.get_value_type(types.float64))
 
-    The conversion goes through int32 (``fptosi`` to i32, then sign extension) because
-    AVX2 converts four doubles to int32 in one instruction (``vcvttpd2dq``) but has no
-    packed double-to-int64 conversion (that is AVX-512DQ's ``vcvttpd2qq``): ``int(t)``
-    in int64 made LLVM convert the lanes one at a time (``vcvttsd2si``) inside the
-    vectorised Yukawa pair loop. The value is the same.
-    """
-    sig = types.int64(types.float64)
+        return sig, codegen
 
-    def codegen(context, builder, signature, args):
-        from llvmlite import ir
+    @intrinsic
+    def _trunc_int32(typingctx, value):
+        """``int(value)`` for a double known to lie well inside the int32 range, as an int64.
 
-        return builder.sext(builder.fptosi(args[0], ir.IntType(32)), ir.IntType(64))
+        The conversion goes through int32 (``fptosi`` to i32, then sign extension) because
+        AVX2 converts four doubles to int32 in one instruction (``vcvttpd2dq``) but has no
+        packed double-to-int64 conversion (that is AVX-512DQ's ``vcvttpd2qq``): ``int(t)``
+        in int64 made LLVM convert the lanes one at a time (``vcvttsd2si``) inside the
+        vectorised Yukawa pair loop. The value is the same.
+        """
+        sig = types.int64(types.float64)
 
-    return sig, codegen
+        def codegen(context, builder, signature, args):
+            from llvmlite import ir
+
+            return builder.sext(builder.fptosi(args[0], ir.IntType(32)), ir.IntType(64))
+
+        return sig, codegen
 
 
 @inline

@@ -1,4 +1,4 @@
-"""Fixed external objects of case (ii) (MODEL.md term 11): a straight current filament on
+"""Fixed external objects of case (ii) (docs/model.md 'Term 11'): a straight current filament on
 the z axis and a large magnetic dipole on it, with monopoles at its ends and a screened
 line charge along it.
 
@@ -26,7 +26,7 @@ from .laws import tip_force_over_r, tip_potential
 
 @inline
 def filament_field_at(px, py, current, w):
-    """Field of the straight filament on the z axis, current along +z (MODEL.md term 11).
+    """Field of the straight filament on the z axis, current along +z (docs/model.md 'Term 11').
 
     ``B = 2 J rho / (rho^2 + w^2) phi_hat``; returns (Bx, By), Bz = 0.
     """

@@ -1,5 +1,4 @@
-"""One-body terms: fields of fixed sources acting on tips (MODEL.md terms 5 and 8)."""
-import math
+"""One-body terms: fields of fixed sources acting on tips (docs/model.md 'Term 5', 'Term 8')."""
 
 import numpy as np
 
@@ -9,7 +8,7 @@ from .laws import wall_potential, wall_push
 
 @inline
 def plasma_field_at(px, py, x0, y0, radius, current):
-    """Field of a straight plasma current along +z through (x0, y0) (MODEL.md term 5).
+    """Field of a straight plasma current along +z through (x0, y0) (docs/model.md 'Term 5').
 
     Uniform current density inside ``radius``: ``B = 2 I rho / R^2 phi_hat``
     inside and ``2 I / rho phi_hat`` outside, with ``phi_hat = (-y', x', 0) / rho``.
@@ -47,7 +46,7 @@ def plasma_field(point, x0, y0, radius, current, out):
 
 @njit_rows
 def plasma_force_on_tips(position, charge, x0, y0, radius, current, out):
-    """``F_k = q_k B_plas(x_k)`` (MODEL.md term 5 on tips); ``out`` (n_tips, 3) overwritten."""
+    """``F_k = q_k B_plas(x_k)`` (docs/model.md 'Term 5' on tips); ``out`` (n_tips, 3) overwritten."""
     for k in prange(position.shape[0]):
         bx, by = plasma_field_at(position[k, 0], position[k, 1], x0, y0, radius, current)
         out[k, 0] = charge[k] * bx
@@ -57,7 +56,7 @@ def plasma_force_on_tips(position, charge, x0, y0, radius, current, out):
 
 @njit_rows
 def electrode_walls(position, velocity, z_cathode, z_anode, rstar, kappa, k_br, out_push, out_brake):
-    """Electrode planes at ``z_cathode < z_anode`` acting on tips (MODEL.md term 8).
+    """Electrode planes at ``z_cathode < z_anode`` acting on tips (docs/model.md 'Term 8').
 
     A tip at distance ``h < r*`` from a plane (measured towards the gap, so h < 0
     beyond the plane) is pushed back into the gap with ``kappa (r* - h) / r*^3``

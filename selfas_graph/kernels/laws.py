@@ -3,7 +3,7 @@
 Every law returns the *radial* factor ``f(r) / r`` so that the force vector is
 ``factor * (x_k - x_l)``; this avoids a division by ``r`` in the loops and makes
 ``r = 0`` easy to guard. Potentials are returned alongside for the energy
-kernels and the gradient tests. Sources are MODEL.md section 3 (term numbers).
+kernels and the gradient tests. Sources are docs/model.md 'Force terms' (by term number).
 """
 import math
 
@@ -13,7 +13,7 @@ from .expo import exp_nonpositive
 
 @inline_sum
 def tip_force_over_r(r2, p, rstar, kappa):
-    """Tip-tip magnetic force with a soft core (MODEL.md term 1), divided by r.
+    """Tip-tip magnetic force with a soft core (docs/model.md 'Term 1'), divided by r.
 
     ``f(r) = p / r^2`` for ``r >= r*`` (Coulomb law between magnetic charges) and
     ``f(r) = p r / r*^3 + kappa (r* - r) / r*^3`` inside (a charge smeared over a
@@ -50,7 +50,7 @@ def tip_force_over_r(r2, p, rstar, kappa):
 
 @inline
 def tip_potential(r2, p, rstar, kappa):
-    """Potential of :func:`tip_force_over_r` (MODEL.md term 1), zero at infinity.
+    """Potential of :func:`tip_force_over_r` (docs/model.md 'Term 1'), zero at infinity.
 
     ``U = p / r`` outside, ``U = p (3 r*^2 - r^2) / (2 r*^3) + kappa (r* - r)^2 / (2 r*^3)``
     inside; U is continuous at r* and ``f = -dU/dr``.
@@ -66,7 +66,7 @@ def tip_potential(r2, p, rstar, kappa):
 
 @inline
 def yukawa_force_over_r(r2, zz, screening, core):
-    """Screened electric repulsion between rod centres (MODEL.md term 6), divided by r.
+    """Screened electric repulsion between rod centres (docs/model.md 'Term 6'), divided by r.
 
     ``f(r) = Z_i Z_j exp(-r/R_D) (1/r^2 + 1/(R_D r))``, the negative derivative of
     ``U = Z_i Z_j exp(-r/R_D) / r``, for ``r >= a``. Inside the core radius ``a``
@@ -115,7 +115,7 @@ def yukawa_potential(r2, zz, screening, core):
 
 @inline
 def wall_push(h, rstar, kappa):
-    """Elastic push of an electrode plane on a tip at height h above it (MODEL.md term 8).
+    """Elastic push of an electrode plane on a tip at height h above it (docs/model.md 'Term 8').
 
     ``kappa (r* - h) / r*^3`` for ``h < r*`` (any h, also below the plane), else 0.
     """

@@ -1,4 +1,4 @@
-"""Short-range pair terms over a neighbour list (MODEL.md terms 2 and 6).
+"""Short-range pair terms over a neighbour list (docs/model.md 'Term 2', 'Term 6').
 
 Neighbour lists are in compressed-row form and hold both directions of every
 pair: the neighbours of point ``k`` are ``index[start[k]:start[k + 1]]``. Each
@@ -24,7 +24,7 @@ def _closer(position, k, l, r2max):
 
 @njit_parallel
 def tip_brake(position, velocity, start, index, rstar, k_br, out):
-    """Friction between tips of different rods closer than r* (MODEL.md term 2, paper Eq. 12).
+    """Friction between tips of different rods closer than r* (docs/model.md 'Term 2', paper Eq. 12).
 
     ``F_k -= k_br (v_k - v_l)`` for every neighbour l with ``|x_k - x_l| < r*``.
 
@@ -61,7 +61,7 @@ def tip_brake(position, velocity, start, index, rstar, k_br, out):
 
 @njit_parallel_sum
 def yukawa_centres(centre, rod_charge, start, index, screening, core, cutoff, lo, hi, out):
-    """Screened electric repulsion between rod centres (MODEL.md term 6).
+    """Screened electric repulsion between rod centres (docs/model.md 'Term 6').
 
     ``F_i = sum_j Z_i Z_j exp(-r/R_D) (1/r^2 + 1/(R_D r)) r_hat_ij`` over neighbours
     with ``r < cutoff``, softened inside the core radius (see ``laws.yukawa_force_over_r``).

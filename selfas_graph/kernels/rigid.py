@@ -1,4 +1,4 @@
-"""Rigid massless bond between the two tips of each rod (paper Eqs. 5-9, 14-15; MODEL.md section 4).
+"""Rigid massless bond between the two tips of each rod (paper Eqs. 5-9, 14-15; docs/model.md 'Rigid rods and time integration').
 
 Derivation of the exact bond force. With ``r12 = x_a - x_b``, ``v12 = v_a - v_b``,
 equal tip masses m, and external forces F_a, F_b, the tips move as
@@ -14,7 +14,7 @@ that variant is kept as ``exact=False`` for comparison. Masses are 1 (reduced un
 The bond force holds whatever length the bond has, so it serves rods of any length.
 
 Rod lengths. ``length`` is an ``(n_rods,)`` array of the lengths l_i the bonds keep
-(units L, docs/model.md section 2), or an empty array when every rod has length 1:
+(units L, docs/model.md 'Rods'), or an empty array when every rod has length 1:
 then the kernels compute exactly what they did before per-rod lengths existed
 (``1.0 / sqrt(r2)`` and ``l_i / sqrt(r2)`` with l_i = 1 are the same float).
 """

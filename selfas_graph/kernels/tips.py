@@ -1,4 +1,4 @@
-"""Tip-tip magnetic force (MODEL.md term 1) as a direct sum over all tip pairs.
+"""Tip-tip magnetic force (docs/model.md 'Term 1') as a direct sum over all tip pairs.
 
 Tips are numbered ``2 i`` and ``2 i + 1`` for rod ``i``; the two tips of one
 rod do not interact (their bond is rigid). Positions come as three separate
@@ -122,7 +122,7 @@ def fast_switch(r2, r_in, r_out):
 
 @njit_rows
 def tip_tip_fast(position, charge, start, index, rstar, kappa, r_in, r_out, out):
-    """Fast part ``S(r) f(r)`` of the tip-tip force (MODEL.md term 1) over a tip neighbour list.
+    """Fast part ``S(r) f(r)`` of the tip-tip force (docs/model.md 'Term 1') over a tip neighbour list.
 
     Multiple time stepping splits each pair's force as ``S f + (1 - S) f`` with the switch
     :func:`fast_switch`; this kernel sums the first part, which holds the stiff core and the

@@ -1,4 +1,4 @@
-"""Tip-tip magnetic force (MODEL.md term 1) by a multipole tree.
+"""Tip-tip magnetic force (docs/model.md 'Term 1') by a multipole tree.
 
 Every rod is a dipole (tips +q and -q), so the net charge of a cell of tips is
 near zero and a monopole-only Barnes-Hut tree is badly wrong (median relative
@@ -661,7 +661,7 @@ def build_tip_tree(x, y, z, charge, leaf_size=LEAF_SIZE, group_size=GROUP_SIZE, 
 
 
 def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None):
-    """Tip-tip force (MODEL.md term 1) on tips ``lo..hi-1`` from all tips, by the tree.
+    """Tip-tip force (docs/model.md 'Term 1') on tips ``lo..hi-1`` from all tips, by the tree.
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Nodal analysis of the rod network: potentials and rod currents (docs/model.md section 7).
+"""Nodal analysis of the rod network: potentials and rod currents (docs/model.md 'Circuit').
 
 Arrays in, arrays out. The caller (``graph.ConnectivityGraph.solve``) turns the
 connectivity graph into edge arrays; this module never sees networkx.
@@ -450,7 +450,7 @@ def solve_network(n_nodes, edges, resistance, fixed_node, fixed_potential, solve
     fixed_node : (k,) int
         Nodes held at a given potential (sources); a node may be listed several
         times, and a merged node holding different values takes their mean
-        (docs/model.md section 7, choice B3).
+        (docs/model.md 'Circuit', choice B3).
     fixed_potential : (k,) float64
         The potential of each entry of ``fixed_node`` (units R0 J0).
     solver : {"direct", "cg", "auto"}

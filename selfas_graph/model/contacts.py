@@ -1,4 +1,4 @@
-"""Contact detection with hysteresis, producing event records (MODEL.md section 5).
+"""Contact detection with hysteresis, producing event records (docs/model.md 'Contacts and events').
 
 Two tips of different rods come into contact when closer than r* and stay in
 contact until they are farther apart than ``release_radius`` (default 1.5 r*),
@@ -63,7 +63,6 @@ class ContactTracker:
         sorted by ids (a deterministic order).
         """
         rows = []
-        n = self.n_tips
         # releases: current contacts now farther apart than the release radius
         if len(self.pairs):
             d = position[self.pairs[:, 0]] - position[self.pairs[:, 1]]

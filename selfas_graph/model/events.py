@@ -15,12 +15,12 @@ OPEN_CIRCUIT        -1                      -1
 ==================  ======================  =====================================
 
 Tips are numbered ``2 i`` (tip a, magnetic charge +q_i) and ``2 i + 1``
-(tip b, -q_i) for rod ``i`` (MODEL.md section 2).
+(tip b, -q_i) for rod ``i`` (docs/model.md 'Rods').
 
 SHORT_CIRCUIT is emitted when the network goes from carrying no current-carrying
 filament to carrying one (a conducting path now joins two conductor contacts at
 different potentials); OPEN_CIRCUIT when the last such path is broken
-(MODEL.md section 5).
+(docs/model.md 'Contacts and events').
 """
 import enum
 from typing import NamedTuple
@@ -78,7 +78,7 @@ def named_events(rows) -> list:
 
 
 #: conductor ids. Case (i): the two electrode planes. Case (ii): the fixed
-#: current filament, whose potential varies along z (MODEL.md section 6).
+#: current filament, whose potential varies along z (docs/model.md 'Circuit').
 CONDUCTOR_CATHODE = 0
 CONDUCTOR_ANODE = 1
 CONDUCTOR_FILAMENT = 2

@@ -1,4 +1,4 @@
-"""The force field: which terms of MODEL.md section 3 are on, and how each is computed.
+"""The force field: which terms of docs/model.md 'Force terms' are on, and how each is computed.
 
 A :class:`ForceField` is built from the scenario's ``[forces]`` tables; only
 the listed terms are constructed, so a term the scene does not use costs
@@ -463,7 +463,7 @@ class ForceField:
 
     Attributes
     ----------
-    terms : list of the active term objects, MODEL.md order
+    terms : list of the active term objects, docs/model.md order ('Force terms')
     channels : list of (name, conservative)
     calls : Counter of kernel evaluations per term (tests count these)
     """

@@ -1,4 +1,4 @@
-"""The connectivity graph of rods and contacts, and its topology (MODEL.md section 5).
+"""The connectivity graph of rods and contacts, and its topology (docs/model.md 'Connectivity graph and topology').
 
 Two layers:
 
@@ -119,7 +119,7 @@ def _frozen(arr: np.ndarray) -> np.ndarray:
 
 
 def classify_rods(n_rods, tip_contacts, conductor_tip, conductor_node_key) -> Topology:
-    """Classify rods as free, cluster, dead end or filament (MODEL.md section 5).
+    """Classify rods as free, cluster, dead end or filament (docs/model.md 'Connectivity graph and topology').
 
     Parameters
     ----------

@@ -1,23 +1,19 @@
-"""Explicit 4-step Adams-Bashforth with the rigid-bond constraint (paper Sec. 2, MODEL.md section 4).
+"""Explicit 4-step Adams-Bashforth with the rigid-bond constraint (paper Sec. 2, docs/model.md 'Rigid rods and time integration').
 
 The state ``y = (x, v)`` obeys ``dx/dt = v``, ``dv/dt = a(x, v)`` where ``a`` is
-the force per unit mass plus the rigid-bond force. One step:
-
-1. evaluate ``a_n = a(x_n, v_n)`` and the power of every non-conservative force;
-2. if four derivatives are in the history, Adams-Bashforth 4:
-   ``y_{n+1} = y_n + dt/24 (55 f_n - 59 f_{n-1} + 37 f_{n-2} - 9 f_{n-3})``;
-   otherwise a classical RK4 step (self-starting: the first three steps, and the
-   first three after :meth:`reset_history`);
-   With ``integrator.slow_every = K > 1`` (multiple time stepping) the slow forces
-   in ``a_n`` (far tip pairs, Yukawa, rod-current terms) are evaluated on every K-th
-   step and extrapolated (or held) in between; the stiff short-range forces are fresh
-   every step;
-3. with ``integrator.brake = "split"``, the stiff brakes (left out of step 2) act on
-   the velocities through their exact solution over dt, pair after pair;
-4. bond constraint: position projection and velocity correction (each optional);
-5. the work of each non-conservative channel advances with the same weights as
-   the positions (AB4 or RK4), so the energy balance ``E(t) - E(0) - W(t)``
-   measures only the integration error.
+the force per unit mass plus the rigid-bond force. :meth:`AdamsBashforth4.step` is the
+"forces -> Adams-Bashforth update -> split brake -> bond constraint" part of the step
+whose order docs/model.md 'Order of one step' states. Its update is Adams-Bashforth 4,
+``y_{n+1} = y_n + dt/24 (55 f_n - 59 f_{n-1} + 37 f_{n-2} - 9 f_{n-3})``, once four
+derivatives are in the history, and a classical RK4 step otherwise (self-starting: the
+first three steps, and the first three after :meth:`reset_history`). With
+``integrator.slow_every = K > 1`` (multiple time stepping) the slow forces (far tip pairs,
+Yukawa, rod-current terms) are evaluated on every K-th step and extrapolated (or held) in
+between; the stiff short-range forces are fresh every step. With ``integrator.brake =
+"split"`` the stiff brakes, left out of the update, act on the velocities through their
+exact solution over dt, pair after pair. The work of each non-conservative channel
+advances with the same weights as the positions (AB4 or RK4), so the energy balance
+``E(t) - E(0) - W(t)`` measures only the integration error.
 
 The largest bond-length error before the constraint (the step's own error) and
 after it (what remains in the state) are recorded for every step.

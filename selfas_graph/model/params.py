@@ -3,7 +3,7 @@
 Each dataclass field carries its documentation and its admissible range in
 ``metadata``; :mod:`selfas_graph.io.scenario` walks these classes to validate a
 TOML scenario, so defaults, types, ranges and docs are written once, here.
-All values are in the reduced units of MODEL.md section 1.
+All values are in the reduced units of docs/model.md 'Reduced units'.
 
 Optional sections (the force terms, the circuit) default to ``None``: a term
 whose table is absent from the scenario is not computed at all.
@@ -30,7 +30,7 @@ def spec(default, doc, *, ge=None, gt=None, lt=None, le=None, choices=None, leng
 
 @dataclass(frozen=True)
 class ChargeDistribution:
-    """How a per-rod charge is drawn (MODEL.md section 8)."""
+    """How a per-rod charge is drawn (docs/model.md 'Rods')."""
 
     distribution: str = spec(
         "constant",
@@ -47,7 +47,7 @@ class ChargeDistribution:
 
 @dataclass(frozen=True)
 class LengthDistribution:
-    """Per-rod length l_i in units of the mean rod length L (docs/model.md section 2)."""
+    """Per-rod length l_i in units of the mean rod length L (docs/model.md 'Rods')."""
 
     distribution: str = spec(
         "constant", "constant (every rod has `value`), uniform (uniform in (low, high)), "
@@ -75,7 +75,7 @@ class LengthDistribution:
 
 @dataclass(frozen=True)
 class ResistanceDistribution:
-    """Per-rod resistance R_i in units of R0 (docs/model.md section 7)."""
+    """Per-rod resistance R_i in units of R0 (docs/model.md 'Circuit')."""
 
     distribution: str = spec(
         "constant", "constant (every rod gets `value`), uniform (uniform in (low, high)), "
@@ -174,7 +174,7 @@ def plasma_current_text(p: "Parameters"):
 
     Case (i) names the electrodes and whether the current is parallel to that of a rod
     filament spanning the gap (which flows from the anode at z = +dZ/2 to the cathode
-    when the bias is positive, docs/model.md section 6).
+    when the bias is positive, docs/model.md 'Circuit').
     """
     pf = p.forces.plasma_filament
     if pf is None:
@@ -205,7 +205,7 @@ class Yukawa:
     core_radius: float = spec(
         0.0, "a: inside this centre distance the force falls linearly to zero (a point charge "
         "inside a charged ball; rods of diameter D cannot bring their centres much closer than D); 0 = the bare law of "
-        "MODEL.md term 6, unbounded for crossing rods", ge=0.0,
+        "docs/model.md 'Term 6', unbounded for crossing rods", ge=0.0,
     )
 
 
@@ -221,7 +221,7 @@ class Electrodes:
 
 @dataclass(frozen=True)
 class CurrentField:
-    """Term 9: the Biot-Savart field of rod currents on tips (wire radius D/2, MODEL.md term 9)."""
+    """Term 9: the Biot-Savart field of rod currents on tips (wire radius D/2, docs/model.md 'Term 9')."""
 
 
 @dataclass(frozen=True)
@@ -256,7 +256,7 @@ class ExternalDipole:
 
 @dataclass(frozen=True)
 class ForceParams:
-    """The force terms of MODEL.md section 3; a term whose table is absent is off."""
+    """The force terms of docs/model.md 'Force terms'; a term whose table is absent is off."""
 
     tip_magnetic: Optional[TipMagnetic] = spec(None, "term 1: tip-tip magnetic force")
     tip_brake: Optional[TipBrake] = spec(None, "term 2: brake between touching tips")
@@ -273,14 +273,14 @@ class ForceParams:
         None, "term 10: Lorentz force on rod currents from all fields (needs [circuit])")
 
     def active(self):
-        """Names of the terms that are on, in MODEL.md order."""
+        """Names of the terms that are on, in docs/model.md order ('Force terms')."""
         return [f.name for f in dataclasses.fields(self) if getattr(self, f.name) is not None]
 
 
 @dataclass(frozen=True)
 class IntegratorParams:
     dt: float = spec(1e-3, "time step (units t0); an accuracy knob", gt=0.0)
-    bond_force: str = spec("exact", "rigid-bond force: exact (MODEL.md section 4) or paper (Eq. 9 as printed)",
+    bond_force: str = spec("exact", "rigid-bond force: exact (docs/model.md 'Rigid rods and time integration') or paper (Eq. 9 as printed)",
                            choices=("exact", "paper"))
     velocity_correction: bool = spec(True, "apply the paper's velocity correction, Eqs. (14-15), after each step")
     position_projection: bool = spec(True, "restore each bond length to 1 about the rod centre after each step")

@@ -73,26 +73,19 @@ class RunSummary:
 class Simulation:
     """Rigid magnetized rods under the scene's force terms.
 
-    One call of :meth:`step` does, in this order::
-
-        forces (tips, centres, external fields, currents from the last solve;
-                with several MPI ranks each computes the rows of its block of rods
-                in the expensive terms, and the blocks are exchanged)
-        -> Adams-Bashforth update -> bond constraint (positions, velocities)
-        -> health check (NaN, broken bond, runaway step)
-        -> contact search -> events -> graph update
-        -> circuit solve if the graph changed (the currents act from the next step on)
-
-    and :meth:`run` adds, after each step, the observers on their triggers
-    (progress callback; a frame with observables, events and the graph state
-    every ``output.interval``). Contacts present in the initial state are
+    One call of :meth:`step` advances every rod by one time step, in the order that
+    docs/model.md 'Order of one step' states (forces, Adams-Bashforth update, split
+    brake, bond constraint, health check, contact search, events, graph, circuit);
+    :meth:`run` adds, after each step, the observers on their triggers (progress
+    callback; a frame with observables, events and the graph state every
+    ``output.interval``). Contacts present in the initial state are
     recorded as events of step 0 when the simulation is built.
 
     Parameters
     ----------
     params : Parameters
     state : State, optional
-        Initial state; default: the random placement of MODEL.md section 8.
+        Initial state; default: the random placement of docs/model.md 'Assumptions and project choices'.
     timing : bool
         Record wall time per force term (``force_field.seconds``).
     comm : MPI communicator or the serial stub, optional
@@ -110,7 +103,7 @@ class Simulation:
     """
 
     def __init__(self, params: Parameters, state: State | None = None, timing: bool = False,
-                 detect_initial_contacts: bool = True, comm=None, check_state: bool = True):
+                 comm=None, check_state: bool = True):
         self.params = params
         if state is not None and check_state:
             state = state.checked()
@@ -147,10 +140,10 @@ class Simulation:
                 half = 0.5 * self.bias * el.gap + 0.0  # + 0.0: no negative zero without a bias
                 conductors = {ev.CONDUCTOR_CATHODE: -half + 0.0, ev.CONDUCTOR_ANODE: half}
             if fil is not None:
-                conductors[ev.CONDUCTOR_FILAMENT] = None  # psi = -delta_J0 z per contact (MODEL.md section 6)
+                conductors[ev.CONDUCTOR_FILAMENT] = None  # psi = -delta_J0 z per contact (docs/model.md 'Circuit')
             self._filament_tip = np.zeros(0, dtype=np.int64)
             self._filament_z = np.zeros(0)
-            #: conductor id -> fixed potential (units R0 J0), MODEL.md section 6
+            #: conductor id -> fixed potential (units R0 J0), docs/model.md 'Circuit'
             self.conductor_potential = conductors
             solver = params.circuit.solver if params.circuit is not None else "auto"
             self.graph = ConnectivityGraph(self.state.n_rods, conductors, solver=solver,
@@ -209,7 +202,7 @@ class Simulation:
         state = State(np.array(snap["position"]), np.array(snap["velocity"]), np.array(snap["tip_charge"]),
                       np.array(snap["rod_charge"]), int(snap["step"]), float(snap["time"]),
                       *(np.array(snap[k]) if k in snap else None for k in ("rod_length", "rod_resistance")))
-        sim = cls(params, state=state, timing=timing, detect_initial_contacts=False, comm=comm, check_state=False)
+        sim = cls(params, state=state, timing=timing, comm=comm, check_state=False)
         it, ff = sim.integrator, sim.force_field
         it.hist_v[:], it.hist_a[:], it.hist_p[:] = snap["hist_v"], snap["hist_a"], snap["hist_p"]
         it.head, it.count = int(snap["head"]), int(snap["count"])
@@ -266,7 +259,7 @@ class Simulation:
                 self._update_contacts()
 
     def _filament_potential(self, tip, conductor):
-        """Potential of a tip touching the case (ii) filament: -delta_J0 z (MODEL.md section 6)."""
+        """Potential of a tip touching the case (ii) filament: -delta_J0 z (docs/model.md 'Circuit')."""
         return -self.bias * float(self.state.position[tip, 2])
 
     def _update_contacts(self):
@@ -319,7 +312,7 @@ class Simulation:
         st, integ = self.state, self.integrator
         err = integ.bond_error_before
         self.max_bond_error = max(self.max_bond_error, integ.bond_error_after)
-        x, v = st.position, st.velocity
+        v = st.velocity
         vmax = float(np.abs(v).max(initial=0.0))
         if math.isfinite(err) and err < BOND_BREAK and vmax * self.dt < MAX_STEP_DISPLACEMENT and math.isfinite(vmax):
             return
@@ -414,7 +407,7 @@ class Simulation:
             obs[f"work/{k}"] = w
         if self._energy0 is None:
             self._energy0 = total - sum(work.values())
-        # E(t) - E(0) - W(t): zero up to the integration error (MODEL.md section 3: brakes
+        # E(t) - E(0) - W(t): zero up to the integration error (docs/model.md 'Work bookkeeping and the energy balance': brakes
         # and the plasma field do work, tracked per channel by the integrator)
         obs["energy_total"] = total
         obs["energy_balance"] = total - sum(work.values()) - self._energy0

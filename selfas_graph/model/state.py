@@ -29,7 +29,7 @@ class State:
 
     Rod ``i`` has tip a at row ``2 i`` (magnetic charge ``+q_i``) and tip b at row
     ``2 i + 1`` (``-q_i``); unit tip masses and, unless ``rod_length`` is given,
-    unit rod length (docs/model.md section 2).
+    unit rod length (docs/model.md 'Rods').
 
     Attributes
     ----------
@@ -87,7 +87,7 @@ class State:
         ------
         StateError
             Wrong shapes, non-finite values, a rod whose tips do not carry +q and -q
-            (docs/model.md section 2), or a rod length off 1 by more than ``BOND_TOLERANCE``.
+            (docs/model.md 'Rods'), or a rod length off 1 by more than ``BOND_TOLERANCE``.
         """
         def arr(name, value, shape):
             try:
@@ -116,7 +116,7 @@ class State:
         if len(bad):
             i = int(bad[0])
             raise StateError(f"State.tip_charge: rod {i} has tip charges {qa[i]:g} and {qb[i]:g}; rod i carries +q_i "
-                             f"on tip 2i and -q_i on tip 2i+1 (docs/model.md section 2; State.from_rods builds "
+                             f"on tip 2i and -q_i on tip 2i+1 (docs/model.md 'Rods'; State.from_rods builds "
                              f"them)" + (f", {len(bad) - 1} more rods too" if len(bad) > 1 else ""))
         extra = {}
         for name in ("rod_length", "rod_resistance"):
@@ -188,7 +188,7 @@ _UNIT_LENGTH.setflags(write=False)
 
 
 def draw_charges(dist: ChargeDistribution, n: int, rng, magnetic=None) -> np.ndarray:
-    """Per-rod values (charges, lengths, resistances) from a distribution (docs/model.md section 2).
+    """Per-rod values (charges, lengths, resistances) from a distribution (docs/model.md 'Rods').
 
     ``two_level`` gives exactly ``round(high_fraction * n)`` rods the high value,
     at random positions in the rod list.
@@ -207,7 +207,7 @@ def draw_charges(dist: ChargeDistribution, n: int, rng, magnetic=None) -> np.nda
 
 
 def random_state(params: Parameters, rng=None) -> State:
-    """Random initial state of MODEL.md section 8, all from ``params.scenario.seed``.
+    """Random initial state of docs/model.md 'Assumptions and project choices', all from ``params.scenario.seed``.
 
     Charges are drawn first, then the rods one by one: centre uniform in the box,
     axis uniform on the sphere, accepted when both tips lie in the box and no tip

@@ -1,0 +1,72 @@
+"""The import rules of ARCHITECTURE.md: no import runs upwards through the layers.
+
+Every ``import`` and ``from ... import`` of the package (at module level or inside a function)
+is resolved to the part of the package it reaches, and checked against the table below.
+"""
+import ast
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parent.parent / "selfas_graph"
+
+#: part of the package -> the parts it may import from (besides itself); as in ARCHITECTURE.md
+ALLOWED = {
+    "kernels": set(),
+    "parallel": set(),
+    "_version": set(),
+    "model": {"kernels", "parallel"},
+    "io": {"model", "kernels", "_version"},
+    "analysis": {"model", "kernels"},
+    "ensemble": {"analysis", "io", "model", "kernels", "parallel", "_version"},
+    "cli": {"analysis", "ensemble", "io", "model", "kernels", "parallel", "_version"},
+    "__init__": {"analysis", "ensemble", "io", "model", "kernels", "parallel", "_version"},
+}
+#: the one upward import, inside functions: the schema walk of Parameters lives with the scenario files
+EXCEPTIONS = {("model/params.py", "io")}
+
+
+def _part(dotted):
+    parts = dotted.split(".")
+    return parts[1] if len(parts) > 1 else "__init__"
+
+
+def _imports(path):
+    """(line, dotted name) of every import of the package in ``path``, relative ones resolved."""
+    rel = path.relative_to(PACKAGE.parent).with_suffix("")
+    package = list(rel.parts[:-1])  # the package the module sits in (itself for an __init__.py)
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[:len(package) - (node.level - 1)]
+                yield node.lineno, ".".join(base + ([node.module] if node.module else []))
+            elif node.module and node.module.split(".")[0] == "selfas_graph":
+                yield node.lineno, node.module
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.split(".")[0] == "selfas_graph":
+                    yield node.lineno, alias.name
+
+
+def test_every_part_of_the_package_is_in_the_table():
+    """A new package or top-level module gets its place in the layers (and in ARCHITECTURE.md)."""
+    parts = {p.stem if p.is_file() else p.name for p in PACKAGE.iterdir()
+             if (p.suffix == ".py" or (p / "__init__.py").exists())}
+    assert parts <= set(ALLOWED), f"not in the import table: {sorted(parts - set(ALLOWED))}"
+
+
+def test_no_import_runs_upwards():
+    bad = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE).as_posix()
+        me = rel.split("/")[0].removesuffix(".py")
+        for line, target in _imports(path):
+            to = _part(target)
+            if to == me or to in ALLOWED[me] or (rel, to) in EXCEPTIONS:
+                continue
+            bad.append(f"selfas_graph/{rel}:{line} imports {target}")
+    assert not bad, "imports against the layers (ARCHITECTURE.md, 'Import rules'):\n" + "\n".join(bad)
+
+
+def test_the_check_sees_relative_imports():
+    """Not vacuous: model/simulation.py's relative imports resolve to full names."""
+    targets = {t for _, t in _imports(PACKAGE / "model" / "simulation.py")}
+    assert "selfas_graph.model.forces" in targets and "selfas_graph.parallel" in targets
