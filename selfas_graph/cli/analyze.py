@@ -20,7 +20,7 @@ import numpy as np
 
 from ..analysis.claims import CLAIM_KEYS, frame_claims
 from ..io.h5md import RunFile, RunFileError
-from .main import CliError
+from .main import CliError, add_run_and_frame
 
 #: the columns of the --series table (the full set goes to --csv and --json)
 SERIES_COLUMNS = {"frame": "frame", "time": "t", "largest_structure_rods": "rods", "largest_moment_q": "|m_q|",
@@ -31,10 +31,7 @@ _INTEGER = ("frame", "step")
 
 
 def add_arguments(p):
-    p.add_argument("run", help="run file written by selfas-graph simulate")
-    which = p.add_mutually_exclusive_group()
-    which.add_argument("--frame", type=int, help="frame number (negative counts from the end; default: last)")
-    which.add_argument("--time", type=float, help="the frame nearest to this simulated time")
+    which = add_run_and_frame(p)
     which.add_argument("--series", action="store_true", help="every saved frame (a time series)")
     p.add_argument("--every", type=int, default=1, metavar="K", help="with a series: every K-th frame (default 1)")
     form = p.add_mutually_exclusive_group()

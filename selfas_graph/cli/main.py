@@ -51,6 +51,16 @@ class CliIOError(CliError):
         self.hard_exit = hard_exit
 
 
+def add_run_and_frame(p):
+    """The run-file argument and the ``--frame K | --time T`` choice that the commands reading a
+    saved frame share; returns the mutually exclusive group for more choices (e.g. ``--series``)."""
+    p.add_argument("run", help="run file written by selfas-graph simulate")
+    which = p.add_mutually_exclusive_group()
+    which.add_argument("--frame", type=int, help="frame number (negative counts from the end; default: last)")
+    which.add_argument("--time", type=float, help="the frame nearest to this simulated time")
+    return which
+
+
 def build_parser():
     parser = argparse.ArgumentParser(prog="selfas-graph", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"selfas-graph {__version__}")

@@ -39,7 +39,7 @@ import numpy as np
 from ..analysis import bz_profile, flux_through_disc, radial_density, rod_centres, timeline
 from ..io.h5md import RunFile, RunFileError
 from ..model.graph import DEAD_END, FILAMENT, ConnectivityGraph
-from .main import CliError, CliIOError
+from .main import CliError, CliIOError, add_run_and_frame
 from .paths import check_target
 
 KINDS = ("snapshot", "density", "field", "flux", "timeline", "moment", "fractal", "skeleton")
@@ -69,11 +69,8 @@ ELECTRODE_COLOUR = (0.85, 0.65, 0.15)
 
 
 def add_arguments(p):
-    p.add_argument("run", help="run file written by selfas-graph simulate")
+    add_run_and_frame(p)
     p.add_argument("--kind", choices=KINDS, default="snapshot", help="which figure (default: snapshot)")
-    which = p.add_mutually_exclusive_group()
-    which.add_argument("--frame", type=int, help="frame number (negative counts from the end; default: last)")
-    which.add_argument("--time", type=float, help="the frame nearest to this simulated time")
     p.add_argument("-o", "--output", help="PNG file to write (default: RUN_KIND_frameK.png next to the run file)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.add_argument("--planes", type=float, nargs="+", metavar="Z",

@@ -14,14 +14,11 @@ import numpy as np
 from ..io.h5md import RunFile, RunFileError
 from ..model import events as ev
 from ..model.graph import DEAD_END, FILAMENT, ROLE_NAMES, ConnectivityGraph
-from .main import CliError
+from .main import CliError, add_run_and_frame
 
 
 def add_arguments(p):
-    p.add_argument("run", help="run file written by selfas-graph simulate")
-    which = p.add_mutually_exclusive_group()
-    which.add_argument("--frame", type=int, help="frame number (negative counts from the end; default: last)")
-    which.add_argument("--time", type=float, help="the frame nearest to this simulated time")
+    add_run_and_frame(p)
     p.add_argument("--json", action="store_true", help="print JSON for scripts instead of tables")
     p.add_argument("--events", type=int, default=10, metavar="N", help="show the last N events (default 10)")
 
