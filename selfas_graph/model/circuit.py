@@ -96,24 +96,26 @@ def _as_index_array(value, name: str, ndim: int, n_max: int | None) -> np.ndarra
     return np.ascontiguousarray(arr)
 
 
+def _as_potentials(potential, index, name, index_name, what, target) -> np.ndarray:
+    """Finite float64 potentials, one per entry of ``index`` (ValueError naming both arrays)."""
+    potential = np.asarray(potential, dtype=np.float64).reshape(-1)
+    if potential.shape != index.shape:
+        raise ValueError(f"{name} has shape {potential.shape}, {index_name} has shape {index.shape}: "
+                         f"one potential per {what}")
+    if not np.all(np.isfinite(potential)):
+        bad = np.flatnonzero(~np.isfinite(potential))[0]
+        raise ValueError(f"{name} must be finite; {what} {bad} ({target} {index[bad]}) has {potential[bad]}")
+    return potential
+
+
 def _validate(n_tips, tip_contacts, conductor_tip, conductor_potential):
     n_tips = _as_count(n_tips, "n_tips")
     if n_tips % 2:
         raise ValueError(f"n_tips must be even (two tips per rod), got {n_tips}")
     tip_contacts = _as_index_array(tip_contacts, "tip_contacts", 2, n_tips)
     conductor_tip = _as_index_array(conductor_tip, "conductor_tip", 1, n_tips)
-    conductor_potential = np.asarray(conductor_potential, dtype=np.float64).reshape(-1)
-    if conductor_potential.shape != conductor_tip.shape:
-        raise ValueError(
-            f"conductor_potential has shape {conductor_potential.shape}, "
-            f"conductor_tip has shape {conductor_tip.shape}: one potential per conductor contact"
-        )
-    if not np.all(np.isfinite(conductor_potential)):
-        bad = np.flatnonzero(~np.isfinite(conductor_potential))[0]
-        raise ValueError(
-            f"conductor_potential must be finite; contact {bad} (tip {conductor_tip[bad]}) "
-            f"has {conductor_potential[bad]}"
-        )
+    conductor_potential = _as_potentials(conductor_potential, conductor_tip, "conductor_potential", "conductor_tip",
+                                         "conductor contact", "tip")
     return n_tips, tip_contacts, conductor_tip, conductor_potential
 
 
@@ -464,14 +466,8 @@ def solve_network(n_nodes, edges, resistance, fixed_node, fixed_potential, solve
     edges = _as_index_array(edges, "edges", 2, n_nodes)
     resistance = _as_resistance(resistance, "resistance", edges.shape[0], allow_zero=True)
     fixed_node = _as_index_array(fixed_node, "fixed_node", 1, n_nodes)
-    fixed_potential = np.asarray(fixed_potential, dtype=np.float64).reshape(-1)
-    if fixed_potential.shape != fixed_node.shape:
-        raise ValueError(
-            f"fixed_potential has shape {fixed_potential.shape}, fixed_node has shape "
-            f"{fixed_node.shape}: one potential per fixed node entry"
-        )
-    if not np.all(np.isfinite(fixed_potential)):
-        raise ValueError("fixed_potential must be finite")
+    fixed_potential = _as_potentials(fixed_potential, fixed_node, "fixed_potential", "fixed_node", "fixed node entry",
+                                     "node")
     return _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver)
 
 
