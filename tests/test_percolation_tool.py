@@ -121,7 +121,9 @@ def test_censored_and_skipped(tool, tmp_path, capsys):
     (["--counts", "300", "--seeds", "0", "--t-max", "1"], "--seeds: 0 must be positive"),
     (["--counts", "300", "--seeds", "-2", "--t-max", "1"], "--seeds: -2 must be positive"),
     (["--densities", "--seeds", "1", "--t-max", "1"], "--densities: expected at least one argument"),
-    (["--seeds", "1", "--t-max", "1"], "one of the arguments --densities --fractions --counts is required"),
+    (["--seeds", "1", "--t-max", "1"], "required: --densities, --fractions or --counts"),
+    (["--counts", "300", "--t-max", "1"], "required: --seeds"),
+    (["--counts", "300", "--seeds", "1", "--t-max", "1", "--fields", "none"], "--fields: invalid choice"),
     (["--densities", "0", "--seeds", "1", "--t-max", "1"], "--densities: 0 must be positive"),
     (["--counts", "300", "--seeds", "1", "--t-max", "0"], "--t-max: 0 must be positive"),
     (["--counts", "300", "--seeds", "1", "--t-max", "1", "--workers", "0"], "--workers: 0 must be positive"),
@@ -134,3 +136,40 @@ def test_bad_inputs(tool, capsys, argv, message):
         tool.main([QUICK, *argv])
     assert exc.value.code == 2
     assert message in capsys.readouterr().err
+
+
+def test_fields_off_removes_the_magnetic_and_current_terms(tool, tmp_path, capsys):
+    """--fields off is --set forces.NAME=false for each magnetic and current term, recorded in the result."""
+    js = tmp_path / "off.json"
+    assert tool.main([QUICK, "--counts", "300", "--seeds", "1", "--t-max", "0.05", "--fields", "off",
+                      "-o", str(js)]) == 0
+    res = json.loads(js.read_text())
+    assert res["fields"] == "off" and tool.fields_of(res) == "off"
+    assert res["overrides"][:len(tool.FIELD_TERMS)] == [f"forces.{n}=false" for n in tool.FIELD_TERMS]
+    from selfas_graph import load_scenario
+
+    params = load_scenario(QUICK, overrides=res["overrides"]).params
+    assert all(getattr(params.forces, n) is None for n in tool.FIELD_TERMS)
+    assert params.forces.yukawa is not None and params.forces.electrodes is not None
+
+
+def test_compare_draws_results_and_refuses_other_files(tool, ensemble, tmp_path, capsys):
+    res, _ = ensemble
+    on = tmp_path / "on.json"
+    on.write_text(json.dumps(res))
+    old_off = dict(res, overrides=["forces.tip_magnetic=false"])  # a file written before the "fields" key
+    old_off.pop("fields", None)
+    off = tmp_path / "off.json"
+    off.write_text(json.dumps(old_off))
+    assert tool.fields_of(old_off) == "off" and tool.fields_of(res) == "on"
+    png = tmp_path / "cmp.png"
+    assert tool.main(["--compare", str(on), str(off), "--plot", str(png)]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}")
+    for argv, message in ((["--compare", str(bad), "--plot", str(png)], "bad.json: not a result file"),
+                          (["--compare", str(on)], "--compare needs --plot"),
+                          ([QUICK, "--compare", str(on), "--plot", str(png)], "draws earlier results only")):
+        with pytest.raises(SystemExit) as exc:
+            tool.main(argv)
+        assert exc.value.code == 2 and message in capsys.readouterr().err

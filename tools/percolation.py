@@ -1,8 +1,16 @@
 """Dynamic percolation: short-circuit times over an ensemble of random runs at several rod densities.
 
 Usage: python tools/percolation.py SCENARIO (--densities RHO ... | --fractions PHI ... | --counts N ...)
-           --seeds K --t-max T [--first-seed S] [--workers W] [--chunk DT] [--set key=value ...]
-           [-o results.json] [--plot out.png]
+           --seeds K --t-max T [--fields on|off] [--first-seed S] [--workers W] [--chunk DT]
+           [--set key=value ...] [-o results.json] [--plot out.png]
+       python tools/percolation.py --compare A.json B.json ... --plot out.png
+
+``--fields off`` removes the magnetic and current terms (``forces.tip_magnetic``,
+``uniform_field``, ``plasma_filament``, ``current_field``, ``current_lorentz``: the same as
+``--set forces.NAME=false`` for each), leaving the brakes, the screened repulsion and the
+electrodes: the contrast that tells how much the fields lower the percolation threshold.
+``--compare`` draws the results of earlier calls (their ``-o`` files) on one figure: the
+fraction short-circuited and the median short-circuit time against the volume fraction.
 
 The rod density is varied through ``rods.count`` at the scenario's fixed placement box
 (volume V). Three ways to give it, one per option:
@@ -45,6 +53,8 @@ sys.path.insert(0, str(ROOT))
 
 #: densest packing of equal spheres: tips at least d apart are spheres of diameter d that do not overlap
 _MAX_PACKING = math.pi / (3.0 * math.sqrt(2.0))
+#: the terms ``--fields off`` removes: every magnetic field and every force on or from a current
+FIELD_TERMS = ("tip_magnetic", "uniform_field", "plasma_filament", "current_field", "current_lorentz")
 STATUSES = ("short_circuit", "censored", "failed", "unplaceable", "error", "interrupted")
 
 
@@ -99,17 +109,19 @@ def build_parser():
     ap = argparse.ArgumentParser(
         prog="percolation.py", description=__doc__.splitlines()[0],
         epilog="density = rods / box volume; volume fraction = rods * pi (D/2)^2 L / box volume")
-    ap.add_argument("scenario", help="scenario TOML file")
-    grp = ap.add_mutually_exclusive_group(required=True)
+    ap.add_argument("scenario", nargs="?", help="scenario TOML file (not with --compare)")
+    grp = ap.add_mutually_exclusive_group()
     grp.add_argument("--densities", type=_positive(float), nargs="+", metavar="RHO",
                      help="number densities, rods per unit box volume (L^-3)")
     grp.add_argument("--fractions", type=_positive(float), nargs="+", metavar="PHI",
                      help="rod volume fractions rods * pi (D/2)^2 L / V")
     grp.add_argument("--counts", type=_positive(int), nargs="+", metavar="N", help="rod counts")
-    ap.add_argument("--seeds", type=_positive(int), required=True, metavar="K", help="runs per density")
+    ap.add_argument("--seeds", type=_positive(int), metavar="K", help="runs per density")
     ap.add_argument("--first-seed", type=int, default=None, metavar="S",
                     help="seeds S .. S+K-1 (default: the scenario's scenario.seed)")
-    ap.add_argument("--t-max", type=_positive(float), required=True, metavar="T",
+    ap.add_argument("--fields", choices=("on", "off"), default="on",
+                    help="off: without the magnetic and current terms (" + ", ".join(FIELD_TERMS) + "); default on")
+    ap.add_argument("--t-max", type=_positive(float), metavar="T",
                     help="simulated time after which a run without short circuit is censored")
     ap.add_argument("--workers", type=_positive(int), default=1, metavar="W", help="worker processes (default 1)")
     ap.add_argument("--chunk", type=_positive(float), default=0.25, metavar="DT",
@@ -118,6 +130,8 @@ def build_parser():
                     help="extra scenario override for every run, as selfas-graph simulate --set")
     ap.add_argument("-o", "--output", metavar="JSON", help="write every run's result and the statistics here")
     ap.add_argument("--plot", metavar="PNG", help="plot fraction short-circuited vs density and the distributions")
+    ap.add_argument("--compare", nargs="+", metavar="JSON",
+                    help="draw earlier results (-o files) on one figure (--plot); runs nothing")
     return ap
 
 
@@ -288,9 +302,83 @@ def plot(result, path):
     plt.close(fig)
 
 
+def fields_of(result) -> str:
+    """'on' or 'off' for a result file (files without the key: 'off' if their overrides removed tip_magnetic)."""
+    if "fields" in result:
+        return result["fields"]
+    return "off" if "forces.tip_magnetic=false" in result.get("overrides", []) else "on"
+
+
+def plot_compare(results, path):
+    """Fraction short-circuited by t_max and the median short-circuit time against the volume fraction,
+    one curve per result (e.g. the fields on and off)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for res in results:
+        dens = res["densities"]
+        phi = [d["volume_fraction"] for d in dens]
+        frac = [d["fraction"] if d["fraction"] is not None else float("nan") for d in dens]
+        lo = [f - d["fraction_ci95"][0] if d["fraction_ci95"] else 0.0 for f, d in zip(frac, dens)]
+        hi = [d["fraction_ci95"][1] - f if d["fraction_ci95"] else 0.0 for f, d in zip(frac, dens)]
+        label = (f"fields {fields_of(res)} ({res['scenario_name']}, {len(res['seeds'])} seeds per point, "
+                 f"t$_{{max}}$ = {res['t_max']:g} t$_0$)")
+        (line,) = ax1.plot(phi, frac, lw=1.2, marker="o", ms=3.5, label=label)
+        ax1.errorbar(phi, frac, yerr=[lo, hi], fmt="none", ecolor=line.get_color(), capsize=3, lw=0.8)
+        med = [(d["volume_fraction"], d["median"], d["q25"], d["q75"]) for d in dens if d["median"] is not None]
+        if med:
+            x, m, q1, q3 = (list(v) for v in zip(*med))
+            q3 = [res["t_max"] if v is None else v for v in q3]
+            ax2.plot(x, m, lw=1.2, marker="o", ms=3.5, color=line.get_color(), label=label)
+            ax2.fill_between(x, q1, q3, color=line.get_color(), alpha=0.2, lw=0)
+    for ax in (ax1, ax2):
+        ax.set_xscale("log")
+        ax.set_xlabel(r"rod volume fraction $\phi = N \pi (D/2)^2 L / V$")
+        ax.grid(alpha=0.3)
+    ax1.set_ylim(-0.03, 1.03)
+    ax1.set_ylabel("fraction of runs short-circuited by t$_{max}$")
+    ax1.set_title("Short circuit against volume fraction (95 % Wilson intervals)", fontsize=10)
+    ax2.set_ylabel("short-circuit time (t$_0$)")
+    ax2.set_title("Median short-circuit time, band from the first to the third quartile", fontsize=10)
+    ax1.legend(fontsize=8, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=130)
+    plt.close(fig)
+
+
+def compare_main(ap, args):
+    if not args.plot:
+        ap.error("--compare needs --plot PNG")
+    if args.scenario or args.densities or args.fractions or args.counts or args.seeds or args.t_max:
+        ap.error("--compare draws earlier results only: give no scenario, densities, --seeds or --t-max")
+    results = []
+    for name in args.compare:
+        try:
+            with open(name) as fh:
+                res = json.load(fh)
+            res["densities"], res["seeds"], res["t_max"]  # noqa: B018 - the keys a result file must have
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            ap.error(f"{name}: not a result file of this tool ({exc.__class__.__name__}: {exc})")
+        results.append(res)
+    plot_compare(results, args.plot)
+    print(f"wrote {args.plot}")
+    return 0
+
+
 def main(argv=None):
     ap = build_parser()
     args = ap.parse_args(argv)
+    if args.compare:
+        return compare_main(ap, args)
+    missing = [name for name, v in (("SCENARIO", args.scenario), ("--seeds", args.seeds), ("--t-max", args.t_max),
+                                    ("--densities, --fractions or --counts",
+                                     args.densities or args.fractions or args.counts)) if not v]
+    if missing:
+        ap.error("required: " + ", ".join(missing) + " (or --compare JSON ... --plot PNG)")
+    if args.fields == "off":
+        args.overrides = [f"forces.{name}=false" for name in FIELD_TERMS] + list(args.overrides)
     base, points, skipped, meta = plan(ap, args)
     if not points:
         ap.error("no density left to run (every one was skipped, see above)")
@@ -320,7 +408,7 @@ def main(argv=None):
     runs.sort(key=lambda r: (r["count"], r["seed"]))
     result = {
         "scenario": str(args.scenario), "scenario_name": base.params.scenario.name, "version": __version__,
-        "overrides": list(args.overrides), "t_max": args.t_max, "chunk": args.chunk, "seeds": seeds,
+        "overrides": list(args.overrides), "fields": args.fields, "t_max": args.t_max, "chunk": args.chunk, "seeds": seeds,
         "workers": args.workers, "threads_per_run": 1, **meta,
         "censoring": "status 'censored': no short circuit by t_max (censored at t_end = t_max); 'failed': a numerical "
                      "failure at t_end (censored there); 'unplaceable' and 'error' runs are left out of the "
