@@ -69,3 +69,42 @@ def random_rods(n, rng, box=4.0, q=(0.5, 2.0)):
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+# --------------------------------------------------------------------------- hostile-input tests
+# fixtures of tests/test_hostile.py and tests/test_hostile_bugs.py (their helpers: tests/hostile.py)
+
+class RealRun(dict):
+    """A module's real run (a dict with a short repr: failure reports stay readable)."""
+
+    def __repr__(self):
+        return f"RealRun({self['run']})"
+
+
+@pytest.fixture(scope="module")
+def real_run(tmp_path_factory):
+    """One small real run of ``hostile.BASE`` (4 rods, 2 steps, 3 frames, graph data) and its checkpoint,
+    written once per module."""
+    from hostile import BASE_TEXT
+    from selfas_graph.cli.main import main
+
+    d = tmp_path_factory.mktemp("real_run")
+    scen = d / "hostile.toml"
+    scen.write_text(BASE_TEXT)
+    run = d / "run.h5"
+    try:
+        code = main(["simulate", str(scen), "-o", str(run), "--progress", "none"])
+    except SystemExit as exc:  # pragma: no cover
+        code = exc.code
+    assert code == 0
+    ckpt = d / "run.checkpoint.h5"
+    assert run.exists() and ckpt.exists()
+    return RealRun(dir=d, scenario=scen, run=run, checkpoint=ckpt,
+                   run_bytes=run.read_bytes(), checkpoint_bytes=ckpt.read_bytes())
+
+
+@pytest.fixture
+def workdir(tmp_path, monkeypatch):
+    """A scratch folder that is also the working directory (so no stray file lands in the repo)."""
+    monkeypatch.chdir(tmp_path)
+    return tmp_path

@@ -4,8 +4,11 @@ Each follows docs/model.md 'Force terms' or 'Rigid rods and time integration' li
 to round-off.
 """
 import math
+from collections import defaultdict
+from itertools import combinations
 
 import numpy as np
+import scipy.integrate
 
 
 def tip_law(r, p, rstar, kappa):
@@ -360,3 +363,162 @@ def _filament_rods_networkx(n_nodes, u, v, comp, candidate, cnode, key_index, n_
     edge_in_x[core] = np.where(in_chain, chain_in_x[np.maximum(chain, 0)], np.isin(code, x_codes))
     where = np.minimum(np.searchsorted(code_all, rod_code), code_all.shape[0] - 1)
     return rod_in & edge_in_x[where]
+
+
+# ----------------------------------------------------------------------------- rod currents
+# docs/model.md 'Term 9', 'Term 10': the segment field in the textbook form (perpendicular foot,
+# cosines of the end angles), sums with explicit loops, forces with np.cross.
+
+
+def segment_field(x, A, B, J, w):
+    """Finite-wire field, textbook form: (J rho / (rho^2 + w^2)) (cos t1 - cos t2) phi_hat.
+
+    rho is the distance of x to the line AB, phi_hat = s_hat x rho_hat, cos t1 and
+    cos t2 the cosines of the angles between s_hat and x - A, x - B.
+    """
+    x, A, B = (np.asarray(v, dtype=float) for v in (x, A, B))
+    s = B - A
+    L = np.linalg.norm(s)
+    if L == 0.0:
+        return np.zeros(3)
+    sh = s / L
+    a = x - A
+    b = x - B
+    rho_vec = a - np.dot(a, sh) * sh
+    rho = np.linalg.norm(rho_vec)
+    if rho == 0.0 or np.linalg.norm(a) == 0.0 or np.linalg.norm(b) == 0.0:
+        return np.zeros(3)
+    phi = np.cross(sh, rho_vec / rho)
+    cos1 = np.dot(sh, a) / np.linalg.norm(a)
+    cos2 = np.dot(sh, b) / np.linalg.norm(b)
+    return J * rho / (rho**2 + w**2) * (cos1 - cos2) * phi
+
+
+def rod_current_field(points, exclude, position, active, current, w):
+    """Field of the active rods at each point, skipping exclude[p], by explicit loops."""
+    out = np.zeros((len(points), 3))
+    for p, x in enumerate(points):
+        for j in active:
+            if j == exclude[p]:
+                continue
+            out[p] += segment_field(x, position[2 * j], position[2 * j + 1], current[j], w)
+    return out
+
+
+def quadrature_points(position, active, t):
+    """x_a + t s for each active rod (rod-major rows)."""
+    rows = []
+    for j in active:
+        xa, xb = position[2 * j], position[2 * j + 1]
+        for tg in t:
+            rows.append(xa + tg * (xb - xa))
+    return np.array(rows).reshape(-1, 3)
+
+
+def lorentz_force_on_rods(position, active, current, field, t, wts):
+    """Tip forces from J w_g (s x B_g), shared (1 - t_g) to tip a and t_g to tip b."""
+    out = np.zeros_like(position)
+    n_gl = len(t)
+    for r, j in enumerate(active):
+        s = position[2 * j + 1] - position[2 * j]
+        for g in range(n_gl):
+            dF = current[j] * wts[g] * np.cross(s, field[r * n_gl + g])
+            out[2 * j] += (1.0 - t[g]) * dF
+            out[2 * j + 1] += t[g] * dF
+    return out
+
+
+
+# ----------------------------------------------------------------------------- neighbour lists
+
+
+def neighbour_pairs(x, r, exclude_same_rod):
+    """Every pair (i < j) of points closer than r, by all distances (of different rods if asked)."""
+    d = np.linalg.norm(x[:, None] - x[None], axis=-1)
+    i, j = np.nonzero(np.triu(d < r, 1))
+    keep = (i // 2 != j // 2) if exclude_same_rod else np.ones(len(i), bool)
+    return set(zip(i[keep].tolist(), j[keep].tolist()))
+
+
+
+# ----------------------------------------------------------------------------- external objects
+
+
+def line_yukawa_force(p, z1, z2, lam, R, w, Z=1.0):
+    """Direct numerical integral of the screened line-charge force (scipy.quad, tight tolerances)."""
+    def comp(i):
+        def integrand(zl):
+            d = np.array([p[0], p[1], p[2] - zl])
+            r = math.sqrt(d @ d + w * w)
+            return Z * lam * math.exp(-r / R) * (1 / r**2 + 1 / (R * r)) * d[i] / r
+        return scipy.integrate.quad(integrand, z1, z2, epsabs=1e-14, epsrel=1e-11, limit=400,
+                              points=[p[2]] if z1 < p[2] < z2 else None)[0]
+    return np.array([comp(i) for i in range(3)])
+
+
+
+# ----------------------------------------------------------------------------- filament rule, literally
+# docs/model.md 'Connectivity graph and topology' on netlists, with networkx: every simple path
+# (exponential, small graphs only) and the biconnected-component rule without reductions.
+
+
+def merged_labels(n_tips, tip_contacts):
+    """Merged node of each tip, by networkx connected components."""
+    ideal = nx.Graph()
+    ideal.add_nodes_from(range(n_tips))
+    ideal.add_edges_from(map(tuple, np.asarray(tip_contacts).tolist()))
+    label = np.empty(n_tips, dtype=np.int64)
+    for k, comp in enumerate(nx.connected_components(ideal)):
+        label[list(comp)] = k
+    return label
+
+
+def attached_labels(n_rods, tip_contacts, conductor_tip, key):
+    """Electrical node of each tip: its merged node, or ``("att", k)`` when the merged node
+    touches conductors of exactly one key k (ideal contacts pin it to that conductor)."""
+    m = merged_labels(2 * n_rods, tip_contacts).tolist()
+    keys = defaultdict(set)
+    for t, k in zip(np.asarray(conductor_tip).tolist(), np.asarray(key).tolist()):
+        keys[m[t]].add(k)
+    return [("att", next(iter(keys[x]))) if len(keys[x]) == 1 else x for x in m]
+
+
+def brute_force_filament(n_rods, tip_contacts, conductor_tip, key):
+    """Rods on some simple path between two different attachments: enumerate all paths.
+
+    The definition of docs/model.md 'Connectivity graph and topology' taken literally, on a MultiGraph (parallel
+    rods are separate edges); exponential, so only for small graphs.
+    """
+    m = attached_labels(n_rods, tip_contacts, conductor_tip, key)
+    g = nx.MultiGraph()
+    for i in range(n_rods):
+        g.add_edge(m[2 * i], m[2 * i + 1], key=("rod", i))
+    for j, (t, k) in enumerate(zip(np.asarray(conductor_tip).tolist(), np.asarray(key).tolist())):
+        if m[t] != ("att", k):
+            g.add_edge(m[t], ("att", k), key=("contact", j))
+    atts = sorted({("att", k) for k in np.asarray(key).tolist()})
+    on_path = np.zeros(n_rods, dtype=bool)
+    for a1, a2 in combinations(atts, 2):
+        for path in nx.all_simple_edge_paths(g, a1, a2):
+            for _, _, (kind, i) in path:
+                if kind == "rod":
+                    on_path[i] = True
+    return on_path
+
+
+def rule_filament(n_rods, tip_contacts, conductor_tip, key):
+    """The biconnected-component rule applied literally with networkx (no reductions)."""
+    m = attached_labels(n_rods, tip_contacts, conductor_tip, key)
+    g = nx.Graph()
+    g.add_edges_from((m[2 * i], m[2 * i + 1]) for i in range(n_rods) if m[2 * i] != m[2 * i + 1])
+    for t, k in zip(np.asarray(conductor_tip).tolist(), np.asarray(key).tolist()):
+        if m[t] != ("att", k):
+            g.add_edge(m[t], ("att", k))
+        g.add_edge(("att", k), "X")
+    in_x = set()
+    if "X" in g:
+        for block in nx.biconnected_component_edges(g):
+            if any("X" in e for e in block):
+                in_x |= {frozenset(e) for e in block}
+    return np.array([frozenset((m[2 * i], m[2 * i + 1])) in in_x for i in range(n_rods)])
+

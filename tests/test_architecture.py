@@ -67,6 +67,8 @@ def test_no_import_runs_upwards():
 
 
 def test_the_check_sees_relative_imports():
-    """Not vacuous: model/simulation.py's relative imports resolve to full names."""
+    """Not vacuous: relative imports resolve to full names, also from a subpackage (model/terms/)."""
     targets = {t for _, t in _imports(PACKAGE / "model" / "simulation.py")}
-    assert "selfas_graph.model.forces" in targets and "selfas_graph.parallel" in targets
+    assert "selfas_graph.model.terms" in targets and "selfas_graph.parallel" in targets
+    targets = {t for _, t in _imports(PACKAGE / "model" / "terms" / "forcefield.py")}
+    assert {"selfas_graph.parallel", "selfas_graph.model.neighbours", "selfas_graph.model.terms.base"} <= targets

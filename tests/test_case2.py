@@ -1,9 +1,7 @@
 """Case (ii) external objects (docs/model.md 'Term 11', 'Circuit'): filament, dipole monopoles, line charge."""
-import math
 
 import numpy as np
 import pytest
-from scipy import integrate
 
 import reference as ref
 from conftest import simulation
@@ -51,18 +49,6 @@ def test_monopoles_on_tips_match_tip_law(rng):
     assert np.abs(brake[3]).max() > 0
 
 
-def _line_force_quad(p, z1, z2, lam, R, w, Z=1.0):
-    """Direct numerical integral of the screened line-charge force (scipy.quad, tight tolerances)."""
-    def comp(i):
-        def integrand(zl):
-            d = np.array([p[0], p[1], p[2] - zl])
-            r = math.sqrt(d @ d + w * w)
-            return Z * lam * math.exp(-r / R) * (1 / r**2 + 1 / (R * r)) * d[i] / r
-        return integrate.quad(integrand, z1, z2, epsabs=1e-14, epsrel=1e-11, limit=400,
-                              points=[p[2]] if z1 < p[2] < z2 else None)[0]
-    return np.array([comp(i) for i in range(3)])
-
-
 # quad warns about round-off near the axis where the integrand in z is a narrow peak; its
 # result there agrees with a smooth-variable quad to 1e-15, so the warning is not a failure
 @pytest.mark.filterwarnings("ignore::scipy.integrate.IntegrationWarning")
@@ -74,7 +60,7 @@ def test_line_charge_force_against_direct_integration(point):
     (the default) are off by 2e-6 of |F|, 64 nodes by < 1e-11. Elsewhere 32 nodes give < 1e-9.
     """
     p = np.array([point], dtype=float)
-    expect = _line_force_quad(p[0], -10.0, 10.0, 3.2, 2.4, 0.09)
+    expect = ref.line_yukawa_force(p[0], -10.0, 10.0, 3.2, 2.4, 0.09)
     for n, tol in ((32, 5e-6), (64, 1e-10)):
         t, w = gauss_legendre_01(n)
         out = np.empty_like(p)

@@ -2,10 +2,10 @@
 import numpy as np
 
 from selfas_graph.model import events as ev
-from selfas_graph.model.forces import external_monopoles
 from selfas_graph.model.graph import classify_rods
 from selfas_graph.model.params import ChargeDistribution, ExternalDipole
 from selfas_graph.model.state import draw_charges
+from selfas_graph.model.terms import external_monopoles
 
 
 def test_direct_anode_cathode_contact_is_no_short_circuit():

@@ -46,3 +46,94 @@ def test_conservative_channels_are_minus_energy_gradients(scene):
             numeric[k, d] = -(up - down) / (2 * h)
     # central differences: O(h^2 U''') truncation and O(U eps / h) round-off, ~1e-8 of the force here
     np.testing.assert_allclose(force, numeric, rtol=1e-5, atol=1e-6 * np.abs(force).max())
+
+
+#: every term that is a source of magnetic field, with the case (i) and case (ii) fields in one scene
+SOURCES = {"uniform_field": {"B": [0.3, -0.2, 0.7]}, "plasma_filament": {"radius": 1.5, "current": -2.0},
+           "external_filament": {"current": 4.0, "diameter": 0.18},
+           "external_dipole": {"magnetic_charge": 3.0, "length": 2.0}}
+
+
+def _source_scene(rng, state=None, **kw):
+    state = random_rods(6, rng, box=1.8, q=(0.5, 1.5)) if state is None else state
+    return state, simulation(state, forces={"tip_magnetic": {}, **SOURCES, "current_field": {}, "current_lorentz": {}},
+                             circuit={"delta_J0": 1.0},
+                             placement={"box": [[-3, 3], [-3, 3], [-1.0, 1.0]], "min_tip_distance": 0.0}, **kw)
+
+
+def test_field_sources_answer_their_field_and_act_on_tips_with_it(rng):
+    """Each field source gives its field at points; on tips far from any core the force of the term is
+    q_k B(x_k), the field the Lorentz term asks for (docs/model.md 'Term 10')."""
+    state, sim = _source_scene(rng)
+    ff = sim.force_field
+    assert [t.name for t in ff.field_sources] == list(SOURCES)  # all four, in term order
+    ff.evaluate(state.position, state.velocity)
+    channel = {"uniform_field": "uniform_field", "plasma_filament": "plasma_filament",
+               "external_filament": "external_filament", "external_dipole": "external_monopoles"}
+    far = np.linalg.norm(state.position[:, None, :] - ff.field_sources[-1].source[None], axis=-1).min(axis=1) > 0.06
+    assert far.sum() >= 8
+    for src in ff.field_sources:
+        b = np.empty_like(state.position)
+        src.field_at(state.position, b)
+        # the same law in the same arithmetic (the dipole's tip law outside its core r*): round-off only
+        np.testing.assert_allclose(ff.out[channel[src.name]][far], state.tip_charge[far, None] * b[far],
+                                   rtol=1e-13, atol=1e-13)
+    b = np.empty((1, 3))
+    ff.field_sources[0].field_at(np.zeros((1, 3)), b)
+    np.testing.assert_array_equal(b[0], SOURCES["uniform_field"]["B"])
+
+
+def test_lorentz_term_sums_the_rod_currents_and_every_source_in_term_order(rng):
+    """The Lorentz force on rod currents is the one of the field summed kernel by kernel (rod currents,
+    then the sources in term order), bit for bit."""
+    from selfas_graph.kernels import currents as kc
+    from selfas_graph.kernels import external as kx
+    from selfas_graph.kernels import fields as kf
+
+    state, sim = _source_scene(rng)
+    ff = sim.force_field
+    current = np.linspace(-1.0, 1.5, state.n_rods)
+    current[2] = 0.0
+    ff.set_currents(current)
+    ff.evaluate(state.position, state.velocity)
+    active = np.flatnonzero(current)
+    t, wt = kc.gauss_legendre_01(4)
+    pts = np.empty((len(active) * 4, 3))
+    kc.quadrature_points(state.position, active, t, pts)
+    field, extra = np.empty_like(pts), np.empty_like(pts)
+    kc.rod_current_field(pts, np.repeat(active, 4), state.position, active, ff.current, 0.03, field)
+    field += np.array(SOURCES["uniform_field"]["B"])
+    kf.plasma_field(pts, 0.0, 0.0, 1.5, -2.0, extra)
+    field += extra
+    kx.filament_field(pts, 4.0, 0.09, extra)
+    field += extra
+    kx.monopole_field(pts, np.array([[0, 0, 1.0], [0, 0, -1.0]]), np.array([3.0, -3.0]), 0.06, extra)
+    field += extra
+    want = np.zeros_like(state.position)
+    kc.lorentz_force_on_rods(state.position, active, ff.current, field, t, wt, want)
+    assert np.abs(want).max() > 1e-3
+    np.testing.assert_array_equal(ff.out["current_lorentz"], want)
+
+
+def test_state_dict_restores_the_next_evaluations_bit_for_bit(rng):
+    """ForceField.state_dict / load_state_dict: currents, neighbour lists and the held slow forces
+    (multiple time stepping with extrapolation) carry over, so a fresh field continues the same."""
+    state, sim = _source_scene(rng, integrator={"slow_every": 4})
+    ff = sim.force_field
+    x, v = state.position.copy(), state.velocity.copy()
+    ff.set_currents(np.linspace(0.5, 1.0, state.n_rods))
+    for step in (0, 4):
+        ff.evaluate(x + 1e-3 * step * v, v, full=True, step=step)
+    d = ff.state_dict()
+    assert {"current", "tip_nl_reference", "tip_nl_builds", "mts_stale", "mts_held_tip_far"} <= set(d)
+    assert all(isinstance(val, (np.ndarray, int)) for val in d.values())
+    _, fresh = _source_scene(None, state.copy(), integrator={"slow_every": 4})
+    fresh.force_field.load_state_dict(d)
+    y = x + 6e-3 * v
+    np.testing.assert_array_equal(fresh.force_field.evaluate(y, v, full=False, step=6),
+                                  ff.evaluate(y, v, full=False, step=6))
+    np.testing.assert_array_equal(fresh.force_field.active_rod, ff.active_rod)
+    # a dict without held forces (another setting, an older checkpoint): every slow term is recomputed
+    _, other = _source_scene(None, state.copy(), integrator={"slow_every": 4})
+    other.force_field.load_state_dict({"current": d["current"]})
+    assert other.force_field.mts.stale == set(other.force_field.mts.slow_keys)

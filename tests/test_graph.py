@@ -10,12 +10,12 @@ circuit solve; their tolerance is the round-off of a sparse solve (~1e-14
 observed, 1e-12 allowed).
 """
 from collections import defaultdict
-from itertools import combinations
 
 import networkx as nx
 import numpy as np
 import pytest
 
+import reference as ref
 from selfas_graph.model import events as ev
 from selfas_graph.model.graph import (
     CLUSTER,
@@ -75,67 +75,6 @@ def electrode_graph(rods, voltage=DELTA, star=True):
 def roles(rods):
     n_rods, tc, ct, cid = netlist(rods)
     return classify_rods(n_rods, tc, ct, cid)
-
-
-def merged_labels(n_tips, tip_contacts):
-    """Merged node of each tip, by networkx connected components."""
-    ideal = nx.Graph()
-    ideal.add_nodes_from(range(n_tips))
-    ideal.add_edges_from(map(tuple, np.asarray(tip_contacts).tolist()))
-    label = np.empty(n_tips, dtype=np.int64)
-    for k, comp in enumerate(nx.connected_components(ideal)):
-        label[list(comp)] = k
-    return label
-
-
-def attached_labels(n_rods, tip_contacts, conductor_tip, key):
-    """Electrical node of each tip: its merged node, or ``("att", k)`` when the merged node
-    touches conductors of exactly one key k (ideal contacts pin it to that conductor)."""
-    m = merged_labels(2 * n_rods, tip_contacts).tolist()
-    keys = defaultdict(set)
-    for t, k in zip(np.asarray(conductor_tip).tolist(), np.asarray(key).tolist()):
-        keys[m[t]].add(k)
-    return [("att", next(iter(keys[x]))) if len(keys[x]) == 1 else x for x in m]
-
-
-def brute_force_filament(n_rods, tip_contacts, conductor_tip, key):
-    """Rods on some simple path between two different attachments: enumerate all paths.
-
-    The definition of docs/model.md 'Connectivity graph and topology' taken literally, on a MultiGraph (parallel
-    rods are separate edges); exponential, so only for small graphs.
-    """
-    m = attached_labels(n_rods, tip_contacts, conductor_tip, key)
-    g = nx.MultiGraph()
-    for i in range(n_rods):
-        g.add_edge(m[2 * i], m[2 * i + 1], key=("rod", i))
-    for j, (t, k) in enumerate(zip(np.asarray(conductor_tip).tolist(), np.asarray(key).tolist())):
-        if m[t] != ("att", k):
-            g.add_edge(m[t], ("att", k), key=("contact", j))
-    atts = sorted({("att", k) for k in np.asarray(key).tolist()})
-    on_path = np.zeros(n_rods, dtype=bool)
-    for a1, a2 in combinations(atts, 2):
-        for path in nx.all_simple_edge_paths(g, a1, a2):
-            for _, _, (kind, i) in path:
-                if kind == "rod":
-                    on_path[i] = True
-    return on_path
-
-
-def rule_filament(n_rods, tip_contacts, conductor_tip, key):
-    """The biconnected-component rule applied literally with networkx (no reductions)."""
-    m = attached_labels(n_rods, tip_contacts, conductor_tip, key)
-    g = nx.Graph()
-    g.add_edges_from((m[2 * i], m[2 * i + 1]) for i in range(n_rods) if m[2 * i] != m[2 * i + 1])
-    for t, k in zip(np.asarray(conductor_tip).tolist(), np.asarray(key).tolist()):
-        if m[t] != ("att", k):
-            g.add_edge(m[t], ("att", k))
-        g.add_edge(("att", k), "X")
-    in_x = set()
-    if "X" in g:
-        for block in nx.biconnected_component_edges(g):
-            if any("X" in e for e in block):
-                in_x |= {frozenset(e) for e in block}
-    return np.array([frozenset((m[2 * i], m[2 * i + 1])) in in_x for i in range(n_rods)])
 
 
 def random_netlist(n_rods, n_junctions, rng, free_fraction=0.1):
@@ -351,7 +290,7 @@ def test_roles_match_brute_force_path_enumeration(seed):
         own = rng.random(key.size) < 0.5
         key[own] = 100 + np.flatnonzero(own)
     t = classify_rods(n_rods, tc, ct, key)
-    np.testing.assert_array_equal(t.role == FILAMENT, brute_force_filament(n_rods, tc, ct, key))
+    np.testing.assert_array_equal(t.role == FILAMENT, ref.brute_force_filament(n_rods, tc, ct, key))
 
 
 @pytest.mark.parametrize("seed, density", [(s, d) for s in range(6) for d in (1.0, 0.6)])
@@ -366,7 +305,7 @@ def test_roles_match_networkx_rule_on_larger_graphs(seed, density):
     n_rods, tc, ct, cid = netlist(rods, star=bool(seed % 2))
     key = cid if seed % 2 else np.where(rng.random(cid.size) < 0.3, 10 + np.arange(cid.size), cid)
     t = classify_rods(n_rods, tc, ct, key)
-    np.testing.assert_array_equal(t.role == FILAMENT, rule_filament(n_rods, tc, ct, key))
+    np.testing.assert_array_equal(t.role == FILAMENT, ref.rule_filament(n_rods, tc, ct, key))
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -4,6 +4,8 @@ Tolerance: rtol 1e-12 on each component, with an absolute floor of 1e-12 times
 the largest component, since sums of many terms of both signs can cancel to
 well below their size (the round-off is relative to the terms, not the sum).
 """
+import os
+
 import numpy as np
 import pytest
 
@@ -257,11 +259,9 @@ def test_rows_kernels_serial_and_parallel_builds_agree_bit_for_bit(rng):
                 np.testing.assert_array_equal(u, w, err_msg=kernel.__name__)
 
 
-def test_cached_kernels_are_dropped_when_any_kernel_source_changed(tmp_path):
-    """numba checks a cached kernel only against its own file; the package keeps a digest of all
-    kernel sources beside the cache and drops the cache when it differs (a law edited in laws.py
-    must not leave pairs.py's old machine code in use)."""
-    from selfas_graph.kernels._jit import DIGEST_FILE, drop_stale_cache, sources_digest
+def test_kernel_sources_digest_sees_every_kernel_module(tmp_path):
+    """The digest changes when any kernel module changes, e.g. a law in laws.py that pairs.py inlines."""
+    from selfas_graph.kernels._jit import sources_digest
 
     src = tmp_path / "src"
     src.mkdir()
@@ -269,16 +269,64 @@ def test_cached_kernels_are_dropped_when_any_kernel_source_changed(tmp_path):
     (src / "pairs.py").write_text("from .laws import f\n")
     before = sources_digest(src)
     (src / "laws.py").write_text("def f(x):\n    return 2 * x\n")
-    after = sources_digest(src)
-    assert before != after
-    cache = tmp_path / "cache"
-    cache.mkdir()
-    (cache / DIGEST_FILE).write_text(before + "\n")
-    for name in ("pairs.yukawa-62.py311.nbi", "pairs.yukawa-62.py311.1.nbc", "keep.txt"):
-        (cache / name).write_text("x")
-    assert drop_stale_cache(cache, before) == 0  # same sources: the cache stays
-    assert drop_stale_cache(cache, after) == 2  # changed: both cache files go, other files stay
-    assert sorted(p.name for p in cache.iterdir()) == sorted([DIGEST_FILE, "keep.txt"])
-    assert (cache / DIGEST_FILE).read_text().strip() == after
-    assert drop_stale_cache(cache, after) == 0
-    assert drop_stale_cache(tmp_path / "missing", after) == 0  # no folder yet: nothing to drop, no error
+    assert sources_digest(src) != before
+
+
+@pytest.mark.skipif(os.environ.get("NUMBA_DISABLE_JIT", "0") != "0", reason="no compiled kernels without the JIT")
+def test_every_kernel_caches_under_the_sources_digest():
+    """Every compiled kernel of the package keys its on-disk cache with the digest of all kernel sources."""
+    import importlib
+    import pkgutil
+
+    from numba.core.dispatcher import Dispatcher
+
+    import selfas_graph.kernels as package
+    from selfas_graph.kernels._jit import SOURCES_DIGEST, SourcesKeyedCache, _RowsKernel
+
+    kernels = []
+    for info in pkgutil.iter_modules(package.__path__):
+        module = importlib.import_module(f"selfas_graph.kernels.{info.name}")
+        for obj in vars(module).values():
+            if isinstance(obj, _RowsKernel):
+                kernels += [obj.serial, obj.parallel]
+            elif isinstance(obj, Dispatcher) and obj.py_func.__module__ == module.__name__:
+                kernels.append(obj)
+    assert len(kernels) > 50
+    assert all(isinstance(k._cache, SourcesKeyedCache) for k in kernels)
+    key = kernels[0]._cache._index_key((), kernels[0].targetctx.codegen())
+    assert key[-1] == SOURCES_DIGEST
+
+
+_PROBE = """
+import sys
+sys.path.insert(0, sys.argv[1])
+from selfas_graph.kernels import _jit
+_jit.SOURCES_DIGEST = sys.argv[2]   # as if the kernel sources were others
+import probe_kernel
+assert probe_kernel.twice(2.0) == 4.0
+stats = probe_kernel.twice.stats
+print(sum(stats.cache_hits.values()), sum(stats.cache_misses.values()))
+"""
+
+
+@pytest.mark.skipif(os.environ.get("NUMBA_DISABLE_JIT", "0") != "0", reason="no compiled kernels without the JIT")
+def test_a_kernel_cached_from_other_sources_is_not_loaded(tmp_path):
+    """numba checks a cached kernel only against its own file, not against the laws it inlines from
+    other modules: a kernel cached under another digest of the kernel sources is compiled afresh
+    (a cache miss), one cached under the same digest is loaded (a hit); nothing is deleted."""
+    import subprocess
+    import sys
+
+    (tmp_path / "probe_kernel.py").write_text(
+        "from selfas_graph.kernels._jit import njit\n\n\n@njit\ndef twice(x):\n    return 2.0 * x\n")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+
+    def run(digest):
+        out = subprocess.run([sys.executable, "-c", _PROBE, str(tmp_path), digest], env=env, capture_output=True,
+                             text=True, check=True).stdout.split()
+        return tuple(int(v) for v in out)  # (cache hits, cache misses)
+
+    assert run("A") == (0, 1)  # compiled and saved
+    assert run("A") == (1, 0)  # the same sources: loaded from the cache
+    assert run("B") == (0, 1)  # other sources: not loaded, compiled afresh
+    assert run("A") == (1, 0)  # both entries kept side by side

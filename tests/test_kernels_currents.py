@@ -1,6 +1,6 @@
 """Tests of the rod-current kernels (docs/model.md 'Term 9', 'Term 10').
 
-The oracles below are plain numpy / Python loops written from the physics, not from
+The oracles (tests/reference.py) are plain numpy / Python loops written from the physics, not from
 the kernel code: the segment field in the textbook form (perpendicular foot, cosines
 of the end angles), sums with explicit loops, forces with ``np.cross``.
 """
@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy import integrate
 
+import reference
 from selfas_graph.kernels.currents import (
     current_force_on_tips,
     gauss_legendre_01,
@@ -19,69 +20,6 @@ from selfas_graph.kernels.currents import (
 
 #: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
 pytestmark = pytest.mark.jit_off_ok
-
-# ------------------------------------------------------------------------------------
-# oracles
-# ------------------------------------------------------------------------------------
-
-
-def ref_segment_field(x, A, B, J, w):
-    """Finite-wire field, textbook form: (J rho / (rho^2 + w^2)) (cos t1 - cos t2) phi_hat.
-
-    rho is the distance of x to the line AB, phi_hat = s_hat x rho_hat, cos t1 and
-    cos t2 the cosines of the angles between s_hat and x - A, x - B.
-    """
-    x, A, B = (np.asarray(v, dtype=float) for v in (x, A, B))
-    s = B - A
-    L = np.linalg.norm(s)
-    if L == 0.0:
-        return np.zeros(3)
-    sh = s / L
-    a = x - A
-    b = x - B
-    rho_vec = a - np.dot(a, sh) * sh
-    rho = np.linalg.norm(rho_vec)
-    if rho == 0.0 or np.linalg.norm(a) == 0.0 or np.linalg.norm(b) == 0.0:
-        return np.zeros(3)
-    phi = np.cross(sh, rho_vec / rho)
-    cos1 = np.dot(sh, a) / np.linalg.norm(a)
-    cos2 = np.dot(sh, b) / np.linalg.norm(b)
-    return J * rho / (rho**2 + w**2) * (cos1 - cos2) * phi
-
-
-def ref_field(points, exclude, position, active, current, w):
-    """Field of the active rods at each point, skipping exclude[p], by explicit loops."""
-    out = np.zeros((len(points), 3))
-    for p, x in enumerate(points):
-        for j in active:
-            if j == exclude[p]:
-                continue
-            out[p] += ref_segment_field(x, position[2 * j], position[2 * j + 1], current[j], w)
-    return out
-
-
-def ref_quadrature_points(position, active, t):
-    """x_a + t s for each active rod (rod-major rows)."""
-    rows = []
-    for j in active:
-        xa, xb = position[2 * j], position[2 * j + 1]
-        for tg in t:
-            rows.append(xa + tg * (xb - xa))
-    return np.array(rows).reshape(-1, 3)
-
-
-def ref_lorentz(position, active, current, field, t, wts):
-    """Tip forces from J w_g (s x B_g), shared (1 - t_g) to tip a and t_g to tip b."""
-    out = np.zeros_like(position)
-    n_gl = len(t)
-    for r, j in enumerate(active):
-        s = position[2 * j + 1] - position[2 * j]
-        for g in range(n_gl):
-            dF = current[j] * wts[g] * np.cross(s, field[r * n_gl + g])
-            out[2 * j] += (1.0 - t[g]) * dF
-            out[2 * j + 1] += t[g] * dF
-    return out
-
 
 def random_rods(seed, n_rods=40, box=5.0, zero_fraction=0.25):
     """Rods with centres uniform in a box, unit axes uniform on the sphere, random currents.
@@ -132,7 +70,7 @@ def test_segment_field_matches_oracle(w):
         x, A, B = rng.uniform(-3, 3, size=(3, 3))
         J = rng.uniform(-3, 3)
         got = np.array(segment_field(*x, *A, *B, J, w))
-        ref = ref_segment_field(x, A, B, J, w)
+        ref = reference.segment_field(x, A, B, J, w)
         # the two forms differ only in rounding order; atol covers components that
         # cancel to ~0, at round-off (1e-15) of the field's own magnitude
         np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-14 * np.abs(ref).max())
@@ -150,7 +88,7 @@ def test_rod_current_field_matches_oracle(seed, w):
     exclude = np.concatenate([np.arange(len(position)) // 2,
                               rng.integers(-1, len(current), size=len(extra))])
     got = field_call(point, exclude, position, active, current, w)
-    ref = ref_field(point, exclude, position, active, current, w)
+    ref = reference.rod_current_field(point, exclude, position, active, current, w)
     # sums of ~30 terms of size up to ~J/w that partly cancel: atol is round-off
     # (1e-13) relative to the largest field in the set
     np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-13 * np.abs(ref).max())
@@ -164,7 +102,7 @@ def test_current_force_on_tips_matches_oracle(seed, w):
     base = np.random.default_rng(seed).normal(size=(n_tips, 3))
     out = base.copy()
     current_force_on_tips(position, charge, active, current, w, 0, len(position), out)
-    ref = ref_field(position, np.arange(n_tips) // 2, position, active, current, w)
+    ref = reference.rod_current_field(position, np.arange(n_tips) // 2, position, active, current, w)
     ref = base + charge[:, None] * ref
     # see test_rod_current_field_matches_oracle; base is O(1) so round-off of it too
     np.testing.assert_allclose(out, ref, rtol=1e-12, atol=1e-13 * np.abs(ref).max())
@@ -178,7 +116,7 @@ def test_quadrature_points_matches_oracle(n_gl):
     out = np.full((len(active) * n_gl, 3), np.nan)
     quadrature_points(position, active, t, out)
     # coordinates are O(3); atol is a few ulps of that for coordinates near zero
-    np.testing.assert_allclose(out, ref_quadrature_points(position, active, t), rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(out, reference.quadrature_points(position, active, t), rtol=1e-12, atol=1e-14)
 
 
 @pytest.mark.parametrize("n_gl", [1, 4])
@@ -191,7 +129,7 @@ def test_lorentz_force_matches_oracle(n_gl):
     base = rng.normal(size=position.shape)
     out = base.copy()
     lorentz_force_on_rods(position, active, current, field, t, wts, out)
-    ref = base + ref_lorentz(position, active, current, field, t, wts)
+    ref = base + reference.lorentz_force_on_rods(position, active, current, field, t, wts)
     # forces are O(1..10); atol is round-off of that for components near zero
     np.testing.assert_allclose(out, ref, rtol=1e-12, atol=1e-13)
 
@@ -486,7 +424,7 @@ def test_field_exclusion_skips_only_the_named_rod():
     x = np.array([[0.2, -0.1, 0.4]])
     full = field_call(x, [-1], position, active, current, 0.03)[0]
     for j in active[:5]:
-        own = ref_segment_field(x[0], position[2 * j], position[2 * j + 1], current[j], 0.03)
+        own = reference.segment_field(x[0], position[2 * j], position[2 * j + 1], current[j], 0.03)
         got = field_call(x, [j], position, active, current, 0.03)[0]
         # difference of sums of ~40 O(1) terms: round-off relative to the largest term
         np.testing.assert_allclose(got, full - own, rtol=1e-12, atol=1e-13 * np.abs(full).max())
@@ -502,7 +440,7 @@ def test_tip_force_skips_own_rod():
     current_force_on_tips(position, charge, np.array([0], dtype=np.int64), current, 0.03, 0, len(position), out)
     assert np.all(out[:2] == 0.0)
     for k in (2, 3):
-        expected = charge[k] * ref_segment_field(position[k], position[0], position[1], 2.0, 0.03)
+        expected = charge[k] * reference.segment_field(position[k], position[0], position[1], 2.0, 0.03)
         assert np.linalg.norm(expected) > 0.1
         # same law, different rounding order: round-off of an O(1) value
         np.testing.assert_allclose(out[k], expected, rtol=1e-12, atol=1e-15)

@@ -2,18 +2,12 @@
 import numpy as np
 import pytest
 
+import reference as ref
 from selfas_graph.kernels.cells import neighbour_rows
 from selfas_graph.model.neighbours import NeighbourList
 
 #: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
 pytestmark = pytest.mark.jit_off_ok
-
-
-def brute_pairs(x, r, exclude_same_rod):
-    d = np.linalg.norm(x[:, None] - x[None], axis=-1)
-    i, j = np.nonzero(np.triu(d < r, 1))
-    keep = (i // 2 != j // 2) if exclude_same_rod else np.ones(len(i), bool)
-    return set(zip(i[keep].tolist(), j[keep].tolist()))
 
 
 def listed(nl):
@@ -28,7 +22,7 @@ def test_list_covers_cutoff_through_moves(rng):
     for _ in range(20):
         x = x + rng.normal(scale=0.03, size=x.shape)
         nl.update(x)
-        assert brute_pairs(x, 0.6, True) <= listed(nl)
+        assert ref.neighbour_pairs(x, 0.6, True) <= listed(nl)
     assert 1 < nl.n_builds < 20
 
 
@@ -37,7 +31,7 @@ def test_same_rod_pairs_excluded(rng):
     nl = NeighbourList(2.0, 0.1, exclude_same_rod=True)
     nl.build(x)
     assert all(k // 2 != l // 2 for k, l in listed(nl))
-    assert listed(nl) == brute_pairs(x, 2.1, True)
+    assert listed(nl) == ref.neighbour_pairs(x, 2.1, True)
 
 
 def test_compressed_rows_symmetric(rng):
@@ -87,7 +81,7 @@ def test_cell_rows_two_points_of_one_rod():
 def test_cell_rows_equal_brute_force(rng, box, radius, exclude):
     """Same pair set as all-pairs distances: several cells per axis, all points in one cell, sparse points."""
     x = rng.uniform(-box, box, (300, 3))
-    assert rows(*neighbour_rows(x, radius, exclude)) == both_ways(brute_pairs(x, radius, exclude))
+    assert rows(*neighbour_rows(x, radius, exclude)) == both_ways(ref.neighbour_pairs(x, radius, exclude))
 
 
 def test_cell_rows_flat_and_coincident_points(rng):
@@ -96,14 +90,14 @@ def test_cell_rows_flat_and_coincident_points(rng):
     x[:, 2] = 0.0
     x[100:, 1] = 1.0
     x[150:160] = x[150]
-    assert rows(*neighbour_rows(x, 0.7)) == both_ways(brute_pairs(x, 0.7, False))
+    assert rows(*neighbour_rows(x, 0.7)) == both_ways(ref.neighbour_pairs(x, 0.7, False))
 
 
 def test_cell_rows_points_far_apart(rng):
     """Clusters 1e12 apart: the grid is capped (memory stays O(n)) and every close pair is still found."""
     x = np.concatenate([rng.uniform(0, 1, (50, 3)), rng.uniform(0, 1, (50, 3)) + 1e12])
     start, index = neighbour_rows(x, 0.4, max_cells=64)
-    assert rows(start, index) == both_ways(brute_pairs(x, 0.4, False))
+    assert rows(start, index) == both_ways(ref.neighbour_pairs(x, 0.4, False))
 
 
 def test_cell_rows_independent_of_grid_and_deterministic(rng):
@@ -133,8 +127,8 @@ def test_pairs_sorted_once_each(rng):
     nl = NeighbourList(0.5, 0.1)
     nl.build(x)
     p = nl.pairs
-    assert set(map(tuple, p.tolist())) == brute_pairs(x, 0.6, False)
+    assert set(map(tuple, p.tolist())) == ref.neighbour_pairs(x, 0.6, False)
     assert (p[:, 0] < p[:, 1]).all()
     np.testing.assert_array_equal(p, p[np.lexsort((p[:, 1], p[:, 0]))])
     nl.build(x[:10])
-    assert set(map(tuple, nl.pairs.tolist())) == brute_pairs(x[:10], 0.6, False)
+    assert set(map(tuple, nl.pairs.tolist())) == ref.neighbour_pairs(x[:10], 0.6, False)

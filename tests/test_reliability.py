@@ -272,7 +272,7 @@ def test_the_energy_check_treats_nan_as_a_failure(scen):
 
 def test_frame_0_is_checked_before_it_is_written(scen, tmp_path, capsys, monkeypatch):
     """A NaN energy at the start used to be written as frame 0 before the run stopped."""
-    from selfas_graph.model.forces import ForceField
+    from selfas_graph.model.terms import ForceField
 
     real = ForceField.potential_energy
 

@@ -21,9 +21,9 @@ sys.path.insert(0, str(ROOT))
 from selfas_graph.io.h5md import RunFile  # noqa: E402
 from selfas_graph.io.scenario import scenario_from_text  # noqa: E402
 from selfas_graph.kernels.fields import plasma_field  # noqa: E402
-from selfas_graph.model.forces import ForceField  # noqa: E402
 from selfas_graph.model.graph import FILAMENT  # noqa: E402
 from selfas_graph.model.state import random_state  # noqa: E402
+from selfas_graph.model.terms import ForceField  # noqa: E402
 
 
 def _axis_frame(x):

@@ -17,6 +17,10 @@ No code path depends on the CPU: the kernels are plain loops that LLVM vectorise
 whatever numba compiles for (``NUMBA_CPU_NAME``; the host CPU by default), 4 doubles a
 vector with AVX2, 8 with AVX-512. ``tools/bench_kernels.py --targets host haswell``
 times the hot kernels for both; docs/performance.md has the figures.
+
+Compiled kernels are cached on disk, keyed also by the digest of all kernel sources
+(:class:`SourcesKeyedCache`, docs/model.md 'Assumptions and project choices', B27): a kernel
+compiled before a law it inlines changed is never loaded. Importing the package deletes nothing.
 """
 import functools
 import hashlib
@@ -33,12 +37,11 @@ from pathlib import Path
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numba  # noqa: E402
+from numba.core.caching import FunctionCache  # noqa: E402
+from numba.core.dispatcher import Dispatcher  # noqa: E402
 
 #: cache compiled kernels on disk so that a second CLI run starts in seconds
 _COMMON = dict(cache=True, nogil=True, error_model="numpy")
-
-#: name of the file, beside the cached kernels, that holds the digest of the sources they came from
-DIGEST_FILE = "selfas_graph_kernel_sources.sha1"
 
 
 def sources_digest(folder=None) -> str:
@@ -51,59 +54,48 @@ def sources_digest(folder=None) -> str:
     return h.hexdigest()
 
 
-def drop_stale_cache(cache_dir, digest) -> int:
-    """Delete the cached kernels in ``cache_dir`` unless they were compiled from sources with ``digest``.
+#: digest of the kernel sources this process compiles from; part of every cached kernel's index key
+SOURCES_DIGEST = sources_digest()
 
-    numba checks a cached kernel only against the file that defines it, not against the laws it
-    inlines from other modules (``laws.py``, ``expo.py``): after an update of those alone, the
-    old machine code would be loaded silently. A digest of all kernel sources, kept beside the
-    cache, catches that; on a mismatch every cached kernel of this package is dropped and
-    compiled again. Returns the number of files deleted. Errors (a read-only or vanished
-    folder, another process deleting at the same time) are ignored: numba then compiles afresh
-    or caches elsewhere.
+
+class SourcesKeyedCache(FunctionCache):
+    """numba's on-disk cache of one kernel, with :data:`SOURCES_DIGEST` in the index key.
+
+    numba keys a cached kernel by its signature, the CPU and the bytecode of the function itself,
+    and drops it when the file that defines it changes; it does not see the laws the kernel
+    inlines from other modules (``laws.py``, ``expo.py``). With the digest of all kernel sources
+    in the key, machine code compiled from other sources never matches: it is not loaded, the
+    kernel is compiled afresh and saved beside it. Nothing is deleted (numba itself drops an
+    index when the kernel's own file changes; ``NUMBA_CACHE_DIR`` moves the cache, and deleting
+    that folder, or the ``__pycache__`` folder of the kernels, clears it).
     """
-    cache_dir = Path(cache_dir)
-    stamp = cache_dir / DIGEST_FILE
-    try:
-        if stamp.read_text().strip() == digest:
-            return 0
-    except OSError:
-        pass
-    dropped = 0
-    for f in list(cache_dir.glob("*.nbi")) + list(cache_dir.glob("*.nbc")):
-        try:
-            f.unlink()
-            dropped += 1
-        except OSError:
-            pass
-    try:
-        cache_dir.mkdir(parents=True, exist_ok=True)
-        stamp.write_text(digest + "\n")
-    except OSError:
-        pass
-    return dropped
+
+    def _index_key(self, sig, codegen):
+        return super()._index_key(sig, codegen) + (SOURCES_DIGEST,)
 
 
-def _kernel_cache_dir():
-    """The folder numba caches this package's kernels in (in the source tree, or user-wide if that
-    is read-only, or under NUMBA_CACHE_DIR), as numba itself locates it for a kernel here."""
-    probe = numba.njit(cache=True)(lambda: 0)
-    return Path(probe._cache._cache_path)
+def _jit(**flags):
+    """``numba.njit(**flags)`` with the package's common flags and a :class:`SourcesKeyedCache`."""
+    decorate = numba.njit(**flags, **_COMMON)
+
+    def wrap(fn):
+        kernel = decorate(fn)
+        if isinstance(kernel, Dispatcher):  # with NUMBA_DISABLE_JIT=1 the function stays Python
+            kernel._cache = SourcesKeyedCache(kernel.py_func)
+        return kernel
+
+    return wrap
 
 
-try:
-    drop_stale_cache(_kernel_cache_dir(), sources_digest())
-except Exception:  # noqa: BLE001 - numba internals differ between versions; the check is a safeguard
-    pass
 _SUM_FLAGS = {"reassoc", "contract", "arcp"}
 
-njit = numba.njit(fastmath=False, **_COMMON)
-njit_parallel = numba.njit(parallel=True, fastmath=False, **_COMMON)
+njit = _jit(fastmath=False)
+njit_parallel = _jit(parallel=True, fastmath=False)
 #: all-pairs reductions: vectorisable sums, NaN/inf kept (see module docstring)
-njit_parallel_sum = numba.njit(parallel=True, fastmath=_SUM_FLAGS, **_COMMON)
+njit_parallel_sum = _jit(parallel=True, fastmath=_SUM_FLAGS)
 #: scalar laws: always inlined into the loops that call them
-inline = numba.njit(inline="always", fastmath=False, **_COMMON)
-inline_sum = numba.njit(inline="always", fastmath=_SUM_FLAGS, **_COMMON)
+inline = _jit(inline="always", fastmath=False)
+inline_sum = _jit(inline="always", fastmath=_SUM_FLAGS)
 prange = numba.prange
 
 #: rows from which an O(n) kernel (:func:`njit_rows`) runs on all numba threads. Below it one
@@ -120,13 +112,13 @@ class _RowsKernel:
 
     def __init__(self, fn):
         self.py_func = fn
-        self.parallel = numba.njit(parallel=True, fastmath=False, **_COMMON)(fn)
+        self.parallel = _jit(parallel=True, fastmath=False)(fn)
         # a renamed copy, so that the on-disk cache keeps the serial build apart from the parallel one
         twin = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_serial", fn.__defaults__,
                                   fn.__closure__)
         twin.__qualname__ = fn.__qualname__ + "_serial"
         twin.__module__ = fn.__module__
-        self.serial = numba.njit(parallel=False, fastmath=False, **_COMMON)(twin)
+        self.serial = _jit(parallel=False, fastmath=False)(twin)
         functools.update_wrapper(self, fn)
 
     def __call__(self, first, *args):

@@ -19,11 +19,11 @@ from ..kernels.pairs import close_pair_count
 from ..parallel import RowBlocks
 from . import events as ev
 from .contacts import ContactTracker
-from .forces import ForceField
 from .graph import FILAMENT, ConnectivityGraph
 from .integrator import AdamsBashforth4
 from .params import Parameters
 from .state import State, StateError, random_state
+from .terms import ForceField
 
 #: a bond whose length is off by more than this after a step is broken: no
 #: corrector recovers it meaningfully (typical per-step errors are < 1e-6)
@@ -175,18 +175,13 @@ class Simulation:
             "bond_error_before": it.bond_error_before, "bond_error_after": it.bond_error_after,
             "max_bond_error": self.max_bond_error,
             "energy0": np.nan if self._energy0 is None else self._energy0,
-            "current": ff.current.copy(),
             "events": np.array([tuple(r) for r in self.events], dtype=ev.EVENT_DTYPE),
             "short_circuit_time": np.nan if self.short_circuit_time is None else self.short_circuit_time,
         }
         for name in ("rod_length", "rod_resistance"):
             if getattr(st, name) is not None:
                 snap[name] = getattr(st, name).copy()
-        snap.update(ff.mts_state())
-        for name, nl in (("tip_nl", ff._tip_nl), ("centre_nl", ff._centre_nl)):
-            if nl is not None and nl.reference is not None:
-                snap[f"{name}_reference"] = nl.reference.copy()
-                snap[f"{name}_builds"] = nl.n_builds
+        snap.update(ff.state_dict())  # currents, neighbour lists, held slow forces
         if self.contacts is not None:
             c = self.contacts
             snap.update(contact_pairs=c.pairs.copy(), on_cathode=c.on_cathode.copy(), on_anode=c.on_anode.copy(),
@@ -217,13 +212,6 @@ class Simulation:
         sim.short_circuit_time = None if math.isnan(sct) else sct
         sim.events = [tuple(r.item()) for r in np.asarray(snap["events"])]
         ff._bind(state.position, state.velocity)
-        if "tip_nl_reference" in snap:
-            nl = ff.tip_neighbours(snap["tip_nl_reference"])
-            nl.build(np.array(snap["tip_nl_reference"]))
-            nl.n_builds = int(snap["tip_nl_builds"])
-        if "centre_nl_reference" in snap and ff._centre_nl is not None:
-            ff._centre_nl.build(np.array(snap["centre_nl_reference"]))
-            ff._centre_nl.n_builds = int(snap["centre_nl_builds"])
         if sim.contacts is not None:
             c = sim.contacts
             c.pairs = np.array(snap["contact_pairs"], dtype=np.int64).reshape(-1, 2)
@@ -239,8 +227,7 @@ class Simulation:
                 # the solve is a pure function of the graph arrays, so this is the solution the
                 # interrupted run held; the currents in use are restored as saved
                 sim.solution = sim.graph.solve()
-        ff.set_currents(np.array(snap["current"], dtype=np.float64))
-        ff.restore_mts_state(snap)  # held slow forces; without matching ones the next evaluation is full
+        ff.load_state_dict(snap)  # currents, neighbour lists, held slow forces (missing ones: rebuilt)
         return sim
 
     @property

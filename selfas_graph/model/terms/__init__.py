@@ -1,0 +1,33 @@
+"""The force terms of docs/model.md 'Force terms', one class per term, and their container.
+
+=====================  =====================================================================
+module                 contents
+=====================  =====================================================================
+``base``               :class:`Term` (the interface), :class:`FieldSource`, shared helpers
+``pairs``              forces between rods: terms 1, 2, 6 (tip-tip magnetic, tip brake, Yukawa)
+``fields``             one-body terms of the apparatus: 3, 4, 5, 7, 8
+``external``           the fixed objects of case (ii): term 11
+``currents``           :class:`RodCurrents` and terms 9, 10
+``registry``           ``TERM_CLASSES``: scenario name -> term class
+``forcefield``         :class:`ForceField`, the container (channels, sums, gather over ranks, state)
+``mts``                :class:`MultipleTimeStepping`: the held slow forces
+=====================  =====================================================================
+
+The term classes end in ``Force`` (``TipMagneticForce``); their parameters are the classes of
+:mod:`selfas_graph.model.params` without the suffix (``TipMagnetic``).
+"""
+from .base import FieldSource, Term, share_by_mass
+from .currents import CurrentFieldForce, CurrentLorentzForce, RodCurrents
+from .external import ExternalDipoleForce, ExternalFilamentForce, external_monopoles
+from .fields import AmbientBrakeForce, ElectricFieldForce, ElectrodesForce, PlasmaFilamentForce, UniformFieldForce
+from .forcefield import ForceField
+from .mts import MultipleTimeStepping
+from .pairs import TipBrakeForce, TipMagneticForce, YukawaForce, yukawa_cutoff
+from .registry import TERM_CLASSES
+
+__all__ = [
+    "AmbientBrakeForce", "CurrentFieldForce", "CurrentLorentzForce", "ElectricFieldForce", "ElectrodesForce",
+    "ExternalDipoleForce", "ExternalFilamentForce", "FieldSource", "ForceField", "MultipleTimeStepping",
+    "PlasmaFilamentForce", "RodCurrents", "TERM_CLASSES", "Term", "TipBrakeForce", "TipMagneticForce",
+    "UniformFieldForce", "YukawaForce", "external_monopoles", "share_by_mass", "yukawa_cutoff",
+]

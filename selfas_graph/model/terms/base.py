@@ -1,0 +1,82 @@
+"""What a force term is: the :class:`Term` interface, the :class:`FieldSource` interface of the
+terms that are sources of a magnetic field, and two helpers the terms share.
+
+A term is built from the scene's :class:`~selfas_graph.model.params.Parameters` and the
+:class:`~selfas_graph.model.state.State`; it keeps only constants. Everything that changes
+during a run (positions, velocities, currents, neighbour lists, buffers) lives in the
+:class:`~selfas_graph.model.terms.forcefield.ForceField` that calls it, passed as ``ff``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+class Term:
+    """One force term of docs/model.md 'Force terms'.
+
+    Class attributes
+    ----------------
+    name : str
+        The term's field of :class:`~selfas_graph.model.params.ForceParams` (its scenario table).
+    channels : list of (str, bool)
+        The force buffers the term writes, and whether each is conservative (has an energy).
+    slow : bool
+        With multiple time stepping (``integrator.slow_every > 1``) the term is evaluated only on
+        full evaluations and its force held (or extrapolated) in between: the smooth, costly
+        long-range sums. Other terms are evaluated every step.
+    uses_currents : bool
+        The term reads the rod currents: new currents make its held force stale.
+    counts_own_calls : bool
+        The term counts its kernel calls in ``ff.calls`` itself (only when it calls a kernel);
+        for the others the field counts every ``compute``.
+    """
+
+    name = ""
+    channels: list = []
+    slow = False
+    uses_currents = False
+    counts_own_calls = False
+
+    def compute(self, ff, out):  # pragma: no cover - interface
+        """Write the term's force on every tip into ``out[channel]`` for each of its channels."""
+        raise NotImplementedError
+
+    def energy(self, ff):
+        """{channel: potential energy} of the conservative channels at ``ff.position`` (None: none)."""
+        return None
+
+    def blocked(self, ff):
+        """Channels whose last ``compute`` filled only the rows of ``ff.blocks`` (default: none)."""
+        return ()
+
+    def split(self, ff, dt):
+        """Apply this term's stiff brake exactly over ``dt`` (``integrator.brake = "split"``).
+
+        Modifies ``ff.velocity`` in place and returns {channel: work done}; the work is the
+        change of kinetic energy of the tips it touched, exactly.
+        """
+        return {}
+
+
+class FieldSource:
+    """A term whose source also makes a magnetic field that other terms feel.
+
+    The Lorentz force on rod currents (docs/model.md 'Term 10') sums, at its quadrature points,
+    the field of the rod currents and of every field source that is on, in the order of the
+    terms (docs/model.md 'Force terms').
+    """
+
+    def field_at(self, points, out):  # pragma: no cover - interface
+        """Overwrite ``out`` (m, 3) with the source's magnetic field at ``points`` (m, 3) (units B0)."""
+        raise NotImplementedError
+
+
+def share_by_mass(centre_force, tip_out):
+    """A force on a rod centre goes half to each tip (equal masses; paper Eqs. 5-6)."""
+    tip_out[0::2] = 0.5 * centre_force
+    tip_out[1::2] = 0.5 * centre_force
+
+
+def kinetic(velocity, tips):
+    """Kinetic energy of the given tips (unit masses): the exact work of a split brake is its change."""
+    return 0.5 * float(np.einsum("ij,ij->", velocity[tips], velocity[tips]))

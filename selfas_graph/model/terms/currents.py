@@ -1,0 +1,126 @@
+"""The rod currents and the two terms that read them (docs/model.md 'Term 9', 'Term 10').
+
+:class:`RodCurrents` holds the currents of the last circuit solve and is the source of their
+magnetic field. The field of the rod currents acts on the magnetic tips (term 9,
+:class:`CurrentFieldForce`); the Lorentz force on the currents (term 10,
+:class:`CurrentLorentzForce`) feels the rod currents' field and that of every other field
+source that is on (:class:`~selfas_graph.model.terms.base.FieldSource`), which it asks for
+their field at its quadrature points.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ...kernels import currents as kc
+from .base import Term
+
+
+class RodCurrents:
+    """The rod currents of the last circuit solve, and the source of their field.
+
+    Parameters
+    ----------
+    n_rods : int
+    wire_radius : float
+        w = D / 2, which keeps the field finite near a rod (docs/model.md 'Term 9').
+
+    Attributes
+    ----------
+    current : (n_rods,) float64
+        J_i, positive from tip a to tip b (units J0); zero until :meth:`set` is called.
+    active_rod : (n_active,) int64
+        The rods whose current is not exactly zero, sorted: the only rods the kernels visit.
+    position : (n_tips, 3) float64 or None
+        The tip positions the field is computed for (bound by the force field).
+    """
+
+    def __init__(self, n_rods: int, wire_radius: float):
+        self.n_rods = n_rods
+        self.w = wire_radius
+        self.current = np.zeros(n_rods)
+        self.active_rod = np.zeros(0, dtype=np.int64)
+        self.position = None
+
+    def set(self, current) -> None:
+        """Take the currents ``(n_rods,)``; rods whose current is exactly zero are left out of the kernels."""
+        current = np.ascontiguousarray(current, dtype=np.float64)
+        if current.shape != (self.n_rods,):
+            raise ValueError(f"currents must have shape ({self.n_rods},), got {current.shape}")
+        self.current = current
+        self.active_rod = np.flatnonzero(current != 0.0).astype(np.int64)
+
+    def field_at(self, points, out, exclude_rod):
+        """Overwrite ``out`` (m, 3) with the field of the rod currents at ``points`` (m, 3), leaving out
+        at each point the rod ``exclude_rod[p]`` ((m,) int64; -1: none), e.g. the rod the point is on."""
+        kc.rod_current_field(points, exclude_rod, self.position, self.active_rod, self.current, self.w, out)
+
+
+class CurrentFieldForce(Term):
+    """Term 9: q_k times the field of all other rods' currents (``ff.rod_currents``, wire radius D/2).
+    No kernel call while no rod carries current."""
+
+    name = "current_field"
+    channels = [("current_field", False)]
+    slow = True
+    uses_currents = True
+    counts_own_calls = True
+
+    def __init__(self, p, state):
+        pass
+
+    def compute(self, ff, out):
+        f = out["current_field"]
+        f.fill(0.0)
+        rc = ff.rod_currents
+        if len(rc.active_rod):
+            lo, hi = ff.blocks.tips
+            kc.current_force_on_tips(ff.position, ff.tip_charge, rc.active_rod, rc.current, rc.w, lo, hi, f)
+            ff.calls[self.name] += 1
+
+    def blocked(self, ff):
+        return ("current_field",) if len(ff.active_rod) else ()
+
+
+class CurrentLorentzForce(Term):
+    """Term 10: J_i s_i x B_tot on current-carrying rods, by Gauss-Legendre quadrature along each rod.
+
+    B_tot = the currents of all other rods (``ff.rod_currents``) + every field source that is
+    on (``ff.field_sources``, in term order: the uniform field, the plasma filament, the external
+    filament and the dipole's monopoles). Only current-carrying rods are visited, and of them
+    only those in the field's block of rods (the field at their points still sums over every
+    current).
+    """
+
+    name = "current_lorentz"
+    channels = [("current_lorentz", False)]
+    slow = True
+    uses_currents = True
+    counts_own_calls = True
+
+    def __init__(self, p, state):
+        self.t, self.wt = kc.gauss_legendre_01(p.forces.current_lorentz.quadrature_points)
+
+    def compute(self, ff, out):
+        f = out["current_lorentz"]
+        f.fill(0.0)
+        active = ff.active_rod
+        if not len(active):
+            return
+        ff.calls[self.name] += 1
+        # active_rod is sorted (RodCurrents.set), so the rods of this block are one slice of it
+        mine = active[np.searchsorted(active, ff.blocks.rods[0]):np.searchsorted(active, ff.blocks.rods[1])]
+        if not len(mine):
+            return
+        ng = len(self.t)
+        pts = ff.buffer("gl_points", len(mine) * ng)
+        kc.quadrature_points(ff.position, mine, self.t, pts)
+        field = ff.buffer("gl_field", len(mine) * ng)
+        ff.rod_currents.field_at(pts, field, exclude_rod=np.repeat(mine, ng))
+        extra = ff.buffer("gl_extra", len(pts))
+        for source in ff.field_sources:
+            source.field_at(pts, extra)
+            field += extra
+        kc.lorentz_force_on_rods(ff.position, mine, ff.current, field, self.t, self.wt, f)
+
+    def blocked(self, ff):
+        return ("current_lorentz",) if len(ff.active_rod) else ()

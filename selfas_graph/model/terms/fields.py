@@ -1,0 +1,110 @@
+"""One-body terms of the apparatus: each tip or rod alone in a given field or medium
+(docs/model.md 'Term 3', 'Term 4', 'Term 5', 'Term 7', 'Term 8').
+
+The uniform magnetic field and the plasma filament are also sources of the field that the
+Lorentz force on rod currents feels (:class:`~selfas_graph.model.terms.base.FieldSource`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ...kernels import fields as kf
+from .base import FieldSource, Term, kinetic, share_by_mass
+
+
+class AmbientBrakeForce(Term):
+    """Term 3: the ambient medium brakes every tip, ``-M_br v``."""
+
+    name = "ambient_brake"
+    channels = [("ambient_brake", False)]
+
+    def __init__(self, p, state):
+        self.k = p.forces.ambient_brake.coefficient
+
+    def compute(self, ff, out):
+        np.multiply(ff.velocity, -self.k, out=out["ambient_brake"])
+
+
+class UniformFieldForce(Term, FieldSource):
+    """Term 4: ``q_k B`` of the uniform magnetic field; conservative."""
+
+    name = "uniform_field"
+    channels = [("uniform_field", True)]
+
+    def __init__(self, p, state):
+        self.B = np.array(p.forces.uniform_field.B, dtype=np.float64)
+
+    def compute(self, ff, out):
+        np.multiply(ff.tip_charge[:, None], self.B[None, :], out=out["uniform_field"])
+
+    def energy(self, ff):
+        return {"uniform_field": -float(ff.tip_charge @ (ff.position @ self.B))}
+
+    def field_at(self, points, out):
+        out[:] = self.B
+
+
+class PlasmaFilamentForce(Term, FieldSource):
+    """Term 5: ``q_k B_plas(x_k)`` of the plasma current filament along z."""
+
+    name = "plasma_filament"
+    channels = [("plasma_filament", False)]
+
+    def __init__(self, p, state):
+        pf = p.forces.plasma_filament
+        self.args = (float(pf.axis[0]), float(pf.axis[1]), pf.radius, pf.current)
+
+    def compute(self, ff, out):
+        kf.plasma_force_on_tips(ff.position, ff.tip_charge, *self.args, out["plasma_filament"])
+
+    def field_at(self, points, out):
+        kf.plasma_field(points, *self.args, out)
+
+
+class ElectricFieldForce(Term):
+    """Term 7: ``Z_i E`` on each rod centre, shared by its tips; conservative."""
+
+    name = "electric_field"
+    channels = [("electric_field", True)]
+
+    def __init__(self, p, state):
+        self.E = np.array(p.forces.electric_field.E, dtype=np.float64)
+
+    def compute(self, ff, out):
+        share_by_mass(ff.rod_charge[:, None] * self.E[None, :], out["electric_field"])
+
+    def energy(self, ff):
+        return {"electric_field": -float(ff.rod_charge @ (ff.centre() @ self.E))}
+
+
+class ElectrodesForce(Term):
+    """Term 8: the electrode planes push tips back into the gap and brake them (split or explicit)."""
+
+    name = "electrodes"
+    channels = [("electrodes", True), ("electrode_brake", False)]
+
+    def __init__(self, p, state):
+        gap = p.forces.electrodes.gap
+        self.z = (-0.5 * gap, 0.5 * gap)
+        self.rstar = p.rods.rstar
+        self.kappa = p.rods.tip_stiffness
+        self.k = p.forces.tip_brake.coefficient if p.forces.tip_brake is not None else 0.0
+        self.split_mode = p.integrator.brake == "split"
+
+    def compute(self, ff, out):
+        k = 0.0 if self.split_mode else self.k
+        kf.electrode_walls(ff.position, ff.velocity, self.z[0], self.z[1], self.rstar, self.kappa, k,
+                           out["electrodes"], out["electrode_brake"])
+
+    def split(self, ff, dt):
+        z = ff.position[:, 2]
+        touching = (z - self.z[0] < self.rstar).astype(np.float64) + (self.z[1] - z < self.rstar)
+        tips = np.flatnonzero(touching)
+        if not len(tips) or self.k == 0.0:
+            return {}
+        before = kinetic(ff.velocity, tips)
+        ff.velocity[tips] *= np.exp(-self.k * touching[tips] * dt)[:, None]  # dv/dt = -n k v, exactly
+        return {"electrode_brake": kinetic(ff.velocity, tips) - before}
+
+    def energy(self, ff):
+        return {"electrodes": kf.electrode_energy(ff.position, self.z[0], self.z[1], self.rstar, self.kappa)}

@@ -1,0 +1,309 @@
+"""The force field: the container of the terms that are on (docs/model.md 'Force terms').
+
+A :class:`ForceField` is built from the scenario's ``[forces]`` tables; only
+the listed terms are constructed, so a term the scene does not use costs
+nothing (no buffer, no kernel call, no neighbour list). Each term writes its
+force into its own *channel* buffer; the field sums the channels and, for the
+non-conservative channels, the power ``sum_k F_k . v_k`` that the integrator
+turns into work. Conservative channels report a potential energy instead.
+
+The expensive terms (tip-tip sum, Yukawa, the two current terms) compute only the
+rows of the field's :class:`~selfas_graph.parallel.RowBlocks` block of rods and say
+so through :meth:`Term.blocked <selfas_graph.model.terms.base.Term.blocked>`;
+:meth:`ForceField.evaluate` then fills in the other ranks' rows (the gather over
+ranks), so every channel is complete on every rank. With one rank the block is every
+rod and nothing is communicated. Their energies are computed as one value per row,
+gathered the same way and summed over all rows on every rank: the same float whatever
+the number of ranks.
+
+The field also holds what changes during a run besides the state: the rod currents
+(:class:`~selfas_graph.model.terms.currents.RodCurrents`), the neighbour lists, and with
+multiple time stepping the held slow forces
+(:class:`~selfas_graph.model.terms.mts.MultipleTimeStepping`); :meth:`ForceField.state_dict`
+and :meth:`ForceField.load_state_dict` save and restore them for exact restarts.
+"""
+from __future__ import annotations
+
+import time
+from collections import Counter
+
+import numpy as np
+
+from ...parallel import RowBlocks
+from ..neighbours import NeighbourList
+from ..params import Parameters
+from .base import FieldSource
+from .currents import RodCurrents
+from .mts import MultipleTimeStepping
+from .pairs import TipMagneticForce, YukawaForce
+from .registry import TERM_CLASSES
+
+
+class ForceField:
+    """The force terms of one scene, with their buffers and neighbour lists.
+
+    Parameters
+    ----------
+    params : Parameters
+    state : State
+        Supplies the per-tip and per-rod constants (charges) and the sizes.
+    timing : bool
+        Accumulate wall time per term in ``self.seconds`` (for benchmarks).
+    blocks : RowBlocks, optional
+        The rods whose rows this process computes in the expensive terms (default: all of
+        them, a serial run).
+
+    Attributes
+    ----------
+    terms : list of the active term objects, docs/model.md order ('Force terms')
+    channels : list of (name, conservative)
+    field_sources : the terms that are also sources of a magnetic field (FieldSource), in term order
+    rod_currents : RodCurrents, the currents of the last circuit solve
+    mts : MultipleTimeStepping or None (``integrator.slow_every = 1``)
+    calls : Counter of kernel evaluations per term (tests count these)
+    """
+
+    def __init__(self, params: Parameters, state, timing: bool = False, blocks: RowBlocks | None = None):
+        self.params = params
+        self.blocks = RowBlocks(state.n_rods) if blocks is None else blocks
+        if self.blocks.n_rods != state.n_rods:
+            raise ValueError(f"the row blocks cover {self.blocks.n_rods} rods, the state has {state.n_rods}")
+        self.tip_charge = state.tip_charge
+        self.rod_charge = state.rod_charge
+        self.n_tips = state.n_tips
+        self.n_rods = state.n_rods
+        self.terms = [TERM_CLASSES[name](params, state) for name in params.forces.active()]
+        self.channels = [c for t in self.terms for c in t.channels]
+        self.field_sources = [t for t in self.terms if isinstance(t, FieldSource)]
+        self.nonconservative = [name for name, cons in self.channels if not cons]
+        self.conservative = [name for name, cons in self.channels if cons]
+        self.out = {name: np.zeros((self.n_tips, 3)) for name, _ in self.channels}
+        self.total = np.zeros((self.n_tips, 3))
+        self.calls = Counter()
+        self.timing = timing
+        self.seconds = Counter()
+        self._buffers = {}
+        skin = params.neighbours.skin
+        self._tip_nl = None
+        self._centre_nl = None
+        self._tip_range = params.rods.rstar
+        for t in self.terms:
+            if isinstance(t, YukawaForce) and t.cutoff > 0.0:
+                self._centre_nl = NeighbourList(t.cutoff, skin)
+        self._skin = skin
+        self.position = None
+        self.velocity = None
+        # wire radius w = D/2 of the rod currents' field (docs/model.md 'Term 9', choice A5)
+        self.rod_currents = RodCurrents(self.n_rods, wire_radius=0.5 * params.rods.diameter)
+        # multiple time stepping (integrator.slow_every > 1): the slow terms' channels keep their
+        # last evaluation; the tip term's far part is kept apart from its fast close pairs
+        self.multiple_time_stepping = params.integrator.slow_every > 1
+        self.mts = None
+        if self.multiple_time_stepping:
+            tip_term = next((t for t in self.terms if isinstance(t, TipMagneticForce)), None)
+            self.mts = MultipleTimeStepping(params, self.terms, self.out, tip_term)
+            if tip_term is not None:
+                self.extend_tip_range(self.mts.fast_range[1])
+
+    @property
+    def current(self) -> np.ndarray:
+        """Rod currents of the last circuit solve, (n_rods,) float64 (``rod_currents.current``)."""
+        return self.rod_currents.current
+
+    @property
+    def active_rod(self) -> np.ndarray:
+        """The rods that carry current, sorted (``rod_currents.active_rod``)."""
+        return self.rod_currents.active_rod
+
+    def set_currents(self, current):
+        """Rod currents from the last circuit solve, (n_rods,) float64; used from the next evaluation on.
+
+        Rods whose current is exactly zero are left out of the current kernels.
+        """
+        self.rod_currents.set(current)
+        if self.mts is not None:
+            self.mts.currents_changed()
+
+    # -- lazily computed views of the current (position, velocity) ---------------------------------
+    def _bind(self, position, velocity):
+        self.position = position
+        self.velocity = velocity
+        self.rod_currents.position = position
+        self._soa = None
+        self._centre = None
+
+    def soa(self):
+        if self._soa is None:
+            self._soa = tuple(np.ascontiguousarray(self.position[:, d]) for d in range(3))
+        return self._soa
+
+    def centre(self):
+        if self._centre is None:
+            self._centre = 0.5 * (self.position[0::2] + self.position[1::2])
+        return self._centre
+
+    def buffer(self, name, rows):
+        buf = self._buffers.get(name)
+        if buf is None or buf.shape[0] != rows:
+            buf = self._buffers[name] = np.zeros((rows, 3))
+        return buf
+
+    def tip_neighbours(self, position=None) -> NeighbourList:
+        """Tip pairs of different rods closer than the tip range (plus skin), up to date for ``position``.
+
+        The range is r*, or the contact release radius once :meth:`extend_tip_range`
+        was called, so that the brake and the contact search share one list.
+        """
+        if self._tip_nl is None:
+            self._tip_nl = NeighbourList(self._tip_range, self._skin, exclude_same_rod=True)
+        self._tip_nl.update(self.position if position is None else position)
+        return self._tip_nl
+
+    def extend_tip_range(self, radius: float) -> None:
+        """Make the tip neighbour list cover ``radius`` (the contact release radius)."""
+        if radius > self._tip_range:
+            self._tip_range = float(radius)
+            self._tip_nl = None
+
+    def centre_neighbours(self) -> NeighbourList:
+        self._centre_nl.update(self.centre())
+        return self._centre_nl
+
+    # -- evaluation -------------------------------------------------------------------------------
+    def evaluate(self, position, velocity, power=None, full=True, step=None):
+        """Total force on every tip at (position, velocity).
+
+        Parameters
+        ----------
+        position, velocity : (n_tips, 3) float64
+        power : (len(nonconservative),) float64, optional
+            Filled with ``sum_k F_k . v_k`` of each non-conservative channel.
+        full : bool
+            With multiple time stepping: False evaluates only the fast terms, the fast part
+            of the tip-tip force and the slow terms whose inputs changed (new currents), and
+            adds the other slow forces as extrapolated (or held) from their last evaluations.
+            Ignored (always full) without it.
+        step : int, optional
+            The step this evaluation starts (None inside the RK4 stages): the clock of the
+            extrapolation.
+
+        Returns
+        -------
+        (n_tips, 3) float64
+            The summed force (a buffer owned by the field; copy it to keep it).
+        """
+        self._bind(position, velocity)
+        mts = self.mts
+        full = full or mts is None
+        blocked = []
+        refreshed = []
+        for t in self.terms:
+            if t.slow:
+                if not (full or t.name in mts.stale):  # without mts, full is always True
+                    continue
+                refreshed.append(t.name)
+            t0 = time.perf_counter() if self.timing else 0.0
+            t.compute(self, self.out)
+            if not t.counts_own_calls:
+                self.calls[t.name] += 1
+            if self.timing:
+                self.seconds[t.name] += time.perf_counter() - t0
+            blocked.extend(t.blocked(self))
+        if not self.blocks.serial:
+            t0 = time.perf_counter() if self.timing else 0.0
+            self.blocks.gather_rows([self.out[name] for name in blocked], rows_per_rod=2)
+            if self.timing:
+                self.seconds["gather"] += time.perf_counter() - t0
+        if mts is not None:
+            mts.complete(self, refreshed, full, step, self.seconds if self.timing else None)
+        total = self.total
+        total.fill(0.0)
+        for name, _ in self.channels:
+            total += self.out[name]
+        if power is not None:
+            for j, name in enumerate(self.nonconservative):
+                power[j] = np.einsum("ij,ij->", self.out[name], velocity)
+        return total
+
+    def held_forces(self) -> dict:
+        """The slow forces held between full evaluations (multiple time stepping), by name; views, not
+        copies; {} without multiple time stepping (:meth:`MultipleTimeStepping.held_forces`)."""
+        return {} if self.mts is None else self.mts.held_forces()
+
+    # -- the field's own state, for exact restarts -------------------------------------------------
+    def state_dict(self) -> dict:
+        """What the next evaluations depend on besides the positions and velocities, as a flat dict of
+        copies (the checkpoint's keys): the rod currents (``current``), the build positions and build
+        counts of the neighbour lists (``tip_nl_*``, ``centre_nl_*``) and, with multiple time stepping,
+        the held slow forces (``mts_*``, :meth:`MultipleTimeStepping.state_dict`)."""
+        d = {"current": self.current.copy()}
+        if self.mts is not None:
+            d.update(self.mts.state_dict())
+        for name, nl in (("tip_nl", self._tip_nl), ("centre_nl", self._centre_nl)):
+            if nl is not None and nl.reference is not None:
+                d[f"{name}_reference"] = nl.reference.copy()
+                d[f"{name}_builds"] = nl.n_builds
+        return d
+
+    def load_state_dict(self, d: dict) -> None:
+        """Put back what :meth:`state_dict` returned (``d`` may hold other keys too).
+
+        Keys that are missing (a checkpoint of other settings or an older version) leave that part
+        as built: a neighbour list is then built at its next use, and without matching held forces
+        every slow term is computed at the next evaluation.
+        """
+        if "tip_nl_reference" in d:
+            nl = self.tip_neighbours(d["tip_nl_reference"])
+            nl.build(np.array(d["tip_nl_reference"]))
+            nl.n_builds = int(d["tip_nl_builds"])
+        if "centre_nl_reference" in d and self._centre_nl is not None:
+            self._centre_nl.build(np.array(d["centre_nl_reference"]))
+            self._centre_nl.n_builds = int(d["centre_nl_builds"])
+        self.set_currents(np.array(d["current"], dtype=np.float64))
+        if self.mts is not None:
+            self.mts.load_state_dict(d)
+
+    def split_brakes(self, position, velocity, dt, work):
+        """``integrator.brake = "split"``: apply every stiff brake exactly over ``dt`` (velocity in place).
+
+        ``work`` (len(nonconservative),) is incremented by each brake's work.
+        """
+        self._bind(position, velocity)
+        for t in self.terms:
+            for channel, w in t.split(self, dt).items():
+                work[self.nonconservative.index(channel)] += w
+
+    def potential_energy(self, position) -> dict:
+        """Potential energy of each conservative channel at ``position``."""
+        self._bind(position, np.zeros_like(position) if self.velocity is None else self.velocity)
+        energy = {}
+        for t in self.terms:
+            e = t.energy(self)
+            if e:
+                energy.update(e)
+        return energy
+
+    def dominant_channel(self, rows) -> str:
+        """Name of the channel with the largest force on the given tips (for failure diagnoses);
+        a non-finite force (NaN or inf) counts as the largest."""
+        return self.dominant_force(rows)[0]
+
+    def dominant_force(self, rows) -> tuple[str, float]:
+        """(channel, largest force component) of the channel with the largest force on the given
+        tips; NaN counts as inf. ("none", 0.0) without channels."""
+        best, name = -1.0, "none"
+        for ch, _ in self.channels:
+            m = float(np.nan_to_num(np.abs(self.out[ch][rows]), nan=np.inf).max(initial=0.0))
+            if m > best:
+                best, name = m, ch
+        return name, max(best, 0.0)
+
+    def describe(self) -> dict:
+        """Resolved settings derived from the parameters (e.g. the Yukawa cut-off radius)."""
+        d = {"terms": [t.name for t in self.terms]}
+        for t in self.terms:
+            if isinstance(t, TipMagneticForce):
+                d["tip_magnetic_sum"] = f"tree (opening angle {t.theta:g})" if t.tree else "direct"
+            if isinstance(t, YukawaForce):
+                d["yukawa_cutoff"] = t.cutoff
+        return d

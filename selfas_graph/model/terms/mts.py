@@ -1,0 +1,137 @@
+"""Multiple time stepping, ``integrator.slow_every = K > 1``
+(docs/model.md 'Multiple time stepping (`integrator.slow_every`)').
+
+The slow terms (:attr:`Term.slow <selfas_graph.model.terms.base.Term.slow>`: the far tip
+pairs, the Yukawa sum, the rod-current terms) are evaluated on full evaluations only; in
+between, their forces are held, or extrapolated linearly in time from their last two full
+evaluations. The tip-tip force is split: its close pairs (within the fast range) are
+evaluated at every step, its far part (``tip_far``) is held. A slow term whose inputs
+changed (new currents) is *stale* and is computed at the next evaluation, full or not.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+
+class MultipleTimeStepping:
+    """The held slow forces of one :class:`~selfas_graph.model.terms.forcefield.ForceField`.
+
+    Parameters
+    ----------
+    params : Parameters
+    terms : list of Term
+        The field's terms; the slow ones are held.
+    out : dict of (n_tips, 3) arrays
+        The field's channel buffers (the slow channels are held in place there).
+    tip_term : TipMagneticForce or None
+        The tip-tip term, whose fast part is evaluated at every step.
+    """
+
+    def __init__(self, params, terms, out, tip_term=None):
+        ip = params.integrator
+        self.slow_every = ip.slow_every
+        self.out = out
+        self.tip_term = tip_term
+        if tip_term is not None:
+            rstar = params.rods.rstar
+            #: close tip pairs: full force below r_in, switched off smoothly up to r_out
+            self.fast_range = ((ip.fast_range - 1.0) * rstar, ip.fast_range * rstar)
+            self.tip_far = np.zeros_like(out["tip_magnetic"])
+            self._tip_fast = np.zeros_like(out["tip_magnetic"])
+        #: slow term name -> the held arrays it refreshes (``held_forces`` keys)
+        self.slow_keys = {t.name: (["tip_far"] if t is tip_term else [c for c, _ in t.channels])
+                          for t in terms if t.slow}
+        #: slow terms whose inputs changed (new currents): computed at the next evaluation, full or not
+        self.stale = set(self.slow_keys)
+        self._uses_currents = [t.name for t in terms if t.slow and t.uses_currents]
+        self.extrapolate = ip.slow_extrapolation
+        if self.extrapolate:
+            self._base = {k: np.zeros_like(v) for k, v in self.held_forces().items()}
+            self._rate = {k: np.zeros_like(v) for k, v in self.held_forces().items()}
+            self._base_step = {k: None for k in self._base}
+
+    def currents_changed(self) -> None:
+        """New rod currents: the slow terms that read them are computed at the next evaluation."""
+        self.stale.update(self._uses_currents)
+
+    def complete(self, ff, refreshed, full, step, seconds=None) -> None:
+        """After the terms ran: add the tip-tip fast part, extrapolate (or keep) the held forces.
+
+        ``refreshed`` lists the slow terms computed in this evaluation; ``seconds``, a Counter,
+        receives the wall time of the fast part (``tip_magnetic_fast``) if given.
+        """
+        self.stale.clear()
+        fast = None
+        tip_fresh = "tip_magnetic" in refreshed
+        if self.tip_term is not None:
+            t0 = time.perf_counter() if seconds is not None else 0.0
+            fast = self._tip_fast
+            self.tip_term.fast(ff, *self.fast_range, fast)
+            if tip_fresh:
+                np.subtract(self.out["tip_magnetic"], fast, out=self.tip_far)
+            if seconds is not None:
+                seconds["tip_magnetic_fast"] += time.perf_counter() - t0
+        if self.extrapolate:
+            self._extrapolate([k for name in refreshed for k in self.slow_keys[name]], full, step)
+        if fast is not None and not tip_fresh:
+            np.add(self.tip_far, fast, out=self.out["tip_magnetic"])
+
+    def _extrapolate(self, refreshed, full, step):
+        """Linear extrapolation in time of each held slow force from its last two evaluations.
+
+        A force just ``refreshed`` becomes the new base; its rate is the difference from the
+        previous base over the steps between them when both were full evaluations at step
+        starts at most 2 K apart, else zero (after an RK4 start, or when the currents changed:
+        a jump, not a trend). The others are extrapolated to ``step``.
+        """
+        for key, arr in self.held_forces().items():
+            base, rate, prev = self._base[key], self._rate[key], self._base_step[key]
+            if key in refreshed:
+                gap = None if (prev is None or step is None or not full) else step - prev
+                if gap is not None and 0 < gap <= 2 * self.slow_every:
+                    np.subtract(arr, base, out=rate)
+                    rate /= gap
+                else:
+                    rate.fill(0.0)
+                base[:] = arr
+                self._base_step[key] = step if full else None
+            elif prev is not None and step is not None:
+                np.multiply(rate, step - prev, out=arr)
+                arr += base
+
+    def held_forces(self) -> dict:
+        """The slow forces held between full evaluations, by name (the slow channels and ``tip_far``,
+        the tip-tip force less its fast part); views, not copies."""
+        return {key: (self.tip_far if key == "tip_far" else self.out[key])
+                for keys in self.slow_keys.values() for key in keys}
+
+    def state_dict(self) -> dict:
+        """What the next evaluations depend on besides the state, as copies: held forces, the stale
+        terms and, with extrapolation, bases, rates and their steps (flat, checkpoint keys ``mts_*``)."""
+        snap = {f"mts_held_{k}": v.copy() for k, v in self.held_forces().items()}
+        snap["mts_stale"] = np.array([name in self.stale for name in self.slow_keys], dtype=bool)
+        if self.extrapolate:
+            snap.update({f"mts_base_{k}": v.copy() for k, v in self._base.items()})
+            snap.update({f"mts_rate_{k}": v.copy() for k, v in self._rate.items()})
+            snap["mts_base_step"] = np.array([-1 if b is None else b for b in self._base_step.values()],
+                                             dtype=np.int64)
+        return snap
+
+    def load_state_dict(self, snap: dict) -> bool:
+        """Put back what :meth:`state_dict` returned; False (every slow term then computed at the next
+        evaluation) when ``snap`` was taken with other settings, e.g. without multiple time stepping."""
+        mine = self.state_dict()
+        if set(mine) - set(snap) or np.shape(snap["mts_stale"]) != mine["mts_stale"].shape:
+            return False
+        for k, v in self.held_forces().items():
+            v[:] = snap[f"mts_held_{k}"]
+        self.stale = {name for name, flag in zip(self.slow_keys, np.asarray(snap["mts_stale"])) if flag}
+        if self.extrapolate:
+            for k in self._base:
+                self._base[k][:] = snap[f"mts_base_{k}"]
+                self._rate[k][:] = snap[f"mts_rate_{k}"]
+            steps = np.asarray(snap["mts_base_step"])
+            self._base_step = {k: (None if b < 0 else int(b)) for k, b in zip(self._base, steps)}
+        return True

@@ -1,0 +1,152 @@
+"""Pair terms: forces between rods (docs/model.md 'Term 1', 'Term 2', 'Term 6').
+
+The tip-tip magnetic force and the Yukawa repulsion are the expensive sums: they compute
+only the rows of the field's block of rods (:meth:`Term.blocked`) and are slow terms under
+multiple time stepping. The tip brake shares the tip neighbour list with the contact search.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...kernels import pairs as kp
+from ...kernels import tips as kt
+from ...kernels import tree as ktree
+from .base import Term, share_by_mass
+
+
+def yukawa_cutoff(z_max: float, screening: float, tolerance: float) -> float:
+    """Distance beyond which ``z_max^2 exp(-r/R_D) (1/r^2 + 1/(R_D r)) < tolerance``.
+
+    The force magnitude decreases monotonically in r, so bisection on
+    ``[1e-6, 1e6]`` finds the crossing to 1e-12 relative. Returns 0 if no charge.
+    """
+    if z_max <= 0.0:
+        return 0.0
+
+    def f(r):
+        return z_max * z_max * math.exp(-r / screening) * (1.0 / r ** 2 + 1.0 / (screening * r)) - tolerance
+
+    lo, hi = 1e-6, 1e6
+    if f(lo) < 0.0:
+        return lo
+    for _ in range(200):
+        mid = math.sqrt(lo * hi)
+        if f(mid) > 0.0:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo < 1e-12 * hi:
+            break
+    return hi
+
+
+class TipMagneticForce(Term):
+    """Term 1. Slow as a whole; with multiple time stepping the force field adds back the fast
+    part of the close pairs at every evaluation (:meth:`fast`)."""
+
+    name = "tip_magnetic"
+    channels = [("tip_magnetic", True)]
+    slow = True
+
+    def __init__(self, p, state):
+        self.rstar = p.rods.rstar
+        self.kappa = p.rods.tip_stiffness
+        tm = p.forces.tip_magnetic
+        self.tree = tm.method == "tree" or (tm.method == "auto" and state.n_rods >= tm.tree_above)
+        self.theta = tm.opening_angle
+
+    def compute(self, ff, out):
+        x, y, z = ff.soa()
+        lo, hi = ff.blocks.tips
+        if self.tree:
+            try:
+                tree = ktree.build_tip_tree(x, y, z, ff.tip_charge)
+            except ValueError:
+                if np.isfinite(ff.position).all():
+                    raise
+                # NaN or inf positions: no tree can place them; the direct sum passes them on
+                # to the forces, where the run's health check stops with a diagnosis
+            else:
+                ktree.evaluate_tip_tree(tree, self.rstar, self.kappa, self.theta, out["tip_magnetic"], lo, hi)
+                return
+        kt.tip_tip_direct(x, y, z, ff.tip_charge, self.rstar, self.kappa, lo, hi, out["tip_magnetic"])
+
+    def blocked(self, ff):
+        return ("tip_magnetic",)
+
+    def fast(self, ff, r_in, r_out, out):
+        """The fast part of the force, pairs closer than ``r_out`` switched off smoothly from ``r_in`` on."""
+        nl = ff.tip_neighbours()
+        kt.tip_tip_fast(ff.position, ff.tip_charge, nl.start, nl.index, self.rstar, self.kappa, r_in, r_out, out)
+
+    def energy(self, ff):
+        x, y, z = ff.soa()
+        lo, hi = ff.blocks.tips
+        e = np.empty(ff.n_tips)
+        kt.tip_tip_energy(x, y, z, ff.tip_charge, self.rstar, self.kappa, lo, hi, e)
+        ff.blocks.gather_rows([e], rows_per_rod=2)
+        return {"tip_magnetic": float(e.sum())}
+
+
+class TipBrakeForce(Term):
+    name = "tip_brake"
+    channels = [("tip_brake", False)]
+
+    def __init__(self, p, state):
+        self.rstar = p.rods.rstar
+        self.k = p.forces.tip_brake.coefficient
+        self.split_mode = p.integrator.brake == "split"
+
+    def compute(self, ff, out):
+        if self.split_mode:
+            out["tip_brake"].fill(0.0)
+            return
+        nl = ff.tip_neighbours()
+        kp.tip_brake(ff.position, ff.velocity, nl.start, nl.index, self.rstar, self.k, out["tip_brake"])
+
+    def split(self, ff, dt):
+        nl = ff.tip_neighbours()
+        pairs = kp.close_pairs(ff.position, nl.start, nl.index, self.rstar)
+        if not len(pairs):
+            return {}
+        return {"tip_brake": kp.brake_pairs_exact(ff.velocity, pairs, self.k, dt)}
+
+
+class YukawaForce(Term):
+    name = "yukawa"
+    channels = [("yukawa", True)]
+    slow = True
+
+    def __init__(self, p, state):
+        y = p.forces.yukawa
+        self.screening = y.screening_length
+        self.core = y.core_radius
+        zmax = float(np.abs(state.rod_charge).max(initial=0.0))
+        self.cutoff = yukawa_cutoff(zmax, y.screening_length, y.tolerance)
+
+    def compute(self, ff, out):
+        if self.cutoff == 0.0:  # no rod is charged: the term is zero
+            out["yukawa"].fill(0.0)
+            return
+        nl = ff.centre_neighbours()
+        f = ff.buffer("yukawa_centre", ff.n_rods)
+        lo, hi = ff.blocks.rods
+        kp.yukawa_centres(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.core, self.cutoff,
+                          lo, hi, f)
+        share_by_mass(f[lo:hi], out["yukawa"][2 * lo:2 * hi])
+
+    def blocked(self, ff):
+        return ("yukawa",) if self.cutoff > 0.0 else ()
+
+    def energy(self, ff):
+        if self.cutoff == 0.0:
+            return {"yukawa": 0.0}
+        nl = ff.centre_neighbours()
+        lo, hi = ff.blocks.rods
+        e = np.empty(ff.n_rods)
+        kp.yukawa_energy(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.core, self.cutoff,
+                         lo, hi, e)
+        ff.blocks.gather_rows([e], rows_per_rod=1)
+        return {"yukawa": float(e.sum())}
