@@ -370,6 +370,11 @@ def compare_main(ap, args):
 def main(argv=None):
     ap = build_parser()
     args = ap.parse_args(argv)
+    if args.plot:  # before any run, not after an hour of them
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            ap.error('--plot needs matplotlib: pip install "selfas-graph[plot]"')
     if args.compare:
         return compare_main(ap, args)
     missing = [name for name, v in (("SCENARIO", args.scenario), ("--seeds", args.seeds), ("--t-max", args.t_max),
