@@ -270,14 +270,15 @@ def plot(result, path):
     frac = [d["fraction"] if d["fraction"] is not None else float("nan") for d in dens]
     lo = [f - d["fraction_ci95"][0] if d["fraction_ci95"] else 0.0 for f, d in zip(frac, dens)]
     hi = [d["fraction_ci95"][1] - f if d["fraction_ci95"] else 0.0 for f, d in zip(frac, dens)]
-    ax1.errorbar(rho, frac, yerr=[lo, hi], marker="o", capsize=3)
+    ax1.errorbar(rho, frac, yerr=[lo, hi], marker="o", ms=4, lw=1.2, capsize=3)
+    ax1.set_xscale("log")
     ax1.set_xlabel("rods per unit volume (L$^{-3}$)")
     ax1.set_ylabel(f"fraction short-circuited by t = {t_max:g}")
     ax1.set_ylim(-0.03, 1.03)
-    ax1.set_title("short circuit vs density (95% Wilson CI)")
+    ax1.set_title("Short circuit against density (95 % Wilson intervals)", fontsize=10)
     vrod = result["rod_volume"]
     top = ax1.secondary_xaxis("top", functions=(lambda x: x * vrod, lambda x: x / vrod))
-    top.set_xlabel("volume fraction")
+    top.set_xlabel(r"rod volume fraction $\phi$")
     ax1.grid(alpha=0.3)
     for d in dens:
         curve = d["km"]
@@ -291,12 +292,13 @@ def plot(result, path):
             ax2.plot([t_max], [fs[-1]], marker=">", color=line.get_color(), clip_on=False)
     ax2.set_xlim(0.0, t_max)
     ax2.set_ylim(-0.03, 1.03)
-    ax2.set_xlabel("short-circuit time")
+    ax2.set_xlabel("short-circuit time (t$_0$)")
     ax2.set_ylabel("fraction of runs short-circuited (Kaplan-Meier)")
-    ax2.set_title("distribution of short-circuit times\n(runs without one are censored: > t_max, arrow)")
+    ax2.set_title("Distribution of short-circuit times\n(runs without one by t$_{max}$ are censored: arrow)", fontsize=10)
     ax2.grid(alpha=0.3)
     ax2.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, labelspacing=0.9)
-    fig.suptitle(f"{Path(result['scenario']).name}: {len(result['seeds'])} seeds per density", fontsize=10)
+    fields = "" if fields_of(result) == "on" else ", without the magnetic and current terms"
+    fig.suptitle(f"Scene '{result['scenario_name']}'{fields}: {len(result['seeds'])} seeds per density", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
