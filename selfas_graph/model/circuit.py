@@ -43,7 +43,8 @@ from scipy.sparse.linalg import cg, splu
 
 from selfas_graph.kernels.graph import component_labels
 
-__all__ = ["CircuitSolution", "NetworkSolution", "solve_circuit", "solve_network", "merge_tips", "SOLVERS"]
+__all__ = ["CircuitSolution", "NetworkSolution", "SolveMemo", "solve_circuit", "solve_network", "merge_tips",
+           "SOLVERS"]
 
 #: linear solvers for the reduced system (``solve_circuit(..., solver=...)``)
 SOLVERS = ("direct", "cg", "auto")
@@ -224,12 +225,8 @@ def _solve_direct(A: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
 AUTO_CG_UNKNOWNS = 50_000
 
 
-#: the last reduced system solved and its solution: ``(key, x)`` (see :func:`_solve_spd`)
-_last_system: tuple[tuple, np.ndarray] | None = None
-
-
-def _solve_spd(A: sp.csc_matrix, b: np.ndarray, solver: str) -> np.ndarray:
-    """Solve the reduced system with ``solver`` ("direct", "cg" or "auto", see :func:`solve_circuit`).
+class SolveMemo:
+    """The last reduced system solved and its solution, for one caller (a :class:`~.network.Network`).
 
     A system equal, byte for byte, to the last one solved (matrix in compressed columns,
     right-hand side, solver) returns a copy of the last solution: the solvers are
@@ -237,15 +234,36 @@ def _solve_spd(A: sp.csc_matrix, b: np.ndarray, solver: str) -> np.ndarray:
     Fig. 2 run after the short circuit about half of the solves meet an unchanged system
     (the contact events fell in structures without current), and the factorisation is
     about half of a solve (docs/performance.md, "Topology and circuit per event").
+    A memo only saves time: a solve without one gives the same bits.
     """
-    global _last_system
-    key = (solver, A.shape, A.indptr.tobytes(), A.indices.tobytes(), A.data.tobytes(), b.tobytes())
-    last = _last_system
-    if last is not None and last[0] == key:
-        return last[1].copy()
-    x = _solve_spd_new(A, b, solver)
-    _last_system = (key, x.copy())
-    return x
+
+    def __init__(self):
+        self.key: tuple | None = None
+        self.solution: np.ndarray | None = None
+        #: number of systems solved afresh and answered from the memo
+        self.solved = 0
+        self.reused = 0
+
+    def clear(self) -> None:
+        self.key = self.solution = None
+
+    def solve(self, A: sp.csc_matrix, b: np.ndarray, solver: str) -> np.ndarray:
+        key = (solver, A.shape, A.indptr.tobytes(), A.indices.tobytes(), A.data.tobytes(), b.tobytes())
+        if self.key is not None and self.key == key:
+            self.reused += 1
+            return self.solution.copy()
+        x = _solve_spd_new(A, b, solver)
+        self.key, self.solution = key, x.copy()
+        self.solved += 1
+        return x
+
+
+def _solve_spd(A: sp.csc_matrix, b: np.ndarray, solver: str, memo: SolveMemo | None = None) -> np.ndarray:
+    """Solve the reduced system with ``solver`` ("direct", "cg" or "auto", see :func:`solve_circuit`),
+    through ``memo`` when one is given (:class:`SolveMemo`)."""
+    if memo is not None:
+        return memo.solve(A, b, solver)
+    return _solve_spd_new(A, b, solver)
 
 
 def _solve_spd_new(A: sp.csc_matrix, b: np.ndarray, solver: str) -> np.ndarray:
@@ -278,7 +296,7 @@ def _as_resistance(value, name: str, m: int, allow_zero: bool) -> np.ndarray:
     return np.ascontiguousarray(arr)
 
 
-def _potentials(n_nodes, u, v, g, is_dir, psi_dir, solver) -> np.ndarray:
+def _potentials(n_nodes, u, v, g, is_dir, psi_dir, solver, memo=None) -> np.ndarray:
     """Node potentials of a resistor network with Dirichlet nodes (NaN where floating).
 
     ``u``, ``v`` are the resistors' end nodes (``u != v``), ``g`` their conductances.
@@ -323,7 +341,7 @@ def _potentials(n_nodes, u, v, g, is_dir, psi_dir, solver) -> np.ndarray:
         b = np.bincount(
             iu[u_to_d], weights=g[u_to_d] * psi_dir[v[u_to_d]], minlength=n_int
         ) + np.bincount(iv[v_to_d], weights=g[v_to_d] * psi_dir[u[v_to_d]], minlength=n_int)
-        psi[interior] = _solve_spd(A, b, solver)
+        psi[interior] = _solve_spd(A, b, solver, memo)
     return psi, comp, comp_active
 
 
@@ -360,16 +378,19 @@ class NetworkSolution:
     kirchhoff_residual: float
 
 
-def _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, resistance_is_one=False):
+def _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, resistance_is_one=False, memo=None,
+           merged=None):
     """Core of :func:`solve_network` on validated arrays; see there.
 
     ``resistance_is_one``: every resistance is 1 (the default rods); the currents
-    are then the potential differences themselves, with no division.
+    are then the potential differences themselves, with no division. ``memo``: a
+    :class:`SolveMemo`. ``merged``: ``(n_merged, node_of)``, the merge of the nodes by the
+    ideal edges when the caller has it already (it must be what :func:`merge_tips` gives).
     """
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     ideal = resistance == 0.0
-    n_merged, node_of = merge_tips(n_nodes, edges[ideal])
+    n_merged, node_of = merge_tips(n_nodes, edges[ideal]) if merged is None else merged
 
     # Dirichlet values: mean of the given potentials of the fixed nodes in each merged node
     cnode = node_of[fixed_node]
@@ -388,7 +409,7 @@ def _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, resi
     g_all = 1.0 / r_all
     keep = u_all != v_all
     psi, comp, comp_active = _potentials(
-        n_merged, u_all[keep], v_all[keep], g_all[keep], is_dir, psi_dir, solver
+        n_merged, u_all[keep], v_all[keep], g_all[keep], is_dir, psi_dir, solver, memo
     )
 
     psi0 = np.where(np.isnan(psi), 0.0, psi)
@@ -431,7 +452,8 @@ def _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, resi
     )
 
 
-def solve_network(n_nodes, edges, resistance, fixed_node, fixed_potential, solver: str = "direct") -> NetworkSolution:
+def solve_network(n_nodes, edges, resistance, fixed_node, fixed_potential, solver: str = "direct",
+                  memo: SolveMemo | None = None) -> NetworkSolution:
     """Solve Kirchhoff's laws on any network of resistors with nodes of fixed potential.
 
     The general form of the nodal analysis of :func:`solve_circuit` (docs/model.md
@@ -457,6 +479,8 @@ def solve_network(n_nodes, edges, resistance, fixed_node, fixed_potential, solve
         The potential of each entry of ``fixed_node`` (units R0 J0).
     solver : {"direct", "cg", "auto"}
         As in :func:`solve_circuit`.
+    memo : SolveMemo, optional
+        As in :func:`solve_circuit`.
 
     Returns
     -------
@@ -468,12 +492,12 @@ def solve_network(n_nodes, edges, resistance, fixed_node, fixed_potential, solve
     fixed_node = _as_index_array(fixed_node, "fixed_node", 1, n_nodes)
     fixed_potential = _as_potentials(fixed_potential, fixed_node, "fixed_potential", "fixed_node", "fixed node entry",
                                      "node")
-    return _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver)
+    return _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, memo=memo)
 
 
 def solve_circuit(
     n_tips, tip_contacts, conductor_tip, conductor_potential, solver: str = "direct",
-    rod_resistance=None, contact_resistance: float = 0.0,
+    rod_resistance=None, contact_resistance: float = 0.0, memo: SolveMemo | None = None, merged=None,
 ) -> CircuitSolution:
     """Solve Kirchhoff's laws on the rod network.
 
@@ -506,6 +530,12 @@ def solve_circuit(
         0 (default): ideal contacts, tips in contact merged into one node. r > 0:
         every contact is a resistor r, and each conductor contact joins its tip to
         a node of its own held at the contact's potential.
+    memo : SolveMemo, optional
+        The caller's memo of the last reduced system (a run's :class:`~.network.Network`
+        holds one); without it every call solves afresh, with the same bits.
+    merged : (n_nodes, node_of_tip), optional
+        The merge of the tips by their contacts (:func:`merge_tips`), when the caller has it
+        already (:class:`~.graph.Topology` carries it); used with ideal contacts only.
 
     Returns
     -------
@@ -537,9 +567,16 @@ def solve_circuit(
     edges[n_rods + m:, 0] = conductor_tip
     edges[n_rods + m:, 1] = n_tips + np.arange(k)
     resistance = np.concatenate([r_rod, np.full(m + k, r_contact)])
+    if merged is not None and r_contact == 0.0:
+        # conductor contact j is node n_tips + j, joined to its tip by an ideal edge: it takes the
+        # tip's merged node, and the numbering (by smallest member, always a tip) is merge_tips'
+        n_merged, node_of_tip = merged
+        merged = (int(n_merged), np.concatenate([node_of_tip, node_of_tip[conductor_tip]]))
+    else:
+        merged = None
     net = _solve(
         n_tips + k, edges, resistance, n_tips + np.arange(k), conductor_potential, solver,
-        resistance_is_one=unit and r_contact == 0.0,
+        resistance_is_one=unit and r_contact == 0.0, memo=memo, merged=merged,
     )
     current = net.current[:n_rods]
     assert current.shape == (n_rods,)
