@@ -27,7 +27,7 @@ import numpy as np
 
 #: attribute names (any group) that differ between two runs of the same scene by design
 VOLATILE = ("created", "creation_time", "date", "version", "program_version", "wall", "elapsed",
-            "steps_per_second", "hostname", "host", "cpu", "run_file", "git", "command")
+            "steps_per_second", "hostname", "host", "cpu", "run_file", "git", "command", "run_id")
 
 
 def _volatile(name: str) -> bool:
