@@ -153,13 +153,14 @@ def test_unchanged_system_is_not_factorised_again(monkeypatch):
     without a new factorisation; a changed system is solved afresh; the returned arrays are
     copies; a solve without a memo, or with another memo, gives the same bits."""
     import selfas_graph.model.circuit as circuit
+    import selfas_graph.model.linear as linear
 
     rng = np.random.default_rng(11)
     tc, ct, cid = aggregate(600, rng, loops=0.3)
     pot = np.where(cid == A, 1.115, -1.115)
     calls = []
-    inner = circuit._solve_spd_new
-    monkeypatch.setattr(circuit, "_solve_spd_new", lambda *a: calls.append(1) or inner(*a))
+    inner = linear._solve_spd_new
+    monkeypatch.setattr(linear, "_solve_spd_new", lambda *a: calls.append(1) or inner(*a))
     memo = circuit.SolveMemo()
     first = solve_circuit(1200, tc, ct, pot, memo=memo)
     # a contact between two free rods far from any current leaves the reduced system as it is

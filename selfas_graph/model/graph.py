@@ -11,50 +11,41 @@ The roles and the topology rule are in :mod:`.topology`; their names are importa
 """
 from __future__ import annotations
 
-import operator
 from collections.abc import Callable, Iterable, Mapping
 
 import numpy as np
 
 from selfas_graph.model import events as ev
-from selfas_graph.model.circuit import (
-    CircuitSolution,
-    SolveMemo,
-    _as_count,
-    _as_index_array,
-    _as_resistance,
-    _frozen,
-    solve_circuit,
-)
 from selfas_graph.model.topology import (
     CLUSTER,
     DEAD_END,
     FILAMENT,
     FREE,
     ROLE_NAMES,
+    ContactArrays,
     Topology,
     circuit_event,
     classify_rods,
-    conductor_node_key,
+)
+from selfas_graph.model.validate import (
+    _as_count,
+    _as_index_array,
+    _as_resistance,
+    _frozen,
+    conductor_id,
+    finite_potential,
+    tip_index,
+    tip_pair,
 )
 
-__all__ = [
-    "FREE",
-    "CLUSTER",
-    "DEAD_END",
-    "FILAMENT",
-    "ROLE_NAMES",
-    "Topology",
-    "classify_rods",
-    "ConnectivityGraph",
-]
+__all__ = ["FREE", "CLUSTER", "DEAD_END", "FILAMENT", "ROLE_NAMES", "Topology", "classify_rods", "ConnectivityGraph"]
 
 
 # --------------------------------------------------------------------------- state
 _DERIVED_KINDS = (ev.SHORT_CIRCUIT, ev.OPEN_CIRCUIT)
 
 
-class ConnectivityGraph:
+class ConnectivityGraph(ContactArrays):
     """Connectivity state of the rods: the rods (fixed) and the contacts, changed by events only.
 
     Tips ``0 .. n_tips-1``; rod ``i`` joins tips ``2 i`` and ``2 i + 1``. A contact joins two
@@ -117,29 +108,13 @@ class ConnectivityGraph:
         self.changed = True  # nothing solved yet
 
     # ------------------------------------------------------------------ validation
-    @staticmethod
-    def _conductor_id(c) -> int:
-        try:
-            return operator.index(c)
-        except TypeError:
-            raise ValueError(f"conductor id must be an integer, got {c!r}") from None
+    _conductor_id = staticmethod(conductor_id)
 
     def _tip(self, k, name: str = "tip") -> int:
-        try:
-            k = operator.index(k)
-        except TypeError:
-            raise ValueError(f"{name} must be an integer, got {k!r}") from None
-        if not 0 <= k < self.n_tips:
-            raise ValueError(f"{name} {k} out of range [0, {self.n_tips})")
-        return k
+        return tip_index(k, self.n_tips, name)
 
     def _tip_pair(self, k, l) -> tuple[int, int]:
-        k, l = self._tip(k), self._tip(l)
-        if k // 2 == l // 2:
-            raise ValueError(
-                f"tips {k} and {l} are the two tips of rod {k // 2}: a rod cannot touch itself"
-            )
-        return (k, l) if k < l else (l, k)
+        return tip_pair(k, l, self.n_tips)
 
     def _known_conductor(self, c) -> int:
         c = self._conductor_id(c)
@@ -233,12 +208,7 @@ class ConnectivityGraph:
         self.changed = True
         self._arrays = None
 
-    @staticmethod
-    def _finite(potential, k, c) -> float:
-        pot = float(potential)
-        if not np.isfinite(pot):
-            raise ValueError(f"potential of tip {k} on conductor {c} must be finite, got {pot}")
-        return pot
+    _finite = staticmethod(finite_potential)
 
     # ------------------------------------------------------------------ events
     def apply(
@@ -349,47 +319,8 @@ class ConnectivityGraph:
             }
         return dict(self._arrays)
 
-    def conductor_node_key(self, arrays: dict[str, np.ndarray] | None = None) -> np.ndarray:
-        """Attachment key of each conductor contact of :meth:`arrays` (see :func:`classify_rods`).
-
-        Fixed-potential conductor ``c`` -> ``c``; per-contact conductors -> a key
-        unique to the contact, above every conductor id.
-        """
-        arrays = self.arrays() if arrays is None else arrays
-        return conductor_node_key(arrays["conductor_id"], self._per_contact, list(self._fixed) + list(self._per_contact))
-
-    def topology(self) -> Topology:
-        """Roles and structures of the current graph (cached until the next contact change)."""
-        if self._topology is None:
-            arr = self.arrays()
-            self._topology = classify_rods(
-                self.n_rods, arr["tip_contacts"], arr["conductor_tip"], self.conductor_node_key(arr)
-            )
-        return self._topology
-
-    def solve(self, memo: SolveMemo | None = None) -> CircuitSolution:
-        """Potentials and rod currents of the current graph; clears :attr:`changed`.
-
-        ``memo``: a :class:`~.circuit.SolveMemo` that remembers the last reduced system.
-        Raises ValueError if a per-contact potential is unset.
-        """
-        arr = self.arrays()
-        pot = arr["conductor_potential"]
-        if np.isnan(pot).any():
-            i = np.flatnonzero(np.isnan(pot))
-            pairs = list(zip(arr["conductor_tip"][i].tolist(), arr["conductor_id"][i].tolist()))
-            raise ValueError(f"unset contact potential for (tip, conductor) {pairs[:10]}")
-        topo = self.topology()
-        sol = solve_circuit(self.n_tips, arr["tip_contacts"], arr["conductor_tip"], pot, solver=self.solver,
-                            rod_resistance=self.rod_resistance, contact_resistance=self.contact_resistance,
-                            memo=memo, merged=(topo.n_nodes, topo.node_of_tip))
-        self.changed = False
-        return sol
-
-    @property
-    def has_short_circuit(self) -> bool:
-        """Whether a filament joins two different conductor attachments now."""
-        return self.topology().has_short_circuit
+    def _conductors(self) -> tuple[set, list]:
+        return self._per_contact, list(self._fixed) + list(self._per_contact)
 
     def to_networkx(self):
         """The graph as a new ``networkx.Graph`` (a copy: changing it does not change this object).

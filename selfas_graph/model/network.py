@@ -23,9 +23,10 @@ import dataclasses
 import numpy as np
 
 from . import events as ev
-from .circuit import CircuitSolution, SolveMemo, _frozen, solve_circuit
+from .circuit import CircuitSolution, SolveMemo
 from .contacts import ContactTracker
-from .topology import FILAMENT, Topology, circuit_event, classify_rods, conductor_node_key
+from .topology import FILAMENT, ContactArrays, Topology, circuit_event
+from .validate import _frozen
 
 __all__ = ["Network", "NetworkUpdate"]
 
@@ -54,7 +55,7 @@ class NetworkUpdate:
     changed: bool = False
 
 
-class Network:
+class Network(ContactArrays):
     """Contacts, connectivity, conductor potentials and circuit of a run.
 
     Parameters
@@ -215,31 +216,19 @@ class Network:
                             "conductor_potential": _frozen(np.ascontiguousarray(pot[order]))}
         return dict(self._arrays)
 
+    def _conductors(self) -> tuple[set, list]:
+        return {c for c, p in self.conductor_potential.items() if p is None}, list(self.conductor_potential)
+
     def topology(self) -> Topology:
         """Roles and structures of the rods (cached until the contacts change)."""
-        if self._topology is None:
-            arr = self.arrays()
-            per = {c for c, p in self.conductor_potential.items() if p is None}
-            key = conductor_node_key(arr["conductor_id"], per, list(self.conductor_potential))
-            self._topology = classify_rods(self.n_rods, arr["tip_contacts"], arr["conductor_tip"], key)
-            self._short = self._topology.has_short_circuit
-        return self._topology
+        topo = super().topology()
+        self._short = topo.has_short_circuit
+        return topo
 
-    @property
-    def has_short_circuit(self) -> bool:
-        """Whether a filament joins two different conductor attachments now."""
-        return self.topology().has_short_circuit
-
-    def solve(self) -> CircuitSolution:
-        """Potentials and rod currents of the present contacts (through :attr:`memo`); clears
-        :attr:`changed`."""
-        arr, topo = self.arrays(), self.topology()
-        sol = solve_circuit(self.n_tips, arr["tip_contacts"], arr["conductor_tip"], arr["conductor_potential"],
-                            solver=self.solver, rod_resistance=self.rod_resistance,
-                            contact_resistance=self.contact_resistance, memo=self.memo,
-                            merged=(topo.n_nodes, topo.node_of_tip))
-        self.changed = False
-        return sol
+    def solve(self, memo: SolveMemo | None = None) -> CircuitSolution:
+        """Potentials and rod currents of the present contacts, through :attr:`memo` unless another
+        memo is given; clears :attr:`changed`."""
+        return super().solve(self.memo if memo is None else memo)
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict:

@@ -17,8 +17,16 @@ on, before a checkpoint) and ``finish(sim)`` (after the last step of a run).
 """
 from __future__ import annotations
 
-__all__ = ["Trigger", "Periodic", "Always", "When", "Operation", "PerStepRows", "FrameWriter", "EnergyCheck", "Progress",
+__all__ = ["RunInterrupted", "Trigger", "Periodic", "Always", "When", "Operation", "PerStepRows", "FrameWriter", "EnergyCheck", "Progress",
            "StopCheck", "Checkpoint"]
+
+
+class RunInterrupted(Exception):
+    """The run was asked to stop (a signal); a checkpoint was written if a checkpointer was given."""
+
+    def __init__(self, step):
+        super().__init__(f"interrupted at step {step}")
+        self.step = step
 
 
 class Trigger:
@@ -168,15 +176,13 @@ class Checkpoint(Operation):
 
 class StopCheck(Operation):
     """Stops the run when ``stop()`` is true: writes a checkpoint (with ``checkpoint``, a
-    :class:`Checkpoint`) and raises :class:`~.simulation.RunInterrupted`."""
+    :class:`Checkpoint`) and raises :class:`RunInterrupted`."""
 
     def __init__(self, stop, checkpoint: Checkpoint | None = None):
         self.trigger = When(stop)
         self.checkpoint = checkpoint
 
     def act(self, sim, i, n_steps):
-        from .simulation import RunInterrupted
-
         if self.checkpoint is not None:
             self.checkpoint.act(sim, i, n_steps)
         raise RunInterrupted(sim.state.step)
