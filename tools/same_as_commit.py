@@ -7,7 +7,7 @@ Usage::
 
 For each scenario, exports ``REV`` (default ``HEAD``) with ``git archive`` into a temporary
 folder, runs ``selfas-graph simulate`` once with that code and once with the working tree
-(same Python, same thread count: ``NUMBA_NUM_THREADS`` and ``OMP_NUM_THREADS`` are set to
+(same Python, run from a temporary folder, each checked to import the code meant; same thread count: ``NUMBA_NUM_THREADS`` and ``OMP_NUM_THREADS`` are set to
 ``--threads``, default 1), and compares the two run files with ``tools/same_run.py``. The
 ``--set`` overrides apply to every scenario. A scenario may carry its own overrides after a
 ``+``: ``scenarios/fig8_quick.toml+run.t_end=6+forces.external_filament.diameter=0.6``.
@@ -35,14 +35,24 @@ sys.path.insert(0, str(HERE))
 
 from same_run import compare  # noqa: E402
 
+#: run in the code folder given by PYTHONPATH, and check that it is that code which runs (the
+#: working tree's editable install, or a current folder holding selfas_graph, would win otherwise)
+RUNNER = """import sys
+from pathlib import Path
+import selfas_graph
+assert Path(selfas_graph.__file__).resolve().parent.parent == Path(sys.argv.pop(1)).resolve(), selfas_graph.__file__
+from selfas_graph.cli.main import main
+sys.exit(main())
+"""
 
-def _simulate(code: Path, scenario: str, sets: list[str], out: Path, threads: int) -> None:
+
+def _simulate(code: Path, scenario: str, sets: list[str], out: Path, threads: int, cwd: Path) -> None:
     env = dict(os.environ, PYTHONPATH=str(code), NUMBA_NUM_THREADS=str(threads), OMP_NUM_THREADS=str(threads))
-    cmd = [sys.executable, "-c", "import sys; from selfas_graph.cli.main import main; sys.exit(main())",
-           "simulate", scenario, "-o", str(out), "--progress", "none", "--force"]
+    cmd = [sys.executable, "-c", RUNNER, str(code), "simulate", str(Path(scenario).resolve()), "-o", str(out),
+           "--progress", "none", "--force"]
     for s in sets:
         cmd += ["--set", s]
-    r = subprocess.run(cmd, env=env, cwd=ROOT, capture_output=True, text=True)
+    r = subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True)
     if r.returncode != 0:
         raise SystemExit(f"{code}: simulate {scenario} failed (exit {r.returncode}):\n{r.stdout}{r.stderr}")
 
@@ -62,7 +72,7 @@ def main(argv=None) -> int:
         archive = subprocess.run(["git", "archive", args.commit, "selfas_graph"], cwd=ROOT, capture_output=True,
                                  check=True).stdout
         subprocess.run(["tar", "-x", "-C", str(base)], input=archive, check=True)
-        out_dir = args.keep or tmp
+        out_dir = (args.keep or tmp).resolve()
         out_dir.mkdir(parents=True, exist_ok=True)
         failed = 0
         for i, spec in enumerate(args.scenarios):
@@ -70,8 +80,8 @@ def main(argv=None) -> int:
             sets = args.set + own
             name = f"{i}_{Path(scenario).stem}"
             before, after = out_dir / f"{name}_commit.h5", out_dir / f"{name}_tree.h5"
-            _simulate(base, scenario, sets, before, args.threads)
-            _simulate(ROOT, scenario, sets, after, args.threads)
+            _simulate(base, scenario, sets, before, args.threads, tmp)
+            _simulate(ROOT, scenario, sets, after, args.threads, tmp)
             counts: dict = {}
             diffs = compare(before, after, counts=counts)
             for line in diffs:
