@@ -95,7 +95,8 @@ class Network(ContactArrays):
         self.contact_resistance = float(contact_resistance)
         conductors = {}
         if electrodes is not None:
-            half = 0.5 * self.bias * (electrodes[1] - electrodes[0]) + 0.0  # + 0.0: no negative zero without a bias
+            # the planes are -+gap/2, so their distance is the gap exactly; + 0.0: no negative zero without a bias
+            half = 0.5 * self.bias * (electrodes[1] - electrodes[0]) + 0.0
             conductors = {ev.CONDUCTOR_CATHODE: -half + 0.0, ev.CONDUCTOR_ANODE: half}
         if filament_radius is not None:
             conductors[ev.CONDUCTOR_FILAMENT] = None  # psi = -delta_J0 z per contact (docs/model.md 'Circuit')

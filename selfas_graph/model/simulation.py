@@ -156,6 +156,8 @@ class Simulation(HealthChecks, Observables):
         snap.update(max_bond_error=self.max_bond_error, energy0=np.nan if self._energy0 is None else self._energy0,
                     events=np.array([tuple(r) for r in self.events], dtype=ev.EVENT_DTYPE),
                     short_circuit_time=np.nan if self.short_circuit_time is None else self.short_circuit_time)
+        if self.network is not None:
+            snap.update(self.network.state_dict())
         # -- force field: currents in use, held slow forces, neighbour lists
         ff = self.force_field
         snap["current"] = ff.current.copy()
@@ -165,8 +167,6 @@ class Simulation(HealthChecks, Observables):
                 snap[f"{name}_reference"] = nl.reference.copy()
                 snap[f"{name}_builds"] = nl.n_builds
         # -- end of the force field's part
-        if self.network is not None:
-            snap.update(self.network.state_dict())
         return snap
 
     @classmethod
