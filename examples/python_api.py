@@ -51,7 +51,7 @@ out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(tempfile.mkdtemp()) / "co
 with sg.RunWriter.for_simulation(sim, out, overwrite=True) as writer:
     for t_end in (0.1, 0.2, 0.3):
         sim.run(t_end, writer=writer)
-        role = sim.graph.topology().role
+        role = sim.network.topology().role
         names = [sg.ROLE_NAMES[int(r)] for r in role]
         current = sim.force_field.current
         print(f"t = {sim.state.time:.3f}: roles {names[:3]} (column), {names[3]} (free); "

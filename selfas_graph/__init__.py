@@ -13,11 +13,12 @@ The Python API a script or notebook uses::
     sim = sg.Simulation(params)
     with sg.RunWriter.for_simulation(sim, "mine.h5") as out:
         sim.run(1.0, writer=out)                             # in chunks: run(1.0), run(2.0), ...
+    sim.operations.append(my_operation)   # an sg.Operation with a trigger, e.g. sg.Periodic(100)
 
 A worked example: examples/python_api.py.
 
 Layers: :mod:`selfas_graph.kernels` (numba, arrays only), :mod:`selfas_graph.model`
-(state, forces, integrator, events, graph, circuit), and the edges
+(state, forces, integrator, network: contacts, graph, circuit; operations), and the edges
 :mod:`selfas_graph.io` (scenarios, HDF5), :mod:`selfas_graph.cli`,
 :mod:`selfas_graph.parallel` (MPI).
 """
@@ -28,6 +29,8 @@ from .io.scenario import Scenario, ScenarioError, load_scenario, parameters_from
 from .model.circuit import CircuitSolution, solve_circuit
 from .model.events import Event, EventKind, named_events
 from .model.graph import ROLE_NAMES, ConnectivityGraph, classify_rods
+from .model.network import Network
+from .model.operations import Operation, Periodic
 from .model.params import Parameters
 from .model.simulation import NumericalFailure, RunSummary, Simulation
 from .model.state import PlacementError, State, StateError, random_state
@@ -37,4 +40,5 @@ __all__ = [
     "Parameters", "Simulation", "RunSummary", "NumericalFailure", "State", "StateError", "random_state",
     "PlacementError", "RunFile", "RunFileError", "RunWriter", "export_run", "ExportError", "solve_circuit",
     "CircuitSolution", "ConnectivityGraph", "classify_rods", "ROLE_NAMES", "Event", "EventKind", "named_events",
+    "Network", "Operation", "Periodic",
 ]

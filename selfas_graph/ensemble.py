@@ -220,7 +220,7 @@ def run_seed(task: dict) -> dict:
             out["status"], out["message"] = "interrupted", f"stopped at step {exc.step}; checkpoint {ckpt}"
         except NumericalFailure as exc:
             failure = path.with_name(path.stem + ".failure.h5")
-            sim._flush_pending(writer)  # the events and per-step rows up to the failure, as simulate does
+            sim.flush_output(writer)  # the events and per-step rows up to the failure, as simulate does
             writer.close(status=f"failed: {exc}")
             write_checkpoint(failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step,
                                                        "failure": str(exc)})

@@ -253,7 +253,7 @@ def test_case_ii_rod_along_filament():
     g.add_conductor_contact(0, F, -delta * 0.4)
     g.add_conductor_contact(1, F, -delta * 1.4)
     g.add_conductor_contact(3, F, -delta * 3.0)
-    assert ("contact", 0, F) in g.graph and ("contact", 3, F) in g.graph
+    assert ("contact", 0, F) in g.to_networkx() and ("contact", 3, F) in g.to_networkx()
     np.testing.assert_array_equal(g.topology().role, [FILAMENT, DEAD_END])
     sol = g.solve()
     assert sol.current[0] == pytest.approx(delta * 1.0, abs=TOL)
@@ -327,15 +327,15 @@ def test_current_flows_only_in_filaments(seed):
 def test_graph_nodes_and_edges():
     """Tips are int nodes, rods are kind='rod' edges, contacts kind='contact' edges."""
     g = ConnectivityGraph(2, {C: -0.5, A: 0.5, F: None})
-    assert set(range(4)) <= set(g.graph.nodes)
-    assert g.graph.edges[0, 1]["kind"] == "rod" and g.graph.edges[2, 3]["kind"] == "rod"
-    assert g.graph.nodes[("conductor", A)]["potential"] == 0.5
+    assert set(range(4)) <= set(g.to_networkx().nodes)
+    assert g.to_networkx().edges[0, 1]["kind"] == "rod" and g.to_networkx().edges[2, 3]["kind"] == "rod"
+    assert g.to_networkx().nodes[("conductor", A)]["potential"] == 0.5
     g.add_tip_contact(3, 0)
     g.add_conductor_contact(1, A)
     g.add_conductor_contact(2, F, potential=-1.0)
-    assert g.graph.edges[0, 3]["kind"] == "contact"
-    assert g.graph.edges[1, ("conductor", A)]["kind"] == "contact"
-    assert g.graph.nodes[("contact", 2, F)]["potential"] == -1.0
+    assert g.to_networkx().edges[0, 3]["kind"] == "contact"
+    assert g.to_networkx().edges[1, ("conductor", A)]["kind"] == "contact"
+    assert g.to_networkx().nodes[("contact", 2, F)]["potential"] == -1.0
     arr = g.arrays()
     np.testing.assert_array_equal(arr["tip_contacts"], [[0, 3]])
     np.testing.assert_array_equal(arr["conductor_tip"], [1, 2])
@@ -343,7 +343,7 @@ def test_graph_nodes_and_edges():
     np.testing.assert_array_equal(arr["conductor_potential"], [0.5, -1.0])
     assert arr["tip_contacts"].dtype == np.int64 and arr["conductor_potential"].dtype == np.float64
     g.remove_conductor_contact(2, F)
-    assert ("contact", 2, F) not in g.graph
+    assert ("contact", 2, F) not in g.to_networkx()
 
 
 def test_events_in_sequence_equal_direct_build():
@@ -362,7 +362,7 @@ def test_events_in_sequence_equal_direct_build():
     direct.add_conductor_contact(0, A)
     for k, v in direct.arrays().items():
         np.testing.assert_array_equal(g.arrays()[k], v, err_msg=k)
-    assert nx.utils.graphs_equal(g.graph, direct.graph)
+    assert nx.utils.graphs_equal(g.to_networkx(), direct.to_networkx())
 
 
 def test_short_and_open_circuit_rows():
@@ -423,8 +423,8 @@ def test_arrays_round_trip():
     h = ConnectivityGraph.from_arrays(n_rods, pots, g.arrays())
     for k, v in g.arrays().items():
         np.testing.assert_array_equal(h.arrays()[k], v, err_msg=k)
-    assert nx.utils.graphs_equal(g.graph, h.graph)
-    assert h.graph.nodes[("contact", 7, F)]["potential"] != h.graph.nodes[("contact", 7, F)]["potential"]
+    assert nx.utils.graphs_equal(g.to_networkx(), h.to_networkx())
+    assert h.to_networkx().nodes[("contact", 7, F)]["potential"] != h.to_networkx().nodes[("contact", 7, F)]["potential"]
     np.testing.assert_array_equal(g.topology().role, h.topology().role)
     assert h.has_short_circuit == g.has_short_circuit
 
@@ -460,7 +460,7 @@ def test_failed_batch_is_rolled_back():
         g.apply(rows)
     for k, v in before.items():
         np.testing.assert_array_equal(g.arrays()[k], v)
-    assert g.graph.nodes[("contact", 2, F)]["potential"] == 0.5
+    assert g.to_networkx().nodes[("contact", 2, F)]["potential"] == 0.5
 
 
 # ------------------------------------------------------------------------------ invalid input

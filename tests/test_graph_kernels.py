@@ -149,30 +149,50 @@ def test_solve_circuit_node_order_unchanged():
 
 
 def test_unchanged_system_is_not_factorised_again(monkeypatch):
-    """A solve whose reduced system equals the last one's returns the same bits without a new
-    factorisation; a changed system is solved afresh; the returned arrays are copies."""
+    """A solve through a memo whose reduced system equals the last one's returns the same bits
+    without a new factorisation; a changed system is solved afresh; the returned arrays are
+    copies; a solve without a memo, or with another memo, gives the same bits."""
     import selfas_graph.model.circuit as circuit
+    import selfas_graph.model.linear as linear
 
     rng = np.random.default_rng(11)
     tc, ct, cid = aggregate(600, rng, loops=0.3)
     pot = np.where(cid == A, 1.115, -1.115)
     calls = []
-    inner = circuit._solve_spd_new
-    monkeypatch.setattr(circuit, "_solve_spd_new", lambda *a: calls.append(1) or inner(*a))
-    monkeypatch.setattr(circuit, "_last_system", None)
-    first = solve_circuit(1200, tc, ct, pot)
+    inner = linear._solve_spd_new
+    monkeypatch.setattr(linear, "_solve_spd_new", lambda *a: calls.append(1) or inner(*a))
+    memo = circuit.SolveMemo()
+    first = solve_circuit(1200, tc, ct, pot, memo=memo)
     # a contact between two free rods far from any current leaves the reduced system as it is
     free_tips = np.setdiff1d(np.arange(1200), np.concatenate([tc.ravel(), ct]))
     free_rods = np.unique(free_tips // 2)
     free_rods = [r for r in free_rods if 2 * r in free_tips and 2 * r + 1 in free_tips][:2]
     extra = np.array([[2 * free_rods[0], 2 * free_rods[1]]])
-    second = solve_circuit(1200, np.concatenate([tc, extra]), ct, pot)
-    assert len(calls) == 1
+    second = solve_circuit(1200, np.concatenate([tc, extra]), ct, pot, memo=memo)
+    assert len(calls) == 1 and (memo.solved, memo.reused) == (1, 1)
     np.testing.assert_array_equal(second.current, first.current)
     assert second.total_current == first.total_current
-    monkeypatch.setattr(circuit, "_last_system", None)
     fresh = solve_circuit(1200, np.concatenate([tc, extra]), ct, pot)
     assert len(calls) == 2
     np.testing.assert_array_equal(fresh.potential, second.potential)
-    solve_circuit(1200, tc, ct, pot * 2.0)  # another right-hand side: solved again
+    other = circuit.SolveMemo()
+    np.testing.assert_array_equal(solve_circuit(1200, tc, ct, pot, memo=other).potential, first.potential)
     assert len(calls) == 3
+    solve_circuit(1200, tc, ct, pot * 2.0, memo=memo)  # another right-hand side: solved again
+    assert len(calls) == 4 and memo.solved == 2
+
+
+def test_solve_with_the_topologys_tip_merge_gives_the_same_bits():
+    """The circuit solve handed the topology's merge of the tips (``merged=``, the tips merged
+    once per event in a run) gives the bits of the solve that merges them itself."""
+    from selfas_graph.model.graph import classify_rods
+
+    rng = np.random.default_rng(5)
+    tc, ct, cid = aggregate(600, rng, loops=0.3)
+    pot = np.where(cid == A, 1.115, -1.115)
+    topo = classify_rods(600, tc, ct, cid)
+    a = solve_circuit(1200, tc, ct, pot)
+    b = solve_circuit(1200, tc, ct, pot, merged=(topo.n_nodes, topo.node_of_tip))
+    for name in ("potential", "current", "node_of_tip", "injected_current"):
+        np.testing.assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
+    assert (b.total_current, b.dissipated_power) == (a.total_current, a.dissipated_power)

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+import pytest
 
 TOOL = Path(__file__).resolve().parent.parent / "tools" / "same_run.py"
 
@@ -37,3 +38,18 @@ def test_same_run_tool(tmp_path):
     _write(tmp_path / "d.h5", x, extra=True)
     r = _run(tmp_path / "a.h5", tmp_path / "d.h5")
     assert r.returncode == 1 and "more: only in" in r.stdout, r.stdout
+
+
+@pytest.mark.slow
+def test_same_as_commit_tool_finds_the_working_tree_equal_to_head(tmp_path):
+    """tools/same_as_commit.py runs a short scene with HEAD's code and with the working tree (each
+    checked to import the code meant) and compares the run files; a clean tree agrees with HEAD.
+    Slow: the exported commit's kernels are compiled afresh."""
+    tool = TOOL.with_name("same_as_commit.py")
+    dirty = subprocess.run(["git", "status", "--porcelain", "selfas_graph"], capture_output=True, text=True,
+                           cwd=TOOL.parent.parent)
+    if dirty.returncode != 0 or dirty.stdout.strip():
+        pytest.skip("not a git checkout, or the working tree differs from HEAD in selfas_graph/")
+    r = subprocess.run([sys.executable, str(tool), "scenarios/quick.toml+run.t_end=0.02+rods.count=20",
+                        "--keep", str(tmp_path)], capture_output=True, text=True, cwd=TOOL.parent.parent)
+    assert r.returncode == 0 and "the same, bit for bit" in r.stdout, r.stdout + r.stderr

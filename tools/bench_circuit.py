@@ -21,8 +21,8 @@ Columns: rods (free rods included), contacts (tip-tip plus conductor), rods in
 filaments, ``classify_rods`` time, the same topology by the scipy/networkx version the
 array kernels replaced (``tests/reference.py``, the peer: results checked equal),
 ``solve_circuit`` time with the default direct solver and with ``solver="cg"``. Each time is
-the best of ``--repeat`` runs; the circuit's memo of the last system is cleared before each
-solve, so every solve factorises.
+the best of ``--repeat`` runs; the solves are given no memo of the last system
+(``circuit.SolveMemo``), so every solve factorises.
 """
 from __future__ import annotations
 
@@ -44,7 +44,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_peer import machine  # noqa: E402
 
 import reference  # noqa: E402
-from selfas_graph.model import circuit  # noqa: E402
 from selfas_graph.model.circuit import solve_circuit  # noqa: E402
 from selfas_graph.model.events import CONDUCTOR_ANODE, CONDUCTOR_CATHODE  # noqa: E402
 from selfas_graph.model.graph import classify_rods  # noqa: E402
@@ -134,7 +133,6 @@ def chain_network(n_rods: int, rng: np.random.Generator, free: float = 0.2, leng
 def _best(fn, repeat):
     best, out = np.inf, None
     for _ in range(repeat):
-        circuit._last_system = None  # time a full solve, not the memo of the last one
         t0 = time.perf_counter()
         out = fn()
         best = min(best, time.perf_counter() - t0)

@@ -438,7 +438,7 @@ def run(args):
         if world.rank != 0:  # every rank fails at the same step (same state); rank 0 reports it
             return EXIT_NUMERICAL
         if writer:
-            sim._flush_pending(writer)
+            sim.flush_output(writer)
             writer.close(status=f"failed: {exc}")
             # the failed state (possibly NaN) goes to its own file for inspection, never into the run file
             try:

@@ -237,7 +237,59 @@ def run_provenance(sim, scenario, command_line, run_id, scenario_path=None, mpi_
     }
 
 
-class RunWriter:
+class _PendingRows:
+    """What a writer holds between frames: the per-step rows a simulation hands over every step,
+    and how many of the run's events are written. Shared by :class:`RunWriter` and :class:`NullWriter`."""
+
+    n_frames = 0
+    events_written = 0
+    _pending = (np.empty(0, dtype=np.int64), np.empty(0))
+    _n_pending = 0
+
+    def reserve_per_step(self, n: int) -> None:
+        """Start a buffer of up to ``n`` per-step rows (at most one output interval, +1); rows
+        not handed on by :meth:`flush_pending` are dropped."""
+        self._pending = (np.empty(n, dtype=np.int64), np.empty(n))
+        self._n_pending = 0
+
+    def buffer_per_step(self, step: int, value: float) -> None:
+        """Keep one per-step row (the step's bond error) until the next :meth:`flush_pending`."""
+        steps, values = self._pending
+        steps[self._n_pending] = step
+        values[self._n_pending] = value
+        self._n_pending += 1
+
+    def flush_pending(self, events=None) -> None:
+        """Write the buffered per-step rows and, given the run's whole event log ``events``, the
+        events not written yet (the events dataset is created at the first call)."""
+        if self._n_pending:
+            steps, values = self._pending
+            self.write_per_step(steps[:self._n_pending], values[:self._n_pending])
+            self._n_pending = 0
+        if events is not None:
+            self.write_events(events[self.events_written:])
+            self.events_written = len(events)
+
+    def state_dict(self) -> dict:
+        """Frames and events written, and the per-step rows not written yet."""
+        steps, values = self._pending
+        return {"n_frames": int(self.n_frames), "events_written": int(self.events_written),
+                "pending_step": steps[:self._n_pending].copy(), "pending_value": values[:self._n_pending].copy()}
+
+    def load_state_dict(self, d: dict) -> None:
+        """Restore :meth:`state_dict` (the per-step buffer keeps at least the rows given)."""
+        self.n_frames = int(d["n_frames"])
+        self.events_written = int(d["events_written"])
+        steps = np.asarray(d["pending_step"], dtype=np.int64)
+        n = steps.shape[0]
+        if self._pending[0].shape[0] < n:
+            self.reserve_per_step(n)
+        self._pending[0][:n] = steps
+        self._pending[1][:n] = np.asarray(d["pending_value"], dtype=np.float64)
+        self._n_pending = n
+
+
+class RunWriter(_PendingRows):
     """Writes frames and observables of one run.
 
     Parameters
@@ -563,7 +615,7 @@ class RunWriter:
             self.f = None
 
 
-class NullWriter:
+class NullWriter(_PendingRows):
     """Takes every call a :class:`RunWriter` takes and keeps nothing: the writer of MPI ranks other than 0.
 
     With it every rank makes the same calls in the run loop, in particular the frames'

@@ -1,7 +1,8 @@
 """Nodal analysis of the rod network: potentials and rod currents (docs/model.md 'Circuit').
 
-Arrays in, arrays out. The caller (``graph.ConnectivityGraph.solve``) turns the
-connectivity graph into edge arrays; this module never sees networkx.
+Arrays in, arrays out. The callers (``network.Network.solve`` in a run,
+``graph.ConnectivityGraph.solve`` for a saved graph) hand over the contacts as arrays.
+The reduced system is assembled and solved in :mod:`.linear`.
 :func:`solve_network` solves any resistor network; :func:`solve_circuit` turns
 rods and contacts into one.
 
@@ -38,86 +39,23 @@ import dataclasses
 import math
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.linalg import cg, splu
 
 from selfas_graph.kernels.graph import component_labels
+from selfas_graph.model.linear import AUTO_CG_UNKNOWNS, CG_RTOL, SolveMemo, _potentials, _solve_spd_new  # noqa: F401
+from selfas_graph.model.validate import (  # noqa: F401
+    _as_count,
+    _as_index_array,
+    _as_potentials,
+    _as_resistance,
+    _frozen,
+    _validate,
+)
 
-__all__ = ["CircuitSolution", "NetworkSolution", "solve_circuit", "solve_network", "merge_tips", "SOLVERS"]
+__all__ = ["CircuitSolution", "NetworkSolution", "SolveMemo", "solve_circuit", "solve_network", "merge_tips",
+           "SOLVERS"]
 
 #: linear solvers for the reduced system (``solve_circuit(..., solver=...)``)
 SOLVERS = ("direct", "cg", "auto")
-
-#: relative residual at which the "cg" solver stops. On a 10^5-rod diluted cubic
-#: lattice (37 000 unknowns) it reaches it in 354 Jacobi-CG iterations and then
-#: differs from the direct solution by 8e-13 (potentials of order 16): round-off.
-CG_RTOL = 1e-14
-
-
-# --------------------------------------------------------------------------- validation
-def _as_count(value, name: str) -> int:
-    """Coerce a non-negative integer count, or raise ValueError naming ``name``."""
-    try:
-        n = int(np.asarray(value).item()) if not isinstance(value, int) else value
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a non-negative integer, got {value!r}") from None
-    if isinstance(value, (float, np.floating)) and float(value) != n:
-        raise ValueError(f"{name} must be an integer, got {value!r}")
-    if n < 0:
-        raise ValueError(f"{name} must be non-negative, got {n}")
-    return n
-
-
-def _as_index_array(value, name: str, ndim: int, n_max: int | None) -> np.ndarray:
-    """Coerce an integer index array of rank ``ndim`` (``(m,)`` or ``(m, 2)``).
-
-    Raises ValueError naming ``name`` for a wrong shape, non-integer values or an
-    index outside ``[0, n_max)`` (when ``n_max`` is given).
-    """
-    arr = np.asarray(value)
-    if arr.size == 0:
-        return np.zeros((0,) if ndim == 1 else (0, 2), dtype=np.int64)
-    if arr.dtype.kind not in "iu":
-        if arr.dtype.kind == "f" and np.all(np.isfinite(arr)) and np.all(arr == np.round(arr)):
-            arr = arr.astype(np.int64)
-        else:
-            raise ValueError(f"{name} must hold integers, got dtype {arr.dtype}")
-    arr = arr.astype(np.int64, copy=False)
-    if ndim == 1 and arr.ndim != 1:
-        raise ValueError(f"{name} must have shape (k,), got {arr.shape}")
-    if ndim == 2 and (arr.ndim != 2 or arr.shape[1] != 2):
-        raise ValueError(f"{name} must have shape (m, 2), got {arr.shape}")
-    if n_max is not None:
-        bad = (arr < 0) | (arr >= n_max)
-        if bad.any():
-            raise ValueError(
-                f"{name} holds tip index {int(arr[bad].flat[0])} outside [0, {n_max})"
-            )
-    return np.ascontiguousarray(arr)
-
-
-def _as_potentials(potential, index, name, index_name, what, target) -> np.ndarray:
-    """Finite float64 potentials, one per entry of ``index`` (ValueError naming both arrays)."""
-    potential = np.asarray(potential, dtype=np.float64).reshape(-1)
-    if potential.shape != index.shape:
-        raise ValueError(f"{name} has shape {potential.shape}, {index_name} has shape {index.shape}: "
-                         f"one potential per {what}")
-    if not np.all(np.isfinite(potential)):
-        bad = np.flatnonzero(~np.isfinite(potential))[0]
-        raise ValueError(f"{name} must be finite; {what} {bad} ({target} {index[bad]}) has {potential[bad]}")
-    return potential
-
-
-def _validate(n_tips, tip_contacts, conductor_tip, conductor_potential):
-    n_tips = _as_count(n_tips, "n_tips")
-    if n_tips % 2:
-        raise ValueError(f"n_tips must be even (two tips per rod), got {n_tips}")
-    tip_contacts = _as_index_array(tip_contacts, "tip_contacts", 2, n_tips)
-    conductor_tip = _as_index_array(conductor_tip, "conductor_tip", 1, n_tips)
-    conductor_potential = _as_potentials(conductor_potential, conductor_tip, "conductor_potential", "conductor_tip",
-                                         "conductor contact", "tip")
-    return n_tips, tip_contacts, conductor_tip, conductor_potential
-
 
 # --------------------------------------------------------------------------- topology helper
 def merge_tips(n_tips: int, tip_contacts: np.ndarray) -> tuple[int, np.ndarray]:
@@ -149,11 +87,6 @@ def merge_tips(n_tips: int, tip_contacts: np.ndarray) -> tuple[int, np.ndarray]:
 
 
 # --------------------------------------------------------------------------- result
-def _frozen(arr: np.ndarray) -> np.ndarray:
-    arr.setflags(write=False)
-    return arr
-
-
 @dataclasses.dataclass(frozen=True, eq=False)
 class CircuitSolution:
     """Result of one nodal-analysis solve (arrays are read-only).
@@ -204,129 +137,6 @@ class CircuitSolution:
         return int(self.injected_current.shape[0])
 
 
-# --------------------------------------------------------------------------- solve
-def _solve_direct(A: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
-    """Sparse LU of the SPD reduced Laplacian.
-
-    A is symmetric positive definite (an irreducibly diagonally dominant
-    M-matrix per block), so pivoting on the diagonal is safe and a symmetric
-    fill-reducing ordering keeps the factors sparse. Measured on a 10^5-rod
-    diluted cubic lattice (37 000 unknowns): this takes 0.8-0.9 s and 9e6 factor
-    entries; ``spsolve``'s default (COLAMD with partial pivoting) took 111 s.
-    """
-    lu = splu(A, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0, options={"SymmetricMode": True})
-    return lu.solve(b)
-
-
-#: "auto" uses the direct solver below this many unknowns and "cg" above. Measured with
-#: tools/bench_circuit.py at 10^5 rods: direct 0.87 s / cg 0.16 s on a diluted cubic
-#: lattice, 0.07 s / 0.17 s on cross-linked chains; at 10^4 both are under 15 ms.
-AUTO_CG_UNKNOWNS = 50_000
-
-
-#: the last reduced system solved and its solution: ``(key, x)`` (see :func:`_solve_spd`)
-_last_system: tuple[tuple, np.ndarray] | None = None
-
-
-def _solve_spd(A: sp.csc_matrix, b: np.ndarray, solver: str) -> np.ndarray:
-    """Solve the reduced system with ``solver`` ("direct", "cg" or "auto", see :func:`solve_circuit`).
-
-    A system equal, byte for byte, to the last one solved (matrix in compressed columns,
-    right-hand side, solver) returns a copy of the last solution: the solvers are
-    deterministic, so that is the solution a new solve would give, bit for bit. In the
-    Fig. 2 run after the short circuit about half of the solves meet an unchanged system
-    (the contact events fell in structures without current), and the factorisation is
-    about half of a solve (docs/performance.md, "Topology and circuit per event").
-    """
-    global _last_system
-    key = (solver, A.shape, A.indptr.tobytes(), A.indices.tobytes(), A.data.tobytes(), b.tobytes())
-    last = _last_system
-    if last is not None and last[0] == key:
-        return last[1].copy()
-    x = _solve_spd_new(A, b, solver)
-    _last_system = (key, x.copy())
-    return x
-
-
-def _solve_spd_new(A: sp.csc_matrix, b: np.ndarray, solver: str) -> np.ndarray:
-    if solver == "auto":
-        solver = "cg" if A.shape[0] > AUTO_CG_UNKNOWNS else "direct"
-    if solver == "cg":
-        jacobi = sp.diags(1.0 / A.diagonal())
-        # iterations grow like sqrt(condition number) ~ the network's diameter in
-        # rods (354 on the 10^5-rod lattice); long thin networks need more and are
-        # cheap for the direct solver, so the cap hands them over early
-        maxiter = min(2 * A.shape[0], 2000) + 10
-        x, info = cg(A, b, rtol=CG_RTOL, atol=0.0, M=jacobi, maxiter=maxiter)
-        if info == 0:
-            return x
-    return _solve_direct(A, b)
-
-
-def _as_resistance(value, name: str, m: int, allow_zero: bool) -> np.ndarray:
-    """Coerce per-edge resistances: a scalar or an ``(m,)`` array of finite values >= 0 (or > 0)."""
-    arr = np.asarray(value, dtype=np.float64)
-    if arr.ndim == 0:
-        arr = np.full(m, float(arr))
-    if arr.shape != (m,):
-        raise ValueError(f"{name} must be a number or have shape ({m},), got shape {arr.shape}")
-    bad = ~np.isfinite(arr) | (arr < 0.0) | ((arr == 0.0) if not allow_zero else False)
-    if np.any(bad):
-        i = int(np.flatnonzero(bad)[0])
-        want = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{name} must be finite and {want}; entry {i} is {arr[i]}")
-    return np.ascontiguousarray(arr)
-
-
-def _potentials(n_nodes, u, v, g, is_dir, psi_dir, solver) -> np.ndarray:
-    """Node potentials of a resistor network with Dirichlet nodes (NaN where floating).
-
-    ``u``, ``v`` are the resistors' end nodes (``u != v``), ``g`` their conductances.
-    Only the connected components with two different Dirichlet values are solved;
-    a component with one value sits at it exactly, one with none floats (NaN).
-    """
-    n_comp, comp = component_labels(n_nodes, np.ascontiguousarray(u, dtype=np.int64),
-                                    np.ascontiguousarray(v, dtype=np.int64))
-    dir_nodes = np.flatnonzero(is_dir)
-    comp_lo = np.full(n_comp, np.inf)
-    comp_hi = np.full(n_comp, -np.inf)
-    np.minimum.at(comp_lo, comp[dir_nodes], psi_dir[dir_nodes])
-    np.maximum.at(comp_hi, comp[dir_nodes], psi_dir[dir_nodes])
-    comp_has_dir = np.isfinite(comp_lo)
-    comp_active = comp_has_dir & (comp_hi > comp_lo)
-
-    psi = np.full(n_nodes, np.nan)
-    # components with a single Dirichlet value sit at it exactly: no solve, no round-off
-    const_node = comp_has_dir[comp] & ~comp_active[comp]
-    psi[const_node] = comp_lo[comp[const_node]]
-    psi[dir_nodes] = psi_dir[dir_nodes]
-
-    interior = comp_active[comp] & ~is_dir
-    n_int = int(interior.sum())
-    if n_int:
-        # reduced Laplacian assembled directly from the edge list:
-        # diagonal = summed conductance at the node (all resistors, including those
-        # to Dirichlet nodes); off-diagonal -g per interior-interior resistor
-        # (duplicates summed); resistors to a Dirichlet node move g psi_D to the
-        # right-hand side. With unit conductances every sum is an exact integer.
-        index = np.full(n_nodes, -1, dtype=np.int64)
-        index[interior] = np.arange(n_int)
-        iu, iv = index[u], index[v]
-        degree = np.bincount(u, weights=g, minlength=n_nodes) + np.bincount(v, weights=g, minlength=n_nodes)
-        both = (iu >= 0) & (iv >= 0)
-        rows = np.concatenate([np.arange(n_int), iu[both], iv[both]])
-        cols = np.concatenate([np.arange(n_int), iv[both], iu[both]])
-        vals = np.concatenate([degree[interior], -g[both], -g[both]])
-        A = sp.coo_matrix((vals, (rows, cols)), shape=(n_int, n_int)).tocsc()
-        u_to_d = (iu >= 0) & is_dir[v]
-        v_to_d = (iv >= 0) & is_dir[u]
-        b = np.bincount(
-            iu[u_to_d], weights=g[u_to_d] * psi_dir[v[u_to_d]], minlength=n_int
-        ) + np.bincount(iv[v_to_d], weights=g[v_to_d] * psi_dir[u[v_to_d]], minlength=n_int)
-        psi[interior] = _solve_spd(A, b, solver)
-    return psi, comp, comp_active
-
-
 @dataclasses.dataclass(frozen=True, eq=False)
 class NetworkSolution:
     """Result of :func:`solve_network` (arrays are read-only).
@@ -360,16 +170,19 @@ class NetworkSolution:
     kirchhoff_residual: float
 
 
-def _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, resistance_is_one=False):
+def _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, resistance_is_one=False, memo=None,
+           merged=None):
     """Core of :func:`solve_network` on validated arrays; see there.
 
     ``resistance_is_one``: every resistance is 1 (the default rods); the currents
-    are then the potential differences themselves, with no division.
+    are then the potential differences themselves, with no division. ``memo``: a
+    :class:`SolveMemo`. ``merged``: ``(n_merged, node_of)``, the merge of the nodes by the
+    ideal edges when the caller has it already (it must be what :func:`merge_tips` gives).
     """
     if solver not in SOLVERS:
         raise ValueError(f"solver must be one of {SOLVERS}, got {solver!r}")
     ideal = resistance == 0.0
-    n_merged, node_of = merge_tips(n_nodes, edges[ideal])
+    n_merged, node_of = merge_tips(n_nodes, edges[ideal]) if merged is None else merged
 
     # Dirichlet values: mean of the given potentials of the fixed nodes in each merged node
     cnode = node_of[fixed_node]
@@ -388,7 +201,7 @@ def _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, resi
     g_all = 1.0 / r_all
     keep = u_all != v_all
     psi, comp, comp_active = _potentials(
-        n_merged, u_all[keep], v_all[keep], g_all[keep], is_dir, psi_dir, solver
+        n_merged, u_all[keep], v_all[keep], g_all[keep], is_dir, psi_dir, solver, memo
     )
 
     psi0 = np.where(np.isnan(psi), 0.0, psi)
@@ -431,7 +244,8 @@ def _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, resi
     )
 
 
-def solve_network(n_nodes, edges, resistance, fixed_node, fixed_potential, solver: str = "direct") -> NetworkSolution:
+def solve_network(n_nodes, edges, resistance, fixed_node, fixed_potential, solver: str = "direct",
+                  memo: SolveMemo | None = None) -> NetworkSolution:
     """Solve Kirchhoff's laws on any network of resistors with nodes of fixed potential.
 
     The general form of the nodal analysis of :func:`solve_circuit` (docs/model.md
@@ -457,6 +271,8 @@ def solve_network(n_nodes, edges, resistance, fixed_node, fixed_potential, solve
         The potential of each entry of ``fixed_node`` (units R0 J0).
     solver : {"direct", "cg", "auto"}
         As in :func:`solve_circuit`.
+    memo : SolveMemo, optional
+        As in :func:`solve_circuit`.
 
     Returns
     -------
@@ -468,12 +284,12 @@ def solve_network(n_nodes, edges, resistance, fixed_node, fixed_potential, solve
     fixed_node = _as_index_array(fixed_node, "fixed_node", 1, n_nodes)
     fixed_potential = _as_potentials(fixed_potential, fixed_node, "fixed_potential", "fixed_node", "fixed node entry",
                                      "node")
-    return _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver)
+    return _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, memo=memo)
 
 
 def solve_circuit(
     n_tips, tip_contacts, conductor_tip, conductor_potential, solver: str = "direct",
-    rod_resistance=None, contact_resistance: float = 0.0,
+    rod_resistance=None, contact_resistance: float = 0.0, memo: SolveMemo | None = None, merged=None,
 ) -> CircuitSolution:
     """Solve Kirchhoff's laws on the rod network.
 
@@ -506,6 +322,12 @@ def solve_circuit(
         0 (default): ideal contacts, tips in contact merged into one node. r > 0:
         every contact is a resistor r, and each conductor contact joins its tip to
         a node of its own held at the contact's potential.
+    memo : SolveMemo, optional
+        The caller's memo of the last reduced system (a run's :class:`~.network.Network`
+        holds one); without it every call solves afresh, with the same bits.
+    merged : (n_nodes, node_of_tip), optional
+        The merge of the tips by their contacts (:func:`merge_tips`), when the caller has it
+        already (:class:`~.graph.Topology` carries it); used with ideal contacts only.
 
     Returns
     -------
@@ -537,9 +359,16 @@ def solve_circuit(
     edges[n_rods + m:, 0] = conductor_tip
     edges[n_rods + m:, 1] = n_tips + np.arange(k)
     resistance = np.concatenate([r_rod, np.full(m + k, r_contact)])
+    if merged is not None and r_contact == 0.0:
+        # conductor contact j is node n_tips + j, joined to its tip by an ideal edge: it takes the
+        # tip's merged node, and the numbering (by smallest member, always a tip) is merge_tips'
+        n_merged, node_of_tip = merged
+        merged = (int(n_merged), np.concatenate([node_of_tip, node_of_tip[conductor_tip]]))
+    else:
+        merged = None
     net = _solve(
         n_tips + k, edges, resistance, n_tips + np.arange(k), conductor_potential, solver,
-        resistance_is_one=unit and r_contact == 0.0,
+        resistance_is_one=unit and r_contact == 0.0, memo=memo, merged=merged,
     )
     current = net.current[:n_rods]
     assert current.shape == (n_rods,)

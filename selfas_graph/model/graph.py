@@ -1,262 +1,57 @@
-"""The connectivity graph of rods and contacts, and its topology (docs/model.md 'Connectivity graph and topology').
+"""The connectivity graph of rods and contacts, replayed from events (docs/model.md 'Connectivity graph and topology').
 
-Two layers:
+:class:`ConnectivityGraph` holds a set of contacts changed by contact events (a batch fails
+whole or not at all), with :meth:`~ConnectivityGraph.topology` (:func:`.topology.classify_rods`)
+and :meth:`~ConnectivityGraph.solve` (nodal analysis, :mod:`.circuit`). It is the object to
+rebuild a saved frame's graph or to replay an event log (``RunFile.graph``, ``selfas-graph
+topology``, ``plot``); :meth:`~ConnectivityGraph.to_networkx` gives the graph to networkx's
+algorithms. A run keeps its contacts in its :class:`~.network.Network`.
 
-* :func:`classify_rods` -- arrays in, :class:`Topology` out: which rods are free,
-  in clusters, dead ends or current-carrying filaments, and which structure each
-  rod belongs to.
-* :class:`ConnectivityGraph` -- the connectivity *state*: a networkx graph changed
-  by contact events only (never rebuilt per step), with :meth:`~ConnectivityGraph.topology`
-  and :meth:`~ConnectivityGraph.solve` (nodal analysis, :mod:`.circuit`).
-
-Topology rule
--------------
-Tips joined by ideal contacts form one merged electrical node; rods are edges
-between merged nodes. Each conductor contact carries a *key*: contacts with the
-same key are one attachment (case (i): all anode contacts share the anode's key,
-all cathode contacts the cathode's; case (ii): every filament contact has its
-own key, since the filament potential varies along it). Each key becomes one
-attachment node. Contacts with conductors are ideal like tip contacts, so a merged
-node that touches exactly one key *is* that attachment node (its tips sit at the
-conductor's potential); a merged node touching several keys is joined to each of
-them. A virtual node X is joined to every attachment node. A rod is **FILAMENT**
-iff it lies on a simple path between two *different* attachment nodes, i.e. iff its
-edge lies on a cycle through X, i.e. iff it is in a biconnected component that
-contains X (one depth-first search from X, :func:`selfas_graph.kernels.graph.edges_in_blocks_of`;
-the tests hold it to networkx's ``biconnected_component_edges``). Merging same-key contacts is
-what keeps a loop from the anode back to the anode from counting as a filament,
-also when the loop's far end touches the anode at a junction that leads on to the
-cathode: both ends of such a loop are pinned at the anode's potential, and no
-current flows in it.
-
-A balanced bridge rod is FILAMENT (it lies on such a path) although its current
-is zero; the circuit solve reports the current, this module the topology.
-
-Structures are the connected components of rods joined by tip-tip contacts;
-conductors do **not** join structures (two aggregates that both touch the anode
-are two structures). A rod with no contact at all is FREE and has no structure.
+The roles and the topology rule are in :mod:`.topology`; their names are importable from here.
 """
 from __future__ import annotations
 
-import dataclasses
-import operator
 from collections.abc import Callable, Iterable, Mapping
 
-import networkx as nx
 import numpy as np
 
-from selfas_graph.kernels.graph import edges_in_blocks_of
-from selfas_graph.kernels.graph import structures as component_structures
 from selfas_graph.model import events as ev
-from selfas_graph.model.circuit import (
-    CircuitSolution,
+from selfas_graph.model.topology import (
+    CLUSTER,
+    DEAD_END,
+    FILAMENT,
+    FREE,
+    ROLE_NAMES,
+    ContactArrays,
+    Topology,
+    circuit_event,
+    classify_rods,
+)
+from selfas_graph.model.validate import (
     _as_count,
     _as_index_array,
     _as_resistance,
-    merge_tips,
-    solve_circuit,
+    _frozen,
+    conductor_id,
+    finite_potential,
+    tip_index,
+    tip_pair,
 )
 
-__all__ = [
-    "FREE",
-    "CLUSTER",
-    "DEAD_END",
-    "FILAMENT",
-    "ROLE_NAMES",
-    "Topology",
-    "classify_rods",
-    "ConnectivityGraph",
-]
-
-#: rod roles (``Topology.role``)
-FREE = 0  #: no contacts at all
-CLUSTER = 1  #: stuck to other rods; the structure touches no conductor
-DEAD_END = 2  #: in a structure touching a conductor, on no path between different attachments
-FILAMENT = 3  #: on a path between conductor attachments of different potential
-ROLE_NAMES = {FREE: "free", CLUSTER: "cluster", DEAD_END: "dead_end", FILAMENT: "filament"}
-
-
-# --------------------------------------------------------------------------- topology
-@dataclasses.dataclass(frozen=True, eq=False)
-class Topology:
-    """Roles of the rods and the structures they form (arrays are read-only).
-
-    Attributes
-    ----------
-    role : (n_rods,) int8
-        FREE, CLUSTER, DEAD_END or FILAMENT.
-    structure : (n_rods,) int64
-        Structure id of each rod, ``-1`` for free rods. Ids are ``0 .. n_structures-1``.
-    structure_size : (n_structures,) int64
-        Number of rods in each structure.
-    largest_structure : int
-        Id of the structure with the most rods (lowest id on ties), -1 if none.
-    n_filament, n_dead_end, n_cluster, n_free : int
-        Number of rods with each role.
-    has_short_circuit : bool
-        ``n_filament > 0``: a conducting path joins two different conductor attachments.
-    """
-
-    role: np.ndarray
-    structure: np.ndarray
-    structure_size: np.ndarray
-    largest_structure: int
-    n_filament: int
-    n_dead_end: int
-    n_cluster: int
-    n_free: int
-    has_short_circuit: bool
-
-    @property
-    def n_structures(self) -> int:
-        """Number of structures (connected aggregates of at least one rod with a contact)."""
-        return int(self.structure_size.shape[0])
-
-
-def _frozen(arr: np.ndarray) -> np.ndarray:
-    arr.setflags(write=False)
-    return arr
-
-
-def classify_rods(n_rods, tip_contacts, conductor_tip, conductor_node_key) -> Topology:
-    """Classify rods as free, cluster, dead end or filament (docs/model.md 'Connectivity graph and topology').
-
-    Parameters
-    ----------
-    n_rods : int
-        Number of rods; rod ``i`` has tips ``2 i`` and ``2 i + 1``.
-    tip_contacts : (m, 2) int64
-        Pairs of tips in contact.
-    conductor_tip : (k,) int64
-        Tips touching a conductor, one entry per contact.
-    conductor_node_key : (k,) int64
-        Attachment key of each conductor contact: contacts with equal keys are one
-        attachment (case (i): the conductor id; case (ii) filament: a key unique
-        to the contact).
-
-    Returns
-    -------
-    Topology
-
-    Notes
-    -----
-    Cost: two passes of union-find over all tips and rods (the tip merge and the
-    components, :mod:`selfas_graph.kernels.graph`), and one depth-first search over
-    the components that touch at least two different attachment keys (no other
-    component can hold a filament). Measured at the Fig. 2 sizes (1200 rods): 0.16 ms
-    before the first short circuit, 0.5 ms with 700 filament rods, 6 times less than
-    with scipy's ``connected_components`` and networkx (docs/performance.md,
-    "Topology and circuit per event").
-    """
-    n_rods = _as_count(n_rods, "n_rods")
-    n_tips = 2 * n_rods
-    tip_contacts = _as_index_array(tip_contacts, "tip_contacts", 2, n_tips)
-    conductor_tip = _as_index_array(conductor_tip, "conductor_tip", 1, n_tips)
-    key = _as_index_array(conductor_node_key, "conductor_node_key", 1, None)
-    if key.shape != conductor_tip.shape:
-        raise ValueError(
-            f"conductor_node_key has shape {key.shape}, conductor_tip has shape "
-            f"{conductor_tip.shape}: one key per conductor contact"
-        )
-
-    n_nodes, node_of_tip = merge_tips(n_tips, tip_contacts)
-    if key.size:
-        key_values, key_index = np.unique(key, return_inverse=True)
-        key_index = key_index.astype(np.int64, copy=False)
-    else:
-        key_values, key_index = key, key
-    n_keys = key_values.shape[0]
-    # components of merged nodes joined by rods (self-loop rods are harmless here); structures:
-    # components holding at least one non-free rod, renumbered 0..S-1; components touching a
-    # conductor, and those touching >= 2 different keys
-    comp, n_comp, free, structure, structure_size, comp_touch, candidate = component_structures(
-        n_rods, node_of_tip, n_nodes, tip_contacts, conductor_tip, key_index)
-    largest = int(np.argmax(structure_size)) if structure_size.size else -1
-    u = node_of_tip[0::2]
-    rod_comp = comp[u]
-
-    filament = np.zeros(n_rods, dtype=bool)
-    if candidate.any():
-        filament = _filament_rods(n_nodes, u, node_of_tip[1::2], comp, candidate, node_of_tip[conductor_tip],
-                                  key_index, n_keys)
-
-    role = np.full(n_rods, CLUSTER, dtype=np.int8)
-    role[comp_touch[rod_comp]] = DEAD_END
-    role[filament] = FILAMENT
-    role[free] = FREE
-    counts = np.bincount(role, minlength=4)
-    return Topology(
-        role=_frozen(role),
-        structure=_frozen(structure),
-        structure_size=_frozen(structure_size),
-        largest_structure=largest,
-        n_filament=int(counts[FILAMENT]),
-        n_dead_end=int(counts[DEAD_END]),
-        n_cluster=int(counts[CLUSTER]),
-        n_free=int(counts[FREE]),
-        has_short_circuit=bool(counts[FILAMENT] > 0),
-    )
-
-
-def _filament_rods(n_nodes, u, v, comp, candidate, cnode, key_index, n_keys) -> np.ndarray:
-    """Rods in a biconnected component with the virtual node X (see module docstring).
-
-    Auxiliary simple graph H: merged nodes ``0 .. n_nodes-1`` of the candidate
-    components, attachment of key ``j`` as node ``n_nodes + j``, X as node
-    ``n_nodes + n_keys``; a merged node that touches exactly one key is replaced by
-    that key's attachment node. Edges are the rods, the contacts of merged nodes that
-    touch two or more keys (merged node -> attachment) and X -> attachment. Edges are
-    coded ``lo * stride + hi``.
-
-    Parallel rods collapse to one edge of H. That is exact: two parallel rods
-    share the block of their common edge (or form a block of their own, which
-    cannot contain X). Self-loop rods are never filament.
-
-    The blocks through X come from one depth-first search from X over H
-    (:func:`selfas_graph.kernels.graph.edges_in_blocks_of`).
-    """
-    x_node = n_nodes + n_keys
-    n_h = x_node + 1
-    stride = np.int64(n_h)
-    att_in = candidate[comp[cnode]]
-    # contacts are ideal, so a merged node touching exactly one attachment key is that
-    # attachment electrically: it becomes the attachment node itself. A path through it
-    # then ends there, and a loop that leaves an electrode and comes back to it (both ends
-    # pinned at the same potential, no current) is a cycle through that attachment alone.
-    # Nodes touching two or more keys keep one edge to each attachment.
-    node_key = np.unique(cnode[att_in] * np.int64(n_keys) + key_index[att_in])  # distinct (node, key)
-    nk_node, nk_key = node_key // n_keys, node_key % n_keys
-    keys_per_node = np.bincount(nk_node, minlength=n_nodes)
-    rep = np.arange(n_nodes, dtype=np.int64)
-    single = keys_per_node[nk_node] == 1
-    rep[nk_node[single]] = n_nodes + nk_key[single]
-    ru, rv = rep[u], rep[v]
-    rod_in = candidate[comp[u]] & (ru != rv)
-    rod_code = np.minimum(ru, rv) * stride + np.maximum(ru, rv)
-    multi = keys_per_node[nk_node] >= 2
-    att_code = nk_node[multi] * stride + (n_nodes + nk_key[multi])
-    keys_used = np.unique(key_index[att_in]) + n_nodes
-    # unique edges of H; attachment < X, so (attachment, X) is (lo, hi)
-    code = np.unique(np.concatenate([rod_code[rod_in], att_code, keys_used * stride + x_node]))
-    edge_in_x = edges_in_blocks_of(n_h, code // stride, code % stride, x_node)
-    where = np.minimum(np.searchsorted(code, rod_code), code.shape[0] - 1)
-    return rod_in & edge_in_x[where]
+__all__ = ["FREE", "CLUSTER", "DEAD_END", "FILAMENT", "ROLE_NAMES", "Topology", "classify_rods", "ConnectivityGraph"]
 
 
 # --------------------------------------------------------------------------- state
 _DERIVED_KINDS = (ev.SHORT_CIRCUIT, ev.OPEN_CIRCUIT)
 
 
-class ConnectivityGraph:
-    """Connectivity state of the rods: a networkx graph changed by events only.
+class ConnectivityGraph(ContactArrays):
+    """Connectivity state of the rods: the rods (fixed) and the contacts, changed by events only.
 
-    Nodes are tips ``0 .. n_tips-1`` (ints), ``("conductor", c)`` for a conductor
-    with a fixed potential (electrodes, case (i)), and ``("contact", k, c)`` for
-    each contact of tip ``k`` with a conductor whose potential is given per
-    contact (the case (ii) filament). Edges carry ``kind="rod"`` (one resistor per
-    rod, added at construction) or ``kind="contact"`` (ideal, or a resistor
-    ``contact_resistance`` when that is > 0). Potentials are the
-    ``potential`` attribute of the conductor / contact node.
+    Tips ``0 .. n_tips-1``; rod ``i`` joins tips ``2 i`` and ``2 i + 1``. A contact joins two
+    tips of different rods, or a tip and a conductor: one with a fixed potential (electrodes,
+    case (i)) or one whose potential is given per contact (the case (ii) filament).
+    :meth:`to_networkx` draws it as a networkx graph.
 
     Parameters
     ----------
@@ -276,10 +71,10 @@ class ConnectivityGraph:
 
     Notes
     -----
-    Beside the networkx graph the object keeps insertion-ordered dicts of the
-    contacts, an index (not a second state: every change goes through the methods
-    below, which update both) that makes :meth:`arrays` cost a few ms for 10^5
-    contacts instead of an O(edges) walk over networkx's adjacency.
+    The contacts are stored once, in two insertion-ordered dicts (tip pairs; (tip, conductor)
+    -> potential); :meth:`arrays` sorts them into arrays (a few ms for 10^5 contacts, cached
+    until the next change). A networkx graph kept beside them cost an O(edges) walk to read
+    back (about 1 s for 10^5 contacts), so it is built only on request (:meth:`to_networkx`).
     """
 
     def __init__(self, n_rods: int, conductor_potential: Mapping[int, float | None], solver: str = "auto",
@@ -306,13 +101,6 @@ class ConnectivityGraph:
                 if not np.isfinite(pot):
                     raise ValueError(f"conductor {c} potential must be finite, got {pot}")
                 self._fixed[c] = pot
-        self.graph = nx.Graph()
-        self.graph.add_nodes_from(range(self.n_tips))
-        self.graph.add_edges_from(
-            ((2 * i, 2 * i + 1) for i in range(self.n_rods)), kind="rod"
-        )
-        for c, pot in self._fixed.items():
-            self.graph.add_node(("conductor", c), potential=pot)
         self._tip_contact: dict[tuple[int, int], None] = {}
         self._conductor_contact: dict[tuple[int, int], float] = {}
         self._topology: Topology | None = None
@@ -320,29 +108,13 @@ class ConnectivityGraph:
         self.changed = True  # nothing solved yet
 
     # ------------------------------------------------------------------ validation
-    @staticmethod
-    def _conductor_id(c) -> int:
-        try:
-            return operator.index(c)
-        except TypeError:
-            raise ValueError(f"conductor id must be an integer, got {c!r}") from None
+    _conductor_id = staticmethod(conductor_id)
 
     def _tip(self, k, name: str = "tip") -> int:
-        try:
-            k = operator.index(k)
-        except TypeError:
-            raise ValueError(f"{name} must be an integer, got {k!r}") from None
-        if not 0 <= k < self.n_tips:
-            raise ValueError(f"{name} {k} out of range [0, {self.n_tips})")
-        return k
+        return tip_index(k, self.n_tips, name)
 
     def _tip_pair(self, k, l) -> tuple[int, int]:
-        k, l = self._tip(k), self._tip(l)
-        if k // 2 == l // 2:
-            raise ValueError(
-                f"tips {k} and {l} are the two tips of rod {k // 2}: a rod cannot touch itself"
-            )
-        return (k, l) if k < l else (l, k)
+        return tip_pair(k, l, self.n_tips)
 
     def _known_conductor(self, c) -> int:
         c = self._conductor_id(c)
@@ -370,7 +142,6 @@ class ConnectivityGraph:
         k, l = self._tip_pair(k, l)
         if (k, l) in self._tip_contact:
             raise ValueError(f"tips {k} and {l} are already in contact")
-        self.graph.add_edge(k, l, kind="contact")
         self._tip_contact[(k, l)] = None
         self._touch()
 
@@ -379,7 +150,6 @@ class ConnectivityGraph:
         k, l = self._tip_pair(k, l)
         if (k, l) not in self._tip_contact:
             raise ValueError(f"cannot release tips {k} and {l}: they are not in contact")
-        self.graph.remove_edge(k, l)
         del self._tip_contact[(k, l)]
         self._touch()
 
@@ -405,8 +175,6 @@ class ConnectivityGraph:
             pot = self._fixed[c]
         else:
             pot = np.nan if potential is None else self._finite(potential, k, c)
-            self.graph.add_node(("contact", k, c), potential=pot)
-        self.graph.add_edge(k, self._conductor_node(k, c), kind="contact")
         self._conductor_contact[(k, c)] = pot
         self._touch()
 
@@ -419,11 +187,6 @@ class ConnectivityGraph:
                 f"cannot release tip {k} from conductor {c} ({ev.CONDUCTOR_NAMES.get(c, '?')}): "
                 "it does not touch it"
             )
-        node = self._conductor_node(k, c)
-        if c in self._fixed:
-            self.graph.remove_edge(k, node)
-        else:
-            self.graph.remove_node(node)
         del self._conductor_contact[(k, c)]
         self._touch()
 
@@ -441,17 +204,11 @@ class ConnectivityGraph:
         if (k, c) not in self._conductor_contact:
             raise ValueError(f"tip {k} does not touch conductor {c}")
         pot = self._finite(potential, k, c)
-        self.graph.nodes[("contact", k, c)]["potential"] = pot
         self._conductor_contact[(k, c)] = pot
         self.changed = True
         self._arrays = None
 
-    @staticmethod
-    def _finite(potential, k, c) -> float:
-        pot = float(potential)
-        if not np.isfinite(pot):
-            raise ValueError(f"potential of tip {k} on conductor {c} must be finite, got {pot}")
-        return pot
+    _finite = staticmethod(finite_potential)
 
     # ------------------------------------------------------------------ events
     def apply(
@@ -526,13 +283,7 @@ class ConnectivityGraph:
             raise
         if last is None or not undo:
             return []
-        topo = self.topology()
-        if topo.has_short_circuit == short_before:
-            return []
-        step, time = last
-        if topo.has_short_circuit:
-            return [(step, time, ev.SHORT_CIRCUIT, topo.n_filament, -1)]
-        return [(step, time, ev.OPEN_CIRCUIT, -1, -1)]
+        return circuit_event(short_before, self.topology(), *last)
 
     # ------------------------------------------------------------------ queries
     def arrays(self) -> dict[str, np.ndarray]:
@@ -568,47 +319,31 @@ class ConnectivityGraph:
             }
         return dict(self._arrays)
 
-    def conductor_node_key(self, arrays: dict[str, np.ndarray] | None = None) -> np.ndarray:
-        """Attachment key of each conductor contact of :meth:`arrays` (see :func:`classify_rods`).
+    def _conductors(self) -> tuple[set, list]:
+        return self._per_contact, list(self._fixed) + list(self._per_contact)
 
-        Fixed-potential conductor ``c`` -> ``c``; per-contact conductors -> a key
-        unique to the contact, above every conductor id.
+    def to_networkx(self):
+        """The graph as a new ``networkx.Graph`` (a copy: changing it does not change this object).
+
+        Nodes are tips ``0 .. n_tips-1`` (ints), ``("conductor", c)`` for a conductor of fixed
+        potential and ``("contact", k, c)`` for each contact of tip ``k`` with a conductor whose
+        potential is given per contact; conductor and contact nodes carry ``potential``. Edges
+        carry ``kind="rod"`` or ``kind="contact"``.
         """
-        arrays = self.arrays() if arrays is None else arrays
-        cid = arrays["conductor_id"]
-        base = max(list(self._fixed) + list(self._per_contact) + [-1]) + 1
-        per = np.isin(cid, np.fromiter(self._per_contact, dtype=np.int64, count=len(self._per_contact)))
-        return np.where(per, base + np.arange(cid.shape[0]), cid).astype(np.int64)
+        import networkx as nx
 
-    def topology(self) -> Topology:
-        """Roles and structures of the current graph (cached until the next contact change)."""
-        if self._topology is None:
-            arr = self.arrays()
-            self._topology = classify_rods(
-                self.n_rods, arr["tip_contacts"], arr["conductor_tip"], self.conductor_node_key(arr)
-            )
-        return self._topology
-
-    def solve(self) -> CircuitSolution:
-        """Potentials and rod currents of the current graph; clears :attr:`changed`.
-
-        Raises ValueError if a per-contact potential is unset.
-        """
-        arr = self.arrays()
-        pot = arr["conductor_potential"]
-        if np.isnan(pot).any():
-            i = np.flatnonzero(np.isnan(pot))
-            pairs = list(zip(arr["conductor_tip"][i].tolist(), arr["conductor_id"][i].tolist()))
-            raise ValueError(f"unset contact potential for (tip, conductor) {pairs[:10]}")
-        sol = solve_circuit(self.n_tips, arr["tip_contacts"], arr["conductor_tip"], pot, solver=self.solver,
-                            rod_resistance=self.rod_resistance, contact_resistance=self.contact_resistance)
-        self.changed = False
-        return sol
-
-    @property
-    def has_short_circuit(self) -> bool:
-        """Whether a filament joins two different conductor attachments now."""
-        return self.topology().has_short_circuit
+        g = nx.Graph()
+        g.add_nodes_from(range(self.n_tips))
+        g.add_edges_from(((2 * i, 2 * i + 1) for i in range(self.n_rods)), kind="rod")
+        for c, pot in self._fixed.items():
+            g.add_node(("conductor", c), potential=pot)
+        g.add_edges_from(self._tip_contact, kind="contact")
+        for (k, c), pot in self._conductor_contact.items():
+            node = self._conductor_node(k, c)
+            if c not in self._fixed:
+                g.add_node(node, potential=pot)
+            g.add_edge(k, node, kind="contact")
+        return g
 
     # ------------------------------------------------------------------ rebuild
     @classmethod

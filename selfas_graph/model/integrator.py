@@ -70,6 +70,23 @@ class AdamsBashforth4:
         """Forget the derivative history; the next three steps are RK4 again."""
         self.count = 0
 
+    def state_dict(self) -> dict:
+        """Derivative history, work per channel, time origin and bond errors: what the next
+        steps depend on besides the state (arrays and plain values)."""
+        return {"hist_v": self.hist_v.copy(), "hist_a": self.hist_a.copy(), "hist_p": self.hist_p.copy(),
+                "head": self.head, "count": self.count, "work": self.work.copy(),
+                "time_origin_step": self.time_origin[0], "time_origin_time": self.time_origin[1],
+                "bond_error_before": self.bond_error_before, "bond_error_after": self.bond_error_after}
+
+    def load_state_dict(self, d: dict) -> None:
+        """Restore :meth:`state_dict` (also as read back from a checkpoint)."""
+        self.hist_v[:], self.hist_a[:], self.hist_p[:] = d["hist_v"], d["hist_a"], d["hist_p"]
+        self.head, self.count = int(d["head"]), int(d["count"])
+        self.work[:] = d["work"]
+        self.time_origin = (int(d["time_origin_step"]), float(d["time_origin_time"]))
+        self.bond_error_before = float(d["bond_error_before"])
+        self.bond_error_after = float(d["bond_error_after"])
+
     def acceleration(self, position, velocity, out, power, full=True, step=None):
         """Tip accelerations (forces plus rigid bonds) at (position, velocity).
 

@@ -82,3 +82,16 @@ class NeighbourList:
         self._pairs = None
         self._reference = points.copy()
         self.n_builds += 1
+
+    def state_dict(self) -> dict:
+        """The positions of the last build and the build count ({} before the first build): a list
+        rebuilt from them is the same list."""
+        if self._reference is None:
+            return {}
+        return {"reference": self._reference.copy(), "builds": self.n_builds}
+
+    def load_state_dict(self, d: dict) -> None:
+        """Rebuild from :meth:`state_dict` (nothing for an empty one)."""
+        if "reference" in d:
+            self.build(np.array(d["reference"]))
+            self.n_builds = int(d["builds"])

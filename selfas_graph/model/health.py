@@ -1,0 +1,184 @@
+"""Health checks of a running simulation: broken bonds, runaway steps, non-finite values, the
+energy balance; each failure stops the run with a diagnosis that names the likely cause
+(docs/model.md 'Work bookkeeping and the energy balance').
+
+:class:`HealthChecks` is a part of :class:`~.simulation.Simulation` (it reads the simulation's
+state, parameters, integrator and force field).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: a bond whose length is off by more than this after a step is broken: no
+#: corrector recovers it meaningfully (typical per-step errors are < 1e-6)
+BOND_BREAK = 0.05
+#: a tip moving more than this (in rod lengths) in one step means the step is
+#: far beyond stability: the tip core (width r* ~ 0.06) is crossed in one step
+MAX_STEP_DISPLACEMENT = 0.25
+#: a force component beyond this (units F_M0) is out of scale rather than a time-step problem:
+#: the stiffest force of a sane scene, the tip core's kappa / r*^2 at kappa = 1, r* = 0.06, is
+#: 278, and the paper's scenes stay below 1e4; a failure with a force above this blames the term
+FORCE_OUT_OF_SCALE = 1e8
+
+
+class NumericalFailure(RuntimeError):
+    """The run went numerically wrong; the message is a diagnosis."""
+
+    def __init__(self, message, step, rods=()):
+        super().__init__(message)
+        self.step = step
+        self.rods = list(rods)
+
+
+
+class HealthChecks:
+    """The checks :class:`~.simulation.Simulation` runs after every step and on every frame."""
+
+    def _check(self):
+        st, integ = self.state, self.integrator
+        err = integ.bond_error_before
+        self.max_bond_error = max(self.max_bond_error, integ.bond_error_after)
+        v = st.velocity
+        vmax = float(np.abs(v).max(initial=0.0))
+        if math.isfinite(err) and err < BOND_BREAK and vmax * self.dt < MAX_STEP_DISPLACEMENT and math.isfinite(vmax):
+            return
+        self._fail(err, vmax)
+
+    def _fail(self, err, vmax):
+        st = self.state
+        x, v = st.position, st.velocity
+        bad_tip = ~np.isfinite(x).all(axis=1) | ~np.isfinite(v).all(axis=1)
+        speed = np.linalg.norm(np.nan_to_num(v, nan=np.inf), axis=1)
+        if bad_tip.any():
+            what = "a non-finite position or velocity (NaN or inf)"
+            tips = np.flatnonzero(bad_tip)
+        elif not err < BOND_BREAK:
+            what = f"a broken rigid bond (length error {err:.3g} > {BOND_BREAK})"
+            r = np.linalg.norm(x[0::2] - x[1::2], axis=1)
+            tips = 2 * np.argsort(-np.abs(r - (1.0 if st.rod_length is None else st.rod_length)))[:5]
+        else:
+            what = f"a runaway step (a tip moved {vmax * self.dt:.3g} rod lengths in one step)"
+            tips = np.argsort(-speed)[:5]
+        rods = sorted(set(int(k) // 2 for k in tips[:10]))
+        term, force = self._out_of_scale_term()
+        if term is not None:
+            msg = (f"numerical failure at step {st.step} (t = {st.time:.6g}): {what}; rods involved: "
+                   f"{rods[:10]}; the '{term}' term's force was already {force:.3g} F_M0 at the last saved state, "
+                   f"out of scale (above {FORCE_OUT_OF_SCALE:g}): no time step follows it. Check the parameters "
+                   f"of that term and the charges it acts on ({_term_keys(term)}).")
+            raise NumericalFailure(msg, st.step, rods)
+        dominant = self.force_field.dominant_channel(np.asarray(tips[:10]))
+        cause = (f"largest force on them from the '{dominant}' term" if dominant != "none"
+                 else "no force term is on, so the integrator alone is at fault")
+        stiff = self._stiff_brakes()
+        if stiff:
+            cause = stiff
+        msg = (f"numerical failure at step {st.step} (t = {st.time:.6g}): {what}; rods involved: "
+               f"{rods[:10]}; {cause}. "
+               f"The time step integrator.dt = {self.dt:g} is the likely cause: try a smaller one "
+               f"(the stiff parts are the tip core and the brakes inside r*){self._slow_hint()}.")
+        raise NumericalFailure(msg, st.step, rods)
+
+    def _stiff_brakes(self) -> str:
+        """A diagnosis naming the explicit brakes too stiff for dt (coefficient * dt > 2), or ""."""
+        f, ip = self.params.forces, self.params.integrator
+        if ip.brake != "explicit":
+            return ""
+        over = [(name, b.coefficient) for name, b in (("tip_brake", f.tip_brake), ("ambient_brake", f.ambient_brake))
+                if b is not None and b.coefficient * self.dt > 2.0]
+        if not over:
+            return ""
+        name, k = max(over, key=lambda x: x[1])
+        return (f"the '{name}' term is too stiff for the step: forces.{name}.coefficient * dt = {k * self.dt:.3g} "
+                f"(an explicit brake is stable only below 2; integrator.brake = \"split\" is stable for any)")
+
+    def _out_of_scale_term(self):
+        """(channel, force) of a channel whose force at the last sane state (the last frame, or the
+        start of the run) exceeds :data:`FORCE_OUT_OF_SCALE`, else (None, 0.0).
+
+        At the failed state every force is huge (the brakes answer the runaway velocities), so
+        the culprit is looked for where the run was still sane.
+        """
+        good = getattr(self, "_last_good", None)
+        if good is None:
+            return None, 0.0
+        ff = self.force_field
+        with np.errstate(all="ignore"):
+            ff.evaluate(good[0].copy(), good[1].copy(), full=True)
+            name, force = ff.dominant_force(np.arange(self.state.n_tips))
+        return (name, force) if name != "none" and not force <= FORCE_OUT_OF_SCALE else (None, 0.0)
+    def _slow_hint(self) -> str:
+        """With multiple time stepping, the other suspect of a failure (appended to its message)."""
+        k = self.params.integrator.slow_every
+        if k <= 1:
+            return ""
+        return (f"; or the slow forces, evaluated every integrator.slow_every = {k} steps, change too much "
+                f"in between: try a smaller slow_every (8 or 16 in the shipped scenes)")
+
+    def energy_scale(self, obs) -> float:
+        """Energy turned over so far: kinetic energy plus |work| of every non-conservative channel."""
+        return abs(obs["energy/kinetic"]) + sum(abs(v) for k, v in obs.items() if k.startswith("work/"))
+
+    def check_energy(self, obs):
+        """Stop when an energy or work is not finite, or the energy balance is off by more than
+        ``integrator.energy_tolerance`` of the scale (NaN counts as off).
+
+        Brakes stiffer than the step can follow make the AB4 step pump energy into the
+        contact modes that the brake then dissipates: positions and bonds stay sane, but
+        the balance E - E0 - W grows to the size of the dissipated work.
+        """
+        st = self.state
+        bad = [k for k, v in obs.items()
+               if (k.startswith(("energy", "work/")) or k == "momentum") and not np.isfinite(v).all()]
+        if bad:
+            terms = [k.split("/", 1)[1] for k in bad if "/" in k and k.split("/", 1)[1] != "kinetic"]
+            term = terms[0] if terms else None
+            where = (f"the '{term}' term is out of scale: check its parameters and the charges it acts on "
+                     f"({_term_keys(term)})" if term else
+                     "the state itself is out of scale (velocities or positions beyond double precision)")
+            raise NumericalFailure(
+                f"numerical failure at step {st.step} (t = {st.time:.6g}): non-finite (NaN or inf) "
+                f"{', '.join(bad[:6])}; {where}. Nothing non-finite was written.", st.step)
+        tol = self.params.integrator.energy_tolerance
+        scale = self.energy_scale(obs)
+        err = abs(obs["energy_balance"])
+        if scale > 0 and not err <= tol * scale:
+            st = self.state
+            works = sorted(((abs(v), k[5:]) for k, v in obs.items() if k.startswith("work/")), reverse=True)
+            top = works[0][1] if works else "none"
+            raise NumericalFailure(
+                f"numerical failure at step {st.step} (t = {st.time:.6g}): the energy balance is off by {err:.3g}, "
+                f"{err / scale:.0%} of the energy turned over ({scale:.3g}; integrator.energy_tolerance = {tol:g}); "
+                f"the largest work is done by the '{top}' term. The time step integrator.dt = {self.dt:g} is likely "
+                f"past the stability limit of the stiff contact terms (tip brake k_br, tip core): try half of it"
+                f"{self._slow_hint()}.",
+                st.step)
+
+    _check_energy = check_energy  # the name of selfas-graph 0.2
+
+
+#: the scenario keys behind each force channel (for failure messages that name a term)
+_CHANNEL_KEYS = {
+    "tip_magnetic": "rods.magnetic_charge, rods.tip_stiffness, rods.transition_radius",
+    "tip_brake": "forces.tip_brake.coefficient",
+    "ambient_brake": "forces.ambient_brake.coefficient",
+    "uniform_field": "forces.uniform_field.B, rods.magnetic_charge",
+    "plasma_filament": "forces.plasma_filament.current, forces.plasma_filament.radius, rods.magnetic_charge",
+    "yukawa": "rods.electric_charge, forces.yukawa.screening_length, forces.yukawa.core_radius",
+    "electric_field": "forces.electric_field.E, rods.electric_charge",
+    "electrodes": "forces.electrodes.gap, rods.tip_stiffness",
+    "electrode_brake": "forces.electrodes, forces.tip_brake.coefficient",
+    "current_field": "circuit.delta_J0, rods.magnetic_charge",
+    "current_lorentz": "circuit.delta_J0 and the fields the currents sit in",
+    "external_filament": "forces.external_filament.current, forces.external_filament.diameter",
+    "external_dipole": "forces.external_dipole.*, rods.magnetic_charge, rods.electric_charge",
+}
+
+
+def _term_keys(channel) -> str:
+    for name, keys in _CHANNEL_KEYS.items():
+        if channel and channel.startswith(name):
+            return keys
+    return f"forces.{channel}" if channel else "the force terms"

@@ -1,0 +1,269 @@
+"""The electrical network of a run: contacts, topology, conductor potentials and the circuit.
+
+:class:`Network` owns, in one object, what contact events change (docs/model.md 'Contacts and
+events', 'Connectivity graph and topology', 'Circuit'):
+
+* the contacts, stored once: the :class:`~.contacts.ContactTracker` (tip pairs, the tips on
+  each conductor) and, for the case (ii) filament, the potential of each tip's contact;
+* the conductor potentials (electrodes of case (i), ``-delta_J0 z`` along the filament of
+  case (ii)) and the filament contact heights at the last solve;
+* the topology (:func:`.topology.classify_rods`, cached until the contacts change), the
+  circuit solve (:func:`.circuit.solve_circuit`, handed the topology's merge of the tips) and
+  the memo of its last linear system (:class:`.circuit.SolveMemo`);
+* the rod currents last handed out.
+
+One call per step, :meth:`Network.update`, takes the positions and the tip neighbour list
+the contact search runs over and returns the step's events and, when they changed, the rod
+currents (:class:`NetworkUpdate`). The simulation hands the currents to the force field.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from . import events as ev
+from .circuit import CircuitSolution, SolveMemo
+from .contacts import ContactTracker
+from .topology import FILAMENT, ContactArrays, Topology, circuit_event
+from .validate import _frozen
+
+__all__ = ["Network", "NetworkUpdate"]
+
+#: state_dict keys of the contacts and the graph (the checkpoint format of selfas-graph 0.2)
+GRAPH_KEYS = ("tip_contacts", "conductor_tip", "conductor_id", "conductor_potential")
+
+
+@dataclasses.dataclass
+class NetworkUpdate:
+    """What one :meth:`Network.update` changed.
+
+    Attributes
+    ----------
+    events : list of (step, time, kind, a, b)
+        Contact events of the step, then a SHORT_CIRCUIT / OPEN_CIRCUIT row if the batch
+        made a filament appear or vanish (kinds in :mod:`.events`).
+    current : (n_rods,) float64 or None
+        The new rod currents (zero off the filament rods), or None if they did not change.
+    changed : bool
+        Whether the contacts or the contact potentials changed (events, or case (ii)
+        contact heights that moved): the integrator's history may be reset then.
+    """
+
+    events: list
+    current: np.ndarray | None = None
+    changed: bool = False
+
+
+class Network(ContactArrays):
+    """Contacts, connectivity, conductor potentials and circuit of a run.
+
+    Parameters
+    ----------
+    n_rods : int
+    rstar, release_radius : float
+        Contact and release distances of the contact search (:class:`~.contacts.ContactTracker`).
+    electrodes : (z_cathode, z_anode) or None
+        Electrode planes of case (i).
+    filament_radius : float or None
+        Radius of the case (ii) filament on the z axis.
+    bias : float
+        delta_J0: electrode potentials +-delta_J0 gap / 2, filament potential -delta_J0 z.
+    circuit : bool
+        Solve the circuit when the contacts change (a ``[circuit]`` table is present).
+    solver : str
+        Linear solver (``circuit.solve_circuit``).
+    height_tolerance : float
+        Case (ii): a filament contact that moved along z by more than this since the last
+        solve gets its new potential and the circuit is solved again.
+    rod_resistance : (n_rods,) float64 or None
+    contact_resistance : float
+    """
+
+    def __init__(self, n_rods, rstar, release_radius, electrodes=None, filament_radius=None, bias=0.0,
+                 circuit=False, solver="auto", height_tolerance=0.0, rod_resistance=None, contact_resistance=0.0):
+        self.n_rods = int(n_rods)
+        self.n_tips = 2 * self.n_rods
+        #: the contact search and the contact store (tip pairs, tips on each conductor)
+        self.contacts = ContactTracker(self.n_tips, rstar, release_radius, electrodes, filament_radius)
+        self.bias = float(bias)
+        self.circuit = bool(circuit)
+        #: linear solver of :meth:`solve` ("auto", "direct" or "cg"; see circuit.solve_circuit)
+        self.solver = solver
+        self.height_tolerance = float(height_tolerance)
+        self.rod_resistance = None if rod_resistance is None else _frozen(np.array(rod_resistance, dtype=np.float64))
+        self.contact_resistance = float(contact_resistance)
+        conductors = {}
+        if electrodes is not None:
+            # the planes are -+gap/2, so their distance is the gap exactly; + 0.0: no negative zero without a bias
+            half = 0.5 * self.bias * (electrodes[1] - electrodes[0]) + 0.0
+            conductors = {ev.CONDUCTOR_CATHODE: -half + 0.0, ev.CONDUCTOR_ANODE: half}
+        if filament_radius is not None:
+            conductors[ev.CONDUCTOR_FILAMENT] = None  # psi = -delta_J0 z per contact (docs/model.md 'Circuit')
+        #: conductor id -> fixed potential (units R0 J0), None where given per contact (docs/model.md 'Circuit')
+        self.conductor_potential = conductors
+        self._flags = [(ev.CONDUCTOR_CATHODE, self.contacts.on_cathode), (ev.CONDUCTOR_ANODE, self.contacts.on_anode),
+                       (ev.CONDUCTOR_FILAMENT, self.contacts.on_filament)]
+        self._flags = [(c, f) for c, f in self._flags if c in conductors]
+        #: potential of each tip's contact with the filament (NaN off it), -delta_J0 z at contact or last move
+        self.filament_potential = np.full(self.n_tips, np.nan)
+        #: filament contacts at the last solve and their heights then
+        self.filament_tip = np.zeros(0, dtype=np.int64)
+        self.filament_z = np.zeros(0)
+        self.memo = SolveMemo()
+        self.solution: CircuitSolution | None = None
+        #: rod currents last handed out (zero off the filament rods)
+        self.current = np.zeros(self.n_rods)
+        #: the contacts or potentials changed since the last solve
+        self.changed = True
+        self._topology: Topology | None = None
+        self._arrays: dict | None = None
+        self._short = False  # has_short_circuit of the last topology: the state before a batch
+
+    @classmethod
+    def from_params(cls, params, state) -> "Network":
+        """The network of a scene (``params.contacts`` enabled), for ``state``'s rods."""
+        cp, el, fil, circ = params.contacts, params.forces.electrodes, params.forces.external_filament, params.circuit
+        rstar = params.rods.rstar
+        return cls(state.n_rods, rstar, cp.release_factor * rstar,
+                   electrodes=(-0.5 * el.gap, 0.5 * el.gap) if el is not None else None,
+                   filament_radius=0.5 * fil.diameter if fil is not None else None,
+                   bias=circ.delta_J0 if circ is not None else 0.0, circuit=circ is not None,
+                   solver=circ.solver if circ is not None else "auto",
+                   height_tolerance=circ.height_tolerance if circ is not None else 0.0,
+                   rod_resistance=state.rod_resistance, contact_resistance=cp.resistance)
+
+    # ------------------------------------------------------------------ the step
+    def update(self, position, neighbours, step, time) -> NetworkUpdate:
+        """Search contacts at ``position`` (over ``neighbours``, a tip neighbour list covering the
+        release radius), apply them, and solve the circuit if anything changed."""
+        rows = self.contacts.update(position, neighbours, step, time)
+        moved = self._heights_moved(position)
+        if not rows and not moved:
+            return NetworkUpdate([])
+        if rows:
+            for _, _, kind, a, b in rows:
+                if b == ev.CONDUCTOR_FILAMENT and kind == ev.CONDUCTOR_CONTACT:
+                    self.filament_potential[a] = -self.bias * float(position[a, 2])
+                elif b == ev.CONDUCTOR_FILAMENT and kind == ev.CONDUCTOR_RELEASE:
+                    self.filament_potential[a] = np.nan
+            self._touch()
+            rows += circuit_event(self._short, self.topology(), int(rows[-1][0]), float(rows[-1][1]))
+        current = None
+        if self.circuit and self.changed:
+            if self.has_short_circuit:
+                self.solution = self.solve()
+                # rods off every conductor-to-conductor path carry no current by topology; the
+                # solve leaves them round-off currents (measured up to 2e-14 in a Fig. 2 run)
+                current = np.where(self.topology().role == FILAMENT, self.solution.current, 0.0)
+            else:
+                # no rod lies between two conductor attachments: every current is zero, so the
+                # linear solve (about 1 ms at 1200 rods) is skipped until a path exists
+                self.solution = None
+                self.changed = False
+                if np.count_nonzero(self.current):
+                    current = np.zeros(self.n_rods)
+            if current is not None:
+                self.current = current
+            arr = self.arrays()
+            self.filament_tip = arr["conductor_tip"][arr["conductor_id"] == ev.CONDUCTOR_FILAMENT]
+            self.filament_z = position[self.filament_tip, 2].copy()
+        return NetworkUpdate(rows, current, True)
+
+    def _heights_moved(self, position) -> bool:
+        """Case (ii): give the filament contacts that moved along z by more than the height
+        tolerance since the last solve their new potential; True if any did."""
+        if not len(self.filament_tip) or not self.circuit:
+            return False
+        z = position[self.filament_tip, 2]
+        moved = np.abs(z - self.filament_z) > self.height_tolerance
+        if not moved.any():
+            return False
+        for k in self.filament_tip[moved]:
+            self.filament_potential[k] = -self.bias * float(position[k, 2])
+        self.changed = True
+        self._arrays = None
+        return True
+
+    def _touch(self) -> None:
+        self.changed = True
+        self._topology = None
+        self._arrays = None
+
+    # ------------------------------------------------------------------ queries
+    @property
+    def n_contacts(self) -> int:
+        """Number of tip-tip contacts."""
+        return self.contacts.n_contacts
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The contacts as arrays, as :meth:`.graph.ConnectivityGraph.arrays` gives them: ``tip_contacts``
+        (m, 2) sorted rows (k < l); ``conductor_tip``, ``conductor_id``, ``conductor_potential``
+        sorted by (tip, conductor)."""
+        if self._arrays is None:
+            tc = np.sort(self.contacts.pairs, axis=1)
+            tc = tc[np.lexsort((tc[:, 1], tc[:, 0]))]
+            tips = [np.flatnonzero(flag) for _, flag in self._flags]
+            kt = np.concatenate(tips + [np.zeros(0, dtype=np.int64)]).astype(np.int64)
+            kc = np.concatenate([np.full(len(t), c, dtype=np.int64) for (c, _), t in zip(self._flags, tips)]
+                                + [np.zeros(0, dtype=np.int64)])
+            pot = np.concatenate([self.filament_potential[t] if self.conductor_potential[c] is None
+                                  else np.full(len(t), float(self.conductor_potential[c]))
+                                  for (c, _), t in zip(self._flags, tips)] + [np.zeros(0)])
+            order = np.lexsort((kc, kt))
+            self._arrays = {"tip_contacts": _frozen(np.ascontiguousarray(tc, dtype=np.int64)),
+                            "conductor_tip": _frozen(np.ascontiguousarray(kt[order])),
+                            "conductor_id": _frozen(np.ascontiguousarray(kc[order])),
+                            "conductor_potential": _frozen(np.ascontiguousarray(pot[order]))}
+        return dict(self._arrays)
+
+    def _conductors(self) -> tuple[set, list]:
+        return {c for c, p in self.conductor_potential.items() if p is None}, list(self.conductor_potential)
+
+    def topology(self) -> Topology:
+        """Roles and structures of the rods (cached until the contacts change)."""
+        topo = super().topology()
+        self._short = topo.has_short_circuit
+        return topo
+
+    def solve(self, memo: SolveMemo | None = None) -> CircuitSolution:
+        """Potentials and rod currents of the present contacts, through :attr:`memo` unless another
+        memo is given; clears :attr:`changed`."""
+        return super().solve(self.memo if memo is None else memo)
+
+    # ------------------------------------------------------------------ state
+    def state_dict(self) -> dict:
+        """The contacts, flags, filament heights and currents, as arrays and plain values; the
+        contacts also as ``graph_*`` arrays (:meth:`arrays`). The solution and the memo are
+        not saved: :meth:`load_state_dict` solves again (the solve is a pure function of the
+        contacts, so that is the solution the saved run held)."""
+        c = self.contacts
+        d = {"contact_pairs": c.pairs.copy(), "on_cathode": c.on_cathode.copy(), "on_anode": c.on_anode.copy(),
+             "on_filament": c.on_filament.copy(), "filament_tip": self.filament_tip.copy(),
+             "filament_z": self.filament_z.copy(), "has_solution": self.solution is not None,
+             "current": self.current.copy()}
+        d.update({f"graph_{k}": v.copy() for k, v in self.arrays().items()})
+        return d
+
+    def load_state_dict(self, d: dict) -> None:
+        """Restore :meth:`state_dict` (also as read back from a checkpoint of selfas-graph 0.2)."""
+        c = self.contacts
+        c.pairs = np.array(d["contact_pairs"], dtype=np.int64).reshape(-1, 2)
+        c.on_cathode[:], c.on_anode[:], c.on_filament[:] = d["on_cathode"], d["on_anode"], d["on_filament"]
+        self.filament_tip = np.array(d["filament_tip"], dtype=np.int64)
+        self.filament_z = np.array(d["filament_z"], dtype=np.float64)
+        self.filament_potential[:] = np.nan
+        cid = np.asarray(d["graph_conductor_id"])
+        fil = cid == ev.CONDUCTOR_FILAMENT
+        self.filament_potential[np.asarray(d["graph_conductor_tip"])[fil]] = np.asarray(d["graph_conductor_potential"])[fil]
+        self._touch()
+        self.topology()
+        self.solution = None
+        if bool(d["has_solution"]) and self.circuit:
+            self.solution = self.solve()
+        if "current" in d:
+            self.current = np.array(d["current"], dtype=np.float64)
+
+    def __repr__(self) -> str:
+        return (f"Network(n_rods={self.n_rods}, contacts={self.n_contacts}, "
+                f"conductors={sorted(self.conductor_potential)}, changed={self.changed})")

@@ -1,0 +1,83 @@
+"""What a simulation reports about its state: energies, observables (one row per saved frame),
+the status a progress display shows, the contact count.
+
+:class:`Observables` is a part of :class:`~.simulation.Simulation` (it reads the simulation's
+state, integrator, force field and network).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..kernels.pairs import close_pair_count
+
+
+class Observables:
+    """The measures :class:`~.simulation.Simulation` gives of its present state."""
+
+    def energies(self) -> dict:
+        """Kinetic and potential energy of each conservative term (unit tip masses)."""
+        st = self.state
+        e = {"kinetic": 0.5 * float(np.einsum("ij,ij->", st.velocity, st.velocity))}
+        e.update(self.force_field.potential_energy(st.position))
+        return e
+
+    def _record_initial_energy(self):
+        """E(0) - W(0), the reference of the energy balance, taken before the first step."""
+        self._energy0 = sum(self.energies().values()) - float(self.integrator.work.sum())
+
+    def observables(self) -> dict:
+        """Scalars and small vectors describing the current state (one row per saved frame)."""
+        st = self.state
+        obs = {}
+        energy = self.energies()
+        for k, v in energy.items():
+            obs[f"energy/{k}"] = v
+        total = sum(energy.values())
+        work = dict(zip(self.force_field.nonconservative, self.integrator.work))
+        for k, w in work.items():
+            obs[f"work/{k}"] = w
+        if self._energy0 is None:
+            self._energy0 = total - sum(work.values())
+        # E(t) - E(0) - W(t): zero up to the integration error (docs/model.md 'Work bookkeeping and the energy balance': brakes
+        # and the plasma field do work, tracked per channel by the integrator)
+        obs["energy_total"] = total
+        obs["energy_balance"] = total - sum(work.values()) - self._energy0
+        obs["momentum"] = st.velocity.sum(axis=0)
+        obs["bond_error"] = self.integrator.bond_error_before
+        obs["contacts"] = float(self.contact_count())
+        if self.network is not None:
+            topo = self.network.topology()
+            obs["rods/filament"] = topo.n_filament
+            obs["rods/dead_end"] = topo.n_dead_end
+            obs["rods/cluster"] = topo.n_cluster
+            obs["rods/free"] = topo.n_free
+            obs["largest_structure"] = int(topo.structure_size[topo.largest_structure]) if topo.largest_structure >= 0 else 0
+            obs["events"] = len(self.events)
+            obs["short_circuit"] = float(topo.has_short_circuit)
+        if self.params.circuit is not None:
+            sol = self.solution
+            obs["total_current"] = sol.total_current if sol is not None else 0.0
+            obs["effective_resistance"] = sol.effective_resistance if sol is not None else float("inf")
+        return obs
+
+    def status(self) -> dict:
+        """What a progress display shows: tip contacts, tip-conductor contacts (electrodes, the
+        case (ii) filament), the time of the first short circuit (None before it), the total
+        current (J0) and the number of rods carrying current."""
+        c = self.contacts
+        sol = self.solution
+        return {
+            "contacts": self.contact_count(),
+            "electrode_contacts": int(c.on_cathode.sum() + c.on_anode.sum()) if c is not None else 0,
+            "filament_contacts": int(c.on_filament.sum()) if c is not None else 0,
+            "short_circuit_time": self.short_circuit_time,
+            "total_current": float(sol.total_current) if sol is not None else 0.0,
+            "current_rods": int(np.count_nonzero(self.force_field.current)),
+        }
+
+    def contact_count(self) -> int:
+        """Number of tip pairs of different rods in contact (closer than r*, or still held by hysteresis)."""
+        if self.contacts is not None:
+            return self.contacts.n_contacts
+        tnl = self.force_field.tip_neighbours(self.state.position)
+        return int(close_pair_count(self.state.position, tnl.start, tnl.index, self.params.rods.rstar))

@@ -1,0 +1,189 @@
+"""Operations on a running simulation and the triggers that time them.
+
+After each step, :meth:`Simulation.run <.simulation.Simulation.run>` asks every operation's
+trigger whether it acts on this time step, in the order the operations are listed; an
+operation with ``final = True`` also acts after the last step of a run. The operations are
+those of ``sim.operations`` (attached for every run) and those ``run`` builds from its
+arguments for one call (``writer``, ``progress``, ``stop``, ``checkpointer``), in this order:
+frame writer (or the energy check when nothing is written), the attached operations,
+progress display, stop check, checkpointer.
+
+A trigger is a callable ``trigger(timestep) -> bool`` (HOOMD-blue's ``hoomd.trigger``
+model): :class:`Periodic` (every ``period`` steps, at ``phase``), :class:`Always`, and
+:class:`When` (a predicate of no arguments, e.g. a wall clock or a signal flag). An
+operation has a ``trigger`` and ``act(sim, i, n_steps)``; it may also define
+``start(sim, n_steps)`` (before the first step of a run), ``flush(sim)`` (hand buffered data
+on, before a checkpoint) and ``finish(sim)`` (after the last step of a run).
+"""
+from __future__ import annotations
+
+__all__ = ["RunInterrupted", "Trigger", "Periodic", "Always", "When", "Operation", "PerStepRows", "FrameWriter", "EnergyCheck", "Progress",
+           "StopCheck", "Checkpoint"]
+
+
+class RunInterrupted(Exception):
+    """The run was asked to stop (a signal); a checkpoint was written if a checkpointer was given."""
+
+    def __init__(self, step):
+        super().__init__(f"interrupted at step {step}")
+        self.step = step
+
+
+class Trigger:
+    """Decides whether an operation acts at a time step."""
+
+    def __call__(self, timestep: int) -> bool:
+        raise NotImplementedError
+
+
+class Periodic(Trigger):
+    """True when ``timestep % period == phase``."""
+
+    def __init__(self, period: int, phase: int = 0):
+        self.period = max(1, int(period))
+        self.phase = int(phase) % self.period
+
+    def __call__(self, timestep: int) -> bool:
+        return timestep % self.period == self.phase
+
+    def __repr__(self) -> str:
+        return f"Periodic(period={self.period}, phase={self.phase})"
+
+
+class Always(Trigger):
+    """True at every time step."""
+
+    def __call__(self, timestep: int) -> bool:
+        return True
+
+
+class When(Trigger):
+    """True when ``predicate()`` is (the time step is not looked at)."""
+
+    def __init__(self, predicate):
+        self.predicate = predicate
+
+    def __call__(self, timestep: int) -> bool:
+        return bool(self.predicate())
+
+
+class Operation:
+    """Base of the operations: a ``trigger`` and what to do when it fires."""
+
+    trigger: Trigger = Always()
+    #: also act after the last step of a run, whatever the trigger says
+    final = False
+
+    def start(self, sim, n_steps: int) -> None:
+        pass
+
+    def act(self, sim, i: int, n_steps: int) -> None:
+        raise NotImplementedError
+
+    def flush(self, sim) -> None:
+        pass
+
+    def finish(self, sim) -> None:
+        pass
+
+
+class PerStepRows(Operation):
+    """Hands the writer the bond error of every step; the writer buffers the rows until the
+    next frame or checkpoint (``writer.buffer_per_step``, ``writer.flush_pending``)."""
+
+    def __init__(self, writer, every: int):
+        self.writer = writer
+        self.every = every
+
+    def start(self, sim, n_steps):
+        # frames fall at least every `every` steps: the buffer never holds more rows
+        self.writer.reserve_per_step(min(self.every, n_steps) + 1)
+
+    def act(self, sim, i, n_steps):
+        self.writer.buffer_per_step(sim.state.step, sim.integrator.bond_error_before)
+
+
+class FrameWriter(Operation):
+    """Saves a frame (positions, velocities, observables, the graph) every ``output.interval``
+    and at the end of a run, and one at the start if the writer has none yet.
+
+    The frame's observables are checked first (:meth:`Simulation.check_energy`): no NaN
+    reaches the file.
+    """
+
+    final = True
+
+    def __init__(self, writer, every: int):
+        self.writer = writer
+        self.trigger = Periodic(every)
+        #: the observables of the last frame written in the steps of this run
+        self.last_observables = None
+
+    def start(self, sim, n_steps):
+        self.last_observables = None
+        if self.writer.n_frames == 0:
+            sim.write_frame(self.writer)
+
+    def act(self, sim, i, n_steps):
+        # frames fall on absolute steps that are multiples of `every`, so at most `every`
+        # steps pass between two frames
+        self.last_observables = sim.write_frame(self.writer)
+
+    def flush(self, sim):
+        sim.flush_output(self.writer)
+        self.writer.flush()
+
+
+class EnergyCheck(Operation):
+    """Checks the energy balance every ``output.interval`` when no frame is written (a frame
+    checks its own observables)."""
+
+    def __init__(self, every: int):
+        self.trigger = Periodic(every)
+
+    def act(self, sim, i, n_steps):
+        sim.check_energy(sim.observables())
+
+
+class Progress(Operation):
+    """Calls ``callback(sim, done, total)`` every ``every`` steps of the run and after its last."""
+
+    final = True
+
+    def __init__(self, callback, every: int, first_step: int = 0):
+        self.callback = callback
+        self.trigger = Periodic(every, phase=first_step)
+
+    def act(self, sim, i, n_steps):
+        self.callback(sim, i, n_steps)
+
+
+class Checkpoint(Operation):
+    """Writes a checkpoint when ``checkpointer.due()`` (a wall clock) and after the last step,
+    each time after every operation has flushed its buffered data."""
+
+    def __init__(self, checkpointer):
+        self.checkpointer = checkpointer
+        self.trigger = When(checkpointer.due)
+
+    def act(self, sim, i, n_steps):
+        sim.flush_operations()
+        self.checkpointer.write(sim)
+
+    def finish(self, sim):
+        self.act(sim, None, None)
+
+
+class StopCheck(Operation):
+    """Stops the run when ``stop()`` is true: writes a checkpoint (with ``checkpoint``, a
+    :class:`Checkpoint`) and raises :class:`RunInterrupted`."""
+
+    def __init__(self, stop, checkpoint: Checkpoint | None = None):
+        self.trigger = When(stop)
+        self.checkpoint = checkpoint
+
+    def act(self, sim, i, n_steps):
+        if self.checkpoint is not None:
+            self.checkpoint.act(sim, i, n_steps)
+        raise RunInterrupted(sim.state.step)
+

@@ -1,0 +1,303 @@
+"""Roles of the rods and the structures they form, from contact arrays (docs/model.md 'Connectivity graph and topology').
+
+:func:`classify_rods` -- arrays in, :class:`Topology` out: which rods are free, in
+clusters, dead ends or current-carrying filaments, and which structure each rod
+belongs to. Its callers hold the contacts: :class:`~.network.Network` in a run,
+:class:`~.graph.ConnectivityGraph` for an event log read back from a file.
+
+Topology rule
+-------------
+Tips joined by ideal contacts form one merged electrical node; rods are edges
+between merged nodes. Each conductor contact carries a *key*: contacts with the
+same key are one attachment (case (i): all anode contacts share the anode's key,
+all cathode contacts the cathode's; case (ii): every filament contact has its
+own key, since the filament potential varies along it). Each key becomes one
+attachment node. Contacts with conductors are ideal like tip contacts, so a merged
+node that touches exactly one key *is* that attachment node (its tips sit at the
+conductor's potential); a merged node touching several keys is joined to each of
+them. A virtual node X is joined to every attachment node. A rod is **FILAMENT**
+iff it lies on a simple path between two *different* attachment nodes, i.e. iff its
+edge lies on a cycle through X, i.e. iff it is in a biconnected component that
+contains X (one depth-first search from X, :func:`selfas_graph.kernels.graph.edges_in_blocks_of`;
+the tests hold it to networkx's ``biconnected_component_edges``). Merging same-key contacts is
+what keeps a loop from the anode back to the anode from counting as a filament,
+also when the loop's far end touches the anode at a junction that leads on to the
+cathode: both ends of such a loop are pinned at the anode's potential, and no
+current flows in it.
+
+A balanced bridge rod is FILAMENT (it lies on such a path) although its current
+is zero; the circuit solve reports the current, this module the topology.
+
+Structures are the connected components of rods joined by tip-tip contacts;
+conductors do **not** join structures (two aggregates that both touch the anode
+are two structures). A rod with no contact at all is FREE and has no structure.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from selfas_graph.kernels.graph import edges_in_blocks_of
+from selfas_graph.kernels.graph import structures as component_structures
+from selfas_graph.model import events as ev
+from selfas_graph.model.circuit import CircuitSolution, SolveMemo, merge_tips, solve_circuit
+from selfas_graph.model.validate import _as_count, _as_index_array, _frozen
+
+__all__ = ["FREE", "CLUSTER", "DEAD_END", "FILAMENT", "ROLE_NAMES", "Topology", "classify_rods",
+           "conductor_node_key", "circuit_event", "ContactArrays"]
+
+#: rod roles (``Topology.role``)
+FREE = 0  #: no contacts at all
+CLUSTER = 1  #: stuck to other rods; the structure touches no conductor
+DEAD_END = 2  #: in a structure touching a conductor, on no path between different attachments
+FILAMENT = 3  #: on a path between conductor attachments of different potential
+ROLE_NAMES = {FREE: "free", CLUSTER: "cluster", DEAD_END: "dead_end", FILAMENT: "filament"}
+
+
+# --------------------------------------------------------------------------- topology
+@dataclasses.dataclass(frozen=True, eq=False)
+class Topology:
+    """Roles of the rods and the structures they form (arrays are read-only).
+
+    Attributes
+    ----------
+    role : (n_rods,) int8
+        FREE, CLUSTER, DEAD_END or FILAMENT.
+    structure : (n_rods,) int64
+        Structure id of each rod, ``-1`` for free rods. Ids are ``0 .. n_structures-1``.
+    structure_size : (n_structures,) int64
+        Number of rods in each structure.
+    largest_structure : int
+        Id of the structure with the most rods (lowest id on ties), -1 if none.
+    n_filament, n_dead_end, n_cluster, n_free : int
+        Number of rods with each role.
+    has_short_circuit : bool
+        ``n_filament > 0``: a conducting path joins two different conductor attachments.
+    n_nodes, node_of_tip : int, (n_tips,) int64
+        The merged electrical nodes (:func:`~.circuit.merge_tips`), handed on to the circuit
+        solve so that the tips are merged once.
+    """
+
+    role: np.ndarray
+    structure: np.ndarray
+    structure_size: np.ndarray
+    largest_structure: int
+    n_filament: int
+    n_dead_end: int
+    n_cluster: int
+    n_free: int
+    has_short_circuit: bool
+    n_nodes: int | None = None
+    node_of_tip: np.ndarray | None = None
+
+    @property
+    def n_structures(self) -> int:
+        """Number of structures (connected aggregates of at least one rod with a contact)."""
+        return int(self.structure_size.shape[0])
+
+
+def classify_rods(n_rods, tip_contacts, conductor_tip, conductor_node_key) -> Topology:
+    """Classify rods as free, cluster, dead end or filament (docs/model.md 'Connectivity graph and topology').
+
+    Parameters
+    ----------
+    n_rods : int
+        Number of rods; rod ``i`` has tips ``2 i`` and ``2 i + 1``.
+    tip_contacts : (m, 2) int64
+        Pairs of tips in contact.
+    conductor_tip : (k,) int64
+        Tips touching a conductor, one entry per contact.
+    conductor_node_key : (k,) int64
+        Attachment key of each conductor contact: contacts with equal keys are one
+        attachment (case (i): the conductor id; case (ii) filament: a key unique
+        to the contact).
+
+    Returns
+    -------
+    Topology
+
+    Notes
+    -----
+    Cost: two passes of union-find over all tips and rods (the tip merge and the
+    components, :mod:`selfas_graph.kernels.graph`), and one depth-first search over
+    the components that touch at least two different attachment keys (no other
+    component can hold a filament). Measured at the Fig. 2 sizes (1200 rods): 0.16 ms
+    before the first short circuit, 0.5 ms with 700 filament rods, 6 times less than
+    with scipy's ``connected_components`` and networkx (docs/performance.md,
+    "Topology and circuit per event").
+    """
+    n_rods = _as_count(n_rods, "n_rods")
+    n_tips = 2 * n_rods
+    tip_contacts = _as_index_array(tip_contacts, "tip_contacts", 2, n_tips)
+    conductor_tip = _as_index_array(conductor_tip, "conductor_tip", 1, n_tips)
+    key = _as_index_array(conductor_node_key, "conductor_node_key", 1, None)
+    if key.shape != conductor_tip.shape:
+        raise ValueError(
+            f"conductor_node_key has shape {key.shape}, conductor_tip has shape "
+            f"{conductor_tip.shape}: one key per conductor contact"
+        )
+
+    n_nodes, node_of_tip = merge_tips(n_tips, tip_contacts)
+    if key.size:
+        key_values, key_index = np.unique(key, return_inverse=True)
+        key_index = key_index.astype(np.int64, copy=False)
+    else:
+        key_values, key_index = key, key
+    n_keys = key_values.shape[0]
+    # components of merged nodes joined by rods (self-loop rods are harmless here); structures:
+    # components holding at least one non-free rod, renumbered 0..S-1; components touching a
+    # conductor, and those touching >= 2 different keys
+    comp, n_comp, free, structure, structure_size, comp_touch, candidate = component_structures(
+        n_rods, node_of_tip, n_nodes, tip_contacts, conductor_tip, key_index)
+    largest = int(np.argmax(structure_size)) if structure_size.size else -1
+    u = node_of_tip[0::2]
+    rod_comp = comp[u]
+
+    filament = np.zeros(n_rods, dtype=bool)
+    if candidate.any():
+        filament = _filament_rods(n_nodes, u, node_of_tip[1::2], comp, candidate, node_of_tip[conductor_tip],
+                                  key_index, n_keys)
+
+    role = np.full(n_rods, CLUSTER, dtype=np.int8)
+    role[comp_touch[rod_comp]] = DEAD_END
+    role[filament] = FILAMENT
+    role[free] = FREE
+    counts = np.bincount(role, minlength=4)
+    return Topology(
+        role=_frozen(role),
+        structure=_frozen(structure),
+        structure_size=_frozen(structure_size),
+        largest_structure=largest,
+        n_filament=int(counts[FILAMENT]),
+        n_dead_end=int(counts[DEAD_END]),
+        n_cluster=int(counts[CLUSTER]),
+        n_free=int(counts[FREE]),
+        has_short_circuit=bool(counts[FILAMENT] > 0),
+        n_nodes=int(n_nodes),
+        node_of_tip=_frozen(node_of_tip),
+    )
+
+
+def _filament_rods(n_nodes, u, v, comp, candidate, cnode, key_index, n_keys) -> np.ndarray:
+    """Rods in a biconnected component with the virtual node X (see module docstring).
+
+    Auxiliary simple graph H: merged nodes ``0 .. n_nodes-1`` of the candidate
+    components, attachment of key ``j`` as node ``n_nodes + j``, X as node
+    ``n_nodes + n_keys``; a merged node that touches exactly one key is replaced by
+    that key's attachment node. Edges are the rods, the contacts of merged nodes that
+    touch two or more keys (merged node -> attachment) and X -> attachment. Edges are
+    coded ``lo * stride + hi``.
+
+    Parallel rods collapse to one edge of H. That is exact: two parallel rods
+    share the block of their common edge (or form a block of their own, which
+    cannot contain X). Self-loop rods are never filament.
+
+    The blocks through X come from one depth-first search from X over H
+    (:func:`selfas_graph.kernels.graph.edges_in_blocks_of`).
+    """
+    x_node = n_nodes + n_keys
+    n_h = x_node + 1
+    stride = np.int64(n_h)
+    att_in = candidate[comp[cnode]]
+    # contacts are ideal, so a merged node touching exactly one attachment key is that
+    # attachment electrically: it becomes the attachment node itself. A path through it
+    # then ends there, and a loop that leaves an electrode and comes back to it (both ends
+    # pinned at the same potential, no current) is a cycle through that attachment alone.
+    # Nodes touching two or more keys keep one edge to each attachment.
+    node_key = np.unique(cnode[att_in] * np.int64(n_keys) + key_index[att_in])  # distinct (node, key)
+    nk_node, nk_key = node_key // n_keys, node_key % n_keys
+    keys_per_node = np.bincount(nk_node, minlength=n_nodes)
+    rep = np.arange(n_nodes, dtype=np.int64)
+    single = keys_per_node[nk_node] == 1
+    rep[nk_node[single]] = n_nodes + nk_key[single]
+    ru, rv = rep[u], rep[v]
+    rod_in = candidate[comp[u]] & (ru != rv)
+    rod_code = np.minimum(ru, rv) * stride + np.maximum(ru, rv)
+    multi = keys_per_node[nk_node] >= 2
+    att_code = nk_node[multi] * stride + (n_nodes + nk_key[multi])
+    keys_used = np.unique(key_index[att_in]) + n_nodes
+    # unique edges of H; attachment < X, so (attachment, X) is (lo, hi)
+    code = np.unique(np.concatenate([rod_code[rod_in], att_code, keys_used * stride + x_node]))
+    edge_in_x = edges_in_blocks_of(n_h, code // stride, code % stride, x_node)
+    where = np.minimum(np.searchsorted(code, rod_code), code.shape[0] - 1)
+    return rod_in & edge_in_x[where]
+
+
+
+
+def conductor_node_key(conductor_id: np.ndarray, per_contact, conductor_ids) -> np.ndarray:
+    """Attachment key of each conductor contact (see :func:`classify_rods`).
+
+    A conductor of fixed potential ``c`` -> ``c``; a conductor in ``per_contact`` (potential
+    given per contact, the case (ii) filament) -> a key unique to the contact, above every id
+    in ``conductor_ids``.
+    """
+    base = max(list(conductor_ids) + [-1]) + 1
+    per = np.isin(conductor_id, np.fromiter(per_contact, dtype=np.int64, count=len(per_contact)))
+    return np.where(per, base + np.arange(conductor_id.shape[0]), conductor_id).astype(np.int64)
+
+
+def circuit_event(short_before: bool, topology: Topology, step: int, time: float) -> list[tuple]:
+    """The derived event row of a batch of contact events, given whether a filament existed before it.
+
+    ``[(step, time, SHORT_CIRCUIT, n_filament, -1)]`` if the network went from no filament to a
+    filament, ``[(step, time, OPEN_CIRCUIT, -1, -1)]`` for the reverse, else ``[]``.
+    """
+    if topology.has_short_circuit == short_before:
+        return []
+    if topology.has_short_circuit:
+        return [(step, time, ev.SHORT_CIRCUIT, topology.n_filament, -1)]
+    return [(step, time, ev.OPEN_CIRCUIT, -1, -1)]
+
+
+class ContactArrays:
+    """The topology and the circuit solve of contacts given as arrays: what
+    :class:`~.graph.ConnectivityGraph` and :class:`~.network.Network` share.
+
+    A subclass provides ``arrays()`` (``tip_contacts``, ``conductor_tip``, ``conductor_id``,
+    ``conductor_potential``), ``_conductors()`` (the per-contact conductor ids, all conductor
+    ids), ``n_rods``, ``n_tips``, ``solver``, ``rod_resistance``, ``contact_resistance``, and sets
+    ``_topology`` to None when the contacts change.
+    """
+
+    _topology: Topology | None = None
+    changed = True
+
+    def conductor_node_key(self, arrays: dict | None = None) -> np.ndarray:
+        """Attachment key of each conductor contact of :meth:`arrays` (:func:`conductor_node_key`)."""
+        arrays = self.arrays() if arrays is None else arrays
+        return conductor_node_key(arrays["conductor_id"], *self._conductors())
+
+    def topology(self) -> Topology:
+        """Roles and structures of the rods (cached until the next contact change)."""
+        if self._topology is None:
+            arr = self.arrays()
+            self._topology = classify_rods(self.n_rods, arr["tip_contacts"], arr["conductor_tip"],
+                                           self.conductor_node_key(arr))
+        return self._topology
+
+    @property
+    def has_short_circuit(self) -> bool:
+        """Whether a filament joins two different conductor attachments now."""
+        return self.topology().has_short_circuit
+
+    def solve(self, memo: SolveMemo | None = None) -> CircuitSolution:
+        """Potentials and rod currents of the present contacts; clears ``changed``.
+
+        ``memo``: a :class:`~.circuit.SolveMemo` that remembers the last reduced system. The
+        tips are merged once, by the topology (:attr:`Topology.node_of_tip`). Raises ValueError
+        if a per-contact potential is unset.
+        """
+        arr = self.arrays()
+        pot = arr["conductor_potential"]
+        if np.isnan(pot).any():
+            i = np.flatnonzero(np.isnan(pot))
+            pairs = list(zip(arr["conductor_tip"][i].tolist(), arr["conductor_id"][i].tolist()))
+            raise ValueError(f"unset contact potential for (tip, conductor) {pairs[:10]}")
+        topo = self.topology()
+        sol = solve_circuit(self.n_tips, arr["tip_contacts"], arr["conductor_tip"], pot, solver=self.solver,
+                            rod_resistance=self.rod_resistance, contact_resistance=self.contact_resistance,
+                            memo=memo, merged=(topo.n_nodes, topo.node_of_tip))
+        self.changed = False
+        return sol

@@ -1,0 +1,73 @@
+"""Operations with triggers: what acts after which step of Simulation.run."""
+import numpy as np
+import pytest
+
+from conftest import SMALL_CIRCUIT_SCENE
+from selfas_graph.io.h5md import NullWriter
+from selfas_graph.io.scenario import scenario_from_text
+from selfas_graph.model.operations import Always, Operation, Periodic, RunInterrupted, When
+from selfas_graph.model.simulation import Simulation
+
+
+def _sim():
+    return Simulation.from_scenario(scenario_from_text(SMALL_CIRCUIT_SCENE))
+
+
+class _Log(Operation):
+    """Records the time steps it acted on."""
+
+    def __init__(self, trigger, final=False):
+        self.trigger, self.final, self.steps = trigger, final, []
+
+    def act(self, sim, i, n_steps):
+        self.steps.append(sim.state.step)
+
+
+def test_triggers():
+    assert [s for s in range(10) if Periodic(4)(s)] == [0, 4, 8]
+    assert [s for s in range(10) if Periodic(4, phase=6)(s)] == [2, 6]
+    assert all(Always()(s) for s in range(3))
+    flag = [False]
+    w = When(lambda: flag[0])
+    assert not w(1)
+    flag[0] = True
+    assert w(1)
+
+
+def test_attached_operations_act_on_their_trigger_in_every_run_and_run_is_the_step_loop():
+    """An operation in sim.operations acts after the steps its trigger names, in every run call;
+    with final = True also after a run's last step. The frame writer writes frame 0, then every
+    output interval (100 steps here) and at the end."""
+    sim = _sim()
+    every7, final = _Log(Periodic(7)), _Log(Periodic(1000), final=True)
+    sim.operations += [every7, final]
+    writer = NullWriter()
+    sim.run(t_end=0.02, writer=writer)  # 40 steps
+    sim.run(t_end=0.06)  # 80 more, no writer
+    assert every7.steps == list(range(7, 121, 7))
+    assert final.steps == [40, 120]
+    assert writer.n_frames == 2  # frame 0 and the end of the first run (no multiple of 100 in 1..40)
+
+
+def test_progress_counts_steps_of_the_run_and_stop_raises_after_a_checkpoint():
+    sim = _sim()
+    sim.step(3)
+    seen = []
+    sim.run(t_end=sim.state.time + 10 * sim.dt, progress=lambda s, i, n: seen.append((s.state.step, i, n)),
+            progress_every=4)
+    assert seen == [(7, 4, 10), (11, 8, 10), (13, 10, 10)]
+
+    class Checkpointer:
+        written = []
+
+        def due(self):
+            return False
+
+        def write(self, s):
+            self.written.append(s.state.step)
+
+    ck = Checkpointer()
+    with pytest.raises(RunInterrupted) as exc:
+        sim.run(t_end=sim.state.time + 10 * sim.dt, checkpointer=ck, stop=lambda: sim.state.step >= 15)
+    assert exc.value.step == 15 and ck.written == [15]
+    assert np.isfinite(sim.state.position).all()
