@@ -32,3 +32,14 @@ def test_every_function_falls_in_one_part():
     assert tool.part_of(("/x/selfas_graph/kernels/currents.py", 1, "rod_current_field")).startswith("current field at")
     assert tool.part_of(("/x/selfas_graph/kernels/cells.py", 1, "_row_fill")) == "neighbour-list builds"
     assert tool.part_of(("~", 0, "<built-in method numpy.einsum>")) == "numpy and other"
+
+
+def test_checks_tool_times_both_checks(capsys):
+    sys.path.insert(0, str(ROOT / "tools"))
+    spec = importlib.util.spec_from_file_location("_selfas_tools_bench_checks", ROOT / "tools" / "bench_checks.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    got = tool.main(["--scenario", str(ROOT / "scenarios" / "quick.toml"), "--settle", "4", "--repeat", "2",
+                     "--calls", "2"])
+    assert len(got) == 2 and all(v[0] > 0 and v[1] > 0 for v in got.values())
+    assert "compiles for" in capsys.readouterr().out
