@@ -415,3 +415,38 @@ def test_ten_thousand_contacts_in_one_step():
     assert not topo.has_short_circuit
     sim.step()
     assert len(sim.events) == 10_000
+
+
+def test_quiet_step_kernel_never_hides_an_event(rng, monkeypatch):
+    """The one-pass check (kernels/pairs.py::contacts_unchanged) answers True only on steps where the
+    full check finds no event: two trackers, with and without it, follow a random walk of tips that
+    keeps crossing r*, the release radius, the electrodes and the filament surface, and stay equal."""
+    import selfas_graph.model.contacts as contacts_module
+    from selfas_graph.kernels.pairs import contacts_unchanged
+
+    n = 160
+    position = rng.uniform([-0.4, -0.4, -0.5], [0.4, 0.4, 0.5], size=(n, 3))
+    fast = ContactTracker(n, RSTAR, RELEASE, electrodes=(-0.45, 0.45), filament_radius=0.3)
+    slow = ContactTracker(n, RSTAR, RELEASE, electrodes=(-0.45, 0.45), filament_radius=0.3)
+    nl = NeighbourList(RELEASE, 0.05, exclude_same_rod=True)
+    answers = []
+    calls = []
+    busy = 0
+    monkeypatch.setattr(contacts_module, "contacts_unchanged",
+                        lambda *a: calls.append(contacts_unchanged(*a)) or calls[-1])
+    for step in range(400):
+        position += rng.normal(scale=0.004, size=position.shape)
+        nl.update(position)
+        got = fast.update(position, nl, step, 0.0)
+        answers.append(calls[-1])
+        with monkeypatch.context() as m:
+            m.setattr(contacts_module, "contacts_unchanged", lambda *a: False)
+            want = slow.update(position, nl, step, 0.0)
+        assert got == want
+        np.testing.assert_array_equal(fast.pairs, slow.pairs)
+        for flags in ("on_cathode", "on_anode", "on_filament"):
+            np.testing.assert_array_equal(getattr(fast, flags), getattr(slow, flags))
+        if answers[-1]:
+            assert got == []
+        busy += bool(got)
+    assert 0 < sum(answers) < len(answers) and busy > 50  # both answers exercised, many steps with events

@@ -151,6 +151,28 @@ def test_new_currents_refresh_the_current_terms_at_the_next_step(rng, extrapolat
     assert ff.calls["current_field"] == 2 and ff.calls["tip_magnetic"] == before + 2
 
 
+def test_the_same_currents_again_refresh_nothing(rng):
+    """A solve that gives the currents already in use (an event in a structure that carries none)
+    leaves the held current forces as they are: nothing is recomputed off the cycle."""
+    s = random_rods(6, rng, box=3.0)
+    sim = simulation(s, forces={"tip_magnetic": {}, "electrodes": {"gap": 20.0}, "current_field": {},
+                                "current_lorentz": {}},
+                     circuit={"delta_J0": 1.0}, integrator={"slow_every": 5, "dt": 1e-3})
+    sim.step(6)  # RK4 start, step 5 full, now at step 6
+    ff = sim.force_field
+    current = np.linspace(0.5, 1.0, s.n_rods)
+    ff.set_currents(current)
+    sim.step(1)  # step 6: fast, the new currents computed
+    assert ff.calls["current_field"] == 1
+    ff.set_currents(current.copy())  # the same values, another array
+    assert not ff.stale
+    sim.step(1)  # step 7: fast, nothing recomputed
+    assert ff.calls["current_field"] == 1 and ff.calls["current_lorentz"] == 1
+    ff.set_currents(current * 1.5)  # different values: refreshed at the next step
+    sim.step(1)
+    assert ff.calls["current_field"] == 2
+
+
 def test_error_vanishes_as_the_slow_interval_shrinks():
     """Position difference from K = 1 after 0.05 t0 (the violent start of a random scene, before
     contacts amplify every difference), with the default fast range. Held forces err to first

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import reference as ref
-from selfas_graph.kernels.cells import neighbour_rows
+from selfas_graph.kernels.cells import max_displacement2, neighbour_rows
 from selfas_graph.model.neighbours import NeighbourList
 
 #: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
@@ -132,3 +132,19 @@ def test_pairs_sorted_once_each(rng):
     np.testing.assert_array_equal(p, p[np.lexsort((p[:, 1], p[:, 0]))])
     nl.build(x[:10])
     assert set(map(tuple, nl.pairs.tolist())) == ref.neighbour_pairs(x[:10], 0.6, False)
+
+
+def test_max_displacement_is_the_numpy_value_to_the_bit(rng):
+    """The kernel the list checks its skin with gives what the numpy passes it replaced gave, bit for
+    bit: the sum of the squared columns in the order (x + z) + y (numpy 2's einsum order for three)."""
+    for n in (1, 7, 2400):
+        r0 = rng.uniform(-10, 10, size=(n, 3))
+        for scale in (1e-9, 1e-3, 1.0):
+            x = r0 + scale * rng.normal(size=(n, 3))
+            d = x - r0
+            want = ((d[:, 0] * d[:, 0] + d[:, 2] * d[:, 2]) + d[:, 1] * d[:, 1]).max(initial=0.0)
+            assert max_displacement2(x, r0) == want
+    assert max_displacement2(np.zeros((0, 3)), np.zeros((0, 3))) == 0.0
+    x = r0.copy()
+    x[3, 1] = np.nan
+    assert max_displacement2(x, r0) == np.inf  # NaN forces a rebuild, as the numpy check did

@@ -1,7 +1,7 @@
 """Kernel benchmark: the hot kernels of a step, one at a time, per instruction set.
 
 Usage: python tools/bench_kernels.py [--rods 1200 6000 24000] [--repeat 7] [--threads 1]
-                                     [--targets host haswell znver3] [--json OUT.json]
+                                     [--targets host haswell znver3] [--before REF] [--json OUT.json]
 
 On the tips of the Fig. 2 scene scaled to each size (as tools/bench_step.py), it times, each
 ``--repeat`` times (median [min-max] ms per call), on ``--threads`` numba threads:
@@ -13,6 +13,16 @@ On the tips of the Fig. 2 scene scaled to each size (as tools/bench_step.py), it
 - ``tree build`` and ``tree eval``: the tip tree (kernels/tree.py) at its defaults;
 - ``yukawa``: the screened rod-centre sum over the scene's neighbour list.
 
+- ``current tips`` and ``current field``: the field of the rod currents (docs/model.md 'Term 9',
+  'Term 10') on every tip and at the 4 Gauss-Legendre points of every current-carrying rod,
+  with ``--active-fraction`` of the rods (default 0.72, the Fig. 2 run at t = 340) carrying
+  random currents.
+
+``--before REF`` also times the kernels of the git revision REF (its ``selfas_graph/kernels``
+copied into a temporary package), interleaved with today's in the same process, and prints
+both and their ratio (before / after, median of the per-repeat ratios): the fair comparison on
+a loaded machine.
+
 ``--cpu-time`` times by the process's CPU time instead of the wall clock: on a shared machine
 under load it counts only the cycles the kernel got (with one thread).
 
@@ -23,11 +33,14 @@ build; on an AVX-512 host, ``haswell`` is the AVX2 build. Each process prints th
 target it compiled for.
 """
 import argparse
+import importlib
 import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
+import types
 from pathlib import Path
 
 import numpy as np
@@ -78,19 +91,58 @@ def timed(fn, repeat, clock=time.perf_counter):
     return t
 
 
+def timed_pair(fn_before, fn_after, repeat, clock=time.perf_counter):
+    """Both callables, interleaved (the order alternates between repeats): two lists of ms."""
+    fn_before()
+    fn_after()
+    t = ([], [])
+    for i in range(repeat):
+        for j in ((0, 1) if i % 2 == 0 else (1, 0)):
+            fn = fn_before if j == 0 else fn_after
+            t0 = clock()
+            fn()
+            t[j].append(1e3 * (clock() - t0))
+    return t
+
+
+def kernels_at(ref):
+    """The kernel modules of git revision ``ref``, as a namespace with ``tips``, ``tree``, ``pairs``,
+    ``currents`` (``selfas_graph/kernels`` of that revision copied into a package of its own)."""
+    sha = subprocess.run(["git", "rev-parse", ref], cwd=ROOT, capture_output=True, text=True,
+                         check=True).stdout.strip()
+    name = f"selfas_kernels_{sha[:12]}"
+    home = Path(tempfile.gettempdir()) / "selfas_bench_kernels"
+    pkg = home / name
+    if not (pkg / "__init__.py").exists():
+        pkg.mkdir(parents=True, exist_ok=True)
+        files = subprocess.run(["git", "ls-tree", "--name-only", sha, "selfas_graph/kernels/"], cwd=ROOT,
+                               capture_output=True, text=True, check=True).stdout.split()
+        for f in files:
+            if f.endswith(".py"):
+                text = subprocess.run(["git", "show", f"{sha}:{f}"], cwd=ROOT, capture_output=True,
+                                      check=True).stdout
+                (pkg / Path(f).name).write_bytes(text)
+    if str(home) not in sys.path:
+        sys.path.insert(0, str(home))
+    return types.SimpleNamespace(**{m: importlib.import_module(f"{name}.{m}")
+                                    for m in ("tips", "tree", "pairs", "currents")})
+
+
 def run(args):
     import numba
     from bench_peer import machine, machine_line
     from bench_step import scene
 
     from selfas_graph import Simulation
-    from selfas_graph.kernels import pairs as kp
-    from selfas_graph.kernels import tree as ktree
-    from selfas_graph.kernels.tips import tip_tip_direct
+    from selfas_graph.kernels import currents, pairs, tips, tree
 
     numba.set_num_threads(args.threads)
     plain = _plain()
     clock = time.process_time if args.cpu_time else time.perf_counter
+    now = types.SimpleNamespace(tips=tips, tree=tree, pairs=pairs, currents=currents)
+    before_ref = getattr(args, "before", None)
+    before = kernels_at(before_ref) if before_ref else None
+    fraction = getattr(args, "active_fraction", 0.72)
     out_rows = []
     for n in args.rods:
         sc = scene(str(ROOT / "scenarios" / "fig2.toml"), n)
@@ -102,25 +154,58 @@ def run(args):
         rstar, kappa = p.rods.rstar, p.rods.tip_stiffness
         f = np.empty((x.shape[0], 3))
         res = {"rods": n}
-        tips = x.shape[0]
-        if n <= args.direct_max:
-            rep = args.repeat if n <= 6000 else max(2, args.repeat // 3)
-            res["direct"] = timed(lambda: tip_tip_direct(x, y, z, q, rstar, kappa, 0, tips, f), rep, clock)
-            res["plain"] = timed(lambda: plain(x, y, z, q, f), rep, clock)
-        res["tree build"] = timed(lambda: ktree.build_tip_tree(x, y, z, q), args.repeat, clock)
-        tree = ktree.build_tip_tree(x, y, z, q)
-        res["tree eval"] = timed(lambda: ktree.evaluate_tip_tree(tree, rstar, kappa, ktree.THETA, f), args.repeat, clock)
+        ntips = x.shape[0]
         ff = sim.force_field
         ff._bind(st.position, st.velocity)
         yk = next(t for t in ff.terms if t.name == "yukawa")
         nl = ff.centre_neighbours()
         c = ff.centre()
         fy = np.empty((n, 3))
-        res["yukawa"] = timed(lambda: kp.yukawa_centres(c, st.rod_charge, nl.start, nl.index, yk.screening, yk.core,
-                                                         yk.cutoff, 0, n, fy), args.repeat, clock)
+        rng = np.random.default_rng(7)
+        current = np.where(rng.random(n) < fraction, rng.uniform(-3.0, 3.0, n), 0.0)
+        active = np.flatnonzero(current != 0.0).astype(np.int64)
+        gl_t, _ = currents.gauss_legendre_01(4)
+        pts = np.empty((len(active) * len(gl_t), 3))
+        currents.quadrature_points(st.position, active, gl_t, pts)
+        excl = np.repeat(active, len(gl_t))
+        fb = np.empty_like(pts)
+        w = 0.5 * p.rods.diameter
+        trees = {}
+
+        def tree_of(K):
+            if id(K) not in trees:
+                trees[id(K)] = K.tree.build_tip_tree(x, y, z, q)
+            return trees[id(K)]
+
+        direct = n <= args.direct_max
+        rep_big = args.repeat if n <= 6000 else max(2, args.repeat // 3)
+        jobs = [
+            ("direct", direct, rep_big, lambda K: lambda: K.tips.tip_tip_direct(x, y, z, q, rstar, kappa, 0, ntips, f)),
+            ("tree build", True, args.repeat, lambda K: lambda: K.tree.build_tip_tree(x, y, z, q)),
+            ("tree eval", True, args.repeat,
+             lambda K: lambda: K.tree.evaluate_tip_tree(tree_of(K), rstar, kappa, K.tree.THETA, f)),
+            ("yukawa", True, args.repeat,
+             lambda K: lambda: K.pairs.yukawa_centres(c, st.rod_charge, nl.start, nl.index, yk.screening, yk.core,
+                                                      yk.cutoff, 0, n, fy)),
+            ("current tips", direct, rep_big,
+             lambda K: lambda: K.currents.current_force_on_tips(st.position, q, active, current, w, 0, ntips, f)),
+            ("current field", direct, rep_big,
+             lambda K: lambda: K.currents.rod_current_field(pts, excl, st.position, active, current, w, fb)),
+        ]
+        for name, on, rep, make in jobs:
+            if not on:
+                continue
+            if before is None:
+                res[name] = timed(make(now), rep, clock)
+            else:
+                res[name + " before"], res[name] = timed_pair(make(before), make(now), rep, clock)
+        if direct:
+            res["plain"] = timed(lambda: plain(x, y, z, q, f), rep_big, clock)
         res["yukawa_pairs"] = int(nl.start[-1])
+        res["active_rods"] = int(len(active))
         out_rows.append(res)
-    return {"machine": machine(), "line": machine_line(), "threads": args.threads, "rows": out_rows}
+    return {"machine": machine(), "line": machine_line(), "threads": args.threads, "rows": out_rows,
+            "before": before_ref}
 
 
 def main(argv=None):
@@ -133,6 +218,9 @@ def main(argv=None):
                          "this counts only the cycles the kernel got (use with --threads 1)")
     ap.add_argument("--direct-max", type=int, default=6000, help="time the direct sums up to this many rods")
     ap.add_argument("--targets", nargs="+", default=["host"], help="host, or NUMBA_CPU_NAME values (haswell, znver3)")
+    ap.add_argument("--before", help="also time the kernels of this git revision, interleaved (e.g. HEAD~3)")
+    ap.add_argument("--active-fraction", type=float, default=0.72,
+                    help="fraction of the rods carrying current in the current kernels")
     ap.add_argument("--json", help="write all results to this file")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -149,6 +237,8 @@ def main(argv=None):
         cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "--rods", *map(str, args.rods),
                "--repeat", str(args.repeat), "--threads", str(args.threads), "--direct-max", str(args.direct_max)]
         cmd += ["--cpu-time"] if args.cpu_time else []
+        cmd += ["--before", args.before] if args.before else []
+        cmd += ["--active-fraction", str(args.active_fraction)]
         got = subprocess.run(cmd, env=env, capture_output=True, text=True)
         if got.returncode:
             print(f"{target}: failed, left out of the table:\n{got.stderr}", file=sys.stderr, flush=True)
@@ -160,26 +250,40 @@ def main(argv=None):
     args.targets = [t for t in args.targets if t in results]
     print(f"\n{'CPU' if args.cpu_time else 'wall'} ms per call on {args.threads} thread(s), median [min-max] of {args.repeat}; "
           "direct and plain also in 1e9 tip pairs/s/thread (median)")
-    kernels = ["direct", "plain", "tree build", "tree eval", "yukawa"]
-    print("| rods | kernel | " + " | ".join(args.targets) + " |")
-    print("|---|---|" + "---|" * len(args.targets))
+    kernels = ["direct", "plain", "tree build", "tree eval", "yukawa", "current tips", "current field"]
+    cols = [(t, k) for t in args.targets for k in (("before", "after", "speed-up") if args.before else ("",))]
+    if args.before:
+        print(f"before = {args.before}, after = the working tree; speed-up = median of before/after per repeat")
+    print("| rods | kernel | " + " | ".join(f"{t} {k}".strip() for t, k in cols) + " |")
+    print("|---|---|" + "---|" * len(cols))
+
+    def cell(row, key, n, k):
+        v = np.array(row[key])
+        text = f"{np.median(v):.3g} [{v.min():.3g}-{v.max():.3g}]"
+        if k in ("direct", "plain"):
+            text += f" ({(2 * n) ** 2 / (np.median(v) * 1e-3) / args.threads / 1e9:.2f}e9)"
+        if k == "yukawa":
+            text += f" ({np.median(v) * 1e6 / row['yukawa_pairs']:.1f} ns/pair)"
+        return text
+
     for i, n in enumerate(args.rods):
         for k in kernels:
             cells = []
-            for target in args.targets:
+            for target, what in cols:
                 row = results[target]["rows"][i]
                 if k not in row:
                     cells.append("")
-                    continue
-                v = np.array(row[k])
-                cell = f"{np.median(v):.3g} [{v.min():.3g}-{v.max():.3g}]"
-                if k in ("direct", "plain"):
-                    cell += f" ({(2 * n) ** 2 / (np.median(v) * 1e-3) / args.threads / 1e9:.2f}e9)"
-                if k == "yukawa":
-                    cell += f" ({np.median(v) * 1e6 / row['yukawa_pairs']:.1f} ns/pair)"
-                cells.append(cell)
+                elif what == "before":
+                    cells.append(cell(row, k + " before", n, k) if k + " before" in row else "")
+                elif what == "speed-up":
+                    if k + " before" in row:
+                        r = np.array(row[k + " before"]) / np.array(row[k])
+                        cells.append(f"{np.median(r):.2f} [{r.min():.2f}-{r.max():.2f}]")
+                    else:
+                        cells.append("")
+                else:
+                    cells.append(cell(row, k, n, k))
             print(f"| {n} | {k} | " + " | ".join(cells) + " |")
-
 
 if __name__ == "__main__":
     main()

@@ -109,6 +109,34 @@ def _row_fill(position, sorted_position, lo, h, g, cell_start, cell_point, r2max
                start[k])
 
 
+@njit
+def max_displacement2(position, reference):
+    """Largest squared distance between a row of ``position`` and the same row of ``reference``.
+
+    One pass over both arrays instead of three numpy passes (difference, row dot products,
+    maximum): measured 3 against 25 us for 2400 tips on one core, and a Verlet list checks it
+    3 times per step. Each row is summed as ``(dx^2 + dz^2) + dy^2``, the order in which numpy 2's
+    ``np.einsum("ij,ij->i", d, d)``, the check it replaces, sums three columns (equal on 2e5 random
+    rows; any other order differs in the last bit in a fifth of them), so that the rebuild
+    decisions, and with them the runs, stay the same bit for bit. Returns inf when a row holds NaN
+    (a list built then lists nothing and the run's health check stops the run), 0 for no rows.
+
+    Parameters
+    ----------
+    position, reference : (n, 3) float64
+    """
+    m = 0.0
+    for i in range(position.shape[0]):
+        dx = position[i, 0] - reference[i, 0]
+        dy = position[i, 1] - reference[i, 1]
+        dz = position[i, 2] - reference[i, 2]
+        d2 = (dx * dx + dz * dz) + dy * dy
+        if d2 != d2:
+            return np.inf
+        m = max(m, d2)
+    return m
+
+
 def cell_grid(position, radius, max_cells):
     """Grid for :func:`neighbour_rows`: lower corner, cell side >= radius, cells per axis.
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.pairs import close_pair_count, close_pairs
+from ..kernels.pairs import close_pair_count, close_pairs, contacts_unchanged
 from . import events as ev
 
 
@@ -62,6 +62,12 @@ class ContactTracker:
         list of (step, time, kind, a, b) tuples, releases first, then contacts, each
         sorted by ids (a deterministic order).
         """
+        # [perf] one kernel pass answers the common step without news (kernels/pairs.py::contacts_unchanged)
+        el = self.electrodes if self.electrodes is not None else (np.nan, np.nan)
+        fr = self.filament_radius if self.filament_radius is not None else np.nan
+        if contacts_unchanged(position, neighbours.start, neighbours.index, self.pairs, self.rstar, self.release,
+                              float(el[0]), float(el[1]), self.on_cathode, self.on_anode, float(fr), self.on_filament):
+            return []
         rows = []
         # releases: current contacts now farther apart than the release radius
         if len(self.pairs):

@@ -41,13 +41,19 @@ class RodCurrents:
         self.active_rod = np.zeros(0, dtype=np.int64)
         self.position = None
 
-    def set(self, current) -> None:
-        """Take the currents ``(n_rods,)``; rods whose current is exactly zero are left out of the kernels."""
+    def set(self, current) -> bool:
+        """Take the currents ``(n_rods,)``; rods whose current is exactly zero are left out of the kernels.
+
+        Returns False (and keeps the arrays in use) when the currents are those in use, bit for bit.
+        """
         current = np.ascontiguousarray(current, dtype=np.float64)
         if current.shape != (self.n_rods,):
             raise ValueError(f"currents must have shape ({self.n_rods},), got {current.shape}")
+        if np.array_equal(current, self.current):
+            return False
         self.current = current
         self.active_rod = np.flatnonzero(current != 0.0).astype(np.int64)
+        return True
 
     def field_at(self, points, out, exclude_rod):
         """Overwrite ``out`` (m, 3) with the field of the rod currents at ``points`` (m, 3), leaving out

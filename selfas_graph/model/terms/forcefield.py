@@ -118,10 +118,12 @@ class ForceField:
     def set_currents(self, current):
         """Rod currents from the last circuit solve, (n_rods,) float64; used from the next evaluation on.
 
-        Rods whose current is exactly zero are left out of the current kernels.
+        Rods whose current is exactly zero are left out of the current kernels. The same currents
+        again (a solve after an event in a structure that carries none) turn nothing stale: the held
+        current forces stay valid, as between any two full evaluations (late in the Fig. 2 scene half
+        the solves; docs/performance.md).
         """
-        self.rod_currents.set(current)
-        if self.mts is not None:
+        if self.rod_currents.set(current) and self.mts is not None:
             self.mts.currents_changed()
 
     # -- lazily computed views of the current (position, velocity) ---------------------------------

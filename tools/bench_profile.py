@@ -1,0 +1,255 @@
+"""Where a step goes: the CPU time of a run's steps, by part, from a checkpoint or a fresh scene.
+
+Usage: python tools/bench_profile.py --checkpoint RUN.checkpoint.h5 [--steps 2000] [--threads 1]
+       python tools/bench_profile.py --scenario scenarios/fig2.toml --settle 2000 [--steps 2000]
+       python tools/bench_profile.py --checkpoint RUN.checkpoint.h5 --before REF [--rounds 8] [--steps 250]
+
+Steps the simulation ``--steps`` times after 48 warm-up steps under cProfile on the thread's CPU
+clock (on a machine loaded by other jobs the wall clock counts their time too), and sorts the time
+spent in each function into the parts of a step: the force kernels (each slow sum, the fast close
+pairs, the split brake), neighbour-list builds, contact search, events (graph, circuit), and the
+rest (integrator, force-field bookkeeping, numpy glue). Kernel calls are counted, so that the cost
+per call and the calls per step are both printed. The profile adds some overhead per Python call
+(about 1 us); the first line gives the CPU time per step without it, measured on the same steps'
+successors.
+
+A checkpoint is read as the run left it (read only: a copy of a running job's checkpoint is
+fine). One written by an older version without a checksum is read without verification, with a
+note: the benchmark needs the state, not its provenance.
+
+``--before REF`` compares whole steps instead: two processes, one running the package of the git
+revision REF (exported to a temporary folder), one the working tree, both from the same state,
+take turns of ``--steps`` steps (``--rounds`` turns each, the first of each discarded as warm-up)
+and report their CPU time per step (the thread's with one thread, the process's with more): the two codes see the same machine load, interleaved.
+The ratio is the median of the per-round ratios.
+
+Prints the CPU model and the instruction set numba compiled for (``NUMBA_CPU_NAME``).
+"""
+import argparse
+import cProfile
+import json
+import os
+import pstats
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+
+os.environ.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")  # a checkpoint of a running job is read only
+
+ROOT = Path(__file__).resolve().parent.parent
+#: the package to import: the working tree, or an exported revision (``--before``)
+PACKAGE_ROOT = Path(os.environ.get("SELFAS_BENCH_PACKAGE_ROOT", ROOT))
+sys.path.insert(0, str(PACKAGE_ROOT))
+sys.path.insert(0, str(ROOT / "tools"))
+
+import numpy as np  # noqa: E402
+
+#: (part, test on "path:function") in order; the first match wins
+PARTS = [
+    ("tip-tip far sum (direct or tree, slow)", lambda f: f.endswith(("tips.py:tip_tip_direct", ))
+     or "kernels/tree.py" in f),
+    ("tip-tip close pairs (fast, every step)", lambda f: f.endswith("tips.py:tip_tip_fast")),
+    ("Yukawa sum (slow)", lambda f: f.endswith(("pairs.py:yukawa_centres", "pairs.py:yukawa_energy"))),
+    ("current field on tips (term 9, slow)", lambda f: f.endswith("currents.py:current_force_on_tips")),
+    ("current field at Lorentz points (term 10, slow)", lambda f: "kernels/currents.py" in f),
+    ("split brake (close pairs, exact brake)", lambda f: f.endswith(("pairs.py:close_pairs", "pairs.py:_close_counts",
+                                                                      "pairs.py:_close_fill",
+                                                                      "pairs.py:brake_pairs_exact",
+                                                                      "pairs.py:close_pair_count"))),
+    ("neighbour-list builds", lambda f: "kernels/cells.py" in f),
+    ("cheap O(n) kernels (walls, fields, integration, bonds)",
+     lambda f: "selfas_graph/kernels/" in f and not f.endswith("_jit.py:__call__")),
+    ("contact search and events (Python)", lambda f: "model/contacts.py" in f or "model/events.py" in f),
+    ("graph and circuit on events", lambda f: any(f"model/{m}.py" in f for m in (
+        "graph", "circuit", "network", "topology", "linear", "validate"))),
+    ("force field bookkeeping (Python)", lambda f: "model/terms/" in f),
+    ("neighbour-list checks (Python)", lambda f: "model/neighbours.py" in f),
+    ("integrator and run loop (Python)", lambda f: any(f"model/{m}.py" in f for m in (
+        "integrator", "simulation", "operations", "health", "observables"))),
+    ("numpy and other", lambda f: True),
+]
+
+
+def load_state(args):
+    """(Simulation, origin text) from ``--checkpoint`` or ``--scenario`` + ``--settle``."""
+    from selfas_graph import Simulation, load_scenario
+    from selfas_graph.io.checkpoint import CheckpointError, read_checkpoint
+    from selfas_graph.io.scenario import scenario_from_text
+
+    if args.checkpoint:
+        note = ""
+        try:
+            snap, meta = read_checkpoint(args.checkpoint)
+        except CheckpointError as exc:
+            if "checksum" not in str(exc):
+                raise
+            import h5py
+
+            with h5py.File(args.checkpoint, "r") as f:
+                g = f["snapshot"]
+                snap = {k: v for k, v in g.attrs.items()}
+                for k in g:
+                    snap[k] = g[k][()]
+                meta = dict(f["meta"].attrs)
+            note = " (no checksum: written by an older version, read without verification)"
+        sc = scenario_from_text(meta["scenario_text"], overrides=json.loads(meta["overrides"]) + list(args.extra))
+        sim = Simulation.from_snapshot(sc.params, snap)
+        return sim, f"checkpoint {args.checkpoint} at t = {float(snap['time']):.3f}{note}"
+    sc = load_scenario(args.scenario, overrides=args.extra)
+    sim = Simulation.from_scenario(sc)
+    sim.step(args.settle)
+    return sim, f"{args.scenario} after {args.settle} steps"
+
+
+def part_of(key):
+    path, _, fn = key
+    name = f"{path.replace(os.sep, '/')}:{fn}"
+    for part, test in PARTS:
+        if test(name):
+            return part
+    return PARTS[-1][0]
+
+
+def profile(sim, steps):
+    """{part: CPU seconds} and {kernel function: calls} over ``steps`` steps."""
+    pr = cProfile.Profile(time.thread_time)
+    pr.enable()
+    sim.step(steps)
+    pr.disable()
+    st = pstats.Stats(pr)
+    parts = defaultdict(float)
+    calls = {}
+    for key, (_cc, nc, tt, _ct, _callers) in st.stats.items():
+        parts[part_of(key)] += tt
+        if "selfas_graph/kernels/" in key[0].replace(os.sep, "/") and key[2] != "__call__" and tt > 0:
+            calls[key[2]] = calls.get(key[2], 0) + nc
+    return parts, calls
+
+
+def export(ref):
+    """The tree of git revision ``ref`` in a temporary folder (kept, keyed by its commit): its path."""
+    sha = subprocess.run(["git", "rev-parse", ref], cwd=ROOT, capture_output=True, text=True,
+                         check=True).stdout.strip()
+    dest = Path(tempfile.gettempdir()) / "selfas_bench_profile" / sha[:12]
+    if not (dest / "selfas_graph").exists():
+        dest.mkdir(parents=True, exist_ok=True)
+        archive = subprocess.run(["git", "archive", sha], cwd=ROOT, capture_output=True, check=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
+    return dest
+
+
+def serve(args):
+    """Child of ``--before``: load the state, then run ``--steps`` steps per line read, print the CPU time."""
+    import numba
+
+    numba.set_num_threads(args.threads)
+    sim, origin = load_state(args)
+    sim.step(48)
+    import selfas_graph
+
+    print(json.dumps({"origin": origin, "rods": sim.state.n_rods, "package": selfas_graph.__file__}), flush=True)
+    # one thread: the thread's CPU clock; more: the process's, which counts the workers too
+    clock = time.thread_time if args.threads == 1 else time.process_time
+    for line in sys.stdin:
+        if not line.strip():
+            break
+        t0 = clock()
+        sim.step(args.steps)
+        print(json.dumps({"cpu": (clock() - t0) / args.steps,
+                          "active": int(len(sim.force_field.active_rod))}), flush=True)
+
+
+def compare(args):
+    from bench_peer import machine_line
+
+    base = [sys.executable, str(Path(__file__).resolve()), "--serve", "--steps", str(args.steps),
+            "--threads", str(args.threads), "--settle", str(args.settle), "--scenario", args.scenario]
+    base += ["--checkpoint", args.checkpoint] if args.checkpoint else []
+    for e in args.extra:
+        base += ["--set", e]
+    old_root = export(args.before)
+    procs = {}
+    for name, root in (("before", old_root), ("after", ROOT)):
+        env = dict(os.environ, SELFAS_BENCH_PACKAGE_ROOT=str(root))
+        env.pop("PYTHONPATH", None)
+        procs[name] = subprocess.Popen(base, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+    head = {k: json.loads(p.stdout.readline()) for k, p in procs.items()}
+    times = {k: [] for k in procs}
+    for r in range(args.rounds + 1):
+        for name in (("before", "after") if r % 2 == 0 else ("after", "before")):
+            p = procs[name]
+            p.stdin.write("go\n")
+            p.stdin.flush()
+            got = json.loads(p.stdout.readline())
+            if r > 0:
+                times[name].append(got["cpu"])
+    for p in procs.values():
+        p.stdin.write("\n")
+        p.stdin.close()
+        p.wait()
+    b, a = np.array(times["before"]), np.array(times["after"])
+    print(machine_line())
+    print(f"before: {head['before']['package']}; after: {head['after']['package']}")
+    print(f"{head['after']['origin']}; {args.threads} numba thread(s); {args.rounds} rounds of {args.steps} steps each, "
+          f"interleaved; load average {os.getloadavg()[0]:.1f}")
+    print(f"before ({args.before}): {1e3 * np.median(b):.3f} ms/step CPU [{1e3 * b.min():.3f}-{1e3 * b.max():.3f}]")
+    print(f"after (working tree): {1e3 * np.median(a):.3f} ms/step CPU [{1e3 * a.min():.3f}-{1e3 * a.max():.3f}]")
+    r = b / a
+    print(f"speed-up before/after: {np.median(r):.3f} [{r.min():.3f}-{r.max():.3f}]")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--checkpoint", help="start from this checkpoint (read only)")
+    ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "fig2.toml"))
+    ap.add_argument("--settle", type=int, default=2000, help="steps before the profile, from a fresh scene")
+    ap.add_argument("--steps", type=int, default=2000)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--set", dest="extra", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--json", help="write the figures to this file")
+    ap.add_argument("--before", help="compare whole steps with the package of this git revision, interleaved")
+    ap.add_argument("--rounds", type=int, default=8)
+    ap.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.serve:
+        return serve(args)
+    if args.before:
+        return compare(args)
+    import numba
+    from bench_peer import machine, machine_line
+
+    numba.set_num_threads(args.threads)
+    sim, origin = load_state(args)
+    sim.step(48)  # compiled kernels, warm caches
+    t0 = time.thread_time()
+    sim.step(args.steps)
+    plain = (time.thread_time() - t0) / args.steps
+    active = len(sim.force_field.active_rod)
+    parts, calls = profile(sim, args.steps)
+    total = sum(parts.values())
+    print(machine_line())
+    print(f"{origin}; {sim.state.n_rods} rods, {active} carrying current at the end; {args.threads} numba "
+          f"thread(s); load average {os.getloadavg()[0]:.1f}")
+    print(f"CPU time per step: {1e3 * plain:.3f} ms without the profiler, {1e3 * total / args.steps:.3f} ms "
+          f"with it ({args.steps} steps each)\n")
+    print("| part | ms/step | share |")
+    print("|---|---|---|")
+    for part, _ in PARTS:
+        if parts.get(part, 0.0) > 0.0:
+            print(f"| {part} | {1e3 * parts[part] / args.steps:.3f} | {100 * parts[part] / total:.1f} % |")
+    print(f"| total (profiled) | {1e3 * total / args.steps:.3f} | 100 % |\n")
+    top = sorted(calls.items(), key=lambda kv: -kv[1])
+    print("kernel calls per 1000 steps: " + ", ".join(f"{k} {1000 * v / args.steps:.0f}" for k, v in top[:14]))
+    if args.json:
+        Path(args.json).write_text(json.dumps({"machine": machine(), "origin": origin, "steps": args.steps,
+                                               "ms_per_step": 1e3 * plain, "active_rods": active,
+                                               "parts_ms_per_step": {k: 1e3 * v / args.steps
+                                                                     for k, v in parts.items()},
+                                               "kernel_calls": calls}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
