@@ -1,0 +1,164 @@
+"""Parameters of the force terms (docs/model.md 'Force terms'): one frozen dataclass per scenario
+table ``[forces.NAME]``, and :class:`ForceParams`, the set of them; a term whose table is absent
+is off. Part of the schema of :mod:`selfas_graph.model.params` (which re-exports every name here).
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Optional
+
+from .schema import spec
+
+if TYPE_CHECKING:
+    from .params import Parameters
+
+
+@dataclass(frozen=True)
+class TipMagnetic:
+    """Term 1: tip-tip magnetic Coulomb force with a soft core, summed directly or by a multipole tree."""
+
+    method: str = spec(
+        "auto", "how the force is summed: direct (all tip pairs, exact), tree (octupole octree; pairs "
+        "within r* always exact; error set by opening_angle), auto (the tree above tree_above rods)",
+        choices=("auto", "direct", "tree"))
+    opening_angle: float = spec(
+        0.4, "tree: a cell acts as a multipole when its radius is below this times its distance; an "
+        "accuracy knob (0.4: median relative force error 3e-4 to 8e-4 in a uniform rod gas, "
+        "docs/performance.md)", gt=0.0, lt=1.0)
+    tree_above: int = spec(
+        2000, "auto: use the tree from this many rods on (measured: the tree costs what the direct sum "
+        "does near 500 rods and half of it at 2000-3000, docs/performance.md)", ge=1)
+
+
+@dataclass(frozen=True)
+class TipBrake:
+    coefficient: float = spec(100.0, "k_br, friction between tips closer than r* (units m/t0)", ge=0.0)
+
+
+@dataclass(frozen=True)
+class AmbientBrake:
+    coefficient: float = spec(1.5, "M_br, friction of every tip with the ambient medium (units m/t0)", ge=0.0)
+
+
+@dataclass(frozen=True)
+class UniformField:
+    B: tuple = spec(None, "uniform magnetic field (Bx, By, Bz) in units B0", length=3, factory=lambda: (0.0, 0.0, 0.5))
+
+
+@dataclass(frozen=True)
+class PlasmaFilament:
+    radius: float = spec(6.0, "R_plas, radius of the uniform current channel", gt=0.0)
+    current: float = spec(
+        -7.5, "I_plas, total current, signed along +z (units J0): negative runs from the anode (z = +dZ/2) to "
+        "the cathode, parallel to the current of a rod filament spanning the gap, as the paper's discharge "
+        "(docs/model.md term 5)")
+    axis: tuple = spec(None, "(x0, y0) of the channel axis", length=2, factory=lambda: (0.0, 0.0))
+
+
+def plasma_current_text(p: "Parameters"):
+    """One line saying which way the plasma current of ``p`` flows, or None without term 5.
+
+    Case (i) names the electrodes and whether the current is parallel to that of a rod
+    filament spanning the gap (which flows from the anode at z = +dZ/2 to the cathode
+    when the bias is positive, docs/model.md 'Circuit').
+    """
+    pf = p.forces.plasma_filament
+    if pf is None:
+        return None
+    size = f"{abs(pf.current):g} J0"
+    if pf.current == 0.0:
+        return "plasma current 0 (the plasma filament has no field)"
+    el = p.forces.electrodes
+    if el is None:
+        return f"plasma current {size} along {'-' if pf.current < 0 else '+'}z (I_plas = {pf.current:g})"
+    half = 0.5 * el.gap
+    anode, cathode = f"the anode (z = +{half:g})", f"the cathode (z = -{half:g})"
+    text = (f"plasma current {size} from {anode} to {cathode}" if pf.current < 0
+            else f"plasma current {size} from {cathode} to {anode}")
+    if p.circuit is not None and p.circuit.delta_J0 > 0:
+        text += (", parallel to the current of a spanning filament" if pf.current < 0
+                 else ", antiparallel to the current of a spanning filament")
+    return text + f" (I_plas = {pf.current:g})"
+
+
+@dataclass(frozen=True)
+class Yukawa:
+    screening_length: float = spec(1.0, "R_D, screening length of the rod charges", gt=0.0)
+    tolerance: float = spec(
+        1e-4, "the force is cut off where Z_max^2 times its magnitude falls below this (units F_M0); "
+        "an accuracy knob", gt=0.0, lt=1.0,
+    )
+    core_radius: float = spec(
+        0.0, "a: inside this centre distance the force falls linearly to zero (a point charge "
+        "inside a charged ball; rods of diameter D cannot bring their centres much closer than D); 0 = the bare law of "
+        "docs/model.md 'Term 6', unbounded for crossing rods", ge=0.0,
+    )
+
+
+@dataclass(frozen=True)
+class ElectricField:
+    E: tuple = spec(None, "uniform electric field (Ex, Ey, Ez) acting on rod charges", length=3, factory=lambda: (0.0, 0.0, 0.0))
+
+
+@dataclass(frozen=True)
+class Electrodes:
+    gap: float = spec(17.9, "distance dZ between the cathode plane z = -dZ/2 and the anode plane z = +dZ/2", gt=0.0)
+
+
+@dataclass(frozen=True)
+class CurrentField:
+    """Term 9: the Biot-Savart field of rod currents on tips (wire radius D/2, docs/model.md 'Term 9')."""
+
+
+@dataclass(frozen=True)
+class CurrentLorentz:
+    quadrature_points: int = spec(
+        4, "Gauss-Legendre points along each rod for the Lorentz force on its current; an accuracy knob",
+        ge=1, le=1000)
+
+
+@dataclass(frozen=True)
+class ExternalFilament:
+    """Term 11, case (ii): a fixed straight current filament on the z axis, also a conductor."""
+
+    current: float = spec(10.0, "J_ext, current along +z (units J0)")
+    diameter: float = spec(0.18, "D_ext; its field is 2 J rho / (rho^2 + (D_ext/2)^2) and tips touch it "
+                                 "within r* + D_ext/2 of the axis", gt=0.0)
+
+
+@dataclass(frozen=True)
+class ExternalDipole:
+    """Term 11, case (ii): a fixed large dipole centred on the z axis at z = 0."""
+
+    magnetic_charge: float = spec(10.0, "Z_Mext: +Z_Mext at z = +length/2 and -Z_Mext at z = -length/2 "
+                                        "(moment along +z, co-directed with B_ext)")
+    length: float = spec(20.0, "L_ext", gt=0.0)
+    line_charge: float = spec(3.2, "lambda_ext, electric charge per unit length along the dipole")
+    screening_length: float = spec(2.4, "R_Dext, screening length of the line charge", gt=0.0)
+    radius: float = spec(0.09, "radius of the line charge (softens it on the axis; D_ext/2 in the paper's scene)", gt=0.0)
+    quadrature_points: int = spec(32, "Gauss-Legendre points of the line-charge integral; an accuracy knob",
+                                  ge=1, le=1000)
+
+
+@dataclass(frozen=True)
+class ForceParams:
+    """The force terms of docs/model.md 'Force terms'; a term whose table is absent is off."""
+
+    tip_magnetic: Optional[TipMagnetic] = spec(None, "term 1: tip-tip magnetic force")
+    tip_brake: Optional[TipBrake] = spec(None, "term 2: brake between touching tips")
+    ambient_brake: Optional[AmbientBrake] = spec(None, "term 3: brake in the ambient medium")
+    uniform_field: Optional[UniformField] = spec(None, "term 4: uniform external magnetic field")
+    plasma_filament: Optional[PlasmaFilament] = spec(None, "term 5: field of a plasma current filament")
+    yukawa: Optional[Yukawa] = spec(None, "term 6: screened electric repulsion of rod charges")
+    electric_field: Optional[ElectricField] = spec(None, "term 7: uniform electric field on rod charges")
+    electrodes: Optional[Electrodes] = spec(None, "term 8: electrode walls (case (i))")
+    external_filament: Optional[ExternalFilament] = spec(None, "term 11: fixed current filament on the z axis (case (ii))")
+    external_dipole: Optional[ExternalDipole] = spec(None, "term 11: fixed large dipole with a screened line charge (case (ii))")
+    current_field: Optional[CurrentField] = spec(None, "term 9: field of rod currents on tips (needs [circuit])")
+    current_lorentz: Optional[CurrentLorentz] = spec(
+        None, "term 10: Lorentz force on rod currents from all fields (needs [circuit])")
+
+    def active(self):
+        """Names of the terms that are on, in docs/model.md order ('Force terms')."""
+        return [f.name for f in dataclasses.fields(self) if getattr(self, f.name) is not None]
