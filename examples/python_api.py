@@ -11,6 +11,7 @@ are short-circuited from the first step; six free rods float beside them. The sc
 Run it with ``python examples/python_api.py [OUT.h5]`` (a few seconds after the kernels are
 compiled); the tests run it too (tests/test_python_api.py).
 """
+
 import sys
 import tempfile
 from pathlib import Path
@@ -20,14 +21,16 @@ import numpy as np
 import selfas_graph as sg
 
 # 1. parameters: a nested dict as a scenario file would hold, validated the same way
-params = sg.Parameters.from_dict({
-    "scenario": {"name": "column", "seed": 7},
-    "rods": {"count": 9},
-    "placement": {"box": [[-3.0, 3.0], [-3.0, 3.0], [-1.5, 1.5]]},
-    "forces": {"tip_magnetic": {}, "tip_brake": {}, "ambient_brake": {}, "electrodes": {"gap": 3.06}},
-    "circuit": {"delta_J0": 2.0},
-    "output": {"interval": 0.05},
-})
+params = sg.Parameters.from_dict(
+    {
+        "scenario": {"name": "column", "seed": 7},
+        "rods": {"count": 9},
+        "placement": {"box": [[-3.0, 3.0], [-3.0, 3.0], [-1.5, 1.5]]},
+        "forces": {"tip_magnetic": {}, "tip_brake": {}, "ambient_brake": {}, "electrodes": {"gap": 3.06}},
+        "circuit": {"delta_J0": 2.0},
+        "output": {"interval": 0.05},
+    }
+)
 params = params.replace({"integrator.dt": 1e-3}, forces={"uniform_field": {"B": [0.0, 0.0, 0.5]}})
 try:
     params.replace(integrator={"dt": -1.0})
@@ -54,9 +57,11 @@ with sg.RunWriter.for_simulation(sim, out, overwrite=True) as writer:
         role = sim.network.topology().role
         names = [sg.ROLE_NAMES[int(r)] for r in role]
         current = sim.force_field.current
-        print(f"t = {sim.state.time:.3f}: roles {names[:3]} (column), {names[3]} (free); "
-              f"currents in the column {np.round(current[:3], 4).tolist()}, "
-              f"total {sim.observables()['total_current']:.4f}")
+        print(
+            f"t = {sim.state.time:.3f}: roles {names[:3]} (column), {names[3]} (free); "
+            f"currents in the column {np.round(current[:3], 4).tolist()}, "
+            f"total {sim.observables()['total_current']:.4f}"
+        )
 
 # events by name
 for event in sg.named_events(sim.events)[:5]:
@@ -66,6 +71,8 @@ assert any(e.kind == sg.EventKind.SHORT_CIRCUIT for e in sg.named_events(sim.eve
 # 4. read the file back
 with sg.RunFile(out) as run:
     g = run.graph(frame=-1)
-    print(f"{out}: {run.n_frames} frames; last frame roles {np.bincount(g['role'], minlength=4).tolist()} "
-          f"(free, cluster, dead_end, filament); {len(run.named_events())} events, first "
-          f"{run.named_events()[0].kind.label}")
+    print(
+        f"{out}: {run.n_frames} frames; last frame roles {np.bincount(g['role'], minlength=4).tolist()} "
+        f"(free, cluster, dead_end, filament); {len(run.named_events())} events, first "
+        f"{run.named_events()[0].kind.label}"
+    )

@@ -22,6 +22,7 @@ Layers: :mod:`selfas_graph.kernels` (numba, arrays only), :mod:`selfas_graph.mod
 :mod:`selfas_graph.io` (scenarios, HDF5), :mod:`selfas_graph.cli`,
 :mod:`selfas_graph.parallel` (MPI).
 """
+
 from ._version import __version__
 from .io.export import ExportError, export_run
 from .io.h5md import RunFile, RunFileError, RunWriter
@@ -36,9 +37,34 @@ from .model.simulation import NumericalFailure, RunSummary, Simulation
 from .model.state import PlacementError, State, StateError, random_state
 
 __all__ = [
-    "__version__", "load_scenario", "scenario_from_text", "parameters_from_dict", "Scenario", "ScenarioError",
-    "Parameters", "Simulation", "RunSummary", "NumericalFailure", "State", "StateError", "random_state",
-    "PlacementError", "RunFile", "RunFileError", "RunWriter", "export_run", "ExportError", "solve_circuit",
-    "CircuitSolution", "ConnectivityGraph", "classify_rods", "ROLE_NAMES", "Event", "EventKind", "named_events",
-    "Network", "Operation", "Periodic",
+    "__version__",
+    "load_scenario",
+    "scenario_from_text",
+    "parameters_from_dict",
+    "Scenario",
+    "ScenarioError",
+    "Parameters",
+    "Simulation",
+    "RunSummary",
+    "NumericalFailure",
+    "State",
+    "StateError",
+    "random_state",
+    "PlacementError",
+    "RunFile",
+    "RunFileError",
+    "RunWriter",
+    "export_run",
+    "ExportError",
+    "solve_circuit",
+    "CircuitSolution",
+    "ConnectivityGraph",
+    "classify_rods",
+    "ROLE_NAMES",
+    "Event",
+    "EventKind",
+    "named_events",
+    "Network",
+    "Operation",
+    "Periodic",
 ]

@@ -26,6 +26,7 @@ The runs go to :class:`selfas_graph.parallel.task_pool`: ``jobs`` spawned proces
 one machine (``cores // jobs`` numba threads each), or the ranks of an MPI launcher.
 The same runner serves ``tools/percolation.py`` (:func:`run_tasks`, :func:`run_to_short_circuit`).
 """
+
 from __future__ import annotations
 
 import concurrent.futures
@@ -62,8 +63,21 @@ from .model.simulation import NumericalFailure, RunInterrupted, Simulation
 from .model.state import PlacementError
 from .parallel import task_pool
 
-__all__ = ["Ensemble", "EnsembleError", "FRAME_MEASURES", "Frame", "Measure", "SeedPlan", "format_table",
-           "run_seed", "run_tasks", "run_to_short_circuit", "seed_path", "summarise", "write_summary"]
+__all__ = [
+    "Ensemble",
+    "EnsembleError",
+    "FRAME_MEASURES",
+    "Frame",
+    "Measure",
+    "SeedPlan",
+    "format_table",
+    "run_seed",
+    "run_tasks",
+    "run_to_short_circuit",
+    "seed_path",
+    "summarise",
+    "write_summary",
+]
 
 #: file name of seed ``s`` in the ensemble's folder
 SEED_FILE = "seed_{:04d}.h5"
@@ -96,8 +110,11 @@ def _flat(d, prefix=""):
 def parameter_differences(stored: dict, wanted: dict) -> list[str]:
     """Dotted keys whose values differ between two parameter dicts, except :data:`FREE_PARAMETERS`."""
     a, b = _flat(json.loads(json.dumps(stored))), _flat(json.loads(json.dumps(wanted)))
-    return sorted(k for k in set(a) | set(b)
-                  if k not in FREE_PARAMETERS and a.get(k) != b.get(k) and not _newer_key_at_default(k, a, b))
+    return sorted(
+        k
+        for k in set(a) | set(b)
+        if k not in FREE_PARAMETERS and a.get(k) != b.get(k) and not _newer_key_at_default(k, a, b)
+    )
 
 
 def _newer_key_at_default(key, stored_flat, wanted_flat) -> bool:
@@ -177,8 +194,17 @@ def run_seed(task: dict) -> dict:
     import numba
 
     path, t_end = Path(task["path"]), float(task["t_end"])
-    out = {"seed": int(task["seed"]), "path": str(path), "action": task["action"], "status": None, "t": None,
-           "steps": 0, "wall_seconds": 0.0, "threads": numba.get_num_threads(), "message": None}
+    out = {
+        "seed": int(task["seed"]),
+        "path": str(path),
+        "action": task["action"],
+        "status": None,
+        "t": None,
+        "steps": 0,
+        "wall_seconds": 0.0,
+        "threads": numba.get_num_threads(),
+        "message": None,
+    }
     t0 = time.perf_counter()
     sim = writer = None
     ckpt = checkpoint_path(path)
@@ -189,28 +215,42 @@ def run_seed(task: dict) -> dict:
                 with RunFile(path) as run:
                     run_id = run.meta.get("run_id")
                 if not run_id or run_id != meta.get("run_id"):
-                    raise EnsembleError(f"the checkpoint {ckpt} belongs to another run than {path} (run identity "
-                                        f"{meta.get('run_id') or 'none'} against {run_id or 'none'})")
+                    raise EnsembleError(
+                        f"the checkpoint {ckpt} belongs to another run than {path} (run identity "
+                        f"{meta.get('run_id') or 'none'} against {run_id or 'none'})"
+                    )
                 meta = {**meta, "t_end": t_end}
-                scenario = scenario_from_text(meta["scenario_text"], overrides=json.loads(meta["overrides"]),
-                                              t_end=t_end)
+                scenario = scenario_from_text(
+                    meta["scenario_text"], overrides=json.loads(meta["overrides"]), t_end=t_end
+                )
                 sim = Simulation.from_snapshot(scenario.params, snap)
                 writer = RunWriter.reopen(path, int(snap["step"]))
             else:
-                scenario = scenario_from_text(task["text"], path=Path(task["scenario_path"]),
-                                              overrides=task["overrides"], t_end=t_end)
+                scenario = scenario_from_text(
+                    task["text"], path=Path(task["scenario_path"]), overrides=task["overrides"], t_end=t_end
+                )
                 sim = Simulation.from_scenario(scenario)
                 p = scenario.params
                 run_id = uuid.uuid4().hex
-                provenance = run_provenance(sim, scenario, task.get("command", ""), run_id,
-                                            scenario_path=task["scenario_path"])
-                writer = RunWriter(path, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
-                                   overwrite=bool(task.get("force")), velocities=p.output.velocities,
-                                   frame_interval=sim.frame_interval, rod_length=sim.state.rod_length,
-                                   rod_resistance=sim.state.rod_resistance)
+                provenance = run_provenance(
+                    sim, scenario, task.get("command", ""), run_id, scenario_path=task["scenario_path"]
+                )
+                writer = RunWriter(
+                    path,
+                    sim.state.n_tips,
+                    sim.state.tip_charge,
+                    sim.state.rod_charge,
+                    provenance,
+                    overwrite=bool(task.get("force")),
+                    velocities=p.output.velocities,
+                    frame_interval=sim.frame_interval,
+                    rod_length=sim.state.rod_length,
+                    rod_resistance=sim.state.rod_resistance,
+                )
                 meta = checkpoint_meta(scenario, run_id, path.name, t_end, __version__)
-            checkpointer = Checkpointer(ckpt, scenario.params.output.checkpoint_interval,
-                                        {k: v for k, v in meta.items() if k != "step"})
+            checkpointer = Checkpointer(
+                ckpt, scenario.params.output.checkpoint_interval, {k: v for k, v in meta.items() if k != "step"}
+            )
             summary = sim.run(writer=writer, checkpointer=checkpointer, stop=stop)
             writer.set_attrs(wall_seconds=summary.wall_seconds, steps_done=summary.steps)
             writer.close(status="finished")
@@ -222,8 +262,9 @@ def run_seed(task: dict) -> dict:
             failure = path.with_name(path.stem + ".failure.h5")
             sim.flush_output(writer)  # the events and per-step rows up to the failure, as simulate does
             writer.close(status=f"failed: {exc}")
-            write_checkpoint(failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step,
-                                                       "failure": str(exc)})
+            write_checkpoint(
+                failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step, "failure": str(exc)}
+            )
             out["status"], out["message"] = "failed", f"{exc} (failed state in {failure})"
         except Exception as exc:  # noqa: BLE001 - one broken seed must not lose the others; reported
             # not a numerical failure: the file stays resumable from its last checkpoint
@@ -247,8 +288,18 @@ def run_to_short_circuit(task: dict) -> dict:
     with ``t_end``, ``steps``, ``events``, ``filament_rods``, ``wall_seconds``.
     """
     seed, t_max = task["seed"], float(task["t_max"])
-    out = {**{k: task[k] for k in task.get("echo", ())}, "seed": seed, "status": None, "time": None, "t_end": 0.0, "steps": 0, "events": 0, "filament_rods": 0,
-           "wall_seconds": 0.0, "message": None}
+    out = {
+        **{k: task[k] for k in task.get("echo", ())},
+        "seed": seed,
+        "status": None,
+        "time": None,
+        "t_end": 0.0,
+        "steps": 0,
+        "events": 0,
+        "filament_rods": 0,
+        "wall_seconds": 0.0,
+        "message": None,
+    }
     t0 = time.perf_counter()
     sim = None
     try:
@@ -399,8 +450,9 @@ class Ensemble:
         self.force = bool(force)
         bad = [o for o in self.overrides if o.split("=", 1)[0].strip() == "scenario.seed"]
         if bad:
-            raise EnsembleError(f"--set {bad[0]}: the ensemble sets scenario.seed for each run; "
-                                f"choose the seeds with --first-seed")
+            raise EnsembleError(
+                f"--set {bad[0]}: the ensemble sets scenario.seed for each run; choose the seeds with --first-seed"
+            )
         try:
             self.base = load_scenario(self.scenario_path, overrides=self.overrides, t_end=t_end)
         except ScenarioError as exc:
@@ -424,8 +476,9 @@ class Ensemble:
 
     def scenario_for(self, seed):
         """The :class:`~selfas_graph.io.scenario.Scenario` of one seed."""
-        return scenario_from_text(self.base.text, path=self.base.path, overrides=self._overrides(seed),
-                                  t_end=self.t_end)
+        return scenario_from_text(
+            self.base.text, path=self.base.path, overrides=self._overrides(seed), t_end=self.t_end
+        )
 
     def _overrides(self, seed):
         return [*self.overrides, f"scenario.seed={seed}"]
@@ -459,7 +512,7 @@ class Ensemble:
             except EnsembleError as exc:
                 problems.append(str(exc))
         if problems:
-            hint = ("; pass --force to replace them" if not self.force else "")
+            hint = "; pass --force to replace them" if not self.force else ""
             raise EnsembleError("seed files that cannot be used:\n  " + "\n  ".join(problems) + hint)
         return plans
 
@@ -485,8 +538,9 @@ class Ensemble:
             if self.force:
                 return SeedPlan(seed, path, "run", "replacing: other parameters")
             shown = ", ".join(f"{k} = {_get(stored, k)!r} (here {_get(wanted.to_dict(), k)!r})" for k in diff[:4])
-            raise EnsembleError(f"{path} belongs to other parameters: {shown}"
-                                + (f" and {len(diff) - 4} more" if len(diff) > 4 else ""))
+            raise EnsembleError(
+                f"{path} belongs to other parameters: {shown}" + (f" and {len(diff) - 4} more" if len(diff) > 4 else "")
+            )
         half_step = 0.5 * wanted.integrator.dt
         if status == "finished" and t_last >= self.t_end - half_step:
             return SeedPlan(seed, path, "done", f"finished at t = {t_last:.6g}")
@@ -500,22 +554,36 @@ class Ensemble:
         except CheckpointError:
             usable = False
         if usable:
-            return SeedPlan(seed, path, "resume", f"{status} at t = {t_last:.6g}; checkpoint at t = "
-                                                  f"{float(snap['time']):.6g}")
+            return SeedPlan(
+                seed, path, "resume", f"{status} at t = {t_last:.6g}; checkpoint at t = {float(snap['time']):.6g}"
+            )
         if summary_only:
             return SeedPlan(seed, path, "partial", f"{status} at t = {t_last:.6g}")
         if self.force:
             return SeedPlan(seed, path, "run", f"replacing: {status} at t = {t_last:.6g}, no usable checkpoint")
-        raise EnsembleError(f"{path} is {status} at t = {t_last:.6g} (end time {self.t_end:g}) and has no usable "
-                            f"checkpoint {ckpt.name} to continue from")
+        raise EnsembleError(
+            f"{path} is {status} at t = {t_last:.6g} (end time {self.t_end:g}) and has no usable "
+            f"checkpoint {ckpt.name} to continue from"
+        )
 
     # ------------------------------------------------------------------ running
     def tasks(self, plans) -> list[dict]:
         """The :func:`run_seed` tasks of the plans that need a run."""
-        return [{"seed": p.seed, "path": str(p.path), "action": p.action, "t_end": self.t_end,
-                 "text": self.base.text, "scenario_path": str(self.base.path), "overrides": self._overrides(p.seed),
-                 "force": self.force, "command": self.command_for(p.seed)}
-                for p in plans if p.action in ("run", "resume")]
+        return [
+            {
+                "seed": p.seed,
+                "path": str(p.path),
+                "action": p.action,
+                "t_end": self.t_end,
+                "text": self.base.text,
+                "scenario_path": str(self.base.path),
+                "overrides": self._overrides(p.seed),
+                "force": self.force,
+                "command": self.command_for(p.seed),
+            }
+            for p in plans
+            if p.action in ("run", "resume")
+        ]
 
     def run(self, jobs=1, report=None, pool=None) -> list[dict]:
         """Run every seed that is not done; returns :func:`run_seed`'s results (None: never started).
@@ -536,10 +604,16 @@ class Ensemble:
         """:func:`summarise` over the seed files present (default times: quarters of the end time)."""
         paths = [seed_path(self.folder, s) for s in self.seeds]
         times = default_times(self.t_end) if times is None else times
-        out = summarise([p for p in paths if p.exists()], times, t_end=self.t_end, measures=measures,
-                        flux_radius=flux_radius)
-        out.update(scenario=str(self.scenario_path), overrides=self.overrides, folder=str(self.folder),
-                   seeds_requested=self.seeds, missing=[str(p) for p in paths if not p.exists()])
+        out = summarise(
+            [p for p in paths if p.exists()], times, t_end=self.t_end, measures=measures, flux_radius=flux_radius
+        )
+        out.update(
+            scenario=str(self.scenario_path),
+            overrides=self.overrides,
+            folder=str(self.folder),
+            seeds_requested=self.seeds,
+            missing=[str(p) for p in paths if not p.exists()],
+        )
         return out
 
 
@@ -662,18 +736,28 @@ FRAME_MEASURES = [
     Measure("filament_rods", "rods", "rods in current-carrying filaments", _filament_rods),
     Measure("total_current", "J0", "current through the circuit (observable total_current)", _total_current),
     Measure("inside_R_plas", "fraction", "fraction of rod centres within R_plas of the plasma axis", _inside_plasma),
-    Measure("median_axis_distance", "L", "median distance of rod centres from the axis",
-            lambda f: float(np.median(f.rho))),
-    Measure("midplane_flux", "Phi_0", "flux of the rod currents' B_z through the disc z = 0 of radius flux_radius "
-            "(default: the placement box's half-diagonal)", _midplane_flux),
+    Measure(
+        "median_axis_distance", "L", "median distance of rod centres from the axis", lambda f: float(np.median(f.rho))
+    ),
+    Measure(
+        "midplane_flux",
+        "Phi_0",
+        "flux of the rod currents' B_z through the disc z = 0 of radius flux_radius "
+        "(default: the placement box's half-diagonal)",
+        _midplane_flux,
+    ),
 ]
-FRAME_MEASURES += [Measure(k, u, d, lambda f, k=k: float(f.claims[k])) for k, u, d in (
-    ("largest_structure_rods", "rods", "rods in the largest structure"),
-    ("largest_moment_ratio", "1", "largest structure's |m_q| over the mean single-rod moment"),
-    ("fractal_dimension", "1", "mass-radius dimension of the largest structure (NaN while its R_g < 3 L)"),
-    ("box_dimension", "1", "box-counting dimension of the largest structure"),
-    ("rg_dimension", "1", "R_g ~ N^(1/D) dimension over the structures of the frame"),
-    ("cycle_rank", "loops", "cycle rank of the contact graph (E - V + C)"))]
+FRAME_MEASURES += [
+    Measure(k, u, d, lambda f, k=k: float(f.claims[k]))
+    for k, u, d in (
+        ("largest_structure_rods", "rods", "rods in the largest structure"),
+        ("largest_moment_ratio", "1", "largest structure's |m_q| over the mean single-rod moment"),
+        ("fractal_dimension", "1", "mass-radius dimension of the largest structure (NaN while its R_g < 3 L)"),
+        ("box_dimension", "1", "box-counting dimension of the largest structure"),
+        ("rg_dimension", "1", "R_g ~ N^(1/D) dimension over the structures of the frame"),
+        ("cycle_rank", "loops", "cycle rank of the contact graph (E - V + C)"),
+    )
+]
 
 
 # ----------------------------------------------------------------------------- summary
@@ -722,9 +806,15 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
             seen = t_sc is not None and t_sc <= cens
             sc_t.append(t_sc if seen else cens)
             sc_obs.append(seen)
-            seeds.append({"path": str(path), "seed": int(params["scenario"]["seed"]),
-                          "status": str(run.meta.get("status", "")), "t_end": end,
-                          "short_circuit_time": t_sc if seen else None})
+            seeds.append(
+                {
+                    "path": str(path),
+                    "seed": int(params["scenario"]["seed"]),
+                    "status": str(run.meta.get("status", "")),
+                    "t_end": end,
+                    "short_circuit_time": t_sc if seen else None,
+                }
+            )
             for k, t in enumerate(times):
                 if not t_run.size:
                     break
@@ -737,14 +827,26 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
     keep = [j for j, p in enumerate(paths) if str(p) not in {u["path"] for u in unreadable}]
     values = values[:, keep]
     sc = censored_times(sc_t, sc_obs) if seeds else None
-    out = {"version": __version__, "n_seeds": len(seeds), "times": times, "t_end": t_end, "seeds": seeds,
-           "unreadable": unreadable,
-           "short_circuit": None if sc is None else {k: _plain(v) for k, v in sc.items()},
-           "measures": {}}
+    out = {
+        "version": __version__,
+        "n_seeds": len(seeds),
+        "times": times,
+        "t_end": t_end,
+        "seeds": seeds,
+        "unreadable": unreadable,
+        "short_circuit": None if sc is None else {k: _plain(v) for k, v in sc.items()},
+        "measures": {},
+    }
     for m, measure in enumerate(measures):
         mean, sem, n = mean_sem(values[m], axis=0)
-        out["measures"][measure.name] = {"unit": measure.unit, "doc": measure.doc, "mean": _plain(mean),
-                                         "sem": _plain(sem), "n": n.tolist(), "values": _plain(values[m])}
+        out["measures"][measure.name] = {
+            "unit": measure.unit,
+            "doc": measure.doc,
+            "mean": _plain(mean),
+            "sem": _plain(sem),
+            "n": n.tolist(),
+            "values": _plain(values[m]),
+        }
     return out
 
 
@@ -773,17 +875,27 @@ def format_table(summary) -> str:
     sc = summary.get("short_circuit")
     if sc:
         f = lambda v: "not reached" if v is None else f"{v:.4g}"  # noqa: E731
-        mean = ("n/a" if sc["mean_observed"] is None else
-                f"{sc['mean_observed']:.4g}" + (f" +- {sc['sem_observed']:.2g}" if sc["sem_observed"] is not None
-                                                 else ""))
-        lines.append(f"short circuit: {sc['n_observed']} of {sc['n']} seeds "
-                     f"({sc['n_censored']} without one, censored at their end time); "
-                     f"Kaplan-Meier median {f(sc['median'])} (quartiles {f(sc['q25'])}, {f(sc['q75'])}); "
-                     f"mean over the {sc['n_observed']} that short-circuited {mean}")
+        mean = (
+            "n/a"
+            if sc["mean_observed"] is None
+            else f"{sc['mean_observed']:.4g}"
+            + (f" +- {sc['sem_observed']:.2g}" if sc["sem_observed"] is not None else "")
+        )
+        lines.append(
+            f"short circuit: {sc['n_observed']} of {sc['n']} seeds "
+            f"({sc['n_censored']} without one, censored at their end time); "
+            f"Kaplan-Meier median {f(sc['median'])} (quartiles {f(sc['q25'])}, {f(sc['q75'])}); "
+            f"mean over the {sc['n_observed']} that short-circuited {mean}"
+        )
     times = summary["times"]
     head = "| measure | unit | " + " | ".join(f"t = {t:g}" for t in times) + " |"
-    lines += ["", "mean +- standard error over seeds (seeds with a frame at that time)", "", head,
-              "|" + "---|" * (len(times) + 2)]
+    lines += [
+        "",
+        "mean +- standard error over seeds (seeds with a frame at that time)",
+        "",
+        head,
+        "|" + "---|" * (len(times) + 2),
+    ]
     for name, m in summary["measures"].items():
         cells = [_pm(a, b, n) for a, b, n in zip(m["mean"], m["sem"], m["n"])]
         lines.append(f"| {name} | {m['unit']} | " + " | ".join(cells) + " |")
@@ -804,8 +916,16 @@ def write_summary(summary, folder) -> tuple[Path, Path]:
     w.writerow(["measure", "unit", "time", "mean", "sem", "n"])
     sc = summary.get("short_circuit")
     if sc:
-        w.writerow(["short_circuit_time_observed", "t0", "", _csv(sc["mean_observed"]), _csv(sc["sem_observed"]),
-                    sc["n_observed"]])
+        w.writerow(
+            [
+                "short_circuit_time_observed",
+                "t0",
+                "",
+                _csv(sc["mean_observed"]),
+                _csv(sc["sem_observed"]),
+                sc["n_observed"],
+            ]
+        )
         w.writerow(["short_circuit_time_km_median", "t0", "", _csv(sc["median"]), "", sc["n"]])
         w.writerow(["seeds_without_short_circuit", "seeds", "", sc["n_censored"], "", sc["n"]])
     for name, m in summary["measures"].items():

@@ -16,6 +16,7 @@ bit for bit. Integration, contacts, events, graph and circuit run identically on
 every rank. Energies are gathered the same way as one value per row and summed
 on every rank over all rows, so they do not depend on the number of ranks either.
 """
+
 from __future__ import annotations
 
 import os
@@ -142,7 +143,7 @@ class RowBlocks:
             if r == self.rank:
                 continue
             rlo, rhi = int(bounds[r]), int(bounds[r + 1])
-            block = recv[displs[r]:displs[r] + counts[r]].reshape(k, rhi - rlo, width)
+            block = recv[displs[r] : displs[r] + counts[r]].reshape(k, rhi - rlo, width)
             for c, a in enumerate(arrays):
                 a[rlo:rhi] = block[c].reshape(a[rlo:rhi].shape)
 
@@ -246,8 +247,11 @@ class task_pool:
         self.workers = self.jobs
         self.threads = threads_per_job(self.jobs) if self._threads is None else int(self._threads)
         self.executor = concurrent.futures.ProcessPoolExecutor(
-            max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"),
-            initializer=init_job_worker, initargs=(self.threads,))
+            max_workers=self.jobs,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=init_job_worker,
+            initargs=(self.threads,),
+        )
         return self
 
     def __exit__(self, *exc):

@@ -1,4 +1,5 @@
 """Shared helpers: small hand-built systems with fixed seeds."""
+
 import numpy as np
 import pytest
 
@@ -74,6 +75,7 @@ def rng():
 # --------------------------------------------------------------------------- hostile-input tests
 # fixtures of tests/test_hostile.py and tests/test_hostile_bugs.py (their helpers: tests/hostile.py)
 
+
 class RealRun(dict):
     """A module's real run (a dict with a short repr: failure reports stay readable)."""
 
@@ -99,8 +101,9 @@ def real_run(tmp_path_factory):
     assert code == 0
     ckpt = d / "run.checkpoint.h5"
     assert run.exists() and ckpt.exists()
-    return RealRun(dir=d, scenario=scen, run=run, checkpoint=ckpt,
-                   run_bytes=run.read_bytes(), checkpoint_bytes=ckpt.read_bytes())
+    return RealRun(
+        dir=d, scenario=scen, run=run, checkpoint=ckpt, run_bytes=run.read_bytes(), checkpoint_bytes=ckpt.read_bytes()
+    )
 
 
 @pytest.fixture

@@ -4,6 +4,7 @@ contract, TOML writing, the walk over the scenario schema, the hypothesis strate
 generate scenario files and hostile HDF5 files. The fixtures both modules use, ``real_run`` and
 ``workdir``, are in tests/conftest.py.
 """
+
 from __future__ import annotations
 
 import copy
@@ -36,9 +37,18 @@ set_hypothesis_home_dir(Path(tempfile.gettempdir()) / "selfas_graph_hypothesis")
 
 #: derandomized (same cases on every machine), no deadline (the first real run compiles
 #: kernels), no example database (nothing is written into the repository)
-HOSTILE = dict(derandomize=True, deadline=None, database=None, print_blob=False,
-               suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow,
-                                      HealthCheck.filter_too_much, HealthCheck.data_too_large])
+HOSTILE = dict(
+    derandomize=True,
+    deadline=None,
+    database=None,
+    print_blob=False,
+    suppress_health_check=[
+        HealthCheck.function_scoped_fixture,
+        HealthCheck.too_slow,
+        HealthCheck.filter_too_much,
+        HealthCheck.data_too_large,
+    ],
+)
 
 #: generated cases that ran, per test (printed at the end of the module)
 CASES = Counter()
@@ -47,8 +57,16 @@ BASE = {
     "scenario": {"name": "hostile", "seed": 7},
     "rods": {"count": 4},
     "placement": {"box": [[-1.5, 1.5], [-1.5, 1.5], [-1.0, 1.0]]},
-    "forces": {"tip_magnetic": {}, "tip_brake": {}, "ambient_brake": {}, "uniform_field": {}, "yukawa": {},
-               "electrodes": {"gap": 2.0}, "current_field": {}, "current_lorentz": {}},
+    "forces": {
+        "tip_magnetic": {},
+        "tip_brake": {},
+        "ambient_brake": {},
+        "uniform_field": {},
+        "yukawa": {},
+        "electrodes": {"gap": 2.0},
+        "current_field": {},
+        "current_lorentz": {},
+    },
     "circuit": {"delta_J0": 2.0},
     "integrator": {"dt": 1e-3},
     "run": {"t_end": 0.002},
@@ -91,8 +109,9 @@ def check_contract(res: Result, allowed=(0, 2, 3)):
     assert res.code in allowed, f"exit code {res.code}, expected one of {allowed}; stderr:\n{res.err[-4000:]}"
     assert "Traceback" not in res.err, res.err[-4000:]
     if res.code == 2:
-        assert re.search(r"^selfas-graph( \w+)?: error: \S", res.err, re.M), \
+        assert re.search(r"^selfas-graph( \w+)?: error: \S", res.err, re.M), (
             f"exit 2 without a message naming the problem; stderr:\n{res.err[-2000:]}"
+        )
     if res.code == 3:
         assert "numerical failure" in res.err, res.err[-2000:]
 
@@ -117,6 +136,7 @@ def example_dir(root: Path) -> Path:
 
 
 # --------------------------------------------------------------------------- TOML writing
+
 
 def toml_str(s: str) -> str:
     out = ['"']
@@ -191,6 +211,7 @@ def parse(data: bytes):
 
 # --------------------------------------------------------------------------- schema paths
 
+
 def _leaf_fields(cls, prefix=()):
     """{path: (type, field)} of every schema key, tables included (optional tables as their dataclass)."""
     hints = typing.get_type_hints(cls)
@@ -212,9 +233,23 @@ LEAVES = list(LEAF_FIELDS)
 
 # --------------------------------------------------------------------------- strategies
 
-SPECIAL_FLOATS = [0.0, -0.0, -1.0, 0.5, 2.0, 1e-3, 1e-300, 5e-324, 1e300, -1e300, 1.7976931348623157e308,
-                  math.nan, math.inf, -math.inf]
-GIANT_INTS = [2 ** 31, 2 ** 53 + 1, 2 ** 63 - 1, -(2 ** 63), 2 ** 64, 10 ** 30]
+SPECIAL_FLOATS = [
+    0.0,
+    -0.0,
+    -1.0,
+    0.5,
+    2.0,
+    1e-3,
+    1e-300,
+    5e-324,
+    1e300,
+    -1e300,
+    1.7976931348623157e308,
+    math.nan,
+    math.inf,
+    -math.inf,
+]
+GIANT_INTS = [2**31, 2**53 + 1, 2**63 - 1, -(2**63), 2**64, 10**30]
 
 hostile_floats = st.one_of(st.sampled_from(SPECIAL_FLOATS), st.floats(allow_nan=True, allow_infinity=True))
 hostile_ints = st.one_of(st.integers(-10, 50), st.sampled_from(GIANT_INTS))
@@ -264,11 +299,13 @@ def typed_values(path):
     return st.one_of(hostile_floats, hostile_ints, st.floats(0, 10), st.floats(1e-12, 1e-3))
 
 
-typed_set = st.sampled_from(sorted(LEAF_FIELDS)).flatmap(
-    lambda p: typed_values(p).map(lambda v, p=p: ("set", p, v)))
+typed_set = st.sampled_from(sorted(LEAF_FIELDS)).flatmap(lambda p: typed_values(p).map(lambda v, p=p: ("set", p, v)))
 mutations = st.lists(
-    st.one_of(typed_set, typed_set, st.tuples(st.just("set"), paths, hostile_values), st.tuples(st.just("delete"), paths)),
-    min_size=1, max_size=3,
+    st.one_of(
+        typed_set, typed_set, st.tuples(st.just("set"), paths, hostile_values), st.tuples(st.just("delete"), paths)
+    ),
+    min_size=1,
+    max_size=3,
 )
 
 
@@ -299,10 +336,14 @@ def scenario_files(draw):
     raw = mutate(BASE, draw(mutations))
     text = to_toml(raw)
     data = text.encode("utf-8")
-    how = draw(st.sampled_from(["toml"] * 8 + ["truncated", "junk", "non_utf8", "empty", "nul", "bom",
-                                              "duplicate_table", "missing_sections", "deep"]))
+    how = draw(
+        st.sampled_from(
+            ["toml"] * 8
+            + ["truncated", "junk", "non_utf8", "empty", "nul", "bom", "duplicate_table", "missing_sections", "deep"]
+        )
+    )
     if how == "truncated":
-        data = data[:draw(st.integers(0, max(0, len(data) - 1)))]
+        data = data[: draw(st.integers(0, max(0, len(data) - 1)))]
     elif how == "junk":
         data = draw(st.binary(max_size=300))
     elif how == "non_utf8":
@@ -333,9 +374,6 @@ def scenario_files(draw):
 # --------------------------------------------------------------------------- inputs left out
 
 
-
-
-
 def _get(raw, *path, default=None):
     node = raw
     for k in path:
@@ -347,8 +385,6 @@ def _get(raw, *path, default=None):
 
 def _is_num(v):
     return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
 
 
 def known_bug_scenario(raw, real=False):
@@ -374,16 +410,41 @@ def nameless(path_text) -> bool:
 
 # --------------------------------------------------------------------------- hostile files for topology, plot, resume
 
-RUN_PATHS = ["h5md", "h5md/creator", "parameters", "parameters/selfas_graph", "particles", "particles/tips",
-             "particles/tips/position", "particles/tips/position/value", "particles/tips/position/step",
-             "particles/tips/position/time", "particles/tips/velocity/value", "particles/tips/charge",
-             "particles/rods/charge", "observables", "observables/energy_balance/value",
-             "observables/bond_error_per_step/step", "observables/bond_error_per_step/value", "events",
-             "graph", "graph/step", "graph/time", "graph/role", "graph/current", "graph/tip_contacts_count",
-             "snapshot", "snapshot/position", "meta"]
-h5_names = st.one_of(st.sampled_from(RUN_PATHS),
-                     st.lists(st.text(st.characters(categories=("L", "N")), min_size=1, max_size=5),
-                              min_size=1, max_size=3).map("/".join))
+RUN_PATHS = [
+    "h5md",
+    "h5md/creator",
+    "parameters",
+    "parameters/selfas_graph",
+    "particles",
+    "particles/tips",
+    "particles/tips/position",
+    "particles/tips/position/value",
+    "particles/tips/position/step",
+    "particles/tips/position/time",
+    "particles/tips/velocity/value",
+    "particles/tips/charge",
+    "particles/rods/charge",
+    "observables",
+    "observables/energy_balance/value",
+    "observables/bond_error_per_step/step",
+    "observables/bond_error_per_step/value",
+    "events",
+    "graph",
+    "graph/step",
+    "graph/time",
+    "graph/role",
+    "graph/current",
+    "graph/tip_contacts_count",
+    "snapshot",
+    "snapshot/position",
+    "meta",
+]
+h5_names = st.one_of(
+    st.sampled_from(RUN_PATHS),
+    st.lists(st.text(st.characters(categories=("L", "N")), min_size=1, max_size=5), min_size=1, max_size=3).map(
+        "/".join
+    ),
+)
 h5_items = st.tuples(
     h5_names,
     st.sampled_from(["group", "dataset"]),
@@ -392,8 +453,11 @@ h5_items = st.tuples(
 )
 h5_attrs = st.dictionaries(
     st.sampled_from(["format", "parameters_json", "scenario_text", "status", "overrides", "run_file", "x"]),
-    st.one_of(st.sampled_from([CHECKPOINT_FORMAT, "{}", "[]", "not json", "", "nan"]), st.integers(-3, 3),
-              st.floats(allow_nan=True)),
+    st.one_of(
+        st.sampled_from([CHECKPOINT_FORMAT, "{}", "[]", "not json", "", "nan"]),
+        st.integers(-3, 3),
+        st.floats(allow_nan=True),
+    ),
     max_size=3,
 )
 hostile_files = st.one_of(
@@ -412,7 +476,7 @@ def make_hostile_file(spec, path: Path, template: bytes) -> Path:
     if kind == "truncated":
         cut = spec[1]
         k = cut if isinstance(cut, int) else int(cut * len(template))
-        path.write_bytes(template[:min(k, len(template) - 1)])
+        path.write_bytes(template[: min(k, len(template) - 1)])
     elif kind == "junk":
         path.write_bytes(spec[1])
     elif kind == "hdf5_signature_junk":

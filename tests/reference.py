@@ -3,6 +3,7 @@
 Each follows docs/model.md 'Force terms' or 'Rigid rods and time integration' literally; the kernels must agree with them
 to round-off.
 """
+
 import math
 from collections import defaultdict
 from itertools import combinations
@@ -40,8 +41,12 @@ def tip_tip_force(position, charge, rstar, kappa):
 
 def tip_tip_energy(position, charge, rstar, kappa):
     n = len(position)
-    return sum(tip_law_potential(np.linalg.norm(position[k] - position[l]), charge[k] * charge[l], rstar, kappa)
-               for k in range(n) for l in range(k + 1, n) if k // 2 != l // 2)
+    return sum(
+        tip_law_potential(np.linalg.norm(position[k] - position[l]), charge[k] * charge[l], rstar, kappa)
+        for k in range(n)
+        for l in range(k + 1, n)
+        if k // 2 != l // 2
+    )
 
 
 def tip_brake(position, velocity, rstar, k_br):
@@ -428,7 +433,6 @@ def lorentz_force_on_rods(position, active, current, field, t, wts):
     return out
 
 
-
 # ----------------------------------------------------------------------------- neighbour lists
 
 
@@ -440,21 +444,23 @@ def neighbour_pairs(x, r, exclude_same_rod):
     return set(zip(i[keep].tolist(), j[keep].tolist()))
 
 
-
 # ----------------------------------------------------------------------------- external objects
 
 
 def line_yukawa_force(p, z1, z2, lam, R, w, Z=1.0):
     """Direct numerical integral of the screened line-charge force (scipy.quad, tight tolerances)."""
+
     def comp(i):
         def integrand(zl):
             d = np.array([p[0], p[1], p[2] - zl])
             r = math.sqrt(d @ d + w * w)
             return Z * lam * math.exp(-r / R) * (1 / r**2 + 1 / (R * r)) * d[i] / r
-        return scipy.integrate.quad(integrand, z1, z2, epsabs=1e-14, epsrel=1e-11, limit=400,
-                              points=[p[2]] if z1 < p[2] < z2 else None)[0]
-    return np.array([comp(i) for i in range(3)])
 
+        return scipy.integrate.quad(
+            integrand, z1, z2, epsabs=1e-14, epsrel=1e-11, limit=400, points=[p[2]] if z1 < p[2] < z2 else None
+        )[0]
+
+    return np.array([comp(i) for i in range(3)])
 
 
 # ----------------------------------------------------------------------------- filament rule, literally
@@ -521,4 +527,3 @@ def rule_filament(n_rods, tip_contacts, conductor_tip, key):
             if any("X" in e for e in block):
                 in_x |= {frozenset(e) for e in block}
     return np.array([frozenset((m[2 * i], m[2 * i + 1])) in in_x for i in range(n_rods)])
-

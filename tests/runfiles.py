@@ -1,5 +1,6 @@
 """Helpers shared by the tests that compare whole run files or launch the command line in a
 subprocess (serially or under the ``mpich`` wheel's ``mpiexec``)."""
+
 import os
 import shutil
 import subprocess
@@ -31,8 +32,11 @@ def differing_datasets(path, reference) -> list:
     floating tips' potentials are NaN); the two files must hold the same datasets."""
     got, want = datasets(path), datasets(reference)
     assert got.keys() == want.keys(), sorted(set(got) ^ set(want))
-    return [k for k in want if not (got[k].shape == want[k].shape and np.array_equal(
-        got[k], want[k], equal_nan=want[k].dtype.kind == "f"))]
+    return [
+        k
+        for k in want
+        if not (got[k].shape == want[k].shape and np.array_equal(got[k], want[k], equal_nan=want[k].dtype.kind == "f"))
+    ]
 
 
 def assert_same_run(path, reference):

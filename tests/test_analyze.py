@@ -5,6 +5,7 @@ structure then holds more than 30 rods, so every measure is defined at the last 
 made once for the module. The measures themselves are tested on hand-built objects in
 tests/test_claims.py; here: the file-level entry point, the output forms and the errors.
 """
+
 import csv
 import io
 import json
@@ -21,16 +22,31 @@ from selfas_graph.io.h5md import RunFile
 
 REPO = Path(__file__).resolve().parents[1]
 #: the keys the ensemble summary reads
-ENSEMBLE_KEYS = ("largest_structure_rods", "largest_moment_q", "largest_moment_ratio", "largest_moment_J_z",
-                 "unpaired_charge_largest", "fractal_dimension", "fractal_dimension_err", "rg_dimension",
-                 "rg_dimension_err", "box_dimension", "box_dimension_err", "cycle_rank")
+ENSEMBLE_KEYS = (
+    "largest_structure_rods",
+    "largest_moment_q",
+    "largest_moment_ratio",
+    "largest_moment_J_z",
+    "unpaired_charge_largest",
+    "fractal_dimension",
+    "fractal_dimension_err",
+    "rg_dimension",
+    "rg_dimension_err",
+    "box_dimension",
+    "box_dimension_err",
+    "cycle_rank",
+)
 
 
 @pytest.fixture(scope="module")
 def run_file(tmp_path_factory):
     out = tmp_path_factory.mktemp("analyze") / "quick.h5"
-    assert main(["simulate", str(REPO / "scenarios" / "quick.toml"), "-o", str(out), "--t-end", "2.5",
-                 "--progress", "none"]) == 0
+    assert (
+        main(
+            ["simulate", str(REPO / "scenarios" / "quick.toml"), "-o", str(out), "--t-end", "2.5", "--progress", "none"]
+        )
+        == 0
+    )
     return out
 
 
@@ -47,7 +63,8 @@ def test_frame_claims_keys_and_values(run_file):
         direct = claims_of_arrays(run.position(-1), run.tip_charge, g["tip_contacts"], g["current"])
         assert {k: v for k, v in c.items() if k not in ("time", "step")} == pytest.approx(direct, nan_ok=True)
         assert c["largest_moment_ratio"] == pytest.approx(
-            c["largest_moment_q"] / np.abs(run.tip_charge[0::2]).mean(), rel=1e-12)  # round-off
+            c["largest_moment_q"] / np.abs(run.tip_charge[0::2]).mean(), rel=1e-12
+        )  # round-off
         # the first frame: no contact yet, measures of structures undefined
         c0 = frame_claims(run, 0)
         assert c0["largest_structure_rods"] == 0 and math.isnan(c0["largest_moment_q"]) and c0["cycle_rank"] == 0

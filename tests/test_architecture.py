@@ -3,6 +3,7 @@
 Every ``import`` and ``from ... import`` of the package (at module level or inside a function)
 is resolved to the part of the package it reaches, and checked against the table below.
 """
+
 import ast
 from pathlib import Path
 
@@ -36,7 +37,7 @@ def _imports(path):
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
         if isinstance(node, ast.ImportFrom):
             if node.level:
-                base = package[:len(package) - (node.level - 1)]
+                base = package[: len(package) - (node.level - 1)]
                 yield node.lineno, ".".join(base + ([node.module] if node.module else []))
             elif node.module and node.module.split(".")[0] == "selfas_graph":
                 yield node.lineno, node.module
@@ -48,8 +49,11 @@ def _imports(path):
 
 def test_every_part_of_the_package_is_in_the_table():
     """A new package or top-level module gets its place in the layers (and in ARCHITECTURE.md)."""
-    parts = {p.stem if p.is_file() else p.name for p in PACKAGE.iterdir()
-             if (p.suffix == ".py" or (p / "__init__.py").exists())}
+    parts = {
+        p.stem if p.is_file() else p.name
+        for p in PACKAGE.iterdir()
+        if (p.suffix == ".py" or (p / "__init__.py").exists())
+    }
     assert parts <= set(ALLOWED), f"not in the import table: {sorted(parts - set(ALLOWED))}"
 
 
@@ -82,6 +86,9 @@ NOT_YET_SPLIT: set[str] = set()
 
 def test_model_modules_stay_short():
     """No module of selfas_graph/model/ is over MODEL_MODULE_LINES lines (ARCHITECTURE.md)."""
-    long = {p.name: n for p in sorted((PACKAGE / "model").rglob("*.py"))
-            if p.name not in NOT_YET_SPLIT and (n := len(p.read_text(encoding="utf-8").splitlines())) > MODEL_MODULE_LINES}
+    long = {
+        p.name: n
+        for p in sorted((PACKAGE / "model").rglob("*.py"))
+        if p.name not in NOT_YET_SPLIT and (n := len(p.read_text(encoding="utf-8").splitlines())) > MODEL_MODULE_LINES
+    }
     assert not long, f"model modules over {MODEL_MODULE_LINES} lines: {long}; split them by concept"

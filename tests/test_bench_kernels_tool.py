@@ -4,6 +4,7 @@ The timings in this process (no child per instruction set); the numbers are meas
 checked here, only that every kernel was timed the asked number of times and that the machine
 and the numba target are reported.
 """
+
 import argparse
 import importlib.util
 import sys

@@ -1,5 +1,6 @@
 """Smoke test of tools/bench_profile.py on the quick scene (a few steps): every part of the table
 sums to the profiled total and the kernels are counted; the times are measurements, not checked."""
+
 import importlib.util
 import sys
 from pathlib import Path
@@ -39,7 +40,8 @@ def test_checks_tool_times_both_checks(capsys):
     spec = importlib.util.spec_from_file_location("_selfas_tools_bench_checks", ROOT / "tools" / "bench_checks.py")
     tool = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tool)
-    got = tool.main(["--scenario", str(ROOT / "scenarios" / "quick.toml"), "--settle", "4", "--repeat", "2",
-                     "--calls", "2"])
+    got = tool.main(
+        ["--scenario", str(ROOT / "scenarios" / "quick.toml"), "--settle", "4", "--repeat", "2", "--calls", "2"]
+    )
     assert len(got) == 2 and all(v[0] > 0 and v[1] > 0 for v in got.values())
     assert "compiles for" in capsys.readouterr().out

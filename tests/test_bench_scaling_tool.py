@@ -4,6 +4,7 @@ The tool's main() runs in this process (tools/ is not a package: it is imported 
 path); the numbers themselves are measurements, not checked here, only that every row is
 there with its ratios and the tree's error, and that the plot is written.
 """
+
 import importlib.util
 import json
 import sys
@@ -49,7 +50,8 @@ def test_no_peer_flag(tmp_path, capsys):
     """``--no-peer`` times our step alone: no peer figure, no ratio."""
     tool = _tool()
     js = tmp_path / "s.json"
-    tool.main(["--rods", "60", "--method", "tree", "--step-seconds", "0.02", "--repeat", "1", "--no-peer",
-               "--json", str(js)])
+    tool.main(
+        ["--rods", "60", "--method", "tree", "--step-seconds", "0.02", "--repeat", "1", "--no-peer", "--json", str(js)]
+    )
     rows = json.loads(js.read_text())["rows"]
     assert len(rows) == 1 and "peer_ms" not in rows[0] and "vs_peer" not in rows[0]

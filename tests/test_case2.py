@@ -81,8 +81,10 @@ def test_line_charge_force_is_minus_gradient(rng):
             cp, cm = c.copy(), c.copy()
             cp[i, d] += h
             cm[i, d] -= h
-            num = -(kx.line_yukawa_energy(cp, z, -10.0, 10.0, 3.2, 2.4, 0.09, t, w)
-                    - kx.line_yukawa_energy(cm, z, -10.0, 10.0, 3.2, 2.4, 0.09, t, w)) / (2 * h)
+            num = -(
+                kx.line_yukawa_energy(cp, z, -10.0, 10.0, 3.2, 2.4, 0.09, t, w)
+                - kx.line_yukawa_energy(cm, z, -10.0, 10.0, 3.2, 2.4, 0.09, t, w)
+            ) / (2 * h)
             # central differences: O(h^2) truncation plus U * 1e-16 / h round-off, ~1e-8 here
             assert f[i, d] == pytest.approx(num, rel=1e-6, abs=1e-7)
 
@@ -125,8 +127,12 @@ def test_filament_contact_potentials_follow_heights():
     """When contacts move along z beyond circuit.height_tolerance, their potentials are updated and re-solved."""
     state = _rod_on_axis([0.0, 0.0, 1.0], centre=(0.05, 0.0, 0.0))
     state.velocity[:, 2] = 1.0  # the rod slides up along the filament
-    sim = simulation(state, forces={"external_filament": {"current": 0.0, "diameter": 0.18}},
-                     circuit={"delta_J0": 2.0, "height_tolerance": 0.01}, integrator={"dt": 1e-3})
+    sim = simulation(
+        state,
+        forces={"external_filament": {"current": 0.0, "diameter": 0.18}},
+        circuit={"delta_J0": 2.0, "height_tolerance": 0.01},
+        integrator={"dt": 1e-3},
+    )
     sim.step(50)  # moved 0.05 > tolerance
     np.testing.assert_allclose(sim.solution.potential, -2.0 * state.position[:, 2], atol=2 * 0.01 * 2.0)
     assert abs(sim.solution.potential[0] + 2.0 * state.position[0, 2]) <= 2.0 * 0.01 + 1e-12
@@ -137,11 +143,18 @@ def test_case2_energy_bookkeeping():
     """Monopoles and line charge are conservative; the filament field does tracked work: E - E0 - W stays small."""
     rng = np.random.default_rng(5)
     n = 8
-    centre = np.column_stack([rng.uniform(1.0, 2.0, n) * np.cos(rng.uniform(0, 6.3, n)),
-                              rng.uniform(1.0, 2.0, n) * np.sin(rng.uniform(0, 6.3, n)), rng.uniform(-3, 3, n)])
+    centre = np.column_stack(
+        [
+            rng.uniform(1.0, 2.0, n) * np.cos(rng.uniform(0, 6.3, n)),
+            rng.uniform(1.0, 2.0, n) * np.sin(rng.uniform(0, 6.3, n)),
+            rng.uniform(-3, 3, n),
+        ]
+    )
     state = State.from_rods(centre, rng.normal(size=(n, 3)), rng.uniform(0.3, 0.6, n), rng.uniform(0.3, 0.6, n))
-    forces = {"external_filament": {"current": 1.0}, "external_dipole": {"magnetic_charge": 1.0, "length": 8.0,
-                                                                          "line_charge": 0.5}}
+    forces = {
+        "external_filament": {"current": 1.0},
+        "external_dipole": {"magnetic_charge": 1.0, "length": 8.0, "line_charge": 0.5},
+    }
     sim = simulation(state, forces=forces, integrator={"dt": 1e-3}, contacts={"enabled": False})
     sim.run(t_end=1.0)
     obs = sim.observables()
@@ -180,14 +193,22 @@ def test_case2_scene_is_symmetric_under_rotation_about_x_with_tips_swapped():
     centre[0], axis[0] = (0.05, 0.0, 1.3), (0.0, 0.0, 1.0)  # on the filament at both tips
     q = rng.uniform(0.7, 2.0, n)
     forces = {
-        "tip_magnetic": {}, "tip_brake": {}, "ambient_brake": {}, "uniform_field": {"B": [0.0, 0.0, 1.5]},
+        "tip_magnetic": {},
+        "tip_brake": {},
+        "ambient_brake": {},
+        "uniform_field": {"B": [0.0, 0.0, 1.5]},
         "yukawa": {"screening_length": 0.6, "core_radius": 0.06},
         "external_filament": {"current": 10.0, "diameter": 0.18},
         "external_dipole": {"magnetic_charge": 10.0, "length": 8.0, "line_charge": 3.2},
-        "current_field": {}, "current_lorentz": {},
+        "current_field": {},
+        "current_lorentz": {},
     }
-    sections = dict(forces=forces, circuit={"delta_J0": 2.0}, integrator={"dt": 1e-3, "brake": "split"},
-                    placement={"box": [[-3, 3], [-3, 3], [-6, 6]], "min_tip_distance": 0.0})
+    sections = dict(
+        forces=forces,
+        circuit={"delta_J0": 2.0},
+        integrator={"dt": 1e-3, "brake": "split"},
+        placement={"box": [[-3, 3], [-3, 3], [-6, 6]], "min_tip_distance": 0.0},
+    )
     a = simulation(State.from_rods(centre, axis, q, q), **sections)
     m = State.from_rods(centre * [1.0, -1.0, -1.0], -axis * [1.0, -1.0, -1.0], q, q)
     b = simulation(m, **sections)

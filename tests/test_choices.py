@@ -1,4 +1,5 @@
 """Project choices of docs/model.md 'Assumptions and project choices' that no physics test covers otherwise."""
+
 import numpy as np
 
 from selfas_graph.model import events as ev
@@ -11,8 +12,7 @@ from selfas_graph.model.terms import external_monopoles
 def test_direct_anode_cathode_contact_is_no_short_circuit():
     """B5: a contact joining a cathode-touching tip to an anode-touching tip, no rod between: no filament."""
     # rod 0's tip b (1) touches the cathode, rod 1's tip a (2) the anode, and tips 1 and 2 touch each other
-    topo = classify_rods(2, np.array([[1, 2]]), np.array([1, 2]),
-                         np.array([ev.CONDUCTOR_CATHODE, ev.CONDUCTOR_ANODE]))
+    topo = classify_rods(2, np.array([[1, 2]]), np.array([1, 2]), np.array([ev.CONDUCTOR_CATHODE, ev.CONDUCTOR_ANODE]))
     assert topo.n_filament == 0 and not topo.has_short_circuit
 
 

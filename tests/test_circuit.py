@@ -12,6 +12,7 @@ Tolerances: a sparse direct solve of these small systems is exact up to
 round-off, a few ulp of the potentials (O(1)-O(10)); 1e-12 absolute (or
 relative for sums) leaves a margin of 100x over what is observed (~1e-14).
 """
+
 from collections import defaultdict
 
 import networkx as nx
@@ -321,7 +322,7 @@ def test_star_junction(style):
     n_rods, tc, ct, cid = netlist(rods, star=(style != "chain"))
     if style == "complete":
         tips = [1, 3, 4, 6]
-        tc = np.array([(a, b) for i, a in enumerate(tips) for b in tips[i + 1:]], dtype=np.int64)
+        tc = np.array([(a, b) for i, a in enumerate(tips) for b in tips[i + 1 :]], dtype=np.int64)
     sol = solve_circuit(2 * n_rods, tc, ct, electrode_potential(cid, V))
     np.testing.assert_allclose(sol.current, V / 2, atol=TOL)
     assert len(set(sol.node_of_tip[[1, 3, 4, 6]].tolist())) == 1

@@ -13,6 +13,7 @@ the reduced Laplacian (< 1e3 here), i.e. ~1e-13; ``TOL = 1e-12`` leaves a margin
 10x over that (observed: ~1e-15). Where the resistances span 1e6, the condition
 number is 1e6 larger and the tolerance says so.
 """
+
 import networkx as nx
 import numpy as np
 import pytest
@@ -98,12 +99,12 @@ def test_unbalanced_wheatstone_bridge_with_unequal_resistances_by_hand():
     R = np.array([1.0, 2.0, 3.0, 4.0, 5.0])
     sol = bridge(R)
     np.testing.assert_allclose(sol.potential, [1.0, 0.0, 63 / 85, 58 / 85], rtol=0, atol=TOL)
-    np.testing.assert_allclose(
-        sol.current, [22 / 85, 27 / 170, 63 / 255, 58 / 340, 1 / 85], rtol=0, atol=TOL)
+    np.testing.assert_allclose(sol.current, [22 / 85, 27 / 170, 63 / 255, 58 / 340, 1 / 85], rtol=0, atol=TOL)
     assert sol.total_current == pytest.approx(71 / 170, rel=TOL)
     assert sol.effective_resistance == pytest.approx(170 / 71, rel=TOL)
     assert sol.effective_resistance == pytest.approx(
-        nx_weighted_resistance(4, np.array([[0, 2], [0, 3], [2, 1], [3, 1], [2, 3]]), R, 0, 1), rel=TOL)
+        nx_weighted_resistance(4, np.array([[0, 2], [0, 3], [2, 1], [3, 1], [2, 3]]), R, 0, 1), rel=TOL
+    )
     assert sol.kirchhoff_residual < TOL
     assert sol.dissipated_power == pytest.approx(sol.supplied_power, rel=TOL)
 
@@ -174,8 +175,7 @@ def test_resistance_contrast_of_a_million():
     edges, R = np.array(edges), np.array(R)
     n_nodes = 2 * n + 2
     sol = solve_network(n_nodes, edges, R, [0, n_nodes - 1], [1.0, 0.0])
-    assert sol.effective_resistance == pytest.approx(
-        nx_weighted_resistance(n_nodes, edges, R, 0, n_nodes - 1), rel=rel)
+    assert sol.effective_resistance == pytest.approx(nx_weighted_resistance(n_nodes, edges, R, 0, n_nodes - 1), rel=rel)
     assert sol.kirchhoff_residual < TOL
 
 
@@ -196,7 +196,8 @@ def test_solve_network_agrees_with_a_dense_nodal_solve(seed):
     # the two-terminal value against networkx (only two fixed nodes)
     two = solve_network(n_nodes, edges, R, fixed[:2], [1.0, 0.0])
     assert two.effective_resistance == pytest.approx(
-        nx_weighted_resistance(n_nodes, edges, R, fixed[0], fixed[1]), rel=TOL)
+        nx_weighted_resistance(n_nodes, edges, R, fixed[0], fixed[1]), rel=TOL
+    )
 
 
 @pytest.mark.parametrize("seed", [21, 22, 23, 24])
@@ -211,14 +212,14 @@ def test_kirchhoff_and_power_balance_on_random_weighted_networks(seed):
     R = np.exp(rng.uniform(np.log(0.1), np.log(10.0), n_rods))
     sol = solve_circuit(2 * n_rods, tc, ct, pot, rod_resistance=R)
     check_laws(sol, ct, cid)
-    assert sol.dissipated_power == pytest.approx(float(np.sum(sol.current ** 2 * R)), rel=TOL)
+    assert sol.dissipated_power == pytest.approx(float(np.sum(sol.current**2 * R)), rel=TOL)
     for r in (0.05, 2.0):
         sol = solve_circuit(2 * n_rods, tc, ct, pot, rod_resistance=R, contact_resistance=r)
         assert sol.kirchhoff_residual < TOL
         # with resistive contacts each conductor contact is a node of its own
         assert sol.injected_current.sum() == pytest.approx(0.0, abs=TOL * 100)  # sum of O(10) injections
         assert sol.dissipated_power == pytest.approx(sol.supplied_power, rel=TOL)
-        assert sol.dissipated_power > float(np.sum(sol.current ** 2 * R))  # the contacts dissipate too
+        assert sol.dissipated_power > float(np.sum(sol.current**2 * R))  # the contacts dissipate too
 
 
 @pytest.mark.parametrize("seed", [31, 32])
@@ -271,8 +272,7 @@ def test_ideal_edges_merge_their_nodes():
 )
 def test_solve_network_invalid_input(kwargs, message):
     """Bad resistances, indices or potentials raise ValueError naming the argument."""
-    args = dict(n_nodes=3, edges=[[0, 1], [1, 2]], resistance=[1.0, 1.0], fixed_node=[0, 2],
-                fixed_potential=[1.0, 0.0])
+    args = dict(n_nodes=3, edges=[[0, 1], [1, 2]], resistance=[1.0, 1.0], fixed_node=[0, 2], fixed_potential=[1.0, 0.0])
     args.update(kwargs)
     with pytest.raises(ValueError, match=message):
         solve_network(**args)
@@ -301,8 +301,7 @@ def test_chain_with_resistive_contacts_carries_delta_over_total_resistance(n, r)
     R, V = 1.7, DELTA * n
     rods = [("N" if i == 0 else f"j{i}", "P" if i == n - 1 else f"j{i + 1}") for i in range(n)]
     n_rods, tc, ct, cid = netlist(rods)
-    sol = solve_circuit(2 * n_rods, tc, ct, electrode_potential(cid, V), rod_resistance=R,
-                        contact_resistance=r)
+    sol = solve_circuit(2 * n_rods, tc, ct, electrode_potential(cid, V), rod_resistance=R, contact_resistance=r)
     J = V / (n * R + (n + 1) * r)
     np.testing.assert_allclose(sol.current, -J, rtol=TOL)  # tip a at the cathode side: J flows b -> a
     assert sol.effective_resistance == pytest.approx(n * R + (n + 1) * r, rel=TOL)
@@ -317,8 +316,7 @@ def test_chain_with_unequal_rods_and_contacts():
     r, V = 0.25, 1.0
     rods = [("N", "a"), ("a", "b"), ("b", "c"), ("c", "P")]
     n_rods, tc, ct, cid = netlist(rods)
-    sol = solve_circuit(2 * n_rods, tc, ct, electrode_potential(cid, V), rod_resistance=R,
-                        contact_resistance=r)
+    sol = solve_circuit(2 * n_rods, tc, ct, electrode_potential(cid, V), rod_resistance=R, contact_resistance=r)
     np.testing.assert_allclose(sol.current, -V / (R.sum() + 5 * r), rtol=TOL)
 
 
@@ -332,8 +330,10 @@ def test_small_contact_resistance_tends_to_ideal_contacts():
     n_rods, tc, ct, cid = netlist(rods)
     pot = electrode_potential(cid, 10.0)
     ideal = solve_circuit(2 * n_rods, tc, ct, pot)
-    diff = [np.abs(solve_circuit(2 * n_rods, tc, ct, pot, contact_resistance=r).current - ideal.current).max()
-            for r in (1e-3, 1e-4, 1e-5)]
+    diff = [
+        np.abs(solve_circuit(2 * n_rods, tc, ct, pot, contact_resistance=r).current - ideal.current).max()
+        for r in (1e-3, 1e-4, 1e-5)
+    ]
     assert diff[0] / diff[1] == pytest.approx(10.0, rel=0.01)
     assert diff[1] / diff[2] == pytest.approx(10.0, rel=0.01)
     assert diff[2] < 1e-4 * np.abs(ideal.current).max()
@@ -371,16 +371,20 @@ def test_graph_roles_do_not_depend_on_resistances():
     rng = np.random.default_rng(3)
     rods = random_network(120, 60, rng)
     n_rods, tc, ct, cid = netlist(rods)
-    arrays = {"tip_contacts": tc, "conductor_tip": ct, "conductor_id": cid,
-              "conductor_potential": electrode_potential(cid, 4.0)}
+    arrays = {
+        "tip_contacts": tc,
+        "conductor_tip": ct,
+        "conductor_id": cid,
+        "conductor_potential": electrode_potential(cid, 4.0),
+    }
     conductors = {CONDUCTOR_CATHODE: -2.0, CONDUCTOR_ANODE: 2.0}
     R = rng.uniform(0.5, 2.0, n_rods)
     plain = ConnectivityGraph.from_arrays(n_rods, conductors, arrays)
     weighted = ConnectivityGraph.from_arrays(n_rods, conductors, arrays, rod_resistance=R, contact_resistance=0.3)
     np.testing.assert_array_equal(plain.topology().role, weighted.topology().role)
     np.testing.assert_array_equal(
-        weighted.topology().role, classify_rods(n_rods, tc, ct, weighted.conductor_node_key()).role)
+        weighted.topology().role, classify_rods(n_rods, tc, ct, weighted.conductor_node_key()).role
+    )
     sol = weighted.solve()
-    direct = solve_circuit(2 * n_rods, tc, ct, electrode_potential(cid, 4.0), rod_resistance=R,
-                           contact_resistance=0.3)
+    direct = solve_circuit(2 * n_rods, tc, ct, electrode_potential(cid, 4.0), rod_resistance=R, contact_resistance=0.3)
     np.testing.assert_array_equal(sol.current, direct.current)

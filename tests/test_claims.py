@@ -3,6 +3,7 @@
 The objects: a straight chain, a ring, a planar square-lattice sheet, a compact cubic-lattice
 block, and a pair of rods head-to-tail and head-to-head. Tips that coincide are in contact.
 """
+
 import itertools
 
 import numpy as np
@@ -102,8 +103,9 @@ def test_chain_moment_is_n_times_the_rod_moment():
 def test_moment_does_not_depend_on_the_origin():
     pos, q, tc = chain(5, direction=(0.0, 0.6, 0.8))
     label, _ = structures(5, tc)
-    np.testing.assert_allclose(monopole_moment(pos + [3, -7, 11], q, label), monopole_moment(pos, q, label),
-                               atol=ROUND_OFF)
+    np.testing.assert_allclose(
+        monopole_moment(pos + [3, -7, 11], q, label), monopole_moment(pos, q, label), atol=ROUND_OFF
+    )
 
 
 def test_rod_pairs_head_to_tail_and_head_to_head():
@@ -140,13 +142,16 @@ def test_straight_chain_on_the_axis_has_no_current_moment():
 
 
 # ----------------------------------------------------------------------------- skeleton
-@pytest.mark.parametrize("obj, rank, lengths, degrees", [
-    (chain(10), 0, {}, {2: 9}),
-    (ring(12), 1, {12: 1}, {2: 12}),
-    (lattice(5, 2), 25, {4: 25}, {2: 4, 3: 16, 4: 16}),
-    (lattice(2, 3), 28, {4: 28}, {3: 8, 4: 12, 5: 6, 6: 1}),  # E - V + 1 = 54 - 27 + 1
-    (pair(True), 0, {}, {2: 1}),
-])
+@pytest.mark.parametrize(
+    "obj, rank, lengths, degrees",
+    [
+        (chain(10), 0, {}, {2: 9}),
+        (ring(12), 1, {12: 1}, {2: 12}),
+        (lattice(5, 2), 25, {4: 25}, {2: 4, 3: 16, 4: 16}),
+        (lattice(2, 3), 28, {4: 28}, {3: 8, 4: 12, 5: 6, 6: 1}),  # E - V + 1 = 54 - 27 + 1
+        (pair(True), 0, {}, {2: 1}),
+    ],
+)
 def test_skeleton_of_hand_built_objects(obj, rank, lengths, degrees):
     pos, q, tc = obj
     n = len(q) // 2
@@ -178,24 +183,30 @@ def test_radius_of_gyration_of_a_chain():
     assert size.tolist() == [20]
 
 
-@pytest.mark.parametrize("objects, anchor", [
-    ([chain(n) for n in (2, 3, 5, 8, 13, 21, 34)], 1),
-    ([lattice(L, 2, closed=False) for L in (8, 11, 16, 23, 32)], 2),
-    ([lattice(L, 3, closed=False) for L in (2, 3, 4, 6, 8)], 3),
-])
+@pytest.mark.parametrize(
+    "objects, anchor",
+    [
+        ([chain(n) for n in (2, 3, 5, 8, 13, 21, 34)], 1),
+        ([lattice(L, 2, closed=False) for L in (8, 11, 16, 23, 32)], 2),
+        ([lattice(L, 3, closed=False) for L in (2, 3, 4, 6, 8)], 3),
+    ],
+)
 def test_rg_scaling_dimension(objects, anchor):
     pos, labels = several(objects)
     rg, size = radius_of_gyration(pos, labels)
     within(rg_dimension(size, rg), anchor)
 
 
-@pytest.mark.parametrize("obj, anchor", [
-    (chain(100), 1),
-    (lattice(24, 2, closed=False), 2),
-    (lattice(20, 2), 2),
-    (lattice(10, 3, closed=False), 3),
-    (lattice(12, 3), 3),
-])
+@pytest.mark.parametrize(
+    "obj, anchor",
+    [
+        (chain(100), 1),
+        (lattice(24, 2, closed=False), 2),
+        (lattice(20, 2), 2),
+        (lattice(10, 3, closed=False), 3),
+        (lattice(12, 3), 3),
+    ],
+)
 def test_mass_radius_and_box_counting_dimensions(obj, anchor):
     pos = obj[0]
     within(mass_radius_dimension(pos), anchor)

@@ -1,4 +1,5 @@
 """``selfas-graph simulate``: output layout, protection of existing files, exit codes."""
+
 import shutil
 import subprocess
 
@@ -54,8 +55,15 @@ def test_simulate_writes_h5md_run(scenario, tmp_path, capsys):
         np.testing.assert_array_equal(pos["step"][:], [0, 10, 20, 30, 40, 50])
         np.testing.assert_allclose(pos["time"][:], [0, 0.01, 0.02, 0.03, 0.04, 0.05], atol=1e-12)
         assert f["particles/tips/velocity/value"].shape == (6, 16, 3)
-        for name in ("energy/kinetic", "energy/tip_magnetic", "work/tip_brake", "energy_balance",
-                     "bond_error", "momentum", "contacts"):
+        for name in (
+            "energy/kinetic",
+            "energy/tip_magnetic",
+            "work/tip_brake",
+            "energy_balance",
+            "bond_error",
+            "momentum",
+            "contacts",
+        ):
             assert f[f"observables/{name}/value"].shape[0] == 6, name
         assert f["observables/bond_error_per_step/value"].shape == (50,)
         meta = f["parameters/selfas_graph"].attrs
@@ -100,8 +108,22 @@ def test_dry_run_writes_nothing(scenario, tmp_path, capsys, monkeypatch):
 
 def test_numerical_failure_exits_3_with_diagnosis_and_no_nan_in_file(scenario, tmp_path, capsys):
     out = tmp_path / "run.h5"
-    code = main(["simulate", str(scenario), "-o", str(out), "--set", "integrator.dt=0.05",
-                 "--set", "output.interval=0.05", "--t-end", "100", "--progress", "none"])
+    code = main(
+        [
+            "simulate",
+            str(scenario),
+            "-o",
+            str(out),
+            "--set",
+            "integrator.dt=0.05",
+            "--set",
+            "output.interval=0.05",
+            "--t-end",
+            "100",
+            "--progress",
+            "none",
+        ]
+    )
     assert code == 3
     err = capsys.readouterr().err
     assert "numerical failure at step" in err and "integrator.dt = 0.05" in err

@@ -33,6 +33,7 @@ Independent oracle for the flux of any set of straight segments (w = 0): Stokes,
 vector potential of a segment ``A = J s_hat ln((|a| + s_hat.a) / (|b| + s_hat.b))``
 (``a = x - A``, ``b = x - B``), from ``A = J int dl / |x - x'|``.
 """
+
 import numpy as np
 import pytest
 from scipy.special import ellipe, ellipk
@@ -74,14 +75,14 @@ def polygon_axis_bz(n, a, h, J, w):
 
 def loop_bz(a, rho, h, J):
     """B_z of a circular current loop of radius a at (rho, h) (module docstring)."""
-    D = (a + rho) ** 2 + h ** 2
+    D = (a + rho) ** 2 + h**2
     m = 4.0 * a * rho / D
     return 2.0 * J / np.sqrt(D) * (ellipk(m) + (a * a - rho * rho - h * h) / ((a - rho) ** 2 + h * h) * ellipe(m))
 
 
 def loop_flux(a, R, h, J):
     """Flux of a circular loop of radius a through the coaxial disc of radius R at height h."""
-    D = (a + R) ** 2 + h ** 2
+    D = (a + R) ** 2 + h**2
     m = 4.0 * a * R / D
     return 4.0 * np.pi * J * np.sqrt(D) * ((1.0 - m / 2.0) * ellipk(m) - ellipe(m))
 
@@ -119,7 +120,7 @@ def test_rods_on_a_cylinder_fill_one_shell():
     edges, dens = radial_density(centre, r_max=6.0, n_bins=12, z_range=(-5.0, 5.0))
     np.testing.assert_allclose(edges, np.arange(13) * 0.5, rtol=0, atol=1e-15)
     expected = np.zeros(12)
-    expected[6] = n / (np.pi * (3.5 ** 2 - 3.0 ** 2) * 10.0)
+    expected[6] = n / (np.pi * (3.5**2 - 3.0**2) * 10.0)
     np.testing.assert_allclose(dens, expected, rtol=1e-12, atol=0)
     assert np.argmax(dens) == 6
 
@@ -141,11 +142,11 @@ def test_uniform_points_have_flat_radial_density():
     n = 200_000
     centre = rng.uniform([-10.0, -10.0, -5.0], [10.0, 10.0, 5.0], (n, 3))
     edges, dens = radial_density(centre, r_max=10.0, n_bins=20, z_range=(-5.0, 5.0))
-    volume = np.pi * np.diff(edges ** 2) * 10.0
+    volume = np.pi * np.diff(edges**2) * 10.0
     expected_count = n / 4000.0 * volume
     z_score = (dens * volume - expected_count) / np.sqrt(expected_count)
     assert np.all(np.abs(z_score) < 4.5), z_score
-    assert 5.9 < np.sum(z_score ** 2) < 45.3
+    assert 5.9 < np.sum(z_score**2) < 45.3
 
 
 def test_rod_centres_are_tip_midpoints():
@@ -206,8 +207,9 @@ def test_large_ring_field_matches_circular_loop():
     bz0 = bz_profile([0.0], 0.0, pos, None, current, W)[0]
     np.testing.assert_allclose(bz0, 2.0 * np.pi * J / a, rtol=1e-3)
     for h in (0.5 * a, -a):
-        np.testing.assert_allclose(bz_profile([0.0], h, pos, None, current, W)[0],
-                                   2.0 * np.pi * J * a * a / (a * a + h * h) ** 1.5, rtol=1e-3)
+        np.testing.assert_allclose(
+            bz_profile([0.0], h, pos, None, current, W)[0], 2.0 * np.pi * J * a * a / (a * a + h * h) ** 1.5, rtol=1e-3
+        )
     rho = np.linspace(0.5, 1.5 * a, 25)
     rho = rho[np.abs(rho - a) > 3.0]
     got = bz_profile(rho, 2.0, pos, None, current, 0.0, n_phi=127)
@@ -225,20 +227,24 @@ def test_disc_flux_quadrature_is_exact_for_polynomial_fields():
     uniform field."""
     R = np.array([3.0, 0.0, 1.2, 7.5, 3.0, 0.05])
     B = 0.37
-    np.testing.assert_allclose(disc_flux(R, lambda r: np.full_like(r, B)), np.pi * R ** 2 * B, rtol=1e-13, atol=0)
-    np.testing.assert_allclose(disc_flux(R, lambda r: np.full_like(r, B), n_r=1, dr_max=10.0),
-                               np.pi * R ** 2 * B, rtol=1e-13, atol=0)
-    np.testing.assert_allclose(disc_flux(R, lambda r: r ** 2, n_r=2), np.pi * R ** 4 / 2, rtol=1e-13, atol=0)
+    np.testing.assert_allclose(disc_flux(R, lambda r: np.full_like(r, B)), np.pi * R**2 * B, rtol=1e-13, atol=0)
+    np.testing.assert_allclose(
+        disc_flux(R, lambda r: np.full_like(r, B), n_r=1, dr_max=10.0), np.pi * R**2 * B, rtol=1e-13, atol=0
+    )
+    np.testing.assert_allclose(disc_flux(R, lambda r: r**2, n_r=2), np.pi * R**4 / 2, rtol=1e-13, atol=0)
     assert disc_flux([], lambda r: r).shape == (0,)
 
 
-@pytest.mark.parametrize("R_over_a, z0, rtol, loop_rtol", [
-    (0.5, 0.0, 1e-12, 1e-3),    # inside the ring, in its plane: integrand smooth on [0, R]
-    (0.9, 0.0, 1e-12, 1e-3),    # in the plane, disc edge 2 L from the wire
-    (0.99, 0.0, 1e-11, 1e-2),   # in the plane, disc edge 0.2 L from the wire: steep integrand
-    (0.5, 1.0, 1e-12, 1e-3),    # a plane 1 L above the ring
-    (1.5, 1.0, 1e-12, 1e-3),    # disc wider than the ring, crossing over the wire 1 L below
-])
+@pytest.mark.parametrize(
+    "R_over_a, z0, rtol, loop_rtol",
+    [
+        (0.5, 0.0, 1e-12, 1e-3),  # inside the ring, in its plane: integrand smooth on [0, R]
+        (0.9, 0.0, 1e-12, 1e-3),  # in the plane, disc edge 2 L from the wire
+        (0.99, 0.0, 1e-11, 1e-2),  # in the plane, disc edge 0.2 L from the wire: steep integrand
+        (0.5, 1.0, 1e-12, 1e-3),  # a plane 1 L above the ring
+        (1.5, 1.0, 1e-12, 1e-3),  # disc wider than the ring, crossing over the wire 1 L below
+    ],
+)
 def test_ring_flux_matches_stokes_oracle_and_loop(R_over_a, z0, rtol, loop_rtol):
     """Flux of a ring of 128 unit rods through discs, with the bare wire (w = 0):
     (1) against the Stokes line integral of the ring's exact vector potential (module docstring),
@@ -314,8 +320,14 @@ def test_timeline_takes_first_short_circuit():
     t = np.array([0.0, 0.5, 1.0, 1.5, 2.0])
     n_fil = np.array([0, 0, 0, 45, 45])
     current = np.array([0, 0, 0, 0.57, 2.9])
-    events = ev.event_array([(100, 0.05, ev.TIP_CONTACT, 0, 3), (2529, 1.2645, ev.SHORT_CIRCUIT, 21, -1),
-                             (2900, 1.45, ev.OPEN_CIRCUIT, -1, -1), (3000, 1.5, ev.SHORT_CIRCUIT, 30, -1)])
+    events = ev.event_array(
+        [
+            (100, 0.05, ev.TIP_CONTACT, 0, 3),
+            (2529, 1.2645, ev.SHORT_CIRCUIT, 21, -1),
+            (2900, 1.45, ev.OPEN_CIRCUIT, -1, -1),
+            (3000, 1.5, ev.SHORT_CIRCUIT, 30, -1),
+        ]
+    )
     tl = timeline(t, n_fil, current, events)
     assert tl.short_circuit_time == 1.2645
     np.testing.assert_array_equal(tl.n_filament, n_fil)

@@ -6,6 +6,7 @@
 - every ``tests/<file>.py::<name>`` reference names an existing test function, and every
   ``selfas_graph/<module>.py::<name>`` reference an existing function, class or constant.
 """
+
 import ast
 import dataclasses
 import importlib.util
@@ -47,6 +48,7 @@ def _backticked(text):
 
 # ----------------------------------------------------------------------------- scenarios.md
 
+
 def test_scenarios_md_is_up_to_date(tool):
     """docs/scenarios.md equals render(): the reference lists the schema as it is now."""
     path = DOCS / "scenarios.md"
@@ -79,6 +81,7 @@ def test_example_scenario_in_scenarios_md_loads():
 
 # ----------------------------------------------------------------------------- scenario keys
 
+
 def _schema_paths(cls=P.Parameters, prefix=""):
     """Every table and key path of the scenario schema, walking the parameter dataclasses."""
     out = set()
@@ -106,7 +109,7 @@ def _key_mentions(text):
     for span in _backticked(text):
         candidate = span.strip()
         if candidate.startswith("--set "):
-            candidate = candidate[len("--set "):]
+            candidate = candidate[len("--set ") :]
         candidate = candidate.split("=")[0].strip().strip("[]")
         if KEY_LIKE.match(candidate) and candidate.split(".")[0] in SECTIONS:
             found.append(candidate)
@@ -126,6 +129,7 @@ def test_every_key_named_in_the_docs_exists(page):
 
 
 # ----------------------------------------------------------------------------- code references
+
 
 def _defined_names(path: Path):
     """Top-level functions, classes and assigned names of a module, and ``Class.method`` names."""
@@ -219,8 +223,9 @@ def _model_md_headings():
 
 
 def _citing_files():
-    return sorted(p for tree in CITING_TREES for p in (ROOT / tree).rglob("*")
-                  if p.suffix in (".py", ".toml") and p.is_file())
+    return sorted(
+        p for tree in CITING_TREES for p in (ROOT / tree).rglob("*") if p.suffix in (".py", ".toml") and p.is_file()
+    )
 
 
 def test_code_cites_docs_model_md():
@@ -242,8 +247,11 @@ def test_every_docs_model_md_section_cited_in_the_code_exists():
 
 def test_code_cites_docs_model_md_sections_by_name():
     """Section numbers move when the page grows: the code names the section instead."""
-    bad = [str(p.relative_to(ROOT)) for p in _citing_files()
-           if re.search(r"docs/model\.md,? sections? \d", p.read_text(encoding="utf-8"))]
+    bad = [
+        str(p.relative_to(ROOT))
+        for p in _citing_files()
+        if re.search(r"docs/model\.md,? sections? \d", p.read_text(encoding="utf-8"))
+    ]
     assert not bad, f"docs/model.md cited by section number in {bad}; cite the heading in quotes"
 
 

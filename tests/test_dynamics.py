@@ -1,4 +1,5 @@
 """Integrator and rigid-bond dynamics: analytic motions and conservation laws (docs/model.md 'Rigid rods and time integration')."""
+
 import math
 
 import numpy as np
@@ -91,8 +92,11 @@ def test_energy_conserved_with_conservative_terms():
 
 def _balance(dt):
     state = random_rods(12, np.random.default_rng(9), box=6.0, q=(0.3, 0.6))
-    forces = dict(CONSERVATIVE, ambient_brake={"coefficient": 1.5},
-                  plasma_filament={"radius": 3.0, "current": 3.0, "axis": [0.5, 0.0]})
+    forces = dict(
+        CONSERVATIVE,
+        ambient_brake={"coefficient": 1.5},
+        plasma_filament={"radius": 3.0, "current": 3.0, "axis": [0.5, 0.0]},
+    )
     sim = simulation(state, forces=forces, integrator={"dt": dt})
     while state.time < 2.0 - 1e-9:
         sim.run(t_end=state.time + 0.25)
@@ -118,8 +122,15 @@ def test_energy_balance_with_brake_and_plasma():
 def _spinning_rod(bond_force, project, correct, steps):
     state = State.from_rods([[0.0, 0.0, 0.0]], [[1.0, 0.0, 0.0]], [1.0], [0.0])
     state.velocity[:] = np.cross([0.0, 0.0, 1.0], state.position)  # spin about z, omega = 1
-    sim = simulation(state, integrator={"dt": 1e-3, "bond_force": bond_force,
-                                        "position_projection": project, "velocity_correction": correct})
+    sim = simulation(
+        state,
+        integrator={
+            "dt": 1e-3,
+            "bond_force": bond_force,
+            "position_projection": project,
+            "velocity_correction": correct,
+        },
+    )
     worst = 0.0
     for _ in range(steps):
         sim.step()

@@ -5,6 +5,7 @@ about 30 s on 2 cores) is shared by the checks of the printed table, the summary
 the rerun that must run nothing; the resume, refusal and summary checks use the 60-rod
 circuit scene of conftest (one seed to t = 0.6 takes about 2 s).
 """
+
 import csv
 import json
 import math
@@ -60,7 +61,8 @@ def test_quick_ensemble_prints_the_summary_table(quick):
         assert f"| {name} |" in out
     assert "| t = 0.125 | t = 0.25 | t = 0.375 | t = 0.5 |" in out
     assert sorted(p.name for p in folder.glob("seed_*.h5")) == [
-        f"seed_000{s}{x}.h5" for s in (1, 2, 3, 4) for x in (".checkpoint", "")]
+        f"seed_000{s}{x}.h5" for s in (1, 2, 3, 4) for x in (".checkpoint", "")
+    ]
 
 
 def test_summary_files(quick):
@@ -88,8 +90,25 @@ def test_summary_files(quick):
 def test_rerun_runs_nothing_new(quick, capsys):
     folder, _ = quick
     before = {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")}
-    assert main(["ensemble", QUICK, "--seeds", "4", "--jobs", "2", "--t-end", str(T_END), "-o", str(folder),
-                 "--times", "0.5"]) == 0
+    assert (
+        main(
+            [
+                "ensemble",
+                QUICK,
+                "--seeds",
+                "4",
+                "--jobs",
+                "2",
+                "--t-end",
+                str(T_END),
+                "-o",
+                str(folder),
+                "--times",
+                "0.5",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "0 to run, 0 to resume, 4 done" in out and "[1/" not in out and "| t = 0.5 |" in out
     assert {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")} == before
@@ -98,23 +117,28 @@ def test_rerun_runs_nothing_new(quick, capsys):
 def test_other_parameters_are_refused(quick, capsys):
     folder, _ = quick
     before = {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")}
-    assert main(["ensemble", QUICK, "--seeds", "2", "--t-end", str(T_END), "-o", str(folder),
-                 "--set", "rods.count=200"]) == 2
+    assert (
+        main(["ensemble", QUICK, "--seeds", "2", "--t-end", str(T_END), "-o", str(folder), "--set", "rods.count=200"])
+        == 2
+    )
     err = capsys.readouterr().err
     assert "seed_0001.h5 belongs to other parameters: rods.count = 300 (here 200)" in err and "--force" in err
     assert {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")} == before
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["--seeds", "0"], "--seeds: 0 must be >= 1"),
-    (["--seeds", "2", "--set", "scenario.seed=5"], "the ensemble sets scenario.seed"),
-    (["--seeds", "2", "--set", "rods.cont=5"], "rods.cont"),
-    (["--seeds", "2", "--times", "1,x"], "give simulated times separated by commas"),
-    (["--seeds", "2", "--t-end", "0.5", "--times", "0.6"], "after the end time 0.5"),
-    (["--seeds", "2", "--first-seed", "-3"], "seeds must be distinct integers >= 0"),
-    (["--seeds", "2", "--first-seed", str(2 ** 70)], "seed 1180591620717411303424: "),
-    (["--seeds", "2", "--flux-radius", "nan"], "--flux-radius must be a positive length"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--seeds", "0"], "--seeds: 0 must be >= 1"),
+        (["--seeds", "2", "--set", "scenario.seed=5"], "the ensemble sets scenario.seed"),
+        (["--seeds", "2", "--set", "rods.cont=5"], "rods.cont"),
+        (["--seeds", "2", "--times", "1,x"], "give simulated times separated by commas"),
+        (["--seeds", "2", "--t-end", "0.5", "--times", "0.6"], "after the end time 0.5"),
+        (["--seeds", "2", "--first-seed", "-3"], "seeds must be distinct integers >= 0"),
+        (["--seeds", "2", "--first-seed", str(2**70)], "seed 1180591620717411303424: "),
+        (["--seeds", "2", "--flux-radius", "nan"], "--flux-radius must be a positive length"),
+    ],
+)
 def test_bad_input(tmp_path, capsys, argv, message):
     """Exit code 2 (argparse's or the command's), the message names the problem, nothing is written."""
     try:
@@ -222,15 +246,31 @@ def test_summary_leaves_out_seeds_that_ended_early(scene, tmp_path):
     s = summarise([seed_path(tmp_path, 3), seed_path(tmp_path, 4)], [0.2, 0.4])
     assert s["measures"]["median_axis_distance"]["n"] == [2, 1]
     assert s["short_circuit"]["censored_at"] == sorted(
-        [d["t_end"] for d in s["seeds"] if d["short_circuit_time"] is None])
+        [d["t_end"] for d in s["seeds"] if d["short_circuit_time"] is None]
+    )
 
 
 def test_seed_file_is_what_simulate_writes(scene, tmp_path):
     """A seed's file is the run of ``simulate --set scenario.seed=S``, bit for bit, but for its provenance."""
     ens = Ensemble(scene, [4], tmp_path / "e", t_end=0.2)
     ens.run()
-    assert main(["simulate", str(scene), "--set", "scenario.seed=4", "--t-end", "0.2", "-o",
-                 str(tmp_path / "direct.h5"), "--progress", "none"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                str(scene),
+                "--set",
+                "scenario.seed=4",
+                "--t-end",
+                "0.2",
+                "-o",
+                str(tmp_path / "direct.h5"),
+                "--progress",
+                "none",
+            ]
+        )
+        == 0
+    )
     differ = _same_run(seed_path(tmp_path / "e", 4), tmp_path / "direct.h5")
     assert differ == []
     with RunFile(seed_path(tmp_path / "e", 4)) as run:
@@ -247,8 +287,21 @@ def test_sigterm_stops_the_seeds_with_checkpoints_and_a_rerun_continues(scene, t
     import sys
     import time
 
-    cmd = [sys.executable, "-m", "selfas_graph.cli.main", "ensemble", str(scene), "--seeds", "3", "--jobs", "2",
-           "--t-end", "20", "-o", str(tmp_path / "e")]
+    cmd = [
+        sys.executable,
+        "-m",
+        "selfas_graph.cli.main",
+        "ensemble",
+        str(scene),
+        "--seeds",
+        "3",
+        "--jobs",
+        "2",
+        "--t-end",
+        "20",
+        "-o",
+        str(tmp_path / "e"),
+    ]
     env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     first = [seed_path(tmp_path / "e", s) for s in (3, 4)]
@@ -271,8 +324,25 @@ def test_sigterm_stops_the_seeds_with_checkpoints_and_a_rerun_continues(scene, t
 
 def test_no_run_summarises_the_files_present(quick, capsys):
     folder, _ = quick
-    assert main(["ensemble", QUICK, "--seeds", "5", "--t-end", str(T_END), "-o", str(folder), "--no-run",
-                 "--times", "0.5", "--plot"]) == 0
+    assert (
+        main(
+            [
+                "ensemble",
+                QUICK,
+                "--seeds",
+                "5",
+                "--t-end",
+                str(T_END),
+                "-o",
+                str(folder),
+                "--no-run",
+                "--times",
+                "0.5",
+                "--plot",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "1 to run, 0 to resume, 4 done" in out and "[1/" not in out
     png = (folder / "summary.png").read_bytes()

@@ -16,8 +16,9 @@ from selfas_graph.ensemble import seed_path
 pytestmark = pytest.mark.mpi
 
 if MPIEXEC is None:
-    pytest.skip("mpiexec not found next to the Python interpreter or on PATH (install the mpich wheel)",
-                allow_module_level=True)
+    pytest.skip(
+        "mpiexec not found next to the Python interpreter or on PATH (install the mpich wheel)", allow_module_level=True
+    )
 pytest.importorskip("mpi4py", reason="mpi4py is not installed")
 
 ARGS = ["scene.toml", "--seeds", "2", "--t-end", "0.2"]
@@ -60,8 +61,7 @@ def test_ranks_run_the_seeds_of_the_serial_ensemble(scene, form, ranks):
 
 
 def test_bad_input_under_mpi_stops_every_rank_with_one_message(scene):
-    res = _launch(["-m", "selfas_graph.cli.main", "ensemble", *ARGS, "-o", "never", "--set", "rods.cont=3"],
-                  scene, 2)
+    res = _launch(["-m", "selfas_graph.cli.main", "ensemble", *ARGS, "-o", "never", "--set", "rods.cont=3"], scene, 2)
     assert res.returncode == 2
     assert res.stderr.count("error:") == 1 and "rods.cont" in res.stderr, res.stderr
     assert not (scene / "never").exists()

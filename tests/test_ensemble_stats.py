@@ -1,4 +1,5 @@
 """Statistics over seeds (selfas_graph.analysis.ensemble_stats) on hand-made data with known answers."""
+
 import math
 
 import numpy as np
@@ -16,9 +17,7 @@ def test_mean_sem_by_hand():
 
 def test_mean_sem_leaves_out_missing_seeds_per_column():
     # rows are seeds, columns times; NaN: that seed has no frame at that time
-    values = np.array([[1.0, 10.0, np.nan],
-                       [3.0, np.nan, np.nan],
-                       [5.0, 20.0, 7.0]])
+    values = np.array([[1.0, 10.0, np.nan], [3.0, np.nan, np.nan], [5.0, 20.0, 7.0]])
     mean, sem, n = es.mean_sem(values)
     assert n.tolist() == [3, 2, 1]
     assert mean[0] == 3.0 and mean[1] == 15.0 and mean[2] == 7.0
@@ -56,7 +55,7 @@ def test_kaplan_meier_all_censored():
 def test_wilson_interval_known_values():
     # 0 of 4: lo 0, hi = z^2 / (n + z^2) = 3.8415 / 7.8415
     lo, hi = es.wilson_interval(0, 4)
-    assert lo == 0.0 and hi == pytest.approx(es.Z95 ** 2 / (4 + es.Z95 ** 2), rel=1e-14)
+    assert lo == 0.0 and hi == pytest.approx(es.Z95**2 / (4 + es.Z95**2), rel=1e-14)
     lo, hi = es.wilson_interval(5, 10)  # symmetric about 1/2
     assert lo + hi == pytest.approx(1.0, rel=1e-14) and 0.23 < lo < 0.24  # 0.2366 (tables)
     assert es.wilson_interval(0, 0) == (0.0, 1.0)

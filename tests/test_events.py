@@ -4,6 +4,7 @@ Small hand-built scenes with exact expectations: two rods that meet tip to tip,
 the contact hysteresis on hand-set positions, a prepared chain of three rods that
 closes the gap between the electrodes, and 10^4 contacts recorded in one step.
 """
+
 import time
 
 import numpy as np
@@ -29,8 +30,9 @@ def _kinds(events, kind):
 # --------------------------------------------------------------------------- two rods
 def _two_rods(gap=0.1, **sections):
     """Rods 0 and 1 on the z axis, tip b of rod 0 (tip 1, -q) facing tip a of rod 1 (tip 2, +q)."""
-    state = State.from_rods([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0 + gap]], [[0, 0, 1.0], [0, 0, 1.0]],
-                            [1.0, 1.0], [0.0, 0.0])
+    state = State.from_rods(
+        [[0.0, 0.0, 0.0], [0.0, 0.0, 1.0 + gap]], [[0, 0, 1.0], [0, 0, 1.0]], [1.0, 1.0], [0.0, 0.0]
+    )
     sections.setdefault("forces", STICKY)
     sections.setdefault("integrator", {"dt": 1e-3})
     return state, simulation(state, **sections)
@@ -59,7 +61,7 @@ def test_two_rods_meet_tip_to_tip_with_one_contact_event():
     assert step == first_below and step > 1
     assert t == pytest.approx(step * 1e-3, abs=1e-12)  # time = step * dt, stamped from the state
     assert not _kinds(sim.events, ev.TIP_RELEASE)
-    assert distance[step - 1:].max() < RELEASE and distance[-1] < RSTAR
+    assert distance[step - 1 :].max() < RELEASE and distance[-1] < RSTAR
     assert sim.contacts.n_contacts == 1 and sim.contact_count() == 1
     assert sim.graph.topology().n_cluster == 2
 
@@ -160,8 +162,11 @@ def test_electrode_contact_hysteresis_on_hand_set_positions():
     ]
     for step, (h, kind, touching) in enumerate(expected):
         rows = update(h, step)
-        want = [] if kind is None else [(step, float(step), kind, 0, ev.CONDUCTOR_CATHODE),
-                                        (step, float(step), kind, 3, ev.CONDUCTOR_ANODE)]
+        want = (
+            []
+            if kind is None
+            else [(step, float(step), kind, 0, ev.CONDUCTOR_CATHODE), (step, float(step), kind, 3, ev.CONDUCTOR_ANODE)]
+        )
         assert rows == want, f"step {step}, h = {h}"
         assert tracker.on_cathode[0] == touching and tracker.on_anode[3] == touching
         assert not tracker.on_cathode[1:].any() and not tracker.on_anode[:3].any()
@@ -196,8 +201,14 @@ def test_release_and_contact_in_one_update_are_ordered():
 # --------------------------------------------------------------------------- prepared chain
 GAP = 3.16
 DELTA_J0 = 2.0
-CHAIN_FORCES = {"tip_magnetic": {}, "tip_brake": {}, "ambient_brake": {}, "electrodes": {"gap": GAP},
-                "current_field": {}, "current_lorentz": {}}
+CHAIN_FORCES = {
+    "tip_magnetic": {},
+    "tip_brake": {},
+    "ambient_brake": {},
+    "electrodes": {"gap": GAP},
+    "current_field": {},
+    "current_lorentz": {},
+}
 
 
 def chain_state(offset=0.005):
@@ -230,14 +241,28 @@ def chain_run():
     """The chain run up to 5 steps after its short circuit, with a trace of every step."""
     sim = chain_simulation()
     ff = sim.force_field
-    trace = [dict(step=0, active=len(ff.active_rod), calls=dict(ff.calls), solution=sim.solution,
-                  channel={c: 0.0 for c in CURRENT_TERMS})]
+    trace = [
+        dict(
+            step=0,
+            active=len(ff.active_rod),
+            calls=dict(ff.calls),
+            solution=sim.solution,
+            channel={c: 0.0 for c in CURRENT_TERMS},
+        )
+    ]
     sc_step = None
     while sim.state.step < 500 and (sc_step is None or sim.state.step < sc_step + 5):
         sim.step()
-        trace.append(dict(step=sim.state.step, active=len(ff.active_rod), calls=dict(ff.calls),
-                          solution=sim.solution, current=ff.current.copy(),
-                          channel={c: float(np.abs(ff.out[c]).max()) for c in CURRENT_TERMS}))
+        trace.append(
+            dict(
+                step=sim.state.step,
+                active=len(ff.active_rod),
+                calls=dict(ff.calls),
+                solution=sim.solution,
+                current=ff.current.copy(),
+                channel={c: float(np.abs(ff.out[c]).max()) for c in CURRENT_TERMS},
+            )
+        )
         if sc_step is None and _kinds(sim.events, ev.SHORT_CIRCUIT):
             sc_step = sim.state.step
     return sim, trace, sc_step
@@ -247,9 +272,11 @@ def test_chain_initial_contacts_are_events_of_step_0(chain_run):
     """Contacts present at construction are events of step 0: tips 1-2, tip 0 on the cathode, tip 5 on the anode."""
     sim, _, _ = chain_run
     initial = [e for e in sim.events if e[0] == 0]
-    assert initial == [(0, 0.0, ev.TIP_CONTACT, 1, 2),
-                       (0, 0.0, ev.CONDUCTOR_CONTACT, 0, ev.CONDUCTOR_CATHODE),
-                       (0, 0.0, ev.CONDUCTOR_CONTACT, 5, ev.CONDUCTOR_ANODE)]
+    assert initial == [
+        (0, 0.0, ev.TIP_CONTACT, 1, 2),
+        (0, 0.0, ev.CONDUCTOR_CONTACT, 0, ev.CONDUCTOR_CATHODE),
+        (0, 0.0, ev.CONDUCTOR_CONTACT, 5, ev.CONDUCTOR_ANODE),
+    ]
 
 
 def test_chain_closes_the_gap_with_one_short_circuit(chain_run):
@@ -314,8 +341,9 @@ def test_chain_with_a_gap_of_exactly_three_rods_carries_delta_J0(chain_run):
 
     sim, _, _ = chain_run
     half = 0.5 * DELTA_J0 * 3.0
-    graph = ConnectivityGraph.from_arrays(3, {ev.CONDUCTOR_CATHODE: -half, ev.CONDUCTOR_ANODE: half},
-                                          sim.graph.arrays())
+    graph = ConnectivityGraph.from_arrays(
+        3, {ev.CONDUCTOR_CATHODE: -half, ev.CONDUCTOR_ANODE: half}, sim.graph.arrays()
+    )
     sol = graph.solve()
     np.testing.assert_allclose(sol.current, -DELTA_J0, rtol=0, atol=1e-12)
     assert sol.total_current == pytest.approx(DELTA_J0, abs=1e-12)
@@ -432,8 +460,9 @@ def test_quiet_step_kernel_never_hides_an_event(rng, monkeypatch):
     answers = []
     calls = []
     busy = 0
-    monkeypatch.setattr(contacts_module, "contacts_unchanged",
-                        lambda *a: calls.append(contacts_unchanged(*a)) or calls[-1])
+    monkeypatch.setattr(
+        contacts_module, "contacts_unchanged", lambda *a: calls.append(contacts_unchanged(*a)) or calls[-1]
+    )
     for step in range(400):
         position += rng.normal(scale=0.004, size=position.shape)
         nl.update(position)

@@ -1,4 +1,5 @@
 """The vectorisable exponential used by the Yukawa law agrees with libm's to round-off."""
+
 import math
 
 import numpy as np
@@ -26,8 +27,15 @@ def evaluate(x):
 
 def test_within_two_ulp_of_libm(rng):
     """Over the whole range of normal results (x down to -708), the error is at most 2 ulp (module docstring)."""
-    x = np.concatenate([-rng.uniform(0, 1, 200_000), -rng.uniform(0, 40, 200_000), -rng.uniform(0, 708, 200_000),
-                        -np.logspace(-300, 2.85, 2000), -np.arange(0, 709) * math.log(2.0)])
+    x = np.concatenate(
+        [
+            -rng.uniform(0, 1, 200_000),
+            -rng.uniform(0, 40, 200_000),
+            -rng.uniform(0, 708, 200_000),
+            -np.logspace(-300, 2.85, 2000),
+            -np.arange(0, 709) * math.log(2.0),
+        ]
+    )
     ref = np.exp(x)
     err = np.abs(evaluate(x) - ref) / np.spacing(ref)
     assert err.max() <= 2.0

@@ -1,5 +1,6 @@
 """``selfas-graph export``: GSD and extended XYZ that gsd, MDAnalysis and ASE open, with the rods as
 bonds, the roles as types and the currents; the output path rules."""
+
 import shutil
 from pathlib import Path
 
@@ -23,9 +24,15 @@ def run(tmp_path):
 
 def _expected(path):
     with RunFile(path) as r:
-        return {"pos": r.f["particles/tips/position/value"][:], "vel": r.f["particles/tips/velocity/value"][:],
-                "role": r.f["graph/role"][:], "current": r.f["graph/current"][:], "step": r.step, "time": r.time,
-                "charge": r.tip_charge}
+        return {
+            "pos": r.f["particles/tips/position/value"][:],
+            "vel": r.f["particles/tips/velocity/value"][:],
+            "role": r.f["graph/role"][:],
+            "current": r.f["graph/current"][:],
+            "step": r.step,
+            "time": r.time,
+            "charge": r.tip_charge,
+        }
 
 
 def test_gsd_export_opens_in_gsd_and_mdanalysis(run, capsys):
@@ -98,8 +105,9 @@ def test_output_rules(run, capsys):
     assert list(p.name for p in run.parent.iterdir() if p.suffix == ".part") == []
 
 
-@pytest.mark.parametrize("spec, frames", [("all", [0, 1, 2, 3]), ("-1", [3]), ("1:3", [1, 2]), ("::2", [0, 2]),
-                                          ("0,-1", [0, 3])])
+@pytest.mark.parametrize(
+    "spec, frames", [("all", [0, 1, 2, 3]), ("-1", [3]), ("1:3", [1, 2]), ("::2", [0, 2]), ("0,-1", [0, 3])]
+)
 def test_parse_frames(spec, frames):
     assert parse_frames(spec, 4).tolist() == frames
 
@@ -117,7 +125,9 @@ def test_ovito_reads_the_exports(run):
     e = _expected(run)
     for fmt in ("gsd", "xyz"):
         assert main(["export", str(run), "--format", fmt]) == 0
-        pipeline = ovito_io.import_file(str(run.with_suffix("." + fmt)), **({"multiple_frames": True} if fmt == "xyz" else {}))
+        pipeline = ovito_io.import_file(
+            str(run.with_suffix("." + fmt)), **({"multiple_frames": True} if fmt == "xyz" else {})
+        )
         assert pipeline.source.num_frames == 7
         data = pipeline.compute(6)
         p = data.particles

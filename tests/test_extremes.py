@@ -1,4 +1,5 @@
 """Numerical stability at the extremes: every case runs cleanly or stops with a diagnosis, never NaN."""
+
 import numpy as np
 import pytest
 
@@ -56,8 +57,9 @@ def test_tiny_and_huge_charges(rng, q, runs):
 def test_extreme_screening_lengths(rng, screening):
     """R_D from 1e-3 (cut-off below the rod spacing: no neighbours) to 1e3 (cut-off beyond the box: all pairs)."""
     state = random_rods(20, rng, box=3.0, q=(0.5, 0.6))
-    sim = simulation(state, forces={"yukawa": {"screening_length": screening, "tolerance": 1e-6}},
-                     integrator={"dt": 5e-4})
+    sim = simulation(
+        state, forces={"yukawa": {"screening_length": screening, "tolerance": 1e-6}}, integrator={"dt": 5e-4}
+    )
     sim.run(t_end=0.1)
     assert _finite(sim) and abs(sim.observables()["energy_balance"]) < 1e-9
 
@@ -66,8 +68,9 @@ def test_extreme_screening_lengths(rng, screening):
 def test_huge_brake_coefficient(rng, brake, runs):
     """k_br = 1e5: the explicit brake stops with a diagnosis naming a brake; the split brake runs."""
     state = random_rods(20, rng, box=1.2)
-    sim = simulation(state, forces={"tip_magnetic": {}, "tip_brake": {"coefficient": 1e5}},
-                     integrator={"dt": 5e-4, "brake": brake})
+    sim = simulation(
+        state, forces={"tip_magnetic": {}, "tip_brake": {"coefficient": 1e5}}, integrator={"dt": 5e-4, "brake": brake}
+    )
     if runs:
         sim.run(t_end=0.1)
         assert _finite(sim) and sim.observables()["work/tip_brake"] < 0
@@ -92,8 +95,14 @@ def test_all_rods_in_one_chain_with_zero_and_huge_bias(delta):
     runs. delta_J0 = 1e4: currents of 2e2 J0; the run goes on or stops with a diagnosis, never NaN.
     """
     state, gap = _chain(50)
-    forces = {"tip_magnetic": {}, "tip_brake": {}, "electrodes": {"gap": gap}, "current_field": {},
-              "current_lorentz": {}, "uniform_field": {"B": [0.3, 0.0, 0.5]}}
+    forces = {
+        "tip_magnetic": {},
+        "tip_brake": {},
+        "electrodes": {"gap": gap},
+        "current_field": {},
+        "current_lorentz": {},
+        "uniform_field": {"B": [0.3, 0.0, 0.5]},
+    }
     sim = simulation(state, forces=forces, circuit={"delta_J0": delta}, integrator={"dt": 2e-4, "brake": "split"})
     kinds = [r[2] for r in sim.events]
     assert kinds.count(ev.SHORT_CIRCUIT) == 1
@@ -118,8 +127,13 @@ def test_one_rod_runs():
     """A single rod with every one-body term on: nothing to pair with, energy balance at round-off."""
     state = State.from_rods([[0.3, -0.2, 0.1]], [[1.0, 0.5, 0.2]], [1.2], [0.7])
     state.velocity[:] = [[0.1, 0.0, 0.0], [0.0, 0.2, 0.0]]
-    forces = dict(ALL_PAIR_TERMS, uniform_field={"B": [0, 0, 0.5]}, plasma_filament={"radius": 2.0, "current": 1.0},
-                  electric_field={"E": [0, 0, 0.1]}, electrodes={"gap": 4.0})
+    forces = dict(
+        ALL_PAIR_TERMS,
+        uniform_field={"B": [0, 0, 0.5]},
+        plasma_filament={"radius": 2.0, "current": 1.0},
+        electric_field={"E": [0, 0, 0.1]},
+        electrodes={"gap": 4.0},
+    )
     sim = simulation(state, forces=forces, integrator={"dt": 1e-3})
     sim.run(t_end=1.0)
     obs = sim.observables()
@@ -132,10 +146,15 @@ def test_dead_end_rods_get_exactly_zero_current():
     # a fifth rod hanging sideways from the top tip of the second rod (tip 3, at z = 0)
     junction = state.position[3].copy()
     extra = State.from_rods([junction + [0.5 + 0.01, 0.0, 0.0]], [[1.0, 0.0, 0.0]], [1.0], [0.0])
-    both = State(np.vstack([state.position, extra.position]), np.zeros((10, 3)),
-                 np.concatenate([state.tip_charge, extra.tip_charge]), np.zeros(5))
-    sim = simulation(both, forces={"tip_magnetic": {}, "electrodes": {"gap": gap}, "current_field": {}},
-                     circuit={"delta_J0": 2.0})
+    both = State(
+        np.vstack([state.position, extra.position]),
+        np.zeros((10, 3)),
+        np.concatenate([state.tip_charge, extra.tip_charge]),
+        np.zeros(5),
+    )
+    sim = simulation(
+        both, forces={"tip_magnetic": {}, "electrodes": {"gap": gap}, "current_field": {}}, circuit={"delta_J0": 2.0}
+    )
     role = sim.graph.topology().role
     assert list(role) == [FILAMENT] * 4 + [2]  # the dangling rod is a dead end
     assert sim.force_field.current[4] == 0.0

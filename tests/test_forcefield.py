@@ -4,6 +4,7 @@ This checks the wiring of the model layer (which kernel fills which channel, for
 centres shared between tips, energy shifts), not only the kernels: a term whose force were
 not computed, or computed into the wrong channel, fails here.
 """
+
 import numpy as np
 import pytest
 
@@ -15,8 +16,15 @@ CONSERVATIVE_SCENES = {
     "yukawa": {"yukawa": {"screening_length": 0.8, "tolerance": 1e-12}},
     "electric_field": {"electric_field": {"E": [0.1, 0.4, -0.3]}},
     "electrodes": {"electrodes": {"gap": 2.0}},
-    "external_dipole": {"external_dipole": {"magnetic_charge": 3.0, "length": 2.0, "line_charge": 1.5,
-                                            "screening_length": 1.2, "quadrature_points": 64}},
+    "external_dipole": {
+        "external_dipole": {
+            "magnetic_charge": 3.0,
+            "length": 2.0,
+            "line_charge": 1.5,
+            "screening_length": 1.2,
+            "quadrature_points": 64,
+        }
+    },
 }
 
 
@@ -27,8 +35,12 @@ def test_conservative_channels_are_minus_energy_gradients(scene):
     state = random_rods(5, rng, box=1.8, q=(0.5, 1.5))
     if scene == "electrodes":  # tips inside the walls' range r* = 0.06, one beyond a plane
         state.position[0, 2], state.position[3, 2], state.position[6, 2] = 0.97, -0.98, 1.01
-    sim = simulation(state, forces=CONSERVATIVE_SCENES[scene], contacts={"enabled": False},
-                     placement={"box": [[-3, 3], [-3, 3], [-1.0, 1.0]], "min_tip_distance": 0.0})
+    sim = simulation(
+        state,
+        forces=CONSERVATIVE_SCENES[scene],
+        contacts={"enabled": False},
+        placement={"box": [[-3, 3], [-3, 3], [-1.0, 1.0]], "min_tip_distance": 0.0},
+    )
     ff = sim.force_field
     ff.evaluate(state.position, state.velocity)
     channels = [c for c, cons in ff.channels if cons]
@@ -49,16 +61,23 @@ def test_conservative_channels_are_minus_energy_gradients(scene):
 
 
 #: every term that is a source of magnetic field, with the case (i) and case (ii) fields in one scene
-SOURCES = {"uniform_field": {"B": [0.3, -0.2, 0.7]}, "plasma_filament": {"radius": 1.5, "current": -2.0},
-           "external_filament": {"current": 4.0, "diameter": 0.18},
-           "external_dipole": {"magnetic_charge": 3.0, "length": 2.0}}
+SOURCES = {
+    "uniform_field": {"B": [0.3, -0.2, 0.7]},
+    "plasma_filament": {"radius": 1.5, "current": -2.0},
+    "external_filament": {"current": 4.0, "diameter": 0.18},
+    "external_dipole": {"magnetic_charge": 3.0, "length": 2.0},
+}
 
 
 def _source_scene(rng, state=None, **kw):
     state = random_rods(6, rng, box=1.8, q=(0.5, 1.5)) if state is None else state
-    return state, simulation(state, forces={"tip_magnetic": {}, **SOURCES, "current_field": {}, "current_lorentz": {}},
-                             circuit={"delta_J0": 1.0},
-                             placement={"box": [[-3, 3], [-3, 3], [-1.0, 1.0]], "min_tip_distance": 0.0}, **kw)
+    return state, simulation(
+        state,
+        forces={"tip_magnetic": {}, **SOURCES, "current_field": {}, "current_lorentz": {}},
+        circuit={"delta_J0": 1.0},
+        placement={"box": [[-3, 3], [-3, 3], [-1.0, 1.0]], "min_tip_distance": 0.0},
+        **kw,
+    )
 
 
 def test_field_sources_answer_their_field_and_act_on_tips_with_it(rng):
@@ -68,16 +87,21 @@ def test_field_sources_answer_their_field_and_act_on_tips_with_it(rng):
     ff = sim.force_field
     assert [t.name for t in ff.field_sources] == list(SOURCES)  # all four, in term order
     ff.evaluate(state.position, state.velocity)
-    channel = {"uniform_field": "uniform_field", "plasma_filament": "plasma_filament",
-               "external_filament": "external_filament", "external_dipole": "external_monopoles"}
+    channel = {
+        "uniform_field": "uniform_field",
+        "plasma_filament": "plasma_filament",
+        "external_filament": "external_filament",
+        "external_dipole": "external_monopoles",
+    }
     far = np.linalg.norm(state.position[:, None, :] - ff.field_sources[-1].source[None], axis=-1).min(axis=1) > 0.06
     assert far.sum() >= 8
     for src in ff.field_sources:
         b = np.empty_like(state.position)
         src.field_at(state.position, b)
         # the same law in the same arithmetic (the dipole's tip law outside its core r*): round-off only
-        np.testing.assert_allclose(ff.out[channel[src.name]][far], state.tip_charge[far, None] * b[far],
-                                   rtol=1e-13, atol=1e-13)
+        np.testing.assert_allclose(
+            ff.out[channel[src.name]][far], state.tip_charge[far, None] * b[far], rtol=1e-13, atol=1e-13
+        )
     b = np.empty((1, 3))
     ff.field_sources[0].field_at(np.zeros((1, 3)), b)
     np.testing.assert_array_equal(b[0], SOURCES["uniform_field"]["B"])
@@ -130,8 +154,9 @@ def test_state_dict_restores_the_next_evaluations_bit_for_bit(rng):
     _, fresh = _source_scene(None, state.copy(), integrator={"slow_every": 4})
     fresh.force_field.load_state_dict(d)
     y = x + 6e-3 * v
-    np.testing.assert_array_equal(fresh.force_field.evaluate(y, v, full=False, step=6),
-                                  ff.evaluate(y, v, full=False, step=6))
+    np.testing.assert_array_equal(
+        fresh.force_field.evaluate(y, v, full=False, step=6), ff.evaluate(y, v, full=False, step=6)
+    )
     np.testing.assert_array_equal(fresh.force_field.active_rod, ff.active_rod)
     # a dict without held forces (another setting, an older checkpoint): every slow term is recomputed
     _, other = _source_scene(None, state.copy(), integrator={"slow_every": 4})

@@ -9,6 +9,7 @@ literally with networkx (no reductions) on larger ones. Currents come from the
 circuit solve; their tolerance is the round-off of a sparse solve (~1e-14
 observed, 1e-12 allowed).
 """
+
 from collections import defaultdict
 
 import networkx as nx
@@ -424,7 +425,9 @@ def test_arrays_round_trip():
     for k, v in g.arrays().items():
         np.testing.assert_array_equal(h.arrays()[k], v, err_msg=k)
     assert nx.utils.graphs_equal(g.to_networkx(), h.to_networkx())
-    assert h.to_networkx().nodes[("contact", 7, F)]["potential"] != h.to_networkx().nodes[("contact", 7, F)]["potential"]
+    assert (
+        h.to_networkx().nodes[("contact", 7, F)]["potential"] != h.to_networkx().nodes[("contact", 7, F)]["potential"]
+    )
     np.testing.assert_array_equal(g.topology().role, h.topology().role)
     assert h.has_short_circuit == g.has_short_circuit
 

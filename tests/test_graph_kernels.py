@@ -4,6 +4,7 @@ them against the scipy/networkx implementation it replaced (tests/reference.py),
 Exact equality everywhere: these are integer and boolean results, and the component
 numbering feeds the circuit's node order (hence its round-off), so it must not change.
 """
+
 import networkx as nx
 import numpy as np
 import pytest
@@ -100,8 +101,7 @@ def aggregate(n_rods, rng, loops=0.05, free=0.1):
             j = int(rng.integers(0, i))
             tc.append((2 * j + int(rng.integers(2)), 2 * i + 1))
     tc = sorted({tuple(sorted(p)) for p in tc if p[0] // 2 != p[1] // 2})
-    return (np.array(tc, dtype=np.int64).reshape(-1, 2), np.array(ct, dtype=np.int64),
-            np.array(cid, dtype=np.int64))
+    return (np.array(tc, dtype=np.int64).reshape(-1, 2), np.array(ct, dtype=np.int64), np.array(cid, dtype=np.int64))
 
 
 def _same_topology(got, want):

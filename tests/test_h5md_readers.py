@@ -1,5 +1,6 @@
 """Run files follow H5MD 1.1 and open with the readers users have (MDAnalysis, pyh5md), and
 RunFile still reads files written in the layout before the H5MD additions (tests/data)."""
+
 import warnings
 from pathlib import Path
 
@@ -21,7 +22,9 @@ def run_file(tmp_path_factory):
     """A short run of the small circuit scene: 60 rods, 100 steps, a frame every 20 steps."""
     d = tmp_path_factory.mktemp("h5md")
     scene = d / "small.toml"
-    scene.write_text(SMALL_CIRCUIT_SCENE.replace("t_end = 0.6", "t_end = 0.05").replace("interval = 0.05", "interval = 0.01"))
+    scene.write_text(
+        SMALL_CIRCUIT_SCENE.replace("t_end = 0.6", "t_end = 0.05").replace("interval = 0.05", "interval = 0.01")
+    )
     out = d / "small.h5"
     assert main(["simulate", str(scene), "-o", str(out), "--progress", "none"]) == 0
     return out
@@ -35,8 +38,11 @@ def _fixed_ascii(attr_id):
 def test_layout_follows_h5md_1_1(run_file):
     with h5py.File(run_file, "r") as f:
         assert tuple(f["h5md"].attrs["version"]) == (1, 1)
-        for group, names in (("h5md/author", ("name",)), ("h5md/creator", ("name", "version")),
-                             ("h5md/modules/units", ("system",))):
+        for group, names in (
+            ("h5md/author", ("name",)),
+            ("h5md/creator", ("name", "version")),
+            ("h5md/modules/units", ("system",)),
+        ):
             for name in names:  # H5MD 1.1: fixed-length strings
                 assert _fixed_ascii(f[group].attrs.get_id(name)), f"{group}@{name}"
         assert f["h5md/creator"].attrs["name"].decode() == "selfas-graph"
@@ -58,7 +64,9 @@ def test_layout_follows_h5md_1_1(run_file):
         np.testing.assert_allclose(f["observables/dt/value"][:], 20 * dt, rtol=1e-12)
         # units: fixed-length ASCII strings in the reduced units, none on what MDAnalysis parses
         units = {}
-        f.visititems(lambda name, obj: units.__setitem__(name, obj.attrs["unit"].decode()) if "unit" in obj.attrs else None)
+        f.visititems(
+            lambda name, obj: units.__setitem__(name, obj.attrs["unit"].decode()) if "unit" in obj.attrs else None
+        )
         for name in units:
             assert _fixed_ascii(f[name].attrs.get_id("unit"))
         assert units["observables/energy/kinetic/value"] == "F_M0 L"

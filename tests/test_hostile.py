@@ -43,6 +43,7 @@ only inputs that are slow rather than wrong (``hostile.known_bug_scenario``: mor
 place). The helpers and strategies of both modules are in ``tests/hostile.py``, their fixtures
 (``real_run``, ``workdir``) in ``tests/conftest.py``.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -103,8 +104,7 @@ from selfas_graph.model import params as P
 def _report_cases(request):
     yield
     total = sum(CASES.values())
-    line = "hostile input: %d generated cases (%s)" % (
-        total, ", ".join(f"{k} {v}" for k, v in sorted(CASES.items())))
+    line = "hostile input: %d generated cases (%s)" % (total, ", ".join(f"{k} {v}" for k, v in sorted(CASES.items())))
     reporter = request.config.pluginmanager.get_plugin("terminalreporter")
     if reporter is not None:
         reporter.write_line("\n" + line)
@@ -114,13 +114,14 @@ def _report_cases(request):
 
 # --------------------------------------------------------------------------- generated scenario files
 
+
 def _plan(out: str) -> dict | None:
     """The JSON plan printed by ``--dry-run``."""
     k = out.find("\n{")
     if k < 0:
         return None
     try:
-        return json.loads(out[k + 1:])
+        return json.loads(out[k + 1 :])
     except json.JSONDecodeError:
         return None
 
@@ -190,15 +191,48 @@ def test_generated_scenario_files_real_run(case, workdir, capsys):
 
 set_keys = st.one_of(
     st.sampled_from([".".join(p) for p in LEAVES + SECTIONS[1:]]),
-    st.sampled_from(["", ".", "a..b", " rods.count ", "rods.count.x", "forces.yukawa.x.y", "output.file.z", "rods.",
-                     ".rods", "run.t_end=1", "scenario", "forces"]),
+    st.sampled_from(
+        [
+            "",
+            ".",
+            "a..b",
+            " rods.count ",
+            "rods.count.x",
+            "forces.yukawa.x.y",
+            "output.file.z",
+            "rods.",
+            ".rods",
+            "run.t_end=1",
+            "scenario",
+            "forces",
+        ]
+    ),
     st.lists(key_names, min_size=1, max_size=3).map(".".join),
 )
 set_values = st.one_of(
     hostile_values.map(toml_value),
     st.text(st.characters(exclude_categories=("Cs",)), max_size=12),
-    st.sampled_from(["", "=", "[", "{", "nan", "-inf", "1e999", "0x10", "1_000", "true", "\"unterminated", "{a = 1}",
-                     "[" * 60 + "]" * 60, "1\nrods = 3", "'literal'", "2024-01-01", "[[0, 1], [0, 1], [0, 1]]"]),
+    st.sampled_from(
+        [
+            "",
+            "=",
+            "[",
+            "{",
+            "nan",
+            "-inf",
+            "1e999",
+            "0x10",
+            "1_000",
+            "true",
+            '"unterminated',
+            "{a = 1}",
+            "[" * 60 + "]" * 60,
+            "1\nrods = 3",
+            "'literal'",
+            "2024-01-01",
+            "[[0, 1], [0, 1], [0, 1]]",
+        ]
+    ),
 )
 set_items = st.one_of(
     st.tuples(set_keys, set_values).map(lambda kv: f"{kv[0]}={kv[1]}"),
@@ -273,8 +307,12 @@ def test_generated_t_end(value, workdir, capsys, real_run):
 
 
 simulate_options = st.one_of(
-    st.tuples(st.just("-o"), st.sampled_from(["out.h5", "/", ".", "", "sub/out.h5", "SCEN", "adir", "out.checkpoint.h5",
-                                               "x", "adir/", "-", "out.h5/"])),
+    st.tuples(
+        st.just("-o"),
+        st.sampled_from(
+            ["out.h5", "/", ".", "", "sub/out.h5", "SCEN", "adir", "out.checkpoint.h5", "x", "adir/", "-", "out.h5/"]
+        ),
+    ),
     st.tuples(st.just("--resume"), st.sampled_from([".", "/", "", "out.h5", "SCEN", "adir", "missing.h5", "-"])),
     st.tuples(st.just("--set"), set_items),
     st.tuples(st.just("--t-end"), st.sampled_from(["0.001", "0", "-1", "nan", "inf", "abc", "", "1e-12"])),
@@ -293,8 +331,11 @@ def _option_value(argv, *names):
 
 
 @settings(max_examples=100, **HOSTILE)
-@given(positional=st.sampled_from([None, "SCEN", "missing.toml", ".", "", "-", "adir", "SCEN SCEN"]),
-       options=st.lists(simulate_options, max_size=5), order=st.randoms(use_true_random=False))
+@given(
+    positional=st.sampled_from([None, "SCEN", "missing.toml", ".", "", "-", "adir", "SCEN SCEN"]),
+    options=st.lists(simulate_options, max_size=5),
+    order=st.randoms(use_true_random=False),
+)
 def test_generated_simulate_argv(positional, options, order, workdir, capsys, real_run):
     """100 generated argument lists of ``simulate``: a scenario (or a missing file, a directory, '.',
     '' or two scenarios) with options in random order and with hostile values (-o to '/', '.', '',
@@ -322,7 +363,8 @@ def test_generated_simulate_argv(positional, options, order, workdir, capsys, re
 
 
 name_parts = st.text(st.characters(categories=("L", "N"), include_characters="_-. "), min_size=1, max_size=8).filter(
-    lambda s: s not in (".", ".."))
+    lambda s: s not in (".", "..")
+)
 output_cases = st.one_of(
     st.tuples(st.just("missing_folder"), st.lists(name_parts, min_size=1, max_size=3)),
     st.tuples(st.just("file_as_folder"), name_parts),
@@ -330,9 +372,13 @@ output_cases = st.one_of(
     st.tuples(st.just("existing_run")),
     st.tuples(st.just("directory"), st.booleans()),
     st.tuples(st.just("scenario_itself")),
-    st.tuples(st.just("output_file_key"), st.one_of(
-        st.sampled_from(["", ".", "..", "a", "adir", "s.toml", "a\x00b.h5", " ", "x.h5 ", "\u00e9.h5"]),
-        st.text(st.characters(exclude_categories=("Cs",), exclude_characters="/"), max_size=8))),
+    st.tuples(
+        st.just("output_file_key"),
+        st.one_of(
+            st.sampled_from(["", ".", "..", "a", "adir", "s.toml", "a\x00b.h5", " ", "x.h5 ", "\u00e9.h5"]),
+            st.text(st.characters(exclude_categories=("Cs",), exclude_characters="/"), max_size=8),
+        ),
+    ),
 )
 
 
@@ -414,7 +460,7 @@ def test_hostile_files_to_topology(spec, json_out, workdir, capsys, real_run):
     without the HDF5 signature, empty file, a directory, a text file, foreign HDF5 files with random
     groups and datasets, some named like a run's): exit 2 with a message, no traceback, no stdout,
     the file byte-identical afterwards."""
-    bug = ("test_bug_topology_foreign_graph" if has_run_markers(spec) and has_items(spec, *GRAPH_PATHS) else None)
+    bug = "test_bug_topology_foreign_graph" if has_run_markers(spec) and has_items(spec, *GRAPH_PATHS) else None
     note(f"bug={bug}")
     skip_known(bug)
     CASES["topology_files"] += 1
@@ -428,10 +474,13 @@ def test_hostile_files_to_topology(spec, json_out, workdir, capsys, real_run):
 
 
 @settings(max_examples=40, **HOSTILE)
-@given(frame=st.one_of(st.none(), st.integers(-10, 10), st.sampled_from(GIANT_INTS)),
-       time=st.one_of(st.none(), hostile_floats),
-       events=st.one_of(st.none(), st.integers(-5, 5), st.sampled_from(GIANT_INTS)),
-       json_out=st.booleans(), junk=st.sampled_from([None, "x", "1.5", ""]))
+@given(
+    frame=st.one_of(st.none(), st.integers(-10, 10), st.sampled_from(GIANT_INTS)),
+    time=st.one_of(st.none(), hostile_floats),
+    events=st.one_of(st.none(), st.integers(-5, 5), st.sampled_from(GIANT_INTS)),
+    json_out=st.booleans(),
+    junk=st.sampled_from([None, "x", "1.5", ""]),
+)
 def test_generated_topology_arguments(frame, time, events, json_out, junk, capsys, real_run):
     """40 generated argument sets of ``topology`` on a real run (frames in and out of range, huge,
     --time NaN/inf/huge/negative, --events of any size, unparsable values): exit 0 or 2, no
@@ -473,13 +522,16 @@ def test_hostile_files_to_plot(spec, kind, workdir, capsys, real_run):
 
 
 @settings(max_examples=15, **HOSTILE)
-@given(kind=st.sampled_from(["snapshot", "density", "field", "flux", "timeline"]),
-       r_max=st.one_of(st.none(), st.sampled_from([0.0, -1.0, math.nan, 1e-300, 0.5, 3.0, 1e6])),
-       planes=st.one_of(st.none(), st.lists(st.floats(-1e6, 1e6), min_size=1, max_size=4)),
-       bins=st.one_of(st.none(), st.integers(-3, 200)),
-       n_phi=st.one_of(st.none(), st.integers(-3, 500)),
-       z_mext=st.one_of(st.none(), st.sampled_from([0.0, math.nan, math.inf, -2.0, 1e-300, 10.0])),
-       dpi=st.integers(10, 60), frame=st.one_of(st.none(), st.integers(-5, 5)))
+@given(
+    kind=st.sampled_from(["snapshot", "density", "field", "flux", "timeline"]),
+    r_max=st.one_of(st.none(), st.sampled_from([0.0, -1.0, math.nan, 1e-300, 0.5, 3.0, 1e6])),
+    planes=st.one_of(st.none(), st.lists(st.floats(-1e6, 1e6), min_size=1, max_size=4)),
+    bins=st.one_of(st.none(), st.integers(-3, 200)),
+    n_phi=st.one_of(st.none(), st.integers(-3, 500)),
+    z_mext=st.one_of(st.none(), st.sampled_from([0.0, math.nan, math.inf, -2.0, 1e-300, 10.0])),
+    dpi=st.integers(10, 60),
+    frame=st.one_of(st.none(), st.integers(-5, 5)),
+)
 def test_generated_plot_arguments(kind, r_max, planes, bins, n_phi, z_mext, dpi, frame, workdir, capsys, real_run):
     """15 generated option sets of ``plot`` on a real run (--r-max zero/negative/NaN/tiny/huge, finite
     --planes, --bins and --n-phi below 1 and up to hundreds, --z-mext zero/NaN/inf, frames in and out of
@@ -489,8 +541,13 @@ def test_generated_plot_arguments(kind, r_max, planes, bins, n_phi, z_mext, dpi,
     d = example_dir(workdir)
     png = d / "fig.png"
     argv = ["plot", real_run["run"], "--kind", kind, "-o", png, f"--dpi={dpi}"]
-    for opt, value in (("--r-max", r_max), ("--bins", bins), ("--n-phi", n_phi), ("--z-mext", z_mext),
-                       ("--frame", frame)):
+    for opt, value in (
+        ("--r-max", r_max),
+        ("--bins", bins),
+        ("--n-phi", n_phi),
+        ("--z-mext", z_mext),
+        ("--frame", frame),
+    ):
         if value is not None:
             argv.append(f"{opt}={value!r}")
     if planes:
@@ -507,8 +564,11 @@ def test_hostile_checkpoints_to_resume(spec, workdir, capsys, real_run):
     """50 generated files (as above, truncations of a real checkpoint) given to ``simulate --resume``
     as the checkpoint: exit 2 with a message, no traceback, the file byte-identical, nothing
     created, and the real run the checkpoint names untouched."""
-    bug = ("test_bug_checkpoint_with_missing_groups"
-           if spec[0] == "foreign" and spec[2].get("format") == CHECKPOINT_FORMAT else None)
+    bug = (
+        "test_bug_checkpoint_with_missing_groups"
+        if spec[0] == "foreign" and spec[2].get("format") == CHECKPOINT_FORMAT
+        else None
+    )
     note(f"bug={bug}")
     skip_known(bug)
     CASES["resume_checkpoints"] += 1
@@ -540,14 +600,16 @@ def test_hostile_run_files_to_resume(spec, t_end, workdir, capsys, real_run):
     ckpt = d / "good.checkpoint.h5"
     ckpt.write_bytes(real_run["checkpoint_bytes"])
     before = tree(d)
-    res = cli(capsys, "simulate", "--resume", ckpt, "-o", f, "--progress", "none",
-              *([f"--t-end={t_end}"] if t_end else []))
+    res = cli(
+        capsys, "simulate", "--resume", ckpt, "-o", f, "--progress", "none", *([f"--t-end={t_end}"] if t_end else [])
+    )
     check_contract(res, allowed=(2,))
     assert tree(d) == before
     assert real_run["run"].read_bytes() == real_run["run_bytes"]
 
 
 # --------------------------------------------------------------------------- magnitudes, checkpoints, moves
+
 
 def _numeric_keys():
     """Every numeric key of the schema: (dotted path, type, field)."""
@@ -570,8 +632,20 @@ def _numeric_keys():
 
 NUMERIC_KEYS = _numeric_keys()
 #: tiny and huge magnitudes, at and beyond the documented 1e-30..1e30 and at the ends of double precision
-MAGNITUDES = ["5e-324", "1e-310", "1e-300", "1e-31", "1e-30", "1e30", "1e31", "1e200", "1e308",
-              "-1e30", "-1e308", "-5e-324"]
+MAGNITUDES = [
+    "5e-324",
+    "1e-310",
+    "1e-300",
+    "1e-31",
+    "1e-30",
+    "1e30",
+    "1e31",
+    "1e200",
+    "1e308",
+    "-1e30",
+    "-1e308",
+    "-5e-324",
+]
 
 
 def _magnitude_value(tp, f, text):
@@ -600,8 +674,16 @@ def test_generated_magnitudes_in_every_numeric_key(key, value, workdir, capsys):
         allowed = {"graph/potential", "graph/conductor_potential", "observables/effective_resistance/value"}
         with h5py.File(out, "r") as h:
             bad = []
-            h.visititems(lambda n, o: bad.append(n) if isinstance(o, h5py.Dataset) and o.dtype.kind == "f"
-                         and n not in allowed and not np.isfinite(o[()]).all() else None)
+            h.visititems(
+                lambda n, o: (
+                    bad.append(n)
+                    if isinstance(o, h5py.Dataset)
+                    and o.dtype.kind == "f"
+                    and n not in allowed
+                    and not np.isfinite(o[()]).all()
+                    else None
+                )
+            )
         assert not bad, f"non-finite values stored in {bad}"
 
 

@@ -4,6 +4,7 @@ expected behaviour; all fixed. A new one is added here, marked ``xfail(strict=Tr
 The contract is that of tests/test_hostile.py: bad input gives exit code 2 and a message naming the
 problem, a numerical failure exit code 3, never a traceback, and no existing file is damaged.
 """
+
 from __future__ import annotations
 
 import copy
@@ -47,25 +48,32 @@ def test_bug_huge_min_tip_distance(workdir, capsys):
 
 @pytest.mark.parametrize("term", ["current_lorentz", "external_dipole"])
 def test_bug_huge_quadrature_points(term, workdir, capsys):
-    res = cli(capsys, "simulate", scenario_file(workdir), "--dry-run",
-              f"--set=forces.{term}.quadrature_points=9223372036854775807")
+    res = cli(
+        capsys,
+        "simulate",
+        scenario_file(workdir),
+        "--dry-run",
+        f"--set=forces.{term}.quadrature_points=9223372036854775807",
+    )
     _expect_usage_error(res, "quadrature_points")
 
 
-@pytest.mark.parametrize("args", [["--set=integrator.dt=5e-324"], ["--t-end=1.7e308"],
-                                  ["--set=integrator.dt=1e-10", "--set=output.interval=1e300"]])
+@pytest.mark.parametrize(
+    "args",
+    [["--set=integrator.dt=5e-324"], ["--t-end=1.7e308"], ["--set=integrator.dt=1e-10", "--set=output.interval=1e300"]],
+)
 def test_bug_step_count_overflow(args, workdir, capsys):
     check_contract(cli(capsys, "simulate", scenario_file(workdir), "--dry-run", *args), allowed=(2,))
 
 
 def test_bug_huge_rod_count(workdir, capsys):
-    scen = scenario_file(workdir, rods={"count": 10 ** 12}, placement={"min_tip_distance": 0.0})
+    scen = scenario_file(workdir, rods={"count": 10**12}, placement={"min_tip_distance": 0.0})
     _expect_usage_error(cli(capsys, "simulate", scen, "--dry-run"), "rods.count")
 
 
 def test_bug_seed_beyond_64_bits(workdir, capsys):
     out = workdir / "out.h5"
-    res = cli(capsys, "simulate", scenario_file(workdir, scenario={"seed": 2 ** 64}), "-o", out, "--progress", "none")
+    res = cli(capsys, "simulate", scenario_file(workdir, scenario={"seed": 2**64}), "-o", out, "--progress", "none")
     check_contract(res, allowed=(0, 2))
     assert out.exists() == (res.code == 0)
 
@@ -78,13 +86,21 @@ def test_bug_huge_output_interval(workdir, capsys):
 
 
 def test_bug_huge_neighbour_skin(workdir, capsys):
-    res = cli(capsys, "simulate", scenario_file(workdir, neighbours={"skin": 1e300}), "-o", workdir / "out.h5",
-              "--progress", "none")
+    res = cli(
+        capsys,
+        "simulate",
+        scenario_file(workdir, neighbours={"skin": 1e300}),
+        "-o",
+        workdir / "out.h5",
+        "--progress",
+        "none",
+    )
     check_contract(res)
 
 
-@pytest.mark.parametrize("sections", [{"rods": {"tip_stiffness": 1e300}},
-                                      {"forces": {"uniform_field": {"B": [1e300, 0.0, 0.0]}}}])
+@pytest.mark.parametrize(
+    "sections", [{"rods": {"tip_stiffness": 1e300}}, {"forces": {"uniform_field": {"B": [1e300, 0.0, 0.0]}}}]
+)
 def test_bug_overflowing_forces(sections, workdir, capsys):
     raw = copy.deepcopy(BASE)
     for k, v in sections.items():
@@ -97,8 +113,17 @@ def test_bug_overflowing_forces(sections, workdir, capsys):
 
 def test_bug_resume_into_an_unrelated_run(workdir, capsys, real_run):
     other = workdir / "B.h5"
-    res = cli(capsys, "simulate", real_run["scenario"], "-o", other, "--progress", "none",
-              "--set=rods.count=6", "--t-end=0.005")
+    res = cli(
+        capsys,
+        "simulate",
+        real_run["scenario"],
+        "-o",
+        other,
+        "--progress",
+        "none",
+        "--set=rods.count=6",
+        "--t-end=0.005",
+    )
     assert res.code == 0
     before = other.read_bytes()
     ckpt = workdir / "A.checkpoint.h5"
@@ -203,7 +228,7 @@ def test_bug_plot_nonfinite_planes(kind, plane, workdir, capsys, real_run):
 def test_bug_truncated_file_message_blames_file_locking(data, workdir, capsys, real_run):
     path = workdir / "run.h5"
     if data == "truncated":
-        path.write_bytes(real_run["run_bytes"][:len(real_run["run_bytes"]) // 2])
+        path.write_bytes(real_run["run_bytes"][: len(real_run["run_bytes"]) // 2])
     else:
         path.write_bytes(b"\x89HDF\r\n\x1a\n" + b"\xff" * 1024)  # HDF5: "bad superblock version number"
     res = cli(capsys, "topology", path)
@@ -237,16 +262,26 @@ def test_bug_resume_t_end_before_the_checkpoint(workdir, capsys, real_run):
     assert run.read_bytes() == real_run["run_bytes"]
 
 
-@pytest.mark.parametrize("rods", [{"electric_charge": {"distribution": "constant", "value": 0.0}},
-                                  {"magnetic_charge": {"value": 0.0}}])
+@pytest.mark.parametrize(
+    "rods", [{"electric_charge": {"distribution": "constant", "value": 0.0}}, {"magnetic_charge": {"value": 0.0}}]
+)
 def test_bug_yukawa_with_zero_charges(rods, workdir, capsys):
     out = workdir / "out.h5"
     res = cli(capsys, "simulate", scenario_file(workdir, rods=rods), "-o", out, "--progress", "none")
     check_contract(res, allowed=(0,))
 
 
-@pytest.mark.parametrize("args", [["-o", ".", "--dry-run"], ["-o", "/", "--dry-run"], ["-o", "."],
-                                  ["--set=output.file=\".\"", "--dry-run"], ["--resume", "."], ["--resume", "/"]])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["-o", ".", "--dry-run"],
+        ["-o", "/", "--dry-run"],
+        ["-o", "."],
+        ['--set=output.file="."', "--dry-run"],
+        ["--resume", "."],
+        ["--resume", "/"],
+    ],
+)
 def test_bug_output_path_without_a_name(args, workdir, capsys):
     scen = scenario_file(workdir)
     argv = ["simulate", *([] if "--resume" in args else [scen]), *args]

@@ -4,6 +4,7 @@ Tolerance: rtol 1e-12 on each component, with an absolute floor of 1e-12 times
 the largest component, since sums of many terms of both signs can cancel to
 well below their size (the round-off is relative to the terms, not the sum).
 """
+
 import os
 
 import numpy as np
@@ -233,8 +234,21 @@ def _rows_kernel_cases(rng):
         (kf.electrode_walls, lambda: (x, v, -1.0, 1.0, RSTAR, KAPPA, 100.0, np.zeros((n, 3)), np.zeros((n, 3)))),
         (kx.filament_field, lambda: (x, 2.0, 0.05, np.zeros((n, 3)))),
         (kx.filament_force_on_tips, lambda: (x, q, 2.0, 0.05, np.zeros((n, 3)))),
-        (kx.monopoles_on_tips, lambda: (x, v, q, src, np.array([1.0, -1.0, 2.0, -2.0]), RSTAR, KAPPA, 100.0,
-                                         np.zeros((n, 3)), np.zeros((n, 3)))),
+        (
+            kx.monopoles_on_tips,
+            lambda: (
+                x,
+                v,
+                q,
+                src,
+                np.array([1.0, -1.0, 2.0, -2.0]),
+                RSTAR,
+                KAPPA,
+                100.0,
+                np.zeros((n, 3)),
+                np.zeros((n, 3)),
+            ),
+        ),
         (kx.monopole_field, lambda: (x, src, np.array([1.0, -1.0, 2.0, -2.0]), RSTAR, np.zeros((n, 3)))),
         (kx.line_yukawa_on_centres, lambda: (x, q, -1.0, 1.0, 0.5, 1.0, 0.05, *kc_nodes(8), np.zeros((n, 3)))),
     ]
@@ -318,12 +332,14 @@ def test_a_kernel_cached_from_other_sources_is_not_loaded(tmp_path):
     import sys
 
     (tmp_path / "probe_kernel.py").write_text(
-        "from selfas_graph.kernels._jit import njit\n\n\n@njit\ndef twice(x):\n    return 2.0 * x\n")
+        "from selfas_graph.kernels._jit import njit\n\n\n@njit\ndef twice(x):\n    return 2.0 * x\n"
+    )
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
 
     def run(digest):
-        out = subprocess.run([sys.executable, "-c", _PROBE, str(tmp_path), digest], env=env, capture_output=True,
-                             text=True, check=True).stdout.split()
+        out = subprocess.run(
+            [sys.executable, "-c", _PROBE, str(tmp_path), digest], env=env, capture_output=True, text=True, check=True
+        ).stdout.split()
         return tuple(int(v) for v in out)  # (cache hits, cache misses)
 
     assert run("A") == (0, 1)  # compiled and saved

@@ -4,6 +4,7 @@ The oracles (tests/reference.py) are plain numpy / Python loops written from the
 the kernel code: the segment field in the textbook form (perpendicular foot, cosines
 of the end angles), sums with explicit loops, forces with ``np.cross``.
 """
+
 import numpy as np
 import pytest
 from scipy import integrate
@@ -20,6 +21,7 @@ from selfas_graph.kernels.currents import (
 
 #: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
 pytestmark = pytest.mark.jit_off_ok
+
 
 def random_rods(seed, n_rods=40, box=5.0, zero_fraction=0.25):
     """Rods with centres uniform in a box, unit axes uniform on the sphere, random currents.
@@ -46,8 +48,15 @@ def random_rods(seed, n_rods=40, box=5.0, zero_fraction=0.25):
 
 def field_call(point, exclude, position, active, current, w):
     out = np.full((len(point), 3), np.nan)  # NaN fill: proves every row is overwritten
-    rod_current_field(np.ascontiguousarray(point, dtype=float), np.asarray(exclude, dtype=np.int64),
-                      position, np.asarray(active, dtype=np.int64), current, w, out)
+    rod_current_field(
+        np.ascontiguousarray(point, dtype=float),
+        np.asarray(exclude, dtype=np.int64),
+        position,
+        np.asarray(active, dtype=np.int64),
+        current,
+        w,
+        out,
+    )
     return out
 
 
@@ -85,8 +94,7 @@ def test_rod_current_field_matches_oracle(seed, w):
     point = np.vstack([position, extra])
     # tips skip their own rod; free points skip a random rod (or none, -1), so that the
     # exclusion is tested where the skipped rod's field is not zero anyway
-    exclude = np.concatenate([np.arange(len(position)) // 2,
-                              rng.integers(-1, len(current), size=len(extra))])
+    exclude = np.concatenate([np.arange(len(position)) // 2, rng.integers(-1, len(current), size=len(extra))])
     got = field_call(point, exclude, position, active, current, w)
     ref = reference.rod_current_field(point, exclude, position, active, current, w)
     # sums of ~30 terms of size up to ~J/w that partly cancel: atol is round-off
@@ -193,8 +201,9 @@ def test_segment_field_matches_numerical_biot_savart():
             r = x - (A + t * s)
             return J * np.cross(s, r)[k] / np.linalg.norm(r) ** 3
 
-        ref = np.array([integrate.quad(integrand, 0.0, 1.0, args=(k,), epsabs=0, epsrel=1e-13, limit=200)[0]
-                        for k in range(3)])
+        ref = np.array(
+            [integrate.quad(integrand, 0.0, 1.0, args=(k,), epsabs=0, epsrel=1e-13, limit=200)[0] for k in range(3)]
+        )
         got = np.array(segment_field(*x, *A, *B, J, 0.0))
         # 1e-9 relative to |B|: quad is converged to ~1e-13; atol covers a component near zero
         np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9 * np.linalg.norm(ref))
@@ -257,8 +266,9 @@ def test_nan_position_passes_through_to_the_field():
     assert np.isnan(got).any()
     position = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [np.nan, 0.0, 0.0], [1.0, 0.0, 0.0]])
     out = np.zeros((4, 3))
-    current_force_on_tips(position, np.array([1.0, -1.0, 1.0, -1.0]), np.array([0], dtype=np.int64),
-                          np.array([2.0, 0.0]), 0.03, 0, 4, out)
+    current_force_on_tips(
+        position, np.array([1.0, -1.0, 1.0, -1.0]), np.array([0], dtype=np.int64), np.array([2.0, 0.0]), 0.03, 0, 4, out
+    )
     assert np.isnan(out[2]).any() and np.all(np.isfinite(out[3]))
 
 

@@ -1,4 +1,5 @@
 """The scalar force laws of docs/model.md 'Term 1', 'Term 6', 'Term 8' against their formulas."""
+
 import math
 
 import pytest
@@ -104,9 +105,11 @@ def test_yukawa_core_is_bounded_continuous_and_minus_gradient(r):
     for rc in (core,):  # continuity at the core radius, to round-off
         below, above = rc * (1 - 1e-12), rc * (1 + 1e-12)
         assert yukawa_force_over_r(below**2, zz, screening, core) * below == pytest.approx(
-            yukawa_force_over_r(above**2, zz, screening, core) * above, rel=1e-9)
+            yukawa_force_over_r(above**2, zz, screening, core) * above, rel=1e-9
+        )
         assert yukawa_potential(below**2, zz, screening, core) == pytest.approx(
-            yukawa_potential(above**2, zz, screening, core), rel=1e-9)
+            yukawa_potential(above**2, zz, screening, core), rel=1e-9
+        )
 
 
 @pytest.mark.parametrize("h", [-0.02, 0.0, 0.01, 0.05, 0.0599, 0.1])

@@ -23,8 +23,9 @@ from selfas_graph.model import events as ev
 pytestmark = pytest.mark.mpi
 
 if MPIEXEC is None:
-    pytest.skip("mpiexec not found next to the Python interpreter or on PATH (install the mpich wheel)",
-                allow_module_level=True)
+    pytest.skip(
+        "mpiexec not found next to the Python interpreter or on PATH (install the mpich wheel)", allow_module_level=True
+    )
 pytest.importorskip("mpi4py", reason="mpi4py is not installed")
 
 SCENE = SMALL_CIRCUIT_SCENE
@@ -115,11 +116,16 @@ def test_bad_input_stops_every_rank_with_one_message(scene, case):
     The output checks are made by rank 0 alone and broadcast: a rank checking for itself
     could see the file rank 0 has just created.
     """
-    args = {"bad_key": ["scene.toml", "-o", "never.h5", "--set", "forces.tip_magnetc=true"],
-            "output_exists": ["scene.toml", "-o", "exists.h5"],
-            "missing_folder": ["scene.toml", "-o", "no/such/folder/run.h5"]}[case]
-    expected = {"bad_key": "did you mean 'tip_magnetic'", "output_exists": "output file exists.h5 exists",
-                "missing_folder": "does not exist"}[case]
+    args = {
+        "bad_key": ["scene.toml", "-o", "never.h5", "--set", "forces.tip_magnetc=true"],
+        "output_exists": ["scene.toml", "-o", "exists.h5"],
+        "missing_folder": ["scene.toml", "-o", "no/such/folder/run.h5"],
+    }[case]
+    expected = {
+        "bad_key": "did you mean 'tip_magnetic'",
+        "output_exists": "output file exists.h5 exists",
+        "missing_folder": "does not exist",
+    }[case]
     (scene / "exists.h5").write_bytes(b"precious")
     res = _launch(2, args, scene)
     assert res.returncode == 2

@@ -7,6 +7,7 @@ literal reference, fast + slow = the whole force), which evaluations skip the sl
 kernels (by counting calls), that currents changing force a full evaluation, that the
 error vanishes as K -> 1, and that a resumed run continues bit for bit.
 """
+
 import numpy as np
 import pytest
 
@@ -87,7 +88,9 @@ def test_fast_kernel_equals_the_literal_switched_sum(rng):
             d = s.position[k] - s.position[l]
             r = np.linalg.norm(d)
             if 0 < r < r_out:
-                want[k] += ref.tip_law(r, s.tip_charge[k] * s.tip_charge[l], RSTAR, KAPPA) * _switch(r, r_in, r_out) * d / r
+                want[k] += (
+                    ref.tip_law(r, s.tip_charge[k] * s.tip_charge[l], RSTAR, KAPPA) * _switch(r, r_in, r_out) * d / r
+                )
     assert np.abs(want).max() > 1.0  # the core pairs are in
     # round-off of sums of a few terms of size up to ~1e4 (core pairs): 1e-12 relative to the largest
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
@@ -128,10 +131,12 @@ def test_new_currents_refresh_the_current_terms_at_the_next_step(rng, extrapolat
     """After a circuit solve the current terms are recomputed at the next step, full or not, and
     only they: the tip-tip and Yukawa sums keep their cycle."""
     s = random_rods(6, rng, box=3.0)
-    sim = simulation(s, forces={"tip_magnetic": {}, "electrodes": {"gap": 20.0}, "current_field": {},
-                                "current_lorentz": {}},
-                     circuit={"delta_J0": 1.0},
-                     integrator={"slow_every": 5, "dt": 1e-3, "slow_extrapolation": extrapolate == "true"})
+    sim = simulation(
+        s,
+        forces={"tip_magnetic": {}, "electrodes": {"gap": 20.0}, "current_field": {}, "current_lorentz": {}},
+        circuit={"delta_J0": 1.0},
+        integrator={"slow_every": 5, "dt": 1e-3, "slow_extrapolation": extrapolate == "true"},
+    )
     sim.step(5)  # RK4 start, steps 3 and 4 fast
     ff = sim.force_field
     before = ff.calls["tip_magnetic"]
@@ -155,9 +160,12 @@ def test_the_same_currents_again_refresh_nothing(rng):
     """A solve that gives the currents already in use (an event in a structure that carries none)
     leaves the held current forces as they are: nothing is recomputed off the cycle."""
     s = random_rods(6, rng, box=3.0)
-    sim = simulation(s, forces={"tip_magnetic": {}, "electrodes": {"gap": 20.0}, "current_field": {},
-                                "current_lorentz": {}},
-                     circuit={"delta_J0": 1.0}, integrator={"slow_every": 5, "dt": 1e-3})
+    sim = simulation(
+        s,
+        forces={"tip_magnetic": {}, "electrodes": {"gap": 20.0}, "current_field": {}, "current_lorentz": {}},
+        circuit={"delta_J0": 1.0},
+        integrator={"slow_every": 5, "dt": 1e-3},
+    )
     sim.step(6)  # RK4 start, step 5 full, now at step 6
     ff = sim.force_field
     current = np.linspace(0.5, 1.0, s.n_rods)
@@ -230,7 +238,9 @@ def test_resume_with_currents_flowing_is_bit_for_bit(tmp_path):
     first = Simulation.from_scenario(sc)
     first.step(901)
     path = tmp_path / "c.h5"
-    write_checkpoint(path, first.snapshot(), {"scenario_text": text, "overrides": "[]", "run_file": "x", "version": "t"})
+    write_checkpoint(
+        path, first.snapshot(), {"scenario_text": text, "overrides": "[]", "run_file": "x", "version": "t"}
+    )
     second = Simulation.from_snapshot(sc.params, read_checkpoint(path)[0])
     second.step(299)
     np.testing.assert_array_equal(second.state.position, whole.state.position)

@@ -1,4 +1,5 @@
 """The Verlet neighbour list holds every pair within the cut-off, before and after moves."""
+
 import numpy as np
 import pytest
 
@@ -11,7 +12,7 @@ pytestmark = pytest.mark.jit_off_ok
 
 
 def listed(nl):
-    return {(k, int(l)) for k in range(len(nl.start) - 1) for l in nl.index[nl.start[k]:nl.start[k + 1]] if k < l}
+    return {(k, int(l)) for k in range(len(nl.start) - 1) for l in nl.index[nl.start[k] : nl.start[k + 1]] if k < l}
 
 
 def test_list_covers_cutoff_through_moves(rng):
@@ -39,17 +40,18 @@ def test_compressed_rows_symmetric(rng):
     nl = NeighbourList(0.5, 0.1)
     nl.build(x)
     for k in range(100):
-        for l in nl.index[nl.start[k]:nl.start[k + 1]]:
-            assert k in nl.index[nl.start[l]:nl.start[l + 1]]
+        for l in nl.index[nl.start[k] : nl.start[k + 1]]:
+            assert k in nl.index[nl.start[l] : nl.start[l + 1]]
 
 
 # -- the cell-list build (kernels/cells.py) against the brute-force pair set -------------------------
+
 
 def rows(start, index):
     """The compressed rows as a set of ordered pairs; also checks no row lists a point twice."""
     out = set()
     for k in range(len(start) - 1):
-        row = index[start[k]:start[k + 1]].tolist()
+        row = index[start[k] : start[k + 1]].tolist()
         assert len(set(row)) == len(row)
         out |= {(k, l) for l in row}
     return out

@@ -1,4 +1,5 @@
 """Operations with triggers: what acts after which step of Simulation.run."""
+
 import numpy as np
 import pytest
 
@@ -53,8 +54,9 @@ def test_progress_counts_steps_of_the_run_and_stop_raises_after_a_checkpoint():
     sim = _sim()
     sim.step(3)
     seen = []
-    sim.run(t_end=sim.state.time + 10 * sim.dt, progress=lambda s, i, n: seen.append((s.state.step, i, n)),
-            progress_every=4)
+    sim.run(
+        t_end=sim.state.time + 10 * sim.dt, progress=lambda s, i, n: seen.append((s.state.step, i, n)), progress_every=4
+    )
     assert seen == [(7, 4, 10), (11, 8, 10), (13, 10, 10)]
 
     class Checkpointer:

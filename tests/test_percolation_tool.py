@@ -8,6 +8,7 @@ the number of workers; a t-max far shorter than the short circuit gives censored
 The tool runs on the library's ensemble runner and statistics, whose Kaplan-Meier and
 Wilson intervals are tested on hand-made data in tests/test_ensemble_stats.py.
 """
+
 import importlib.util
 import json
 import math
@@ -20,8 +21,24 @@ QUICK = str(ROOT / "scenarios" / "quick.toml")
 T_MAX = 2.2  # quick.toml short-circuits at t = 2.01 with its seed (1) at 300 rods
 DENSITIES = ["0.4", "0.6"]  # rods per unit volume: 200 and 300 rods in the 10 x 10 x 5 box
 RUN_KEYS = {"count", "seed", "status", "time", "t_end", "steps", "events", "filament_rods", "wall_seconds", "message"}
-DENSITY_KEYS = {"requested", "count", "number_density", "volume_fraction", "runs", "short_circuited", "censored",
-                "failed", "excluded", "fraction", "fraction_ci95", "km_fraction", "q25", "median", "q75", "km"}
+DENSITY_KEYS = {
+    "requested",
+    "count",
+    "number_density",
+    "volume_fraction",
+    "runs",
+    "short_circuited",
+    "censored",
+    "failed",
+    "excluded",
+    "fraction",
+    "fraction_ci95",
+    "km_fraction",
+    "q25",
+    "median",
+    "q75",
+    "km",
+}
 
 
 def _tool():
@@ -41,8 +58,23 @@ def tool():
 def ensemble(tool, tmp_path_factory):
     out = tmp_path_factory.mktemp("percolation")
     js, png = out / "res.json", out / "res.png"
-    rc = tool.main([QUICK, "--densities", *DENSITIES, "--seeds", "2", "--t-max", str(T_MAX), "--workers", "1",
-                    "-o", str(js), "--plot", str(png)])
+    rc = tool.main(
+        [
+            QUICK,
+            "--densities",
+            *DENSITIES,
+            "--seeds",
+            "2",
+            "--t-max",
+            str(T_MAX),
+            "--workers",
+            "1",
+            "-o",
+            str(js),
+            "--plot",
+            str(png),
+        ]
+    )
     assert rc == 0
     return json.loads(js.read_text()), png
 
@@ -64,7 +96,7 @@ def test_json_structure(ensemble):
             assert 0.0 <= run["time"] <= T_MAX and run["time"] == run["t_end"] and run["filament_rods"] > 0
         else:
             assert run["time"] is None and run["t_end"] == pytest.approx(T_MAX) and run["filament_rods"] == 0
-    vrod = math.pi * 0.03 ** 2
+    vrod = math.pi * 0.03**2
     for d in res["densities"]:
         assert set(d) == DENSITY_KEYS
         assert d["number_density"] == pytest.approx(d["count"] / 500.0)
@@ -93,8 +125,12 @@ def test_deterministic_with_two_workers(tool, ensemble, tmp_path):
     """The runs of one density again, on 2 worker processes: the same numbers."""
     res, _ = ensemble
     js = tmp_path / "w2.json"
-    assert tool.main([QUICK, "--densities", DENSITIES[1], "--seeds", "2", "--t-max", str(T_MAX), "--workers", "2",
-                      "-o", str(js)]) == 0
+    assert (
+        tool.main(
+            [QUICK, "--densities", DENSITIES[1], "--seeds", "2", "--t-max", str(T_MAX), "--workers", "2", "-o", str(js)]
+        )
+        == 0
+    )
     again = json.loads(js.read_text())
     first = [_deterministic(r) for r in res["runs"] if r["count"] == 300]
     assert [_deterministic(r) for r in again["runs"]] == first
@@ -117,20 +153,23 @@ def test_censored_and_skipped(tool, tmp_path, capsys):
     assert "| 300 | 0.6 |" in out and ">0.01" in out
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["--counts", "300", "--seeds", "0", "--t-max", "1"], "--seeds: 0 must be positive"),
-    (["--counts", "300", "--seeds", "-2", "--t-max", "1"], "--seeds: -2 must be positive"),
-    (["--densities", "--seeds", "1", "--t-max", "1"], "--densities: expected at least one argument"),
-    (["--seeds", "1", "--t-max", "1"], "required: --densities, --fractions or --counts"),
-    (["--counts", "300", "--t-max", "1"], "required: --seeds"),
-    (["--counts", "300", "--seeds", "1", "--t-max", "1", "--fields", "none"], "--fields: invalid choice"),
-    (["--densities", "0", "--seeds", "1", "--t-max", "1"], "--densities: 0 must be positive"),
-    (["--counts", "300", "--seeds", "1", "--t-max", "0"], "--t-max: 0 must be positive"),
-    (["--counts", "300", "--seeds", "1", "--t-max", "1", "--workers", "0"], "--workers: 0 must be positive"),
-    (["--fractions", "0.3", "0.5", "--seeds", "1", "--t-max", "1"], "no density left to run"),
-    (["--counts", "300", "--seeds", "1", "--t-max", "1", "--set", "integrator.dt=-1"], "integrator.dt"),
-    (["--counts", "300", "--seeds", "1", "--t-max", "1", "--set", "contacts.enabled=false"], "contacts.enabled"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--counts", "300", "--seeds", "0", "--t-max", "1"], "--seeds: 0 must be positive"),
+        (["--counts", "300", "--seeds", "-2", "--t-max", "1"], "--seeds: -2 must be positive"),
+        (["--densities", "--seeds", "1", "--t-max", "1"], "--densities: expected at least one argument"),
+        (["--seeds", "1", "--t-max", "1"], "required: --densities, --fractions or --counts"),
+        (["--counts", "300", "--t-max", "1"], "required: --seeds"),
+        (["--counts", "300", "--seeds", "1", "--t-max", "1", "--fields", "none"], "--fields: invalid choice"),
+        (["--densities", "0", "--seeds", "1", "--t-max", "1"], "--densities: 0 must be positive"),
+        (["--counts", "300", "--seeds", "1", "--t-max", "0"], "--t-max: 0 must be positive"),
+        (["--counts", "300", "--seeds", "1", "--t-max", "1", "--workers", "0"], "--workers: 0 must be positive"),
+        (["--fractions", "0.3", "0.5", "--seeds", "1", "--t-max", "1"], "no density left to run"),
+        (["--counts", "300", "--seeds", "1", "--t-max", "1", "--set", "integrator.dt=-1"], "integrator.dt"),
+        (["--counts", "300", "--seeds", "1", "--t-max", "1", "--set", "contacts.enabled=false"], "contacts.enabled"),
+    ],
+)
 def test_bad_inputs(tool, capsys, argv, message):
     with pytest.raises(SystemExit) as exc:
         tool.main([QUICK, *argv])
@@ -141,11 +180,12 @@ def test_bad_inputs(tool, capsys, argv, message):
 def test_fields_off_removes_the_magnetic_and_current_terms(tool, tmp_path, capsys):
     """--fields off is --set forces.NAME=false for each magnetic and current term, recorded in the result."""
     js = tmp_path / "off.json"
-    assert tool.main([QUICK, "--counts", "300", "--seeds", "1", "--t-max", "0.05", "--fields", "off",
-                      "-o", str(js)]) == 0
+    assert (
+        tool.main([QUICK, "--counts", "300", "--seeds", "1", "--t-max", "0.05", "--fields", "off", "-o", str(js)]) == 0
+    )
     res = json.loads(js.read_text())
     assert res["fields"] == "off" and tool.fields_of(res) == "off"
-    assert res["overrides"][:len(tool.FIELD_TERMS)] == [f"forces.{n}=false" for n in tool.FIELD_TERMS]
+    assert res["overrides"][: len(tool.FIELD_TERMS)] == [f"forces.{n}=false" for n in tool.FIELD_TERMS]
     from selfas_graph import load_scenario
 
     params = load_scenario(QUICK, overrides=res["overrides"]).params
@@ -167,9 +207,11 @@ def test_compare_draws_results_and_refuses_other_files(tool, ensemble, tmp_path,
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     bad = tmp_path / "bad.json"
     bad.write_text("{}")
-    for argv, message in ((["--compare", str(bad), "--plot", str(png)], "bad.json: not a result file"),
-                          (["--compare", str(on)], "--compare needs --plot"),
-                          ([QUICK, "--compare", str(on), "--plot", str(png)], "draws earlier results only")):
+    for argv, message in (
+        (["--compare", str(bad), "--plot", str(png)], "bad.json: not a result file"),
+        (["--compare", str(on)], "--compare needs --plot"),
+        ([QUICK, "--compare", str(on), "--plot", str(png)], "draws earlier results only"),
+    ):
         with pytest.raises(SystemExit) as exc:
             tool.main(argv)
         assert exc.value.code == 2 and message in capsys.readouterr().err

@@ -6,6 +6,7 @@ filament carries once it spans the gap. These tests compute both fields with the
 kernels and circuit, so a sign slip in a scene, in the circuit's electrode potentials or in
 either field kernel shows here.
 """
+
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +23,8 @@ SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 
 #: every shipped scene with a plasma filament between electrodes with a circuit
 CASE_I_PLASMA = sorted(
-    p.name for p in SCENARIOS.glob("*.toml")
+    p.name
+    for p in SCENARIOS.glob("*.toml")
     if (lambda f: f.plasma_filament is not None and f.electrodes is not None)(load_scenario(p).params.forces)
     and load_scenario(p).params.circuit is not None
 )
@@ -76,8 +78,15 @@ def test_plasma_current_is_parallel_to_the_current_of_a_spanning_chain(name):
     phi = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
     point = np.column_stack([3.0 * np.cos(phi), 3.0 * np.sin(phi), np.zeros_like(phi)])
     b_chain = np.zeros_like(point)
-    rod_current_field(point, np.full(len(point), -1), sim.state.position, np.flatnonzero(current),
-                      current, 0.5 * params.rods.diameter, b_chain)
+    rod_current_field(
+        point,
+        np.full(len(point), -1),
+        sim.state.position,
+        np.flatnonzero(current),
+        current,
+        0.5 * params.rods.diameter,
+        b_chain,
+    )
     pf = params.forces.plasma_filament
     b_plasma = np.zeros_like(point)
     plasma_field(point, pf.axis[0], pf.axis[1], pf.radius, pf.current, b_plasma)
@@ -91,7 +100,8 @@ def test_the_direction_is_said_in_words():
     params = load_scenario(SCENARIOS / "fig2.toml").params
     assert plasma_current_text(params) == (
         "plasma current 7.5 J0 from the anode (z = +8.95) to the cathode (z = -8.95), "
-        "parallel to the current of a spanning filament (I_plas = -7.5)")
+        "parallel to the current of a spanning filament (I_plas = -7.5)"
+    )
     reversed_ = load_scenario(SCENARIOS / "fig2.toml", overrides=["forces.plasma_filament.current=7.5"]).params
     assert "from the cathode (z = -8.95) to the anode (z = +8.95), antiparallel" in plasma_current_text(reversed_)
     assert plasma_current_text(load_scenario(SCENARIOS / "fig8.toml").params) is None

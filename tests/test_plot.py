@@ -3,6 +3,7 @@
 One small run of ``scenarios/quick.toml`` up to t = 2.5 (past its short circuit at
 t = 2.01, so there are filaments, dead ends and currents) is made once for the module.
 """
+
 import sys
 from pathlib import Path
 
@@ -19,8 +20,9 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 @pytest.fixture(scope="module")
 def run_file(tmp_path_factory):
     out = tmp_path_factory.mktemp("plot") / "quick.h5"
-    rc = main(["simulate", str(REPO / "scenarios" / "quick.toml"), "-o", str(out), "--t-end", "2.5",
-               "--progress", "none"])
+    rc = main(
+        ["simulate", str(REPO / "scenarios" / "quick.toml"), "-o", str(out), "--t-end", "2.5", "--progress", "none"]
+    )
     assert rc == 0
     return out
 
@@ -29,9 +31,26 @@ def run_file(tmp_path_factory):
 def no_graph_run(tmp_path_factory):
     """A run without contacts: positions only, no graph data (a few steps)."""
     out = tmp_path_factory.mktemp("plot_nograph") / "nograph.h5"
-    rc = main(["simulate", str(REPO / "scenarios" / "quick.toml"), "-o", str(out), "--t-end", "0.01",
-               "--progress", "none", "--set", "contacts.enabled=false",
-               "--set", "circuit=false", "--set", "forces.current_field=false", "--set", "forces.current_lorentz=false"])
+    rc = main(
+        [
+            "simulate",
+            str(REPO / "scenarios" / "quick.toml"),
+            "-o",
+            str(out),
+            "--t-end",
+            "0.01",
+            "--progress",
+            "none",
+            "--set",
+            "contacts.enabled=false",
+            "--set",
+            "circuit=false",
+            "--set",
+            "forces.current_field=false",
+            "--set",
+            "forces.current_lorentz=false",
+        ]
+    )
     assert rc == 0
     return out
 
@@ -64,8 +83,28 @@ def test_large_run_snapshot_colours_the_largest_structure(run_file, tmp_path, mo
 def test_options_planes_time_and_dipole_units(run_file, tmp_path):
     """--planes, --time, --n-phi and --z-mext are accepted and still give PNGs."""
     out = tmp_path / "flux.png"
-    assert main(["plot", str(run_file), "--kind", "flux", "--time", "1.6", "--planes", "-1", "1",
-                 "--n-phi", "128", "--z-mext", "10", "-o", str(out)]) == 0
+    assert (
+        main(
+            [
+                "plot",
+                str(run_file),
+                "--kind",
+                "flux",
+                "--time",
+                "1.6",
+                "--planes",
+                "-1",
+                "1",
+                "--n-phi",
+                "128",
+                "--z-mext",
+                "10",
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
     assert is_png(out)
 
 
@@ -135,9 +174,14 @@ def test_ensemble_summary_plot_draws_every_measure_with_its_band(tmp_path):
     from selfas_graph.cli.main import CliError
     from selfas_graph.cli.plot import plot_summary
 
-    summary = {"n_seeds": 3, "times": [0.0, 1.0, 2.0], "measures": {
-        "filament_rods": {"unit": "rods", "mean": [0.0, 10.0, 12.0], "sem": [0.0, 1.5, None], "n": [3, 3, 1]},
-        "cycle_rank": {"unit": "loops", "mean": [0.0, None, 4.0], "sem": [0.0, None, None], "n": [3, 3, 1]}}}
+    summary = {
+        "n_seeds": 3,
+        "times": [0.0, 1.0, 2.0],
+        "measures": {
+            "filament_rods": {"unit": "rods", "mean": [0.0, 10.0, 12.0], "sem": [0.0, 1.5, None], "n": [3, 3, 1]},
+            "cycle_rank": {"unit": "loops", "mean": [0.0, None, 4.0], "sem": [0.0, None, None], "n": [3, 3, 1]},
+        },
+    }
     out = plot_summary(summary, tmp_path / "s.png", title="test")
     assert is_png(out)
     with pytest.raises(CliError, match="none of the measures"):

@@ -1,5 +1,6 @@
 """The Python API: validated parameters and states, exact run ends, run files from Python, event
 kinds by name, the top-level names, and the worked example (examples/python_api.py)."""
+
 import dataclasses
 import runpy
 import sys
@@ -19,16 +20,21 @@ def test_parameters_replace_and_from_dict_validate_as_scenario_files_do():
     p = sg.Parameters()
     assert p.replace({"integrator.dt": 5e-4}).integrator.dt == 5e-4
     assert p.replace(rods={"count": np.int64(7)}).rods.count == 7  # numpy integers accepted, stored plain
-    assert p.replace({"forces.yukawa": True}).forces.yukawa == sg.Parameters.from_dict({"forces": {"yukawa": {}}}).forces.yukawa
+    assert (
+        p.replace({"forces.yukawa": True}).forces.yukawa
+        == sg.Parameters.from_dict({"forces": {"yukawa": {}}}).forces.yukawa
+    )
     assert p.replace({"forces.yukawa": True}).replace({"forces.yukawa": False}).forces.yukawa is None
     assert sg.Parameters.from_dict(p.to_raw()) == p
     toml = "[integrator]\ndt = -1.0\n"
     with pytest.raises(sg.ScenarioError) as from_toml:
         scenario_from_text(toml)
-    for attempt in (lambda: p.replace(integrator={"dt": -1.0}),
-                    lambda: p.replace({"integrator.dt": -1.0}),
-                    lambda: sg.Parameters.from_dict({"integrator": {"dt": -1.0}}),
-                    lambda: dataclasses.replace(p, integrator=dataclasses.replace(p.integrator, dt=-1.0))):
+    for attempt in (
+        lambda: p.replace(integrator={"dt": -1.0}),
+        lambda: p.replace({"integrator.dt": -1.0}),
+        lambda: sg.Parameters.from_dict({"integrator": {"dt": -1.0}}),
+        lambda: dataclasses.replace(p, integrator=dataclasses.replace(p.integrator, dt=-1.0)),
+    ):
         with pytest.raises(sg.ScenarioError) as exc:
             attempt()
         assert exc.value.problems == from_toml.value.problems == ["integrator.dt: -1.0 is out of range; valid: > 0"]
@@ -42,8 +48,11 @@ def test_default_parameters_use_the_split_brake_and_run():
     """The defaults run: the split brake at dt = 1e-3 (the explicit one needs dt <= 5e-4)."""
     p = sg.Parameters()
     assert p.integrator.brake == "split" and p.integrator.dt == 1e-3
-    p = p.replace(rods={"count": 2}, placement={"box": [[-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]]},
-                  forces={"tip_magnetic": {}, "tip_brake": {}, "ambient_brake": {}})
+    p = p.replace(
+        rods={"count": 2},
+        placement={"box": [[-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]]},
+        forces={"tip_magnetic": {}, "tip_brake": {}, "ambient_brake": {}},
+    )
     state = sg.State.from_rods([[0.0, 0.0, 0.0], [0.0, 0.0, 1.05]], [[0, 0, 1.0], [0, 0, 1.0]], [1.0, 1.0], [1.0, 1.0])
     sim = sg.Simulation(p, state=state)
     sim.run(1.2)  # past step 1000, where the explicit brake at this dt failed
@@ -56,8 +65,9 @@ def _rods(n=2):
 
 
 def _params(n=2):
-    return sg.Parameters().replace(rods={"count": n}, forces={"tip_magnetic": {}},
-                                   placement={"box": [[-1.0, 3.0 * n], [-1.0, 1.0], [-1.0, 1.0]]})
+    return sg.Parameters().replace(
+        rods={"count": n}, forces={"tip_magnetic": {}}, placement={"box": [[-1.0, 3.0 * n], [-1.0, 1.0], [-1.0, 1.0]]}
+    )
 
 
 def test_state_is_validated_and_copied():
@@ -138,8 +148,20 @@ def test_event_kind_is_an_enumeration_in_the_file(tmp_path):
 
 
 def test_top_level_names():
-    for name in ("solve_circuit", "parameters_from_dict", "load_scenario", "Simulation", "State", "RunFile",
-                 "RunWriter", "export_run", "EventKind", "named_events", "ROLE_NAMES", "Parameters"):
+    for name in (
+        "solve_circuit",
+        "parameters_from_dict",
+        "load_scenario",
+        "Simulation",
+        "State",
+        "RunFile",
+        "RunWriter",
+        "export_run",
+        "EventKind",
+        "named_events",
+        "ROLE_NAMES",
+        "Parameters",
+    ):
         assert name in sg.__all__ and hasattr(sg, name)
 
 
@@ -160,8 +182,10 @@ def test_resume_keeps_the_brake_a_run_started_with(tmp_path):
     from selfas_graph.io.checkpoint import checkpoint_path, read_checkpoint
 
     scene = tmp_path / "s.toml"
-    scene.write_text("[rods]\ncount = 2\n[forces.tip_magnetic]\n[forces.tip_brake]\n[run]\nt_end = 0.01\n"
-                     "[output]\ninterval = 0.005\ncheckpoint_interval = 0\n")
+    scene.write_text(
+        "[rods]\ncount = 2\n[forces.tip_magnetic]\n[forces.tip_brake]\n[run]\nt_end = 0.01\n"
+        "[output]\ninterval = 0.005\ncheckpoint_interval = 0\n"
+    )
     out = tmp_path / "s.h5"
     assert sg_main(["simulate", str(scene), "-o", str(out), "--progress", "none"]) == 0
     with h5py.File(out, "r+") as f:  # as a run file of that time says

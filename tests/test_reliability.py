@@ -5,6 +5,7 @@ run that resumes to the uninterrupted one bit for bit.
 Each ``test_*`` below reproduces one way the long-run machinery used to break (written against
 the code before its fix, where it failed) and pins the behaviour now.
 """
+
 from __future__ import annotations
 
 import shutil
@@ -72,6 +73,7 @@ def frame_times(path):
 
 # ----------------------------------------------------------------------------- run identity
 
+
 def test_run_and_checkpoint_carry_the_same_run_id(scen, tmp_path, capsys):
     out = tmp_path / "run.h5"
     assert simulate(capsys, scen, "-o", out)[0] == 0
@@ -124,6 +126,7 @@ def test_a_foreign_checkpoint_is_refused_naming_both_files(scen, tmp_path, capsy
 
 
 # ----------------------------------------------------------------------------- corrupt checkpoints
+
 
 @pytest.fixture
 def finished(scen, tmp_path, capsys):
@@ -198,29 +201,41 @@ def test_a_checkpoint_write_that_fails_leaves_no_tmp_and_keeps_the_previous(fini
 
 # ----------------------------------------------------------------------------- no NaN stored
 
+
 def _non_finite_datasets(path):
     """Float datasets holding NaN or inf, except those where NaN means 'none' (floating potentials,
     the resistance of an open circuit)."""
     allowed = {"graph/potential", "graph/conductor_potential", "observables/effective_resistance/value"}
     bad = []
     with h5py.File(path, "r") as f:
-        f.visititems(lambda n, o: bad.append(n) if isinstance(o, h5py.Dataset) and o.dtype.kind == "f"
-                     and n not in allowed and not np.isfinite(o[()]).all() else None)
+        f.visititems(
+            lambda n, o: (
+                bad.append(n)
+                if isinstance(o, h5py.Dataset)
+                and o.dtype.kind == "f"
+                and n not in allowed
+                and not np.isfinite(o[()]).all()
+                else None
+            )
+        )
     return bad
 
 
-@pytest.mark.parametrize("override, key", [
-    ("rods.magnetic_charge.value=1e308", "rods.magnetic_charge.value"),
-    ("rods.electric_charge={distribution='constant', value=1e308}", "rods.electric_charge.value"),
-    ("forces.yukawa.core_radius=1e200", "forces.yukawa.core_radius"),
-    ("forces.yukawa.screening_length=5e-324", "forces.yukawa.screening_length"),
-    ("circuit.delta_J0=1e308", "circuit.delta_J0"),
-    ("forces.uniform_field.B=[0, 0, 1e308]", "forces.uniform_field.B"),
-    ("rods.tip_stiffness=1e308", "rods.tip_stiffness"),
-    ("scenario.seed=9223372036854775808", "scenario.seed"),
-    ("rods.count=" + "9" * 5000, "rods.count"),
-    ("placement.max_attempts=" + "9" * 400, "placement.max_attempts"),
-])
+@pytest.mark.parametrize(
+    "override, key",
+    [
+        ("rods.magnetic_charge.value=1e308", "rods.magnetic_charge.value"),
+        ("rods.electric_charge={distribution='constant', value=1e308}", "rods.electric_charge.value"),
+        ("forces.yukawa.core_radius=1e200", "forces.yukawa.core_radius"),
+        ("forces.yukawa.screening_length=5e-324", "forces.yukawa.screening_length"),
+        ("circuit.delta_J0=1e308", "circuit.delta_J0"),
+        ("forces.uniform_field.B=[0, 0, 1e308]", "forces.uniform_field.B"),
+        ("rods.tip_stiffness=1e308", "rods.tip_stiffness"),
+        ("scenario.seed=9223372036854775808", "scenario.seed"),
+        ("rods.count=" + "9" * 5000, "rods.count"),
+        ("placement.max_attempts=" + "9" * 400, "placement.max_attempts"),
+    ],
+)
 def test_values_whose_derived_quantities_overflow_are_refused(scen, tmp_path, capsys, override, key):
     """Each used to store NaN (frame 0), finish with a NaN energy balance, or end in a traceback."""
     out = tmp_path / "run.h5"
@@ -240,12 +255,15 @@ def test_a_line_break_inside_set_is_refused(scen, capsys):
     assert code == 2 and "line break" in err
 
 
-@pytest.mark.parametrize("override, term", [
-    ("rods.magnetic_charge.value=1e30", "tip_magnetic"),
-    ("rods.magnetic_charge.value=1e6", "tip_magnetic"),
-    ("forces.uniform_field.B=[0, 0, 1e10]", "uniform_field"),
-    ("rods.tip_stiffness=1e20", "electrodes"),
-])
+@pytest.mark.parametrize(
+    "override, term",
+    [
+        ("rods.magnetic_charge.value=1e30", "tip_magnetic"),
+        ("rods.magnetic_charge.value=1e6", "tip_magnetic"),
+        ("forces.uniform_field.B=[0, 0, 1e10]", "uniform_field"),
+        ("rods.tip_stiffness=1e20", "electrodes"),
+    ],
+)
 def test_absurd_magnitudes_stop_naming_the_term_and_store_no_nan(scen, tmp_path, capsys, override, term):
     """Absurd charges or fields used to stop with a message blaming dt and naming an unrelated term."""
     out = tmp_path / "run.h5"
@@ -292,6 +310,7 @@ def test_frame_0_is_checked_before_it_is_written(scen, tmp_path, capsys, monkeyp
 
 # ----------------------------------------------------------------------------- output paths
 
+
 def test_plot_onto_its_own_run_file_is_refused(finished, capsys):
     """``plot run.h5 -o run.h5 --force`` used to replace the run file with a PNG."""
     pytest.importorskip("matplotlib")
@@ -312,8 +331,9 @@ def test_simulate_onto_its_own_scenario_is_refused(scen, capsys):
 def test_non_regular_targets_are_refused(finished, scen, capsys, command):
     """``-o /dev/null --force`` used to exit 0 and create /dev/null.checkpoint.h5."""
     pytest.importorskip("matplotlib")
-    argv = (["simulate", "--progress", "none", scen] if command == "simulate"
-            else ["plot", finished, "--kind", "density"])
+    argv = (
+        ["simulate", "--progress", "none", scen] if command == "simulate" else ["plot", finished, "--kind", "density"]
+    )
     import os
 
     def stamp():
@@ -329,14 +349,16 @@ def test_non_regular_targets_are_refused(finished, scen, capsys, command):
 def test_an_over_long_output_name_is_exit_2(finished, scen, tmp_path, capsys, command):
     pytest.importorskip("matplotlib")
     long = tmp_path / ("x" * 300 + ".h5")
-    argv = (["simulate", "--progress", "none", scen] if command == "simulate"
-            else ["plot", finished, "--kind", "density"])
+    argv = (
+        ["simulate", "--progress", "none", scen] if command == "simulate" else ["plot", finished, "--kind", "density"]
+    )
     code, _, err = cli(capsys, *argv, "-o", long)
     assert code == 2 and "too long" in err
 
 
-@pytest.mark.parametrize("option", [["--bins", "1000000000"], ["--bins", "0"], ["--n-phi", "1000000000"],
-                                    ["--planes"] + ["0"] * 1000])
+@pytest.mark.parametrize(
+    "option", [["--bins", "1000000000"], ["--bins", "0"], ["--n-phi", "1000000000"], ["--planes"] + ["0"] * 1000]
+)
 def test_size_like_plot_options_are_bounded(finished, tmp_path, capsys, option):
     """``plot --kind density --bins 1000000000`` used to run for minutes."""
     pytest.importorskip("matplotlib")
@@ -355,7 +377,11 @@ def test_damaged_run_files_to_plot_and_topology(finished, tmp_path, capsys, dama
             n = f["particles/tips/position/time"].shape[0]
             del f["particles/tips/position/time"]
             f["particles/tips/position/time"] = np.array([b"t"] * n)
-    argv = ["plot", finished, "--kind", "density", "-o", tmp_path / "x.png"] if command == "plot" else ["topology", finished]
+    argv = (
+        ["plot", finished, "--kind", "density", "-o", tmp_path / "x.png"]
+        if command == "plot"
+        else ["topology", finished]
+    )
     code, _, err = cli(capsys, *argv)
     assert code in ((0, 2) if (command, damage) == ("topology", "parameters_json") else (2,)), err
     if code == 2:
@@ -386,9 +412,16 @@ def test_topology_on_a_file_a_simulation_holds_says_it_is_locked(finished, capsy
     import subprocess
     import sys
 
-    holder = subprocess.Popen([sys.executable, "-c", "import h5py, sys, time; f = h5py.File(sys.argv[1], 'r+'); "
-                               "print('open', flush=True); time.sleep(60)", str(finished)],
-                              stdout=subprocess.PIPE, text=True)
+    holder = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import h5py, sys, time; f = h5py.File(sys.argv[1], 'r+'); print('open', flush=True); time.sleep(60)",
+            str(finished),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert holder.stdout.readline().strip() == "open"
         code, _, err = cli(capsys, "topology", finished)
@@ -402,6 +435,7 @@ def test_topology_on_a_file_a_simulation_holds_says_it_is_locked(finished, capsy
 
 # ----------------------------------------------------------------------------- early checkpoints, end time
 
+
 def test_a_run_killed_in_its_first_checkpoint_interval_resumes(scen, tmp_path, capsys):
     """With checkpoint_interval = 900 s a kill in the first 15 minutes used to leave no checkpoint."""
     import signal
@@ -409,11 +443,15 @@ def test_a_run_killed_in_its_first_checkpoint_interval_resumes(scen, tmp_path, c
     import sys
     import time
 
-    scen.write_text(SCENE.replace("checkpoint_interval = 0", "checkpoint_interval = 900").replace(
-        "t_end = 0.004", "t_end = 50.0"))
+    scen.write_text(
+        SCENE.replace("checkpoint_interval = 0", "checkpoint_interval = 900").replace("t_end = 0.004", "t_end = 50.0")
+    )
     out = tmp_path / "run.h5"
-    proc = subprocess.Popen([sys.executable, "-m", "selfas_graph.cli.main", "simulate", str(scen), "-o", str(out),
-                             "--progress", "none"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "selfas_graph.cli.main", "simulate", str(scen), "-o", str(out), "--progress", "none"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+    )
     deadline = time.time() + 120
     while time.time() < deadline and proc.poll() is None and not checkpoint_path(out).exists():
         time.sleep(0.05)
@@ -438,9 +476,12 @@ def test_a_plain_resume_continues_to_the_end_time_given_on_the_command_line(scen
 
 # ----------------------------------------------------------------------------- I/O errors
 
-BIG = SCENE.replace("count = 4", "count = 200").replace(
-    "box = [[-1.5, 1.5], [-1.5, 1.5], [-1.0, 1.0]]", "box = [[-8.0, 8.0], [-8.0, 8.0], [-1.0, 1.0]]").replace(
-    "t_end = 0.004", "t_end = 0.4").replace("interval = 0.002", "interval = 0.01")
+BIG = (
+    SCENE.replace("count = 4", "count = 200")
+    .replace("box = [[-1.5, 1.5], [-1.5, 1.5], [-1.0, 1.0]]", "box = [[-8.0, 8.0], [-8.0, 8.0], [-1.0, 1.0]]")
+    .replace("t_end = 0.004", "t_end = 0.4")
+    .replace("interval = 0.002", "interval = 0.01")
+)
 
 
 def _run_limited(tmp_path, folder, limit=None, extra=()):
@@ -459,9 +500,24 @@ def _run_limited(tmp_path, folder, limit=None, extra=()):
             signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
             resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
 
-    return subprocess.run([sys.executable, "-m", "selfas_graph.cli.main", "simulate", str(scen), "-o",
-                           str(folder / "run.h5"), "--progress", "none", *extra],
-                          preexec_fn=lim, capture_output=True, text=True, timeout=600)
+    return subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "selfas_graph.cli.main",
+            "simulate",
+            str(scen),
+            "-o",
+            str(folder / "run.h5"),
+            "--progress",
+            "none",
+            *extra,
+        ],
+        preexec_fn=lim,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
 
 
 def _check_io_failure(res, folder):
@@ -504,11 +560,18 @@ def test_a_disk_filling_during_the_run_keeps_the_last_checkpoint_and_resumes(tmp
     import subprocess
     import sys
 
-    (tmp_path / "big.toml").write_text(BIG.replace("t_end = 0.4", "t_end = 5.0").replace(
-        "interval = 0.01", "interval = 0.001").replace("checkpoint_interval = 0", "checkpoint_interval = 0.05"))
+    (tmp_path / "big.toml").write_text(
+        BIG.replace("t_end = 0.4", "t_end = 5.0")
+        .replace("interval = 0.01", "interval = 0.001")
+        .replace("checkpoint_interval = 0", "checkpoint_interval = 0.05")
+    )
     cmd = [sys.executable, "-m", "selfas_graph.cli.main", "simulate", "--progress", "none"]
-    res = subprocess.run(cmd + [str(tmp_path / "big.toml"), "-o", str(small_tmpfs / "run.h5")],
-                         capture_output=True, text=True, timeout=900)
+    res = subprocess.run(
+        cmd + [str(tmp_path / "big.toml"), "-o", str(small_tmpfs / "run.h5")],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
     _check_io_failure(res, small_tmpfs)
     assert checkpoint_path(small_tmpfs / "run.h5").exists()
     step = int(read_checkpoint(checkpoint_path(small_tmpfs / "run.h5"))[0]["step"])
@@ -518,8 +581,12 @@ def test_a_disk_filling_during_the_run_keeps_the_last_checkpoint_and_resumes(tmp
     moved.mkdir()
     for p in small_tmpfs.iterdir():
         shutil.copy(p, moved / p.name)
-    res = subprocess.run(cmd + ["--resume", str(moved / "run.h5"), "--t-end", f"{step * 1e-3 + 0.01}"],
-                         capture_output=True, text=True, timeout=600)
+    res = subprocess.run(
+        cmd + ["--resume", str(moved / "run.h5"), "--t-end", f"{step * 1e-3 + 0.01}"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert res.returncode == 0, res.stderr
 
 
@@ -538,6 +605,7 @@ def test_a_quota_ends_the_run_with_exit_4_and_a_readable_file(tmp_path, limit):
 
 # ----------------------------------------------------------------------------- rank and thread counts
 
+
 def test_one_body_energies_do_not_depend_on_the_thread_count():
     """The electrode energy was a parallel reduction whose order followed the thread count, so the
     2- and 3-rank files (1 thread per rank) differed from the serial one (2 threads) by 1 ulp."""
@@ -554,14 +622,19 @@ def test_one_body_energies_do_not_depend_on_the_thread_count():
     results = []
     for threads in sorted({1, numba.config.NUMBA_NUM_THREADS}):
         numba.set_num_threads(threads)
-        results.append((kf.electrode_energy(x, -1.0, 1.0, 0.06, 1.0),
-                        kx.monopoles_energy(x, charge, source, np.array([1.0, -1.0]), 0.06, 1.0),
-                        kx.line_yukawa_energy(x, charge, -1.0, 1.0, 3.2, 2.4, 0.09, 0.5 * (nodes + 1), 0.5 * weights)))
+        results.append(
+            (
+                kf.electrode_energy(x, -1.0, 1.0, 0.06, 1.0),
+                kx.monopoles_energy(x, charge, source, np.array([1.0, -1.0]), 0.06, 1.0),
+                kx.line_yukawa_energy(x, charge, -1.0, 1.0, 3.2, 2.4, 0.09, 0.5 * (nodes + 1), 0.5 * weights),
+            )
+        )
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     assert all(r == results[0] for r in results)
 
 
 # ----------------------------------------------------------------------------- kill -9 at any moment
+
 
 def _all_datasets(path):
     out = {}
@@ -584,11 +657,15 @@ def test_kill_9_stress_loop_ends_with_the_uninterrupted_run(tmp_path):
     from conftest import SMALL_CIRCUIT_SCENE
 
     scen = tmp_path / "s.toml"
-    scen.write_text(SMALL_CIRCUIT_SCENE.replace("t_end = 0.6", "t_end = 3.0").replace(
-        "checkpoint_interval = 0", "checkpoint_interval = 0.2"))
+    scen.write_text(
+        SMALL_CIRCUIT_SCENE.replace("t_end = 0.6", "t_end = 3.0").replace(
+            "checkpoint_interval = 0", "checkpoint_interval = 0.2"
+        )
+    )
     base = [sys.executable, "-m", "selfas_graph.cli.main", "simulate", "--progress", "none"]
-    full = subprocess.run(base + [str(scen), "-o", str(tmp_path / "full.h5")], capture_output=True, text=True,
-                          timeout=600)
+    full = subprocess.run(
+        base + [str(scen), "-o", str(tmp_path / "full.h5")], capture_output=True, text=True, timeout=600
+    )
     assert full.returncode == 0, full.stderr
     out = tmp_path / "cut.h5"
     delays = [0.05 + 3.95 * ((k * 0.618034) % 1.0) for k in range(24)]  # spread over (0.05, 4) s
@@ -612,13 +689,21 @@ def test_kill_9_stress_loop_ends_with_the_uninterrupted_run(tmp_path):
             with h5py.File(out, "r") as f:  # and a readable run file
                 assert f["particles/tips/position/value"].shape[0] >= 1
     assert kills >= 10
-    res = subprocess.run(base + ["--resume", str(out)] if checkpoint_path(out).exists()
-                         else base + [str(scen), "-o", str(out), "--force"],
-                         capture_output=True, text=True, timeout=600)
+    res = subprocess.run(
+        base + ["--resume", str(out)]
+        if checkpoint_path(out).exists()
+        else base + [str(scen), "-o", str(out), "--force"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert res.returncode == 0, res.stderr
     ref, got = _all_datasets(tmp_path / "full.h5"), _all_datasets(out)
     assert sorted(ref) == sorted(got)
-    differ = [n for n in ref if not (ref[n].shape == got[n].shape and np.array_equal(
-        ref[n], got[n], equal_nan=ref[n].dtype.kind == "f"))]
+    differ = [
+        n
+        for n in ref
+        if not (ref[n].shape == got[n].shape and np.array_equal(ref[n], got[n], equal_nan=ref[n].dtype.kind == "f"))
+    ]
     assert not differ, differ
     assert not list(tmp_path.glob("*.tmp"))

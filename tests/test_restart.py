@@ -1,4 +1,5 @@
 """Checkpoints and exact restart: an interrupted and resumed run equals the uninterrupted one bit for bit."""
+
 import json
 import signal
 import subprocess
@@ -34,8 +35,13 @@ def _run(path, stop_at=None, resume_from=None):
     meta = {"scenario_text": sc.text, "overrides": "[]", "run_file": str(path), "version": "test"}
     if resume_from is None:
         sim = Simulation.from_scenario(sc)
-        writer = RunWriter(path, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge,
-                           {"parameters_json": json.dumps(sc.params.to_dict()), "scenario_text": sc.text})
+        writer = RunWriter(
+            path,
+            sim.state.n_tips,
+            sim.state.tip_charge,
+            sim.state.rod_charge,
+            {"parameters_json": json.dumps(sc.params.to_dict()), "scenario_text": sc.text},
+        )
     else:
         snap, meta = read_checkpoint(resume_from)
         sim = Simulation.from_snapshot(sc.params, snap)
@@ -73,8 +79,12 @@ def test_interrupted_and_resumed_run_is_bitwise_identical(reference, tmp_path, w
     the step of the short circuit, and a step between two frames.
     """
     ref_path, contact_steps, short = reference
-    stop_at = {"startup": 2, "after_contact": contact_steps[len(contact_steps) // 2],
-               "after_short_circuit": short[0], "mid_frame": 537}[where]
+    stop_at = {
+        "startup": 2,
+        "after_contact": contact_steps[len(contact_steps) // 2],
+        "after_short_circuit": short[0],
+        "mid_frame": 537,
+    }[where]
     path = tmp_path / "run.h5"
     _, finished = _run(path, stop_at=stop_at)
     assert not finished
@@ -125,12 +135,15 @@ def test_sigterm_checkpoints_and_resume_completes(tmp_path):
     """A real process stopped by SIGTERM writes a checkpoint, exits 143, and --resume finishes the run
     with the same data as an uninterrupted process."""
     scen = tmp_path / "s.toml"
-    scen.write_text(SCENE.replace("t_end = 0.6", "t_end = 3.0").replace("checkpoint_interval = 0", "checkpoint_interval = 0.3"))
+    scen.write_text(
+        SCENE.replace("t_end = 0.6", "t_end = 3.0").replace("checkpoint_interval = 0", "checkpoint_interval = 0.3")
+    )
     cmd = [sys.executable, "-m", "selfas_graph.cli.main", "simulate", str(scen), "--progress", "none"]
     full = subprocess.run(cmd + ["-o", str(tmp_path / "full.h5")], capture_output=True, text=True, timeout=300)
     assert full.returncode == 0, full.stderr
-    proc = subprocess.Popen(cmd + ["-o", str(tmp_path / "cut.h5")], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+    proc = subprocess.Popen(
+        cmd + ["-o", str(tmp_path / "cut.h5")], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
     # wait until the run is stepping: its first periodic checkpoint appears (renamed into place
     # atomically). The run file itself cannot be opened meanwhile: HDF5 locks a file open for writing.
     deadline = time.time() + 120
@@ -142,8 +155,21 @@ def test_sigterm_checkpoints_and_resume_completes(tmp_path):
         pytest.skip("the run finished before the signal arrived")
     assert proc.returncode == 128 + signal.SIGTERM, err
     assert "SIGTERM received" in err and "--resume" in err
-    res = subprocess.run([sys.executable, "-m", "selfas_graph.cli.main", "simulate", "--resume",
-                          str(tmp_path / "cut.h5"), "--progress", "none"], capture_output=True, text=True, timeout=300)
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "selfas_graph.cli.main",
+            "simulate",
+            "--resume",
+            str(tmp_path / "cut.h5"),
+            "--progress",
+            "none",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert res.returncode == 0, res.stderr
     ref, got = datasets(tmp_path / "full.h5"), datasets(tmp_path / "cut.h5")
     for name in ref:
@@ -161,9 +187,13 @@ def test_kill_9_keeps_the_file_readable_and_resume_completes_it(tmp_path):
 
     rng = random.Random(7)
     scen = tmp_path / "s.toml"
-    scen.write_text(SCENE.replace("t_end = 0.6", "t_end = 3.0").replace("checkpoint_interval = 0", "checkpoint_interval = 0.2"))
+    scen.write_text(
+        SCENE.replace("t_end = 0.6", "t_end = 3.0").replace("checkpoint_interval = 0", "checkpoint_interval = 0.2")
+    )
     base = [sys.executable, "-m", "selfas_graph.cli.main", "simulate", "--progress", "none"]
-    full = subprocess.run(base + [str(scen), "-o", str(tmp_path / "full.h5")], capture_output=True, text=True, timeout=300)
+    full = subprocess.run(
+        base + [str(scen), "-o", str(tmp_path / "full.h5")], capture_output=True, text=True, timeout=300
+    )
     assert full.returncode == 0, full.stderr
     out = tmp_path / "cut.h5"
     cmd = base + [str(scen), "-o", str(out)]

@@ -1,5 +1,6 @@
 """Rods of different lengths (docs/model.md 'Rods'): placement, rigid bonds, dynamics,
 the scene keys, and bit-for-bit equality of equal-rod runs with the keys at their defaults."""
+
 import math
 from pathlib import Path
 
@@ -29,8 +30,7 @@ def test_rod_of_length_l_swings_with_the_period_of_its_moment_of_inertia(length)
     q, B, theta0 = 1.3, 0.8, 0.05
     axis = [math.sin(theta0), 0.0, -math.cos(theta0)]
     state = State.from_rods([[0.0, 0.0, 0.0]], [axis], [q], [0.0], length=[length])
-    sim = simulation(state, forces={"uniform_field": {"B": [0.0, 0.0, B]}}, integrator={"dt": 1e-3},
-                     placement=BOX)
+    sim = simulation(state, forces={"uniform_field": {"B": [0.0, 0.0, B]}}, integrator={"dt": 1e-3}, placement=BOX)
     crossings, prev, t_prev = [], None, None
     while len(crossings) < 7:
         sx = state.position[1, 0] - state.position[0, 0]
@@ -111,14 +111,20 @@ def test_two_rods_of_different_lengths_match_an_independent_rigid_body_integrati
     error = []
     for dt in (1e-3, 5e-4):
         state = State.from_rods(centre, axis, q, [0.0, 0.0], length=ell)
-        sim = simulation(state, forces={"tip_magnetic": {"method": "direct"}, "uniform_field": {"B": B.tolist()}},
-                         integrator={"dt": dt}, contacts={"enabled": False}, placement=BOX)
+        sim = simulation(
+            state,
+            forces={"tip_magnetic": {"method": "direct"}, "uniform_field": {"B": B.tolist()}},
+            integrator={"dt": dt},
+            contacts={"enabled": False},
+            placement=BOX,
+        )
         sim.run(t_end=t_end)
         assert state.time == pytest.approx(t_end, abs=1e-12)
         error.append(np.abs(state.position - tips).max())
         # each bond keeps its own length (projection: round-off of a sqrt, ~1e-16)
-        np.testing.assert_allclose(np.linalg.norm(state.position[1::2] - state.position[0::2], axis=1), ell,
-                                   rtol=0, atol=1e-14)
+        np.testing.assert_allclose(
+            np.linalg.norm(state.position[1::2] - state.position[0::2], axis=1), ell, rtol=0, atol=1e-14
+        )
     assert 10 < error[0] / error[1] < 20
     assert error[1] < 1e-8
 
@@ -130,8 +136,14 @@ QUICK = ROOT / "scenarios" / "quick.toml"
 
 def test_random_placement_gives_each_rod_its_drawn_length():
     """Tips are placed at the centre -+ l_i/2 along the axis, inside the box."""
-    sc = load_scenario(QUICK, overrides=["rods.count=200", "rods.length={distribution='uniform', low=0.4, high=1.6}",
-                                         "rods.resistance={value=2.0, per_length=true}"])
+    sc = load_scenario(
+        QUICK,
+        overrides=[
+            "rods.count=200",
+            "rods.length={distribution='uniform', low=0.4, high=1.6}",
+            "rods.resistance={value=2.0, per_length=true}",
+        ],
+    )
     st = random_state(sc.params)
     ell = np.linalg.norm(st.position[1::2] - st.position[0::2], axis=1)
     np.testing.assert_allclose(ell, st.rod_length, rtol=0, atol=1e-15)  # a scaling of a unit vector
@@ -142,8 +154,14 @@ def test_random_placement_gives_each_rod_its_drawn_length():
 
 
 def test_two_level_lengths_and_a_bare_number_resistance():
-    sc = load_scenario(QUICK, overrides=["rods.length={distribution='two_level', low=0.75, high=1.5, "
-                                         "high_fraction=0.3333333333333333}", "rods.resistance=3", "contacts.resistance=0.5"])
+    sc = load_scenario(
+        QUICK,
+        overrides=[
+            "rods.length={distribution='two_level', low=0.75, high=1.5, high_fraction=0.3333333333333333}",
+            "rods.resistance=3",
+            "contacts.resistance=0.5",
+        ],
+    )
     st = random_state(sc.params)
     assert np.count_nonzero(st.rod_length == 1.5) == round(300 / 3)
     np.testing.assert_array_equal(st.rod_resistance, 3.0)
@@ -169,8 +187,15 @@ def test_bad_length_and_resistance_keys_are_named(override, message):
 
 def test_length_distribution_survives_checkpoint_restart(tmp_path):
     """A snapshot carries the per-rod lengths and resistances: the restarted run continues bit for bit."""
-    sc = load_scenario(QUICK, overrides=["rods.count=60", "rods.length={distribution='uniform', low=0.5, high=1.5}",
-                                         "rods.resistance={value=1.0, per_length=true}", "contacts.resistance=0.2"])
+    sc = load_scenario(
+        QUICK,
+        overrides=[
+            "rods.count=60",
+            "rods.length={distribution='uniform', low=0.5, high=1.5}",
+            "rods.resistance={value=1.0, per_length=true}",
+            "contacts.resistance=0.2",
+        ],
+    )
     a = Simulation.from_scenario(sc)
     a.run(t_end=0.05)
     b = Simulation.from_snapshot(sc.params, a.snapshot())
@@ -190,8 +215,16 @@ def test_equal_rods_with_the_keys_at_their_defaults_run_bit_for_bit_as_without_t
     without the keys (the code paths of equal rods and ideal contacts)."""
     t_end = 2.2  # the quick scene's filament closes at t = 2.01 with its seed
     plain = Simulation.from_scenario(load_scenario(QUICK))
-    keyed = Simulation.from_scenario(load_scenario(QUICK, overrides=[
-        "rods.length=1.0", "rods.resistance={distribution='constant', value=1.0}", "contacts.resistance=0.0"]))
+    keyed = Simulation.from_scenario(
+        load_scenario(
+            QUICK,
+            overrides=[
+                "rods.length=1.0",
+                "rods.resistance={distribution='constant', value=1.0}",
+                "contacts.resistance=0.0",
+            ],
+        )
+    )
     assert plain.state.rod_length is None and keyed.state.rod_length is not None
     np.testing.assert_array_equal(plain.state.position, keyed.state.position)
     plain.run(t_end=t_end)
@@ -218,8 +251,21 @@ def test_run_file_keeps_lengths_and_resistances(tmp_path):
     from selfas_graph.cli.main import main
 
     out = tmp_path / "mixed.h5"
-    assert main(["simulate", str(ROOT / "scenarios" / "quick_mixed.toml"), "-o", str(out), "--t-end", "0.01",
-                 "--progress", "none"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                str(ROOT / "scenarios" / "quick_mixed.toml"),
+                "-o",
+                str(out),
+                "--t-end",
+                "0.01",
+                "--progress",
+                "none",
+            ]
+        )
+        == 0
+    )
     st = random_state(load_scenario(ROOT / "scenarios" / "quick_mixed.toml").params)
     with RunFile(out) as run:
         np.testing.assert_array_equal(run.rod_length, st.rod_length)

@@ -1,5 +1,6 @@
 """What a user sees while a run goes: the progress line and the end summary name the contacts,
 the electrode contacts, the short-circuit time and the current."""
+
 import io
 import re
 
@@ -12,11 +13,17 @@ from selfas_graph.cli.simulate import _Lines, _print_summary
 def _column(short):
     """Three vertical rods between electrodes, tips 0.02 apart: joined from step 0 when ``short``."""
     gap = 3.06 if short else 4.0
-    p = sg.Parameters.from_dict({
-        "rods": {"count": 3}, "placement": {"box": [[-1.0, 1.0], [-1.0, 1.0], [-1.53, 1.53]]},
-        "forces": {"tip_magnetic": {}, "tip_brake": {}, "electrodes": {"gap": gap}}, "circuit": {"delta_J0": 2.0},
-    })
-    state = sg.State.from_rods([[0, 0, -1.02], [0, 0, 0], [0, 0, 1.02]], np.tile([0, 0, 1.0], (3, 1)), np.ones(3), np.ones(3))
+    p = sg.Parameters.from_dict(
+        {
+            "rods": {"count": 3},
+            "placement": {"box": [[-1.0, 1.0], [-1.0, 1.0], [-1.53, 1.53]]},
+            "forces": {"tip_magnetic": {}, "tip_brake": {}, "electrodes": {"gap": gap}},
+            "circuit": {"delta_J0": 2.0},
+        }
+    )
+    state = sg.State.from_rods(
+        [[0, 0, -1.02], [0, 0, 0], [0, 0, 1.02]], np.tile([0, 0, 1.0], (3, 1)), np.ones(3), np.ones(3)
+    )
     return sg.Simulation(p, state=state)
 
 
@@ -29,7 +36,10 @@ def test_progress_line_and_summary_after_a_short_circuit(tmp_path, capsys):
     assert re.search(r"contacts 2, on electrodes 2, short circuit at t = 0, I = 2\.04 J0", line), line
     _print_summary(summary, tmp_path / "x.h5", sim)
     out = capsys.readouterr().out
-    assert "short circuit: the conductors were first joined at t = 0; at the end 3 rods carry current, total 2.04 J0" in out
+    assert (
+        "short circuit: the conductors were first joined at t = 0; at the end 3 rods carry current, total 2.04 J0"
+        in out
+    )
     assert sim.status()["current_rods"] == 3
 
 

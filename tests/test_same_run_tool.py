@@ -1,4 +1,5 @@
 """Smoke test of tools/same_run.py: equal files agree, a one-ulp change or a missing dataset is found."""
+
 import subprocess
 import sys
 from pathlib import Path
@@ -46,10 +47,15 @@ def test_same_as_commit_tool_finds_the_working_tree_equal_to_head(tmp_path):
     checked to import the code meant) and compares the run files; a clean tree agrees with HEAD.
     Slow: the exported commit's kernels are compiled afresh."""
     tool = TOOL.with_name("same_as_commit.py")
-    dirty = subprocess.run(["git", "status", "--porcelain", "selfas_graph"], capture_output=True, text=True,
-                           cwd=TOOL.parent.parent)
+    dirty = subprocess.run(
+        ["git", "status", "--porcelain", "selfas_graph"], capture_output=True, text=True, cwd=TOOL.parent.parent
+    )
     if dirty.returncode != 0 or dirty.stdout.strip():
         pytest.skip("not a git checkout, or the working tree differs from HEAD in selfas_graph/")
-    r = subprocess.run([sys.executable, str(tool), "scenarios/quick.toml+run.t_end=0.02+rods.count=20",
-                        "--keep", str(tmp_path)], capture_output=True, text=True, cwd=TOOL.parent.parent)
+    r = subprocess.run(
+        [sys.executable, str(tool), "scenarios/quick.toml+run.t_end=0.02+rods.count=20", "--keep", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        cwd=TOOL.parent.parent,
+    )
     assert r.returncode == 0 and "the same, bit for bit" in r.stdout, r.stdout + r.stderr

@@ -1,4 +1,5 @@
 """Scenario validation: every rule gives a message naming the key and what is valid."""
+
 from pathlib import Path
 
 import pytest
@@ -43,17 +44,23 @@ def test_wrong_type_names_key_and_expected_type():
     assert "rods.count: expected an integer, got '10' (str)" in problems(GOOD.replace("count = 10", 'count = "10"'))
     assert "integrator.dt: expected a number, got true (bool)" in problems(GOOD + "[integrator]\ndt = true\n")
     assert "integrator.position_projection: expected true or false" in problems(
-        GOOD + "[integrator]\nposition_projection = 1\n")
-    assert "forces.uniform_field.B: expected an array of 3 numbers" in problems(GOOD + "[forces.uniform_field]\nB = [1, 2]\n")
+        GOOD + "[integrator]\nposition_projection = 1\n"
+    )
+    assert "forces.uniform_field.B: expected an array of 3 numbers" in problems(
+        GOOD + "[forces.uniform_field]\nB = [1, 2]\n"
+    )
 
 
-@pytest.mark.parametrize("line, key, valid", [
-    ("[integrator]\ndt = 0.0", "integrator.dt", "> 0"),
-    ("[integrator]\ndt = -1e-3", "integrator.dt", "> 0"),
-    ("[run]\nt_end = 0", "run.t_end", "> 0"),
-    ("[rods.magnetic_charge]\nhigh_fraction = 1.5", "rods.magnetic_charge.high_fraction", "<= 1"),
-    ("[forces.yukawa]\ntolerance = 0", "forces.yukawa.tolerance", "> 0"),
-])
+@pytest.mark.parametrize(
+    "line, key, valid",
+    [
+        ("[integrator]\ndt = 0.0", "integrator.dt", "> 0"),
+        ("[integrator]\ndt = -1e-3", "integrator.dt", "> 0"),
+        ("[run]\nt_end = 0", "run.t_end", "> 0"),
+        ("[rods.magnetic_charge]\nhigh_fraction = 1.5", "rods.magnetic_charge.high_fraction", "<= 1"),
+        ("[forces.yukawa]\ntolerance = 0", "forces.yukawa.tolerance", "> 0"),
+    ],
+)
 def test_out_of_range(line, key, valid):
     msg = problems(GOOD + line + "\n")
     assert f"{key}: " in msg and "out of range" in msg and valid in msg
@@ -93,9 +100,11 @@ def test_box_beyond_electrodes_and_empty_range():
 
 def test_circuit_needs_contacts_and_a_conductor():
     assert "with contacts.enabled = false it can never close" in problems(
-        GOOD + "[circuit]\ndelta_J0 = 1.0\n[contacts]\nenabled = false\n")
-    assert "the circuit needs a conductor" in problems(GOOD.replace("[forces.electrodes]\ngap = 6.0\n", "")
-                                                      .replace("[-3, 3]]", "[-3, 3]]") + "[circuit]\n")
+        GOOD + "[circuit]\ndelta_J0 = 1.0\n[contacts]\nenabled = false\n"
+    )
+    assert "the circuit needs a conductor" in problems(
+        GOOD.replace("[forces.electrodes]\ngap = 6.0\n", "").replace("[-3, 3]]", "[-3, 3]]") + "[circuit]\n"
+    )
     assert "rod currents come from the circuit solve" in problems(GOOD + "[forces.current_field]\n")
 
 
@@ -120,8 +129,9 @@ def test_not_toml_and_missing_file(tmp_path):
 
 
 def test_overrides_go_through_the_same_checks():
-    sc = scenario_from_text(GOOD, overrides=["integrator.dt=5e-4", "forces.uniform_field.B=[0, 0, 1]",
-                                             "integrator.bond_force=paper"])
+    sc = scenario_from_text(
+        GOOD, overrides=["integrator.dt=5e-4", "forces.uniform_field.B=[0, 0, 1]", "integrator.bond_force=paper"]
+    )
     assert sc.params.integrator.dt == 5e-4 and sc.params.forces.uniform_field.B == (0.0, 0.0, 1.0)
     assert sc.params.integrator.bond_force == "paper"
     assert "integrator.dt: -1.0 is out of range" in problems(GOOD, ["integrator.dt=-1"])

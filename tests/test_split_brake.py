@@ -1,4 +1,5 @@
 """The split brake (integrator.brake = "split"): exact pairwise solution, stability past the explicit limit."""
+
 import math
 
 import numpy as np

@@ -1,5 +1,6 @@
 """Each component saves and restores its own state; the checkpoint is their union, and a
 checkpoint written before the components had their own methods still resumes."""
+
 import json
 from pathlib import Path
 

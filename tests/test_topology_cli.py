@@ -5,6 +5,7 @@ The run file is written in-process the way ``selfas-graph simulate`` writes it
 of three rods that short-circuits the electrodes at a known step: a random scene
 would not say when (or whether) that happens.
 """
+
 import json
 import math
 
@@ -32,23 +33,29 @@ def chain_state():
     tips 3-4 0.08 apart (closed by the attraction at step 14, measured), tips 0 and 5
     touching the cathode and the anode (h = 0.025 < r*)."""
     z0 = -GAP / 2 + 0.025 + 0.5
-    return State.from_rods([[0, 0, z0], [0, 0, z0 + 1.03], [0, 0, z0 + 2.11]], [[0, 0, 1.0]] * 3,
-                           [1.0] * 3, [0.0] * 3)
+    return State.from_rods([[0, 0, z0], [0, 0, z0 + 1.03], [0, 0, z0 + 2.11]], [[0, 0, 1.0]] * 3, [1.0] * 3, [0.0] * 3)
 
 
 def write_run(path, contacts=True):
     """Run the chain to T_END and write it as ``simulate`` does; returns the Simulation."""
     state = chain_state()
     extra = {"circuit": {"delta_J0": DELTA_J0}} if contacts else {}  # a circuit needs contacts
-    sim = simulation(state, forces={"tip_magnetic": {}, "tip_brake": {}, "ambient_brake": {},
-                                    "electrodes": {"gap": GAP}},
-                     integrator={"dt": DT}, contacts={"enabled": contacts}, output={"interval": INTERVAL}, **extra)
+    sim = simulation(
+        state,
+        forces={"tip_magnetic": {}, "tip_brake": {}, "ambient_brake": {}, "electrodes": {"gap": GAP}},
+        integrator={"dt": DT},
+        contacts={"enabled": contacts},
+        output={"interval": INTERVAL},
+        **extra,
+    )
     provenance = {
         "scenario_text": "# hand-built chain of three rods (tests/test_topology_cli.py)",
         "parameters_json": json.dumps(sim.params.to_dict()),
         "version": __version__,
         "command_line": "pytest tests/test_topology_cli.py",
-        "seed": 0, "mpi_ranks": 1, "numba_threads": 1,
+        "seed": 0,
+        "mpi_ranks": 1,
+        "numba_threads": 1,
     }
     writer = RunWriter(path, state.n_tips, state.tip_charge, state.rod_charge, provenance)
     try:
@@ -103,8 +110,12 @@ def test_topology_text_shows_filament_currents_and_events(chain_run, capsys):
     assert "events up to this frame: conductor_contact 2, short_circuit 1, tip_contact 2" in out
     event_lines = [line.split() for line in out.splitlines() if line.startswith("  step")]
     assert [(int(w[1]), w[5], int(w[6]), int(w[7])) for w in event_lines] == [
-        (0, "tip_contact", 1, 2), (0, "conductor_contact", 0, 0), (0, "conductor_contact", 5, 1),
-        (step, "tip_contact", 3, 4), (step, "short_circuit", n_fil, -1)]
+        (0, "tip_contact", 1, 2),
+        (0, "conductor_contact", 0, 0),
+        (0, "conductor_contact", 5, 1),
+        (step, "tip_contact", 3, 4),
+        (step, "short_circuit", n_fil, -1),
+    ]
 
 
 def test_topology_json_matches_the_simulation(chain_run, capsys):
@@ -130,8 +141,9 @@ def test_topology_json_matches_the_simulation(chain_run, capsys):
     assert data["first_short_circuit"] == {"step": step, "time": t}
     assert data["short_circuit"] is True
     assert data["conductors"] == {"cathode": -DELTA_J0 * GAP / 2, "anode": DELTA_J0 * GAP / 2}
-    assert data["structures"] == [{"id": 0, "rods": 3, "filament": 3, "dead_end": 0,
-                                   "conductors": ["anode", "cathode"]}]
+    assert data["structures"] == [
+        {"id": 0, "rods": 3, "filament": 3, "dead_end": 0, "conductors": ["anode", "cathode"]}
+    ]
     assert len(data["events"]) == len(sim.events)
     assert data["event_counts"] == {"tip_contact": 2, "conductor_contact": 2, "short_circuit": 1}
 
@@ -181,15 +193,18 @@ def bad_files(tmp_path_factory, chain_run):
     return d
 
 
-@pytest.mark.parametrize("name, args, message", [
-    ("chain", ["--frame", "11"], "frame 11 out of range; the file has frames 0..10"),
-    ("chain", ["--frame", "-12"], "frame -12 out of range; the file has frames 0..10"),
-    ("no_graph.h5", [], "the file has no graph data (the run had contacts.enabled = false"),
-    ("missing.h5", [], "missing.h5: no such file"),
-    ("notes.h5", [], "not a readable HDF5 file"),
-    ("empty.h5", [], "not a readable HDF5 file"),
-    ("foreign.h5", [], "an HDF5 file, but not a selfas-graph run"),
-])
+@pytest.mark.parametrize(
+    "name, args, message",
+    [
+        ("chain", ["--frame", "11"], "frame 11 out of range; the file has frames 0..10"),
+        ("chain", ["--frame", "-12"], "frame -12 out of range; the file has frames 0..10"),
+        ("no_graph.h5", [], "the file has no graph data (the run had contacts.enabled = false"),
+        ("missing.h5", [], "missing.h5: no such file"),
+        ("notes.h5", [], "not a readable HDF5 file"),
+        ("empty.h5", [], "not a readable HDF5 file"),
+        ("foreign.h5", [], "an HDF5 file, but not a selfas-graph run"),
+    ],
+)
 def test_bad_input_exits_2_with_one_line(chain_run, bad_files, capsys, name, args, message):
     """Each bad input gives exit code 2 and one line on stderr naming the problem, no traceback, no stdout."""
     path = chain_run[0] if name == "chain" else bad_files / name

@@ -6,6 +6,7 @@ summarised by the median and the 99th percentile; each bound is about twice
 the value measured with the fixed seeds here (noted beside it), so that the
 tests catch a lost order of accuracy but not a change of round-off.
 """
+
 import numpy as np
 import pytest
 
@@ -25,8 +26,7 @@ def rods_to_tips(centre, axis, q):
 def uniform_rods(n_rods, rng, density=0.19):
     """Rods uniform in a cube at the Fig. 2 density (rods per unit volume)."""
     side = (n_rods / density) ** (1 / 3)
-    return rods_to_tips(rng.uniform(0, side, (n_rods, 3)), rng.normal(size=(n_rods, 3)),
-                        rng.uniform(2 / 3, 2, n_rods))
+    return rods_to_tips(rng.uniform(0, side, (n_rods, 3)), rng.normal(size=(n_rods, 3)), rng.uniform(2 / 3, 2, n_rods))
 
 
 def chain_rods(n_chains, length, rng, n_clusters=3, spread=4.0):
@@ -143,8 +143,11 @@ def test_near_pairs_exact():
     tolerance is relative to the (large) core force."""
     rng = np.random.default_rng(3)
     far = uniform_rods(300, rng)
-    pair = rods_to_tips(np.array([[-0.5 - RSTAR / 4, 0, 0], [0.5 + RSTAR / 4, 0, 0]]) - 30.0,
-                        np.array([[1.0, 0, 0], [1.0, 0, 0]]), np.array([1.5, 1.2]))
+    pair = rods_to_tips(
+        np.array([[-0.5 - RSTAR / 4, 0, 0], [0.5 + RSTAR / 4, 0, 0]]) - 30.0,
+        np.array([[1.0, 0, 0], [1.0, 0, 0]]),
+        np.array([1.5, 1.2]),
+    )
     tips = [np.concatenate([p, f]) for p, f in zip(pair, far)]
     expected = direct(*tips)
     for knobs in ({"leaf_size": 1, "group_size": 1}, {}):
@@ -180,8 +183,9 @@ def test_one_rod():
 def test_two_rods():
     """Two rods: four tips fit one leaf, so the tree is the direct sum to round-off
     at any theta (no cell is ever approximated)."""
-    tips = rods_to_tips(np.array([[0, 0, 0], [1.7, 0.3, -0.4]]), np.array([[0, 0, 1.0], [1, 1, 0.0]]),
-                        np.array([1.3, 0.8]))
+    tips = rods_to_tips(
+        np.array([[0, 0, 0], [1.7, 0.3, -0.4]]), np.array([[0, 0, 1.0], [1, 1, 0.0]]), np.array([1.3, 0.8])
+    )
     close(tree(*tips, 0.9), direct(*tips))
 
 
@@ -249,8 +253,11 @@ def _field(n_rods, method, seed=4, **tip_magnetic):
     from conftest import random_rods, simulation
 
     state = random_rods(n_rods, np.random.default_rng(seed), box=8.0)
-    sim = simulation(state, forces={"tip_magnetic": {"method": method, **tip_magnetic}},
-                     placement={"box": [[-4.5, 4.5]] * 3, "min_tip_distance": 0.0})
+    sim = simulation(
+        state,
+        forces={"tip_magnetic": {"method": method, **tip_magnetic}},
+        placement={"box": [[-4.5, 4.5]] * 3, "min_tip_distance": 0.0},
+    )
     return sim.force_field, state
 
 

@@ -15,6 +15,7 @@ on one numba thread and the thread's CPU clock, interleaved (the order alternate
 Prints microseconds per call (median of the repeats), the ratio, the CPU model and the
 instruction set numba compiled for (``NUMBA_CPU_NAME``).
 """
+
 import argparse
 import sys
 import time
@@ -31,7 +32,7 @@ def interleaved(a, b, repeat, calls):
     """Median microseconds per call of ``a`` and ``b``, and the median of the per-repeat ratios."""
     ta, tb = [], []
     for r in range(repeat + 1):
-        for fn, t in (((a, ta), (b, tb)) if r % 2 == 0 else ((b, tb), (a, ta))):
+        for fn, t in ((a, ta), (b, tb)) if r % 2 == 0 else ((b, tb), (a, ta)):
             t0 = time.thread_time()
             for _ in range(calls):
                 fn()
@@ -70,8 +71,10 @@ def run(args):
         d = position - reference
         return np.einsum("ij,ij->i", d, d).max(initial=0.0)
 
-    rows = [("contact check, step without events", full_check, lambda: tracker.update(position, nl, 0, 0.0)),
-            (f"skin check, {len(position)} tips", skin_numpy, lambda: max_displacement2(position, reference))]
+    rows = [
+        ("contact check, step without events", full_check, lambda: tracker.update(position, nl, 0, 0.0)),
+        (f"skin check, {len(position)} tips", skin_numpy, lambda: max_displacement2(position, reference)),
+    ]
     print(machine_line())
     print(f"{origin}; {sim.contacts.n_contacts} contacts; one thread, CPU time, median of {args.repeat}")
     print("| check | numpy (us) | kernel (us) | ratio |")

@@ -24,6 +24,7 @@ array kernels replaced (``tests/reference.py``, the peer: results checked equal)
 the best of ``--repeat`` runs; the solves are given no memo of the last system
 (``circuit.SolveMemo``), so every solve factorises.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -165,9 +166,7 @@ def main(argv=None):
             t_peer, peer = _best(lambda: reference.classify_rods_scipy_networkx(n_rods, tc, ct, cid), args.repeat)
             assert np.array_equal(peer.role, topo.role) and np.array_equal(peer.structure, topo.structure)
             t_solve, sol = _best(lambda: solve_circuit(2 * n_rods, tc, ct, pot), args.repeat)
-            t_cg, sol_cg = _best(
-                lambda: solve_circuit(2 * n_rods, tc, ct, pot, solver="cg"), args.repeat
-            )
+            t_cg, sol_cg = _best(lambda: solve_circuit(2 * n_rods, tc, ct, pot, solver="cg"), args.repeat)
             assert abs(sol_cg.total_current - sol.total_current) <= 1e-9 * sol.total_current
             name = make.__name__.split("_")[0]
             print(

@@ -50,6 +50,7 @@ Usage::
 
 Prints markdown tables.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -180,37 +181,53 @@ def contact_overhead(scenario_path, settle, steps):
 
     ms = 1e3
     pct = 100.0 / step_on_quiet
-    print(f"\n(a) contact detection + events, {params.rods.count} rods of {scenario_path}; "
-          f"{numba.get_num_threads()} numba threads; after {settle} settling steps (t = {sim.state.time:g}, "
-          f"{settle_s:.1f} s): {n_contacts} contacts, {len(sim.events)} events so far. "
-          f"Medians over {steps} steps; a full step without an event (contacts on) = "
-          f"{ms * step_on_quiet:.3f} ms is the 100 %.\n")
+    print(
+        f"\n(a) contact detection + events, {params.rods.count} rods of {scenario_path}; "
+        f"{numba.get_num_threads()} numba threads; after {settle} settling steps (t = {sim.state.time:g}, "
+        f"{settle_s:.1f} s): {n_contacts} contacts, {len(sim.events)} events so far. "
+        f"Medians over {steps} steps; a full step without an event (contacts on) = "
+        f"{ms * step_on_quiet:.3f} ms is the 100 %.\n"
+    )
     print("| measurement | ms/step | % of a full step |")
     print("|---|---|---|")
     print(f"| full Fig. 2 step, contacts on (all {steps} steps) | {ms * step_on:.3f} | {pct * step_on:.1f} % |")
-    print(f"| full Fig. 2 step, contacts off, interleaved with the above | {ms * step_off:.3f} | "
-          f"{pct * step_off:.1f} % |")
-    print(f"| difference on - off (includes the tip list grown to 1.5 r* for the brake) | "
-          f"{ms * (step_on - step_off):.3f} | {pct * (step_on - step_off):.1f} % |")
-    print(f"| difference on (steps without an event) - off | {ms * (step_on_quiet - step_off):.3f} | "
-          f"{pct * (step_on_quiet - step_off):.1f} % |")
-    print(f"| contact search + events in the run, steps without an event ({int(quiet.sum())} steps) | "
-          f"{ms * upd_quiet:.3f} | **{pct * upd_quiet:.2f} %** |")
-    print(f"| ContactTracker.update alone on unchanged positions | {ms * tracker_alone:.3f} | "
-          f"{pct * tracker_alone:.2f} % |")
-    print(f"| frozen scene (v = 0, weak ambient brake): step with contacts on - off | "
-          f"{ms * (frozen_on - frozen_off):.3f} | {pct * (frozen_on - frozen_off):.2f} % |")
-    print(f"| (for comparison) contacts + graph + topology + solve on steps with events "
-          f"({n_event_steps} steps, {n_events} events) | {ms * upd_event:.3f} | {pct * upd_event:.1f} % |")
-    print(f"| (for comparison) mean over all steps, events included | {ms * mean_upd:.3f} | "
-          f"{pct * mean_upd:.1f} % |")
+    print(
+        f"| full Fig. 2 step, contacts off, interleaved with the above | {ms * step_off:.3f} | {pct * step_off:.1f} % |"
+    )
+    print(
+        f"| difference on - off (includes the tip list grown to 1.5 r* for the brake) | "
+        f"{ms * (step_on - step_off):.3f} | {pct * (step_on - step_off):.1f} % |"
+    )
+    print(
+        f"| difference on (steps without an event) - off | {ms * (step_on_quiet - step_off):.3f} | "
+        f"{pct * (step_on_quiet - step_off):.1f} % |"
+    )
+    print(
+        f"| contact search + events in the run, steps without an event ({int(quiet.sum())} steps) | "
+        f"{ms * upd_quiet:.3f} | **{pct * upd_quiet:.2f} %** |"
+    )
+    print(
+        f"| ContactTracker.update alone on unchanged positions | {ms * tracker_alone:.3f} | "
+        f"{pct * tracker_alone:.2f} % |"
+    )
+    print(
+        f"| frozen scene (v = 0, weak ambient brake): step with contacts on - off | "
+        f"{ms * (frozen_on - frozen_off):.3f} | {pct * (frozen_on - frozen_off):.2f} % |"
+    )
+    print(
+        f"| (for comparison) contacts + graph + topology + solve on steps with events "
+        f"({n_event_steps} steps, {n_events} events) | {ms * upd_event:.3f} | {pct * upd_event:.1f} % |"
+    )
+    print(f"| (for comparison) mean over all steps, events included | {ms * mean_upd:.3f} | {pct * mean_upd:.1f} % |")
 
 
 # --------------------------------------------------------------------------- (b)
 def _graph_of(n_rods, tc, ct, cid, pot, hold_back):
     """A ConnectivityGraph of the network without the tip contacts ``hold_back`` (row indices)."""
-    cond = {ev.CONDUCTOR_CATHODE: float(pot[cid == ev.CONDUCTOR_CATHODE][0]),
-            ev.CONDUCTOR_ANODE: float(pot[cid == ev.CONDUCTOR_ANODE][0])}
+    cond = {
+        ev.CONDUCTOR_CATHODE: float(pot[cid == ev.CONDUCTOR_CATHODE][0]),
+        ev.CONDUCTOR_ANODE: float(pot[cid == ev.CONDUCTOR_ANODE][0]),
+    }
     keep = np.ones(len(tc), dtype=bool)
     keep[hold_back] = False
     arrays = {"tip_contacts": tc[keep], "conductor_tip": ct, "conductor_id": cid, "conductor_potential": pot}
@@ -219,10 +236,14 @@ def _graph_of(n_rods, tc, ct, cid, pot, hold_back):
 
 def graph_update(sizes, batches, repeat, seed):
     rng = np.random.default_rng(seed)
-    print(f"\n(b) ConnectivityGraph: apply a batch of TIP_CONTACT events, topology(), solve(); "
-          f"chains network of tools/bench_circuit.py; best of {repeat}\n")
-    print("| rods | contacts | events in batch | build graph (s) | apply + topology (ms) | topology() after (ms) "
-          "| solve (ms) | total (ms) | fresh classify_rods (ms) | filament rods |")
+    print(
+        f"\n(b) ConnectivityGraph: apply a batch of TIP_CONTACT events, topology(), solve(); "
+        f"chains network of tools/bench_circuit.py; best of {repeat}\n"
+    )
+    print(
+        "| rods | contacts | events in batch | build graph (s) | apply + topology (ms) | topology() after (ms) "
+        "| solve (ms) | total (ms) | fresh classify_rods (ms) | filament rods |"
+    )
     print("|---|---|---|---|---|---|---|---|---|---|")
     for n in sizes:
         n_rods, tc, ct, cid, pot = chain_network(n, rng)
@@ -249,15 +270,22 @@ def graph_update(sizes, batches, repeat, seed):
                 t4 = time.perf_counter()
                 graph.topology()
                 t5 = time.perf_counter()
-                for key, value in (("apply", t1 - t0), ("topo", t2 - t1), ("solve", t3 - t2),
-                                   ("total", t3 - t0), ("fresh", t5 - t4)):
+                for key, value in (
+                    ("apply", t1 - t0),
+                    ("topo", t2 - t1),
+                    ("solve", t3 - t2),
+                    ("total", t3 - t0),
+                    ("fresh", t5 - t4),
+                ):
                     best[key] = min(best[key], value)
                 graph.apply(release)
                 graph.topology()
             assert sol.kirchhoff_residual < 1e-9 * max(1.0, sol.total_current)
-            print(f"| {n_rods} | {len(tc) + len(ct)} | {batch} | {build:.2f} | {1e3 * best['apply']:.1f} | "
-                  f"{1e3 * best['topo']:.3f} | {1e3 * best['solve']:.1f} | {1e3 * best['total']:.1f} | "
-                  f"{1e3 * best['fresh']:.1f} | {topo.n_filament} |")
+            print(
+                f"| {n_rods} | {len(tc) + len(ct)} | {batch} | {build:.2f} | {1e3 * best['apply']:.1f} | "
+                f"{1e3 * best['topo']:.3f} | {1e3 * best['solve']:.1f} | {1e3 * best['total']:.1f} | "
+                f"{1e3 * best['fresh']:.1f} | {topo.n_filament} |"
+            )
 
 
 # --------------------------------------------------------------------------- (c)
@@ -292,8 +320,9 @@ def events_in_run(scenario_path, settle, checkpoint, steps, peer_graphs):
     calls: dict[str, list[float]] = {}
     graphs = []
     g = graph_module
-    saved = {name: getattr(g, name) for name in ("classify_rods", "merge_tips", "component_structures",
-                                                  "_filament_rods")}
+    saved = {
+        name: getattr(g, name) for name in ("classify_rods", "merge_tips", "component_structures", "_filament_rods")
+    }
     solve = type(sim.graph).solve
     inner_classify = _timed(calls, "classify_rods", saved["classify_rods"])
 
@@ -340,24 +369,30 @@ def events_in_run(scenario_path, settle, checkpoint, steps, peer_graphs):
         return float(np.sum(calls.get(name, [])))
 
     n_cls = len(calls["classify_rods"])
-    print(f"\n(c) topology and circuit per event, {sim.state.n_rods} rods, from {origin}: {steps} steps "
-          f"t = {sim.state.time - steps * sim.dt:.1f} .. {sim.state.time:.1f}, "
-          f"{len(sim.events) - n_events} events, {topo.n_filament} filament / {topo.n_dead_end} dead-end / "
-          f"{topo.n_cluster} cluster rods at the end; {cpu:.2f} s CPU for the steps "
-          f"({1e3 * cpu / steps:.2f} ms/step). Thread CPU time per call, medians.\n")
+    print(
+        f"\n(c) topology and circuit per event, {sim.state.n_rods} rods, from {origin}: {steps} steps "
+        f"t = {sim.state.time - steps * sim.dt:.1f} .. {sim.state.time:.1f}, "
+        f"{len(sim.events) - n_events} events, {topo.n_filament} filament / {topo.n_dead_end} dead-end / "
+        f"{topo.n_cluster} cluster rods at the end; {cpu:.2f} s CPU for the steps "
+        f"({1e3 * cpu / steps:.2f} ms/step). Thread CPU time per call, medians.\n"
+    )
     print("| part | calls per 1000 steps | ms per call (median) | share of the steps' CPU time |")
     print("|---|---|---|---|")
-    for name, label in (("classify_rods", "classify_rods (all of it)"),
-                        ("merge_tips", "  tip merge (merge_tips)"),
-                        ("component_structures", "  components, structures, attachments (one kernel)"),
-                        ("_filament_rods", "  filament search (blocks through X)"),
-                        ("solve", "ConnectivityGraph.solve (circuit)")):
+    for name, label in (
+        ("classify_rods", "classify_rods (all of it)"),
+        ("merge_tips", "  tip merge (merge_tips)"),
+        ("component_structures", "  components, structures, attachments (one kernel)"),
+        ("_filament_rods", "  filament search (blocks through X)"),
+        ("solve", "ConnectivityGraph.solve (circuit)"),
+    ):
         calls_k = per_k(name) if name != "merge_tips" else 1000.0 * n_cls / steps
         print(f"| {label} | {calls_k:.1f} | {med(name):.3f} | {100 * total(name) / cpu:.1f} % |")
     if peer:
         p, o = 1e3 * float(np.median(peer)), 1e3 * float(np.median(ours))
-        print(f"\nOn the first {len(peer)} graphs of these calls (same results checked): classify_rods "
-              f"{o:.3f} ms, the scipy/networkx version (tests/reference.py) {p:.3f} ms, ratio {p / o:.1f}x.")
+        print(
+            f"\nOn the first {len(peer)} graphs of these calls (same results checked): classify_rods "
+            f"{o:.3f} ms, the scipy/networkx version (tests/reference.py) {p:.3f} ms, ratio {p / o:.1f}x."
+        )
 
 
 def main(argv=None):
@@ -377,9 +412,11 @@ def main(argv=None):
     ap.add_argument("--skip-c", action="store_true")
     args = ap.parse_args(argv)
     m = machine()
-    print(f"{m['cpu_model']} ({m['widest']}, numba target {m['cpu_name']}), python {platform.python_version()}, "
-          f"numpy {np.__version__}, numba {numba.__version__}, {os.cpu_count()} CPUs, "
-          f"{numba.get_num_threads()} numba threads")
+    print(
+        f"{m['cpu_model']} ({m['widest']}, numba target {m['cpu_name']}), python {platform.python_version()}, "
+        f"numpy {np.__version__}, numba {numba.__version__}, {os.cpu_count()} CPUs, "
+        f"{numba.get_num_threads()} numba threads"
+    )
     if not args.skip_a:
         contact_overhead(args.scenario, args.settle, args.steps)
     if not args.skip_b:

@@ -32,6 +32,7 @@ that one table shows what an AVX2 machine gets (``haswell``, ``znver3``) beside 
 build; on an AVX-512 host, ``haswell`` is the AVX2 build. Each process prints the CPU and the
 target it compiled for.
 """
+
 import argparse
 import importlib
 import json
@@ -97,7 +98,7 @@ def timed_pair(fn_before, fn_after, repeat, clock=time.perf_counter):
     fn_after()
     t = ([], [])
     for i in range(repeat):
-        for j in ((0, 1) if i % 2 == 0 else (1, 0)):
+        for j in (0, 1) if i % 2 == 0 else (1, 0):
             fn = fn_before if j == 0 else fn_after
             t0 = clock()
             fn()
@@ -108,24 +109,28 @@ def timed_pair(fn_before, fn_after, repeat, clock=time.perf_counter):
 def kernels_at(ref):
     """The kernel modules of git revision ``ref``, as a namespace with ``tips``, ``tree``, ``pairs``,
     ``currents`` (``selfas_graph/kernels`` of that revision copied into a package of its own)."""
-    sha = subprocess.run(["git", "rev-parse", ref], cwd=ROOT, capture_output=True, text=True,
-                         check=True).stdout.strip()
+    sha = subprocess.run(["git", "rev-parse", ref], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
     name = f"selfas_kernels_{sha[:12]}"
     home = Path(tempfile.gettempdir()) / "selfas_bench_kernels"
     pkg = home / name
     if not (pkg / "__init__.py").exists():
         pkg.mkdir(parents=True, exist_ok=True)
-        files = subprocess.run(["git", "ls-tree", "--name-only", sha, "selfas_graph/kernels/"], cwd=ROOT,
-                               capture_output=True, text=True, check=True).stdout.split()
+        files = subprocess.run(
+            ["git", "ls-tree", "--name-only", sha, "selfas_graph/kernels/"],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.split()
         for f in files:
             if f.endswith(".py"):
-                text = subprocess.run(["git", "show", f"{sha}:{f}"], cwd=ROOT, capture_output=True,
-                                      check=True).stdout
+                text = subprocess.run(["git", "show", f"{sha}:{f}"], cwd=ROOT, capture_output=True, check=True).stdout
                 (pkg / Path(f).name).write_bytes(text)
     if str(home) not in sys.path:
         sys.path.insert(0, str(home))
-    return types.SimpleNamespace(**{m: importlib.import_module(f"{name}.{m}")
-                                    for m in ("tips", "tree", "pairs", "currents")})
+    return types.SimpleNamespace(
+        **{m: importlib.import_module(f"{name}.{m}") for m in ("tips", "tree", "pairs", "currents")}
+    )
 
 
 def run(args):
@@ -182,15 +187,34 @@ def run(args):
         jobs = [
             ("direct", direct, rep_big, lambda K: lambda: K.tips.tip_tip_direct(x, y, z, q, rstar, kappa, 0, ntips, f)),
             ("tree build", True, args.repeat, lambda K: lambda: K.tree.build_tip_tree(x, y, z, q)),
-            ("tree eval", True, args.repeat,
-             lambda K: lambda: K.tree.evaluate_tip_tree(tree_of(K), rstar, kappa, K.tree.THETA, f)),
-            ("yukawa", True, args.repeat,
-             lambda K: lambda: K.pairs.yukawa_centres(c, st.rod_charge, nl.start, nl.index, yk.screening, yk.core,
-                                                      yk.cutoff, 0, n, fy)),
-            ("current tips", direct, rep_big,
-             lambda K: lambda: K.currents.current_force_on_tips(st.position, q, active, current, w, 0, ntips, f)),
-            ("current field", direct, rep_big,
-             lambda K: lambda: K.currents.rod_current_field(pts, excl, st.position, active, current, w, fb)),
+            (
+                "tree eval",
+                True,
+                args.repeat,
+                lambda K: lambda: K.tree.evaluate_tip_tree(tree_of(K), rstar, kappa, K.tree.THETA, f),
+            ),
+            (
+                "yukawa",
+                True,
+                args.repeat,
+                lambda K: (
+                    lambda: K.pairs.yukawa_centres(
+                        c, st.rod_charge, nl.start, nl.index, yk.screening, yk.core, yk.cutoff, 0, n, fy
+                    )
+                ),
+            ),
+            (
+                "current tips",
+                direct,
+                rep_big,
+                lambda K: lambda: K.currents.current_force_on_tips(st.position, q, active, current, w, 0, ntips, f),
+            ),
+            (
+                "current field",
+                direct,
+                rep_big,
+                lambda K: lambda: K.currents.rod_current_field(pts, excl, st.position, active, current, w, fb),
+            ),
         ]
         for name, on, rep, make in jobs:
             if not on:
@@ -204,8 +228,13 @@ def run(args):
         res["yukawa_pairs"] = int(nl.start[-1])
         res["active_rods"] = int(len(active))
         out_rows.append(res)
-    return {"machine": machine(), "line": machine_line(), "threads": args.threads, "rows": out_rows,
-            "before": before_ref}
+    return {
+        "machine": machine(),
+        "line": machine_line(),
+        "threads": args.threads,
+        "rows": out_rows,
+        "before": before_ref,
+    }
 
 
 def main(argv=None):
@@ -213,14 +242,21 @@ def main(argv=None):
     ap.add_argument("--rods", type=int, nargs="+", default=[1200, 6000, 24000])
     ap.add_argument("--repeat", type=int, default=7)
     ap.add_argument("--threads", type=int, default=1)
-    ap.add_argument("--cpu-time", action="store_true",
-                    help="time by the process's CPU time, not the wall clock: on a busy shared machine "
-                         "this counts only the cycles the kernel got (use with --threads 1)")
+    ap.add_argument(
+        "--cpu-time",
+        action="store_true",
+        help="time by the process's CPU time, not the wall clock: on a busy shared machine "
+        "this counts only the cycles the kernel got (use with --threads 1)",
+    )
     ap.add_argument("--direct-max", type=int, default=6000, help="time the direct sums up to this many rods")
     ap.add_argument("--targets", nargs="+", default=["host"], help="host, or NUMBA_CPU_NAME values (haswell, znver3)")
     ap.add_argument("--before", help="also time the kernels of this git revision, interleaved (e.g. HEAD~3)")
-    ap.add_argument("--active-fraction", type=float, default=0.72,
-                    help="fraction of the rods carrying current in the current kernels")
+    ap.add_argument(
+        "--active-fraction",
+        type=float,
+        default=0.72,
+        help="fraction of the rods carrying current in the current kernels",
+    )
     ap.add_argument("--json", help="write all results to this file")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -234,8 +270,19 @@ def main(argv=None):
         env.pop("NUMBA_CPU_FEATURES", None)
         if target != "host":
             env["NUMBA_CPU_NAME"] = target
-        cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "--rods", *map(str, args.rods),
-               "--repeat", str(args.repeat), "--threads", str(args.threads), "--direct-max", str(args.direct_max)]
+        cmd = [
+            sys.executable,
+            str(Path(__file__).resolve()),
+            "--child",
+            "--rods",
+            *map(str, args.rods),
+            "--repeat",
+            str(args.repeat),
+            "--threads",
+            str(args.threads),
+            "--direct-max",
+            str(args.direct_max),
+        ]
         cmd += ["--cpu-time"] if args.cpu_time else []
         cmd += ["--before", args.before] if args.before else []
         cmd += ["--active-fraction", str(args.active_fraction)]
@@ -248,8 +295,10 @@ def main(argv=None):
         if args.json:  # after every target, so that a failure later keeps the figures
             Path(args.json).write_text(json.dumps(results, indent=1))
     args.targets = [t for t in args.targets if t in results]
-    print(f"\n{'CPU' if args.cpu_time else 'wall'} ms per call on {args.threads} thread(s), median [min-max] of {args.repeat}; "
-          "direct and plain also in 1e9 tip pairs/s/thread (median)")
+    print(
+        f"\n{'CPU' if args.cpu_time else 'wall'} ms per call on {args.threads} thread(s), median [min-max] of {args.repeat}; "
+        "direct and plain also in 1e9 tip pairs/s/thread (median)"
+    )
     kernels = ["direct", "plain", "tree build", "tree eval", "yukawa", "current tips", "current field"]
     cols = [(t, k) for t in args.targets for k in (("before", "after", "speed-up") if args.before else ("",))]
     if args.before:
@@ -284,6 +333,7 @@ def main(argv=None):
                 else:
                     cells.append(cell(row, k, n, k))
             print(f"| {n} | {k} | " + " | ".join(cells) + " |")
+
 
 if __name__ == "__main__":
     main()

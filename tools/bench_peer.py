@@ -16,6 +16,7 @@ solve; it does not know the screened rod charges, the brakes or the circuit, whi
 simulation's step carries on top. Without OpenMM, ``OpenMMPeer.available()`` is False and
 ``missing()`` says how to install it.
 """
+
 import os
 import platform
 import time
@@ -55,14 +56,36 @@ def numba_target() -> dict:
     vector = sorted(f[1:] for f in feats if f.startswith("+") and (f[1:].startswith(("avx", "fma", "sse4"))))
     if not feats:
         vector = ["(all of " + name + ")"]
-    widest = ("AVX-512" if any(v.startswith("avx512") for v in vector) else
-              "AVX2" if "avx2" in vector else "AVX" if "avx" in vector else "SSE")
+    widest = (
+        "AVX-512"
+        if any(v.startswith("avx512") for v in vector)
+        else "AVX2"
+        if "avx2" in vector
+        else "AVX"
+        if "avx" in vector
+        else "SSE"
+    )
     if not feats:
-        widest = {"haswell": "AVX2", "broadwell": "AVX2", "skylake": "AVX2", "znver1": "AVX2", "znver2": "AVX2",
-                  "znver3": "AVX2", "znver4": "AVX-512", "skylake-avx512": "AVX-512", "icelake-server": "AVX-512",
-                  "sapphirerapids": "AVX-512", "x86-64": "SSE2"}.get(name, "as " + name)
-    return {"cpu_name": name, "set_by": "NUMBA_CPU_NAME" if numba.config.CPU_NAME else "host",
-            "widest": widest, "vector_features": vector, "numba": numba.__version__}
+        widest = {
+            "haswell": "AVX2",
+            "broadwell": "AVX2",
+            "skylake": "AVX2",
+            "znver1": "AVX2",
+            "znver2": "AVX2",
+            "znver3": "AVX2",
+            "znver4": "AVX-512",
+            "skylake-avx512": "AVX-512",
+            "icelake-server": "AVX-512",
+            "sapphirerapids": "AVX-512",
+            "x86-64": "SSE2",
+        }.get(name, "as " + name)
+    return {
+        "cpu_name": name,
+        "set_by": "NUMBA_CPU_NAME" if numba.config.CPU_NAME else "host",
+        "widest": widest,
+        "vector_features": vector,
+        "numba": numba.__version__,
+    }
 
 
 def machine() -> dict:
@@ -72,8 +95,10 @@ def machine() -> dict:
 
 def machine_line() -> str:
     m = machine()
-    return (f"CPU: {m['cpu_model']} ({m['cores']} cores); numba {m['numba']} compiles for {m['cpu_name']} "
-            f"({m['set_by']}; widest vectors {m['widest']}: {' '.join(m['vector_features'])})")
+    return (
+        f"CPU: {m['cpu_model']} ({m['cores']} cores); numba {m['numba']} compiles for {m['cpu_name']} "
+        f"({m['set_by']}; widest vectors {m['widest']}: {' '.join(m['vector_features'])})"
+    )
 
 
 class OpenMMPeer:
@@ -89,8 +114,10 @@ class OpenMMPeer:
 
     @staticmethod
     def missing() -> str:
-        return ("peer skipped: OpenMM is not installed (pip install -e \".[bench]\" or pip install openmm); "
-                "no ratio to it is printed")
+        return (
+            'peer skipped: OpenMM is not installed (pip install -e ".[bench]" or pip install openmm); '
+            "no ratio to it is printed"
+        )
 
     def __init__(self, position, tip_charge, threads, cutoff=PEER_CUTOFF, tolerance=PEER_TOLERANCE, dt=1e-4):
         import openmm
@@ -103,8 +130,9 @@ class OpenMMPeer:
         shifted = pos - lo + 0.5 * (side - (hi - lo))
         n = pos.shape[0]
         system = openmm.System()
-        system.setDefaultPeriodicBoxVectors(openmm.Vec3(side[0], 0, 0), openmm.Vec3(0, side[1], 0),
-                                            openmm.Vec3(0, 0, side[2]))
+        system.setDefaultPeriodicBoxVectors(
+            openmm.Vec3(side[0], 0, 0), openmm.Vec3(0, side[1], 0), openmm.Vec3(0, 0, side[2])
+        )
         nb = openmm.NonbondedForce()
         nb.setNonbondedMethod(openmm.NonbondedForce.PME)
         nb.setCutoffDistance(cutoff)

@@ -25,6 +25,7 @@ The ratio is the median of the per-round ratios.
 
 Prints the CPU model and the instruction set numba compiled for (``NUMBA_CPU_NAME``).
 """
+
 import argparse
 import cProfile
 import json
@@ -49,26 +50,44 @@ import numpy as np  # noqa: E402
 
 #: (part, test on "path:function") in order; the first match wins
 PARTS = [
-    ("tip-tip far sum (direct or tree, slow)", lambda f: f.endswith(("tips.py:tip_tip_direct", ))
-     or "kernels/tree.py" in f),
+    (
+        "tip-tip far sum (direct or tree, slow)",
+        lambda f: f.endswith(("tips.py:tip_tip_direct",)) or "kernels/tree.py" in f,
+    ),
     ("tip-tip close pairs (fast, every step)", lambda f: f.endswith("tips.py:tip_tip_fast")),
     ("Yukawa sum (slow)", lambda f: f.endswith(("pairs.py:yukawa_centres", "pairs.py:yukawa_energy"))),
     ("current field on tips (term 9, slow)", lambda f: f.endswith("currents.py:current_force_on_tips")),
     ("current field at Lorentz points (term 10, slow)", lambda f: "kernels/currents.py" in f),
-    ("split brake (close pairs, exact brake)", lambda f: f.endswith(("pairs.py:close_pairs", "pairs.py:_close_counts",
-                                                                      "pairs.py:_close_fill",
-                                                                      "pairs.py:brake_pairs_exact",
-                                                                      "pairs.py:close_pair_count"))),
+    (
+        "split brake (close pairs, exact brake)",
+        lambda f: f.endswith(
+            (
+                "pairs.py:close_pairs",
+                "pairs.py:_close_counts",
+                "pairs.py:_close_fill",
+                "pairs.py:brake_pairs_exact",
+                "pairs.py:close_pair_count",
+            )
+        ),
+    ),
     ("neighbour-list builds", lambda f: "kernels/cells.py" in f),
-    ("cheap O(n) kernels (walls, fields, integration, bonds)",
-     lambda f: "selfas_graph/kernels/" in f and not f.endswith("_jit.py:__call__")),
+    (
+        "cheap O(n) kernels (walls, fields, integration, bonds)",
+        lambda f: "selfas_graph/kernels/" in f and not f.endswith("_jit.py:__call__"),
+    ),
     ("contact search and events (Python)", lambda f: "model/contacts.py" in f or "model/events.py" in f),
-    ("graph and circuit on events", lambda f: any(f"model/{m}.py" in f for m in (
-        "graph", "circuit", "network", "topology", "linear", "validate"))),
+    (
+        "graph and circuit on events",
+        lambda f: any(f"model/{m}.py" in f for m in ("graph", "circuit", "network", "topology", "linear", "validate")),
+    ),
     ("force field bookkeeping (Python)", lambda f: "model/terms/" in f),
     ("neighbour-list checks (Python)", lambda f: "model/neighbours.py" in f),
-    ("integrator and run loop (Python)", lambda f: any(f"model/{m}.py" in f for m in (
-        "integrator", "simulation", "operations", "health", "observables"))),
+    (
+        "integrator and run loop (Python)",
+        lambda f: any(
+            f"model/{m}.py" in f for m in ("integrator", "simulation", "operations", "health", "observables")
+        ),
+    ),
     ("numpy and other", lambda f: True),
 ]
 
@@ -131,8 +150,7 @@ def profile(sim, steps):
 
 def export(ref):
     """The tree of git revision ``ref`` in a temporary folder (kept, keyed by its commit): its path."""
-    sha = subprocess.run(["git", "rev-parse", ref], cwd=ROOT, capture_output=True, text=True,
-                         check=True).stdout.strip()
+    sha = subprocess.run(["git", "rev-parse", ref], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
     dest = Path(tempfile.gettempdir()) / "selfas_bench_profile" / sha[:12]
     if not (dest / "selfas_graph").exists():
         dest.mkdir(parents=True, exist_ok=True)
@@ -158,15 +176,27 @@ def serve(args):
             break
         t0 = clock()
         sim.step(args.steps)
-        print(json.dumps({"cpu": (clock() - t0) / args.steps,
-                          "active": int(len(sim.force_field.active_rod))}), flush=True)
+        print(
+            json.dumps({"cpu": (clock() - t0) / args.steps, "active": int(len(sim.force_field.active_rod))}), flush=True
+        )
 
 
 def compare(args):
     from bench_peer import machine_line
 
-    base = [sys.executable, str(Path(__file__).resolve()), "--serve", "--steps", str(args.steps),
-            "--threads", str(args.threads), "--settle", str(args.settle), "--scenario", args.scenario]
+    base = [
+        sys.executable,
+        str(Path(__file__).resolve()),
+        "--serve",
+        "--steps",
+        str(args.steps),
+        "--threads",
+        str(args.threads),
+        "--settle",
+        str(args.settle),
+        "--scenario",
+        args.scenario,
+    ]
     base += ["--checkpoint", args.checkpoint] if args.checkpoint else []
     for e in args.extra:
         base += ["--set", e]
@@ -179,7 +209,7 @@ def compare(args):
     head = {k: json.loads(p.stdout.readline()) for k, p in procs.items()}
     times = {k: [] for k in procs}
     for r in range(args.rounds + 1):
-        for name in (("before", "after") if r % 2 == 0 else ("after", "before")):
+        for name in ("before", "after") if r % 2 == 0 else ("after", "before"):
             p = procs[name]
             p.stdin.write("go\n")
             p.stdin.flush()
@@ -193,8 +223,10 @@ def compare(args):
     b, a = np.array(times["before"]), np.array(times["after"])
     print(machine_line())
     print(f"before: {head['before']['package']}; after: {head['after']['package']}")
-    print(f"{head['after']['origin']}; {args.threads} numba thread(s); {args.rounds} rounds of {args.steps} steps each, "
-          f"interleaved; load average {os.getloadavg()[0]:.1f}")
+    print(
+        f"{head['after']['origin']}; {args.threads} numba thread(s); {args.rounds} rounds of {args.steps} steps each, "
+        f"interleaved; load average {os.getloadavg()[0]:.1f}"
+    )
     print(f"before ({args.before}): {1e3 * np.median(b):.3f} ms/step CPU [{1e3 * b.min():.3f}-{1e3 * b.max():.3f}]")
     print(f"after (working tree): {1e3 * np.median(a):.3f} ms/step CPU [{1e3 * a.min():.3f}-{1e3 * a.max():.3f}]")
     r = b / a
@@ -231,10 +263,14 @@ def main(argv=None):
     parts, calls = profile(sim, args.steps)
     total = sum(parts.values())
     print(machine_line())
-    print(f"{origin}; {sim.state.n_rods} rods, {active} carrying current at the end; {args.threads} numba "
-          f"thread(s); load average {os.getloadavg()[0]:.1f}")
-    print(f"CPU time per step: {1e3 * plain:.3f} ms without the profiler, {1e3 * total / args.steps:.3f} ms "
-          f"with it ({args.steps} steps each)\n")
+    print(
+        f"{origin}; {sim.state.n_rods} rods, {active} carrying current at the end; {args.threads} numba "
+        f"thread(s); load average {os.getloadavg()[0]:.1f}"
+    )
+    print(
+        f"CPU time per step: {1e3 * plain:.3f} ms without the profiler, {1e3 * total / args.steps:.3f} ms "
+        f"with it ({args.steps} steps each)\n"
+    )
     print("| part | ms/step | share |")
     print("|---|---|---|")
     for part, _ in PARTS:
@@ -244,11 +280,20 @@ def main(argv=None):
     top = sorted(calls.items(), key=lambda kv: -kv[1])
     print("kernel calls per 1000 steps: " + ", ".join(f"{k} {1000 * v / args.steps:.0f}" for k, v in top[:14]))
     if args.json:
-        Path(args.json).write_text(json.dumps({"machine": machine(), "origin": origin, "steps": args.steps,
-                                               "ms_per_step": 1e3 * plain, "active_rods": active,
-                                               "parts_ms_per_step": {k: 1e3 * v / args.steps
-                                                                     for k, v in parts.items()},
-                                               "kernel_calls": calls}, indent=1))
+        Path(args.json).write_text(
+            json.dumps(
+                {
+                    "machine": machine(),
+                    "origin": origin,
+                    "steps": args.steps,
+                    "ms_per_step": 1e3 * plain,
+                    "active_rods": active,
+                    "parts_ms_per_step": {k: 1e3 * v / args.steps for k, v in parts.items()},
+                    "kernel_calls": calls,
+                },
+                indent=1,
+            )
+        )
 
 
 if __name__ == "__main__":

@@ -16,6 +16,7 @@ Two tables, each with its peer measured in the same run:
 
 The CPU model and instruction-set flags are printed first.
 """
+
 import argparse
 import sys
 import time

@@ -26,6 +26,7 @@ compiles AVX2 code on any x86 host). Without OpenMM the peer is skipped with a n
 written by ``--json`` (e.g. one run on 1 rank and one under ``mpiexec -n 2``), with the
 peer's figures of the same runs and an N log N guide.
 """
+
 import argparse
 import json
 import sys
@@ -67,7 +68,9 @@ def tree_error(sim, theta, rng):
 
 def build(path, n_rods, method, extra=()):
     """The simulation of one size and method, warmed up (compilation, neighbour lists, the RK4 start)."""
-    sc = load_scenario(path, overrides=list(scene(path, n_rods, extra).overrides) + [f"forces.tip_magnetic.method={method}"])
+    sc = load_scenario(
+        path, overrides=list(scene(path, n_rods, extra).overrides) + [f"forces.tip_magnetic.method={method}"]
+    )
     sim = Simulation.from_scenario(sc, timing=True, comm=world)
     sim.step(3)
     return sim
@@ -97,12 +100,22 @@ def main(argv=None):
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "fig2.toml"))
     ap.add_argument("--rods", type=int, nargs="+", default=[1200, 6000, 24000, 100000])
     ap.add_argument("--method", nargs="+", choices=["direct", "tree"], default=["direct", "tree"])
-    ap.add_argument("--step-seconds", type=float, default=4.0,
-                    help="time about this long per block of steps (at least 2 steps, at most 200)")
+    ap.add_argument(
+        "--step-seconds",
+        type=float,
+        default=4.0,
+        help="time about this long per block of steps (at least 2 steps, at most 200)",
+    )
     ap.add_argument("--repeat", type=int, default=5, help="blocks of steps per figure, ours and the peer's in turn")
     ap.add_argument("--no-peer", action="store_true", help="do not time the peer (OpenMM)")
-    ap.add_argument("--set", dest="extra", action="append", default=[], metavar="KEY=VALUE",
-                    help="change the scene for every size, e.g. --set integrator.slow_every=1 (repeatable)")
+    ap.add_argument(
+        "--set",
+        dest="extra",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="change the scene for every size, e.g. --set integrator.slow_every=1 (repeatable)",
+    )
     ap.add_argument("--json", help="write the rows to this JSON file (rank 0)")
     ap.add_argument("--plot", help="draw ms/step against rods from --from-json files into this PNG")
     ap.add_argument("--from-json", nargs="+", default=[], help="JSON files of earlier runs for --plot")
@@ -120,9 +133,11 @@ def main(argv=None):
     elif not args.no_peer and not OpenMMPeer.available():
         say(OpenMMPeer.missing())
     say(machine_line())
-    say(f"{world.size} MPI rank(s) x {threads} numba threads; scenario {args.scenario}; "
+    say(
+        f"{world.size} MPI rank(s) x {threads} numba threads; scenario {args.scenario}; "
         f"tree opening angle {THETA} (the default); {args.repeat} repeats, median [min-max]"
-        + (f"; {' '.join(args.extra)}" if args.extra else ""))
+        + (f"; {' '.join(args.extra)}" if args.extra else "")
+    )
     rng = np.random.default_rng(0)
     rows = []
     for n in args.rods:
@@ -150,10 +165,19 @@ def main(argv=None):
                     theirs.append(wall)
                     theirs_cpu.append(cpu)
             med, text = summary(ours)
-            row = {"rods": n, "method": method, "ranks": world.size, "threads": threads,
-                   "slow_every": sim.params.integrator.slow_every, "steps": steps,
-                   "ms_per_step": med, "ms_all": ours, "ms_text": text, "tip_share": float(np.median(tips)),
-                   "cpu_ms_all": ours_cpu}
+            row = {
+                "rods": n,
+                "method": method,
+                "ranks": world.size,
+                "threads": threads,
+                "slow_every": sim.params.integrator.slow_every,
+                "steps": steps,
+                "ms_per_step": med,
+                "ms_all": ours,
+                "ms_text": text,
+                "tip_share": float(np.median(tips)),
+                "cpu_ms_all": ours_cpu,
+            }
             if method == "direct":
                 direct_ms = med
             if method == "tree" and world.rank == 0:
@@ -173,8 +197,10 @@ def main(argv=None):
             say(_fmt(row), flush=True)
             if args.json and world.rank == 0:  # after every row, so that an interrupted run keeps its figures
                 _write(args, rows)
-    say("\n| rods | tip-tip sum | ranks x threads | ms per step | tip-tip share | tree median / p99 error "
-        "| speed-up over direct | peer ms per step | ratio to the peer (ours / peer) | ratio of CPU time |")
+    say(
+        "\n| rods | tip-tip sum | ranks x threads | ms per step | tip-tip share | tree median / p99 error "
+        "| speed-up over direct | peer ms per step | ratio to the peer (ours / peer) | ratio of CPU time |"
+    )
     say("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         say(_fmt(r, markdown=True))
@@ -182,17 +208,25 @@ def main(argv=None):
 
 
 def _write(args, rows):
-    Path(args.json).write_text(json.dumps({"scenario": args.scenario, "machine": machine(),
-                                           "extra": args.extra, "rows": rows}, indent=1))
+    Path(args.json).write_text(
+        json.dumps({"scenario": args.scenario, "machine": machine(), "extra": args.extra, "rows": rows}, indent=1)
+    )
 
 
 def _fmt(r, markdown=False):
     err = f"{r['median_error']:.1e} / {r['p99_error']:.1e}" if "median_error" in r else ""
-    cells = [str(r["rods"]), r["method"], f"{r['ranks']} x {r['threads']}", r["ms_text"],
-             f"{r['tip_share']:.0%}", err,
-             f"{r['vs_direct']:.2f}" if "vs_direct" in r else "",
-             r.get("peer_text", "(no peer)"), r.get("vs_peer_text", ""),
-             f"{r['vs_peer_cpu']:.2f}" if "vs_peer_cpu" in r else ""]
+    cells = [
+        str(r["rods"]),
+        r["method"],
+        f"{r['ranks']} x {r['threads']}",
+        r["ms_text"],
+        f"{r['tip_share']:.0%}",
+        err,
+        f"{r['vs_direct']:.2f}" if "vs_direct" in r else "",
+        r.get("peer_text", "(no peer)"),
+        r.get("vs_peer_text", ""),
+        f"{r['vs_peer_cpu']:.2f}" if "vs_peer_cpu" in r else "",
+    ]
     return ("| " + " | ".join(cells) + " |") if markdown else "  ".join(cells)
 
 
@@ -210,10 +244,17 @@ def plot(files, out):
             if pts:
                 r0 = next(r for r in rows if r["method"] == method)
                 x, y = zip(*pts)
-                ax.loglog(x, y, "o-" if method == "tree" else "s--",
-                          label=f"{method}, {r0['ranks']} rank(s) x {r0['threads']} thread(s)"
-                          + (f", slow sums every {r0['slow_every']} steps" if r0.get("slow_every", 1) > 1
-                             else ", every term every step"))
+                ax.loglog(
+                    x,
+                    y,
+                    "o-" if method == "tree" else "s--",
+                    label=f"{method}, {r0['ranks']} rank(s) x {r0['threads']} thread(s)"
+                    + (
+                        f", slow sums every {r0['slow_every']} steps"
+                        if r0.get("slow_every", 1) > 1
+                        else ", every term every step"
+                    ),
+                )
     peer = {}
     for f in files:
         for r in json.loads(Path(f).read_text())["rows"]:

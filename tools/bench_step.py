@@ -13,6 +13,7 @@ in the same run, the tip-tip direct sum alone: its tip pairs per second per core
 and the ratio of a full step to it. Under ``mpiexec`` the per-term times are rank 0's,
 and ``gather`` is the time its force rows take to reach the other ranks.
 """
+
 import argparse
 import json
 import os
@@ -52,14 +53,27 @@ def main():
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "fig2.toml"))
     ap.add_argument("--rods", type=int, nargs="+", default=[1200, 6000])
     ap.add_argument("--steps", type=int, default=200)
-    ap.add_argument("--compare", action="store_true",
-                    help="run 1 rank x 1 thread, 2 ranks x 1 thread and 1 rank x 2 threads; print one table")
-    ap.add_argument("--repeat", type=int, default=1,
-                    help="with --compare: run the configurations this many times in turn and keep each one's "
-                         "fastest (the machine is shared: the minimum is the least disturbed run)")
+    ap.add_argument(
+        "--compare",
+        action="store_true",
+        help="run 1 rank x 1 thread, 2 ranks x 1 thread and 1 rank x 2 threads; print one table",
+    )
+    ap.add_argument(
+        "--repeat",
+        type=int,
+        default=1,
+        help="with --compare: run the configurations this many times in turn and keep each one's "
+        "fastest (the machine is shared: the minimum is the least disturbed run)",
+    )
     ap.add_argument("--json", action="store_true", help="print only a JSON line of ms/step per size (rank 0)")
-    ap.add_argument("--set", dest="extra", action="append", default=[], metavar="KEY=VALUE",
-                    help="change the scene, e.g. --set integrator.slow_every=1 (repeatable)")
+    ap.add_argument(
+        "--set",
+        dest="extra",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="change the scene, e.g. --set integrator.slow_every=1 (repeatable)",
+    )
     args = ap.parse_args()
     if args.compare:
         return compare(args)
@@ -91,12 +105,16 @@ def main():
         world.Barrier()
         pairs = (2 * n) ** 2 / direct / threads
         evals = ff.calls["tip_magnetic"] / max(1, sim.state.step)
-        say(f"\n{n} rods: {per_step * 1e3:.2f} ms/step ({1 / per_step:.0f} steps/s); "
+        say(
+            f"\n{n} rods: {per_step * 1e3:.2f} ms/step ({1 / per_step:.0f} steps/s); "
             f"tip-tip direct sum alone {direct * 1e3:.2f} ms = {pairs / 1e9:.2f}e9 tip pairs/s/core; "
-            f"step / direct-sum ratio {per_step / direct:.2f}")
+            f"step / direct-sum ratio {per_step / direct:.2f}"
+        )
         for name, sec in sorted(ff.seconds.items(), key=lambda kv: -kv[1]):
             say(f"    {name:16s} {sec / steps * 1e3:8.3f} ms/step")
-        say(f"    (force evaluations per step: {evals:.2f}; Yukawa cut-off {ff.describe().get('yukawa_cutoff', 0):.2f})")
+        say(
+            f"    (force evaluations per step: {evals:.2f}; Yukawa cut-off {ff.describe().get('yukawa_cutoff', 0):.2f})"
+        )
         rows.append((n, per_step * 1e3, 1 / per_step, direct * 1e3, pairs / 1e9))
     if args.json:
         if world.rank == 0:
@@ -111,8 +129,18 @@ def main():
 def compare(args):
     """Run this tool once per entry of CONFIGS (under mpiexec for several ranks) and tabulate ms/step."""
     mpiexec = Path(sys.executable).parent / "mpiexec"
-    base = [sys.executable, str(Path(__file__).resolve()), "--json", "--steps", str(args.steps),
-            "--scenario", args.scenario, "--rods", *map(str, args.rods), *(a for e in args.extra for a in ("--set", e))]
+    base = [
+        sys.executable,
+        str(Path(__file__).resolve()),
+        "--json",
+        "--steps",
+        str(args.steps),
+        "--scenario",
+        args.scenario,
+        "--rods",
+        *map(str, args.rods),
+        *(a for e in args.extra for a in ("--set", e)),
+    ]
     results = [{} for _ in CONFIGS]
     for _ in range(args.repeat):
         for best, (label, ranks, threads) in zip(results, CONFIGS):
@@ -123,8 +151,11 @@ def compare(args):
             print(f"{label}: {got}", file=sys.stderr, flush=True)
             for n, ms in got.items():
                 best[n] = min(ms, best.get(n, float("inf")))
-    print("| rods | " + " | ".join(f"{label} (ms/step)" for label, _, _ in CONFIGS)
-          + " | speed-up, 2 ranks | speed-up, 2 threads |")
+    print(
+        "| rods | "
+        + " | ".join(f"{label} (ms/step)" for label, _, _ in CONFIGS)
+        + " | speed-up, 2 ranks | speed-up, 2 threads |"
+    )
     print("|---" * (len(CONFIGS) + 3) + "|")
     for n in args.rods:
         ms = [r[str(n)] for r in results]

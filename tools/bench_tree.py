@@ -25,6 +25,7 @@ The last table gives, per size, the fastest setting with median error <= the
 ``--target`` error, and the crossover size where the tree overtakes the direct
 sum (log-log interpolation of the speed-up between sizes).
 """
+
 import argparse
 import sys
 import time
@@ -173,9 +174,11 @@ def main():
                             # it and the first measurement, both minima over runs
                             t_ref = min(t_direct, ref.seconds(max(1, args.reps - 1)))
                             speedup = t_ref / (t_build + t_eval)
-                            print(f" {order:5d} {leaf:4d} {group:5d} {theta:5.2f} {1e3 * t_build:10.1f} "
-                                  f"{1e3 * t_eval:10.1f} {med:12.2e} {p99:10.2e} {1e3 * t_ref:11.1f} {speedup:9.2f}",
-                                  flush=True)
+                            print(
+                                f" {order:5d} {leaf:4d} {group:5d} {theta:5.2f} {1e3 * t_build:10.1f} "
+                                f"{1e3 * t_eval:10.1f} {med:12.2e} {p99:10.2e} {1e3 * t_ref:11.1f} {speedup:9.2f}",
+                                flush=True,
+                            )
                             if med <= args.target and (best is None or speedup > best[0]):
                                 best = (speedup, order, leaf, group, theta, t_build, t_eval, med, p99, t_ref)
             summary.append((config, n_rods, best))
@@ -186,8 +189,10 @@ def main():
             print(f" {config:8s} {n_rods:6d}  none reached the target")
             continue
         s, order, leaf, group, theta, tb, te, med, p99, tr = best
-        print(f" {config:8s} {n_rods:6d} {order:5d} {leaf:4d} {group:5d} {theta:5.2f} {1e3 * tb:10.1f} {1e3 * te:10.1f} "
-              f"{med:12.2e} {p99:10.2e} {1e3 * tr:11.1f} {s:9.2f}")
+        print(
+            f" {config:8s} {n_rods:6d} {order:5d} {leaf:4d} {group:5d} {theta:5.2f} {1e3 * tb:10.1f} {1e3 * te:10.1f} "
+            f"{med:12.2e} {p99:10.2e} {1e3 * tr:11.1f} {s:9.2f}"
+        )
     for config in args.config:
         rows = [(n, b[0]) for c, n, b in summary if c == config and b is not None]
         cross = crossover([r[0] for r in rows], [r[1] for r in rows])

@@ -7,6 +7,7 @@ NAME_field.png, NAME_flux.png and NAME_timeline.png (last frame unless said othe
 with ``--claims`` the time series NAME_moment.png, NAME_fractal.png and NAME_skeleton.png
 (docs/model.md "Measures of the paper's claims"), through ``selfas-graph plot``.
 """
+
 import argparse
 import sys
 from pathlib import Path
@@ -27,8 +28,14 @@ def main(argv=None):
     out = Path(args.outdir)
     out.mkdir(parents=True, exist_ok=True)
     name = args.prefix or Path(args.run).stem
-    jobs = [("snapshot", "0", "snapshot_start"), ("snapshot", "-1", "snapshot_end"), ("density", "-1", "density"),
-            ("field", "-1", "field"), ("flux", "-1", "flux"), ("timeline", None, "timeline")]
+    jobs = [
+        ("snapshot", "0", "snapshot_start"),
+        ("snapshot", "-1", "snapshot_end"),
+        ("density", "-1", "density"),
+        ("field", "-1", "field"),
+        ("flux", "-1", "flux"),
+        ("timeline", None, "timeline"),
+    ]
     if args.claims:
         jobs += [(kind, None, kind) for kind in ("moment", "fractal", "skeleton")]
     for kind, frame, label in jobs:

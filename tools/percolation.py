@@ -41,6 +41,7 @@ cannot be placed in the box (checked with the first seed before any run) is skip
 a message naming it. To keep run files and summarise other measures, run
 ``selfas-graph ensemble SCENARIO --set rods.count=N`` per density instead.
 """
+
 import argparse
 import json
 import math
@@ -59,6 +60,7 @@ STATUSES = ("short_circuit", "censored", "failed", "unplaceable", "error", "inte
 
 
 # ----------------------------------------------------------------------------- statistics
+
 
 def _none(v):
     return None if v is None or (isinstance(v, float) and math.isnan(v)) else float(v)
@@ -93,6 +95,7 @@ def summarise(point, runs):
 
 # ----------------------------------------------------------------------------- planning
 
+
 def _positive(kind):
     def parse(text):
         try:
@@ -102,36 +105,77 @@ def _positive(kind):
         if not (v > 0 and math.isfinite(v)):
             raise argparse.ArgumentTypeError(f"{text} must be positive")
         return v
+
     return parse
 
 
 def build_parser():
     ap = argparse.ArgumentParser(
-        prog="percolation.py", description=__doc__.splitlines()[0],
-        epilog="density = rods / box volume; volume fraction = rods * pi (D/2)^2 L / box volume")
+        prog="percolation.py",
+        description=__doc__.splitlines()[0],
+        epilog="density = rods / box volume; volume fraction = rods * pi (D/2)^2 L / box volume",
+    )
     ap.add_argument("scenario", nargs="?", help="scenario TOML file (not with --compare)")
     grp = ap.add_mutually_exclusive_group()
-    grp.add_argument("--densities", type=_positive(float), nargs="+", metavar="RHO",
-                     help="number densities, rods per unit box volume (L^-3)")
-    grp.add_argument("--fractions", type=_positive(float), nargs="+", metavar="PHI",
-                     help="rod volume fractions rods * pi (D/2)^2 L / V")
+    grp.add_argument(
+        "--densities",
+        type=_positive(float),
+        nargs="+",
+        metavar="RHO",
+        help="number densities, rods per unit box volume (L^-3)",
+    )
+    grp.add_argument(
+        "--fractions",
+        type=_positive(float),
+        nargs="+",
+        metavar="PHI",
+        help="rod volume fractions rods * pi (D/2)^2 L / V",
+    )
     grp.add_argument("--counts", type=_positive(int), nargs="+", metavar="N", help="rod counts")
     ap.add_argument("--seeds", type=_positive(int), metavar="K", help="runs per density")
-    ap.add_argument("--first-seed", type=int, default=None, metavar="S",
-                    help="seeds S .. S+K-1 (default: the scenario's scenario.seed)")
-    ap.add_argument("--fields", choices=("on", "off"), default="on",
-                    help="off: without the magnetic and current terms (" + ", ".join(FIELD_TERMS) + "); default on")
-    ap.add_argument("--t-max", type=_positive(float), metavar="T",
-                    help="simulated time after which a run without short circuit is censored")
+    ap.add_argument(
+        "--first-seed",
+        type=int,
+        default=None,
+        metavar="S",
+        help="seeds S .. S+K-1 (default: the scenario's scenario.seed)",
+    )
+    ap.add_argument(
+        "--fields",
+        choices=("on", "off"),
+        default="on",
+        help="off: without the magnetic and current terms (" + ", ".join(FIELD_TERMS) + "); default on",
+    )
+    ap.add_argument(
+        "--t-max",
+        type=_positive(float),
+        metavar="T",
+        help="simulated time after which a run without short circuit is censored",
+    )
     ap.add_argument("--workers", type=_positive(int), default=1, metavar="W", help="worker processes (default 1)")
-    ap.add_argument("--chunk", type=_positive(float), default=0.25, metavar="DT",
-                    help="simulated time per run() call (progress granularity; results do not depend on it)")
-    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                    help="extra scenario override for every run, as selfas-graph simulate --set")
+    ap.add_argument(
+        "--chunk",
+        type=_positive(float),
+        default=0.25,
+        metavar="DT",
+        help="simulated time per run() call (progress granularity; results do not depend on it)",
+    )
+    ap.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="extra scenario override for every run, as selfas-graph simulate --set",
+    )
     ap.add_argument("-o", "--output", metavar="JSON", help="write every run's result and the statistics here")
     ap.add_argument("--plot", metavar="PNG", help="plot fraction short-circuited vs density and the distributions")
-    ap.add_argument("--compare", nargs="+", metavar="JSON",
-                    help="draw earlier results (-o files) on one figure (--plot); runs nothing")
+    ap.add_argument(
+        "--compare",
+        nargs="+",
+        metavar="JSON",
+        help="draw earlier results (-o files) on one figure (--plot); runs nothing",
+    )
     return ap
 
 
@@ -149,8 +193,10 @@ def plan(ap, args):
     if not p.contacts.enabled:
         ap.error(f"{args.scenario}: contacts.enabled is false, so no short circuit can ever be detected")
     if p.forces.electrodes is None and p.forces.external_filament is None:
-        ap.error(f"{args.scenario}: no conductor (neither [forces.electrodes] nor [forces.external_filament]), "
-                 "so no short circuit is possible")
+        ap.error(
+            f"{args.scenario}: no conductor (neither [forces.electrodes] nor [forces.external_filament]), "
+            "so no short circuit is possible"
+        )
     box = [[float(a), float(b)] for a, b in p.placement.box]
     sides = [b - a for a, b in box]
     volume = math.prod(sides)
@@ -181,17 +227,25 @@ def plan(ap, args):
             continue
         # tips of different rods start at least dmin apart: 2n non-overlapping spheres of
         # diameter dmin with centres in the box, i.e. inside the box grown by dmin / 2
-        packed = 2 * n * math.pi / 6.0 * dmin ** 3
+        packed = 2 * n * math.pi / 6.0 * dmin**3
         room = math.prod(s + dmin for s in sides)
         if dmin > 0 and packed > _MAX_PACKING * room:
-            skip(kind, value, n, f"{2 * n} tips at least {dmin:g} apart (placement.min_tip_distance) cannot fit "
-                                 f"in the box {box} even at the densest packing")
+            skip(
+                kind,
+                value,
+                n,
+                f"{2 * n} tips at least {dmin:g} apart (placement.min_tip_distance) cannot fit "
+                f"in the box {box} even at the densest packing",
+            )
             continue
         if n > 2000:
             print(f"checking that {n} rods ({kind} {value:g}) can be placed in the box...", flush=True)
         try:
-            sc = scenario_from_text(text, path=base.path, overrides=list(args.overrides) + [
-                f"scenario.seed={first_seed}", f"rods.count={n}"])
+            sc = scenario_from_text(
+                text,
+                path=base.path,
+                overrides=list(args.overrides) + [f"scenario.seed={first_seed}", f"rods.count={n}"],
+            )
             random_state(sc.params)
         except PlacementError as exc:
             skip(kind, value, n, f"the rods cannot be placed in the box with seed {first_seed}: {exc}")
@@ -200,15 +254,29 @@ def plan(ap, args):
             skip(kind, value, n, str(exc))
             continue
         seen[n] = f"{kind} {value:g}"
-        points.append({"requested": {"by": kind, "value": value}, "count": n,
-                       "number_density": n / volume, "volume_fraction": n * rod_volume / volume})
+        points.append(
+            {
+                "requested": {"by": kind, "value": value},
+                "count": n,
+                "number_density": n / volume,
+                "volume_fraction": n * rod_volume / volume,
+            }
+        )
     points.sort(key=lambda pt: pt["count"])
-    meta = {"box": box, "box_volume": volume, "rod_diameter": p.rods.diameter, "rod_volume": rod_volume,
-            "min_tip_distance": dmin, "first_seed": first_seed, "dt": p.integrator.dt}
+    meta = {
+        "box": box,
+        "box_volume": volume,
+        "rod_diameter": p.rods.diameter,
+        "rod_volume": rod_volume,
+        "min_tip_distance": dmin,
+        "first_seed": first_seed,
+        "dt": p.integrator.dt,
+    }
     return base, points, skipped, meta
 
 
 # ----------------------------------------------------------------------------- running
+
 
 def run_all(tasks, workers, report):
     """Run every task on ``workers`` processes (in this process if 1), one numba thread each; results in task order."""
@@ -221,9 +289,21 @@ def run_all(tasks, workers, report):
         done = run_tasks(run_to_short_circuit, [tasks[i] for i in order], pool, report)
     results = [None] * len(tasks)
     for i, r in zip(order, done):
-        results[i] = r if r is not None else {**{k: tasks[i][k] for k in ("count", "seed")}, "status": "error",
-                                              "time": None, "t_end": 0.0, "steps": 0, "events": 0,
-                                              "filament_rods": 0, "wall_seconds": 0.0, "message": "not run"}
+        results[i] = (
+            r
+            if r is not None
+            else {
+                **{k: tasks[i][k] for k in ("count", "seed")},
+                "status": "error",
+                "time": None,
+                "t_end": 0.0,
+                "steps": 0,
+                "events": 0,
+                "filament_rods": 0,
+                "wall_seconds": 0.0,
+                "message": "not run",
+            }
+        )
         if r is None:
             results[i]["status"] = "interrupted"
     return results
@@ -235,21 +315,32 @@ def _fmt_t(v, t_max):
 
 def print_table(result):
     t_max = result["t_max"]
-    print(f"\n{result['scenario']}: box volume {result['box_volume']:g}, rod D/L = {result['rod_diameter']:g}, "
-          f"t_max = {t_max:g}, seeds {result['seeds'][0]}..{result['seeds'][-1]}, "
-          f"{result['threads_per_run']} numba thread per run")
-    print("short-circuit time quartiles: Kaplan-Meier, runs without a short circuit censored at t_max "
-          f"(failed runs at their failure time); '>{t_max:g}' = not reached by t_max\n")
-    head = ("| rods | rods/V | vol. fraction | runs | short-circuited by T | fraction (95% CI) | q25 | median "
-            "| q75 | censored | failed |")
+    print(
+        f"\n{result['scenario']}: box volume {result['box_volume']:g}, rod D/L = {result['rod_diameter']:g}, "
+        f"t_max = {t_max:g}, seeds {result['seeds'][0]}..{result['seeds'][-1]}, "
+        f"{result['threads_per_run']} numba thread per run"
+    )
+    print(
+        "short-circuit time quartiles: Kaplan-Meier, runs without a short circuit censored at t_max "
+        f"(failed runs at their failure time); '>{t_max:g}' = not reached by t_max\n"
+    )
+    head = (
+        "| rods | rods/V | vol. fraction | runs | short-circuited by T | fraction (95% CI) | q25 | median "
+        "| q75 | censored | failed |"
+    )
     print(head)
     print("|" + "---|" * (head.count("|") - 1))
     for d in result["densities"]:
-        frac = "n/a" if d["fraction"] is None else (
-            f"{d['fraction']:.2f} ({d['fraction_ci95'][0]:.2f}-{d['fraction_ci95'][1]:.2f})")
-        print(f"| {d['count']} | {d['number_density']:.4g} | {d['volume_fraction']:.3g} | {d['runs']} "
-              f"| {d['short_circuited']}/{d['runs']} | {frac} | {_fmt_t(d['q25'], t_max)} "
-              f"| {_fmt_t(d['median'], t_max)} | {_fmt_t(d['q75'], t_max)} | {d['censored']} | {d['failed']} |")
+        frac = (
+            "n/a"
+            if d["fraction"] is None
+            else (f"{d['fraction']:.2f} ({d['fraction_ci95'][0]:.2f}-{d['fraction_ci95'][1]:.2f})")
+        )
+        print(
+            f"| {d['count']} | {d['number_density']:.4g} | {d['volume_fraction']:.3g} | {d['runs']} "
+            f"| {d['short_circuited']}/{d['runs']} | {frac} | {_fmt_t(d['q25'], t_max)} "
+            f"| {_fmt_t(d['median'], t_max)} | {_fmt_t(d['q75'], t_max)} | {d['censored']} | {d['failed']} |"
+        )
     for s in result["skipped"]:
         print(f"skipped {s['requested']['by']} {s['requested']['value']:g}: {s['reason']}")
     bad = [r for r in result["runs"] if r["status"] in ("unplaceable", "error", "interrupted")]
@@ -260,6 +351,7 @@ def print_table(result):
 def plot(result, path):
     """Fraction short-circuited vs density, and the distribution of short-circuit times per density."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -294,7 +386,9 @@ def plot(result, path):
     ax2.set_ylim(-0.03, 1.03)
     ax2.set_xlabel("short-circuit time (t$_0$)")
     ax2.set_ylabel("fraction of runs short-circuited (Kaplan-Meier)")
-    ax2.set_title("Distribution of short-circuit times\n(runs without one by t$_{max}$ are censored: arrow)", fontsize=10)
+    ax2.set_title(
+        "Distribution of short-circuit times\n(runs without one by t$_{max}$ are censored: arrow)", fontsize=10
+    )
     ax2.grid(alpha=0.3)
     ax2.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, labelspacing=0.9)
     fields = "" if fields_of(result) == "on" else ", without the magnetic and current terms"
@@ -315,6 +409,7 @@ def plot_compare(results, path):
     """Fraction short-circuited by t_max and the median short-circuit time against the volume fraction,
     one curve per result (e.g. the fields on and off)."""
     import matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -325,8 +420,10 @@ def plot_compare(results, path):
         frac = [d["fraction"] if d["fraction"] is not None else float("nan") for d in dens]
         lo = [f - d["fraction_ci95"][0] if d["fraction_ci95"] else 0.0 for f, d in zip(frac, dens)]
         hi = [d["fraction_ci95"][1] - f if d["fraction_ci95"] else 0.0 for f, d in zip(frac, dens)]
-        label = (f"fields {fields_of(res)} ({res['scenario_name']}, {len(res['seeds'])} seeds per point, "
-                 f"t$_{{max}}$ = {res['t_max']:g} t$_0$)")
+        label = (
+            f"fields {fields_of(res)} ({res['scenario_name']}, {len(res['seeds'])} seeds per point, "
+            f"t$_{{max}}$ = {res['t_max']:g} t$_0$)"
+        )
         (line,) = ax1.plot(phi, frac, lw=1.2, marker="o", ms=3.5, label=label)
         ax1.errorbar(phi, frac, yerr=[lo, hi], fmt="none", ecolor=line.get_color(), capsize=3, lw=0.8)
         med = [(d["volume_fraction"], d["median"], d["q25"], d["q75"]) for d in dens if d["median"] is not None]
@@ -379,9 +476,16 @@ def main(argv=None):
             ap.error('--plot needs matplotlib: pip install "selfas-graph[plot]"')
     if args.compare:
         return compare_main(ap, args)
-    missing = [name for name, v in (("SCENARIO", args.scenario), ("--seeds", args.seeds), ("--t-max", args.t_max),
-                                    ("--densities, --fractions or --counts",
-                                     args.densities or args.fractions or args.counts)) if not v]
+    missing = [
+        name
+        for name, v in (
+            ("SCENARIO", args.scenario),
+            ("--seeds", args.seeds),
+            ("--t-max", args.t_max),
+            ("--densities, --fractions or --counts", args.densities or args.fractions or args.counts),
+        )
+        if not v
+    ]
     if missing:
         ap.error("required: " + ", ".join(missing) + " (or --compare JSON ... --plot PNG)")
     if args.fields == "off":
@@ -392,11 +496,25 @@ def main(argv=None):
     from selfas_graph import __version__
 
     seeds = [meta["first_seed"] + k for k in range(args.seeds)]
-    tasks = [{"text": base.text, "path": str(base.path), "count": pt["count"], "seed": s, "echo": ("count",),
-              "overrides": [*args.overrides, f"scenario.seed={s}", f"rods.count={pt['count']}"],
-              "t_max": args.t_max, "chunk": args.chunk} for pt in points for s in seeds]
-    print(f"{len(points)} densities x {len(seeds)} seeds = {len(tasks)} runs to t = {args.t_max:g} "
-          f"on {args.workers} worker(s)", flush=True)
+    tasks = [
+        {
+            "text": base.text,
+            "path": str(base.path),
+            "count": pt["count"],
+            "seed": s,
+            "echo": ("count",),
+            "overrides": [*args.overrides, f"scenario.seed={s}", f"rods.count={pt['count']}"],
+            "t_max": args.t_max,
+            "chunk": args.chunk,
+        }
+        for pt in points
+        for s in seeds
+    ]
+    print(
+        f"{len(points)} densities x {len(seeds)} seeds = {len(tasks)} runs to t = {args.t_max:g} "
+        f"on {args.workers} worker(s)",
+        flush=True,
+    )
     done = [0]
 
     def report(r):
@@ -407,20 +525,30 @@ def main(argv=None):
             what = f"no short circuit by t = {r['t_end']:.4g}"
         else:
             what = f"{r['status']} at t = {r['t_end']:.4g}: {r['message']}"
-        print(f"[{done[0]}/{len(tasks)}] {r['count']} rods, seed {r['seed']}: {what} ({r['wall_seconds']:.1f} s)",
-              flush=True)
+        print(
+            f"[{done[0]}/{len(tasks)}] {r['count']} rods, seed {r['seed']}: {what} ({r['wall_seconds']:.1f} s)",
+            flush=True,
+        )
 
     t0 = time.perf_counter()
     runs = run_all(tasks, args.workers, report)
     runs.sort(key=lambda r: (r["count"], r["seed"]))
     result = {
-        "scenario": str(args.scenario), "scenario_name": base.params.scenario.name, "version": __version__,
-        "overrides": list(args.overrides), "fields": args.fields, "t_max": args.t_max, "chunk": args.chunk, "seeds": seeds,
-        "workers": args.workers, "threads_per_run": 1, **meta,
+        "scenario": str(args.scenario),
+        "scenario_name": base.params.scenario.name,
+        "version": __version__,
+        "overrides": list(args.overrides),
+        "fields": args.fields,
+        "t_max": args.t_max,
+        "chunk": args.chunk,
+        "seeds": seeds,
+        "workers": args.workers,
+        "threads_per_run": 1,
+        **meta,
         "censoring": "status 'censored': no short circuit by t_max (censored at t_end = t_max); 'failed': a numerical "
-                     "failure at t_end (censored there); 'unplaceable' and 'error' runs are left out of the "
-                     "statistics. q25/median/q75 are Kaplan-Meier quantiles, null when not reached by t_max; "
-                     "km lists (t, F(t)) at every short-circuit time",
+        "failure at t_end (censored there); 'unplaceable' and 'error' runs are left out of the "
+        "statistics. q25/median/q75 are Kaplan-Meier quantiles, null when not reached by t_max; "
+        "km lists (t, F(t)) at every short-circuit time",
         "densities": [summarise(pt, [r for r in runs if r["count"] == pt["count"]]) for pt in points],
         "skipped": skipped,
         "runs": runs,

@@ -10,6 +10,7 @@ B_ext alone on the rod currents (field taken at the rod centre). Rods jiggle in 
 so one frame's contact forces are noisy; the standard error over frames says how much. Used for
 the Fig. 2 runs in docs/results.md.
 """
+
 import sys
 from pathlib import Path
 
@@ -89,8 +90,10 @@ def main(path, frames):
         print(f"  {name:34s} {v[:, 0].mean():+9.4f} +- {err[0]:.4f} {v[:, 1].mean():+9.4f} +- {err[1]:.4f}")
     s = x[1::2] - x[0::2]
     J = np.where(fil, last["current"], 0.0)
-    print(f"sum of J s_z over the filament rods (last frame): {float((J * s[:, 2])[fil].sum()):+.3f} "
-          "(negative: the network current runs along -z)")
+    print(
+        f"sum of J s_z over the filament rods (last frame): {float((J * s[:, 2])[fil].sum()):+.3f} "
+        "(negative: the network current runs along -z)"
+    )
 
 
 if __name__ == "__main__":

@@ -20,6 +20,7 @@ Use it before committing a change that should keep a run's results: e.g. ::
 
 (the second scene is case (ii) with currents flowing from t = 3.5 on).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -48,8 +49,19 @@ sys.exit(main())
 
 def _simulate(code: Path, scenario: str, sets: list[str], out: Path, threads: int, cwd: Path) -> None:
     env = dict(os.environ, PYTHONPATH=str(code), NUMBA_NUM_THREADS=str(threads), OMP_NUM_THREADS=str(threads))
-    cmd = [sys.executable, "-c", RUNNER, str(code), "simulate", str(Path(scenario).resolve()), "-o", str(out),
-           "--progress", "none", "--force"]
+    cmd = [
+        sys.executable,
+        "-c",
+        RUNNER,
+        str(code),
+        "simulate",
+        str(Path(scenario).resolve()),
+        "-o",
+        str(out),
+        "--progress",
+        "none",
+        "--force",
+    ]
     for s in sets:
         cmd += ["--set", s]
     r = subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True)
@@ -69,8 +81,9 @@ def main(argv=None) -> int:
         tmp = Path(tmp)
         base = tmp / "code"
         base.mkdir()
-        archive = subprocess.run(["git", "archive", args.commit, "selfas_graph"], cwd=ROOT, capture_output=True,
-                                 check=True).stdout
+        archive = subprocess.run(
+            ["git", "archive", args.commit, "selfas_graph"], cwd=ROOT, capture_output=True, check=True
+        ).stdout
         subprocess.run(["tar", "-x", "-C", str(base)], input=archive, check=True)
         out_dir = (args.keep or tmp).resolve()
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -86,9 +99,11 @@ def main(argv=None) -> int:
             diffs = compare(before, after, counts=counts)
             for line in diffs:
                 print(f"  {line}")
-            print(f"{spec}: {args.commit} and the working tree: {counts['datasets']} datasets and "
-                  f"{counts['attributes']} attributes compared, "
-                  + ("the same, bit for bit" if not diffs else f"{len(diffs)} differences"))
+            print(
+                f"{spec}: {args.commit} and the working tree: {counts['datasets']} datasets and "
+                f"{counts['attributes']} attributes compared, "
+                + ("the same, bit for bit" if not diffs else f"{len(diffs)} differences")
+            )
             failed += bool(diffs)
     return 1 if failed else 0
 

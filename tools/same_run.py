@@ -17,6 +17,7 @@ before and after the change (same thread count), then compare, e.g.::
     selfas-graph simulate scenarios/quick.toml -o /tmp/after.h5    # on the new one
     python tools/same_run.py /tmp/before.h5 /tmp/after.h5
 """
+
 from __future__ import annotations
 
 import argparse
@@ -26,9 +27,23 @@ import h5py
 import numpy as np
 
 #: attribute names (any group) that differ between two runs of the same scene by design
-VOLATILE = ("created", "creation_time", "date", "version", "program_version", "wall", "elapsed",
-            "steps_per_second", "hostname", "host", "cpu", "run_file", "git", "command",
-            "run_id")  # a random identifier drawn for every run
+VOLATILE = (
+    "created",
+    "creation_time",
+    "date",
+    "version",
+    "program_version",
+    "wall",
+    "elapsed",
+    "steps_per_second",
+    "hostname",
+    "host",
+    "cpu",
+    "run_file",
+    "git",
+    "command",
+    "run_id",
+)  # a random identifier drawn for every run
 
 
 def _volatile(name: str) -> bool:
@@ -104,8 +119,10 @@ def main(argv=None) -> int:
     diffs = compare(args.a, args.b, attrs=not args.ignore_attrs, counts=counts)
     for line in diffs:
         print(line)
-    print(f"{args.a} and {args.b}: {counts['datasets']} datasets and {counts['attributes']} attributes compared, "
-          + ("the same, bit for bit" if not diffs else f"{len(diffs)} differences"))
+    print(
+        f"{args.a} and {args.b}: {counts['datasets']} datasets and {counts['attributes']} attributes compared, "
+        + ("the same, bit for bit" if not diffs else f"{len(diffs)} differences")
+    )
     return 1 if diffs else 0
 
 

@@ -12,6 +12,7 @@ Usage::
 
 ``render()`` returns the text; ``tests/test_docs.py`` compares it with the file.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,6 +36,7 @@ except ImportError:  # run from a checkout without `pip install -e .`
 
 
 # ----------------------------------------------------------------------------- schema walk
+
 
 @dataclasses.dataclass
 class Key:
@@ -334,8 +336,10 @@ def _render_section(section: Section, depth: int, lines: list) -> None:
     lines.append("")
     intro = section.intro
     if section.optional:
-        intro += (f" Optional: on when the table `[{section.path}]` is present, off when it is absent"
-                  f" (`--set {section.path}=false`).")
+        intro += (
+            f" Optional: on when the table `[{section.path}]` is present, off when it is absent"
+            f" (`--set {section.path}=false`)."
+        )
     if intro:
         lines.append(intro.strip())
         lines.append("")
@@ -374,10 +378,14 @@ def render() -> str:
 
 # ----------------------------------------------------------------------------- command line
 
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description="Write docs/scenarios.md from selfas_graph.model.params.")
-    parser.add_argument("--check", action="store_true",
-                        help="do not write; exit 1 if docs/scenarios.md differs from what would be written")
+    parser.add_argument(
+        "--check",
+        action="store_true",
+        help="do not write; exit 1 if docs/scenarios.md differs from what would be written",
+    )
     args = parser.parse_args(argv)
     text = render()
     rel = OUTPUT.relative_to(ROOT)

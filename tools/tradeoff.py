@@ -25,6 +25,7 @@ integrator.bond_force (exact/paper), integrator.position_projection, integrator.
 (with ``--set integrator.slow_every=K``; also against no splitting). Prints a markdown table and writes JSON and a plot of
 error against cost, one curve per knob.
 """
+
 import argparse
 import json
 import sys
@@ -101,7 +102,8 @@ def run_once(path, overrides, duration, snap):
     t_end = duration
     contacts = {(int(r[3]), int(r[4])) for r in sim.events[n_old:] if r[2] == ev.TIP_CONTACT}
     return {
-        "position": sim.state.position.copy(), "contacts": contacts,
+        "position": sim.state.position.copy(),
+        "contacts": contacts,
         "ms_per_step": 1e3 * wall / max(sim.state.step - step_start, 1),
         "s_per_time": wall / t_end,
         "bond_error": sim.max_bond_error,
@@ -113,12 +115,21 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenario")
     ap.add_argument("--from", dest="t0", type=float, default=0.0, help="branch all runs from this time (default 0)")
-    ap.add_argument("--checkpoint", help="branch from this checkpoint file (e.g. a long run past the short circuit) "
-                                         "instead of a fresh start; --from then runs on from its time")
+    ap.add_argument(
+        "--checkpoint",
+        help="branch from this checkpoint file (e.g. a long run past the short circuit) "
+        "instead of a fresh start; --from then runs on from its time",
+    )
     ap.add_argument("--t", type=float, default=0.5, help="simulated time of each run (default 0.5)")
     ap.add_argument("--knob", nargs="+", choices=sorted(KNOBS), help="only these knobs (default: all that apply)")
-    ap.add_argument("--set", dest="base_set", action="append", default=[], metavar="KEY=VALUE",
-                    help="change the scene's defaults for every run, e.g. --set integrator.brake=split (repeatable)")
+    ap.add_argument(
+        "--set",
+        dest="base_set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="change the scene's defaults for every run, e.g. --set integrator.brake=split (repeatable)",
+    )
     ap.add_argument("--json", help="write all results to this JSON file")
     ap.add_argument("--plot", help="write the error-cost plot to this PNG file")
     args = ap.parse_args(argv)
@@ -138,8 +149,11 @@ def main(argv=None):
         sim0.run(t_end=sim0.state.time + sim0.steps_for(args.t0 - sim0.state.time) * sim0.dt)
     snap = sim0.snapshot()
     run_once(args.scenario, args.base_set, min(args.t, 0.01), snap)  # warm-up: compile every kernel before timing
-    print(f"branch point t = {sim0.state.time:g} ({len(sim0.force_field.active_rod)} rods carry current); "
-          f"each run {args.t} t0; each knob against the defaults with that knob at its tightest", flush=True)
+    print(
+        f"branch point t = {sim0.state.time:g} ({len(sim0.force_field.active_rod)} rods carry current); "
+        f"each run {args.t} t0; each knob against the defaults with that knob at its tightest",
+        flush=True,
+    )
     rows = []
     refs = {}
     for knob in knobs:
@@ -154,22 +168,40 @@ def main(argv=None):
                 row["failed"] = res["failed"]
             else:
                 diff = np.abs(res["position"] - ref["position"]).max()
-                row.update(ms_per_step=res["ms_per_step"], s_per_time=res["s_per_time"],
-                           position_error=float(diff), bond_error=res["bond_error"],
-                           energy_balance=res["energy_balance"],
-                           events_missed=len(ref["contacts"] - res["contacts"]),
-                           events_extra=len(res["contacts"] - ref["contacts"]))
+                row.update(
+                    ms_per_step=res["ms_per_step"],
+                    s_per_time=res["s_per_time"],
+                    position_error=float(diff),
+                    bond_error=res["bond_error"],
+                    energy_balance=res["energy_balance"],
+                    events_missed=len(ref["contacts"] - res["contacts"]),
+                    events_extra=len(res["contacts"] - ref["contacts"]),
+                )
             rows.append(row)
             print(_fmt_row(row), flush=True)
-    print("\n| knob | setting | ms/step | s per t0 | position error | bond error | energy balance | contacts missed/extra |")
+    print(
+        "\n| knob | setting | ms/step | s per t0 | position error | bond error | energy balance | contacts missed/extra |"
+    )
     print("|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(_fmt_row(r, markdown=True))
-    print("\nreferences (the defaults with one knob at its tightest): "
-          + "; ".join(f"{k}: {_overrides(KNOBS[k][1])} at {r['ms_per_step']:.2f} ms/step" for k, r in refs.items()))
+    print(
+        "\nreferences (the defaults with one knob at its tightest): "
+        + "; ".join(f"{k}: {_overrides(KNOBS[k][1])} at {r['ms_per_step']:.2f} ms/step" for k, r in refs.items())
+    )
     if args.json:
-        Path(args.json).write_text(json.dumps({"scenario": args.scenario, "from": args.t0, "t": args.t,
-                                               "references": {k: KNOBS[k][1] for k in refs}, "rows": rows}, indent=1))
+        Path(args.json).write_text(
+            json.dumps(
+                {
+                    "scenario": args.scenario,
+                    "from": args.t0,
+                    "t": args.t,
+                    "references": {k: KNOBS[k][1] for k in refs},
+                    "rows": rows,
+                },
+                indent=1,
+            )
+        )
     if args.plot:
         _plot(rows, args.plot)
 
@@ -179,8 +211,16 @@ def _fmt_row(r, markdown=False):
     if "failed" in r:
         cells = [r["knob"], setting, "failed: " + r["failed"], "", "", "", "", ""]
     else:
-        cells = [r["knob"], setting, f"{r['ms_per_step']:.2f}", f"{r['s_per_time']:.1f}", f"{r['position_error']:.2e}",
-                 f"{r['bond_error']:.1e}", f"{r['energy_balance']:.1e}", f"{r['events_missed']}/{r['events_extra']}"]
+        cells = [
+            r["knob"],
+            setting,
+            f"{r['ms_per_step']:.2f}",
+            f"{r['s_per_time']:.1f}",
+            f"{r['position_error']:.2e}",
+            f"{r['bond_error']:.1e}",
+            f"{r['energy_balance']:.1e}",
+            f"{r['events_missed']}/{r['events_extra']}",
+        ]
     return ("| " + " | ".join(cells) + " |") if markdown else "  ".join(cells)
 
 
@@ -192,8 +232,11 @@ def _plot(rows, out):
 
     fig, ax = plt.subplots(figsize=(7, 5))
     for knob in dict.fromkeys(r["knob"] for r in rows):
-        pts = [(r["s_per_time"], max(r["position_error"], 1e-16), r["value"]) for r in rows
-               if r["knob"] == knob and "failed" not in r]
+        pts = [
+            (r["s_per_time"], max(r["position_error"], 1e-16), r["value"])
+            for r in rows
+            if r["knob"] == knob and "failed" not in r
+        ]
         if pts:
             x, y, labels = zip(*pts)
             ax.loglog(x, y, "o-", label=knob)

@@ -6,6 +6,7 @@ Arrays in, arrays out: these functions see one frame's numpy arrays (or a run's
 observable arrays) and never open a file; reading run files is the job of
 :mod:`selfas_graph.io` and of the ``plot`` command.
 """
+
 from .diagnostics import (
     Timeline,
     auto_n_phi,

@@ -9,6 +9,7 @@ array functions of :mod:`.moments`, :mod:`.fractal` and :mod:`.skeleton`.
 Structures are rods joined by tip-tip contacts (the conductors join none), as in the
 ``topology`` command; "the largest structure" is the one with the most rods.
 """
+
 from __future__ import annotations
 
 import math
@@ -98,16 +99,24 @@ def claims_of_arrays(position, tip_charge, tip_contacts, current=None, loops=Tru
         _, node = contact_nodes(n_rods, tip_contacts)
         out["junction_charge_largest"] = float(junction_charge(tip_charge, node, label, n_s)[big])
     else:
-        for key in ("largest_moment_q", "largest_moment_q_z", "largest_moment_ratio", "unpaired_charge_largest",
-                    "junction_charge_largest"):
+        for key in (
+            "largest_moment_q",
+            "largest_moment_q_z",
+            "largest_moment_ratio",
+            "unpaired_charge_largest",
+            "junction_charge_largest",
+        ):
             out[key] = NAN
     if current is not None and n_s:
         out["largest_moment_J_z"] = float(current_moment(position, current, label, n_s)[big, 2])
         out["moment_J_z"] = float(current_moment(position, current, np.zeros(n_rods, dtype=np.int64), 1)[0, 2])
     else:
         out["largest_moment_J_z"] = NAN
-        out["moment_J_z"] = float(current_moment(position, current, np.zeros(n_rods, dtype=np.int64), 1)[0, 2]) \
-            if current is not None and n_rods else NAN
+        out["moment_J_z"] = (
+            float(current_moment(position, current, np.zeros(n_rods, dtype=np.int64), 1)[0, 2])
+            if current is not None and n_rods
+            else NAN
+        )
     _fit("fractal_dimension", mass_radius_dimension(position, rods), "fractal_r_min", "fractal_r_max", out)
     rg, rg_size = radius_of_gyration(position, label, n_s)
     _fit("rg_dimension", rg_dimension(rg_size, rg), "rg_n_min", "rg_n_max", out)

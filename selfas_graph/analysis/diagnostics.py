@@ -43,6 +43,7 @@ Two approximations, each with its own knob:
   on the quick.toml frame above, refining to 16 nodes per 0.05 L changes the flux
   by 1e-4 of its maximum, which is the rods near the plane, not smooth curvature.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -213,8 +214,9 @@ def radial_density(centre, r_max, n_bins, z_range, mask=None):
     rho = np.hypot(centre[keep, 0], centre[keep, 1])
     r_edges = np.linspace(0.0, r_max, n_bins + 1)
     # np.histogram closes the last bin on the right; keep shells half-open instead
-    count = np.bincount(np.floor(rho[rho < r_max] / r_max * n_bins).astype(np.int64).clip(0, n_bins - 1),
-                        minlength=n_bins)
+    count = np.bincount(
+        np.floor(rho[rho < r_max] / r_max * n_bins).astype(np.int64).clip(0, n_bins - 1), minlength=n_bins
+    )
     volume = np.pi * (r_edges[1:] ** 2 - r_edges[:-1] ** 2) * (z_hi - z_lo)
     return r_edges, count / volume
 
@@ -270,7 +272,7 @@ def bz_profile(points_r, z_plane, position, active_rod, current, wire_radius, n_
     bz = np.empty(m)
     block = max(1, _POINTS_PER_CALL // n_phi)
     for start in range(0, m, block):
-        r = points_r[start:start + block]
+        r = points_r[start : start + block]
         point = np.empty((r.shape[0], n_phi, 3))
         point[:, :, 0] = r[:, None] * cos_phi[None, :]
         point[:, :, 1] = r[:, None] * sin_phi[None, :]
@@ -279,7 +281,7 @@ def bz_profile(points_r, z_plane, position, active_rod, current, wire_radius, n_
         out = np.empty_like(point)
         exclude = np.full(point.shape[0], -1, dtype=np.int64)
         rod_current_field(point, exclude, position, active_rod, current, wire_radius, out)
-        bz[start:start + block] = out[:, 2].reshape(r.shape[0], n_phi).mean(axis=1)
+        bz[start : start + block] = out[:, 2].reshape(r.shape[0], n_phi).mean(axis=1)
     return bz
 
 
@@ -336,8 +338,9 @@ def disc_flux(r_values, bz_of_r, n_r=8, dr_max=0.25):
     return cumulative[np.searchsorted(edges, r_values)]
 
 
-def flux_through_disc(r_values, z_plane, position, active_rod, current, wire_radius,
-                      n_phi=None, n_r=8, dr_max=0.25, z_mext=None):
+def flux_through_disc(
+    r_values, z_plane, position, active_rod, current, wire_radius, n_phi=None, n_r=8, dr_max=0.25, z_mext=None
+):
     """Magnetic flux of the rod currents' B_z through discs on the plane ``z = z_plane``.
 
     ``Phi(R) = int_0^R 2 pi r Bz(r) dr`` with ``Bz`` from :func:`bz_profile` and the

@@ -14,6 +14,7 @@ standard error over seeds. Arrays in, arrays out; no files:
 * :func:`censored_times` -- the whole summary of censored times: counts, mean and standard
   error of the observed times alone (labelled so), and the Kaplan-Meier quartiles.
 """
+
 from __future__ import annotations
 
 import math
@@ -141,9 +142,17 @@ def censored_times(times, observed):
     n, m = int(times.shape[0]), int(observed.sum())
     mean, sem, _ = mean_sem(times[observed])
     return {
-        "n": n, "n_observed": m, "n_censored": n - m,
-        "fraction": m / n if n else math.nan, "fraction_ci95": wilson_interval(m, n),
-        "mean_observed": float(mean), "sem_observed": float(sem),
-        "q25": km_quantile(t, F, 0.25), "median": km_quantile(t, F, 0.5), "q75": km_quantile(t, F, 0.75),
-        "km_t": t, "km_F": F, "censored_at": np.sort(times[~observed]),
+        "n": n,
+        "n_observed": m,
+        "n_censored": n - m,
+        "fraction": m / n if n else math.nan,
+        "fraction_ci95": wilson_interval(m, n),
+        "mean_observed": float(mean),
+        "sem_observed": float(sem),
+        "q25": km_quantile(t, F, 0.25),
+        "median": km_quantile(t, F, 0.5),
+        "q75": km_quantile(t, F, 0.75),
+        "km_t": t,
+        "km_F": F,
+        "censored_at": np.sort(times[~observed]),
     }

@@ -26,6 +26,7 @@ For ``rg_dimension`` both are carried to D = 1 / slope. On the hand-built anchor
 ``tests/test_claims.py`` (a chain, a square-lattice sheet, a cubic-lattice block) the
 dimensions come out 1, 2 and 3 within this uncertainty.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -92,7 +93,7 @@ def log_fit(x, y):
     if n < 3:
         return slope, NAN, intercept
     resid = ly - (intercept + slope * lx)
-    se = math.sqrt(float((resid ** 2).sum()) / (n - 2) / sxx)
+    se = math.sqrt(float((resid**2).sum()) / (n - 2) / sxx)
     return slope, se, intercept
 
 
@@ -107,7 +108,7 @@ def _slope_uncertainty(x, y):
     curvature = 0.0
     if np.unique(x[lo]).shape[0] >= 2 and np.unique(x[hi]).shape[0] >= 2:
         curvature = abs(log_fit(x[hi], y[hi])[0] - log_fit(x[lo], y[lo])[0])
-    return slope, math.sqrt((se if math.isfinite(se) else 0.0) ** 2 + curvature ** 2)
+    return slope, math.sqrt((se if math.isfinite(se) else 0.0) ** 2 + curvature**2)
 
 
 def _rods(position, rods):
@@ -217,15 +218,16 @@ def rg_dimension(size, rg, min_size=2, min_sizes=3):
     keep = (size >= min_size) & np.isfinite(rg) & (rg > 0)
     size, rg = size[keep], rg[keep]
     if np.unique(size).shape[0] < min_sizes:
-        return Fit.undefined(f"{np.unique(size).shape[0]} distinct structure sizes >= {min_size}, "
-                             f"fewer than {min_sizes}")
+        return Fit.undefined(
+            f"{np.unique(size).shape[0]} distinct structure sizes >= {min_size}, fewer than {min_sizes}"
+        )
     if size.max() < 2 * size.min():
         return Fit.undefined("structure sizes span less than a factor 2")
     order = np.argsort(size, kind="stable")
     slope, err = _slope_uncertainty(size[order], rg[order])
     if not slope > 0:
         return Fit.undefined(f"R_g does not grow with N (slope {slope:.3g})")
-    return Fit(1.0 / slope, err / slope ** 2, (float(size.min()), float(size.max())), int(size.shape[0]))
+    return Fit(1.0 / slope, err / slope**2, (float(size.min()), float(size.max())), int(size.shape[0]))
 
 
 def box_dimension(position, rods=None, spacing=None, eps_min=1.0, k_min=4, n_eps=10, min_rods=30):
@@ -268,8 +270,10 @@ def box_dimension(position, rods=None, spacing=None, eps_min=1.0, k_min=4, n_eps
     side = float((pts.max(axis=0) - lo).max())
     k_max = int(side // eps_min)
     if k_max < 2 * k_min:
-        return Fit.undefined(f"the structure ({side:.3g} rod lengths across) holds less than a factor 2 of box sizes "
-                             f"between {eps_min:g} and a {k_min}th of it")
+        return Fit.undefined(
+            f"the structure ({side:.3g} rod lengths across) holds less than a factor 2 of box sizes "
+            f"between {eps_min:g} and a {k_min}th of it"
+        )
     ks = np.unique(np.round(np.geomspace(k_min, k_max, n_eps)).astype(np.int64))
     count = np.empty(ks.shape[0])
     for j, k in enumerate(ks):

@@ -22,6 +22,7 @@ Units (docs/model.md 'Reduced units'): moments in Z_M0 e L; a rod of charge q ha
 * :func:`junction_charge` -- ``sum |sum q|`` over the contact clusters of each structure: the
   charge left unpaired inside junctions (0 for head-to-tail contacts of equal rods).
 """
+
 from __future__ import annotations
 
 import numpy as np

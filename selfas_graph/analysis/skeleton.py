@@ -16,6 +16,7 @@ junctions make a loop of two, a rod whose tips sit in one junction a loop of one
   multigraph.
 * :func:`junction_degrees` -- tips per contact cluster (merged node of two or more tips).
 """
+
 from __future__ import annotations
 
 import networkx as nx

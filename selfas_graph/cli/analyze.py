@@ -9,6 +9,7 @@ section 7a). ``--series`` (or ``--csv`` without ``--frame``/``--time``) gives on
 frame (every K-th with ``--every K``). NaN (null in JSON, empty in CSV) where a measure is
 undefined. A thin layer over :func:`selfas_graph.analysis.claims.frame_claims`.
 """
+
 from __future__ import annotations
 
 import csv
@@ -23,9 +24,18 @@ from ..io.h5md import RunFile, RunFileError
 from .main import CliError, add_run_and_frame
 
 #: the columns of the --series table (the full set goes to --csv and --json)
-SERIES_COLUMNS = {"frame": "frame", "time": "t", "largest_structure_rods": "rods", "largest_moment_q": "|m_q|",
-                  "largest_moment_ratio": "|m_q|/rod", "largest_moment_J_z": "m_J,z", "fractal_dimension": "D_mass",
-                  "rg_dimension": "D_Rg", "box_dimension": "D_box", "cycle_rank": "cycle_rank"}
+SERIES_COLUMNS = {
+    "frame": "frame",
+    "time": "t",
+    "largest_structure_rods": "rods",
+    "largest_moment_q": "|m_q|",
+    "largest_moment_ratio": "|m_q|/rod",
+    "largest_moment_J_z": "m_J,z",
+    "fractal_dimension": "D_mass",
+    "rg_dimension": "D_Rg",
+    "box_dimension": "D_box",
+    "cycle_rank": "cycle_rank",
+}
 #: integer columns of --json and --csv
 _INTEGER = ("frame", "step")
 
@@ -36,8 +46,7 @@ def add_arguments(p):
     p.add_argument("--every", type=int, default=1, metavar="K", help="with a series: every K-th frame (default 1)")
     form = p.add_mutually_exclusive_group()
     form.add_argument("--json", action="store_true", help="print JSON for scripts")
-    form.add_argument("--csv", action="store_true",
-                      help="print CSV (all frames unless --frame or --time is given)")
+    form.add_argument("--csv", action="store_true", help="print CSV (all frames unless --frame or --time is given)")
     p.add_argument("--no-loops", action="store_true", help="skip the loop lengths (a cycle basis; the slowest part)")
 
 
@@ -74,8 +83,11 @@ def run(args):
         with RunFile(args.run) as f:
             frames, series = _frames(f, args)
             if not f.has_graph:
-                print(f"selfas-graph analyze: {f.path} has no contact data (contacts.enabled = false?): "
-                      f"every measure is NaN", file=sys.stderr)
+                print(
+                    f"selfas-graph analyze: {f.path} has no contact data (contacts.enabled = false?): "
+                    f"every measure is NaN",
+                    file=sys.stderr,
+                )
             try:
                 rows = [frame_claims(f, k, loops=not args.no_loops) | {"frame": float(k)} for k in frames]
             except (KeyError, IndexError, TypeError, ValueError) as exc:
@@ -95,8 +107,10 @@ def run(args):
         for r in rows:
             w.writerow([_cell(r[k]) for k in keys])
     elif series:
-        print(f"{path}: {len(rows)} frames; largest structure: rods, |m_q| (Z_M0 e L), |m_q| per mean rod moment, "
-              f"m_J,z (J0 L^2), mass-radius and box dimensions; D_Rg over all structures")
+        print(
+            f"{path}: {len(rows)} frames; largest structure: rods, |m_q| (Z_M0 e L), |m_q| per mean rod moment, "
+            f"m_J,z (J0 L^2), mass-radius and box dimensions; D_Rg over all structures"
+        )
         print("  ".join(f"{c:>10}" for c in SERIES_COLUMNS.values()))
         for r in rows:
             print("  ".join(f"{_fmt(r[c]):>10}" for c in SERIES_COLUMNS))
@@ -109,12 +123,16 @@ def run(args):
             value = _fmt(r[k])
             if k + "_err" in r:
                 lo, hi = _RANGES[k]
-                value += (f" +- {_fmt(r[k + '_err'])} (fit over {_fmt(r[lo])}..{_fmt(r[hi])})"
-                          if np.isfinite(r[k]) else "")
+                value += (
+                    f" +- {_fmt(r[k + '_err'])} (fit over {_fmt(r[lo])}..{_fmt(r[hi])})" if np.isfinite(r[k]) else ""
+                )
             print(f"  {k:<26} {value:<40} {meaning}")
     return 0
 
 
-_RANGES = {"fractal_dimension": ("fractal_r_min", "fractal_r_max"), "rg_dimension": ("rg_n_min", "rg_n_max"),
-           "box_dimension": ("box_eps_min", "box_eps_max")}
+_RANGES = {
+    "fractal_dimension": ("fractal_r_min", "fractal_r_max"),
+    "rg_dimension": ("rg_n_min", "rg_n_max"),
+    "box_dimension": ("box_eps_min", "box_eps_max"),
+}
 _RANGE_KEYS = {k for pair in _RANGES.values() for k in pair}

@@ -15,6 +15,7 @@ threads each. On a cluster allocation, ``mpiexec -n P selfas-graph ensemble ...`
 them on the P - 1 ranks other than rank 0, which hands them out and writes the summary.
 The Python API is :mod:`selfas_graph.ensemble`.
 """
+
 from __future__ import annotations
 
 import math
@@ -32,8 +33,9 @@ def _times(text):
     try:
         values = [float(x) for x in text.split(",") if x.strip()]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: give simulated times separated by commas, e.g. 100,300,600") \
-            from None
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: give simulated times separated by commas, e.g. 100,300,600"
+        ) from None
     if not values or not all(math.isfinite(v) and v >= 0 for v in values):
         raise argparse.ArgumentTypeError(f"{text!r}: give finite simulated times >= 0, separated by commas")
     return values
@@ -54,26 +56,56 @@ def _positive_int(text):
 def add_arguments(p):
     p.add_argument("scenario", help="scenario file (TOML), e.g. scenarios/quick.toml")
     p.add_argument("--seeds", type=_positive_int, required=True, metavar="N", help="number of seeds")
-    p.add_argument("--first-seed", type=int, metavar="S",
-                   help="seeds S .. S+N-1 (default: the scenario's scenario.seed)")
-    p.add_argument("--jobs", type=_positive_int, default=1, metavar="J",
-                   help="seeds run at once on this machine, each with cores // J numba threads (default 1; "
-                        "under mpiexec the ranks are the workers)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a scenario value for every seed, as in simulate (repeatable)")
+    p.add_argument(
+        "--first-seed", type=int, metavar="S", help="seeds S .. S+N-1 (default: the scenario's scenario.seed)"
+    )
+    p.add_argument(
+        "--jobs",
+        type=_positive_int,
+        default=1,
+        metavar="J",
+        help="seeds run at once on this machine, each with cores // J numba threads (default 1; "
+        "under mpiexec the ranks are the workers)",
+    )
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario value for every seed, as in simulate (repeatable)",
+    )
     p.add_argument("--t-end", type=float, help="simulated end time of every seed (overrides run.t_end)")
-    p.add_argument("-o", "--output", metavar="DIR", help="folder of the run files and summary "
-                                                         "(default: SCENARIO name + '_ensemble'); created if missing")
-    p.add_argument("--times", type=_times, metavar="T1,T2,...",
-                   help="times of the summary (default: a quarter, half, three quarters and all of the end time)")
-    p.add_argument("--flux-radius", type=float, metavar="R",
-                   help="disc radius of the mid-plane flux (default: the placement box's half-diagonal in x-y)")
+    p.add_argument(
+        "-o",
+        "--output",
+        metavar="DIR",
+        help="folder of the run files and summary (default: SCENARIO name + '_ensemble'); created if missing",
+    )
+    p.add_argument(
+        "--times",
+        type=_times,
+        metavar="T1,T2,...",
+        help="times of the summary (default: a quarter, half, three quarters and all of the end time)",
+    )
+    p.add_argument(
+        "--flux-radius",
+        type=float,
+        metavar="R",
+        help="disc radius of the mid-plane flux (default: the placement box's half-diagonal in x-y)",
+    )
     p.add_argument("--no-run", action="store_true", help="summarise the seed files present; run nothing")
-    p.add_argument("--plot", action="store_true",
-                   help="also draw DIR/summary.png: each measure against time, mean and a band of one standard error")
-    p.add_argument("--force", action="store_true",
-                   help="replace seed files that cannot be reused (other parameters, failed, or incomplete without "
-                        "a checkpoint); finished ones are kept")
+    p.add_argument(
+        "--plot",
+        action="store_true",
+        help="also draw DIR/summary.png: each measure against time, mean and a band of one standard error",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="replace seed files that cannot be reused (other parameters, failed, or incomplete without "
+        "a checkpoint); finished ones are kept",
+    )
 
 
 def run(args):
@@ -98,8 +130,15 @@ def _run(args, pool):
     try:
         name_source = Path(args.scenario).stem
         folder = Path(args.output) if args.output else Path(f"{name_source}_ensemble")
-        ens = Ensemble(args.scenario, args.seeds, folder, overrides=args.overrides, t_end=args.t_end,
-                       first_seed=args.first_seed, force=args.force)
+        ens = Ensemble(
+            args.scenario,
+            args.seeds,
+            folder,
+            overrides=args.overrides,
+            t_end=args.t_end,
+            first_seed=args.first_seed,
+            force=args.force,
+        )
         plans = ens.plan(summary_only=args.no_run)
     except EnsembleError as exc:
         raise CliError(str(exc)) from None
@@ -118,10 +157,13 @@ def _run(args, pool):
     else:
         where = f"{pool.workers} processes x {pool.threads} numba threads"
     p = ens.base.params
-    print(f"{p.scenario.name}: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {ens.t_end:g} in {folder}/: "
-          f"{count['run']} to run, {count['resume']} to resume, {count['done']} done, {count['failed']} failed"
-          + (f", {count['partial']} partial (summarised to their last frame)" if count["partial"] else "")
-          + ("" if args.no_run else f"; on {where}"), flush=True)
+    print(
+        f"{p.scenario.name}: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {ens.t_end:g} in {folder}/: "
+        f"{count['run']} to run, {count['resume']} to resume, {count['done']} done, {count['failed']} failed"
+        + (f", {count['partial']} partial (summarised to their last frame)" if count["partial"] else "")
+        + ("" if args.no_run else f"; on {where}"),
+        flush=True,
+    )
     for plan in plans:
         if plan.action == "failed":
             print(f"  seed {plan.seed}: {plan.note} (kept; --force reruns it)", flush=True)
@@ -134,18 +176,24 @@ def _run(args, pool):
         def report(r):
             done[0] += 1
             what = {"finished": "finished", "interrupted": "interrupted", "failed": "failed", "error": "error"}.get(
-                r.get("status"), str(r.get("status")))
+                r.get("status"), str(r.get("status"))
+            )
             extra = f": {r['message']}" if r.get("message") else ""
             t = f" at t = {r['t']:.6g}" if r.get("t") is not None else ""
-            print(f"[{done[0]}/{len(tasks)}] seed {r.get('seed', '?')}: {what}{t} "
-                  f"({r.get('wall_seconds', 0.0):.1f} s){extra}", flush=True)
+            print(
+                f"[{done[0]}/{len(tasks)}] seed {r.get('seed', '?')}: {what}{t} "
+                f"({r.get('wall_seconds', 0.0):.1f} s){extra}",
+                flush=True,
+            )
 
         t0 = time.perf_counter()
         from ..ensemble import run_seed, run_tasks
 
         results = run_tasks(run_seed, tasks, pool, report)
-        print(f"ran {sum(r is not None for r in results)} of {len(tasks)} seeds in {time.perf_counter() - t0:.1f} s",
-              flush=True)
+        print(
+            f"ran {sum(r is not None for r in results)} of {len(tasks)} seeds in {time.perf_counter() - t0:.1f} s",
+            flush=True,
+        )
     summary = ens.summarise(times=times, flux_radius=args.flux_radius)
     if summary["n_seeds"]:
         print()
@@ -163,8 +211,11 @@ def _run(args, pool):
         print("no seed file to summarise")
     statuses = [r.get("status") for r in results if r is not None]
     if "interrupted" in statuses or any(r is None for r in results):
-        print("selfas-graph ensemble: interrupted; rerun the same command to continue "
-              "(finished seeds are kept, interrupted ones resume from their checkpoints)", file=sys.stderr)
+        print(
+            "selfas-graph ensemble: interrupted; rerun the same command to continue "
+            "(finished seeds are kept, interrupted ones resume from their checkpoints)",
+            file=sys.stderr,
+        )
         return 130
     if "error" in statuses:
         print("selfas-graph ensemble: some seeds stopped with an error (above)", file=sys.stderr)

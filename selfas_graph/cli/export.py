@@ -5,6 +5,7 @@ role, one bond per rod, the currents; extended XYZ (ASE, OVITO) the same per tip
 bonds. The run file is only read; the output never replaces it, and an existing output
 only with --force (docs/output.md).
 """
+
 from __future__ import annotations
 
 from ..io.export import FORMATS, ExportError, export_run
@@ -14,10 +15,18 @@ from .main import CliError
 
 def add_arguments(p):
     p.add_argument("run", help="run file written by selfas-graph simulate")
-    p.add_argument("--format", choices=FORMATS, required=True, help="gsd (OVITO, HOOMD-blue, MDAnalysis) or xyz "
-                   "(extended XYZ: ASE, OVITO)")
-    p.add_argument("--frames", default="all", help="all (default), K, A:B[:S] (a Python slice) or K1,K2,... "
-                   "(negative numbers count from the end; write --frames=-1)")
+    p.add_argument(
+        "--format",
+        choices=FORMATS,
+        required=True,
+        help="gsd (OVITO, HOOMD-blue, MDAnalysis) or xyz (extended XYZ: ASE, OVITO)",
+    )
+    p.add_argument(
+        "--frames",
+        default="all",
+        help="all (default), K, A:B[:S] (a Python slice) or K1,K2,... "
+        "(negative numbers count from the end; write --frames=-1)",
+    )
     p.add_argument("-o", "--output", help="output file (default: RUN with .gsd or .xyz)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
 

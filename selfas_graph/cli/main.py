@@ -6,6 +6,7 @@ folder), 130 interrupted. Under ``mpiexec`` every rank exits with the
 same code and only rank 0 prints the error; an unexpected error on one rank
 aborts them all (no rank is left waiting for the others).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -19,8 +20,10 @@ COMMANDS = {
     "simulate": ("selfas_graph.cli.simulate", "run a scenario and write an HDF5 run file"),
     "topology": ("selfas_graph.cli.topology", "structures, filaments, currents and events of a saved frame"),
     "analyze": ("selfas_graph.cli.analyze", "magnetic moment, fractal dimensions and loops of a saved frame or series"),
-    "plot": ("selfas_graph.cli.plot", "figures of a saved run: snapshot, density, field, flux, timeline, "
-                                      "moment, fractal, skeleton (PNG)"),
+    "plot": (
+        "selfas_graph.cli.plot",
+        "figures of a saved run: snapshot, density, field, flux, timeline, moment, fractal, skeleton (PNG)",
+    ),
     "ensemble": ("selfas_graph.cli.ensemble", "run a scenario over many seeds; mean and standard error over them"),
     "export": ("selfas_graph.cli.export", "a run as GSD (OVITO, HOOMD-blue, MDAnalysis) or extended XYZ (ASE, OVITO)"),
 }

@@ -5,6 +5,7 @@ folder, a FIFO), must not be one of the command's own inputs (a scenario, a run 
 and must have a name the file system accepts; every refusal is a :class:`CliError`
 (exit 2) naming the path and what to do.
 """
+
 from __future__ import annotations
 
 import errno
@@ -47,24 +48,32 @@ def check_target(path, what="output file", force=False, inputs=()) -> Path:
         st = None
     except OSError as exc:
         if exc.errno == errno.ENAMETOOLONG:
-            raise CliError(f"the {what} path {str(path)[:60]}... is too long for the file system "
-                           f"({len(path.name)} characters in its last name); give a shorter one") from None
+            raise CliError(
+                f"the {what} path {str(path)[:60]}... is too long for the file system "
+                f"({len(path.name)} characters in its last name); give a shorter one"
+            ) from None
         raise CliError(f"the {what} path {path} cannot be used: {exc.strerror}") from None
     if st is not None:
         if stat.S_ISDIR(st.st_mode):
             raise CliError(f"the {what} path {path} is a directory")
         if not stat.S_ISREG(st.st_mode):
-            raise CliError(f"the {what} path {path} is not a regular file (a device, pipe or socket); "
-                           f"give the name of a file to write")
+            raise CliError(
+                f"the {what} path {path} is not a regular file (a device, pipe or socket); "
+                f"give the name of a file to write"
+            )
         for source in inputs:
             if source is not None and same_file(path, source):
-                raise CliError(f"the {what} {path} is the input {source} of this command; "
-                               f"give another name (it would be destroyed, even with --force)")
+                raise CliError(
+                    f"the {what} {path} is the input {source} of this command; "
+                    f"give another name (it would be destroyed, even with --force)"
+                )
         if not force:
             raise CliError(f"{what} {path} exists; pass --force to overwrite it or -o to choose another name")
     elif len(path.name.encode("utf-8", "surrogateescape")) > _name_max(path.parent):
-        raise CliError(f"the {what} name {path.name[:40]}... is too long for the file system "
-                       f"({len(path.name)} characters); give a shorter one")
+        raise CliError(
+            f"the {what} name {path.name[:40]}... is too long for the file system "
+            f"({len(path.name)} characters); give a shorter one"
+        )
     return path
 
 

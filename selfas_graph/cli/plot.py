@@ -28,6 +28,7 @@ The output goes next to the run file as ``RUN_KIND_frameK.png`` (``RUN_timeline.
 for the timeline) unless ``-o`` says otherwise; an existing file is kept unless
 ``--force``. Needs matplotlib (``pip install "selfas-graph[plot]"``); draws headless.
 """
+
 from __future__ import annotations
 
 import functools
@@ -73,21 +74,35 @@ def add_arguments(p):
     p.add_argument("--kind", choices=KINDS, default="snapshot", help="which figure (default: snapshot)")
     p.add_argument("-o", "--output", help="PNG file to write (default: RUN_KIND_frameK.png next to the run file)")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
-    p.add_argument("--planes", type=float, nargs="+", metavar="Z",
-                   help="planes z = const for field and flux (default: the electrode planes and z = 0; in case (ii) "
-                        "z = +-(L_ext/2 - 0.02) and 0 as in Figs. 10-11; otherwise "
-                        "the lowest tip, 0 and the highest tip)")
-    p.add_argument("--r-max", type=float,
-                   help="largest radius of the profiles (default: the farthest rod from the axis)")
+    p.add_argument(
+        "--planes",
+        type=float,
+        nargs="+",
+        metavar="Z",
+        help="planes z = const for field and flux (default: the electrode planes and z = 0; in case (ii) "
+        "z = +-(L_ext/2 - 0.02) and 0 as in Figs. 10-11; otherwise "
+        "the lowest tip, 0 and the highest tip)",
+    )
+    p.add_argument(
+        "--r-max", type=float, help="largest radius of the profiles (default: the farthest rod from the axis)"
+    )
     p.add_argument("--bins", type=int, default=30, help="radial shells of the density profile (default 30)")
-    p.add_argument("--n-phi", type=int,
-                   help="azimuthal samples of the field average (default: one per wire radius of arc "
-                        "on the largest circle, at least 64)")
-    p.add_argument("--z-mext", type=float,
-                   help="flux in units of an external dipole's flux 4 pi Z_Mext instead of Phi_0 = 4 pi")
+    p.add_argument(
+        "--n-phi",
+        type=int,
+        help="azimuthal samples of the field average (default: one per wire radius of arc "
+        "on the largest circle, at least 64)",
+    )
+    p.add_argument(
+        "--z-mext", type=float, help="flux in units of an external dipole's flux 4 pi Z_Mext instead of Phi_0 = 4 pi"
+    )
     p.add_argument("--dpi", type=int, default=150, help="resolution of the PNG (default 150)")
-    p.add_argument("--every", type=int, metavar="K",
-                   help="moment, fractal, skeleton: every K-th frame (default: at most 200 frames)")
+    p.add_argument(
+        "--every",
+        type=int,
+        metavar="K",
+        help="moment, fractal, skeleton: every K-th frame (default: at most 200 frames)",
+    )
 
 
 def _matplotlib():
@@ -144,8 +159,9 @@ class _Frame:
         if self.graph is None:
             if not run.has_graph:
                 run.graph_frame_index(self.index)  # raises the reader's explanation
-            raise RunFileError(f"{run.path}: no graph data saved at frame {self.index} (step {self.step}), "
-                               f"which the {kind} plot needs")
+            raise RunFileError(
+                f"{run.path}: no graph data saved at frame {self.index} (step {self.step}), which the {kind} plot needs"
+            )
 
     @property
     def role(self):
@@ -228,15 +244,16 @@ def _snapshot(fig, run, frame, args):
             red = (role == DEAD_END) & np.isin(frame.structure, networks)
             red_label = "dead ends of filament networks"
         rest = ~(fil | red)
-        groups += [(rest, OTHER_COLOUR, 0.6, "other rods"),
-                   (fil, FILAMENT_COLOUR, 1.6, "current-carrying filaments"),
-                   (red, DEAD_END_COLOUR if not large else LARGEST_COLOUR, 1.6, red_label)]
+        groups += [
+            (rest, OTHER_COLOUR, 0.6, "other rods"),
+            (fil, FILAMENT_COLOUR, 1.6, "current-carrying filaments"),
+            (red, DEAD_END_COLOUR if not large else LARGEST_COLOUR, 1.6, red_label),
+        ]
     handles = []
     for mask, colour, width, label in groups:
         alpha = 0.6 if colour is OTHER_COLOUR and role is not None else 1.0
         if mask.any():
-            ax.add_collection3d(Line3DCollection(seg[mask], colors=[colour], linewidths=width, alpha=alpha,
-                                                 zorder=2))
+            ax.add_collection3d(Line3DCollection(seg[mask], colors=[colour], linewidths=width, alpha=alpha, zorder=2))
         handles.append(Line2D([], [], color=colour, lw=2, alpha=alpha, label=f"{label} ({int(mask.sum())})"))
     lo, hi = frame.position.min(axis=0), frame.position.max(axis=0)
     if frame.gap is not None:
@@ -244,16 +261,21 @@ def _snapshot(fig, run, frame, args):
         x0, x1, y0, y1 = lo[0] - 0.5, hi[0] + 0.5, lo[1] - 0.5, hi[1] + 0.5
         for z, name in ((-frame.gap / 2, "cathode"), (frame.gap / 2, "anode")):
             rect = [[(x0, y0, z), (x1, y0, z), (x1, y1, z), (x0, y1, z)]]
-            ax.add_collection3d(Poly3DCollection(rect, facecolors=[ELECTRODE_COLOUR], edgecolors=[ELECTRODE_COLOUR],
-                                                 alpha=0.12, zorder=0))
-        handles.append(Line2D([], [], color=ELECTRODE_COLOUR, lw=6, alpha=0.4,
-                              label=f"electrodes z = $\\pm${frame.gap / 2:g} L"))
+            ax.add_collection3d(
+                Poly3DCollection(
+                    rect, facecolors=[ELECTRODE_COLOUR], edgecolors=[ELECTRODE_COLOUR], alpha=0.12, zorder=0
+                )
+            )
+        handles.append(
+            Line2D([], [], color=ELECTRODE_COLOUR, lw=6, alpha=0.4, label=f"electrodes z = $\\pm${frame.gap / 2:g} L")
+        )
     if frame.dipole is not None or frame.external_filament:
         if frame.dipole is not None:
             half = frame.dipole[1] / 2
             ax.plot([0, 0], [0, 0], [-half, half], color="black", lw=3, zorder=1)
-            handles.append(Line2D([], [], color="black", lw=3,
-                                  label=f"external dipole, $Z_{{Mext}}$ = {frame.dipole[0]:g}"))
+            handles.append(
+                Line2D([], [], color="black", lw=3, label=f"external dipole, $Z_{{Mext}}$ = {frame.dipole[0]:g}")
+            )
             lo[2], hi[2] = min(lo[2], -half), max(hi[2], half)
         if frame.external_filament:
             ax.plot([0, 0], [0, 0], [lo[2], hi[2]], color="black", lw=0.8, ls="--", zorder=1)
@@ -300,8 +322,10 @@ def _density(fig, run, frame, args):
     r_max = _r_max(args, centre)
     curves = [("total", None, TOTAL_COLOUR)]
     if frame.role is not None:
-        curves += [("in current-carrying filaments", frame.role == FILAMENT, FILAMENT_COLOUR),
-                   ("in the largest structure", frame.largest_mask, LARGEST_COLOUR)]
+        curves += [
+            ("in current-carrying filaments", frame.role == FILAMENT, FILAMENT_COLOUR),
+            ("in the largest structure", frame.largest_mask, LARGEST_COLOUR),
+        ]
     for label, mask, colour in curves:
         edges, dens = radial_density(centre, r_max, args.bins, z_range, mask=mask)
         n = len(centre) if mask is None else int(mask.sum())
@@ -312,9 +336,12 @@ def _density(fig, run, frame, args):
     ax.set_ylabel("rod density (rods / $L^3$)")
     _outside_legend(fig, ncols=3)
     note = "" if frame.role is not None else " (no graph data: total only)"
-    ax.set_title(_title(run, frame, "radial density") + note
-                 + f"\naveraged over {_num(z_range[0], '.3g')} $\\leq$ z $\\leq$ {_num(z_range[1], '.3g')} L and azimuth",
-                 fontsize="medium")
+    ax.set_title(
+        _title(run, frame, "radial density")
+        + note
+        + f"\naveraged over {_num(z_range[0], '.3g')} $\\leq$ z $\\leq$ {_num(z_range[1], '.3g')} L and azimuth",
+        fontsize="medium",
+    )
 
 
 def _planes(args, frame):
@@ -335,7 +362,7 @@ def _plane_colours(planes):
     if len(planes) == 3:
         return ["blue", "black", "red"]
     if len(planes) <= 2:
-        return ["blue", "red"][:len(planes)]
+        return ["blue", "red"][: len(planes)]
     import matplotlib
 
     cmap = matplotlib.colormaps["coolwarm"]
@@ -362,8 +389,9 @@ def _field_or_flux(fig, run, frame, args):
         if args.kind == "field":
             y = bz_profile(r, z, frame.position, None, current, frame.wire_radius, n_phi=args.n_phi)
         else:
-            y = flux_through_disc(r, z, frame.position, None, current, frame.wire_radius, n_phi=args.n_phi,
-                                  z_mext=args.z_mext)
+            y = flux_through_disc(
+                r, z, frame.position, None, current, frame.wire_radius, n_phi=args.n_phi, z_mext=args.z_mext
+            )
         ax.plot(r, y, color=colour, label=f"plane z = {_num(z)} L")
     ax.axhline(0.0, color="0.7", lw=0.8, zorder=0)
     ax.set_xlim(0, r_max)
@@ -396,7 +424,7 @@ def _figsize(kind, frame):
     if frame.dipole is not None:
         height = max(height, frame.dipole[1])
     ratio = min(max(height / width, 0.6), 2.2)
-    return (7.0, 7.0 * ratio ** 0.6 + 0.8) if ratio > 1 else (8.0, 7.0)
+    return (7.0, 7.0 * ratio**0.6 + 0.8) if ratio > 1 else (8.0, 7.0)
 
 
 def _timeline(fig, run, frame, args):
@@ -413,16 +441,30 @@ def _timeline(fig, run, frame, args):
     ax.set_ylim(bottom=0)
     if tl.total_current is not None:
         ax2 = ax.twinx()
-        lines += ax2.plot(tl.time, tl.total_current, color="black", label="total current",
-                          **(style | ({"marker": "s"} if "marker" in style else {})))
+        lines += ax2.plot(
+            tl.time,
+            tl.total_current,
+            color="black",
+            label="total current",
+            **(style | ({"marker": "s"} if "marker" in style else {})),
+        )
         ax2.set_ylabel("total current ($J_0$)")
         ax2.set_ylim(bottom=min(0.0, float(np.nanmin(tl.total_current))))
     if tl.short_circuit_time is not None:
-        lines.append(ax.axvline(tl.short_circuit_time, color=DEAD_END_COLOUR, ls="--",
-                                label=f"short circuit, t = {tl.short_circuit_time:.4g}"))
+        lines.append(
+            ax.axvline(
+                tl.short_circuit_time,
+                color=DEAD_END_COLOUR,
+                ls="--",
+                label=f"short circuit, t = {tl.short_circuit_time:.4g}",
+            )
+        )
     _outside_legend(fig, lines, ncols=3)
-    sc = ("no short circuit" if tl.short_circuit_time is None
-          else f"short circuit at t = {tl.short_circuit_time:.4g} $t_0$")
+    sc = (
+        "no short circuit"
+        if tl.short_circuit_time is None
+        else f"short circuit at t = {tl.short_circuit_time:.4g} $t_0$"
+    )
     ax.set_title(f"{_scene(run)}: filaments over time ({sc})", fontsize="medium")
 
 
@@ -439,14 +481,16 @@ def _moment(fig, run, frame, args):
     s = _series(run, args)
     ax = fig.add_subplot()
     style = _series_style(len(s["time"]))  # markers on short series: a value between NaNs stays visible
-    lines = ax.plot(s["time"], s["largest_moment_ratio"], **style, color=LARGEST_COLOUR,
-                    label="$|m_q|$ / mean rod moment")
+    lines = ax.plot(
+        s["time"], s["largest_moment_ratio"], **style, color=LARGEST_COLOUR, label="$|m_q|$ / mean rod moment"
+    )
     ax.set_xlabel("time t ($t_0$)")
     ax.set_ylabel("$|m_q|$ of the largest structure / mean $|q|$")
     ax.set_ylim(bottom=0)
     ax2 = ax.twinx()
-    lines += ax2.plot(s["time"], s["largest_moment_J_z"], **style, color=FILAMENT_COLOUR,
-                      label="$m_{J,z}$ of its rod currents")
+    lines += ax2.plot(
+        s["time"], s["largest_moment_J_z"], **style, color=FILAMENT_COLOUR, label="$m_{J,z}$ of its rod currents"
+    )
     ax2.set_ylabel("$m_{J,z}$ of the rod currents ($J_0 L^2$)")
     ax2.axhline(0.0, color="0.8", lw=0.8, zorder=0)
     _outside_legend(fig, lines, ncols=2)
@@ -456,9 +500,11 @@ def _moment(fig, run, frame, args):
 def _fractal(fig, run, frame, args):
     s = _series(run, args)
     ax = fig.add_subplot()
-    for key, colour, label in (("fractal_dimension", LARGEST_COLOUR, "mass-radius, largest structure"),
-                               ("box_dimension", "black", "box counting, largest structure"),
-                               ("rg_dimension", TOTAL_COLOUR, r"$R_g \sim N^{1/D}$ over all structures")):
+    for key, colour, label in (
+        ("fractal_dimension", LARGEST_COLOUR, "mass-radius, largest structure"),
+        ("box_dimension", "black", "box counting, largest structure"),
+        ("rg_dimension", TOTAL_COLOUR, r"$R_g \sim N^{1/D}$ over all structures"),
+    ):
         y, err = s[key], s[key + "_err"]
         ax.plot(s["time"], y, **_series_style(len(y)), color=colour, label=label)
         ax.fill_between(s["time"], y - err, y + err, color=colour, alpha=0.1, lw=0)
@@ -485,8 +531,16 @@ def _skeleton(fig, run, frame, args):
     ax.set_title(f"{_scene(run)}: loops of the rod network", fontsize="medium")
 
 
-DRAW = {"snapshot": _snapshot, "density": _density, "field": _field_or_flux, "flux": _field_or_flux,
-        "timeline": _timeline, "moment": _moment, "fractal": _fractal, "skeleton": _skeleton}
+DRAW = {
+    "snapshot": _snapshot,
+    "density": _density,
+    "field": _field_or_flux,
+    "flux": _field_or_flux,
+    "timeline": _timeline,
+    "moment": _moment,
+    "fractal": _fractal,
+    "skeleton": _skeleton,
+}
 
 
 def _check_options(args):
@@ -569,9 +623,9 @@ def plot_summary(summary: dict, out, title: str, dpi=150, measures=None) -> Path
         ax.fill_between(times, mean - sem, mean + sem, color="0.6", alpha=0.5, lw=0)
         unit = m.get("unit") or ""
         ax.set_ylabel(name.replace("_", " ") + ("" if unit in ("", "1") else f" [{unit}]"), fontsize="small")
-    for ax in axes[len(names):]:
+    for ax in axes[len(names) :]:
         ax.set_visible(False)
-    for ax in axes[max(0, len(names) - ncols):len(names)]:
+    for ax in axes[max(0, len(names) - ncols) : len(names)]:
         ax.set_xlabel("t [$t_0$]")
         ax.tick_params(labelbottom=True)
     # seeds behind each time: where the count changes (shorter runs end), a dotted line, and
@@ -581,14 +635,24 @@ def plot_summary(summary: dict, out, title: str, dpi=150, measures=None) -> Path
     for j, k in enumerate(starts):
         if n[k] == 0:
             continue
-        for ax in axes[:len(names)]:
+        for ax in axes[: len(names)]:
             if k:
                 ax.axvline(times[k], color="0.5", lw=0.6, ls=":")
-        axes[0].annotate(f"{n[k]} seed{'s' if n[k] != 1 else ''}", (times[k], 1.0), xycoords=("data", "axes fraction"),
-                         xytext=(2, -2 - 8 * (j % 2)), textcoords="offset points", ha="left", va="top",
-                         fontsize="x-small", color="0.3")
-    fig.suptitle(f"{title}: mean \N{PLUS-MINUS SIGN} one standard error over the seeds with a frame at each time",
-                 fontsize="medium")
+        axes[0].annotate(
+            f"{n[k]} seed{'s' if n[k] != 1 else ''}",
+            (times[k], 1.0),
+            xycoords=("data", "axes fraction"),
+            xytext=(2, -2 - 8 * (j % 2)),
+            textcoords="offset points",
+            ha="left",
+            va="top",
+            fontsize="x-small",
+            color="0.3",
+        )
+    fig.suptitle(
+        f"{title}: mean \N{PLUS-MINUS SIGN} one standard error over the seeds with a frame at each time",
+        fontsize="medium",
+    )
     out = Path(out)
     _save_png(fig, out, dpi)
     return out

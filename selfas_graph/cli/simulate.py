@@ -9,6 +9,7 @@ Rank 0 alone checks the input and the files, prints, and writes the run file,
 checkpoints and failure snapshots; it sends its verdict to the other ranks, so
 that every rank stops together, with one message and the serial exit code.
 """
+
 from __future__ import annotations
 
 import json
@@ -52,17 +53,30 @@ from .paths import check_target
 
 def add_arguments(p):
     p.add_argument("scenario", nargs="?", help="scenario file (TOML), e.g. scenarios/quick.toml")
-    p.add_argument("--resume", metavar="RUN_OR_CHECKPOINT",
-                   help="continue an interrupted run from RUN.h5 (its RUN.checkpoint.h5) or a checkpoint file; "
-                        "only --t-end may change")
+    p.add_argument(
+        "--resume",
+        metavar="RUN_OR_CHECKPOINT",
+        help="continue an interrupted run from RUN.h5 (its RUN.checkpoint.h5) or a checkpoint file; "
+        "only --t-end may change",
+    )
     p.add_argument("-o", "--output", help="output HDF5 file (default: output.file, or SCENARIO name with .h5)")
-    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a scenario value, e.g. --set integrator.dt=5e-4 (repeatable)")
+    p.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a scenario value, e.g. --set integrator.dt=5e-4 (repeatable)",
+    )
     p.add_argument("--t-end", type=float, help="simulated end time (overrides run.t_end)")
     p.add_argument("--dry-run", action="store_true", help="validate and place the rods, print the plan, write nothing")
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
-    p.add_argument("--progress", choices=("auto", "bar", "lines", "none"), default="auto",
-                   help="progress display (auto: a bar on a terminal, periodic lines otherwise)")
+    p.add_argument(
+        "--progress",
+        choices=("auto", "bar", "lines", "none"),
+        default="auto",
+        help="progress display (auto: a bar on a terminal, periodic lines otherwise)",
+    )
 
 
 def _fmt_time(seconds):
@@ -102,9 +116,12 @@ class _Lines:
         self.last = now
         rate = done / max(now - self.t0, 1e-9)
         eta = (total - done) / rate if rate > 0 else 0
-        print(f"t = {sim.state.time:.4g} / {sim.params.run.t_end:.4g}  step {sim.state.step}  "
-              f"{100 * done / max(total, 1):5.1f}%  {rate:.0f} steps/s  ETA {_fmt_time(eta)}  {_status_text(sim)}",
-              file=self.stream, flush=True)
+        print(
+            f"t = {sim.state.time:.4g} / {sim.params.run.t_end:.4g}  step {sim.state.step}  "
+            f"{100 * done / max(total, 1):5.1f}%  {rate:.0f} steps/s  ETA {_fmt_time(eta)}  {_status_text(sim)}",
+            file=self.stream,
+            flush=True,
+        )
 
     def close(self):
         pass
@@ -114,8 +131,13 @@ class _Bar:
     def __init__(self, total, t_end):
         from tqdm import tqdm
 
-        self.bar = tqdm(total=total, unit="step", dynamic_ncols=True, file=sys.stderr,
-                        bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}, {rate_fmt}] {postfix}")
+        self.bar = tqdm(
+            total=total,
+            unit="step",
+            dynamic_ncols=True,
+            file=sys.stderr,
+            bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}, {rate_fmt}] {postfix}",
+        )
         self.t_end = t_end
         self.n = 0
 
@@ -173,8 +195,9 @@ def _resume_paths(args):
     """
     src = Path(args.resume)
     if src.name in ("", ".", "..") or src.is_dir():
-        raise CliError(f"--resume {args.resume}: give a run file (RUN.h5) or its checkpoint (RUN.checkpoint.h5), "
-                       f"not a folder")
+        raise CliError(
+            f"--resume {args.resume}: give a run file (RUN.h5) or its checkpoint (RUN.checkpoint.h5), not a folder"
+        )
     if src.name.endswith(".checkpoint.h5"):
         return src, None
     return checkpoint_path(src), src
@@ -190,7 +213,7 @@ def _load_resume(args):
     except CheckpointError as exc:
         raise CliError(f"cannot resume: {exc}") from None
     if out is None:
-        name = str(meta.get("run_name") or ckpt.name[:-len(".checkpoint.h5")] + ".h5")
+        name = str(meta.get("run_name") or ckpt.name[: -len(".checkpoint.h5")] + ".h5")
         if Path(name).name != name or name in (".", ".."):
             raise CliError(f"cannot resume: {ckpt} names its run file {name!r}, which is not a file name")
         out = ckpt.with_name(name)
@@ -206,11 +229,14 @@ def _load_resume(args):
     except (ScenarioError, ValueError, TypeError) as exc:
         raise CliError(f"cannot resume: the checkpoint's scenario no longer validates: {exc}") from None
     if args.t_end is not None and args.t_end < float(snap["time"]):
-        raise CliError(f"--t-end (run.t_end) {args.t_end:g} is before the checkpoint's time {float(snap['time']):.6g}; "
-                       f"give a later end time")
+        raise CliError(
+            f"--t-end (run.t_end) {args.t_end:g} is before the checkpoint's time {float(snap['time']):.6g}; "
+            f"give a later end time"
+        )
     if not out.exists():
-        raise CliError(f"cannot resume: the run file {out} of checkpoint {ckpt} does not exist "
-                       f"(give the run file with -o)")
+        raise CliError(
+            f"cannot resume: the run file {out} of checkpoint {ckpt} does not exist (give the run file with -o)"
+        )
     # the run file must be this run's, checked read-only before anything in it is changed
     try:
         with RunFile(out) as run_file:
@@ -225,13 +251,16 @@ def _load_resume(args):
     if problems:
         raise CliError(f"cannot resume into {out}: it cannot be continued: {'; '.join(problems)}")
     if not run_id or run_id != meta.get("run_id"):
-        raise CliError(f"cannot resume: the checkpoint {ckpt} belongs to another run than the run file {out} "
-                       f"(run identity {meta.get('run_id') or 'none'} in the checkpoint, {run_id or 'none'} in the "
-                       f"run file); give the run file's own checkpoint")
+        raise CliError(
+            f"cannot resume: the checkpoint {ckpt} belongs to another run than the run file {out} "
+            f"(run identity {meta.get('run_id') or 'none'} in the checkpoint, {run_id or 'none'} in the "
+            f"run file); give the run file's own checkpoint"
+        )
     if same and brake is not None and brake != scenario.params.integrator.brake:
         # a scene without integrator.brake, started when the default was explicit: continue as it ran
-        scenario = scenario_from_text(meta["scenario_text"], t_end=t_end,
-                                      overrides=json.loads(meta["overrides"]) + [f"integrator.brake={brake}"])
+        scenario = scenario_from_text(
+            meta["scenario_text"], t_end=t_end, overrides=json.loads(meta["overrides"]) + [f"integrator.brake={brake}"]
+        )
     if not same:
         raise CliError(f"cannot resume: {out} is not the run of checkpoint {ckpt} (different scenario or rod count)")
     if not len(steps) or steps[0] > int(snap["step"]):
@@ -308,8 +337,10 @@ def _prepare(args):
             except CheckpointError:
                 other = None
             if other != run_id:
-                raise CliError(f"cannot resume into {out}: the file {ckpt} beside it, where its checkpoints go, "
-                               f"is not a checkpoint of this run; move it away first")
+                raise CliError(
+                    f"cannot resume into {out}: the file {ckpt} beside it, where its checkpoints go, "
+                    f"is not a checkpoint of this run; move it away first"
+                )
     else:
         run_id = uuid.uuid4().hex
         if not args.scenario:
@@ -324,8 +355,10 @@ def _prepare(args):
         check_target(out, "output file", force=True, inputs=[args.scenario])
         check_target(ckpt, "checkpoint file", force=True, inputs=[args.scenario])
         if not args.dry_run and ckpt.exists() and not args.force:
-            raise CliError(f"checkpoint file {ckpt} exists (from an earlier run?); pass --force to overwrite it, "
-                           f"or --resume {out} to continue that run")
+            raise CliError(
+                f"checkpoint file {ckpt} exists (from an earlier run?); pass --force to overwrite it, "
+                f"or --resume {out} to continue that run"
+            )
     if snap is None and not args.dry_run:
         if out.exists() and not args.force:
             raise CliError(f"output file {out} exists; pass --force to overwrite it or -o to choose another name")
@@ -343,8 +376,11 @@ def run(args):
     scenario, snap, out, ckpt, run_id = _on_root(lambda: _prepare(args))
     p = scenario.params
     try:
-        sim = (Simulation.from_scenario(scenario, comm=world) if snap is None
-               else Simulation.from_snapshot(p, snap, comm=world))
+        sim = (
+            Simulation.from_scenario(scenario, comm=world)
+            if snap is None
+            else Simulation.from_snapshot(p, snap, comm=world)
+        )
     except PlacementError as exc:
         raise CliError(str(exc)) from None
 
@@ -356,16 +392,25 @@ def run(args):
     except ValueError as exc:
         raise CliError(f"run.t_end: {exc}") from None
     plan = {
-        "scenario": str(args.scenario), "rods": p.rods.count, "terms": p.forces.active(),
-        "dt": p.integrator.dt, "t_end": p.run.t_end, "steps": n_steps,
+        "scenario": str(args.scenario),
+        "rods": p.rods.count,
+        "terms": p.forces.active(),
+        "dt": p.integrator.dt,
+        "t_end": p.run.t_end,
+        "steps": n_steps,
         "frames": n_steps // max(1, round(p.output.interval / p.integrator.dt)) + 1,
-        "output": str(out), "threads": numba.get_num_threads(), "mpi_ranks": world.size,
+        "output": str(out),
+        "threads": numba.get_num_threads(),
+        "mpi_ranks": world.size,
         **{k: v for k, v in sim.force_field.describe().items() if k != "terms"},
     }
     if world.rank == 0:
-        print(f"selfas-graph {__version__}: {p.scenario.name}: {p.rods.count} rods, terms "
-              f"{', '.join(plan['terms']) or 'none'}; dt = {p.integrator.dt:g}, t_end = {p.run.t_end:g} "
-              f"({n_steps} steps); {plan['threads']} threads x {world.size} ranks", flush=True)
+        print(
+            f"selfas-graph {__version__}: {p.scenario.name}: {p.rods.count} rods, terms "
+            f"{', '.join(plan['terms']) or 'none'}; dt = {p.integrator.dt:g}, t_end = {p.run.t_end:g} "
+            f"({n_steps} steps); {plan['threads']} threads x {world.size} ranks",
+            flush=True,
+        )
     if args.dry_run:
         if world.rank == 0:
             print("dry run: placement succeeded, nothing written")
@@ -380,17 +425,29 @@ def run(args):
                 writer = RunWriter.reopen(out, int(snap["step"]))
             except RunFileError as exc:
                 raise CliError(f"cannot resume: {exc}") from None
-            print(f"resuming at step {int(snap['step'])} (t = {float(snap['time']):.6g}) from {ckpt}; "
-                  f"{writer.n_frames} frames kept in {out}", flush=True)
+            print(
+                f"resuming at step {int(snap['step'])} (t = {float(snap['time']):.6g}) from {ckpt}; "
+                f"{writer.n_frames} frames kept in {out}",
+                flush=True,
+            )
             return writer
-        provenance = run_provenance(sim, scenario, shlex.join(sys.argv), run_id, scenario_path=args.scenario,
-                                    mpi_ranks=world.size)
+        provenance = run_provenance(
+            sim, scenario, shlex.join(sys.argv), run_id, scenario_path=args.scenario, mpi_ranks=world.size
+        )
         existed = out.exists()
         try:
-            return RunWriter(out, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
-                             overwrite=args.force, velocities=p.output.velocities,
-                             rod_length=sim.state.rod_length, rod_resistance=sim.state.rod_resistance,
-                             frame_interval=sim.frame_interval)
+            return RunWriter(
+                out,
+                sim.state.n_tips,
+                sim.state.tip_charge,
+                sim.state.rod_charge,
+                provenance,
+                overwrite=args.force,
+                velocities=p.output.velocities,
+                rod_length=sim.state.rod_length,
+                rod_resistance=sim.state.rod_resistance,
+                frame_interval=sim.frame_interval,
+            )
         except OSError as exc:
             if not existed:  # a failed run leaves no output file behind
                 try:
@@ -409,8 +466,9 @@ def run(args):
         if world.rank != 0:
             writer = NullWriter(n_frames)
     if world.rank == 0:
-        checkpointer = Checkpointer(ckpt, p.output.checkpoint_interval,
-                                    checkpoint_meta(scenario, run_id, out.name, p.run.t_end, __version__))
+        checkpointer = Checkpointer(
+            ckpt, p.output.checkpoint_interval, checkpoint_meta(scenario, run_id, out.name, p.run.t_end, __version__)
+        )
     mode = args.progress
     if mode == "auto":
         mode = "bar" if sys.stderr.isatty() else "lines"
@@ -428,8 +486,11 @@ def run(args):
             writer.close(status=f"interrupted at step {exc.step}")
         name = signal.Signals(stop.signum).name
         if world.rank == 0:
-            print(f"selfas-graph simulate: {name} received: stopped at step {exc.step} (t = {sim.state.time:.6g}); "
-                  f"checkpoint {ckpt}; continue with: selfas-graph simulate --resume {out}", file=sys.stderr)
+            print(
+                f"selfas-graph simulate: {name} received: stopped at step {exc.step} (t = {sim.state.time:.6g}); "
+                f"checkpoint {ckpt}; continue with: selfas-graph simulate --resume {out}",
+                file=sys.stderr,
+            )
         return 128 + stop.signum
     except NumericalFailure as exc:
         if reporter:
@@ -442,13 +503,17 @@ def run(args):
             writer.close(status=f"failed: {exc}")
             # the failed state (possibly NaN) goes to its own file for inspection, never into the run file
             try:
-                write_checkpoint(failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step,
-                                                           "failure": str(exc)})
+                write_checkpoint(
+                    failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step, "failure": str(exc)}
+                )
             except (OSError, RuntimeError) as io:
                 print(f"selfas-graph simulate: the failed state could not be saved ({io})", file=sys.stderr)
         print(f"selfas-graph simulate: {exc}", file=sys.stderr)
-        print(f"frames up to the last output interval are in {out}; the failed state is in {failure} "
-              f"(read it with selfas_graph.io.checkpoint.read_checkpoint)", file=sys.stderr)
+        print(
+            f"frames up to the last output interval are in {out}; the failed state is in {failure} "
+            f"(read it with selfas_graph.io.checkpoint.read_checkpoint)",
+            file=sys.stderr,
+        )
         return EXIT_NUMERICAL
     except KeyboardInterrupt:
         if reporter:
@@ -505,9 +570,11 @@ def _io_failure(exc, writer, out, ckpt, checkpointer, sim):
         except CheckpointError:
             last = str(ckpt)
     reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())[:300]
-    msg = (f"I/O error at step {sim.state.step} (t = {sim.state.time:.6g}) while writing: {reason}. "
-           f"The frames flushed before it are in {out}; last good checkpoint: {last}. Free some space "
-           f"(or fix the folder) and continue with: selfas-graph simulate --resume {out}")
+    msg = (
+        f"I/O error at step {sim.state.step} (t = {sim.state.time:.6g}) while writing: {reason}. "
+        f"The frames flushed before it are in {out}; last good checkpoint: {last}. Free some space "
+        f"(or fix the folder) and continue with: selfas-graph simulate --resume {out}"
+    )
     if world.size > 1:
         print(f"selfas-graph simulate: error: {msg}", file=sys.stderr, flush=True)
         world.Abort(4)
@@ -526,8 +593,13 @@ def _print_summary(s, out, sim):
     st = sim.status()
     if sim.params.circuit is not None:
         sc = st["short_circuit_time"]
-        lines.append((f"  short circuit: the conductors were first joined at t = {sc:.6g}" if sc is not None
-                      else "  short circuit: never")
-                     + f"; at the end {st['current_rods']} rods carry current, total {st['total_current']:.4g} J0")
+        lines.append(
+            (
+                f"  short circuit: the conductors were first joined at t = {sc:.6g}"
+                if sc is not None
+                else "  short circuit: never"
+            )
+            + f"; at the end {st['current_rods']} rods carry current, total {st['total_current']:.4g} J0"
+        )
     lines.append(f"  output: {out} ({s.frames} frames); checkpoint {checkpoint_path(out)}")
     print("\n".join(lines))

@@ -4,6 +4,7 @@ Reads the run file alone: the structures, which rods are current-carrying
 filaments and which are dead ends, the current in each, the total current, the
 effective resistance between the electrodes and the event history up to the frame.
 """
+
 from __future__ import annotations
 
 import json
@@ -36,13 +37,22 @@ def analyse(run: RunFile, frame=None, t=None) -> dict:
     for sid in np.argsort(-topo.structure_size, kind="stable"):
         rods = np.flatnonzero(topo.structure == sid)
         tips = set((2 * rods).tolist()) | set((2 * rods + 1).tolist())
-        touching = sorted({ev.CONDUCTOR_NAMES.get(int(c), str(c))
-                           for k, c in zip(g["conductor_tip"], g["conductor_id"]) if int(k) in tips})
-        structures.append({
-            "id": int(sid), "rods": int(len(rods)),
-            "filament": int((role[rods] == FILAMENT).sum()), "dead_end": int((role[rods] == DEAD_END).sum()),
-            "conductors": touching,
-        })
+        touching = sorted(
+            {
+                ev.CONDUCTOR_NAMES.get(int(c), str(c))
+                for k, c in zip(g["conductor_tip"], g["conductor_id"])
+                if int(k) in tips
+            }
+        )
+        structures.append(
+            {
+                "id": int(sid),
+                "rods": int(len(rods)),
+                "filament": int((role[rods] == FILAMENT).sum()),
+                "dead_end": int((role[rods] == DEAD_END).sum()),
+                "conductors": touching,
+            }
+        )
     fil = np.flatnonzero(role == FILAMENT)
     events = run.events(until_step=g["step"])
     counts = Counter(ev.KIND_NAMES.get(int(k), str(k)) for k in events["kind"])
@@ -54,8 +64,11 @@ def analyse(run: RunFile, frame=None, t=None) -> dict:
             k = min(g["frame"], len(values) - 1)
             obs[name] = float(values[k])
     return {
-        "file": str(run.path), "frame": g["frame"], "frames": int(run.f["graph/step"].shape[0]),
-        "step": g["step"], "time": g["time"],
+        "file": str(run.path),
+        "frame": g["frame"],
+        "frames": int(run.f["graph/step"].shape[0]),
+        "step": g["step"],
+        "time": g["time"],
         "conductors": {ev.CONDUCTOR_NAMES.get(c, str(c)): p for c, p in g["conductors"].items()},
         "rods": {ROLE_NAMES[r]: int((role == r).sum()) for r in sorted(ROLE_NAMES)} | {"total": int(n_rods)},
         "structures": structures,
@@ -67,8 +80,16 @@ def analyse(run: RunFile, frame=None, t=None) -> dict:
         "filament_rods": [{"rod": int(i), "current": float(current[i])} for i in fil],
         "dead_end_rods": [int(i) for i in np.flatnonzero(role == DEAD_END)],
         "event_counts": dict(counts),
-        "events": [{"step": int(e["step"]), "time": float(e["time"]), "kind": ev.KIND_NAMES.get(int(e["kind"]), "?"),
-                    "a": int(e["a"]), "b": int(e["b"])} for e in events],
+        "events": [
+            {
+                "step": int(e["step"]),
+                "time": float(e["time"]),
+                "kind": ev.KIND_NAMES.get(int(e["kind"]), "?"),
+                "a": int(e["a"]),
+                "b": int(e["b"]),
+            }
+            for e in events
+        ],
     }
 
 
@@ -119,14 +140,24 @@ def run(args):
     r = data["rods"]
     lines = [
         f"{data['file']}: frame {data['frame']} of 0..{data['frames'] - 1}, step {data['step']}, t = {data['time']:.6g}",
-        "conductors: " + (", ".join(f"{k} psi = {v:+.6g}" if v is not None else f"{k} psi = -delta_J0 z per contact"
-                                    for k, v in data["conductors"].items()) or "none"),
+        "conductors: "
+        + (
+            ", ".join(
+                f"{k} psi = {v:+.6g}" if v is not None else f"{k} psi = -delta_J0 z per contact"
+                for k, v in data["conductors"].items()
+            )
+            or "none"
+        ),
         f"rods: {r['total']} = {r['filament']} in current-carrying filaments + {r['dead_end']} dead ends + "
         f"{r['cluster']} in floating clusters + {r['free']} free",
         f"structures: {len(data['structures'])} (largest: {data['largest_structure']} rods)",
-        "short circuit: " + ("yes" if data["short_circuit"] else "no")
-        + (f" (first at step {data['first_short_circuit']['step']}, t = {data['first_short_circuit']['time']:.6g})"
-           if data["first_short_circuit"] else ""),
+        "short circuit: "
+        + ("yes" if data["short_circuit"] else "no")
+        + (
+            f" (first at step {data['first_short_circuit']['step']}, t = {data['first_short_circuit']['time']:.6g})"
+            if data["first_short_circuit"]
+            else ""
+        ),
         f"total current: {_fmt(data['total_current'], ' J0')}; effective resistance between the electrodes: "
         f"{_fmt(data['effective_resistance'], ' R0')}",
     ]
@@ -135,26 +166,31 @@ def run(args):
         lines.append("\nstructures touching a conductor:")
         lines.append(f"  {'id':>5} {'rods':>6} {'filament':>9} {'dead end':>9}  conductors")
         for s in touching[:20]:
-            lines.append(f"  {s['id']:>5} {s['rods']:>6} {s['filament']:>9} {s['dead_end']:>9}  {', '.join(s['conductors'])}")
+            lines.append(
+                f"  {s['id']:>5} {s['rods']:>6} {s['filament']:>9} {s['dead_end']:>9}  {', '.join(s['conductors'])}"
+            )
         if len(touching) > 20:
             lines.append(f"  ... and {len(touching) - 20} more")
     if data["filament_rods"]:
         lines.append("\ncurrent-carrying filament rods (current in J0, + from tip a to tip b):")
         cells = [f"{d['rod']:>6} {d['current']:+10.4g}" for d in data["filament_rods"]]
         for i in range(0, min(len(cells), 60), 4):
-            lines.append("  " + "   ".join(cells[i:i + 4]))
+            lines.append("  " + "   ".join(cells[i : i + 4]))
         if len(cells) > 60:
             lines.append(f"  ... and {len(cells) - 60} more (use --json for all)")
     if data["dead_end_rods"]:
         d = data["dead_end_rods"]
         lines.append(f"\ndead-end rods: {' '.join(map(str, d[:30]))}" + (" ..." if len(d) > 30 else ""))
-    lines.append("\nevents up to this frame: "
-                 + (", ".join(f"{k} {v}" for k, v in sorted(data["event_counts"].items())) or "none"))
-    shown = data["events"][-args.events:] if args.events > 0 else []
+    lines.append(
+        "\nevents up to this frame: "
+        + (", ".join(f"{k} {v}" for k, v in sorted(data["event_counts"].items())) or "none")
+    )
+    shown = data["events"][-args.events :] if args.events > 0 else []
     if shown:
         lines.append(f"  {'step':>13}  {'t':<14} {'kind':<18} {'a':>7} {'b':>7}  (what a and b are)")
     for e in shown:
-        lines.append(f"  step {e['step']:>8}  t = {e['time']:<10.6g} {e['kind']:<18} {e['a']:>7} {e['b']:>7}  "
-                     f"{_describe(e)}")
+        lines.append(
+            f"  step {e['step']:>8}  t = {e['time']:<10.6g} {e['kind']:<18} {e['a']:>7} {e['b']:>7}  {_describe(e)}"
+        )
     print("\n".join(lines))
     return 0

@@ -12,6 +12,7 @@ kill at any moment leaves either the previous checkpoint or the new one, never a
 file; a write that fails (full disk) removes its ``.tmp`` and leaves the previous
 checkpoint in place.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -84,10 +85,14 @@ def write_checkpoint(path, snapshot: dict, meta: dict) -> None:
         # refused before the temporary file exists: the previous checkpoint stays, nothing is left behind
         from .h5md import DiskFullError
 
-        raise DiskFullError(28, f"No space left for a checkpoint ({free / 2**20:.2f} MiB free, about "
-                          f"{need / 2**20:.2f} MiB needed)", str(tmp))
-    meta = {k: (v if isinstance(v, (str, int, float, np.integer, np.floating)) else json.dumps(v))
-            for k, v in meta.items()}
+        raise DiskFullError(
+            28,
+            f"No space left for a checkpoint ({free / 2**20:.2f} MiB free, about {need / 2**20:.2f} MiB needed)",
+            str(tmp),
+        )
+    meta = {
+        k: (v if isinstance(v, (str, int, float, np.integer, np.floating)) else json.dumps(v)) for k, v in meta.items()
+    }
     try:
         with h5py.File(tmp, "w") as f:
             f.attrs["format"] = FORMAT
@@ -164,21 +169,27 @@ def read_checkpoint(path) -> tuple[dict, dict]:
         except CheckpointError:
             raise
         except (KeyError, TypeError, ValueError, OSError, RuntimeError, AttributeError) as exc:
-            raise CheckpointError(f"{path}: an incomplete or damaged checkpoint ({' '.join(str(exc).split())})") from None
+            raise CheckpointError(
+                f"{path}: an incomplete or damaged checkpoint ({' '.join(str(exc).split())})"
+            ) from None
     missing = [k for k in ("position", "velocity", "step", "time", "hist_v", "hist_a") if k not in snap]
     missing += [k for k in ("scenario_text", "overrides") if k not in meta]
     if missing:
         raise CheckpointError(f"{path}: an incomplete checkpoint (missing {', '.join(missing)})")
     if checksum is None:
-        raise CheckpointError(f"{path}: the checkpoint carries no checksum, so its contents cannot be verified "
-                              f"(written by an older selfas-graph, or damaged)")
+        raise CheckpointError(
+            f"{path}: the checkpoint carries no checksum, so its contents cannot be verified "
+            f"(written by an older selfas-graph, or damaged)"
+        )
     try:
         ok = isinstance(checksum, str) and _digest(snap, meta) == checksum
     except (TypeError, ValueError, UnicodeError):
         ok = False
     if not ok:
-        raise CheckpointError(f"{path}: the checkpoint's contents do not match its checksum "
-                              f"(the file is damaged or was edited); it cannot be resumed from")
+        raise CheckpointError(
+            f"{path}: the checkpoint's contents do not match its checksum "
+            f"(the file is damaged or was edited); it cannot be resumed from"
+        )
     check_snapshot(snap, path)
     return snap, meta
 
@@ -195,8 +206,9 @@ def check_snapshot(snap: dict, path="checkpoint") -> None:
 
     pos = np.asarray(snap["position"])
     if pos.dtype.kind != "f" or pos.ndim != 2 or pos.shape[1] != 3 or pos.shape[0] % 2:
-        raise CheckpointError(f"{path}: snapshot/position must be a (2 n_rods, 3) float array, "
-                              f"got {pos.dtype} {pos.shape}")
+        raise CheckpointError(
+            f"{path}: snapshot/position must be a (2 n_rods, 3) float array, got {pos.dtype} {pos.shape}"
+        )
     for key in FINITE:
         if key not in snap:
             continue
@@ -204,12 +216,15 @@ def check_snapshot(snap: dict, path="checkpoint") -> None:
         if arr.dtype.kind not in "fiu" or arr.dtype.fields is not None:
             raise CheckpointError(f"{path}: snapshot/{key} must hold numbers, got dtype {arr.dtype}")
         if not np.isfinite(arr).all():
-            raise CheckpointError(f"{path}: snapshot/{key} holds non-finite values (NaN or inf); "
-                                  f"the state cannot be continued")
+            raise CheckpointError(
+                f"{path}: snapshot/{key} holds non-finite values (NaN or inf); the state cannot be continued"
+            )
     for key in ("velocity",):
         if np.asarray(snap[key]).shape != pos.shape:
-            raise CheckpointError(f"{path}: snapshot/{key} has shape {np.asarray(snap[key]).shape}, "
-                                  f"expected {pos.shape} like the positions")
+            raise CheckpointError(
+                f"{path}: snapshot/{key} has shape {np.asarray(snap[key]).shape}, "
+                f"expected {pos.shape} like the positions"
+            )
     for key in ("step", "time"):
         v = np.asarray(snap[key])
         if v.ndim != 0 or v.dtype.kind not in "fiu" or not np.isfinite(v):
@@ -217,18 +232,26 @@ def check_snapshot(snap: dict, path="checkpoint") -> None:
     if "events" in snap:
         ev = np.asarray(snap["events"])
         if ev.dtype != EVENT_DTYPE or ev.ndim != 1:
-            raise CheckpointError(f"{path}: snapshot/events must be a 1-D array of event records "
-                                  f"{EVENT_DTYPE.descr}, got {ev.dtype} {ev.shape}")
+            raise CheckpointError(
+                f"{path}: snapshot/events must be a 1-D array of event records "
+                f"{EVENT_DTYPE.descr}, got {ev.dtype} {ev.shape}"
+            )
 
 
 def checkpoint_meta(scenario, run_id, run_name, t_end, version) -> dict:
     """The ``/meta`` of a run's checkpoints: what ``simulate --resume`` needs besides the
     snapshot (the scenario text and overrides, the run identity shared with the run file,
     the run file's name beside the checkpoint, the effective end time)."""
-    return {"format_note": "selfas-graph checkpoint; continue with selfas-graph simulate --resume",
-            "scenario_text": scenario.text, "overrides": json.dumps(list(scenario.overrides)),
-            "run_id": str(run_id), "run_name": str(run_name), "run_file": str(run_name), "t_end": float(t_end),
-            "version": version}
+    return {
+        "format_note": "selfas-graph checkpoint; continue with selfas-graph simulate --resume",
+        "scenario_text": scenario.text,
+        "overrides": json.dumps(list(scenario.overrides)),
+        "run_id": str(run_id),
+        "run_name": str(run_name),
+        "run_file": str(run_name),
+        "t_end": float(t_end),
+        "version": version,
+    }
 
 
 class Checkpointer:

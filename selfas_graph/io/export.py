@@ -16,6 +16,7 @@ rod's role. Positions are in rod lengths, times in t0 (docs/output.md).
   reading the role names as elements), ``role`` (0..3), ``rod``, ``current``, ``magnetic_charge``
   and ``velo`` if saved; per frame ``Time``, ``Step``, ``total_current``, ``pbc="F F F"``.
 """
+
 from __future__ import annotations
 
 import os
@@ -54,13 +55,16 @@ def parse_frames(spec, n_frames) -> np.ndarray:
         else:
             picked = np.array([int(p) for p in text.split(",")], dtype=np.int64)
     except (ValueError, OverflowError):
-        raise ExportError(f"--frames {text!r}: write all, a frame number, a slice A:B or A:B:S, or a list "
-                          f"K1,K2 (negative numbers count from the end)") from None
+        raise ExportError(
+            f"--frames {text!r}: write all, a frame number, a slice A:B or A:B:S, or a list "
+            f"K1,K2 (negative numbers count from the end)"
+        ) from None
     if ":" not in text:
         bad = picked[(picked < -n_frames) | (picked >= n_frames)]
         if len(bad):
-            raise ExportError(f"--frames {text}: frame {int(bad[0])} out of range; the file has frames "
-                              f"0..{n_frames - 1}")
+            raise ExportError(
+                f"--frames {text}: frame {int(bad[0])} out of range; the file has frames 0..{n_frames - 1}"
+            )
         picked = picked % n_frames
     if not len(picked):
         raise ExportError(f"--frames {text}: selects no frame of the {n_frames} in the file")
@@ -112,9 +116,13 @@ class _Frames:
             current = run.f["graph/current"][j].astype(np.float64)
         total = self.total_current.get(step, 0.0) if self.total_current is not None else 0.0
         return {
-            "step": step, "time": float(self.times[k]), "position": run.f["particles/tips/position/value"][k],
+            "step": step,
+            "time": float(self.times[k]),
+            "position": run.f["particles/tips/position/value"][k],
             "velocity": run.f["particles/tips/velocity/value"][k] if self.has_velocity else None,
-            "role": role, "current": current, "total_current": float(total),
+            "role": role,
+            "current": current,
+            "total_current": float(total),
         }
 
     def box_edge(self, frames) -> float:
@@ -189,12 +197,23 @@ def write_xyz(run: RunFile, path, frames):
                 if d["velocity"] is not None:
                     props += ":velo:R:3"
                 out.write(f"{data.n_tips}\n")
-                out.write(f'Lattice="{edge:.17g} 0 0 0 {edge:.17g} 0 0 0 {edge:.17g}" Origin="{-edge / 2:.17g} '
-                          f'{-edge / 2:.17g} {-edge / 2:.17g}" Properties={props} Time={d["time"]:.17g} '
-                          f'Step={d["step"]} total_current={d["total_current"]:.17g} pbc="F F F"\n')
+                out.write(
+                    f'Lattice="{edge:.17g} 0 0 0 {edge:.17g} 0 0 0 {edge:.17g}" Origin="{-edge / 2:.17g} '
+                    f'{-edge / 2:.17g} {-edge / 2:.17g}" Properties={props} Time={d["time"]:.17g} '
+                    f'Step={d["step"]} total_current={d["total_current"]:.17g} pbc="F F F"\n'
+                )
                 x, v = d["position"], d["velocity"]
-                columns = [names[role], x[:, 0], x[:, 1], x[:, 2], np.zeros(data.n_tips, dtype=np.int64), role,
-                           rod_of_tip, d["current"][rod_of_tip], data.charge]
+                columns = [
+                    names[role],
+                    x[:, 0],
+                    x[:, 1],
+                    x[:, 2],
+                    np.zeros(data.n_tips, dtype=np.int64),
+                    role,
+                    rod_of_tip,
+                    d["current"][rod_of_tip],
+                    data.charge,
+                ]
                 fmt = "%s %.17g %.17g %.17g %d %d %d %.17g %.17g"
                 if v is not None:
                     columns += [v[:, 0], v[:, 1], v[:, 2]]
@@ -224,5 +243,14 @@ def export_run(run_path, fmt, out=None, frames=None, force=False) -> tuple[Path,
     return path, len(picked)
 
 
-__all__ = ["export_run", "parse_frames", "output_path", "write_gsd", "write_xyz", "ExportError", "FORMATS",
-           "ROLE_TYPES", "RunFileError"]
+__all__ = [
+    "export_run",
+    "parse_frames",
+    "output_path",
+    "write_gsd",
+    "write_xyz",
+    "ExportError",
+    "FORMATS",
+    "ROLE_TYPES",
+    "RunFileError",
+]

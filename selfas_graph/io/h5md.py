@@ -39,6 +39,7 @@ Only one process writes. Every frame is followed by a flush, so a run that is
 killed keeps everything up to its last saved frame. ``status`` is "running"
 until the run ends, then "finished" or "failed: <reason>".
 """
+
 from __future__ import annotations
 
 import errno
@@ -64,8 +65,14 @@ def observable_unit(name):
     """The reduced unit of an observable, or None for counts and flags."""
     if name.startswith(("energy", "work/")):
         return ENERGY
-    return {"momentum": "m L t_0-1", "bond_error": LENGTH, "bond_error_per_step": LENGTH, "dt": TIME,
-            "total_current": CURRENT, "effective_resistance": "R_0"}.get(name)
+    return {
+        "momentum": "m L t_0-1",
+        "bond_error": LENGTH,
+        "bond_error_per_step": LENGTH,
+        "dt": TIME,
+        "total_current": CURRENT,
+        "effective_resistance": "R_0",
+    }.get(name)
 
 
 def _fixed(text):
@@ -75,8 +82,14 @@ def _fixed(text):
 
 
 #: the events' dtype in the file: ``kind`` an HDF5 enumeration of the names in KIND_NAMES
-EVENT_FILE_DTYPE = np.dtype([(name, h5py.enum_dtype({v: k for k, v in KIND_NAMES.items()}, basetype="<i4"))
-                             if name == "kind" else (name, EVENT_DTYPE[name]) for name in EVENT_DTYPE.names])
+EVENT_FILE_DTYPE = np.dtype(
+    [
+        (name, h5py.enum_dtype({v: k for k, v in KIND_NAMES.items()}, basetype="<i4"))
+        if name == "kind"
+        else (name, EVENT_DTYPE[name])
+        for name in EVENT_DTYPE.names
+    ]
+)
 
 
 def _set_unit(obj, unit):
@@ -131,9 +144,8 @@ def _growable(group, name, shape, dtype):
     kill during that write can leave it undecodable, losing frames written long before; an
     uncompressed chunk is appended in place (seen in tests/test_restart.py's kill test).
     """
-    rows = max(1, min(1024, 2 ** 20 // max(1, int(np.prod(shape)) * 8)))
-    return group.create_dataset(name, shape=(0,) + shape, maxshape=(None,) + shape, dtype=dtype,
-                                chunks=(rows,) + shape)
+    rows = max(1, min(1024, 2**20 // max(1, int(np.prod(shape)) * 8)))
+    return group.create_dataset(name, shape=(0,) + shape, maxshape=(None,) + shape, dtype=dtype, chunks=(rows,) + shape)
 
 
 def _append(ds, value):
@@ -141,7 +153,7 @@ def _append(ds, value):
     value = np.asarray(value)
     k = 1 if value.shape == ds.shape[1:] else value.shape[0]
     ds.resize(n + k, axis=0)
-    ds[n:n + k] = value
+    ds[n : n + k] = value
     return n
 
 
@@ -192,18 +204,27 @@ def appendable_problems(f) -> list:
         check(f"{group}/value", "f")
     obs = f.get("observables")
     if isinstance(obs, h5py.Group):
+
         def visit(name, obj):
             if isinstance(obj, h5py.Group) and "value" in obj:
                 check(f"observables/{name}/step", "iu")
                 check(f"observables/{name}/value", "f")
                 if name != "bond_error_per_step":
                     check(f"observables/{name}/time", "f")
+
         obs.visititems(visit)
     check("events", dtype=EVENT_DTYPE)
     g = f.get("graph")
     if isinstance(g, h5py.Group):
-        for name in ("step", "tip_contacts_count", "conductor_contacts_count", "tip_contacts", "conductor_tip",
-                     "conductor_id", "role"):
+        for name in (
+            "step",
+            "tip_contacts_count",
+            "conductor_contacts_count",
+            "tip_contacts",
+            "conductor_tip",
+            "conductor_id",
+            "role",
+        ):
             check(f"graph/{name}", "iu")
         for name in ("time", "current", "potential", "conductor_potential"):
             check(f"graph/{name}", "f")
@@ -222,8 +243,9 @@ def run_provenance(sim, scenario, command_line, run_id, scenario_path=None, mpi_
     if scenario_path is None:
         scenario_path = scenario.path if scenario is not None and scenario.path is not None else ""
     return {
-        "scenario_text": scenario.text if scenario is not None else
-        "# built in Python; the resolved parameters are in parameters_json\n",
+        "scenario_text": scenario.text
+        if scenario is not None
+        else "# built in Python; the resolved parameters are in parameters_json\n",
         "scenario_path": str(scenario_path),
         "overrides": json.dumps(list(scenario.overrides) if scenario is not None else []),
         "parameters_json": json.dumps(p.to_dict()),
@@ -264,17 +286,21 @@ class _PendingRows:
         events not written yet (the events dataset is created at the first call)."""
         if self._n_pending:
             steps, values = self._pending
-            self.write_per_step(steps[:self._n_pending], values[:self._n_pending])
+            self.write_per_step(steps[: self._n_pending], values[: self._n_pending])
             self._n_pending = 0
         if events is not None:
-            self.write_events(events[self.events_written:])
+            self.write_events(events[self.events_written :])
             self.events_written = len(events)
 
     def state_dict(self) -> dict:
         """Frames and events written, and the per-step rows not written yet."""
         steps, values = self._pending
-        return {"n_frames": int(self.n_frames), "events_written": int(self.events_written),
-                "pending_step": steps[:self._n_pending].copy(), "pending_value": values[:self._n_pending].copy()}
+        return {
+            "n_frames": int(self.n_frames),
+            "events_written": int(self.events_written),
+            "pending_step": steps[: self._n_pending].copy(),
+            "pending_value": values[: self._n_pending].copy(),
+        }
 
     def load_state_dict(self, d: dict) -> None:
         """Restore :meth:`state_dict` (the per-step buffer keeps at least the rows given)."""
@@ -312,11 +338,24 @@ class RunWriter(_PendingRows):
         (MDAnalysis reads it as its time step between frames).
     """
 
-    def __init__(self, path, n_tips, tip_charge, rod_charge, provenance, overwrite=False, velocities=True,
-                 frame_interval=None, rod_length=None, rod_resistance=None):
+    def __init__(
+        self,
+        path,
+        n_tips,
+        tip_charge,
+        rod_charge,
+        provenance,
+        overwrite=False,
+        velocities=True,
+        frame_interval=None,
+        rod_length=None,
+        rod_resistance=None,
+    ):
         self.path = Path(path)
         if self.path.exists() and not overwrite:
-            raise OutputExistsError(f"output file {self.path} exists; pass --force to overwrite it or -o to choose another")
+            raise OutputExistsError(
+                f"output file {self.path} exists; pass --force to overwrite it or -o to choose another"
+            )
         if not self.path.parent.exists():
             raise FileNotFoundError(f"the folder of the output file {self.path} does not exist")
         # default (earliest) format on purpose: the "latest" superblock carries a writer flag that a
@@ -342,7 +381,8 @@ class RunWriter(_PendingRows):
         _box(rods)
         _set_unit(rods.create_dataset("charge", data=np.asarray(rod_charge, dtype=np.float64)), CHARGE)
         bonds = f.create_group("connectivity").create_dataset(
-            "rods", data=np.arange(n_tips, dtype=np.int64).reshape(-1, 2))
+            "rods", data=np.arange(n_tips, dtype=np.int64).reshape(-1, 2)
+        )
         bonds.attrs["particles_group"] = tips.ref
         for name, values, unit in (("length", rod_length, LENGTH), ("resistance", rod_resistance, "R_0")):
             if values is not None:
@@ -351,8 +391,11 @@ class RunWriter(_PendingRows):
         for name in ("position",) + (("velocity",) if velocities else ()):
             g = tips.create_group(name)
             # no unit attribute here: MDAnalysis refuses every unit outside its SI table
-            self._elements[name] = (_growable(g, "step", (), "<i8"), _growable(g, "time", (), "<f8"),
-                                    _growable(g, "value", (n_tips, 3), "<f8"))
+            self._elements[name] = (
+                _growable(g, "step", (), "<i8"),
+                _growable(g, "time", (), "<f8"),
+                _growable(g, "value", (n_tips, 3), "<f8"),
+            )
         self._obs = {}
         self.frame_interval = frame_interval
         self.observables = f.create_group("observables")
@@ -411,7 +454,9 @@ class RunWriter(_PendingRows):
                 self._obs[name] = (obj["step"], obj["time"], obj["value"])
 
         self.observables.visititems(visit)
-        self.frame_interval = float(self._obs["dt"][2][-1]) if "dt" in self._obs and self._obs["dt"][2].shape[0] else None
+        self.frame_interval = (
+            float(self._obs["dt"][2][-1]) if "dt" in self._obs and self._obs["dt"][2].shape[0] else None
+        )
         g = self.observables["bond_error_per_step"]
         n = keep(g["step"], g["value"])
         _truncate(g["step"], n)
@@ -422,12 +467,22 @@ class RunWriter(_PendingRows):
         self.events_written = f["events"].shape[0] if "events" in f else 0
         if "graph" in f:
             g = f["graph"]
-            per_frame = ("step", "time", "tip_contacts_count", "conductor_contacts_count", "role", "current", "potential")
+            per_frame = (
+                "step",
+                "time",
+                "tip_contacts_count",
+                "conductor_contacts_count",
+                "role",
+                "current",
+                "potential",
+            )
             n = keep(*(g[name] for name in per_frame))
             m = int(g["tip_contacts_count"][:n].sum())
             k = int(g["conductor_contacts_count"][:n].sum())
-            if g["tip_contacts"].shape[0] < m or min(g[name].shape[0] for name in
-                                                     ("conductor_tip", "conductor_id", "conductor_potential")) < k:
+            if (
+                g["tip_contacts"].shape[0] < m
+                or min(g[name].shape[0] for name in ("conductor_tip", "conductor_id", "conductor_potential")) < k
+            ):
                 f.close()
                 raise RunFileError(f"{self.path}: the graph data up to step {step} are incomplete (damaged file)")
             for name in per_frame:
@@ -466,8 +521,11 @@ class RunWriter(_PendingRows):
         free = free_bytes(self.path.parent)
         need = self.reserve()
         if free is not None and free < need:
-            raise DiskFullError(28, f"{free / 2**20:.2f} MiB free in {self.path.parent or '.'}, "
-                                    f"the next frame may need {need / 2**20:.2f} MiB")
+            raise DiskFullError(
+                28,
+                f"{free / 2**20:.2f} MiB free in {self.path.parent or '.'}, "
+                f"the next frame may need {need / 2**20:.2f} MiB",
+            )
         # a quota or a file-size limit does not show in the free space: ask the file system for the
         # room (posix_fallocate), then give it back; HDF5 has written everything up to the size seen
         try:
@@ -481,8 +539,10 @@ class RunWriter(_PendingRows):
             except OSError as exc:
                 if exc.errno in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS, errno.ENODEV):
                     return  # a file system without fallocate: failed writes are caught when they happen
-                raise DiskFullError(exc.errno, f"{exc.strerror}: {self.path} cannot grow by the "
-                                               f"{need / 2**20:.2f} MiB the next frame may need") from None
+                raise DiskFullError(
+                    exc.errno,
+                    f"{exc.strerror}: {self.path} cannot grow by the {need / 2**20:.2f} MiB the next frame may need",
+                ) from None
             finally:
                 if os.fstat(fd).st_size != size:
                     os.ftruncate(fd, size)
@@ -504,8 +564,11 @@ class RunWriter(_PendingRows):
             value = np.asarray(value, dtype=np.float64)
             if name not in self._obs:
                 g = self.observables.create_group(name)
-                self._obs[name] = (_growable(g, "step", (), "<i8"), _growable(g, "time", (), "<f8"),
-                                   _growable(g, "value", value.shape, "<f8"))
+                self._obs[name] = (
+                    _growable(g, "step", (), "<i8"),
+                    _growable(g, "time", (), "<f8"),
+                    _growable(g, "value", value.shape, "<f8"),
+                )
                 _set_unit(self._obs[name][1], TIME)
                 _set_unit(self._obs[name][2], observable_unit(name))
             s, tt, v = self._obs[name]
@@ -545,7 +608,11 @@ class RunWriter(_PendingRows):
             g = self.f.create_group("graph")
             g.attrs["conductor_ids"] = np.array(sorted(conductor_potential), dtype=np.int64)
             g.attrs["conductor_potentials"] = np.array(
-                [np.nan if conductor_potential[c] is None else conductor_potential[c] for c in sorted(conductor_potential)])
+                [
+                    np.nan if conductor_potential[c] is None else conductor_potential[c]
+                    for c in sorted(conductor_potential)
+                ]
+            )
             g.attrs["role_names"] = json.dumps({0: "free", 1: "cluster", 2: "dead_end", 3: "filament"})
             _growable(g, "step", (), "<i8")
             _set_unit(_growable(g, "time", (), "<f8"), TIME)
@@ -590,10 +657,18 @@ class RunWriter(_PendingRows):
         provenance = run_provenance(sim, getattr(sim, "scenario", None), shlex.join(sys.argv), uuid.uuid4().hex)
         if author is not None:
             provenance["author"] = author
-        return cls(path, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, provenance,
-                   overwrite=overwrite, velocities=p.output.velocities if velocities is None else velocities,
-                   frame_interval=sim.frame_interval, rod_length=sim.state.rod_length,
-                   rod_resistance=sim.state.rod_resistance)
+        return cls(
+            path,
+            sim.state.n_tips,
+            sim.state.tip_charge,
+            sim.state.rod_charge,
+            provenance,
+            overwrite=overwrite,
+            velocities=p.output.velocities if velocities is None else velocities,
+            frame_interval=sim.frame_interval,
+            rod_length=sim.state.rod_length,
+            rod_resistance=sim.state.rod_resistance,
+        )
 
     def __enter__(self):
         return self
@@ -673,17 +748,28 @@ class RunFile:
         except OSError as exc:
             reason = " ".join(str(exc).split())  # h5py's messages can span lines
             if re.search(r"\block", reason.lower()) or "already open for write" in reason.lower():
-                raise RunFileError(f"{self.path}: locked by another process, most likely a simulation still "
-                                   f"writing it (HDF5 file locking: {reason}); wait for it to end, or set "
-                                   f"HDF5_USE_FILE_LOCKING=FALSE to read it anyway") from None
+                raise RunFileError(
+                    f"{self.path}: locked by another process, most likely a simulation still "
+                    f"writing it (HDF5 file locking: {reason}); wait for it to end, or set "
+                    f"HDF5_USE_FILE_LOCKING=FALSE to read it anyway"
+                ) from None
             raise RunFileError(f"{self.path}: not a readable HDF5 file ({reason})") from None
-        required = ("parameters/selfas_graph", "particles/tips/position/value", "particles/tips/position/step",
-                    "particles/tips/position/time", "particles/tips/charge", "particles/rods/charge", "observables")
+        required = (
+            "parameters/selfas_graph",
+            "particles/tips/position/value",
+            "particles/tips/position/step",
+            "particles/tips/position/time",
+            "particles/tips/charge",
+            "particles/rods/charge",
+            "observables",
+        )
         missing = [name for name in required if not isinstance(self.f.get(name), (h5py.Dataset, h5py.Group))]
         if missing or "parameters_json" not in self.f["parameters/selfas_graph"].attrs:
             self.f.close()
-            raise RunFileError(f"{self.path}: an HDF5 file, but not a selfas-graph run "
-                               f"(missing {', '.join(missing) or 'parameters_json'})")
+            raise RunFileError(
+                f"{self.path}: an HDF5 file, but not a selfas-graph run "
+                f"(missing {', '.join(missing) or 'parameters_json'})"
+            )
         self.meta = dict(self.f["parameters/selfas_graph"].attrs)
         n = self.f["particles/tips/position/value"].shape
         if len(n) != 3 or n[2] != 3 or self.f["particles/tips/position/step"].shape[0] != n[0]:
@@ -692,9 +778,11 @@ class RunFile:
         kinds = {name: self.f[f"particles/tips/position/{name}"].dtype.kind for name in ("step", "time", "value")}
         if kinds["step"] not in "iu" or kinds["time"] != "f" or kinds["value"] != "f":
             self.f.close()
-            raise RunFileError(f"{self.path}: the positions' step, time and value datasets must hold integers, "
-                               f"numbers and numbers (found dtype kinds {kinds['step']}, {kinds['time']}, "
-                               f"{kinds['value']})")
+            raise RunFileError(
+                f"{self.path}: the positions' step, time and value datasets must hold integers, "
+                f"numbers and numbers (found dtype kinds {kinds['step']}, {kinds['time']}, "
+                f"{kinds['value']})"
+            )
 
     def __enter__(self):
         return self
@@ -781,14 +869,28 @@ class RunFile:
             return ds[:]
         return np.arange(self.n_tips, dtype=np.int64).reshape(-1, 2)
 
-    _GRAPH = ("step", "time", "tip_contacts", "tip_contacts_count", "conductor_tip", "conductor_id",
-              "conductor_potential", "conductor_contacts_count", "role", "current", "potential")
+    _GRAPH = (
+        "step",
+        "time",
+        "tip_contacts",
+        "tip_contacts_count",
+        "conductor_tip",
+        "conductor_id",
+        "conductor_potential",
+        "conductor_contacts_count",
+        "role",
+        "current",
+        "potential",
+    )
 
     @property
     def has_graph(self) -> bool:
         g = self.f.get("graph")
-        return (isinstance(g, h5py.Group) and all(isinstance(g.get(n), h5py.Dataset) for n in self._GRAPH)
-                and g["step"].shape[0] > 0)
+        return (
+            isinstance(g, h5py.Group)
+            and all(isinstance(g.get(n), h5py.Dataset) for n in self._GRAPH)
+            and g["step"].shape[0] > 0
+        )
 
     def events(self, until_step=None) -> np.ndarray:
         """Event records (structured array, fields step, time, kind, a, b), optionally up to a step."""
@@ -803,8 +905,10 @@ class RunFile:
 
     def graph_frame_index(self, frame=None, t=None) -> int:
         if not self.has_graph:
-            raise RunFileError(f"{self.path}: the file has no graph data (the run had contacts.enabled = false, "
-                               f"or was written before any frame)")
+            raise RunFileError(
+                f"{self.path}: the file has no graph data (the run had contacts.enabled = false, "
+                f"or was written before any frame)"
+            )
         n = self.f["graph/step"].shape[0]
         if t is not None:
             if not np.isfinite(t):
@@ -821,8 +925,8 @@ class RunFile:
         g = self.f["graph"]
         tc_count = g["tip_contacts_count"][:]
         cc_count = g["conductor_contacts_count"][:]
-        t0, t1 = int(tc_count[:k].sum()), int(tc_count[:k + 1].sum())
-        c0, c1 = int(cc_count[:k].sum()), int(cc_count[:k + 1].sum())
+        t0, t1 = int(tc_count[:k].sum()), int(tc_count[: k + 1].sum())
+        c0, c1 = int(cc_count[:k].sum()), int(cc_count[: k + 1].sum())
         ids = g.attrs["conductor_ids"]
         pots = g.attrs["conductor_potentials"]
         return {
@@ -842,7 +946,9 @@ class RunFile:
     def observable_names(self):
         """Names of all observables, nested ones as ``group/name`` (e.g. ``energy/kinetic``)."""
         names = []
-        self.f["observables"].visit(lambda name: names.append(name[:-len("/value")]) if name.endswith("/value") else None)
+        self.f["observables"].visit(
+            lambda name: names.append(name[: -len("/value")]) if name.endswith("/value") else None
+        )
         return sorted(names)
 
     def observable(self, name):

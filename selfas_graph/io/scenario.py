@@ -7,6 +7,7 @@ cross-field consistency checks -> frozen parameters. All problems found are
 reported together in one :class:`ScenarioError`; nothing is written before
 loading succeeds.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -136,6 +137,7 @@ def parameters_from_dict(raw: dict, source=None) -> P.Parameters:
 
 # ----------------------------------------------------------------------------- overrides
 
+
 def _apply_override(raw, item):
     if "\n" in item or "\r" in item:
         return [f"--set {item!r}: a line break inside one --set; give each key=value as its own --set"]
@@ -160,13 +162,14 @@ def _apply_override(raw, item):
         if nxt is None or nxt is True:
             nxt = node[name] = {}
         if not isinstance(nxt, dict):
-            return [f"--set {item!r}: {'.'.join(parts[:i + 1])} is a value, not a table"]
+            return [f"--set {item!r}: {'.'.join(parts[: i + 1])} is a value, not a table"]
         node = nxt
     node[parts[-1]] = value
     return []
 
 
 # ----------------------------------------------------------------------------- schema walk
+
 
 def _type_name(tp):
     return {int: "an integer", float: "a number", bool: "true or false", str: "a string"}.get(tp, str(tp))
@@ -264,9 +267,11 @@ def _check_number(path, value, tp, meta, problems):
             problems.append(f"{path}: expected a finite number, got {value}")
             return _INVALID
         if value != 0.0 and not MIN_MAGNITUDE <= abs(value) <= MAX_MAGNITUDE:
-            problems.append(f"{path}: {value!r} is out of scale; every number of a scenario is 0 or between "
-                            f"{MIN_MAGNITUDE:g} and {MAX_MAGNITUDE:g} in magnitude (reduced units, docs/model.md "
-                            f"section 1), so that the forces and energies derived from it stay finite")
+            problems.append(
+                f"{path}: {value!r} is out of scale; every number of a scenario is 0 or between "
+                f"{MIN_MAGNITUDE:g} and {MAX_MAGNITUDE:g} in magnitude (reduced units, docs/model.md "
+                f"section 1), so that the forces and energies derived from it stay finite"
+            )
             return _INVALID
     elif tp is str:
         if not isinstance(value, str):
@@ -281,8 +286,7 @@ def _check_number(path, value, tp, meta, problems):
         return value
     bounds = []
     ok = True
-    for key, op, word in (("ge", "__ge__", ">="), ("gt", "__gt__", ">"),
-                          ("le", "__le__", "<="), ("lt", "__lt__", "<")):
+    for key, op, word in (("ge", "__ge__", ">="), ("gt", "__gt__", ">"), ("le", "__le__", "<="), ("lt", "__lt__", "<")):
         b = meta.get(key)
         if b is not None:
             bounds.append(f"{word} {b:g}" if not isinstance(b, int) or abs(b) < 10**6 else f"{word} {b}")
@@ -317,8 +321,10 @@ def _check_array(path, value, template, problems):
         problems.append(f"{path}: every entry must be a finite number, got {_describe(value)}")
         return _INVALID
     if not all(v == 0.0 or MIN_MAGNITUDE <= abs(v) <= MAX_MAGNITUDE for v in flat):
-        problems.append(f"{path}: an entry is out of scale; every number of a scenario is 0 or between "
-                        f"{MIN_MAGNITUDE:g} and {MAX_MAGNITUDE:g} in magnitude, got {_describe(value)}")
+        problems.append(
+            f"{path}: an entry is out of scale; every number of a scenario is 0 or between "
+            f"{MIN_MAGNITUDE:g} and {MAX_MAGNITUDE:g} in magnitude, got {_describe(value)}"
+        )
         return _INVALID
     return _to_tuple(value)
 
@@ -361,6 +367,7 @@ def _unknown_key(path, key, valid):
 
 # ----------------------------------------------------------------------------- cross-field checks
 
+
 def check_consistency(p: P.Parameters):
     """Problems that involve several keys at once. Returns a list of messages."""
     out = []
@@ -378,22 +385,28 @@ def check_consistency(p: P.Parameters):
     ext = [box[d][1] - box[d][0] for d in range(3)]
     longest = rods.length.bounds()[1] if rods.length is not None else 1.0
     if rods.count > 0 and math.sqrt(sum(e * e for e in ext)) <= longest:
-        out.append(f"placement.box: a rod of length {longest:g} cannot fit in a box of size "
-                   f"{ext[0]:g} x {ext[1]:g} x {ext[2]:g}; make the box larger")
+        out.append(
+            f"placement.box: a rod of length {longest:g} cannot fit in a box of size "
+            f"{ext[0]:g} x {ext[1]:g} x {ext[2]:g}; make the box larger"
+        )
         return out
     dmin = p.min_tip_distance
     volume = ext[0] * ext[1] * ext[2]
     # random sequential packing of spheres jams near a volume fraction of 0.38;
     # beyond ~0.3 the rejection sampler stalls, so refuse that early and clearly
-    fraction = 2 * rods.count * (math.pi / 6.0) * dmin ** 3 / volume
+    fraction = 2 * rods.count * (math.pi / 6.0) * dmin**3 / volume
     if fraction > 0.3:
-        out.append(f"rods.count: {rods.count} rods cannot fit the box with placement.min_tip_distance = {dmin:g} "
-                   f"(exclusion volume fraction {fraction:.2f} > 0.3); use fewer rods, a larger box "
-                   f"or a smaller min_tip_distance")
+        out.append(
+            f"rods.count: {rods.count} rods cannot fit the box with placement.min_tip_distance = {dmin:g} "
+            f"(exclusion volume fraction {fraction:.2f} > 0.3); use fewer rods, a larger box "
+            f"or a smaller min_tip_distance"
+        )
     for name, dist in (("magnetic_charge", rods.magnetic_charge), ("electric_charge", rods.electric_charge)):
         if dist.distribution == "magnetic" and name == "magnetic_charge":
-            out.append("rods.magnetic_charge.distribution: 'magnetic' is only valid for electric_charge; "
-                       "use constant, uniform or two_level")
+            out.append(
+                "rods.magnetic_charge.distribution: 'magnetic' is only valid for electric_charge; "
+                "use constant, uniform or two_level"
+            )
         if dist.distribution == "uniform" and dist.low > dist.high:
             out.append(f"rods.{name}: low = {dist.low:g} is above high = {dist.high:g}")
     for name in ("length", "resistance"):
@@ -403,34 +416,48 @@ def check_consistency(p: P.Parameters):
     if rods.length is not None:
         mean = rods.length.mean()
         if abs(mean - 1.0) > 1e-9:
-            out.append(f"rods.length: the law's mean is {mean:.12g}, not 1; lengths are in units of the mean rod "
-                       f"length L (docs/model.md 'Reduced units'), so choose values with mean 1 (e.g. uniform in "
-                       f"(0.5, 1.5))")
+            out.append(
+                f"rods.length: the law's mean is {mean:.12g}, not 1; lengths are in units of the mean rod "
+                f"length L (docs/model.md 'Reduced units'), so choose values with mean 1 (e.g. uniform in "
+                f"(0.5, 1.5))"
+            )
         shortest = rods.length.bounds()[0]
         if shortest < rods.diameter:
-            out.append(f"rods.length: the shortest rod ({shortest:g}) is shorter than its diameter "
-                       f"rods.diameter = {rods.diameter:g}")
+            out.append(
+                f"rods.length: the shortest rod ({shortest:g}) is shorter than its diameter "
+                f"rods.diameter = {rods.diameter:g}"
+            )
     el = p.forces.electrodes
     if el is not None:
         zlo, zhi = box[2]
         if zlo < -el.gap / 2 - 1e-12 or zhi > el.gap / 2 + 1e-12:
-            out.append(f"placement.box: the z range [{zlo:g}, {zhi:g}] reaches beyond the electrodes at "
-                       f"z = +-{el.gap / 2:g} (forces.electrodes.gap = {el.gap:g}); rods must start between them")
+            out.append(
+                f"placement.box: the z range [{zlo:g}, {zhi:g}] reaches beyond the electrodes at "
+                f"z = +-{el.gap / 2:g} (forces.electrodes.gap = {el.gap:g}); rods must start between them"
+            )
     if p.circuit is not None and el is None and p.forces.external_filament is None:
-        out.append("circuit: the circuit needs a conductor to apply its bias: add [forces.electrodes] (case (i)) "
-                   "or [forces.external_filament] (case (ii))")
+        out.append(
+            "circuit: the circuit needs a conductor to apply its bias: add [forces.electrodes] (case (i)) "
+            "or [forces.external_filament] (case (ii))"
+        )
     if p.circuit is not None and not p.contacts.enabled:
-        out.append("circuit: the circuit is built from contacts; with contacts.enabled = false it can never close "
-                   "(remove [circuit] or enable contacts)")
+        out.append(
+            "circuit: the circuit is built from contacts; with contacts.enabled = false it can never close "
+            "(remove [circuit] or enable contacts)"
+        )
     for term in ("current_field", "current_lorentz"):
         if getattr(p.forces, term) is not None and p.circuit is None:
-            out.append(f"forces.{term}: rod currents come from the circuit solve; add a [circuit] table "
-                       f"(with delta_J0) or remove this term")
+            out.append(
+                f"forces.{term}: rod currents come from the circuit solve; add a [circuit] table "
+                f"(with delta_J0) or remove this term"
+            )
     # a run of more than 1e12 steps cannot finish; its step count would also overflow
     for name, length in (("run.t_end", p.run.t_end), ("output.interval", p.output.interval)):
         if length / p.integrator.dt > 1e12:
-            out.append(f"{name} / integrator.dt = {length / p.integrator.dt:.3g} steps; at most 1e12 are possible "
-                       f"(make integrator.dt larger or {name} smaller)")
+            out.append(
+                f"{name} / integrator.dt = {length / p.integrator.dt:.3g} steps; at most 1e12 are possible "
+                f"(make integrator.dt larger or {name} smaller)"
+            )
     if p.output.interval < p.integrator.dt:
         out.append(f"output.interval = {p.output.interval:g} is shorter than integrator.dt = {p.integrator.dt:g}")
     return out

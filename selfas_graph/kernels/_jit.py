@@ -22,6 +22,7 @@ Compiled kernels are cached on disk, keyed also by the digest of all kernel sour
 (:class:`SourcesKeyedCache`, docs/model.md 'Assumptions and project choices', B27): a kernel
 compiled before a law it inlines changed is never loaded. Importing the package deletes nothing.
 """
+
 import functools
 import hashlib
 import os
@@ -114,8 +115,7 @@ class _RowsKernel:
         self.py_func = fn
         self.parallel = _jit(parallel=True, fastmath=False)(fn)
         # a renamed copy, so that the on-disk cache keeps the serial build apart from the parallel one
-        twin = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_serial", fn.__defaults__,
-                                  fn.__closure__)
+        twin = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_serial", fn.__defaults__, fn.__closure__)
         twin.__qualname__ = fn.__qualname__ + "_serial"
         twin.__module__ = fn.__module__
         self.serial = _jit(parallel=False, fastmath=False)(twin)
@@ -131,6 +131,8 @@ def njit_rows(fn):
     the first argument, parallel (``prange``) from there on. Both builds give the same numbers
     bit for bit, since no loop in these kernels reduces across rows except by max."""
     return _RowsKernel(fn)
+
+
 #: iterations handed to a thread at a time in the next prange loop (0: equal static
 #: blocks, numba's default); callable inside kernels, returns the previous value
 set_parallel_chunksize = numba.set_parallel_chunksize

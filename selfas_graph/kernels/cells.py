@@ -23,6 +23,7 @@ Glossary: ``n`` points, ``g`` (3,) int64 cells per axis, ``h`` cell side, ``lo``
 ``cell_point`` (n,) int64 the points of each cell in compressed rows (ascending
 point index within a cell), ``sorted_position`` (n, 3) float64 ``position[cell_point]``.
 """
+
 import numpy as np
 
 from ._jit import inline, njit, njit_parallel, prange
@@ -52,8 +53,9 @@ def bin_points(position, lo, h, g, cell_start, cell_point):
     cell_start[:] = 0
     cell = np.empty(n, dtype=np.int64)
     for k in range(n):
-        c = (_cell_of(position, k, lo, h, g, 0) * g[1] + _cell_of(position, k, lo, h, g, 1)) * g[2] \
-            + _cell_of(position, k, lo, h, g, 2)
+        c = (_cell_of(position, k, lo, h, g, 0) * g[1] + _cell_of(position, k, lo, h, g, 1)) * g[2] + _cell_of(
+            position, k, lo, h, g, 2
+        )
         cell[k] = c
         cell_start[c + 1] += 1
     for c in range(cell_start.shape[0] - 1):
@@ -97,16 +99,16 @@ def _row_counts(position, sorted_position, lo, h, g, cell_start, cell_point, r2m
     none = np.empty(0, dtype=np.int64)
     for t in prange(position.shape[0]):
         k = cell_point[t]  # points in cell order: neighbouring iterations read the same cells
-        counts[k] = _visit(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, exclude_same_rod, k,
-                           none, 0)
+        counts[k] = _visit(
+            position, sorted_position, lo, h, g, cell_start, cell_point, r2max, exclude_same_rod, k, none, 0
+        )
 
 
 @njit_parallel
 def _row_fill(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, exclude_same_rod, start, index):
     for t in prange(position.shape[0]):
         k = cell_point[t]
-        _visit(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, exclude_same_rod, k, index,
-               start[k])
+        _visit(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, exclude_same_rod, k, index, start[k])
 
 
 @njit

@@ -30,6 +30,7 @@ Glossary of the short symbols used inside the kernels:
 ``J``      rod current
 =========  ==================================================================
 """
+
 import operator
 
 import numpy as np
@@ -175,7 +176,17 @@ def _active_rod_field(px, py, pz, skip_rod, seg, active_rod, wire_radius):
     fz = 0.0
     for r in range(active_rod.shape[0]):
         gx, gy, gz = segment_field(
-            px, py, pz, seg[0, r], seg[1, r], seg[2, r], seg[3, r], seg[4, r], seg[5, r], seg[6, r], wire_radius,
+            px,
+            py,
+            pz,
+            seg[0, r],
+            seg[1, r],
+            seg[2, r],
+            seg[3, r],
+            seg[4, r],
+            seg[5, r],
+            seg[6, r],
+            wire_radius,
         )
         keep = 0.0 if active_rod[r] == skip_rod else 1.0
         fx += keep * gx
@@ -219,7 +230,13 @@ def rod_current_field(point, exclude_rod, position, active_rod, current, wire_ra
     seg = _segments(position, active_rod, current)
     for p in prange(point.shape[0]):
         fx, fy, fz = _active_rod_field(
-            point[p, 0], point[p, 1], point[p, 2], exclude_rod[p], seg, active_rod, wire_radius,
+            point[p, 0],
+            point[p, 1],
+            point[p, 2],
+            exclude_rod[p],
+            seg,
+            active_rod,
+            wire_radius,
         )
         out[p, 0] = fx
         out[p, 1] = fy
@@ -261,7 +278,13 @@ def current_force_on_tips(position, charge, active_rod, current, wire_radius, lo
         if q == 0.0:
             continue
         fx, fy, fz = _active_rod_field(
-            position[k, 0], position[k, 1], position[k, 2], k // 2, seg, active_rod, wire_radius,
+            position[k, 0],
+            position[k, 1],
+            position[k, 2],
+            k // 2,
+            seg,
+            active_rod,
+            wire_radius,
         )
         out[k, 0] += q * fx
         out[k, 1] += q * fy

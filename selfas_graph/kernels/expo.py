@@ -17,6 +17,7 @@ Special values: ``exp(0) = 1``; ``x < -745.2`` gives 0 (the true value is below 
 the smallest subnormal); NaN gives NaN. Meant for ``x <= 0``: positive ``x`` is
 computed the same way but only up to ``x < 709`` (no overflow handling).
 """
+
 import struct
 
 import numba
@@ -43,6 +44,7 @@ if numba.config.DISABLE_JIT:
         return int(value)
 
 else:
+
     @intrinsic
     def _double_from_bits(typingctx, bits):
         """The double whose IEEE bits are the int64 ``bits`` (a register move, vectorisable)."""

@@ -16,6 +16,7 @@ over ``u`` from ``asinh((z1 - z_p)/rho_e)`` to ``asinh((z2 - z_p)/rho_e)``. In u
 smooth and its peak at the foot of the perpendicular is resolved, so Gauss-Legendre with a
 few tens of nodes converges fast (the number of nodes is an accuracy knob).
 """
+
 import math
 
 import numpy as np

@@ -7,6 +7,7 @@ not have (docs/performance.md, "Topology and circuit per event").
 
 Glossary: ``n`` nodes ``0 .. n-1``; ``a``, ``b`` (m,) int64 the two end nodes of each edge.
 """
+
 import numpy as np
 
 from ._jit import njit

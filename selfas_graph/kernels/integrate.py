@@ -1,4 +1,5 @@
 """Linear combinations used by the time integrators, without temporaries."""
+
 from ._jit import njit_rows, prange
 
 

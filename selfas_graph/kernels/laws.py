@@ -5,6 +5,7 @@ Every law returns the *radial* factor ``f(r) / r`` so that the force vector is
 ``r = 0`` easy to guard. Potentials are returned alongside for the energy
 kernels and the gradient tests. Sources are docs/model.md 'Force terms' (by term number).
 """
+
 import math
 
 from ._jit import inline, inline_sum

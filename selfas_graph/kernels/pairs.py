@@ -5,6 +5,7 @@ pair: the neighbours of point ``k`` are ``index[start[k]:start[k + 1]]``. Each
 parallel iteration writes only its own row (gather). The list may hold pairs
 beyond the interaction range (a Verlet skin); the kernels test the distance.
 """
+
 import math
 
 import numpy as np
@@ -163,8 +164,20 @@ QUIET_MARGIN = 1e-9
 
 
 @njit
-def contacts_unchanged(position, start, index, pairs, rstar, release, z_cathode, z_anode, on_cathode, on_anode,
-                       filament_radius, on_filament):
+def contacts_unchanged(
+    position,
+    start,
+    index,
+    pairs,
+    rstar,
+    release,
+    z_cathode,
+    z_anode,
+    on_cathode,
+    on_anode,
+    filament_radius,
+    on_filament,
+):
     """True only when the contact tracker's step would find no event: one pass instead of its dozen
     numpy passes on the common step without news (``model/contacts.py::ContactTracker.update``).
 

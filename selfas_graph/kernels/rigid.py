@@ -18,6 +18,7 @@ Rod lengths. ``length`` is an ``(n_rods,)`` array of the lengths l_i the bonds k
 then the kernels compute exactly what they did before per-rod lengths existed
 (``1.0 / sqrt(r2)`` and ``l_i / sqrt(r2)`` with l_i = 1 are the same float).
 """
+
 import math
 
 from ._jit import njit_rows, prange

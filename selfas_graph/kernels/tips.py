@@ -5,6 +5,7 @@ rod do not interact (their bond is rigid). Positions come as three separate
 coordinate arrays (structure of arrays) so that the inner loop vectorises;
 the "same rod" pair is removed by a select, not a branch.
 """
+
 import math
 
 from ._jit import inline, inline_sum, njit_parallel_sum, njit_rows, prange

@@ -76,6 +76,7 @@ Rows are tip numbers, which are in no spatial order: a caller that splits rows
 over MPI ranks gets every group walked on every rank (a split in Morton order,
 ``TipTree.index``, would share the walks out too; the kernel takes tip numbers).
 """
+
 import math
 from typing import NamedTuple
 
@@ -379,14 +380,11 @@ def _field_quadrupole(dx, dy, dz, m, px, py, pz, qxx, qxy, qxz, qyy, qyz):
     pd = px * dx + py * dy + pz * dz
     dqd = dx * ux + dy * uy + dz * uz
     radial = m * ir3 + 3.0 * pd * ir5 + 2.5 * dqd * ir7
-    return (radial * dx - px * ir3 - ux * ir5,
-            radial * dy - py * ir3 - uy * ir5,
-            radial * dz - pz * ir3 - uz * ir5)
+    return (radial * dx - px * ir3 - ux * ir5, radial * dy - py * ir3 - uy * ir5, radial * dz - pz * ir3 - uz * ir5)
 
 
 @inline_sum
-def _field_octupole(dx, dy, dz, m, px, py, pz, qxx, qxy, qxz, qyy, qyz,
-                    oxxx, oxxy, oxxz, oxyy, oxyz, oyyy, oyyz):
+def _field_octupole(dx, dy, dz, m, px, py, pz, qxx, qxy, qxz, qyy, qyz, oxxx, oxxy, oxxz, oxyy, oxyz, oyyy, oyyz):
     """Field of a cell's moments up to octupole at offset d from its centre (module docstring)."""
     ir = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
     ir2 = ir * ir
@@ -413,9 +411,11 @@ def _field_octupole(dx, dy, dz, m, px, py, pz, qxx, qxy, qxz, qyy, qyz,
     vz = oxxz * xx + oyyz * yy + ozzz * zz + oxyz * xy + oxzz * xz + oyzz * yz
     dvd = dx * vx + dy * vy + dz * vz
     radial = m * ir3 + 3.0 * pd * ir5 + 2.5 * dqd * ir7 + (7.0 / 6.0) * dvd * ir9
-    return (radial * dx - px * ir3 - ux * ir5 - 0.5 * vx * ir7,
-            radial * dy - py * ir3 - uy * ir5 - 0.5 * vy * ir7,
-            radial * dz - pz * ir3 - uz * ir5 - 0.5 * vz * ir7)
+    return (
+        radial * dx - px * ir3 - ux * ir5 - 0.5 * vx * ir7,
+        radial * dy - py * ir3 - uy * ir5 - 0.5 * vy * ir7,
+        radial * dz - pz * ir3 - uz * ir5 - 0.5 * vz * ir7,
+    )
 
 
 @njit
@@ -430,8 +430,30 @@ def _append(buf, n, value):
 
 
 @njit_parallel_sum
-def evaluate_groups(x, y, z, charge, rod, index, rank, start, end, nxt, box, centre, radius,
-                    moment, group, order, theta, rstar, kappa, lo, hi, out):
+def evaluate_groups(
+    x,
+    y,
+    z,
+    charge,
+    rod,
+    index,
+    rank,
+    start,
+    end,
+    nxt,
+    box,
+    centre,
+    radius,
+    moment,
+    group,
+    order,
+    theta,
+    rstar,
+    kappa,
+    lo,
+    hi,
+    out,
+):
     """Tip-tip force on the tips with original number in [lo, hi) by the tree.
 
     One walk per target group (module docstring): near leaves are summed exactly
@@ -515,16 +537,46 @@ def evaluate_groups(x, y, z, charge, rod, index, rank, start, end, nxt, box, cen
                 mc = moment[c]
                 if order >= 3:
                     for t in range(n_pad):
-                        e1, e2, e3 = _field_octupole(tx[t] - cx, ty[t] - cy, tz[t] - cz, mc[0], mc[1], mc[2],
-                                                     mc[3], mc[4], mc[5], mc[6], mc[7], mc[8], mc[9], mc[10],
-                                                     mc[11], mc[12], mc[13], mc[14], mc[15])
+                        e1, e2, e3 = _field_octupole(
+                            tx[t] - cx,
+                            ty[t] - cy,
+                            tz[t] - cz,
+                            mc[0],
+                            mc[1],
+                            mc[2],
+                            mc[3],
+                            mc[4],
+                            mc[5],
+                            mc[6],
+                            mc[7],
+                            mc[8],
+                            mc[9],
+                            mc[10],
+                            mc[11],
+                            mc[12],
+                            mc[13],
+                            mc[14],
+                            mc[15],
+                        )
                         ex[t] += e1
                         ey[t] += e2
                         ez[t] += e3
                 else:
                     for t in range(n_pad):
-                        e1, e2, e3 = _field_quadrupole(tx[t] - cx, ty[t] - cy, tz[t] - cz, mc[0], mc[1], mc[2],
-                                                       mc[3], mc[4], mc[5], mc[6], mc[7], mc[8])
+                        e1, e2, e3 = _field_quadrupole(
+                            tx[t] - cx,
+                            ty[t] - cy,
+                            tz[t] - cz,
+                            mc[0],
+                            mc[1],
+                            mc[2],
+                            mc[3],
+                            mc[4],
+                            mc[5],
+                            mc[6],
+                            mc[7],
+                            mc[8],
+                        )
                         ex[t] += e1
                         ey[t] += e2
                         ez[t] += e3
@@ -656,8 +708,9 @@ def build_tip_tree(x, y, z, charge, leaf_size=LEAF_SIZE, group_size=GROUP_SIZE, 
     moment = np.empty((n_cells, N_MOMENT))
     cell_moments(xs, ys, zs, qs, start, end, int(order), box, centre, radius, moment)
     group = target_groups(start, end, nxt, int(group_size))
-    return TipTree(index, rank, xs, ys, zs, qs, index // 2, start, end, nxt, box, centre, radius,
-                   moment, group, int(order))
+    return TipTree(
+        index, rank, xs, ys, zs, qs, index // 2, start, end, nxt, box, centre, radius, moment, group, int(order)
+    )
 
 
 def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None):
@@ -697,16 +750,38 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None):
     # blocks. Set here, not in the kernel, which could then not be cached.
     chunk = set_parallel_chunksize(1)
     try:
-        evaluate_groups(tree.x, tree.y, tree.z, tree.charge, tree.rod, tree.index, tree.rank, tree.start,
-                        tree.end, tree.next, tree.box, tree.centre, tree.radius, tree.moment, tree.group,
-                        tree.order, float(theta), float(rstar), float(kappa), lo, hi, out)
+        evaluate_groups(
+            tree.x,
+            tree.y,
+            tree.z,
+            tree.charge,
+            tree.rod,
+            tree.index,
+            tree.rank,
+            tree.start,
+            tree.end,
+            tree.next,
+            tree.box,
+            tree.centre,
+            tree.radius,
+            tree.moment,
+            tree.group,
+            tree.order,
+            float(theta),
+            float(rstar),
+            float(kappa),
+            lo,
+            hi,
+            out,
+        )
     finally:
         set_parallel_chunksize(chunk)
     return out
 
 
-def tip_tip_tree(x, y, z, charge, rstar, kappa, theta, out, lo=0, hi=None, leaf_size=LEAF_SIZE,
-                 group_size=GROUP_SIZE, order=ORDER):
+def tip_tip_tree(
+    x, y, z, charge, rstar, kappa, theta, out, lo=0, hi=None, leaf_size=LEAF_SIZE, group_size=GROUP_SIZE, order=ORDER
+):
     """Tip-tip force on tips ``lo..hi-1`` by a multipole tree: build, then evaluate.
 
     Same arguments and result as :func:`selfas_graph.kernels.tips.tip_tip_direct`

@@ -33,6 +33,7 @@ Laplacian of the resistors on merged nodes, weighted by their conductances
 (parallel resistors add their conductances; resistors whose two ends are in one
 merged node are dropped: they carry 0).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -51,11 +52,11 @@ from selfas_graph.model.validate import (  # noqa: F401
     _validate,
 )
 
-__all__ = ["CircuitSolution", "NetworkSolution", "SolveMemo", "solve_circuit", "solve_network", "merge_tips",
-           "SOLVERS"]
+__all__ = ["CircuitSolution", "NetworkSolution", "SolveMemo", "solve_circuit", "solve_network", "merge_tips", "SOLVERS"]
 
 #: linear solvers for the reduced system (``solve_circuit(..., solver=...)``)
 SOLVERS = ("direct", "cg", "auto")
+
 
 # --------------------------------------------------------------------------- topology helper
 def merge_tips(n_tips: int, tip_contacts: np.ndarray) -> tuple[int, np.ndarray]:
@@ -80,7 +81,8 @@ def merge_tips(n_tips: int, tip_contacts: np.ndarray) -> tuple[int, np.ndarray]:
     if m == 0:
         return n_tips, np.arange(n_tips, dtype=np.int64)
     n_nodes, labels = component_labels(
-        n_tips, np.ascontiguousarray(tip_contacts[:, 0], dtype=np.int64),
+        n_tips,
+        np.ascontiguousarray(tip_contacts[:, 0], dtype=np.int64),
         np.ascontiguousarray(tip_contacts[:, 1], dtype=np.int64),
     )
     return int(n_nodes), labels
@@ -170,8 +172,9 @@ class NetworkSolution:
     kirchhoff_residual: float
 
 
-def _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, resistance_is_one=False, memo=None,
-           merged=None):
+def _solve(
+    n_nodes, edges, resistance, fixed_node, fixed_potential, solver, resistance_is_one=False, memo=None, merged=None
+):
     """Core of :func:`solve_network` on validated arrays; see there.
 
     ``resistance_is_one``: every resistance is 1 (the default rods); the currents
@@ -189,9 +192,7 @@ def _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, resi
     count = np.bincount(cnode, minlength=n_merged)
     is_dir = count > 0
     psi_dir = np.zeros(n_merged)
-    psi_dir[is_dir] = (
-        np.bincount(cnode, weights=fixed_potential, minlength=n_merged)[is_dir] / count[is_dir]
-    )
+    psi_dir[is_dir] = np.bincount(cnode, weights=fixed_potential, minlength=n_merged)[is_dir] / count[is_dir]
 
     # resistors as edges between merged nodes; those inside one merged node are dropped
     res = ~ideal
@@ -200,9 +201,7 @@ def _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, resi
     r_all = resistance[res]
     g_all = 1.0 / r_all
     keep = u_all != v_all
-    psi, comp, comp_active = _potentials(
-        n_merged, u_all[keep], v_all[keep], g_all[keep], is_dir, psi_dir, solver, memo
-    )
+    psi, comp, comp_active = _potentials(n_merged, u_all[keep], v_all[keep], g_all[keep], is_dir, psi_dir, solver, memo)
 
     psi0 = np.where(np.isnan(psi), 0.0, psi)
     drop = psi0[u_all] - psi0[v_all]  # exactly 0 for shorted and floating resistors
@@ -244,8 +243,9 @@ def _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, resi
     )
 
 
-def solve_network(n_nodes, edges, resistance, fixed_node, fixed_potential, solver: str = "direct",
-                  memo: SolveMemo | None = None) -> NetworkSolution:
+def solve_network(
+    n_nodes, edges, resistance, fixed_node, fixed_potential, solver: str = "direct", memo: SolveMemo | None = None
+) -> NetworkSolution:
     """Solve Kirchhoff's laws on any network of resistors with nodes of fixed potential.
 
     The general form of the nodal analysis of :func:`solve_circuit` (docs/model.md
@@ -282,14 +282,22 @@ def solve_network(n_nodes, edges, resistance, fixed_node, fixed_potential, solve
     edges = _as_index_array(edges, "edges", 2, n_nodes)
     resistance = _as_resistance(resistance, "resistance", edges.shape[0], allow_zero=True)
     fixed_node = _as_index_array(fixed_node, "fixed_node", 1, n_nodes)
-    fixed_potential = _as_potentials(fixed_potential, fixed_node, "fixed_potential", "fixed_node", "fixed node entry",
-                                     "node")
+    fixed_potential = _as_potentials(
+        fixed_potential, fixed_node, "fixed_potential", "fixed_node", "fixed node entry", "node"
+    )
     return _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, memo=memo)
 
 
 def solve_circuit(
-    n_tips, tip_contacts, conductor_tip, conductor_potential, solver: str = "direct",
-    rod_resistance=None, contact_resistance: float = 0.0, memo: SolveMemo | None = None, merged=None,
+    n_tips,
+    tip_contacts,
+    conductor_tip,
+    conductor_potential,
+    solver: str = "direct",
+    rod_resistance=None,
+    contact_resistance: float = 0.0,
+    memo: SolveMemo | None = None,
+    merged=None,
 ) -> CircuitSolution:
     """Solve Kirchhoff's laws on the rod network.
 
@@ -355,9 +363,9 @@ def solve_circuit(
     edges = np.empty((n_rods + m + k, 2), dtype=np.int64)
     edges[:n_rods, 0] = np.arange(0, n_tips, 2)
     edges[:n_rods, 1] = np.arange(1, n_tips, 2)
-    edges[n_rods:n_rods + m] = tip_contacts
-    edges[n_rods + m:, 0] = conductor_tip
-    edges[n_rods + m:, 1] = n_tips + np.arange(k)
+    edges[n_rods : n_rods + m] = tip_contacts
+    edges[n_rods + m :, 0] = conductor_tip
+    edges[n_rods + m :, 1] = n_tips + np.arange(k)
     resistance = np.concatenate([r_rod, np.full(m + k, r_contact)])
     if merged is not None and r_contact == 0.0:
         # conductor contact j is node n_tips + j, joined to its tip by an ideal edge: it takes the
@@ -367,8 +375,15 @@ def solve_circuit(
     else:
         merged = None
     net = _solve(
-        n_tips + k, edges, resistance, n_tips + np.arange(k), conductor_potential, solver,
-        resistance_is_one=unit and r_contact == 0.0, memo=memo, merged=merged,
+        n_tips + k,
+        edges,
+        resistance,
+        n_tips + np.arange(k),
+        conductor_potential,
+        solver,
+        resistance_is_one=unit and r_contact == 0.0,
+        memo=memo,
+        merged=merged,
     )
     current = net.current[:n_rods]
     assert current.shape == (n_rods,)

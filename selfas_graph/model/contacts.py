@@ -10,6 +10,7 @@ The search reuses the force field's tip neighbour list (extended to the
 release radius): each step costs one pass over the listed pairs plus a sorted
 set difference of the (few) close pairs against the current contacts.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -65,14 +66,26 @@ class ContactTracker:
         # [perf] one kernel pass answers the common step without news (kernels/pairs.py::contacts_unchanged)
         el = self.electrodes if self.electrodes is not None else (np.nan, np.nan)
         fr = self.filament_radius if self.filament_radius is not None else np.nan
-        if contacts_unchanged(position, neighbours.start, neighbours.index, self.pairs, self.rstar, self.release,
-                              float(el[0]), float(el[1]), self.on_cathode, self.on_anode, float(fr), self.on_filament):
+        if contacts_unchanged(
+            position,
+            neighbours.start,
+            neighbours.index,
+            self.pairs,
+            self.rstar,
+            self.release,
+            float(el[0]),
+            float(el[1]),
+            self.on_cathode,
+            self.on_anode,
+            float(fr),
+            self.on_filament,
+        ):
             return []
         rows = []
         # releases: current contacts now farther apart than the release radius
         if len(self.pairs):
             d = position[self.pairs[:, 0]] - position[self.pairs[:, 1]]
-            gone = np.einsum("ij,ij->i", d, d) > self.release ** 2
+            gone = np.einsum("ij,ij->i", d, d) > self.release**2
             if gone.any():
                 for k, l in self.pairs[gone]:
                     rows.append((step, time, ev.TIP_RELEASE, int(k), int(l)))
@@ -83,7 +96,7 @@ class ContactTracker:
         n_close = close_pair_count(position, neighbours.start, neighbours.index, self.rstar)
         if len(self.pairs):
             d = position[self.pairs[:, 0]] - position[self.pairs[:, 1]]
-            n_known = int((np.einsum("ij,ij->i", d, d) < self.rstar ** 2).sum())
+            n_known = int((np.einsum("ij,ij->i", d, d) < self.rstar**2).sum())
         else:
             n_known = 0
         close = close_pairs(position, neighbours.start, neighbours.index, self.rstar) if n_close > n_known else ()
@@ -99,8 +112,10 @@ class ContactTracker:
         surfaces = []
         if self.electrodes is not None:
             z = position[:, 2]
-            surfaces += [(self.on_cathode, z - self.electrodes[0], ev.CONDUCTOR_CATHODE),
-                         (self.on_anode, self.electrodes[1] - z, ev.CONDUCTOR_ANODE)]
+            surfaces += [
+                (self.on_cathode, z - self.electrodes[0], ev.CONDUCTOR_CATHODE),
+                (self.on_anode, self.electrodes[1] - z, ev.CONDUCTOR_ANODE),
+            ]
         if self.filament_radius is not None:
             rho = np.hypot(position[:, 0], position[:, 1])
             surfaces.append((self.on_filament, rho - self.filament_radius, ev.CONDUCTOR_FILAMENT))

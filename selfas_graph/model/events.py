@@ -22,6 +22,7 @@ filament to carrying one (a conducting path now joins two conductor contacts at
 different potentials); OPEN_CIRCUIT when the last such path is broken
 (docs/model.md 'Contacts and events').
 """
+
 import enum
 from typing import NamedTuple
 
@@ -42,7 +43,6 @@ KIND_NAMES = {
     SHORT_CIRCUIT: "short_circuit",
     OPEN_CIRCUIT: "open_circuit",
 }
-
 
 
 class EventKind(enum.IntEnum):

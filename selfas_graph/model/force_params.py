@@ -2,6 +2,7 @@
 table ``[forces.NAME]``, and :class:`ForceParams`, the set of them; a term whose table is absent
 is off. Part of the schema of :mod:`selfas_graph.model.params` (which re-exports every name here).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -19,16 +20,25 @@ class TipMagnetic:
     """Term 1: tip-tip magnetic Coulomb force with a soft core, summed directly or by a multipole tree."""
 
     method: str = spec(
-        "auto", "how the force is summed: direct (all tip pairs, exact), tree (octupole octree; pairs "
+        "auto",
+        "how the force is summed: direct (all tip pairs, exact), tree (octupole octree; pairs "
         "within r* always exact; error set by opening_angle), auto (the tree above tree_above rods)",
-        choices=("auto", "direct", "tree"))
+        choices=("auto", "direct", "tree"),
+    )
     opening_angle: float = spec(
-        0.4, "tree: a cell acts as a multipole when its radius is below this times its distance; an "
+        0.4,
+        "tree: a cell acts as a multipole when its radius is below this times its distance; an "
         "accuracy knob (0.4: median relative force error 3e-4 to 8e-4 in a uniform rod gas, "
-        "docs/performance.md)", gt=0.0, lt=1.0)
+        "docs/performance.md)",
+        gt=0.0,
+        lt=1.0,
+    )
     tree_above: int = spec(
-        2000, "auto: use the tree from this many rods on (measured: the tree costs what the direct sum "
-        "does near 500 rods and half of it at 2000-3000, docs/performance.md)", ge=1)
+        2000,
+        "auto: use the tree from this many rods on (measured: the tree costs what the direct sum "
+        "does near 500 rods and half of it at 2000-3000, docs/performance.md)",
+        ge=1,
+    )
 
 
 @dataclass(frozen=True)
@@ -50,9 +60,11 @@ class UniformField:
 class PlasmaFilament:
     radius: float = spec(6.0, "R_plas, radius of the uniform current channel", gt=0.0)
     current: float = spec(
-        -7.5, "I_plas, total current, signed along +z (units J0): negative runs from the anode (z = +dZ/2) to "
+        -7.5,
+        "I_plas, total current, signed along +z (units J0): negative runs from the anode (z = +dZ/2) to "
         "the cathode, parallel to the current of a rod filament spanning the gap, as the paper's discharge "
-        "(docs/model.md term 5)")
+        "(docs/model.md term 5)",
+    )
     axis: tuple = spec(None, "(x0, y0) of the channel axis", length=2, factory=lambda: (0.0, 0.0))
 
 
@@ -74,11 +86,17 @@ def plasma_current_text(p: "Parameters"):
         return f"plasma current {size} along {'-' if pf.current < 0 else '+'}z (I_plas = {pf.current:g})"
     half = 0.5 * el.gap
     anode, cathode = f"the anode (z = +{half:g})", f"the cathode (z = -{half:g})"
-    text = (f"plasma current {size} from {anode} to {cathode}" if pf.current < 0
-            else f"plasma current {size} from {cathode} to {anode}")
+    text = (
+        f"plasma current {size} from {anode} to {cathode}"
+        if pf.current < 0
+        else f"plasma current {size} from {cathode} to {anode}"
+    )
     if p.circuit is not None and p.circuit.delta_J0 > 0:
-        text += (", parallel to the current of a spanning filament" if pf.current < 0
-                 else ", antiparallel to the current of a spanning filament")
+        text += (
+            ", parallel to the current of a spanning filament"
+            if pf.current < 0
+            else ", antiparallel to the current of a spanning filament"
+        )
     return text + f" (I_plas = {pf.current:g})"
 
 
@@ -86,19 +104,25 @@ def plasma_current_text(p: "Parameters"):
 class Yukawa:
     screening_length: float = spec(1.0, "R_D, screening length of the rod charges", gt=0.0)
     tolerance: float = spec(
-        1e-4, "the force is cut off where Z_max^2 times its magnitude falls below this (units F_M0); "
-        "an accuracy knob", gt=0.0, lt=1.0,
+        1e-4,
+        "the force is cut off where Z_max^2 times its magnitude falls below this (units F_M0); an accuracy knob",
+        gt=0.0,
+        lt=1.0,
     )
     core_radius: float = spec(
-        0.0, "a: inside this centre distance the force falls linearly to zero (a point charge "
+        0.0,
+        "a: inside this centre distance the force falls linearly to zero (a point charge "
         "inside a charged ball; rods of diameter D cannot bring their centres much closer than D); 0 = the bare law of "
-        "docs/model.md 'Term 6', unbounded for crossing rods", ge=0.0,
+        "docs/model.md 'Term 6', unbounded for crossing rods",
+        ge=0.0,
     )
 
 
 @dataclass(frozen=True)
 class ElectricField:
-    E: tuple = spec(None, "uniform electric field (Ex, Ey, Ez) acting on rod charges", length=3, factory=lambda: (0.0, 0.0, 0.0))
+    E: tuple = spec(
+        None, "uniform electric field (Ex, Ey, Ez) acting on rod charges", length=3, factory=lambda: (0.0, 0.0, 0.0)
+    )
 
 
 @dataclass(frozen=True)
@@ -114,8 +138,8 @@ class CurrentField:
 @dataclass(frozen=True)
 class CurrentLorentz:
     quadrature_points: int = spec(
-        4, "Gauss-Legendre points along each rod for the Lorentz force on its current; an accuracy knob",
-        ge=1, le=1000)
+        4, "Gauss-Legendre points along each rod for the Lorentz force on its current; an accuracy knob", ge=1, le=1000
+    )
 
 
 @dataclass(frozen=True)
@@ -123,22 +147,29 @@ class ExternalFilament:
     """Term 11, case (ii): a fixed straight current filament on the z axis, also a conductor."""
 
     current: float = spec(10.0, "J_ext, current along +z (units J0)")
-    diameter: float = spec(0.18, "D_ext; its field is 2 J rho / (rho^2 + (D_ext/2)^2) and tips touch it "
-                                 "within r* + D_ext/2 of the axis", gt=0.0)
+    diameter: float = spec(
+        0.18,
+        "D_ext; its field is 2 J rho / (rho^2 + (D_ext/2)^2) and tips touch it within r* + D_ext/2 of the axis",
+        gt=0.0,
+    )
 
 
 @dataclass(frozen=True)
 class ExternalDipole:
     """Term 11, case (ii): a fixed large dipole centred on the z axis at z = 0."""
 
-    magnetic_charge: float = spec(10.0, "Z_Mext: +Z_Mext at z = +length/2 and -Z_Mext at z = -length/2 "
-                                        "(moment along +z, co-directed with B_ext)")
+    magnetic_charge: float = spec(
+        10.0, "Z_Mext: +Z_Mext at z = +length/2 and -Z_Mext at z = -length/2 (moment along +z, co-directed with B_ext)"
+    )
     length: float = spec(20.0, "L_ext", gt=0.0)
     line_charge: float = spec(3.2, "lambda_ext, electric charge per unit length along the dipole")
     screening_length: float = spec(2.4, "R_Dext, screening length of the line charge", gt=0.0)
-    radius: float = spec(0.09, "radius of the line charge (softens it on the axis; D_ext/2 in the paper's scene)", gt=0.0)
-    quadrature_points: int = spec(32, "Gauss-Legendre points of the line-charge integral; an accuracy knob",
-                                  ge=1, le=1000)
+    radius: float = spec(
+        0.09, "radius of the line charge (softens it on the axis; D_ext/2 in the paper's scene)", gt=0.0
+    )
+    quadrature_points: int = spec(
+        32, "Gauss-Legendre points of the line-charge integral; an accuracy knob", ge=1, le=1000
+    )
 
 
 @dataclass(frozen=True)
@@ -153,11 +184,16 @@ class ForceParams:
     yukawa: Optional[Yukawa] = spec(None, "term 6: screened electric repulsion of rod charges")
     electric_field: Optional[ElectricField] = spec(None, "term 7: uniform electric field on rod charges")
     electrodes: Optional[Electrodes] = spec(None, "term 8: electrode walls (case (i))")
-    external_filament: Optional[ExternalFilament] = spec(None, "term 11: fixed current filament on the z axis (case (ii))")
-    external_dipole: Optional[ExternalDipole] = spec(None, "term 11: fixed large dipole with a screened line charge (case (ii))")
+    external_filament: Optional[ExternalFilament] = spec(
+        None, "term 11: fixed current filament on the z axis (case (ii))"
+    )
+    external_dipole: Optional[ExternalDipole] = spec(
+        None, "term 11: fixed large dipole with a screened line charge (case (ii))"
+    )
     current_field: Optional[CurrentField] = spec(None, "term 9: field of rod currents on tips (needs [circuit])")
     current_lorentz: Optional[CurrentLorentz] = spec(
-        None, "term 10: Lorentz force on rod currents from all fields (needs [circuit])")
+        None, "term 10: Lorentz force on rod currents from all fields (needs [circuit])"
+    )
 
     def active(self):
         """Names of the terms that are on, in docs/model.md order ('Force terms')."""

@@ -9,6 +9,7 @@ algorithms. A run keeps its contacts in its :class:`~.network.Network`.
 
 The roles and the topology rule are in :mod:`.topology`; their names are importable from here.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
@@ -77,14 +78,23 @@ class ConnectivityGraph(ContactArrays):
     back (about 1 s for 10^5 contacts), so it is built only on request (:meth:`to_networkx`).
     """
 
-    def __init__(self, n_rods: int, conductor_potential: Mapping[int, float | None], solver: str = "auto",
-                 rod_resistance=None, contact_resistance: float = 0.0):
+    def __init__(
+        self,
+        n_rods: int,
+        conductor_potential: Mapping[int, float | None],
+        solver: str = "auto",
+        rod_resistance=None,
+        contact_resistance: float = 0.0,
+    ):
         #: linear solver of :meth:`solve` ("auto", "direct" or "cg"; see circuit.solve_circuit)
         self.solver = solver
         self.n_rods = _as_count(n_rods, "n_rods")
         #: resistance of each rod (units R0), or None for R0 = 1 everywhere (circuit.solve_circuit)
-        self.rod_resistance = None if rod_resistance is None else _frozen(
-            _as_resistance(rod_resistance, "rod_resistance", self.n_rods, allow_zero=False).copy())
+        self.rod_resistance = (
+            None
+            if rod_resistance is None
+            else _frozen(_as_resistance(rod_resistance, "rod_resistance", self.n_rods, allow_zero=False).copy())
+        )
         #: resistance of every contact (units R0); 0 = ideal contacts (circuit.solve_circuit)
         self.contact_resistance = float(contact_resistance)
         if not (np.isfinite(self.contact_resistance) and self.contact_resistance >= 0.0):
@@ -184,8 +194,7 @@ class ConnectivityGraph(ContactArrays):
         c = self._known_conductor(c)
         if (k, c) not in self._conductor_contact:
             raise ValueError(
-                f"cannot release tip {k} from conductor {c} ({ev.CONDUCTOR_NAMES.get(c, '?')}): "
-                "it does not touch it"
+                f"cannot release tip {k} from conductor {c} ({ev.CONDUCTOR_NAMES.get(c, '?')}): it does not touch it"
             )
         del self._conductor_contact[(k, c)]
         self._touch()

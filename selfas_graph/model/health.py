@@ -5,6 +5,7 @@ energy balance; each failure stops the run with a diagnosis that names the likel
 :class:`HealthChecks` is a part of :class:`~.simulation.Simulation` (it reads the simulation's
 state, parameters, integrator and force field).
 """
+
 from __future__ import annotations
 
 import math
@@ -30,7 +31,6 @@ class NumericalFailure(RuntimeError):
         super().__init__(message)
         self.step = step
         self.rods = list(rods)
-
 
 
 class HealthChecks:
@@ -64,21 +64,28 @@ class HealthChecks:
         rods = sorted(set(int(k) // 2 for k in tips[:10]))
         term, force = self._out_of_scale_term()
         if term is not None:
-            msg = (f"numerical failure at step {st.step} (t = {st.time:.6g}): {what}; rods involved: "
-                   f"{rods[:10]}; the '{term}' term's force was already {force:.3g} F_M0 at the last saved state, "
-                   f"out of scale (above {FORCE_OUT_OF_SCALE:g}): no time step follows it. Check the parameters "
-                   f"of that term and the charges it acts on ({_term_keys(term)}).")
+            msg = (
+                f"numerical failure at step {st.step} (t = {st.time:.6g}): {what}; rods involved: "
+                f"{rods[:10]}; the '{term}' term's force was already {force:.3g} F_M0 at the last saved state, "
+                f"out of scale (above {FORCE_OUT_OF_SCALE:g}): no time step follows it. Check the parameters "
+                f"of that term and the charges it acts on ({_term_keys(term)})."
+            )
             raise NumericalFailure(msg, st.step, rods)
         dominant = self.force_field.dominant_channel(np.asarray(tips[:10]))
-        cause = (f"largest force on them from the '{dominant}' term" if dominant != "none"
-                 else "no force term is on, so the integrator alone is at fault")
+        cause = (
+            f"largest force on them from the '{dominant}' term"
+            if dominant != "none"
+            else "no force term is on, so the integrator alone is at fault"
+        )
         stiff = self._stiff_brakes()
         if stiff:
             cause = stiff
-        msg = (f"numerical failure at step {st.step} (t = {st.time:.6g}): {what}; rods involved: "
-               f"{rods[:10]}; {cause}. "
-               f"The time step integrator.dt = {self.dt:g} is the likely cause: try a smaller one "
-               f"(the stiff parts are the tip core and the brakes inside r*){self._slow_hint()}.")
+        msg = (
+            f"numerical failure at step {st.step} (t = {st.time:.6g}): {what}; rods involved: "
+            f"{rods[:10]}; {cause}. "
+            f"The time step integrator.dt = {self.dt:g} is the likely cause: try a smaller one "
+            f"(the stiff parts are the tip core and the brakes inside r*){self._slow_hint()}."
+        )
         raise NumericalFailure(msg, st.step, rods)
 
     def _stiff_brakes(self) -> str:
@@ -86,13 +93,18 @@ class HealthChecks:
         f, ip = self.params.forces, self.params.integrator
         if ip.brake != "explicit":
             return ""
-        over = [(name, b.coefficient) for name, b in (("tip_brake", f.tip_brake), ("ambient_brake", f.ambient_brake))
-                if b is not None and b.coefficient * self.dt > 2.0]
+        over = [
+            (name, b.coefficient)
+            for name, b in (("tip_brake", f.tip_brake), ("ambient_brake", f.ambient_brake))
+            if b is not None and b.coefficient * self.dt > 2.0
+        ]
         if not over:
             return ""
         name, k = max(over, key=lambda x: x[1])
-        return (f"the '{name}' term is too stiff for the step: forces.{name}.coefficient * dt = {k * self.dt:.3g} "
-                f"(an explicit brake is stable only below 2; integrator.brake = \"split\" is stable for any)")
+        return (
+            f"the '{name}' term is too stiff for the step: forces.{name}.coefficient * dt = {k * self.dt:.3g} "
+            f'(an explicit brake is stable only below 2; integrator.brake = "split" is stable for any)'
+        )
 
     def _out_of_scale_term(self):
         """(channel, force) of a channel whose force at the last sane state (the last frame, or the
@@ -109,13 +121,16 @@ class HealthChecks:
             ff.evaluate(good[0].copy(), good[1].copy(), full=True)
             name, force = ff.dominant_force(np.arange(self.state.n_tips))
         return (name, force) if name != "none" and not force <= FORCE_OUT_OF_SCALE else (None, 0.0)
+
     def _slow_hint(self) -> str:
         """With multiple time stepping, the other suspect of a failure (appended to its message)."""
         k = self.params.integrator.slow_every
         if k <= 1:
             return ""
-        return (f"; or the slow forces, evaluated every integrator.slow_every = {k} steps, change too much "
-                f"in between: try a smaller slow_every (8 or 16 in the shipped scenes)")
+        return (
+            f"; or the slow forces, evaluated every integrator.slow_every = {k} steps, change too much "
+            f"in between: try a smaller slow_every (8 or 16 in the shipped scenes)"
+        )
 
     def energy_scale(self, obs) -> float:
         """Energy turned over so far: kinetic energy plus |work| of every non-conservative channel."""
@@ -130,17 +145,25 @@ class HealthChecks:
         the balance E - E0 - W grows to the size of the dissipated work.
         """
         st = self.state
-        bad = [k for k, v in obs.items()
-               if (k.startswith(("energy", "work/")) or k == "momentum") and not np.isfinite(v).all()]
+        bad = [
+            k
+            for k, v in obs.items()
+            if (k.startswith(("energy", "work/")) or k == "momentum") and not np.isfinite(v).all()
+        ]
         if bad:
             terms = [k.split("/", 1)[1] for k in bad if "/" in k and k.split("/", 1)[1] != "kinetic"]
             term = terms[0] if terms else None
-            where = (f"the '{term}' term is out of scale: check its parameters and the charges it acts on "
-                     f"({_term_keys(term)})" if term else
-                     "the state itself is out of scale (velocities or positions beyond double precision)")
+            where = (
+                f"the '{term}' term is out of scale: check its parameters and the charges it acts on "
+                f"({_term_keys(term)})"
+                if term
+                else "the state itself is out of scale (velocities or positions beyond double precision)"
+            )
             raise NumericalFailure(
                 f"numerical failure at step {st.step} (t = {st.time:.6g}): non-finite (NaN or inf) "
-                f"{', '.join(bad[:6])}; {where}. Nothing non-finite was written.", st.step)
+                f"{', '.join(bad[:6])}; {where}. Nothing non-finite was written.",
+                st.step,
+            )
         tol = self.params.integrator.energy_tolerance
         scale = self.energy_scale(obs)
         err = abs(obs["energy_balance"])
@@ -154,7 +177,8 @@ class HealthChecks:
                 f"the largest work is done by the '{top}' term. The time step integrator.dt = {self.dt:g} is likely "
                 f"past the stability limit of the stiff contact terms (tip brake k_br, tip core): try half of it"
                 f"{self._slow_hint()}.",
-                st.step)
+                st.step,
+            )
 
     _check_energy = check_energy  # the name of selfas-graph 0.2
 

@@ -18,6 +18,7 @@ advances with the same weights as the positions (AB4 or RK4), so the energy bala
 The largest bond-length error before the constraint (the step's own error) and
 after it (what remains in the state) are recorded for every step.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -41,8 +42,9 @@ class AdamsBashforth4:
         Apply the position projection / the velocity correction after each step.
     """
 
-    def __init__(self, force_field, dt, exact_bond=True, project=True, correct_velocity=True, split_brakes=False,
-                 slow_every=1):
+    def __init__(
+        self, force_field, dt, exact_bond=True, project=True, correct_velocity=True, split_brakes=False, slow_every=1
+    ):
         self.ff = force_field
         self.dt = float(dt)
         self.exact_bond = bool(exact_bond)
@@ -73,10 +75,18 @@ class AdamsBashforth4:
     def state_dict(self) -> dict:
         """Derivative history, work per channel, time origin and bond errors: what the next
         steps depend on besides the state (arrays and plain values)."""
-        return {"hist_v": self.hist_v.copy(), "hist_a": self.hist_a.copy(), "hist_p": self.hist_p.copy(),
-                "head": self.head, "count": self.count, "work": self.work.copy(),
-                "time_origin_step": self.time_origin[0], "time_origin_time": self.time_origin[1],
-                "bond_error_before": self.bond_error_before, "bond_error_after": self.bond_error_after}
+        return {
+            "hist_v": self.hist_v.copy(),
+            "hist_a": self.hist_a.copy(),
+            "hist_p": self.hist_p.copy(),
+            "head": self.head,
+            "count": self.count,
+            "work": self.work.copy(),
+            "time_origin_step": self.time_origin[0],
+            "time_origin_time": self.time_origin[1],
+            "bond_error_before": self.bond_error_before,
+            "bond_error_after": self.bond_error_after,
+        }
 
     def load_state_dict(self, d: dict) -> None:
         """Restore :meth:`state_dict` (also as read back from a checkpoint)."""

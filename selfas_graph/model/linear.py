@@ -1,5 +1,6 @@
 """The reduced nodal system of a resistor network: assembly, sparse solve, and the memo of the
 last system solved (docs/model.md 'Circuit'). Used by :mod:`.circuit`."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -96,8 +97,9 @@ def _potentials(n_nodes, u, v, g, is_dir, psi_dir, solver, memo=None) -> np.ndar
     Only the connected components with two different Dirichlet values are solved;
     a component with one value sits at it exactly, one with none floats (NaN).
     """
-    n_comp, comp = component_labels(n_nodes, np.ascontiguousarray(u, dtype=np.int64),
-                                    np.ascontiguousarray(v, dtype=np.int64))
+    n_comp, comp = component_labels(
+        n_nodes, np.ascontiguousarray(u, dtype=np.int64), np.ascontiguousarray(v, dtype=np.int64)
+    )
     dir_nodes = np.flatnonzero(is_dir)
     comp_lo = np.full(n_comp, np.inf)
     comp_hi = np.full(n_comp, -np.inf)
@@ -131,8 +133,8 @@ def _potentials(n_nodes, u, v, g, is_dir, psi_dir, solver, memo=None) -> np.ndar
         A = sp.coo_matrix((vals, (rows, cols)), shape=(n_int, n_int)).tocsc()
         u_to_d = (iu >= 0) & is_dir[v]
         v_to_d = (iv >= 0) & is_dir[u]
-        b = np.bincount(
-            iu[u_to_d], weights=g[u_to_d] * psi_dir[v[u_to_d]], minlength=n_int
-        ) + np.bincount(iv[v_to_d], weights=g[v_to_d] * psi_dir[u[v_to_d]], minlength=n_int)
+        b = np.bincount(iu[u_to_d], weights=g[u_to_d] * psi_dir[v[u_to_d]], minlength=n_int) + np.bincount(
+            iv[v_to_d], weights=g[v_to_d] * psi_dir[u[v_to_d]], minlength=n_int
+        )
         psi[interior] = _solve_spd(A, b, solver, memo)
     return psi, comp, comp_active

@@ -16,6 +16,7 @@ One call per step, :meth:`Network.update`, takes the positions and the tip neigh
 the contact search runs over and returns the step's events and, when they changed, the rod
 currents (:class:`NetworkUpdate`). The simulation hands the currents to the force field.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -80,8 +81,20 @@ class Network(ContactArrays):
     contact_resistance : float
     """
 
-    def __init__(self, n_rods, rstar, release_radius, electrodes=None, filament_radius=None, bias=0.0,
-                 circuit=False, solver="auto", height_tolerance=0.0, rod_resistance=None, contact_resistance=0.0):
+    def __init__(
+        self,
+        n_rods,
+        rstar,
+        release_radius,
+        electrodes=None,
+        filament_radius=None,
+        bias=0.0,
+        circuit=False,
+        solver="auto",
+        height_tolerance=0.0,
+        rod_resistance=None,
+        contact_resistance=0.0,
+    ):
         self.n_rods = int(n_rods)
         self.n_tips = 2 * self.n_rods
         #: the contact search and the contact store (tip pairs, tips on each conductor)
@@ -102,8 +115,11 @@ class Network(ContactArrays):
             conductors[ev.CONDUCTOR_FILAMENT] = None  # psi = -delta_J0 z per contact (docs/model.md 'Circuit')
         #: conductor id -> fixed potential (units R0 J0), None where given per contact (docs/model.md 'Circuit')
         self.conductor_potential = conductors
-        self._flags = [(ev.CONDUCTOR_CATHODE, self.contacts.on_cathode), (ev.CONDUCTOR_ANODE, self.contacts.on_anode),
-                       (ev.CONDUCTOR_FILAMENT, self.contacts.on_filament)]
+        self._flags = [
+            (ev.CONDUCTOR_CATHODE, self.contacts.on_cathode),
+            (ev.CONDUCTOR_ANODE, self.contacts.on_anode),
+            (ev.CONDUCTOR_FILAMENT, self.contacts.on_filament),
+        ]
         self._flags = [(c, f) for c, f in self._flags if c in conductors]
         #: potential of each tip's contact with the filament (NaN off it), -delta_J0 z at contact or last move
         self.filament_potential = np.full(self.n_tips, np.nan)
@@ -125,13 +141,19 @@ class Network(ContactArrays):
         """The network of a scene (``params.contacts`` enabled), for ``state``'s rods."""
         cp, el, fil, circ = params.contacts, params.forces.electrodes, params.forces.external_filament, params.circuit
         rstar = params.rods.rstar
-        return cls(state.n_rods, rstar, cp.release_factor * rstar,
-                   electrodes=(-0.5 * el.gap, 0.5 * el.gap) if el is not None else None,
-                   filament_radius=0.5 * fil.diameter if fil is not None else None,
-                   bias=circ.delta_J0 if circ is not None else 0.0, circuit=circ is not None,
-                   solver=circ.solver if circ is not None else "auto",
-                   height_tolerance=circ.height_tolerance if circ is not None else 0.0,
-                   rod_resistance=state.rod_resistance, contact_resistance=cp.resistance)
+        return cls(
+            state.n_rods,
+            rstar,
+            cp.release_factor * rstar,
+            electrodes=(-0.5 * el.gap, 0.5 * el.gap) if el is not None else None,
+            filament_radius=0.5 * fil.diameter if fil is not None else None,
+            bias=circ.delta_J0 if circ is not None else 0.0,
+            circuit=circ is not None,
+            solver=circ.solver if circ is not None else "auto",
+            height_tolerance=circ.height_tolerance if circ is not None else 0.0,
+            rod_resistance=state.rod_resistance,
+            contact_resistance=cp.resistance,
+        )
 
     # ------------------------------------------------------------------ the step
     def update(self, position, neighbours, step, time) -> NetworkUpdate:
@@ -205,16 +227,26 @@ class Network(ContactArrays):
             tc = tc[np.lexsort((tc[:, 1], tc[:, 0]))]
             tips = [np.flatnonzero(flag) for _, flag in self._flags]
             kt = np.concatenate(tips + [np.zeros(0, dtype=np.int64)]).astype(np.int64)
-            kc = np.concatenate([np.full(len(t), c, dtype=np.int64) for (c, _), t in zip(self._flags, tips)]
-                                + [np.zeros(0, dtype=np.int64)])
-            pot = np.concatenate([self.filament_potential[t] if self.conductor_potential[c] is None
-                                  else np.full(len(t), float(self.conductor_potential[c]))
-                                  for (c, _), t in zip(self._flags, tips)] + [np.zeros(0)])
+            kc = np.concatenate(
+                [np.full(len(t), c, dtype=np.int64) for (c, _), t in zip(self._flags, tips)]
+                + [np.zeros(0, dtype=np.int64)]
+            )
+            pot = np.concatenate(
+                [
+                    self.filament_potential[t]
+                    if self.conductor_potential[c] is None
+                    else np.full(len(t), float(self.conductor_potential[c]))
+                    for (c, _), t in zip(self._flags, tips)
+                ]
+                + [np.zeros(0)]
+            )
             order = np.lexsort((kc, kt))
-            self._arrays = {"tip_contacts": _frozen(np.ascontiguousarray(tc, dtype=np.int64)),
-                            "conductor_tip": _frozen(np.ascontiguousarray(kt[order])),
-                            "conductor_id": _frozen(np.ascontiguousarray(kc[order])),
-                            "conductor_potential": _frozen(np.ascontiguousarray(pot[order]))}
+            self._arrays = {
+                "tip_contacts": _frozen(np.ascontiguousarray(tc, dtype=np.int64)),
+                "conductor_tip": _frozen(np.ascontiguousarray(kt[order])),
+                "conductor_id": _frozen(np.ascontiguousarray(kc[order])),
+                "conductor_potential": _frozen(np.ascontiguousarray(pot[order])),
+            }
         return dict(self._arrays)
 
     def _conductors(self) -> tuple[set, list]:
@@ -238,10 +270,16 @@ class Network(ContactArrays):
         not saved: :meth:`load_state_dict` solves again (the solve is a pure function of the
         contacts, so that is the solution the saved run held)."""
         c = self.contacts
-        d = {"contact_pairs": c.pairs.copy(), "on_cathode": c.on_cathode.copy(), "on_anode": c.on_anode.copy(),
-             "on_filament": c.on_filament.copy(), "filament_tip": self.filament_tip.copy(),
-             "filament_z": self.filament_z.copy(), "has_solution": self.solution is not None,
-             "current": self.current.copy()}
+        d = {
+            "contact_pairs": c.pairs.copy(),
+            "on_cathode": c.on_cathode.copy(),
+            "on_anode": c.on_anode.copy(),
+            "on_filament": c.on_filament.copy(),
+            "filament_tip": self.filament_tip.copy(),
+            "filament_z": self.filament_z.copy(),
+            "has_solution": self.solution is not None,
+            "current": self.current.copy(),
+        }
         d.update({f"graph_{k}": v.copy() for k, v in self.arrays().items()})
         return d
 
@@ -255,7 +293,9 @@ class Network(ContactArrays):
         self.filament_potential[:] = np.nan
         cid = np.asarray(d["graph_conductor_id"])
         fil = cid == ev.CONDUCTOR_FILAMENT
-        self.filament_potential[np.asarray(d["graph_conductor_tip"])[fil]] = np.asarray(d["graph_conductor_potential"])[fil]
+        self.filament_potential[np.asarray(d["graph_conductor_tip"])[fil]] = np.asarray(d["graph_conductor_potential"])[
+            fil
+        ]
         self._touch()
         self.topology()
         self.solution = None
@@ -265,5 +305,7 @@ class Network(ContactArrays):
             self.current = np.array(d["current"], dtype=np.float64)
 
     def __repr__(self) -> str:
-        return (f"Network(n_rods={self.n_rods}, contacts={self.n_contacts}, "
-                f"conductors={sorted(self.conductor_potential)}, changed={self.changed})")
+        return (
+            f"Network(n_rods={self.n_rods}, contacts={self.n_contacts}, "
+            f"conductors={sorted(self.conductor_potential)}, changed={self.changed})"
+        )

@@ -4,6 +4,7 @@ the status a progress display shows, the contact count.
 :class:`Observables` is a part of :class:`~.simulation.Simulation` (it reads the simulation's
 state, integrator, force field and network).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -51,7 +52,9 @@ class Observables:
             obs["rods/dead_end"] = topo.n_dead_end
             obs["rods/cluster"] = topo.n_cluster
             obs["rods/free"] = topo.n_free
-            obs["largest_structure"] = int(topo.structure_size[topo.largest_structure]) if topo.largest_structure >= 0 else 0
+            obs["largest_structure"] = (
+                int(topo.structure_size[topo.largest_structure]) if topo.largest_structure >= 0 else 0
+            )
             obs["events"] = len(self.events)
             obs["short_circuit"] = float(topo.has_short_circuit)
         if self.params.circuit is not None:

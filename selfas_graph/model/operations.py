@@ -15,10 +15,23 @@ operation has a ``trigger`` and ``act(sim, i, n_steps)``; it may also define
 ``start(sim, n_steps)`` (before the first step of a run), ``flush(sim)`` (hand buffered data
 on, before a checkpoint) and ``finish(sim)`` (after the last step of a run).
 """
+
 from __future__ import annotations
 
-__all__ = ["RunInterrupted", "Trigger", "Periodic", "Always", "When", "Operation", "PerStepRows", "FrameWriter", "EnergyCheck", "Progress",
-           "StopCheck", "Checkpoint"]
+__all__ = [
+    "RunInterrupted",
+    "Trigger",
+    "Periodic",
+    "Always",
+    "When",
+    "Operation",
+    "PerStepRows",
+    "FrameWriter",
+    "EnergyCheck",
+    "Progress",
+    "StopCheck",
+    "Checkpoint",
+]
 
 
 class RunInterrupted(Exception):
@@ -186,4 +199,3 @@ class StopCheck(Operation):
         if self.checkpoint is not None:
             self.checkpoint.act(sim, i, n_steps)
         raise RunInterrupted(sim.state.step)
-

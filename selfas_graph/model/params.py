@@ -8,6 +8,7 @@ All values are in the reduced units of docs/model.md 'Reduced units'.
 Optional sections (the force terms, the circuit) default to ``None``: a term
 whose table is absent from the scenario is not computed at all.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -60,9 +61,12 @@ class LengthDistribution:
     """Per-rod length l_i in units of the mean rod length L (docs/model.md 'Rods')."""
 
     distribution: str = spec(
-        "constant", "constant (every rod has `value`), uniform (uniform in (low, high)), "
+        "constant",
+        "constant (every rod has `value`), uniform (uniform in (low, high)), "
         "two_level (`high` for a fraction `high_fraction` of the rods, `low` for the rest); "
-        "the law's mean must be 1, since L is the mean length", choices=("constant", "uniform", "two_level"))
+        "the law's mean must be 1, since L is the mean length",
+        choices=("constant", "uniform", "two_level"),
+    )
     value: float = spec(1.0, "length of every rod when distribution = constant (then 1)", gt=0.0)
     low: float = spec(0.5, "lower bound (uniform) or common value (two_level)", gt=0.0)
     high: float = spec(1.5, "upper bound (uniform) or rare value (two_level)", gt=0.0)
@@ -88,24 +92,30 @@ class ResistanceDistribution:
     """Per-rod resistance R_i in units of R0 (docs/model.md 'Circuit')."""
 
     distribution: str = spec(
-        "constant", "constant (every rod gets `value`), uniform (uniform in (low, high)), "
+        "constant",
+        "constant (every rod gets `value`), uniform (uniform in (low, high)), "
         "two_level (`high` for a fraction `high_fraction` of the rods, `low` for the rest)",
-        choices=("constant", "uniform", "two_level"))
+        choices=("constant", "uniform", "two_level"),
+    )
     value: float = spec(1.0, "resistance of every rod when distribution = constant", gt=0.0)
     low: float = spec(0.5, "lower bound (uniform) or common value (two_level)", gt=0.0)
     high: float = spec(1.5, "upper bound (uniform) or rare value (two_level)", gt=0.0)
     high_fraction: float = spec(0.5, "fraction of rods with the `high` value (two_level)", ge=0.0, le=1.0)
     per_length: bool = spec(
-        False, "the drawn value is a resistance per unit length: R_i = value * l_i (l_i from rods.length)")
+        False, "the drawn value is a resistance per unit length: R_i = value * l_i (l_i from rods.length)"
+    )
 
 
 @dataclass(frozen=True)
 class RodParams:
     # 10^7 rods hold about 2 GB per float64 array of tips: the practical ceiling of one machine
     count: int = spec(300, "number of rods (a scene needs at least one)", ge=1, le=10_000_000)
-    magnetic_charge: ChargeDistribution = spec(None, "tip magnetic charge q_i (units Z_M0 e)", factory=ChargeDistribution)
+    magnetic_charge: ChargeDistribution = spec(
+        None, "tip magnetic charge q_i (units Z_M0 e)", factory=ChargeDistribution
+    )
     electric_charge: ChargeDistribution = spec(
-        None, "electric charge Z_i of the rod centre (units Z_M0 e)",
+        None,
+        "electric charge Z_i of the rod centre (units Z_M0 e)",
         factory=lambda: ChargeDistribution(distribution="magnetic"),
     )
     diameter: float = spec(0.06, "rod diameter D (inverse aspect ratio D/L)", gt=0.0, lt=0.5)
@@ -114,11 +124,14 @@ class RodParams:
     )
     tip_stiffness: float = spec(1.0, "kappa, elastic stiffness of the tip core and of the electrode walls", ge=0.0)
     length: Optional[LengthDistribution] = spec(
-        None, "length l_i of each rod in units of the mean length L, a number or a distribution table "
-        "(absent: every rod has length 1)")
+        None,
+        "length l_i of each rod in units of the mean length L, a number or a distribution table "
+        "(absent: every rod has length 1)",
+    )
     resistance: Optional[ResistanceDistribution] = spec(
-        None, "resistance R_i of each rod in units of R0, a number or a distribution table "
-        "(absent: every rod has R0 = 1)")
+        None,
+        "resistance R_i of each rod in units of R0, a number or a distribution table (absent: every rod has R0 = 1)",
+    )
 
     @property
     def rstar(self) -> float:
@@ -128,7 +141,8 @@ class RodParams:
 @dataclass(frozen=True)
 class PlacementParams:
     box: tuple = spec(
-        None, "[[xmin, xmax], [ymin, ymax], [zmin, zmax]] holding both tips of every rod at t = 0",
+        None,
+        "[[xmin, xmax], [ymin, ymax], [zmin, zmax]] holding both tips of every rod at t = 0",
         factory=lambda: ((-5.0, 5.0), (-5.0, 5.0), (-5.0, 5.0)),
     )
     min_tip_distance: Optional[float] = spec(
@@ -140,77 +154,119 @@ class PlacementParams:
 @dataclass(frozen=True)
 class IntegratorParams:
     dt: float = spec(1e-3, "time step (units t0); an accuracy knob", gt=0.0)
-    bond_force: str = spec("exact", "rigid-bond force: exact (docs/model.md 'Rigid rods and time integration') or paper (Eq. 9 as printed)",
-                           choices=("exact", "paper"))
+    bond_force: str = spec(
+        "exact",
+        "rigid-bond force: exact (docs/model.md 'Rigid rods and time integration') or paper (Eq. 9 as printed)",
+        choices=("exact", "paper"),
+    )
     velocity_correction: bool = spec(True, "apply the paper's velocity correction, Eqs. (14-15), after each step")
     position_projection: bool = spec(True, "restore each bond length to 1 about the rod centre after each step")
     brake: str = spec(
-        "split", "how the stiff contact brakes (tip brake, electrode and monopole brakes) are integrated: "
+        "split",
+        "how the stiff contact brakes (tip brake, electrode and monopole brakes) are integrated: "
         "explicit (a force in the Adams-Bashforth step) or split (solved exactly pair by pair after each step, "
-        "stable for any dt; first order in dt for the brakes' effect)", choices=("explicit", "split"))
+        "stable for any dt; first order in dt for the brakes' effect)",
+        choices=("explicit", "split"),
+    )
     energy_tolerance: float = spec(
-        0.1, "stop the run when the energy balance |E - E0 - W| exceeds this fraction of the energy turned over "
+        0.1,
+        "stop the run when the energy balance |E - E0 - W| exceeds this fraction of the energy turned over "
         "(kinetic energy + |work| of every non-conservative term), checked every output interval; the usual "
-        "sign of a time step past the stability limit of the brakes", gt=0.0)
+        "sign of a time step past the stability limit of the brakes",
+        gt=0.0,
+    )
     restart_on_events: bool = spec(
-        False, "restart the Adams-Bashforth history (three RK4 steps) after a contact event or a new circuit "
-        "solution, when forces jump", )
+        False,
+        "restart the Adams-Bashforth history (three RK4 steps) after a contact event or a new circuit "
+        "solution, when forces jump",
+    )
     slow_every: int = spec(
-        1, "multiple time stepping: evaluate the slow forces (tip-tip pairs beyond fast_range, the Yukawa sum, the "
+        1,
+        "multiple time stepping: evaluate the slow forces (tip-tip pairs beyond fast_range, the Yukawa sum, the "
         "rod-current terms 9 and 10) every this many steps and hold them in between, while the stiff short-range "
-        "forces are evaluated every step; 1 evaluates everything every step; an accuracy knob", ge=1, le=1000)
+        "forces are evaluated every step; 1 evaluates everything every step; an accuracy knob",
+        ge=1,
+        le=1000,
+    )
     slow_extrapolation: bool = spec(
-        True, "with slow_every > 1: extrapolate the slow forces linearly in time from the last two full "
-        "evaluations (second order in slow_every dt) instead of holding them constant (first order)")
+        True,
+        "with slow_every > 1: extrapolate the slow forces linearly in time from the last two full "
+        "evaluations (second order in slow_every dt) instead of holding them constant (first order)",
+    )
     fast_range: float = spec(
-        8.0, "with slow_every > 1: tip pairs closer than (fast_range - 1) r* count as fast, pairs beyond "
-        "fast_range r* as slow, with a smooth switch in between; an accuracy knob", ge=2.0, le=100.0)
+        8.0,
+        "with slow_every > 1: tip pairs closer than (fast_range - 1) r* count as fast, pairs beyond "
+        "fast_range r* as slow, with a smooth switch in between; an accuracy knob",
+        ge=2.0,
+        le=100.0,
+    )
 
 
 @dataclass(frozen=True)
 class ContactParams:
     enabled: bool = spec(True, "detect tip and electrode contacts and record them as events")
     release_factor: float = spec(
-        1.5, "a contact is released when the tips are farther apart than release_factor * r* (hysteresis)", ge=1.0)
+        1.5, "a contact is released when the tips are farther apart than release_factor * r* (hysteresis)", ge=1.0
+    )
     resistance: float = spec(
-        0.0, "resistance r of every tip-tip and tip-conductor contact in the circuit (units R0); 0 = ideal "
-        "contacts, tips in contact are one electrical node", ge=0.0)
+        0.0,
+        "resistance r of every tip-tip and tip-conductor contact in the circuit (units R0); 0 = ideal "
+        "contacts, tips in contact are one electrical node",
+        ge=0.0,
+    )
 
 
 @dataclass(frozen=True)
 class CircuitParams:
     delta_J0: float = spec(
-        2.23, "bias parameter delta_J0 = U L / (R0 J0 dZ) (paper Eq. 1); electrode potentials +-delta_J0 dZ / 2, "
-        "filament potential -delta_J0 z", ge=0.0)
+        2.23,
+        "bias parameter delta_J0 = U L / (R0 J0 dZ) (paper Eq. 1); electrode potentials +-delta_J0 dZ / 2, "
+        "filament potential -delta_J0 z",
+        ge=0.0,
+    )
     solver: str = spec(
-        "auto", "linear solver of the nodal equations: direct (sparse LU), cg (conjugate gradients to round-off, "
+        "auto",
+        "linear solver of the nodal equations: direct (sparse LU), cg (conjugate gradients to round-off, "
         "falls back to direct), auto (direct up to 50000 unknowns, cg above; measured in docs/performance.md)",
-        choices=("auto", "direct", "cg"))
+        choices=("auto", "direct", "cg"),
+    )
     height_tolerance: float = spec(
-        0.01, "case (ii): re-solve the circuit when a tip touching the filament has moved this far along z since the "
-        "last solve (its potential is -delta_J0 z); an accuracy knob", gt=0.0)
+        0.01,
+        "case (ii): re-solve the circuit when a tip touching the filament has moved this far along z since the "
+        "last solve (its potential is -delta_J0 z); an accuracy knob",
+        gt=0.0,
+    )
 
 
 @dataclass(frozen=True)
 class NeighbourParams:
-    skin: float = spec(0.3, "Verlet skin of the neighbour lists; rebuilt when a point moved more than skin/2",
-                       gt=0.0, le=100.0)
+    skin: float = spec(
+        0.3, "Verlet skin of the neighbour lists; rebuilt when a point moved more than skin/2", gt=0.0, le=100.0
+    )
 
 
 @dataclass(frozen=True)
 class RunParams:
-    t_end: float = spec(10.0, "simulated time at which the run stops (units t0); a whole number of steps "
-                        "integrator.dt from the start", gt=0.0)
+    t_end: float = spec(
+        10.0,
+        "simulated time at which the run stops (units t0); a whole number of steps integrator.dt from the start",
+        gt=0.0,
+    )
 
 
 @dataclass(frozen=True)
 class OutputParams:
     interval: float = spec(1.0, "simulated time between saved frames; data are flushed to disk at each", gt=0.0)
-    file: Optional[str] = spec(None, "output HDF5 path (default: the scenario file name with .h5, in the working directory)")
+    file: Optional[str] = spec(
+        None, "output HDF5 path (default: the scenario file name with .h5, in the working directory)"
+    )
     velocities: bool = spec(True, "save tip velocities with every frame")
     checkpoint_interval: float = spec(
-        900.0, "wall-clock seconds between checkpoints (RUN.checkpoint.h5), the first right after the first step; "
-        "one is also written at the end and on SIGTERM/SIGINT; 0 writes only those", ge=0.0)
+        900.0,
+        "wall-clock seconds between checkpoints (RUN.checkpoint.h5), the first right after the first step; "
+        "one is also written at the end and on SIGTERM/SIGINT; 0 writes only those",
+        ge=0.0,
+    )
 
 
 @dataclass(frozen=True)

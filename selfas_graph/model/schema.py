@@ -3,6 +3,7 @@
 :mod:`selfas_graph.io.scenario` reads this metadata to validate scenario files, and
 ``tools/scenario_docs.py`` to write docs/scenarios.md.
 """
+
 from dataclasses import field
 
 

@@ -7,6 +7,7 @@
     sim.run(t_end=5.0)
     sim.observables()["energy_balance"]
 """
+
 from __future__ import annotations
 
 import math
@@ -26,8 +27,15 @@ from .params import Parameters
 from .state import State, StateError, random_state
 from .terms import ForceField
 
-__all__ = ["Simulation", "RunSummary", "RunInterrupted", "NumericalFailure", "BOND_BREAK", "MAX_STEP_DISPLACEMENT",
-           "FORCE_OUT_OF_SCALE"]
+__all__ = [
+    "Simulation",
+    "RunSummary",
+    "RunInterrupted",
+    "NumericalFailure",
+    "BOND_BREAK",
+    "MAX_STEP_DISPLACEMENT",
+    "FORCE_OUT_OF_SCALE",
+]
 
 
 @dataclass
@@ -79,20 +87,29 @@ class Simulation(HealthChecks, Observables):
         An invalid ``state``, or one whose rod count differs from ``rods.count``.
     """
 
-    def __init__(self, params: Parameters, state: State | None = None, timing: bool = False,
-                 comm=None, check_state: bool = True):
+    def __init__(
+        self, params: Parameters, state: State | None = None, timing: bool = False, comm=None, check_state: bool = True
+    ):
         self.params = params
         if state is not None and check_state:
             state = state.checked()
         if state is not None and state.n_rods != params.rods.count:
-            raise StateError(f"the state has {state.n_rods} rods but rods.count = {params.rods.count}; make them "
-                             f"agree, e.g. params.replace(rods={{'count': {state.n_rods}}})")
+            raise StateError(
+                f"the state has {state.n_rods} rods but rods.count = {params.rods.count}; make them "
+                f"agree, e.g. params.replace(rods={{'count': {state.n_rods}}})"
+            )
         self.state = random_state(params) if state is None else state
         self.force_field = ForceField(params, self.state, timing=timing, blocks=RowBlocks(self.state.n_rods, comm))
         ip = params.integrator
-        self.integrator = AdamsBashforth4(self.force_field, ip.dt, exact_bond=ip.bond_force == "exact",
-                                          project=ip.position_projection, correct_velocity=ip.velocity_correction,
-                                          split_brakes=ip.brake == "split", slow_every=ip.slow_every)
+        self.integrator = AdamsBashforth4(
+            self.force_field,
+            ip.dt,
+            exact_bond=ip.bond_force == "exact",
+            project=ip.position_projection,
+            correct_velocity=ip.velocity_correction,
+            split_brakes=ip.brake == "split",
+            slow_every=ip.slow_every,
+        )
         self.integrator.time_origin = (self.state.step, self.state.time)
         self.max_bond_error = 0.0
         self._energy0 = None
@@ -146,27 +163,43 @@ class Simulation(HealthChecks, Observables):
         network's (:meth:`Network.state_dict`), and the run's events and energy reference.
         """
         st = self.state
-        snap = {"position": st.position.copy(), "velocity": st.velocity.copy(),
-                "tip_charge": st.tip_charge.copy(), "rod_charge": st.rod_charge.copy(),
-                "step": st.step, "time": st.time}
+        snap = {
+            "position": st.position.copy(),
+            "velocity": st.velocity.copy(),
+            "tip_charge": st.tip_charge.copy(),
+            "rod_charge": st.rod_charge.copy(),
+            "step": st.step,
+            "time": st.time,
+        }
         for name in ("rod_length", "rod_resistance"):
             if getattr(st, name) is not None:
                 snap[name] = getattr(st, name).copy()
         snap.update(self.integrator.state_dict())
-        snap.update(max_bond_error=self.max_bond_error, energy0=np.nan if self._energy0 is None else self._energy0,
-                    events=np.array([tuple(r) for r in self.events], dtype=ev.EVENT_DTYPE),
-                    short_circuit_time=np.nan if self.short_circuit_time is None else self.short_circuit_time)
+        snap.update(
+            max_bond_error=self.max_bond_error,
+            energy0=np.nan if self._energy0 is None else self._energy0,
+            events=np.array([tuple(r) for r in self.events], dtype=ev.EVENT_DTYPE),
+            short_circuit_time=np.nan if self.short_circuit_time is None else self.short_circuit_time,
+        )
         if self.network is not None:
             snap.update(self.network.state_dict())
-        snap.update(self.force_field.state_dict())  # currents in use (after the network's), neighbour lists, held slow forces
+        snap.update(
+            self.force_field.state_dict()
+        )  # currents in use (after the network's), neighbour lists, held slow forces
         return snap
 
     @classmethod
     def from_snapshot(cls, params: Parameters, snap: dict, timing: bool = False, comm=None) -> "Simulation":
         """Rebuild a simulation from :meth:`snapshot` (see there)."""
-        state = State(np.array(snap["position"]), np.array(snap["velocity"]), np.array(snap["tip_charge"]),
-                      np.array(snap["rod_charge"]), int(snap["step"]), float(snap["time"]),
-                      *(np.array(snap[k]) if k in snap else None for k in ("rod_length", "rod_resistance")))
+        state = State(
+            np.array(snap["position"]),
+            np.array(snap["velocity"]),
+            np.array(snap["tip_charge"]),
+            np.array(snap["rod_charge"]),
+            int(snap["step"]),
+            float(snap["time"]),
+            *(np.array(snap[k]) if k in snap else None for k in ("rod_length", "rod_resistance")),
+        )
         sim = cls(params, state=state, timing=timing, comm=comm, check_state=False)
         sim.integrator.load_state_dict(snap)
         sim.max_bond_error = float(snap["max_bond_error"])
@@ -234,14 +267,17 @@ class Simulation(HealthChecks, Observables):
         # round-off of t_end - t: a few ulps of the step count, and no more than 1e-6 of a step below 1e10 steps
         if abs(x - n) > 1e-6 + 4 * np.finfo(float).eps * abs(x):
             lo = t + math.floor(x) * dt
-            raise ValueError(f"t_end = {t_end:.10g} is not a whole number of steps dt = {dt:g} from t = {t:.10g} "
-                             f"({x:.6g} steps); the nearest reachable times are {lo:.10g} and {lo + dt:.10g}")
+            raise ValueError(
+                f"t_end = {t_end:.10g} is not a whole number of steps dt = {dt:g} from t = {t:.10g} "
+                f"({x:.6g} steps); the nearest reachable times are {lo:.10g} and {lo + dt:.10g}"
+            )
         if n < 0:
             raise ValueError(f"t_end = {t_end:.10g} lies before the current time t = {t:.10g}; a run goes forward only")
         return n
 
-    def run(self, t_end=None, writer=None, progress=None, progress_every=None, checkpointer=None,
-            stop=None) -> RunSummary:
+    def run(
+        self, t_end=None, writer=None, progress=None, progress_every=None, checkpointer=None, stop=None
+    ) -> RunSummary:
         """Run from the current time to ``t_end`` (default ``run.t_end``).
 
         Can be called again to continue in chunks (``sim.run(1.0); sim.run(2.0)`` takes the
@@ -334,8 +370,14 @@ class Simulation(HealthChecks, Observables):
         writer.write_frame(st.step, st.time, st.position, st.velocity, obs)
         if self.network is not None:
             net, sol = self.network, self.network.solution
-            writer.write_graph(st.step, st.time, net.arrays(), net.topology().role, self.force_field.current,
-                               sol.potential if sol is not None else np.full(st.n_tips, np.nan),
-                               net.conductor_potential)
+            writer.write_graph(
+                st.step,
+                st.time,
+                net.arrays(),
+                net.topology().role,
+                self.force_field.current,
+                sol.potential if sol is not None else np.full(st.n_tips, np.nan),
+                net.conductor_potential,
+            )
         writer.flush()
         return obs

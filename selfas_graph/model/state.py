@@ -1,4 +1,5 @@
 """The state of the rods (struct of arrays) and its random initial placement."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -68,10 +69,16 @@ class State:
         return 0.5 * (self.position[0::2] + self.position[1::2])
 
     def copy(self) -> "State":
-        return State(self.position.copy(), self.velocity.copy(), self.tip_charge.copy(),
-                     self.rod_charge.copy(), self.step, self.time,
-                     None if self.rod_length is None else self.rod_length.copy(),
-                     None if self.rod_resistance is None else self.rod_resistance.copy())
+        return State(
+            self.position.copy(),
+            self.velocity.copy(),
+            self.tip_charge.copy(),
+            self.rod_charge.copy(),
+            self.step,
+            self.time,
+            None if self.rod_length is None else self.rod_length.copy(),
+            None if self.rod_resistance is None else self.rod_resistance.copy(),
+        )
 
     def bond_length(self) -> np.ndarray:
         """The length each bond should have: ``rod_length``, or an empty array for unit rods.
@@ -89,23 +96,26 @@ class State:
             Wrong shapes, non-finite values, a rod whose tips do not carry +q and -q
             (docs/model.md 'Rods'), or a rod length off 1 by more than ``BOND_TOLERANCE``.
         """
+
         def arr(name, value, shape):
             try:
                 a = np.array(value, dtype=np.float64)
             except (TypeError, ValueError):
                 raise StateError(f"State.{name}: expected an array of numbers of shape {shape}") from None
             if a.shape != shape:
-                raise StateError(f"State.{name}: shape {a.shape}, expected {shape} "
-                                 f"(rod i has tips 2i and 2i+1)")
+                raise StateError(f"State.{name}: shape {a.shape}, expected {shape} (rod i has tips 2i and 2i+1)")
             if not np.isfinite(a).all():
-                raise StateError(f"State.{name}: non-finite values (NaN or inf) at rows "
-                                 f"{np.flatnonzero(~np.isfinite(a.reshape(len(a), -1)).all(axis=1))[:5].tolist()}")
+                raise StateError(
+                    f"State.{name}: non-finite values (NaN or inf) at rows "
+                    f"{np.flatnonzero(~np.isfinite(a.reshape(len(a), -1)).all(axis=1))[:5].tolist()}"
+                )
             return a
 
         x = np.asarray(self.position)
         if x.ndim != 2 or x.shape[1:] != (3,) or x.shape[0] < 2 or x.shape[0] % 2:
-            raise StateError(f"State.position: shape {x.shape}, expected (2 n_rods, 3) with n_rods >= 1 "
-                             f"(rod i has tips 2i and 2i+1)")
+            raise StateError(
+                f"State.position: shape {x.shape}, expected (2 n_rods, 3) with n_rods >= 1 (rod i has tips 2i and 2i+1)"
+            )
         n = x.shape[0] // 2
         position = arr("position", self.position, (2 * n, 3))
         velocity = arr("velocity", self.velocity, (2 * n, 3))
@@ -115,9 +125,11 @@ class State:
         bad = np.flatnonzero(qa != -qb)
         if len(bad):
             i = int(bad[0])
-            raise StateError(f"State.tip_charge: rod {i} has tip charges {qa[i]:g} and {qb[i]:g}; rod i carries +q_i "
-                             f"on tip 2i and -q_i on tip 2i+1 (docs/model.md 'Rods'; State.from_rods builds "
-                             f"them)" + (f", {len(bad) - 1} more rods too" if len(bad) > 1 else ""))
+            raise StateError(
+                f"State.tip_charge: rod {i} has tip charges {qa[i]:g} and {qb[i]:g}; rod i carries +q_i "
+                f"on tip 2i and -q_i on tip 2i+1 (docs/model.md 'Rods'; State.from_rods builds "
+                f"them)" + (f", {len(bad) - 1} more rods too" if len(bad) > 1 else "")
+            )
         extra = {}
         for name in ("rod_length", "rod_resistance"):
             value = getattr(self, name)
@@ -131,18 +143,19 @@ class State:
         off = np.flatnonzero(np.abs(length - target) > BOND_TOLERANCE * target)
         if len(off):
             i = int(off[np.argmax(np.abs(length[off] - target[off]))])
-            raise StateError(f"State.position: rod {i} has length {length[i]:.6g}, not its "
-                             f"{'rod_length' if 'rod_length' in extra else 'length 1'} {target[i]:.6g} (to "
-                             f"{BOND_TOLERANCE:g} relative), {len(off)} rods are off; build the state with "
-                             f"State.from_rods (centres and axes)")
+            raise StateError(
+                f"State.position: rod {i} has length {length[i]:.6g}, not its "
+                f"{'rod_length' if 'rod_length' in extra else 'length 1'} {target[i]:.6g} (to "
+                f"{BOND_TOLERANCE:g} relative), {len(off)} rods are off; build the state with "
+                f"State.from_rods (centres and axes)"
+            )
         step, t = int(self.step), float(self.time)
         if step < 0 or not np.isfinite(t):
             raise StateError(f"State: step {step} and time {t} must be a step >= 0 and a finite time")
         return State(position, velocity, tip_charge, rod_charge, step, t, **extra)
 
     @classmethod
-    def from_rods(cls, centre, axis, magnetic_charge, electric_charge, velocity=None, length=None,
-                  resistance=None):
+    def from_rods(cls, centre, axis, magnetic_charge, electric_charge, velocity=None, length=None, resistance=None):
         """Build a state from rod centres and axes ``s = x_b - x_a`` (normalised here).
 
         Parameters
@@ -178,8 +191,14 @@ class State:
         tip_charge[0::2] = q
         tip_charge[1::2] = -q
         v = np.zeros_like(position) if velocity is None else np.array(velocity, dtype=np.float64).reshape(2 * n, 3)
-        return cls(position, v, tip_charge, np.asarray(electric_charge, dtype=np.float64).reshape(n).copy(),
-                   rod_length=length, rod_resistance=resistance)
+        return cls(
+            position,
+            v,
+            tip_charge,
+            np.asarray(electric_charge, dtype=np.float64).reshape(n).copy(),
+            rod_length=length,
+            rod_resistance=resistance,
+        )
 
 
 #: the rigid-bond kernels' sign for "every rod has length 1"

@@ -32,6 +32,7 @@ Structures are the connected components of rods joined by tip-tip contacts;
 conductors do **not** join structures (two aggregates that both touch the anode
 are two structures). A rod with no contact at all is FREE and has no structure.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -44,8 +45,18 @@ from selfas_graph.model import events as ev
 from selfas_graph.model.circuit import CircuitSolution, SolveMemo, merge_tips, solve_circuit
 from selfas_graph.model.validate import _as_count, _as_index_array, _frozen
 
-__all__ = ["FREE", "CLUSTER", "DEAD_END", "FILAMENT", "ROLE_NAMES", "Topology", "classify_rods",
-           "conductor_node_key", "circuit_event", "ContactArrays"]
+__all__ = [
+    "FREE",
+    "CLUSTER",
+    "DEAD_END",
+    "FILAMENT",
+    "ROLE_NAMES",
+    "Topology",
+    "classify_rods",
+    "conductor_node_key",
+    "circuit_event",
+    "ContactArrays",
+]
 
 #: rod roles (``Topology.role``)
 FREE = 0  #: no contacts at all
@@ -149,15 +160,17 @@ def classify_rods(n_rods, tip_contacts, conductor_tip, conductor_node_key) -> To
     # components holding at least one non-free rod, renumbered 0..S-1; components touching a
     # conductor, and those touching >= 2 different keys
     comp, n_comp, free, structure, structure_size, comp_touch, candidate = component_structures(
-        n_rods, node_of_tip, n_nodes, tip_contacts, conductor_tip, key_index)
+        n_rods, node_of_tip, n_nodes, tip_contacts, conductor_tip, key_index
+    )
     largest = int(np.argmax(structure_size)) if structure_size.size else -1
     u = node_of_tip[0::2]
     rod_comp = comp[u]
 
     filament = np.zeros(n_rods, dtype=bool)
     if candidate.any():
-        filament = _filament_rods(n_nodes, u, node_of_tip[1::2], comp, candidate, node_of_tip[conductor_tip],
-                                  key_index, n_keys)
+        filament = _filament_rods(
+            n_nodes, u, node_of_tip[1::2], comp, candidate, node_of_tip[conductor_tip], key_index, n_keys
+        )
 
     role = np.full(n_rods, CLUSTER, dtype=np.int8)
     role[comp_touch[rod_comp]] = DEAD_END
@@ -224,8 +237,6 @@ def _filament_rods(n_nodes, u, v, comp, candidate, cnode, key_index, n_keys) -> 
     return rod_in & edge_in_x[where]
 
 
-
-
 def conductor_node_key(conductor_id: np.ndarray, per_contact, conductor_ids) -> np.ndarray:
     """Attachment key of each conductor contact (see :func:`classify_rods`).
 
@@ -273,8 +284,9 @@ class ContactArrays:
         """Roles and structures of the rods (cached until the next contact change)."""
         if self._topology is None:
             arr = self.arrays()
-            self._topology = classify_rods(self.n_rods, arr["tip_contacts"], arr["conductor_tip"],
-                                           self.conductor_node_key(arr))
+            self._topology = classify_rods(
+                self.n_rods, arr["tip_contacts"], arr["conductor_tip"], self.conductor_node_key(arr)
+            )
         return self._topology
 
     @property
@@ -296,8 +308,16 @@ class ContactArrays:
             pairs = list(zip(arr["conductor_tip"][i].tolist(), arr["conductor_id"][i].tolist()))
             raise ValueError(f"unset contact potential for (tip, conductor) {pairs[:10]}")
         topo = self.topology()
-        sol = solve_circuit(self.n_tips, arr["tip_contacts"], arr["conductor_tip"], pot, solver=self.solver,
-                            rod_resistance=self.rod_resistance, contact_resistance=self.contact_resistance,
-                            memo=memo, merged=(topo.n_nodes, topo.node_of_tip))
+        sol = solve_circuit(
+            self.n_tips,
+            arr["tip_contacts"],
+            arr["conductor_tip"],
+            pot,
+            solver=self.solver,
+            rod_resistance=self.rod_resistance,
+            contact_resistance=self.contact_resistance,
+            memo=memo,
+            merged=(topo.n_nodes, topo.node_of_tip),
+        )
         self.changed = False
         return sol

@@ -1,5 +1,6 @@
 """Checks of the arrays the topology and the circuit take: counts, index arrays, potentials and
 resistances, with errors that name the argument and what it should hold."""
+
 from __future__ import annotations
 
 import operator
@@ -42,9 +43,7 @@ def _as_index_array(value, name: str, ndim: int, n_max: int | None) -> np.ndarra
     if n_max is not None:
         bad = (arr < 0) | (arr >= n_max)
         if bad.any():
-            raise ValueError(
-                f"{name} holds tip index {int(arr[bad].flat[0])} outside [0, {n_max})"
-            )
+            raise ValueError(f"{name} holds tip index {int(arr[bad].flat[0])} outside [0, {n_max})")
     return np.ascontiguousarray(arr)
 
 
@@ -52,8 +51,9 @@ def _as_potentials(potential, index, name, index_name, what, target) -> np.ndarr
     """Finite float64 potentials, one per entry of ``index`` (ValueError naming both arrays)."""
     potential = np.asarray(potential, dtype=np.float64).reshape(-1)
     if potential.shape != index.shape:
-        raise ValueError(f"{name} has shape {potential.shape}, {index_name} has shape {index.shape}: "
-                         f"one potential per {what}")
+        raise ValueError(
+            f"{name} has shape {potential.shape}, {index_name} has shape {index.shape}: one potential per {what}"
+        )
     if not np.all(np.isfinite(potential)):
         bad = np.flatnonzero(~np.isfinite(potential))[0]
         raise ValueError(f"{name} must be finite; {what} {bad} ({target} {index[bad]}) has {potential[bad]}")
@@ -66,8 +66,9 @@ def _validate(n_tips, tip_contacts, conductor_tip, conductor_potential):
         raise ValueError(f"n_tips must be even (two tips per rod), got {n_tips}")
     tip_contacts = _as_index_array(tip_contacts, "tip_contacts", 2, n_tips)
     conductor_tip = _as_index_array(conductor_tip, "conductor_tip", 1, n_tips)
-    conductor_potential = _as_potentials(conductor_potential, conductor_tip, "conductor_potential", "conductor_tip",
-                                         "conductor contact", "tip")
+    conductor_potential = _as_potentials(
+        conductor_potential, conductor_tip, "conductor_potential", "conductor_tip", "conductor contact", "tip"
+    )
     return n_tips, tip_contacts, conductor_tip, conductor_potential
 
 

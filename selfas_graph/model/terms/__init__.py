@@ -16,6 +16,7 @@ module                 contents
 The term classes end in ``Force`` (``TipMagneticForce``); their parameters are the classes of
 :mod:`selfas_graph.model.params` without the suffix (``TipMagnetic``).
 """
+
 from .base import FieldSource, Term, share_by_mass
 from .currents import CurrentFieldForce, CurrentLorentzForce, RodCurrents
 from .external import ExternalDipoleForce, ExternalFilamentForce, external_monopoles
@@ -26,8 +27,25 @@ from .pairs import TipBrakeForce, TipMagneticForce, YukawaForce, yukawa_cutoff
 from .registry import TERM_CLASSES
 
 __all__ = [
-    "AmbientBrakeForce", "CurrentFieldForce", "CurrentLorentzForce", "ElectricFieldForce", "ElectrodesForce",
-    "ExternalDipoleForce", "ExternalFilamentForce", "FieldSource", "ForceField", "MultipleTimeStepping",
-    "PlasmaFilamentForce", "RodCurrents", "TERM_CLASSES", "Term", "TipBrakeForce", "TipMagneticForce",
-    "UniformFieldForce", "YukawaForce", "external_monopoles", "share_by_mass", "yukawa_cutoff",
+    "AmbientBrakeForce",
+    "CurrentFieldForce",
+    "CurrentLorentzForce",
+    "ElectricFieldForce",
+    "ElectrodesForce",
+    "ExternalDipoleForce",
+    "ExternalFilamentForce",
+    "FieldSource",
+    "ForceField",
+    "MultipleTimeStepping",
+    "PlasmaFilamentForce",
+    "RodCurrents",
+    "TERM_CLASSES",
+    "Term",
+    "TipBrakeForce",
+    "TipMagneticForce",
+    "UniformFieldForce",
+    "YukawaForce",
+    "external_monopoles",
+    "share_by_mass",
+    "yukawa_cutoff",
 ]

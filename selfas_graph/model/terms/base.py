@@ -6,6 +6,7 @@ A term is built from the scene's :class:`~selfas_graph.model.params.Parameters` 
 during a run (positions, velocities, currents, neighbour lists, buffers) lives in the
 :class:`~selfas_graph.model.terms.forcefield.ForceField` that calls it, passed as ``ff``.
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -7,6 +7,7 @@ magnetic field. The field of the rod currents acts on the magnetic tips (term 9,
 source that is on (:class:`~selfas_graph.model.terms.base.FieldSource`), which it asks for
 their field at its quadrature points.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -114,7 +115,7 @@ class CurrentLorentzForce(Term):
             return
         ff.calls[self.name] += 1
         # active_rod is sorted (RodCurrents.set), so the rods of this block are one slice of it
-        mine = active[np.searchsorted(active, ff.blocks.rods[0]):np.searchsorted(active, ff.blocks.rods[1])]
+        mine = active[np.searchsorted(active, ff.blocks.rods[0]) : np.searchsorted(active, ff.blocks.rods[1])]
         if not len(mine):
             return
         ng = len(self.t)

@@ -2,6 +2,7 @@
 z axis and a large dipole on it. Both are also sources of the field that the Lorentz force on
 rod currents feels (:class:`~selfas_graph.model.terms.base.FieldSource`).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -52,8 +53,18 @@ class ExternalDipoleForce(Term, FieldSource):
 
     def compute(self, ff, out):
         k = 0.0 if self.split_mode else self.k
-        kx.monopoles_on_tips(ff.position, ff.velocity, ff.tip_charge, self.source, self.source_charge, self.rstar,
-                             self.kappa, k, out["external_monopoles"], out["external_monopole_brake"])
+        kx.monopoles_on_tips(
+            ff.position,
+            ff.velocity,
+            ff.tip_charge,
+            self.source,
+            self.source_charge,
+            self.rstar,
+            self.kappa,
+            k,
+            out["external_monopoles"],
+            out["external_monopole_brake"],
+        )
         f = ff.buffer("line_centre", ff.n_rods)
         kx.line_yukawa_on_centres(ff.centre(), ff.rod_charge, *self.line, self.nodes, self.weights, f)
         share_by_mass(f, out["external_line_charge"])
@@ -63,7 +74,7 @@ class ExternalDipoleForce(Term, FieldSource):
 
     def split(self, ff, dt):
         d2 = ((ff.position[:, None, :] - self.source[None, :, :]) ** 2).sum(axis=-1)
-        touching = (d2 < self.rstar ** 2).sum(axis=1).astype(np.float64)
+        touching = (d2 < self.rstar**2).sum(axis=1).astype(np.float64)
         tips = np.flatnonzero(touching)
         if not len(tips) or self.k == 0.0:
             return {}
@@ -73,8 +84,10 @@ class ExternalDipoleForce(Term, FieldSource):
 
     def energy(self, ff):
         return {
-            "external_monopoles": kx.monopoles_energy(ff.position, ff.tip_charge, self.source, self.source_charge,
-                                                      self.rstar, self.kappa),
-            "external_line_charge": kx.line_yukawa_energy(ff.centre(), ff.rod_charge, *self.line, self.nodes,
-                                                          self.weights),
+            "external_monopoles": kx.monopoles_energy(
+                ff.position, ff.tip_charge, self.source, self.source_charge, self.rstar, self.kappa
+            ),
+            "external_line_charge": kx.line_yukawa_energy(
+                ff.centre(), ff.rod_charge, *self.line, self.nodes, self.weights
+            ),
         }

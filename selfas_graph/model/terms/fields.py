@@ -4,6 +4,7 @@
 The uniform magnetic field and the plasma filament are also sources of the field that the
 Lorentz force on rod currents feels (:class:`~selfas_graph.model.terms.base.FieldSource`).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -93,8 +94,17 @@ class ElectrodesForce(Term):
 
     def compute(self, ff, out):
         k = 0.0 if self.split_mode else self.k
-        kf.electrode_walls(ff.position, ff.velocity, self.z[0], self.z[1], self.rstar, self.kappa, k,
-                           out["electrodes"], out["electrode_brake"])
+        kf.electrode_walls(
+            ff.position,
+            ff.velocity,
+            self.z[0],
+            self.z[1],
+            self.rstar,
+            self.kappa,
+            k,
+            out["electrodes"],
+            out["electrode_brake"],
+        )
 
     def split(self, ff, dt):
         z = ff.position[:, 2]

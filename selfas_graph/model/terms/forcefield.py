@@ -22,6 +22,7 @@ multiple time stepping the held slow forces
 (:class:`~selfas_graph.model.terms.mts.MultipleTimeStepping`); :meth:`ForceField.state_dict`
 and :meth:`ForceField.load_state_dict` save and restore them for exact restarts.
 """
+
 from __future__ import annotations
 
 import time

@@ -8,6 +8,7 @@ evaluations. The tip-tip force is split: its close pairs (within the fast range)
 evaluated at every step, its far part (``tip_far``) is held. A slow term whose inputs
 changed (new currents) is *stale* and is computed at the next evaluation, full or not.
 """
+
 from __future__ import annotations
 
 import time
@@ -41,8 +42,9 @@ class MultipleTimeStepping:
             self.tip_far = np.zeros_like(out["tip_magnetic"])
             self._tip_fast = np.zeros_like(out["tip_magnetic"])
         #: slow term name -> the held arrays it refreshes (``held_forces`` keys)
-        self.slow_keys = {t.name: (["tip_far"] if t is tip_term else [c for c, _ in t.channels])
-                          for t in terms if t.slow}
+        self.slow_keys = {
+            t.name: (["tip_far"] if t is tip_term else [c for c, _ in t.channels]) for t in terms if t.slow
+        }
         #: slow terms whose inputs changed (new currents): computed at the next evaluation, full or not
         self.stale = set(self.slow_keys)
         self._uses_currents = [t.name for t in terms if t.slow and t.uses_currents]
@@ -104,8 +106,11 @@ class MultipleTimeStepping:
     def held_forces(self) -> dict:
         """The slow forces held between full evaluations, by name (the slow channels and ``tip_far``,
         the tip-tip force less its fast part); views, not copies."""
-        return {key: (self.tip_far if key == "tip_far" else self.out[key])
-                for keys in self.slow_keys.values() for key in keys}
+        return {
+            key: (self.tip_far if key == "tip_far" else self.out[key])
+            for keys in self.slow_keys.values()
+            for key in keys
+        }
 
     def state_dict(self) -> dict:
         """What the next evaluations depend on besides the state, as copies: held forces, the stale
@@ -115,8 +120,7 @@ class MultipleTimeStepping:
         if self.extrapolate:
             snap.update({f"mts_base_{k}": v.copy() for k, v in self._base.items()})
             snap.update({f"mts_rate_{k}": v.copy() for k, v in self._rate.items()})
-            snap["mts_base_step"] = np.array([-1 if b is None else b for b in self._base_step.values()],
-                                             dtype=np.int64)
+            snap["mts_base_step"] = np.array([-1 if b is None else b for b in self._base_step.values()], dtype=np.int64)
         return snap
 
     def load_state_dict(self, snap: dict) -> bool:

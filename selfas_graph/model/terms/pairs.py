@@ -4,6 +4,7 @@ The tip-tip magnetic force and the Yukawa repulsion are the expensive sums: they
 only the rows of the field's block of rods (:meth:`Term.blocked`) and are slow terms under
 multiple time stepping. The tip brake shares the tip neighbour list with the contact search.
 """
+
 from __future__ import annotations
 
 import math
@@ -26,7 +27,7 @@ def yukawa_cutoff(z_max: float, screening: float, tolerance: float) -> float:
         return 0.0
 
     def f(r):
-        return z_max * z_max * math.exp(-r / screening) * (1.0 / r ** 2 + 1.0 / (screening * r)) - tolerance
+        return z_max * z_max * math.exp(-r / screening) * (1.0 / r**2 + 1.0 / (screening * r)) - tolerance
 
     lo, hi = 1e-6, 1e6
     if f(lo) < 0.0:
@@ -133,9 +134,10 @@ class YukawaForce(Term):
         nl = ff.centre_neighbours()
         f = ff.buffer("yukawa_centre", ff.n_rods)
         lo, hi = ff.blocks.rods
-        kp.yukawa_centres(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.core, self.cutoff,
-                          lo, hi, f)
-        share_by_mass(f[lo:hi], out["yukawa"][2 * lo:2 * hi])
+        kp.yukawa_centres(
+            ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.core, self.cutoff, lo, hi, f
+        )
+        share_by_mass(f[lo:hi], out["yukawa"][2 * lo : 2 * hi])
 
     def blocked(self, ff):
         return ("yukawa",) if self.cutoff > 0.0 else ()
@@ -146,7 +148,8 @@ class YukawaForce(Term):
         nl = ff.centre_neighbours()
         lo, hi = ff.blocks.rods
         e = np.empty(ff.n_rods)
-        kp.yukawa_energy(ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.core, self.cutoff,
-                         lo, hi, e)
+        kp.yukawa_energy(
+            ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.core, self.cutoff, lo, hi, e
+        )
         ff.blocks.gather_rows([e], rows_per_rod=1)
         return {"yukawa": float(e.sum())}
