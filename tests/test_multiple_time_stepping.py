@@ -173,7 +173,7 @@ def test_the_same_currents_again_refresh_nothing(rng):
     sim.step(1)  # step 6: fast, the new currents computed
     assert ff.calls["current_field"] == 1
     ff.set_currents(current.copy())  # the same values, another array
-    assert not ff.stale
+    assert not ff.mts.stale
     sim.step(1)  # step 7: fast, nothing recomputed
     assert ff.calls["current_field"] == 1 and ff.calls["current_lorentz"] == 1
     ff.set_currents(current * 1.5)  # different values: refreshed at the next step
