@@ -211,7 +211,9 @@ def test_compare_draws_results_and_refuses_other_files(tool, ensemble, tmp_path,
         (["--compare", str(bad), "--plot", str(png)], "bad.json: not a result file"),
         (["--compare", str(on)], "--compare needs --plot"),
         ([QUICK, "--compare", str(on), "--plot", str(png)], "draws earlier results only"),
+        (["--compare", str(on), str(off), "--plot", str(off)], "is the input"),
     ):
         with pytest.raises(SystemExit) as exc:
             tool.main(argv)
         assert exc.value.code == 2 and message in capsys.readouterr().err
+    assert tool.fields_of(json.loads(off.read_text())) == "off"  # the input refused as a target is intact

@@ -348,6 +348,14 @@ def print_table(result):
         print(f"left out: {r['count']} rods, seed {r['seed']}: {r['status']}: {r['message']}")
 
 
+def _fraction_bars(dens):
+    """Fraction short-circuited per density (NaN without runs) and its Wilson interval as error-bar lengths."""
+    frac = [d["fraction"] if d["fraction"] is not None else float("nan") for d in dens]
+    lo = [f - d["fraction_ci95"][0] if d["fraction_ci95"] else 0.0 for f, d in zip(frac, dens)]
+    hi = [d["fraction_ci95"][1] - f if d["fraction_ci95"] else 0.0 for f, d in zip(frac, dens)]
+    return frac, lo, hi
+
+
 def plot(result, path):
     """Fraction short-circuited vs density, and the distribution of short-circuit times per density."""
     import matplotlib
@@ -359,9 +367,7 @@ def plot(result, path):
     t_max = result["t_max"]
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(13, 4.6), gridspec_kw={"width_ratios": [1, 1.15]})
     rho = [d["number_density"] for d in dens]
-    frac = [d["fraction"] if d["fraction"] is not None else float("nan") for d in dens]
-    lo = [f - d["fraction_ci95"][0] if d["fraction_ci95"] else 0.0 for f, d in zip(frac, dens)]
-    hi = [d["fraction_ci95"][1] - f if d["fraction_ci95"] else 0.0 for f, d in zip(frac, dens)]
+    frac, lo, hi = _fraction_bars(dens)
     ax1.errorbar(rho, frac, yerr=[lo, hi], marker="o", ms=4, lw=1.2, capsize=3)
     ax1.set_xscale("log")
     ax1.set_xlabel("rods per unit volume (L$^{-3}$)")
@@ -417,9 +423,7 @@ def plot_compare(results, path):
     for res in results:
         dens = res["densities"]
         phi = [d["volume_fraction"] for d in dens]
-        frac = [d["fraction"] if d["fraction"] is not None else float("nan") for d in dens]
-        lo = [f - d["fraction_ci95"][0] if d["fraction_ci95"] else 0.0 for f, d in zip(frac, dens)]
-        hi = [d["fraction_ci95"][1] - f if d["fraction_ci95"] else 0.0 for f, d in zip(frac, dens)]
+        frac, lo, hi = _fraction_bars(dens)
         label = (
             f"fields {fields_of(res)} ({res['scenario_name']}, {len(res['seeds'])} seeds per point, "
             f"t$_{{max}}$ = {res['t_max']:g} t$_0$)"
@@ -452,6 +456,11 @@ def compare_main(ap, args):
         ap.error("--compare needs --plot PNG")
     if args.scenario or args.densities or args.fractions or args.counts or args.seeds or args.t_max:
         ap.error("--compare draws earlier results only: give no scenario, densities, --seeds or --t-max")
+    from selfas_graph.cli.paths import same_file
+
+    for name in args.compare:
+        if same_file(args.plot, name):
+            ap.error(f"--plot {args.plot} is the input {name}; give another name (it would be destroyed)")
     results = []
     for name in args.compare:
         try:
