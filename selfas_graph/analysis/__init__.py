@@ -18,8 +18,11 @@ from .diagnostics import (
     timeline,
 )
 from .ensemble_stats import censored_times, kaplan_meier, km_quantile, mean_sem, wilson_interval
+from .episodes import CircuitEpisodes, circuit_episodes
 
 __all__ = [
+    "CircuitEpisodes",
+    "circuit_episodes",
     "Timeline",
     "auto_n_phi",
     "censored_times",
