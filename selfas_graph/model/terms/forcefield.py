@@ -30,10 +30,10 @@ from collections import Counter
 
 import numpy as np
 
+from ...kernels.integrate import channel_sum
 from ...parallel import RowBlocks
 from ..neighbours import NeighbourList
 from ..params import Parameters
-from ...kernels.integrate import channel_sum
 from .base import FieldSource, Term
 from .currents import RodCurrents
 from .mts import MultipleTimeStepping

@@ -52,7 +52,9 @@ class MultipleTimeStepping:
         self._uses_currents = [t.name for t in terms if t.slow and t.uses_currents]
         #: the held arrays by name (fixed objects, written in place): what held_forces returns
         self._held = {
-            key: (self.tip_far if key == "tip_far" else self.out[key]) for keys in self.slow_keys.values() for key in keys
+            key: (self.tip_far if key == "tip_far" else self.out[key])
+            for keys in self.slow_keys.values()
+            for key in keys
         }
         self.extrapolate = ip.slow_extrapolation
         if self.extrapolate:
