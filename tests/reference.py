@@ -527,3 +527,66 @@ def rule_filament(n_rods, tip_contacts, conductor_tip, key):
             if any("X" in e for e in block):
                 in_x |= {frozenset(e) for e in block}
     return np.array([frozenset((m[2 * i], m[2 * i + 1])) in in_x for i in range(n_rods)])
+
+
+# ----------------------------------------------------------------------------- per-step glue
+
+
+def channel_sum(channels):
+    """Sum of the force channels, element by element, in channel order starting from 0.0."""
+    n_ch, n, _ = channels.shape
+    out = np.zeros((n, 3))
+    for k in range(n):
+        for c in range(3):
+            acc = 0.0
+            for j in range(n_ch):
+                acc = acc + float(channels[j, k, c])
+            out[k, c] = acc
+    return out
+
+
+def extrapolate(rate, base, steps):
+    """Linear extrapolation ``rate * steps + base`` of a held force, element by element."""
+    out = np.empty_like(base)
+    for k in range(len(base)):
+        for c in range(3):
+            out[k, c] = float(rate[k, c]) * steps + float(base[k, c])
+    return out
+
+
+def brake_close_pairs(position, velocity, radius, k_br, dt, exclude_same_rod=True):
+    """The split brake of docs/model.md 'Rigid rods and time integration', by all distances: every
+    pair k < l (of different rods) closer than ``radius``, in (k, l) order, relaxed exactly over dt.
+    Returns (velocity after, work, pairs braked)."""
+    v = [list(map(float, row)) for row in velocity]
+    decay = math.exp(-2.0 * k_br * dt)
+    work, m = 0.0, 0
+    for k, l in sorted(neighbour_pairs(position, radius, exclude_same_rod)):
+        rel2 = 0.0
+        for d in range(3):
+            diff = v[k][d] - v[l][d]
+            rel2 += diff * diff
+            mean = 0.5 * (v[k][d] + v[l][d])
+            v[k][d], v[l][d] = mean + 0.5 * diff * decay, mean - 0.5 * diff * decay
+        work -= 0.25 * (1.0 - decay * decay) * rel2
+        m += 1
+    return np.array(v).reshape(velocity.shape), work, m
+
+
+def electrode_brake(position, velocity, z_lo, z_hi, rstar, k_br, dt):
+    """The exact electrode brake: a tip within r* of n planes has dv/dt = -n k_br v over dt.
+    Returns (velocity after, change of kinetic energy)."""
+    v = np.array(velocity, dtype=float)
+    work = 0.0
+    for k in range(len(v)):
+        n = int(position[k, 2] - z_lo < rstar) + int(z_hi - position[k, 2] < rstar)
+        if n:
+            e0 = 0.5 * float(v[k] @ v[k])
+            v[k] = v[k] * math.exp(-n * k_br * dt)
+            work += 0.5 * float(v[k] @ v[k]) - e0
+    return v, work
+
+
+def uniform_force(charge, B):
+    """Term 4, q_k B, tip by tip."""
+    return np.array([[float(q) * float(b) for b in B] for q in charge]).reshape(len(charge), 3)

@@ -226,9 +226,12 @@ def _rows_kernel_cases(rng):
     return [
         (ki.ab4_update, lambda: (x, v, 2 * v, 3 * v, 4 * v, 1e-3, np.zeros((n, 3)))),
         (ki.axpy, lambda: (x, v, 0.1, np.zeros((n, 3)))),
+        (ki.channel_sum, lambda: (np.zeros((n, 3)), np.stack([x, v, 2 * x]))),
+        (ki.extrapolate, lambda: (np.zeros((n, 3)), v, x, 7.0)),
         (kr.bond_acceleration, lambda: (v, x, x + v, True, np.zeros((n, 3)))),
         (kr.bond_length_error, lambda: (x, np.zeros(0))),
         (kr.constrain_bonds, lambda: (x.copy(), v.copy(), True, True, np.zeros(0))),
+        (kf.uniform_force_on_tips, lambda: (q, np.array([0.1, -0.2, 0.5]), np.zeros((n, 3)))),
         (kf.plasma_field, lambda: (x, 0.1, -0.2, 1.5, 7.5, np.zeros((n, 3)))),
         (kf.plasma_force_on_tips, lambda: (x, q, 0.1, -0.2, 1.5, 7.5, np.zeros((n, 3)))),
         (kf.electrode_walls, lambda: (x, v, -1.0, 1.0, RSTAR, KAPPA, 100.0, np.zeros((n, 3)), np.zeros((n, 3)))),

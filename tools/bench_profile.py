@@ -67,6 +67,9 @@ PARTS = [
                 "pairs.py:_close_fill",
                 "pairs.py:brake_pairs_exact",
                 "pairs.py:close_pair_count",
+                "pairs.py:brake_close_pairs",
+                "pairs.py:brake_close_pairs_exact",
+                "fields.py:electrode_brake_exact",
             )
         ),
     ),

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from ._jit import inline, njit_parallel, njit_rows, prange
+from ._jit import inline, njit, njit_parallel, njit_rows, prange
 from .laws import wall_potential, wall_push
 
 
@@ -55,6 +55,17 @@ def plasma_force_on_tips(position, charge, x0, y0, radius, current, out):
 
 
 @njit_rows
+def uniform_force_on_tips(charge, B, out):
+    """``F_k = q_k B`` of a uniform field (docs/model.md 'Term 4'); ``out`` (n_tips, 3) overwritten.
+
+    One product per element, as numpy's broadcast ``charge[:, None] * B[None, :]`` (bit for bit).
+    """
+    for k in prange(charge.shape[0]):
+        for d in range(3):
+            out[k, d] = charge[k] * B[d]
+
+
+@njit_rows
 def electrode_walls(position, velocity, z_cathode, z_anode, rstar, kappa, k_br, out_push, out_brake):
     """Electrode planes at ``z_cathode < z_anode`` acting on tips (docs/model.md 'Term 8').
 
@@ -99,3 +110,41 @@ def electrode_energy(position, z_cathode, z_anode, rstar, kappa):
     for k in range(n):
         total += per_tip[k]
     return total
+
+
+@njit
+def electrode_brake_exact(position, velocity, z_cathode, z_anode, rstar, decay, before, after):
+    """The exact electrode brake over one step (``integrator.brake = "split"``, docs/model.md 'Term 8').
+
+    A tip within r* of ``n`` planes (n = 1 or 2; ``h < r*`` as in :func:`electrode_walls`) has its
+    velocity multiplied by ``decay[n]``, which the caller computes once as ``exp(-n k_br dt)``.
+    The velocities of the touched tips, in tip order, are copied to ``before`` and ``after`` (their
+    first m rows) so that the caller sums their kinetic energies as it always did.
+
+    Parameters
+    ----------
+    position : (n_tips, 3) float64
+    velocity : (n_tips, 3) float64, modified in place
+    z_cathode, z_anode, rstar : float
+    decay : (3,) float64
+        Factor per number of planes touched (entry 0 unused).
+    before, after : (n_tips, 3) float64
+        Scratch rows, overwritten.
+
+    Returns
+    -------
+    int
+        m, the number of tips touching a plane.
+    """
+    m = 0
+    for k in range(position.shape[0]):
+        z = position[k, 2]
+        n = (1 if z - z_cathode < rstar else 0) + (1 if z_anode - z < rstar else 0)
+        if n:
+            f = decay[n]
+            for d in range(3):
+                before[m, d] = velocity[k, d]
+                velocity[k, d] = velocity[k, d] * f
+                after[m, d] = velocity[k, d]
+            m += 1
+    return m

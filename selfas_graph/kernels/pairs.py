@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from ._jit import inline, njit, njit_parallel, njit_parallel_sum, njit_rows, prange
+from ._jit import PARALLEL_ROWS, inline, njit, njit_parallel, njit_parallel_sum, njit_rows, prange
 from .laws import yukawa_force_over_r, yukawa_potential
 
 
@@ -332,3 +332,61 @@ def brake_pairs_exact(velocity, pairs, k_br, dt):
             velocity[l, d] = mean - half
         work -= 0.25 * (1.0 - decay * decay) * rel2
     return work
+
+
+@njit
+def brake_close_pairs_exact(position, velocity, start, index, radius, k_br, dt):
+    """:func:`close_pairs` and :func:`brake_pairs_exact` in one serial pass, without the pair array.
+
+    The listed pairs ``k < l`` closer than ``radius`` are braked exactly over ``dt`` in the order
+    :func:`close_pairs` lists them (row k by row k, each row in list order), with the same
+    arithmetic: the velocities and the work are those of the two calls, bit for bit. The search
+    reads only positions, the brake writes only velocities, so they may share the pass.
+
+    Parameters
+    ----------
+    position : (n_tips, 3) float64
+    velocity : (n_tips, 3) float64, modified in place
+    start, index : int64 arrays, the compressed-row neighbour list
+    radius, k_br, dt : float
+
+    Returns
+    -------
+    (float, int)
+        The work done (as :func:`brake_pairs_exact`) and the number of pairs braked.
+    """
+    decay = math.exp(-2.0 * k_br * dt)
+    r2max = radius * radius
+    work = 0.0
+    m = 0
+    for k in range(position.shape[0]):
+        for j in range(start[k], start[k + 1]):
+            l = index[j]
+            if l > k and _closer(position, k, l, r2max):
+                m += 1
+                rel2 = 0.0
+                for d in range(3):
+                    diff = velocity[k, d] - velocity[l, d]
+                    rel2 += diff * diff
+                    mean = 0.5 * (velocity[k, d] + velocity[l, d])
+                    half = 0.5 * diff * decay
+                    velocity[k, d] = mean + half
+                    velocity[l, d] = mean - half
+                work -= 0.25 * (1.0 - decay * decay) * rel2
+    return work, m
+
+
+def brake_close_pairs(position, velocity, start, index, radius, k_br, dt):
+    """The exact brake of every listed pair closer than ``radius`` (velocity in place): (work, pairs braked).
+
+    Bit for bit ``brake_pairs_exact(velocity, close_pairs(position, start, index, radius), k_br, dt)``:
+    one serial pass (:func:`brake_close_pairs_exact`) below :data:`~._jit.PARALLEL_ROWS` tips, where
+    the numpy glue of the two calls costs more than the pass; above it the pair search runs on all
+    threads first.
+    """
+    if position.shape[0] < PARALLEL_ROWS:
+        return brake_close_pairs_exact(position, velocity, start, index, radius, k_br, dt)
+    pairs = close_pairs(position, start, index, radius)
+    if not len(pairs):
+        return 0.0, 0
+    return brake_pairs_exact(velocity, pairs, k_br, dt), len(pairs)

@@ -67,6 +67,8 @@ class AdamsBashforth4:
         self.bond_error_after = 0.0
         self._tmp = [np.zeros((n, 3)) for _ in range(4)]
         self._p = np.zeros(n_ch)
+        #: the history slots of f_n, f_{n-1}, f_{n-2}, f_{n-3} for each head
+        self._slots = [[(h - j) % 4 for j in range(4)] for h in range(4)]
 
     def reset_history(self):
         """Forget the derivative history; the next three steps are RK4 again."""
@@ -120,7 +122,7 @@ class AdamsBashforth4:
         self.acceleration(x, v, self.hist_a[h], self.hist_p[h], full=full, step=state.step)
         self.count = min(self.count + 1, 4)
         if self.count == 4:
-            slots = [(h - j) % 4 for j in range(4)]
+            slots = self._slots[h]
             hv, ha = self.hist_v, self.hist_a
             self.work += self.dt * (AB4_WEIGHTS @ self.hist_p[slots])
             ab4_update(x, hv[slots[0]], hv[slots[1]], hv[slots[2]], hv[slots[3]], self.dt, x)

@@ -80,4 +80,9 @@ def share_by_mass(centre_force, tip_out):
 
 def kinetic(velocity, tips):
     """Kinetic energy of the given tips (unit masses): the exact work of a split brake is its change."""
-    return 0.5 * float(np.einsum("ij,ij->", velocity[tips], velocity[tips]))
+    return kinetic_of(velocity[tips])
+
+
+def kinetic_of(velocity):
+    """Kinetic energy of the tips whose velocities are the rows of ``velocity`` (unit masses)."""
+    return 0.5 * float(np.einsum("ij,ij->", velocity, velocity))

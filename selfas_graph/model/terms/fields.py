@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...kernels import fields as kf
-from .base import FieldSource, Term, kinetic, share_by_mass
+from .base import FieldSource, Term, kinetic_of, share_by_mass
 
 
 class AmbientBrakeForce(Term):
@@ -36,7 +36,7 @@ class UniformFieldForce(Term, FieldSource):
         self.B = np.array(p.forces.uniform_field.B, dtype=np.float64)
 
     def compute(self, ff, out):
-        np.multiply(ff.tip_charge[:, None], self.B[None, :], out=out["uniform_field"])
+        kf.uniform_force_on_tips(ff.tip_charge, self.B, out["uniform_field"])
 
     def energy(self, ff):
         return {"uniform_field": -float(ff.tip_charge @ (ff.position @ self.B))}
@@ -91,6 +91,7 @@ class ElectrodesForce(Term):
         self.kappa = p.rods.tip_stiffness
         self.k = p.forces.tip_brake.coefficient if p.forces.tip_brake is not None else 0.0
         self.split_mode = p.integrator.brake == "split"
+        self._decay, self._decay_dt = None, None
 
     def compute(self, ff, out):
         k = 0.0 if self.split_mode else self.k
@@ -107,14 +108,17 @@ class ElectrodesForce(Term):
         )
 
     def split(self, ff, dt):
-        z = ff.position[:, 2]
-        touching = (z - self.z[0] < self.rstar).astype(np.float64) + (self.z[1] - z < self.rstar)
-        tips = np.flatnonzero(touching)
-        if not len(tips) or self.k == 0.0:
+        if self.k == 0.0:
             return {}
-        before = kinetic(ff.velocity, tips)
-        ff.velocity[tips] *= np.exp(-self.k * touching[tips] * dt)[:, None]  # dv/dt = -n k v, exactly
-        return {"electrode_brake": kinetic(ff.velocity, tips) - before}
+        if self._decay_dt != dt:
+            # dv/dt = -n k v, exactly, for a tip touching n planes
+            self._decay = np.exp(-self.k * np.array([0.0, 1.0, 2.0]) * dt)
+            self._decay_dt = dt
+        before, after = ff.buffer("electrode_before", ff.n_tips), ff.buffer("electrode_after", ff.n_tips)
+        m = kf.electrode_brake_exact(ff.position, ff.velocity, *self.z, self.rstar, self._decay, before, after)
+        if not m:
+            return {}
+        return {"electrode_brake": kinetic_of(after[:m]) - kinetic_of(before[:m])}
 
     def energy(self, ff):
         return {"electrodes": kf.electrode_energy(ff.position, self.z[0], self.z[1], self.rstar, self.kappa)}

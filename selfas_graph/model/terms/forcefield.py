@@ -30,10 +30,11 @@ from collections import Counter
 
 import numpy as np
 
+from ...kernels.integrate import channel_sum
 from ...parallel import RowBlocks
 from ..neighbours import NeighbourList
 from ..params import Parameters
-from .base import FieldSource
+from .base import FieldSource, Term
 from .currents import RodCurrents
 from .mts import MultipleTimeStepping
 from .pairs import TipMagneticForce, YukawaForce
@@ -78,7 +79,12 @@ class ForceField:
         self.field_sources = [t for t in self.terms if isinstance(t, FieldSource)]
         self.nonconservative = [name for name, cons in self.channels if not cons]
         self.conservative = [name for name, cons in self.channels if cons]
-        self.out = {name: np.zeros((self.n_tips, 3)) for name, _ in self.channels}
+        # the channel buffers are the rows of one array, summed in one pass (kernels.integrate.channel_sum)
+        self._channel_block = np.zeros((len(self.channels), self.n_tips, 3))
+        self.out = {name: self._channel_block[j] for j, (name, _) in enumerate(self.channels)}
+        self._split_terms = [t for t in self.terms if type(t).split is not Term.split]
+        self._channel_index = {name: j for j, name in enumerate(self.nonconservative)}
+        self._nonconservative_out = [self.out[name] for name in self.nonconservative]
         self.total = np.zeros((self.n_tips, 3))
         self.calls = Counter()
         self.timing = timing
@@ -198,6 +204,7 @@ class ForceField:
         self._bind(position, velocity)
         mts = self.mts
         full = full or mts is None
+        timing, serial, out, calls = self.timing, self.blocks.serial, self.out, self.calls
         blocked = []
         refreshed = []
         for t in self.terms:
@@ -205,14 +212,15 @@ class ForceField:
                 if not (full or t.name in mts.stale):  # without mts, full is always True
                     continue
                 refreshed.append(t.name)
-            t0 = time.perf_counter() if self.timing else 0.0
-            t.compute(self, self.out)
+            t0 = time.perf_counter() if timing else 0.0
+            t.compute(self, out)
             if not t.counts_own_calls:
-                self.calls[t.name] += 1
-            if self.timing:
+                calls[t.name] += 1
+            if timing:
                 self.seconds[t.name] += time.perf_counter() - t0
-            blocked.extend(t.blocked(self))
-        if not self.blocks.serial:
+            if not serial:
+                blocked.extend(t.blocked(self))
+        if not serial:
             t0 = time.perf_counter() if self.timing else 0.0
             self.blocks.gather_rows([self.out[name] for name in blocked], rows_per_rod=2)
             if self.timing:
@@ -220,12 +228,10 @@ class ForceField:
         if mts is not None:
             mts.complete(self, refreshed, full, step, self.seconds if self.timing else None)
         total = self.total
-        total.fill(0.0)
-        for name, _ in self.channels:
-            total += self.out[name]
+        channel_sum(total, self._channel_block)  # ((0 + c_0) + c_1) + ..., in channel order
         if power is not None:
-            for j, name in enumerate(self.nonconservative):
-                power[j] = np.einsum("ij,ij->", self.out[name], velocity)
+            for j, f in enumerate(self._nonconservative_out):
+                power[j] = np.einsum("ij,ij->", f, velocity)
         return total
 
     def held_forces(self) -> dict:
@@ -272,9 +278,9 @@ class ForceField:
         ``work`` (len(nonconservative),) is incremented by each brake's work.
         """
         self._bind(position, velocity)
-        for t in self.terms:
+        for t in self._split_terms:
             for channel, w in t.split(self, dt).items():
-                work[self.nonconservative.index(channel)] += w
+                work[self._channel_index[channel]] += w
 
     def potential_energy(self, position) -> dict:
         """Potential energy of each conservative channel at ``position``."""

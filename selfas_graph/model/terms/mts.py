@@ -15,6 +15,8 @@ import time
 
 import numpy as np
 
+from ...kernels.integrate import extrapolate
+
 
 class MultipleTimeStepping:
     """The held slow forces of one :class:`~selfas_graph.model.terms.forcefield.ForceField`.
@@ -48,10 +50,16 @@ class MultipleTimeStepping:
         #: slow terms whose inputs changed (new currents): computed at the next evaluation, full or not
         self.stale = set(self.slow_keys)
         self._uses_currents = [t.name for t in terms if t.slow and t.uses_currents]
+        #: the held arrays by name (fixed objects, written in place): what held_forces returns
+        self._held = {
+            key: (self.tip_far if key == "tip_far" else self.out[key])
+            for keys in self.slow_keys.values()
+            for key in keys
+        }
         self.extrapolate = ip.slow_extrapolation
         if self.extrapolate:
-            self._base = {k: np.zeros_like(v) for k, v in self.held_forces().items()}
-            self._rate = {k: np.zeros_like(v) for k, v in self.held_forces().items()}
+            self._base = {k: np.zeros_like(v) for k, v in self._held.items()}
+            self._rate = {k: np.zeros_like(v) for k, v in self._held.items()}
             self._base_step = {k: None for k in self._base}
 
     def currents_changed(self) -> None:
@@ -76,7 +84,7 @@ class MultipleTimeStepping:
             if seconds is not None:
                 seconds["tip_magnetic_fast"] += time.perf_counter() - t0
         if self.extrapolate:
-            self._extrapolate([k for name in refreshed for k in self.slow_keys[name]], full, step)
+            self._extrapolate([k for name in refreshed for k in self.slow_keys[name]] if refreshed else (), full, step)
         if fast is not None and not tip_fresh:
             np.add(self.tip_far, fast, out=self.out["tip_magnetic"])
 
@@ -88,7 +96,7 @@ class MultipleTimeStepping:
         starts at most 2 K apart, else zero (after an RK4 start, or when the currents changed:
         a jump, not a trend). The others are extrapolated to ``step``.
         """
-        for key, arr in self.held_forces().items():
+        for key, arr in self._held.items():
             base, rate, prev = self._base[key], self._rate[key], self._base_step[key]
             if key in refreshed:
                 gap = None if (prev is None or step is None or not full) else step - prev
@@ -100,17 +108,12 @@ class MultipleTimeStepping:
                 base[:] = arr
                 self._base_step[key] = step if full else None
             elif prev is not None and step is not None:
-                np.multiply(rate, step - prev, out=arr)
-                arr += base
+                extrapolate(arr, rate, base, float(step - prev))  # rate * (step - prev) + base
 
     def held_forces(self) -> dict:
         """The slow forces held between full evaluations, by name (the slow channels and ``tip_far``,
         the tip-tip force less its fast part); views, not copies."""
-        return {
-            key: (self.tip_far if key == "tip_far" else self.out[key])
-            for keys in self.slow_keys.values()
-            for key in keys
-        }
+        return dict(self._held)
 
     def state_dict(self) -> dict:
         """What the next evaluations depend on besides the state, as copies: held forces, the stale

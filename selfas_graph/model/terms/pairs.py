@@ -109,10 +109,8 @@ class TipBrakeForce(Term):
 
     def split(self, ff, dt):
         nl = ff.tip_neighbours()
-        pairs = kp.close_pairs(ff.position, nl.start, nl.index, self.rstar)
-        if not len(pairs):
-            return {}
-        return {"tip_brake": kp.brake_pairs_exact(ff.velocity, pairs, self.k, dt)}
+        work, braked = kp.brake_close_pairs(ff.position, ff.velocity, nl.start, nl.index, self.rstar, self.k, dt)
+        return {"tip_brake": work} if braked else {}
 
 
 class YukawaForce(Term):
