@@ -860,15 +860,28 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None, precision="
 
 
 def tip_tip_tree(
-    x, y, z, charge, rstar, kappa, theta, out, lo=0, hi=None, leaf_size=LEAF_SIZE, group_size=GROUP_SIZE, order=ORDER
+    x,
+    y,
+    z,
+    charge,
+    rstar,
+    kappa,
+    theta,
+    out,
+    lo=0,
+    hi=None,
+    leaf_size=LEAF_SIZE,
+    group_size=GROUP_SIZE,
+    order=ORDER,
+    precision="float64",
 ):
     """Tip-tip force on tips ``lo..hi-1`` by a multipole tree: build, then evaluate.
 
     Same arguments and result as :func:`selfas_graph.kernels.tips.tip_tip_direct`
     (``x, y, z, charge`` of shape (n_tips,), ``out`` of shape (n_tips, 3)), up to the
     tree's truncation error, plus the opening angle ``theta`` (see
-    :func:`evaluate_tip_tree`), the row range and the knobs of :func:`build_tip_tree`.
-    Returns ``out``.
+    :func:`evaluate_tip_tree`), the row range, the knobs of :func:`build_tip_tree` and the
+    ``precision`` of the near field (:func:`evaluate_tip_tree`). Returns ``out``.
     """
     tree = build_tip_tree(x, y, z, charge, leaf_size, group_size, order)
-    return evaluate_tip_tree(tree, rstar, kappa, theta, out, lo, hi)
+    return evaluate_tip_tree(tree, rstar, kappa, theta, out, lo, hi, precision)
