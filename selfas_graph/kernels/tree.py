@@ -604,8 +604,9 @@ def evaluate_groups(
         # near leaves: exact law, one long loop per target over a contiguous copy of
         # their tips (a reduction that vectorises like the direct sum)
         # mixed: float32 copies relative to the group's box centre (a scene far from
-        # the origin loses nothing), rods as int32 (8 lanes like the coordinates);
-        # only the copies of the chosen precision are filled
+        # the origin loses nothing), each coordinate as a float32 pair hi + lo (lo the
+        # float32 rounding of what hi misses), rods as int32 (8 lanes like the
+        # coordinates); only the copies of the chosen precision are filled
         gcx = 0.5 * (xl + xh)
         gcy = 0.5 * (yl + yh)
         gcz = 0.5 * (zl + zh)
@@ -614,6 +615,9 @@ def evaluate_groups(
         fx = np.empty(n32, np.float32)
         fy = np.empty(n32, np.float32)
         fz = np.empty(n32, np.float32)
+        lx = np.empty(n32, np.float32)
+        ly = np.empty(n32, np.float32)
+        lz = np.empty(n32, np.float32)
         fq = np.empty(n32, np.float32)
         frod = np.empty(n32, np.int32)
         nx = np.empty(n64)
@@ -632,6 +636,9 @@ def evaluate_groups(
                     fx[j] = np.float32(x[i] - gcx)
                     fy[j] = np.float32(y[i] - gcy)
                     fz[j] = np.float32(z[i] - gcz)
+                    lx[j] = np.float32((x[i] - gcx) - np.float64(fx[j]))
+                    ly[j] = np.float32((y[i] - gcy) - np.float64(fy[j]))
+                    lz[j] = np.float32((z[i] - gcz) - np.float64(fz[j]))
                     fq[j] = np.float32(charge[i])
                     frod[j] = np.int32(rod[i])
                     j += 1
@@ -657,6 +664,9 @@ def evaluate_groups(
                 xk32 = np.float32(xk - gcx)
                 yk32 = np.float32(yk - gcy)
                 zk32 = np.float32(zk - gcz)
+                xl32 = np.float32((xk - gcx) - np.float64(xk32))
+                yl32 = np.float32((yk - gcy) - np.float64(yk32))
+                zl32 = np.float32((zk - gcz) - np.float64(zk32))
                 qk32 = np.float32(qk)
                 rk32 = np.int32(rk)
                 bx = zero32
@@ -665,9 +675,12 @@ def evaluate_groups(
                 for j in range(n_near_tips):
                     # names of their own: a name shared with the float64 code would be
                     # typed float64 and promote the loop
-                    ux = xk32 - fx[j]
-                    uy = yk32 - fy[j]
-                    uz = zk32 - fz[j]
+                    # hi - hi is exact for close tips (Sterbenz), so the difference
+                    # keeps float32 precision relative to itself, not to |x - centre|
+                    # (measured in aggregates: median error 4e-7 instead of 8e-6)
+                    ux = (xk32 - fx[j]) + (xl32 - lx[j])
+                    uy = (yk32 - fy[j]) + (yl32 - ly[j])
+                    uz = (zk32 - fz[j]) + (zl32 - lz[j])
                     g32 = tip_force_over_r_f32(ux * ux + uy * uy + uz * uz, qk32 * fq[j], rstar32, kappa32)
                     g32 = zero32 if frod[j] == rk32 else g32
                     bx += g32 * ux
@@ -793,17 +806,18 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None, precision="
         Target rows; ``hi=None`` means ``n_tips``.
     precision : str
         ``"float64"``: every sum in float64. ``"mixed"``: the exact near pairs are summed in
-        float32 (coordinates taken relative to the target group's box centre before the cast,
-        the law in float32, one float32 sum per target then added in float64 to the far field,
-        which stays float64, as does the subtraction of the rod partner). AVX2 runs 8 float32
-        lanes per instruction against 4 float64, and LLVM replaces the float32 square root and
-        division by a reciprocal square root estimate and one Newton step (``vrsqrtps``): no
-        divider at all in the loop. Measured (docs/performance.md, tools/bench_tree.py
-        ``--precision``): the difference from float64 is about 4e-7 of a tip's force (median),
-        at most 2e-5 of it, four orders below the tree's own error; the estimate differs
-        between CPU makers, so the last float32 bits are not the same on every machine.
-        Tips closer than about ``1e-7`` times their distance from the group's centre are not
-        resolved in float32 (tips in contact sit ``r*/2`` apart).
+        float32: coordinates taken relative to the target group's box centre before the cast,
+        each as two float32 numbers ``hi + lo`` so that the difference of two close tips keeps
+        float32 precision relative to itself; the law in float32
+        (:func:`.laws.tip_force_over_r_f32`); one float32 sum per target, then added in float64
+        to the far field, which stays float64, as does the subtraction of the rod partner.
+        AVX2 runs 8 float32 lanes per instruction against 4 float64, and LLVM replaces the
+        float32 square root and division by a reciprocal square root estimate and one Newton
+        step (``vrsqrtps``): no divider in the loop. Measured (docs/performance.md,
+        tools/bench_tree.py ``--precision``): the difference from float64 is about 4e-7 of a
+        tip's force (median), at most 2e-4 of it in aggregates, where contact forces nearly
+        cancel; the estimate differs between CPU makers, so the last float32 bits are not the
+        same on every machine.
 
     Raises
     ------
