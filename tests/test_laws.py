@@ -6,6 +6,7 @@ import pytest
 
 from selfas_graph.kernels.laws import (
     tip_force_over_r,
+    tip_force_over_r_f32,
     tip_potential,
     wall_potential,
     wall_push,
@@ -120,3 +121,24 @@ def test_wall_push_is_minus_gradient(h):
     assert wall_push(h, RSTAR, kappa) == pytest.approx(numeric, rel=1e-6, abs=1e-6)
     if h >= RSTAR:
         assert wall_push(h, RSTAR, kappa) == 0.0
+
+
+@pytest.mark.parametrize("r", [0.0, 1e-6, 0.01, 0.03, 0.0599, 0.06, 0.0601, 0.5, 3.7, 25.0])
+@pytest.mark.parametrize("p", [-2.0, 0.5])
+def test_float32_law_is_the_float64_law(r, p):
+    """tip_force_over_r_f32 is the same law in float32 (the tree's mixed near field): equal to
+    the float64 law to 1e-6 of the size of its terms, both branches and the r = 0 guard (float32 rounding is
+    6e-8; r^2 is rounded too and a compiled 1 / sqrt may be an estimate refined by one Newton
+    step, about 2e-7 of 1/r, 6e-7 of 1/r^3). Compiled, it returns a float32 (no promotion)."""
+    import numba
+    import numpy as np
+
+    f32 = np.float32
+    args = (f32(r * r), f32(p), f32(RSTAR), f32(2.0))
+    got = tip_force_over_r_f32(*args)
+    want = tip_force_over_r(float(args[0]), float(args[1]), float(args[2]), 2.0)
+    # relative to the size of the terms: inside r* the law is a difference, zero at r*/2 here
+    scale = 0.0 if r == 0.0 else (abs(p) + 2.0 * RSTAR / r) / RSTAR**3 if r < RSTAR else abs(p) / r**3
+    assert abs(got - want) <= 1e-6 * scale
+    if not numba.config.DISABLE_JIT:  # the compiled law returns float32 (Python sees a float)
+        assert [sig.return_type for sig in tip_force_over_r_f32.nopython_signatures] == [numba.float32]

@@ -289,3 +289,125 @@ def test_force_field_tree_passes_nan_on_to_the_health_check():
     pos[3] = np.nan
     f = ff.evaluate(pos, state.velocity)
     assert np.isnan(f).any()
+
+
+# ------------------------------------------------------------- mixed-precision near field
+# precision="mixed" sums the near pairs in float32 (kernels/tree.py evaluate_tip_tree).
+# Measured with the fixtures here (theta 0.4 and 0): |F_mixed - F_float64| at most 1.1e-6 of
+# the largest force, median 4e-7 - 5e-7 of each tip's force (float32 rounding, 6e-8, of terms
+# that partly cancel). The bounds are ten times (MIXED_ATOL) and four times (MIXED_MEDIAN) that.
+MIXED_ATOL = 1e-5
+MIXED_MEDIAN = 2e-6
+
+
+def mixed(x, y, z, charge, theta, **knobs):
+    return tree(x, y, z, charge, theta, precision="mixed", **knobs)
+
+
+def close_mixed(actual, expected):
+    """Equal to float32 rounding of the near field: MIXED_ATOL of the largest force."""
+    np.testing.assert_allclose(actual, expected, rtol=0, atol=MIXED_ATOL * np.abs(expected).max())
+
+
+@pytest.mark.parametrize("config", ["uniform", "chains"])
+@pytest.mark.parametrize("theta", [0.4, 0.0])
+def test_mixed_matches_float64(config, theta, request):
+    """The mixed tree equals the float64 tree to float32 rounding, and its error against the
+    direct sum is the tree's own: measured median and p99 within 1.3 % of the float64 tree's
+    (the float32 difference, 4e-7 of a force, adds to a truncation error of 3e-6 - 3e-4)."""
+    tips = request.getfixturevalue(config)
+    f64 = tree(*tips, theta)
+    f32 = mixed(*tips, theta)
+    close_mixed(f32, f64)
+    assert np.median(relative_error(f32, f64)) < MIXED_MEDIAN
+    if theta > 0:
+        expected = direct(*tips)
+        e64, e32 = relative_error(f64, expected), relative_error(f32, expected)
+        for stat in (np.median, lambda e: np.percentile(e, 99)):
+            assert abs(stat(e32) - stat(e64)) < 0.05 * stat(e64)
+
+
+def test_mixed_far_from_the_origin(chains):
+    """The whole scene shifted by 1e4: coordinates are taken relative to the group's box
+    centre before the cast to float32, so the mixed tree still equals the float64 tree of the
+    shifted scene to float32 rounding (a cast of absolute coordinates, 1e4 +- 5e-4, would not
+    resolve tips in contact, r*/2 = 0.03 apart)."""
+    shifted = [t + (1e4 if d < 3 else 0.0) for d, t in enumerate(chains)]
+    close_mixed(mixed(*shifted, 0.4), tree(*shifted, 0.4))
+
+
+def test_mixed_single_leaf_is_direct(chains):
+    """One leaf and one group hold every tip: no cell is accepted, the mixed tree is the direct
+    sum in float32 (measured 1.1e-6 of the largest force)."""
+    n = len(chains[0])
+    close_mixed(mixed(*chains, 0.4, leaf_size=n, group_size=n), direct(*chains))
+
+
+@pytest.mark.jit_off_ok
+def test_mixed_core_and_same_rod():
+    """Small scenes (also run with NUMBA_DISABLE_JIT=1): one rod gives exactly zero (its two tips
+    are the same rod, excluded as in float64); coincident tips give exactly zero (r = 0); two
+    rods whose tips sit inside the soft core, r*/2 apart, get the direct core force to float32
+    rounding."""
+    one = rods_to_tips(np.zeros((1, 3)), np.array([[0, 0, 1.0]]), np.array([1.3]))
+    assert np.array_equal(mixed(*one, 0.5), np.zeros((2, 3)))
+    x = np.zeros(8)
+    assert np.array_equal(mixed(x, x, x, np.tile([1.0, -1.0], 4), 0.5), np.zeros((8, 3)))
+    pair = rods_to_tips(
+        np.array([[-0.5 - RSTAR / 4, 0, 0], [0.5 + RSTAR / 4, 0.001, 0]]),
+        np.array([[1.0, 0, 0], [1.0, 0, 0]]),
+        np.array([1.5, 1.2]),
+    )
+    expected = direct(*pair)
+    assert np.linalg.norm(expected[1]) > 100  # inside the core: kappa / r*^3 scale
+    close_mixed(mixed(*pair, 0.9), expected)
+
+
+def test_mixed_core_among_many():
+    """A touching pair beside 300 rods, single-tip leaves and a large opening angle (as
+    test_near_pairs_exact): the core force is exact to float32 rounding of the core force."""
+    rng = np.random.default_rng(3)
+    far = uniform_rods(300, rng)
+    pair = rods_to_tips(
+        np.array([[-0.5 - RSTAR / 4, 0, 0], [0.5 + RSTAR / 4, 0, 0]]) - 30.0,
+        np.array([[1.0, 0, 0], [1.0, 0, 0]]),
+        np.array([1.5, 1.2]),
+    )
+    tips = [np.concatenate([p, f]) for p, f in zip(pair, far)]
+    expected = direct(*tips)
+    core = np.linalg.norm(expected[1])
+    for knobs in ({"leaf_size": 1, "group_size": 1}, {}):
+        np.testing.assert_allclose(mixed(*tips, 0.9, **knobs)[1:3], expected[1:3], atol=1e-5 * core)
+
+
+def test_mixed_row_ranges_bitwise(chains):
+    """Row ranges evaluated separately equal one mixed evaluation bitwise (each target's float32
+    sum does not depend on the other targets); an empty range writes nothing, and ranges in
+    which most groups have no target are skipped group by group."""
+    t = build_tip_tree(*chains)
+    n = len(chains[0])
+    whole = np.empty((n, 3))
+    evaluate_tip_tree(t, RSTAR, KAPPA, 0.5, whole, precision="mixed")
+    parts = np.full((n, 3), np.nan)
+    evaluate_tip_tree(t, RSTAR, KAPPA, 0.5, parts, 7, 7, precision="mixed")
+    assert np.isnan(parts).all()
+    m = n // 3 + 1
+    for lo, hi in ((0, m), (m, m + 1), (m + 1, n - 3), (n - 3, n)):
+        evaluate_tip_tree(t, RSTAR, KAPPA, 0.5, parts, lo, hi, precision="mixed")
+    assert np.array_equal(parts, whole)
+
+
+def test_mixed_invalid_precision(chains):
+    t = build_tip_tree(*chains)
+    with pytest.raises(ValueError, match="precision must be one of 'float64', 'mixed'"):
+        evaluate_tip_tree(t, RSTAR, KAPPA, 0.5, np.empty((len(chains[0]), 3)), precision="float32")
+
+
+def test_force_field_tree_precision():
+    """forces.tip_magnetic.tree_precision = mixed reaches the tree: the force field's forces
+    equal those with float64 to float32 rounding, and the dry run's settings say so."""
+    ff_64, state = _field(400, "tree")
+    ff_32, _ = _field(400, "tree", tree_precision="mixed")
+    assert ff_32.describe()["tip_magnetic_sum"] == "tree (opening angle 0.4, mixed near field)"
+    f = [ff.evaluate(state.position, state.velocity).copy() for ff in (ff_64, ff_32)]
+    close_mixed(f[1], f[0])

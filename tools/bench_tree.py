@@ -2,9 +2,11 @@
 
 Usage: python tools/bench_tree.py [--rods 1000 10000 100000] [--theta 0.3 0.4 0.5 0.6]
        [--leaf 32 64 128] [--group 128] [--order 2 3] [--config uniform chains]
+       [--precision float64 mixed]
 
 For each configuration and size it prints, per tree setting (order, leaf size,
-group size, theta), the build and evaluation time of a full force evaluation,
+group size, theta, precision of the near field), the build and evaluation time
+of a full force evaluation,
 the median and 99th-percentile relative error per tip against the direct sum,
 and the speed-up over the direct sum measured in the same run. Configurations:
 
@@ -20,6 +22,11 @@ same for every target). The machine is shared, so every time is the minimum of
 ``--reps`` runs, and each setting's direct time is re-measured right beside it:
 the speed-up column divides the shorter of that and the first direct time by
 the tree's build plus evaluation time.
+
+With more than one ``--precision`` the precisions of one setting are timed in
+turns (``--reps`` rounds, CPU time of this process, so run it on one thread:
+``NUMBA_NUM_THREADS=1``), and a last column gives the evaluation time as
+median [min-max] over the rounds; the ``eval ms`` column stays the minimum.
 
 The last table gives, per size, the fastest setting with median error <= the
 ``--target`` error, and the crossover size where the tree overtakes the direct
@@ -38,7 +45,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from selfas_graph.kernels.tips import tip_tip_direct, tip_tip_direct_rows  # noqa: E402
-from selfas_graph.kernels.tree import build_tip_tree, evaluate_tip_tree  # noqa: E402
+from selfas_graph.kernels.tree import PRECISIONS, build_tip_tree, evaluate_tip_tree  # noqa: E402
 from selfas_graph.model.state import State  # noqa: E402
 
 RSTAR, KAPPA, DENSITY = 0.06, 1.0, 0.19
@@ -131,6 +138,31 @@ def crossover(sizes, speedup):
     return None
 
 
+def measure(args, tree, theta, precision, out, ref, t_direct, t_build):
+    """(median err, p99 err, eval seconds, direct seconds, speed-up) of one tree setting."""
+    evaluate_tip_tree(tree, RSTAR, KAPPA, theta, out, precision=precision)
+    t_eval = best_of(args.reps, lambda: evaluate_tip_tree(tree, RSTAR, KAPPA, theta, out, precision=precision))
+    med, p99 = ref.error(out)
+    # the direct time under the load of this moment; the shorter of
+    # it and the first measurement, both minima over runs
+    t_ref = min(t_direct, ref.seconds(max(1, args.reps - 1)))
+    return med, p99, t_eval, t_ref, t_ref / (t_build + t_eval)
+
+
+def turns(reps, tree, theta, precisions, out):
+    """CPU ms of one evaluation per precision, the precisions in turns for ``max(reps, 5)`` rounds
+    (so that a change of load on the shared machine falls on all of them alike)."""
+    cpu = {p: [] for p in precisions}
+    for p in precisions:
+        evaluate_tip_tree(tree, RSTAR, KAPPA, theta, out, precision=p)  # compile outside the timing
+    for _ in range(max(reps, 5)):
+        for p in precisions:
+            t0 = time.process_time()
+            evaluate_tip_tree(tree, RSTAR, KAPPA, theta, out, precision=p)
+            cpu[p].append(1e3 * (time.process_time() - t0))
+    return {p: np.array(t) for p, t in cpu.items()}
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rods", type=int, nargs="+", default=[1000, 3000, 10000, 30000, 100000])
@@ -138,6 +170,7 @@ def main():
     ap.add_argument("--leaf", type=int, nargs="+", default=[32, 64, 128])
     ap.add_argument("--group", type=int, nargs="+", default=[128])
     ap.add_argument("--order", type=int, nargs="+", default=[2, 3])
+    ap.add_argument("--precision", nargs="+", default=["float64"], choices=list(PRECISIONS))
     ap.add_argument("--config", nargs="+", default=["uniform", "chains"], choices=["uniform", "chains"])
     ap.add_argument("--sample", type=int, default=4000, help="direct reference rows above --full-direct")
     ap.add_argument("--full-direct", type=int, default=20000, help="largest tip count summed directly")
@@ -157,7 +190,11 @@ def main():
             t_direct = ref.seconds(args.reps)
             kind = "full" if ref.full else f"{len(ref.row)} rows, extrapolated"
             print(f"\n{config}, {n_rods} rods ({n} tips): direct {1e3 * t_direct:.1f} ms ({kind})")
-            print(" order leaf group theta   build ms    eval ms   median err    p99 err   direct ms  speed-up")
+            extra = "   eval CPU ms median [min-max]" if len(args.precision) > 1 else ""
+            print(
+                " order leaf group theta precision   build ms    eval ms   median err    p99 err   direct ms  speed-up"
+                + extra
+            )
             out = np.empty((n, 3))
             best = None
             for order in args.order:
@@ -167,30 +204,50 @@ def main():
                         t_build = best_of(args.reps, lambda: build_tip_tree(*tips, leaf, group, order))
                         tree = build_tip_tree(*tips, leaf, group, order)
                         for theta in args.theta:
-                            evaluate_tip_tree(tree, RSTAR, KAPPA, theta, out)
-                            t_eval = best_of(args.reps, lambda: evaluate_tip_tree(tree, RSTAR, KAPPA, theta, out))
-                            med, p99 = ref.error(out)
-                            # the direct time under the load of this moment; the shorter of
-                            # it and the first measurement, both minima over runs
-                            t_ref = min(t_direct, ref.seconds(max(1, args.reps - 1)))
-                            speedup = t_ref / (t_build + t_eval)
-                            print(
-                                f" {order:5d} {leaf:4d} {group:5d} {theta:5.2f} {1e3 * t_build:10.1f} "
-                                f"{1e3 * t_eval:10.1f} {med:12.2e} {p99:10.2e} {1e3 * t_ref:11.1f} {speedup:9.2f}",
-                                flush=True,
-                            )
-                            if med <= args.target and (best is None or speedup > best[0]):
-                                best = (speedup, order, leaf, group, theta, t_build, t_eval, med, p99, t_ref)
+                            spread = {}
+                            if len(args.precision) > 1:
+                                spread = turns(args.reps, tree, theta, args.precision, out)
+                            for precision in args.precision:
+                                row = measure(args, tree, theta, precision, out, ref, t_direct, t_build)
+                                med, p99, t_eval, t_ref, speedup = row
+                                cpu = spread.get(precision)
+                                text = (
+                                    "" if cpu is None else f"   {np.median(cpu):.1f} [{cpu.min():.1f}-{cpu.max():.1f}]"
+                                )
+                                print(
+                                    f" {order:5d} {leaf:4d} {group:5d} {theta:5.2f} {precision:>9s} {1e3 * t_build:10.1f} "
+                                    f"{1e3 * t_eval:10.1f} {med:12.2e} {p99:10.2e} {1e3 * t_ref:11.1f} {speedup:9.2f}"
+                                    + text,
+                                    flush=True,
+                                )
+                                if med <= args.target and (best is None or speedup > best[0]):
+                                    best = (
+                                        speedup,
+                                        order,
+                                        leaf,
+                                        group,
+                                        theta,
+                                        t_build,
+                                        t_eval,
+                                        med,
+                                        p99,
+                                        t_ref,
+                                        precision,
+                                    )
             summary.append((config, n_rods, best))
     print(f"\nfastest setting with median error <= {args.target:g} (speed-up = direct / (build + eval)):")
-    print(" config    rods  order leaf group theta   build ms    eval ms   median err    p99 err   direct ms  speed-up")
+    print(
+        " config    rods  order leaf group theta precision   build ms    eval ms   median err    p99 err"
+        "   direct ms  speed-up"
+    )
     for config, n_rods, best in summary:
         if best is None:
             print(f" {config:8s} {n_rods:6d}  none reached the target")
             continue
-        s, order, leaf, group, theta, tb, te, med, p99, tr = best
+        s, order, leaf, group, theta, tb, te, med, p99, tr, precision = best
         print(
-            f" {config:8s} {n_rods:6d} {order:5d} {leaf:4d} {group:5d} {theta:5.2f} {1e3 * tb:10.1f} {1e3 * te:10.1f} "
+            f" {config:8s} {n_rods:6d} {order:5d} {leaf:4d} {group:5d} {theta:5.2f} {precision:>9s} {1e3 * tb:10.1f} "
+            f"{1e3 * te:10.1f} "
             f"{med:12.2e} {p99:10.2e} {1e3 * tr:11.1f} {s:9.2f}"
         )
     for config in args.config:

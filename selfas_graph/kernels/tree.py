@@ -54,6 +54,11 @@ multiple of ``PAD``; the cell's moments are read once). When the target's rod pa
 in an accepted cell, its exact pair force is subtracted (the multipole included
 it). ``theta = 0`` accepts no cell and gives the direct sum.
 
+The near pairs may be summed in float32 (``precision="mixed"`` of
+:func:`evaluate_tip_tree`): coordinates relative to the group's box centre,
+the law of :func:`.laws.tip_force_over_r_f32`, one float32 sum per target added
+to the float64 far field. The float64 path is unchanged by it.
+
 Measured on one core of an AVX-512 machine, the accepted-cell loop costs
 about 2 ns per cell and target with octupoles, the near loop about 0.6 ns per
 tip pair, as the direct sum (about 1.7 ns on an AVX2 Zen 3 core, bound by the
@@ -83,7 +88,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._jit import inline_sum, njit, njit_parallel, njit_parallel_sum, prange, set_parallel_chunksize
-from .laws import tip_force_over_r
+from .laws import tip_force_over_r, tip_force_over_r_f32
 
 #: bits of the Morton key per axis; also the depth cap of the tree
 KEY_BITS = 21
@@ -104,6 +109,8 @@ THETA = 0.4
 #: AVX-512 machine: 1.13 to 1.28 times faster than no padding, padding to 16 or 32
 #: gained less (1.08) or lost (0.88)
 PAD = 8
+#: precisions of the near field (:func:`evaluate_tip_tree`)
+PRECISIONS = ("float64", "mixed")
 
 
 class TipTree(NamedTuple):
@@ -452,6 +459,7 @@ def evaluate_groups(
     kappa,
     lo,
     hi,
+    mixed,
     out,
 ):
     """Tip-tip force on the tips with original number in [lo, hi) by the tree.
@@ -474,11 +482,16 @@ def evaluate_groups(
         Opening angle, transition radius r* and core stiffness.
     lo, hi : int
         Original tip numbers to evaluate; other rows of ``out`` are untouched.
+    mixed : bool
+        Sum the near pairs in float32 (:func:`evaluate_tip_tree`); False: float64.
     out : (n_tips, 3) float64
         Rows ``lo:hi`` overwritten with the force on each tip (original order).
     """
     n_cells = start.shape[0]
     theta2 = theta * theta
+    rstar32 = np.float32(rstar)
+    kappa32 = np.float32(kappa)
+    zero32 = np.float32(0.0)
     for gi in prange(group.shape[0]):
         g = group[gi]
         gs = start[g]
@@ -590,24 +603,53 @@ def evaluate_groups(
                 c += 1
         # near leaves: exact law, one long loop per target over a contiguous copy of
         # their tips (a reduction that vectorises like the direct sum)
-        nx = np.empty(n_near_tips)
-        ny = np.empty(n_near_tips)
-        nz = np.empty(n_near_tips)
-        nq = np.empty(n_near_tips)
-        nrod = np.empty(n_near_tips, np.int64)
+        # mixed: float32 copies relative to the group's box centre (a scene far from
+        # the origin loses nothing), each coordinate as a float32 pair hi + lo (lo the
+        # float32 rounding of what hi misses), rods as int32 (8 lanes like the
+        # coordinates); only the copies of the chosen precision are filled
+        gcx = 0.5 * (xl + xh)
+        gcy = 0.5 * (yl + yh)
+        gcz = 0.5 * (zl + zh)
+        n32 = n_near_tips if mixed else 0
+        n64 = 0 if mixed else n_near_tips
+        fx = np.empty(n32, np.float32)
+        fy = np.empty(n32, np.float32)
+        fz = np.empty(n32, np.float32)
+        lx = np.empty(n32, np.float32)
+        ly = np.empty(n32, np.float32)
+        lz = np.empty(n32, np.float32)
+        fq = np.empty(n32, np.float32)
+        frod = np.empty(n32, np.int32)
+        nx = np.empty(n64)
+        ny = np.empty(n64)
+        nz = np.empty(n64)
+        nq = np.empty(n64)
+        nrod = np.empty(n64, np.int64)
         j = 0
         for a in range(n_near):
             s = start[near[a]]
             e = end[near[a]]
             for w in range(n_w):
                 partner_near[w] |= (partner[w] >= s) & (partner[w] < e)
-            for i in range(s, e):
-                nx[j] = x[i]
-                ny[j] = y[i]
-                nz[j] = z[i]
-                nq[j] = charge[i]
-                nrod[j] = rod[i]
-                j += 1
+            if mixed:
+                for i in range(s, e):
+                    fx[j] = np.float32(x[i] - gcx)
+                    fy[j] = np.float32(y[i] - gcy)
+                    fz[j] = np.float32(z[i] - gcz)
+                    lx[j] = np.float32((x[i] - gcx) - np.float64(fx[j]))
+                    ly[j] = np.float32((y[i] - gcy) - np.float64(fy[j]))
+                    lz[j] = np.float32((z[i] - gcz) - np.float64(fz[j]))
+                    fq[j] = np.float32(charge[i])
+                    frod[j] = np.int32(rod[i])
+                    j += 1
+            else:
+                for i in range(s, e):
+                    nx[j] = x[i]
+                    ny[j] = y[i]
+                    nz[j] = z[i]
+                    nq[j] = charge[i]
+                    nrod[j] = rod[i]
+                    j += 1
         for w in range(n_w):
             i = sel[w]
             xk = tx[w]
@@ -618,15 +660,45 @@ def evaluate_groups(
             sx = 0.0
             sy = 0.0
             sz = 0.0
-            for j in range(n_near_tips):
-                dx = xk - nx[j]
-                dy = yk - ny[j]
-                dz = zk - nz[j]
-                gl = tip_force_over_r(dx * dx + dy * dy + dz * dz, qk * nq[j], rstar, kappa)
-                gl = 0.0 if nrod[j] == rk else gl
-                sx += gl * dx
-                sy += gl * dy
-                sz += gl * dz
+            if mixed:
+                xk32 = np.float32(xk - gcx)
+                yk32 = np.float32(yk - gcy)
+                zk32 = np.float32(zk - gcz)
+                xl32 = np.float32((xk - gcx) - np.float64(xk32))
+                yl32 = np.float32((yk - gcy) - np.float64(yk32))
+                zl32 = np.float32((zk - gcz) - np.float64(zk32))
+                qk32 = np.float32(qk)
+                rk32 = np.int32(rk)
+                bx = zero32
+                by = zero32
+                bz = zero32
+                for j in range(n_near_tips):
+                    # names of their own: a name shared with the float64 code would be
+                    # typed float64 and promote the loop
+                    # hi - hi is exact for close tips (Sterbenz), so the difference
+                    # keeps float32 precision relative to itself, not to |x - centre|
+                    # (measured in aggregates: median error 4e-7 instead of 8e-6)
+                    ux = (xk32 - fx[j]) + (xl32 - lx[j])
+                    uy = (yk32 - fy[j]) + (yl32 - ly[j])
+                    uz = (zk32 - fz[j]) + (zl32 - lz[j])
+                    g32 = tip_force_over_r_f32(ux * ux + uy * uy + uz * uz, qk32 * fq[j], rstar32, kappa32)
+                    g32 = zero32 if frod[j] == rk32 else g32
+                    bx += g32 * ux
+                    by += g32 * uy
+                    bz += g32 * uz
+                sx = np.float64(bx)
+                sy = np.float64(by)
+                sz = np.float64(bz)
+            else:
+                for j in range(n_near_tips):
+                    dx = xk - nx[j]
+                    dy = yk - ny[j]
+                    dz = zk - nz[j]
+                    gl = tip_force_over_r(dx * dx + dy * dy + dz * dz, qk * nq[j], rstar, kappa)
+                    gl = 0.0 if nrod[j] == rk else gl
+                    sx += gl * dx
+                    sy += gl * dy
+                    sz += gl * dz
             sx += qk * ex[w]
             sy += qk * ey[w]
             sz += qk * ez[w]
@@ -713,7 +785,7 @@ def build_tip_tree(x, y, z, charge, leaf_size=LEAF_SIZE, group_size=GROUP_SIZE, 
     )
 
 
-def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None):
+def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None, precision="float64"):
     """Tip-tip force (docs/model.md 'Term 1') on tips ``lo..hi-1`` from all tips, by the tree.
 
     Parameters
@@ -732,6 +804,25 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None):
         Rows ``lo:hi`` (original tip numbers) are overwritten; others untouched.
     lo, hi : int
         Target rows; ``hi=None`` means ``n_tips``.
+    precision : str
+        ``"float64"``: every sum in float64. ``"mixed"``: the exact near pairs are summed in
+        float32: coordinates taken relative to the target group's box centre before the cast,
+        each as two float32 numbers ``hi + lo`` so that the difference of two close tips keeps
+        float32 precision relative to itself; the law in float32
+        (:func:`.laws.tip_force_over_r_f32`); one float32 sum per target, then added in float64
+        to the far field, which stays float64, as does the subtraction of the rod partner.
+        AVX2 runs 8 float32 lanes per instruction against 4 float64, and LLVM replaces the
+        float32 square root and division by a reciprocal square root estimate and one Newton
+        step (``vrsqrtps``): no divider in the loop. Measured (docs/performance.md,
+        tools/bench_tree.py ``--precision``): the difference from float64 is about 4e-7 of a
+        tip's force (median), at most 2e-4 of it in aggregates, where contact forces nearly
+        cancel; the estimate differs between CPU makers, so the last float32 bits are not the
+        same on every machine.
+
+    Raises
+    ------
+    ValueError
+        On rows out of range, theta out of [0, 1), an unknown precision or a bad ``out``.
     """
     n = tree.x.shape[0]
     hi = n if hi is None else int(hi)
@@ -740,6 +831,8 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None):
         raise ValueError(f"need 0 <= lo <= hi <= n_tips = {n}, got lo={lo}, hi={hi}")
     if not 0.0 <= theta < 1.0:
         raise ValueError(f"theta must be in [0, 1), got {theta}")
+    if precision not in PRECISIONS:
+        raise ValueError(f"precision must be one of {', '.join(map(repr, PRECISIONS))}, got {precision!r}")
     if out.shape != (n, 3) or out.dtype != np.float64 or not out.flags.c_contiguous:
         raise ValueError(f"out must be a C-contiguous float64 array of shape ({n}, 3)")
     if lo == hi:
@@ -772,6 +865,7 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None):
             float(kappa),
             lo,
             hi,
+            precision == "mixed",
             out,
         )
     finally:
@@ -780,15 +874,28 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None):
 
 
 def tip_tip_tree(
-    x, y, z, charge, rstar, kappa, theta, out, lo=0, hi=None, leaf_size=LEAF_SIZE, group_size=GROUP_SIZE, order=ORDER
+    x,
+    y,
+    z,
+    charge,
+    rstar,
+    kappa,
+    theta,
+    out,
+    lo=0,
+    hi=None,
+    leaf_size=LEAF_SIZE,
+    group_size=GROUP_SIZE,
+    order=ORDER,
+    precision="float64",
 ):
     """Tip-tip force on tips ``lo..hi-1`` by a multipole tree: build, then evaluate.
 
     Same arguments and result as :func:`selfas_graph.kernels.tips.tip_tip_direct`
     (``x, y, z, charge`` of shape (n_tips,), ``out`` of shape (n_tips, 3)), up to the
     tree's truncation error, plus the opening angle ``theta`` (see
-    :func:`evaluate_tip_tree`), the row range and the knobs of :func:`build_tip_tree`.
-    Returns ``out``.
+    :func:`evaluate_tip_tree`), the row range, the knobs of :func:`build_tip_tree` and the
+    ``precision`` of the near field (:func:`evaluate_tip_tree`). Returns ``out``.
     """
     tree = build_tip_tree(x, y, z, charge, leaf_size, group_size, order)
-    return evaluate_tip_tree(tree, rstar, kappa, theta, out, lo, hi)
+    return evaluate_tip_tree(tree, rstar, kappa, theta, out, lo, hi, precision)

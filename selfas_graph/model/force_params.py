@@ -33,6 +33,13 @@ class TipMagnetic:
         gt=0.0,
         lt=1.0,
     )
+    tree_precision: str = spec(
+        "float64",
+        "tree: arithmetic of the exact near pairs: float64, or mixed (float32 near pairs relative "
+        "to the target group's centre, float64 far field and sums; differs from float64 by about "
+        "4e-7 of a tip's force, docs/performance.md)",
+        choices=("float64", "mixed"),
+    )
     tree_above: int = spec(
         2000,
         "auto: use the tree from this many rods on (measured: the tree costs what the direct sum "

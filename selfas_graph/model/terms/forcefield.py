@@ -312,7 +312,9 @@ class ForceField:
         d = {"terms": [t.name for t in self.terms]}
         for t in self.terms:
             if isinstance(t, TipMagneticForce):
-                d["tip_magnetic_sum"] = f"tree (opening angle {t.theta:g})" if t.tree else "direct"
+                d["tip_magnetic_sum"] = (
+                    f"tree (opening angle {t.theta:g}, {t.precision} near field)" if t.tree else "direct"
+                )
             if isinstance(t, YukawaForce):
                 d["yukawa_cutoff"] = t.cutoff
         return d

@@ -57,6 +57,7 @@ class TipMagneticForce(Term):
         tm = p.forces.tip_magnetic
         self.tree = tm.method == "tree" or (tm.method == "auto" and state.n_rods >= tm.tree_above)
         self.theta = tm.opening_angle
+        self.precision = tm.tree_precision
 
     def compute(self, ff, out):
         x, y, z = ff.soa()
@@ -70,7 +71,9 @@ class TipMagneticForce(Term):
                 # NaN or inf positions: no tree can place them; the direct sum passes them on
                 # to the forces, where the run's health check stops with a diagnosis
             else:
-                ktree.evaluate_tip_tree(tree, self.rstar, self.kappa, self.theta, out["tip_magnetic"], lo, hi)
+                ktree.evaluate_tip_tree(
+                    tree, self.rstar, self.kappa, self.theta, out["tip_magnetic"], lo, hi, self.precision
+                )
                 return
         kt.tip_tip_direct(x, y, z, ff.tip_charge, self.rstar, self.kappa, lo, hi, out["tip_magnetic"])
 
