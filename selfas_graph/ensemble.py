@@ -39,6 +39,8 @@ import math
 import shlex
 import signal
 import time
+import types
+import typing
 import uuid
 from pathlib import Path
 from typing import Callable
@@ -135,9 +137,36 @@ _MISSING = object()
 
 @functools.lru_cache(maxsize=1)
 def _DEFAULTS_FLAT():
+    """Every key's default, dotted, including the keys of the optional tables (force terms,
+    ``[circuit]`` ...) that are off by default: a key added to such a table later has a default
+    too, and a file of an earlier version that has the table on used it."""
     from .model.params import Parameters
 
-    return _flat(json.loads(json.dumps(Parameters().to_dict())))
+    flat = _flat(json.loads(json.dumps(Parameters().to_dict())))
+    flat.update(_optional_table_defaults(Parameters, ""))
+    return flat
+
+
+def _optional_table_defaults(cls, prefix) -> dict:
+    """Dotted defaults of the keys of every optional table below the dataclass ``cls``."""
+    out = {}
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        tp = hints[f.name]
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        inner = args[0] if typing.get_origin(tp) in (typing.Union, types.UnionType) and len(args) == 1 else tp
+        if not dataclasses.is_dataclass(inner):
+            continue
+        key = f"{prefix}{f.name}"
+        if inner is not tp:  # optional: off by default, its keys' defaults from the table's class
+            try:
+                table = inner()
+            except TypeError:  # a table without defaults for every key has no default to offer
+                continue
+            for k, v in _flat(json.loads(json.dumps(dataclasses.asdict(table)))).items():
+                out[f"{key}.{k}"] = v
+        out.update(_optional_table_defaults(inner, key + "."))
+    return out
 
 
 @dataclasses.dataclass

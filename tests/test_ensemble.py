@@ -387,3 +387,17 @@ def test_a_file_of_an_earlier_version_matches_where_it_lacks_only_later_keys_at_
     assert parameter_differences(stored, changed) == ["contacts.resistance"]
     stored["forces"]["yukawa"] = None  # the term off in the file: its keys are real differences
     assert "forces.yukawa.screening_length" in parameter_differences(stored, wanted)
+
+
+def test_a_later_key_of_an_optional_table_at_its_default_matches_a_file_that_lacks_it():
+    """A key added later to a table that is off by default (forces.tip_magnetic.tree_precision)
+    has a default too: a file written before it, with the table on, used that default."""
+    from selfas_graph.ensemble import parameter_differences
+    from selfas_graph.model.params import Parameters
+
+    wanted = Parameters().replace({"forces.tip_magnetic": {}}).to_dict()
+    stored = json.loads(json.dumps(wanted))
+    del stored["forces"]["tip_magnetic"]["tree_precision"]
+    assert parameter_differences(stored, wanted) == []
+    mixed = Parameters().replace({"forces.tip_magnetic": {"tree_precision": "mixed"}}).to_dict()
+    assert parameter_differences(stored, mixed) == ["forces.tip_magnetic.tree_precision"]
