@@ -177,3 +177,15 @@ def test_tool_refuses_missing_files_and_incomplete_replay(tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         tool.main(["--replay", str(tmp_path / "nope.h5"), "--frame", "0"])
     assert e.value.code == 2 and "--scenario" in capsys.readouterr().err
+
+
+def test_importing_the_tools_leaves_the_environment_alone():
+    """The tools turn HDF5 file locking off for their own command line only: imported (as these
+    tests do) they must not change it for the rest of the process, whose locking tests need it."""
+    import os
+
+    before = dict(os.environ)
+    for name in ("short_circuits", "bench_profile", "bench_events"):
+        spec = importlib.util.spec_from_file_location(f"tool_{name}", ROOT / "tools" / f"{name}.py")
+        spec.loader.exec_module(importlib.util.module_from_spec(spec))
+    assert dict(os.environ) == before

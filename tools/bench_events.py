@@ -61,8 +61,6 @@ import sys
 import time
 from pathlib import Path
 
-os.environ.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")  # a checkpoint of a running job is read only
-
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -426,4 +424,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
+    # a running job's file is read only here; set for the command, not on import (tests import this)
+    os.environ.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")
     main()

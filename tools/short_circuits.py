@@ -30,8 +30,6 @@ import os
 import sys
 from pathlib import Path
 
-os.environ.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")  # a running job's file is read only here
-
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
@@ -220,4 +218,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
+    # a running job's file is read only here; set for the command, not on import (tests import this)
+    os.environ.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")
     sys.exit(main())
