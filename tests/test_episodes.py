@@ -133,40 +133,17 @@ def test_tool_summary_table_and_json_of_a_run_file(small_run, tmp_path, capsys):
 
 def test_tool_replay_restarts_from_a_frame(small_run, capsys):
     tool = _tool()
-    assert (
-        tool.main(
-            [
-                "--replay",
-                str(small_run),
-                "--scenario",
-                str(ROOT / "scenarios" / "quick.toml"),
-                "--set",
-                "rods.count=20",
-                "--frame",
-                "-1",
-                "--for",
-                "0.01",
-            ]
-        )
-        == 0
-    )
+
+    def replay(frame):
+        scenario = str(ROOT / "scenarios" / "quick.toml")
+        args = ["--replay", str(small_run), "--scenario", scenario, "--set", "rods.count=20", "--frame", frame]
+        return tool.main(args + ["--for", "0.01"])
+
+    assert replay("-1") == 0
     text = capsys.readouterr().out
     assert "restart of" in text and "20 rods" in text
     with pytest.raises(SystemExit, match="outside the 2 frames"):
-        tool.main(
-            [
-                "--replay",
-                str(small_run),
-                "--scenario",
-                str(ROOT / "scenarios" / "quick.toml"),
-                "--set",
-                "rods.count=20",
-                "--frame",
-                "5",
-                "--for",
-                "0.01",
-            ]
-        )
+        replay("5")
 
 
 def test_tool_refuses_missing_files_and_incomplete_replay(tmp_path, capsys):

@@ -135,20 +135,24 @@ def test_single_tip_leaves(chains):
     assert np.median(err) < 2e-8  # measured 5.5e-9
 
 
+def touching_pair_beside_300_rods():
+    """Tips of two rods touching at r*/2 (tip b of rod 0 on tip a of rod 1), far from 300 rods."""
+    far = uniform_rods(300, np.random.default_rng(3))
+    pair = rods_to_tips(
+        np.array([[-0.5 - RSTAR / 4, 0, 0], [0.5 + RSTAR / 4, 0, 0]]) - 30.0,
+        np.array([[1.0, 0, 0], [1.0, 0, 0]]),
+        np.array([1.5, 1.2]),
+    )
+    return [np.concatenate([p, f]) for p, f in zip(pair, far)]
+
+
 def test_near_pairs_exact():
     """Two tips closer than r* (a touching pair at r*/2) get exactly the direct core force,
     even at a large opening angle with single-tip leaves, where a plain Barnes-Hut rule
     would accept the partner-of-contact cell as a monopole: the tree must open every cell
     within r* of the target. The far cluster adds a small approximated field, so the
     tolerance is relative to the (large) core force."""
-    rng = np.random.default_rng(3)
-    far = uniform_rods(300, rng)
-    pair = rods_to_tips(
-        np.array([[-0.5 - RSTAR / 4, 0, 0], [0.5 + RSTAR / 4, 0, 0]]) - 30.0,
-        np.array([[1.0, 0, 0], [1.0, 0, 0]]),
-        np.array([1.5, 1.2]),
-    )
-    tips = [np.concatenate([p, f]) for p, f in zip(pair, far)]
+    tips = touching_pair_beside_300_rods()
     expected = direct(*tips)
     for knobs in ({"leaf_size": 1, "group_size": 1}, {}):
         got = tree(*tips, 0.9, **knobs)
@@ -366,14 +370,7 @@ def test_mixed_core_and_same_rod():
 def test_mixed_core_among_many():
     """A touching pair beside 300 rods, single-tip leaves and a large opening angle (as
     test_near_pairs_exact): the core force is exact to float32 rounding of the core force."""
-    rng = np.random.default_rng(3)
-    far = uniform_rods(300, rng)
-    pair = rods_to_tips(
-        np.array([[-0.5 - RSTAR / 4, 0, 0], [0.5 + RSTAR / 4, 0, 0]]) - 30.0,
-        np.array([[1.0, 0, 0], [1.0, 0, 0]]),
-        np.array([1.5, 1.2]),
-    )
-    tips = [np.concatenate([p, f]) for p, f in zip(pair, far)]
+    tips = touching_pair_beside_300_rods()
     expected = direct(*tips)
     core = np.linalg.norm(expected[1])
     for knobs in ({"leaf_size": 1, "group_size": 1}, {}):

@@ -297,6 +297,21 @@ def close_pairs(position, start, index, radius):
 
 
 @njit
+def _brake_pair(velocity, k, l, decay):
+    """Brake one pair exactly (velocity in place: the mean kept, the difference times ``decay``);
+    returns ``|v_k - v_l|^2`` before the brake, from which the callers take the work."""
+    rel2 = 0.0
+    for d in range(3):
+        diff = velocity[k, d] - velocity[l, d]
+        rel2 += diff * diff
+        mean = 0.5 * (velocity[k, d] + velocity[l, d])
+        half = 0.5 * diff * decay
+        velocity[k, d] = mean + half
+        velocity[l, d] = mean - half
+    return rel2
+
+
+@njit
 def brake_pairs_exact(velocity, pairs, k_br, dt):
     """Exact brake of each listed tip pair over ``dt``, pair after pair (a Shardlow-type splitting).
 
@@ -322,15 +337,7 @@ def brake_pairs_exact(velocity, pairs, k_br, dt):
     for j in range(pairs.shape[0]):
         k = pairs[j, 0]
         l = pairs[j, 1]
-        rel2 = 0.0
-        for d in range(3):
-            diff = velocity[k, d] - velocity[l, d]
-            rel2 += diff * diff
-            mean = 0.5 * (velocity[k, d] + velocity[l, d])
-            half = 0.5 * diff * decay
-            velocity[k, d] = mean + half
-            velocity[l, d] = mean - half
-        work -= 0.25 * (1.0 - decay * decay) * rel2
+        work -= 0.25 * (1.0 - decay * decay) * _brake_pair(velocity, k, l, decay)
     return work
 
 
@@ -364,15 +371,7 @@ def brake_close_pairs_exact(position, velocity, start, index, radius, k_br, dt):
             l = index[j]
             if l > k and _closer(position, k, l, r2max):
                 m += 1
-                rel2 = 0.0
-                for d in range(3):
-                    diff = velocity[k, d] - velocity[l, d]
-                    rel2 += diff * diff
-                    mean = 0.5 * (velocity[k, d] + velocity[l, d])
-                    half = 0.5 * diff * decay
-                    velocity[k, d] = mean + half
-                    velocity[l, d] = mean - half
-                work -= 0.25 * (1.0 - decay * decay) * rel2
+                work -= 0.25 * (1.0 - decay * decay) * _brake_pair(velocity, k, l, decay)
     return work, m
 
 
