@@ -166,3 +166,21 @@ def test_importing_the_tools_leaves_the_environment_alone():
         spec = importlib.util.spec_from_file_location(f"tool_{name}", ROOT / "tools" / f"{name}.py")
         spec.loader.exec_module(importlib.util.module_from_spec(spec))
     assert dict(os.environ) == before
+
+
+def test_tool_refuses_bad_files_settings_and_writing_over_its_input(small_run, tmp_path, capsys):
+    tool = _tool()
+    junk = tmp_path / "junk.h5"
+    junk.write_text("not HDF5")
+    with pytest.raises(SystemExit) as e:
+        tool.main([str(junk)])
+    assert e.value.code == 2 and "not a readable HDF5 file" in capsys.readouterr().err
+    before = small_run.read_bytes()
+    with pytest.raises(SystemExit) as e:
+        tool.main([str(small_run), "--json", str(small_run)])
+    assert e.value.code == 2 and "one of the run files read" in capsys.readouterr().err
+    assert small_run.read_bytes() == before
+    args = ["--replay", str(small_run), "--scenario", str(ROOT / "scenarios" / "quick.toml"), "--frame", "0"]
+    with pytest.raises(SystemExit) as e:
+        tool.main(args + ["--for", "0.01", "--set", "rods.nonsense=1"])
+    assert e.value.code == 2 and "rods.nonsense" in capsys.readouterr().err

@@ -190,6 +190,13 @@ def main(argv=None):
     sys.path.insert(0, str(ROOT / "tools"))
     from bench_peer import machine_line
 
+    from selfas_graph.cli.paths import same_file
+    from selfas_graph.io.h5md import RunFileError
+    from selfas_graph.io.scenario import ScenarioError
+
+    inputs = list(args.runs) + ([args.replay] if args.replay else [])
+    if args.json and any(same_file(args.json, r) for r in inputs):
+        ap.error(f"--json {args.json} is one of the run files read: choose another output file")
     if args.replay:
         if args.runs:
             ap.error("give either run files to summarise or --replay, not both")
@@ -203,14 +210,20 @@ def main(argv=None):
         if args.__dict__["for"] <= 0 or args.chunk <= 0:
             ap.error("--for and --chunk must be positive")
         print(machine_line())
-        result = replay(args)
+        try:
+            result = replay(args)
+        except (ScenarioError, RunFileError) as exc:
+            ap.error(str(exc))
     else:
         if not args.runs:
             ap.error("give run files to summarise, or --replay RUN.h5 --scenario S --frame K --for T")
         for r in args.runs:
             if not Path(r).is_file():
                 ap.error(f"no such run file: {r}")
-        result = [summarise(r) for r in args.runs]
+        try:
+            result = [summarise(r) for r in args.runs]
+        except (RunFileError, ValueError) as exc:
+            ap.error(str(exc))
         print_summary(result)
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1) + "\n")
