@@ -55,6 +55,9 @@ KNOBS = {
     "integrator.bond_force": (["paper", "exact"], {"integrator.bond_force": "exact"}),
     "integrator.position_projection": ([False, True], {"integrator.position_projection": True}),
     "integrator.slow_every": ([1, 2, 4, 8, 16, 32], {"integrator.slow_every": 1}),
+    # the tip-tip sum: the tree (at its near-field precision, --set forces.tip_magnetic.tree_precision=...)
+    # against the exact direct sum
+    "forces.tip_magnetic.method": (["direct", "tree"], {"forces.tip_magnetic.method": "direct"}),
     "integrator.slow_extrapolation": ([False, True], {"integrator.slow_every": 1}),
     # only with slow_every > 1 in the base (--set integrator.slow_every=8): each range against no splitting
     "integrator.fast_range": ([2.0, 3.0, 4.0, 6.0, 8.0, 12.0], {"integrator.slow_every": 1}),
