@@ -150,3 +150,37 @@ def test_max_displacement_is_the_numpy_value_to_the_bit(rng):
     x = r0.copy()
     x[3, 1] = np.nan
     assert max_displacement2(x, r0) == np.inf  # NaN forces a rebuild, as the numpy check did
+
+
+def test_cell_rows_on_the_radius_and_across_cells():
+    """A pair exactly at the radius is not listed (the test is ``r < radius``), one a hair inside is,
+    also when the two points are 2 cells apart (cells of side radius / 2) or more with a capped grid."""
+    radius = 2.0  # the squared distances below are exact in binary
+    x = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0 - 1e-12, 0.0], [0.0, 0.0, -2.0], [9.0, 9.0, 9.0]])
+    expected = both_ways({(0, 2)})
+    assert rows(*neighbour_rows(x, radius)) == expected
+    assert rows(*neighbour_rows(x, radius, max_cells=2)) == expected
+
+
+@pytest.mark.parametrize("n", [5, 7])
+def test_cell_rows_odd_count_with_same_rod_excluded(rng, n):
+    """With an odd number of points the last has no partner tip; the counts and the rows still agree."""
+    x = rng.uniform(0, 0.5, (n, 3))
+    assert rows(*neighbour_rows(x, 1.0, True)) == both_ways(ref.neighbour_pairs(x, 1.0, True))
+
+
+def test_cell_rows_in_cell_order(rng):
+    """Each row lists its neighbours in the order the cells are visited: ascending cell, then
+    ascending point index within a cell (the module docstring), the same for any thread count."""
+    from selfas_graph.kernels import cells
+
+    x = rng.uniform(0, 4, (200, 3))
+    radius = 0.9
+    start, index = neighbour_rows(x, radius)
+    lo, h, g = cells.cell_grid(x, radius / cells.CELLS_PER_RADIUS, max(16 * len(x), 1000))
+    c = np.minimum(np.maximum(((x - lo) / h).astype(np.int64), 0), g - 1)
+    cell = (c[:, 0] * g[1] + c[:, 1]) * g[2] + c[:, 2]
+    for k in range(len(x)):
+        row = index[start[k] : start[k + 1]]
+        key = cell[row] * len(x) + row
+        assert (np.diff(key) > 0).all()
