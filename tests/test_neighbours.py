@@ -184,3 +184,37 @@ def test_cell_rows_in_cell_order(rng):
         row = index[start[k] : start[k + 1]]
         key = cell[row] * len(x) + row
         assert (np.diff(key) > 0).all()
+
+
+@pytest.mark.parametrize("exclude", [False, True])
+@pytest.mark.parametrize("n", [0, 1, 2, 150])
+def test_rows_numbered_by_cell(rng, n, exclude):
+    """The rows numbered by cell (``cell_order=True``) are the rows renumbered by the build's cell
+    order (reference.rows_in_cell_order); the order is a permutation; the plain rows are unchanged."""
+    x = rng.uniform(0, 3, (n, 3))
+    start, index = neighbour_rows(x, 0.8, exclude)
+    s2, i2, (order, start_t, index_t) = neighbour_rows(x, 0.8, exclude, cell_order=True)
+    np.testing.assert_array_equal(s2, start)
+    np.testing.assert_array_equal(i2, index)
+    np.testing.assert_array_equal(np.sort(order), np.arange(n))
+    ref_start, ref_index = ref.rows_in_cell_order(start, index, order)
+    np.testing.assert_array_equal(start_t, ref_start)
+    np.testing.assert_array_equal(index_t, ref_index)
+
+
+def test_sorted_rows_of_a_list_with_and_without_cell_order(rng):
+    """``sorted_rows`` is the same whether the build made it (``cell_order``) or it is made on first
+    use, follows rebuilds, and is a trivial order for a broken (NaN) state that lists nothing."""
+    x = rng.uniform(0, 3, (120, 3))
+    a = NeighbourList(0.5, 0.1, cell_order=True)
+    b = NeighbourList(0.5, 0.1)
+    for points in (x, x + 0.3):
+        a.build(points)
+        b.build(points)
+        for u, v in zip(a.sorted_rows, b.sorted_rows):
+            np.testing.assert_array_equal(u, v)
+    x[4, 0] = np.nan
+    a.build(x)
+    order, start, index = a.sorted_rows
+    np.testing.assert_array_equal(order, np.arange(120))
+    assert start.shape == (121,) and len(index) == 0

@@ -93,3 +93,37 @@ def test_rows_of_a_block(rng):
     part = kernel(c, z, 2.5, lo=20, hi=45)
     np.testing.assert_array_equal(part[20:45], full[20:45])
     assert np.isnan(part[:20]).all() and np.isnan(part[45:]).all()
+
+
+@pytest.mark.parametrize("lo, hi", [(0, 200), (50, 130), (0, 0)])
+def test_sorted_copies_same_bit_for_bit(rng, lo, hi):
+    """The sum over copies in cell order (``yukawa_centres_sorted``, what the term calls) gives the
+    forces of ``yukawa_centres`` over the same list bit for bit (the same terms in the same
+    sequence); rows outside lo:hi are not touched."""
+    c = rng.uniform(-4, 4, (200, 3))
+    c[7] = c[8]  # two rods on top of each other
+    z = rng.uniform(0.5, 1.5, 200)
+    nl = NeighbourList(3.0, 0.3, cell_order=True)
+    nl.build(c)
+    order, start, index = nl.sorted_rows
+    plain = np.full((200, 3), np.nan)
+    kp.yukawa_centres(c, z, nl.start, nl.index, SCREENING, 0.06, 3.0, lo, hi, plain)
+    out = np.full((200, 3), np.nan)
+    kp.yukawa_centres_sorted(c[order], z[order], order, start, index, SCREENING, 0.06, 3.0, lo, hi, out)
+    np.testing.assert_array_equal(out, plain)  # NaN (untouched) rows compare equal too
+    rows = [k for k in range(lo, hi) if k not in (7, 8)]  # the reference has no answer for the coincident pair
+    with np.errstate(invalid="ignore"):
+        expected = ref.yukawa_force(c, z, SCREENING, 3.0, 0.06)
+    close(out[rows], expected[rows])
+
+
+def test_sorted_copies_one_rod_and_no_rods():
+    """One rod and no rod: empty lists, a zero force and nothing to do."""
+    for n in (0, 1):
+        c = np.zeros((n, 3))
+        nl = NeighbourList(3.0, 0.3, cell_order=True)
+        nl.build(c)
+        order, start, index = nl.sorted_rows
+        out = np.full((n, 3), np.nan)
+        kp.yukawa_centres_sorted(c[order], np.ones(n)[order], order, start, index, SCREENING, 0.0, 3.0, 0, n, out)
+        np.testing.assert_array_equal(out, np.zeros((n, 3)))

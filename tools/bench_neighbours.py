@@ -8,10 +8,13 @@ the state of ``--checkpoint`` when given), it times on one numba thread, by the 
 time (``time.process_time``: on a shared machine it counts only the cycles the kernel got):
 
 - ``centre list``: the rod-centre list (kernels/cells.py ``neighbour_rows``), radius Yukawa
-  cut-off + ``neighbours.skin``, as model/neighbours.py builds it;
+  cut-off + ``neighbours.skin``, as model/neighbours.py builds it for the Yukawa term (with the
+  rows numbered by cell where the revision has them);
 - ``tip list``: the tip list, radius the tip range (r*, or the contact release radius when
   larger) + skin, without the pairs of one rod;
-- ``yukawa``: ``kernels/pairs.py::yukawa_centres`` over that centre list (also in ns per listed pair).
+- ``yukawa``: the Yukawa sum as the term calls it over that list (``kernels/pairs.py::
+  yukawa_centres_sorted`` with the copies in cell order it reads, or ``yukawa_centres`` in a
+  revision without it), also in ns per listed pair.
 
 ``--before REF`` also times the kernels of the git revision REF (tools/bench_kernels.py
 ``kernels_at``), interleaved with the working tree's (the order alternates between repeats),
@@ -91,16 +94,30 @@ def run(args):
         fy = np.empty((n, 3))
         lists = {}
 
+        def sorted_sum(K):
+            """True where the revision sums over copies in cell order (pairs.yukawa_centres_sorted)."""
+            return hasattr(K.pairs, "yukawa_centres_sorted")
+
         def centre_list(K):
             if id(K) not in lists:
-                lists[id(K)] = K.cells.neighbour_rows(c, centre_radius)
+                if sorted_sum(K):
+                    lists[id(K)] = K.cells.neighbour_rows(c, centre_radius, cell_order=True)
+                else:
+                    lists[id(K)] = K.cells.neighbour_rows(c, centre_radius)
             return lists[id(K)]
 
         def job(name, K):
             if name == "centre list":
+                if sorted_sum(K):  # as the Yukawa term asks for it: also the rows numbered by cell
+                    return lambda: K.cells.neighbour_rows(c, centre_radius, cell_order=True)
                 return lambda: K.cells.neighbour_rows(c, centre_radius)
             if name == "tip list":
                 return lambda: K.cells.neighbour_rows(tips, tip_radius, True)
+            if sorted_sum(K):  # as the Yukawa term calls it: copies in cell order made per call
+                _, _, (order, s, i) = centre_list(K)
+                return lambda: K.pairs.yukawa_centres_sorted(
+                    c[order], st.rod_charge[order], order, s, i, yk.screening, yk.core, yk.cutoff, 0, n, fy
+                )
             s, i = centre_list(K)
             return lambda: K.pairs.yukawa_centres(c, st.rod_charge, s, i, yk.screening, yk.core, yk.cutoff, 0, n, fy)
 
@@ -110,7 +127,7 @@ def run(args):
                 res[name] = timed(job(name, now), args.repeat, clock)
             else:
                 res[name + " before"], res[name] = timed_pair(job(name, before), job(name, now), args.repeat, clock)
-        res["yukawa_pairs"] = int(centre_list(now)[0][-1])
+        res["yukawa_pairs"] = int(centre_list(now)[0][-1])  # start[n] of either form
         res["tip_pairs"] = int(kernels.cells.neighbour_rows(tips, tip_radius, True)[0][-1])
         rows.append(res)
     return {"machine": machine(), "line": machine_line(), "rows": rows, "before": args.before}
