@@ -18,8 +18,8 @@ numbers, and the rows are visited in cell order too, so that consecutive iterati
 read the same cells (measured on one core: 130 -> 118 ms at 24 000 rod centres, 608 ->
 523 ms at 10^5, and 132 -> 95 ms for the 2 10^5 tips, whose sparse grid of 1.1e6 cells
 otherwise misses the cache at every point). The counting pass is a branch-free count
-that vectorises; the fill pass keeps a branch (a branch-free store measured slower: 6.7
-against 8.8 ms for the late Fig. 2 rod centres, each store waiting on the previous).
+that vectorises; the fill pass keeps a branch (a branch-free store measured slower: 8.8
+against 6.7 ms for the late Fig. 2 rod centres, each store waiting on the previous).
 
 Glossary: ``n`` points, ``g`` (3,) int64 cells per axis, ``h`` cell side, ``span`` cells
 searched on each side, ``lo`` (3,) float64 the grid's lower corner, ``cell_start``
