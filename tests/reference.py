@@ -444,6 +444,16 @@ def neighbour_pairs(x, r, exclude_same_rod):
     return set(zip(i[keep].tolist(), j[keep].tolist()))
 
 
+def rows_in_cell_order(start, index, order):
+    """Compressed rows renumbered by the permutation ``order``: row t is the row of point
+    ``order[t]``, in the same order, each neighbour l written as its place in ``order``."""
+    place = np.empty(len(order), dtype=np.int64)
+    place[order] = np.arange(len(order))
+    rows = [place[index[start[k] : start[k + 1]]] for k in order]
+    new_start = np.concatenate([[0], np.cumsum([len(r) for r in rows])]).astype(np.int64)
+    return new_start, (np.concatenate(rows) if rows else np.zeros(0, np.int64)).astype(np.int64)
+
+
 # ----------------------------------------------------------------------------- external objects
 
 

@@ -150,3 +150,71 @@ def test_max_displacement_is_the_numpy_value_to_the_bit(rng):
     x = r0.copy()
     x[3, 1] = np.nan
     assert max_displacement2(x, r0) == np.inf  # NaN forces a rebuild, as the numpy check did
+
+
+def test_cell_rows_on_the_radius_and_across_cells():
+    """A pair exactly at the radius is not listed (the test is ``r < radius``), one a hair inside is,
+    also when the two points are 2 cells apart (cells of side radius / 2) or more with a capped grid."""
+    radius = 2.0  # the squared distances below are exact in binary
+    x = np.array([[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0 - 1e-12, 0.0], [0.0, 0.0, -2.0], [9.0, 9.0, 9.0]])
+    expected = both_ways({(0, 2)})
+    assert rows(*neighbour_rows(x, radius)) == expected
+    assert rows(*neighbour_rows(x, radius, max_cells=2)) == expected
+
+
+@pytest.mark.parametrize("n", [5, 7])
+def test_cell_rows_odd_count_with_same_rod_excluded(rng, n):
+    """With an odd number of points the last has no partner tip; the counts and the rows still agree."""
+    x = rng.uniform(0, 0.5, (n, 3))
+    assert rows(*neighbour_rows(x, 1.0, True)) == both_ways(ref.neighbour_pairs(x, 1.0, True))
+
+
+def test_cell_rows_in_cell_order(rng):
+    """Each row lists its neighbours in the order the cells are visited: ascending cell, then
+    ascending point index within a cell (the module docstring), the same for any thread count."""
+    from selfas_graph.kernels import cells
+
+    x = rng.uniform(0, 4, (200, 3))
+    radius = 0.9
+    start, index = neighbour_rows(x, radius)
+    lo, h, g = cells.cell_grid(x, radius / cells.CELLS_PER_RADIUS, max(16 * len(x), 1000))
+    c = np.minimum(np.maximum(((x - lo) / h).astype(np.int64), 0), g - 1)
+    cell = (c[:, 0] * g[1] + c[:, 1]) * g[2] + c[:, 2]
+    for k in range(len(x)):
+        row = index[start[k] : start[k + 1]]
+        key = cell[row] * len(x) + row
+        assert (np.diff(key) > 0).all()
+
+
+@pytest.mark.parametrize("exclude", [False, True])
+@pytest.mark.parametrize("n", [0, 1, 2, 150])
+def test_rows_numbered_by_cell(rng, n, exclude):
+    """The rows numbered by cell (``cell_order=True``) are the rows renumbered by the build's cell
+    order (reference.rows_in_cell_order); the order is a permutation; the plain rows are unchanged."""
+    x = rng.uniform(0, 3, (n, 3))
+    start, index = neighbour_rows(x, 0.8, exclude)
+    s2, i2, (order, start_t, index_t) = neighbour_rows(x, 0.8, exclude, cell_order=True)
+    np.testing.assert_array_equal(s2, start)
+    np.testing.assert_array_equal(i2, index)
+    np.testing.assert_array_equal(np.sort(order), np.arange(n))
+    ref_start, ref_index = ref.rows_in_cell_order(start, index, order)
+    np.testing.assert_array_equal(start_t, ref_start)
+    np.testing.assert_array_equal(index_t, ref_index)
+
+
+def test_sorted_rows_of_a_list_with_and_without_cell_order(rng):
+    """``sorted_rows`` is the same whether the build made it (``cell_order``) or it is made on first
+    use, follows rebuilds, and is a trivial order for a broken (NaN) state that lists nothing."""
+    x = rng.uniform(0, 3, (120, 3))
+    a = NeighbourList(0.5, 0.1, cell_order=True)
+    b = NeighbourList(0.5, 0.1)
+    for points in (x, x + 0.3):
+        a.build(points)
+        b.build(points)
+        for u, v in zip(a.sorted_rows, b.sorted_rows):
+            np.testing.assert_array_equal(u, v)
+    x[4, 0] = np.nan
+    a.build(x)
+    order, start, index = a.sorted_rows
+    np.testing.assert_array_equal(order, np.arange(120))
+    assert start.shape == (121,) and len(index) == 0

@@ -53,7 +53,10 @@ PARTS = [
         lambda f: f.endswith(("tips.py:tip_tip_direct",)) or "kernels/tree.py" in f,
     ),
     ("tip-tip close pairs (fast, every step)", lambda f: f.endswith("tips.py:tip_tip_fast")),
-    ("Yukawa sum (slow)", lambda f: f.endswith(("pairs.py:yukawa_centres", "pairs.py:yukawa_energy"))),
+    (
+        "Yukawa sum (slow)",
+        lambda f: f.endswith(("pairs.py:yukawa_centres", "pairs.py:yukawa_centres_sorted", "pairs.py:yukawa_energy")),
+    ),
     ("current field on tips (term 9, slow)", lambda f: f.endswith("currents.py:current_force_on_tips")),
     ("current field at Lorentz points (term 10, slow)", lambda f: "kernels/currents.py" in f),
     (

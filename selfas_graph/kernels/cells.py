@@ -1,8 +1,9 @@
 """Neighbour lists from a cell list, in the compressed-row form of :mod:`.pairs`.
 
-Points are binned into a grid of cubic cells of side ``h >= r``; every pair closer
-than ``r`` then lies in the same or in adjacent cells (27 cells per point). The list
-is built in two parallel passes over points, as :func:`.pairs.close_pairs` is: count
+Points are binned into a grid of cubic cells of side ``h >= r / 2`` (:data:`CELLS_PER_RADIUS`);
+every pair closer than ``r`` then lies at most ``span = ceil(r / h)`` cells apart along each
+axis (2 with cells of side ``r / 2``: 125 cells per point, in 25 runs contiguous in memory).
+The list is built in two parallel passes over points, as :func:`.pairs.close_pairs` is: count
 each point's neighbours, then fill each row at its prefix-sum offset, so that each
 iteration writes only its own row. A row lists its neighbours in the order the cells
 are visited (ascending cell, then ascending point index within a cell): a function
@@ -11,18 +12,23 @@ and after a restart from the positions of the last build. Sorting each row by in
 instead would cost 2.3 times the rest of the build (measured at 24 000 rod centres)
 and made the Yukawa pair loop no faster on one core.
 
-The candidates are read from a copy of the positions in cell order, so the inner
-loop streams through memory instead of jumping between random point numbers, and the
-rows are visited in cell order too, so that consecutive iterations read the same cells
-(measured on one core: 130 -> 118 ms at 24 000 rod centres, 608 -> 523 ms at 10^5, and
-132 -> 95 ms for the 2 10^5 tips, whose sparse grid of 1.1e6 cells otherwise misses
-the cache at every point).
+The candidates are read from copies of the coordinates in cell order (``sx, sy, sz``),
+so the inner loop streams through memory instead of jumping between random point
+numbers, and the rows are visited in cell order too, so that consecutive iterations
+read the same cells (measured on one core: 130 -> 118 ms at 24 000 rod centres, 608 ->
+523 ms at 10^5, and 132 -> 95 ms for the 2 10^5 tips, whose sparse grid of 1.1e6 cells
+otherwise misses the cache at every point). The counting pass is a branch-free count
+that vectorises; the fill pass keeps a branch (a branch-free store measured slower: 8.8
+against 6.7 ms for the late Fig. 2 rod centres, each store waiting on the previous).
 
-Glossary: ``n`` points, ``g`` (3,) int64 cells per axis, ``h`` cell side, ``lo``
-(3,) float64 the grid's lower corner, ``cell_start`` (g0 g1 g2 + 1,) int64 and
-``cell_point`` (n,) int64 the points of each cell in compressed rows (ascending
-point index within a cell), ``sorted_position`` (n, 3) float64 ``position[cell_point]``.
+Glossary: ``n`` points, ``g`` (3,) int64 cells per axis, ``h`` cell side, ``span`` cells
+searched on each side, ``lo`` (3,) float64 the grid's lower corner, ``cell_start``
+(g0 g1 g2 + 1,) int64 and ``cell_point`` (n,) int64 the points of each cell in compressed
+rows (ascending point index within a cell), ``sx, sy, sz`` (n,) float64
+``position[cell_point, d]``.
 """
+
+import math
 
 import numpy as np
 
@@ -67,48 +73,110 @@ def bin_points(position, lo, h, g, cell_start, cell_point):
 
 
 @inline
-def _visit(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, exclude_same_rod, k, row, c0):
-    """Count the neighbours of point k; with ``row`` non-empty, also write them from ``c0`` on."""
-    cx = _cell_of(position, k, lo, h, g, 0)
-    cy = _cell_of(position, k, lo, h, g, 1)
-    cz = _cell_of(position, k, lo, h, g, 2)
-    xk = position[k, 0]
-    yk = position[k, 1]
-    zk = position[k, 2]
-    c = c0
-    for ax in range(max(cx - 1, 0), min(cx + 2, g[0])):
-        for ay in range(max(cy - 1, 0), min(cy + 2, g[1])):
-            base = (ax * g[1] + ay) * g[2]
-            # the cells cz-1 .. cz+1 along the last axis are contiguous in cell_point
-            j0 = cell_start[base + max(cz - 1, 0)]
-            j1 = cell_start[base + min(cz + 2, g[2])]
-            for j in range(j0, j1):
-                dx = xk - sorted_position[j, 0]
-                dy = yk - sorted_position[j, 1]
-                dz = zk - sorted_position[j, 2]
-                l = cell_point[j]
-                if dx * dx + dy * dy + dz * dz < r2max and l != k and not (exclude_same_rod and l // 2 == k // 2):
-                    if row.shape[0] > 0:
-                        row[c] = l
-                    c += 1
-    return c - c0
+def _row_range(position, lo, h, g, k, span, d):
+    """Cells ``c - span .. c + span`` (clipped to the grid) around point k's cell along axis d, as a range."""
+    c = _cell_of(position, k, lo, h, g, d)
+    return range(max(c - span, 0), min(c + span + 1, g[d]))
 
 
 @njit_parallel
-def _row_counts(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, exclude_same_rod, counts):
-    none = np.empty(0, dtype=np.int64)
-    for t in prange(position.shape[0]):
+def _row_counts(position, sx, sy, sz, lo, h, g, span, cell_start, cell_point, r2max, exclude_same_rod, counts):
+    """Row lengths: candidates closer than ``sqrt(r2max)``, less the point itself and (with
+    ``exclude_same_rod``) the other tip of its rod when that is in range.
+
+    The candidate loop is a branch-free count over contiguous runs of the sorted coordinates
+    (``sx, sy, sz``), which LLVM vectorises; the two exclusions are corrected once per row.
+    """
+    n = position.shape[0]
+    for t in prange(n):
         k = cell_point[t]  # points in cell order: neighbouring iterations read the same cells
-        counts[k] = _visit(
-            position, sorted_position, lo, h, g, cell_start, cell_point, r2max, exclude_same_rod, k, none, 0
-        )
+        xk = position[k, 0]
+        yk = position[k, 1]
+        zk = position[k, 2]
+        c = 0
+        zr = _row_range(position, lo, h, g, k, span, 2)
+        for ax in _row_range(position, lo, h, g, k, span, 0):
+            for ay in _row_range(position, lo, h, g, k, span, 1):
+                base = (ax * g[1] + ay) * g[2]  # the cells along the last axis are contiguous
+                for j in range(cell_start[base + zr.start], cell_start[base + zr.stop]):
+                    dx = xk - sx[j]
+                    dy = yk - sy[j]
+                    dz = zk - sz[j]
+                    c += 1 if dx * dx + dy * dy + dz * dz < r2max else 0
+        c -= 1  # the point itself, always a candidate at distance 0 (r2max > 0)
+        m = k ^ 1  # the other tip of the same rod
+        if exclude_same_rod and m < n:
+            dx = xk - position[m, 0]
+            dy = yk - position[m, 1]
+            dz = zk - position[m, 2]
+            c -= 1 if dx * dx + dy * dy + dz * dz < r2max else 0
+        counts[k] = c
 
 
 @njit_parallel
-def _row_fill(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, exclude_same_rod, start, index):
-    for t in prange(position.shape[0]):
+def _row_fill(
+    position,
+    sx,
+    sy,
+    sz,
+    lo,
+    h,
+    g,
+    span,
+    cell_start,
+    cell_point,
+    r2max,
+    exclude_same_rod,
+    start,
+    index,
+    start_t,
+    index_t,
+):
+    """Write each row at its offset ``start[k]``, candidates in the order :func:`_row_counts` visits them.
+
+    The test is on the same squared distances as in :func:`_row_counts` (the same expression on
+    the same numbers), so each row gets exactly its counted length. With ``index_t`` non-empty,
+    also write the same rows numbered by cell at ``start_t[t]``: row t is that of point
+    ``cell_point[t]``, and a neighbour is written as its place j in the cell order.
+    """
+    n = position.shape[0]
+    both = index_t.shape[0] > 0
+    for t in prange(n):
         k = cell_point[t]
-        _visit(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, exclude_same_rod, k, index, start[k])
+        xk = position[k, 0]
+        yk = position[k, 1]
+        zk = position[k, 2]
+        half = k >> 1 if exclude_same_rod else -1  # no point index is negative
+        c = start[k]
+        c_t = start_t[t] if both else 0
+        zr = _row_range(position, lo, h, g, k, span, 2)
+        for ax in _row_range(position, lo, h, g, k, span, 0):
+            for ay in _row_range(position, lo, h, g, k, span, 1):
+                base = (ax * g[1] + ay) * g[2]
+                for j in range(cell_start[base + zr.start], cell_start[base + zr.stop]):
+                    dx = xk - sx[j]
+                    dy = yk - sy[j]
+                    dz = zk - sz[j]
+                    l = cell_point[j]
+                    if dx * dx + dy * dy + dz * dz < r2max and l != k and (l >> 1) != half:
+                        index[c] = l
+                        c += 1
+                        if both:
+                            index_t[c_t] = j
+                            c_t += 1
+
+
+@njit
+def bounds(position):
+    """Lower and upper corner of the points, (3,) float64 each (one pass; numpy's ``min(axis=0)``
+    on an (n, 3) array took 90 us for 2400 points, a tenth of a tip-list build)."""
+    lo = position[0].copy()
+    hi = position[0].copy()
+    for k in range(1, position.shape[0]):
+        for d in range(3):
+            lo[d] = min(lo[d], position[k, d])
+            hi[d] = max(hi[d], position[k, d])
+    return lo, hi
 
 
 @njit
@@ -139,33 +207,40 @@ def max_displacement2(position, reference):
     return m
 
 
-def cell_grid(position, radius, max_cells):
-    """Grid for :func:`neighbour_rows`: lower corner, cell side >= radius, cells per axis.
+#: cells per search radius along each axis: cells of side ``radius / 2`` and the 5 x 5 x 5 cells
+#: around a point's own (25 contiguous runs) hold 0.58 of the candidates of side ``radius`` and
+#: 3 x 3 x 3 cells; measured on one core, rod-centre lists (radius 6.86) 20-25 % faster to build at
+#: 1200-24 000 rods. Where the grid cap makes the cells larger, fewer are visited (:func:`neighbour_rows`).
+CELLS_PER_RADIUS = 2
 
-    The side grows beyond ``radius`` when the points are spread so far apart that
-    cells of side ``radius`` would number more than ``max_cells`` (a larger side
+
+def cell_grid(position, side, max_cells):
+    """Grid for :func:`neighbour_rows`: lower corner, cell side >= ``side``, cells per axis.
+
+    The side doubles beyond ``side`` while the points are spread so far apart that
+    cells of that side would number more than ``max_cells`` (a larger side
     only makes the search test more pairs, never miss one).
 
     Parameters
     ----------
     position : (n, 3) float64, finite, n >= 1
-    radius : float > 0
+    side : float > 0
     max_cells : int >= 1
 
     Returns
     -------
     lo : (3,) float64, h : float, g : (3,) int64
     """
-    lo = position.min(axis=0)
-    extent = position.max(axis=0) - lo
-    h = float(radius)
-    while np.prod(np.floor(extent / h) + 1.0) > max_cells:
+    lo, hi = bounds(position)
+    extent = [float(hi[d] - lo[d]) for d in range(3)]
+    h = float(side)
+    while math.prod(math.floor(e / h) + 1.0 for e in extent) > max_cells:
         h *= 2.0
-    g = (np.floor(extent / h) + 1.0).astype(np.int64)
+    g = np.array([math.floor(e / h) + 1 for e in extent], dtype=np.int64)
     return lo, h, g
 
 
-def neighbour_rows(position, radius, exclude_same_rod=False, max_cells=None):
+def neighbour_rows(position, radius, exclude_same_rod=False, max_cells=None, cell_order=False):
     """All ordered pairs closer than ``radius`` as compressed rows (order: see the module docstring).
 
     Parameters
@@ -177,7 +252,14 @@ def neighbour_rows(position, radius, exclude_same_rod=False, max_cells=None):
     exclude_same_rod : bool
         Leave out the pairs ``(2 i, 2 i + 1)``, the two tips of one rod.
     max_cells : int, optional
-        Cap on the grid size (default ``max(8 n, 1000)``: memory O(n) however far apart the points are).
+        Cap on the grid size (default ``max(16 n, 1000)``: memory O(n), 128 bytes per point,
+        however far apart the points are). At 8 n the tips of the late Fig. 2 state (2400 tips,
+        radius 0.78) got cells of twice the radius and 8 times the candidates: 1.47 against
+        0.88 ms per build on one core.
+    cell_order : bool
+        Also return the rows numbered by cell, written in the same fill pass (one more store per
+        listed pair; renumbering the list afterwards, reading its rows in random order, took as
+        long as a Yukawa sum at 24 000 rods).
 
     Returns
     -------
@@ -185,24 +267,37 @@ def neighbour_rows(position, radius, exclude_same_rod=False, max_cells=None):
     index : (start[n],) int64
         The neighbours of point k are ``index[start[k]:start[k + 1]]``;
         both directions of every pair are listed.
+    cell_rows : tuple, with ``cell_order`` only
+        ``(order, start_t, index_t)``: the points in cell order (``cell_point``) and the rows
+        renumbered by it: row t is the row of point ``order[t]``, in the same order,
+        each neighbour l written as its place in ``order`` (``t`` with ``order[t] = l``).
     """
     position = np.ascontiguousarray(position, dtype=np.float64)
     n = position.shape[0]
     start = np.zeros(n + 1, dtype=np.int64)
     if n < 2:
-        return start, np.zeros(0, dtype=np.int64)
+        empty = np.zeros(0, dtype=np.int64)
+        if cell_order:
+            return start, empty, (np.arange(n, dtype=np.int64), start.copy(), empty.copy())
+        return start, empty
     if max_cells is None:
-        max_cells = max(8 * n, 1000)
-    lo, h, g = cell_grid(position, radius, max_cells)
+        max_cells = max(16 * n, 1000)
+    radius = float(radius)
+    lo, h, g = cell_grid(position, radius / CELLS_PER_RADIUS, max_cells)
+    span = math.ceil(radius / h)  # cells to search on each side: a pair closer than radius is at most this far apart
     cell_start = np.empty(int(np.prod(g)) + 1, dtype=np.int64)
     cell_point = np.empty(n, dtype=np.int64)
     bin_points(position, lo, h, g, cell_start, cell_point)
-    sorted_position = position[cell_point]
+    sx, sy, sz = (np.ascontiguousarray(position[cell_point, d]) for d in range(3))
     counts = np.empty(n, dtype=np.int64)
-    r2max = float(radius) * float(radius)
+    r2max = radius * radius
     ex = bool(exclude_same_rod)
-    _row_counts(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, ex, counts)
+    _row_counts(position, sx, sy, sz, lo, h, g, span, cell_start, cell_point, r2max, ex, counts)
     np.cumsum(counts, out=start[1:])
     index = np.empty(start[-1], dtype=np.int64)
-    _row_fill(position, sorted_position, lo, h, g, cell_start, cell_point, r2max, ex, start, index)
-    return start, index
+    start_t = np.zeros(n + 1 if cell_order else 1, dtype=np.int64)
+    index_t = np.empty(start[-1] if cell_order else 0, dtype=np.int64)
+    if cell_order:
+        np.cumsum(counts[cell_point], out=start_t[1:])
+    _row_fill(position, sx, sy, sz, lo, h, g, span, cell_start, cell_point, r2max, ex, start, index, start_t, index_t)
+    return (start, index, (cell_point, start_t, index_t)) if cell_order else (start, index)

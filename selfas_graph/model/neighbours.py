@@ -8,6 +8,10 @@ in compressed rows with both directions, the layout the kernels in
 list's two passes; measured at 24 000 rod centres (cut-off plus skin 6.86, 5.0e6
 directed pairs) on one core, 118 ms per build against 465 ms for scipy's k-d tree
 ``query_pairs`` followed by a sort into rows (523 against 2738 ms at 10^5 rods).
+
+A list with ``cell_order`` set (the Yukawa term sets it on the rod-centre list) also keeps its
+rows numbered by cell (:attr:`NeighbourList.sorted_rows`), written by the same build, for a sum
+that reads its inputs from copies in cell order (``kernels/pairs.py::yukawa_centres_sorted``).
 """
 
 from __future__ import annotations
@@ -28,15 +32,20 @@ class NeighbourList:
         Extra range; trades rebuild frequency against list length.
     exclude_same_rod : bool
         Drop pairs ``(2 i, 2 i + 1)`` (the two tips of one rod).
+    cell_order : bool
+        Also make :attr:`sorted_rows` at every build (an attribute: a term may set it on a list
+        it is handed).
     """
 
-    def __init__(self, cutoff: float, skin: float, exclude_same_rod: bool = False):
+    def __init__(self, cutoff: float, skin: float, exclude_same_rod: bool = False, cell_order: bool = False):
         self.cutoff = float(cutoff)
         self.skin = float(skin)
         self.exclude_same_rod = exclude_same_rod
         self.start = np.zeros(1, dtype=np.int64)
         self.index = np.zeros(0, dtype=np.int64)
+        self.cell_order = cell_order
         self._pairs = None
+        self._sorted = (np.zeros(0, dtype=np.int64), self.start.copy(), self.index.copy())
         self._reference = None
         self.n_builds = 0
 
@@ -57,6 +66,22 @@ class NeighbourList:
             self._pairs = np.ascontiguousarray(np.stack([k[order], l[order]], axis=1))
         return self._pairs
 
+    @property
+    def sorted_rows(self):
+        """``(order, start, index)``: the points in cell order and the rows renumbered by it
+        (``neighbour_rows(..., cell_order=True)``). Made by every build once :attr:`cell_order` is
+        set, else by building the same list again on first use.
+
+        Row t is the row of point ``order[t]`` in the same order, its neighbours given by their
+        places in ``order``: a kernel that reads copies of its inputs in that order
+        (``centre[order]``) reads each row's neighbours from a few contiguous stretches of memory.
+        """
+        if self._sorted is None:  # built without cell_order: the same build again, with them
+            _, _, self._sorted = neighbour_rows(
+                self._reference, self.cutoff + self.skin, self.exclude_same_rod, cell_order=True
+            )
+        return self._sorted
+
     def update(self, points: np.ndarray) -> bool:
         """Rebuild if needed for ``points`` (n, 3); returns True if rebuilt."""
         ref = self._reference
@@ -75,10 +100,14 @@ class NeighbourList:
         # rather than bin it (its cell is undefined); the run's health check stops the run after
         # this step with a diagnosis
         if n > 1 and np.isfinite(points).all() and np.abs(points).max() < 1e150:
-            self.start, self.index = neighbour_rows(points, self.cutoff + self.skin, self.exclude_same_rod)
+            self.start, self.index, *cell_rows = neighbour_rows(
+                points, self.cutoff + self.skin, self.exclude_same_rod, cell_order=self.cell_order
+            )
+            self._sorted = cell_rows[0] if cell_rows else None
         else:
             self.start = np.zeros(n + 1, dtype=np.int64)
             self.index = np.zeros(0, dtype=np.int64)
+            self._sorted = (np.arange(n, dtype=np.int64), self.start.copy(), self.index.copy())
         self._pairs = None
         self._reference = points.copy()
         self.n_builds += 1

@@ -1,0 +1,33 @@
+"""Smoke test of tools/bench_neighbours.py on a tiny scaled Fig. 2 scene (a few seconds).
+
+The timings in this process (no child per instruction set); the numbers are measurements, not
+checked here, only that every kernel was timed the asked number of times, that the lists are
+not empty and that the machine and the numba target are reported.
+"""
+
+import argparse
+import importlib.util
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _tool():
+    sys.path.insert(0, str(ROOT / "tools"))  # the tool imports bench_step, bench_kernels and bench_peer beside it
+    spec = importlib.util.spec_from_file_location(
+        "_selfas_tools_bench_neighbours", ROOT / "tools" / "bench_neighbours.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_every_kernel_timed_with_machine_and_target():
+    tool = _tool()
+    got = tool.run(argparse.Namespace(rods=[60], repeat=2, checkpoint=None, before=None))
+    row = got["rows"][0]
+    for kernel in tool.KERNELS:
+        assert len(row[kernel]) == 2 and all(t >= 0 for t in row[kernel])
+    assert row["yukawa_pairs"] > 0 and row["tip_radius"] > 0
+    assert got["machine"]["cpu_name"] and "compiles for" in got["line"]
