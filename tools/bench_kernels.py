@@ -27,6 +27,12 @@ On the tips of the Fig. 2 scene scaled to each size (as tools/bench_step.py), it
 ``--kernels`` times only the named kernels (default: all); ``--active-rods N ...`` sets the
 number of current-carrying rods for each ``--rods`` size instead of ``--active-fraction``.
 
+``--mixed-error CHECKPOINT`` instead prints the error of the mixed current kernels against the
+float64 ones on the state of a checkpoint (read only): median, p99 and max of the per-row
+relative difference of the term-9 force, of the rod currents' field at the quadrature points and
+of the term-10 force (with every other field source), and the largest difference over the
+largest force.
+
 ``--before REF`` also times the kernels of the git revision REF (its ``selfas_graph/kernels``
 copied into a temporary package), interleaved with today's in the same process, and prints
 both and their ratio (before / after, median of the per-repeat ratios): the fair comparison on
@@ -272,6 +278,51 @@ def run(args):
     }
 
 
+def mixed_error(checkpoint):
+    """Rows (quantity, median, p99, max, max diff / max force) of the mixed current kernels
+    against the float64 ones on the state of ``checkpoint`` (see the module docstring)."""
+    from bench_profile import load_state
+
+    from selfas_graph.kernels import currents as kc
+
+    sim, origin = load_state(types.SimpleNamespace(checkpoint=checkpoint, extra=[], scenario=None, settle=0))
+    ff = sim.force_field
+    st = sim.state
+    ff._bind(st.position, st.velocity)
+    rc = ff.rod_currents
+    act, cur, w, pos = rc.active_rod, rc.current, rc.w, st.position
+    if not len(act):
+        raise SystemExit(f"{checkpoint}: no rod carries current in this state")
+
+    def row(name, a, b):
+        na = np.linalg.norm(a, axis=1)
+        e = np.linalg.norm(a - b, axis=1)[na > 0] / na[na > 0]
+        return (name, np.median(e), np.percentile(e, 99), e.max(), np.linalg.norm(a - b, axis=1).max() / na.max())
+
+    rows = []
+    f64, f32 = np.zeros_like(pos), np.zeros_like(pos)
+    kc.current_force_on_tips(pos, st.tip_charge, act, cur, w, 0, len(pos), f64)
+    kc.current_force_on_tips_mixed(pos, st.tip_charge, act, cur, w, 0, len(pos), f32)
+    rows.append(row("term 9 force on the tips", f64, f32))
+    t, wt = kc.gauss_legendre_01(sim.params.forces.current_lorentz.quadrature_points)
+    pts = np.empty((len(act) * len(t), 3))
+    kc.quadrature_points(pos, act, t, pts)
+    excl = np.repeat(act, len(t))
+    b64, b32 = np.empty_like(pts), np.empty_like(pts)
+    kc.rod_current_field(pts, excl, pos, act, cur, w, b64)
+    kc.rod_current_field_mixed(pts, excl, pos, act, cur, w, b32)
+    rows.append(row("rod currents' field at the quadrature points", b64, b32))
+    other, extra = np.zeros_like(pts), np.empty_like(pts)
+    for source in ff.field_sources:
+        source.field_at(pts, extra)
+        other += extra
+    l64, l32 = np.zeros_like(pos), np.zeros_like(pos)
+    kc.lorentz_force_on_rods(pos, act, cur, b64 + other, t, wt, l64)
+    kc.lorentz_force_on_rods(pos, act, cur, b32 + other, t, wt, l32)
+    rows.append(row("term 10 force (all fields)", l64, l32))
+    return origin, len(act), st.n_rods, rows
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rods", type=int, nargs="+", default=[1200, 6000, 24000])
@@ -294,9 +345,21 @@ def main(argv=None):
     )
     ap.add_argument("--kernels", nargs="+", help="time only these kernels (names as in the table)")
     ap.add_argument("--active-rods", type=int, nargs="+", help="current-carrying rods for each --rods size")
+    ap.add_argument("--mixed-error", metavar="CHECKPOINT", help="error of the mixed current kernels on this state")
     ap.add_argument("--json", help="write all results to this file")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.mixed_error:
+        from bench_peer import machine_line
+
+        origin, n_active, n_rods, rows = mixed_error(args.mixed_error)
+        print(machine_line())
+        print(f"{origin}; {n_active} of {n_rods} rods carrying current; mixed against float64, per row relative")
+        print("| quantity | median | p99 | max | max difference / largest force |")
+        print("|---|---|---|---|---|")
+        for name, *v in rows:
+            print(f"| {name} | " + " | ".join(f"{x:.1e}" for x in v) + " |")
+        return
     if args.child:
         print(json.dumps(run(args)))
         return
