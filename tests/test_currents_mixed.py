@@ -215,3 +215,16 @@ def test_precision_knob_picks_the_mixed_kernel(key):
     raw["forces"][key]["precision"] = "float32"
     with pytest.raises(ValueError, match=f"forces.{key}.precision"):
         parameters_from_dict(raw)
+
+
+def test_mixed_nan_position_passes_through_to_the_field():
+    """As in float64 (tests/test_kernels_currents.py): a NaN target or source coordinate (a run
+    gone wrong) gives a NaN field, not a silent zero, so that the health check sees it."""
+    position = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [np.nan, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    charge = np.array([1.0, -1.0, 1.0, -1.0])
+    out = np.zeros((4, 3))
+    current_force_on_tips_mixed(position, charge, np.array([0], dtype=np.int64), np.array([2.0, 0.0]), 0.03, 0, 4, out)
+    assert np.isnan(out[2]).any() and np.all(np.isfinite(out[3]))
+    out = np.zeros((4, 3))
+    current_force_on_tips_mixed(position, charge, np.array([1], dtype=np.int64), np.array([0.0, 2.0]), 0.03, 0, 4, out)
+    assert np.isnan(out[0]).any()
