@@ -564,7 +564,7 @@ def rod_current_field_mixed(point, exclude_rod, position, active_rod, current, w
     """:func:`rod_current_field` with the segment law in float32 (the mixed precision above).
 
     Same arguments and result, to float32 rounding of each segment's field (about 1e-7 of
-    it); about twice as fast on AVX2 (docs/performance.md 'Rod-current kernels on AVX2').
+    it); 1.6-1.9 times as fast on AVX2 (docs/performance.md 'Rod-current kernels on AVX2').
     """
     seg, rod, origin = _segments_mixed(position, active_rod, current, wire_radius)
     for p in prange(point.shape[0]):

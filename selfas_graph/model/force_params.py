@@ -140,7 +140,7 @@ class Electrodes:
 _CURRENT_PRECISION_HELP = (
     "arithmetic of the rod currents' field {where}: float64, or mixed (the segment law in float32 "
     "with coordinates as float32 hi + lo pairs relative to the active rods' centre, float64 sums; "
-    "about 1.5-1.7 times faster on AVX2, differs from float64 by a median of 2e-7 of the field, "
+    "about 1.6-1.9 times faster on AVX2, differs from float64 by a median of 1e-7 of a force, at most 2e-5, "
     "docs/performance.md)"
 )
 
