@@ -26,7 +26,8 @@ def test_every_kernel_timed_with_machine_and_target():
     args = argparse.Namespace(rods=[60], repeat=2, threads=1, direct_max=100, cpu_time=True)
     got = tool.run(args)
     row = got["rows"][0]
-    for kernel in ("direct", "plain", "tree build", "tree eval", "yukawa", "current tips", "current field"):
+    kernels = ("direct", "plain", "tree build", "tree eval", "yukawa", "current tips", "current field")
+    for kernel in kernels + ("current tips mixed", "current field mixed"):
         assert len(row[kernel]) == 2 and all(t >= 0 for t in row[kernel])
     assert row["yukawa_pairs"] > 0 and row["active_rods"] > 0
     assert got["machine"]["cpu_name"] and "compiles for" in got["line"]

@@ -18,6 +18,21 @@ On the tips of the Fig. 2 scene scaled to each size (as tools/bench_step.py), it
   with ``--active-fraction`` of the rods (default 0.72, the Fig. 2 run at t = 340) carrying
   random currents.
 
+- ``current tips mixed`` and ``current field mixed``: the same two sums with the segment law in
+  float32 (``precision = "mixed"`` of ``[forces.current_field]`` and ``[forces.current_lorentz]``);
+  with ``--before`` they are interleaved with the float64 kernels of the working tree (their
+  "before" column), so that the speed-up is float64 / mixed. The current kernels also print ns
+  per target-segment pair.
+
+``--kernels`` times only the named kernels (default: all); ``--active-rods N ...`` sets the
+number of current-carrying rods for each ``--rods`` size instead of ``--active-fraction``.
+
+``--mixed-error CHECKPOINT`` instead prints the error of the mixed current kernels against the
+float64 ones on the state of a checkpoint (read only): median, p99 and max of the per-row
+relative difference of the term-9 force, of the rod currents' field at the quadrature points and
+of the term-10 force (with every other field source), and the largest difference over the
+largest force.
+
 ``--before REF`` also times the kernels of the git revision REF (its ``selfas_graph/kernels``
 copied into a temporary package), interleaved with today's in the same process, and prints
 both and their ratio (before / after, median of the per-repeat ratios): the fair comparison on
@@ -167,7 +182,13 @@ def run(args):
         c = ff.centre()
         fy = np.empty((n, 3))
         rng = np.random.default_rng(7)
-        current = np.where(rng.random(n) < fraction, rng.uniform(-3.0, 3.0, n), 0.0)
+        n_active = getattr(args, "active_rods", None)
+        if n_active:
+            current = np.zeros(n)
+            pick = rng.choice(n, size=min(n, n_active[args.rods.index(n)]), replace=False)
+            current[pick] = rng.uniform(-3.0, 3.0, len(pick))
+        else:
+            current = np.where(rng.random(n) < fraction, rng.uniform(-3.0, 3.0, n), 0.0)
         active = np.flatnonzero(current != 0.0).astype(np.int64)
         gl_t, _ = currents.gauss_legendre_01(4)
         pts = np.empty((len(active) * len(gl_t), 3))
@@ -215,15 +236,35 @@ def run(args):
                 rep_big,
                 lambda K: lambda: K.currents.rod_current_field(pts, excl, st.position, active, current, w, fb),
             ),
+            (
+                "current tips mixed",
+                direct,
+                rep_big,
+                lambda K: lambda: K.currents.current_force_on_tips_mixed(st.position, q, active, current, w, 0, ntips, f),
+            ),
+            (
+                "current field mixed",
+                direct,
+                rep_big,
+                lambda K: lambda: K.currents.rod_current_field_mixed(pts, excl, st.position, active, current, w, fb),
+            ),
         ]
+        chosen = getattr(args, "kernels", None)
         for name, on, rep, make in jobs:
-            if not on:
+            if not on or (chosen and name not in chosen):
                 continue
-            if before is None:
+            if name.endswith(" mixed"):
+                # the peer of a mixed kernel is the float64 kernel of the working tree
+                peer = jobs[[j[0] for j in jobs].index(name[: -len(" mixed")])][3](now)
+                if before is None:
+                    res[name] = timed(make(now), rep, clock)
+                else:
+                    res[name + " before"], res[name] = timed_pair(peer, make(now), rep, clock)
+            elif before is None:
                 res[name] = timed(make(now), rep, clock)
             else:
                 res[name + " before"], res[name] = timed_pair(make(before), make(now), rep, clock)
-        if direct:
+        if direct and (not chosen or "plain" in chosen):
             res["plain"] = timed(lambda: plain(x, y, z, q, f), rep_big, clock)
         res["yukawa_pairs"] = int(nl.start[-1])
         res["active_rods"] = int(len(active))
@@ -235,6 +276,51 @@ def run(args):
         "rows": out_rows,
         "before": before_ref,
     }
+
+
+def mixed_error(checkpoint):
+    """Rows (quantity, median, p99, max, max diff / max force) of the mixed current kernels
+    against the float64 ones on the state of ``checkpoint`` (see the module docstring)."""
+    from bench_profile import load_state
+
+    from selfas_graph.kernels import currents as kc
+
+    sim, origin = load_state(types.SimpleNamespace(checkpoint=checkpoint, extra=[], scenario=None, settle=0))
+    ff = sim.force_field
+    st = sim.state
+    ff._bind(st.position, st.velocity)
+    rc = ff.rod_currents
+    act, cur, w, pos = rc.active_rod, rc.current, rc.w, st.position
+    if not len(act):
+        raise SystemExit(f"{checkpoint}: no rod carries current in this state")
+
+    def row(name, a, b):
+        na = np.linalg.norm(a, axis=1)
+        e = np.linalg.norm(a - b, axis=1)[na > 0] / na[na > 0]
+        return (name, np.median(e), np.percentile(e, 99), e.max(), np.linalg.norm(a - b, axis=1).max() / na.max())
+
+    rows = []
+    f64, f32 = np.zeros_like(pos), np.zeros_like(pos)
+    kc.current_force_on_tips(pos, st.tip_charge, act, cur, w, 0, len(pos), f64)
+    kc.current_force_on_tips_mixed(pos, st.tip_charge, act, cur, w, 0, len(pos), f32)
+    rows.append(row("term 9 force on the tips", f64, f32))
+    t, wt = kc.gauss_legendre_01(sim.params.forces.current_lorentz.quadrature_points)
+    pts = np.empty((len(act) * len(t), 3))
+    kc.quadrature_points(pos, act, t, pts)
+    excl = np.repeat(act, len(t))
+    b64, b32 = np.empty_like(pts), np.empty_like(pts)
+    kc.rod_current_field(pts, excl, pos, act, cur, w, b64)
+    kc.rod_current_field_mixed(pts, excl, pos, act, cur, w, b32)
+    rows.append(row("rod currents' field at the quadrature points", b64, b32))
+    other, extra = np.zeros_like(pts), np.empty_like(pts)
+    for source in ff.field_sources:
+        source.field_at(pts, extra)
+        other += extra
+    l64, l32 = np.zeros_like(pos), np.zeros_like(pos)
+    kc.lorentz_force_on_rods(pos, act, cur, b64 + other, t, wt, l64)
+    kc.lorentz_force_on_rods(pos, act, cur, b32 + other, t, wt, l32)
+    rows.append(row("term 10 force (all fields)", l64, l32))
+    return origin, len(act), st.n_rods, rows
 
 
 def main(argv=None):
@@ -257,9 +343,23 @@ def main(argv=None):
         default=0.72,
         help="fraction of the rods carrying current in the current kernels",
     )
+    ap.add_argument("--kernels", nargs="+", help="time only these kernels (names as in the table)")
+    ap.add_argument("--active-rods", type=int, nargs="+", help="current-carrying rods for each --rods size")
+    ap.add_argument("--mixed-error", metavar="CHECKPOINT", help="error of the mixed current kernels on this state")
     ap.add_argument("--json", help="write all results to this file")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.mixed_error:
+        from bench_peer import machine_line
+
+        origin, n_active, n_rods, rows = mixed_error(args.mixed_error)
+        print(machine_line())
+        print(f"{origin}; {n_active} of {n_rods} rods carrying current; mixed against float64, per row relative")
+        print("| quantity | median | p99 | max | max difference / largest force |")
+        print("|---|---|---|---|---|")
+        for name, *v in rows:
+            print(f"| {name} | " + " | ".join(f"{x:.1e}" for x in v) + " |")
+        return
     if args.child:
         print(json.dumps(run(args)))
         return
@@ -286,6 +386,8 @@ def main(argv=None):
         cmd += ["--cpu-time"] if args.cpu_time else []
         cmd += ["--before", args.before] if args.before else []
         cmd += ["--active-fraction", str(args.active_fraction)]
+        cmd += ["--kernels", *args.kernels] if args.kernels else []
+        cmd += ["--active-rods", *map(str, args.active_rods)] if args.active_rods else []
         got = subprocess.run(cmd, env=env, capture_output=True, text=True)
         if got.returncode:
             print(f"{target}: failed, left out of the table:\n{got.stderr}", file=sys.stderr, flush=True)
@@ -299,10 +401,23 @@ def main(argv=None):
         f"\n{'CPU' if args.cpu_time else 'wall'} ms per call on {args.threads} thread(s), median [min-max] of {args.repeat}; "
         "direct and plain also in 1e9 tip pairs/s/thread (median)"
     )
-    kernels = ["direct", "plain", "tree build", "tree eval", "yukawa", "current tips", "current field"]
+    kernels = [
+        "direct",
+        "plain",
+        "tree build",
+        "tree eval",
+        "yukawa",
+        "current tips",
+        "current field",
+        "current tips mixed",
+        "current field mixed",
+    ]
     cols = [(t, k) for t in args.targets for k in (("before", "after", "speed-up") if args.before else ("",))]
     if args.before:
-        print(f"before = {args.before}, after = the working tree; speed-up = median of before/after per repeat")
+        print(
+            f"before = {args.before}, after = the working tree; speed-up = median of before/after per repeat; "
+            "for the mixed kernels, before = the float64 kernel of the working tree"
+        )
     print("| rods | kernel | " + " | ".join(f"{t} {k}".strip() for t, k in cols) + " |")
     print("|---|---|" + "---|" * len(cols))
 
@@ -313,6 +428,9 @@ def main(argv=None):
             text += f" ({(2 * n) ** 2 / (np.median(v) * 1e-3) / args.threads / 1e9:.2f}e9)"
         if k == "yukawa":
             text += f" ({np.median(v) * 1e6 / row['yukawa_pairs']:.1f} ns/pair)"
+        if k.startswith("current"):
+            targets = 2 * n if k.startswith("current tips") else 4 * row["active_rods"]
+            text += f" ({np.median(v) * 1e6 / (targets * row['active_rods']):.2f} ns/pair)"
         return text
 
     for i, n in enumerate(args.rods):
@@ -332,7 +450,8 @@ def main(argv=None):
                         cells.append("")
                 else:
                     cells.append(cell(row, k, n, k))
-            print(f"| {n} | {k} | " + " | ".join(cells) + " |")
+            if any(cells):
+                print(f"| {n} | {k} | " + " | ".join(cells) + " |")
 
 
 if __name__ == "__main__":

@@ -15,6 +15,10 @@ import numpy as np
 from ...kernels import currents as kc
 from .base import Term
 
+#: the kernels of each precision (forces.current_field.precision, forces.current_lorentz.precision)
+_FIELD_KERNEL = {"float64": kc.rod_current_field, "mixed": kc.rod_current_field_mixed}
+_TIP_KERNEL = {"float64": kc.current_force_on_tips, "mixed": kc.current_force_on_tips_mixed}
+
 
 class RodCurrents:
     """The rod currents of the last circuit solve, and the source of their field.
@@ -56,15 +60,19 @@ class RodCurrents:
         self.active_rod = np.flatnonzero(current != 0.0).astype(np.int64)
         return True
 
-    def field_at(self, points, out, exclude_rod):
+    def field_at(self, points, out, exclude_rod, precision="float64"):
         """Overwrite ``out`` (m, 3) with the field of the rod currents at ``points`` (m, 3), leaving out
-        at each point the rod ``exclude_rod[p]`` ((m,) int64; -1: none), e.g. the rod the point is on."""
-        kc.rod_current_field(points, exclude_rod, self.position, self.active_rod, self.current, self.w, out)
+        at each point the rod ``exclude_rod[p]`` ((m,) int64; -1: none), e.g. the rod the point is on.
+        ``precision``: ``"float64"``, or ``"mixed"`` (float32 law, float64 sums;
+        :func:`~selfas_graph.kernels.currents.rod_current_field_mixed`)."""
+        kernel = _FIELD_KERNEL[precision]
+        kernel(points, exclude_rod, self.position, self.active_rod, self.current, self.w, out)
 
 
 class CurrentFieldForce(Term):
     """Term 9: q_k times the field of all other rods' currents (``ff.rod_currents``, wire radius D/2).
-    No kernel call while no rod carries current."""
+    No kernel call while no rod carries current. ``forces.current_field.precision`` picks the
+    float64 or the mixed-precision kernel."""
 
     name = "current_field"
     channels = [("current_field", False)]
@@ -73,7 +81,8 @@ class CurrentFieldForce(Term):
     counts_own_calls = True
 
     def __init__(self, p, state):
-        pass
+        self.precision = p.forces.current_field.precision
+        self.kernel = _TIP_KERNEL[self.precision]
 
     def compute(self, ff, out):
         f = out["current_field"]
@@ -81,7 +90,7 @@ class CurrentFieldForce(Term):
         rc = ff.rod_currents
         if len(rc.active_rod):
             lo, hi = ff.blocks.tips
-            kc.current_force_on_tips(ff.position, ff.tip_charge, rc.active_rod, rc.current, rc.w, lo, hi, f)
+            self.kernel(ff.position, ff.tip_charge, rc.active_rod, rc.current, rc.w, lo, hi, f)
             ff.calls[self.name] += 1
 
     def blocked(self, ff):
@@ -95,7 +104,8 @@ class CurrentLorentzForce(Term):
     on (``ff.field_sources``, in term order: the uniform field, the plasma filament, the external
     filament and the dipole's monopoles). Only current-carrying rods are visited, and of them
     only those in the field's block of rods (the field at their points still sums over every
-    current).
+    current). ``forces.current_lorentz.precision`` sets the arithmetic of the rod currents' field
+    at the quadrature points (float64, or mixed); the other sources stay float64.
     """
 
     name = "current_lorentz"
@@ -106,6 +116,7 @@ class CurrentLorentzForce(Term):
 
     def __init__(self, p, state):
         self.t, self.wt = kc.gauss_legendre_01(p.forces.current_lorentz.quadrature_points)
+        self.precision = p.forces.current_lorentz.precision
 
     def compute(self, ff, out):
         f = out["current_lorentz"]
@@ -122,7 +133,7 @@ class CurrentLorentzForce(Term):
         pts = ff.buffer("gl_points", len(mine) * ng)
         kc.quadrature_points(ff.position, mine, self.t, pts)
         field = ff.buffer("gl_field", len(mine) * ng)
-        ff.rod_currents.field_at(pts, field, exclude_rod=np.repeat(mine, ng))
+        ff.rod_currents.field_at(pts, field, exclude_rod=np.repeat(mine, ng), precision=self.precision)
         extra = ff.buffer("gl_extra", len(pts))
         for source in ff.field_sources:
             source.field_at(pts, extra)
