@@ -21,7 +21,8 @@ note: the benchmark needs the state, not its provenance.
 revision REF (exported to a temporary folder), one the working tree, both from the same state,
 take turns of ``--steps`` steps (``--rounds`` turns each, the first of each discarded as warm-up)
 and report their CPU time per step (the thread's with one thread, the process's with more): the two codes see the same machine load, interleaved.
-The ratio is the median of the per-round ratios.
+The ratio is the median of the per-round ratios. The wall clock per step is printed too: it counts the
+machine's other jobs, so it means something only on a quiet machine (the load average is printed).
 
 Prints the CPU model and the instruction set numba compiled for (``NUMBA_CPU_NAME``).
 """
@@ -93,6 +94,17 @@ PARTS = [
 ]
 
 
+def start_threads(threads):
+    """``numba.set_num_threads(threads)``, after importing the package: it sets ``OMP_WAIT_POLICY``,
+    which the OpenMP runtime reads once, when numba starts its threads (started first, the idle
+    workers spin between parallel kernels and double the CPU time per step on 2 threads)."""
+    import numba
+
+    import selfas_graph  # noqa: F401
+
+    numba.set_num_threads(threads)
+
+
 def load_state(args):
     """(Simulation, origin text) from ``--checkpoint`` or ``--scenario`` + ``--settle``."""
     from selfas_graph import Simulation, load_scenario
@@ -162,9 +174,7 @@ def export(ref):
 
 def serve(args):
     """Child of ``--before``: load the state, then run ``--steps`` steps per line read, print the CPU time."""
-    import numba
-
-    numba.set_num_threads(args.threads)
+    start_threads(args.threads)
     sim, origin = load_state(args)
     sim.step(48)
     import selfas_graph
@@ -175,11 +185,10 @@ def serve(args):
     for line in sys.stdin:
         if not line.strip():
             break
-        t0 = clock()
+        t0, w0 = clock(), time.perf_counter()
         sim.step(args.steps)
-        print(
-            json.dumps({"cpu": (clock() - t0) / args.steps, "active": int(len(sim.force_field.active_rod))}), flush=True
-        )
+        cpu, wall = (clock() - t0) / args.steps, (time.perf_counter() - w0) / args.steps
+        print(json.dumps({"cpu": cpu, "wall": wall, "active": int(len(sim.force_field.active_rod))}), flush=True)
 
 
 def compare(args):
@@ -209,6 +218,7 @@ def compare(args):
         procs[name] = subprocess.Popen(base, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
     head = {k: json.loads(p.stdout.readline()) for k, p in procs.items()}
     times = {k: [] for k in procs}
+    walls = {k: [] for k in procs}
     for r in range(args.rounds + 1):
         for name in ("before", "after") if r % 2 == 0 else ("after", "before"):
             p = procs[name]
@@ -217,6 +227,7 @@ def compare(args):
             got = json.loads(p.stdout.readline())
             if r > 0:
                 times[name].append(got["cpu"])
+                walls[name].append(got["wall"])
     for p in procs.values():
         p.stdin.write("\n")
         p.stdin.close()
@@ -232,6 +243,11 @@ def compare(args):
     print(f"after (working tree): {1e3 * np.median(a):.3f} ms/step CPU [{1e3 * a.min():.3f}-{1e3 * a.max():.3f}]")
     r = b / a
     print(f"speed-up before/after: {np.median(r):.3f} [{r.min():.3f}-{r.max():.3f}]")
+    wb, wa = np.array(walls["before"]), np.array(walls["after"])
+    print(
+        f"wall clock per step (counts the machine's other jobs): before {1e3 * np.median(wb):.3f} ms, "
+        f"after {1e3 * np.median(wa):.3f} ms, ratio {np.median(wb / wa):.3f}"
+    )
 
 
 def main(argv=None):
@@ -251,10 +267,9 @@ def main(argv=None):
         return serve(args)
     if args.before:
         return compare(args)
-    import numba
     from bench_peer import machine, machine_line
 
-    numba.set_num_threads(args.threads)
+    start_threads(args.threads)
     sim, origin = load_state(args)
     sim.step(48)  # compiled kernels, warm caches
     t0 = time.thread_time()

@@ -34,12 +34,45 @@ from pathlib import Path
 # next kernel. Measured on the 2-core machine: 7.8 ms per launch of a trivial
 # parallel kernel with the default policy, 10 us with PASSIVE (56 us with
 # numba's workqueue layer). Set before the OpenMP runtime starts; a user's own
-# setting wins.
+# setting wins. The runtime reads it once, when numba starts its threads (the first
+# parallel kernel, or numba.set_num_threads): started before this import, the workers
+# spin (see _warn_if_spinning).
+_USER_WAIT_POLICY = "OMP_WAIT_POLICY" in os.environ
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numba  # noqa: E402
 from numba.core.caching import FunctionCache  # noqa: E402
 from numba.core.dispatcher import Dispatcher  # noqa: E402
+
+
+def _warn_if_spinning():
+    """Warn when numba's OpenMP threads were started before this module set ``OMP_WAIT_POLICY``.
+
+    Then the runtime runs with its default policy: after every parallel kernel the idle workers
+    spin for some milliseconds, on a core the serial part of the step (or another job) needs.
+    Measured in the Fig. 2 scene late in the run on 2 threads (the late-state checkpoint of
+    docs/performance.md): 6.1 ms of CPU and 6.6 ms of wall clock per step with the workers
+    started first, 3.1 and 3.2 ms with them started after this import.
+    """
+    from numba.np.ufunc import parallel
+
+    if _USER_WAIT_POLICY or not getattr(parallel, "_is_initialized", False):
+        return
+    if getattr(parallel, "_threading_layer", None) != "omp":
+        return
+    import warnings
+
+    warnings.warn(
+        "numba's OpenMP threads were started (numba.set_num_threads or a parallel kernel) before "
+        "selfas_graph was imported, without OMP_WAIT_POLICY in the environment: its idle threads "
+        "spin between parallel kernels and take a core. Import selfas_graph first, or set "
+        "OMP_WAIT_POLICY=PASSIVE in the environment.",
+        RuntimeWarning,
+        stacklevel=2,
+    )
+
+
+_warn_if_spinning()
 
 #: cache compiled kernels on disk so that a second CLI run starts in seconds
 _COMMON = dict(cache=True, nogil=True, error_model="numpy")
