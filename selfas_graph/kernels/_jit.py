@@ -142,7 +142,8 @@ PARALLEL_ROWS = 50_000
 
 
 class _RowsKernel:
-    """One O(n) kernel compiled twice, serial and parallel; the length of its first array picks."""
+    """One O(n) kernel compiled twice, serial and parallel; the length of its first array (of the
+    first array of a tuple) picks."""
 
     def __init__(self, fn):
         self.py_func = fn
@@ -155,13 +156,14 @@ class _RowsKernel:
         functools.update_wrapper(self, fn)
 
     def __call__(self, first, *args):
-        kernel = self.parallel if first.shape[0] >= PARALLEL_ROWS else self.serial
+        rows = (first[0] if type(first) is tuple else first).shape[0]
+        kernel = self.parallel if rows >= PARALLEL_ROWS else self.serial
         return kernel(first, *args)
 
 
 def njit_rows(fn):
     """Decorator for O(n) kernels called from Python: serial below :data:`PARALLEL_ROWS` rows of
-    the first argument, parallel (``prange``) from there on. Both builds give the same numbers
+    the first argument (of its first array, if a tuple), parallel (``prange``) from there on. Both builds give the same numbers
     bit for bit, since no loop in these kernels reduces across rows except by max."""
     return _RowsKernel(fn)
 
