@@ -27,6 +27,13 @@ def test_profile_table_of_a_few_steps(capsys):
     assert "kernel calls per 1000 steps:" in out and "ab4_step" in out
 
 
+def test_fused_kernels_table(capsys):
+    tool = _tool()
+    tool.main(["--kernels", "--rounds", "1", "--steps", "10"])
+    out = capsys.readouterr().out
+    assert "| channel sum of 10 channels and 6 powers |" in out and "| extrapolation of 4 held arrays |" in out
+
+
 def test_every_function_falls_in_one_part():
     tool = _tool()
     assert tool.part_of(("/x/selfas_graph/kernels/tips.py", 1, "tip_tip_direct")).startswith("tip-tip far")
