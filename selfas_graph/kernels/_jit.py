@@ -163,8 +163,9 @@ class _RowsKernel:
 
 def njit_rows(fn):
     """Decorator for O(n) kernels called from Python: serial below :data:`PARALLEL_ROWS` rows of
-    the first argument (of its first array, if a tuple), parallel (``prange``) from there on. Both builds give the same numbers
-    bit for bit, since no loop in these kernels reduces across rows except by max."""
+    the first argument (of its first array, if a tuple), parallel (``prange``) from there on. Both
+    builds give the same numbers bit for bit, since no loop in these kernels reduces across rows
+    except by max (and by counting NaN)."""
     return _RowsKernel(fn)
 
 
