@@ -600,3 +600,30 @@ def electrode_brake(position, velocity, z_lo, z_hi, rstar, k_br, dt):
 def uniform_force(charge, B):
     """Term 4, q_k B, tip by tip."""
     return np.array([[float(q) * float(b) for b in B] for q in charge]).reshape(len(charge), 3)
+
+
+def dot(a, b):
+    """``sum_i a_i b_i`` over all elements, correctly rounded (math.fsum of the products)."""
+    return math.fsum(float(p) * float(q) for p, q in zip(np.ravel(a), np.ravel(b)))
+
+
+def ab4_step(x, v, hist_v, hist_a, slots, dt, length=None):
+    """Adams-Bashforth 4 on positions and velocities, element by element, and the largest bond-length
+    error of the new positions. Returns (x, v, error)."""
+    x, v = np.array(x, dtype=float), np.array(v, dtype=float)
+    c = dt / 24.0
+    for y, hist in ((x, hist_v), (v, hist_a)):
+        d0, d1, d2, d3 = (hist[s] for s in slots)
+        for k in range(len(y)):
+            for j in range(3):
+                y[k, j] = y[k, j] + c * (55.0 * d0[k, j] - 59.0 * d1[k, j] + 37.0 * d2[k, j] - 9.0 * d3[k, j])
+    return x, v, bond_length_error(x, length)
+
+
+def bond_length_error(x, length=None):
+    """Largest ``| |x_a - x_b| - l_i |`` over the rods."""
+    worst = 0.0
+    for i in range(len(x) // 2):
+        ell = 1.0 if length is None else float(length[i])
+        worst = max(worst, abs(math.sqrt(sum(float(r) ** 2 for r in x[2 * i] - x[2 * i + 1])) - ell))
+    return worst

@@ -24,7 +24,14 @@ def test_profile_table_of_a_few_steps(capsys):
     rows = [line for line in out.splitlines() if line.startswith("| ") and "ms/step" not in line]
     shares = [float(line.split("|")[3].strip().rstrip(" %")) for line in rows[:-1]]
     assert abs(sum(shares) - 100.0) < 1.0  # each share is rounded to 0.1 %
-    assert "kernel calls per 1000 steps:" in out and "ab4_update" in out
+    assert "kernel calls per 1000 steps:" in out and "ab4_step" in out
+
+
+def test_fused_kernels_table(capsys):
+    tool = _tool()
+    tool.main(["--kernels", "--rounds", "1", "--steps", "10"])
+    out = capsys.readouterr().out
+    assert "| channel sum of 10 channels and 6 powers |" in out and "| extrapolation of 4 held arrays |" in out
 
 
 def test_every_function_falls_in_one_part():

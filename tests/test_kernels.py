@@ -228,6 +228,27 @@ def _rows_kernel_cases(rng):
         (ki.axpy, lambda: (x, v, 0.1, np.zeros((n, 3)))),
         (ki.channel_sum, lambda: (np.zeros((n, 3)), np.stack([x, v, 2 * x]))),
         (ki.extrapolate, lambda: (np.zeros((n, 3)), v, x, 7.0)),
+        (
+            ki.ab4_step,
+            lambda: (
+                x.copy(),
+                v.copy(),
+                np.stack([v, x, 2 * v, 3 * x]),
+                np.stack([x, v, -x, 2 * v]),
+                np.array([2, 1, 0, 3]),
+                1e-3,
+                np.zeros(0),
+            ),
+        ),
+        (
+            ki.channel_sum_power,
+            lambda: (np.zeros((n, 3)), np.stack([x, v, 2 * x]), v, np.array([0, 2]), np.zeros(2)),
+        ),
+        (
+            ki.extrapolate_all,
+            lambda: ((np.zeros((n, 3)), x.copy()), np.stack([v, x]), np.stack([x, v]), np.array([7.0, np.nan])),
+        ),
+        (kr.constrain_bonds_checked, lambda: (x.copy(), v.copy(), True, True, np.zeros(0))),
         (kr.bond_acceleration, lambda: (v, x, x + v, True, np.zeros((n, 3)))),
         (kr.bond_length_error, lambda: (x, np.zeros(0))),
         (kr.constrain_bonds, lambda: (x.copy(), v.copy(), True, True, np.zeros(0))),
@@ -272,8 +293,9 @@ def test_rows_kernels_serial_and_parallel_builds_agree_bit_for_bit(rng):
         rb = kernel.parallel(*b)
         assert ra == rb, kernel.__name__
         for u, w in zip(a, b):
-            if isinstance(u, np.ndarray):
-                np.testing.assert_array_equal(u, w, err_msg=kernel.__name__)
+            for p, q in zip(*((u, w) if isinstance(u, tuple) else ((u,), (w,)))):
+                if isinstance(p, np.ndarray):
+                    np.testing.assert_array_equal(p, q, err_msg=kernel.__name__)
 
 
 def test_kernel_sources_digest_sees_every_kernel_module(tmp_path):

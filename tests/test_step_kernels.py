@@ -1,6 +1,8 @@
 """The kernels that replace the per-step numpy glue: each against its slow reference (tests/reference.py)
 and, bit for bit, against the numpy code it replaced (a run's results must not change by a bit)."""
 
+import platform
+
 import numpy as np
 import pytest
 
@@ -10,6 +12,7 @@ from selfas_graph import load_scenario
 from selfas_graph.kernels import fields as kf
 from selfas_graph.kernels import integrate as ki
 from selfas_graph.kernels import pairs as kp
+from selfas_graph.kernels import rigid as kr
 from selfas_graph.model.neighbours import NeighbourList
 from selfas_graph.model.simulation import Simulation
 from selfas_graph.model.terms.base import kinetic
@@ -176,3 +179,117 @@ def test_uniform_force_is_the_reference_and_the_numpy_broadcast(rng):
     old = np.empty((301, 3))
     np.multiply(q[:, None], B[None, :], out=old)  # the numpy code it replaced
     same_bits(out, old)
+
+
+# ----------------------------------------------------------------------------- fewer calls per step
+def test_dot_is_numpys_einsum_bit_for_bit(rng):
+    """The sum of the powers and kinetic energies: as np.einsum("ij,ij->") sums them on x86-64, for every
+    length (blocks of eight elements and each tail), scale and sign, and the reference to round-off."""
+    dot = ki.dot_as_numpy
+    for n in list(range(0, 20)) + [333, 2400]:
+        for _ in range(5):
+            a = rng.normal(size=(n, 3)) * 10.0 ** rng.uniform(-6, 6, size=(n, 1))
+            b = rng.normal(size=(n, 3))
+            b[::4] = -0.0
+            got = dot(a.reshape(-1), b.reshape(-1), 3 * n)
+            if platform.machine() in ("x86_64", "AMD64"):
+                same_bits(got, np.einsum("ij,ij->", a, b))
+            scale = float(np.abs(a * b).sum())
+            assert abs(got - ref.dot(a, b)) <= 1e-13 * scale  # 3n additions in another order: n eps of the sum
+    a = rng.normal(size=(50, 3))
+    for m in (0, 1, 7, 33):  # the first m rows of a buffer, as the electrode brake sums them
+        if platform.machine() in ("x86_64", "AMD64"):
+            same_bits(dot(a.reshape(-1), a.reshape(-1), 3 * m), np.einsum("ij,ij->", a[:m], a[:m]))
+
+
+def test_channel_sum_power_is_the_sum_and_the_einsum_loop_bit_for_bit(rng):
+    """The force field's evaluation: channel_sum, then the power of each non-conservative channel."""
+    for n_ch, powered in ((11, [1, 2, 4, 7, 9, 10]), (3, [0]), (2, [])):
+        c = channels(rng, n_ch=max(n_ch, 8))[:n_ch].copy()
+        v = rng.normal(size=(500, 3))
+        total_old = np.full((500, 3), np.nan)
+        ki.channel_sum(total_old, c)
+        power_old = np.array([np.einsum("ij,ij->", c[j], v) for j in powered])  # the numpy code it replaced
+        total, power = np.full((500, 3), np.nan), np.full(len(powered), np.nan)
+        ki.channel_sum_power(total, c, v, np.array(powered, dtype=np.int64), power)
+        same_bits(total, total_old)
+        if platform.machine() in ("x86_64", "AMD64"):
+            same_bits(power, power_old)
+        for j, p in zip(powered, power):
+            assert abs(p - ref.dot(c[j], v)) <= 1e-13 * float(np.abs(c[j] * v).sum())  # see the test above
+
+
+def test_extrapolate_all_is_one_extrapolate_per_array(rng):
+    held = [rng.normal(size=(400, 3)) for _ in range(4)]
+    rate = rng.normal(size=(4, 400, 3)) * 1e-3
+    base = rng.normal(size=(4, 400, 3)) * 1e3
+    steps = np.array([3.0, np.nan, 16.0, 0.0])  # NaN: left as it is
+    old = [h.copy() for h in held]
+    for j, s in enumerate(steps):
+        if not np.isnan(s):
+            ki.extrapolate(old[j], rate[j], base[j], s)
+    new = tuple(h.copy() for h in held)
+    ki.extrapolate_all(new, rate, base, steps)
+    for j in range(4):
+        same_bits(new[j], old[j])
+        if not np.isnan(steps[j]):
+            same_bits(new[j], ref.extrapolate(rate[j], base[j], steps[j]))
+    same_bits(new[1], held[1])
+
+
+@pytest.mark.parametrize("unit", [True, False])
+def test_ab4_step_is_the_two_updates_and_the_bond_check(rng, unit):
+    s = random_rods(200, rng)
+    length = np.zeros(0) if unit else rng.uniform(0.5, 2.0, size=200)
+    hist_v, hist_a = rng.normal(size=(4, 400, 3)), rng.normal(size=(4, 400, 3)) * 10.0
+    slots = np.array([3, 2, 1, 0], dtype=np.int64)
+    x_old, v_old = s.position.copy(), s.velocity.copy()
+    ki.ab4_update(x_old, *(hist_v[j] for j in slots), 1e-3, x_old)  # the calls it replaced
+    ki.ab4_update(v_old, *(hist_a[j] for j in slots), 1e-3, v_old)
+    err_old = kr.bond_length_error(x_old, length)
+    x, v = s.position.copy(), s.velocity.copy()
+    err = ki.ab4_step(x, v, hist_v, hist_a, slots, 1e-3, length)
+    same_bits(x, x_old)
+    same_bits(v, v_old)
+    same_bits(err, err_old)
+    x_ref, v_ref, err_ref = ref.ab4_step(s.position, s.velocity, hist_v, hist_a, slots, 1e-3, None if unit else length)
+    same_bits(x, x_ref)  # the same arithmetic, element by element, in Python floats
+    same_bits(v, v_ref)
+    assert err == pytest.approx(err_ref, rel=1e-12, abs=1e-15)  # a square root of a sum in another order
+
+
+@pytest.mark.parametrize("project", [True, False])
+@pytest.mark.parametrize("correct", [True, False])
+@pytest.mark.parametrize("unit", [True, False])
+def test_constrain_bonds_checked_is_the_constraint_and_both_checks(rng, project, correct, unit):
+    s = random_rods(200, rng)
+    length = np.zeros(0) if unit else rng.uniform(0.5, 2.0, size=200)
+    x0 = s.position + 1e-4 * rng.normal(size=s.position.shape)  # bonds off by a step's error
+    v0 = rng.normal(size=x0.shape)
+    x_old, v_old = x0.copy(), v0.copy()
+    err_old = kr.bond_length_error(x_old, length)
+    if project or correct:  # the calls it replaced (the integrator skipped the constraint with neither)
+        kr.constrain_bonds(x_old, v_old, project, correct, length)
+        err_old = kr.bond_length_error(x_old, length) if project else err_old
+    vmax_old = float(np.abs(v_old).max(initial=0.0))  # the health check's
+    x, v = x0.copy(), v0.copy()
+    err, vmax = kr.constrain_bonds_checked(x, v, project, correct, length)
+    same_bits(x, x_old)
+    same_bits(v, v_old)
+    same_bits(err, err_old)
+    same_bits(vmax, vmax_old)
+    x_ref, v_ref = ref.constrain_bonds(x0, v0, project, correct, None if unit else length)
+    np.testing.assert_allclose(x, x_ref, rtol=0, atol=1e-14)  # the projection about the centre, computed otherwise
+    np.testing.assert_allclose(v, v_ref, rtol=0, atol=1e-13)
+    assert err == pytest.approx(ref.bond_length_error(x_ref, None if unit else length), abs=1e-14)
+    assert vmax == pytest.approx(float(np.abs(v_ref).max()), rel=1e-13)
+
+
+def test_constrain_bonds_checked_reports_nan_and_inf_as_numpy_does(rng):
+    s = random_rods(20, rng)
+    for bad in (np.nan, np.inf, -np.inf):
+        v = rng.normal(size=s.position.shape)
+        v[7, 1] = bad
+        _, vmax = kr.constrain_bonds_checked(s.position.copy(), v, False, False, np.zeros(0))
+        same_bits(vmax, np.abs(v).max(initial=0.0))
+    assert kr.constrain_bonds_checked(np.zeros((0, 3)), np.zeros((0, 3)), True, True, np.zeros(0)) == (0.0, 0.0)

@@ -1,6 +1,7 @@
 """Where a step goes: the CPU time of a run's steps, by part, from a checkpoint or a fresh scene.
 
 Usage: python tools/bench_profile.py --checkpoint RUN.checkpoint.h5 [--steps 2000] [--threads 1]
+       python tools/bench_profile.py --kernels [--rounds 8] [--steps 3000]
        python tools/bench_profile.py --scenario scenarios/fig2.toml --settle 2000 [--steps 2000]
        python tools/bench_profile.py --checkpoint RUN.checkpoint.h5 --before REF [--rounds 8] [--steps 250]
 
@@ -21,7 +22,12 @@ note: the benchmark needs the state, not its provenance.
 revision REF (exported to a temporary folder), one the working tree, both from the same state,
 take turns of ``--steps`` steps (``--rounds`` turns each, the first of each discarded as warm-up)
 and report their CPU time per step (the thread's with one thread, the process's with more): the two codes see the same machine load, interleaved.
-The ratio is the median of the per-round ratios.
+The ratio is the median of the per-round ratios. The wall clock per step is printed too: it counts the
+machine's other jobs, so it means something only on a quiet machine (the load average is printed).
+
+``--kernels`` times the every-step kernels that do the work of several calls (``ab4_step``,
+``constrain_bonds_checked``, ``channel_sum_power``, ``extrapolate_all``) against those calls, on
+2400 random tips: ``--rounds 8 --steps 3000`` gives 15 interleaved repeats of 300 calls each.
 
 Prints the CPU model and the instruction set numba compiled for (``NUMBA_CPU_NAME``).
 """
@@ -96,6 +102,17 @@ PARTS = [
 ]
 
 
+def start_threads(threads):
+    """``numba.set_num_threads(threads)``, after importing the package: it sets ``OMP_WAIT_POLICY``,
+    which the OpenMP runtime reads once, when numba starts its threads (started first, the idle
+    workers spin between parallel kernels and double the CPU time per step on 2 threads)."""
+    import numba
+
+    import selfas_graph  # noqa: F401
+
+    numba.set_num_threads(threads)
+
+
 def load_state(args):
     """(Simulation, origin text) from ``--checkpoint`` or ``--scenario`` + ``--settle``."""
     from selfas_graph import Simulation, load_scenario
@@ -165,9 +182,7 @@ def export(ref):
 
 def serve(args):
     """Child of ``--before``: load the state, then run ``--steps`` steps per line read, print the CPU time."""
-    import numba
-
-    numba.set_num_threads(args.threads)
+    start_threads(args.threads)
     sim, origin = load_state(args)
     sim.step(48)
     import selfas_graph
@@ -178,11 +193,10 @@ def serve(args):
     for line in sys.stdin:
         if not line.strip():
             break
-        t0 = clock()
+        t0, w0 = clock(), time.perf_counter()
         sim.step(args.steps)
-        print(
-            json.dumps({"cpu": (clock() - t0) / args.steps, "active": int(len(sim.force_field.active_rod))}), flush=True
-        )
+        cpu, wall = (clock() - t0) / args.steps, (time.perf_counter() - w0) / args.steps
+        print(json.dumps({"cpu": cpu, "wall": wall, "active": int(len(sim.force_field.active_rod))}), flush=True)
 
 
 def compare(args):
@@ -212,6 +226,7 @@ def compare(args):
         procs[name] = subprocess.Popen(base, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
     head = {k: json.loads(p.stdout.readline()) for k, p in procs.items()}
     times = {k: [] for k in procs}
+    walls = {k: [] for k in procs}
     for r in range(args.rounds + 1):
         for name in ("before", "after") if r % 2 == 0 else ("after", "before"):
             p = procs[name]
@@ -220,6 +235,7 @@ def compare(args):
             got = json.loads(p.stdout.readline())
             if r > 0:
                 times[name].append(got["cpu"])
+                walls[name].append(got["wall"])
     for p in procs.values():
         p.stdin.write("\n")
         p.stdin.close()
@@ -235,6 +251,79 @@ def compare(args):
     print(f"after (working tree): {1e3 * np.median(a):.3f} ms/step CPU [{1e3 * a.min():.3f}-{1e3 * a.max():.3f}]")
     r = b / a
     print(f"speed-up before/after: {np.median(r):.3f} [{r.min():.3f}-{r.max():.3f}]")
+    wb, wa = np.array(walls["before"]), np.array(walls["after"])
+    print(
+        f"wall clock per step (counts the machine's other jobs): before {1e3 * np.median(wb):.3f} ms, "
+        f"after {1e3 * np.median(wa):.3f} ms, ratio {np.median(wb / wa):.3f}"
+    )
+
+
+def fused_kernels(tips=2400, calls=300, repeats=15):
+    """The every-step kernels that do the work of several calls, each against the calls it replaced
+    (the same numbers bit for bit, tests/test_step_kernels.py), on random tips, one thread, CPU time,
+    interleaved: {name: (before us, after us, median per-repeat speed-up)}."""
+    from selfas_graph.kernels import integrate as ki
+    from selfas_graph.kernels import rigid as kr
+
+    rng = np.random.default_rng(0)
+    n = tips
+    x0, v0, ell = rng.normal(size=(n, 3)), rng.normal(size=(n, 3)), np.zeros(0)
+    hv, ha, slots = rng.normal(size=(4, n, 3)), rng.normal(size=(4, n, 3)), np.array([3, 2, 1, 0])
+    x, v = x0.copy(), v0.copy()
+    c, total = rng.normal(size=(10, n, 3)), np.zeros((n, 3))
+    powered, power = np.array([1, 2, 4, 7, 8, 9]), np.zeros(6)
+    held = tuple(rng.normal(size=(n, 3)) for _ in range(4))
+    rate, base, steps = rng.normal(size=(4, n, 3)), rng.normal(size=(4, n, 3)), np.full(4, 5.0)
+
+    def step_before():
+        x[:], v[:] = x0, v0
+        ki.ab4_update(x, hv[3], hv[2], hv[1], hv[0], 1e-3, x)
+        ki.ab4_update(v, ha[3], ha[2], ha[1], ha[0], 1e-3, v)
+        kr.bond_length_error(x, ell)
+        kr.constrain_bonds(x, v, True, True, ell)
+        kr.bond_length_error(x, ell)
+        float(np.abs(v).max(initial=0.0))
+
+    def step_after():
+        x[:], v[:] = x0, v0
+        ki.ab4_step(x, v, hv, ha, slots, 1e-3, ell)
+        kr.constrain_bonds_checked(x, v, True, True, ell)
+
+    def sum_before():
+        ki.channel_sum(total, c)
+        for j, k in enumerate(powered):
+            power[j] = np.einsum("ij,ij->", c[k], v)
+
+    def sum_after():
+        ki.channel_sum_power(total, c, v, powered, power)
+
+    def extrapolate_before():
+        for j in range(4):
+            ki.extrapolate(held[j], rate[j], base[j], 5.0)
+
+    def extrapolate_after():
+        ki.extrapolate_all(held, rate, base, steps)
+
+    cases = {
+        f"channel sum of 10 channels and {len(powered)} powers": (sum_before, sum_after),
+        "AB4 update, bond check, constraint, bond check, max abs v": (step_before, step_after),
+        "extrapolation of 4 held arrays": (extrapolate_before, extrapolate_after),
+    }
+    times = {k: ([], []) for k in cases}
+    for pair in cases.values():
+        for f in pair:
+            f()  # compiled
+    for r in range(repeats):
+        for name, pair in cases.items():
+            for i in (0, 1) if r % 2 == 0 else (1, 0):
+                t0 = time.thread_time()
+                for _ in range(calls):
+                    pair[i]()
+                times[name][i].append(1e6 * (time.thread_time() - t0) / calls)
+    return {
+        k: (float(np.median(b)), float(np.median(a)), float(np.median(np.array(b) / np.array(a))))
+        for k, (b, a) in times.items()
+    }
 
 
 def main(argv=None):
@@ -248,16 +337,30 @@ def main(argv=None):
     ap.add_argument("--json", help="write the figures to this file")
     ap.add_argument("--before", help="compare whole steps with the package of this git revision, interleaved")
     ap.add_argument("--rounds", type=int, default=8)
+    ap.add_argument(
+        "--kernels", action="store_true", help="time the fused every-step kernels against the calls they replaced"
+    )
     ap.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.serve:
         return serve(args)
+    if args.kernels:
+        from bench_peer import machine_line
+
+        start_threads(1)
+        figures = fused_kernels(calls=max(1, args.steps // 10), repeats=args.rounds * 2 - 1)
+        print(machine_line())
+        print(f"2400 random tips, 1 numba thread, CPU time, interleaved; load average {os.getloadavg()[0]:.1f}\n")
+        print("| calls | before (us) | after (us) | speed-up |")
+        print("|---|---|---|---|")
+        for name, (b, a, r) in figures.items():
+            print(f"| {name} | {b:.1f} | {a:.1f} | {r:.2f} |")
+        return None
     if args.before:
         return compare(args)
-    import numba
     from bench_peer import machine, machine_line
 
-    numba.set_num_threads(args.threads)
+    start_threads(args.threads)
     sim, origin = load_state(args)
     sim.step(48)  # compiled kernels, warm caches
     t0 = time.thread_time()

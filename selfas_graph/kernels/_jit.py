@@ -34,12 +34,45 @@ from pathlib import Path
 # next kernel. Measured on the 2-core machine: 7.8 ms per launch of a trivial
 # parallel kernel with the default policy, 10 us with PASSIVE (56 us with
 # numba's workqueue layer). Set before the OpenMP runtime starts; a user's own
-# setting wins.
+# setting wins. The runtime reads it once, when numba starts its threads (the first
+# parallel kernel, or numba.set_num_threads): started before this import, the workers
+# spin (see _warn_if_spinning).
+_USER_WAIT_POLICY = "OMP_WAIT_POLICY" in os.environ
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numba  # noqa: E402
 from numba.core.caching import FunctionCache  # noqa: E402
 from numba.core.dispatcher import Dispatcher  # noqa: E402
+
+
+def _warn_if_spinning():
+    """Warn when numba's OpenMP threads were started before this module set ``OMP_WAIT_POLICY``.
+
+    Then the runtime runs with its default policy: after every parallel kernel the idle workers
+    spin for some milliseconds, on a core the serial part of the step (or another job) needs.
+    Measured in the Fig. 2 scene late in the run on 2 threads (the late-state checkpoint of
+    docs/performance.md): 6.1 ms of CPU and 6.6 ms of wall clock per step with the workers
+    started first, 3.1 and 3.2 ms with them started after this import.
+    """
+    from numba.np.ufunc import parallel
+
+    if _USER_WAIT_POLICY or not getattr(parallel, "_is_initialized", False):
+        return
+    if getattr(parallel, "_threading_layer", None) != "omp":
+        return
+    import warnings
+
+    warnings.warn(
+        "numba's OpenMP threads were started (numba.set_num_threads or a parallel kernel) before "
+        "selfas_graph was imported, without OMP_WAIT_POLICY in the environment: its idle threads "
+        "spin between parallel kernels and take a core. Import selfas_graph first, or set "
+        "OMP_WAIT_POLICY=PASSIVE in the environment.",
+        RuntimeWarning,
+        stacklevel=2,
+    )
+
+
+_warn_if_spinning()
 
 #: cache compiled kernels on disk so that a second CLI run starts in seconds
 _COMMON = dict(cache=True, nogil=True, error_model="numpy")
@@ -109,7 +142,8 @@ PARALLEL_ROWS = 50_000
 
 
 class _RowsKernel:
-    """One O(n) kernel compiled twice, serial and parallel; the length of its first array picks."""
+    """One O(n) kernel compiled twice, serial and parallel; the length of its first array (of the
+    first array of a tuple) picks."""
 
     def __init__(self, fn):
         self.py_func = fn
@@ -122,14 +156,16 @@ class _RowsKernel:
         functools.update_wrapper(self, fn)
 
     def __call__(self, first, *args):
-        kernel = self.parallel if first.shape[0] >= PARALLEL_ROWS else self.serial
+        rows = (first[0] if type(first) is tuple else first).shape[0]
+        kernel = self.parallel if rows >= PARALLEL_ROWS else self.serial
         return kernel(first, *args)
 
 
 def njit_rows(fn):
     """Decorator for O(n) kernels called from Python: serial below :data:`PARALLEL_ROWS` rows of
-    the first argument, parallel (``prange``) from there on. Both builds give the same numbers
-    bit for bit, since no loop in these kernels reduces across rows except by max."""
+    the first argument (of its first array, if a tuple), parallel (``prange``) from there on. Both
+    builds give the same numbers bit for bit, since no loop in these kernels reduces across rows
+    except by max (and by counting NaN)."""
     return _RowsKernel(fn)
 
 

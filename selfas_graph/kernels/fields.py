@@ -3,6 +3,7 @@
 import numpy as np
 
 from ._jit import inline, njit, njit_parallel, njit_rows, prange
+from .integrate import dot_as_numpy
 from .laws import wall_potential, wall_push
 
 
@@ -118,8 +119,10 @@ def electrode_brake_exact(position, velocity, z_cathode, z_anode, rstar, decay, 
 
     A tip within r* of ``n`` planes (n = 1 or 2; ``h < r*`` as in :func:`electrode_walls`) has its
     velocity multiplied by ``decay[n]``, which the caller computes once as ``exp(-n k_br dt)``.
-    The velocities of the touched tips, in tip order, are copied to ``before`` and ``after`` (their
-    first m rows) so that the caller sums their kinetic energies as it always did.
+    The work done is the change of the kinetic energy of the touched tips: their velocities, in tip
+    order, are copied to the first m rows of ``before`` and ``after``, whose kinetic energies are
+    summed as numpy's ``0.5 * np.einsum("ij,ij->", u, u)`` of those rows sums them
+    (:func:`~.integrate.dot_as_numpy`), bit for bit.
 
     Parameters
     ----------
@@ -133,8 +136,8 @@ def electrode_brake_exact(position, velocity, z_cathode, z_anode, rstar, decay, 
 
     Returns
     -------
-    int
-        m, the number of tips touching a plane.
+    (float, int)
+        The work done (0.0 when m = 0) and m, the number of tips touching a plane.
     """
     m = 0
     for k in range(position.shape[0]):
@@ -147,4 +150,9 @@ def electrode_brake_exact(position, velocity, z_cathode, z_anode, rstar, decay, 
                 velocity[k, d] = velocity[k, d] * f
                 after[m, d] = velocity[k, d]
             m += 1
-    return m
+    if not m:
+        return 0.0, 0
+    flat_before, flat_after = before.reshape(-1), after.reshape(-1)
+    kinetic_after = 0.5 * dot_as_numpy(flat_after, flat_after, 3 * m)
+    kinetic_before = 0.5 * dot_as_numpy(flat_before, flat_before, 3 * m)
+    return kinetic_after - kinetic_before, m

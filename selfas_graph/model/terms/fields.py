@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...kernels import fields as kf
-from .base import FieldSource, Term, kinetic_of, share_by_mass
+from .base import FieldSource, Term, share_by_mass
 
 
 class AmbientBrakeForce(Term):
@@ -115,10 +115,9 @@ class ElectrodesForce(Term):
             self._decay = np.exp(-self.k * np.array([0.0, 1.0, 2.0]) * dt)
             self._decay_dt = dt
         before, after = ff.buffer("electrode_before", ff.n_tips), ff.buffer("electrode_after", ff.n_tips)
-        m = kf.electrode_brake_exact(ff.position, ff.velocity, *self.z, self.rstar, self._decay, before, after)
-        if not m:
-            return {}
-        return {"electrode_brake": kinetic_of(after[:m]) - kinetic_of(before[:m])}
+        # the work: the change of kinetic energy of the touched tips, as kinetic_of sums it
+        work, m = kf.electrode_brake_exact(ff.position, ff.velocity, *self.z, self.rstar, self._decay, before, after)
+        return {"electrode_brake": work} if m else {}
 
     def energy(self, ff):
         return {"electrodes": kf.electrode_energy(ff.position, self.z[0], self.z[1], self.rstar, self.kappa)}

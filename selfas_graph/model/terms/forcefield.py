@@ -30,7 +30,7 @@ from collections import Counter
 
 import numpy as np
 
-from ...kernels.integrate import channel_sum
+from ...kernels.integrate import channel_sum, channel_sum_power
 from ...parallel import RowBlocks
 from ..neighbours import NeighbourList
 from ..params import Parameters
@@ -84,7 +84,10 @@ class ForceField:
         self.out = {name: self._channel_block[j] for j, (name, _) in enumerate(self.channels)}
         self._split_terms = [t for t in self.terms if type(t).split is not Term.split]
         self._channel_index = {name: j for j, name in enumerate(self.nonconservative)}
-        self._nonconservative_out = [self.out[name] for name in self.nonconservative]
+        #: the rows of the non-conservative channels in the channel block, whose powers evaluate returns
+        self._powered = np.array(
+            [j for j, (_, conservative) in enumerate(self.channels) if not conservative], dtype=np.int64
+        )
         self.total = np.zeros((self.n_tips, 3))
         self.calls = Counter()
         self.timing = timing
@@ -228,10 +231,12 @@ class ForceField:
         if mts is not None:
             mts.complete(self, refreshed, full, step, self.seconds if self.timing else None)
         total = self.total
-        channel_sum(total, self._channel_block)  # ((0 + c_0) + c_1) + ..., in channel order
-        if power is not None:
-            for j, f in enumerate(self._nonconservative_out):
-                power[j] = np.einsum("ij,ij->", f, velocity)
+        # ((0 + c_0) + c_1) + ..., in channel order; with the power of each non-conservative channel
+        # summed as np.einsum("ij,ij->", f, velocity) sums it
+        if power is None:
+            channel_sum(total, self._channel_block)
+        else:
+            channel_sum_power(total, self._channel_block, velocity, self._powered, power)
         return total
 
     def held_forces(self) -> dict:

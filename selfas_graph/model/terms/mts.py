@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from ...kernels.integrate import extrapolate
+from ...kernels.integrate import extrapolate_all
 
 
 class MultipleTimeStepping:
@@ -58,9 +58,15 @@ class MultipleTimeStepping:
         }
         self.extrapolate = ip.slow_extrapolation
         if self.extrapolate:
-            self._base = {k: np.zeros_like(v) for k, v in self._held.items()}
-            self._rate = {k: np.zeros_like(v) for k, v in self._held.items()}
+            # bases and rates as the rows of two blocks, so that one kernel call extrapolates them all
+            keys = list(self._held)
+            self._held_arrays = tuple(self._held[k] for k in keys)
+            self._base_block = np.zeros((len(keys),) + self._held_arrays[0].shape) if keys else None
+            self._rate_block = np.zeros_like(self._base_block) if keys else None
+            self._base = {k: self._base_block[j] for j, k in enumerate(keys)}
+            self._rate = {k: self._rate_block[j] for j, k in enumerate(keys)}
             self._base_step = {k: None for k in self._base}
+            self._steps = np.full(len(keys), np.nan)
 
     def currents_changed(self) -> None:
         """New rod currents: the slow terms that read them are computed at the next evaluation."""
@@ -96,8 +102,11 @@ class MultipleTimeStepping:
         starts at most 2 K apart, else zero (after an RK4 start, or when the currents changed:
         a jump, not a trend). The others are extrapolated to ``step``.
         """
-        for key, arr in self._held.items():
+        steps = self._steps  # steps since each held force's base, NaN: left as it is
+        extrapolated = False
+        for j, (key, arr) in enumerate(self._held.items()):
             base, rate, prev = self._base[key], self._rate[key], self._base_step[key]
+            steps[j] = np.nan
             if key in refreshed:
                 gap = None if (prev is None or step is None or not full) else step - prev
                 if gap is not None and 0 < gap <= 2 * self.slow_every:
@@ -108,7 +117,11 @@ class MultipleTimeStepping:
                 base[:] = arr
                 self._base_step[key] = step if full else None
             elif prev is not None and step is not None:
-                extrapolate(arr, rate, base, float(step - prev))  # rate * (step - prev) + base
+                steps[j] = step - prev
+                extrapolated = True
+        if extrapolated:
+            # rate * (step - prev) + base of each, as np.multiply(rate, steps, out=arr); arr += base
+            extrapolate_all(self._held_arrays, self._rate_block, self._base_block, steps)
 
     def held_forces(self) -> dict:
         """The slow forces held between full evaluations, by name (the slow channels and ``tip_far``,
