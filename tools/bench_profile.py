@@ -63,7 +63,10 @@ PARTS = [
         "Yukawa sum (slow)",
         lambda f: f.endswith(("pairs.py:yukawa_centres", "pairs.py:yukawa_centres_sorted", "pairs.py:yukawa_energy")),
     ),
-    ("current field on tips (term 9, slow)", lambda f: f.endswith("currents.py:current_force_on_tips")),
+    (
+        "current field on tips (term 9, slow)",
+        lambda f: f.endswith(("currents.py:current_force_on_tips", "currents.py:current_force_on_tips_mixed")),
+    ),
     ("current field at Lorentz points (term 10, slow)", lambda f: "kernels/currents.py" in f),
     (
         "split brake (close pairs, exact brake)",
