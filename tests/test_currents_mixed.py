@@ -54,7 +54,9 @@ def magnitude_sum(points, exclude, position, active, current, w):
     for p, x in enumerate(points):
         for j in active:
             if j != exclude[p]:
-                out[p] += np.linalg.norm(reference.segment_field(x, position[2 * j], position[2 * j + 1], current[j], w))
+                out[p] += np.linalg.norm(
+                    reference.segment_field(x, position[2 * j], position[2 * j + 1], current[j], w)
+                )
     return out
 
 
@@ -102,7 +104,9 @@ def one_segment_field(points, A, B, J, w):
     one = np.array([0], dtype=np.int64)
     got = field_mixed(points, -np.ones(len(points), dtype=np.int64), position, one, np.array([J]), w)
     f64 = np.empty_like(got)
-    rod_current_field(np.ascontiguousarray(points), -np.ones(len(points), dtype=np.int64), position, one, np.array([J]), w, f64)
+    rod_current_field(
+        np.ascontiguousarray(points), -np.ones(len(points), dtype=np.int64), position, one, np.array([J]), w, f64
+    )
     ref = np.array([reference.segment_field(x, A, B, J, w) for x in points])
     return got, f64, ref
 

@@ -240,7 +240,9 @@ def run(args):
                 "current tips mixed",
                 direct,
                 rep_big,
-                lambda K: lambda: K.currents.current_force_on_tips_mixed(st.position, q, active, current, w, 0, ntips, f),
+                lambda K: (
+                    lambda: K.currents.current_force_on_tips_mixed(st.position, q, active, current, w, 0, ntips, f)
+                ),
             ),
             (
                 "current field mixed",

@@ -149,9 +149,7 @@ _CURRENT_PRECISION_HELP = (
 class CurrentField:
     """Term 9: the Biot-Savart field of rod currents on tips (wire radius D/2, docs/model.md 'Term 9')."""
 
-    precision: str = spec(
-        "float64", _CURRENT_PRECISION_HELP.format(where="on the tips"), choices=("float64", "mixed")
-    )
+    precision: str = spec("float64", _CURRENT_PRECISION_HELP.format(where="on the tips"), choices=("float64", "mixed"))
 
 
 @dataclass(frozen=True)
