@@ -13,7 +13,10 @@ and the speed-up over the direct sum measured in the same run. Configurations:
 - ``uniform``: rod centres uniform in a cube at the Fig. 2 density (0.19 rods
   per unit volume), random axes, charges uniform in (2/3, 2);
 - ``chains``: the same cube filled with wiggly chains of 20 rods stuck tip to
-  tip (opposite tips r*/2 apart), the aggregated state of a late run.
+  tip (opposite tips r*/2 apart), the aggregated state of a late run;
+- ``fig2``: the initial tips of the Fig. 2 scene scaled to the size as in
+  tools/bench_step.py (the box grows in x and y, a slab between the electrodes),
+  the tips that tools/bench_scaling.py steps.
 
 The direct reference is the full sum up to ``--full-direct`` tips; above that it
 is computed for ``--sample`` random target tips only (``tip_tip_direct_rows``),
@@ -27,6 +30,12 @@ With more than one ``--precision`` the precisions of one setting are timed in
 turns (``--reps`` rounds, CPU time of this process, so run it on one thread:
 ``NUMBA_NUM_THREADS=1``), and a last column gives the evaluation time as
 median [min-max] over the rounds; the ``eval ms`` column stays the minimum.
+
+``--before REF`` adds, in those turns, the evaluation of the kernels of git revision REF
+(``selfas_graph/kernels`` of REF copied into a package of its own, as in
+tools/bench_kernels.py) on the same tree and precision, and prints its CPU ms and the ratio
+before / after (median [min-max] of the per-round ratios): the fair comparison on a loaded
+machine. With ``--before`` only the turns are timed (and the errors of both printed).
 
 The last table gives, per size, the fastest setting with median error <= the
 ``--target`` error, and the crossover size where the tree overtakes the direct
@@ -43,6 +52,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tools"))
 
 from selfas_graph.kernels.tips import tip_tip_direct, tip_tip_direct_rows  # noqa: E402
 from selfas_graph.kernels.tree import PRECISIONS, build_tip_tree, evaluate_tip_tree  # noqa: E402
@@ -78,6 +88,16 @@ def chains(n_rods, rng, length=20):
     centre = centre.reshape(-1, 3)[:n_rods]
     axis = axis.reshape(-1, 3)[:n_rods]
     return tips_of(centre, axis, rng.uniform(2 / 3, 2, n_rods))
+
+
+def fig2(n_rods, rng):
+    from bench_step import scene
+
+    from selfas_graph import Simulation
+
+    sim = Simulation.from_scenario(scene(str(ROOT / "scenarios" / "fig2.toml"), n_rods))
+    p = sim.state.position
+    return (*(np.ascontiguousarray(p[:, d]) for d in range(3)), sim.force_field.tip_charge.copy())
 
 
 def best_of(reps, fn, min_seconds=0.05, max_reps=200):
@@ -149,18 +169,54 @@ def measure(args, tree, theta, precision, out, ref, t_direct, t_build):
     return med, p99, t_eval, t_ref, t_ref / (t_build + t_eval)
 
 
-def turns(reps, tree, theta, precisions, out):
+def turns(reps, tree, theta, precisions, out, old=None):
     """CPU ms of one evaluation per precision, the precisions in turns for ``max(reps, 5)`` rounds
-    (so that a change of load on the shared machine falls on all of them alike)."""
-    cpu = {p: [] for p in precisions}
-    for p in precisions:
-        evaluate_tip_tree(tree, RSTAR, KAPPA, theta, out, precision=p)  # compile outside the timing
+    (so that a change of load on the shared machine falls on all of them alike). With ``old``
+    (``(module, tree)`` of an earlier revision) that revision's evaluation takes its turn beside
+    each precision, keyed ``(precision, "before")``."""
+    runs = [(p, evaluate_tip_tree, tree) for p in precisions]
+    if old is not None:
+        runs += [((p, "before"), old[0].evaluate_tip_tree, old[1]) for p in precisions]
+    cpu = {key: [] for key, _, _ in runs}
+    for key, fn, t in runs:
+        fn(t, RSTAR, KAPPA, theta, out, precision=key if isinstance(key, str) else key[0])  # compile
     for _ in range(max(reps, 5)):
-        for p in precisions:
+        for key, fn, t in runs:
+            p = key if isinstance(key, str) else key[0]
             t0 = time.process_time()
-            evaluate_tip_tree(tree, RSTAR, KAPPA, theta, out, precision=p)
-            cpu[p].append(1e3 * (time.process_time() - t0))
-    return {p: np.array(t) for p, t in cpu.items()}
+            fn(t, RSTAR, KAPPA, theta, out, precision=p)
+            cpu[key].append(1e3 * (time.process_time() - t0))
+    return {key: np.array(t) for key, t in cpu.items()}
+
+
+def compare_before(args, tips, ref, old, n):
+    """``--before``: each setting's evaluation by REF's kernels and today's, in turns."""
+    out = np.empty((n, 3))
+    print(
+        " order leaf group theta precision   median err    p99 err   before median err  "
+        "before CPU ms         after CPU ms          before / after"
+    )
+    for order in args.order:
+        for leaf in args.leaf:
+            for group in args.group:
+                tree = build_tip_tree(*tips, leaf, group, order)
+                old_tree = old.build_tip_tree(*tips, leaf, group, order)
+                for theta in args.theta:
+                    cpu = turns(args.reps, tree, theta, args.precision, out, (old, old_tree))
+                    for p in args.precision:
+                        evaluate_tip_tree(tree, RSTAR, KAPPA, theta, out, precision=p)
+                        med, p99 = ref.error(out)
+                        old.evaluate_tip_tree(old_tree, RSTAR, KAPPA, theta, out, precision=p)
+                        old_med, _ = ref.error(out)
+                        a, b = cpu[p], cpu[p, "before"]
+                        r = b / a
+                        print(
+                            f" {order:5d} {leaf:4d} {group:5d} {theta:5.2f} {p:>9s} {med:12.2e} {p99:10.2e} "
+                            f"{old_med:18.2e}  {np.median(b):7.1f} [{b.min():.1f}-{b.max():.1f}]   "
+                            f"{np.median(a):7.1f} [{a.min():.1f}-{a.max():.1f}]   "
+                            f"{np.median(r):.3f} [{r.min():.3f}-{r.max():.3f}]",
+                            flush=True,
+                        )
 
 
 def main():
@@ -171,15 +227,24 @@ def main():
     ap.add_argument("--group", type=int, nargs="+", default=[128])
     ap.add_argument("--order", type=int, nargs="+", default=[2, 3])
     ap.add_argument("--precision", nargs="+", default=["float64"], choices=list(PRECISIONS))
-    ap.add_argument("--config", nargs="+", default=["uniform", "chains"], choices=["uniform", "chains"])
+    ap.add_argument("--config", nargs="+", default=["uniform", "chains"], choices=["uniform", "chains", "fig2"])
+    ap.add_argument("--before", metavar="REF", help="also time the kernels of git revision REF, in turns")
     ap.add_argument("--sample", type=int, default=4000, help="direct reference rows above --full-direct")
     ap.add_argument("--full-direct", type=int, default=20000, help="largest tip count summed directly")
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--target", type=float, default=1e-3, help="median relative error for the summary")
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
+    from bench_peer import machine_line
+
+    print(machine_line())
     print(f"numba threads: {numba.get_num_threads()}; r* = {RSTAR}, kappa = {KAPPA}, density {DENSITY}")
-    make = {"uniform": uniform, "chains": chains}
+    make = {"uniform": uniform, "chains": chains, "fig2": fig2}
+    old = None
+    if args.before:
+        from bench_kernels import kernels_at
+
+        old = kernels_at(args.before).tree
     summary = []
     for config in args.config:
         for n_rods in args.rods:
@@ -190,6 +255,9 @@ def main():
             t_direct = ref.seconds(args.reps)
             kind = "full" if ref.full else f"{len(ref.row)} rows, extrapolated"
             print(f"\n{config}, {n_rods} rods ({n} tips): direct {1e3 * t_direct:.1f} ms ({kind})")
+            if old is not None:
+                compare_before(args, tips, ref, old, n)
+                continue
             extra = "   eval CPU ms median [min-max]" if len(args.precision) > 1 else ""
             print(
                 " order leaf group theta precision   build ms    eval ms   median err    p99 err   direct ms  speed-up"
@@ -235,6 +303,8 @@ def main():
                                         precision,
                                     )
             summary.append((config, n_rods, best))
+    if old is not None:
+        return
     print(f"\nfastest setting with median error <= {args.target:g} (speed-up = direct / (build + eval)):")
     print(
         " config    rods  order leaf group theta precision   build ms    eval ms   median err    p99 err"

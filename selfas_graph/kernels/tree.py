@@ -54,10 +54,12 @@ multiple of ``PAD``; the cell's moments are read once). When the target's rod pa
 in an accepted cell, its exact pair force is subtracted (the multipole included
 it). ``theta = 0`` accepts no cell and gives the direct sum.
 
-The near pairs may be summed in float32 (``precision="mixed"`` of
-:func:`evaluate_tip_tree`): coordinates relative to the group's box centre,
-the law of :func:`.laws.tip_force_over_r_f32`, one float32 sum per target added
-to the float64 far field. The float64 path is unchanged by it.
+With ``precision="mixed"`` (:func:`evaluate_tip_tree`) the near pairs are summed in
+float32 (coordinates relative to the group's box centre, the law of
+:func:`.laws.tip_force_over_r_f32`, one float32 sum per target), and each accepted
+cell's field is taken in float32 (:func:`_field_octupole_f32`, offsets and moments in
+units of the cell's distance from the group's box) and added in float64 to the sum
+over cells. The float64 path is unchanged by it, bit for bit.
 
 Measured on one core of an AVX-512 machine, the accepted-cell loop costs
 about 2 ns per cell and target with octupoles, the near loop about 0.6 ns per
@@ -109,7 +111,7 @@ THETA = 0.4
 #: AVX-512 machine: 1.13 to 1.28 times faster than no padding, padding to 16 or 32
 #: gained less (1.08) or lost (0.88)
 PAD = 8
-#: precisions of the near field (:func:`evaluate_tip_tree`)
+#: precisions of the evaluation (:func:`evaluate_tip_tree`)
 PRECISIONS = ("float64", "mixed")
 
 
@@ -425,6 +427,65 @@ def _field_octupole(dx, dy, dz, m, px, py, pz, qxx, qxy, qxz, qyy, qyz, oxxx, ox
     )
 
 
+#: float32 constants of :func:`_field_octupole_f32` (a float64 literal would promote it to float64)
+_F32_HALF = np.float32(0.5)
+_F32_ONE = np.float32(1.0)
+_F32_TWO = np.float32(2.0)
+_F32_THREE = np.float32(3.0)
+_F32_FIVE_HALVES = np.float32(2.5)
+_F32_SEVEN_SIXTHS = np.float32(7.0 / 6.0)
+#: the far field of a cell is taken in float32 (``precision="mixed"``) only while the offsets
+#: from the group's box centre, in units of the cell's distance s from the box, stay below this
+#: (and below 1e30 in absolute value, far inside the float32 range):
+#: the float32 offset of a target from the cell centre is then off by at most about
+#: ``6e-8 * SPAN32`` = 6e-5 of its length (a cell of radius b contributes a truncation error of
+#: up to ``theta^4``, 0.026 at theta 0.4, of its own field). Cells beyond it (a target group
+#: much larger than its distance to the cell, or offsets beyond the float32 range) take the
+#: float64 loop.
+SPAN32 = 1000.0
+
+
+@inline_sum
+def _field_octupole_f32(dx, dy, dz, m, px, py, pz, qxx, qxy, qxz, qyy, qyz, oxxx, oxxy, oxxz, oxyy, oxyz, oyyy, oyyz):
+    """:func:`_field_octupole` in float32: every argument float32, every constant float32.
+
+    Called with the offset and the moments in units of the cell's distance (the module
+    docstring's formulas hold in any unit of length), so that every power of ``1/R`` stays
+    near 1 and far from the float32 range. With ``arcp`` LLVM takes ``1/sqrt`` as a reciprocal
+    square root estimate and one Newton step: no divider in the loop.
+    """
+    ir = _F32_ONE / math.sqrt(dx * dx + dy * dy + dz * dz)
+    ir2 = ir * ir
+    ir3 = ir * ir2
+    ir5 = ir3 * ir2
+    ir7 = ir5 * ir2
+    ir9 = ir7 * ir2
+    ux = qxx * dx + qxy * dy + qxz * dz
+    uy = qxy * dx + qyy * dy + qyz * dz
+    uz = qxz * dx + qyz * dy - (qxx + qyy) * dz
+    pd = px * dx + py * dy + pz * dz
+    dqd = dx * ux + dy * uy + dz * uz
+    oxzz = -(oxxx + oxyy)
+    oyzz = -(oxxy + oyyy)
+    ozzz = -(oxxz + oyyz)
+    xx = dx * dx
+    yy = dy * dy
+    zz = dz * dz
+    xy = _F32_TWO * dx * dy
+    xz = _F32_TWO * dx * dz
+    yz = _F32_TWO * dy * dz
+    vx = oxxx * xx + oxyy * yy + oxzz * zz + oxxy * xy + oxxz * xz + oxyz * yz
+    vy = oxxy * xx + oyyy * yy + oyzz * zz + oxyy * xy + oxyz * xz + oyyz * yz
+    vz = oxxz * xx + oyyz * yy + ozzz * zz + oxyz * xy + oxzz * xz + oyzz * yz
+    dvd = dx * vx + dy * vy + dz * vz
+    radial = m * ir3 + _F32_THREE * pd * ir5 + _F32_FIVE_HALVES * dqd * ir7 + _F32_SEVEN_SIXTHS * dvd * ir9
+    return (
+        radial * dx - px * ir3 - ux * ir5 - _F32_HALF * vx * ir7,
+        radial * dy - py * ir3 - uy * ir5 - _F32_HALF * vy * ir7,
+        radial * dz - pz * ir3 - uz * ir5 - _F32_HALF * vz * ir7,
+    )
+
+
 @njit
 def _append(buf, n, value):
     """``buf[n] = value``, doubling the buffer when full; returns the buffer."""
@@ -483,7 +544,8 @@ def evaluate_groups(
     lo, hi : int
         Original tip numbers to evaluate; other rows of ``out`` are untouched.
     mixed : bool
-        Sum the near pairs in float32 (:func:`evaluate_tip_tree`); False: float64.
+        Sum the near pairs and take each accepted cell's field in float32
+        (:func:`evaluate_tip_tree`); False: float64.
     out : (n_tips, 3) float64
         Rows ``lo:hi`` overwritten with the force on each tip (original order).
     """
@@ -531,6 +593,22 @@ def evaluate_groups(
         ex = np.zeros(n_pad)
         ey = np.zeros(n_pad)
         ez = np.zeros(n_pad)
+        # mixed: the far field in float32, targets relative to the group's box centre
+        gcx = 0.5 * (xl + xh)
+        gcy = 0.5 * (yl + yh)
+        gcz = 0.5 * (zl + zh)
+        half = 0.5 * max(xh - xl, yh - yl, zh - zl)
+        n_far32 = n_pad if mixed else 0
+        tx32 = np.empty(n_far32, np.float32)
+        ty32 = np.empty(n_far32, np.float32)
+        tz32 = np.empty(n_far32, np.float32)
+        fx32 = np.empty(n_far32, np.float32)
+        fy32 = np.empty(n_far32, np.float32)
+        fz32 = np.empty(n_far32, np.float32)
+        for t in range(n_far32):
+            tx32[t] = np.float32(tx[t] - gcx)
+            ty32[t] = np.float32(ty[t] - gcy)
+            tz32[t] = np.float32(tz[t] - gcz)
         near = np.empty(64, np.int64)
         n_near = 0
         n_near_tips = 0
@@ -548,7 +626,70 @@ def evaluate_groups(
             b = radius[c]
             if d2 * theta2 > b * b and d2 > (b + rstar) * (b + rstar):
                 mc = moment[c]
-                if order >= 3:
+                # d2 > 0 here: dist is the cell centre's distance from the group's box, which
+                # every target is at least as far from
+                dist = math.sqrt(d2)
+                span = half + max(abs(cx - gcx), abs(cy - gcy), abs(cz - gcz))
+                if mixed and span < SPAN32 * dist and span < 1e30:
+                    # offsets and moments in units of dist (the field then in units of 1/dist^2):
+                    # |offset| >= 1 and the moments' scale is cut by (b / dist)^order, so that the
+                    # powers of 1/R stay far from the float32 range; the cell's field in float32,
+                    # then added in float64 to the sum over cells
+                    inv = 1.0 / dist
+                    inv2 = inv * inv
+                    inv3 = inv2 * inv
+                    inv32 = np.float32(inv)
+                    ccx = np.float32(cx - gcx)
+                    ccy = np.float32(cy - gcy)
+                    ccz = np.float32(cz - gcz)
+                    m0 = np.float32(mc[0])
+                    m1 = np.float32(mc[1] * inv)
+                    m2 = np.float32(mc[2] * inv)
+                    m3 = np.float32(mc[3] * inv)
+                    m4 = np.float32(mc[4] * inv2)
+                    m5 = np.float32(mc[5] * inv2)
+                    m6 = np.float32(mc[6] * inv2)
+                    m7 = np.float32(mc[7] * inv2)
+                    m8 = np.float32(mc[8] * inv2)
+                    m9 = np.float32(mc[9] * inv3)
+                    m10 = np.float32(mc[10] * inv3)
+                    m11 = np.float32(mc[11] * inv3)
+                    m12 = np.float32(mc[12] * inv3)
+                    m13 = np.float32(mc[13] * inv3)
+                    m14 = np.float32(mc[14] * inv3)
+                    m15 = np.float32(mc[15] * inv3)
+                    # two loops: adding the float32 terms to float64 sums in the first kept LLVM
+                    # from vectorising it well (measured slower than the float64 loop)
+                    for t in range(n_pad):
+                        e1, e2, e3 = _field_octupole_f32(
+                            (tx32[t] - ccx) * inv32,
+                            (ty32[t] - ccy) * inv32,
+                            (tz32[t] - ccz) * inv32,
+                            m0,
+                            m1,
+                            m2,
+                            m3,
+                            m4,
+                            m5,
+                            m6,
+                            m7,
+                            m8,
+                            m9,
+                            m10,
+                            m11,
+                            m12,
+                            m13,
+                            m14,
+                            m15,
+                        )
+                        fx32[t] = e1
+                        fy32[t] = e2
+                        fz32[t] = e3
+                    for t in range(n_pad):
+                        ex[t] += np.float64(fx32[t]) * inv2
+                        ey[t] += np.float64(fy32[t]) * inv2
+                        ez[t] += np.float64(fz32[t]) * inv2
+                elif order >= 3:
                     for t in range(n_pad):
                         e1, e2, e3 = _field_octupole(
                             tx[t] - cx,
@@ -607,9 +748,6 @@ def evaluate_groups(
         # the origin loses nothing), each coordinate as a float32 pair hi + lo (lo the
         # float32 rounding of what hi misses), rods as int32 (8 lanes like the
         # coordinates); only the copies of the chosen precision are filled
-        gcx = 0.5 * (xl + xh)
-        gcy = 0.5 * (yl + yh)
-        gcz = 0.5 * (zl + zh)
         n32 = n_near_tips if mixed else 0
         n64 = 0 if mixed else n_near_tips
         fx = np.empty(n32, np.float32)
@@ -810,7 +948,11 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None, precision="
         each as two float32 numbers ``hi + lo`` so that the difference of two close tips keeps
         float32 precision relative to itself; the law in float32
         (:func:`.laws.tip_force_over_r_f32`); one float32 sum per target, then added in float64
-        to the far field, which stays float64, as does the subtraction of the rod partner.
+        to the far field; the subtraction of the rod partner stays float64. The far field:
+        each accepted cell's field in float32 (:func:`_field_octupole_f32`), with the offsets
+        and the moments in units of the cell's distance from the group's box (every power of
+        ``1/R`` then near 1), added in float64 to the sum over cells; a cell whose offsets
+        exceed ``SPAN32`` times that distance keeps the float64 loop.
         AVX2 runs 8 float32 lanes per instruction against 4 float64, and LLVM replaces the
         float32 square root and division by a reciprocal square root estimate and one Newton
         step (``vrsqrtps``): no divider in the loop. Measured (docs/performance.md,

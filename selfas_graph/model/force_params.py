@@ -35,9 +35,9 @@ class TipMagnetic:
     )
     tree_precision: str = spec(
         "float64",
-        "tree: arithmetic of the exact near pairs: float64, or mixed (float32 near pairs relative "
-        "to the target group's centre, float64 far field and sums; differs from float64 by about "
-        "4e-7 of a tip's force, docs/performance.md)",
+        "tree: arithmetic of the evaluation: float64, or mixed (float32 near pairs relative "
+        "to the target group's centre and float32 multipole fields, each summed in float64; "
+        "differs from float64 by about 4e-7 of a tip's force, docs/performance.md)",
         choices=("float64", "mixed"),
     )
     tree_above: int = spec(
