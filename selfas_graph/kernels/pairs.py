@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from ._jit import PARALLEL_ROWS, inline, njit, njit_parallel, njit_parallel_sum, njit_rows, prange
+from ._jit import PARALLEL_ROWS, inline, inline_sum, njit, njit_parallel, njit_parallel_sum, njit_rows, prange
 from .laws import yukawa_force_over_r, yukawa_potential
 
 
@@ -60,6 +60,27 @@ def tip_brake(position, velocity, start, index, rstar, k_br, out):
         out[k, 2] = fz
 
 
+@inline_sum
+def _yukawa_row(centre, rod_charge, i, start, index, screening, core, rc2):
+    """The Yukawa force on row ``i`` of ``centre`` from its listed neighbours (:func:`yukawa_centres`),
+    as (fx, fy, fz); inlined, so that the loop vectorises in the kernel that calls it."""
+    fx = 0.0
+    fy = 0.0
+    fz = 0.0
+    for j in range(start[i], start[i + 1]):
+        l = index[j]
+        dx = centre[i, 0] - centre[l, 0]
+        dy = centre[i, 1] - centre[l, 1]
+        dz = centre[i, 2] - centre[l, 2]
+        r2 = dx * dx + dy * dy + dz * dz
+        g = yukawa_force_over_r(r2, rod_charge[i] * rod_charge[l], screening, core)
+        g = g if r2 < rc2 else 0.0  # a select, not a branch: the loop vectorises
+        fx += g * dx
+        fy += g * dy
+        fz += g * dz
+    return fx, fy, fz
+
+
 @njit_parallel_sum
 def yukawa_centres(centre, rod_charge, start, index, screening, core, cutoff, lo, hi, out):
     """Screened electric repulsion between rod centres (docs/model.md 'Term 6').
@@ -88,20 +109,7 @@ def yukawa_centres(centre, rod_charge, start, index, screening, core, cutoff, lo
     """
     rc2 = cutoff * cutoff
     for i in prange(lo, hi):
-        fx = 0.0
-        fy = 0.0
-        fz = 0.0
-        for j in range(start[i], start[i + 1]):
-            l = index[j]
-            dx = centre[i, 0] - centre[l, 0]
-            dy = centre[i, 1] - centre[l, 1]
-            dz = centre[i, 2] - centre[l, 2]
-            r2 = dx * dx + dy * dy + dz * dz
-            g = yukawa_force_over_r(r2, rod_charge[i] * rod_charge[l], screening, core)
-            g = g if r2 < rc2 else 0.0  # a select, not a branch: the loop vectorises
-            fx += g * dx
-            fy += g * dy
-            fz += g * dz
+        fx, fy, fz = _yukawa_row(centre, rod_charge, i, start, index, screening, core, rc2)
         out[i, 0] = fx
         out[i, 1] = fy
         out[i, 2] = fz
@@ -125,20 +133,7 @@ def yukawa_centres_sorted(centre, rod_charge, order, start, index, screening, co
         i = order[t]
         if i < lo or i >= hi:
             continue
-        fx = 0.0
-        fy = 0.0
-        fz = 0.0
-        for j in range(start[t], start[t + 1]):
-            l = index[j]
-            dx = centre[t, 0] - centre[l, 0]
-            dy = centre[t, 1] - centre[l, 1]
-            dz = centre[t, 2] - centre[l, 2]
-            r2 = dx * dx + dy * dy + dz * dz
-            g = yukawa_force_over_r(r2, rod_charge[t] * rod_charge[l], screening, core)
-            g = g if r2 < rc2 else 0.0  # a select, not a branch: the loop vectorises
-            fx += g * dx
-            fy += g * dy
-            fz += g * dz
+        fx, fy, fz = _yukawa_row(centre, rod_charge, t, start, index, screening, core, rc2)
         out[i, 0] = fx
         out[i, 1] = fy
         out[i, 2] = fz

@@ -21,7 +21,7 @@ then the kernels compute exactly what they did before per-rod lengths existed
 
 import math
 
-from ._jit import njit_rows, prange
+from ._jit import inline, njit_rows, prange
 
 
 @njit_rows
@@ -95,32 +95,38 @@ def constrain_bonds(position, velocity, project, correct_velocity, length):
     n_rods = position.shape[0] // 2
     unit = length.shape[0] == 0
     for i in prange(n_rods):
-        a = 2 * i
-        b = a + 1
+        _constrain_rod(position, velocity, 2 * i, project, correct_velocity, 1.0 if unit else length[i])
+
+
+@inline
+def _constrain_rod(position, velocity, a, project, correct_velocity, ell):
+    """The constraint of the rod with tips a and a + 1 (:func:`constrain_bonds`), in place; returns
+    ``|r12|^2`` of the positions as they leave."""
+    b = a + 1
+    r2 = 0.0
+    for d in range(3):
+        r = position[a, d] - position[b, d]
+        r2 += r * r
+    if project:
+        s = 0.5 * (ell / math.sqrt(r2) - 1.0)
+        for d in range(3):
+            r = position[a, d] - position[b, d]
+            position[a, d] += s * r
+            position[b, d] -= s * r
         r2 = 0.0
         for d in range(3):
             r = position[a, d] - position[b, d]
             r2 += r * r
-        if project:
-            ell = 1.0 if unit else length[i]
-            s = 0.5 * (ell / math.sqrt(r2) - 1.0)
-            for d in range(3):
-                r = position[a, d] - position[b, d]
-                position[a, d] += s * r
-                position[b, d] -= s * r
-            r2 = 0.0
-            for d in range(3):
-                r = position[a, d] - position[b, d]
-                r2 += r * r
-        if correct_velocity:
-            vr = 0.0
-            for d in range(3):
-                vr += (velocity[a, d] - velocity[b, d]) * (position[a, d] - position[b, d])
-            c = -0.5 * vr / r2
-            for d in range(3):
-                r = position[a, d] - position[b, d]
-                velocity[a, d] += c * r
-                velocity[b, d] -= c * r
+    if correct_velocity:
+        vr = 0.0
+        for d in range(3):
+            vr += (velocity[a, d] - velocity[b, d]) * (position[a, d] - position[b, d])
+        c = -0.5 * vr / r2
+        for d in range(3):
+            r = position[a, d] - position[b, d]
+            velocity[a, d] += c * r
+            velocity[b, d] -= c * r
+    return r2
 
 
 @njit_rows
@@ -144,31 +150,9 @@ def constrain_bonds_checked(position, velocity, project, correct_velocity, lengt
     for i in prange(n_rods):
         a = 2 * i
         b = a + 1
-        r2 = 0.0
-        for d in range(3):
-            r = position[a, d] - position[b, d]
-            r2 += r * r
         ell = 1.0 if unit else length[i]
-        if project:
-            s = 0.5 * (ell / math.sqrt(r2) - 1.0)
-            for d in range(3):
-                r = position[a, d] - position[b, d]
-                position[a, d] += s * r
-                position[b, d] -= s * r
-            r2 = 0.0
-            for d in range(3):
-                r = position[a, d] - position[b, d]
-                r2 += r * r
-        if correct_velocity:
-            vr = 0.0
-            for d in range(3):
-                vr += (velocity[a, d] - velocity[b, d]) * (position[a, d] - position[b, d])
-            c = -0.5 * vr / r2
-            for d in range(3):
-                r = position[a, d] - position[b, d]
-                velocity[a, d] += c * r
-                velocity[b, d] -= c * r
         # r2 is that of the positions as they leave: the sum bond_length_error forms
+        r2 = _constrain_rod(position, velocity, a, project, correct_velocity, ell)
         worst = max(worst, abs(math.sqrt(r2) - ell))
         for d in range(3):
             for k in (a, b):
