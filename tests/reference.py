@@ -433,6 +433,79 @@ def lorentz_force_on_rods(position, active, current, field, t, wts):
     return out
 
 
+def closest_parameter(A, s, C, u):
+    """(t, d) of the closest points of segments A + t s and C + v u: minimise over the square
+    [0, 1]^2 by its interior stationary point and the four edges (each a clamped 1-D minimum)."""
+    A, s, C, u = (np.asarray(v, dtype=float) for v in (A, s, C, u))
+
+    def dist(t, v):
+        return float(np.linalg.norm(A + t * s - C - v * u))
+
+    cands = []
+    M = np.array([[s @ s, -(s @ u)], [-(s @ u), u @ u]])
+    rhs = np.array([-(s @ (A - C)), u @ (A - C)])
+    if abs(np.linalg.det(M)) > 1e-12 * (s @ s) * (u @ u):
+        t, v = np.linalg.solve(M, rhs)
+        if 0 <= t <= 1 and 0 <= v <= 1:
+            cands.append((dist(t, v), t))
+    for v in (0.0, 1.0):  # edges v fixed: t minimises |A + t s - (C + v u)|
+        t = min(max(-(s @ (A - C - v * u)) / (s @ s), 0.0), 1.0) if s @ s > 0 else 0.0
+        cands.append((dist(t, v), t))
+    for t in (0.0, 1.0):  # edges t fixed
+        v = min(max((u @ (A + t * s - C)) / (u @ u), 0.0), 1.0) if u @ u > 0 else 0.0
+        cands.append((dist(t, v), t))
+    d, t = min(cands)
+    return t, d
+
+
+def near_rule(A, s, C, u, h_min, panel_t, panel_w, gl_t, gl_w, t_star):
+    """Nodes and weights of the near rule of term 10 (kernels/currents.py 'near pairs'), from its
+    description: panels from t_star to each end, each as long as the distance from its inner
+    edge to segment C + v u (in rod lengths), at least h_min, at most twice the one before
+    (after 53 panels on a side, twice the one before), 4-point Gauss-Legendre on each; then the
+    plain rule with negative weights."""
+    A, s, C, u = (np.asarray(v, dtype=float) for v in (A, s, C, u))
+    length = np.linalg.norm(s)
+
+    def gap(t):  # distance from A + t s to the segment, in rod lengths
+        p = A + t * s
+        v = min(max((p - C) @ u / (u @ u), 0.0), 1.0)
+        return np.linalg.norm(p - C - v * u) / length
+
+    nodes, weights = [], []
+    for direction in (+1, -1):
+        edge, h, count = t_star, max(gap(t_star), h_min), 0
+        while (edge < 1.0) if direction > 0 else (edge > 0.0):
+            other = min(edge + h, 1.0) if direction > 0 else max(edge - h, 0.0)
+            lo, hi = min(edge, other), max(edge, other)
+            nodes += list(lo + (hi - lo) * np.asarray(panel_t))
+            weights += list((hi - lo) * np.asarray(panel_w))
+            edge = other
+            count += 1
+            h = min(2 * h, max(gap(edge), h_min)) if count < 53 else 2 * h
+    return np.array(nodes + list(gl_t)), np.array(weights + [-w for w in gl_w])
+
+
+def lorentz_near_correction(position, active, current, rows, gl_t, gl_w, panel_t, panel_w, w):
+    """Tip forces of the near-pair correction: for each active rod i and each j in rows[i], the
+    force of j's field on i's current by the near rule less the plain rule, shared (1 - t) to
+    tip a and t to tip b."""
+    out = np.zeros_like(position)
+    for i, near in rows.items():
+        A, B = position[2 * i], position[2 * i + 1]
+        s = B - A
+        h_min = max(0.5 * w / np.linalg.norm(s), 2.0**-10)
+        for j in near:
+            C, E = position[2 * j], position[2 * j + 1]
+            t_star, _ = closest_parameter(A, s, C, E - C)
+            nodes, weights = near_rule(A, s, C, E - C, h_min, panel_t, panel_w, gl_t, gl_w, t_star)
+            for t, wt in zip(nodes, weights):
+                dF = current[i] * wt * np.cross(s, segment_field(A + t * s, C, E, current[j], w))
+                out[2 * i] += (1 - t) * dF
+                out[2 * i + 1] += t * dF
+    return out
+
+
 # ----------------------------------------------------------------------------- neighbour lists
 
 

@@ -69,11 +69,12 @@ SOURCES = {
 }
 
 
-def _source_scene(rng, state=None, **kw):
+def _source_scene(rng, state=None, forces_override=None, **kw):
     state = random_rods(6, rng, box=1.8, q=(0.5, 1.5)) if state is None else state
+    lorentz = dict(forces_override or {})  # [forces.current_lorentz] keys
     return state, simulation(
         state,
-        forces={"tip_magnetic": {}, **SOURCES, "current_field": {}, "current_lorentz": {}},
+        forces={"tip_magnetic": {}, **SOURCES, "current_field": {}, "current_lorentz": lorentz},
         circuit={"delta_J0": 1.0},
         placement={"box": [[-3, 3], [-3, 3], [-1.0, 1.0]], "min_tip_distance": 0.0},
         **kw,
@@ -137,6 +138,35 @@ def test_lorentz_term_sums_the_rod_currents_and_every_source_in_term_order(rng):
     kc.lorentz_force_on_rods(state.position, active, ff.current, field, t, wt, want)
     assert np.abs(want).max() > 1e-3
     np.testing.assert_array_equal(ff.out["current_lorentz"], want)
+
+
+def test_lorentz_term_near_range_adds_the_pair_correction_to_the_plain_rule(rng):
+    """With ``forces.current_lorentz.near_range`` the term is the plain rule (every source) plus the
+    kernel's correction of the pairs of current-carrying rods with centres closer than the range
+    (docs/model.md 'Term 10'), bit for bit; near_range = 0 (the default) leaves the plain rule."""
+    from selfas_graph.kernels import cells
+    from selfas_graph.kernels import currents as kc
+
+    state, plain_sim = _source_scene(rng)
+    _, near_sim = _source_scene(None, state.copy(), forces_override={"quadrature_points": 3, "near_range": 1.2})
+    current = np.linspace(-1.0, 1.5, state.n_rods)
+    current[2] = 0.0
+    for sim in (plain_sim, near_sim):
+        sim.force_field.set_currents(current)
+        sim.force_field.evaluate(state.position, state.velocity)
+    _, plain3 = _source_scene(None, state.copy(), forces_override={"quadrature_points": 3})
+    plain3.force_field.set_currents(current)
+    plain3.force_field.evaluate(state.position, state.velocity)
+    want = plain3.force_field.out["current_lorentz"].copy()
+    active = np.flatnonzero(current).astype(np.int64)
+    centre = 0.5 * (state.position[2 * active] + state.position[2 * active + 1])
+    start, index = cells.neighbour_rows(centre, 1.2)
+    assert len(index) > 0  # some pairs are near
+    t, wt = kc.gauss_legendre_01(3)
+    pt, pw = kc.gauss_legendre_01(kc.NEAR_PANEL_POINTS)
+    kc.lorentz_near_correction(state.position, active, current, start, index, 0, len(active), t, wt, pt, pw, 0.03, want)
+    np.testing.assert_array_equal(near_sim.force_field.out["current_lorentz"], want)
+    assert not np.array_equal(want, plain3.force_field.out["current_lorentz"])
 
 
 def test_state_dict_restores_the_next_evaluations_bit_for_bit(rng):

@@ -594,6 +594,243 @@ def current_force_on_tips_mixed(position, charge, active_rod, current, wire_radi
 
 
 # --------------------------------------------------------------------------------------
+# near pairs of term 10: a quadrature adapted to each pair
+# --------------------------------------------------------------------------------------
+#
+# The field of a neighbouring rod's current along a rod is peaked where the two segments come
+# closest (within a few wire radii at a joint or a crossing), so a fixed Gauss-Legendre rule
+# converges only slowly there (docs/performance.md 'Term 10 near pairs'). For the pairs of rods
+# whose centres are closer than ``forces.current_lorentz.near_range`` the field of rod j along
+# rod i is integrated instead by panels placed from the point of rod i closest to rod j: the
+# first panel on each side as long as the distance between the segments (at least the wire
+# radius w, and 2^-10 of the rod), each next one twice as long, up to the rod's ends, with
+# ``NEAR_PANEL_POINTS`` Gauss-Legendre points per panel; what the plain rule gave for the pair
+# is subtracted, so that the plain sum over all rods plus this correction is the adapted rule
+# for near pairs and the plain one for the rest.
+
+#: Gauss-Legendre points per panel of the near rule (4: exact for polynomials of degree 7 on a panel)
+NEAR_PANEL_POINTS = 4
+
+#: shortest first panel of the near rule, in units of the rod's length (bounds the number of
+#: panels to 2 x 11 when the segments touch and w = 0)
+NEAR_MIN_PANEL = 2.0**-10
+
+#: the most panels on one side of the closest point; the last NEAR_DOUBLING_PANELS of them double
+#: (2^-10 (2^11 - 1) > 1: eleven doublings from the shortest panel reach any end)
+NEAR_MAX_PANELS = 64
+NEAR_DOUBLING_PANELS = 11
+
+
+@inline
+def closest_parameter(ax, ay, az, sx, sy, sz, cx, cy, cz, ux, uy, uz):
+    """``(t, d)``: the parameter t in [0, 1] of the point of segment ``A + t s`` closest to segment
+    ``C + v u`` (v in [0, 1]), and the distance d between the two segments.
+
+    The closest points of two segments (clamp the infinite lines' solution to the first
+    segment, project onto the second and clamp, then project back onto the first and clamp);
+    parallel segments (``|s x u|^2`` below ``1e-12 |s|^2 |u|^2``) take ``t = 0``'s partner.
+    Zero-length segments give ``t = 0``. Finite in, finite out.
+    """
+    rx = ax - cx
+    ry = ay - cy
+    rz = az - cz
+    a = sx * sx + sy * sy + sz * sz
+    b = sx * ux + sy * uy + sz * uz
+    c = ux * ux + uy * uy + uz * uz
+    d = sx * rx + sy * ry + sz * rz
+    e = ux * rx + uy * ry + uz * rz
+    den = a * c - b * b
+    t = 0.0
+    if den > 1e-12 * a * c:
+        t = min(max((b * e - c * d) / den, 0.0), 1.0)
+    v = 0.0
+    if c > 0.0:
+        v = (b * t + e) / c
+        if v < 0.0:
+            v = 0.0
+            t = min(max(-d / a, 0.0), 1.0) if a > 0.0 else 0.0
+        elif v > 1.0:
+            v = 1.0
+            t = min(max((b - d) / a, 0.0), 1.0) if a > 0.0 else 0.0
+    elif a > 0.0:
+        t = min(max(-d / a, 0.0), 1.0)
+    qx = rx + t * sx - v * ux
+    qy = ry + t * sy - v * uy
+    qz = rz + t * sz - v * uz
+    return t, np.sqrt(qx * qx + qy * qy + qz * qz)
+
+
+@inline
+def _distance2_to_segment(px, py, pz, cx, cy, cz, ux, uy, uz, inv_uu):
+    """Squared distance from the point p to the segment ``C + v u``, v in [0, 1]
+    (``inv_uu = 1 / |u|^2``, 0 for a zero-length segment)."""
+    rx = px - cx
+    ry = py - cy
+    rz = pz - cz
+    v = min(max((rx * ux + ry * uy + rz * uz) * inv_uu, 0.0), 1.0)
+    qx = rx - v * ux
+    qy = ry - v * uy
+    qz = rz - v * uz
+    return qx * qx + qy * qy + qz * qz
+
+
+@njit
+def near_rule(ax, ay, az, sx, sy, sz, cx, cy, cz, ux, uy, uz, h_min, panel_t, panel_w, gl_t, gl_w, node, weight):
+    """The nodes of one near pair (rod ``A + t s`` in the field of rod ``C + v u``): the adapted
+    panels, then the plain rule ``gl_t, gl_w`` with negative weights.
+
+    Panels start at the point of the rod closest to the other (:func:`closest_parameter`) and go
+    to each end; each is as long as the distance from its inner edge to the other rod, but at
+    least ``h_min`` (in units of the rod's length) and at most twice the one before, so that the
+    field, peaked within that distance, is resolved where it varies; after
+    ``NEAR_MAX_PANELS - NEAR_DOUBLING_PANELS`` panels on one side (rods lying along each other
+    for a long stretch) each next one is twice the one before. ``panel_t, panel_w`` on each
+    panel. Writes ``node[:m], weight[:m]`` and returns m; ``node`` and ``weight`` must hold
+    ``2 NEAR_MAX_PANELS len(panel_t) + len(gl_t)`` entries.
+    """
+    t_star, dist = closest_parameter(ax, ay, az, sx, sy, sz, cx, cy, cz, ux, uy, uz)
+    ss = sx * sx + sy * sy + sz * sz
+    uu = ux * ux + uy * uy + uz * uz
+    inv_uu = 1.0 / uu if uu > 0.0 else 0.0
+    scale = 1.0 / np.sqrt(ss) if ss > 0.0 else 1.0
+    m = 0
+    n_p = panel_t.shape[0]
+    for side in range(2):
+        edge = t_star
+        h = max(dist * scale, h_min)
+        count = 0
+        while (edge < 1.0) if side == 0 else (edge > 0.0):
+            if side == 0:
+                p_lo = edge
+                p_hi = min(edge + h, 1.0)
+                edge = p_hi
+            else:
+                p_lo = max(edge - h, 0.0)
+                p_hi = edge
+                edge = p_lo
+            width = p_hi - p_lo
+            for g in range(n_p):
+                node[m] = p_lo + width * panel_t[g]
+                weight[m] = width * panel_w[g]
+                m += 1
+            count += 1
+            if count < NEAR_MAX_PANELS - NEAR_DOUBLING_PANELS:
+                # h = min(2 h, max(far, h_min)) with far the distance at the edge (in rod lengths);
+                # the square root only when far lies between the two
+                far2 = _distance2_to_segment(
+                    ax + edge * sx, ay + edge * sy, az + edge * sz, cx, cy, cz, ux, uy, uz, inv_uu
+                ) * (scale * scale)
+                if far2 < 4.0 * h * h:
+                    h = max(np.sqrt(far2), h_min) if far2 > h_min * h_min else h_min
+                else:
+                    h = 2.0 * h
+            else:
+                h = 2.0 * h
+    for g in range(gl_t.shape[0]):
+        node[m] = gl_t[g]
+        weight[m] = -gl_w[g]
+        m += 1
+    return m
+
+
+@njit_parallel_sum
+def lorentz_near_correction(
+    position, active_rod, current, start, index, r_lo, r_hi, gl_t, gl_w, panel_t, panel_w, wire_radius, out
+):
+    """The near-pair correction of term 10, ADDED to ``out`` (see the comment above).
+
+    For each active rod ``i = active_rod[r]``, ``r_lo <= r < r_hi``, and each of its near rods
+    ``j = active_rod[index[q]]``, ``start[r] <= q < start[r + 1]``: the force of rod j's field on
+    rod i's current by the adapted panels (:func:`near_rule`), less the same by the plain rule
+    ``gl_t, gl_w``, shared between rod i's tips as :func:`lorentz_force_on_rods` shares it.
+    Float64 segment law (:func:`segment_field`), the nodes of a pair summed in one branch-free
+    loop that vectorises. Parallel over rods; each rod writes only its own two tips, and a rod's
+    result does not depend on ``r_lo, r_hi`` or the thread count.
+
+    Parameters
+    ----------
+    position : (n_tips, 3) float64
+    active_rod : (n_active,) int64
+        Distinct indices of the current-carrying rods.
+    current : (n_rods,) float64
+    start, index : int64 arrays
+        Compressed rows over ``active_rod`` (``start`` has ``n_active + 1`` entries): the near
+        rods of each active rod, as places in ``active_rod``, never the rod itself.
+    r_lo, r_hi : int
+        The active rods (places in ``active_rod``) whose tips this call corrects.
+    gl_t, gl_w : (n_gl,) float64
+        The plain rule on [0, 1] (``forces.current_lorentz.quadrature_points``).
+    panel_t, panel_w : (NEAR_PANEL_POINTS,) float64
+        The rule on each panel, on [0, 1].
+    wire_radius : float
+        w = D / 2 (docs/model.md 'Term 9').
+    out : (n_tips, 3) float64
+        Tip forces; the correction is added to the tips of rods ``active_rod[r_lo:r_hi]``.
+    """
+    size = 2 * NEAR_MAX_PANELS * panel_t.shape[0] + gl_t.shape[0]
+    for r in prange(r_lo, r_hi):
+        i = active_rod[r]
+        ia = 2 * i
+        ib = ia + 1
+        ax = position[ia, 0]
+        ay = position[ia, 1]
+        az = position[ia, 2]
+        sx = position[ib, 0] - ax
+        sy = position[ib, 1] - ay
+        sz = position[ib, 2] - az
+        length = np.sqrt(sx * sx + sy * sy + sz * sz)
+        # the shortest panel: half the wire radius, the width of the field's peak (docs/model.md 'Term 9')
+        h_min = max(0.5 * wire_radius / length, NEAR_MIN_PANEL) if length > 0.0 else 1.0
+        cur = current[i]
+        node = np.empty(size)
+        weight = np.empty(size)
+        fax = 0.0
+        fay = 0.0
+        faz = 0.0
+        fbx = 0.0
+        fby = 0.0
+        fbz = 0.0
+        for q in range(start[r], start[r + 1]):
+            j = active_rod[index[q]]
+            ja = 2 * j
+            jb = ja + 1
+            cx = position[ja, 0]
+            cy = position[ja, 1]
+            cz = position[ja, 2]
+            ex = position[jb, 0]
+            ey = position[jb, 1]
+            ez = position[jb, 2]
+            cj = current[j]
+            m = near_rule(
+                ax, ay, az, sx, sy, sz, cx, cy, cz, ex - cx, ey - cy, ez - cz, h_min,
+                panel_t, panel_w, gl_t, gl_w, node, weight,
+            )  # fmt: skip
+            # branch-free over the nodes of the pair: the loop vectorises
+            for g in range(m):
+                t = node[g]
+                bx, by, bz = segment_field(
+                    ax + t * sx, ay + t * sy, az + t * sz, cx, cy, cz, ex, ey, ez, cj, wire_radius
+                )
+                cw = cur * weight[g]
+                dx = cw * (sy * bz - sz * by)
+                dy = cw * (sz * bx - sx * bz)
+                dz = cw * (sx * by - sy * bx)
+                u = 1.0 - t
+                fax += u * dx
+                fay += u * dy
+                faz += u * dz
+                fbx += t * dx
+                fby += t * dy
+                fbz += t * dz
+        out[ia, 0] += fax
+        out[ia, 1] += fay
+        out[ia, 2] += faz
+        out[ib, 0] += fbx
+        out[ib, 1] += fby
+        out[ib, 2] += fbz
+
+
+# --------------------------------------------------------------------------------------
 # plain Python helper
 # --------------------------------------------------------------------------------------
 

@@ -162,6 +162,14 @@ class CurrentLorentz:
         _CURRENT_PRECISION_HELP.format(where="at the quadrature points (the other fields stay float64)"),
         choices=("float64", "mixed"),
     )
+    near_range: float = spec(
+        0.0,
+        "centre distance (units L) within which another rod's field is integrated along a rod by "
+        "panels adapted to the pair (from the point where the two come closest) instead of the "
+        "quadrature_points rule; 0: off. An accuracy knob (docs/model.md 'Term 10')",
+        ge=0.0,
+        le=1e6,
+    )
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...kernels import cells
 from ...kernels import currents as kc
 from .base import Term
 
@@ -117,6 +118,9 @@ class CurrentLorentzForce(Term):
     def __init__(self, p, state):
         self.t, self.wt = kc.gauss_legendre_01(p.forces.current_lorentz.quadrature_points)
         self.precision = p.forces.current_lorentz.precision
+        #: pairs of current-carrying rods with centres closer than this take the adapted rule
+        self.near_range = p.forces.current_lorentz.near_range
+        self.panel_t, self.panel_w = kc.gauss_legendre_01(kc.NEAR_PANEL_POINTS)
 
     def compute(self, ff, out):
         f = out["current_lorentz"]
@@ -139,6 +143,33 @@ class CurrentLorentzForce(Term):
             source.field_at(pts, extra)
             field += extra
         kc.lorentz_force_on_rods(ff.position, mine, ff.current, field, self.t, self.wt, f)
+        if self.near_range > 0.0:
+            self._near_pairs(ff, active, mine, f)
+
+    def _near_pairs(self, ff, active, mine, f):
+        """The adapted rule for the pairs closer than ``near_range`` (kernels/currents.py
+        ``lorentz_near_correction``): the plain rule's share of each such pair is replaced."""
+        pos = ff.position
+        centre = 0.5 * (pos[2 * active] + pos[2 * active + 1])
+        if not np.isfinite(centre).all():
+            return  # no cell grid places NaN; the run's health check stops with a diagnosis
+        start, index = cells.neighbour_rows(centre, self.near_range)
+        r_lo = int(np.searchsorted(active, mine[0]))
+        kc.lorentz_near_correction(
+            pos,
+            active,
+            ff.current,
+            start,
+            index,
+            r_lo,
+            r_lo + len(mine),
+            self.t,
+            self.wt,
+            self.panel_t,
+            self.panel_w,
+            ff.rod_currents.w,
+            f,
+        )
 
     def blocked(self, ff):
         return ("current_lorentz",) if len(ff.active_rod) else ()
