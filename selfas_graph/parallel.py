@@ -147,6 +147,35 @@ class RowBlocks:
             for c, a in enumerate(arrays):
                 a[rlo:rhi] = block[c].reshape(a[rlo:rhi].shape)
 
+    def gather_list(self, start, index, rows_per_rod=2):
+        """The whole compressed-row list on every rank from each rank's own rows (a collective call).
+
+        Each rank has listed only the rows of its block (``rows_per_rod * lo`` to ``rows_per_rod *
+        hi``; the others empty, as ``kernels/cells.py::neighbour_rows(..., rows=...)`` leaves them).
+        Two ``Allgatherv``: the row lengths, then the rows. Returns ``(start, index)``, the list
+        the whole build would have made, bit for bit.
+        """
+        if self.size == 1:
+            return start, index
+        bounds = rows_per_rod * self.bounds
+        lo, hi = int(bounds[self.rank]), int(bounds[self.rank + 1])
+        n = int(bounds[-1])
+        lengths = np.empty(n, dtype=np.int64)
+        row_counts = np.diff(bounds)
+        self.comm.Allgatherv(
+            np.ascontiguousarray(np.diff(start[lo : hi + 1])),
+            [lengths, (row_counts.tolist(), bounds[:-1].tolist())],
+        )
+        full = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(lengths, out=full[1:])
+        counts = full[bounds[1:]] - full[bounds[:-1]]
+        out = np.empty(int(full[-1]), dtype=np.int64)
+        self.comm.Allgatherv(
+            np.ascontiguousarray(index[start[lo] : start[hi]]),
+            [out, (counts.tolist(), full[bounds[:-1]].tolist())],
+        )
+        return full, out
+
     def _buffer(self, name, shape):
         buf = self._buffers.get(name)
         if buf is None or buf.shape != shape:

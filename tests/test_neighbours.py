@@ -218,3 +218,26 @@ def test_sorted_rows_of_a_list_with_and_without_cell_order(rng):
     order, start, index = a.sorted_rows
     np.testing.assert_array_equal(order, np.arange(120))
     assert start.shape == (121,) and len(index) == 0
+
+
+@pytest.mark.parametrize("rows", [(0, 0), (0, 37), (37, 80), (79, 80)])
+def test_a_block_of_rows_is_those_rows_of_the_whole_list_bit_for_bit(rng, rows):
+    """``neighbour_rows(..., rows=(lo, hi))`` (an MPI rank's block): the rows of the points in the
+    block are the whole list's rows, in the same order, in plain and cell numbering; the others are
+    empty."""
+    x = rng.uniform(0.0, 3.0, size=(80, 3))
+    start, index, (order, start_t, index_t) = neighbour_rows(x, 0.9, cell_order=True)
+    s, i, (o, s_t, i_t) = neighbour_rows(x, 0.9, cell_order=True, rows=rows)
+    assert np.array_equal(o, order)
+    lo, hi = rows
+    for k in range(80):
+        got = i[s[k] : s[k + 1]]
+        want = index[start[k] : start[k + 1]] if lo <= k < hi else np.zeros(0, np.int64)
+        assert np.array_equal(got, want)
+    for t, k in enumerate(order):
+        got = i_t[s_t[t] : s_t[t + 1]]
+        want = index_t[start_t[t] : start_t[t + 1]] if lo <= k < hi else np.zeros(0, np.int64)
+        assert np.array_equal(got, want)
+    nl = NeighbourList(0.6, 0.3, rows=rows)
+    nl.build(x)
+    assert np.array_equal(nl.start, s) and np.array_equal(nl.index, i)

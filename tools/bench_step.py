@@ -3,8 +3,9 @@
 Usage: python tools/bench_step.py [--rods 1200 6000] [--steps 200] [--scenario scenarios/fig2.toml]
                                   [--set KEY=VALUE ...]
        mpiexec -n 2 python tools/bench_step.py ...   (the force rows split over the ranks; rank 0 prints)
-       python tools/bench_step.py --compare ...      (1 rank x 1 thread, 2 ranks x 1 thread and
-                                                      1 rank x 2 threads, in one table)
+       python tools/bench_step.py --compare --repeat 7 ...
+                                                     (1 rank x 1 thread, 2 ranks x 1 thread and
+                                                      1 rank x 2 threads taking turns, in one table)
 
 For each size it builds the scene (all its force terms, random placement), takes
 warm-up steps (numba compilation, neighbour lists), then times ``--steps`` steps and
@@ -62,8 +63,8 @@ def main():
         "--repeat",
         type=int,
         default=1,
-        help="with --compare: run the configurations this many times in turn and keep each one's "
-        "fastest (the machine is shared: the minimum is the least disturbed run)",
+        help="with --compare: rounds in which the configurations take turns; each figure is the "
+        "median [min-max] over the rounds and each ratio the median of the per-round ratios",
     )
     ap.add_argument("--json", action="store_true", help="print only a JSON line of ms/step per size (rank 0)")
     ap.add_argument(
@@ -141,25 +142,39 @@ def compare(args):
         *map(str, args.rods),
         *(a for e in args.extra for a in ("--set", e)),
     ]
-    results = [{} for _ in CONFIGS]
-    for _ in range(args.repeat):
-        for best, (label, ranks, threads) in zip(results, CONFIGS):
+    rounds = [[{} for _ in CONFIGS] for _ in range(args.repeat)]
+    for r in range(args.repeat):
+        # the configurations take turns, in reversed order every other round, so that none always
+        # runs just after another (a warm cache, a machine quieting down)
+        order = list(range(len(CONFIGS)))
+        for c in order if r % 2 == 0 else order[::-1]:
+            label, ranks, threads = CONFIGS[c]
             env = {**os.environ, "NUMBA_NUM_THREADS": str(threads)}
             cmd = base if ranks == 1 else [str(mpiexec if mpiexec.exists() else "mpiexec"), "-n", str(ranks), *base]
             res = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
             got = json.loads(res.stdout.strip().splitlines()[-1])
-            print(f"{label}: {got}", file=sys.stderr, flush=True)
-            for n, ms in got.items():
-                best[n] = min(ms, best.get(n, float("inf")))
+            print(f"round {r + 1}, {label}: {got}", file=sys.stderr, flush=True)
+            rounds[r][c] = got
     print(
         "| rods | "
         + " | ".join(f"{label} (ms/step)" for label, _, _ in CONFIGS)
-        + " | speed-up, 2 ranks | speed-up, 2 threads |"
+        + " | speed-up, 2 ranks | speed-up, 2 threads | 2 ranks / 2 threads, per round |"
     )
-    print("|---" * (len(CONFIGS) + 3) + "|")
+    print("|---" * (len(CONFIGS) + 4) + "|")
     for n in args.rods:
-        ms = [r[str(n)] for r in results]
-        print(f"| {n} | " + " | ".join(f"{m:.2f}" for m in ms) + f" | {ms[0] / ms[1]:.2f} | {ms[0] / ms[2]:.2f} |")
+        ms = np.array([[rnd[c][str(n)] for c in range(len(CONFIGS))] for rnd in rounds])  # (rounds, configs)
+        med = np.median(ms, axis=0)
+        ratio = ms[:, 1] / ms[:, 2]
+        print(
+            f"| {n} | "
+            + " | ".join(f"{m:.2f} [{lo:.2f}-{hi:.2f}]" for m, lo, hi in zip(med, ms.min(0), ms.max(0)))
+            + f" | {np.median(ms[:, 0] / ms[:, 1]):.2f} | {np.median(ms[:, 0] / ms[:, 2]):.2f}"
+            + f" | {np.median(ratio):.2f} [{ratio.min():.2f}-{ratio.max():.2f}] |"
+        )
+    print(
+        f"(median [min-max] of {args.repeat} rounds; the ratios are medians of the per-round ratios; "
+        f"load average at the end {os.getloadavg()[0]:.1f})"
+    )
 
 
 if __name__ == "__main__":

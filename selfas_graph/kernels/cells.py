@@ -80,9 +80,12 @@ def _row_range(position, lo, h, g, k, span, d):
 
 
 @njit_parallel
-def _row_counts(position, sx, sy, sz, lo, h, g, span, cell_start, cell_point, r2max, exclude_same_rod, counts):
+def _row_counts(
+    position, sx, sy, sz, lo, h, g, span, cell_start, cell_point, r2max, exclude_same_rod, row_lo, row_hi, counts
+):
     """Row lengths: candidates closer than ``sqrt(r2max)``, less the point itself and (with
-    ``exclude_same_rod``) the other tip of its rod when that is in range.
+    ``exclude_same_rod``) the other tip of its rod when that is in range; 0 for the points
+    outside ``row_lo <= k < row_hi``.
 
     The candidate loop is a branch-free count over contiguous runs of the sorted coordinates
     (``sx, sy, sz``), which LLVM vectorises; the two exclusions are corrected once per row.
@@ -90,6 +93,9 @@ def _row_counts(position, sx, sy, sz, lo, h, g, span, cell_start, cell_point, r2
     n = position.shape[0]
     for t in prange(n):
         k = cell_point[t]  # points in cell order: neighbouring iterations read the same cells
+        if k < row_lo or k >= row_hi:
+            counts[k] = 0
+            continue
         xk = position[k, 0]
         yk = position[k, 1]
         zk = position[k, 2]
@@ -127,6 +133,8 @@ def _row_fill(
     cell_point,
     r2max,
     exclude_same_rod,
+    row_lo,
+    row_hi,
     start,
     index,
     start_t,
@@ -137,12 +145,15 @@ def _row_fill(
     The test is on the same squared distances as in :func:`_row_counts` (the same expression on
     the same numbers), so each row gets exactly its counted length. With ``index_t`` non-empty,
     also write the same rows numbered by cell at ``start_t[t]``: row t is that of point
-    ``cell_point[t]``, and a neighbour is written as its place j in the cell order.
+    ``cell_point[t]``, and a neighbour is written as its place j in the cell order. Points outside
+    ``row_lo <= k < row_hi`` have empty rows.
     """
     n = position.shape[0]
     both = index_t.shape[0] > 0
     for t in prange(n):
         k = cell_point[t]
+        if k < row_lo or k >= row_hi:
+            continue
         xk = position[k, 0]
         yk = position[k, 1]
         zk = position[k, 2]
@@ -240,7 +251,7 @@ def cell_grid(position, side, max_cells):
     return lo, h, g
 
 
-def neighbour_rows(position, radius, exclude_same_rod=False, max_cells=None, cell_order=False):
+def neighbour_rows(position, radius, exclude_same_rod=False, max_cells=None, cell_order=False, rows=None):
     """All ordered pairs closer than ``radius`` as compressed rows (order: see the module docstring).
 
     Parameters
@@ -260,6 +271,10 @@ def neighbour_rows(position, radius, exclude_same_rod=False, max_cells=None, cel
         Also return the rows numbered by cell, written in the same fill pass (one more store per
         listed pair; renumbering the list afterwards, reading its rows in random order, took as
         long as a Yukawa sum at 24 000 rods).
+    rows : (int, int), optional
+        ``(row_lo, row_hi)``: list only the rows of the points ``row_lo <= k < row_hi`` (their
+        neighbours among all points), the other rows empty; each listed row is the row of the whole
+        list, bit for bit. An MPI rank needs only the rows of its block of rods (the Yukawa sum).
 
     Returns
     -------
@@ -292,12 +307,16 @@ def neighbour_rows(position, radius, exclude_same_rod=False, max_cells=None, cel
     counts = np.empty(n, dtype=np.int64)
     r2max = radius * radius
     ex = bool(exclude_same_rod)
-    _row_counts(position, sx, sy, sz, lo, h, g, span, cell_start, cell_point, r2max, ex, counts)
+    row_lo, row_hi = (0, n) if rows is None else (int(rows[0]), int(rows[1]))
+    _row_counts(position, sx, sy, sz, lo, h, g, span, cell_start, cell_point, r2max, ex, row_lo, row_hi, counts)
     np.cumsum(counts, out=start[1:])
     index = np.empty(start[-1], dtype=np.int64)
     start_t = np.zeros(n + 1 if cell_order else 1, dtype=np.int64)
     index_t = np.empty(start[-1] if cell_order else 0, dtype=np.int64)
     if cell_order:
         np.cumsum(counts[cell_point], out=start_t[1:])
-    _row_fill(position, sx, sy, sz, lo, h, g, span, cell_start, cell_point, r2max, ex, start, index, start_t, index_t)
+    _row_fill(
+        position, sx, sy, sz, lo, h, g, span, cell_start, cell_point, r2max, ex, row_lo, row_hi,
+        start, index, start_t, index_t,
+    )  # fmt: skip
     return (start, index, (cell_point, start_t, index_t)) if cell_order else (start, index)

@@ -35,9 +35,34 @@ class NeighbourList:
     cell_order : bool
         Also make :attr:`sorted_rows` at every build (an attribute: a term may set it on a list
         it is handed).
+    rows : (int, int), optional
+        List only the rows of the points ``rows[0] <= k < rows[1]`` (the others empty): an MPI
+        rank's block, when only its rows are summed (``kernels/cells.py::neighbour_rows``).
+    share : RowBlocks, optional
+        Under MPI, for a list every rank needs whole: each rank builds the rows of its block
+        (``rows_per_rod`` rows per rod) and :meth:`~selfas_graph.parallel.RowBlocks.gather_list`
+        joins them, the same list bit for bit as one whole build, in about half its time on 2 ranks.
     """
 
-    def __init__(self, cutoff: float, skin: float, exclude_same_rod: bool = False, cell_order: bool = False):
+    def __init__(
+        self,
+        cutoff: float,
+        skin: float,
+        exclude_same_rod: bool = False,
+        cell_order: bool = False,
+        rows=None,
+        share=None,
+        rows_per_rod: int = 2,
+    ):
+        if share is not None and not share.serial:
+            if rows is not None or cell_order:
+                raise ValueError("a shared list is built whole, without rows or cell order")
+            lo, hi = share.rods
+            rows = (rows_per_rod * lo, rows_per_rod * hi)
+        else:
+            share = None
+        self.share, self.rows_per_rod = share, rows_per_rod
+        self.rows = None if rows is None else (int(rows[0]), int(rows[1]))
         self.cutoff = float(cutoff)
         self.skin = float(skin)
         self.exclude_same_rod = exclude_same_rod
@@ -78,7 +103,11 @@ class NeighbourList:
         """
         if self._sorted is None:  # built without cell_order: the same build again, with them
             _, _, self._sorted = neighbour_rows(
-                self._reference, self.cutoff + self.skin, self.exclude_same_rod, cell_order=True
+                self._reference,
+                self.cutoff + self.skin,
+                self.exclude_same_rod,
+                cell_order=True,
+                rows=None if self.share is not None else self.rows,
             )
         return self._sorted
 
@@ -101,9 +130,11 @@ class NeighbourList:
         # this step with a diagnosis
         if n > 1 and np.isfinite(points).all() and np.abs(points).max() < 1e150:
             self.start, self.index, *cell_rows = neighbour_rows(
-                points, self.cutoff + self.skin, self.exclude_same_rod, cell_order=self.cell_order
+                points, self.cutoff + self.skin, self.exclude_same_rod, cell_order=self.cell_order, rows=self.rows
             )
             self._sorted = cell_rows[0] if cell_rows else None
+            if self.share is not None:
+                self.start, self.index = self.share.gather_list(self.start, self.index, self.rows_per_rod)
         else:
             self.start = np.zeros(n + 1, dtype=np.int64)
             self.index = np.zeros(0, dtype=np.int64)

@@ -99,7 +99,10 @@ class ForceField:
         self._tip_range = params.rods.rstar
         for t in self.terms:
             if isinstance(t, YukawaForce) and t.cutoff > 0.0:
-                self._centre_nl = NeighbourList(t.cutoff, skin)
+                # under MPI a rank sums the Yukawa rows of its block only: it lists only those rows
+                # (half the build and the memory on 2 ranks; each row the same bit for bit)
+                rows = None if self.blocks.serial else self.blocks.rods
+                self._centre_nl = NeighbourList(t.cutoff, skin, rows=rows)
         self._skin = skin
         self.position = None
         self.velocity = None
@@ -167,7 +170,9 @@ class ForceField:
         was called, so that the brake and the contact search share one list.
         """
         if self._tip_nl is None:
-            self._tip_nl = NeighbourList(self._tip_range, self._skin, exclude_same_rod=True)
+            # every rank needs the whole tip list (contacts, brakes, close pairs); under MPI each builds
+            # the rows of its block and the rows are gathered (parallel.py RowBlocks.gather_list)
+            self._tip_nl = NeighbourList(self._tip_range, self._skin, exclude_same_rod=True, share=self.blocks)
         self._tip_nl.update(self.position if position is None else position)
         return self._tip_nl
 
