@@ -390,14 +390,14 @@ def test_a_file_of_an_earlier_version_matches_where_it_lacks_only_later_keys_at_
 
 
 def test_a_later_key_of_an_optional_table_at_its_default_matches_a_file_that_lacks_it():
-    """A key added later to a table that is off by default (forces.tip_magnetic.tree_precision)
+    """A key added later to a table that is off by default (forces.tip_magnetic.precision)
     has a default too: a file written before it, with the table on, used that default."""
     from selfas_graph.ensemble import parameter_differences
     from selfas_graph.model.params import Parameters
 
     wanted = Parameters().replace({"forces.tip_magnetic": {}}).to_dict()
     stored = json.loads(json.dumps(wanted))
-    del stored["forces"]["tip_magnetic"]["tree_precision"]
+    del stored["forces"]["tip_magnetic"]["precision"]
     assert parameter_differences(stored, wanted) == []
-    mixed = Parameters().replace({"forces.tip_magnetic": {"tree_precision": "mixed"}}).to_dict()
-    assert parameter_differences(stored, mixed) == ["forces.tip_magnetic.tree_precision"]
+    mixed = Parameters().replace({"forces.tip_magnetic": {"precision": "mixed"}}).to_dict()
+    assert parameter_differences(stored, mixed) == ["forces.tip_magnetic.precision"]

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import SMALL_CIRCUIT_SCENE
 
+from conftest import SMALL_CIRCUIT_SCENE
 from selfas_graph.io.checkpoint import write_checkpoint
 from selfas_graph.io.scenario import scenario_from_text
 from selfas_graph.model.simulation import Simulation

@@ -400,11 +400,11 @@ def test_mixed_invalid_precision(chains):
         evaluate_tip_tree(t, RSTAR, KAPPA, 0.5, np.empty((len(chains[0]), 3)), precision="float32")
 
 
-def test_force_field_tree_precision():
-    """forces.tip_magnetic.tree_precision = mixed reaches the tree: the force field's forces
+def test_force_field_precision():
+    """forces.tip_magnetic.precision = mixed reaches the tree: the force field's forces
     equal those with float64 to float32 rounding, and the dry run's settings say so."""
     ff_64, state = _field(400, "tree")
-    ff_32, _ = _field(400, "tree", tree_precision="mixed")
+    ff_32, _ = _field(400, "tree", precision="mixed")
     assert ff_32.describe()["tip_magnetic_sum"] == "tree (opening angle 0.4, mixed near field)"
     f = [ff.evaluate(state.position, state.velocity).copy() for ff in (ff_64, ff_32)]
     close_mixed(f[1], f[0])

@@ -55,7 +55,7 @@ KNOBS = {
     "integrator.bond_force": (["paper", "exact"], {"integrator.bond_force": "exact"}),
     "integrator.position_projection": ([False, True], {"integrator.position_projection": True}),
     "integrator.slow_every": ([1, 2, 4, 8, 16, 32], {"integrator.slow_every": 1}),
-    # the tip-tip sum: the tree (at its near-field precision, --set forces.tip_magnetic.tree_precision=...)
+    # the tip-tip sum: the tree (at its near-field precision, --set forces.tip_magnetic.precision=...)
     # against the exact direct sum
     "forces.tip_magnetic.method": (["direct", "tree"], {"forces.tip_magnetic.method": "direct"}),
     "integrator.slow_extrapolation": ([False, True], {"integrator.slow_every": 1}),

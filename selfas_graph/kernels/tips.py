@@ -8,8 +8,10 @@ the "same rod" pair is removed by a select, not a branch.
 
 import math
 
-from ._jit import inline, inline_sum, njit_parallel_sum, njit_rows, prange
-from .laws import tip_force_over_r, tip_potential
+import numpy as np
+
+from ._jit import inline, inline_sum, njit, njit_parallel_sum, njit_rows, prange
+from .laws import tip_force_over_r, tip_force_over_r_f32, tip_potential
 
 
 @inline_sum
@@ -57,6 +59,121 @@ def tip_tip_direct(x, y, z, charge, rstar, kappa, lo, hi, out):
     """
     for k in prange(lo, hi):
         fx, fy, fz = _force_on_tip(k, x, y, z, charge, rstar, kappa)
+        out[k, 0] = fx
+        out[k, 1] = fy
+        out[k, 2] = fz
+
+
+#: tips per float32 partial sum of :func:`tip_tip_direct_mixed`, each added in float64
+MIXED_BLOCK = 128
+
+#: the mixed sum falls back to float64 when a coordinate lies farther than this from the tips'
+#: box centre or a charge is outside [MIXED_CHARGE_MIN, MIXED_CHARGE_MAX] in magnitude (float32
+#: products of charges and powers of 1/r would over- or underflow; reduced units keep all O(1))
+MIXED_SPAN = 1e15
+MIXED_CHARGE_MIN = 1e-15
+MIXED_CHARGE_MAX = 1e15
+
+
+@njit
+def _tips_mixed(x, y, z, charge):
+    """Tips packed for the mixed sum: ``(ok, pk, rod)``.
+
+    ``pk`` (7, n) float32: rows 0-2 the hi and 3-5 the lo parts of ``x - origin`` (the centre of
+    the tips' box), ``hi = float32(u)``, ``lo = float32(u - hi)``, which hold u to about 1e-14 of
+    itself; row 6 the charge. ``rod`` (n,) int32, ``k >> 1``. ``ok`` False when a coordinate or a
+    charge is outside what float32 holds here (:data:`MIXED_SPAN`, :data:`MIXED_CHARGE_MIN`,
+    :data:`MIXED_CHARGE_MAX`), or not finite: then the caller sums in float64.
+    """
+    n = x.shape[0]
+    pk = np.empty((7, n), np.float32)
+    rod = np.empty(n, np.int32)
+    ok = True
+    origin = np.zeros(3)
+    for d, c in enumerate((x, y, z)):
+        lo = np.inf
+        hi = -np.inf
+        for k in range(n):
+            lo = min(lo, c[k])
+            hi = max(hi, c[k])
+            ok = ok and math.isfinite(c[k])
+        origin[d] = 0.5 * (lo + hi)
+        ok = ok and (hi - lo) < 2.0 * MIXED_SPAN  # False for NaN and inf too
+    for k in range(n):
+        q = abs(charge[k])
+        ok = ok and (q == 0.0 or (MIXED_CHARGE_MIN <= q <= MIXED_CHARGE_MAX))
+    if not ok:
+        return ok, pk, rod
+    for k in range(n):
+        for d, c in enumerate((x, y, z)):
+            u = c[k] - origin[d]
+            h = np.float32(u)
+            pk[d, k] = h
+            pk[3 + d, k] = np.float32(u - np.float64(h))
+        pk[6, k] = np.float32(charge[k])
+        rod[k] = np.int32(k >> 1)
+    return ok, pk, rod
+
+
+@inline_sum
+def _force_on_tip_mixed(k, pk, rod, rstar, kappa):
+    """:func:`_force_on_tip` with the law in float32 (:func:`~.laws.tip_force_over_r_f32`) on the
+    packed tips of :func:`_tips_mixed`: float32 sums over blocks of :data:`MIXED_BLOCK` tips,
+    each added in float64."""
+    n = rod.shape[0]
+    xh = pk[0, k]
+    yh = pk[1, k]
+    zh = pk[2, k]
+    xl = pk[3, k]
+    yl = pk[4, k]
+    zl = pk[5, k]
+    qk = pk[6, k]
+    mine = rod[k]
+    zero = np.float32(0.0)
+    fx = 0.0
+    fy = 0.0
+    fz = 0.0
+    for l0 in range(0, n, MIXED_BLOCK):
+        gx = zero
+        gy = zero
+        gz = zero
+        for l in range(l0, min(l0 + MIXED_BLOCK, n)):
+            # hi differences first: exact for close tips (Sterbenz), so dx keeps float32
+            # precision relative to itself
+            dx = (xh - pk[0, l]) + (xl - pk[3, l])
+            dy = (yh - pk[1, l]) + (yl - pk[4, l])
+            dz = (zh - pk[2, l]) + (zl - pk[5, l])
+            g = tip_force_over_r_f32(dx * dx + dy * dy + dz * dz, qk * pk[6, l], rstar, kappa)
+            g = zero if rod[l] == mine else g  # the tips of one rod: a select, so that the loop vectorises
+            gx += g * dx
+            gy += g * dy
+            gz += g * dz
+        fx += np.float64(gx)
+        fy += np.float64(gy)
+        fz += np.float64(gz)
+    return fx, fy, fz
+
+
+@njit_parallel_sum
+def tip_tip_direct_mixed(x, y, z, charge, rstar, kappa, lo, hi, out):
+    """:func:`tip_tip_direct` with the pair law in float32 (``forces.tip_magnetic.precision = "mixed"``).
+
+    The same arguments and rows (a row does not depend on ``lo, hi``). Each tip's coordinates
+    relative to the centre of the tips' box are float32 pairs hi + lo, so that the separations of
+    close tips keep float32 precision relative to themselves wherever the scene is; the law runs
+    on 8 float32 lanes and its sums over blocks of :data:`MIXED_BLOCK` tips are added in float64.
+    Each force differs from the float64 sum by about 1e-7 of the largest pair force in it
+    (docs/performance.md 'Mixed-precision direct tip-tip sum'). Falls back to the float64 sum,
+    bit for bit, when coordinates or charges are outside what float32 holds (:func:`_tips_mixed`).
+    """
+    ok, pk, rod = _tips_mixed(x, y, z, charge)
+    r32 = np.float32(rstar)
+    k32 = np.float32(kappa)
+    for k in prange(lo, hi):
+        if ok:
+            fx, fy, fz = _force_on_tip_mixed(k, pk, rod, r32, k32)
+        else:
+            fx, fy, fz = _force_on_tip(k, x, y, z, charge, rstar, kappa)
         out[k, 0] = fx
         out[k, 1] = fy
         out[k, 2] = fz

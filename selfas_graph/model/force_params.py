@@ -33,11 +33,13 @@ class TipMagnetic:
         gt=0.0,
         lt=1.0,
     )
-    tree_precision: str = spec(
+    precision: str = spec(
         "float64",
-        "tree: arithmetic of the evaluation: float64, or mixed (float32 near pairs relative "
-        "to the target group's centre and float32 multipole fields, each summed in float64; "
-        "differs from float64 by about 4e-7 of a tip's force, docs/performance.md)",
+        "arithmetic of the sum: float64, or mixed (direct: a float32 pair law on coordinates "
+        "relative to the tips' box centre as float32 hi + lo pairs, sums of 128 pairs added in float64; "
+        "tree: float32 near pairs relative to the target group's centre and float32 multipole "
+        "fields, each summed in float64; both differ from float64 by about 1e-7 to 4e-7 of a "
+        "tip's force, docs/performance.md)",
         choices=("float64", "mixed"),
     )
     tree_above: int = spec(

@@ -57,7 +57,7 @@ class TipMagneticForce(Term):
         tm = p.forces.tip_magnetic
         self.tree = tm.method == "tree" or (tm.method == "auto" and state.n_rods >= tm.tree_above)
         self.theta = tm.opening_angle
-        self.precision = tm.tree_precision
+        self.precision = tm.precision
 
     def compute(self, ff, out):
         x, y, z = ff.soa()
@@ -75,7 +75,8 @@ class TipMagneticForce(Term):
                     tree, self.rstar, self.kappa, self.theta, out["tip_magnetic"], lo, hi, self.precision
                 )
                 return
-        kt.tip_tip_direct(x, y, z, ff.tip_charge, self.rstar, self.kappa, lo, hi, out["tip_magnetic"])
+        direct = kt.tip_tip_direct_mixed if self.precision == "mixed" else kt.tip_tip_direct
+        direct(x, y, z, ff.tip_charge, self.rstar, self.kappa, lo, hi, out["tip_magnetic"])
 
     def blocked(self, ff):
         return ("tip_magnetic",)
