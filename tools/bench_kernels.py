@@ -7,6 +7,8 @@ On the tips of the Fig. 2 scene scaled to each size (as tools/bench_step.py), it
 ``--repeat`` times (median [min-max] ms per call), on ``--threads`` numba threads:
 
 - ``direct``: the tip-tip direct sum (all rows), also as tip pairs per second per thread;
+- ``direct mixed``: the same sum in mixed precision (``forces.tip_magnetic.precision = "mixed"``:
+  float32 pair law, float64 block sums); with ``--before`` interleaved with ``direct``;
 - ``plain``: the same all-pairs loop reduced to a bare Coulomb law (``q_k q_l d / r^3``, no
   soft core, no same-rod select), a reference for what the CPU does with one sqrt and one
   division per pair (up to 6000 rods);
@@ -42,16 +44,16 @@ a loaded machine.
 under load it counts only the cycles the kernel got (with one thread).
 
 ``--targets`` runs the timings once per instruction set, each in a fresh process with
-``NUMBA_CPU_NAME`` set (``host`` leaves it unset: numba compiles for the CPU it runs on), so
-that one table shows what an AVX2 machine gets (``haswell``, ``znver3``) beside the host
-build; on an AVX-512 host, ``haswell`` is the AVX2 build. Each process prints the CPU and the
-target it compiled for.
+``NUMBA_CPU_NAME`` set to the target and ``NUMBA_CPU_FEATURES`` set empty, so that numba uses
+that CPU's own features (tools/bench_peer.py ``target_env``; ``host`` leaves both unset: numba
+compiles for the CPU it runs on). One table then shows what an AVX2 machine gets (``haswell``,
+``znver3``) beside the host build, also on an AVX-512 host. Each process prints the CPU and the
+target and vector features it compiled for.
 """
 
 import argparse
 import importlib
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -207,6 +209,12 @@ def run(args):
         rep_big = args.repeat if n <= 6000 else max(2, args.repeat // 3)
         jobs = [
             ("direct", direct, rep_big, lambda K: lambda: K.tips.tip_tip_direct(x, y, z, q, rstar, kappa, 0, ntips, f)),
+            (
+                "direct mixed",
+                direct,
+                rep_big,
+                lambda K: lambda: K.tips.tip_tip_direct_mixed(x, y, z, q, rstar, kappa, 0, ntips, f),
+            ),
             ("tree build", True, args.repeat, lambda K: lambda: K.tree.build_tip_tree(x, y, z, q)),
             (
                 "tree eval",
@@ -366,12 +374,10 @@ def main(argv=None):
         print(json.dumps(run(args)))
         return
     results = {}
+    from bench_peer import target_env
+
     for target in args.targets:
-        env = dict(os.environ)
-        env.pop("NUMBA_CPU_NAME", None)
-        env.pop("NUMBA_CPU_FEATURES", None)
-        if target != "host":
-            env["NUMBA_CPU_NAME"] = target
+        env = target_env(target)
         cmd = [
             sys.executable,
             str(Path(__file__).resolve()),
@@ -405,6 +411,7 @@ def main(argv=None):
     )
     kernels = [
         "direct",
+        "direct mixed",
         "plain",
         "tree build",
         "tree eval",
@@ -426,7 +433,7 @@ def main(argv=None):
     def cell(row, key, n, k):
         v = np.array(row[key])
         text = f"{np.median(v):.3g} [{v.min():.3g}-{v.max():.3g}]"
-        if k in ("direct", "plain"):
+        if k in ("direct", "direct mixed", "plain"):
             text += f" ({(2 * n) ** 2 / (np.median(v) * 1e-3) / args.threads / 1e9:.2f}e9)"
         if k == "yukawa":
             text += f" ({np.median(v) * 1e6 / row['yukawa_pairs']:.1f} ns/pair)"

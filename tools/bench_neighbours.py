@@ -20,13 +20,13 @@ time (``time.process_time``: on a shared machine it counts only the cycles the k
 ``kernels_at``), interleaved with the working tree's (the order alternates between repeats),
 each over the list its own build makes, and prints the speed-up (median [min-max] of the
 per-repeat ratios before / after): the fair comparison on a loaded machine. Each target runs in
-a fresh process with ``NUMBA_CPU_NAME`` set (``host`` leaves it unset), and prints the CPU and
+a fresh process with ``NUMBA_CPU_NAME`` set and ``NUMBA_CPU_FEATURES`` empty (the named CPU's own
+features; ``host`` leaves both unset, tools/bench_peer.py ``target_env``), and prints the CPU and
 the target numba compiled for.
 """
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import time
@@ -149,12 +149,10 @@ def main(argv=None):
         print(json.dumps(run(args)))
         return
     results = {}
+    from bench_peer import target_env
+
     for target in args.targets:
-        env = dict(os.environ)
-        env.pop("NUMBA_CPU_NAME", None)
-        env.pop("NUMBA_CPU_FEATURES", None)
-        if target != "host":
-            env["NUMBA_CPU_NAME"] = target
+        env = target_env(target)
         cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "--repeat", str(args.repeat)]
         cmd += ["--rods", *map(str, args.rods)]
         cmd += ["--checkpoint", args.checkpoint] if args.checkpoint else []

@@ -2,9 +2,12 @@
 compiled for, and a peer code timed on the same rods in the same run.
 
 ``machine()`` names the CPU model (``/proc/cpuinfo``), the CPU numba compiles for (``NUMBA_CPU_NAME``
-when set, else LLVM's name of the host CPU) and its vector features: a kernel compiled for
-``haswell`` or ``znver3`` uses AVX2 at most, one compiled on an AVX-512 host for the host uses
-AVX-512.
+when set, else LLVM's name of the host CPU) and the vector features it compiles with. numba takes
+the features from ``NUMBA_CPU_FEATURES`` and, when that is unset, from the host CPU, whatever
+``NUMBA_CPU_NAME`` says: on an AVX-512 host, ``NUMBA_CPU_NAME=haswell`` alone still emits AVX-512
+(tuned for Haswell). ``target_env(target)`` gives the environment of a build for a named CPU with
+that CPU's own features (``NUMBA_CPU_FEATURES`` set empty): ``haswell`` or ``znver3`` then use
+AVX2 at most, on any x86 host.
 
 ``OpenMMPeer`` is the peer of the step benchmarks: OpenMM's CPU platform (the optional ``bench``
 extra, ``pip install -e ".[bench]"``) on the same tips as the simulation, each rod two particles of
@@ -41,16 +44,35 @@ def cpu_model() -> str:
     return platform.processor() or platform.machine()
 
 
+def target_env(target: str, environ=None) -> dict:
+    """The environment of a process whose kernels numba compiles for ``target``.
+
+    ``"host"``: the CPU it runs on (``NUMBA_CPU_NAME`` and ``NUMBA_CPU_FEATURES`` removed). Any other
+    name (``haswell``, ``znver3``, ...): that CPU with its own features only, ``NUMBA_CPU_FEATURES``
+    set empty; without it numba would add the host's features to the name (AVX-512 on an AVX-512
+    host, whatever the name).
+    """
+    env = dict(os.environ if environ is None else environ)
+    env.pop("NUMBA_CPU_NAME", None)
+    env.pop("NUMBA_CPU_FEATURES", None)
+    if target != "host":
+        env["NUMBA_CPU_NAME"] = target
+        env["NUMBA_CPU_FEATURES"] = ""
+    return env
+
+
 def numba_target() -> dict:
-    """The CPU numba compiles for and its vector features (from numba's own code generator)."""
+    """The CPU numba compiles for and its vector features, as numba's code generator takes them:
+    ``NUMBA_CPU_FEATURES`` when set (empty: the named CPU's own), else the host's, also when
+    ``NUMBA_CPU_NAME`` names another CPU (numba's ``JITCPUCodegen._get_host_cpu_features``)."""
     import llvmlite.binding as ll
     import numba
 
     name = numba.config.CPU_NAME or ll.get_host_cpu_name()
-    if numba.config.CPU_FEATURES is not None:
+    if numba.config.CPU_FEATURES:
         feats = numba.config.CPU_FEATURES.split(",")
-    elif numba.config.CPU_NAME:
-        feats = []  # the named CPU's own features: LLVM knows them from the name
+    elif numba.config.CPU_FEATURES is not None:
+        feats = []  # set empty: the named CPU's own features, which LLVM knows from the name
     else:
         feats = [("+" if on else "-") + k for k, on in ll.get_host_cpu_features().items()]
     vector = sorted(f[1:] for f in feats if f.startswith("+") and (f[1:].startswith(("avx", "fma", "sse4"))))

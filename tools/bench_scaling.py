@@ -19,8 +19,9 @@ per step (both codes on the same threads), which a busy machine disturbs less th
 clock (a thread that spins while it waits counts as busy). Beside each tree row: the tree's median and 99th-percentile
 relative tip-force error against the direct sum on the same positions (on a random sample of
 2000 tips above 2000 rods), and the speed-up over the direct sum measured in the same run.
-The header names the CPU and the instruction set numba compiled for (``NUMBA_CPU_NAME=haswell``
-compiles AVX2 code on any x86 host). Without OpenMM the peer is skipped with a note.
+The header names the CPU and the instruction set numba compiled for (``NUMBA_CPU_NAME=haswell
+NUMBA_CPU_FEATURES=`` compiles AVX2 code on any x86 host; the name alone keeps the host's features,
+AVX-512 on an AVX-512 host). Without OpenMM the peer is skipped with a note.
 
 ``--plot`` draws ms per step against rods on log-log axes from one or more JSON files
 written by ``--json`` (e.g. one run on 1 rank and one under ``mpiexec -n 2``), with the
