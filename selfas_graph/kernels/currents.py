@@ -327,11 +327,16 @@ def _active_rod_field_mixed(px, py, pz, skip_rod, seg, rod, origin):
     fx = 0.0
     fy = 0.0
     fz = 0.0
-    for r0 in range(0, n, MIXED_BLOCK):
+    # [perf] unsigned indices, as in kernels/tips.py::_force_on_tip_mixed: with signed ones LLVM
+    # loads the rows with gathers on AVX-512 targets (docs/performance.md 'Unsigned loop indices
+    # on AVX-512'); the same sums bit for bit
+    block = np.uint64(MIXED_BLOCK)
+    n_u = np.uint64(n)
+    for r0 in range(np.uint64(0), n_u, block):
         gx = _F32_ZERO
         gy = _F32_ZERO
         gz = _F32_ZERO
-        for r in range(r0, min(r0 + MIXED_BLOCK, n)):
+        for r in range(r0, min(r0 + block, n_u)):
             # hi differences first: exact when x and the end are close (Sterbenz), so that
             # a = x - A keeps float32 precision relative to |a|
             hx, hy, hz = segment_field_f32(

@@ -133,11 +133,16 @@ def _force_on_tip_mixed(k, pk, rod, rstar, kappa):
     fx = 0.0
     fy = 0.0
     fz = 0.0
-    for l0 in range(0, n, MIXED_BLOCK):
+    # [perf] unsigned indices: numba checks a signed index for wraparound, and on AVX-512 targets
+    # LLVM then loads the packed rows with gathers, 2.4 times slower than the AVX2 build's plain
+    # loads (docs/performance.md 'Unsigned loop indices on AVX-512'); the same sums bit for bit
+    block = np.uint64(MIXED_BLOCK)
+    n_u = np.uint64(n)
+    for l0 in range(np.uint64(0), n_u, block):
         gx = zero
         gy = zero
         gz = zero
-        for l in range(l0, min(l0 + MIXED_BLOCK, n)):
+        for l in range(l0, min(l0 + block, n_u)):
             # hi differences first: exact for close tips (Sterbenz), so dx keeps float32
             # precision relative to itself
             dx = (xh - pk[0, l]) + (xl - pk[3, l])
