@@ -1,0 +1,55 @@
+"""What LLVM makes of the mixed-precision pair loops, read from the generated assembly.
+
+The float32 pair loops (the mixed direct tip-tip sum, the rod currents' field in mixed precision)
+must load their packed rows with plain vector loads. With signed loop indices numba checks each
+index for wraparound, and for CPUs with AVX-512 LLVM then vectorised the loops with gathers, 2.2-2.4
+times slower than the AVX2 build on the same Intel Xeon (docs/performance.md 'Unsigned loop
+indices on AVX-512'). The kernels are compiled, not run, for an AVX-512 CPU and for an AVX2 CPU in
+a fresh process with an empty cache, so the check holds on any x86-64 host.
+"""
+
+import json
+import os
+import platform
+import subprocess
+import sys
+
+import pytest
+
+pytestmark = pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"), reason="reads x86-64 assembly")
+
+_PROBE = r"""
+import json, re, sys, warnings
+warnings.simplefilter("ignore")
+import numpy as np, numba
+from selfas_graph.kernels import currents as kc, tips
+n = 64
+pos = np.zeros((2 * n, 3)); q = np.ones(2 * n); act = np.arange(n, dtype=np.int64); cur = np.ones(n)
+out = np.zeros((2 * n, 3)); x = np.zeros(2 * n)
+cases = {
+    "current_force_on_tips_mixed": (kc.current_force_on_tips_mixed, (pos, q, act, cur, 0.03, 0, 2 * n, out)),
+    "rod_current_field_mixed": (kc.rod_current_field_mixed, (pos, act, pos, act, cur, 0.03, out)),
+    "tip_tip_direct_mixed": (tips.tip_tip_direct_mixed, (x, x, x, q, 0.06, 1.0, 0, 2 * n, out)),
+}
+found = {}
+for name, (disp, args) in cases.items():
+    sig = tuple(numba.typeof(a) for a in args)
+    disp.compile(sig)  # compiled only: the target CPU need not be this one
+    lib = disp.overloads[sig].library
+    # the parallel loop body is a gufunc in a library linked to the kernel's own
+    asm = "".join(l.get_asm_str() for l in [lib] + list(getattr(lib, "_linking_libraries", ())))
+    found[name] = {"gathers": len(re.findall(r"\bv(?:p)?gather", asm)), "packed_f32": len(re.findall(r"\bvsubps\b", asm))}
+print(json.dumps(found))
+"""
+
+
+@pytest.mark.parametrize("cpu", ["skylake-avx512", "haswell"])
+def test_mixed_pair_loops_load_rows_without_gathers(cpu, tmp_path):
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
+    env.update(NUMBA_CPU_NAME=cpu, NUMBA_CPU_FEATURES="", NUMBA_CACHE_DIR=str(tmp_path))
+    got = subprocess.run([sys.executable, "-c", _PROBE], env=env, capture_output=True, text=True, timeout=600)
+    assert got.returncode == 0, got.stderr
+    found = json.loads(got.stdout.strip().splitlines()[-1])
+    for name, counts in found.items():
+        assert counts["packed_f32"] > 0, f"{name}: the vectorised float32 loop is not in the inspected code"
+        assert counts["gathers"] == 0, f"{name} for {cpu}: {counts['gathers']} gather instructions"
