@@ -106,21 +106,61 @@ def test_error_bounds_and_convergence(config, request):
         last = (med, p99)
 
 
-def test_octupole_beats_quadrupole(uniform):
-    """At the same opening angle the octupole order is more accurate than the quadrupole
-    (measured: median 1.4e-3 against 3.7e-3 at theta 0.5), so the octupole moments are right."""
+def test_higher_orders_are_more_accurate(uniform):
+    """At the same opening angle each order is more accurate than the one below (measured at
+    theta 0.5, leaves of 64: median 3.6e-3, 1.3e-3 and 4.7e-4 for orders 2, 3 and 4)."""
     expected = direct(*uniform)
-    e2 = np.median(relative_error(tree(*uniform, 0.5, order=2), expected))
-    e3 = np.median(relative_error(tree(*uniform, 0.5, order=3), expected))
-    assert e3 < e2 / 2
+    e = [np.median(relative_error(tree(*uniform, 0.5, order=order), expected)) for order in (2, 3, 4)]
+    assert e[1] < e[0] / 2 and e[2] < e[1] / 2, e
+
+
+def cluster_and_targets(rng, n=40):
+    """Rods (tips +-q) inside a ball of radius about 1 around the origin, and target points on a
+    ray at distances 6, 12 and 24 (the directions of the tips and the ray at random)."""
+    centre = rng.normal(size=(n, 3))
+    centre *= 0.5 / np.linalg.norm(centre, axis=1).max()
+    x, y, z, q = rods_to_tips(centre, rng.normal(size=(n, 3)), rng.uniform(2 / 3, 2, n))
+    ray = rng.normal(size=3)
+    return (x, y, z, q), ray / np.linalg.norm(ray) * np.array([6.0, 12.0, 24.0])[:, None]
+
+
+@pytest.mark.parametrize("order", [2, 3, 4])
+def test_multipole_field_falls_with_its_order(order):
+    """The field of one cell's moments (the kernels of the far field, float64 and float32) against
+    the Coulomb field of its tips: the truncation error of order p falls as 1/d^(p+3) (the first
+    moment left out, of order p + 1, has a field falling so), so doubling the distance divides it
+    by 2^(p+3): 32, 64, 128 for orders 2, 3, 4 (measured 32-33, 65 and 122-125; a wrong term of
+    order n <= p would leave an error falling as 1/d^(n+2) instead). The float32 field, in units of
+    the distance as the tree takes it, equals the float64 one to float32 rounding."""
+    from selfas_graph.kernels import tree as ktree
+
+    tips, points = cluster_and_targets(np.random.default_rng(11))
+    t = build_tip_tree(*tips, leaf_size=len(tips[0]), order=order)  # one cell: the root
+    mc, c = t.moment[0], t.centre[0]
+    errors = []
+    for p in points:
+        d = p - c
+        exact = sum(qk * (p - xk) / np.linalg.norm(p - xk) ** 3 for qk, xk in zip(tips[3], np.stack(tips[:3], 1)))
+        field = np.array(ktree._field_hexadecapole(*d, mc) if order == 4 else ktree._field_octupole(*d, *mc[:16]))
+        if order == 2:
+            np.testing.assert_allclose(field, ktree._field_quadrupole(*d, *mc[:9]), rtol=1e-13)
+        s = np.linalg.norm(d)
+        u = (d / s).astype(np.float32)
+        m32 = (mc * s ** -np.repeat([0, 1, 2, 3, 4], [1, 3, 5, 7, 9])).astype(np.float32)
+        f32 = ktree._field_hexadecapole_f32(*u, *m32) if order == 4 else ktree._field_octupole_f32(*u, *m32[:16])
+        np.testing.assert_allclose(np.array(f32, dtype=np.float64) / s**2, field, rtol=1e-5)
+        errors.append(np.linalg.norm(field - exact))
+    ratios = np.array(errors[:-1]) / np.array(errors[1:])
+    expected = 2.0 ** (order + 3)
+    assert np.all((ratios > 0.8 * expected) & (ratios < 1.25 * expected)), ratios
 
 
 @pytest.mark.parametrize("config", ["uniform", "chains"])
-@pytest.mark.parametrize("theta, order", [(0.0, 2), (0.0, 3), (1e-3, 3)])
+@pytest.mark.parametrize("theta, order", [(0.0, 2), (0.0, 3), (0.0, 4), (1e-3, 3), (1e-3, 4)])
 def test_small_theta_is_direct(config, theta, order, request):
     """theta = 0 accepts no cell: the direct sum to round-off. At theta = 1e-3 only
-    cells far beyond their radius are accepted and the octupole truncation error,
-    about theta^4 = 1e-12 of a cell's field, is itself at round-off (measured at most
+    cells far beyond their radius are accepted and the truncation error, about theta^4 =
+    1e-12 of a cell's field with octupoles, is itself at round-off (measured at most
     4e-14 relative per tip)."""
     tips = request.getfixturevalue(config)
     close(tree(*tips, theta, order=order), direct(*tips))
@@ -317,8 +357,9 @@ def close_mixed(actual, expected):
 @pytest.mark.parametrize("theta", [0.4, 0.0])
 def test_mixed_matches_float64(config, theta, request):
     """The mixed tree equals the float64 tree to float32 rounding, and its error against the
-    direct sum is the tree's own: measured median and p99 within 1.3 % of the float64 tree's
-    (the float32 difference, 4e-7 of a force, adds to a truncation error of 3e-6 - 3e-4)."""
+    direct sum is the tree's own: measured median and p99 within 1.3 % of the float64 tree's in
+    the gas (the float32 difference, 4e-7 of a force, adds to a truncation error of 1e-4), and
+    within 1e-7 of it in the chains (median, truncation error 1e-6)."""
     tips = request.getfixturevalue(config)
     f64 = tree(*tips, theta)
     f32 = mixed(*tips, theta)
@@ -328,7 +369,9 @@ def test_mixed_matches_float64(config, theta, request):
         expected = direct(*tips)
         e64, e32 = relative_error(f64, expected), relative_error(f32, expected)
         for stat in (np.median, lambda e: np.percentile(e, 99)):
-            assert abs(stat(e32) - stat(e64)) < 0.05 * stat(e64)
+            # in the chains the hexadecapole tree errs only 1e-6 (median), where the float32
+            # rounding of the near pairs (MIXED_MEDIAN) is as large: it may add that much
+            assert abs(stat(e32) - stat(e64)) < 0.05 * stat(e64) + MIXED_MEDIAN
 
 
 def test_mixed_far_from_the_origin(chains):
@@ -394,6 +437,31 @@ def test_mixed_row_ranges_bitwise(chains):
     assert np.array_equal(parts, whole)
 
 
+@pytest.mark.parametrize("precision", ["float64", "mixed"])
+def test_group_runs_bitwise(chains, precision):
+    """Runs of groups (as MPI ranks take them, kernels/tree.py group_bounds) evaluated separately
+    equal one evaluation bitwise; each run writes exactly the rows of its tips, a contiguous run in
+    Morton order, and the runs hold about equal numbers of tips."""
+    from selfas_graph.kernels.tree import group_bounds
+
+    t = build_tip_tree(*chains, leaf_size=16, group_size=32)
+    n = len(chains[0])
+    whole = np.empty((n, 3))
+    evaluate_tip_tree(t, RSTAR, KAPPA, 0.5, whole, precision=precision)
+    bounds, tips = group_bounds(t, 3)
+    assert bounds[0] == 0 and bounds[-1] == len(t.group) and tips[0] == 0 and tips[-1] == n
+    assert np.all(np.diff(tips) > n / 3 - 32) and np.all(np.diff(tips) < n / 3 + 32)
+    parts = np.full((n, 3), np.nan)
+    for r in range(3):
+        evaluate_tip_tree(t, RSTAR, KAPPA, 0.5, parts, precision=precision, groups=bounds[r : r + 2])
+        done = np.zeros(n, bool)
+        done[t.index[: tips[r + 1]]] = True
+        assert np.array_equal(~np.isnan(parts[:, 0]), done)
+    assert np.array_equal(parts, whole)
+    with pytest.raises(ValueError, match="groups"):
+        evaluate_tip_tree(t, RSTAR, KAPPA, 0.5, parts, groups=(2, len(t.group) + 1))
+
+
 def test_mixed_invalid_precision(chains):
     t = build_tip_tree(*chains)
     with pytest.raises(ValueError, match="precision must be one of 'float64', 'mixed'"):
@@ -405,7 +473,7 @@ def test_force_field_precision():
     equal those with float64 to float32 rounding, and the dry run's settings say so."""
     ff_64, state = _field(400, "tree")
     ff_32, _ = _field(400, "tree", precision="mixed")
-    assert ff_32.describe()["tip_magnetic_sum"] == "tree (opening angle 0.4, mixed near field)"
+    assert ff_32.describe()["tip_magnetic_sum"] == "tree (order 4, opening angle 0.475, mixed near field)"
     f = [ff.evaluate(state.position, state.velocity).copy() for ff in (ff_64, ff_32)]
     close_mixed(f[1], f[0])
 
@@ -428,8 +496,9 @@ def line_of_rods(n_rods, spacing=2.0):
 def test_mixed_far_field_matches_the_float64_octupoles(uniform):
     """With leaves of one tip and theta 0.5 most of each tip's force comes from accepted cells:
     the float32 far field equals the float64 one to float32 rounding of the largest force, for
-    both orders (order 2 runs the octupole formula with zero octupole moments)."""
-    for order in (2, 3):
+    every order (order 2 runs the octupole formula with zero octupole moments). Each group records
+    hundreds of cells here, several chunks of FAR_CHUNK, the last one padded."""
+    for order in (2, 3, 4):
         knobs = {"leaf_size": 1, "group_size": 8, "order": order}
         close_mixed(mixed(*uniform, 0.5, **knobs), tree(*uniform, 0.5, **knobs))
 

@@ -3,8 +3,8 @@
 Every rod is a dipole (tips +q and -q), so the net charge of a cell of tips is
 near zero and a monopole-only Barnes-Hut tree is badly wrong (median relative
 force error about 4 % at opening angle 0.7). Cells here carry Cartesian
-multipole moments up to quadrupole or octupole order about a fixed expansion
-centre: the centre of the cell's tight bounding box (never the centre of
+multipole moments up to quadrupole, octupole or hexadecapole order about a fixed
+expansion centre: the centre of the cell's tight bounding box (never the centre of
 charge, which is undefined for a neutral cell).
 
 Build (O(N log N)):
@@ -28,16 +28,22 @@ Moments of a cell, with ``s = x_l - c`` (all traceless, so that only
 independent components are stored)::
 
     M = sum q,  P_i = sum q s_i,  Q_ij = sum q (3 s_i s_j - s^2 d_ij),
-    O_ijk = sum q (15 s_i s_j s_k - 3 s^2 (s_i d_jk + s_j d_ik + s_k d_ij))
+    O_ijk = sum q (15 s_i s_j s_k - 3 s^2 (s_i d_jk + s_j d_ik + s_k d_ij)),
+    H_ijkl = sum q (105 s_i s_j s_k s_l - 15 s^2 (d_ij s_k s_l + 5 more pairings)
+                    + 3 s^4 (d_ij d_kl + d_ik d_jl + d_il d_jk))
 
+(the moment of order n is ``(2n - 1)!!`` times the traceless part of ``sum q s^n``)
 and the field ``E = -grad phi`` of ``phi = sum q / |r - x_l|`` at ``d = r - c``
 (R = |d|), from the expansion of 1/|d - s| in Cartesian derivatives of 1/R::
 
-    phi = M / R + P.d / R^3 + (dQd) / (2 R^5) + O(ddd) / (6 R^7)
-    E   = d (M / R^3 + 3 P.d / R^5 + 5 dQd / (2 R^7) + 7 O(ddd) / (6 R^9))
-          - P / R^3 - Q.d / R^5 - O(dd.) / (2 R^7)
+    phi = M / R + P.d / R^3 + (dQd) / (2 R^5) + O(ddd) / (6 R^7) + H(dddd) / (24 R^9)
+    E   = d (M / R^3 + 3 P.d / R^5 + 5 dQd / (2 R^7) + 7 O(ddd) / (6 R^9) + 3 H(dddd) / (8 R^11))
+          - P / R^3 - Q.d / R^5 - O(dd.) / (2 R^7) - H(ddd.) / (6 R^9)
 
-The force on tip k is ``q_k E`` (Coulomb law of term 1 outside r*).
+The force on tip k is ``q_k E`` (Coulomb law of term 1 outside r*). Leaving out
+the moments above order p leaves a field error falling as ``1/R^(p+3)``, a
+relative error of about ``(b/R)^(p+1)`` (tests/test_tree.py
+``test_multipole_field_falls_with_its_order``).
 
 Evaluation walks the tree once per *group* of targets (a cell with at most
 ``group_size`` tips) rather than once per tip: a source cell is accepted for
@@ -46,28 +52,33 @@ group's bounding box, ``b < theta d_min`` (Barnes-Hut opening angle measured
 with the cell radius) and ``d_min > b + r*``: then no source tip of the cell is
 within r* of any target, so every pair inside the soft core is summed exactly
 with :func:`tip_force_over_r`. Leaves that are not accepted are summed exactly
-with the same law, skipping the target's own rod: their tips are copied into
-one contiguous buffer per group and each target runs one long branch-free
-reduction over it, like the direct sum. Each accepted cell is applied to the
-group's targets in one loop over them (vectorised across targets, padded to a
-multiple of ``PAD``; the cell's moments are read once). When the target's rod partner lies
-in an accepted cell, its exact pair force is subtracted (the multipole included
-it). ``theta = 0`` accepts no cell and gives the direct sum.
+with the same law, skipping the target's own rod: their tips (runs of sorted tips,
+next leaves merged) are copied into one contiguous buffer per group and each
+target runs one long branch-free reduction over it, like the direct sum. In float64
+each accepted cell is applied to the group's targets in one loop over them
+(vectorised across targets, padded to a multiple of ``PAD``; the cell's moments are
+read once). When the target's rod partner lies in an accepted cell, its exact pair
+force is subtracted (the multipole included it). ``theta = 0`` accepts no cell and
+gives the direct sum.
 
 With ``precision="mixed"`` (:func:`evaluate_tip_tree`) the near pairs are summed in
-float32 (coordinates relative to the group's box centre, the law of
-:func:`.laws.tip_force_over_r_f32`, one float32 sum per target), and each accepted
-cell's field is taken in float32 (:func:`_field_octupole_f32`, offsets and moments in
-units of the cell's distance from the group's box) and added in float64 to the sum
-over cells. The float64 path is unchanged by it, bit for bit.
+float32 (coordinates held by the tree as float32 pairs hi + lo relative to the root
+cell's centre, the law of :func:`.laws.tip_force_over_r_f32`, one float32 sum per
+target), and each accepted cell is recorded once per group in float32 (its offset
+from the group's box centre, and its moments, in units of its distance from the
+box, :data:`FAR_ROWS` numbers); each target then sums the recorded cells in one
+loop over them, vectorised across cells, in float32 (:func:`_field_octupole_f32`,
+:func:`_field_hexadecapole_f32`), like the near pairs. Both float32 sums are added
+in float64. The float64 path is unchanged by it, bit for bit.
 
-Measured on one core of an AVX-512 machine, the accepted-cell loop costs
-about 2 ns per cell and target with octupoles, the near loop about 0.6 ns per
-tip pair, as the direct sum (about 1.7 ns on an AVX2 Zen 3 core, bound by the
-square root and division of each pair); at the defaults and 1e5 rods the near
-part is the larger (3100 near tips against 460 accepted cells per target; at
-6000 rods in the Fig. 2 scene 1980 against 150, about 80 % of the evaluation). Accuracy and
-speed against the direct sum: tools/bench_tree.py, docs/performance.md.
+The defaults (hexadecapoles, leaves of at most 64 tips, groups of at most 128,
+theta 0.475) reach the median error of octupoles at theta 0.4 (5e-4 to 8e-4 in a
+uniform rod gas and the Fig. 2 slab of 6000 to 10^5 rods) 1.1 to 1.25 times
+faster on AVX2 (docs/performance.md, tools/bench_tree.py). On one AVX2 core of a
+Zen 4 (mixed) a near pair costs about 0.67 ns, an accepted cell about 4 ns per
+target; at the defaults and 24 000 rods of the Fig. 2 slab a target sees about
+1650 near tips and 160 cells, and the near pairs are about 55 % of the evaluation,
+the far field 35 %.
 
 Limits: coordinates must be finite (the front end raises on NaN or inf);
 tips closer than the key resolution ``extent / 2**21`` share a leaf of any
@@ -76,12 +87,12 @@ be below 1.
 
 Parallel over groups, one group at a time per thread; a group writes only the
 rows of its own tips (gather). Only the targets in the asked row range are
-computed (half the rows cost 0.55 of all rows at 1e5 rods: the walks are not
-shared out), and a target's force depends only on the tree, not on which rows
-are asked for, so row ranges evaluated separately equal one evaluation bitwise.
-Rows are tip numbers, which are in no spatial order: a caller that splits rows
-over MPI ranks gets every group walked on every rank (a split in Morton order,
-``TipTree.index``, would share the walks out too; the kernel takes tip numbers).
+computed, and a target's force depends only on the tree, not on which rows are
+asked for, so row ranges evaluated separately equal one evaluation bitwise.
+:func:`evaluate_tip_tree` takes either a range of tip numbers (which are in no
+spatial order: every group holding one of them walks the tree) or a range of groups
+(``groups=(g0, g1)``: the tips of those groups, contiguous in Morton order, each
+group walked once), which is how MPI ranks share the walks out.
 """
 
 import math
@@ -94,8 +105,8 @@ from .laws import tip_force_over_r, tip_force_over_r_f32
 
 #: bits of the Morton key per axis; also the depth cap of the tree
 KEY_BITS = 21
-#: stored moments per cell: M, P (3), Q (5 independent), O (7 independent)
-N_MOMENT = 16
+#: stored moments per cell: M, P (3), Q (5 independent), O (7 independent), H (9 independent)
+N_MOMENT = 25
 
 # Defaults from tools/bench_tree.py (docs/performance.md): the fastest setting
 # with median relative error <= 1e-3 in a uniform rod gas at 1e4 and 1e5 rods,
@@ -104,13 +115,20 @@ N_MOMENT = 16
 # error 1.2 (1e4 rods) to 2 (1e5) times faster than quadrupoles.
 LEAF_SIZE = 64
 GROUP_SIZE = 128
-ORDER = 3
-THETA = 0.4
+ORDER = 4
+THETA = 0.475
 #: far-field targets are padded to a multiple of this (one AVX-512 vector of
 #: doubles, two AVX2 vectors: whole vectors on both); measured at 1e5 rods on an
 #: AVX-512 machine: 1.13 to 1.28 times faster than no padding, padding to 16 or 32
 #: gained less (1.08) or lost (0.88)
-PAD = 8
+PAD = 16
+#: rows of a recorded far cell in the mixed evaluation: offset of its centre from the group's box
+#: centre (3), 1 / distance and its square, the moments in units of the distance
+FAR_ROWS = 5 + N_MOMENT
+#: recorded far cells are stored and summed in chunks of this many (a whole number of vectors on
+#: every target; the last chunk padded with cells of zero moments): with a constant trip count the
+#: loop addresses all rows from one pointer
+FAR_CHUNK = 64
 #: precisions of the evaluation (:func:`evaluate_tip_tree`)
 PRECISIONS = ("float64", "mixed")
 
@@ -125,8 +143,12 @@ class TipTree(NamedTuple):
     ``(n_cells, 6)``: low x, y, z then high x, y, z of the tight bounding box;
     ``centre`` ``(n_cells, 3)`` the expansion centre, ``radius`` ``(n_cells,)``
     the largest distance of a tip from it, ``moment`` ``(n_cells, 16)`` as in
-    the module docstring (zero octupole columns when ``order == 2``). ``group``
-    lists the cells whose tips are evaluated together.
+    the module docstring (zero columns above ``order``). ``group``
+    lists the cells whose tips are evaluated together. For the mixed-precision near
+    field, ``near32`` (6, n_tips) float32 holds each coordinate relative to the root
+    cell's centre as a pair hi + lo (rows x hi, y hi, z hi, x lo, y lo, z lo; lo the
+    float32 rounding of what hi misses), ``charge32`` and ``rod32`` (int32) the
+    charges and rods, all in Morton order.
     """
 
     index: np.ndarray
@@ -145,6 +167,9 @@ class TipTree(NamedTuple):
     moment: np.ndarray
     group: np.ndarray
     order: int
+    near32: np.ndarray
+    charge32: np.ndarray
+    rod32: np.ndarray
 
 
 # ---------------------------------------------------------------- build kernels
@@ -310,6 +335,7 @@ def cell_moments(x, y, z, charge, start, end, order, box, centre, radius, moment
         m = px = py = pz = 0.0
         qxx = qxy = qxz = qyy = qyz = 0.0
         oxxx = oxxy = oxxz = oxyy = oxyz = oyyy = oyyz = 0.0
+        hxxxx = hxxxy = hxxxz = hxxyy = hxxyz = hxyyy = hxyyz = hyyyy = hyyyz = 0.0
         for i in range(s, e):
             sx = x[i] - cx
             sy = y[i] - cy
@@ -335,6 +361,20 @@ def cell_moments(x, y, z, charge, start, end, order, box, centre, radius, moment
                 oxyz += q * 15.0 * sx * sy * sz
                 oyyy += q * 15.0 * sy * sy * sy - 3.0 * t * sy
                 oyyz += q * 15.0 * sy * sy * sz - t * sz
+            if order >= 4:
+                u = 15.0 * q * s2
+                v = 3.0 * q * s2 * s2
+                xx = sx * sx
+                yy = sy * sy
+                hxxxx += 105.0 * q * xx * xx - 6.0 * u * xx + 3.0 * v
+                hxxxy += 105.0 * q * xx * sx * sy - 3.0 * u * sx * sy
+                hxxxz += 105.0 * q * xx * sx * sz - 3.0 * u * sx * sz
+                hxxyy += 105.0 * q * xx * yy - u * (xx + yy) + v
+                hxxyz += 105.0 * q * xx * sy * sz - u * sy * sz
+                hxyyy += 105.0 * q * sx * yy * sy - 3.0 * u * sx * sy
+                hxyyz += 105.0 * q * sx * yy * sz - u * sx * sz
+                hyyyy += 105.0 * q * yy * yy - 6.0 * u * yy + 3.0 * v
+                hyyyz += 105.0 * q * yy * sy * sz - 3.0 * u * sy * sz
         radius[c] = math.sqrt(b2)
         mc = moment[c]
         mc[0] = m
@@ -353,6 +393,35 @@ def cell_moments(x, y, z, charge, start, end, order, box, centre, radius, moment
         mc[13] = oxyz
         mc[14] = oyyy
         mc[15] = oyyz
+        mc[16] = hxxxx
+        mc[17] = hxxxy
+        mc[18] = hxxxz
+        mc[19] = hxxyy
+        mc[20] = hxxyz
+        mc[21] = hxyyy
+        mc[22] = hxyyz
+        mc[23] = hyyyy
+        mc[24] = hyyyz
+
+
+@njit_parallel
+def split_hi_lo(x, y, z, origin, near32):
+    """Coordinates relative to ``origin`` as float32 pairs hi + lo (rows of ``near32``, :class:`TipTree`).
+
+    hi is the float32 rounding of ``x - origin``, lo the float32 rounding of the rest: together
+    they hold about 48 bits, so that ``(hi_k - hi_l) + (lo_k - lo_l)`` keeps float32 precision
+    relative to the distance of two tips, not to their distance from the origin.
+    """
+    for i in prange(x.shape[0]):
+        u = x[i] - origin[0]
+        v = y[i] - origin[1]
+        w = z[i] - origin[2]
+        near32[0, i] = np.float32(u)
+        near32[1, i] = np.float32(v)
+        near32[2, i] = np.float32(w)
+        near32[3, i] = np.float32(u - np.float64(near32[0, i]))
+        near32[4, i] = np.float32(v - np.float64(near32[1, i]))
+        near32[5, i] = np.float32(w - np.float64(near32[2, i]))
 
 
 @njit
@@ -427,6 +496,62 @@ def _field_octupole(dx, dy, dz, m, px, py, pz, qxx, qxy, qxz, qyy, qyz, oxxx, ox
     )
 
 
+@inline_sum
+def _hexadecapole_contraction(dx, dy, dz, h0, h1, h2, h3, h4, h5, h6, h7, h8, three, six):
+    """``w_i = H_ijkl d_j d_k d_l`` of a traceless hexadecapole from its 9 stored components.
+
+    ``h0..h8`` are H_xxxx, H_xxxy, H_xxxz, H_xxyy, H_xxyz, H_xyyy, H_xyyz, H_yyyy, H_yyyz; the six
+    others follow from the vanishing traces. ``three`` and ``six`` carry the precision (float32 or
+    float64 constants), so that one body serves both far-field loops.
+    """
+    hxxzz = -(h0 + h3)
+    hxyzz = -(h1 + h5)
+    hxzzz = -(h2 + h6)
+    hyyzz = -(h3 + h7)
+    hyzzz = -(h4 + h8)
+    hzzzz = -(hxxzz + hyyzz)
+    xxx = dx * dx * dx
+    xxy = three * dx * dx * dy
+    xxz = three * dx * dx * dz
+    xyy = three * dx * dy * dy
+    xyz = six * dx * dy * dz
+    xzz = three * dx * dz * dz
+    yyy = dy * dy * dy
+    yyz = three * dy * dy * dz
+    yzz = three * dy * dz * dz
+    zzz = dz * dz * dz
+    wx = h0 * xxx + h1 * xxy + h2 * xxz + h3 * xyy + h4 * xyz + hxxzz * xzz + h5 * yyy + h6 * yyz + hxyzz * yzz
+    wx += hxzzz * zzz
+    wy = h1 * xxx + h3 * xxy + h4 * xxz + h5 * xyy + h6 * xyz + hxyzz * xzz + h7 * yyy + h8 * yyz + hyyzz * yzz
+    wy += hyzzz * zzz
+    wz = h2 * xxx + h4 * xxy + hxxzz * xxz + h6 * xyy + hxyzz * xyz + hxzzz * xzz + h8 * yyy + hyyzz * yyz
+    wz += hyzzz * yzz + hzzzz * zzz
+    return wx, wy, wz
+
+
+@inline_sum
+def _field_hexadecapole(dx, dy, dz, mc):
+    """Field of a cell's moments up to hexadecapole (``mc``, the cell's row of ``moment``) at
+    offset d from its centre: the octupole field plus, with ``w = H(ddd.)``,
+    ``3/8 d (d.w) / R^11 - w / (6 R^9)`` (module docstring)."""
+    ex, ey, ez = _field_octupole(
+        dx, dy, dz, mc[0], mc[1], mc[2], mc[3], mc[4], mc[5], mc[6], mc[7], mc[8],
+        mc[9], mc[10], mc[11], mc[12], mc[13], mc[14], mc[15],
+    )  # fmt: skip
+    wx, wy, wz = _hexadecapole_contraction(
+        dx, dy, dz, mc[16], mc[17], mc[18], mc[19], mc[20], mc[21], mc[22], mc[23], mc[24], 3.0, 6.0
+    )
+    ir = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
+    ir2 = ir * ir
+    ir9 = ir * ir2 * ir2 * ir2 * ir2
+    radial = 0.375 * (dx * wx + dy * wy + dz * wz) * ir9 * ir2
+    return (
+        ex + radial * dx - (1.0 / 6.0) * wx * ir9,
+        ey + radial * dy - (1.0 / 6.0) * wy * ir9,
+        ez + radial * dz - (1.0 / 6.0) * wz * ir9,
+    )
+
+
 #: float32 constants of :func:`_field_octupole_f32` (a float64 literal would promote it to float64)
 _F32_HALF = np.float32(0.5)
 _F32_ONE = np.float32(1.0)
@@ -486,6 +611,33 @@ def _field_octupole_f32(dx, dy, dz, m, px, py, pz, qxx, qxy, qxz, qyy, qyz, oxxx
     )
 
 
+_F32_SIX = np.float32(6.0)
+_F32_SIXTH = np.float32(1.0 / 6.0)
+_F32_THREE_EIGHTHS = np.float32(0.375)
+
+
+@inline_sum
+def _field_hexadecapole_f32(
+    dx, dy, dz, m, px, py, pz, qxx, qxy, qxz, qyy, qyz, oxxx, oxxy, oxxz, oxyy, oxyz, oyyy, oyyz,
+    h0, h1, h2, h3, h4, h5, h6, h7, h8,
+):  # fmt: skip
+    """:func:`_field_hexadecapole` in float32, as :func:`_field_octupole_f32` (every argument
+    float32, the offset and the moments in units of the cell's distance)."""
+    ex, ey, ez = _field_octupole_f32(
+        dx, dy, dz, m, px, py, pz, qxx, qxy, qxz, qyy, qyz, oxxx, oxxy, oxxz, oxyy, oxyz, oyyy, oyyz
+    )  # fmt: skip
+    wx, wy, wz = _hexadecapole_contraction(dx, dy, dz, h0, h1, h2, h3, h4, h5, h6, h7, h8, _F32_THREE, _F32_SIX)
+    ir = _F32_ONE / math.sqrt(dx * dx + dy * dy + dz * dz)
+    ir2 = ir * ir
+    ir9 = ir * ir2 * ir2 * ir2 * ir2
+    radial = _F32_THREE_EIGHTHS * (dx * wx + dy * wy + dz * wz) * ir9 * ir2
+    return (
+        ex + radial * dx - _F32_SIXTH * wx * ir9,
+        ey + radial * dy - _F32_SIXTH * wy * ir9,
+        ez + radial * dz - _F32_SIXTH * wz * ir9,
+    )
+
+
 @njit
 def _append(buf, n, value):
     """``buf[n] = value``, doubling the buffer when full; returns the buffer."""
@@ -515,15 +667,20 @@ def evaluate_groups(
     moment,
     group,
     order,
+    near32,
+    charge32,
+    rod32,
     theta,
     rstar,
     kappa,
     lo,
     hi,
+    g_lo,
+    g_hi,
     mixed,
     out,
 ):
-    """Tip-tip force on the tips with original number in [lo, hi) by the tree.
+    """Tip-tip force on the tips with original number in [lo, hi) of groups g_lo..g_hi-1 by the tree.
 
     One walk per target group (module docstring): near leaves are summed exactly
     over a contiguous copy of their tips, accepted cells are applied to all the
@@ -535,14 +692,16 @@ def evaluate_groups(
         Tips in Morton order; ``rod`` (n_tips,) int64 their rod numbers.
     index, rank : (n_tips,) int64
         Morton position -> original number and its inverse.
-    start, end, nxt, box, centre, radius, moment, group :
+    start, end, nxt, box, centre, radius, moment, group, near32, charge32, rod32 :
         The tree (:class:`TipTree`).
     order : int
-        2 or 3 (as the moments were built).
+        2, 3 or 4 (as the moments were built).
     theta, rstar, kappa : float
         Opening angle, transition radius r* and core stiffness.
     lo, hi : int
         Original tip numbers to evaluate; other rows of ``out`` are untouched.
+    g_lo, g_hi : int
+        The groups (indices into ``group``) whose targets are evaluated.
     mixed : bool
         Sum the near pairs and take each accepted cell's field in float32
         (:func:`evaluate_tip_tree`); False: float64.
@@ -554,7 +713,7 @@ def evaluate_groups(
     rstar32 = np.float32(rstar)
     kappa32 = np.float32(kappa)
     zero32 = np.float32(0.0)
-    for gi in prange(group.shape[0]):
+    for gi in prange(g_lo, g_hi):
         g = group[gi]
         gs = start[g]
         ge = end[g]
@@ -593,23 +752,19 @@ def evaluate_groups(
         ex = np.zeros(n_pad)
         ey = np.zeros(n_pad)
         ez = np.zeros(n_pad)
-        # mixed: the far field in float32, targets relative to the group's box centre
+        # mixed: the far field in float32, targets relative to the group's box centre; each
+        # accepted cell is recorded (a column of far32: offset, scale, moments, all float32) and
+        # every target sums the recorded cells in one loop
         gcx = 0.5 * (xl + xh)
         gcy = 0.5 * (yl + yh)
         gcz = 0.5 * (zl + zh)
         half = 0.5 * max(xh - xl, yh - yl, zh - zl)
-        n_far32 = n_pad if mixed else 0
-        tx32 = np.empty(n_far32, np.float32)
-        ty32 = np.empty(n_far32, np.float32)
-        tz32 = np.empty(n_far32, np.float32)
-        fx32 = np.empty(n_far32, np.float32)
-        fy32 = np.empty(n_far32, np.float32)
-        fz32 = np.empty(n_far32, np.float32)
-        for t in range(n_far32):
-            tx32[t] = np.float32(tx[t] - gcx)
-            ty32[t] = np.float32(ty[t] - gcy)
-            tz32[t] = np.float32(tz[t] - gcz)
-        near = np.empty(64, np.int64)
+        far32 = np.empty((1 if mixed else 0, FAR_ROWS, FAR_CHUNK), np.float32)
+        n_far = 0
+        # near leaves as runs of consecutive sorted tips (leaves next to each other in Morton
+        # order merge): near_start[a]:near_end[a]
+        near_start = np.empty(64, np.int64)
+        near_end = np.empty(64, np.int64)
         n_near = 0
         n_near_tips = 0
         # one walk for the whole group (its box, not the packed targets, decides,
@@ -633,62 +788,38 @@ def evaluate_groups(
                 if mixed and span < SPAN32 * dist and span < 1e30:
                     # offsets and moments in units of dist (the field then in units of 1/dist^2):
                     # |offset| >= 1 and the moments' scale is cut by (b / dist)^order, so that the
-                    # powers of 1/R stay far from the float32 range; the cell's field in float32,
-                    # then added in float64 to the sum over cells
+                    # powers of 1/R stay far from the float32 range
+                    k = n_far // FAR_CHUNK
+                    f = n_far % FAR_CHUNK
+                    if k == far32.shape[0]:
+                        grown = np.empty((2 * k, FAR_ROWS, FAR_CHUNK), np.float32)
+                        grown[:k] = far32
+                        far32 = grown
                     inv = 1.0 / dist
                     inv2 = inv * inv
                     inv3 = inv2 * inv
-                    inv32 = np.float32(inv)
-                    ccx = np.float32(cx - gcx)
-                    ccy = np.float32(cy - gcy)
-                    ccz = np.float32(cz - gcz)
-                    m0 = np.float32(mc[0])
-                    m1 = np.float32(mc[1] * inv)
-                    m2 = np.float32(mc[2] * inv)
-                    m3 = np.float32(mc[3] * inv)
-                    m4 = np.float32(mc[4] * inv2)
-                    m5 = np.float32(mc[5] * inv2)
-                    m6 = np.float32(mc[6] * inv2)
-                    m7 = np.float32(mc[7] * inv2)
-                    m8 = np.float32(mc[8] * inv2)
-                    m9 = np.float32(mc[9] * inv3)
-                    m10 = np.float32(mc[10] * inv3)
-                    m11 = np.float32(mc[11] * inv3)
-                    m12 = np.float32(mc[12] * inv3)
-                    m13 = np.float32(mc[13] * inv3)
-                    m14 = np.float32(mc[14] * inv3)
-                    m15 = np.float32(mc[15] * inv3)
-                    # two loops: adding the float32 terms to float64 sums in the first kept LLVM
-                    # from vectorising it well (measured slower than the float64 loop)
+                    inv4 = inv2 * inv2
+                    far32[k, 0, f] = np.float32(cx - gcx)
+                    far32[k, 1, f] = np.float32(cy - gcy)
+                    far32[k, 2, f] = np.float32(cz - gcz)
+                    far32[k, 3, f] = np.float32(inv)
+                    far32[k, 4, f] = np.float32(inv2)
+                    far32[k, 5, f] = np.float32(mc[0])
+                    for r in range(1, 4):
+                        far32[k, 5 + r, f] = np.float32(mc[r] * inv)
+                    for r in range(4, 9):
+                        far32[k, 5 + r, f] = np.float32(mc[r] * inv2)
+                    for r in range(9, 16):
+                        far32[k, 5 + r, f] = np.float32(mc[r] * inv3)
+                    for r in range(16, N_MOMENT):
+                        far32[k, 5 + r, f] = np.float32(mc[r] * inv4)
+                    n_far += 1
+                elif order >= 4:
                     for t in range(n_pad):
-                        e1, e2, e3 = _field_octupole_f32(
-                            (tx32[t] - ccx) * inv32,
-                            (ty32[t] - ccy) * inv32,
-                            (tz32[t] - ccz) * inv32,
-                            m0,
-                            m1,
-                            m2,
-                            m3,
-                            m4,
-                            m5,
-                            m6,
-                            m7,
-                            m8,
-                            m9,
-                            m10,
-                            m11,
-                            m12,
-                            m13,
-                            m14,
-                            m15,
-                        )
-                        fx32[t] = e1
-                        fy32[t] = e2
-                        fz32[t] = e3
-                    for t in range(n_pad):
-                        ex[t] += np.float64(fx32[t]) * inv2
-                        ey[t] += np.float64(fy32[t]) * inv2
-                        ez[t] += np.float64(fz32[t]) * inv2
+                        e1, e2, e3 = _field_hexadecapole(tx[t] - cx, ty[t] - cy, tz[t] - cz, mc)
+                        ex[t] += e1
+                        ey[t] += e2
+                        ez[t] += e3
                 elif order >= 3:
                     for t in range(n_pad):
                         e1, e2, e3 = _field_octupole(
@@ -736,18 +867,33 @@ def evaluate_groups(
                         ez[t] += e3
                 c = nxt[c]
             elif nxt[c] == c + 1:
-                near = _append(near, n_near, c)
-                n_near += 1
+                if n_near > 0 and near_end[n_near - 1] == start[c]:
+                    near_end[n_near - 1] = end[c]
+                else:
+                    near_start = _append(near_start, n_near, start[c])
+                    near_end = _append(near_end, n_near, end[c])
+                    n_near += 1
                 n_near_tips += end[c] - start[c]
                 c += 1
             else:
                 c += 1
+        # pad the last chunk of far cells with cells of zero moments at a point outside the group's
+        # box (offsets of 0.5 to 1.5 in its units): each adds exactly zero
+        n_chunks = -(-n_far // FAR_CHUNK)
+        if mixed and n_far % FAR_CHUNK:
+            k = n_far // FAR_CHUNK
+            away = 2.0 * half + 1.0
+            for f in range(n_far % FAR_CHUNK, FAR_CHUNK):
+                far32[k, 0, f] = np.float32(away)
+                far32[k, 1, f] = np.float32(0.0)
+                far32[k, 2, f] = np.float32(0.0)
+                far32[k, 3, f] = np.float32(1.0 / away)
+                for r in range(4, FAR_ROWS):
+                    far32[k, r, f] = np.float32(0.0)
         # near leaves: exact law, one long loop per target over a contiguous copy of
-        # their tips (a reduction that vectorises like the direct sum)
-        # mixed: float32 copies relative to the group's box centre (a scene far from
-        # the origin loses nothing), each coordinate as a float32 pair hi + lo (lo the
-        # float32 rounding of what hi misses), rods as int32 (8 lanes like the
-        # coordinates); only the copies of the chosen precision are filled
+        # their tips (a reduction that vectorises like the direct sum); mixed: copies of the
+        # tree's float32 hi + lo coordinates (relative to the root cell's centre), charges and
+        # int32 rods (8 lanes like the coordinates); only the copies of the chosen precision
         n32 = n_near_tips if mixed else 0
         n64 = 0 if mixed else n_near_tips
         fx = np.empty(n32, np.float32)
@@ -765,29 +911,27 @@ def evaluate_groups(
         nrod = np.empty(n64, np.int64)
         j = 0
         for a in range(n_near):
-            s = start[near[a]]
-            e = end[near[a]]
+            s = near_start[a]
+            e = near_end[a]
             for w in range(n_w):
                 partner_near[w] |= (partner[w] >= s) & (partner[w] < e)
+            m = e - s
             if mixed:
-                for i in range(s, e):
-                    fx[j] = np.float32(x[i] - gcx)
-                    fy[j] = np.float32(y[i] - gcy)
-                    fz[j] = np.float32(z[i] - gcz)
-                    lx[j] = np.float32((x[i] - gcx) - np.float64(fx[j]))
-                    ly[j] = np.float32((y[i] - gcy) - np.float64(fy[j]))
-                    lz[j] = np.float32((z[i] - gcz) - np.float64(fz[j]))
-                    fq[j] = np.float32(charge[i])
-                    frod[j] = np.int32(rod[i])
-                    j += 1
+                fx[j : j + m] = near32[0, s:e]
+                fy[j : j + m] = near32[1, s:e]
+                fz[j : j + m] = near32[2, s:e]
+                lx[j : j + m] = near32[3, s:e]
+                ly[j : j + m] = near32[4, s:e]
+                lz[j : j + m] = near32[5, s:e]
+                fq[j : j + m] = charge32[s:e]
+                frod[j : j + m] = rod32[s:e]
             else:
-                for i in range(s, e):
-                    nx[j] = x[i]
-                    ny[j] = y[i]
-                    nz[j] = z[i]
-                    nq[j] = charge[i]
-                    nrod[j] = rod[i]
-                    j += 1
+                nx[j : j + m] = x[s:e]
+                ny[j : j + m] = y[s:e]
+                nz[j : j + m] = z[s:e]
+                nq[j : j + m] = charge[s:e]
+                nrod[j : j + m] = rod[s:e]
+            j += m
         for w in range(n_w):
             i = sel[w]
             xk = tx[w]
@@ -799,14 +943,14 @@ def evaluate_groups(
             sy = 0.0
             sz = 0.0
             if mixed:
-                xk32 = np.float32(xk - gcx)
-                yk32 = np.float32(yk - gcy)
-                zk32 = np.float32(zk - gcz)
-                xl32 = np.float32((xk - gcx) - np.float64(xk32))
-                yl32 = np.float32((yk - gcy) - np.float64(yk32))
-                zl32 = np.float32((zk - gcz) - np.float64(zk32))
-                qk32 = np.float32(qk)
-                rk32 = np.int32(rk)
+                xk32 = near32[0, i]
+                yk32 = near32[1, i]
+                zk32 = near32[2, i]
+                xl32 = near32[3, i]
+                yl32 = near32[4, i]
+                zl32 = near32[5, i]
+                qk32 = charge32[i]
+                rk32 = rod32[i]
                 bx = zero32
                 by = zero32
                 bz = zero32
@@ -824,9 +968,51 @@ def evaluate_groups(
                     bx += g32 * ux
                     by += g32 * uy
                     bz += g32 * uz
-                sx = np.float64(bx)
-                sy = np.float64(by)
-                sz = np.float64(bz)
+                # the recorded far cells, summed in float32 over cells like the near pairs
+                gx32 = np.float32(xk - gcx)
+                gy32 = np.float32(yk - gcy)
+                gz32 = np.float32(zk - gcz)
+                cx32 = zero32
+                cy32 = zero32
+                cz32 = zero32
+                if order >= 4:
+                    for k in range(n_chunks):
+                        fc = far32[k]
+                        for j in range(FAR_CHUNK):
+                            s32 = fc[3, j]
+                            e1, e2, e3 = _field_hexadecapole_f32(
+                                (gx32 - fc[0, j]) * s32,
+                                (gy32 - fc[1, j]) * s32,
+                                (gz32 - fc[2, j]) * s32,
+                                fc[5, j], fc[6, j], fc[7, j], fc[8, j], fc[9, j], fc[10, j], fc[11, j],
+                                fc[12, j], fc[13, j], fc[14, j], fc[15, j], fc[16, j], fc[17, j], fc[18, j],
+                                fc[19, j], fc[20, j], fc[21, j], fc[22, j], fc[23, j], fc[24, j], fc[25, j],
+                                fc[26, j], fc[27, j], fc[28, j], fc[29, j],
+                            )  # fmt: skip
+                            w32 = fc[4, j]
+                            cx32 += e1 * w32
+                            cy32 += e2 * w32
+                            cz32 += e3 * w32
+                else:
+                    for k in range(n_chunks):
+                        fc = far32[k]
+                        for j in range(FAR_CHUNK):
+                            s32 = fc[3, j]
+                            e1, e2, e3 = _field_octupole_f32(
+                                (gx32 - fc[0, j]) * s32,
+                                (gy32 - fc[1, j]) * s32,
+                                (gz32 - fc[2, j]) * s32,
+                                fc[5, j], fc[6, j], fc[7, j], fc[8, j], fc[9, j], fc[10, j], fc[11, j],
+                                fc[12, j], fc[13, j], fc[14, j], fc[15, j], fc[16, j], fc[17, j], fc[18, j],
+                                fc[19, j], fc[20, j],
+                            )  # fmt: skip
+                            w32 = fc[4, j]
+                            cx32 += e1 * w32
+                            cy32 += e2 * w32
+                            cz32 += e3 * w32
+                sx = np.float64(bx) + qk * np.float64(cx32)
+                sy = np.float64(by) + qk * np.float64(cy32)
+                sz = np.float64(bz) + qk * np.float64(cz32)
             else:
                 for j in range(n_near_tips):
                     dx = xk - nx[j]
@@ -897,8 +1083,8 @@ def build_tip_tree(x, y, z, charge, leaf_size=LEAF_SIZE, group_size=GROUP_SIZE, 
         or knobs out of range.
     """
     x, y, z, charge = _coords(x, y, z, charge)
-    if order not in (2, 3):
-        raise ValueError(f"order must be 2 or 3, got {order}")
+    if order not in (2, 3, 4):
+        raise ValueError(f"order must be 2, 3 or 4, got {order}")
     if leaf_size < 1 or group_size < 1:
         raise ValueError(f"leaf_size and group_size must be >= 1, got {leaf_size}, {group_size}")
     key = np.empty(x.shape[0], np.int64)
@@ -918,12 +1104,49 @@ def build_tip_tree(x, y, z, charge, leaf_size=LEAF_SIZE, group_size=GROUP_SIZE, 
     moment = np.empty((n_cells, N_MOMENT))
     cell_moments(xs, ys, zs, qs, start, end, int(order), box, centre, radius, moment)
     group = target_groups(start, end, nxt, int(group_size))
+    near32 = np.empty((6, xs.shape[0]), np.float32)
+    split_hi_lo(xs, ys, zs, centre[0], near32)
+    rod = index // 2
     return TipTree(
-        index, rank, xs, ys, zs, qs, index // 2, start, end, nxt, box, centre, radius, moment, group, int(order)
+        index,
+        rank,
+        xs,
+        ys,
+        zs,
+        qs,
+        rod,
+        start,
+        end,
+        nxt,
+        box,
+        centre,
+        radius,
+        moment,
+        group,
+        int(order),
+        near32,
+        qs.astype(np.float32),
+        rod.astype(np.int32),
     )
 
 
-def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None, precision="float64"):
+def group_bounds(tree, parts):
+    """Cut the groups into ``parts`` runs of about equal numbers of tips (for :func:`evaluate_tip_tree`'s
+    ``groups``): run r is groups ``bounds[r]:bounds[r + 1]``, tips ``tips[r]:tips[r + 1]`` in Morton order.
+
+    Returns
+    -------
+    bounds, tips : (parts + 1,) int64
+    """
+    first = tree.start[tree.group]
+    n = tree.x.shape[0]
+    want = (n * np.arange(parts + 1, dtype=np.int64)) // parts
+    bounds = np.searchsorted(first, want, side="left").astype(np.int64)
+    tips = np.append(first, n)[bounds]
+    return bounds, tips
+
+
+def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None, precision="float64", groups=None):
     """Tip-tip force (docs/model.md 'Term 1') on tips ``lo..hi-1`` from all tips, by the tree.
 
     Parameters
@@ -935,24 +1158,29 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None, precision="
     theta : float
         Opening angle in [0, 1): a cell is used as a multipole when its radius is
         below ``theta`` times its distance to the target group; 0 gives the direct
-        sum. ``THETA`` (0.4) with the default knobs gives a median relative error
-        of 3e-4 to 8e-4 in a uniform rod gas of 1e3 to 1e5 rods, 30 times less in
-        aggregates (docs/performance.md).
+        sum. ``THETA`` (0.475) with the default knobs (hexadecapoles) gives a median
+        relative error of 5e-4 to 8e-4 in a uniform rod gas and in the Fig. 2 slab of
+        6000 to 1e5 rods, 30 to 100 times less in aggregates (docs/performance.md).
     out : (n_tips, 3) float64, C-contiguous
         Rows ``lo:hi`` (original tip numbers) are overwritten; others untouched.
     lo, hi : int
         Target rows; ``hi=None`` means ``n_tips``.
+    groups : (g0, g1), optional
+        Evaluate only the tips of groups ``g0..g1-1`` (tips ``tree.index[tree.start[tree.group[g0]]:...]``,
+        a contiguous run in Morton order; :func:`group_bounds` cuts the groups into runs of equal
+        size); with ``lo, hi`` at their defaults. Each group is walked once, so that runs of groups
+        share the walks out, where ranges of tip numbers do not. The same forces bit for bit.
     precision : str
         ``"float64"``: every sum in float64. ``"mixed"``: the exact near pairs are summed in
-        float32: coordinates taken relative to the target group's box centre before the cast,
-        each as two float32 numbers ``hi + lo`` so that the difference of two close tips keeps
-        float32 precision relative to itself; the law in float32
-        (:func:`.laws.tip_force_over_r_f32`); one float32 sum per target, then added in float64
-        to the far field; the subtraction of the rod partner stays float64. The far field:
-        each accepted cell's field in float32 (:func:`_field_octupole_f32`), with the offsets
-        and the moments in units of the cell's distance from the group's box (every power of
-        ``1/R`` then near 1), added in float64 to the sum over cells; a cell whose offsets
-        exceed ``SPAN32`` times that distance keeps the float64 loop.
+        float32: coordinates relative to the root cell's centre, each as two float32 numbers
+        ``hi + lo`` (``tree.near32``) so that the difference of two close tips keeps float32
+        precision relative to itself; the law in float32 (:func:`.laws.tip_force_over_r_f32`);
+        one float32 sum per target, added in float64; the subtraction of the rod partner stays
+        float64. The far field: each accepted cell's field in float32
+        (:func:`_field_octupole_f32`, :func:`_field_hexadecapole_f32`), with the offsets and the
+        moments in units of the cell's distance from the group's box (every power of ``1/R``
+        then near 1), summed over the cells in float32 per target and added in float64; a cell
+        whose offsets exceed ``SPAN32`` times that distance takes the float64 loop.
         AVX2 runs 8 float32 lanes per instruction against 4 float64, and LLVM replaces the
         float32 square root and division by a reciprocal square root estimate and one Newton
         step (``vrsqrtps``): no divider in the loop. Measured (docs/performance.md,
@@ -977,7 +1205,11 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None, precision="
         raise ValueError(f"precision must be one of {', '.join(map(repr, PRECISIONS))}, got {precision!r}")
     if out.shape != (n, 3) or out.dtype != np.float64 or not out.flags.c_contiguous:
         raise ValueError(f"out must be a C-contiguous float64 array of shape ({n}, 3)")
-    if lo == hi:
+    n_groups = tree.group.shape[0]
+    g_lo, g_hi = (0, n_groups) if groups is None else (int(groups[0]), int(groups[1]))
+    if not 0 <= g_lo <= g_hi <= n_groups:
+        raise ValueError(f"need 0 <= g0 <= g1 <= {n_groups} groups, got {groups}")
+    if lo == hi or g_lo == g_hi:
         return out
     # groups differ in cost (dense clusters, the edge of the system): threads take
     # one group at a time. Measured on 2 threads: 428 against 469 ms for 1e5 uniform
@@ -1002,11 +1234,16 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None, precision="
             tree.moment,
             tree.group,
             tree.order,
+            tree.near32,
+            tree.charge32,
+            tree.rod32,
             float(theta),
             float(rstar),
             float(kappa),
             lo,
             hi,
+            g_lo,
+            g_hi,
             precision == "mixed",
             out,
         )
