@@ -147,6 +147,30 @@ class RowBlocks:
             for c, a in enumerate(arrays):
                 a[rlo:rhi] = block[c].reshape(a[rlo:rhi].shape)
 
+    def gather_runs(self, array, order, bounds) -> None:
+        """Copy every other rank's rows of ``array`` in, where rank r filled rows ``order[bounds[r]:bounds[r + 1]]``
+        (a collective call).
+
+        For work split in another order than the blocks of rods (the tip-tip tree splits its target
+        groups, runs of tips in Morton order ``order``). ``array`` is float64 with rows of equal
+        width; afterwards every rank holds all rows, bit for bit the same everywhere. One
+        ``Allgatherv``.
+        """
+        if self.size == 1:
+            return
+        width = int(np.prod(array.shape[1:], dtype=np.int64))
+        bounds = np.asarray(bounds, dtype=np.int64)
+        lo, hi = int(bounds[self.rank]), int(bounds[self.rank + 1])
+        counts = width * np.diff(bounds)
+        displs = width * bounds[:-1]
+        flat = array.reshape(array.shape[0], width)
+        send = np.ascontiguousarray(flat[order[lo:hi]])
+        recv = self._buffer(("runs", width), (int(counts.sum()),))
+        self.comm.Allgatherv(send, [recv, (counts.tolist(), displs.tolist())])
+        mine = flat[order[lo:hi]].copy()
+        flat[order] = recv.reshape(-1, width)
+        flat[order[lo:hi]] = mine
+
     def gather_list(self, start, index, rows_per_rod=2):
         """The whole compressed-row list on every rank from each rank's own rows (a collective call).
 

@@ -21,17 +21,25 @@ class TipMagnetic:
 
     method: str = spec(
         "auto",
-        "how the force is summed: direct (all tip pairs, exact), tree (octupole octree; pairs "
-        "within r* always exact; error set by opening_angle), auto (the tree above tree_above rods)",
+        "how the force is summed: direct (all tip pairs, exact), tree (multipole octree; pairs "
+        "within r* always exact; error set by opening_angle and order), auto (the tree above tree_above rods)",
         choices=("auto", "direct", "tree"),
     )
     opening_angle: float = spec(
-        0.4,
+        0.475,
         "tree: a cell acts as a multipole when its radius is below this times its distance; an "
-        "accuracy knob (0.4: median relative force error 3e-4 to 8e-4 in a uniform rod gas, "
-        "docs/performance.md)",
+        "accuracy knob (0.475 with order 4: median relative force error 5e-4 to 8e-4 in a uniform rod gas "
+        "and the Fig. 2 slab of 6000 to 10^5 rods, docs/performance.md)",
         gt=0.0,
         lt=1.0,
+    )
+    order: int = spec(
+        4,
+        "tree: the highest multipole moment of a cell, 2 (quadrupole), 3 (octupole) or 4 (hexadecapole); an "
+        "accuracy knob (the error falls about as opening_angle^(order + 1); with 4 the tree reaches the error "
+        "of order 3 at opening angle 0.4 1.1 to 1.25 times faster, docs/performance.md)",
+        ge=2,
+        le=4,
     )
     precision: str = spec(
         "float64",

@@ -323,7 +323,9 @@ class ForceField:
         for t in self.terms:
             if isinstance(t, TipMagneticForce):
                 d["tip_magnetic_sum"] = (
-                    f"tree (opening angle {t.theta:g}, {t.precision} near field)" if t.tree else "direct"
+                    f"tree (order {t.order}, opening angle {t.theta:g}, {t.precision} near field)"
+                    if t.tree
+                    else "direct"
                 )
             if isinstance(t, YukawaForce):
                 d["yukawa_cutoff"] = t.cutoff

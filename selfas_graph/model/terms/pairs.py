@@ -57,29 +57,41 @@ class TipMagneticForce(Term):
         tm = p.forces.tip_magnetic
         self.tree = tm.method == "tree" or (tm.method == "auto" and state.n_rods >= tm.tree_above)
         self.theta = tm.opening_angle
+        self.order = tm.order
         self.precision = tm.precision
+        self._gathered = False
 
     def compute(self, ff, out):
         x, y, z = ff.soa()
-        lo, hi = ff.blocks.tips
         if self.tree:
             try:
-                tree = ktree.build_tip_tree(x, y, z, ff.tip_charge)
+                tree = ktree.build_tip_tree(x, y, z, ff.tip_charge, order=self.order)
             except ValueError:
                 if np.isfinite(ff.position).all():
                     raise
                 # NaN or inf positions: no tree can place them; the direct sum passes them on
                 # to the forces, where the run's health check stops with a diagnosis
             else:
+                # ranks split the tree's target groups, runs of tips in Morton order, so that each
+                # group is walked on one rank only, and gather their rows: the same forces bit for bit
+                # (docs/performance.md 'Several MPI ranks')
+                groups, tips = ktree.group_bounds(tree, ff.blocks.size)
+                r = ff.blocks.rank
+                f = out["tip_magnetic"]
                 ktree.evaluate_tip_tree(
-                    tree, self.rstar, self.kappa, self.theta, out["tip_magnetic"], lo, hi, self.precision
+                    tree, self.rstar, self.kappa, self.theta, f, precision=self.precision, groups=groups[r : r + 2]
                 )
+                ff.blocks.gather_runs(f, tree.index, tips)
+                self._gathered = True
                 return
+        self._gathered = False
+        lo, hi = ff.blocks.tips
         direct = kt.tip_tip_direct_mixed if self.precision == "mixed" else kt.tip_tip_direct
         direct(x, y, z, ff.tip_charge, self.rstar, self.kappa, lo, hi, out["tip_magnetic"])
 
     def blocked(self, ff):
-        return ("tip_magnetic",)
+        # the tree gathers its own rows (its ranks split groups, not blocks of rods)
+        return () if self._gathered else ("tip_magnetic",)
 
     def fast(self, ff, r_in, r_out, out):
         """The fast part of the force, pairs closer than ``r_out`` switched off smoothly from ``r_in`` on."""
