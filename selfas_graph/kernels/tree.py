@@ -73,7 +73,7 @@ in float64. The float64 path is unchanged by it, bit for bit.
 
 The defaults (hexadecapoles, leaves of at most 64 tips, groups of at most 128,
 theta 0.475) reach the median error of octupoles at theta 0.4 (5e-4 to 8e-4 in a
-uniform rod gas and the Fig. 2 slab of 6000 to 10^5 rods) 1.1 to 1.25 times
+uniform rod gas and the Fig. 2 slab of 6000 to 10^5 rods) 1.0 to 1.25 times
 faster on AVX2 (docs/performance.md, tools/bench_tree.py). On one AVX2 core of a
 Zen 4 (mixed) a near pair costs about 0.67 ns, an accepted cell about 4 ns per
 target; at the defaults and 24 000 rods of the Fig. 2 slab a target sees about
