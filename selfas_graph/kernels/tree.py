@@ -213,6 +213,53 @@ def morton_keys(x, y, z, out):
         out[i] = (_spread_bits(ix) << 2) | (_spread_bits(iy) << 1) | _spread_bits(iz)
 
 
+#: bits per digit of :func:`argsort_keys` (6 passes over 63-bit keys, counts of 2048 fit in L1)
+RADIX_BITS = 11
+
+
+@njit
+def argsort_keys(key):
+    """Stable argsort of non-negative int64 keys below 2**63 (Morton keys): ``np.argsort(key, kind="stable")``.
+
+    Least-significant-digit radix sort, :data:`RADIX_BITS` bits a pass, all digit counts taken in
+    one pass over the keys, and a pass skipped where every key has the same digit (the high bits of
+    a flat scene's keys). Ties keep the order of the tips, so that the result is one permutation
+    whatever the platform. Measured on a Zen 4 (numpy 2.4, whose quicksort there is not the SIMD
+    one): 2.6 against 11 ms for numpy's argsort at 2e5 Morton keys, 0.6 against 2.1 ms at 48 000.
+    """
+    n = key.shape[0]
+    passes = -(-63 // RADIX_BITS)
+    size = 1 << RADIX_BITS
+    mask = size - 1
+    count = np.zeros((passes, size), np.int64)
+    for i in range(n):
+        k = key[i]
+        for p in range(passes):
+            count[p, (k >> (RADIX_BITS * p)) & mask] += 1
+    index = np.arange(n)
+    cur = key.copy()
+    spare_index = np.empty(n, np.int64)
+    spare_key = np.empty(n, np.int64)
+    for p in range(passes):
+        shift = RADIX_BITS * p
+        if n == 0 or count[p, (cur[0] >> shift) & mask] == n:
+            continue  # one digit for all: the pass would not move a key
+        total = 0
+        for d in range(size):  # exclusive prefix sums: the first place of each digit
+            c = count[p, d]
+            count[p, d] = total
+            total += c
+        for i in range(n):
+            d = (cur[i] >> shift) & mask
+            j = count[p, d]
+            count[p, d] = j + 1
+            spare_key[j] = cur[i]
+            spare_index[j] = index[i]
+        cur, spare_key = spare_key, cur
+        index, spare_index = spare_index, index
+    return index
+
+
 @njit
 def _first_with_digit(key, lo, hi, shift, digit):
     """First i in [lo, hi) with ``(key[i] >> shift) & 7 >= digit`` (keys sorted, common prefix)."""
@@ -1089,10 +1136,7 @@ def build_tip_tree(x, y, z, charge, leaf_size=LEAF_SIZE, group_size=GROUP_SIZE, 
         raise ValueError(f"leaf_size and group_size must be >= 1, got {leaf_size}, {group_size}")
     key = np.empty(x.shape[0], np.int64)
     morton_keys(x, y, z, key)
-    # numpy's quicksort of int64 (SIMD on x86) is deterministic and, measured at 2e5
-    # tips, 3.5 ms against 20 ms for the stable sort; the order of equal keys is
-    # irrelevant (they share a leaf)
-    index = np.argsort(key)
+    index = argsort_keys(key)
     rank = np.empty_like(index)
     rank[index] = np.arange(index.shape[0])
     start, end, nxt = build_cells(key[index], int(leaf_size))
