@@ -483,6 +483,25 @@ def test_group_runs_bitwise(chains, precision):
         evaluate_tip_tree(t, RSTAR, KAPPA, 0.5, parts, groups=(2, len(t.group) + 1))
 
 
+def test_cells_filled_in_runs_give_the_same_tree(chains):
+    """The moments of a planned tree filled in runs of cells (as MPI ranks share them,
+    kernels/tree.py cell_bounds) equal one build bitwise, and the runs split the cells' work
+    (their tips) about evenly."""
+    from selfas_graph.kernels.tree import cell_bounds, fill_cells, finish_tip_tree, plan_tip_tree
+
+    whole = build_tip_tree(*chains)
+    t = plan_tip_tree(*chains)
+    bounds = cell_bounds(t, 3)
+    assert bounds[0] == 0 and bounds[-1] == len(t.start) and np.all(np.diff(bounds) > 0)
+    work = np.add.reduceat(t.end - t.start, bounds[:-1])
+    assert work.max() < 1.5 * work.sum() / 3
+    for r in range(3):
+        fill_cells(t, bounds[r], bounds[r + 1])
+    t = finish_tip_tree(t)
+    for name in ("box", "centre", "radius", "moment", "near32", "charge32", "rod32", "group", "index"):
+        assert np.array_equal(getattr(t, name), getattr(whole, name)), name
+
+
 def test_mixed_invalid_precision(chains):
     t = build_tip_tree(*chains)
     with pytest.raises(ValueError, match="precision must be one of 'float64', 'mixed'"):

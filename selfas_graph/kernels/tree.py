@@ -1121,14 +1121,27 @@ def build_tip_tree(x, y, z, charge, leaf_size=LEAF_SIZE, group_size=GROUP_SIZE, 
     group_size : int
         Targets are walked together in cells of at most this many tips.
     order : int
-        Multipole order: 2 (quadrupole) or 3 (octupole).
+        Multipole order: 2 (quadrupole), 3 (octupole) or 4 (hexadecapole).
 
     Raises
     ------
     ValueError
         On shapes that disagree, an odd or zero number of tips, NaN or inf input,
         or knobs out of range.
+
+    The same as :func:`plan_tip_tree`, :func:`fill_cells` over all cells and
+    :func:`finish_tip_tree`, the stages between which processes that share the work of the
+    moments exchange their cells.
     """
+    tree = plan_tip_tree(x, y, z, charge, leaf_size, group_size, order)
+    fill_cells(tree, 0, tree.start.shape[0])
+    return finish_tip_tree(tree)
+
+
+def plan_tip_tree(x, y, z, charge, leaf_size=LEAF_SIZE, group_size=GROUP_SIZE, order=ORDER):
+    """The octree over tips (sorted tips, cells, groups) with its cells' boxes, centres, radii and
+    moments not yet computed (:func:`fill_cells`) and without its float32 copies
+    (:func:`finish_tip_tree`). Arguments and errors as :func:`build_tip_tree`."""
     x, y, z, charge = _coords(x, y, z, charge)
     if order not in (2, 3, 4):
         raise ValueError(f"order must be 2, 3 or 4, got {order}")
@@ -1140,38 +1153,63 @@ def build_tip_tree(x, y, z, charge, leaf_size=LEAF_SIZE, group_size=GROUP_SIZE, 
     rank = np.empty_like(index)
     rank[index] = np.arange(index.shape[0])
     start, end, nxt = build_cells(key[index], int(leaf_size))
-    xs, ys, zs, qs = x[index], y[index], z[index], charge[index]
     n_cells = start.shape[0]
-    box = np.empty((n_cells, 6))
-    centre = np.empty((n_cells, 3))
-    radius = np.empty(n_cells)
-    moment = np.empty((n_cells, N_MOMENT))
-    cell_moments(xs, ys, zs, qs, start, end, int(order), box, centre, radius, moment)
-    group = target_groups(start, end, nxt, int(group_size))
-    near32 = np.empty((6, xs.shape[0]), np.float32)
-    split_hi_lo(xs, ys, zs, centre[0], near32)
-    rod = index // 2
+    empty32 = np.empty(0, np.float32)
     return TipTree(
         index,
         rank,
-        xs,
-        ys,
-        zs,
-        qs,
-        rod,
+        x[index],
+        y[index],
+        z[index],
+        charge[index],
+        index // 2,
         start,
         end,
         nxt,
-        box,
-        centre,
-        radius,
-        moment,
-        group,
+        np.empty((n_cells, 6)),
+        np.empty((n_cells, 3)),
+        np.empty(n_cells),
+        np.empty((n_cells, N_MOMENT)),
+        target_groups(start, end, nxt, int(group_size)),
         int(order),
-        near32,
-        qs.astype(np.float32),
-        rod.astype(np.int32),
+        np.empty((6, 0), np.float32),
+        empty32,
+        np.empty(0, np.int32),
     )
+
+
+def fill_cells(tree, c0, c1):
+    """Compute the boxes, centres, radii and moments of cells ``c0..c1-1`` of a planned tree, in place."""
+    s = slice(int(c0), int(c1))
+    cell_moments(
+        tree.x,
+        tree.y,
+        tree.z,
+        tree.charge,
+        tree.start[s],
+        tree.end[s],
+        tree.order,
+        tree.box[s],
+        tree.centre[s],
+        tree.radius[s],
+        tree.moment[s],
+    )
+
+
+def cell_bounds(tree, parts):
+    """Cut the cells into ``parts`` runs of about equal work for :func:`fill_cells` (a cell's work goes
+    with its tips): run r is cells ``bounds[r]:bounds[r + 1]``. Returns (parts + 1,) int64."""
+    work = np.cumsum(tree.end - tree.start)
+    want = (work[-1] * np.arange(1, parts, dtype=np.int64)) // parts
+    return np.concatenate(([0], np.searchsorted(work, want, side="right"), [work.shape[0]])).astype(np.int64)
+
+
+def finish_tip_tree(tree):
+    """The tree with its float32 copies for the mixed precision (``near32``, ``charge32``, ``rod32``),
+    once every cell is filled (the coordinates are taken relative to the root cell's centre)."""
+    near32 = np.empty((6, tree.x.shape[0]), np.float32)
+    split_hi_lo(tree.x, tree.y, tree.z, tree.centre[0], near32)
+    return tree._replace(near32=near32, charge32=tree.charge.astype(np.float32), rod32=tree.rod.astype(np.int32))
 
 
 def group_bounds(tree, parts):

@@ -65,7 +65,7 @@ class TipMagneticForce(Term):
         x, y, z = ff.soa()
         if self.tree:
             try:
-                tree = ktree.build_tip_tree(x, y, z, ff.tip_charge, order=self.order)
+                tree = self._build_tree(ff, x, y, z)
             except ValueError:
                 if np.isfinite(ff.position).all():
                     raise
@@ -88,6 +88,20 @@ class TipMagneticForce(Term):
         lo, hi = ff.blocks.tips
         direct = kt.tip_tip_direct_mixed if self.precision == "mixed" else kt.tip_tip_direct
         direct(x, y, z, ff.tip_charge, self.rstar, self.kappa, lo, hi, out["tip_magnetic"])
+
+    def _build_tree(self, ff, x, y, z):
+        """The tip tree; under MPI each rank computes the moments of a run of cells and the ranks
+        exchange them (the work two threads would share), the same tree bit for bit."""
+        if ff.blocks.serial:
+            return ktree.build_tip_tree(x, y, z, ff.tip_charge, order=self.order)
+        tree = ktree.plan_tip_tree(x, y, z, ff.tip_charge, order=self.order)
+        bounds = ktree.cell_bounds(tree, ff.blocks.size)
+        r = ff.blocks.rank
+        ktree.fill_cells(tree, bounds[r], bounds[r + 1])
+        cells = np.arange(tree.start.shape[0])
+        for a in (tree.box, tree.centre, tree.radius, tree.moment):
+            ff.blocks.gather_runs(a, cells, bounds)
+        return ktree.finish_tip_tree(tree)
 
     def blocked(self, ff):
         # the tree gathers its own rows (its ranks split groups, not blocks of rods)
