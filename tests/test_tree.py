@@ -533,7 +533,7 @@ def line_of_rods(n_rods, spacing=2.0):
     return rods_to_tips(centre, axis, np.random.default_rng(9).uniform(2 / 3, 2, n_rods))
 
 
-def test_mixed_far_field_matches_the_float64_octupoles(uniform):
+def test_mixed_far_field_matches_the_float64_multipoles(uniform):
     """With leaves of one tip and theta 0.5 most of each tip's force comes from accepted cells:
     the float32 far field equals the float64 one to float32 rounding of the largest force, for
     every order (order 2 runs the octupole formula with zero octupole moments). Each group records
