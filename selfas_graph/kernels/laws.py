@@ -54,6 +54,7 @@ def tip_force_over_r(r2, p, rstar, kappa):
 #: float32 constants of :func:`tip_force_over_r_f32` (a float64 literal would promote the law to float64)
 _F32_ONE = np.float32(1.0)
 _F32_ZERO = np.float32(0.0)
+#: below this squared distance the float32 law gives 0 (:func:`tip_force_over_r_f32`)
 _F32_TINY = np.float32(1e-37)
 
 
@@ -61,20 +62,22 @@ _F32_TINY = np.float32(1e-37)
 def tip_force_over_r_f32(r2, p, rstar, kappa):
     """:func:`tip_force_over_r` in float32: every argument float32, every constant float32.
 
-    The same law, branches and guards (``r2 = 0`` gives 0; the core below ``r*``), for the
-    mixed-precision near field of the tip tree (``tree.evaluate_groups``): AVX2 takes 8 float32
-    lanes per square root and division against 4 float64 lanes. The clamp of ``r2`` is the
-    smallest round float32 power of ten that is normal (``1e-37``; float64 uses ``1e-300``):
-    it only keeps the unused branch finite, a tip pair closer than ``3e-19`` is not resolved in
-    float32 anyway. Relative rounding about 1e-7 of f.
+    The same law and branches (the core below ``r*``), for the mixed-precision near field of the
+    tip tree (``tree.evaluate_groups``) and the mixed direct sum: AVX2 takes 8 float32 lanes per
+    square root and division against 4 float64 lanes. Where float64 gives 0 at ``r2 = 0``, this
+    gives 0 for every ``r2`` below ``1e-37``, the smallest round float32 power of ten that is
+    normal: a tip pair closer than ``3e-19`` is not resolved in float32 anyway, and the one select
+    also discards whatever the reciprocal square root made of such an ``r2`` (inf or NaN), so that
+    no clamp of ``r2`` is needed before it (one instruction less per pair). Relative rounding
+    about 1e-7 of f.
     """
     rs2 = rstar * rstar
     inv_rs3 = _F32_ONE / (rs2 * rstar)  # loop-invariant: hoisted out of the pair loops
-    inv_r = _F32_ONE / math.sqrt(max(r2, _F32_TINY))
+    inv_r = _F32_ONE / math.sqrt(r2)
     outer = p * inv_r * inv_r * inv_r
     inner = (p + kappa * (rstar * inv_r - _F32_ONE)) * inv_rs3
     g = outer if r2 >= rs2 else inner
-    return g if r2 > _F32_ZERO else _F32_ZERO
+    return g if r2 >= _F32_TINY else _F32_ZERO
 
 
 @inline
