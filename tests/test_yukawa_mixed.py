@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 import reference as ref
+from conftest import random_rods, simulation
 from selfas_graph.kernels import pairs as kp
 from selfas_graph.model.neighbours import NeighbourList
 
@@ -196,3 +197,24 @@ def test_nan_position_takes_the_float64_rows(rng):
     np.testing.assert_array_equal(np.isnan(mixed), np.isnan(f64))
     bad = np.isnan(f64).any(axis=1)
     np.testing.assert_array_equal(mixed[bad], f64[bad])
+
+
+def test_precision_knob_picks_the_mixed_kernel(rng):
+    """``forces.yukawa.precision = "mixed"`` gives the float64 term's forces to float32 rounding and
+    the same (float64) energy; other values are refused."""
+    state = random_rods(40, rng, box=3.0)
+    forces, energy = {}, {}
+    for precision in ("float64", "mixed"):
+        sim = simulation(state.copy(), forces={"yukawa": {"core_radius": 0.06, "precision": precision}})
+        ff = sim.force_field
+        ff.evaluate(state.position, state.velocity)
+        forces[precision] = ff.out["yukawa"].copy()
+        energy[precision] = ff.potential_energy(state.position)["yukawa"]
+        cutoff = ff.describe()["yukawa_cutoff"]
+    centre = 0.5 * (state.position[0::2] + state.position[1::2])
+    scale = np.repeat(0.5 * pair_force_sum(centre, state.rod_charge, core=0.06, cutoff=cutoff), 2)
+    assert_close(forces["mixed"], forces["float64"], scale)
+    assert not np.array_equal(forces["mixed"], forces["float64"])
+    assert energy["mixed"] == energy["float64"]
+    with pytest.raises(ValueError, match="forces.yukawa.precision"):
+        simulation(state.copy(), forces={"yukawa": {"precision": "float32"}})
