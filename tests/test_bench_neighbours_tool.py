@@ -27,7 +27,8 @@ def test_every_kernel_timed_with_machine_and_target():
     tool = _tool()
     got = tool.run(argparse.Namespace(rods=[60], repeat=2, checkpoint=None, before=None))
     row = got["rows"][0]
-    for kernel in tool.KERNELS:
+    for kernel in [*tool.KERNELS, tool.MIXED, "float64"]:
         assert len(row[kernel]) == 2 and all(t >= 0 for t in row[kernel])
+    assert 0.0 < row["mixed_error"] < 1e-5  # float32 ran, within its rounding of the float64 sum
     assert row["yukawa_pairs"] > 0 and row["tip_radius"] > 0
     assert got["machine"]["cpu_name"] and "compiles for" in got["line"]

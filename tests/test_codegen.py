@@ -6,6 +6,10 @@ index for wraparound, and for CPUs with AVX-512 LLVM then vectorised the loops w
 times slower than the AVX2 build on the same Intel Xeon (docs/performance.md 'Unsigned loop
 indices on AVX-512'). The kernels are compiled, not run, for an AVX-512 CPU and for an AVX2 CPU in
 a fresh process with an empty cache, so the check holds on any x86-64 host.
+
+The mixed Yukawa sum gathers each row's neighbours in a loop of its own (a neighbour list is
+indirect: gathers belong there) and runs the float32 law in a second loop, which must stay float32
+on 8 lanes with AVX2.
 """
 
 import json
@@ -53,3 +57,36 @@ def test_mixed_pair_loops_load_rows_without_gathers(cpu, tmp_path):
     for name, counts in found.items():
         assert counts["packed_f32"] > 0, f"{name}: the vectorised float32 loop is not in the inspected code"
         assert counts["gathers"] == 0, f"{name} for {cpu}: {counts['gathers']} gather instructions"
+
+
+_YUKAWA_PROBE = r"""
+import json, re, warnings
+warnings.simplefilter("ignore")
+import numpy as np, numba
+from selfas_graph.kernels import pairs
+n = 8
+c = np.zeros((n, 3)); q = np.ones(n); order = np.arange(n); out = np.zeros((n, 3))
+start = np.zeros(n + 1, dtype=np.int64); index = np.zeros(0, dtype=np.int64)
+args = (c, q, order, start, index, 1.0, 0.06, 3.0, 0, n, out)
+sig = tuple(numba.typeof(a) for a in args)
+disp = pairs.yukawa_centres_sorted_mixed
+disp.compile(sig)
+lib = disp.overloads[sig].library
+asm = "".join(l.get_asm_str() for l in [lib] + list(getattr(lib, "_linking_libraries", ())))
+patterns = {"sqrt": r"\bvsqrtps\s+%ymm", "div": r"\bvdivps\s[^\n]*%ymm", "widen": r"\bvcvtps2pd\b"}
+print(json.dumps({k: len(re.findall(p, asm)) for k, p in patterns.items()}))
+"""
+
+
+def test_mixed_yukawa_law_runs_on_8_float32_lanes_with_avx2(tmp_path):
+    """The mixed Yukawa sum's law (``kernels/pairs.py::yukawa_centres_sorted_mixed``) compiled for
+    AVX2: its square root and division are packed float32 on ymm registers, 8 lanes, and nothing
+    is widened from float32 to float64 (``vcvtps2pd``: a float64 constant in the float32 law or
+    exponential would promote the loop to float64)."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
+    env.update(NUMBA_CPU_NAME="haswell", NUMBA_CPU_FEATURES="", NUMBA_CACHE_DIR=str(tmp_path))
+    got = subprocess.run([sys.executable, "-c", _YUKAWA_PROBE], env=env, capture_output=True, text=True, timeout=600)
+    assert got.returncode == 0, got.stderr
+    found = json.loads(got.stdout.strip().splitlines()[-1])
+    assert found["sqrt"] > 0 and found["div"] > 0, found
+    assert found["widen"] == 0, found

@@ -2,6 +2,7 @@
 
 Usage: python tools/bench_neighbours.py [--rods 1200 6000 24000] [--checkpoint STATE.h5] [--repeat 9]
                                         [--targets host haswell] [--before REF] [--json OUT.json]
+                                        [--kernels "yukawa mixed" ...]
 
 For each scene (the Fig. 2 scene scaled to each ``--rods`` as tools/bench_step.py makes it, and
 the state of ``--checkpoint`` when given), it times on one numba thread, by the process's CPU
@@ -14,7 +15,14 @@ time (``time.process_time``: on a shared machine it counts only the cycles the k
   larger) + skin, without the pairs of one rod;
 - ``yukawa``: the Yukawa sum as the term calls it over that list (``kernels/pairs.py::
   yukawa_centres_sorted`` with the copies in cell order it reads, or ``yukawa_centres`` in a
-  revision without it), also in ns per listed pair.
+  revision without it), also in ns per listed pair;
+- ``yukawa mixed``: the same sum with the pair law in float32 (``forces.yukawa.precision =
+  "mixed"``, ``kernels/pairs.py::yukawa_centres_sorted_mixed``), always interleaved with the
+  float64 sum of the working tree (rounds in which the two take turns, the order alternating), and
+  printed in a table of its own: both times, the speed-up (median [min-max] of the per-round
+  ratios float64 / mixed) and the largest difference of a rod's force over the largest force.
+
+``--kernels`` times only the named ones (default: all four).
 
 ``--before REF`` also times the kernels of the git revision REF (tools/bench_kernels.py
 ``kernels_at``), interleaved with the working tree's (the order alternates between repeats),
@@ -39,6 +47,8 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tools"))
 
 KERNELS = ["centre list", "tip list", "yukawa"]
+#: timed against the float64 sum of the working tree, interleaved, in a table of its own
+MIXED = "yukawa mixed"
 
 
 def scenes(args):
@@ -72,6 +82,7 @@ def run(args):
     import selfas_graph.kernels.cells  # noqa: F401  (loaded as attributes of the package)
     import selfas_graph.kernels.pairs  # noqa: F401
 
+    chosen = getattr(args, "kernels", None) or [*KERNELS, MIXED]
     before = None
     if args.before:
         before = kernels_at(args.before)
@@ -115,7 +126,8 @@ def run(args):
                 return lambda: K.cells.neighbour_rows(tips, tip_radius, True)
             if sorted_sum(K):  # as the Yukawa term calls it: copies in cell order made per call
                 _, _, (order, s, i) = centre_list(K)
-                return lambda: K.pairs.yukawa_centres_sorted(
+                kernel = K.pairs.yukawa_centres_sorted_mixed if name == MIXED else K.pairs.yukawa_centres_sorted
+                return lambda: kernel(
                     c[order], st.rod_charge[order], order, s, i, yk.screening, yk.core, yk.cutoff, 0, n, fy
                 )
             s, i = centre_list(K)
@@ -123,10 +135,20 @@ def run(args):
 
         res = {"scene": label, "rods": n, "centre_radius": centre_radius, "tip_radius": tip_radius}
         for name in KERNELS:
+            if name not in chosen:
+                continue
             if before is None:
                 res[name] = timed(job(name, now), args.repeat, clock)
             else:
                 res[name + " before"], res[name] = timed_pair(job(name, before), job(name, now), args.repeat, clock)
+        if MIXED in chosen:
+            res["float64"], res[MIXED] = timed_pair(job("yukawa", now), job(MIXED, now), args.repeat, clock)
+            f64 = np.empty((n, 3))
+            job("yukawa", now)()
+            f64[:] = fy
+            job(MIXED, now)()
+            norm = np.linalg.norm(f64, axis=1)
+            res["mixed_error"] = float(np.linalg.norm(fy - f64, axis=1).max() / norm.max())
         res["yukawa_pairs"] = int(centre_list(now)[0][-1])  # start[n] of either form
         res["tip_pairs"] = int(kernels.cells.neighbour_rows(tips, tip_radius, True)[0][-1])
         rows.append(res)
@@ -140,6 +162,7 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=9)
     ap.add_argument("--targets", nargs="+", default=["host"], help="host, or NUMBA_CPU_NAME values (haswell, znver3)")
     ap.add_argument("--before", help="also time the kernels of this git revision, interleaved (e.g. main)")
+    ap.add_argument("--kernels", nargs="+", default=[*KERNELS, MIXED], choices=[*KERNELS, MIXED])
     ap.add_argument("--json", help="write all results to this file")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -154,7 +177,7 @@ def main(argv=None):
     for target in args.targets:
         env = target_env(target)
         cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "--repeat", str(args.repeat)]
-        cmd += ["--rods", *map(str, args.rods)]
+        cmd += ["--rods", *map(str, args.rods), "--kernels", *args.kernels]
         cmd += ["--checkpoint", args.checkpoint] if args.checkpoint else []
         cmd += ["--before", args.before] if args.before else []
         got = subprocess.run(cmd, env=env, capture_output=True, text=True)
@@ -168,12 +191,6 @@ def main(argv=None):
     targets = [t for t in args.targets if t in results]
     if not targets:
         sys.exit(1)
-    print(f"\nCPU ms per call on 1 thread, median [min-max] of {args.repeat}")
-    cols = [(t, k) for t in targets for k in (("before", "after", "speed-up") if args.before else ("",))]
-    if args.before:
-        print(f"before = {args.before}, after = the working tree; speed-up = median of before/after per repeat")
-    print("| rods | kernel | " + " | ".join(f"{t} {k}".strip() for t, k in cols) + " |")
-    print("|---|---|" + "---|" * len(cols))
 
     def cell(row, key, k):
         v = np.array(row[key])
@@ -182,19 +199,44 @@ def main(argv=None):
             text += f" ({np.median(v) * 1e6 / row['yukawa_pairs']:.1f} ns/pair)"
         return text
 
-    for i, row0 in enumerate(results[targets[0]]["rows"]):
-        for k in KERNELS:
-            cells = []
-            for target, what in cols:
+    kernels = [k for k in KERNELS if k in args.kernels]
+    if kernels:
+        print(f"\nCPU ms per call on 1 thread, median [min-max] of {args.repeat}")
+        cols = [(t, k) for t in targets for k in (("before", "after", "speed-up") if args.before else ("",))]
+        if args.before:
+            print(f"before = {args.before}, after = the working tree; speed-up = median of before/after per repeat")
+        print("| rods | kernel | " + " | ".join(f"{t} {k}".strip() for t, k in cols) + " |")
+        print("|---|---|" + "---|" * len(cols))
+
+        for i, row0 in enumerate(results[targets[0]]["rows"]):
+            for k in kernels:
+                cells = []
+                for target, what in cols:
+                    row = results[target]["rows"][i]
+                    if what == "before":
+                        cells.append(cell(row, k + " before", k))
+                    elif what == "speed-up":
+                        r = np.array(row[k + " before"]) / np.array(row[k])
+                        cells.append(f"{np.median(r):.2f} [{r.min():.2f}-{r.max():.2f}]")
+                    else:
+                        cells.append(cell(row, k, k))
+                print(f"| {row0['scene']} | {k} | " + " | ".join(cells) + " |")
+    if MIXED in args.kernels:
+        print(
+            f"\n{MIXED}: CPU ms per call on 1 thread, float64 and mixed taking turns, median [min-max] of "
+            f"{args.repeat} rounds; speed-up = median [min-max] of the per-round float64 / mixed; error = the "
+            "largest difference of a rod's force / the largest force"
+        )
+        print("| rods | target | float64 | mixed | speed-up | error |")
+        print("|---|---|---|---|---|---|")
+        for i, row0 in enumerate(results[targets[0]]["rows"]):
+            for target in targets:
                 row = results[target]["rows"][i]
-                if what == "before":
-                    cells.append(cell(row, k + " before", k))
-                elif what == "speed-up":
-                    r = np.array(row[k + " before"]) / np.array(row[k])
-                    cells.append(f"{np.median(r):.2f} [{r.min():.2f}-{r.max():.2f}]")
-                else:
-                    cells.append(cell(row, k, k))
-            print(f"| {row0['scene']} | {k} | " + " | ".join(cells) + " |")
+                r = np.array(row["float64"]) / np.array(row[MIXED])
+                print(
+                    f"| {row0['scene']} | {target} | {cell(row, 'float64', 'yukawa')} | {cell(row, MIXED, 'yukawa')} | "
+                    f"{np.median(r):.2f} [{r.min():.2f}-{r.max():.2f}] | {row['mixed_error']:.1e} |"
+                )
     for row in results[targets[0]]["rows"]:
         print(
             f"{row['scene']}: centre list radius {row['centre_radius']:.3f}, {row['yukawa_pairs']} directed pairs; "

@@ -11,7 +11,7 @@ import math
 import numpy as np
 
 from ._jit import inline, inline_sum
-from .expo import exp_nonpositive
+from .expo import exp_nonpositive, exp_nonpositive_f32
 
 
 @inline_sum
@@ -129,6 +129,30 @@ def yukawa_force_over_r(r2, zz, screening, core):
     inv_s = 1.0 / screening  # loop-invariant: hoisted out of the pair loop
     f = zz * exp_nonpositive(-r * inv_s) * (inv_r * inv_r + inv_s * inv_r) * inv_r
     return 0.0 if zero else f
+
+
+@inline
+def yukawa_force_over_r_f32(r2, zz, inv_s, core2):
+    """:func:`yukawa_force_over_r` in float32: every argument float32, every constant float32.
+
+    The same law, core clamp and ``r = 0`` select, for the mixed-precision Yukawa sum
+    (``pairs.yukawa_centres_sorted_mixed``): AVX2 takes 8 float32 lanes per square root and
+    division against 4 float64 lanes, and the exponential is
+    :func:`.expo.exp_nonpositive_f32`. The loop-invariant ``1 / R_D`` and ``a^2`` are arguments
+    (rounded once to float32 by the caller). Relative rounding about 1e-7 of f; the caller keeps
+    its inputs where no product here leaves the normal float32 range (``pairs.py``
+    ``_yukawa_mixed_ok``), except for ``r`` near 0 without a core: ``1/r^3`` overflows float32
+    below ``r = 1e-13 |Z_i Z_j|^(1/3)`` (the caller then sums the row in float64), and a pair
+    closer than about 3e-23, whose ``r^2`` underflows to 0, counts as coincident (0, where
+    float64 gives more than 1e45).
+    """
+    rr = max(r2, core2)
+    zero = rr == _F32_ZERO  # NaN is not zero: it propagates
+    rs = _F32_ONE if zero else rr
+    r = math.sqrt(rs)
+    inv_r = _F32_ONE / r
+    f = zz * exp_nonpositive_f32(-r * inv_s) * (inv_r * inv_r + inv_s * inv_r) * inv_r
+    return _F32_ZERO if zero else f
 
 
 @inline

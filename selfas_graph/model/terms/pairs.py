@@ -152,6 +152,7 @@ class YukawaForce(Term):
         y = p.forces.yukawa
         self.screening = y.screening_length
         self.core = y.core_radius
+        self.precision = y.precision
         zmax = float(np.abs(state.rod_charge).max(initial=0.0))
         self.cutoff = yukawa_cutoff(zmax, y.screening_length, y.tolerance)
 
@@ -166,7 +167,8 @@ class YukawaForce(Term):
         lo, hi = ff.blocks.rods
         # [perf] the sum reads copies in cell order (kernels/pairs.py yukawa_centres_sorted: the same
         # forces bit for bit as yukawa_centres over the list, 1.3 times faster at 24 000 rods)
-        kp.yukawa_centres_sorted(
+        kernel = kp.yukawa_centres_sorted_mixed if self.precision == "mixed" else kp.yukawa_centres_sorted
+        kernel(
             ff.centre()[order],
             ff.rod_charge[order],
             order,
