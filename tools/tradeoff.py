@@ -22,8 +22,12 @@ Knobs: integrator.dt, integrator.brake (explicit/split), integrator.restart_on_e
 the bare law: what the core changes), forces.current_lorentz.quadrature_points,
 integrator.bond_force (exact/paper), integrator.position_projection, integrator.slow_every
 (multiple time stepping, against evaluating every force every step) and integrator.fast_range
-(with ``--set integrator.slow_every=K``; also against no splitting). Prints a markdown table and writes JSON and a plot of
-error against cost, one curve per knob.
+(with ``--set integrator.slow_every=K``; also against no splitting), the tree's
+forces.tip_magnetic.opening_angle and forces.tip_magnetic.order (against the direct sum; only
+where the scene takes the tree, e.g. ``--set forces.tip_magnetic.method=tree``) and the
+``precision`` of forces.tip_magnetic, forces.yukawa, forces.current_field and
+forces.current_lorentz (mixed against float64). Prints a markdown table and writes JSON and a
+plot of error against cost, one curve per knob.
 """
 
 import argparse
@@ -58,6 +62,14 @@ KNOBS = {
     # the tip-tip sum: the tree (at its near-field precision, --set forces.tip_magnetic.precision=...)
     # against the exact direct sum
     "forces.tip_magnetic.method": (["direct", "tree"], {"forces.tip_magnetic.method": "direct"}),
+    # the tree's knobs, where the scene takes the tree: each against the exact direct sum
+    "forces.tip_magnetic.opening_angle": ([0.3, 0.4, 0.475, 0.55], {"forces.tip_magnetic.method": "direct"}),
+    "forces.tip_magnetic.order": ([2, 3, 4], {"forces.tip_magnetic.method": "direct"}),
+    # float32 arithmetic against float64, with everything else as the scene has it
+    "forces.tip_magnetic.precision": (["float64", "mixed"], {"forces.tip_magnetic.precision": "float64"}),
+    "forces.yukawa.precision": (["float64", "mixed"], {"forces.yukawa.precision": "float64"}),
+    "forces.current_field.precision": (["float64", "mixed"], {"forces.current_field.precision": "float64"}),
+    "forces.current_lorentz.precision": (["float64", "mixed"], {"forces.current_lorentz.precision": "float64"}),
     "integrator.slow_extrapolation": ([False, True], {"integrator.slow_every": 1}),
     # only with slow_every > 1 in the base (--set integrator.slow_every=8): each range against no splitting
     "integrator.fast_range": ([2.0, 3.0, 4.0, 6.0, 8.0, 12.0], {"integrator.slow_every": 1}),
@@ -76,9 +88,19 @@ def _overrides(values):
     return [f"{key}={_toml(value)}" for key, value in values.items()]
 
 
+#: knobs of the tip-tip tree: they change nothing where the scene sums the tip pairs directly
+TREE_KNOBS = ("forces.tip_magnetic.opening_angle", "forces.tip_magnetic.order")
+
+
 def _applicable(scenario, knob):
     if knob == "integrator.fast_range" and scenario.params.integrator.slow_every == 1:
         return False  # the range splits nothing without multiple time stepping
+    if knob in TREE_KNOBS:
+        tm = scenario.params.forces.tip_magnetic
+        if tm is None or not (
+            tm.method == "tree" or (tm.method == "auto" and scenario.params.rods.count >= tm.tree_above)
+        ):
+            return False
     node = scenario.params
     for part in knob.split(".")[:-1]:
         node = getattr(node, part, None)
