@@ -174,9 +174,8 @@ def main(argv=None):
     if args.t0 > sim0.state.time:
         sim0.run(t_end=sim0.state.time + sim0.steps_for(args.t0 - sim0.state.time) * sim0.dt)
     snap = sim0.snapshot()
-    run_once(
-        args.scenario, args.base_set, min(args.t, 0.01), snap
-    )  # warm-up: compile the scene's kernels before timing
+    # warm-up: compile the scene's kernels before timing
+    run_once(args.scenario, args.base_set, min(args.t, 0.01), snap)
     print(
         f"branch point t = {sim0.state.time:g} ({len(sim0.force_field.active_rod)} rods carry current); "
         f"each run {args.t} t0; each knob against the defaults with that knob at its tightest",
