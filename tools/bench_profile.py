@@ -61,7 +61,14 @@ PARTS = [
     ("tip-tip close pairs (fast, every step)", lambda f: f.endswith("tips.py:tip_tip_fast")),
     (
         "Yukawa sum (slow)",
-        lambda f: f.endswith(("pairs.py:yukawa_centres", "pairs.py:yukawa_centres_sorted", "pairs.py:yukawa_energy")),
+        lambda f: f.endswith(
+            (
+                "pairs.py:yukawa_centres",
+                "pairs.py:yukawa_centres_sorted",
+                "pairs.py:yukawa_centres_sorted_mixed",
+                "pairs.py:yukawa_energy",
+            )
+        ),
     ),
     (
         "current field on tips (term 9, slow)",
