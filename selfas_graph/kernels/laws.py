@@ -68,14 +68,20 @@ def tip_force_over_r_f32(r2, p, rstar, kappa):
     gives 0 for every ``r2`` below ``1e-37``, the smallest round float32 power of ten that is
     normal: a tip pair closer than ``3e-19`` is not resolved in float32 anyway, and the one select
     also discards whatever the reciprocal square root made of such an ``r2`` (inf or NaN), so that
-    no clamp of ``r2`` is needed before it (one instruction less per pair). Relative rounding
-    about 1e-7 of f.
+    no clamp of ``r2`` is needed before it (one instruction less per pair). The core is taken as
+    ``(p / r*^3 - kappa / r*^3) + (kappa / r*^2) / r``, three loop-invariant factors where
+    ``(p + kappa (r* / r - 1)) / r*^3`` held four in registers and took one operation more: with
+    AVX2's 16 vector registers, 1.03 times faster tree evaluation and 1.02-1.07 times faster mixed
+    direct sum (24 000 and 1200 rods, one thread, interleaved with the code before). Relative
+    rounding about 1e-7 of f.
     """
     rs2 = rstar * rstar
     inv_rs3 = _F32_ONE / (rs2 * rstar)  # loop-invariant: hoisted out of the pair loops
+    k1 = kappa * inv_rs3  # so is this: the core's three constants, not four, in registers
+    k2 = k1 * rstar
     inv_r = _F32_ONE / math.sqrt(r2)
     outer = p * inv_r * inv_r * inv_r
-    inner = (p + kappa * (rstar * inv_r - _F32_ONE)) * inv_rs3
+    inner = (p * inv_rs3 - k1) + k2 * inv_r
     g = outer if r2 >= rs2 else inner
     return g if r2 >= _F32_TINY else _F32_ZERO
 
