@@ -158,6 +158,8 @@ class RowBlocks:
         """
         if self.size == 1:
             return
+        if not array.flags.c_contiguous:
+            raise ValueError("gather_runs needs a C-contiguous array: its rows are written in place")
         width = int(np.prod(array.shape[1:], dtype=np.int64))
         bounds = np.asarray(bounds, dtype=np.int64)
         lo, hi = int(bounds[self.rank]), int(bounds[self.rank + 1])
@@ -167,9 +169,7 @@ class RowBlocks:
         send = np.ascontiguousarray(flat[order[lo:hi]])
         recv = self._buffer(("runs", width), (int(counts.sum()),))
         self.comm.Allgatherv(send, [recv, (counts.tolist(), displs.tolist())])
-        mine = flat[order[lo:hi]].copy()
-        flat[order] = recv.reshape(-1, width)
-        flat[order[lo:hi]] = mine
+        flat[order] = recv.reshape(-1, width)  # this rank's own run comes back as it was sent
 
     def gather_list(self, start, index, rows_per_rod=2):
         """The whole compressed-row list on every rank from each rank's own rows (a collective call).
