@@ -143,11 +143,15 @@ def test_multipole_field_falls_with_its_order(order):
         exact = sum(qk * (p - xk) / np.linalg.norm(p - xk) ** 3 for qk, xk in zip(tips[3], np.stack(tips[:3], 1)))
         field = np.array(ktree._field_hexadecapole(*d, mc) if order == 4 else ktree._field_octupole(*d, *mc[:16]))
         if order == 2:
+            # order 2 leaves the octupoles zero: the octupole kernel is the quadrupole one but for
+            # the order of its float64 operations (a few ulp, 1e-13 leaves room for cancellation)
             np.testing.assert_allclose(field, ktree._field_quadrupole(*d, *mc[:9]), rtol=1e-13)
         s = np.linalg.norm(d)
         u = (d / s).astype(np.float32)
         m32 = (mc * s ** -np.repeat([0, 1, 2, 3, 4], [1, 3, 5, 7, 9])).astype(np.float32)
         f32 = ktree._field_hexadecapole_f32(*u, *m32) if order == 4 else ktree._field_octupole_f32(*u, *m32[:16])
+        # float32 rounding (6e-8) of the inputs and of some 100 operations, with cancellation between
+        # the moments' terms: 1e-5 is well above it, and far below any wrong or missing term's effect
         np.testing.assert_allclose(np.array(f32, dtype=np.float64) / s**2, field, rtol=1e-5)
         errors.append(np.linalg.norm(field - exact))
     ratios = np.array(errors[:-1]) / np.array(errors[1:])
