@@ -71,7 +71,8 @@ SOURCES = {
 
 def _source_scene(rng, state=None, forces_override=None, **kw):
     state = random_rods(6, rng, box=1.8, q=(0.5, 1.5)) if state is None else state
-    lorentz = dict(forces_override or {})  # [forces.current_lorentz] keys
+    # [forces.current_lorentz] keys: the plain 4-point rule unless the test asks for the near pairs
+    lorentz = {"quadrature_points": 4, "near_range": 0.0, **(forces_override or {})}
     return state, simulation(
         state,
         forces={"tip_magnetic": {}, **SOURCES, "current_field": {}, "current_lorentz": lorentz},
@@ -143,7 +144,7 @@ def test_lorentz_term_sums_the_rod_currents_and_every_source_in_term_order(rng):
 def test_lorentz_term_near_range_adds_the_pair_correction_to_the_plain_rule(rng):
     """With ``forces.current_lorentz.near_range`` the term is the plain rule (every source) plus the
     kernel's correction of the pairs of current-carrying rods with centres closer than the range
-    (docs/model.md 'Term 10'), bit for bit; near_range = 0 (the default) leaves the plain rule."""
+    (docs/model.md 'Term 10'), bit for bit; near_range = 0 leaves the plain rule."""
     from selfas_graph.kernels import cells
     from selfas_graph.kernels import currents as kc
 

@@ -43,6 +43,7 @@ from ..io.h5md import (
     run_provenance,
 )
 from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
+from ..model.accuracy import short_of_accuracy
 from ..model.params import plasma_current_text
 from ..model.simulation import NumericalFailure, RunInterrupted, Simulation
 from ..model.state import PlacementError
@@ -416,6 +417,8 @@ def run(args):
             print("dry run: placement succeeded, nothing written")
             if plasma_current_text(p):
                 print(plasma_current_text(p))
+            for rule in short_of_accuracy(p):
+                print(f"faster than accurate: {rule.key} (stated accuracy: {rule.stated})")
             print(json.dumps(plan, indent=2))
         return 0
 

@@ -173,7 +173,13 @@ class CurrentField:
 @dataclass(frozen=True)
 class CurrentLorentz:
     quadrature_points: int = spec(
-        4, "Gauss-Legendre points along each rod for the Lorentz force on its current; an accuracy knob", ge=1, le=1000
+        2,
+        "Gauss-Legendre points along each rod for the Lorentz force on its current, for the rods whose centres "
+        "are at least near_range apart and for the other fields; an accuracy knob (with near_range = 1.5, late "
+        "in Fig. 2 the term errs 2.8e-3 of its rms force at the 99th percentile; 4 points and near_range = 0 "
+        "err 0.65, docs/performance.md 'Term 10 near pairs')",
+        ge=1,
+        le=1000,
     )
     precision: str = spec(
         "float64",
@@ -181,7 +187,7 @@ class CurrentLorentz:
         choices=("float64", "mixed"),
     )
     near_range: float = spec(
-        0.0,
+        1.5,
         "centre distance (units L) within which another rod's field is integrated along a rod by "
         "panels adapted to the pair (from the point where the two come closest) instead of the "
         "quadrature_points rule; 0: off. An accuracy knob (docs/model.md 'Term 10')",

@@ -1,0 +1,114 @@
+"""The accuracy each knob is measured to reach, and the settings of a scene that fall short of it.
+
+Every knob that trades speed for accuracy defaults to the setting that meets the accuracy
+docs/performance.md states for it; a faster setting is a choice a scene makes and names (the
+shipped scenario files carry ``[accuracy knob: ...]`` with the error it costs on the line that
+sets it, which ``tests/test_accuracy_defaults.py`` checks). :func:`short_of_accuracy` lists the
+settings of a parameter set that are below their stated accuracy; ``selfas-graph simulate
+--dry-run`` prints them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Callable
+
+__all__ = ["ACCURACY_RULES", "AccuracyRule", "short_of_accuracy"]
+
+
+@dataclasses.dataclass(frozen=True)
+class AccuracyRule:
+    """One accuracy knob: its dotted key, the setting that meets its stated accuracy, and a test of it.
+
+    ``applies(params)`` says whether the knob matters in the scene (its term is on); ``meets(params)``
+    whether the scene's setting reaches the stated accuracy.
+    """
+
+    key: str
+    stated: str
+    applies: Callable
+    meets: Callable
+
+
+def _term(name):
+    return lambda p: getattr(p.forces, name) is not None
+
+
+def _always(p):
+    return True
+
+
+#: the accuracy knobs, each with the setting that meets the accuracy docs/performance.md states for it
+ACCURACY_RULES = (
+    AccuracyRule(
+        "integrator.dt",
+        "dt <= 1e-3 with the split brake, <= 5e-4 with the explicit one (half the largest step that "
+        "survives the start of Fig. 2; docs/performance.md 'The largest stable time step, and the brake')",
+        _always,
+        lambda p: p.integrator.dt <= (1e-3 if p.integrator.brake == "split" else 5e-4) * (1 + 1e-12),
+    ),
+    AccuracyRule(
+        "integrator.slow_every",
+        "1: every force every step (multiple time stepping errs of the order of the time step's own "
+        "error at 8-16; docs/performance.md 'Multiple time stepping: the slow sums every K steps')",
+        _always,
+        lambda p: p.integrator.slow_every == 1,
+    ),
+    AccuracyRule(
+        "forces.tip_magnetic.opening_angle",
+        "<= 0.475 with order 4 (median relative force error 5e-4 to 8e-4; docs/performance.md 'Tip-tip force by a multipole tree')",
+        lambda p: p.forces.tip_magnetic is not None and p.forces.tip_magnetic.method != "direct",
+        lambda p: p.forces.tip_magnetic.opening_angle <= 0.475 and p.forces.tip_magnetic.order >= 4,
+    ),
+    AccuracyRule(
+        "forces.tip_magnetic.precision",
+        "float64",
+        _term("tip_magnetic"),
+        lambda p: p.forces.tip_magnetic.precision == "float64",
+    ),
+    AccuracyRule(
+        "forces.yukawa.tolerance",
+        "<= 1e-3 (its error sits below the time step's; docs/performance.md 'Speed-accuracy trade of every knob')",
+        _term("yukawa"),
+        lambda p: p.forces.yukawa.tolerance <= 1e-3,
+    ),
+    AccuracyRule(
+        "forces.yukawa.precision", "float64", _term("yukawa"), lambda p: p.forces.yukawa.precision == "float64"
+    ),
+    AccuracyRule(
+        "forces.current_field.precision",
+        "float64",
+        _term("current_field"),
+        lambda p: p.forces.current_field.precision == "float64",
+    ),
+    AccuracyRule(
+        "forces.current_lorentz.near_range",
+        "near_range >= 1.5 with quadrature_points >= 2 (2.8e-3 of the term's rms force at the 99th "
+        "percentile late in Fig. 2; docs/performance.md 'Term 10 near pairs')",
+        _term("current_lorentz"),
+        lambda p: p.forces.current_lorentz.near_range >= 1.5 and p.forces.current_lorentz.quadrature_points >= 2,
+    ),
+    AccuracyRule(
+        "forces.current_lorentz.precision",
+        "float64",
+        _term("current_lorentz"),
+        lambda p: p.forces.current_lorentz.precision == "float64",
+    ),
+    AccuracyRule(
+        "forces.external_dipole.quadrature_points",
+        ">= 32 (docs/model.md 'Term 11')",
+        _term("external_dipole"),
+        lambda p: p.forces.external_dipole.quadrature_points >= 32,
+    ),
+    AccuracyRule(
+        "circuit.height_tolerance",
+        "<= 0.01 L",
+        lambda p: p.forces.external_filament is not None,
+        lambda p: p.circuit.height_tolerance <= 0.01,
+    ),
+)
+
+
+def short_of_accuracy(params) -> list[AccuracyRule]:
+    """The rules of :data:`ACCURACY_RULES` that apply to ``params`` and that its settings do not meet."""
+    return [r for r in ACCURACY_RULES if r.applies(params) and not r.meets(params)]
