@@ -14,12 +14,13 @@ ALLOWED = {
     "kernels": set(),
     "parallel": set(),
     "_version": set(),
+    "provenance": set(),
     "model": {"kernels", "parallel"},
-    "io": {"model", "kernels", "_version"},
+    "io": {"model", "kernels", "_version", "provenance"},
     "analysis": {"model", "kernels"},
-    "ensemble": {"analysis", "io", "model", "kernels", "parallel", "_version"},
-    "cli": {"analysis", "ensemble", "io", "model", "kernels", "parallel", "_version"},
-    "__init__": {"analysis", "ensemble", "io", "model", "kernels", "parallel", "_version"},
+    "ensemble": {"analysis", "io", "model", "kernels", "parallel", "_version", "provenance"},
+    "cli": {"analysis", "ensemble", "io", "model", "kernels", "parallel", "_version", "provenance"},
+    "__init__": {"analysis", "ensemble", "io", "model", "kernels", "parallel", "_version", "provenance"},
 }
 #: the one upward import, inside functions: the schema walk of Parameters lives with the scenario files
 EXCEPTIONS = {("model/params.py", "io")}

@@ -21,9 +21,7 @@ simulation's step carries on top. Without OpenMM, ``OpenMMPeer.available()`` is 
 """
 
 import os
-import platform
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -31,17 +29,6 @@ import numpy as np
 PEER_CUTOFF = 6.0
 #: the peer's Ewald error tolerance
 PEER_TOLERANCE = 1e-4
-
-
-def cpu_model() -> str:
-    """The CPU model name from /proc/cpuinfo (or what the platform module says)."""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def target_env(target: str, environ=None) -> dict:
@@ -61,53 +48,7 @@ def target_env(target: str, environ=None) -> dict:
     return env
 
 
-def numba_target() -> dict:
-    """The CPU numba compiles for and its vector features, as numba's code generator takes them:
-    ``NUMBA_CPU_FEATURES`` when set (empty: the named CPU's own), else the host's, also when
-    ``NUMBA_CPU_NAME`` names another CPU (numba's ``JITCPUCodegen._get_host_cpu_features``)."""
-    import llvmlite.binding as ll
-    import numba
-
-    name = numba.config.CPU_NAME or ll.get_host_cpu_name()
-    if numba.config.CPU_FEATURES:
-        feats = numba.config.CPU_FEATURES.split(",")
-    elif numba.config.CPU_FEATURES is not None:
-        feats = []  # set empty: the named CPU's own features, which LLVM knows from the name
-    else:
-        feats = [("+" if on else "-") + k for k, on in ll.get_host_cpu_features().items()]
-    vector = sorted(f[1:] for f in feats if f.startswith("+") and (f[1:].startswith(("avx", "fma", "sse4"))))
-    if not feats:
-        vector = ["(all of " + name + ")"]
-    widest = (
-        "AVX-512"
-        if any(v.startswith("avx512") for v in vector)
-        else "AVX2"
-        if "avx2" in vector
-        else "AVX"
-        if "avx" in vector
-        else "SSE"
-    )
-    if not feats:
-        widest = {
-            "haswell": "AVX2",
-            "broadwell": "AVX2",
-            "skylake": "AVX2",
-            "znver1": "AVX2",
-            "znver2": "AVX2",
-            "znver3": "AVX2",
-            "znver4": "AVX-512",
-            "skylake-avx512": "AVX-512",
-            "icelake-server": "AVX-512",
-            "sapphirerapids": "AVX-512",
-            "x86-64": "SSE2",
-        }.get(name, "as " + name)
-    return {
-        "cpu_name": name,
-        "set_by": "NUMBA_CPU_NAME" if numba.config.CPU_NAME else "host",
-        "widest": widest,
-        "vector_features": vector,
-        "numba": numba.__version__,
-    }
+from selfas_graph.provenance import cpu_model, numba_target  # noqa: E402,F401  (re-exported)
 
 
 def machine() -> dict:

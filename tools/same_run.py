@@ -43,6 +43,8 @@ VOLATILE = (
     "git",
     "command",
     "run_id",
+    "commit",
+    "resumed_with",
 )  # a random identifier drawn for every run
 
 

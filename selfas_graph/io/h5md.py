@@ -16,7 +16,11 @@ Layout of a run file::
     /observables/dt             step, time, value: simulated time between saved frames
     /observables/bond_error_per_step   step, value: the largest bond error of every step
     /parameters/selfas_graph    attrs: scenario_text, parameters_json, version, command_line,
-                                seed, mpi_ranks, numba_threads, created, status
+                                seed, mpi_ranks, numba_threads, created, status, commit (git
+                                commit of the source, "+dirty" if changed), cpu_model, numba_cpu
+                                (the CPU numba compiled for and its widest vectors), wall_seconds
+                                (wall time of the run's segments that closed the file),
+                                resumed_with (JSON: commit, CPU, threads of continuations that differ)
     /events                     (n_events,) records (step, time, kind, a, b); attrs kind_names
     /graph                      the connectivity graph at every saved frame (if contacts are on):
         step, time                  (n_frames,)
@@ -238,8 +242,10 @@ def run_provenance(sim, scenario, command_line, run_id, scenario_path=None, mpi_
     import numba
 
     from .._version import __version__
+    from ..provenance import cpu_model, numba_target, source_commit
 
     p = sim.params
+    target = numba_target()
     if scenario_path is None:
         scenario_path = scenario.path if scenario is not None and scenario.path is not None else ""
     return {
@@ -256,6 +262,9 @@ def run_provenance(sim, scenario, command_line, run_id, scenario_path=None, mpi_
         "mpi_ranks": int(mpi_ranks),
         "numba_threads": numba.get_num_threads(),
         "run_id": str(run_id),
+        "commit": source_commit(),
+        "cpu_model": cpu_model(),
+        "numba_cpu": f"{target['cpu_name']} ({target['widest']})",
     }
 
 
@@ -407,6 +416,8 @@ class RunWriter(_PendingRows):
             p.attrs[key] = value
         p.attrs["status"] = "running"
         p.attrs["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+        p.attrs["wall_seconds"] = 0.0
+        self._opened = time.monotonic()
         self.n_frames = 0
         f.flush()
 
@@ -491,8 +502,25 @@ class RunWriter(_PendingRows):
             for name in ("conductor_tip", "conductor_id", "conductor_potential"):
                 _truncate(g[name], k)
         f["parameters/selfas_graph"].attrs["status"] = "running"
+        self._resumed_with()
+        self._opened = time.monotonic()
         f.flush()
         return self
+
+    def _resumed_with(self):
+        """Record the commit, CPU and thread count of a continuation when they differ from the ones
+        the file holds (``resumed_with``: a JSON list of them, oldest first)."""
+        import numba
+
+        from ..provenance import cpu_model, source_commit
+
+        attrs = self.f["parameters/selfas_graph"].attrs
+        now = {"commit": source_commit(), "cpu_model": cpu_model(), "numba_threads": numba.get_num_threads()}
+        if all(str(attrs.get(k, "")) == str(v) for k, v in now.items()):
+            return
+        seen = json.loads(attrs.get("resumed_with", "[]"))
+        if now not in seen:
+            attrs["resumed_with"] = json.dumps(seen + [now])
 
     def reserve(self) -> int:
         """Bytes the next frame may need at most: one new chunk of every growable dataset, and a margin
@@ -685,7 +713,10 @@ class RunWriter(_PendingRows):
 
     def close(self, status="finished"):
         if self.f:
-            self.set_attrs(status=status)
+            attrs = self.f["parameters/selfas_graph"].attrs
+            # wall time of every segment of the run that closed its file (a killed one adds nothing)
+            spent = time.monotonic() - getattr(self, "_opened", time.monotonic())
+            self.set_attrs(status=status, wall_seconds=float(attrs.get("wall_seconds", 0.0)) + spent)
             self.f.close()
             self.f = None
 
