@@ -25,6 +25,10 @@ COMMANDS = {
         "figures of a saved run: snapshot, density, field, flux, timeline, moment, fractal, skeleton (PNG)",
     ),
     "ensemble": ("selfas_graph.cli.ensemble", "run a scenario over many seeds; mean and standard error over them"),
+    "study": (
+        "selfas_graph.cli.study",
+        "the results page from runs: list, run and summarise the studies of docs/studies.toml, write the page",
+    ),
     "export": ("selfas_graph.cli.export", "a run as GSD (OVITO, HOOMD-blue, MDAnalysis) or extended XYZ (ASE, OVITO)"),
 }
 

@@ -1,0 +1,132 @@
+"""The results page from runs of the shipped code: ``selfas-graph study list|run|summarise|page``.
+
+``docs/studies.toml`` names each study (a scenario, overrides, seeds, end time, the times to
+summarise) and each claim. ``study run NAME`` runs the study's seeds into ``RUNS/NAME/`` (the
+``ensemble`` command with the study's arguments: resumable, locked, the same files);
+``study summarise NAME`` reads the run files and writes the study's small summary
+``docs/results/NAME.json`` (per-seed values of every measure at every time, the short-circuit
+episodes at event time, and the version, commit, CPU, threads and wall time of the runs) and its
+figures into ``docs/figures/``; ``study page`` writes every generated table of docs/results.md from
+the summaries (``--check``: exit 1 if the page differs from what the summaries give).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .main import CliError
+
+DEFAULT_STUDIES = "docs/studies.toml"
+DEFAULT_SUMMARIES = "docs/results"
+DEFAULT_FIGURES = "docs/figures"
+DEFAULT_PAGE = "docs/results.md"
+
+
+def add_arguments(p):
+    p.add_argument("action", choices=("list", "run", "summarise", "page"), help="what to do")
+    p.add_argument("names", nargs="*", metavar="NAME", help="studies (run, summarise; default for summarise: all)")
+    p.add_argument("--studies", default=DEFAULT_STUDIES, help=f"the studies file (default {DEFAULT_STUDIES})")
+    p.add_argument("--runs", default="runs", help="folder of the run files, one subfolder per study (default runs)")
+    p.add_argument("--jobs", type=int, default=1, help="run: seeds at once on this machine (as ensemble --jobs)")
+    p.add_argument("--force", action="store_true", help="run: replace seed files that cannot be reused")
+    p.add_argument(
+        "--summaries", default=DEFAULT_SUMMARIES, help=f"folder of the summaries (default {DEFAULT_SUMMARIES})"
+    )
+    p.add_argument("--figures", default=DEFAULT_FIGURES, help=f"folder of the figures (default {DEFAULT_FIGURES})")
+    p.add_argument("--page", default=DEFAULT_PAGE, help=f"the results page (default {DEFAULT_PAGE})")
+    p.add_argument("--check", action="store_true", help="page: write nothing; exit 1 if the page is not up to date")
+    p.add_argument("--no-figures", action="store_true", help="summarise: the summary only")
+
+
+def _studies(args):
+    from ..studies import StudiesError, load_studies
+
+    try:
+        return load_studies(args.studies)
+    except StudiesError as exc:
+        raise CliError(str(exc)) from None
+
+
+def _pick(studies, names):
+    from ..studies import StudiesError
+
+    try:
+        return [studies.study(n) for n in names] if names else list(studies.studies.values())
+    except StudiesError as exc:
+        raise CliError(str(exc)) from None
+
+
+def run(args):
+    studies = _studies(args)
+    if args.action == "list":
+        for s in studies.studies.values():
+            extra = f" {' '.join('--set ' + o for o in s.overrides)}" if s.overrides else ""
+            print(f"{s.name}: {s.title}: {s.scenario}{extra}, {s.seeds} seeds to t = {s.t_end:g}")
+        return 0
+    if args.action == "run":
+        if not args.names:
+            raise CliError("study run needs the names of the studies to run (selfas-graph study list shows them)")
+        from .main import main
+
+        code = 0
+        for s in _pick(studies, args.names):
+            argv = ["ensemble", s.scenario, "--seeds", str(s.seeds), "--first-seed", str(s.first_seed)]
+            argv += ["--t-end", repr(s.t_end), "-o", str(Path(args.runs) / s.name), "--jobs", str(args.jobs)]
+            argv += [f"--set={o}" for o in s.overrides] + (["--force"] if args.force else [])
+            print(f"study {s.name}: selfas-graph {' '.join(argv)}", flush=True)
+            code = main(argv) or code
+            if code in (2, 4, 130):
+                return code
+        return code
+    if args.action == "summarise":
+        from ..studies import summarise_study, write_json_atomic
+
+        for s in _pick(studies, args.names):
+            if not (Path(args.runs) / s.name).is_dir():
+                print(f"study {s.name}: no run files in {Path(args.runs) / s.name}; skipped")
+                continue
+            summary = summarise_study(s, args.runs)
+            if not summary["n_seeds"]:
+                print(f"study {s.name}: no readable seed file; skipped")
+                continue
+            try:
+                out = write_json_atomic(summary, Path(args.summaries) / f"{s.name}.json")
+            except OSError as exc:
+                raise CliError(f"cannot write the summary of {s.name}: {exc.strerror or exc}") from None
+            print(f"study {s.name}: {summary['n_seeds']} seeds summarised into {out}")
+            if not args.no_figures:
+                from ..studies.figures import study_figures
+
+                for path in study_figures(s, summary, args.figures):
+                    print(f"  wrote {path}")
+                from .main import main
+
+                first = Path(args.runs) / s.name / summary["seeds"][0]["path"]
+                snap = Path(args.figures) / f"{s.name}_snapshot.png"
+                main(["plot", str(first), "--kind", "snapshot", "-o", str(snap), "--force"])
+        return 0
+    # page
+    from ..studies.page import page_blocks, replace_blocks
+
+    page = Path(args.page)
+    try:
+        text = page.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise CliError(f"cannot read the results page {page}: {exc.strerror or exc}") from None
+    new, missing = replace_blocks(text, page_blocks(studies, args.summaries))
+    for key in missing:
+        print(f"note: the page's block '{key}' has no summary behind it yet; left as it is")
+    if args.check:
+        if new != text:
+            print(f"{page} is not what the summaries give; run: selfas-graph study page")
+            return 1
+        print(f"{page} is up to date with the summaries in {args.summaries}")
+        return 0
+    if new != text:
+        tmp = page.with_name(page.name + ".tmp")
+        tmp.write_text(new, encoding="utf-8")
+        tmp.replace(page)
+        print(f"wrote {page}")
+    else:
+        print(f"{page} already up to date")
+    return 0

@@ -1,0 +1,130 @@
+"""The figures of a study: its measures against time over the seeds, its short-circuit episodes at
+event time, and a snapshot of one seed's last frame (matplotlib, PNG; one style for every figure)."""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from .page import GROUPED, LABELS
+
+__all__ = ["SERIES_MEASURES", "plot_episodes", "plot_series", "study_figures"]
+
+#: the panels of a study's time-series figure
+SERIES_MEASURES = (
+    "filament_rods",
+    "total_current",
+    "inside_R_plas",
+    "largest_structure_rods",
+    "largest_alignment",
+    "midplane_flux",
+    "box_dimension",
+    "cycle_rank",
+)
+SEED_COLOUR, MEAN_COLOUR, FREE_COLOUR = "#4477aa", "black", "#cc6677"
+
+
+def _figure(**kw):
+    from matplotlib.figure import Figure
+
+    return Figure(layout="constrained", **kw)
+
+
+def _words_unit(measure):
+    """A panel's title in words and its axis unit, as matplotlib draws them."""
+    words, unit = LABELS.get(measure, (measure.replace("_", " "), ""))
+    words = words[0].upper() + words[1:]
+    unit = unit.replace("Phi_0", r"$\Phi_0$").replace("J0", "$J_0$").replace("L^2", "$L^2$")
+    return words, unit
+
+
+def _save(fig, path):
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp.png")
+    fig.savefig(tmp, dpi=150)
+    tmp.replace(path)
+    return path
+
+
+def plot_series(summary, out, title) -> Path:
+    """Each measure against time: every seed as a thin line, the mean over seeds and one standard
+    error as a band where the measure is not split by the circuit (module :mod:`.page`)."""
+    names = [m for m in SERIES_MEASURES if m in summary["measures"]]
+    t = np.asarray(summary["times"], dtype=float)
+    ncols = 2
+    nrows = math.ceil(len(names) / ncols)
+    fig = _figure(figsize=(7.2, 2.0 * nrows + 0.6))
+    axes = fig.subplots(nrows, ncols, sharex=True, squeeze=False).ravel()
+    for ax, name in zip(axes, names):
+        m = summary["measures"][name]
+        v = np.array([[np.nan if x is None else x for x in row] for row in m["values"]], dtype=float)
+        for row in v:
+            ax.plot(t, row, color=SEED_COLOUR, lw=0.6, alpha=0.55)
+        if name == "largest_alignment" and "free_alignment" in summary["measures"]:
+            f = summary["measures"]["free_alignment"]
+            fv = np.array([[np.nan if x is None else x for x in row] for row in f["values"]], dtype=float)
+            for row in fv:
+                ax.plot(t, row, color=FREE_COLOUR, lw=0.6, alpha=0.55)
+            ax.plot([], [], color=SEED_COLOUR, label="largest structure")
+            ax.plot([], [], color=FREE_COLOUR, label="rods in no structure")
+            ax.legend(fontsize="x-small", frameon=False, loc="best")
+        if name not in GROUPED:
+            with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # a time with one seed has no spread
+                n = np.isfinite(v).sum(axis=0)
+                mean = np.nanmean(np.where(n > 0, v, 0.0), axis=0) if v.size else v
+                sem = np.nanstd(v, axis=0, ddof=1) / np.sqrt(np.maximum(n, 1))
+            mean = np.where(n > 0, mean, np.nan)
+            ax.plot(t, mean, color=MEAN_COLOUR, lw=1.2)
+            ax.fill_between(t, mean - sem, mean + sem, color="0.5", alpha=0.35, lw=0)
+        words, unit = _words_unit(name)
+        ax.set_title(words, fontsize="small", loc="left")
+        if unit:
+            ax.set_ylabel(unit, fontsize="small")
+        ax.tick_params(labelsize="small")
+    for ax in axes[len(names) :]:
+        ax.set_visible(False)
+    for ax in axes[max(0, len(names) - ncols) : len(names)]:
+        ax.set_xlabel("Time ($t_0$)", fontsize="small")
+        ax.tick_params(labelbottom=True)
+    fig.suptitle(
+        f"{title}: each seed (thin lines); mean and one standard error over seeds (black, grey)",
+        fontsize="medium",
+    )
+    return _save(fig, out)
+
+
+def plot_episodes(summary, out, title) -> Path:
+    """When the gap was closed, seed by seed, at the times of the events (not of the frames)."""
+    seeds = summary["seeds"]
+    fig = _figure(figsize=(7.2, 0.35 * len(seeds) + 1.3))
+    ax = fig.subplots()
+    t_end = float(summary["study"]["t_end"])
+    for k, s in enumerate(seeds):
+        ep = s["episodes"]
+        spans = [(a, (b if b is not None else s["t_end"]) - a) for a, b in zip(ep["start"], ep["end"])]
+        # an episode shorter than the line width is still drawn, as a tick
+        spans = [(a, max(w, 2e-3 * t_end)) for a, w in spans]
+        ax.broken_barh(spans, (k - 0.35, 0.7), facecolors=SEED_COLOUR)
+        ax.text(t_end * 1.005, k, f"{len(spans)}", va="center", fontsize="x-small")
+    ax.set_yticks(range(len(seeds)), [f"seed {s['seed']}" for s in seeds], fontsize="small")
+    ax.set_xlim(0, t_end)
+    ax.set_ylim(-0.6, len(seeds) - 0.4)
+    ax.invert_yaxis()
+    ax.set_xlabel("Time ($t_0$)", fontsize="small")
+    ax.set_title(f"{title}: electrodes short-circuited (bars; number of closings at the right)", fontsize="medium")
+    return _save(fig, out)
+
+
+def study_figures(study, summary, folder) -> list:
+    """The figures of a study made from its summary, into ``folder``: ``NAME_series.png`` and
+    ``NAME_episodes.png`` (the snapshot of a run file is drawn by ``selfas-graph plot``)."""
+    folder = Path(folder)
+    return [
+        plot_series(summary, folder / f"{study.name}_series.png", study.title),
+        plot_episodes(summary, folder / f"{study.name}_episodes.png", study.title),
+    ]

@@ -1,0 +1,308 @@
+"""The results page from the studies' summaries: statistics, tables, verdicts and figures.
+
+Every number of docs/results.md between ``<!-- begin generated: KEY -->`` and
+``<!-- end generated: KEY -->`` is written by :func:`page_blocks` from the committed summaries
+(``docs/results/NAME.json``, :mod:`.summary`); ``tests/test_results_page.py`` checks that the page
+holds what this module makes of them. The statistics (docs/model.md '7a'):
+
+* a measure every seed has: mean +- standard error over the seeds with a value; for a fitted
+  dimension the standard error also carries each fit's own uncertainty,
+  ``SE^2 = s^2 / n + mean(err_i^2) / n``;
+* a measure that splits the seeds into two groups (the circuit carries current or not):
+  "k of n seeds", and the median [range] and mean +- SE of the k seeds it describes, never a mean
+  over both groups;
+* a claim's verdict compares the study with its null model at the paper's end time in units of the
+  combined standard error, d = (x - x_null) / sqrt(SE^2 + SE_null^2): "reproduced" only for
+  |d| > 3 in the direction the claim predicts.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "GROUPED",
+    "LABELS",
+    "claim_rows",
+    "grouped_stat",
+    "load_summary",
+    "page_blocks",
+    "plain_stat",
+    "replace_blocks",
+]
+
+#: measures that are zero in a seed whose circuit is open: reported as "k of n seeds" (module docstring)
+GROUPED = ("filament_rods", "total_current", "midplane_flux", "flux_over_external", "moment_J_z", "largest_moment_J_z")
+#: fitted measures and their own uncertainty
+FIT_ERRORS = {
+    "fractal_dimension": "fractal_dimension_err",
+    "box_dimension": "box_dimension_err",
+    "rg_dimension": "rg_dimension_err",
+}
+#: the smallest ratio of largest to smallest scale of a fit whose dimension the page reports (one decade)
+MIN_SCALE_RATIO = 10.0
+#: words and units of the measures, as the tables and figures show them
+LABELS = {
+    "filament_rods": ("rods in current-carrying filaments", ""),
+    "total_current": ("current through the gap", "J0"),
+    "inside_R_plas": ("fraction of rods within R_plas", ""),
+    "median_axis_distance": ("median distance of rods from the axis", "L"),
+    "midplane_flux": ("flux of the rod currents through the mid-plane", "Phi_0"),
+    "flux_over_external": ("that flux over the flux of B_ext", ""),
+    "largest_structure_rods": ("rods in the largest structure", ""),
+    "largest_moment_ratio": ("largest structure's monopole moment, magnitude", "rod moments"),
+    "largest_alignment": ("alignment of the largest structure's rods", ""),
+    "free_alignment": ("alignment of the rods in no structure", ""),
+    "all_alignment": ("alignment of all rods", ""),
+    "free_rods": ("rods in no structure", ""),
+    "moment_J_z": ("moment of the rod currents m_J,z", "J0 L^2"),
+    "largest_moment_J_z": ("m_J,z of the largest structure", "J0 L^2"),
+    "fractal_dimension": ("mass-radius dimension of the largest structure", ""),
+    "box_dimension": ("box-counting dimension of the largest structure", ""),
+    "rg_dimension": ("dimension from R_g ~ N^(1/D) over the structures", ""),
+    "cycle_rank": ("independent loops (cycle rank)", ""),
+    "cycle_rank_largest": ("independent loops of the largest structure", ""),
+    "structures": ("structures", ""),
+}
+#: the rows of a study's table, in order
+TABLE_MEASURES = (
+    "filament_rods",
+    "total_current",
+    "midplane_flux",
+    "moment_J_z",
+    "inside_R_plas",
+    "median_axis_distance",
+    "largest_structure_rods",
+    "largest_moment_ratio",
+    "largest_alignment",
+    "free_alignment",
+    "box_dimension",
+    "rg_dimension",
+    "cycle_rank",
+)
+
+
+def load_summary(folder, name):
+    """The summary of study ``name`` in ``folder`` (``NAME.json``), or None if it is not there."""
+    path = Path(folder) / f"{name}.json"
+    if not path.exists():
+        return None
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+def _values(summary, measure, t):
+    """Per-seed values of ``measure`` at time ``t`` (NaN where a seed has none)."""
+    times = summary["times"]
+    k = int(np.argmin([abs(x - t) for x in times]))
+    if abs(times[k] - t) > 1e-9 * max(1.0, abs(t)) or measure not in summary["measures"]:
+        return np.full(len(summary["seeds"]), np.nan)
+    return np.array([np.nan if v[k] is None else v[k] for v in summary["measures"][measure]["values"]], dtype=float)
+
+
+def plain_stat(values, errors=None) -> dict:
+    """Mean, standard error and count over the finite values; with ``errors`` (each value's own
+    uncertainty) the standard error is sqrt(s^2 / n + mean(err^2) / n)."""
+    v = np.asarray(values, dtype=float)
+    ok = np.isfinite(v)
+    n = int(ok.sum())
+    if n == 0:
+        return {"n": 0, "mean": math.nan, "sem": math.nan}
+    mean = float(v[ok].mean())
+    var = float(v[ok].var(ddof=1)) if n > 1 else math.nan
+    sem2 = var / n if n > 1 else math.nan
+    if errors is not None:
+        e = np.asarray(errors, dtype=float)[ok]
+        e = np.where(np.isfinite(e), e, 0.0)
+        sem2 = (0.0 if n == 1 else sem2) + float(np.mean(e**2)) / n
+    return {"n": n, "mean": mean, "sem": math.sqrt(sem2) if sem2 == sem2 else math.nan}
+
+
+def grouped_stat(values, active) -> dict:
+    """A measure over the k seeds where ``active`` holds (of the n with a value): k, n, median,
+    min, max, mean and standard error of those k."""
+    v = np.asarray(values, dtype=float)
+    a = np.asarray(active, dtype=bool) & np.isfinite(v)
+    n = int(np.isfinite(v).sum())
+    g = v[a]
+    out = {"k": int(a.sum()), "n": n}
+    if g.size:
+        out |= {"median": float(np.median(g)), "min": float(g.min()), "max": float(g.max())}
+        p = plain_stat(g)
+        out |= {"mean": p["mean"], "sem": p["sem"]}
+    return out
+
+
+def _fmt(x, digits=3):
+    if x is None or not math.isfinite(x):
+        return "n/a"
+    return f"{x:.{digits}g}"
+
+
+def _pm(s):
+    if s["n"] == 0:
+        return "n/a"
+    if not math.isfinite(s["sem"]):
+        return f"{_fmt(s['mean'])} (1 seed)"
+    return f"{_fmt(s['mean'])} ± {_fmt(s['sem'], 2)} ({s['n']})"
+
+
+def measure_text(summary, measure, t) -> str:
+    """A measure of a summary at a time as the page prints it (module docstring)."""
+    v = _values(summary, measure, t)
+    if measure in GROUPED:
+        cur = _values(summary, "total_current", t)
+        g = grouped_stat(v, np.abs(cur) > 0)
+        if g["n"] == 0:
+            return "n/a"
+        if g["k"] == 0:
+            return f"0 of {g['n']} seeds carry current"
+        return (
+            f"{g['k']} of {g['n']} seeds carry current: median {_fmt(g['median'])} "
+            f"[{_fmt(g['min'])} to {_fmt(g['max'])}], mean {_pm(g | {'n': g['k']})}"
+        )
+    if measure in FIT_ERRORS:
+        s = plain_stat(v, _values(summary, FIT_ERRORS[measure], t))
+        if measure == "box_dimension":
+            lo, hi = _values(summary, "box_eps_min", t), _values(summary, "box_eps_max", t)
+            ratio = np.nanmedian(hi / lo) if np.isfinite(hi / lo).any() else math.nan
+            if not ratio >= MIN_SCALE_RATIO:
+                return f"not testable at this size (fitted over a factor {_fmt(ratio, 2)} in scale, {_pm(s)})"
+        return _pm(s)
+    return _pm(plain_stat(v))
+
+
+def _label(measure):
+    words, unit = LABELS.get(measure, (measure.replace("_", " "), ""))
+    return f"{words} ({unit})" if unit else words
+
+
+def study_table(summary) -> str:
+    """The table of a study: a row per measure, a column per table time, and the short circuits."""
+    times = summary["study"]["table_times"]
+    head = "| measure | " + " | ".join(f"t = {t:g}" for t in times) + " |"
+    rows = [head, "|---|" + "---|" * len(times)]
+    for m in TABLE_MEASURES:
+        if m not in summary["measures"]:
+            continue
+        rows.append(f"| {_label(m)} | " + " | ".join(measure_text(summary, m, t) for t in times) + " |")
+    sc = summary.get("short_circuit") or {}
+    n_obs, n = sc.get("n_observed", 0), summary["n_seeds"]
+    text = f"{n_obs} of {n} seeds"
+    if n_obs:
+        text += f", median time (Kaplan-Meier) {_fmt(sc.get('median'))} t0"
+        starts = [s["episodes"]["start"] for s in summary["seeds"]]
+        text += f"; {sum(len(x) for x in starts)} closings of the gap in all"
+    rows.append(f"| short circuit of the electrodes | {text} |" + " |" * (len(times) - 1))
+    return "\n".join(rows)
+
+
+def provenance_text(summary) -> str:
+    """Version, commits, CPU, threads and wall time of a study's runs, in one paragraph."""
+    seeds = summary["seeds"]
+    if not seeds:
+        return "No run files were summarised."
+    commits = sorted({s.get("commit", "")[:10] or "unknown" for s in seeds})
+    cpus = sorted({s.get("cpu_model", "") or "unknown CPU" for s in seeds})
+    targets = sorted({s.get("numba_cpu", "") or "unknown" for s in seeds})
+    threads = sorted({s.get("numba_threads", 0) for s in seeds})
+    wall = [s.get("wall_seconds") for s in seeds if s.get("wall_seconds") is not None]
+    wall = [w for w in wall if isinstance(w, (int, float)) and math.isfinite(w)]
+    versions = sorted({s.get("version", "") for s in seeds})
+    t_ends = [s["t_end"] for s in seeds]
+    text = (
+        f"{len(seeds)} seeds ({', '.join(str(s['seed']) for s in seeds)}), each to t = {_fmt(min(t_ends))}"
+        + (f" to {_fmt(max(t_ends))}" if max(t_ends) > min(t_ends) else "")
+        + f"; version {', '.join(versions)}, commit {', '.join(commits)}; {'; '.join(cpus)}, kernels for "
+        f"{', '.join(targets)}, {'/'.join(str(t) for t in threads)} numba thread(s) a seed"
+    )
+    if wall:
+        text += f"; wall time a seed {_fmt(min(wall) / 60, 2)}-{_fmt(max(wall) / 60, 2)} min"
+    if summary.get("missing"):
+        text += f". Not yet run: {', '.join(summary['missing'])}"
+    return text + "."
+
+
+def _verdict(d, expect):
+    if not math.isfinite(d):
+        return "not decided (too few seeds)"
+    if (d > 3 and expect == "greater") or (d < -3 and expect == "less"):
+        return f"reproduced ({'+' if d > 0 else '−'}{abs(d):.1f} SE from the null model)"
+    if abs(d) > 3:
+        return f"opposite to the claim ({'+' if d > 0 else '−'}{abs(d):.1f} SE from the null model)"
+    return f"not distinguished from the null model ({d:+.1f} SE)".replace("-", "−")
+
+
+def claim_rows(studies, summaries) -> str:
+    """The claims table: each claim's measure at the paper's end time, its null model and the verdict."""
+    rows = [
+        "| claim | what the paper shows | measure at t | selfas-graph | null model | null model's value | verdict |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for c in studies.claims:
+        s = summaries.get(c.study)
+        if s is None:
+            rows.append(f"| {c.claim} | {c.paper} | {_label(c.measure)}, t = {c.time:g} | not run yet | | | |")
+            continue
+        value = measure_text(s, c.measure, c.time)
+        also = "; ".join(f"{_label(m)}: {measure_text(s, m, c.time)}" for m in c.also)
+        if also:
+            value += f"; {also}"
+        null = summaries.get(c.null) if c.null else None
+        if not c.null:
+            null_text, null_value, verdict = "none yet", "", "not yet set against a null model"
+        elif null is None:
+            null_text, null_value, verdict = studies.study(c.null).title, "not run yet", "not yet set against its null"
+        else:
+            nm = c.null_measure or c.measure
+            a = plain_stat(_values(s, c.measure, c.time))
+            b = plain_stat(_values(null, nm, c.time))
+            d = (a["mean"] - b["mean"]) / math.sqrt(a["sem"] ** 2 + b["sem"] ** 2)
+            null_text = studies.study(c.null).title
+            null_value = measure_text(null, nm, c.time) + ("" if nm == c.measure else f" ({_label(nm)})")
+            verdict = _verdict(d, c.expect)
+        rows.append(
+            f"| {c.claim} | {c.paper} | {_label(c.measure)}, t = {c.time:g} | {value} | {null_text} | "
+            f"{null_value} | {verdict} |"
+        )
+    return "\n".join(rows)
+
+
+def page_blocks(studies, folder) -> dict:
+    """Every generated block of the results page, keyed by its marker name."""
+    summaries = {name: load_summary(folder, name) for name in studies.studies}
+    summaries = {k: v for k, v in summaries.items() if v is not None}
+    blocks = {"claims": claim_rows(studies, summaries)}
+    for name, s in summaries.items():
+        blocks[f"table {name}"] = study_table(s)
+        blocks[f"runs {name}"] = provenance_text(s)
+    return blocks
+
+
+_BLOCK = re.compile(
+    r"(<!-- begin generated: (?P<key>[^>]+?) -->\n)(?P<body>.*?)(<!-- end generated: (?P=key) -->)", re.S
+)
+
+
+def replace_blocks(text, blocks) -> tuple[str, list]:
+    """``text`` with every generated block replaced by ``blocks[key]``; also the keys found in the
+    text that ``blocks`` has no entry for (left as they were)."""
+    missing = []
+
+    def sub(m):
+        key = m.group("key")
+        if key not in blocks:
+            missing.append(key)
+            return m.group(0)
+        return m.group(1) + blocks[key].rstrip("\n") + "\n" + m.group(4)
+
+    return _BLOCK.sub(sub, text), missing
+
+
+def page_blocks_in(text) -> dict:
+    """The generated blocks a page holds now, by key."""
+    return {m.group("key"): m.group("body").rstrip("\n") for m in _BLOCK.finditer(text)}

@@ -1,0 +1,194 @@
+"""The studies file: which ensembles the results page is made from, and the claims it tests.
+
+``docs/studies.toml`` names every study (a scenario, its overrides, seeds, end time and the times
+to summarise) and every claim (a measure of a study at a time, the null model it is set against and
+the direction the paper's claim predicts). ``selfas-graph study run NAME`` runs a study's seeds,
+``selfas-graph study summarise NAME`` writes its small summary from the run files, and
+``selfas-graph study page`` writes the tables of docs/results.md from the summaries
+(docs/results.md, "How this page is made")::
+
+    [study.fig2]
+    title = "Fig. 2, case (i)"
+    scenario = "scenarios/fig2.toml"
+    overrides = []                 # KEY=VALUE, as --set
+    seeds = 8                      # seeds first_seed .. first_seed + seeds - 1
+    t_end = 600.0
+    every = 10.0                   # summarise every this many t0 from 0 to t_end
+    table_times = [300.0, 600.0]   # the times of the tables
+
+    [[claim]]
+    id = "filaments"
+    ...
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from pathlib import Path
+
+__all__ = ["Claim", "Study", "StudiesError", "Studies", "load_studies"]
+
+
+class StudiesError(ValueError):
+    """A studies file that cannot be used; the message names the file, the entry and the key."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Study:
+    """One ensemble: a scenario with overrides over seeds to an end time, summarised at times."""
+
+    name: str
+    title: str
+    scenario: str
+    overrides: tuple[str, ...]
+    seeds: int
+    first_seed: int
+    t_end: float
+    every: float
+    table_times: tuple[float, ...]
+    section: str = ""
+    null_of: str = ""
+    doc: str = ""
+
+    @property
+    def times(self) -> list[float]:
+        """0, every, 2 every, ... up to t_end (t_end included)."""
+        n = int(math.floor(self.t_end / self.every + 1e-9))
+        out = [round(k * self.every, 10) for k in range(n + 1)]
+        if out[-1] < self.t_end - 1e-9:
+            out.append(self.t_end)
+        for t in self.table_times:
+            if all(abs(t - u) > 1e-9 for u in out):
+                out.append(t)
+        return sorted(out)
+
+
+@dataclasses.dataclass(frozen=True)
+class Claim:
+    """A claim of the paper tested by one measure of a study at one time, against a null model.
+
+    ``expect`` is the direction the claim predicts against the null ("greater" or "less");
+    ``null`` names the null model's study (the same measure at the same time), or "" for a claim
+    without one yet, whose verdict then says so.
+    """
+
+    id: str
+    claim: str
+    paper: str
+    study: str
+    measure: str
+    time: float
+    null: str = ""
+    null_measure: str = ""
+    expect: str = "greater"
+    also: tuple[str, ...] = ()
+
+
+@dataclasses.dataclass(frozen=True)
+class Studies:
+    path: Path
+    studies: dict
+    claims: tuple
+
+    def study(self, name) -> Study:
+        if name not in self.studies:
+            raise StudiesError(f"{self.path}: no study named {name!r}; the studies are {', '.join(self.studies)}")
+        return self.studies[name]
+
+
+_STUDY_KEYS = {
+    "title": str,
+    "scenario": str,
+    "overrides": list,
+    "seeds": int,
+    "first_seed": int,
+    "t_end": (int, float),
+    "every": (int, float),
+    "table_times": list,
+    "section": str,
+    "null_of": str,
+    "doc": str,
+}
+_CLAIM_KEYS = {
+    "id": str,
+    "claim": str,
+    "paper": str,
+    "study": str,
+    "measure": str,
+    "time": (int, float),
+    "null": str,
+    "null_measure": str,
+    "expect": str,
+    "also": list,
+}
+
+
+def _check(where, table, keys, required):
+    for k, v in table.items():
+        if k not in keys:
+            raise StudiesError(f"{where}: unknown key {k!r}; valid keys: {', '.join(keys)}")
+        if not isinstance(v, keys[k]) or isinstance(v, bool):
+            raise StudiesError(f"{where}.{k}: {v!r} is not of the right type")
+    for k in required:
+        if k not in table:
+            raise StudiesError(f"{where}: missing key {k!r}")
+
+
+def load_studies(path) -> Studies:
+    """Read and check a studies file (StudiesError naming the file and key when it is wrong)."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise StudiesError(f"{path}: cannot read the studies file ({exc.strerror or exc})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise StudiesError(f"{path}: not a valid TOML file ({exc})") from None
+    extra = set(raw) - {"study", "claim"}
+    if extra:
+        raise StudiesError(f"{path}: unknown table(s) {sorted(extra)}; valid: [study.NAME], [[claim]]")
+    studies = {}
+    for name, t in (raw.get("study") or {}).items():
+        where = f"{path}: study.{name}"
+        if not isinstance(t, dict):
+            raise StudiesError(f"{where}: must be a table")
+        _check(where, t, _STUDY_KEYS, ("scenario", "seeds", "t_end"))
+        t_end = float(t["t_end"])
+        every = float(t.get("every", t_end / 4))
+        if not (t_end > 0 and every > 0 and t["seeds"] >= 1):
+            raise StudiesError(f"{where}: t_end, every and seeds must be positive")
+        table_times = tuple(float(x) for x in t.get("table_times", [t_end]))
+        if any(not 0 <= x <= t_end for x in table_times):
+            raise StudiesError(f"{where}.table_times: every time must lie in [0, t_end = {t_end:g}]")
+        studies[name] = Study(
+            name=name,
+            title=t.get("title", name),
+            scenario=t["scenario"],
+            overrides=tuple(str(o) for o in t.get("overrides", [])),
+            seeds=int(t["seeds"]),
+            first_seed=int(t.get("first_seed", 1)),
+            t_end=t_end,
+            every=every,
+            table_times=table_times,
+            section=t.get("section", ""),
+            null_of=t.get("null_of", ""),
+            doc=t.get("doc", ""),
+        )
+    claims = []
+    for k, c in enumerate(raw.get("claim") or []):
+        where = f"{path}: claim[{k}]"
+        _check(where, c, _CLAIM_KEYS, ("id", "claim", "paper", "study", "measure", "time"))
+        for key in ("study", "null"):
+            if c.get(key) and c[key] not in studies:
+                raise StudiesError(f"{where}.{key}: no study named {c[key]!r}")
+        if c.get("expect", "greater") not in ("greater", "less"):
+            raise StudiesError(f"{where}.expect: 'greater' or 'less', got {c['expect']!r}")
+        claims.append(
+            Claim(
+                **{k: v for k, v in c.items() if k not in ("time", "also")},
+                time=float(c["time"]),
+                also=tuple(c.get("also", [])),
+            )
+        )
+    return Studies(path=path, studies=studies, claims=tuple(claims))

@@ -1,0 +1,207 @@
+"""A study's summary: from its run files to one small JSON file that the results page is made from.
+
+The summary holds, for every seed and every time of the study, the value of every measure
+(:data:`STUDY_MEASURES`: the ensemble's frame measures, the fits' own uncertainties, the
+alignment of the largest structure and of the rods in no structure, the rod currents' moment and
+flux), every short-circuit episode of every seed at event time, and the provenance of the runs
+(version, commit, CPU, numba target, threads and wall time of each seed). The statistics are
+not in it: the page computes them from the per-seed values (:mod:`.page`), so a better estimator
+of the spread needs no new runs.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .._version import __version__
+from ..analysis.episodes import circuit_episodes
+from ..analysis.moments import monopole_moment
+from ..analysis.skeleton import structures
+from ..ensemble import FRAME_MEASURES, Measure, seed_path, summarise
+from ..io.h5md import RunFile, RunFileError
+from ..provenance import cpu_model, source_commit
+
+__all__ = ["STUDY_MEASURES", "summarise_study", "write_json_atomic"]
+
+
+def _contacts(f):
+    return None if f.graph is None else np.asarray(f.graph["tip_contacts"], dtype=np.int64).reshape(-1, 2)
+
+
+def _alignment(f, which):
+    """|m_q| over (rods x mean single-rod moment) of the largest structure, of the rods in no
+    structure or of all rods: 1 for rods all lined up head to tail along one direction, about
+    1/sqrt(N) at random. All rods need no contact data."""
+    q = f.run.tip_charge
+    n_rods = q.shape[0] // 2
+    tc = _contacts(f)
+    if tc is None and which != "all":
+        return math.nan
+    label, size = structures(n_rods, tc) if tc is not None else (None, None)
+    mean_rod = float(np.abs(q[0::2]).mean())
+    if which == "all":
+        rods = np.ones(n_rods, dtype=bool)
+    elif which == "largest":
+        if not size.size:
+            return math.nan
+        big = int(np.argmax(size))
+        rods = label == big
+    else:
+        rods = label < 0
+    n = int(rods.sum())
+    if n == 0 or mean_rod <= 0:
+        return math.nan
+    lab = np.where(rods, 0, -1)
+    m = monopole_moment(f.position, q, lab, 1)[0]
+    return float(np.linalg.norm(m)) / (n * mean_rod)
+
+
+def _free_rods(f):
+    tc = _contacts(f)
+    if tc is None:
+        return math.nan
+    label, _ = structures(f.run.tip_charge.shape[0] // 2, tc)
+    return float(np.count_nonzero(label < 0))
+
+
+def _flux_over_external(f):
+    """The rod currents' mid-plane flux over the flux of B_ext through the same disc."""
+    b = f.params["forces"].get("uniform_field")
+    if not b or not b["B"][2]:
+        return math.nan
+    flux = FRAME_BY_NAME["midplane_flux"].fn(f)
+    # Phi_0 = 4 pi B0 L^2 (docs/model.md 'Reduced units'): B_z pi R^2 in units of Phi_0 is B_z R^2 / 4
+    phi_ext = b["B"][2] * f.flux_radius**2 / 4.0
+    return flux / phi_ext
+
+
+FRAME_BY_NAME = {m.name: m for m in FRAME_MEASURES}
+
+#: the measures of a study's summary: the ensemble's, the fits' uncertainties and the alignment measures
+STUDY_MEASURES = list(FRAME_MEASURES) + [
+    Measure(k, u, d, lambda f, k=k: float(f.claims[k]))
+    for k, u, d in (
+        ("fractal_dimension_err", "1", "uncertainty of that mass-radius fit"),
+        ("box_dimension_err", "1", "uncertainty of the box-counting fit"),
+        ("box_eps_min", "L", "smallest box of the box-counting fit"),
+        ("box_eps_max", "L", "largest box of the box-counting fit"),
+        ("rg_dimension_err", "1", "uncertainty of the R_g fit"),
+        ("moment_J_z", "J0 L^2", "m_J,z of all rod currents about the z axis"),
+        ("largest_moment_J_z", "J0 L^2", "m_J,z of the largest structure's rod currents"),
+        ("cycle_rank_largest", "loops", "independent loops of the largest structure"),
+        ("structures", "1", "structures (rods joined by tip contacts)"),
+    )
+]
+STUDY_MEASURES += [
+    Measure("free_rods", "rods", "rods in no structure (no tip contact)", _free_rods),
+    Measure(
+        "largest_alignment",
+        "1",
+        "|m_q| of the largest structure over its rods times the mean single-rod moment",
+        lambda f: _alignment(f, "largest"),
+    ),
+    Measure(
+        "free_alignment",
+        "1",
+        "|m_q| of the rods in no structure over their number times the mean single-rod moment",
+        lambda f: _alignment(f, "free"),
+    ),
+    Measure(
+        "all_alignment",
+        "1",
+        "|m_q| of all rods over their number times the mean single-rod moment",
+        lambda f: _alignment(f, "all"),
+    ),
+    Measure(
+        "flux_over_external",
+        "1",
+        "rod currents' flux through the mid-plane disc over B_ext's flux through it",
+        _flux_over_external,
+    ),
+]
+
+
+def _seed_record(path):
+    """Provenance and short-circuit episodes of one seed file (None if it cannot be read)."""
+    try:
+        run = RunFile(path)
+    except RunFileError:
+        return None
+    with run:
+        meta = run.meta
+        ep = circuit_episodes(run.events())
+        return {
+            "path": Path(path).name,
+            "seed": int(run.parameters["scenario"]["seed"]),
+            "status": str(meta.get("status", "")),
+            "t_end": float(run.time[-1]) if run.n_frames else 0.0,
+            "version": str(meta.get("version", "")),
+            "commit": str(meta.get("commit", "")),
+            "cpu_model": str(meta.get("cpu_model", "")),
+            "numba_cpu": str(meta.get("numba_cpu", "")),
+            "numba_threads": int(meta.get("numba_threads", 0)),
+            "wall_seconds": float(meta.get("wall_seconds", math.nan)),
+            "resumed_with": json.loads(meta.get("resumed_with", "[]")),
+            "episodes": {
+                "start": [float(x) for x in ep.start],
+                "end": [None if not math.isfinite(x) else float(x) for x in ep.end],
+                "filament_rods": [int(x) for x in ep.filament_rods],
+                "opened_by": [int(x) for x in ep.opened_by],
+            },
+        }
+
+
+def summarise_study(study, runs) -> dict:
+    """The summary of ``study`` (a :class:`~.spec.Study`) from its run files in ``runs/study.name``.
+
+    Seeds whose file is missing or unreadable are listed in ``missing``; the statistics of the page
+    count only seeds with a frame at each time.
+    """
+    folder = Path(runs) / study.name
+    seeds = list(range(study.first_seed, study.first_seed + study.seeds))
+    paths = [seed_path(folder, s) for s in seeds]
+    present = [p for p in paths if p.exists()]
+    started = time.perf_counter()
+    out = summarise(present, study.times, t_end=study.t_end, measures=STUDY_MEASURES)
+    records = [r for r in (_seed_record(p) for p in present) if r is not None]
+    out["seeds"] = [
+        s | r for s, r in zip(out["seeds"], records)
+    ]  # ensemble's seed entries (short-circuit time) with provenance
+    for s in out["seeds"]:
+        s["path"] = Path(s["path"]).name
+    out["unreadable"] = [{"path": Path(u["path"]).name, "reason": u["reason"]} for u in out["unreadable"]]
+    out["study"] = {
+        "name": study.name,
+        "title": study.title,
+        "scenario": study.scenario,
+        "overrides": list(study.overrides),
+        "seeds": seeds,
+        "t_end": study.t_end,
+        "table_times": list(study.table_times),
+    }
+    out["missing"] = [p.name for p in paths if not p.exists()]
+    out["summarised_by"] = {
+        "version": __version__,
+        "commit": source_commit(),
+        "cpu_model": cpu_model(),
+        "seconds": round(time.perf_counter() - started, 1),
+    }
+    return out
+
+
+def write_json_atomic(data, path) -> Path:
+    """Write ``data`` as JSON to ``path`` through a temporary file renamed into place."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", encoding="utf-8") as fh:
+        json.dump(data, fh, indent=1, allow_nan=False)
+        fh.write("\n")
+    os.replace(tmp, path)
+    return path

@@ -1,0 +1,114 @@
+"""The results pipeline: the studies file, the statistics of the page, its generated blocks, and a
+study run, summarised and written into a page end to end (on the quick scene)."""
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from selfas_graph.studies import StudiesError, load_studies
+from selfas_graph.studies.page import grouped_stat, plain_stat, replace_blocks
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_the_shipped_studies_file_loads_and_every_claim_names_its_study():
+    studies = load_studies(ROOT / "docs" / "studies.toml")
+    assert {"fig2", "fig6", "fig8"} <= set(studies.studies)
+    assert studies.study("fig2").seeds >= 8 and studies.study("fig6").seeds >= 5 and studies.study("fig8").seeds >= 5
+    for c in studies.claims:
+        assert c.study in studies.studies and (not c.null or c.null in studies.studies)
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("[study.a]\nscenario = 'x'\nseeds = 2\n", "missing key 't_end'"),
+        ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\nsedes = 3\n", "unknown key 'sedes'"),
+        ("[study.a]\nscenario = 'x'\nseeds = 0\nt_end = 1\n", "must be positive"),
+        ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\ntable_times = [2.0]\n", "table_times"),
+        ("[[claim]]\nid='c'\nclaim='c'\npaper='p'\nstudy='nope'\nmeasure='m'\ntime=1\n", "no study named 'nope'"),
+        ("[stduy.a]\n", "unknown table"),
+        ("[study.a\n", "not a valid TOML file"),
+    ],
+)
+def test_a_bad_studies_file_is_refused_naming_the_key(tmp_path, text, words):
+    path = tmp_path / "studies.toml"
+    path.write_text(text)
+    with pytest.raises(StudiesError, match="studies.toml") as err:
+        load_studies(path)
+    assert words in str(err.value)
+
+
+def test_plain_stat_by_hand():
+    s = plain_stat([1.0, 2.0, 3.0, np.nan])
+    assert s["n"] == 3 and s["mean"] == 2.0
+    assert math.isclose(s["sem"], 1.0 / math.sqrt(3), rel_tol=1e-15)  # s = 1, n = 3
+    # each value's own uncertainty adds mean(err^2) / n to SE^2: 1/3 + (0.3^2 + 0.4^2 + 0) / 3 / 3
+    s = plain_stat([1.0, 2.0, 3.0], errors=[0.3, 0.4, np.nan])
+    assert math.isclose(s["sem"] ** 2, 1 / 3 + 0.25 / 9, rel_tol=1e-14)
+    assert plain_stat([np.nan])["n"] == 0
+    assert math.isnan(plain_stat([5.0])["sem"])  # one seed: no spread
+
+
+def test_grouped_stat_reports_the_group_it_describes():
+    """Three seeds carry current, two do not: k = 3 of n = 5, the median and mean of the three only."""
+    g = grouped_stat([4.0, 0.0, 6.0, 0.0, 5.0], [True, False, True, False, True])
+    assert (g["k"], g["n"]) == (3, 5)
+    assert (g["median"], g["min"], g["max"], g["mean"]) == (5.0, 4.0, 6.0, 5.0)
+    assert grouped_stat([0.0, 0.0], [False, False]) == {"k": 0, "n": 2}
+
+
+def test_replace_blocks_changes_only_the_generated_blocks():
+    text = "a\n<!-- begin generated: x -->\nold\n<!-- end generated: x -->\nb\n<!-- begin generated: y -->\n<!-- end generated: y -->\n"
+    new, missing = replace_blocks(text, {"x": "new\nlines"})
+    assert new == text.replace("old", "new\nlines") and missing == ["y"]
+    again, _ = replace_blocks(new, {"x": "new\nlines"})
+    assert again == new
+
+
+def test_a_study_is_run_summarised_and_written_into_a_page(tmp_path):
+    """`study run`, `study summarise`, `study page`: the summary holds the per-seed values, the
+    episodes and the provenance; the page's block is what the summary gives; --check agrees."""
+    (tmp_path / "studies.toml").write_text(
+        f"""
+[study.q]
+title = "Quick scene"
+scenario = "{(ROOT / "scenarios" / "quick.toml").as_posix()}"
+overrides = ["rods.count=60"]
+seeds = 2
+t_end = 0.5
+every = 0.25
+table_times = [0.5]
+"""
+    )
+    (tmp_path / "page.md").write_text("# R\n<!-- begin generated: table q -->\n<!-- end generated: table q -->\n")
+
+    def cli(*args):
+        res = subprocess.run(
+            [sys.executable, "-m", "selfas_graph.cli.main", "study", *args, "--studies", "studies.toml"],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert res.returncode == 0, res.stdout + res.stderr
+        return res.stdout
+
+    cli("run", "q", "--runs", "runs", "--jobs", "1")
+    cli("summarise", "q", "--runs", "runs", "--summaries", "res", "--figures", "figs")
+    summary = json.loads((tmp_path / "res" / "q.json").read_text())
+    assert summary["n_seeds"] == 2 and summary["times"] == [0.0, 0.25, 0.5]
+    assert len(summary["measures"]["largest_alignment"]["values"]) == 2
+    seed = summary["seeds"][0]
+    assert seed["commit"] is not None and seed["cpu_model"] and seed["wall_seconds"] > 0
+    assert set(seed["episodes"]) == {"start", "end", "filament_rods", "opened_by"}
+    assert (tmp_path / "figs" / "q_series.png").exists() and (tmp_path / "figs" / "q_snapshot.png").exists()
+    cli("page", "--summaries", "res", "--page", "page.md")
+    page = (tmp_path / "page.md").read_text()
+    assert "| fraction of rods within R_plas |" in page
+    assert "is up to date" in cli("page", "--summaries", "res", "--page", "page.md", "--check")
