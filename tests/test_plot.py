@@ -186,3 +186,29 @@ def test_ensemble_summary_plot_draws_every_measure_with_its_band(tmp_path):
     assert is_png(out)
     with pytest.raises(CliError, match="none of the measures"):
         plot_summary(summary, tmp_path / "t.png", title="test", measures=["no_such_measure"])
+
+
+@pytest.mark.parametrize("suffix", [".gif", ".mp4"])
+def test_movie_renders_every_frame(run_file, tmp_path, suffix, capsys):
+    """``--movie OUT.gif|mp4``: one snapshot per saved frame (6 frames to t = 2.5 at interval 0.5),
+    no partial file left beside it; an existing movie is kept without --force."""
+    if suffix == ".mp4":
+        pytest.importorskip("imageio_ffmpeg")
+    out = tmp_path / f"quick{suffix}"
+    assert main(["plot", str(run_file), "--movie", str(out)]) == 0
+    assert "(6 frames" in capsys.readouterr().out
+    head = out.read_bytes()[:12]
+    assert head.startswith(b"GIF89a") if suffix == ".gif" else head[4:8] == b"ftyp"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [out.name]
+    if suffix == ".gif":
+        from PIL import Image
+
+        assert Image.open(out).n_frames == 6
+    assert main(["plot", str(run_file), "--movie", str(out)]) == 2
+
+
+def test_movie_refuses_other_formats_and_kinds(run_file, tmp_path, capsys):
+    assert main(["plot", str(run_file), "--movie", str(tmp_path / "m.avi")]) == 2
+    assert ".gif or .mp4" in capsys.readouterr().err
+    assert main(["plot", str(run_file), "--movie", str(tmp_path / "m.gif"), "--kind", "density"]) == 2
+    assert not any(tmp_path.iterdir())

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis import bz_profile, flux_through_disc, radial_density, rod_centres, timeline
+from ..analysis.episodes import circuit_episodes
 from ..io.h5md import RunFile, RunFileError
 from ..model.graph import DEAD_END, FILAMENT, ConnectivityGraph
 from .main import CliError, CliIOError, add_run_and_frame
@@ -67,6 +68,7 @@ LARGEST_COLOUR = "red"
 TOTAL_COLOUR = "green"
 OTHER_COLOUR = (0.55, 0.55, 0.55)
 ELECTRODE_COLOUR = (0.85, 0.65, 0.15)
+PLASMA_STYLE = dict(color=(0.2, 0.6, 0.3), lw=0.9, ls="--", zorder=1)
 
 
 def add_arguments(p):
@@ -96,7 +98,13 @@ def add_arguments(p):
     p.add_argument(
         "--z-mext", type=float, help="flux in units of an external dipole's flux 4 pi Z_Mext instead of Phi_0 = 4 pi"
     )
-    p.add_argument("--dpi", type=int, default=150, help="resolution of the PNG (default 150)")
+    p.add_argument("--dpi", type=int, default=150, help="resolution of the PNG (default 150; a movie's 80)")
+    p.add_argument(
+        "--movie",
+        metavar="OUT.gif|OUT.mp4",
+        help="render the snapshot of every frame (or of every K-th, --every) into a movie: GIF with Pillow, "
+        'MP4 with ffmpeg (pip install "selfas-graph[movie]" or a system ffmpeg)',
+    )
     p.add_argument(
         "--every",
         type=int,
@@ -198,9 +206,9 @@ def _title(run: RunFile, frame: _Frame, what: str) -> str:
 
 
 def _outside_legend(fig, handles=None, ncols=2):
-    """A legend above the axes, off the data (constrained layout makes room for it)."""
+    """A legend below the axes, off the data and clear of the title (constrained layout makes room for it)."""
     kw = {} if handles is None else {"handles": handles}
-    fig.legend(loc="outside upper center", ncols=ncols, fontsize="small", frameon=False, **kw)
+    fig.legend(loc="outside lower center", ncols=ncols, fontsize="small", frameon=False, **kw)
 
 
 def _num(x, fmt=".4g"):
@@ -269,6 +277,17 @@ def _snapshot(fig, run, frame, args):
         handles.append(
             Line2D([], [], color=ELECTRODE_COLOUR, lw=6, alpha=0.4, label=f"electrodes z = $\\pm${frame.gap / 2:g} L")
         )
+    plasma = (run.parameters.get("forces") or {}).get("plasma_filament")
+    if plasma:
+        # the plasma filament: a dashed cylinder of radius R_plas about its axis, between the electrodes
+        (ax0, ay0), r_p = plasma.get("axis", (0.0, 0.0)), float(plasma["radius"])
+        z_lo, z_hi = (-frame.gap / 2, frame.gap / 2) if frame.gap is not None else (lo[2], hi[2])
+        phi = np.linspace(0.0, 2 * np.pi, 97)
+        for z in (z_lo, z_hi):
+            ax.plot(ax0 + r_p * np.cos(phi), ay0 + r_p * np.sin(phi), np.full_like(phi, z), **PLASMA_STYLE)
+        for a in (0.25 * np.pi, 1.25 * np.pi):
+            ax.plot([ax0 + r_p * np.cos(a)] * 2, [ay0 + r_p * np.sin(a)] * 2, [z_lo, z_hi], **PLASMA_STYLE)
+        handles.append(Line2D([], [], label=f"plasma filament, $R_{{plas}}$ = {r_p:g} L", **PLASMA_STYLE))
     if frame.dipole is not None or frame.external_filament:
         if frame.dipole is not None:
             half = frame.dipole[1] / 2
@@ -280,6 +299,8 @@ def _snapshot(fig, run, frame, args):
         if frame.external_filament:
             ax.plot([0, 0], [0, 0], [lo[2], hi[2]], color="black", lw=0.8, ls="--", zorder=1)
             handles.append(Line2D([], [], color="black", lw=0.8, ls="--", label="current filament (z axis)"))
+    if getattr(args, "bounds", None) is not None:  # a movie: the same box in every frame
+        lo, hi = (np.array(b, dtype=np.float64) for b in args.bounds)
     span = np.maximum(hi - lo, 1e-6)
     pad = 0.02 * span.max()
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
@@ -450,21 +471,22 @@ def _timeline(fig, run, frame, args):
         )
         ax2.set_ylabel("total current ($J_0$)")
         ax2.set_ylim(bottom=min(0.0, float(np.nanmin(tl.total_current))))
-    if tl.short_circuit_time is not None:
-        lines.append(
-            ax.axvline(
-                tl.short_circuit_time,
-                color=DEAD_END_COLOUR,
-                ls="--",
-                label=f"short circuit, t = {tl.short_circuit_time:.4g}",
-            )
-        )
+    # the episodes of a closed gap at the times of their events, not of the frames: a closing
+    # shorter than the frame interval is drawn too (at least 0.3 % of the time axis wide)
+    ep = circuit_episodes(run.events())
+    t_last = float(run.time[-1]) if run.n_frames else 0.0
+    width = 3e-3 * max(t_last, 1e-9)
+    for k, (a, b) in enumerate(zip(ep.start, ep.end)):
+        b = t_last if not np.isfinite(b) else b
+        span = ax.axvspan(a, max(b, a + width), color=FILAMENT_COLOUR, alpha=0.15, lw=0)
+        if k == 0:
+            span.set_label("electrodes short-circuited")
+            lines.append(span)
     _outside_legend(fig, lines, ncols=3)
-    sc = (
-        "no short circuit"
-        if tl.short_circuit_time is None
-        else f"short circuit at t = {tl.short_circuit_time:.4g} $t_0$"
-    )
+    if len(ep) == 0:
+        sc = "the gap never closed"
+    else:
+        sc = f"first short circuit at t = {ep.start[0]:.4g} $t_0$, {len(ep)} closing{'s' if len(ep) > 1 else ''}"
     ax.set_title(f"{_scene(run)}: filaments over time ({sc})", fontsize="medium")
 
 
@@ -566,6 +588,10 @@ def _check_options(args):
 def run(args):
     _check_options(args)
     Figure = _matplotlib()
+    if args.movie:
+        from .movie import render_movie
+
+        return render_movie(args, Figure)
     try:
         with RunFile(args.run) as f:
             try:
