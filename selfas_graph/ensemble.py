@@ -781,8 +781,7 @@ FRAME_MEASURES += [
     for k, u, d in (
         ("largest_structure_rods", "rods", "rods in the largest structure"),
         ("largest_moment_ratio", "1", "largest structure's |m_q| over the mean single-rod moment"),
-        ("fractal_dimension", "1", "mass-radius dimension of the largest structure (NaN while its R_g < 3 L)"),
-        ("box_dimension", "1", "box-counting dimension of the largest structure"),
+        ("fractal_dimension", "1", "mass-radius dimension of the largest structure (NaN while its R_g < 4 L)"),
         ("rg_dimension", "1", "R_g ~ N^(1/D) dimension over the structures of the frame"),
         ("cycle_rank", "loops", "cycle rank of the contact graph (E - V + C)"),
     )
