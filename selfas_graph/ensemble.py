@@ -50,7 +50,7 @@ import numpy as np
 from ._version import __version__
 from .analysis.claims import frame_claims
 from .analysis.diagnostics import flux_through_disc, rod_centres, timeline
-from .analysis.ensemble_stats import censored_times, mean_sem
+from .analysis.ensemble_stats import censored_times, grouped_summary, mean_sem, mean_sem_fits
 from .io.checkpoint import (
     Checkpointer,
     CheckpointError,
@@ -72,6 +72,7 @@ __all__ = [
     "Frame",
     "Measure",
     "SeedPlan",
+    "carries_current",
     "format_table",
     "run_seed",
     "run_tasks",
@@ -725,12 +726,31 @@ class Frame:
 
 @dataclasses.dataclass(frozen=True)
 class Measure:
-    """A number per frame: ``fn(frame) -> float`` (NaN when it does not apply), with its unit and meaning."""
+    """A number per frame: ``fn(frame) -> float`` (NaN when it does not apply), with its unit and meaning.
+
+    ``err(frame) -> float``, if given, is the value's own uncertainty (a fit's): the standard
+    error over seeds then adds it (:func:`~selfas_graph.analysis.ensemble_stats.mean_sem_fits`).
+    ``grouped``: the measure describes seeds whose circuit carries a current (:func:`carries_current`);
+    its mean, standard error and count are those of that group alone, with its median and range
+    (:func:`~selfas_graph.analysis.ensemble_stats.grouped_summary`).
+    """
 
     name: str
     unit: str
     doc: str
     fn: Callable[[Frame], float]
+    err: Callable[[Frame], float] | None = None
+    grouped: bool = False
+
+
+def carries_current(f) -> float:
+    """1.0 if a current flows through the circuit at the frame (rods in current-carrying filaments,
+    or a nonzero total current where the frame has no graph), 0.0 if not, NaN if unknown."""
+    rods = _filament_rods(f)
+    if math.isfinite(rods):
+        return float(rods > 0)
+    j = _total_current(f)
+    return float(j != 0.0) if math.isfinite(j) else math.nan
 
 
 def _filament_rods(f):
@@ -762,8 +782,10 @@ def _midplane_flux(f):
 
 #: the per-frame measures of a summary, in table order; a new one is one more line
 FRAME_MEASURES = [
-    Measure("filament_rods", "rods", "rods in current-carrying filaments", _filament_rods),
-    Measure("total_current", "J0", "current through the circuit (observable total_current)", _total_current),
+    Measure("filament_rods", "rods", "rods in current-carrying filaments", _filament_rods, grouped=True),
+    Measure(
+        "total_current", "J0", "current through the circuit (observable total_current)", _total_current, grouped=True
+    ),
     Measure("inside_R_plas", "fraction", "fraction of rod centres within R_plas of the plasma axis", _inside_plasma),
     Measure(
         "median_axis_distance", "L", "median distance of rod centres from the axis", lambda f: float(np.median(f.rho))
@@ -774,17 +796,31 @@ FRAME_MEASURES = [
         "flux of the rod currents' B_z through the disc z = 0 of radius flux_radius "
         "(default: the placement box's half-diagonal)",
         _midplane_flux,
+        grouped=True,
+    ),
+    Measure(
+        "moment_J_z",
+        "J0 L^2",
+        "m_J,z of all rod currents about the z axis",
+        lambda f: float(f.claims["moment_J_z"]),
+        grouped=True,
     ),
 ]
 FRAME_MEASURES += [
-    Measure(k, u, d, lambda f, k=k: float(f.claims[k]))
-    for k, u, d in (
-        ("largest_structure_rods", "rods", "rods in the largest structure"),
-        ("largest_moment_ratio", "1", "largest structure's |m_q| over the mean single-rod moment"),
-        ("fractal_dimension", "1", "mass-radius dimension of the largest structure (NaN while its R_g < 3 L)"),
-        ("box_dimension", "1", "box-counting dimension of the largest structure"),
-        ("rg_dimension", "1", "R_g ~ N^(1/D) dimension over the structures of the frame"),
-        ("cycle_rank", "loops", "cycle rank of the contact graph (E - V + C)"),
+    Measure(
+        k, u, d, lambda f, k=k: float(f.claims[k]), err=(lambda f, k=k: float(f.claims[k + "_err"])) if fit else None
+    )
+    for k, u, d, fit in (
+        ("largest_structure_rods", "rods", "rods in the largest structure", False),
+        ("largest_moment_ratio", "1", "largest structure's |m_q| over the mean single-rod moment", False),
+        (
+            "fractal_dimension",
+            "1",
+            "mass-radius dimension of the largest structure (NaN, not testable, while its R_g < 4 L)",
+            True,
+        ),
+        ("rg_dimension", "1", "R_g ~ N^(1/D) dimension over the structures of the frame", True),
+        ("cycle_rank", "loops", "cycle rank of the contact graph (E - V + C)", False),
     )
 ]
 
@@ -813,11 +849,20 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
     time or None; files that cannot be read are left out and listed in ``unreadable``), ``short_circuit`` (:func:`~selfas_graph.analysis.ensemble_stats.censored_times`:
     seeds without one are censored at their end time, counted, not averaged in),
     ``times`` and ``measures`` (name -> unit, doc, per time mean, sem, n, and ``values``
-    per seed and time, NaN as None).
+    per seed and time, NaN as None). A measure with a fit uncertainty also has ``fit_err``
+    (per seed and time), ``sem_between`` and ``fit_err_rms`` per time, and its ``sem`` is
+    ``sqrt(sem_between^2 + fit_err_rms^2 / n)`` (docs/model.md "Measures of the paper's
+    claims"). A grouped measure (a current flows or not) has ``group`` (what the group is),
+    ``k`` (seeds in the group), ``n_seeds`` (seeds with a value), ``median``, ``min``,
+    ``max`` per time, and its ``mean``, ``sem`` and ``n`` are the group's alone; ``current``
+    per seed and time says which seeds carry a current.
     """
     measures = FRAME_MEASURES if measures is None else measures
     times = [float(t) for t in times]
     seeds, values = [], np.full((len(measures), len(paths), len(times)), np.nan)
+    errs = np.full_like(values, np.nan)
+    current = np.full((len(paths), len(times)), np.nan)
+    grouped = any(m.grouped for m in measures)
     sc_t, sc_obs, unreadable = [], [], []
     for j, path in enumerate(paths):
         try:
@@ -853,8 +898,12 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
                 frame = Frame(run, idx, params, flux_radius)
                 for m, measure in enumerate(measures):
                     values[m, j, k] = measure.fn(frame)
+                    if measure.err is not None:
+                        errs[m, j, k] = measure.err(frame)
+                if grouped:
+                    current[j, k] = carries_current(frame)
     keep = [j for j, p in enumerate(paths) if str(p) not in {u["path"] for u in unreadable}]
-    values = values[:, keep]
+    values, errs, current = values[:, keep], errs[:, keep], current[keep]
     sc = censored_times(sc_t, sc_obs) if seeds else None
     out = {
         "version": __version__,
@@ -866,15 +915,29 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
         "short_circuit": None if sc is None else {k: _plain(v) for k, v in sc.items()},
         "measures": {},
     }
+    if grouped:
+        out["current"] = _plain(current)
     for m, measure in enumerate(measures):
-        mean, sem, n = mean_sem(values[m], axis=0)
+        extra = {}
+        if measure.grouped:
+            g = [grouped_summary(values[m][:, k], current[:, k] == 1.0) for k in range(len(times))]
+            mean, sem, n = (np.array([x[key] for x in g]) for key in ("mean", "sem", "k"))
+            extra = {"group": "seeds whose circuit carries a current"}
+            extra.update({key: _plain(np.array([x[key] for x in g])) for key in ("k", "median", "min", "max")})
+            extra["n_seeds"] = [x["n"] for x in g]
+        elif measure.err is not None:
+            mean, sem, between, rms, n = mean_sem_fits(values[m], errs[m], axis=0)
+            extra = {"sem_between": _plain(between), "fit_err_rms": _plain(rms), "fit_err": _plain(errs[m])}
+        else:
+            mean, sem, n = mean_sem(values[m], axis=0)
         out["measures"][measure.name] = {
             "unit": measure.unit,
             "doc": measure.doc,
             "mean": _plain(mean),
             "sem": _plain(sem),
-            "n": n.tolist(),
+            "n": np.asarray(n).astype(int).tolist(),
             "values": _plain(values[m]),
+            **extra,
         }
     return out
 
@@ -896,6 +959,14 @@ def _pm(mean, sem, n):
     if mean is None:
         return "n/a"
     return f"{mean:.4g} +- {sem:.2g} ({n})" if sem is not None else f"{mean:.4g} ({n})"
+
+
+def _group_cell(m, i):
+    k, n = m["k"][i], m["n_seeds"][i]
+    if not k:
+        return f"0/{n}"
+    f = lambda v: "n/a" if v is None else f"{v:.4g}"  # noqa: E731
+    return f"{k}/{n}: {f(m['median'][i])} [{f(m['min'][i])}, {f(m['max'][i])}], {_pm(m['mean'][i], m['sem'][i], k)}"
 
 
 def format_table(summary) -> str:
@@ -926,13 +997,30 @@ def format_table(summary) -> str:
         "|" + "---|" * (len(times) + 2),
     ]
     for name, m in summary["measures"].items():
-        cells = [_pm(a, b, n) for a, b, n in zip(m["mean"], m["sem"], m["n"])]
+        if "k" in m:
+            cells = [_group_cell(m, i) for i in range(len(times))]
+        else:
+            cells = [_pm(a, b, n) for a, b, n in zip(m["mean"], m["sem"], m["n"])]
         lines.append(f"| {name} | {m['unit']} | " + " | ".join(cells) + " |")
+    if any("k" in m for m in summary["measures"].values()):
+        lines += [
+            "",
+            "current-related measures: k/n seeds carrying a current, the median [min, max] and "
+            "mean +- standard error of those k only",
+        ]
+    if any("fit_err_rms" in m for m in summary["measures"].values()):
+        lines += ["fitted dimensions: the standard error adds each seed's fit uncertainty to the spread between seeds"]
     for u in summary.get("unreadable", ()):
         lines += [f"left out: {u['reason']}"]
     if summary.get("note"):
         lines += ["", f"note: {summary['note']}"]
     return "\n".join(lines)
+
+
+#: columns of summary.csv after measure, unit, time, mean, sem, n (empty where a measure has none):
+#: a fitted measure's standard error between seeds and rms fit uncertainty; a grouped measure's
+#: seeds in the group (k; its mean, sem and n are the group's), seeds with a value, median, min, max
+CSV_EXTRA = ("sem_between", "fit_err_rms", "k", "n_seeds", "median", "min", "max")
 
 
 def write_summary(summary, folder) -> tuple[Path, Path]:
@@ -942,7 +1030,7 @@ def write_summary(summary, folder) -> tuple[Path, Path]:
     js.write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["measure", "unit", "time", "mean", "sem", "n"])
+    w.writerow(["measure", "unit", "time", "mean", "sem", "n", *CSV_EXTRA])
     sc = summary.get("short_circuit")
     if sc:
         w.writerow(
@@ -953,13 +1041,14 @@ def write_summary(summary, folder) -> tuple[Path, Path]:
                 _csv(sc["mean_observed"]),
                 _csv(sc["sem_observed"]),
                 sc["n_observed"],
+                *[""] * len(CSV_EXTRA),
             ]
         )
-        w.writerow(["short_circuit_time_km_median", "t0", "", _csv(sc["median"]), "", sc["n"]])
-        w.writerow(["seeds_without_short_circuit", "seeds", "", sc["n_censored"], "", sc["n"]])
+        w.writerow(["short_circuit_time_km_median", "t0", "", _csv(sc["median"]), "", sc["n"], *[""] * len(CSV_EXTRA)])
+        w.writerow(["seeds_without_short_circuit", "seeds", "", sc["n_censored"], "", sc["n"], *[""] * len(CSV_EXTRA)])
     for name, m in summary["measures"].items():
-        for t, a, b, n in zip(summary["times"], m["mean"], m["sem"], m["n"]):
-            w.writerow([name, m["unit"], t, _csv(a), _csv(b), n])
+        for i, (t, a, b, n) in enumerate(zip(summary["times"], m["mean"], m["sem"], m["n"])):
+            w.writerow([name, m["unit"], t, _csv(a), _csv(b), n, *(_csv(m[c][i]) if c in m else "" for c in CSV_EXTRA)])
     cs.write_text(buf.getvalue())
     return js, cs
 

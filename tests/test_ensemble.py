@@ -401,3 +401,43 @@ def test_a_later_key_of_an_optional_table_at_its_default_matches_a_file_that_lac
     assert parameter_differences(stored, wanted) == []
     mixed = Parameters().replace({"forces.tip_magnetic": {"precision": "mixed"}}).to_dict()
     assert parameter_differences(stored, mixed) == ["forces.tip_magnetic.precision"]
+
+
+def test_fit_errors_and_current_groups_in_the_summary(scene, tmp_path, monkeypatch):
+    """A fitted measure's standard error adds each seed's fit uncertainty; a grouped measure is
+    summarised over the seeds carrying a current alone (k of n, median, range, mean, sem), in
+    summary.json, summary.csv and the table. Hand-set values per seed; which seed carries a
+    current is set by hand too (seed 3 does, seed 4 does not)."""
+    import selfas_graph.ensemble as ens
+    from selfas_graph.ensemble import FRAME_MEASURES, Measure, write_summary
+
+    Ensemble(scene, [3, 4], tmp_path, t_end=0.1).run()
+    seed = lambda f: f.params["scenario"]["seed"]  # noqa: E731
+    monkeypatch.setattr(ens, "carries_current", lambda f: float(seed(f) == 3))
+    fit = Measure(
+        "fake_fit", "1", "a fitted value", lambda f: 2.0 + 0.2 * (seed(f) - 3), err=lambda f: 0.1 * (seed(f) - 2)
+    )
+    cur = Measure("fake_current", "J0", "a current", lambda f: 5.0 * (seed(f) == 3), grouped=True)
+    s = summarise([seed_path(tmp_path, 3), seed_path(tmp_path, 4)], [0.1], measures=[*FRAME_MEASURES, fit, cur])
+    m = s["measures"]["fake_fit"]
+    # values 2.0, 2.2: s^2 = 0.02, between = sqrt(0.02 / 2) = 0.1; errors 0.1, 0.2: mean err^2 = 0.025
+    assert m["mean"] == pytest.approx([2.1], rel=1e-14) and m["sem_between"] == pytest.approx([0.1], rel=1e-12)
+    assert m["fit_err_rms"] == pytest.approx([np.sqrt(0.025)], rel=1e-12)
+    assert m["sem"] == pytest.approx([np.sqrt(0.01 + 0.025 / 2)], rel=1e-12) and m["n"] == [2]
+    g = s["measures"]["fake_current"]
+    assert (g["k"], g["n_seeds"], g["median"], g["min"], g["max"]) == ([1], [2], [5.0], [5.0], [5.0])
+    assert g["mean"] == [5.0] and g["sem"] == [None] and g["n"] == [1]  # never the mean 2.5 of both groups
+    assert s["current"] == [[1.0], [0.0]]
+    assert "| fake_current | J0 | 1/2: 5 [5, 5], 5 (1) |" in format_table(s)
+    _, cs = write_summary(s, tmp_path)
+    rows = {r["measure"]: r for r in csv.DictReader(cs.read_text().splitlines())}
+    assert (
+        rows["fake_current"]["k"] == "1"
+        and rows["fake_current"]["n_seeds"] == "2"
+        and rows["fake_current"]["mean"] == "5.0"
+    )
+    assert float(rows["fake_fit"]["sem_between"]) == pytest.approx(0.1, rel=1e-12) and rows["fake_fit"]["k"] == ""
+    for name in ("filament_rods", "total_current", "midplane_flux", "moment_J_z"):
+        assert "k" in s["measures"][name] and "median" in s["measures"][name]
+    for name in ("fractal_dimension", "rg_dimension"):
+        assert "fit_err_rms" in s["measures"][name]

@@ -73,3 +73,37 @@ def test_censored_times_does_not_average_the_censored_in():
 def test_kaplan_meier_rejects_bad_input(times, observed):
     with pytest.raises(ValueError):
         es.kaplan_meier(times, observed)
+
+
+def test_mean_sem_fits_by_hand():
+    """SE_total^2 = s^2 / n + mean(err^2) / n over the seeds that have a value and an uncertainty."""
+    from selfas_graph.analysis.ensemble_stats import mean_sem_fits
+
+    v = [2.0, 2.2, 2.4, np.nan, 9.0]
+    e = [0.1, 0.2, 0.2, 0.3, np.nan]  # the 4th has no value, the 5th no uncertainty: both left out
+    mean, total, between, rms, n = mean_sem_fits(v, e)
+    # by hand: mean 2.2, s^2 = (0.04 + 0 + 0.04) / 2 = 0.04, mean err^2 = (0.01 + 0.04 + 0.04) / 3 = 0.03
+    assert n == 3 and mean == pytest.approx(2.2, rel=1e-14)  # round-off
+    assert between == pytest.approx(np.sqrt(0.04 / 3), rel=1e-12)
+    assert rms == pytest.approx(np.sqrt(0.03), rel=1e-12)
+    assert total == pytest.approx(np.sqrt(0.04 / 3 + 0.03 / 3), rel=1e-12)
+    mean, total, between, rms, n = mean_sem_fits([[1.0, np.nan]], [[0.5, 0.1]])  # one seed: no standard error
+    assert n.tolist() == [1, 0] and np.isnan(total).all() and rms[0] == 0.5 and mean[0] == 1.0
+
+
+def test_grouped_summary_by_hand():
+    """Current in 3 of 5 seeds (one seed without a value): the active group alone, never both."""
+    from selfas_graph.analysis.ensemble_stats import grouped_summary
+
+    values = [4.0, 0.0, 6.0, np.nan, 5.0, 0.0]
+    active = [True, False, True, True, True, False]  # the NaN seed counts in neither group
+    g = grouped_summary(values, active)
+    assert (g["k"], g["n"]) == (3, 5)
+    assert (g["median"], g["min"], g["max"]) == (5.0, 4.0, 6.0)
+    assert g["mean"] == pytest.approx(5.0, rel=1e-14) and g["sem"] == pytest.approx(1.0 / np.sqrt(3), rel=1e-12)
+    none = grouped_summary([0.0, 0.0], [False, False])
+    assert none["k"] == 0 and none["n"] == 2 and all(np.isnan(none[x]) for x in ("median", "min", "max", "mean", "sem"))
+    one = grouped_summary([3.0, 0.0], [True, False])
+    assert one["mean"] == 3.0 and np.isnan(one["sem"])
+    with pytest.raises(ValueError):
+        grouped_summary([1.0], [True, False])

@@ -17,7 +17,15 @@ from .diagnostics import (
     rod_centres,
     timeline,
 )
-from .ensemble_stats import censored_times, kaplan_meier, km_quantile, mean_sem, wilson_interval
+from .ensemble_stats import (
+    censored_times,
+    grouped_summary,
+    kaplan_meier,
+    km_quantile,
+    mean_sem,
+    mean_sem_fits,
+    wilson_interval,
+)
 from .episodes import CircuitEpisodes, circuit_episodes
 
 __all__ = [
@@ -26,6 +34,8 @@ __all__ = [
     "Timeline",
     "auto_n_phi",
     "censored_times",
+    "grouped_summary",
+    "mean_sem_fits",
     "kaplan_meier",
     "km_quantile",
     "mean_sem",

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from .fractal import box_dimension, mass_radius_dimension, radius_of_gyration, rg_dimension
+from .fractal import mass_radius_dimension, radius_of_gyration, rg_dimension
 from .moments import current_moment, junction_charge, monopole_moment, unpaired_charge
 from .skeleton import contact_nodes, cycle_rank, junction_degrees, loop_lengths, structures
 
@@ -37,18 +37,18 @@ CLAIM_KEYS = {
     "moment_J_z": "m_J,z of all rod currents about the z axis (J0 L^2)",
     "unpaired_charge_largest": "sum |q| at the free tips (no tip contact) of the largest structure (Z_M0 e)",
     "junction_charge_largest": "sum |sum q| over the contact clusters of the largest structure (Z_M0 e)",
-    "fractal_dimension": "mass-radius dimension of the largest structure (>= 30 rods)",
-    "fractal_dimension_err": "its uncertainty",
+    "fractal_dimension": "mass-radius dimension of the largest structure about centres on it "
+    "(>= 30 rods; NaN, not testable, while its R_g < 4 L)",
+    "fractal_dimension_err": "its uncertainty sqrt(se^2 + d^2)",
+    "fractal_dimension_se": "standard error of the fitted slope",
     "fractal_r_min": "fit range of the mass-radius dimension: smallest r (L)",
     "fractal_r_max": "largest r (L)",
-    "rg_dimension": "D from R_g ~ N^(1/D) over the structures of the frame (>= 2 rods)",
+    "rg_dimension": "D from R_g ~ N^(1/D) over the structures of the frame with R_g >= 1 L "
+    "(NaN, not testable, while their R_g spans less than a factor 4)",
     "rg_dimension_err": "its uncertainty",
+    "rg_dimension_se": "standard error of the fitted slope, carried to D",
     "rg_n_min": "fit range of the R_g dimension: smallest structure (rods)",
     "rg_n_max": "largest structure (rods)",
-    "box_dimension": "box-counting dimension of the largest structure (>= 30 rods)",
-    "box_dimension_err": "its uncertainty",
-    "box_eps_min": "fit range of the box-counting dimension: smallest box (L)",
-    "box_eps_max": "largest box (L)",
     "cycle_rank": "independent loops E - V + C of the contact graph",
     "cycle_rank_largest": "independent loops of the largest structure",
     "loop_length_median": "median length (rods) of the loops of a cycle basis",
@@ -62,6 +62,7 @@ CLAIM_KEYS = {
 def _fit(prefix, fit, lo, hi, out):
     out[prefix] = fit.value
     out[prefix + "_err"] = fit.err
+    out[prefix + "_se"] = fit.se
     out[lo], out[hi] = fit.fit_range
 
 
@@ -120,7 +121,6 @@ def claims_of_arrays(position, tip_charge, tip_contacts, current=None, loops=Tru
     _fit("fractal_dimension", mass_radius_dimension(position, rods), "fractal_r_min", "fractal_r_max", out)
     rg, rg_size = radius_of_gyration(position, label, n_s)
     _fit("rg_dimension", rg_dimension(rg_size, rg), "rg_n_min", "rg_n_max", out)
-    _fit("box_dimension", box_dimension(position, rods), "box_eps_min", "box_eps_max", out)
     total, per = cycle_rank(n_rods, tip_contacts, label, n_s)
     out["cycle_rank"] = float(total)
     out["cycle_rank_largest"] = float(per[big]) if n_s else 0.0

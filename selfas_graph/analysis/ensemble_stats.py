@@ -12,7 +12,12 @@ standard error over seeds. Arrays in, arrays out; no files:
   curve does not reach it;
 * :func:`wilson_interval` -- the 95 % Wilson score interval of a fraction m / n;
 * :func:`censored_times` -- the whole summary of censored times: counts, mean and standard
-  error of the observed times alone (labelled so), and the Kaplan-Meier quartiles.
+  error of the observed times alone (labelled so), and the Kaplan-Meier quartiles;
+* :func:`mean_sem_fits` -- mean over seeds of a fitted quantity (a fractal dimension) whose
+  standard error combines the spread between seeds with each seed's own fit uncertainty;
+* :func:`grouped_summary` -- a quantity whose seeds split into two groups (a current flows
+  or not): "k of n seeds", with the median, range, mean and standard error of the active
+  group only, never a mean over both groups.
 """
 
 from __future__ import annotations
@@ -21,7 +26,15 @@ import math
 
 import numpy as np
 
-__all__ = ["censored_times", "kaplan_meier", "km_quantile", "mean_sem", "wilson_interval"]
+__all__ = [
+    "censored_times",
+    "grouped_summary",
+    "kaplan_meier",
+    "km_quantile",
+    "mean_sem",
+    "mean_sem_fits",
+    "wilson_interval",
+]
 
 #: 95 % two-sided normal quantile
 Z95 = 1.959963984540054
@@ -155,4 +168,87 @@ def censored_times(times, observed):
         "km_t": t,
         "km_F": F,
         "censored_at": np.sort(times[~observed]),
+    }
+
+
+def mean_sem_fits(values, fit_err, axis=0):
+    """Mean over seeds of a fitted quantity, its standard error with each fit's uncertainty added.
+
+    ``SE_total^2 = s^2 / n + mean(err_i^2) / n``: ``s^2`` the sample variance between the ``n``
+    seeds with a finite value and a finite ``err_i`` (the spread of the ensemble), ``err_i``
+    each seed's own fit uncertainty. Each seed has the same weight (no inverse-variance
+    weighting: a seed whose structure fits a straight line better is not a likelier sample of
+    the ensemble). The between-seed variance already holds the random part of the fit errors,
+    so the sum counts that part twice: it is an upper bound for it, chosen because most of a
+    fit's uncertainty on these structures is systematic (how the slope depends on the range),
+    shared between seeds and not reduced by their spread. A bias common to every seed is not
+    reduced by averaging at all; the anchors of ``tests/test_fractal.py`` bound it.
+
+    Parameters
+    ----------
+    values, fit_err : array_like of float, same shape
+        One row per seed along ``axis`` (NaN: no value for that seed).
+    axis : int
+
+    Returns
+    -------
+    mean, sem_total, sem_between, fit_err_rms : float64 arrays of ``values``' shape without ``axis``
+        ``sem_between = s / sqrt(n)``, ``fit_err_rms = sqrt(mean(err_i^2))``; ``sem_total`` is
+        NaN for ``n < 2`` as ``sem_between`` is.
+    n : int64 array
+    """
+    v = np.asarray(values, dtype=np.float64)
+    e = np.asarray(fit_err, dtype=np.float64)
+    if v.shape != e.shape:
+        raise ValueError(f"values and fit_err must have the same shape, got {v.shape}, {e.shape}")
+    v = np.where(np.isfinite(e), v, np.nan)  # a value without its uncertainty is left out
+    mean, sem_between, n = mean_sem(v, axis=axis)
+    finite = np.isfinite(v)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ms = np.where(finite, e * e, 0.0).sum(axis=axis) / n
+        fit_rms = np.where(n > 0, np.sqrt(ms), np.nan)
+        total = np.sqrt(sem_between**2 + ms / n)
+    return mean, np.where(n > 1, total, np.nan), sem_between, fit_rms, n
+
+
+def grouped_summary(values, active_mask):
+    """A quantity whose seeds split into an active group and the rest: "k of n seeds", the active group alone.
+
+    For a current-related quantity (total current, rods in current-carrying filaments, the rod
+    currents' flux or moment) seeds whose circuit is open give 0 and the others a value of
+    their own; the mean over both groups describes no seed. Reported instead: how many seeds
+    are active, and the median, range, mean and standard error (``s / sqrt(k)``, ``ddof = 1``)
+    over the active seeds only.
+
+    Parameters
+    ----------
+    values : (n,) float
+        One value per seed (NaN: no value, e.g. the run ended earlier; such a seed counts in
+        neither group).
+    active_mask : (n,) bool
+        True for the seeds of the active group (e.g. a current flows at that time).
+
+    Returns
+    -------
+    dict with ``k`` (active seeds with a value), ``n`` (seeds with a value), ``median``,
+    ``min``, ``max``, ``mean``, ``sem`` of the active group (NaN when ``k = 0``; ``sem`` NaN
+    when ``k < 2``).
+    """
+    v = np.asarray(values, dtype=np.float64).reshape(-1)
+    active = np.asarray(active_mask, dtype=bool).reshape(-1)
+    if v.shape != active.shape:
+        raise ValueError(f"values and active_mask must have the same length, got {v.shape}, {active.shape}")
+    has = np.isfinite(v)
+    group = v[has & active]
+    k = int(group.shape[0])
+    nan = math.nan
+    mean, sem, _ = mean_sem(group) if k else (nan, nan, 0)
+    return {
+        "k": k,
+        "n": int(has.sum()),
+        "median": float(np.median(group)) if k else nan,
+        "min": float(group.min()) if k else nan,
+        "max": float(group.max()) if k else nan,
+        "mean": float(mean),
+        "sem": float(sem),
     }

@@ -33,7 +33,6 @@ SERIES_COLUMNS = {
     "largest_moment_J_z": "m_J,z",
     "fractal_dimension": "D_mass",
     "rg_dimension": "D_Rg",
-    "box_dimension": "D_box",
     "cycle_rank": "cycle_rank",
 }
 #: integer columns of --json and --csv
@@ -118,13 +117,15 @@ def run(args):
         r = rows[0]
         print(f"{path}: frame {int(r['frame'])}, step {int(r['step'])}, t = {r['time']:.6g}")
         for k, meaning in CLAIM_KEYS.items():
-            if k in ("time", "step") or k.endswith("_err") or k in _RANGE_KEYS:
+            if k in ("time", "step") or k.endswith(("_err", "_se")) or k in _RANGE_KEYS:
                 continue
             value = _fmt(r[k])
             if k + "_err" in r:
                 lo, hi = _RANGES[k]
                 value += (
-                    f" +- {_fmt(r[k + '_err'])} (fit over {_fmt(r[lo])}..{_fmt(r[hi])})" if np.isfinite(r[k]) else ""
+                    f" +- {_fmt(r[k + '_err'])} (slope s.e. {_fmt(r[k + '_se'])}, fit over {_fmt(r[lo])}..{_fmt(r[hi])})"
+                    if np.isfinite(r[k])
+                    else " (not testable at this size)"
                 )
             print(f"  {k:<26} {value:<40} {meaning}")
     return 0
@@ -133,6 +134,5 @@ def run(args):
 _RANGES = {
     "fractal_dimension": ("fractal_r_min", "fractal_r_max"),
     "rg_dimension": ("rg_n_min", "rg_n_max"),
-    "box_dimension": ("box_eps_min", "box_eps_max"),
 }
 _RANGE_KEYS = {k for pair in _RANGES.values() for k in pair}

@@ -524,7 +524,6 @@ def _fractal(fig, run, frame, args):
     ax = fig.add_subplot()
     for key, colour, label in (
         ("fractal_dimension", LARGEST_COLOUR, "mass-radius, largest structure"),
-        ("box_dimension", "black", "box counting, largest structure"),
         ("rg_dimension", TOTAL_COLOUR, r"$R_g \sim N^{1/D}$ over all structures"),
     ):
         y, err = s[key], s[key + "_err"]
@@ -532,11 +531,11 @@ def _fractal(fig, run, frame, args):
         ax.fill_between(s["time"], y - err, y + err, color=colour, alpha=0.1, lw=0)
     for d in (1, 2, 3):
         ax.axhline(d, color="0.85", lw=0.8, zorder=0)
-    finite = np.concatenate([s[k][np.isfinite(s[k])] for k in ("fractal_dimension", "box_dimension", "rg_dimension")])
+    finite = np.concatenate([s[k][np.isfinite(s[k])] for k in ("fractal_dimension", "rg_dimension")])
     ax.set_ylim(0, max(3.5, float(finite.max()) + 0.2) if finite.size else 3.5)
     ax.set_xlabel("time t ($t_0$)")
     ax.set_ylabel("dimension D (bands: uncertainty)")
-    _outside_legend(fig, ncols=3)
+    _outside_legend(fig, ncols=2)
     ax.set_title(f"{_scene(run)}: fractal dimensions", fontsize="medium")
 
 
