@@ -48,9 +48,10 @@ def test_plain_stat_by_hand():
     s = plain_stat([1.0, 2.0, 3.0, np.nan])
     assert s["n"] == 3 and s["mean"] == 2.0
     assert math.isclose(s["sem"], 1.0 / math.sqrt(3), rel_tol=1e-15)  # s = 1, n = 3
-    # each value's own uncertainty adds mean(err^2) / n to SE^2: 1/3 + (0.3^2 + 0.4^2 + 0) / 3 / 3
-    s = plain_stat([1.0, 2.0, 3.0], errors=[0.3, 0.4, np.nan])
-    assert math.isclose(s["sem"] ** 2, 1 / 3 + 0.25 / 9, rel_tol=1e-14)
+    # each value's own uncertainty adds mean(err^2) / n to SE^2: 1/3 + (0.3^2 + 0.4^2 + 0.5^2) / 3 / 3
+    s = plain_stat([1.0, 2.0, 3.0], errors=[0.3, 0.4, 0.5])
+    assert math.isclose(s["sem"] ** 2, 1 / 3 + 0.5 / 9, rel_tol=1e-14)
+    assert plain_stat([1.0, 2.0, 3.0], errors=[0.3, 0.4, np.nan])["n"] == 2  # no uncertainty: left out
     assert plain_stat([np.nan])["n"] == 0
     assert math.isnan(plain_stat([5.0])["sem"])  # one seed: no spread
 
@@ -60,7 +61,8 @@ def test_grouped_stat_reports_the_group_it_describes():
     g = grouped_stat([4.0, 0.0, 6.0, 0.0, 5.0], [True, False, True, False, True])
     assert (g["k"], g["n"]) == (3, 5)
     assert (g["median"], g["min"], g["max"], g["mean"]) == (5.0, 4.0, 6.0, 5.0)
-    assert grouped_stat([0.0, 0.0], [False, False]) == {"k": 0, "n": 2}
+    g = grouped_stat([0.0, 0.0], [False, False])
+    assert (g["k"], g["n"]) == (0, 2) and math.isnan(g["mean"])
 
 
 def test_replace_blocks_changes_only_the_generated_blocks():

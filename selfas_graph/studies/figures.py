@@ -21,7 +21,7 @@ SERIES_MEASURES = (
     "largest_structure_rods",
     "largest_alignment",
     "midplane_flux",
-    "box_dimension",
+    "fractal_dimension",
     "cycle_rank",
 )
 SEED_COLOUR, MEAN_COLOUR, FREE_COLOUR = "#4477aa", "black", "#cc6677"

@@ -3,7 +3,7 @@
 Every number of docs/results.md between ``<!-- begin generated: KEY -->`` and
 ``<!-- end generated: KEY -->`` is written by :func:`page_blocks` from the committed summaries
 (``docs/results/NAME.json``, :mod:`.summary`); ``tests/test_results_page.py`` checks that the page
-holds what this module makes of them. The statistics (docs/model.md '7a'):
+holds what this module makes of them. The statistics (docs/model.md "Measures of the paper's claims"):
 
 * a measure every seed has: mean +- standard error over the seeds with a value; for a fitted
   dimension the standard error also carries each fit's own uncertainty,
@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..analysis.ensemble_stats import grouped_summary, mean_sem, mean_sem_fits
+
 __all__ = [
     "GROUPED",
     "LABELS",
@@ -41,11 +43,8 @@ GROUPED = ("filament_rods", "total_current", "midplane_flux", "flux_over_externa
 #: fitted measures and their own uncertainty
 FIT_ERRORS = {
     "fractal_dimension": "fractal_dimension_err",
-    "box_dimension": "box_dimension_err",
     "rg_dimension": "rg_dimension_err",
 }
-#: the smallest ratio of largest to smallest scale of a fit whose dimension the page reports (one decade)
-MIN_SCALE_RATIO = 10.0
 #: words and units of the measures, as the tables and figures show them
 LABELS = {
     "filament_rods": ("rods in current-carrying filaments", ""),
@@ -63,7 +62,6 @@ LABELS = {
     "moment_J_z": ("moment of the rod currents m_J,z", "J0 L^2"),
     "largest_moment_J_z": ("m_J,z of the largest structure", "J0 L^2"),
     "fractal_dimension": ("mass-radius dimension of the largest structure", ""),
-    "box_dimension": ("box-counting dimension of the largest structure", ""),
     "rg_dimension": ("dimension from R_g ~ N^(1/D) over the structures", ""),
     "cycle_rank": ("independent loops (cycle rank)", ""),
     "cycle_rank_largest": ("independent loops of the largest structure", ""),
@@ -81,7 +79,7 @@ TABLE_MEASURES = (
     "largest_moment_ratio",
     "largest_alignment",
     "free_alignment",
-    "box_dimension",
+    "fractal_dimension",
     "rg_dimension",
     "cycle_rank",
 )
@@ -105,36 +103,22 @@ def _values(summary, measure, t):
 
 
 def plain_stat(values, errors=None) -> dict:
-    """Mean, standard error and count over the finite values; with ``errors`` (each value's own
-    uncertainty) the standard error is sqrt(s^2 / n + mean(err^2) / n)."""
-    v = np.asarray(values, dtype=float)
-    ok = np.isfinite(v)
-    n = int(ok.sum())
-    if n == 0:
-        return {"n": 0, "mean": math.nan, "sem": math.nan}
-    mean = float(v[ok].mean())
-    var = float(v[ok].var(ddof=1)) if n > 1 else math.nan
-    sem2 = var / n if n > 1 else math.nan
-    if errors is not None:
-        e = np.asarray(errors, dtype=float)[ok]
-        e = np.where(np.isfinite(e), e, 0.0)
-        sem2 = (0.0 if n == 1 else sem2) + float(np.mean(e**2)) / n
-    return {"n": n, "mean": mean, "sem": math.sqrt(sem2) if sem2 == sem2 else math.nan}
+    """Mean, standard error and count over the finite values
+    (:func:`~selfas_graph.analysis.ensemble_stats.mean_sem`); with ``errors``, each value's own
+    fit uncertainty, the standard error is sqrt(s^2 / n + mean(err^2) / n)
+    (:func:`~selfas_graph.analysis.ensemble_stats.mean_sem_fits`)."""
+    v = np.asarray(values, dtype=float).reshape(-1, 1)
+    if errors is None:
+        mean, sem, n = mean_sem(v)
+    else:
+        mean, sem, _, _, n = mean_sem_fits(v, np.asarray(errors, dtype=float).reshape(-1, 1))
+    return {"n": int(n[0]), "mean": float(mean[0]), "sem": float(sem[0])}
 
 
 def grouped_stat(values, active) -> dict:
-    """A measure over the k seeds where ``active`` holds (of the n with a value): k, n, median,
-    min, max, mean and standard error of those k."""
-    v = np.asarray(values, dtype=float)
-    a = np.asarray(active, dtype=bool) & np.isfinite(v)
-    n = int(np.isfinite(v).sum())
-    g = v[a]
-    out = {"k": int(a.sum()), "n": n}
-    if g.size:
-        out |= {"median": float(np.median(g)), "min": float(g.min()), "max": float(g.max())}
-        p = plain_stat(g)
-        out |= {"mean": p["mean"], "sem": p["sem"]}
-    return out
+    """:func:`~selfas_graph.analysis.ensemble_stats.grouped_summary`: k of n seeds, and the median,
+    range, mean and standard error of the k seeds where ``active`` holds."""
+    return grouped_summary(values, active)
 
 
 def _fmt(x, digits=3):
@@ -166,13 +150,12 @@ def measure_text(summary, measure, t) -> str:
             f"[{_fmt(g['min'])} to {_fmt(g['max'])}], mean {_pm(g | {'n': g['k']})}"
         )
     if measure in FIT_ERRORS:
+        # a fit over less than a factor 4 in scale is refused (NaN) by the estimator
+        # (analysis/fractal.py, MIN_RANGE): where every seed's is, the dimension is not testable
         s = plain_stat(v, _values(summary, FIT_ERRORS[measure], t))
-        if measure == "box_dimension":
-            lo, hi = _values(summary, "box_eps_min", t), _values(summary, "box_eps_max", t)
-            ratio = np.nanmedian(hi / lo) if np.isfinite(hi / lo).any() else math.nan
-            if not ratio >= MIN_SCALE_RATIO:
-                return f"not testable at this size (fitted over a factor {_fmt(ratio, 2)} in scale, {_pm(s)})"
-        return _pm(s)
+        if s["n"] == 0:
+            return "not testable at this size (no fit over a factor 4 in scale)"
+        return _pm(s) if s["n"] == len(v) else f"{_pm(s)}; not testable in {len(v) - s['n']} seeds"
     return _pm(plain_stat(v))
 
 

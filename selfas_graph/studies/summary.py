@@ -88,11 +88,7 @@ STUDY_MEASURES = list(FRAME_MEASURES) + [
     Measure(k, u, d, lambda f, k=k: float(f.claims[k]))
     for k, u, d in (
         ("fractal_dimension_err", "1", "uncertainty of that mass-radius fit"),
-        ("box_dimension_err", "1", "uncertainty of the box-counting fit"),
-        ("box_eps_min", "L", "smallest box of the box-counting fit"),
-        ("box_eps_max", "L", "largest box of the box-counting fit"),
         ("rg_dimension_err", "1", "uncertainty of the R_g fit"),
-        ("moment_J_z", "J0 L^2", "m_J,z of all rod currents about the z axis"),
         ("largest_moment_J_z", "J0 L^2", "m_J,z of the largest structure's rod currents"),
         ("cycle_rank_largest", "loops", "independent loops of the largest structure"),
         ("structures", "1", "structures (rods joined by tip contacts)"),
