@@ -256,13 +256,28 @@ def claim_rows(studies, summaries) -> str:
 
 
 def page_blocks(studies, folder) -> dict:
-    """Every generated block of the results page, keyed by its marker name."""
+    """Every generated block of the results page, keyed by its marker name: ``claims``, and for
+    each study ``table NAME``, ``runs NAME`` and ``figures NAME`` (a study without a summary
+    yet says how to make it)."""
     summaries = {name: load_summary(folder, name) for name in studies.studies}
     summaries = {k: v for k, v in summaries.items() if v is not None}
     blocks = {"claims": claim_rows(studies, summaries)}
-    for name, s in summaries.items():
+    for name, study in studies.studies.items():
+        s = summaries.get(name)
+        if s is None:
+            todo = (
+                f"Not run at this version yet: `selfas-graph study run {name} --jobs 2`, then `study summarise {name}`."
+            )
+            blocks[f"table {name}"] = blocks[f"runs {name}"] = todo
+            blocks[f"figures {name}"] = ""
+            continue
         blocks[f"table {name}"] = study_table(s)
         blocks[f"runs {name}"] = provenance_text(s)
+        blocks[f"figures {name}"] = (
+            f"| {study.title}: every measure over time | short-circuit episodes | seed {s['seeds'][0]['seed']} at "
+            f"t = {_fmt(s['seeds'][0]['t_end'])} |\n|---|---|---|\n"
+            f"| ![](figures/{name}_series.png) | ![](figures/{name}_episodes.png) | ![](figures/{name}_snapshot.png) |"
+        )
     return blocks
 
 
