@@ -12,8 +12,6 @@ Structures are rods joined by tip-tip contacts (the conductors join none), as in
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from .fractal import mass_radius_dimension, radius_of_gyration, rg_dimension
@@ -180,7 +178,3 @@ def claims_series(run, frames=None, loops=True) -> dict[str, np.ndarray]:
     frames = range(run.n_frames) if frames is None else frames
     rows = [frame_claims(run, k, loops=loops) for k in frames]
     return {key: np.array([r.get(key, NAN) for r in rows], dtype=np.float64) for key in CLAIM_KEYS}
-
-
-def is_nan(x) -> bool:
-    return isinstance(x, float) and math.isnan(x)

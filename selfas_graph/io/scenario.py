@@ -171,10 +171,6 @@ def _apply_override(raw, item):
 # ----------------------------------------------------------------------------- schema walk
 
 
-def _type_name(tp):
-    return {int: "an integer", float: "a number", bool: "true or false", str: "a string"}.get(tp, str(tp))
-
-
 def unwrap_optional(tp):
     """``(T, True)`` for ``Optional[T]``, else ``(tp, False)``; shared with tools/scenario_docs.py."""
     if typing.get_origin(tp) is typing.Union:

@@ -31,9 +31,6 @@ from .validate import _frozen
 
 __all__ = ["Network", "NetworkUpdate"]
 
-#: state_dict keys of the contacts and the graph (the checkpoint format of selfas-graph 0.2)
-GRAPH_KEYS = ("tip_contacts", "conductor_tip", "conductor_id", "conductor_potential")
-
 
 @dataclasses.dataclass
 class NetworkUpdate:
