@@ -19,8 +19,9 @@ ALLOWED = {
     "io": {"model", "kernels", "_version", "provenance"},
     "analysis": {"model", "kernels"},
     "ensemble": {"analysis", "io", "model", "kernels", "parallel", "_version", "provenance"},
+    "grid": {"ensemble", "io", "parallel"},
     "studies": {"analysis", "ensemble", "io", "model", "kernels", "parallel", "_version", "provenance"},
-    "cli": {"analysis", "ensemble", "io", "model", "kernels", "parallel", "_version", "provenance", "studies"},
+    "cli": {"analysis", "ensemble", "grid", "io", "model", "kernels", "parallel", "_version", "provenance", "studies"},
     "__init__": {"analysis", "ensemble", "io", "model", "kernels", "parallel", "_version", "provenance"},
 }
 #: the one upward import, inside functions: the schema walk of Parameters lives with the scenario files

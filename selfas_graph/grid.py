@@ -1,0 +1,225 @@
+"""Parameter grids: an ensemble at every point of a product of scenario values.
+
+``selfas-graph ensemble SCENARIO --seeds N --grid KEY=V1,V2,... [--grid KEY2=...]`` runs the
+product of the grids times the seeds: grid point ``KEY=V1`` goes to its own folder
+``DIR/KEY=V1/`` (two keys: ``DIR/KEY=V1+KEY2=W1/``), which is an ordinary ensemble folder (the same
+seed files, resume, skip and lock rules as seeds today). Every point is validated before anything
+runs: an unknown key, a value the schema refuses or an empty list is refused naming the key. The
+combined summary ``DIR/grid_summary.json`` and ``.csv`` has the grid keys as columns; ``--plot``
+draws each measure at the last summarised time against the first grid key, with standard-error
+bars, one line per value of the other keys. From Python::
+
+    from selfas_graph.grid import Grid
+    grid = Grid("scenarios/quick.toml", {"circuit.delta_J0": ["1", "2"]}, seeds=2, folder="sweep")
+    grid.run(jobs=2)
+    table = grid.summarise()
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import itertools
+import math
+from pathlib import Path
+
+from .ensemble import Ensemble, EnsembleError, run_seed, run_tasks, summarise
+from .io.scenario import ScenarioError, load_scenario
+from .parallel import task_pool
+
+__all__ = ["Grid", "parse_grid"]
+
+GRID_JSON, GRID_CSV, GRID_PNG = "grid_summary.json", "grid_summary.csv", "grid_summary.png"
+
+
+def parse_grid(items) -> dict:
+    """``["KEY=V1,V2", ...]`` -> ``{KEY: [V1, V2]}``, in order; EnsembleError naming the item when
+    it is not KEY=VALUES, repeats a key or gives an empty list. A value holding a comma (a vector,
+    ``[0,0,1]``) is kept whole inside its brackets."""
+    out = {}
+    for item in items or ():
+        key, sep, values = str(item).partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise EnsembleError(f"--grid {item!r}: expected KEY=V1,V2,... (e.g. --grid circuit.delta_J0=1,2)")
+        if key in out:
+            raise EnsembleError(f"--grid {key}: given twice; put all its values in one --grid")
+        if key == "scenario.seed":
+            raise EnsembleError("--grid scenario.seed: the seeds are the ensemble's; use --seeds and --first-seed")
+        parts, depth, cur = [], 0, ""
+        for ch in values:
+            depth += ch in "[(" and 1 or 0
+            depth -= ch in "])" and 1 or 0
+            if ch == "," and depth == 0:
+                parts.append(cur)
+                cur = ""
+            else:
+                cur += ch
+        parts.append(cur)
+        parts = [p.strip() for p in parts]
+        if not any(parts) or any(not p for p in parts):
+            raise EnsembleError(f"--grid {key}: an empty value in {values!r}; give V1,V2,... with no empty entry")
+        if len(set(parts)) != len(parts):
+            raise EnsembleError(f"--grid {key}: a value repeats in {values!r}")
+        out[key] = parts
+    return out
+
+
+def _folder_name(point) -> str:
+    name = "+".join(f"{k}={v}" for k, v in point)
+    return name.replace("/", "_").replace(" ", "")
+
+
+class Grid:
+    """An :class:`~selfas_graph.ensemble.Ensemble` at every point of ``grid`` (key -> values).
+
+    Every point's scenario is built (and so validated) here: :class:`EnsembleError` names the
+    grid key whose value the schema refuses before anything runs.
+    """
+
+    def __init__(self, scenario, grid: dict, seeds, folder, overrides=(), t_end=None, first_seed=None, force=False):
+        if not grid:
+            raise EnsembleError("a grid needs at least one --grid KEY=V1,V2,...")
+        self.keys = list(grid)
+        self.folder = Path(folder)
+        base = [o.split("=", 1)[0].strip() for o in overrides]
+        for key in self.keys:
+            if key in base:
+                raise EnsembleError(f"--grid {key}: also given by --set; give it in one place")
+        self.points = [tuple(zip(self.keys, values)) for values in itertools.product(*(grid[k] for k in self.keys))]
+        self.ensembles = []
+        for point in self.points:
+            extra = [f"{k}={v}" for k, v in point]
+            try:  # the key and value checked as a scenario file's, naming the key
+                load_scenario(scenario, overrides=[*overrides, *extra], t_end=t_end)
+            except ScenarioError as exc:
+                raise EnsembleError(f"--grid {', '.join(extra)}: {exc}") from None
+            self.ensembles.append(
+                Ensemble(
+                    scenario,
+                    seeds,
+                    self.folder / _folder_name(point),
+                    overrides=[*overrides, *extra],
+                    t_end=t_end,
+                    first_seed=first_seed,
+                    force=force,
+                )
+            )
+        self.t_end = self.ensembles[0].t_end
+
+    def plans(self, summary_only=False):
+        """Every point's :meth:`Ensemble.plan` (EnsembleError lists the unusable seed files)."""
+        return [e.plan(summary_only=summary_only) for e in self.ensembles]
+
+    def tasks(self, plans):
+        return [t for e, p in zip(self.ensembles, plans) for t in e.tasks(p)]
+
+    def run(self, jobs=1, report=None, pool=None) -> list:
+        """Run what is missing at every point, all points' seeds in one pool."""
+        plans = self.plans()
+        for e in self.ensembles:
+            e.folder.mkdir(parents=True, exist_ok=True)
+        tasks = self.tasks(plans)
+        if pool is None:
+            with task_pool(jobs) as own:
+                return run_tasks(run_seed, tasks, own, report)
+        return run_tasks(run_seed, tasks, pool, report)
+
+    def summarise(self, times=None, flux_radius=None) -> dict:
+        """Each point's :func:`~selfas_graph.ensemble.summarise`, and the rows of the combined table:
+        one per point, measure and time, with the grid keys as columns."""
+        times = [self.t_end * k / 4 for k in (1, 2, 3, 4)] if times is None else [float(t) for t in times]
+        points, rows = [], []
+        for point, ens in zip(self.points, self.ensembles):
+            paths = [p for p in (ens.folder / f"seed_{s:04d}.h5" for s in ens.seeds) if p.exists()]
+            s = summarise(paths, times, t_end=self.t_end, flux_radius=flux_radius)
+            points.append({"point": dict(point), "folder": ens.folder.name, "summary": s})
+            for name, m in s["measures"].items():
+                for k, t in enumerate(times):
+                    rows.append(
+                        {
+                            **dict(point),
+                            "measure": name,
+                            "unit": m["unit"],
+                            "time": t,
+                            "mean": m["mean"][k],
+                            "sem": m["sem"][k],
+                            "n": m["n"][k],
+                        }
+                    )
+        return {"keys": self.keys, "times": times, "t_end": self.t_end, "points": points, "rows": rows}
+
+
+def grid_csv(table) -> str:
+    buf = io.StringIO()
+    fields = [*table["keys"], "measure", "unit", "time", "mean", "sem", "n"]
+    w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
+    w.writeheader()
+    for r in table["rows"]:
+        w.writerow({k: ("" if v is None else v) for k, v in r.items()})
+    return buf.getvalue()
+
+
+def plot_grid(table, out, title) -> Path:
+    """Each measure at the last time against the first grid key (SE bars; a line per value of the others)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    key, others = table["keys"][0], table["keys"][1:]
+    t = table["times"][-1]
+    rows = [r for r in table["rows"] if abs(r["time"] - t) < 1e-9]
+    names = list(dict.fromkeys(r["measure"] for r in rows))
+    ncols = 2
+    nrows = math.ceil(len(names) / ncols)
+    fig = Figure(figsize=(7.2, 2.0 * nrows + 0.8), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+
+    def num(v):
+        try:
+            return float(v)
+        except ValueError:
+            return v
+
+    for ax, name in zip(axes, names):
+        mine = [r for r in rows if r["measure"] == name]
+        groups = {}
+        for r in mine:
+            groups.setdefault(tuple(r[o] for o in others), []).append(r)
+        for label, rs in groups.items():
+            xs = [num(r[key]) for r in rs]
+            ys = [math.nan if r["mean"] is None else r["mean"] for r in rs]
+            es = [0.0 if r["sem"] is None else r["sem"] for r in rs]
+            lab = ", ".join(f"{o} = {v}" for o, v in zip(others, label)) or None
+            ax.errorbar(xs, ys, yerr=es, marker="o", ms=3, capsize=3, lw=1, label=lab)
+        unit = mine[0]["unit"] if mine else ""
+        ax.set_title(name.replace("_", " ") + (f" ({unit})" if unit not in ("", "1") else ""), fontsize="small")
+        ax.set_xlabel(key, fontsize="small")
+        ax.tick_params(labelsize="small")
+        if others:
+            ax.legend(fontsize="x-small", frameon=False)
+    for ax in axes[len(names) :]:
+        ax.set_visible(False)
+    fig.suptitle(f"{title}: mean and one standard error over seeds at t = {t:g}", fontsize="medium")
+    out = Path(out)
+    tmp = out.with_name(out.name + ".tmp.png")
+    fig.savefig(tmp, dpi=150)
+    tmp.replace(out)
+    return out
+
+
+def write_grid_summary(table, folder) -> tuple[Path, Path]:
+    """``grid_summary.json`` and ``grid_summary.csv`` in ``folder``, each written aside and renamed."""
+    import json
+    import os
+
+    folder = Path(folder)
+    out = []
+    for name, text in ((GRID_JSON, json.dumps(table, indent=1, allow_nan=False) + "\n"), (GRID_CSV, grid_csv(table))):
+        path = folder / name
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, path)
+        out.append(path)
+    return tuple(out)
