@@ -36,6 +36,7 @@ import functools
 import io
 import json
 import math
+import os
 import shlex
 import signal
 import time
@@ -649,6 +650,11 @@ class Ensemble:
 def make_folder(folder) -> Path:
     """Create ``folder`` (and its parents) if missing; EnsembleError if that is impossible."""
     folder = Path(folder)
+    if folder.is_symlink() and not folder.exists():
+        raise EnsembleError(
+            f"the output folder {folder} is a symbolic link to {os.readlink(folder)}, which does not exist; "
+            f"create that folder or give another one"
+        )
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -8,6 +8,7 @@ problem, a numerical failure exit code 3, never a traceback, and no existing fil
 from __future__ import annotations
 
 import copy
+import os
 
 import h5py
 import numpy as np
@@ -21,6 +22,7 @@ from hostile import (
     cli,
     scenario_file,
     to_toml,
+    tree,
 )
 from selfas_graph.io.checkpoint import FORMAT as CHECKPOINT_FORMAT
 
@@ -310,3 +312,23 @@ def test_bug_deeply_nested_toml(where, workdir, capsys):
         scen.write_text(BASE_TEXT)
     extra = [f"--set=rods.count={'[' * depth}{']' * depth}"] if where == "set_value" else []
     check_contract(cli(capsys, "simulate", scen, "--dry-run", *extra), allowed=(2,))
+
+
+@pytest.mark.parametrize("command", ["simulate", "plot", "export", "ensemble"])
+def test_bug_a_dangling_symbolic_link_as_the_output(command, workdir, capsys, real_run):
+    """``-o dang.h5`` where dang.h5 is a symbolic link into a folder that does not exist: simulate
+    removed the link after its failed write, plot and export replaced it by a regular file (ensemble,
+    given it as its folder, said only "File exists"). Now every command refuses it (exit 2, naming the link and where it points) and leaves it as it was."""
+    link = workdir / "dang.h5"
+    link.symlink_to(workdir / "nowhere" / "x.h5")
+    args = {
+        "simulate": ["simulate", scenario_file(workdir), "--progress", "none"],
+        "plot": ["plot", real_run["run"]],
+        "export": ["export", real_run["run"], "--format", "xyz"],
+        "ensemble": ["ensemble", scenario_file(workdir), "--seeds", "1"],
+    }[command]
+    before = tree(workdir)
+    res = cli(capsys, *args, "-o", link)
+    _expect_usage_error(res, "dang.h5", "symbolic link")
+    assert tree(workdir) == before
+    assert link.is_symlink() and os.readlink(link) == str(workdir / "nowhere" / "x.h5")

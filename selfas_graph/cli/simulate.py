@@ -434,7 +434,7 @@ def run(args):
         provenance = run_provenance(
             sim, scenario, shlex.join(sys.argv), run_id, scenario_path=args.scenario, mpi_ranks=world.size
         )
-        existed = out.exists()
+        existed = os.path.lexists(out)
         try:
             return RunWriter(
                 out,
