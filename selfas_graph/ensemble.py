@@ -57,8 +57,9 @@ from .io.checkpoint import (
     CheckpointError,
     checkpoint_meta,
     checkpoint_path,
+    failure_meta,
     read_checkpoint,
-    write_checkpoint,
+    write_failure,
 )
 from .io.h5md import RunFile, RunFileError, RunWriter, run_provenance
 from .io.scenario import ScenarioError, load_scenario, scenario_from_text
@@ -218,7 +219,7 @@ def run_seed(task: dict) -> dict:
     ``t_end``, and for "run" also ``text``, ``scenario_path``, ``overrides`` (with the
     seed's) and ``force``; ``command`` is recorded as the run's provenance. Never raises
     for a failing run: returns a dict with ``status`` "finished", "interrupted",
-    "failed" (numerical failure; the failed state goes to ``SEED.failure.h5``) or "error"
+    "failed" (numerical failure; the last good and the failed state go to ``SEED.failure.h5``) or "error"
     (with ``message``), and ``t`` (simulated time reached), ``steps``, ``wall_seconds``, ``threads``.
     """
     import numba
@@ -292,9 +293,7 @@ def run_seed(task: dict) -> dict:
             failure = path.with_name(path.stem + ".failure.h5")
             sim.flush_output(writer)  # the events and per-step rows up to the failure, as simulate does
             writer.close(status=f"failed: {exc}")
-            write_checkpoint(
-                failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step, "failure": str(exc)}
-            )
+            write_failure(failure, sim.last_good_snapshot, sim.snapshot(), failure_meta(checkpointer, sim, exc))
             out["status"], out["message"] = "failed", f"{exc} (failed state in {failure})"
         except Exception as exc:  # noqa: BLE001 - one broken seed must not lose the others; reported
             # not a numerical failure: the file stays resumable from its last checkpoint

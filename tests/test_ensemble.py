@@ -401,3 +401,19 @@ def test_a_later_key_of_an_optional_table_at_its_default_matches_a_file_that_lac
     assert parameter_differences(stored, wanted) == []
     mixed = Parameters().replace({"forces.tip_magnetic": {"precision": "mixed"}}).to_dict()
     assert parameter_differences(stored, mixed) == ["forces.tip_magnetic.precision"]
+
+
+def test_a_failed_seed_keeps_its_last_good_state_and_stores_no_nan(scene, tmp_path):
+    """Charges of 1e10 blow seed 3 up at its first step: the seed is "failed", and its failure file holds
+    the last state that passed the checks (verified, resumable) and the failed one without a NaN."""
+    from hostile import non_finite_datasets
+    from selfas_graph.io.checkpoint import read_checkpoint
+
+    ens = Ensemble(scene, [3], tmp_path, overrides=["rods.magnetic_charge.value=1e10"], t_end=0.01)
+    (r,) = ens.run()
+    assert r["status"] == "failed" and "numerical failure at step 1" in r["message"]
+    failure = tmp_path / "seed_0003.failure.h5"
+    snap, meta = read_checkpoint(failure)
+    assert int(snap["step"]) == 0 and meta["failed_step"] == 1
+    for path in tmp_path.glob("*.h5"):
+        assert non_finite_datasets(path) == [], path.name

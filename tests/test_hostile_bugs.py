@@ -20,6 +20,7 @@ from hostile import (
     Result,
     check_contract,
     cli,
+    non_finite_datasets,
     scenario_file,
     to_toml,
     tree,
@@ -312,6 +313,40 @@ def test_bug_deeply_nested_toml(where, workdir, capsys):
         scen.write_text(BASE_TEXT)
     extra = [f"--set=rods.count={'[' * depth}{']' * depth}"] if where == "set_value" else []
     check_contract(cli(capsys, "simulate", scen, "--dry-run", *extra), allowed=(2,))
+
+
+@pytest.mark.parametrize("value", ["1e10", "1e30"])
+def test_bug_failure_file_holds_the_nan_of_the_failed_step(value, workdir, capsys):
+    """Charges of 1e10 blow the scene up at step 1 (exit 3, the term named). The failure file held
+    the failed step's NaN velocities; now it holds the last finite state (the run's start here,
+    verified and resumable) and the failed step's values with the non-finite entries coded apart."""
+    from selfas_graph.io.checkpoint import read_checkpoint
+
+    out = workdir / "out.h5"
+    res = cli(
+        capsys,
+        "simulate",
+        scenario_file(workdir),
+        "-o",
+        out,
+        "--progress",
+        "none",
+        f"--set=rods.magnetic_charge.value={value}",
+    )
+    check_contract(res, allowed=(3,))
+    failure = workdir / "out.failure.h5"
+    for path in sorted(workdir.glob("*.h5")):
+        assert non_finite_datasets(path) == [], path.name
+    snap, meta = read_checkpoint(failure)  # refuses a non-finite snapshot
+    assert int(snap["step"]) == 0 and "numerical failure at step 1" in meta["failure"]
+    with h5py.File(failure, "r") as f:
+        failed = f["failed"]
+        assert failed.attrs["step"] == 1
+        code = failed["nonfinite/velocity"][()]
+        assert code.shape == failed["velocity"].shape == (8, 3) and code.any()
+        assert set(np.unique(code)) <= {0, 1, 2, 3}  # finite, NaN, +inf, -inf
+        assert np.all(failed["velocity"][()][code != 0] == 0.0)
+        assert np.isfinite(failed["velocity"].attrs["largest_finite"])
 
 
 @pytest.mark.parametrize("command", ["simulate", "plot", "export", "ensemble"])
