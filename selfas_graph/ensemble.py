@@ -65,7 +65,7 @@ from .io.h5md import RunFile, RunFileError, RunWriter, run_provenance
 from .io.scenario import ScenarioError, load_scenario, scenario_from_text
 from .model.simulation import NumericalFailure, RunInterrupted, Simulation
 from .model.state import PlacementError
-from .parallel import task_pool
+from .parallel import parent_gone, task_pool
 
 __all__ = [
     "Ensemble",
@@ -188,13 +188,14 @@ class SeedPlan:
 
 # ----------------------------------------------------------------------------- one seed
 class _StopOnSignal:
-    """``stop`` hook of :meth:`Simulation.run`: true once SIGTERM or SIGINT arrived (then a checkpoint is written)."""
+    """``stop`` hook of :meth:`Simulation.run`: true once SIGTERM or SIGINT arrived, or the ensemble's
+    process died (in a pool worker); then a checkpoint is written."""
 
     def __init__(self):
         self.signum, self.old = None, {}
 
     def __call__(self):
-        return self.signum is not None
+        return self.signum is not None or parent_gone()
 
     def __enter__(self):
         for sig in (signal.SIGTERM, signal.SIGINT):
@@ -421,7 +422,7 @@ def run_tasks(fn: Callable[[dict], dict], tasks: list, pool, report=None, stop_s
             while waiting or running:
                 while waiting and not stopping and len(running) < pool.workers:
                     i = waiting.pop()
-                    running[pool.executor.submit(fn, tasks[i])] = i
+                    running[pool.submit(fn, tasks[i])] = i
                 if not running:
                     break
                 done, _ = concurrent.futures.wait(list(running), return_when=concurrent.futures.FIRST_COMPLETED)

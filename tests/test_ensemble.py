@@ -278,47 +278,39 @@ def test_seed_file_is_what_simulate_writes(scene, tmp_path):
     shutil.rmtree(tmp_path / "e")
 
 
-def test_sigterm_stops_the_seeds_with_checkpoints_and_a_rerun_continues(scene, tmp_path):
-    """SIGTERM to the launching process: the running seeds stop after a step with a checkpoint
-    (exit code 130, no further seed started); the same command again resumes them."""
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
+def test_a_signal_stops_the_seeds_with_checkpoints_and_a_rerun_continues(scene, tmp_path, sig):
+    """SIGTERM or SIGINT to the launching process: the running seeds stop after a step with a checkpoint
+    (exit code 130, no further seed started), no process of the ensemble is left, and the same command
+    again resumes them."""
     import os
     import signal
-    import subprocess
-    import sys
     import time
 
-    cmd = [
-        sys.executable,
-        "-m",
-        "selfas_graph.cli.main",
-        "ensemble",
-        str(scene),
-        "--seeds",
-        "3",
-        "--jobs",
-        "2",
-        "--t-end",
-        "20",
-        "-o",
-        str(tmp_path / "e"),
-    ]
-    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    first = [seed_path(tmp_path / "e", s) for s in (3, 4)]
-    deadline = time.monotonic() + 90  # start-up and kernel loading; a run to t = 20 takes minutes
-    while not all(p.exists() for p in first) and time.monotonic() < deadline:
-        time.sleep(0.2)
-    time.sleep(1.0)
-    proc.send_signal(signal.SIGTERM)
-    out, err = proc.communicate(timeout=90)
-    assert proc.returncode == 130, err
+    folder = tmp_path / "e"
+    proc = _ensemble_process(scene, folder, "--seeds", "3")
+    try:
+        first = [seed_path(folder, s) for s in (3, 4)]
+        _wait_for_seed_files(folder, (3, 4))
+        time.sleep(1.0)
+        proc.send_signal(getattr(signal, sig))
+        out, err = proc.communicate(timeout=90)  # a step and a checkpoint; 90 s: a loaded machine
+        assert proc.returncode == 130, err
+        if Path("/proc/self/stat").exists():
+            assert _group_gone(proc.pid, 10) == [], "processes of the stopped ensemble still run"
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate(timeout=30)
     assert "rerun the same command to continue" in err and out.count("interrupted at t = ") == 2
-    assert not seed_path(tmp_path / "e", 5).exists()
+    assert not seed_path(folder, 5).exists()
     for p in first:
         assert checkpoint_path(p).exists()
         with RunFile(p) as run:
             assert run.meta["status"].startswith("interrupted at step")
-    plans = Ensemble(scene, 3, tmp_path / "e", t_end=20).plan()
+    plans = Ensemble(scene, 3, folder, t_end=20).plan()
     assert [p.action for p in plans] == ["resume", "resume", "run"]
 
 
@@ -417,3 +409,90 @@ def test_a_failed_seed_keeps_its_last_good_state_and_stores_no_nan(scene, tmp_pa
     assert int(snap["step"]) == 0 and meta["failed_step"] == 1
     for path in tmp_path.glob("*.h5"):
         assert non_finite_datasets(path) == [], path.name
+
+
+# ----------------------------------------------------------------------------- processes that end with the ensemble
+def _group_alive(pgid) -> list:
+    """Live processes (zombies left out: they hold no memory and wait only to be reaped) of process group ``pgid``."""
+    import os
+
+    alive = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:  # ended meanwhile
+            continue
+        if fields[0] != "Z" and int(fields[2]) == pgid:  # state, ppid, pgrp
+            alive.append(int(entry))
+    return alive
+
+
+def _group_gone(pgid, timeout) -> list:
+    """Wait up to ``timeout`` seconds for process group ``pgid`` to end; the processes still alive."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while _group_alive(pgid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    return _group_alive(pgid)
+
+
+def _ensemble_process(scene, folder, *extra):
+    """``selfas-graph ensemble`` of seeds 3.. on 2 workers to t = 20 (minutes: it is stopped long before),
+    in a session of its own, so that the test finds and, whatever happens, kills every process of it."""
+    import os
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "selfas_graph.cli.main", "ensemble", str(scene), "--jobs", "2", "--t-end", "20"]
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    return subprocess.Popen(
+        [*cmd, "-o", str(folder), *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        start_new_session=True,
+    )
+
+
+def _wait_for_seed_files(folder, seeds, timeout=90):
+    """Until the seeds' run files exist (start-up and kernel loading take 5-20 s on a loaded 2-core machine)."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while not all(seed_path(folder, s).exists() for s in seeds) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert all(seed_path(folder, s).exists() for s in seeds), "the seeds did not start"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="lists processes through /proc")
+def test_kill_9_of_the_ensemble_leaves_no_process_of_it_and_every_seed_resumes(scene, tmp_path):
+    """SIGKILL of the ensemble's process (a batch system, the OOM killer): its workers and the resource
+    tracker used to finish their seeds and then wait, idle, for good (SIGTERM did not end them). Now each
+    worker sees its launcher gone within PARENT_POLL (0.5 s), stops its seed with a checkpoint and exits:
+    10 s later (a step and a checkpoint of this 60-rod scene take milliseconds; the rest is margin for a
+    loaded machine) no process of the ensemble lives, and the same command resumes both seeds."""
+    import os
+    import signal
+    import time
+
+    folder = tmp_path / "e"
+    proc = _ensemble_process(scene, folder, "--seeds", "3")
+    try:
+        _wait_for_seed_files(folder, (3, 4))
+        time.sleep(1.0)
+        proc.kill()
+        proc.wait(timeout=30)
+        assert _group_gone(proc.pid, 10) == [], "processes of the killed ensemble still run"
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate(timeout=30)
+    plans = Ensemble(scene, 3, folder, t_end=20).plan()
+    assert [p.action for p in plans] == ["resume", "resume", "run"]
