@@ -496,3 +496,40 @@ def test_kill_9_of_the_ensemble_leaves_no_process_of_it_and_every_seed_resumes(s
         proc.communicate(timeout=30)
     plans = Ensemble(scene, 3, folder, t_end=20).plan()
     assert [p.action for p in plans] == ["resume", "resume", "run"]
+
+
+def test_a_second_ensemble_on_the_same_folder_is_refused_before_it_starts_a_seed(scene, tmp_path, capsys):
+    """Two ensembles on one folder at once: the second stops with exit 2 naming the folder and the
+    holder, before it reads or starts any seed; the first runs on. Its lock is released on exit, and a
+    lock file left by a crash (no process holds it any more) is taken over."""
+    import os
+    import signal
+
+    from selfas_graph.ensemble import LOCK_FILE
+
+    folder = tmp_path / "e"
+    proc = _ensemble_process(scene, folder, "--seeds", "2")
+    try:
+        _wait_for_seed_files(folder, (3, 4))
+        before = {p.name: p.stat().st_mtime_ns for p in folder.iterdir() if p.name != LOCK_FILE}
+        rc = main(["ensemble", str(scene), "--seeds", "3", "--t-end", "20", "-o", str(folder)])
+        err = capsys.readouterr().err
+        assert rc == 2 and f"the output folder {folder} is in use by another ensemble (pid {proc.pid}" in err
+        assert not seed_path(folder, 5).exists()
+        assert proc.poll() is None  # the first one runs on
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=90)
+        assert proc.returncode == 130
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate(timeout=30)
+    assert set(before) <= {p.name for p in folder.iterdir()}
+    assert not (folder / LOCK_FILE).exists()  # released on exit
+    (folder / LOCK_FILE).write_text("pid 999999 on a host that crashed\n")  # stale: nobody holds it
+    assert (
+        main(["ensemble", str(scene), "--seeds", "1", "--t-end", "0.05", "-o", str(folder), "--first-seed", "9"]) == 0
+    )
+    assert not (folder / LOCK_FILE).exists()

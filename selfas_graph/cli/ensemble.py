@@ -124,7 +124,28 @@ def _make(folder):
         raise CliError(str(exc)) from None
 
 
+def _lock(folder, held):
+    """Lock the ensemble's folder for this process (once): a second ensemble there is refused (exit 2)."""
+    from ..ensemble import FolderLock
+
+    if held:
+        return
+    try:
+        held.append(FolderLock(folder).acquire())
+    except EnsembleError as exc:
+        raise CliError(str(exc)) from None
+
+
 def _run(args, pool):
+    held = []
+    try:
+        return _run_locked(args, pool, held)
+    finally:
+        for lock in held:
+            lock.release()
+
+
+def _run_locked(args, pool, held):
     from pathlib import Path
 
     try:
@@ -139,6 +160,8 @@ def _run(args, pool):
             first_seed=args.first_seed,
             force=args.force,
         )
+        if not args.no_run and folder.is_dir():  # before its files are read: they may be another ensemble's
+            _lock(folder, held)
         plans = ens.plan(summary_only=args.no_run)
     except EnsembleError as exc:
         raise CliError(str(exc)) from None
@@ -170,6 +193,7 @@ def _run(args, pool):
     results = []
     if not args.no_run and count["run"] + count["resume"]:
         _make(folder)
+        _lock(folder, held)
         tasks = ens.tasks(plans)
         done = [0]
 
