@@ -61,11 +61,11 @@ from .io.checkpoint import (
     read_checkpoint,
     write_failure,
 )
-from .io.h5md import RunFile, RunFileError, RunWriter, run_provenance
+from .io.h5md import DiskFullError, RunFile, RunFileError, RunWriter, is_io_error, run_provenance
 from .io.scenario import ScenarioError, load_scenario, scenario_from_text
 from .model.simulation import NumericalFailure, RunInterrupted, Simulation
 from .model.state import PlacementError
-from .parallel import parent_gone, task_pool
+from .parallel import is_pool_worker, parent_gone, task_pool
 
 __all__ = [
     "Ensemble",
@@ -221,7 +221,8 @@ def run_seed(task: dict) -> dict:
     ``t_end``, and for "run" also ``text``, ``scenario_path``, ``overrides`` (with the
     seed's) and ``force``; ``command`` is recorded as the run's provenance. Never raises
     for a failing run: returns a dict with ``status`` "finished", "interrupted",
-    "failed" (numerical failure; the last good and the failed state go to ``SEED.failure.h5``) or "error"
+    "failed" (numerical failure; the last good and the failed state go to ``SEED.failure.h5``), "io_error"
+    (a write failed: full disk, quota; the file stays resumable, :func:`_stop_on_io_error`) or "error"
     (with ``message``), and ``t`` (simulated time reached), ``steps``, ``wall_seconds``, ``threads``.
     """
     import numba
@@ -299,13 +300,67 @@ def run_seed(task: dict) -> dict:
             out["status"], out["message"] = "failed", f"{exc} (failed state in {failure})"
         except Exception as exc:  # noqa: BLE001 - one broken seed must not lose the others; reported
             # not a numerical failure: the file stays resumable from its last checkpoint
-            out["status"], out["message"] = "error", f"{type(exc).__name__}: {exc}"
-            if writer is not None and getattr(writer, "f", None):
-                writer.close(status=f"error: {type(exc).__name__}: {exc}")
+            if is_io_error(exc):
+                out["status"], out["message"] = "io_error", _stop_on_io_error(exc, writer, sim, path, task)
+            else:
+                out["status"], out["message"] = "error", f"{type(exc).__name__}: {exc}"
+                if writer is not None and getattr(writer, "f", None):
+                    writer.close(status=f"error: {type(exc).__name__}: {exc}")
     if sim is not None:
         out["t"], out["steps"] = float(sim.state.time), int(sim.state.step)
     out["wall_seconds"] = time.perf_counter() - t0
     return out
+
+
+#: run files whose HDF5 handle failed in this process: kept referenced until the process ends
+ABANDONED = []
+
+
+def _stop_on_io_error(exc, writer, sim, path, task) -> str:
+    """End a seed whose writing failed (full disk, quota, a vanished folder) so that a rerun continues it;
+    returns the message.
+
+    A :class:`~selfas_graph.io.h5md.DiskFullError` comes before anything of the write happened:
+    the file is closed as "stopped", which the plan resumes from its checkpoint. Any other failed
+    write leaves HDF5's handle failed: it is abandoned (the file keeps its last flush; a resume drops
+    a torn row), and a pool worker then ends without freeing it (HDF5 may crash on it at exit). A
+    file this task created that has no checkpoint yet holds nothing to continue: it is removed, and
+    a rerun starts the seed again.
+    """
+    ckpt = checkpoint_path(path)
+    reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())[:300]
+    step = f"step {sim.state.step} (t = {sim.state.time:.6g})" if sim is not None else "its start"
+    if writer is not None and getattr(writer, "f", None):
+        clean = isinstance(exc, DiskFullError)
+        if clean:
+            try:
+                writer.close(status=f"stopped by an I/O error at {step}: {reason}")
+            except (OSError, RuntimeError):
+                clean = False
+        if not clean:
+            ABANDONED.append(writer)
+            if is_pool_worker():
+                _exit_quietly_at_shutdown()
+    if task["action"] == "run" and not ckpt.exists():
+        try:
+            path.unlink()
+        except OSError:
+            pass
+        return f"I/O error at {step} while writing: {reason}; nothing to continue from, the seed starts again"
+    return f"I/O error at {step} while writing: {reason}; last good checkpoint {ckpt}"
+
+
+def _exit_quietly_at_shutdown():
+    import atexit
+    import os as _os
+    import sys
+
+    def _exit():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        _os._exit(0)
+
+    atexit.register(_exit)  # runs before the interpreter frees the abandoned HDF5 objects
 
 
 def run_to_short_circuit(task: dict) -> dict:
@@ -389,7 +444,9 @@ class _RaiseOnTerm:
             signal.signal(signal.SIGTERM, self.old)
 
 
-def run_tasks(fn: Callable[[dict], dict], tasks: list, pool, report=None, stop_statuses=("interrupted",)) -> list:
+def run_tasks(
+    fn: Callable[[dict], dict], tasks: list, pool, report=None, stop_statuses=("interrupted", "io_error")
+) -> list:
     """Run ``fn(task)`` for every task on ``pool`` (a :class:`~selfas_graph.parallel.task_pool`); results in task order.
 
     Tasks are handed out in order, one per idle worker (none waits in a queue), and
@@ -416,6 +473,8 @@ def run_tasks(fn: Callable[[dict], dict], tasks: list, pool, report=None, stop_s
             i = running.pop(fut)
             results[i] = _result(fut)
             report(results[i])
+            if results[i].get("status") == "io_error" and not stopping and not pool.mpi:
+                _terminate_workers()  # the other running seeds stop with a checkpoint while there is room
             stopping |= results[i].get("status") in stop_statuses
 
     with _RaiseOnTerm():
@@ -431,12 +490,16 @@ def run_tasks(fn: Callable[[dict], dict], tasks: list, pool, report=None, stop_s
         except KeyboardInterrupt:
             stopping = True
             if not pool.mpi:
-                import multiprocessing
-
-                for child in multiprocessing.active_children():
-                    child.terminate()  # SIGTERM: a running seed stops after its step with a checkpoint
+                _terminate_workers()
             collect(list(running))
     return results
+
+
+def _terminate_workers():
+    import multiprocessing
+
+    for child in multiprocessing.active_children():
+        child.terminate()  # SIGTERM: a running seed stops after its step with a checkpoint
 
 
 def _result(fut):

@@ -328,7 +328,16 @@ def init_job_worker(threads=None, parent_pid=None) -> None:
     set_job_threads(threads)
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, signal.SIG_IGN)
+    _worker[0] = True
     watch_parent(parent_pid)
+
+
+_worker = [False]
+
+
+def is_pool_worker() -> bool:
+    """True in a worker process (or MPI worker rank) of a :class:`task_pool`."""
+    return _worker[0]
 
 
 class task_pool:

@@ -533,3 +533,43 @@ def test_a_second_ensemble_on_the_same_folder_is_refused_before_it_starts_a_seed
         main(["ensemble", str(scene), "--seeds", "1", "--t-end", "0.05", "-o", str(folder), "--first-seed", "9"]) == 0
     )
     assert not (folder / LOCK_FILE).exists()
+
+
+def test_an_ensemble_that_runs_out_of_disk_stops_with_exit_4_and_resumable_seeds(scene, tmp_path):
+    """Two seeds writing a frame every step onto a 16 MiB tmpfs: the disk fills within seconds. The
+    ensemble used to report a generic error (exit 1) and leave files no rerun could continue; now it
+    stops with exit 4, the other seed stops with a checkpoint, every seed file left is readable and
+    planned "resume" (one without a checkpoint yet is removed: planned "run"), and no summary is
+    attempted. Skipped where a tmpfs cannot be mounted."""
+    import os
+    import signal
+    import subprocess
+
+    small = tmp_path / "tmpfs"
+    small.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=16m", "tmpfs", str(small)], capture_output=True, text=True)
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({r.stderr.strip() or 'not permitted'})")
+    over = ["--set", "output.interval=0.001", "--set", "output.checkpoint_interval=0.2"]
+    proc = _ensemble_process(scene, small / "e", "--seeds", "2", *over)
+    try:
+        out, err = proc.communicate(timeout=240)  # fills in 5-30 s on 2 loaded cores; a hang fails here
+        assert proc.returncode == 4, err
+        assert "I/O error" in err and "run the same command again to continue" in err and "Traceback" not in err
+        assert not (small / "e" / "summary.json").exists()
+        moved = tmp_path / "moved"  # room again: the folder copied to a larger disk
+        shutil.copytree(small / "e", moved)
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate(timeout=30)
+        subprocess.run(["umount", "-l", str(small)], capture_output=True)
+    overrides = ["output.interval=0.001", "output.checkpoint_interval=0.2"]
+    plans = Ensemble(scene, 2, moved, overrides=overrides, t_end=20).plan()
+    assert {p.action for p in plans} <= {"resume", "run"} and "resume" in {p.action for p in plans}
+    for p in plans:
+        if p.path.exists():
+            with RunFile(p.path) as run:
+                assert run.n_frames > 0

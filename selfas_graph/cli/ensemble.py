@@ -24,7 +24,7 @@ import time
 
 from ..ensemble import Ensemble, EnsembleError, format_table, write_summary
 from ..parallel import task_pool
-from .main import EXIT_NUMERICAL, CliError
+from .main import EXIT_NUMERICAL, CliError, CliIOError
 
 
 def _times(text):
@@ -199,9 +199,13 @@ def _run_locked(args, pool, held):
 
         def report(r):
             done[0] += 1
-            what = {"finished": "finished", "interrupted": "interrupted", "failed": "failed", "error": "error"}.get(
-                r.get("status"), str(r.get("status"))
-            )
+            what = {
+                "finished": "finished",
+                "interrupted": "interrupted",
+                "failed": "failed",
+                "error": "error",
+                "io_error": "stopped by an I/O error",
+            }.get(r.get("status"), str(r.get("status")))
             extra = f": {r['message']}" if r.get("message") else ""
             t = f" at t = {r['t']:.6g}" if r.get("t") is not None else ""
             print(
@@ -218,6 +222,17 @@ def _run_locked(args, pool, held):
             f"ran {sum(r is not None for r in results)} of {len(tasks)} seeds in {time.perf_counter() - t0:.1f} s",
             flush=True,
         )
+        io = [r for r in results if r is not None and r.get("status") == "io_error"]
+        if io:  # no summary: there is no room for it either
+            from ..ensemble import ABANDONED
+
+            what = "; ".join(f"seed {r['seed']}: {r['message']}" for r in io)
+            raise CliIOError(
+                f"writing into {folder} failed ({what}). "
+                f"Every seed file keeps its frames and checkpoint; free some space (or fix the folder) and "
+                f"run the same command again to continue",
+                hard_exit=bool(ABANDONED),
+            )
     summary = ens.summarise(times=times, flux_radius=args.flux_radius)
     if summary["n_seeds"]:
         print()
