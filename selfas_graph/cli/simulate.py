@@ -577,7 +577,8 @@ def _io_failure(exc, writer, out, ckpt, checkpointer, sim):
     )
     if world.size > 1:
         print(f"selfas-graph simulate: error: {msg}", file=sys.stderr, flush=True)
-        world.Abort(4)
+        world.Abort(4)  # every rank ends (the others wait in a collective call)
+        os._exit(4)  # MPICH's MPI_Abort may return to its caller while the launcher ends the job: print once
     raise CliIOError(msg, hard_exit=not clean) from None
 
 
