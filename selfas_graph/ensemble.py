@@ -36,6 +36,7 @@ import functools
 import io
 import json
 import math
+import os
 import shlex
 import signal
 import time
@@ -56,18 +57,20 @@ from .io.checkpoint import (
     CheckpointError,
     checkpoint_meta,
     checkpoint_path,
+    failure_meta,
     read_checkpoint,
-    write_checkpoint,
+    write_failure,
 )
-from .io.h5md import RunFile, RunFileError, RunWriter, run_provenance
+from .io.h5md import DiskFullError, RunFile, RunFileError, RunWriter, is_io_error, run_provenance
 from .io.scenario import ScenarioError, load_scenario, scenario_from_text
 from .model.simulation import NumericalFailure, RunInterrupted, Simulation
 from .model.state import PlacementError
-from .parallel import task_pool
+from .parallel import is_pool_worker, parent_gone, task_pool
 
 __all__ = [
     "Ensemble",
     "EnsembleError",
+    "FolderLock",
     "FRAME_MEASURES",
     "Frame",
     "Measure",
@@ -187,13 +190,14 @@ class SeedPlan:
 
 # ----------------------------------------------------------------------------- one seed
 class _StopOnSignal:
-    """``stop`` hook of :meth:`Simulation.run`: true once SIGTERM or SIGINT arrived (then a checkpoint is written)."""
+    """``stop`` hook of :meth:`Simulation.run`: true once SIGTERM or SIGINT arrived, or the ensemble's
+    process died (in a pool worker); then a checkpoint is written."""
 
     def __init__(self):
         self.signum, self.old = None, {}
 
     def __call__(self):
-        return self.signum is not None
+        return self.signum is not None or parent_gone()
 
     def __enter__(self):
         for sig in (signal.SIGTERM, signal.SIGINT):
@@ -218,7 +222,8 @@ def run_seed(task: dict) -> dict:
     ``t_end``, and for "run" also ``text``, ``scenario_path``, ``overrides`` (with the
     seed's) and ``force``; ``command`` is recorded as the run's provenance. Never raises
     for a failing run: returns a dict with ``status`` "finished", "interrupted",
-    "failed" (numerical failure; the failed state goes to ``SEED.failure.h5``) or "error"
+    "failed" (numerical failure; the last good and the failed state go to ``SEED.failure.h5``), "io_error"
+    (a write failed: full disk, quota; the file stays resumable, :func:`_stop_on_io_error`) or "error"
     (with ``message``), and ``t`` (simulated time reached), ``steps``, ``wall_seconds``, ``threads``.
     """
     import numba
@@ -292,19 +297,71 @@ def run_seed(task: dict) -> dict:
             failure = path.with_name(path.stem + ".failure.h5")
             sim.flush_output(writer)  # the events and per-step rows up to the failure, as simulate does
             writer.close(status=f"failed: {exc}")
-            write_checkpoint(
-                failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step, "failure": str(exc)}
-            )
+            write_failure(failure, sim.last_good_snapshot, sim.snapshot(), failure_meta(checkpointer, sim, exc))
             out["status"], out["message"] = "failed", f"{exc} (failed state in {failure})"
         except Exception as exc:  # noqa: BLE001 - one broken seed must not lose the others; reported
             # not a numerical failure: the file stays resumable from its last checkpoint
-            out["status"], out["message"] = "error", f"{type(exc).__name__}: {exc}"
-            if writer is not None and getattr(writer, "f", None):
-                writer.close(status=f"error: {type(exc).__name__}: {exc}")
+            if is_io_error(exc):
+                out["status"], out["message"] = "io_error", _stop_on_io_error(exc, writer, sim, path, task)
+            else:
+                out["status"], out["message"] = "error", f"{type(exc).__name__}: {exc}"
+                if writer is not None and getattr(writer, "f", None):
+                    writer.close(status=f"error: {type(exc).__name__}: {exc}")
     if sim is not None:
         out["t"], out["steps"] = float(sim.state.time), int(sim.state.step)
     out["wall_seconds"] = time.perf_counter() - t0
     return out
+
+
+#: run files whose HDF5 handle failed in this process: kept referenced until the process ends
+ABANDONED = []
+
+
+def _stop_on_io_error(exc, writer, sim, path, task) -> str:
+    """End a seed whose writing failed (full disk, quota, a vanished folder) so that a rerun continues it;
+    returns the message.
+
+    A :class:`~selfas_graph.io.h5md.DiskFullError` comes before anything of the write happened:
+    the file is closed as "stopped", which the plan resumes from its checkpoint. Any other failed
+    write leaves HDF5's handle failed: it is abandoned (the file keeps its last flush; a resume drops
+    a torn row), and a pool worker then ends without freeing it (HDF5 may crash on it at exit). A
+    file this task created that has no checkpoint yet holds nothing to continue: it is removed, and
+    a rerun starts the seed again.
+    """
+    ckpt = checkpoint_path(path)
+    reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())[:300]
+    step = f"step {sim.state.step} (t = {sim.state.time:.6g})" if sim is not None else "its start"
+    if writer is not None and getattr(writer, "f", None):
+        clean = isinstance(exc, DiskFullError)
+        if clean:
+            try:
+                writer.close(status=f"stopped by an I/O error at {step}: {reason}")
+            except (OSError, RuntimeError):
+                clean = False
+        if not clean:
+            ABANDONED.append(writer)
+            if is_pool_worker():
+                _exit_quietly_at_shutdown()
+    if task["action"] == "run" and not ckpt.exists():
+        try:
+            path.unlink()
+        except OSError:
+            pass
+        return f"I/O error at {step} while writing: {reason}; nothing to continue from, the seed starts again"
+    return f"I/O error at {step} while writing: {reason}; last good checkpoint {ckpt}"
+
+
+def _exit_quietly_at_shutdown():
+    import atexit
+    import os as _os
+    import sys
+
+    def _exit():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        _os._exit(0)
+
+    atexit.register(_exit)  # runs before the interpreter frees the abandoned HDF5 objects
 
 
 def run_to_short_circuit(task: dict) -> dict:
@@ -388,7 +445,9 @@ class _RaiseOnTerm:
             signal.signal(signal.SIGTERM, self.old)
 
 
-def run_tasks(fn: Callable[[dict], dict], tasks: list, pool, report=None, stop_statuses=("interrupted",)) -> list:
+def run_tasks(
+    fn: Callable[[dict], dict], tasks: list, pool, report=None, stop_statuses=("interrupted", "io_error")
+) -> list:
     """Run ``fn(task)`` for every task on ``pool`` (a :class:`~selfas_graph.parallel.task_pool`); results in task order.
 
     Tasks are handed out in order, one per idle worker (none waits in a queue), and
@@ -415,6 +474,8 @@ def run_tasks(fn: Callable[[dict], dict], tasks: list, pool, report=None, stop_s
             i = running.pop(fut)
             results[i] = _result(fut)
             report(results[i])
+            if results[i].get("status") == "io_error" and not stopping and not pool.mpi:
+                _terminate_workers()  # the other running seeds stop with a checkpoint while there is room
             stopping |= results[i].get("status") in stop_statuses
 
     with _RaiseOnTerm():
@@ -422,7 +483,7 @@ def run_tasks(fn: Callable[[dict], dict], tasks: list, pool, report=None, stop_s
             while waiting or running:
                 while waiting and not stopping and len(running) < pool.workers:
                     i = waiting.pop()
-                    running[pool.executor.submit(fn, tasks[i])] = i
+                    running[pool.submit(fn, tasks[i])] = i
                 if not running:
                     break
                 done, _ = concurrent.futures.wait(list(running), return_when=concurrent.futures.FIRST_COMPLETED)
@@ -430,12 +491,16 @@ def run_tasks(fn: Callable[[dict], dict], tasks: list, pool, report=None, stop_s
         except KeyboardInterrupt:
             stopping = True
             if not pool.mpi:
-                import multiprocessing
-
-                for child in multiprocessing.active_children():
-                    child.terminate()  # SIGTERM: a running seed stops after its step with a checkpoint
+                _terminate_workers()
             collect(list(running))
     return results
+
+
+def _terminate_workers():
+    import multiprocessing
+
+    for child in multiprocessing.active_children():
+        child.terminate()  # SIGTERM: a running seed stops after its step with a checkpoint
 
 
 def _result(fut):
@@ -619,16 +684,17 @@ class Ensemble:
         """Run every seed that is not done; returns :func:`run_seed`'s results (None: never started).
 
         ``pool`` is an entered :class:`~selfas_graph.parallel.task_pool`; by default one of
-        ``jobs`` workers is made here. The folder is created; nothing is run for seeds
-        whose files are done or failed.
+        ``jobs`` workers is made here. The folder is created and locked (:class:`FolderLock`:
+        EnsembleError if another ensemble runs in it); nothing is run for seeds whose files are
+        done or failed.
         """
-        plans = self.plan()
         make_folder(self.folder)
-        tasks = self.tasks(plans)
-        if pool is None:
-            with task_pool(jobs) as own:
-                return run_tasks(run_seed, tasks, own, report)
-        return run_tasks(run_seed, tasks, pool, report)
+        with FolderLock(self.folder):
+            tasks = self.tasks(self.plan())
+            if pool is None:
+                with task_pool(jobs) as own:
+                    return run_tasks(run_seed, tasks, own, report)
+            return run_tasks(run_seed, tasks, pool, report)
 
     def summarise(self, times=None, measures=None, flux_radius=None) -> dict:
         """:func:`summarise` over the seed files present (default times: quarters of the end time)."""
@@ -647,9 +713,107 @@ class Ensemble:
         return out
 
 
+#: lock file of a running ensemble in its folder
+LOCK_FILE = ".ensemble.lock"
+
+
+class FolderLock:
+    """The exclusive lock of an ensemble's folder, held while an ensemble runs seeds in it (a context manager).
+
+    An OS lock on ``FOLDER/.ensemble.lock`` (``flock``; ``msvcrt.locking`` on Windows): the
+    kernel drops it when the process ends, however it ends, so a lock file left by a crash is
+    stale and simply taken over. Its text names the holder (process id, host, start time) for the
+    message of a second ensemble, which is refused at once. The file is removed on release.
+    """
+
+    def __init__(self, folder):
+        self.folder = Path(folder)
+        self.path = self.folder / LOCK_FILE
+        self.fd = None
+
+    def acquire(self) -> "FolderLock":
+        """Take the lock; EnsembleError naming the folder and the holder if another process has it."""
+        while True:
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as exc:
+                raise EnsembleError(f"cannot lock the output folder {self.folder}: {exc.strerror or exc}") from None
+            if not _try_lock(fd):
+                holder = _read_holder(fd)
+                os.close(fd)
+                raise EnsembleError(
+                    f"the output folder {self.folder} is in use by another ensemble ({holder}); wait for it to "
+                    f"end (or stop it), or give another folder with -o"
+                )
+            try:  # the holder before may have removed the file after this opened it: lock the file there now
+                same = os.path.samestat(os.fstat(fd), os.stat(self.path))
+            except OSError:
+                same = False
+            if same:
+                break
+            os.close(fd)
+        import socket
+
+        text = f"pid {os.getpid()} on {socket.gethostname()}, since {time.strftime('%Y-%m-%d %H:%M:%S')}\n"
+        os.ftruncate(fd, 0)
+        os.lseek(fd, 0, os.SEEK_SET)
+        os.write(fd, text.encode())
+        self.fd = fd
+        return self
+
+    def release(self) -> None:
+        if self.fd is None:
+            return
+        try:
+            os.unlink(self.path)  # while still held: a waiting process then finds it gone and retries
+        except OSError:
+            pass
+        os.close(self.fd)
+        self.fd = None
+
+    def __enter__(self):
+        return self.acquire()
+
+    def __exit__(self, *exc):
+        self.release()
+        return False
+
+
+def _try_lock(fd) -> bool:
+    try:
+        import fcntl
+    except ImportError:  # Windows
+        import msvcrt
+
+        try:
+            msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)
+            return True
+        except OSError:
+            return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        return True
+    except OSError:
+        return False
+
+
+def _read_holder(fd) -> str:
+    try:
+        os.lseek(fd, 0, os.SEEK_SET)
+        text = os.read(fd, 200).decode("utf-8", "replace").strip()
+    except OSError:
+        text = ""
+    return text or "a process that has not written its name yet"
+
+
 def make_folder(folder) -> Path:
     """Create ``folder`` (and its parents) if missing; EnsembleError if that is impossible."""
     folder = Path(folder)
+    if folder.is_symlink() and not folder.exists():
+        raise EnsembleError(
+            f"the output folder {folder} is a symbolic link to {os.readlink(folder)}, which does not exist; "
+            f"create that folder or give another one"
+        )
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -20,6 +20,7 @@ on every rank over all rows, so they do not depend on the number of ranks either
 from __future__ import annotations
 
 import os
+import threading
 
 import numpy as np
 
@@ -239,8 +240,85 @@ def set_job_threads(threads=None) -> int:
     return threads
 
 
-def init_job_worker(threads=None) -> None:
-    """Initializer of a pool worker: :func:`set_job_threads`, and SIGINT and SIGTERM ignored between tasks.
+#: how often (seconds) a pool worker looks whether its launching process still lives
+PARENT_POLL = 0.5
+#: how long (seconds) a worker whose launcher died lets its running task stop (a seed stops after its
+#: step and writes a checkpoint, well under a second for the shipped scenes) before it exits anyway
+ORPHAN_GRACE = 30.0
+
+_orphaned = threading.Event()  # set in a worker once its launching process has died
+_job = threading.Lock()  # held while a task runs in this worker
+
+
+def parent_gone() -> bool:
+    """True in a pool worker whose launching process has died: a running task should stop now
+    (a seed, with a checkpoint, as on SIGTERM); the worker then exits. False everywhere else."""
+    return _orphaned.is_set()
+
+
+def _parent_dead(parent_pid) -> bool:
+    if os.getppid() != parent_pid:  # re-parented (POSIX): the launcher is gone
+        return True
+    import multiprocessing
+
+    parent = multiprocessing.parent_process()  # a spawned worker's handle on its launcher (every platform)
+    return parent is not None and not parent.is_alive()
+
+
+def _watch_parent(parent_pid) -> None:
+    """A worker's daemon thread: once the launcher is dead, mark the worker orphaned, give a running
+    task up to :data:`ORPHAN_GRACE` seconds to stop, and end the process (an orphan would otherwise wait
+    for tasks that never come, holding its memory, for good)."""
+    while not _parent_dead(parent_pid):
+        _orphaned.wait(PARENT_POLL)
+    _orphaned.set()
+    _job.acquire(timeout=ORPHAN_GRACE)
+    os._exit(1)
+
+
+def _on_death_signal(signum, frame) -> None:
+    """Linux's parent-death signal: the launcher (or the thread that started this worker) ended."""
+    if _parent_dead(_watched[0]):
+        _orphaned.set()
+
+
+_watched = [None]
+
+
+def watch_parent(parent_pid=None) -> None:
+    """Make this process end with ``parent_pid`` (default its parent now): a daemon thread polls for the
+    parent's death every :data:`PARENT_POLL` seconds (every platform), and on Linux the kernel signals it
+    at once (``prctl(PR_SET_PDEATHSIG)``, the fast path). Then :func:`parent_gone` is true, a running
+    task stops and the process exits."""
+    import signal
+    import sys
+
+    parent_pid = os.getppid() if parent_pid is None else int(parent_pid)
+    _watched[0] = parent_pid
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            signal.signal(signal.SIGUSR1, _on_death_signal)
+            pr_set_pdeathsig = 1
+            ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, int(signal.SIGUSR1), 0, 0, 0)
+        except (OSError, AttributeError, ValueError):  # no libc symbol, or not the main thread: poll only
+            pass
+    threading.Thread(target=_watch_parent, args=(parent_pid,), name="parent-watch", daemon=True).start()
+
+
+def run_job(fn, task):
+    """Run ``fn(task)`` in a pool worker (the pool's task wrapper): while it runs the worker does not
+    exit on its launcher's death (the task stops first); an orphaned worker starts no task."""
+    with _job:
+        if _orphaned.is_set():
+            os._exit(1)
+        return fn(task)
+
+
+def init_job_worker(threads=None, parent_pid=None) -> None:
+    """Initializer of a pool worker: :func:`set_job_threads`, SIGINT and SIGTERM ignored between tasks,
+    and :func:`watch_parent` (the worker ends when its launcher dies, even by SIGKILL).
 
     A task that can stop cleanly installs its own handlers while it runs (a seed writes a
     checkpoint); an idle worker must survive the signal, or the whole pool would break.
@@ -250,6 +328,16 @@ def init_job_worker(threads=None) -> None:
     set_job_threads(threads)
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, signal.SIG_IGN)
+    _worker[0] = True
+    watch_parent(parent_pid)
+
+
+_worker = [False]
+
+
+def is_pool_worker() -> bool:
+    """True in a worker process (or MPI worker rank) of a :class:`task_pool`."""
+    return _worker[0]
 
 
 class task_pool:
@@ -303,7 +391,7 @@ class task_pool:
             max_workers=self.jobs,
             mp_context=multiprocessing.get_context("spawn"),
             initializer=init_job_worker,
-            initargs=(self.threads,),
+            initargs=(self.threads, os.getpid()),
         )
         return self
 
@@ -318,6 +406,10 @@ class task_pool:
 
             numba.set_num_threads(self._restore)
         return False
+
+    def submit(self, fn, task):
+        """Hand ``fn(task)`` to a worker (:func:`run_job`); returns its future."""
+        return self.executor.submit(run_job, fn, task)
 
     @property
     def is_worker(self) -> bool:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import os
 import re
 import shutil
 import tempfile
@@ -117,11 +118,35 @@ def check_contract(res: Result, allowed=(0, 2, 3)):
 
 
 def tree(folder: Path) -> dict:
-    """Every file under ``folder`` (relative path -> bytes; directories -> None)."""
+    """Every file under ``folder`` (relative path -> bytes; directories -> None; a symbolic link ->
+    ("link", its target), so a link changed or replaced counts as a change)."""
     out = {}
     for p in sorted(folder.rglob("*")):
-        out[str(p.relative_to(folder))] = None if p.is_dir() else p.read_bytes()
+        key = str(p.relative_to(folder))
+        out[key] = ("link", os.readlink(p)) if p.is_symlink() else None if p.is_dir() else p.read_bytes()
     return out
+
+
+#: float datasets where NaN means "none" by design: a floating tip's potential, the resistance of an
+#: open circuit (docs/output.md); every other float dataset of a file we write is finite
+NAN_MEANS_NONE = {"graph/potential", "graph/conductor_potential", "observables/effective_resistance/value"}
+
+
+def non_finite_datasets(path: Path) -> list:
+    """Float datasets of an HDF5 file holding NaN or inf (but those of :data:`NAN_MEANS_NONE`)."""
+    bad = []
+    with h5py.File(path, "r") as f:
+        f.visititems(
+            lambda n, o: (
+                bad.append(n)
+                if isinstance(o, h5py.Dataset)
+                and o.dtype.kind == "f"
+                and n not in NAN_MEANS_NONE
+                and not np.isfinite(o[()]).all()
+                else None
+            )
+        )
+    return bad
 
 
 def skip_known(bug):

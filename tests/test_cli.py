@@ -130,7 +130,7 @@ def test_numerical_failure_exits_3_with_diagnosis_and_no_nan_in_file(scenario, t
     with h5py.File(out, "r") as f:
         assert f["parameters/selfas_graph"].attrs["status"].startswith("failed")
         assert np.isfinite(f["particles/tips/position/value"][:]).all()
-    # the failed state is kept aside for inspection, with the diagnosis
+    # the last good state (here the start) and the failed one are kept aside for inspection, with the diagnosis
     from selfas_graph.io.checkpoint import read_checkpoint
 
     snap, meta = read_checkpoint(tmp_path / "run.failure.h5")

@@ -278,47 +278,39 @@ def test_seed_file_is_what_simulate_writes(scene, tmp_path):
     shutil.rmtree(tmp_path / "e")
 
 
-def test_sigterm_stops_the_seeds_with_checkpoints_and_a_rerun_continues(scene, tmp_path):
-    """SIGTERM to the launching process: the running seeds stop after a step with a checkpoint
-    (exit code 130, no further seed started); the same command again resumes them."""
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
+def test_a_signal_stops_the_seeds_with_checkpoints_and_a_rerun_continues(scene, tmp_path, sig):
+    """SIGTERM or SIGINT to the launching process: the running seeds stop after a step with a checkpoint
+    (exit code 130, no further seed started), no process of the ensemble is left, and the same command
+    again resumes them."""
     import os
     import signal
-    import subprocess
-    import sys
     import time
 
-    cmd = [
-        sys.executable,
-        "-m",
-        "selfas_graph.cli.main",
-        "ensemble",
-        str(scene),
-        "--seeds",
-        "3",
-        "--jobs",
-        "2",
-        "--t-end",
-        "20",
-        "-o",
-        str(tmp_path / "e"),
-    ]
-    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-    first = [seed_path(tmp_path / "e", s) for s in (3, 4)]
-    deadline = time.monotonic() + 90  # start-up and kernel loading; a run to t = 20 takes minutes
-    while not all(p.exists() for p in first) and time.monotonic() < deadline:
-        time.sleep(0.2)
-    time.sleep(1.0)
-    proc.send_signal(signal.SIGTERM)
-    out, err = proc.communicate(timeout=90)
-    assert proc.returncode == 130, err
+    folder = tmp_path / "e"
+    proc = _ensemble_process(scene, folder, "--seeds", "3")
+    try:
+        first = [seed_path(folder, s) for s in (3, 4)]
+        _wait_for_seed_files(folder, (3, 4))
+        time.sleep(1.0)
+        proc.send_signal(getattr(signal, sig))
+        out, err = proc.communicate(timeout=90)  # a step and a checkpoint; 90 s: a loaded machine
+        assert proc.returncode == 130, err
+        if Path("/proc/self/stat").exists():
+            assert _group_gone(proc.pid, 10) == [], "processes of the stopped ensemble still run"
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate(timeout=30)
     assert "rerun the same command to continue" in err and out.count("interrupted at t = ") == 2
-    assert not seed_path(tmp_path / "e", 5).exists()
+    assert not seed_path(folder, 5).exists()
     for p in first:
         assert checkpoint_path(p).exists()
         with RunFile(p) as run:
             assert run.meta["status"].startswith("interrupted at step")
-    plans = Ensemble(scene, 3, tmp_path / "e", t_end=20).plan()
+    plans = Ensemble(scene, 3, folder, t_end=20).plan()
     assert [p.action for p in plans] == ["resume", "resume", "run"]
 
 
@@ -441,3 +433,183 @@ def test_fit_errors_and_current_groups_in_the_summary(scene, tmp_path, monkeypat
         assert "k" in s["measures"][name] and "median" in s["measures"][name]
     for name in ("fractal_dimension", "rg_dimension"):
         assert "fit_err_rms" in s["measures"][name]
+
+
+def test_a_failed_seed_keeps_its_last_good_state_and_stores_no_nan(scene, tmp_path):
+    """Charges of 1e10 blow seed 3 up at its first step: the seed is "failed", and its failure file holds
+    the last state that passed the checks (verified, resumable) and the failed one without a NaN."""
+    from hostile import non_finite_datasets
+    from selfas_graph.io.checkpoint import read_checkpoint
+
+    ens = Ensemble(scene, [3], tmp_path, overrides=["rods.magnetic_charge.value=1e10"], t_end=0.01)
+    (r,) = ens.run()
+    assert r["status"] == "failed" and "numerical failure at step 1" in r["message"]
+    failure = tmp_path / "seed_0003.failure.h5"
+    snap, meta = read_checkpoint(failure)
+    assert int(snap["step"]) == 0 and meta["failed_step"] == 1
+    for path in tmp_path.glob("*.h5"):
+        assert non_finite_datasets(path) == [], path.name
+
+
+# ----------------------------------------------------------------------------- processes that end with the ensemble
+def _group_alive(pgid) -> list:
+    """Live processes (zombies left out: they hold no memory and wait only to be reaped) of process group ``pgid``."""
+    import os
+
+    alive = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:  # ended meanwhile
+            continue
+        if fields[0] != "Z" and int(fields[2]) == pgid:  # state, ppid, pgrp
+            alive.append(int(entry))
+    return alive
+
+
+def _group_gone(pgid, timeout) -> list:
+    """Wait up to ``timeout`` seconds for process group ``pgid`` to end; the processes still alive."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while _group_alive(pgid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    return _group_alive(pgid)
+
+
+def _ensemble_process(scene, folder, *extra):
+    """``selfas-graph ensemble`` of seeds 3.. on 2 workers to t = 20 (minutes: it is stopped long before),
+    in a session of its own, so that the test finds and, whatever happens, kills every process of it."""
+    import os
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "selfas_graph.cli.main", "ensemble", str(scene), "--jobs", "2", "--t-end", "20"]
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    return subprocess.Popen(
+        [*cmd, "-o", str(folder), *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        start_new_session=True,
+    )
+
+
+def _wait_for_seed_files(folder, seeds, timeout=90):
+    """Until the seeds' run files exist (start-up and kernel loading take 5-20 s on a loaded 2-core machine)."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while not all(seed_path(folder, s).exists() for s in seeds) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert all(seed_path(folder, s).exists() for s in seeds), "the seeds did not start"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="lists processes through /proc")
+def test_kill_9_of_the_ensemble_leaves_no_process_of_it_and_every_seed_resumes(scene, tmp_path):
+    """SIGKILL of the ensemble's process (a batch system, the OOM killer): its workers and the resource
+    tracker used to finish their seeds and then wait, idle, for good (SIGTERM did not end them). Now each
+    worker sees its launcher gone within PARENT_POLL (0.5 s), stops its seed with a checkpoint and exits:
+    10 s later (a step and a checkpoint of this 60-rod scene take milliseconds; the rest is margin for a
+    loaded machine) no process of the ensemble lives, and the same command resumes both seeds."""
+    import os
+    import signal
+    import time
+
+    folder = tmp_path / "e"
+    proc = _ensemble_process(scene, folder, "--seeds", "3")
+    try:
+        _wait_for_seed_files(folder, (3, 4))
+        time.sleep(1.0)
+        proc.kill()
+        proc.wait(timeout=30)
+        assert _group_gone(proc.pid, 10) == [], "processes of the killed ensemble still run"
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate(timeout=30)
+    plans = Ensemble(scene, 3, folder, t_end=20).plan()
+    assert [p.action for p in plans] == ["resume", "resume", "run"]
+
+
+def test_a_second_ensemble_on_the_same_folder_is_refused_before_it_starts_a_seed(scene, tmp_path, capsys):
+    """Two ensembles on one folder at once: the second stops with exit 2 naming the folder and the
+    holder, before it reads or starts any seed; the first runs on. Its lock is released on exit, and a
+    lock file left by a crash (no process holds it any more) is taken over."""
+    import os
+    import signal
+
+    from selfas_graph.ensemble import LOCK_FILE
+
+    folder = tmp_path / "e"
+    proc = _ensemble_process(scene, folder, "--seeds", "2")
+    try:
+        _wait_for_seed_files(folder, (3, 4))
+        before = {p.name: p.stat().st_mtime_ns for p in folder.iterdir() if p.name != LOCK_FILE}
+        rc = main(["ensemble", str(scene), "--seeds", "3", "--t-end", "20", "-o", str(folder)])
+        err = capsys.readouterr().err
+        assert rc == 2 and f"the output folder {folder} is in use by another ensemble (pid {proc.pid}" in err
+        assert not seed_path(folder, 5).exists()
+        assert proc.poll() is None  # the first one runs on
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=90)
+        assert proc.returncode == 130
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate(timeout=30)
+    assert set(before) <= {p.name for p in folder.iterdir()}
+    assert not (folder / LOCK_FILE).exists()  # released on exit
+    (folder / LOCK_FILE).write_text("pid 999999 on a host that crashed\n")  # stale: nobody holds it
+    assert (
+        main(["ensemble", str(scene), "--seeds", "1", "--t-end", "0.05", "-o", str(folder), "--first-seed", "9"]) == 0
+    )
+    assert not (folder / LOCK_FILE).exists()
+
+
+def test_an_ensemble_that_runs_out_of_disk_stops_with_exit_4_and_resumable_seeds(scene, tmp_path):
+    """Two seeds writing a frame every step onto a 16 MiB tmpfs: the disk fills within seconds. The
+    ensemble used to report a generic error (exit 1) and leave files no rerun could continue; now it
+    stops with exit 4, the other seed stops with a checkpoint, every seed file left is readable and
+    planned "resume" (one without a checkpoint yet is removed: planned "run"), and no summary is
+    attempted. Skipped where a tmpfs cannot be mounted."""
+    import os
+    import signal
+    import subprocess
+
+    small = tmp_path / "tmpfs"
+    small.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=16m", "tmpfs", str(small)], capture_output=True, text=True)
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({r.stderr.strip() or 'not permitted'})")
+    over = ["--set", "output.interval=0.001", "--set", "output.checkpoint_interval=0.2"]
+    proc = _ensemble_process(scene, small / "e", "--seeds", "2", *over)
+    try:
+        out, err = proc.communicate(timeout=240)  # fills in 5-30 s on 2 loaded cores; a hang fails here
+        assert proc.returncode == 4, err
+        assert "I/O error" in err and "run the same command again to continue" in err and "Traceback" not in err
+        assert not (small / "e" / "summary.json").exists()
+        moved = tmp_path / "moved"  # room again: the folder copied to a larger disk
+        shutil.copytree(small / "e", moved)
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate(timeout=30)
+        subprocess.run(["umount", "-l", str(small)], capture_output=True)
+    overrides = ["output.interval=0.001", "output.checkpoint_interval=0.2"]
+    plans = Ensemble(scene, 2, moved, overrides=overrides, t_end=20).plan()
+    assert {p.action for p in plans} <= {"resume", "run"} and "resume" in {p.action for p in plans}
+    for p in plans:
+        if p.path.exists():
+            with RunFile(p.path) as run:
+                assert run.n_frames > 0

@@ -8,6 +8,7 @@ problem, a numerical failure exit code 3, never a traceback, and no existing fil
 from __future__ import annotations
 
 import copy
+import os
 
 import h5py
 import numpy as np
@@ -19,8 +20,10 @@ from hostile import (
     Result,
     check_contract,
     cli,
+    non_finite_datasets,
     scenario_file,
     to_toml,
+    tree,
 )
 from selfas_graph.io.checkpoint import FORMAT as CHECKPOINT_FORMAT
 
@@ -310,3 +313,57 @@ def test_bug_deeply_nested_toml(where, workdir, capsys):
         scen.write_text(BASE_TEXT)
     extra = [f"--set=rods.count={'[' * depth}{']' * depth}"] if where == "set_value" else []
     check_contract(cli(capsys, "simulate", scen, "--dry-run", *extra), allowed=(2,))
+
+
+@pytest.mark.parametrize("value", ["1e10", "1e30"])
+def test_bug_failure_file_holds_the_nan_of_the_failed_step(value, workdir, capsys):
+    """Charges of 1e10 blow the scene up at step 1 (exit 3, the term named). The failure file held
+    the failed step's NaN velocities; now it holds the last finite state (the run's start here,
+    verified and resumable) and the failed step's values with the non-finite entries coded apart."""
+    from selfas_graph.io.checkpoint import read_checkpoint
+
+    out = workdir / "out.h5"
+    res = cli(
+        capsys,
+        "simulate",
+        scenario_file(workdir),
+        "-o",
+        out,
+        "--progress",
+        "none",
+        f"--set=rods.magnetic_charge.value={value}",
+    )
+    check_contract(res, allowed=(3,))
+    failure = workdir / "out.failure.h5"
+    for path in sorted(workdir.glob("*.h5")):
+        assert non_finite_datasets(path) == [], path.name
+    snap, meta = read_checkpoint(failure)  # refuses a non-finite snapshot
+    assert int(snap["step"]) == 0 and "numerical failure at step 1" in meta["failure"]
+    with h5py.File(failure, "r") as f:
+        failed = f["failed"]
+        assert failed.attrs["step"] == 1
+        code = failed["nonfinite/velocity"][()]
+        assert code.shape == failed["velocity"].shape == (8, 3) and code.any()
+        assert set(np.unique(code)) <= {0, 1, 2, 3}  # finite, NaN, +inf, -inf
+        assert np.all(failed["velocity"][()][code != 0] == 0.0)
+        assert np.isfinite(failed["velocity"].attrs["largest_finite"])
+
+
+@pytest.mark.parametrize("command", ["simulate", "plot", "export", "ensemble"])
+def test_bug_a_dangling_symbolic_link_as_the_output(command, workdir, capsys, real_run):
+    """``-o dang.h5`` where dang.h5 is a symbolic link into a folder that does not exist: simulate
+    removed the link after its failed write, plot and export replaced it by a regular file (ensemble,
+    given it as its folder, said only "File exists"). Now every command refuses it (exit 2, naming the link and where it points) and leaves it as it was."""
+    link = workdir / "dang.h5"
+    link.symlink_to(workdir / "nowhere" / "x.h5")
+    args = {
+        "simulate": ["simulate", scenario_file(workdir), "--progress", "none"],
+        "plot": ["plot", real_run["run"]],
+        "export": ["export", real_run["run"], "--format", "xyz"],
+        "ensemble": ["ensemble", scenario_file(workdir), "--seeds", "1"],
+    }[command]
+    before = tree(workdir)
+    res = cli(capsys, *args, "-o", link)
+    _expect_usage_error(res, "dang.h5", "symbolic link")
+    assert tree(workdir) == before
+    assert link.is_symlink() and os.readlink(link) == str(workdir / "nowhere" / "x.h5")

@@ -142,3 +142,41 @@ def test_numerical_failure_stops_every_rank_with_one_message(scene):
     assert res.returncode == 3, res.stderr
     assert res.stderr.count("numerical failure at step 1") == 1, res.stderr
     assert (scene / "fail.failure.h5").exists()
+
+
+def test_an_io_error_under_mpi_aborts_every_rank_with_exit_4(scene):
+    """A file-size limit (RLIMIT_FSIZE, as a quota) stops rank 0's writing at its second frame: rank 0
+    prints the I/O error once and calls MPI_Abort(4), which ends every rank (none is left waiting in a
+    collective call) and gives mpiexec's exit code 4; the run file keeps its flushed frame, readable and
+    finite. 9 MB: above the first frame's reservation for this scene (5.3 MiB), below two of them; a
+    limit that lets a checkpoint be written first takes 30 s and more on 2 loaded cores. (MPICH's
+    MPI_Abort returned to its caller, which then printed the message a second time.)"""
+    import os
+    import resource
+    import subprocess
+    import sys
+
+    from runfiles import TIMEOUT
+
+    def limit():
+        resource.setrlimit(resource.RLIMIT_FSIZE, (9_000_000, 9_000_000))
+
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("PMI_", "HYDRA_", "OMPI_", "MPI_"))}
+    env["NUMBA_NUM_THREADS"] = "1"
+    args = ["-m", "selfas_graph.cli.main", "simulate", "scene.toml", "-o", "quota.h5", "--progress", "none"]
+    args += ["--set", "output.interval=0.0005", "--t-end", "20"]
+    res = subprocess.run(
+        [MPIEXEC, "-n", "2", sys.executable, *args],
+        cwd=scene,
+        env=env,
+        preexec_fn=limit,
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT,
+    )
+    assert res.returncode == 4, res.stderr
+    assert res.stderr.count("error: I/O error at step") == 1 and "MPI_Abort" in res.stderr, res.stderr
+    assert "Traceback" not in res.stderr and "--resume quota.h5" in res.stderr
+    with h5py.File(scene / "quota.h5", "r") as f:
+        assert f["particles/tips/position/value"].shape[0] >= 1
+        assert np.isfinite(f["particles/tips/position/value"][()]).all()

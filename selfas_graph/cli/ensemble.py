@@ -24,7 +24,7 @@ import time
 
 from ..ensemble import Ensemble, EnsembleError, format_table, write_summary
 from ..parallel import task_pool
-from .main import EXIT_NUMERICAL, CliError
+from .main import EXIT_NUMERICAL, CliError, CliIOError
 
 
 def _times(text):
@@ -124,7 +124,28 @@ def _make(folder):
         raise CliError(str(exc)) from None
 
 
+def _lock(folder, held):
+    """Lock the ensemble's folder for this process (once): a second ensemble there is refused (exit 2)."""
+    from ..ensemble import FolderLock
+
+    if held:
+        return
+    try:
+        held.append(FolderLock(folder).acquire())
+    except EnsembleError as exc:
+        raise CliError(str(exc)) from None
+
+
 def _run(args, pool):
+    held = []
+    try:
+        return _run_locked(args, pool, held)
+    finally:
+        for lock in held:
+            lock.release()
+
+
+def _run_locked(args, pool, held):
     from pathlib import Path
 
     try:
@@ -139,6 +160,8 @@ def _run(args, pool):
             first_seed=args.first_seed,
             force=args.force,
         )
+        if not args.no_run and folder.is_dir():  # before its files are read: they may be another ensemble's
+            _lock(folder, held)
         plans = ens.plan(summary_only=args.no_run)
     except EnsembleError as exc:
         raise CliError(str(exc)) from None
@@ -170,14 +193,19 @@ def _run(args, pool):
     results = []
     if not args.no_run and count["run"] + count["resume"]:
         _make(folder)
+        _lock(folder, held)
         tasks = ens.tasks(plans)
         done = [0]
 
         def report(r):
             done[0] += 1
-            what = {"finished": "finished", "interrupted": "interrupted", "failed": "failed", "error": "error"}.get(
-                r.get("status"), str(r.get("status"))
-            )
+            what = {
+                "finished": "finished",
+                "interrupted": "interrupted",
+                "failed": "failed",
+                "error": "error",
+                "io_error": "stopped by an I/O error",
+            }.get(r.get("status"), str(r.get("status")))
             extra = f": {r['message']}" if r.get("message") else ""
             t = f" at t = {r['t']:.6g}" if r.get("t") is not None else ""
             print(
@@ -194,6 +222,17 @@ def _run(args, pool):
             f"ran {sum(r is not None for r in results)} of {len(tasks)} seeds in {time.perf_counter() - t0:.1f} s",
             flush=True,
         )
+        io = [r for r in results if r is not None and r.get("status") == "io_error"]
+        if io:  # no summary: there is no room for it either
+            from ..ensemble import ABANDONED
+
+            what = "; ".join(f"seed {r['seed']}: {r['message']}" for r in io)
+            raise CliIOError(
+                f"writing into {folder} failed ({what}). "
+                f"Every seed file keeps its frames and checkpoint; free some space (or fix the folder) and "
+                f"run the same command again to continue",
+                hard_exit=bool(ABANDONED),
+            )
     summary = ens.summarise(times=times, flux_radius=args.flux_radius)
     if summary["n_seeds"]:
         print()

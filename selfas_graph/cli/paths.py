@@ -1,7 +1,7 @@
 """Checks of the files a subcommand is about to write, shared by ``simulate`` and ``plot``.
 
 A target must be a regular file or not exist yet (never a device such as /dev/null, a
-folder, a FIFO), must not be one of the command's own inputs (a scenario, a run file),
+folder, a FIFO, a symbolic link to nothing), must not be one of the command's own inputs (a scenario, a run file),
 and must have a name the file system accepts; every refusal is a :class:`CliError`
 (exit 2) naming the path and what to do.
 """
@@ -46,6 +46,13 @@ def check_target(path, what="output file", force=False, inputs=()) -> Path:
         st = os.stat(path)
     except (FileNotFoundError, NotADirectoryError):
         st = None
+        if os.path.islink(path):
+            # written through, the link would make a file where it points (or fail there and be
+            # removed); replaced, the link itself would change: neither is what was named
+            raise CliError(
+                f"the {what} path {path} is a symbolic link to {os.readlink(path)}, which does not exist; "
+                f"give the file the link should point to, or another name"
+            ) from None
     except OSError as exc:
         if exc.errno == errno.ENAMETOOLONG:
             raise CliError(

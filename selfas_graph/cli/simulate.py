@@ -29,8 +29,9 @@ from ..io.checkpoint import (
     CheckpointError,
     checkpoint_meta,
     checkpoint_path,
+    failure_meta,
     read_checkpoint,
-    write_checkpoint,
+    write_failure,
 )
 from ..io.h5md import (
     DiskFullError,
@@ -437,7 +438,7 @@ def run(args):
         provenance = run_provenance(
             sim, scenario, shlex.join(sys.argv), run_id, scenario_path=args.scenario, mpi_ranks=world.size
         )
-        existed = out.exists()
+        existed = os.path.lexists(out)
         try:
             return RunWriter(
                 out,
@@ -504,17 +505,16 @@ def run(args):
         if writer:
             sim.flush_output(writer)
             writer.close(status=f"failed: {exc}")
-            # the failed state (possibly NaN) goes to its own file for inspection, never into the run file
+            # the failed state goes to its own file for inspection, never into the run file: beside the
+            # last state that passed the checks, its non-finite entries coded apart (no NaN is stored)
             try:
-                write_checkpoint(
-                    failure, sim.snapshot(), {**checkpointer.meta, "step": sim.state.step, "failure": str(exc)}
-                )
+                write_failure(failure, sim.last_good_snapshot, sim.snapshot(), failure_meta(checkpointer, sim, exc))
             except (OSError, RuntimeError) as io:
                 print(f"selfas-graph simulate: the failed state could not be saved ({io})", file=sys.stderr)
         print(f"selfas-graph simulate: {exc}", file=sys.stderr)
         print(
-            f"frames up to the last output interval are in {out}; the failed state is in {failure} "
-            f"(read it with selfas_graph.io.checkpoint.read_checkpoint)",
+            f"frames up to the last output interval are in {out}; the last good state and the failed one "
+            f"are in {failure} (read_checkpoint reads the first; the second is its group 'failed')",
             file=sys.stderr,
         )
         return EXIT_NUMERICAL
@@ -580,7 +580,8 @@ def _io_failure(exc, writer, out, ckpt, checkpointer, sim):
     )
     if world.size > 1:
         print(f"selfas-graph simulate: error: {msg}", file=sys.stderr, flush=True)
-        world.Abort(4)
+        world.Abort(4)  # every rank ends (the others wait in a collective call)
+        os._exit(4)  # MPICH's MPI_Abort may return to its caller while the launcher ends the job: print once
     raise CliIOError(msg, hard_exit=not clean) from None
 
 

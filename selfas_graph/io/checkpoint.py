@@ -67,15 +67,17 @@ def _stored(value):
     return arr
 
 
-def write_checkpoint(path, snapshot: dict, meta: dict) -> None:
+def write_checkpoint(path, snapshot: dict, meta: dict, failed: dict | None = None) -> None:
     """Write ``snapshot`` and ``meta`` to ``path`` atomically (write aside, fsync, rename).
 
     On any error (e.g. a full disk: ``OSError``) the temporary file is removed and the
     previous checkpoint at ``path``, if any, is left as it was; the error is raised.
+    ``failed``: a failure file's group of the failed state (:func:`write_failure`).
     """
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     need = sum(np.asarray(v).nbytes for v in snapshot.values()) + sum(len(str(v)) for v in meta.values()) + (1 << 20)
+    need += 2 * sum(np.asarray(v).nbytes for v in (failed or {}).values())
     try:
         st = os.statvfs(path.parent if str(path.parent) else ".")
         free = st.f_bavail * st.f_frsize
@@ -111,6 +113,8 @@ def write_checkpoint(path, snapshot: dict, meta: dict) -> None:
             stored = {k: g.attrs[k] for k in g.attrs}
             stored.update({k: g[k][()] for k in g})
             f.attrs["checksum"] = _digest(stored, dict(m.attrs))
+            if failed is not None:
+                _write_failed(f.create_group("failed"), failed)
             f.flush()
         fd = os.open(tmp, os.O_RDONLY)
         try:
@@ -125,6 +129,68 @@ def write_checkpoint(path, snapshot: dict, meta: dict) -> None:
             pass
         raise
     _fsync_folder(path.parent)
+
+
+#: codes of ``failed/nonfinite/KEY`` in a failure file: what an entry of the failed state was
+NONFINITE_CODES = {"finite": 0, "nan": 1, "+inf": 2, "-inf": 3}
+
+
+def nonfinite_code(arr) -> np.ndarray:
+    """int8 array of :data:`NONFINITE_CODES`, the shape of ``arr``: which entries are NaN, +inf, -inf."""
+    arr = np.asarray(arr)
+    code = np.zeros(arr.shape, dtype=np.int8)
+    code[np.isnan(arr)] = NONFINITE_CODES["nan"]
+    code[np.isposinf(arr)] = NONFINITE_CODES["+inf"]
+    code[np.isneginf(arr)] = NONFINITE_CODES["-inf"]
+    return code
+
+
+def _write_failed(g, failed: dict) -> None:
+    """The failed state into group ``g`` without a NaN or inf: each float array with its non-finite
+    entries set to 0, their codes in ``nonfinite/KEY`` and the largest finite magnitude in the
+    dataset's attribute ``largest_finite``; float scalars likewise (codes in the attribute
+    ``nonfinite_scalars``, JSON); other values as they are."""
+    scalars = {}
+    for key, value in failed.items():
+        arr = np.asarray(value)
+        is_float = arr.dtype.kind == "f" and arr.dtype.fields is None
+        finite = np.isfinite(arr) if is_float else None
+        if arr.ndim == 0 and arr.dtype.fields is None:
+            if is_float and not finite:
+                scalars[key] = "nan" if np.isnan(arr) else "+inf" if arr > 0 else "-inf"
+                g.attrs[key] = 0.0
+            else:
+                g.attrs[key] = arr.item()
+            continue
+        if not is_float:
+            g.create_dataset(key, data=arr)
+            continue
+        ds = g.create_dataset(key, data=np.where(finite, arr, 0.0))
+        ds.attrs["largest_finite"] = float(np.abs(arr[finite]).max()) if finite.any() else 0.0
+        if not finite.all():
+            g.create_dataset(f"nonfinite/{key}", data=nonfinite_code(arr))
+    g.attrs["nonfinite_scalars"] = json.dumps(scalars)
+    g.attrs["nonfinite_codes"] = json.dumps(NONFINITE_CODES)
+
+
+def write_failure(path, last_good: dict, failed: dict, meta: dict) -> None:
+    """A failure file: the checkpoint of the last state the run's checks passed (``last_good``, a
+    snapshot: finite, verified by :func:`read_checkpoint`, resumable to replay the failure) and, in
+    group ``failed``, the state at the failed step without a NaN or inf (:func:`_write_failed`: each
+    array's non-finite entries are 0 and coded in ``failed/nonfinite/KEY``). Written atomically."""
+    write_checkpoint(path, last_good, meta, failed=failed)
+
+
+def failure_meta(checkpointer, sim, exc) -> dict:
+    """The ``/meta`` of a failure file: the run's checkpoint meta, the step of the last good state
+    (``step``, that of the snapshot) and the diagnosis (``failure``, ``failed_step``)."""
+    good = sim.last_good_snapshot
+    return {
+        **checkpointer.meta,
+        "step": int(good["step"]) if good is not None else sim.state.step,
+        "failed_step": sim.state.step,
+        "failure": str(exc),
+    }
 
 
 def _fsync_folder(folder):

@@ -73,9 +73,15 @@ def parse_frames(spec, n_frames) -> np.ndarray:
 
 def output_path(run_path, out, fmt, force=False) -> Path:
     """The export's path (default: the run's name with the format's suffix), checked: never the
-    input file, never an existing file without ``force``, in an existing folder."""
+    input file, never an existing file without ``force``, never a symbolic link to nothing (it would be
+    replaced), in an existing folder."""
     run_path = Path(run_path)
     path = Path(out) if out is not None else run_path.with_suffix("." + fmt)
+    if path.is_symlink() and not path.exists():
+        raise ExportError(
+            f"the output path {path} is a symbolic link to {os.readlink(path)}, which does not exist; "
+            f"give the file the link should point to, or another name"
+        )
     if path.exists() and (path.resolve() == run_path.resolve() or os.path.samefile(path, run_path)):
         raise ExportError(f"{path} is the run file itself; choose another output with -o")
     if path.is_dir():

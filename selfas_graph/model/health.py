@@ -36,6 +36,18 @@ class NumericalFailure(RuntimeError):
 class HealthChecks:
     """The checks :class:`~.simulation.Simulation` runs after every step and on every frame."""
 
+    def _keep_last_good(self) -> None:
+        """Keep the state that has just passed the checks (the run's start, each frame): the failure
+        diagnosis evaluates its forces, and a failure file stores its snapshot (finite, resumable)."""
+        self._last_good = (self.state.position.copy(), self.state.velocity.copy())
+        self._last_good_snapshot = self.snapshot()
+
+    @property
+    def last_good_snapshot(self) -> dict | None:
+        """:meth:`snapshot` of the last state that passed the checks of :meth:`run` at its start or
+        at a frame (None before a run): finite, so a failure file can hold it in place of the failed one."""
+        return getattr(self, "_last_good_snapshot", None)
+
     def _check(self):
         integ = self.integrator
         err = integ.bond_error_before

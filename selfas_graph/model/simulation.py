@@ -322,7 +322,7 @@ class Simulation(HealthChecks, Observables):
             ops.append(checkpoint)
         if self._energy0 is None:
             self._record_initial_energy()
-        self._last_good = (self.state.position.copy(), self.state.velocity.copy())
+        self._keep_last_good()
         self._ops = ops
         t0 = time.perf_counter()
         try:
@@ -365,7 +365,7 @@ class Simulation(HealthChecks, Observables):
         obs = self.observables()
         # checked before anything of the frame is written (frame 0 too): no NaN reaches the file
         self.check_energy(obs)
-        self._last_good = (st.position.copy(), st.velocity.copy())
+        self._keep_last_good()
         self.flush_output(writer)
         writer.write_frame(st.step, st.time, st.position, st.velocity, obs)
         if self.network is not None:
