@@ -59,7 +59,7 @@ def test_grid_runs_every_point_once_and_writes_the_combined_summary(tmp_path, ca
     assert {r["circuit.delta_J0"] for r in rows} == {"1", "2"} and {r["n"] for r in rows} <= {"0", "2"}
     table = json.loads((tmp_path / "g" / "grid_summary.json").read_text())
     assert table["keys"] == ["circuit.delta_J0"] and len(table["points"]) == 2
-    assert "4 to run" in out
+    assert "grid of 2 points x 2 seeds: 4 to run" in out
     # run again: nothing new runs
     assert main(argv) == 0
-    assert "0 to run, 0 to resume, 4 done" in capsys.readouterr().out
+    assert "grid of 2 points x 2 seeds: 0 to run" in capsys.readouterr().out

@@ -94,6 +94,13 @@ def add_arguments(p):
         metavar="R",
         help="disc radius of the mid-plane flux (default: the placement box's half-diagonal in x-y)",
     )
+    p.add_argument(
+        "--grid",
+        action="append",
+        metavar="KEY=V1,V2,...",
+        help="run the seeds at every value of a scenario key (repeatable: the product of the grids); each "
+        "point in DIR/KEY=V/, the combined summary in DIR/grid_summary.json and .csv",
+    )
     p.add_argument("--no-run", action="store_true", help="summarise the seed files present; run nothing")
     p.add_argument(
         "--plot",
@@ -148,6 +155,8 @@ def _run(args, pool):
 def _run_locked(args, pool, held):
     from pathlib import Path
 
+    if args.grid:
+        return _run_grid(args, pool, held)
     try:
         name_source = Path(args.scenario).stem
         folder = Path(args.output) if args.output else Path(f"{name_source}_ensemble")
@@ -260,5 +269,88 @@ def _run_locked(args, pool, held):
         print("selfas-graph ensemble: some seeds stopped with an error (above)", file=sys.stderr)
         return 1
     if "failed" in statuses or count["failed"]:
+        return EXIT_NUMERICAL
+    return 0
+
+
+def _run_grid(args, pool, held):
+    """``--grid``: an ensemble at every grid point, all seeds in one pool, the combined summary."""
+    from pathlib import Path
+
+    from ..ensemble import run_seed, run_tasks, write_summary
+    from ..grid import GRID_PNG, Grid, parse_grid, plot_grid, write_grid_summary
+
+    folder = Path(args.output) if args.output else Path(f"{Path(args.scenario).stem}_grid")
+    try:
+        grid = Grid(
+            args.scenario,
+            parse_grid(args.grid),
+            args.seeds,
+            folder,
+            overrides=args.overrides,
+            t_end=args.t_end,
+            first_seed=args.first_seed,
+            force=args.force,
+        )
+        if args.times is not None and max(args.times) > grid.t_end:
+            raise EnsembleError(f"--times {max(args.times):g} is after the end time {grid.t_end:g}")
+        if not args.no_run and folder.is_dir():
+            _lock(folder, held)
+        plans = grid.plans(summary_only=args.no_run)
+    except EnsembleError as exc:
+        raise CliError(str(exc)) from None
+    for point, ens, plan in zip(grid.points, grid.ensembles, plans):
+        count = {a: sum(p.action == a for p in plan) for a in ("run", "resume", "done", "failed")}
+        print(
+            f"{ens.folder}/: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {grid.t_end:g}: {count['run']} to run, "
+            f"{count['resume']} to resume, {count['done']} done, {count['failed']} failed",
+            flush=True,
+        )
+    tasks = [] if args.no_run else grid.tasks(plans)
+    print(f"grid of {len(grid.points)} points x {len(grid.ensembles[0].seeds)} seeds: {len(tasks)} to run", flush=True)
+    results = []
+    if tasks:
+        _make(folder)
+        _lock(folder, held)
+        for ens in grid.ensembles:
+            _make(ens.folder)
+        done = [0]
+
+        def report(r):
+            done[0] += 1
+            extra = f": {r['message']}" if r.get("message") else ""
+            print(
+                f"[{done[0]}/{len(tasks)}] {Path(r.get('path', '?')).parent.name} seed {r.get('seed', '?')}: "
+                f"{r.get('status')}{extra}",
+                flush=True,
+            )
+
+        results = run_tasks(run_seed, tasks, pool, report)
+        io = [r for r in results if r is not None and r.get("status") == "io_error"]
+        if io:
+            from ..ensemble import ABANDONED
+
+            raise CliIOError(
+                f"writing into {folder} failed ({io[0]['message']}); free some space and run the same command again",
+                hard_exit=bool(ABANDONED),
+            )
+    table = grid.summarise(times=args.times, flux_radius=args.flux_radius)
+    try:
+        for point in table["points"]:
+            if point["summary"]["n_seeds"]:
+                write_summary(point["summary"], folder / point["folder"])
+        js, cs = write_grid_summary(table, folder)
+    except (EnsembleError, OSError) as exc:
+        raise CliError(f"cannot write the grid summary into {folder}: {exc}") from None
+    print(f"wrote {js} and {cs}")
+    if args.plot:
+        print(f"wrote {plot_grid(table, folder / GRID_PNG, title=f'{Path(args.scenario).stem} grid')}")
+    statuses = [r.get("status") for r in results if r is not None]
+    if "interrupted" in statuses or any(r is None for r in results):
+        print("selfas-graph ensemble: interrupted; rerun the same command to continue", file=sys.stderr)
+        return 130
+    if "error" in statuses:
+        return 1
+    if "failed" in statuses:
         return EXIT_NUMERICAL
     return 0
