@@ -127,9 +127,9 @@ def tree(folder: Path) -> dict:
     return out
 
 
-#: float datasets where NaN means "none" by design: a floating tip's potential, the resistance of an
-#: open circuit (docs/output.md); every other float dataset of a file we write is finite
-NAN_MEANS_NONE = {"graph/potential", "graph/conductor_potential", "observables/effective_resistance/value"}
+#: float datasets where NaN may mean "none": none since 0.4 (a floating tip's potential is flagged in
+#: graph/floating, an open circuit's effective resistance has no row), so every float dataset is checked
+NAN_MEANS_NONE: set = set()
 
 
 def non_finite_datasets(path: Path) -> list:

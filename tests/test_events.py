@@ -360,7 +360,7 @@ def test_chain_topology_is_a_filament(chain_run):
     obs = sim.observables()
     assert obs["rods/filament"] == 3 and obs["short_circuit"] == 1.0
     assert obs["total_current"] == pytest.approx(DELTA_J0 * GAP / 3.0, abs=1e-12)
-    assert obs["effective_resistance"] == pytest.approx(3.0, abs=1e-12)
+    assert obs["effective_conductance"] == pytest.approx(1 / 3.0, abs=1e-12)
 
 
 def test_current_terms_cost_nothing_before_the_short_circuit(chain_run):

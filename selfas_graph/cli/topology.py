@@ -8,6 +8,7 @@ effective resistance between the electrodes and the event history up to the fram
 from __future__ import annotations
 
 import json
+import math
 from collections import Counter
 
 import numpy as np
@@ -58,11 +59,16 @@ def analyse(run: RunFile, frame=None, t=None) -> dict:
     counts = Counter(ev.KIND_NAMES.get(int(k), str(k)) for k in events["kind"])
     sc = events[events["kind"] == ev.SHORT_CIRCUIT]
     obs = {}
-    for name in ("total_current", "effective_resistance"):
+    for name in ("total_current", "effective_conductance", "effective_resistance"):
         if name in run.observable_names():
             _, values = run.observable(name)
             k = min(g["frame"], len(values) - 1)
             obs[name] = float(values[k])
+    if "effective_conductance" in obs:  # since 0.4: 0 for an open circuit, which has no finite resistance
+        g_eff = obs["effective_conductance"]
+        obs["effective_resistance"] = 1.0 / g_eff if g_eff > 0 else None
+    elif obs.get("effective_resistance") is not None and not math.isfinite(obs["effective_resistance"]):
+        obs["effective_resistance"] = None  # files before 0.4: inf for an open circuit
     return {
         "file": str(run.path),
         "frame": g["frame"],

@@ -1,7 +1,8 @@
 """Checkpoint files: everything a run needs to continue exactly, written atomically.
 
 A checkpoint is an HDF5 file holding :meth:`Simulation.snapshot` (arrays as datasets,
-scalars as attributes of ``/snapshot``) and, in ``/meta``, the scenario text and
+scalars as attributes of ``/snapshot``; a float entry's NaN or inf, the state's "none" markers, as 0
+with its codes in ``nonfinite__KEY``, so that no file holds a NaN) and, in ``/meta``, the scenario text and
 overrides, the run's identity (``run_id``, also stored in the run file), the name of
 the run file it sits beside, the effective end time and the package version. The root
 attribute ``checksum`` is a SHA-256 of every snapshot and meta entry (name, dtype,
@@ -100,7 +101,7 @@ def write_checkpoint(path, snapshot: dict, meta: dict, failed: dict | None = Non
             f.attrs["format"] = FORMAT
             g = f.create_group("snapshot")
             stored = {}
-            for key, value in snapshot.items():
+            for key, value in _encode_nonfinite(snapshot).items():
                 arr = np.asarray(value)
                 if arr.ndim == 0 and arr.dtype.fields is None:
                     g.attrs[key] = arr.item()
@@ -133,6 +134,42 @@ def write_checkpoint(path, snapshot: dict, meta: dict, failed: dict | None = Non
 
 #: codes of ``failed/nonfinite/KEY`` in a failure file: what an entry of the failed state was
 NONFINITE_CODES = {"finite": 0, "nan": 1, "+inf": 2, "-inf": 3}
+_DECODE = {1: np.nan, 2: np.inf, 3: -np.inf}
+#: prefix of a snapshot entry that codes where its float entry KEY holds NaN or inf ("none" markers
+#: of the state: no short circuit yet, a tip with no filament potential, a slow force not yet held)
+NONFINITE_PREFIX = "nonfinite__"
+
+
+def _encode_nonfinite(snapshot: dict) -> dict:
+    """The snapshot as stored: no NaN or inf in the file. A float entry with non-finite values is
+    stored with 0 there and its codes (:data:`NONFINITE_CODES`) as ``nonfinite__KEY``;
+    :func:`_decode_nonfinite` restores it, so a resumed run sees the same state."""
+    out = {}
+    for key, value in snapshot.items():
+        arr = np.asarray(value)
+        if arr.dtype.kind == "f" and arr.dtype.fields is None and not np.isfinite(arr).all():
+            code = nonfinite_code(arr)
+            fixed = np.where(code == 0, arr, 0.0).astype(arr.dtype)
+            out[key] = fixed if arr.ndim else fixed.item()
+            out[NONFINITE_PREFIX + key] = code if arr.ndim else int(code)
+        else:
+            out[key] = value
+    return out
+
+
+def _decode_nonfinite(snap: dict) -> dict:
+    """Inverse of :func:`_encode_nonfinite` on a snapshot as read."""
+    out = {k: v for k, v in snap.items() if not k.startswith(NONFINITE_PREFIX)}
+    for key, code in snap.items():
+        if not key.startswith(NONFINITE_PREFIX) or key[len(NONFINITE_PREFIX) :] not in out:
+            continue
+        name = key[len(NONFINITE_PREFIX) :]
+        code = np.asarray(code)
+        value = np.array(out[name], dtype=np.float64 if np.asarray(out[name]).dtype.kind != "f" else None)
+        for c, v in _DECODE.items():
+            value[code == c] = v
+        out[name] = value if value.ndim else float(value)
+    return out
 
 
 def nonfinite_code(arr) -> np.ndarray:
@@ -256,6 +293,7 @@ def read_checkpoint(path) -> tuple[dict, dict]:
             f"{path}: the checkpoint's contents do not match its checksum "
             f"(the file is damaged or was edited); it cannot be resumed from"
         )
+    snap = _decode_nonfinite(snap)
     check_snapshot(snap, path)
     return snap, meta
 

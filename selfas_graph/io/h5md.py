@@ -29,8 +29,12 @@ Layout of a run file::
                                     (sum k_f,) tip-conductor contacts; conductor_contacts_count (n_frames,)
         role                        (n_frames, n_rods) int8: 0 free, 1 cluster, 2 dead end, 3 filament
         current                     (n_frames, n_rods) rod currents J_i (units J0), 0 without a circuit
-        potential                   (n_frames, n_tips) tip potentials (units R0 J0), NaN if floating
-        attrs conductor_ids, conductor_potentials, role_names
+        potential                   (n_frames, n_tips) tip potentials (units R0 J0), 0 if floating
+        floating                    (n_frames, n_tips) int8: 1 for a tip on no path between conductors
+                                    (no potential; RunFile.graph gives NaN there; files before 0.4
+                                    hold NaN in potential instead)
+        attrs conductor_ids, conductor_potentials (0 where conductor_per_contact is 1: a potential
+              set per contact, the case (ii) filament), conductor_per_contact, role_names
 
 Every dimensionful dataset carries a ``unit`` attribute in the reduced units (symbols above, docs/output.md), except
 the positions, velocities and their times: MDAnalysis' H5MD reader refuses any unit string
@@ -76,6 +80,7 @@ def observable_unit(name):
         "dt": TIME,
         "total_current": CURRENT,
         "effective_resistance": "R_0",
+        "effective_conductance": "R_0-1",
     }.get(name)
 
 
@@ -486,7 +491,7 @@ class RunWriter(_PendingRows):
                 "role",
                 "current",
                 "potential",
-            )
+            ) + (("floating",) if "floating" in g else ())
             n = keep(*(g[name] for name in per_frame))
             m = int(g["tip_contacts_count"][:n].sum())
             k = int(g["conductor_contacts_count"][:n].sum())
@@ -635,12 +640,13 @@ class RunWriter(_PendingRows):
         if "graph" not in self.f:
             g = self.f.create_group("graph")
             g.attrs["conductor_ids"] = np.array(sorted(conductor_potential), dtype=np.int64)
+            # no NaN in the file: a conductor whose potential is set per contact (the case (ii)
+            # filament, -delta_J0 z) is flagged in conductor_per_contact, its entry here 0
+            ids = sorted(conductor_potential)
             g.attrs["conductor_potentials"] = np.array(
-                [
-                    np.nan if conductor_potential[c] is None else conductor_potential[c]
-                    for c in sorted(conductor_potential)
-                ]
+                [0.0 if conductor_potential[c] is None else conductor_potential[c] for c in ids], dtype=np.float64
             )
+            g.attrs["conductor_per_contact"] = np.array([conductor_potential[c] is None for c in ids], dtype=np.int8)
             g.attrs["role_names"] = json.dumps({0: "free", 1: "cluster", 2: "dead_end", 3: "filament"})
             _growable(g, "step", (), "<i8")
             _set_unit(_growable(g, "time", (), "<f8"), TIME)
@@ -652,6 +658,7 @@ class RunWriter(_PendingRows):
             _growable(g, "role", role.shape, "i1")
             _set_unit(_growable(g, "current", current.shape, "<f8"), CURRENT)
             _set_unit(_growable(g, "potential", potential.shape, "<f8"), POTENTIAL)
+            _growable(g, "floating", potential.shape, "i1")
             _set_unit(g["conductor_potential"], POTENTIAL)
         g = self.f["graph"]
         _append(g["step"], step)
@@ -666,7 +673,12 @@ class RunWriter(_PendingRows):
         _append(g["conductor_contacts_count"], len(arrays["conductor_tip"]))
         _append(g["role"], role)
         _append(g["current"], current)
-        _append(g["potential"], potential)
+        # a floating tip (on no path between conductors) has no potential: 1 in ``floating`` and 0
+        # in ``potential``, so that the file holds no NaN; RunFile.graph gives NaN there again
+        floating = ~np.isfinite(potential)
+        _append(g["potential"], np.where(floating, 0.0, potential))
+        if "floating" in g:
+            _append(g["floating"], floating.astype(np.int8))
 
     @classmethod
     def for_simulation(cls, sim, path, overwrite=False, velocities=None, author=None):
@@ -959,7 +971,12 @@ class RunFile:
         t0, t1 = int(tc_count[:k].sum()), int(tc_count[: k + 1].sum())
         c0, c1 = int(cc_count[:k].sum()), int(cc_count[: k + 1].sum())
         ids = g.attrs["conductor_ids"]
-        pots = g.attrs["conductor_potentials"]
+        pots = np.array(g.attrs["conductor_potentials"], dtype=np.float64)
+        if "conductor_per_contact" in g.attrs:  # files before 0.4 hold NaN there instead
+            pots[np.asarray(g.attrs["conductor_per_contact"], dtype=bool)] = np.nan
+        potential = g["potential"][k]
+        if "floating" in g:  # files before 0.4 hold NaN for floating tips instead
+            potential = np.where(g["floating"][k] != 0, np.nan, potential)
         return {
             "frame": k,
             "step": int(g["step"][k]),
@@ -970,7 +987,7 @@ class RunFile:
             "conductor_potential": g["conductor_potential"][c0:c1],
             "role": g["role"][k],
             "current": g["current"][k],
-            "potential": g["potential"][k],
+            "potential": potential,
             "conductors": {int(c): (None if np.isnan(p) else float(p)) for c, p in zip(ids, pots)},
         }
 

@@ -60,7 +60,9 @@ class Observables:
         if self.params.circuit is not None:
             sol = self.solution
             obs["total_current"] = sol.total_current if sol is not None else 0.0
-            obs["effective_resistance"] = sol.effective_resistance if sol is not None else float("inf")
+            # the conductance, not the resistance: an open circuit's is 0, a finite number (files hold no inf)
+            r = sol.effective_resistance if sol is not None else float("inf")
+            obs["effective_conductance"] = 1.0 / r if 0.0 < r < float("inf") else 0.0
         return obs
 
     def status(self) -> dict:
