@@ -713,7 +713,6 @@ def test_no_file_of_a_run_holds_a_nan_and_the_none_markers_come_back(tmp_path):
     tips with no filament potential, floating tips). Neither the run file nor the checkpoint stores a
     NaN or inf (datasets and attributes); the checkpoint reads back with the markers as they were."""
     from conftest import SMALL_CIRCUIT_SCENE
-
     from selfas_graph.io.checkpoint import write_checkpoint
     from selfas_graph.io.h5md import RunWriter
     from selfas_graph.io.scenario import scenario_from_text

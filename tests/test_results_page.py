@@ -17,7 +17,13 @@ def test_the_results_page_is_what_the_summaries_give():
     want = page_blocks(studies, DOCS / "results")
     have = page_blocks_in((DOCS / "results.md").read_text(encoding="utf-8"))
     assert set(have) <= set(want), f"blocks the generator does not make: {sorted(set(have) - set(want))}"
-    needed = {"claims"} | {f"{kind} {name}" for name in studies.studies for kind in ("table", "runs")}
+    needed = {"claims", "convergence"} | {f"sensitivity {name}" for name in studies.sweeps}
+    needed |= {
+        f"{kind} {name}"
+        for name in studies.studies
+        for kind in ("table", "runs")
+        if studies.studies[name].section in ("paper", "null", "contrast")
+    }
     assert needed <= set(have), f"blocks missing from the page: {sorted(needed - set(have))}"
     for key in have:
         assert have[key] == want[key].rstrip("\n"), f"block '{key}' differs: run `selfas-graph study page`"

@@ -114,6 +114,15 @@ def run(args):
     except OSError as exc:
         raise CliError(f"cannot read the results page {page}: {exc.strerror or exc}") from None
     new, missing = replace_blocks(text, page_blocks(studies, args.summaries))
+    if not args.check:
+        from ..studies.figures import plot_sweep
+        from ..studies.page import load_summary
+
+        summaries = {n: load_summary(args.summaries, n) for n in studies.studies}
+        summaries = {k: v for k, v in summaries.items() if v is not None}
+        for name in studies.sweeps:
+            if sum(summaries.get(st) is not None for _, st in studies.sweep_points(name)) >= 2:
+                print(f"wrote {plot_sweep(studies, summaries, name, Path(args.figures) / f'sweep_{name}.png')}")
     for key in missing:
         print(f"note: the page's block '{key}' has no summary behind it yet; left as it is")
     if args.check:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .page import GROUPED, LABELS
+from .page import CLAIM_MEASURES, GROUPED, LABELS, sweep_points
 
 __all__ = ["SERIES_MEASURES", "plot_episodes", "plot_series", "study_figures"]
 
@@ -128,3 +128,31 @@ def study_figures(study, summary, folder) -> list:
         plot_series(summary, folder / f"{study.name}_series.png", study.title),
         plot_episodes(summary, folder / f"{study.name}_episodes.png", study.title),
     ]
+
+
+def plot_sweep(studies, summaries, name, out) -> Path:
+    """The claim measures at the sweep's time against its parameter: mean and one standard error over
+    the seeds of each point (all seeds counted, those without current as 0)."""
+    sw = studies.sweeps[name]
+    ncols = 2
+    nrows = math.ceil(len(CLAIM_MEASURES) / ncols)
+    fig = _figure(figsize=(7.2, 2.0 * nrows + 0.6))
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    for ax, m in zip(axes, CLAIM_MEASURES):
+        pts = [(v, st) for v, st in sweep_points(studies, summaries, name, m) if st["n"]]
+        if pts:
+            x = [v for v, _ in pts]
+            y = [st["mean"] for _, st in pts]
+            e = [0.0 if not math.isfinite(st["sem"]) else st["sem"] for _, st in pts]
+            ax.errorbar(x, y, yerr=e, marker="o", ms=3.5, capsize=3, lw=1.0, color=SEED_COLOUR)
+        ax.axvline(sw.base_value, color="0.6", lw=0.8, ls=":")
+        words, unit = _words_unit(m)
+        ax.set_title(words, fontsize="small", loc="left")
+        if unit:
+            ax.set_ylabel(unit, fontsize="small")
+        ax.set_xlabel(sw.parameter, fontsize="small")
+        ax.tick_params(labelsize="small")
+    for ax in axes[len(CLAIM_MEASURES) :]:
+        ax.set_visible(False)
+    fig.suptitle(f"{sw.title}\n(t = {sw.time:g}; the paper's value dotted)", fontsize="medium")
+    return _save(fig, out)

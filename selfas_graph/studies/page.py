@@ -255,13 +255,108 @@ def claim_rows(studies, summaries) -> str:
     return "\n".join(rows)
 
 
+#: the measures of the convergence and sensitivity tables: one per claim
+CLAIM_MEASURES = (
+    "filament_rods",
+    "inside_R_plas",
+    "midplane_flux",
+    "largest_alignment",
+    "fractal_dimension",
+    "cycle_rank",
+)
+
+
+def _difference(a, b):
+    """(x_a - x_b) / sqrt(SE_a^2 + SE_b^2) of two plain statistics (NaN without a spread)."""
+    den = math.sqrt(a["sem"] ** 2 + b["sem"] ** 2) if a["n"] and b["n"] else math.nan
+    return (a["mean"] - b["mean"]) / den if den > 0 else math.nan
+
+
+def convergence_rows(studies, summaries) -> str:
+    """For each variant of a numerical knob, each claim measure at the variant's end time against the
+    study it varies (same time): both means with their standard errors, the difference in combined
+    standard errors, and what follows for a user."""
+    rows = [
+        "| setting | measure | default | this setting | difference (combined SE) | conclusion |",
+        "|---|---|---|---|---|---|",
+    ]
+    for st in studies.studies.values():
+        if st.section != "convergence":
+            continue
+        s, base = summaries.get(st.name), summaries.get(st.null_of)
+        if s is None or base is None:
+            missing = st.name if s is None else st.null_of
+            rows.append(f"| {st.title} | | | | | not run yet (`selfas-graph study run {missing}`) |")
+            continue
+        t = st.t_end
+        ds = []
+        cells = []
+        for m in CLAIM_MEASURES:
+            errs = _values(s, FIT_ERRORS[m], t) if m in FIT_ERRORS else None
+            berrs = _values(base, FIT_ERRORS[m], t) if m in FIT_ERRORS else None
+            a, b = plain_stat(_values(s, m, t), errs), plain_stat(_values(base, m, t), berrs)
+            d = _difference(a, b)
+            ds.append(d)
+            cells.append((m, b, a, d))
+        finite = [abs(d) for d in ds if math.isfinite(d)]
+        if not finite:
+            verdict = "not decided (too few seeds)"
+        elif max(finite) > 3:
+            verdict = "moves these statistics: not safe for them"
+        elif max(finite) > 2:
+            verdict = "marginal (a difference of 2-3 SE)"
+        else:
+            verdict = "safe for these statistics (every difference within 2 SE)"
+        for k, (m, b, a, d) in enumerate(cells):
+            name = st.title if k == 0 else ""
+            text = "n/a" if not math.isfinite(d) else f"{d:+.1f}".replace("-", "−")
+            rows.append(
+                f"| {name} | {_label(m)}, t = {t:g} | {_pm(b)} | {_pm(a)} | {text} | {verdict if k == 0 else ''} |"
+            )
+    return "\n".join(rows)
+
+
+def sweep_rows(studies, summaries, name) -> str:
+    """A sweep's table: a row per value of its parameter, the claim measures at the sweep's time."""
+    sw = studies.sweeps[name]
+    head = f"| {sw.parameter} | seeds | " + " | ".join(_label(m) for m in CLAIM_MEASURES) + " |"
+    rows = [head, "|---|---|" + "---|" * len(CLAIM_MEASURES)]
+    for value, study in studies.sweep_points(name):
+        s = summaries.get(study)
+        mark = " (the paper's)" if study == sw.base else ""
+        if s is None:
+            rows.append(
+                f"| {value:g}{mark} | not run yet (`selfas-graph study run {study}`) |" + " |" * len(CLAIM_MEASURES)
+            )
+            continue
+        cells = [measure_text(s, m, sw.time) for m in CLAIM_MEASURES]
+        rows.append(f"| {value:g}{mark} | {s['n_seeds']} | " + " | ".join(cells) + " |")
+    if sum(summaries.get(study) is not None for _, study in studies.sweep_points(name)) >= 2:
+        rows.append(f"\n![{sw.title}: the claim measures at t = {sw.time:g}](figures/sweep_{name}.png)")
+    return "\n".join(rows)
+
+
+def sweep_points(studies, summaries, name, measure):
+    """(value, plain statistic) of a measure over a sweep's points that have a summary."""
+    sw = studies.sweeps[name]
+    out = []
+    for value, study in studies.sweep_points(name):
+        s = summaries.get(study)
+        if s is not None:
+            errs = _values(s, FIT_ERRORS[measure], sw.time) if measure in FIT_ERRORS else None
+            out.append((value, plain_stat(_values(s, measure, sw.time), errs)))
+    return out
+
+
 def page_blocks(studies, folder) -> dict:
     """Every generated block of the results page, keyed by its marker name: ``claims``, and for
     each study ``table NAME``, ``runs NAME`` and ``figures NAME`` (a study without a summary
     yet says how to make it)."""
     summaries = {name: load_summary(folder, name) for name in studies.studies}
     summaries = {k: v for k, v in summaries.items() if v is not None}
-    blocks = {"claims": claim_rows(studies, summaries)}
+    blocks = {"claims": claim_rows(studies, summaries), "convergence": convergence_rows(studies, summaries)}
+    for name in studies.sweeps:
+        blocks[f"sensitivity {name}"] = sweep_rows(studies, summaries, name)
     for name, study in studies.studies.items():
         s = summaries.get(name)
         if s is None:

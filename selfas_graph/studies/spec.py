@@ -28,7 +28,7 @@ import math
 import tomllib
 from pathlib import Path
 
-__all__ = ["Claim", "Study", "StudiesError", "Studies", "load_studies"]
+__all__ = ["Claim", "Study", "StudiesError", "Studies", "Sweep", "load_studies"]
 
 
 class StudiesError(ValueError):
@@ -51,6 +51,8 @@ class Study:
     section: str = ""
     null_of: str = ""
     doc: str = ""
+    sweep: str = ""
+    sweep_value: float = math.nan
 
     @property
     def times(self) -> list[float]:
@@ -87,10 +89,30 @@ class Claim:
 
 
 @dataclasses.dataclass(frozen=True)
+class Sweep:
+    """Studies that differ in one physical parameter: those whose ``sweep`` names this, and the
+    paper-scene study ``base`` at ``base_value``, compared at ``time``."""
+
+    name: str
+    title: str
+    parameter: str
+    base: str
+    base_value: float
+    time: float
+
+
+@dataclasses.dataclass(frozen=True)
 class Studies:
     path: Path
     studies: dict
     claims: tuple
+    sweeps: dict = dataclasses.field(default_factory=dict)
+
+    def sweep_points(self, name) -> list:
+        """(value, study name) of a sweep, the base included, in order of the value."""
+        sw = self.sweeps[name]
+        pts = [(sw.base_value, sw.base)] + [(s.sweep_value, s.name) for s in self.studies.values() if s.sweep == name]
+        return sorted(pts)
 
     def study(self, name) -> Study:
         if name not in self.studies:
@@ -110,7 +132,10 @@ _STUDY_KEYS = {
     "section": str,
     "null_of": str,
     "doc": str,
+    "sweep": str,
+    "sweep_value": (int, float),
 }
+_SWEEP_KEYS = {"title": str, "parameter": str, "base": str, "base_value": (int, float), "time": (int, float)}
 _CLAIM_KEYS = {
     "id": str,
     "claim": str,
@@ -145,9 +170,9 @@ def load_studies(path) -> Studies:
         raise StudiesError(f"{path}: cannot read the studies file ({exc.strerror or exc})") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise StudiesError(f"{path}: not a valid TOML file ({exc})") from None
-    extra = set(raw) - {"study", "claim"}
+    extra = set(raw) - {"study", "claim", "sweep"}
     if extra:
-        raise StudiesError(f"{path}: unknown table(s) {sorted(extra)}; valid: [study.NAME], [[claim]]")
+        raise StudiesError(f"{path}: unknown table(s) {sorted(extra)}; valid: [study.NAME], [sweep.NAME], [[claim]]")
     studies = {}
     for name, t in (raw.get("study") or {}).items():
         where = f"{path}: study.{name}"
@@ -174,7 +199,23 @@ def load_studies(path) -> Studies:
             section=t.get("section", ""),
             null_of=t.get("null_of", ""),
             doc=t.get("doc", ""),
+            sweep=t.get("sweep", ""),
+            sweep_value=float(t.get("sweep_value", math.nan)),
         )
+    sweeps = {}
+    for name, t in (raw.get("sweep") or {}).items():
+        where = f"{path}: sweep.{name}"
+        if not isinstance(t, dict):
+            raise StudiesError(f"{where}: must be a table")
+        _check(where, t, _SWEEP_KEYS, tuple(_SWEEP_KEYS))
+        if t["base"] not in studies:
+            raise StudiesError(f"{where}.base: no study named {t['base']!r}")
+        sweeps[name] = Sweep(name, t["title"], t["parameter"], t["base"], float(t["base_value"]), float(t["time"]))
+    for st in studies.values():
+        if st.sweep and st.sweep not in sweeps:
+            raise StudiesError(f"{path}: study.{st.name}.sweep: no sweep named {st.sweep!r}")
+        if st.sweep and not math.isfinite(st.sweep_value):
+            raise StudiesError(f"{path}: study.{st.name}: a study of a sweep needs its sweep_value")
     claims = []
     for k, c in enumerate(raw.get("claim") or []):
         where = f"{path}: claim[{k}]"
@@ -191,4 +232,4 @@ def load_studies(path) -> Studies:
                 also=tuple(c.get("also", [])),
             )
         )
-    return Studies(path=path, studies=studies, claims=tuple(claims))
+    return Studies(path=path, studies=studies, claims=tuple(claims), sweeps=sweeps)
