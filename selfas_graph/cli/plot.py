@@ -417,7 +417,15 @@ def _field_or_flux(fig, run, frame, args):
     ax.axhline(0.0, color="0.7", lw=0.8, zorder=0)
     ax.set_xlim(0, r_max)
     n_active = int(np.count_nonzero(current))
-    note = f"{n_active} rods carry current" if n_active else "no rod carries current (no short circuit yet)"
+    if n_active:
+        note = f"{n_active} rods carry current"
+    else:
+        closed = len(circuit_episodes(run.events(until_step=frame.step)))
+        note = (
+            "no rod carries current (the electrodes have not been short-circuited yet)"
+            if closed == 0
+            else f"no rod carries current at this frame (the gap closed {closed} time{'s' if closed > 1 else ''} before)"
+        )
     if args.kind == "field":
         ax.set_xlabel("distance from the z axis r (L)")
         ax.set_ylabel("$B_z$ of the rod currents ($B_0$), azimuthal mean")
@@ -460,7 +468,7 @@ def _timeline(fig, run, frame, args):
     ax.set_xlabel("time t ($t_0$)")
     ax.set_ylabel("rods in current-carrying filaments", color=FILAMENT_COLOUR)
     ax.set_ylim(bottom=0)
-    if tl.total_current is not None:
+    if tl.total_current is not None and np.nanmax(np.abs(tl.total_current), initial=0.0) > 0:
         ax2 = ax.twinx()
         lines += ax2.plot(
             tl.time,
@@ -509,14 +517,17 @@ def _moment(fig, run, frame, args):
     ax.set_xlabel("time t ($t_0$)")
     ax.set_ylabel("$|m_q|$ of the largest structure / mean $|q|$")
     ax.set_ylim(bottom=0)
-    ax2 = ax.twinx()
-    lines += ax2.plot(
-        s["time"], s["largest_moment_J_z"], **style, color=FILAMENT_COLOUR, label="$m_{J,z}$ of its rod currents"
-    )
-    ax2.set_ylabel("$m_{J,z}$ of the rod currents ($J_0 L^2$)")
-    ax2.axhline(0.0, color="0.8", lw=0.8, zorder=0)
+    m_j = s["largest_moment_J_z"]
+    note = ""
+    if np.nanmax(np.abs(m_j), initial=0.0) > 0:  # a second axis only for a series that is not all zero
+        ax2 = ax.twinx()
+        lines += ax2.plot(s["time"], m_j, **style, color=FILAMENT_COLOUR, label="$m_{J,z}$ of its rod currents")
+        ax2.set_ylabel("$m_{J,z}$ of the rod currents ($J_0 L^2$)")
+        ax2.axhline(0.0, color="0.8", lw=0.8, zorder=0)
+    else:
+        note = " (no rod current in these frames)"
     _outside_legend(fig, lines, ncols=2)
-    ax.set_title(f"{_scene(run)}: magnetic moment of the largest structure", fontsize="medium")
+    ax.set_title(f"{_scene(run)}: magnetic moment of the largest structure{note}", fontsize="medium")
 
 
 def _fractal(fig, run, frame, args):
@@ -647,7 +658,10 @@ def plot_summary(summary: dict, out, title: str, dpi=150, measures=None) -> Path
         ax.plot(times, mean, color="black", **style)
         ax.fill_between(times, mean - sem, mean + sem, color="0.6", alpha=0.5, lw=0)
         unit = m.get("unit") or ""
-        ax.set_ylabel(name.replace("_", " ") + ("" if unit in ("", "1") else f" [{unit}]"), fontsize="small")
+        words = (m.get("doc") or name.replace("_", " ")).split(" (")[0]
+        ax.set_title(words[0].upper() + words[1:], fontsize="small", loc="left")
+        if unit not in ("", "1"):
+            ax.set_ylabel(unit.replace("Phi_0", r"$\Phi_0$").replace("J0", "$J_0$"), fontsize="small")
     for ax in axes[len(names) :]:
         ax.set_visible(False)
     for ax in axes[max(0, len(names) - ncols) : len(names)]:
