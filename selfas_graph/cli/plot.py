@@ -264,6 +264,11 @@ def _snapshot(fig, run, frame, args):
             ax.add_collection3d(Line3DCollection(seg[mask], colors=[colour], linewidths=width, alpha=alpha, zorder=2))
         handles.append(Line2D([], [], color=colour, lw=2, alpha=alpha, label=f"{label} ({int(mask.sum())})"))
     lo, hi = frame.position.min(axis=0), frame.position.max(axis=0)
+    plasma = (run.parameters.get("forces") or {}).get("plasma_filament")
+    if plasma:  # the R_plas cylinder is drawn: the box holds it
+        (px, py), r_p = plasma.get("axis", (0.0, 0.0)), float(plasma["radius"])
+        lo[:2] = np.minimum(lo[:2], [px - r_p, py - r_p])
+        hi[:2] = np.maximum(hi[:2], [px + r_p, py + r_p])
     if frame.gap is not None:
         lo[2], hi[2] = min(lo[2], -frame.gap / 2), max(hi[2], frame.gap / 2)
         x0, x1, y0, y1 = lo[0] - 0.5, hi[0] + 0.5, lo[1] - 0.5, hi[1] + 0.5
@@ -277,7 +282,6 @@ def _snapshot(fig, run, frame, args):
         handles.append(
             Line2D([], [], color=ELECTRODE_COLOUR, lw=6, alpha=0.4, label=f"electrodes z = $\\pm${frame.gap / 2:g} L")
         )
-    plasma = (run.parameters.get("forces") or {}).get("plasma_filament")
     if plasma:
         # the plasma filament: a dashed cylinder of radius R_plas about its axis, between the electrodes
         (ax0, ay0), r_p = plasma.get("axis", (0.0, 0.0)), float(plasma["radius"])
@@ -308,16 +312,19 @@ def _snapshot(fig, run, frame, args):
     ax.set_zlim(lo[2] - pad, hi[2] + pad)
     # framed on the rods: the box has the scene's proportions and fills the figure, whose shape
     # run() chooses from the same proportions (a tall case (ii) column gets a tall figure)
-    ax.set_box_aspect(tuple(span + 2 * pad), zoom=0.95)
+    # a tall box (the Fig. 6 column) is drawn small inside its axes by mplot3d's projection: zoom
+    # it so that it fills the figure's height (the figure's own shape follows the same ratio)
+    tall = float(span[2] / max(span[0], span[1]))
+    ax.set_box_aspect(tuple(span + 2 * pad), zoom=0.95 * min(1.25, max(1.0, tall**0.17)))
     ax.set_xlabel("x (L)")
     ax.set_ylabel("y (L)")
-    ax.set_zlabel("z (L)")
+    ax.set_zlabel("z (L)", labelpad=10)
     # labels clear of the tick marks, so that the minus signs of negative ticks stay visible
     ax.tick_params(axis="z", pad=6)
     ax.tick_params(axis="x", pad=2)
     ax.tick_params(axis="y", pad=2)
     fig.legend(handles=handles, loc="outside lower center", ncols=2, fontsize="small", frameon=False)
-    ax.set_title(_title(run, frame, f"{frame.n_rods} rods"), fontsize="medium")
+    fig.suptitle(_title(run, frame, f"{frame.n_rods} rods"), fontsize="medium")
 
 
 def _r_max(args, points):
