@@ -20,6 +20,8 @@ DEFAULT_STUDIES = "docs/studies.toml"
 DEFAULT_SUMMARIES = "docs/results"
 DEFAULT_FIGURES = "docs/figures"
 DEFAULT_PAGE = "docs/results.md"
+#: frames of a study's movie at most
+MOVIE_FRAMES = 150
 
 
 def add_arguments(p):
@@ -36,6 +38,7 @@ def add_arguments(p):
     p.add_argument("--page", default=DEFAULT_PAGE, help=f"the results page (default {DEFAULT_PAGE})")
     p.add_argument("--check", action="store_true", help="page: write nothing; exit 1 if the page is not up to date")
     p.add_argument("--no-figures", action="store_true", help="summarise: the summary only")
+    p.add_argument("--no-movie", action="store_true", help="summarise: no movie of the first seed")
 
 
 def _studies(args):
@@ -104,6 +107,16 @@ def run(args):
                 first = Path(args.runs) / s.name / summary["seeds"][0]["path"]
                 snap = Path(args.figures) / f"{s.name}_snapshot.png"
                 main(["plot", str(first), "--kind", "snapshot", "-o", str(snap), "--force"])
+                if s.section in ("paper", "contrast") and not args.no_movie:
+                    # the first seed's movie, at most MOVIE_FRAMES frames (MP4 where ffmpeg is there)
+                    from .movie import _ffmpeg
+
+                    from ..io.h5md import RunFile
+
+                    with RunFile(first) as run:
+                        every = max(1, -(-run.n_frames // MOVIE_FRAMES))
+                    movie = Path(args.figures) / f"{s.name}_movie.{'mp4' if _ffmpeg() else 'gif'}"
+                    main(["plot", str(first), "--movie", str(movie), "--every", str(every), "--force"])
         return 0
     # page
     from ..studies.page import page_blocks, replace_blocks

@@ -373,6 +373,11 @@ def page_blocks(studies, folder) -> dict:
             f"t = {_fmt(s['seeds'][0]['t_end'])} |\n|---|---|---|\n"
             f"| ![](figures/{name}_series.png) | ![](figures/{name}_episodes.png) | ![](figures/{name}_snapshot.png) |"
         )
+        if study.section in ("paper", "contrast"):
+            blocks[f"figures {name}"] += (
+                f"\n\nA movie of seed {s['seeds'][0]['seed']}: [`figures/{name}_movie.mp4`](figures/{name}_movie.mp4) "
+                f"(`selfas-graph plot RUN.h5 --movie OUT.mp4`)."
+            )
     return blocks
 
 
