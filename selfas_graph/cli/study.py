@@ -109,9 +109,8 @@ def run(args):
                 main(["plot", str(first), "--kind", "snapshot", "-o", str(snap), "--force"])
                 if s.section in ("paper", "contrast") and not args.no_movie:
                     # the first seed's movie, at most MOVIE_FRAMES frames (MP4 where ffmpeg is there)
-                    from .movie import _ffmpeg
-
                     from ..io.h5md import RunFile
+                    from .movie import _ffmpeg
 
                     with RunFile(first) as run:
                         every = max(1, -(-run.n_frames // MOVIE_FRAMES))
