@@ -9,7 +9,6 @@ The tool runs on the library's ensemble runner and statistics, whose Kaplan-Meie
 Wilson intervals are tested on hand-made data in tests/test_ensemble_stats.py.
 """
 
-import importlib.util
 import json
 import math
 from pathlib import Path
@@ -42,11 +41,9 @@ DENSITY_KEYS = {
 
 
 def _tool():
-    name = "_selfas_tools_percolation"
-    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / "percolation.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    from selfas_graph.bench import percolation
+
+    return percolation
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,5 @@
-"""Smoke test of tools/same_run.py: equal files agree, a one-ulp change or a missing dataset is found."""
+"""Smoke test of selfas_graph/bench/same_run.py (``selfas-graph compare``): equal files agree, a one-ulp
+change or a missing dataset is found."""
 
 import subprocess
 import sys
@@ -8,7 +9,7 @@ import h5py
 import numpy as np
 import pytest
 
-TOOL = Path(__file__).resolve().parent.parent / "tools" / "same_run.py"
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def _write(path, value, extra=False):
@@ -24,7 +25,9 @@ def _write(path, value, extra=False):
 
 
 def _run(a, b):
-    return subprocess.run([sys.executable, str(TOOL), str(a), str(b)], capture_output=True, text=True)
+    return subprocess.run(
+        [sys.executable, "-m", "selfas_graph.bench.same_run", str(a), str(b)], capture_output=True, text=True
+    )
 
 
 def test_same_run_tool(tmp_path):
@@ -43,19 +46,23 @@ def test_same_run_tool(tmp_path):
 
 @pytest.mark.slow
 def test_same_as_commit_tool_finds_the_working_tree_equal_to_head(tmp_path):
-    """tools/same_as_commit.py runs a short scene with HEAD's code and with the working tree (each
+    """selfas_graph/bench/same_as_commit.py runs a short scene with HEAD's code and with the working tree (each
     checked to import the code meant) and compares the run files; a clean tree agrees with HEAD.
     Slow: the exported commit's kernels are compiled afresh."""
-    tool = TOOL.with_name("same_as_commit.py")
-    dirty = subprocess.run(
-        ["git", "status", "--porcelain", "selfas_graph"], capture_output=True, text=True, cwd=TOOL.parent.parent
-    )
+    dirty = subprocess.run(["git", "status", "--porcelain", "selfas_graph"], capture_output=True, text=True, cwd=ROOT)
     if dirty.returncode != 0 or dirty.stdout.strip():
         pytest.skip("not a git checkout, or the working tree differs from HEAD in selfas_graph/")
     r = subprocess.run(
-        [sys.executable, str(tool), "scenarios/quick.toml+run.t_end=0.02+rods.count=20", "--keep", str(tmp_path)],
+        [
+            sys.executable,
+            "-m",
+            "selfas_graph.bench.same_as_commit",
+            "scenarios/quick.toml+run.t_end=0.02+rods.count=20",
+            "--keep",
+            str(tmp_path),
+        ],
         capture_output=True,
         text=True,
-        cwd=TOOL.parent.parent,
+        cwd=ROOT,
     )
     assert r.returncode == 0 and "the same, bit for bit" in r.stdout, r.stdout + r.stderr

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python tools/same_run.py RUN_A.h5 RUN_B.h5 [--ignore-attrs]
+    selfas-graph compare RUN_A.h5 RUN_B.h5 [--ignore-attrs]
 
 Walks both HDF5 files and compares every dataset (shape, dtype and bytes; NaN equals NaN
 at the same place, since the bytes are compared) and, unless ``--ignore-attrs``, every
@@ -15,7 +15,7 @@ before and after the change (same thread count), then compare, e.g.::
 
     selfas-graph simulate scenarios/quick.toml -o /tmp/before.h5   # on the old commit
     selfas-graph simulate scenarios/quick.toml -o /tmp/after.h5    # on the new one
-    python tools/same_run.py /tmp/before.h5 /tmp/after.h5
+    selfas-graph compare /tmp/before.h5 /tmp/after.h5
 """
 
 from __future__ import annotations
