@@ -1,6 +1,6 @@
-"""Smoke test of tools/tradeoff.py on the quick scene (a few seconds).
+"""Smoke test of selfas_graph/bench/tradeoff.py on the quick scene (a few seconds).
 
-The tool's main() runs in this process (tools/ is not a package: it is imported from its path).
+The tool's main() runs in this process.
 The figures are measurements, not checked here; only that each setting of a knob has its row
 with both position errors, that the knob's own reference (float64) differs from itself by
 nothing, and that the tree's knobs are left out where the scene sums the tip pairs directly.
