@@ -66,3 +66,46 @@ def test_same_as_commit_tool_finds_the_working_tree_equal_to_head(tmp_path):
         cwd=ROOT,
     )
     assert r.returncode == 0 and "the same, bit for bit" in r.stdout, r.stdout + r.stderr
+
+
+def test_compare_command_is_the_tool(tmp_path, capsys):
+    """``selfas-graph compare A B`` is same_run on the command line (exit 0 equal, 1 different), as is
+    ``selfas-graph bench same_run A B``; a missing file is a usage error (exit 2) naming it."""
+    from selfas_graph.cli.main import main
+
+    x = np.array([1.0, 2.0, 3.0])
+    _write(tmp_path / "a.h5", x)
+    _write(tmp_path / "b.h5", x)
+    _write(tmp_path / "c.h5", np.array([1.0, 2.0, np.nextafter(3.0, 4.0)]))
+    a, b, c = (str(tmp_path / f"{n}.h5") for n in "abc")
+    assert main(["compare", a, b]) == 0 and "the same, bit for bit" in capsys.readouterr().out
+    assert main(["compare", a, c]) == 1 and "data differ (1 of 3" in capsys.readouterr().out
+    assert main(["bench", "same_run", a, c]) == 1 and "data differ (1 of 3" in capsys.readouterr().out
+    assert main(["compare", a, str(tmp_path / "nope.h5")]) == 2 and "no such run file" in capsys.readouterr().err
+
+
+BENCH = ROOT / "selfas_graph" / "bench"
+#: modules of selfas_graph/bench that other tools import and that are no tool themselves
+HELPERS = {"__init__", "peer", "oracles"}
+
+
+def test_bench_lists_every_tool(capsys):
+    """``selfas-graph bench`` alone lists every tool, one line each; an unknown name exits 2 naming them."""
+    from selfas_graph.cli.main import main
+
+    assert main(["bench"]) == 0
+    lines = capsys.readouterr().out.split("\n\n")[0].splitlines()
+    assert {line.split()[0] for line in lines} == {p.stem for p in BENCH.glob("*.py")} - HELPERS
+    assert all(len(line.split(maxsplit=1)) == 2 for line in lines)  # each with its one line
+    assert main(["bench", "nope"]) == 2 and "same_run" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", sorted({p.stem for p in BENCH.glob("*.py")} - HELPERS))
+def test_every_tool_runs_through_the_command_line(name, capsys):
+    """Every tool imports as part of the package and takes its arguments through ``selfas-graph bench``:
+    its help names the command."""
+    from selfas_graph.cli.main import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["bench", name, "--help"])
+    assert e.value.code == 0 and f"usage: selfas-graph bench {name}" in capsys.readouterr().out

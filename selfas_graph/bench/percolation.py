@@ -107,7 +107,6 @@ def _positive(kind):
 
 def build_parser():
     ap = argparse.ArgumentParser(
-        prog="percolation.py",
         description=__doc__.splitlines()[0],
         epilog="density = rods / box volume; volume fraction = rods * pi (D/2)^2 L / box volume",
     )

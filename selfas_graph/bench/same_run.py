@@ -111,12 +111,15 @@ def compare(path_a, path_b, attrs: bool = True, counts: dict | None = None) -> l
     return out
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def add_arguments(ap):
+    """The arguments of the command (also ``selfas-graph compare``)."""
     ap.add_argument("a")
     ap.add_argument("b")
     ap.add_argument("--ignore-attrs", action="store_true", help="compare datasets only")
-    args = ap.parse_args(argv)
+
+
+def run(args) -> int:
+    """Compare ``args.a`` with ``args.b``, print the differences and the verdict; 1 if they differ."""
     counts: dict = {}
     diffs = compare(args.a, args.b, attrs=not args.ignore_attrs, counts=counts)
     for line in diffs:
@@ -126,6 +129,12 @@ def main(argv=None) -> int:
         + ("the same, bit for bit" if not diffs else f"{len(diffs)} differences")
     )
     return 1 if diffs else 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_arguments(ap)
+    return run(ap.parse_args(argv))
 
 
 if __name__ == "__main__":
