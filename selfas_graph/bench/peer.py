@@ -1,4 +1,4 @@
-"""What the benchmarks in tools/ print beside their figures: the machine, the instruction set numba
+"""What the benchmarks in selfas_graph/bench/ print beside their figures: the machine, the instruction set numba
 compiled for, and a peer code timed on the same rods in the same run.
 
 ``machine()`` names the CPU model (``/proc/cpuinfo``), the CPU numba compiles for (``NUMBA_CPU_NAME``
