@@ -24,7 +24,7 @@ or overwritten; ``force=True`` replaces the files that cannot be reused.
 
 The runs go to :class:`selfas_graph.parallel.task_pool`: ``jobs`` spawned processes on
 one machine (``cores // jobs`` numba threads each), or the ranks of an MPI launcher.
-The same runner serves ``tools/percolation.py`` (:func:`run_tasks`, :func:`run_to_short_circuit`).
+The same runner serves ``selfas-graph bench percolation`` (:func:`run_tasks`, :func:`run_to_short_circuit`).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Where and with what a run or a measurement was made: the source commit, the CPU model and the
 instruction set numba compiles for. Run files (:func:`selfas_graph.io.h5md.run_provenance`), study
-summaries and the benchmarks in ``tools/`` record them."""
+summaries and the benchmarks in ``selfas_graph/bench/`` record them."""
 
 import os
 import platform

@@ -5,6 +5,7 @@ is resolved to the part of the package it reaches, and checked against the table
 """
 
 import ast
+import re
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent.parent / "selfas_graph"
@@ -21,7 +22,33 @@ ALLOWED = {
     "ensemble": {"analysis", "io", "model", "kernels", "parallel", "_version", "provenance"},
     "grid": {"ensemble", "io", "parallel"},
     "studies": {"analysis", "ensemble", "io", "model", "kernels", "parallel", "_version", "provenance"},
-    "cli": {"analysis", "ensemble", "grid", "io", "model", "kernels", "parallel", "_version", "provenance", "studies"},
+    "cli": {
+        "analysis",
+        "bench",
+        "ensemble",
+        "grid",
+        "io",
+        "model",
+        "kernels",
+        "parallel",
+        "_version",
+        "provenance",
+        "studies",
+    },
+    "bench": {
+        "analysis",
+        "cli",
+        "ensemble",
+        "grid",
+        "io",
+        "model",
+        "kernels",
+        "parallel",
+        "_version",
+        "provenance",
+        "studies",
+        "__init__",
+    },
     "__init__": {"analysis", "ensemble", "io", "model", "kernels", "parallel", "_version", "provenance"},
 }
 #: the one upward import, inside functions: the schema walk of Parameters lives with the scenario files
@@ -95,3 +122,51 @@ def test_model_modules_stay_short():
         if p.name not in NOT_YET_SPLIT and (n := len(p.read_text(encoding="utf-8").splitlines())) > MODEL_MODULE_LINES
     }
     assert not long, f"model modules over {MODEL_MODULE_LINES} lines: {long}; split them by concept"
+
+
+#: the modules of tests/ that the tests import as top-level names (pyproject.toml, known-first-party)
+TEST_MODULES = {"tests", "reference", "conftest", "hostile", "runfiles"}
+
+
+def _reaches_outside(rel, text):
+    """Where the module ``rel`` with source ``text`` imports from tests/ or changes ``sys.path``."""
+    bad = []
+    for node in ast.walk(ast.parse(text)):
+        if isinstance(node, ast.Attribute) and node.attr in ("insert", "append"):
+            v = node.value
+            if isinstance(v, ast.Attribute) and v.attr == "path" and getattr(v.value, "id", None) == "sys":
+                bad.append(f"{rel}:{node.lineno} changes sys.path")
+        names = []
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+            names = [node.module]
+        bad += [f"{rel}:{node.lineno} imports {n}" for n in names if n.split(".")[0] in TEST_MODULES]
+    if re.search(r"sys\.path\.(insert|append)", text):  # also in code held in strings (child processes)
+        bad.append(f"{rel}: names sys.path.insert or sys.path.append")
+    return sorted(set(bad))
+
+
+def test_the_package_stands_alone():
+    """The package imports nothing from tests/ (its oracles, fixtures or hostile inputs) and puts no
+    folder on ``sys.path``: every module, the tools in ``bench/`` included, is imported as part of
+    the package, so it runs from an installed copy as from the checkout."""
+    bad = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        bad += _reaches_outside(path.relative_to(PACKAGE.parent).as_posix(), path.read_text(encoding="utf-8"))
+    assert not bad, "the package must not reach into tests/ or onto sys.path:\n" + "\n".join(bad)
+
+
+def test_the_stand_alone_check_sees_each_way_out():
+    """Not vacuous: each way a module could reach outside the package is found."""
+    for text in (
+        "import sys\nsys.path.insert(0, 'tools')",
+        "import sys\nsys.path.append('x')",
+        "import reference",
+        "from conftest import x",
+        "from hostile import y",
+        "import tests.runfiles",
+        "RUNNER = 'import sys; sys.path.insert(0, d)'",
+    ):
+        assert _reaches_outside("m.py", text), text
+    assert not _reaches_outside("m.py", "from . import oracles\nimport selfas_graph.bench.peer")

@@ -1,4 +1,4 @@
-"""Smoke test of tools/bench_kernels.py on a tiny scaled Fig. 2 scene (a few seconds).
+"""Smoke test of selfas_graph/bench/kernels.py on a tiny scaled Fig. 2 scene (a few seconds).
 
 The timings in this process (no child per instruction set); the numbers are measurements, not
 checked here, only that every kernel was timed the asked number of times and that the machine
@@ -6,7 +6,6 @@ and the numba target are reported.
 """
 
 import argparse
-import importlib.util
 import sys
 from pathlib import Path
 
@@ -14,11 +13,9 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def _tool():
-    sys.path.insert(0, str(ROOT / "tools"))  # the tool imports bench_step and bench_peer beside it
-    spec = importlib.util.spec_from_file_location("_selfas_tools_bench_kernels", ROOT / "tools" / "bench_kernels.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    from selfas_graph.bench import kernels
+
+    return kernels
 
 
 def test_every_kernel_timed_with_machine_and_target():
@@ -42,8 +39,7 @@ def test_a_named_target_compiles_with_its_own_features_only():
     import os
     import subprocess
 
-    sys.path.insert(0, str(ROOT / "tools"))
-    from bench_peer import target_env
+    from selfas_graph.bench.peer import target_env
 
     env = target_env("haswell", {"NUMBA_CPU_FEATURES": "+avx512f", "PATH": os.environ.get("PATH", "")})
     assert env["NUMBA_CPU_NAME"] == "haswell" and env["NUMBA_CPU_FEATURES"] == ""
@@ -51,7 +47,7 @@ def test_a_named_target_compiles_with_its_own_features_only():
     assert "NUMBA_CPU_NAME" not in host and "NUMBA_CPU_FEATURES" not in host
 
     probe = (
-        "import json, sys; sys.path.insert(0, sys.argv[1]); from bench_peer import numba_target; "
+        "import json; from selfas_graph.bench.peer import numba_target; "
         "import llvmlite.binding as ll; t = numba_target(); "
         "t['host_avx512'] = bool(ll.get_host_cpu_features().get('avx512f', False)); print(json.dumps(t))"
     )
@@ -59,9 +55,7 @@ def test_a_named_target_compiles_with_its_own_features_only():
     def report(extra):
         env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CPU")}
         env.update(extra)
-        out = subprocess.run(
-            [sys.executable, "-c", probe, str(ROOT / "tools")], env=env, capture_output=True, text=True
-        )
+        out = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True)
         assert out.returncode == 0, out.stderr
         return json.loads(out.stdout)
 

@@ -1,4 +1,4 @@
-"""Smoke test of tools/bench_neighbours.py on a tiny scaled Fig. 2 scene (a few seconds).
+"""Smoke test of selfas_graph/bench/neighbours.py on a tiny scaled Fig. 2 scene (a few seconds).
 
 The timings in this process (no child per instruction set); the numbers are measurements, not
 checked here, only that every kernel was timed the asked number of times, that the lists are
@@ -6,21 +6,15 @@ not empty and that the machine and the numba target are reported.
 """
 
 import argparse
-import importlib.util
-import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def _tool():
-    sys.path.insert(0, str(ROOT / "tools"))  # the tool imports bench_step, bench_kernels and bench_peer beside it
-    spec = importlib.util.spec_from_file_location(
-        "_selfas_tools_bench_neighbours", ROOT / "tools" / "bench_neighbours.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    from selfas_graph.bench import neighbours
+
+    return neighbours
 
 
 def test_every_kernel_timed_with_machine_and_target():

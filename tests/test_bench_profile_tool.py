@@ -1,19 +1,15 @@
-"""Smoke test of tools/bench_profile.py on the quick scene (a few steps): every part of the table
+"""Smoke test of selfas_graph/bench/profile.py on the quick scene (a few steps): every part of the table
 sums to the profiled total and the kernels are counted; the times are measurements, not checked."""
 
-import importlib.util
-import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def _tool():
-    sys.path.insert(0, str(ROOT / "tools"))  # the tool imports bench_peer beside it
-    spec = importlib.util.spec_from_file_location("_selfas_tools_bench_profile", ROOT / "tools" / "bench_profile.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    from selfas_graph.bench import profile
+
+    return profile
 
 
 def test_profile_table_of_a_few_steps(capsys):
@@ -43,10 +39,8 @@ def test_every_function_falls_in_one_part():
 
 
 def test_checks_tool_times_both_checks(capsys):
-    sys.path.insert(0, str(ROOT / "tools"))
-    spec = importlib.util.spec_from_file_location("_selfas_tools_bench_checks", ROOT / "tools" / "bench_checks.py")
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
+    from selfas_graph.bench import checks as tool
+
     got = tool.main(
         ["--scenario", str(ROOT / "scenarios" / "quick.toml"), "--settle", "4", "--repeat", "2", "--calls", "2"]
     )

@@ -1,24 +1,19 @@
-"""Smoke test of tools/bench_scaling.py on a tiny scaled Fig. 2 scene (a few seconds).
+"""Smoke test of selfas_graph/bench/scaling.py on a tiny scaled Fig. 2 scene (a few seconds).
 
-The tool's main() runs in this process (tools/ is not a package: it is imported from its
-path); the numbers themselves are measurements, not checked here, only that every row is
+The tool's main() runs in this process; the numbers themselves are measurements, not checked here, only that every row is
 there with its ratios and the tree's error, and that the plot is written.
 """
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def _tool():
-    sys.path.insert(0, str(ROOT / "tools"))  # the tool imports bench_step beside it
-    spec = importlib.util.spec_from_file_location("_selfas_tools_bench_scaling", ROOT / "tools" / "bench_scaling.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    from selfas_graph.bench import scaling
+
+    return scaling
 
 
 def test_rows_errors_ratios_and_plot(tmp_path, capsys):

@@ -1,6 +1,6 @@
 """The documentation cannot drift from the code.
 
-- docs/scenarios.md is exactly what tools/scenario_docs.py renders from the schema;
+- docs/scenarios.md is exactly what selfas_graph/bench/scenario_docs.py renders from the schema;
 - every scenario key that a page in docs/ names (``section.key`` in backticks) exists in the
   schema of :mod:`selfas_graph.model.params`;
 - every ``tests/<file>.py::<name>`` reference names an existing test function, and every
@@ -9,9 +9,7 @@
 
 import ast
 import dataclasses
-import importlib.util
 import re
-import sys
 import typing
 from pathlib import Path
 
@@ -23,21 +21,15 @@ from selfas_graph.model import params as P
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs"
 DOC_PAGES = sorted(DOCS.glob("*.md"))
-REGENERATE = "run `python tools/scenario_docs.py` to regenerate docs/scenarios.md"
+REGENERATE = "run `selfas-graph bench scenario_docs` to regenerate docs/scenarios.md"
 
 
 @pytest.fixture(scope="module")
 def tool():
-    """tools/scenario_docs.py, imported from its path (tools/ is not a package)."""
-    name = "_selfas_tools_scenario_docs"
-    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / "scenario_docs.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module  # dataclasses look their module up while the file executes
-    try:
-        spec.loader.exec_module(module)
-        yield module
-    finally:
-        sys.modules.pop(name, None)
+    """The generator of docs/scenarios.md, selfas_graph/bench/scenario_docs.py."""
+    from selfas_graph.bench import scenario_docs
+
+    return scenario_docs
 
 
 def _backticked(text):
@@ -67,7 +59,7 @@ def test_check_flag_reports_a_stale_file(tool, tmp_path, monkeypatch, capsys):
     out.write_text(tool.render() + "\nhand edit\n", encoding="utf-8")
     capsys.readouterr()
     assert tool.main(["--check"]) == 1
-    assert "python tools/scenario_docs.py" in capsys.readouterr().err
+    assert "selfas-graph bench scenario_docs" in capsys.readouterr().err
 
 
 def test_example_scenario_in_scenarios_md_loads():
@@ -207,7 +199,7 @@ def test_every_cited_function_exists(page):
 #: headings may follow, separated by ``, `` or `` or ``/`` and ``
 _NAME = r"""(?:'[^'\n]+'|"[^"\n]+")"""  # in single quotes, or in double quotes when it has an apostrophe
 MODEL_CITE = re.compile(rf"docs/model\.md\s+({_NAME}(?:(?:,\s*|\s+or\s+|\s+and\s+){_NAME})*)")
-CITING_TREES = ("selfas_graph", "tools", "tests", "scenarios")
+CITING_TREES = ("selfas_graph", "tests", "scenarios")
 _QUOTED = re.compile("'([^'\\n]+)'|\"([^\"\\n]+)\"")
 OLD_NAME = "MODEL" + ".md"  # the project's model text, which users do not have
 
@@ -235,7 +227,7 @@ def test_code_cites_docs_model_md():
 
 
 def test_every_docs_model_md_section_cited_in_the_code_exists():
-    """Every docs/model.md section cited in the code, tools, tests and scenes is a heading of that page."""
+    """Every docs/model.md section cited in the code (the tools in selfas_graph/bench included), tests and scenes is a heading of that page."""
     headings = _model_md_headings()
     bad = []
     for path in _citing_files():

@@ -1,5 +1,5 @@
 """Short-circuit episodes from hand-built event records (selfas_graph.analysis.episodes), and the
-tool that prints them for run files (tools/short_circuits.py) on a file with known events."""
+tool that prints them for run files (selfas_graph/bench/short_circuits.py) on a file with known events."""
 
 import importlib.util
 from pathlib import Path
@@ -90,10 +90,9 @@ def test_malformed_events_are_refused_with_the_reason(ev, match):
 
 
 def _tool():
-    spec = importlib.util.spec_from_file_location("short_circuits_tool", ROOT / "tools" / "short_circuits.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    from selfas_graph.bench import short_circuits
+
+    return short_circuits
 
 
 @pytest.fixture(scope="module")
@@ -162,9 +161,9 @@ def test_importing_the_tools_leaves_the_environment_alone():
     import os
 
     before = dict(os.environ)
-    for name in ("short_circuits", "bench_profile", "bench_events"):
-        spec = importlib.util.spec_from_file_location(f"tool_{name}", ROOT / "tools" / f"{name}.py")
-        spec.loader.exec_module(importlib.util.module_from_spec(spec))
+    for name in ("short_circuits", "profile", "events"):
+        spec = importlib.util.find_spec(f"selfas_graph.bench.{name}")
+        spec.loader.exec_module(importlib.util.module_from_spec(spec))  # a fresh copy: its import runs again
     assert dict(os.environ) == before
 
 

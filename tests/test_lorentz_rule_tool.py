@@ -1,9 +1,7 @@
-"""Smoke test of tools/lorentz_rule.py on a small hand-made state with currents: a table row per
+"""Smoke test of selfas_graph/bench/lorentz_rule.py on a small hand-made state with currents: a table row per
 rule, the errors against the converged integral ordered as the rules' accuracy (the times are
 measurements, not checked)."""
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -18,11 +16,9 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def _tool():
-    sys.path.insert(0, str(ROOT / "tools"))  # the tool imports bench_peer and bench_profile beside it
-    spec = importlib.util.spec_from_file_location("_selfas_tools_lorentz_rule", ROOT / "tools" / "lorentz_rule.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    from selfas_graph.bench import lorentz_rule
+
+    return lorentz_rule
 
 
 def test_rules_table_on_a_state_with_currents(tmp_path, capsys):

@@ -1,7 +1,6 @@
-"""Smoke test of tools/percolation.py: an ensemble of short-circuit times on quick.toml.
+"""Smoke test of selfas_graph/bench/percolation.py: an ensemble of short-circuit times on quick.toml.
 
-The tool's main() runs in this process (tools/ is not a package: it is imported from its
-path). One small ensemble (2 densities x 2 seeds to t = 2.2, about 30 s on 2 cores) is
+The tool's main() runs in this process. One small ensemble (2 densities x 2 seeds to t = 2.2, about 30 s on 2 cores) is
 shared by the checks of the JSON structure, the statistics, the table and the plot; the
 same runs are repeated on 2 worker processes to check that the results do not depend on
 the number of workers; a t-max far shorter than the short circuit gives censored runs.
@@ -9,7 +8,6 @@ The tool runs on the library's ensemble runner and statistics, whose Kaplan-Meie
 Wilson intervals are tested on hand-made data in tests/test_ensemble_stats.py.
 """
 
-import importlib.util
 import json
 import math
 from pathlib import Path
@@ -42,11 +40,9 @@ DENSITY_KEYS = {
 
 
 def _tool():
-    name = "_selfas_tools_percolation"
-    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / "percolation.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    from selfas_graph.bench import percolation
+
+    return percolation
 
 
 @pytest.fixture(scope="module")

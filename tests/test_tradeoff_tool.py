@@ -1,14 +1,12 @@
-"""Smoke test of tools/tradeoff.py on the quick scene (a few seconds).
+"""Smoke test of selfas_graph/bench/tradeoff.py on the quick scene (a few seconds).
 
-The tool's main() runs in this process (tools/ is not a package: it is imported from its path).
+The tool's main() runs in this process.
 The figures are measurements, not checked here; only that each setting of a knob has its row
 with both position errors, that the knob's own reference (float64) differs from itself by
 nothing, and that the tree's knobs are left out where the scene sums the tip pairs directly.
 """
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 from selfas_graph import load_scenario
@@ -17,11 +15,9 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def _tool():
-    sys.path.insert(0, str(ROOT / "tools"))
-    spec = importlib.util.spec_from_file_location("_selfas_tools_tradeoff", ROOT / "tools" / "tradeoff.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    from selfas_graph.bench import tradeoff
+
+    return tradeoff
 
 
 def test_precision_knob_rows(tmp_path, capsys):

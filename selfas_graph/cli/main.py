@@ -30,6 +30,11 @@ COMMANDS = {
         "the results page from runs: list, run and summarise the studies of docs/studies.toml, write the page",
     ),
     "export": ("selfas_graph.cli.export", "a run as GSD (OVITO, HOOMD-blue, MDAnalysis) or extended XYZ (ASE, OVITO)"),
+    "compare": ("selfas_graph.cli.compare", "whether two run files hold the same data, bit for bit"),
+    "bench": (
+        "selfas_graph.cli.bench",
+        "benchmarks and tools (selfas_graph.bench): bench NAME ARGS runs one, bench alone lists them",
+    ),
 }
 
 EXIT_USAGE = 2

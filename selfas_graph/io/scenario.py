@@ -172,7 +172,7 @@ def _apply_override(raw, item):
 
 
 def unwrap_optional(tp):
-    """``(T, True)`` for ``Optional[T]``, else ``(tp, False)``; shared with tools/scenario_docs.py."""
+    """``(T, True)`` for ``Optional[T]``, else ``(tp, False)``; shared with selfas_graph/bench/scenario_docs.py."""
     if typing.get_origin(tp) is typing.Union:
         args = [a for a in typing.get_args(tp) if a is not type(None)]
         if len(args) == 1:

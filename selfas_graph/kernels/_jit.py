@@ -15,7 +15,7 @@ the direct sum to 1e-12 relative of a strict reference).
 
 No code path depends on the CPU: the kernels are plain loops that LLVM vectorises for
 whatever numba compiles for (``NUMBA_CPU_NAME``; the host CPU by default), 4 doubles a
-vector with AVX2, 8 with AVX-512. ``tools/bench_kernels.py --targets host haswell``
+vector with AVX2, 8 with AVX-512. ``selfas-graph bench kernels --targets host haswell``
 times the hot kernels for both; docs/performance.md has the figures.
 
 Compiled kernels are cached on disk, keyed also by the digest of all kernel sources

@@ -74,7 +74,7 @@ in float64. The float64 path is unchanged by it, bit for bit.
 The defaults (hexadecapoles, leaves of at most 64 tips, groups of at most 128,
 theta 0.475) reach the median error of octupoles at theta 0.4 (5e-4 to 8e-4 in a
 uniform rod gas and the Fig. 2 slab of 6000 to 10^5 rods) 1.0 to 1.25 times
-faster on AVX2 (docs/performance.md, tools/bench_tree.py). On one AVX2 core of a
+faster on AVX2 (docs/performance.md, selfas_graph/bench/tree.py). On one AVX2 core of a
 Zen 4 (mixed) a near pair costs about 0.67 ns, an accepted cell about 4 ns per
 target; at the defaults and 24 000 rods of the Fig. 2 slab a target sees about
 1650 near tips and 160 cells, and the near pairs are about 55 % of the evaluation,
@@ -108,7 +108,7 @@ KEY_BITS = 21
 #: stored moments per cell: M, P (3), Q (5 independent), O (7 independent), H (9 independent)
 N_MOMENT = 25
 
-# Defaults from tools/bench_tree.py (docs/performance.md): the fastest setting
+# Defaults from selfas_graph/bench/tree.py (docs/performance.md): the fastest setting
 # with median relative error <= 1e-3 in a uniform rod gas at 1e4 and 1e5 rods,
 # the hardest of the measured configurations (in aggregates the contact forces
 # dominate and the relative error is 30 times smaller). Octupoles reach that
@@ -1268,7 +1268,7 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None, precision="
         AVX2 runs 8 float32 lanes per instruction against 4 float64, and LLVM replaces the
         float32 square root and division by a reciprocal square root estimate and one Newton
         step (``vrsqrtps``): no divider in the loop. Measured (docs/performance.md,
-        tools/bench_tree.py ``--precision``): the difference from float64 is about 4e-7 of a
+        selfas_graph/bench/tree.py ``--precision``): the difference from float64 is about 4e-7 of a
         tip's force (median), at most 2e-4 of it in aggregates, where contact forces nearly
         cancel; the estimate differs between CPU makers, so the last float32 bits are not the
         same on every machine.

@@ -318,7 +318,7 @@ def solve_circuit(
         ``"direct"`` (default): sparse LU (SuperLU) with a symmetric minimum-degree
         ordering, exact to round-off; fast for the branched, quasi-one-dimensional
         networks filaments form (70 ms for 10^5 rods of cross-linked chains) but
-        0.8 s for a 10^5-rod diluted cubic lattice (``tools/bench_circuit.py``).
+        0.8 s for a 10^5-rod diluted cubic lattice (``selfas-graph bench circuit``).
         ``"cg"``: Jacobi-preconditioned conjugate gradients to a relative residual
         ``CG_RTOL`` (round-off level): 0.14 s on that lattice, slower than
         "direct" on chains; it falls back to the direct solver if it has not

@@ -29,7 +29,7 @@ def _solve_direct(A: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
 
 
 #: "auto" uses the direct solver below this many unknowns and "cg" above. Measured with
-#: tools/bench_circuit.py at 10^5 rods: direct 0.87 s / cg 0.16 s on a diluted cubic
+#: selfas_graph/bench/circuit.py at 10^5 rods: direct 0.87 s / cg 0.16 s on a diluted cubic
 #: lattice, 0.07 s / 0.17 s on cross-linked chains; at 10^4 both are under 15 ms.
 AUTO_CG_UNKNOWNS = 50_000
 

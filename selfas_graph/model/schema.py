@@ -1,7 +1,7 @@
 """The field helper of the parameter schema: a dataclass field with its documentation and range.
 
 :mod:`selfas_graph.io.scenario` reads this metadata to validate scenario files, and
-``tools/scenario_docs.py`` to write docs/scenarios.md.
+``selfas-graph bench scenario_docs`` to write docs/scenarios.md.
 """
 
 from dataclasses import field

@@ -1,15 +1,15 @@
 """Scaling benchmark: milliseconds per full step of the Fig. 2 scene from 10^3 to 10^5 rods, beside a peer.
 
-Usage: python tools/bench_scaling.py [--rods 1200 6000 24000 100000] [--method direct tree]
+Usage: selfas-graph bench scaling [--rods 1200 6000 24000 100000] [--method direct tree]
                                      [--repeat 5] [--no-peer] [--set KEY=VALUE ...] [--json OUT.json]
-       python tools/bench_scaling.py --plot OUT.png --from-json A.json B.json ...
-       mpiexec -n 2 python tools/bench_scaling.py ... --no-peer   (force rows split over 2 ranks; rank 0 prints)
+       selfas-graph bench scaling --plot OUT.png --from-json A.json B.json ...
+       mpiexec -n 2 selfas-graph bench scaling ... --no-peer   (force rows split over 2 ranks; rank 0 prints)
 
-For each size the Fig. 2 scene is scaled as in tools/bench_step.py (the box grows in x and y,
+For each size the Fig. 2 scene is scaled as in selfas_graph/bench/step.py (the box grows in x and y,
 so the density and the electrode gap stay the paper's) and every Fig. 2 term is on, at the
 scene's default accuracy. For each way of summing the tip-tip force (``direct``, ``tree``)
 it takes warm-up steps (compilation, neighbour lists), then times blocks of steps, ``--repeat``
-times, interleaved with blocks of steps of the peer on the same tips (tools/bench_peer.py:
+times, interleaved with blocks of steps of the peer on the same tips (selfas_graph/bench/peer.py:
 OpenMM's CPU platform, PME at rc = 6 and tolerance 1e-4, rods as +-q pairs held by a
 constraint, as many threads as numba has). Every figure is printed as median [min-max] over the
 repeats; the ratio to the peer is the median of the per-repeat ratios ours / peer (each
@@ -30,23 +30,20 @@ peer's figures of the same runs and an N log N guide.
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tools"))
+from selfas_graph import Simulation, load_scenario
+from selfas_graph.kernels.tips import tip_tip_direct_rows
+from selfas_graph.kernels.tree import THETA, tip_tip_tree
+from selfas_graph.parallel import world
 
-from bench_peer import OpenMMPeer, machine, machine_line, summary  # noqa: E402
-from bench_step import scene  # noqa: E402
+from .peer import OpenMMPeer, machine, machine_line, summary
+from .step import scene
 
-from selfas_graph import Simulation, load_scenario  # noqa: E402
-from selfas_graph.kernels.tips import tip_tip_direct_rows  # noqa: E402
-from selfas_graph.kernels.tree import THETA, tip_tip_tree  # noqa: E402
-from selfas_graph.parallel import world  # noqa: E402
+ROOT = Path(__file__).resolve().parents[2]
 
 #: sampled target tips for the tree's error above 2000 rods (the direct rows cost O(sample x N))
 SAMPLE = 2000

@@ -2,7 +2,7 @@
 
 Usage::
 
-    PYTHONPATH=. python tools/bench_circuit.py [--sizes 1000 10000 100000] [--repeat 3] [--seed 1]
+    selfas-graph bench circuit [--sizes 1000 10000 100000] [--repeat 3] [--seed 1]
 
 Networks (all between a cathode at the bottom and an anode at the top, plus
 free rods that touch nothing):
@@ -19,7 +19,7 @@ free rods that touch nothing):
 
 Columns: rods (free rods included), contacts (tip-tip plus conductor), rods in
 filaments, ``classify_rods`` time, the same topology by the scipy/networkx version the
-array kernels replaced (``tests/reference.py``, the peer: results checked equal),
+array kernels replaced (``selfas_graph/bench/oracles.py``, the peer: results checked equal),
 ``solve_circuit`` time with the default direct solver and with ``solver="cg"``. Each time is
 the best of ``--repeat`` runs; the solves are given no memo of the last system
 (``circuit.SolveMemo``), so every solve factorises.
@@ -30,24 +30,18 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import sys
 import time
-from pathlib import Path
 
 import networkx
 import numpy as np
 import scipy
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+from selfas_graph.model.circuit import solve_circuit
+from selfas_graph.model.events import CONDUCTOR_ANODE, CONDUCTOR_CATHODE
+from selfas_graph.model.graph import classify_rods
 
-from bench_peer import machine  # noqa: E402
-
-import reference  # noqa: E402
-from selfas_graph.model.circuit import solve_circuit  # noqa: E402
-from selfas_graph.model.events import CONDUCTOR_ANODE, CONDUCTOR_CATHODE  # noqa: E402
-from selfas_graph.model.graph import classify_rods  # noqa: E402
+from . import oracles
+from .peer import machine
 
 
 def _junction_contacts(junction_of_tip: np.ndarray) -> np.ndarray:
@@ -163,7 +157,7 @@ def main(argv=None):
         for n in args.sizes:
             n_rods, tc, ct, cid, pot = make(n, rng)
             t_topo, topo = _best(lambda: classify_rods(n_rods, tc, ct, cid), args.repeat)
-            t_peer, peer = _best(lambda: reference.classify_rods_scipy_networkx(n_rods, tc, ct, cid), args.repeat)
+            t_peer, peer = _best(lambda: oracles.classify_rods_scipy_networkx(n_rods, tc, ct, cid), args.repeat)
             assert np.array_equal(peer.role, topo.role) and np.array_equal(peer.structure, topo.structure)
             t_solve, sol = _best(lambda: solve_circuit(2 * n_rods, tc, ct, pot), args.repeat)
             t_cg, sol_cg = _best(lambda: solve_circuit(2 * n_rods, tc, ct, pot, solver="cg"), args.repeat)

@@ -1,9 +1,9 @@
 """Where a step goes: the CPU time of a run's steps, by part, from a checkpoint or a fresh scene.
 
-Usage: python tools/bench_profile.py --checkpoint RUN.checkpoint.h5 [--steps 2000] [--threads 1]
-       python tools/bench_profile.py --kernels [--rounds 8] [--steps 3000]
-       python tools/bench_profile.py --scenario scenarios/fig2.toml --settle 2000 [--steps 2000]
-       python tools/bench_profile.py --checkpoint RUN.checkpoint.h5 --before REF [--rounds 8] [--steps 250]
+Usage: selfas-graph bench profile --checkpoint RUN.checkpoint.h5 [--steps 2000] [--threads 1]
+       selfas-graph bench profile --kernels [--rounds 8] [--steps 3000]
+       selfas-graph bench profile --scenario scenarios/fig2.toml --settle 2000 [--steps 2000]
+       selfas-graph bench profile --checkpoint RUN.checkpoint.h5 --before REF [--rounds 8] [--steps 250]
 
 Steps the simulation ``--steps`` times after 48 warm-up steps under cProfile on the thread's CPU
 clock (on a machine loaded by other jobs the wall clock counts their time too), and sorts the time
@@ -37,6 +37,7 @@ import cProfile
 import json
 import os
 import pstats
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -44,13 +45,12 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-#: the package to import: the working tree, or an exported revision (``--before``)
-PACKAGE_ROOT = Path(os.environ.get("SELFAS_BENCH_PACKAGE_ROOT", ROOT))
-sys.path.insert(0, str(PACKAGE_ROOT))
-sys.path.insert(0, str(ROOT / "tools"))
+import numpy as np
 
-import numpy as np  # noqa: E402
+ROOT = Path(__file__).resolve().parents[2]
+#: set (unless set) by the command line, not on import (tests import this): a running job's file
+#: is read only here (``selfas-graph bench`` sets them too)
+COMMAND_ENV = {"HDF5_USE_FILE_LOCKING": "FALSE"}
 
 #: (part, test on "path:function") in order; the first match wins
 PARTS = [
@@ -180,13 +180,21 @@ def profile(sim, steps):
 
 
 def export(ref):
-    """The tree of git revision ``ref`` in a temporary folder (kept, keyed by its commit): its path."""
+    """The tree of git revision ``ref`` in a temporary folder (kept, keyed by its commit): its path.
+
+    Today's ``selfas_graph/bench/profile.py`` is put beside that revision's package (as
+    ``selfas_graph/bench``), so that the child of ``--before`` serves steps the same way with the
+    old code."""
     sha = subprocess.run(["git", "rev-parse", ref], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
     dest = Path(tempfile.gettempdir()) / "selfas_bench_profile" / sha[:12]
     if not (dest / "selfas_graph").exists():
         dest.mkdir(parents=True, exist_ok=True)
         archive = subprocess.run(["git", "archive", sha], cwd=ROOT, capture_output=True, check=True).stdout
         subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
+    bench = dest / "selfas_graph" / "bench"
+    bench.mkdir(exist_ok=True)
+    for f in ("__init__.py", "profile.py"):
+        shutil.copyfile(Path(__file__).with_name(f), bench / f)
     return dest
 
 
@@ -210,11 +218,10 @@ def serve(args):
 
 
 def compare(args):
-    from bench_peer import machine_line
+    from .peer import machine_line, tool_command, tool_env
 
     base = [
-        sys.executable,
-        str(Path(__file__).resolve()),
+        *tool_command("profile"),
         "--serve",
         "--steps",
         str(args.steps),
@@ -231,8 +238,9 @@ def compare(args):
     old_root = export(args.before)
     procs = {}
     for name, root in (("before", old_root), ("after", ROOT)):
-        env = dict(os.environ, SELFAS_BENCH_PACKAGE_ROOT=str(root))
+        env = dict(os.environ)
         env.pop("PYTHONPATH", None)
+        env = tool_env(env, root)
         procs[name] = subprocess.Popen(base, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
     head = {k: json.loads(p.stdout.readline()) for k, p in procs.items()}
     times = {k: [] for k in procs}
@@ -355,7 +363,7 @@ def main(argv=None):
     if args.serve:
         return serve(args)
     if args.kernels:
-        from bench_peer import machine_line
+        from .peer import machine_line
 
         start_threads(1)
         figures = fused_kernels(calls=max(1, args.steps // 10), repeats=args.rounds * 2 - 1)
@@ -368,7 +376,7 @@ def main(argv=None):
         return None
     if args.before:
         return compare(args)
-    from bench_peer import machine, machine_line
+    from .peer import machine, machine_line
 
     start_threads(args.threads)
     sim, origin = load_state(args)
@@ -414,6 +422,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    # a running job's file is read only here; set for the command, not on import (tests import this)
-    os.environ.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")
+    for key, value in COMMAND_ENV.items():
+        os.environ.setdefault(key, value)
     main()

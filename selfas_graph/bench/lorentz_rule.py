@@ -1,6 +1,6 @@
 """Accuracy and cost of the quadrature of term 10 (the Lorentz force on rod currents) on a run's state.
 
-Usage: python tools/lorentz_rule.py --checkpoint RUN.checkpoint.h5 [--rule 4:0 2:1.5 ...] [--rounds 7]
+Usage: selfas-graph bench lorentz_rule --checkpoint RUN.checkpoint.h5 [--rule 4:0 2:1.5 ...] [--rounds 7]
 
 Each ``--rule N:R`` is ``forces.current_lorentz.quadrature_points = N`` with ``near_range = R``
 (R = 0: the plain rule on every pair; docs/model.md 'Term 10'), the rest of the run's scenario as it
@@ -17,20 +17,15 @@ Prints the CPU model and the instruction set numba compiled for (``NUMBA_CPU_NAM
 """
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tools"))
+import numpy as np
 
-import numpy as np  # noqa: E402
-from bench_peer import machine_line  # noqa: E402
-from bench_profile import load_state  # noqa: E402
+import selfas_graph  # noqa: F401  before any kernel runs: it sets the OpenMP wait policy
+from selfas_graph.kernels import currents as kc
 
-import selfas_graph  # noqa: E402, F401  before any kernel runs: it sets the OpenMP wait policy
-from selfas_graph.kernels import currents as kc  # noqa: E402
+from .peer import machine_line
+from .profile import load_state
 
 
 def lorentz_force(ff, active, rule, sources=None, rods=None, with_fields=True):

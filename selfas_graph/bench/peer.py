@@ -1,4 +1,4 @@
-"""What the benchmarks in tools/ print beside their figures: the machine, the instruction set numba
+"""What the benchmarks in selfas_graph/bench/ print beside their figures: the machine, the instruction set numba
 compiled for, and a peer code timed on the same rods in the same run.
 
 ``machine()`` names the CPU model (``/proc/cpuinfo``), the CPU numba compiles for (``NUMBA_CPU_NAME``
@@ -21,7 +21,9 @@ simulation's step carries on top. Without OpenMM, ``OpenMMPeer.available()`` is 
 """
 
 import os
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -48,7 +50,27 @@ def target_env(target: str, environ=None) -> dict:
     return env
 
 
-from selfas_graph.provenance import cpu_model, numba_target  # noqa: E402,F401  (re-exported)
+from selfas_graph.provenance import cpu_model, numba_target  # noqa: F401  (re-exported)
+
+#: the folder that holds this package: a tool's child process imports the same code from it
+PACKAGE_ROOT = Path(__file__).resolve().parents[2]
+
+
+def tool_command(name: str) -> list:
+    """The command line of a process running the tool ``name`` (``python -P -m selfas_graph.bench.NAME``).
+
+    ``-P`` keeps the current folder off the module path, so the package is the one ``tool_env``
+    names, whatever folder the child runs in.
+    """
+    return [sys.executable, "-P", "-m", f"selfas_graph.bench.{name}"]
+
+
+def tool_env(environ=None, root=PACKAGE_ROOT) -> dict:
+    """``environ`` (default: this process's environment) with ``root`` first on ``PYTHONPATH``: a
+    child started with ``tool_command`` imports the package in ``root`` (by default this one)."""
+    env = dict(os.environ if environ is None else environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(root)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
+    return env
 
 
 def machine() -> dict:

@@ -1,9 +1,9 @@
 """Kernel benchmark: the hot kernels of a step, one at a time, per instruction set.
 
-Usage: python tools/bench_kernels.py [--rods 1200 6000 24000] [--repeat 7] [--threads 1]
+Usage: selfas-graph bench kernels [--rods 1200 6000 24000] [--repeat 7] [--threads 1]
                                      [--targets host haswell znver3] [--before REF] [--json OUT.json]
 
-On the tips of the Fig. 2 scene scaled to each size (as tools/bench_step.py), it times, each
+On the tips of the Fig. 2 scene scaled to each size (as selfas_graph/bench/step.py), it times, each
 ``--repeat`` times (median [min-max] ms per call), on ``--threads`` numba threads:
 
 - ``direct``: the tip-tip direct sum (all rows), also as tip pairs per second per thread;
@@ -45,7 +45,7 @@ under load it counts only the cycles the kernel got (with one thread).
 
 ``--targets`` runs the timings once per instruction set, each in a fresh process with
 ``NUMBA_CPU_NAME`` set to the target and ``NUMBA_CPU_FEATURES`` set empty, so that numba uses
-that CPU's own features (tools/bench_peer.py ``target_env``; ``host`` leaves both unset: numba
+that CPU's own features (selfas_graph/bench/peer.py ``target_env``; ``host`` leaves both unset: numba
 compiles for the CPU it runs on). One table then shows what an AVX2 machine gets (``haswell``,
 ``znver3``) beside the host build, also on an AVX-512 host. Each process prints the CPU and the
 target and vector features it compiled for.
@@ -53,6 +53,7 @@ target and vector features it compiled for.
 
 import argparse
 import importlib
+import importlib.util
 import json
 import subprocess
 import sys
@@ -63,9 +64,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tools"))
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _plain():
@@ -143,8 +142,11 @@ def kernels_at(ref):
             if f.endswith(".py"):
                 text = subprocess.run(["git", "show", f"{sha}:{f}"], cwd=ROOT, capture_output=True, check=True).stdout
                 (pkg / Path(f).name).write_bytes(text)
-    if str(home) not in sys.path:
-        sys.path.insert(0, str(home))
+    if name not in sys.modules:  # the copy as a package of its own name, imported from its folder
+        spec = importlib.util.spec_from_file_location(name, pkg / "__init__.py", submodule_search_locations=[str(pkg)])
+        package = importlib.util.module_from_spec(spec)
+        sys.modules[name] = package
+        spec.loader.exec_module(package)
     return types.SimpleNamespace(
         **{m: importlib.import_module(f"{name}.{m}") for m in ("tips", "tree", "pairs", "currents")}
     )
@@ -152,11 +154,12 @@ def kernels_at(ref):
 
 def run(args):
     import numba
-    from bench_peer import machine, machine_line
-    from bench_step import scene
 
     from selfas_graph import Simulation
     from selfas_graph.kernels import currents, pairs, tips, tree
+
+    from .peer import machine, machine_line
+    from .step import scene
 
     numba.set_num_threads(args.threads)
     plain = _plain()
@@ -291,9 +294,9 @@ def run(args):
 def mixed_error(checkpoint):
     """Rows (quantity, median, p99, max, max diff / max force) of the mixed current kernels
     against the float64 ones on the state of ``checkpoint`` (see the module docstring)."""
-    from bench_profile import load_state
-
     from selfas_graph.kernels import currents as kc
+
+    from .profile import load_state
 
     sim, origin = load_state(types.SimpleNamespace(checkpoint=checkpoint, extra=[], scenario=None, settle=0))
     ff = sim.force_field
@@ -360,7 +363,7 @@ def main(argv=None):
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.mixed_error:
-        from bench_peer import machine_line
+        from .peer import machine_line
 
         origin, n_active, n_rods, rows = mixed_error(args.mixed_error)
         print(machine_line())
@@ -374,13 +377,12 @@ def main(argv=None):
         print(json.dumps(run(args)))
         return
     results = {}
-    from bench_peer import target_env
+    from .peer import target_env, tool_command, tool_env
 
     for target in args.targets:
-        env = target_env(target)
+        env = tool_env(target_env(target))
         cmd = [
-            sys.executable,
-            str(Path(__file__).resolve()),
+            *tool_command("kernels"),
             "--child",
             "--rods",
             *map(str, args.rods),

@@ -1,6 +1,6 @@
 """Why a network drifts outwards: radial forces on the rods of a run's last frame, by term.
 
-Usage: python tools/radial_forces.py RUN.h5 [--frames 20]
+Usage: selfas-graph bench radial_forces RUN.h5 [--frames 20]
 
 Prints the median distance of rod centres from the z axis at a few frames, then, averaged over
 the last frames (velocities set to zero, the saved currents on the current-carrying rods), the
@@ -11,20 +11,16 @@ so one frame's contact forces are noisy; the standard error over frames says how
 the Fig. 2 runs in docs/results.md.
 """
 
-import sys
-from pathlib import Path
+import argparse
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-from selfas_graph.io.h5md import RunFile  # noqa: E402
-from selfas_graph.io.scenario import scenario_from_text  # noqa: E402
-from selfas_graph.kernels.fields import plasma_field  # noqa: E402
-from selfas_graph.model.graph import FILAMENT  # noqa: E402
-from selfas_graph.model.state import random_state  # noqa: E402
-from selfas_graph.model.terms import ForceField  # noqa: E402
+from selfas_graph.io.h5md import RunFile
+from selfas_graph.io.scenario import scenario_from_text
+from selfas_graph.kernels.fields import plasma_field
+from selfas_graph.model.graph import FILAMENT
+from selfas_graph.model.state import random_state
+from selfas_graph.model.terms import ForceField
 
 
 def _axis_frame(x):
@@ -62,7 +58,7 @@ def radial_parts(params, x, role, current):
     return parts
 
 
-def main(path, frames):
+def report(path, frames):
     with RunFile(path) as rf:
         times = rf.time
         n = len(times)
@@ -96,11 +92,13 @@ def main(path, frames):
     )
 
 
-if __name__ == "__main__":
-    import argparse
-
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", help="run file (HDF5)")
     ap.add_argument("--frames", type=int, default=20, help="average over this many last frames (default 20)")
-    a = ap.parse_args()
-    main(a.run, a.frames)
+    a = ap.parse_args(argv)
+    report(a.run, a.frames)
+
+
+if __name__ == "__main__":
+    main()

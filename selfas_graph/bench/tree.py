@@ -1,6 +1,6 @@
 """Tip-tip force benchmark: the multipole tree against the direct sum.
 
-Usage: python tools/bench_tree.py [--rods 1000 10000 100000] [--theta 0.3 0.4 0.5 0.6]
+Usage: selfas-graph bench tree [--rods 1000 10000 100000] [--theta 0.3 0.4 0.5 0.6]
        [--leaf 32 64 128] [--group 128] [--order 2 3] [--config uniform chains]
        [--precision float64 mixed]
 
@@ -15,8 +15,8 @@ and the speed-up over the direct sum measured in the same run. Configurations:
 - ``chains``: the same cube filled with wiggly chains of 20 rods stuck tip to
   tip (opposite tips r*/2 apart), the aggregated state of a late run;
 - ``fig2``: the initial tips of the Fig. 2 scene scaled to the size as in
-  tools/bench_step.py (the box grows in x and y, a slab between the electrodes),
-  the tips that tools/bench_scaling.py steps.
+  selfas_graph/bench/step.py (the box grows in x and y, a slab between the electrodes),
+  the tips that selfas_graph/bench/scaling.py steps.
 
 The direct reference is the full sum up to ``--full-direct`` tips; above that it
 is computed for ``--sample`` random target tips only (``tip_tip_direct_rows``),
@@ -33,7 +33,7 @@ median [min-max] over the rounds; the ``eval ms`` column stays the minimum.
 
 ``--before REF`` adds, in those turns, the evaluation of the kernels of git revision REF
 (``selfas_graph/kernels`` of REF copied into a package of its own, as in
-tools/bench_kernels.py) on the same tree and precision, and prints its CPU ms and the ratio
+selfas_graph/bench/kernels.py) on the same tree and precision, and prints its CPU ms and the ratio
 before / after (median [min-max] of the per-round ratios): the fair comparison on a loaded
 machine. With ``--before`` only the turns are timed (and the errors of both printed).
 
@@ -43,20 +43,17 @@ sum (log-log interpolation of the speed-up between sizes).
 """
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import numba
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tools"))
+from selfas_graph.kernels.tips import tip_tip_direct, tip_tip_direct_rows
+from selfas_graph.kernels.tree import PRECISIONS, build_tip_tree, evaluate_tip_tree
+from selfas_graph.model.state import State
 
-from selfas_graph.kernels.tips import tip_tip_direct, tip_tip_direct_rows  # noqa: E402
-from selfas_graph.kernels.tree import PRECISIONS, build_tip_tree, evaluate_tip_tree  # noqa: E402
-from selfas_graph.model.state import State  # noqa: E402
+ROOT = Path(__file__).resolve().parents[2]
 
 RSTAR, KAPPA, DENSITY = 0.06, 1.0, 0.19
 
@@ -91,9 +88,9 @@ def chains(n_rods, rng, length=20):
 
 
 def fig2(n_rods, rng):
-    from bench_step import scene
-
     from selfas_graph import Simulation
+
+    from .step import scene
 
     sim = Simulation.from_scenario(scene(str(ROOT / "scenarios" / "fig2.toml"), n_rods))
     p = sim.state.position
@@ -219,7 +216,7 @@ def compare_before(args, tips, ref, old, n):
                         )
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rods", type=int, nargs="+", default=[1000, 3000, 10000, 30000, 100000])
     ap.add_argument("--theta", type=float, nargs="+", default=[0.3, 0.4, 0.5, 0.6])
@@ -234,15 +231,15 @@ def main():
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--target", type=float, default=1e-3, help="median relative error for the summary")
     ap.add_argument("--seed", type=int, default=1)
-    args = ap.parse_args()
-    from bench_peer import machine_line
+    args = ap.parse_args(argv)
+    from .peer import machine_line
 
     print(machine_line())
     print(f"numba threads: {numba.get_num_threads()}; r* = {RSTAR}, kappa = {KAPPA}, density {DENSITY}")
     make = {"uniform": uniform, "chains": chains, "fig2": fig2}
     old = None
     if args.before:
-        from bench_kernels import kernels_at
+        from .kernels import kernels_at
 
         old = kernels_at(args.before).tree
     summary = []

@@ -1,6 +1,6 @@
 """Make the paper-style figures of one run into a folder (the pictures of docs/results.md).
 
-Usage: python tools/figures.py RUN.h5 OUTDIR [--prefix NAME]
+Usage: selfas-graph bench figures RUN.h5 OUTDIR [--prefix NAME]
 
 Writes NAME_snapshot_start.png (frame 0), NAME_snapshot_end.png, NAME_density.png,
 NAME_field.png, NAME_flux.png and NAME_timeline.png (last frame unless said otherwise), and
@@ -12,10 +12,7 @@ import argparse
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-from selfas_graph.cli.main import main as cli  # noqa: E402
+from selfas_graph.cli.main import main as cli
 
 
 def main(argv=None):

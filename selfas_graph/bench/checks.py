@@ -1,9 +1,9 @@
 """The per-step checks that became kernels, against the numpy code they replace, in one process.
 
-Usage: python tools/bench_checks.py --checkpoint RUN.checkpoint.h5 [--repeat 15] [--calls 200]
-       python tools/bench_checks.py --scenario scenarios/fig2.toml --settle 2000
+Usage: selfas-graph bench checks --checkpoint RUN.checkpoint.h5 [--repeat 15] [--calls 200]
+       selfas-graph bench checks --scenario scenarios/fig2.toml --settle 2000
 
-On a state from a checkpoint (read as tools/bench_profile.py reads it) or a settled scene, times,
+On a state from a checkpoint (read as selfas_graph/bench/profile.py reads it) or a settled scene, times,
 on one numba thread and the thread's CPU clock, interleaved (the order alternates between repeats):
 
 - ``contact check``: ``ContactTracker.update`` on a step without events, with its one-pass
@@ -17,15 +17,12 @@ instruction set numba compiled for (``NUMBA_CPU_NAME``).
 """
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tools"))
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def interleaved(a, b, repeat, calls):
@@ -43,11 +40,12 @@ def interleaved(a, b, repeat, calls):
 
 def run(args):
     import numba
-    from bench_peer import machine_line
-    from bench_profile import load_state
 
     import selfas_graph.model.contacts as contacts_module
     from selfas_graph.kernels.cells import max_displacement2
+
+    from .peer import machine_line
+    from .profile import load_state
 
     numba.set_num_threads(1)
     sim, origin = load_state(args)

@@ -2,20 +2,20 @@
 
 Usage::
 
-    python tools/same_as_commit.py [--commit REV] [--keep DIR] SCENARIO [SCENARIO ...]
+    selfas-graph bench same_as_commit [--commit REV] [--keep DIR] SCENARIO [SCENARIO ...]
         [--set KEY=VALUE ...]
 
 For each scenario, exports ``REV`` (default ``HEAD``) with ``git archive`` into a temporary
 folder, runs ``selfas-graph simulate`` once with that code and once with the working tree
 (same Python, run from a temporary folder, each checked to import the code meant; same thread count: ``NUMBA_NUM_THREADS`` and ``OMP_NUM_THREADS`` are set to
-``--threads``, default 1), and compares the two run files with ``tools/same_run.py``. The
+``--threads``, default 1), and compares the two run files with ``selfas_graph/bench/same_run.py``. The
 ``--set`` overrides apply to every scenario. A scenario may carry its own overrides after a
 ``+``: ``scenarios/fig8_quick.toml+run.t_end=6+forces.external_filament.diameter=0.6``.
 Exits 1 if any pair differs.
 
 Use it before committing a change that should keep a run's results: e.g. ::
 
-    python tools/same_as_commit.py scenarios/quick.toml \\
+    selfas-graph bench same_as_commit scenarios/quick.toml \\
         scenarios/fig8_quick.toml+run.t_end=6+forces.external_filament.diameter=0.6
 
 (the second scene is case (ii) with currents flowing from t = 3.5 on).
@@ -30,11 +30,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
-ROOT = HERE.parent
-sys.path.insert(0, str(HERE))
+from .same_run import compare
 
-from same_run import compare  # noqa: E402
+#: the folder that holds the working tree's package (and its git checkout)
+ROOT = Path(__file__).resolve().parents[2]
 
 #: run in the code folder given by PYTHONPATH, and check that it is that code which runs (the
 #: working tree's editable install, or a current folder holding selfas_graph, would win otherwise)

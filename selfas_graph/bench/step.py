@@ -1,9 +1,9 @@
 """Step benchmark: milliseconds per full step for the Fig. 2 scene and a 6000-rod variant.
 
-Usage: python tools/bench_step.py [--rods 1200 6000] [--steps 200] [--scenario scenarios/fig2.toml]
+Usage: selfas-graph bench step [--rods 1200 6000] [--steps 200] [--scenario scenarios/fig2.toml]
                                   [--set KEY=VALUE ...]
-       mpiexec -n 2 python tools/bench_step.py ...   (the force rows split over the ranks; rank 0 prints)
-       python tools/bench_step.py --compare --repeat 7 ...
+       mpiexec -n 2 selfas-graph bench step ...   (the force rows split over the ranks; rank 0 prints)
+       selfas-graph bench step --compare --repeat 7 ...
                                                      (1 rank x 1 thread, 2 ranks x 1 thread and
                                                       1 rank x 2 threads taking turns, in one table)
 
@@ -26,12 +26,11 @@ from pathlib import Path
 import numba
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+from selfas_graph import Simulation, load_scenario
+from selfas_graph.kernels.tips import tip_tip_direct
+from selfas_graph.parallel import world
 
-from selfas_graph import Simulation, load_scenario  # noqa: E402
-from selfas_graph.kernels.tips import tip_tip_direct  # noqa: E402
-from selfas_graph.parallel import world  # noqa: E402
+ROOT = Path(__file__).resolve().parents[2]
 
 #: (label, ranks, numba threads) of ``--compare``
 CONFIGS = [("1 rank x 1 thread", 1, 1), ("2 ranks x 1 thread", 2, 1), ("1 rank x 2 threads", 1, 2)]
@@ -49,7 +48,7 @@ def scene(path, n_rods, extra=()):
     return load_scenario(path, overrides=over)
 
 
-def main():
+def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "fig2.toml"))
     ap.add_argument("--rods", type=int, nargs="+", default=[1200, 6000])
@@ -75,7 +74,7 @@ def main():
         metavar="KEY=VALUE",
         help="change the scene, e.g. --set integrator.slow_every=1 (repeatable)",
     )
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
     if args.compare:
         return compare(args)
     say = print if world.rank == 0 and not args.json else (lambda *a, **k: None)
@@ -130,9 +129,10 @@ def main():
 def compare(args):
     """Run this tool once per entry of CONFIGS (under mpiexec for several ranks) and tabulate ms/step."""
     mpiexec = Path(sys.executable).parent / "mpiexec"
+    from .peer import tool_command, tool_env
+
     base = [
-        sys.executable,
-        str(Path(__file__).resolve()),
+        *tool_command("step"),
         "--json",
         "--steps",
         str(args.steps),
@@ -149,7 +149,7 @@ def compare(args):
         order = list(range(len(CONFIGS)))
         for c in order if r % 2 == 0 else order[::-1]:
             label, ranks, threads = CONFIGS[c]
-            env = {**os.environ, "NUMBA_NUM_THREADS": str(threads)}
+            env = tool_env({**os.environ, "NUMBA_NUM_THREADS": str(threads)})
             cmd = base if ranks == 1 else [str(mpiexec if mpiexec.exists() else "mpiexec"), "-n", str(ranks), *base]
             res = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True)
             got = json.loads(res.stdout.strip().splitlines()[-1])

@@ -1,6 +1,6 @@
 """Speed-accuracy trade of every accuracy knob of a scene, against a tight reference run.
 
-Usage: python tools/tradeoff.py SCENARIO [--from T0] [--checkpoint FILE] [--t 0.5] [--knob NAME ...]
+Usage: selfas-graph bench tradeoff SCENARIO [--from T0] [--checkpoint FILE] [--t 0.5] [--knob NAME ...]
        [--set KEY=VALUE ...] [--json OUT] [--plot OUT.png]
 
 The scene is first run at its defaults to ``--from T0`` (e.g. past the short circuit, so
@@ -39,12 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-from selfas_graph import NumericalFailure, Simulation, load_scenario  # noqa: E402
-from selfas_graph.io.checkpoint import CheckpointError, read_checkpoint  # noqa: E402
-from selfas_graph.model import events as ev  # noqa: E402
+from selfas_graph import NumericalFailure, Simulation, load_scenario
+from selfas_graph.io.checkpoint import CheckpointError, read_checkpoint
+from selfas_graph.model import events as ev
 
 #: knob -> (settings to sweep, the reference run's overrides); a setting the scene cannot use
 #: (e.g. a Yukawa tolerance without Yukawa) is skipped. Most references put the knob itself at

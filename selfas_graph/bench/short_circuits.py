@@ -1,7 +1,7 @@
 """Short-circuit episodes of runs: how long the gap stays closed, what opens it, and the currents.
 
-Usage: python tools/short_circuits.py RUN.h5 [RUN.h5 ...] [--json out.json]
-       python tools/short_circuits.py --replay RUN.h5 --scenario SCENARIO --frame K --for T
+Usage: selfas-graph bench short_circuits RUN.h5 [RUN.h5 ...] [--json out.json]
+       selfas-graph bench short_circuits --replay RUN.h5 --scenario SCENARIO --frame K --for T
            [--set key=value ...] [--json out.json]
 
 The first form reads the event records of each run file and prints, per run, the number of
@@ -30,10 +30,12 @@ import os
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+import numpy as np
 
-import numpy as np  # noqa: E402
+ROOT = Path(__file__).resolve().parents[2]
+#: set (unless set) by the command line, not on import (tests import this): a running job's file
+#: is read only here (``selfas-graph bench`` sets them too)
+COMMAND_ENV = {"HDF5_USE_FILE_LOCKING": "FALSE"}
 
 KIND = {2: "tip-tip release", 4: "electrode release", -2: "both", 0: "unknown", -1: "still closed"}
 
@@ -187,12 +189,11 @@ def build_parser():
 def main(argv=None):
     ap = build_parser()
     args = ap.parse_args(argv)
-    sys.path.insert(0, str(ROOT / "tools"))
-    from bench_peer import machine_line
-
     from selfas_graph.cli.paths import same_file
     from selfas_graph.io.h5md import RunFileError
     from selfas_graph.io.scenario import ScenarioError
+
+    from .peer import machine_line
 
     inputs = list(args.runs) + ([args.replay] if args.replay else [])
     if args.json and any(same_file(args.json, r) for r in inputs):
@@ -231,6 +232,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    # a running job's file is read only here; set for the command, not on import (tests import this)
-    os.environ.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")
+    for key, value in COMMAND_ENV.items():
+        os.environ.setdefault(key, value)
     sys.exit(main())

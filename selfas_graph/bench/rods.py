@@ -1,6 +1,6 @@
 """What rods that differ cost: equal rods against per-rod lengths, resistances and contacts.
 
-Usage: python tools/bench_rods.py [--steps 300] [--rounds 3] [--tips 600 100000]
+Usage: selfas-graph bench rods [--steps 300] [--rounds 3] [--tips 600 100000]
 
 Two tables, each with its peer measured in the same run:
 
@@ -18,18 +18,16 @@ The CPU model and instruction-set flags are printed first.
 """
 
 import argparse
-import sys
 import time
 from pathlib import Path
 
 import numba
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+from selfas_graph import Simulation, load_scenario
+from selfas_graph.kernels.rigid import bond_length_error, constrain_bonds
 
-from selfas_graph import Simulation, load_scenario  # noqa: E402
-from selfas_graph.kernels.rigid import bond_length_error, constrain_bonds  # noqa: E402
+ROOT = Path(__file__).resolve().parents[2]
 
 DEFAULT_KEYS = ["rods.length=1.0", "rods.resistance=1.0", "contacts.resistance=0.0"]
 

@@ -1,10 +1,10 @@
 """Neighbour-list and Yukawa benchmark: the list builds and the sum over the rod-centre list, per instruction set.
 
-Usage: python tools/bench_neighbours.py [--rods 1200 6000 24000] [--checkpoint STATE.h5] [--repeat 9]
+Usage: selfas-graph bench neighbours [--rods 1200 6000 24000] [--checkpoint STATE.h5] [--repeat 9]
                                         [--targets host haswell] [--before REF] [--json OUT.json]
                                         [--kernels "yukawa mixed" ...]
 
-For each scene (the Fig. 2 scene scaled to each ``--rods`` as tools/bench_step.py makes it, and
+For each scene (the Fig. 2 scene scaled to each ``--rods`` as selfas_graph/bench/step.py makes it, and
 the state of ``--checkpoint`` when given), it times on one numba thread, by the process's CPU
 time (``time.process_time``: on a shared machine it counts only the cycles the kernel got):
 
@@ -24,12 +24,12 @@ time (``time.process_time``: on a shared machine it counts only the cycles the k
 
 ``--kernels`` times only the named ones (default: all four).
 
-``--before REF`` also times the kernels of the git revision REF (tools/bench_kernels.py
+``--before REF`` also times the kernels of the git revision REF (selfas_graph/bench/kernels.py
 ``kernels_at``), interleaved with the working tree's (the order alternates between repeats),
 each over the list its own build makes, and prints the speed-up (median [min-max] of the
 per-repeat ratios before / after): the fair comparison on a loaded machine. Each target runs in
 a fresh process with ``NUMBA_CPU_NAME`` set and ``NUMBA_CPU_FEATURES`` empty (the named CPU's own
-features; ``host`` leaves both unset, tools/bench_peer.py ``target_env``), and prints the CPU and
+features; ``host`` leaves both unset, selfas_graph/bench/peer.py ``target_env``), and prints the CPU and
 the target numba compiled for.
 """
 
@@ -42,9 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tools"))
+ROOT = Path(__file__).resolve().parents[2]
 
 KERNELS = ["centre list", "tip list", "yukawa"]
 #: timed against the float64 sum of the working tree, interleaved, in a table of its own
@@ -53,13 +51,13 @@ MIXED = "yukawa mixed"
 
 def scenes(args):
     """(label, Simulation) for every scene asked for."""
-    from bench_step import scene
-
     from selfas_graph import Simulation
+
+    from .step import scene
 
     out = []
     if args.checkpoint:
-        from bench_profile import load_state
+        from .profile import load_state
 
         ns = argparse.Namespace(checkpoint=args.checkpoint, extra=[])
         sim, _ = load_state(ns)
@@ -71,10 +69,11 @@ def scenes(args):
 
 def run(args):
     import numba
-    from bench_kernels import kernels_at, timed, timed_pair
-    from bench_peer import machine, machine_line
 
     from selfas_graph import kernels
+
+    from .kernels import kernels_at, timed, timed_pair
+    from .peer import machine, machine_line
 
     numba.set_num_threads(1)
     clock = time.process_time
@@ -158,7 +157,9 @@ def run(args):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rods", type=int, nargs="*", default=[1200, 6000, 24000])
-    ap.add_argument("--checkpoint", help="also time the state of this checkpoint (tools/bench_profile.py --checkpoint)")
+    ap.add_argument(
+        "--checkpoint", help="also time the state of this checkpoint (selfas-graph bench profile --checkpoint)"
+    )
     ap.add_argument("--repeat", type=int, default=9)
     ap.add_argument("--targets", nargs="+", default=["host"], help="host, or NUMBA_CPU_NAME values (haswell, znver3)")
     ap.add_argument("--before", help="also time the kernels of this git revision, interleaved (e.g. main)")
@@ -172,11 +173,11 @@ def main(argv=None):
         print(json.dumps(run(args)))
         return
     results = {}
-    from bench_peer import target_env
+    from .peer import target_env, tool_command, tool_env
 
     for target in args.targets:
-        env = target_env(target)
-        cmd = [sys.executable, str(Path(__file__).resolve()), "--child", "--repeat", str(args.repeat)]
+        env = tool_env(target_env(target))
+        cmd = [*tool_command("neighbours"), "--child", "--repeat", str(args.repeat)]
         cmd += ["--rods", *map(str, args.rods), "--kernels", *args.kernels]
         cmd += ["--checkpoint", args.checkpoint] if args.checkpoint else []
         cmd += ["--before", args.before] if args.before else []

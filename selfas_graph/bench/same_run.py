@@ -2,7 +2,7 @@
 
 Usage::
 
-    python tools/same_run.py RUN_A.h5 RUN_B.h5 [--ignore-attrs]
+    selfas-graph compare RUN_A.h5 RUN_B.h5 [--ignore-attrs]
 
 Walks both HDF5 files and compares every dataset (shape, dtype and bytes; NaN equals NaN
 at the same place, since the bytes are compared) and, unless ``--ignore-attrs``, every
@@ -15,7 +15,7 @@ before and after the change (same thread count), then compare, e.g.::
 
     selfas-graph simulate scenarios/quick.toml -o /tmp/before.h5   # on the old commit
     selfas-graph simulate scenarios/quick.toml -o /tmp/after.h5    # on the new one
-    python tools/same_run.py /tmp/before.h5 /tmp/after.h5
+    selfas-graph compare /tmp/before.h5 /tmp/after.h5
 """
 
 from __future__ import annotations
@@ -111,12 +111,15 @@ def compare(path_a, path_b, attrs: bool = True, counts: dict | None = None) -> l
     return out
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def add_arguments(ap):
+    """The arguments of the command (also ``selfas-graph compare``)."""
     ap.add_argument("a")
     ap.add_argument("b")
     ap.add_argument("--ignore-attrs", action="store_true", help="compare datasets only")
-    args = ap.parse_args(argv)
+
+
+def run(args) -> int:
+    """Compare ``args.a`` with ``args.b``, print the differences and the verdict; 1 if they differ."""
     counts: dict = {}
     diffs = compare(args.a, args.b, attrs=not args.ignore_attrs, counts=counts)
     for line in diffs:
@@ -126,6 +129,12 @@ def main(argv=None) -> int:
         + ("the same, bit for bit" if not diffs else f"{len(diffs)} differences")
     )
     return 1 if diffs else 0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_arguments(ap)
+    return run(ap.parse_args(argv))
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python tools/bench_events.py [--scenario scenarios/fig2.toml] [--settle 2000] [--steps 300]
+    selfas-graph bench events [--scenario scenarios/fig2.toml] [--settle 2000] [--steps 300]
                                  [--sizes 1000 10000 100000] [--batch 10 1000] [--repeat 3]
                                  [--checkpoint RUN.checkpoint.h5] [--run-steps 1000]
                                  [--skip-a] [--skip-b] [--skip-c]
@@ -31,7 +31,7 @@ Usage::
 
 (b) ``ConnectivityGraph`` on networks of 10^3, 10^4, 10^5 rods (cross-linked chains
     spanning two electrodes, dangling rods and 20 % free rods: the ``chains`` network
-    of ``tools/bench_circuit.py``): the graph holds the network minus a batch of tip
+    of ``selfas_graph/bench/circuit.py``): the graph holds the network minus a batch of tip
     contacts; timed are ``apply`` of that batch as TIP_CONTACT events (graph mutation
     plus the topology it needs to detect a short circuit), ``topology()`` (cached by
     then), and ``solve()``. Fresh ``classify_rods`` time is shown for reference.
@@ -45,7 +45,7 @@ Usage::
     steps, median cost per call split into its parts (tip merge, components, filament
     search, the rest being input checks and numpy glue), and their share of the CPU time of the steps. The graphs of the first
     ``--peer-graphs`` calls are kept and classified again by the scipy/networkx
-    implementation the kernels replaced (``tests/reference.py``), the peer of the ratio,
+    implementation the kernels replaced (``selfas_graph/bench/oracles.py``), the peer of the ratio,
     and the two results are checked to be the same.
 
 Prints markdown tables.
@@ -57,29 +57,28 @@ import argparse
 import dataclasses
 import os
 import platform
-import sys
 import time
 from pathlib import Path
 
-import numba  # noqa: E402
-import numpy as np  # noqa: E402
+import numba
+import numpy as np
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tools"))
-sys.path.insert(0, str(ROOT / "tests"))
+from selfas_graph import Simulation, load_scenario
+from selfas_graph.io.checkpoint import read_checkpoint
+from selfas_graph.io.scenario import scenario_from_text
+from selfas_graph.model import events as ev
+from selfas_graph.model import graph as graph_module
+from selfas_graph.model.graph import ConnectivityGraph
+from selfas_graph.model.params import AmbientBrake, ForceParams
 
-from bench_circuit import chain_network  # noqa: E402
-from bench_peer import machine  # noqa: E402
+from . import oracles
+from .circuit import chain_network
+from .peer import machine
 
-import reference  # noqa: E402
-from selfas_graph import Simulation, load_scenario  # noqa: E402
-from selfas_graph.io.checkpoint import read_checkpoint  # noqa: E402
-from selfas_graph.io.scenario import scenario_from_text  # noqa: E402
-from selfas_graph.model import events as ev  # noqa: E402
-from selfas_graph.model import graph as graph_module  # noqa: E402
-from selfas_graph.model.graph import ConnectivityGraph  # noqa: E402
-from selfas_graph.model.params import AmbientBrake, ForceParams  # noqa: E402
+ROOT = Path(__file__).resolve().parents[2]
+#: set (unless set) by the command line, not on import (tests import this): a running job's file
+#: is read only here (``selfas-graph bench`` sets them too)
+COMMAND_ENV = {"HDF5_USE_FILE_LOCKING": "FALSE"}
 
 
 # --------------------------------------------------------------------------- (a)
@@ -236,7 +235,7 @@ def graph_update(sizes, batches, repeat, seed):
     rng = np.random.default_rng(seed)
     print(
         f"\n(b) ConnectivityGraph: apply a batch of TIP_CONTACT events, topology(), solve(); "
-        f"chains network of tools/bench_circuit.py; best of {repeat}\n"
+        f"chains network of selfas_graph/bench/circuit.py; best of {repeat}\n"
     )
     print(
         "| rods | contacts | events in batch | build graph (s) | apply + topology (ms) | topology() after (ms) "
@@ -347,7 +346,7 @@ def events_in_run(scenario_path, settle, checkpoint, steps, peer_graphs):
     peer, ours = [], []
     for args in graphs:
         t0 = time.thread_time()
-        want = reference.classify_rods_scipy_networkx(*args)
+        want = oracles.classify_rods_scipy_networkx(*args)
         t1 = time.thread_time()
         got = g.classify_rods(*args)
         t2 = time.thread_time()
@@ -389,7 +388,7 @@ def events_in_run(scenario_path, settle, checkpoint, steps, peer_graphs):
         p, o = 1e3 * float(np.median(peer)), 1e3 * float(np.median(ours))
         print(
             f"\nOn the first {len(peer)} graphs of these calls (same results checked): classify_rods "
-            f"{o:.3f} ms, the scipy/networkx version (tests/reference.py) {p:.3f} ms, ratio {p / o:.1f}x."
+            f"{o:.3f} ms, the scipy/networkx version (selfas_graph/bench/oracles.py) {p:.3f} ms, ratio {p / o:.1f}x."
         )
 
 
@@ -424,6 +423,6 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    # a running job's file is read only here; set for the command, not on import (tests import this)
-    os.environ.setdefault("HDF5_USE_FILE_LOCKING", "FALSE")
+    for key, value in COMMAND_ENV.items():
+        os.environ.setdefault(key, value)
     main()

@@ -1,9 +1,9 @@
 """Dynamic percolation: short-circuit times over an ensemble of random runs at several rod densities.
 
-Usage: python tools/percolation.py SCENARIO (--densities RHO ... | --fractions PHI ... | --counts N ...)
+Usage: selfas-graph bench percolation SCENARIO (--densities RHO ... | --fractions PHI ... | --counts N ...)
            --seeds K --t-max T [--fields on|off] [--first-seed S] [--workers W] [--chunk DT]
            [--set key=value ...] [-o results.json] [--plot out.png]
-       python tools/percolation.py --compare A.json B.json ... --plot out.png
+       selfas-graph bench percolation --compare A.json B.json ... --plot out.png
 
 ``--fields off`` removes the magnetic and current terms (``forces.tip_magnetic``,
 ``uniform_field``, ``plasma_filament``, ``current_field``, ``current_lorentz``: the same as
@@ -47,10 +47,6 @@ import json
 import math
 import sys
 import time
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 
 #: densest packing of equal spheres: tips at least d apart are spheres of diameter d that do not overlap
 _MAX_PACKING = math.pi / (3.0 * math.sqrt(2.0))
@@ -111,7 +107,6 @@ def _positive(kind):
 
 def build_parser():
     ap = argparse.ArgumentParser(
-        prog="percolation.py",
         description=__doc__.splitlines()[0],
         epilog="density = rods / box volume; volume fraction = rods * pi (D/2)^2 L / box volume",
     )

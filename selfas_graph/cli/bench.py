@@ -1,0 +1,67 @@
+"""The benchmarks and tools of ``selfas_graph.bench``: ``selfas-graph bench [NAME [ARGS ...]]``.
+
+``selfas-graph bench NAME ARGS ...`` runs the tool NAME in this process with its own arguments
+(``selfas-graph bench NAME --help``) and output, as ``python -m selfas_graph.bench.NAME ARGS ...``
+does; ``selfas-graph bench`` alone lists the tools, one line each.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ast
+import contextlib
+import importlib
+import os
+import sys
+from pathlib import Path
+
+import selfas_graph.bench as bench
+
+from .main import CliError
+
+
+def add_arguments(p):
+    p.add_argument("tool", nargs="?", metavar="NAME", help="the tool to run (without one: list the tools)")
+    p.add_argument("tool_args", nargs=argparse.REMAINDER, metavar="ARGS", help="the tool's own arguments")
+
+
+def tools() -> dict[str, str]:
+    """Tool name -> the first line of its docstring, for every module of ``selfas_graph.bench`` with a
+    ``main`` (the shared helpers have none). Read from the source: nothing is imported."""
+    out = {}
+    for path in sorted(Path(bench.__file__).parent.glob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        if any(isinstance(node, ast.FunctionDef) and node.name == "main" for node in tree.body):
+            out[path.stem] = (ast.get_docstring(tree) or "").split("\n")[0]
+    return out
+
+
+@contextlib.contextmanager
+def _program(name, argv):
+    """``sys.argv`` as the tool would see it from its own command line, so that its usage line names
+    ``selfas-graph bench NAME``."""
+    saved = sys.argv
+    sys.argv = [name, *argv]
+    try:
+        yield
+    finally:
+        sys.argv = saved
+
+
+def run(args):
+    known = tools()
+    if args.tool is None:
+        width = max(map(len, known))
+        for name, line in known.items():
+            print(f"{name:<{width}}  {line}")
+        print("\nselfas-graph bench NAME --help: a tool's arguments; selfas-graph compare is same_run")
+        return 0
+    if args.tool not in known:
+        raise CliError(f"no tool {args.tool!r}; the tools are: {', '.join(known)}")
+    module = importlib.import_module(f"{bench.__name__}.{args.tool}")
+    for key, value in getattr(module, "COMMAND_ENV", {}).items():
+        os.environ.setdefault(key, value)
+    with _program(f"selfas-graph bench {args.tool}", args.tool_args):
+        result = module.main(args.tool_args)
+    # a tool's exit code is what main returns, when that is a number (some return their figures)
+    return result if isinstance(result, int) else 0
