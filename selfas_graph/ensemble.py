@@ -65,6 +65,7 @@ from .io.h5md import DiskFullError, RunFile, RunFileError, RunWriter, is_io_erro
 from .io.scenario import ScenarioError, load_scenario, scenario_from_text
 from .model.simulation import NumericalFailure, RunInterrupted, Simulation
 from .model.state import PlacementError
+from .model.topology import FILAMENT
 from .parallel import is_pool_worker, parent_gone, task_pool
 
 __all__ = [
@@ -918,7 +919,7 @@ def carries_current(f) -> float:
 
 
 def _filament_rods(f):
-    return math.nan if f.graph is None else float(np.count_nonzero(f.graph["role"] == 3))  # 3: filament role
+    return math.nan if f.graph is None else float(np.count_nonzero(f.graph["role"] == FILAMENT))
 
 
 def _total_current(f):

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import layout
 from ..io.h5md import RunFile, RunFileError
 from .main import CliError, CliIOError
 from .paths import check_target
@@ -66,7 +67,7 @@ def render_movie(args, Figure) -> int:
     try:
         with RunFile(run_path) as run:
             frames = _frames(run, args.every)
-            pos = run.f["particles/tips/position/value"]
+            pos = run.f[layout.TIP_POSITION_VALUE]
             lo = np.min([pos[k].min(axis=0) for k in frames], axis=0)
             hi = np.max([pos[k].max(axis=0) for k in frames], axis=0)
             args.bounds = (lo, hi)

@@ -242,7 +242,7 @@ def _load_resume(args):
     # the run file must be this run's, checked read-only before anything in it is changed
     try:
         with RunFile(out) as run_file:
-            n_tips = run_file.f["particles/tips/position/value"].shape[1]
+            n_tips = run_file.n_tips
             same = n_tips == np.asarray(snap["position"]).shape[0] and run_file.scenario_text == meta["scenario_text"]
             steps = run_file.step
             brake = _started_brake(run_file)
