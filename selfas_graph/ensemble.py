@@ -61,6 +61,7 @@ from .io.checkpoint import (
     read_checkpoint,
     write_failure,
 )
+from .io.frame import SavedFrame
 from .io.h5md import DiskFullError, RunFile, RunFileError, RunWriter, is_io_error, run_provenance
 from .io.scenario import ScenarioError, load_scenario, scenario_from_text
 from .model.simulation import NumericalFailure, RunInterrupted, Simulation
@@ -838,38 +839,21 @@ def default_times(t_end):
 # ----------------------------------------------------------------------------- per-frame measures
 
 
-class Frame:
-    """One saved frame of a run file, with what the measures need computed once (lazily).
+class Frame(SavedFrame):
+    """One saved frame of a run file (:class:`~selfas_graph.io.frame.SavedFrame`), with what the
+    measures need computed once (lazily).
 
-    Attributes: ``run`` (open :class:`~selfas_graph.io.h5md.RunFile`), ``index``, ``time``,
-    ``params`` (stored parameters), ``position``, ``graph`` (dict or None), ``centres`` (rod
-    centres), ``rho`` (their distance from the plasma axis, or the z axis),
-    ``flux_radius``, ``claims`` (``frame_claims(run, index)``).
+    Adds to the saved frame: ``centres`` (rod centres), ``rho`` (their distance from the plasma
+    axis, or the z axis), ``flux_radius``, ``claims`` (``frame_claims(run, index)``).
     """
 
     def __init__(self, run, index, params, flux_radius=None):
-        self.run, self.index, self.params = run, int(index), params
-        self.time = float(run.time[self.index])
+        super().__init__(run, index, params)
         self._flux_radius = flux_radius
-
-    @functools.cached_property
-    def position(self):
-        return self.run.position(self.index)
-
-    @functools.cached_property
-    def graph(self):
-        if not self.run.has_graph:
-            return None
-        g = self.run.graph(t=self.time)
-        return g if abs(g["time"] - self.time) <= 1e-9 * max(1.0, abs(self.time)) else None
 
     @functools.cached_property
     def centres(self):
         return rod_centres(self.position)
-
-    @property
-    def plasma(self):
-        return self.params["forces"].get("plasma_filament")
 
     @functools.cached_property
     def rho(self):

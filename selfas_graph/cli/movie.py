@@ -46,7 +46,7 @@ def render_movie(args, Figure) -> int:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from tqdm import tqdm
 
-    from .plot import _figsize, _Frame, _snapshot
+    from .plot import _figsize, _snapshot
 
     out = Path(args.movie)
     kind = out.suffix.lower()
@@ -73,7 +73,7 @@ def render_movie(args, Figure) -> int:
             args.bounds = (lo, hi)
             size = None
             for k in tqdm(frames, desc=f"movie {out.name}", unit="frame", disable=None):
-                frame = _Frame(run, frame=k)
+                frame = run.frame(k)
                 if frame.gap is not None:
                     args.bounds = (
                         np.array([lo[0], lo[1], min(lo[2], -frame.gap / 2)]),

@@ -106,7 +106,7 @@ class _Frames:
         self.steps = run.step
         self.times = run.time
         self.has_velocity = layout.TIP_VELOCITY_VALUE in run.f
-        self.graph_steps = run.f[layout.GRAPH_STEP][:] if run.has_graph else np.zeros(0, dtype=np.int64)
+        self.graph_steps = run.graph_steps
         self.total_current = None
         if layout.TOTAL_CURRENT in run.observable_names():
             g = run.f[layout.observable(layout.TOTAL_CURRENT)]

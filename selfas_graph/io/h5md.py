@@ -843,6 +843,13 @@ class RunFile:
             raise RunFileError(f"{self.path}: frame {k} out of range; the file has frames 0..{n - 1}")
         return k % n
 
+    def frame(self, index=None, t=None):
+        """One saved frame as a :class:`~selfas_graph.io.frame.SavedFrame`: by index (negative counts
+        from the end; default the last) or nearest time ``t``; its graph data are those of the same step."""
+        from .frame import SavedFrame
+
+        return SavedFrame(self, self.frame_index(index, t))
+
     def position(self, frame=-1) -> np.ndarray:
         return self.f[layout.TIP_POSITION_VALUE][self.frame_index(frame)]
 
@@ -893,6 +900,11 @@ class RunFile:
             and all(isinstance(g.get(n), h5py.Dataset) for n in layout.GRAPH_DATASETS)
             and g["step"].shape[0] > 0
         )
+
+    @property
+    def graph_steps(self) -> np.ndarray:
+        """The steps of the frames saved with graph data (empty without any)."""
+        return self.f[layout.GRAPH_STEP][:] if self.has_graph else np.zeros(0, dtype=np.int64)
 
     def events(self, until_step=None) -> np.ndarray:
         """Event records (structured array, fields step, time, kind, a, b), optionally up to a step."""
