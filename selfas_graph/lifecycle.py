@@ -13,7 +13,7 @@ A run is: a run file, new (:func:`new_run_file`: provenance and the file) or reo
 - ``io_error`` (a write failed: full disk, quota, a vanished folder): the caller ends the file
   with :func:`close_after_io_error` and its own message.
 
-A ``KeyboardInterrupt`` closes the file "interrupted" and goes on. What each caller says
+A ``KeyboardInterrupt`` closes the file "interrupted" and is raised again. What each caller says
 about an end (messages, exit codes, result dicts) stays with the caller: ``cli/simulate.py``
 and ``ensemble.run_seed``.
 """
