@@ -152,8 +152,8 @@ def run_to_file(sim, writer, checkpointer, stop, path, progress=None, keeps_file
     keeps_files : bool
         False on the MPI ranks other than 0: a numerical failure writes nothing there.
 
-    Errors other than I/O errors propagate (after closing the progress display on an I/O
-    error's path only, as the loop left it). ``KeyboardInterrupt`` closes the file "interrupted".
+    Errors other than I/O errors propagate, the file and the display left as they were;
+    ``KeyboardInterrupt`` closes both (the file "interrupted") and is raised again.
     """
     try:
         summary = sim.run(writer=writer, progress=progress, checkpointer=checkpointer, stop=stop)
