@@ -57,15 +57,16 @@ from .io.checkpoint import (
     CheckpointError,
     checkpoint_meta,
     checkpoint_path,
-    failure_meta,
     read_checkpoint,
-    write_failure,
 )
-from .io.h5md import DiskFullError, RunFile, RunFileError, RunWriter, is_io_error, run_provenance
+from .io.frame import SavedFrame
+from .io.h5md import RunFile, RunFileError, RunWriter, is_io_error
 from .io.scenario import ScenarioError, load_scenario, scenario_from_text
+from .lifecycle import StopOnSignal, close_after_io_error, new_run_file, run_to_file
 from .model.simulation import NumericalFailure, RunInterrupted, Simulation
 from .model.state import PlacementError
-from .parallel import is_pool_worker, parent_gone, task_pool
+from .model.topology import FILAMENT
+from .parallel import is_pool_worker, task_pool
 
 __all__ = [
     "Ensemble",
@@ -189,32 +190,6 @@ class SeedPlan:
 
 
 # ----------------------------------------------------------------------------- one seed
-class _StopOnSignal:
-    """``stop`` hook of :meth:`Simulation.run`: true once SIGTERM or SIGINT arrived, or the ensemble's
-    process died (in a pool worker); then a checkpoint is written."""
-
-    def __init__(self):
-        self.signum, self.old = None, {}
-
-    def __call__(self):
-        return self.signum is not None or parent_gone()
-
-    def __enter__(self):
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            try:
-                self.old[sig] = signal.signal(sig, self._handle)
-            except ValueError:  # not the main thread: the launcher's own handling applies
-                pass
-        return self
-
-    def _handle(self, signum, frame):
-        self.signum = signum
-
-    def __exit__(self, *exc):
-        for sig, handler in self.old.items():
-            signal.signal(sig, handler)
-
-
 def run_seed(task: dict) -> dict:
     """Run (or continue) one seed of an ensemble to its end time; the pool's task function.
 
@@ -241,9 +216,9 @@ def run_seed(task: dict) -> dict:
         "message": None,
     }
     t0 = time.perf_counter()
-    sim = writer = None
+    sim = writer = end = None
     ckpt = checkpoint_path(path)
-    with _StopOnSignal() as stop:
+    with StopOnSignal() as stop:
         try:
             if task["action"] == "resume":
                 snap, meta = read_checkpoint(ckpt)
@@ -265,40 +240,22 @@ def run_seed(task: dict) -> dict:
                     task["text"], path=Path(task["scenario_path"]), overrides=task["overrides"], t_end=t_end
                 )
                 sim = Simulation.from_scenario(scenario)
-                p = scenario.params
                 run_id = uuid.uuid4().hex
-                provenance = run_provenance(
-                    sim, scenario, task.get("command", ""), run_id, scenario_path=task["scenario_path"]
-                )
-                writer = RunWriter(
-                    path,
-                    sim.state.n_tips,
-                    sim.state.tip_charge,
-                    sim.state.rod_charge,
-                    provenance,
-                    overwrite=bool(task.get("force")),
-                    velocities=p.output.velocities,
-                    frame_interval=sim.frame_interval,
-                    rod_length=sim.state.rod_length,
-                    rod_resistance=sim.state.rod_resistance,
+                writer = new_run_file(
+                    sim, scenario, path, run_id, task.get("command", ""), task["scenario_path"], bool(task.get("force"))
                 )
                 meta = checkpoint_meta(scenario, run_id, path.name, t_end, __version__)
             checkpointer = Checkpointer(
                 ckpt, scenario.params.output.checkpoint_interval, {k: v for k, v in meta.items() if k != "step"}
             )
-            summary = sim.run(writer=writer, checkpointer=checkpointer, stop=stop)
-            writer.set_attrs(wall_seconds=summary.wall_seconds, steps_done=summary.steps)
-            writer.close(status="finished")
-            out["status"] = "finished"
-        except RunInterrupted as exc:
-            writer.close(status=f"interrupted at step {exc.step}")
-            out["status"], out["message"] = "interrupted", f"stopped at step {exc.step}; checkpoint {ckpt}"
-        except NumericalFailure as exc:
-            failure = path.with_name(path.stem + ".failure.h5")
-            sim.flush_output(writer)  # the events and per-step rows up to the failure, as simulate does
-            writer.close(status=f"failed: {exc}")
-            write_failure(failure, sim.last_good_snapshot, sim.snapshot(), failure_meta(checkpointer, sim, exc))
-            out["status"], out["message"] = "failed", f"{exc} (failed state in {failure})"
+            end = run_to_file(sim, writer, checkpointer, stop, path)
+            out["status"] = end.status
+            if end.status == "interrupted":
+                out["message"] = f"stopped at step {end.error.step}; checkpoint {ckpt}"
+            elif end.status == "failed":
+                out["message"] = f"{end.error} (failed state in {end.failure})"
+            elif end.status == "io_error":
+                out["message"] = _stop_on_io_error(end.error, writer, sim, path, task)
         except Exception as exc:  # noqa: BLE001 - one broken seed must not lose the others; reported
             # not a numerical failure: the file stays resumable from its last checkpoint
             if is_io_error(exc):
@@ -307,14 +264,12 @@ def run_seed(task: dict) -> dict:
                 out["status"], out["message"] = "error", f"{type(exc).__name__}: {exc}"
                 if writer is not None and getattr(writer, "f", None):
                     writer.close(status=f"error: {type(exc).__name__}: {exc}")
+    if end is not None and end.failure_not_saved is not None:
+        raise end.failure_not_saved  # the failed state could not be saved: the pool reports the seed's error
     if sim is not None:
         out["t"], out["steps"] = float(sim.state.time), int(sim.state.step)
     out["wall_seconds"] = time.perf_counter() - t0
     return out
-
-
-#: run files whose HDF5 handle failed in this process: kept referenced until the process ends
-ABANDONED = []
 
 
 def _stop_on_io_error(exc, writer, sim, path, task) -> str:
@@ -332,16 +287,8 @@ def _stop_on_io_error(exc, writer, sim, path, task) -> str:
     reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())[:300]
     step = f"step {sim.state.step} (t = {sim.state.time:.6g})" if sim is not None else "its start"
     if writer is not None and getattr(writer, "f", None):
-        clean = isinstance(exc, DiskFullError)
-        if clean:
-            try:
-                writer.close(status=f"stopped by an I/O error at {step}: {reason}")
-            except (OSError, RuntimeError):
-                clean = False
-        if not clean:
-            ABANDONED.append(writer)
-            if is_pool_worker():
-                _exit_quietly_at_shutdown()
+        if not close_after_io_error(writer, exc, f"stopped by an I/O error at {step}: {reason}") and is_pool_worker():
+            _exit_quietly_at_shutdown()
     if task["action"] == "run" and not ckpt.exists():
         try:
             path.unlink()
@@ -393,7 +340,7 @@ def run_to_short_circuit(task: dict) -> dict:
         scenario = scenario_from_text(task["text"], path=Path(task["path"]), overrides=task["overrides"], t_end=t_max)
         sim = Simulation.from_scenario(scenario)
         total = sim.steps_for(t_max)
-        with _StopOnSignal() as signalled:
+        with StopOnSignal() as signalled:
             stop = lambda: sim.short_circuit_time is not None or signalled()  # noqa: E731
             while sim.short_circuit_time is None and sim.state.step < total and not signalled():
                 # run() takes whole steps only: the chunk and the end rounded to steps
@@ -426,25 +373,6 @@ def run_to_short_circuit(task: dict) -> dict:
 
 
 # ----------------------------------------------------------------------------- the runner
-class _RaiseOnTerm:
-    """In the launching process: SIGTERM becomes KeyboardInterrupt (so the pool is wound down as on Ctrl-C)."""
-
-    def __enter__(self):
-        try:
-            self.old = signal.signal(signal.SIGTERM, self._handle)
-        except ValueError:  # not the main thread
-            self.old = None
-        return self
-
-    @staticmethod
-    def _handle(signum, frame):
-        raise KeyboardInterrupt
-
-    def __exit__(self, *exc):
-        if self.old is not None:
-            signal.signal(signal.SIGTERM, self.old)
-
-
 def run_tasks(
     fn: Callable[[dict], dict], tasks: list, pool, report=None, stop_statuses=("interrupted", "io_error")
 ) -> list:
@@ -478,7 +406,7 @@ def run_tasks(
                 _terminate_workers()  # the other running seeds stop with a checkpoint while there is room
             stopping |= results[i].get("status") in stop_statuses
 
-    with _RaiseOnTerm():
+    with StopOnSignal(signals=(signal.SIGTERM,), interrupt=True):  # Ctrl-C and SIGTERM wind the pool down alike
         try:
             while waiting or running:
                 while waiting and not stopping and len(running) < pool.workers:
@@ -837,38 +765,21 @@ def default_times(t_end):
 # ----------------------------------------------------------------------------- per-frame measures
 
 
-class Frame:
-    """One saved frame of a run file, with what the measures need computed once (lazily).
+class Frame(SavedFrame):
+    """One saved frame of a run file (:class:`~selfas_graph.io.frame.SavedFrame`), with what the
+    measures need computed once (lazily).
 
-    Attributes: ``run`` (open :class:`~selfas_graph.io.h5md.RunFile`), ``index``, ``time``,
-    ``params`` (stored parameters), ``position``, ``graph`` (dict or None), ``centres`` (rod
-    centres), ``rho`` (their distance from the plasma axis, or the z axis),
-    ``flux_radius``, ``claims`` (``frame_claims(run, index)``).
+    Adds to the saved frame: ``centres`` (rod centres), ``rho`` (their distance from the plasma
+    axis, or the z axis), ``flux_radius``, ``claims`` (``frame_claims(run, index)``).
     """
 
     def __init__(self, run, index, params, flux_radius=None):
-        self.run, self.index, self.params = run, int(index), params
-        self.time = float(run.time[self.index])
+        super().__init__(run, index, params)
         self._flux_radius = flux_radius
-
-    @functools.cached_property
-    def position(self):
-        return self.run.position(self.index)
-
-    @functools.cached_property
-    def graph(self):
-        if not self.run.has_graph:
-            return None
-        g = self.run.graph(t=self.time)
-        return g if abs(g["time"] - self.time) <= 1e-9 * max(1.0, abs(self.time)) else None
 
     @functools.cached_property
     def centres(self):
         return rod_centres(self.position)
-
-    @property
-    def plasma(self):
-        return self.params["forces"].get("plasma_filament")
 
     @functools.cached_property
     def rho(self):
@@ -918,7 +829,7 @@ def carries_current(f) -> float:
 
 
 def _filament_rods(f):
-    return math.nan if f.graph is None else float(np.count_nonzero(f.graph["role"] == 3))  # 3: filament role
+    return math.nan if f.graph is None else float(np.count_nonzero(f.graph["role"] == FILAMENT))
 
 
 def _total_current(f):

@@ -233,7 +233,7 @@ def _run_locked(args, pool, held):
         )
         io = [r for r in results if r is not None and r.get("status") == "io_error"]
         if io:  # no summary: there is no room for it either
-            from ..ensemble import ABANDONED
+            from ..lifecycle import ABANDONED
 
             what = "; ".join(f"seed {r['seed']}: {r['message']}" for r in io)
             raise CliIOError(
@@ -328,7 +328,7 @@ def _run_grid(args, pool, held):
         results = run_tasks(run_seed, tasks, pool, report)
         io = [r for r in results if r is not None and r.get("status") == "io_error"]
         if io:
-            from ..ensemble import ABANDONED
+            from ..lifecycle import ABANDONED
 
             raise CliIOError(
                 f"writing into {folder} failed ({io[0]['message']}); free some space and run the same command again",

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io import layout
 from ..io.h5md import RunFile, RunFileError
 from .main import CliError, CliIOError
 from .paths import check_target
@@ -45,7 +46,7 @@ def render_movie(args, Figure) -> int:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from tqdm import tqdm
 
-    from .plot import _figsize, _Frame, _snapshot
+    from .plot import _figsize, _snapshot
 
     out = Path(args.movie)
     kind = out.suffix.lower()
@@ -66,13 +67,13 @@ def render_movie(args, Figure) -> int:
     try:
         with RunFile(run_path) as run:
             frames = _frames(run, args.every)
-            pos = run.f["particles/tips/position/value"]
+            pos = run.f[layout.TIP_POSITION_VALUE]
             lo = np.min([pos[k].min(axis=0) for k in frames], axis=0)
             hi = np.max([pos[k].max(axis=0) for k in frames], axis=0)
             args.bounds = (lo, hi)
             size = None
             for k in tqdm(frames, desc=f"movie {out.name}", unit="frame", disable=None):
-                frame = _Frame(run, frame=k)
+                frame = run.frame(k)
                 if frame.gap is not None:
                     args.bounds = (
                         np.array([lo[0], lo[1], min(lo[2], -frame.gap / 2)]),

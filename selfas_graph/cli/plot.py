@@ -31,7 +31,6 @@ for the timeline) unless ``-o`` says otherwise; an existing file is kept unless
 
 from __future__ import annotations
 
-import functools
 import os
 from pathlib import Path
 
@@ -39,8 +38,9 @@ import numpy as np
 
 from ..analysis import bz_profile, flux_through_disc, radial_density, rod_centres, timeline
 from ..analysis.episodes import circuit_episodes
+from ..io.frame import SavedFrame
 from ..io.h5md import RunFile, RunFileError
-from ..model.graph import DEAD_END, FILAMENT, ConnectivityGraph
+from ..model.graph import DEAD_END, FILAMENT
 from .main import CliError, CliIOError, add_run_and_frame
 from .paths import check_target
 
@@ -138,70 +138,13 @@ def _output_path(args, run_path: Path, frame: int) -> Path:
     return out
 
 
-class _Frame:
-    """One saved frame's arrays: positions, and the graph state of the same step if saved."""
-
-    def __init__(self, run: RunFile, frame=None, t=None):
-        self.index = run.frame_index(frame=frame, t=t)
-        self.time = float(run.time[self.index])
-        self.step = int(run.step[self.index])
-        self.position = run.position(self.index)
-        self.n_rods = self.position.shape[0] // 2
-        params = run.parameters
-        self.wire_radius = 0.5 * float(params["rods"]["diameter"])
-        forces = params.get("forces") or {}
-        electrodes = forces.get("electrodes")
-        self.gap = float(electrodes["gap"]) if electrodes else None
-        dipole = forces.get("external_dipole")
-        #: case (ii): (Z_Mext, L_ext) of the external dipole, drawn and used as the flux unit
-        self.dipole = (float(dipole["magnetic_charge"]), float(dipole["length"])) if dipole else None
-        self.external_filament = forces.get("external_filament") is not None
-        self.graph = None
-        if run.has_graph:
-            steps = run.f["graph/step"][:]
-            match = np.flatnonzero(steps == self.step)
-            if match.size:
-                self.graph = run.graph(frame=int(match[0]))
-
-    def require_graph(self, run: RunFile, kind: str):
-        if self.graph is None:
-            if not run.has_graph:
-                run.graph_frame_index(self.index)  # raises the reader's explanation
-            raise RunFileError(
-                f"{run.path}: no graph data saved at frame {self.index} (step {self.step}), which the {kind} plot needs"
-            )
-
-    @property
-    def role(self):
-        """Rod roles by the current topology rule from the saved contacts, None without graph data."""
-        return None if self.topology is None else self.topology.role
-
-    @functools.cached_property
-    def topology(self):
-        """Structures of the frame (rebuilt from the saved contact arrays), None without graph data."""
-        if self.graph is None:
-            return None
-        return ConnectivityGraph.from_arrays(self.n_rods, self.graph["conductors"], self.graph).topology()
-
-    @property
-    def structure(self):
-        return None if self.topology is None else self.topology.structure
-
-    @property
-    def largest_mask(self):
-        topo = self.topology
-        if topo is None or topo.largest_structure < 0:
-            return np.zeros(self.n_rods, dtype=bool)
-        return topo.structure == topo.largest_structure
-
-
 def _scene(run: RunFile) -> str:
     """The scene's name for titles (a figure names its scene and time, not its file)."""
     name = str((run.parameters.get("scenario") or {}).get("name") or "run")
     return {"fig2": "Fig. 2 scene", "fig6": "Fig. 6 scene", "fig8": "Fig. 8 scene"}.get(name, f"{name} scene")
 
 
-def _title(run: RunFile, frame: _Frame, what: str) -> str:
+def _title(run: RunFile, frame: SavedFrame, what: str) -> str:
     return f"{_scene(run)}: {what}, t = {frame.time:.4g} $t_0$"
 
 
@@ -264,7 +207,7 @@ def _snapshot(fig, run, frame, args):
             ax.add_collection3d(Line3DCollection(seg[mask], colors=[colour], linewidths=width, alpha=alpha, zorder=2))
         handles.append(Line2D([], [], color=colour, lw=2, alpha=alpha, label=f"{label} ({int(mask.sum())})"))
     lo, hi = frame.position.min(axis=0), frame.position.max(axis=0)
-    plasma = (run.parameters.get("forces") or {}).get("plasma_filament")
+    plasma = frame.plasma
     if plasma:  # the R_plas cylinder is drawn: the box holds it
         (px, py), r_p = plasma.get("axis", (0.0, 0.0)), float(plasma["radius"])
         lo[:2] = np.minimum(lo[:2], [px - r_p, py - r_p])
@@ -398,7 +341,7 @@ def _plane_colours(planes):
 
 
 def _field_or_flux(fig, run, frame, args):
-    frame.require_graph(run, args.kind)
+    frame.require_graph(args.kind)
     if args.n_phi is not None and args.n_phi < 1:
         raise CliError(f"--n-phi must be >= 1, got {args.n_phi}")
     if args.z_mext is not None and not (np.isfinite(args.z_mext) and args.z_mext != 0):
@@ -612,9 +555,9 @@ def run(args):
     try:
         with RunFile(args.run) as f:
             try:
-                frame = _Frame(f, frame=args.frame, t=args.time)
+                frame = f.frame(args.frame, t=args.time)
                 if args.kind in NEEDS_GRAPH:
-                    frame.require_graph(f, args.kind)
+                    frame.require_graph(args.kind)
                 out = _output_path(args, f.path, frame.index)
                 fig = Figure(figsize=_figsize(args.kind, frame), layout="constrained")
                 DRAW[args.kind](fig, f, frame, args)

@@ -29,24 +29,21 @@ from ..io.checkpoint import (
     CheckpointError,
     checkpoint_meta,
     checkpoint_path,
-    failure_meta,
     read_checkpoint,
-    write_failure,
 )
 from ..io.h5md import (
-    DiskFullError,
     NullWriter,
     RunFile,
     RunFileError,
     RunWriter,
     appendable_problems,
     is_io_error,
-    run_provenance,
 )
 from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
+from ..lifecycle import StopOnSignal, close_after_io_error, new_run_file, run_to_file
 from ..model.accuracy import short_of_accuracy
 from ..model.params import plasma_current_text
-from ..model.simulation import NumericalFailure, RunInterrupted, Simulation
+from ..model.simulation import Simulation
 from ..model.state import PlacementError
 from ..parallel import fit_threads_to_cores, world
 from .main import EXIT_NUMERICAL, CliError, CliIOError
@@ -152,41 +149,6 @@ class _Bar:
         self.bar.close()
 
 
-class _StopFlag:
-    """Set by SIGTERM / SIGINT so that the run stops after the current step with a checkpoint.
-
-    Under MPI the ranks agree on stopping (a collective call, made every ``every`` steps so
-    that it costs nothing next to a step): all stop after the same step, with the signal
-    number that rank 0 or any other rank received.
-    """
-
-    def __init__(self, every=10):
-        self.signum = None
-        self.every = every
-        self.calls = 0
-
-    def __call__(self):
-        if world.size == 1:
-            return self.signum is not None
-        self.calls += 1
-        if self.calls % self.every:
-            return False
-        self.signum = max(world.allgather(self.signum or 0)) or None
-        return self.signum is not None
-
-    def install(self):
-        self.old = {}
-        for sig in (signal.SIGTERM, signal.SIGINT):
-            self.old[sig] = signal.signal(sig, self._handle)
-
-    def _handle(self, signum, frame):
-        self.signum = signum
-
-    def restore(self):
-        for sig, handler in self.old.items():
-            signal.signal(sig, handler)
-
-
 def _resume_paths(args):
     """(checkpoint to read, run file to continue) named by ``--resume`` (and ``-o``).
 
@@ -242,7 +204,7 @@ def _load_resume(args):
     # the run file must be this run's, checked read-only before anything in it is changed
     try:
         with RunFile(out) as run_file:
-            n_tips = run_file.f["particles/tips/position/value"].shape[1]
+            n_tips = run_file.n_tips
             same = n_tips == np.asarray(snap["position"]).shape[0] and run_file.scenario_text == meta["scenario_text"]
             steps = run_file.step
             brake = _started_brake(run_file)
@@ -435,22 +397,10 @@ def run(args):
                 flush=True,
             )
             return writer
-        provenance = run_provenance(
-            sim, scenario, shlex.join(sys.argv), run_id, scenario_path=args.scenario, mpi_ranks=world.size
-        )
         existed = os.path.lexists(out)
         try:
-            return RunWriter(
-                out,
-                sim.state.n_tips,
-                sim.state.tip_charge,
-                sim.state.rod_charge,
-                provenance,
-                overwrite=args.force,
-                velocities=p.output.velocities,
-                rod_length=sim.state.rod_length,
-                rod_resistance=sim.state.rod_resistance,
-                frame_interval=sim.frame_interval,
+            return new_run_file(
+                sim, scenario, out, run_id, shlex.join(sys.argv), args.scenario, args.force, mpi_ranks=world.size
             )
         except OSError as exc:
             if not existed:  # a failed run leaves no output file behind
@@ -479,93 +429,47 @@ def run(args):
     reporter = None
     if world.rank == 0 and mode != "none":
         reporter = _Bar(n_steps, p.run.t_end) if mode == "bar" else _Lines(sys.stderr)
-    stop = _StopFlag()
-    stop.install()
-    try:
-        summary = sim.run(writer=writer, progress=reporter, checkpointer=checkpointer, stop=stop)
-    except RunInterrupted as exc:
-        if reporter:
-            reporter.close()
-        if writer:
-            writer.close(status=f"interrupted at step {exc.step}")
-        name = signal.Signals(stop.signum).name
+    with StopOnSignal(comm=world) as stop:
+        end = run_to_file(sim, writer, checkpointer, stop, out, progress=reporter, keeps_files=world.rank == 0)
+    exc = end.error
+    if end.status == "interrupted":
         if world.rank == 0:
             print(
-                f"selfas-graph simulate: {name} received: stopped at step {exc.step} (t = {sim.state.time:.6g}); "
-                f"checkpoint {ckpt}; continue with: selfas-graph simulate --resume {out}",
+                f"selfas-graph simulate: {signal.Signals(stop.signum).name} received: stopped at step {exc.step} "
+                f"(t = {sim.state.time:.6g}); checkpoint {ckpt}; continue with: selfas-graph simulate --resume {out}",
                 file=sys.stderr,
             )
         return 128 + stop.signum
-    except NumericalFailure as exc:
-        if reporter:
-            reporter.close()
-        failure = out.with_name(out.stem + ".failure.h5")
+    if end.status == "failed":
         if world.rank != 0:  # every rank fails at the same step (same state); rank 0 reports it
             return EXIT_NUMERICAL
-        if writer:
-            sim.flush_output(writer)
-            writer.close(status=f"failed: {exc}")
-            # the failed state goes to its own file for inspection, never into the run file: beside the
-            # last state that passed the checks, its non-finite entries coded apart (no NaN is stored)
-            try:
-                write_failure(failure, sim.last_good_snapshot, sim.snapshot(), failure_meta(checkpointer, sim, exc))
-            except (OSError, RuntimeError) as io:
-                print(f"selfas-graph simulate: the failed state could not be saved ({io})", file=sys.stderr)
+        if end.failure_not_saved is not None:
+            print(
+                f"selfas-graph simulate: the failed state could not be saved ({end.failure_not_saved})", file=sys.stderr
+            )
         print(f"selfas-graph simulate: {exc}", file=sys.stderr)
         print(
             f"frames up to the last output interval are in {out}; the last good state and the failed one "
-            f"are in {failure} (read_checkpoint reads the first; the second is its group 'failed')",
+            f"are in {end.failure} (read_checkpoint reads the first; the second is its group 'failed')",
             file=sys.stderr,
         )
         return EXIT_NUMERICAL
-    except KeyboardInterrupt:
-        if reporter:
-            reporter.close()
-        if writer:
-            writer.close(status="interrupted")
-        raise
-    except (OSError, RuntimeError) as exc:
-        if not is_io_error(exc):
-            raise
-        if reporter:
-            reporter.close()
-        _io_failure(exc, writer, out, ckpt, checkpointer, sim)
-    finally:
-        stop.restore()
-    if reporter:
-        reporter.close()
-    if writer:
-        try:
-            writer.set_attrs(wall_seconds=summary.wall_seconds, steps_done=summary.steps)
-            writer.close(status="finished")
-        except (OSError, RuntimeError) as exc:
-            if not is_io_error(exc):
-                raise
-            _io_failure(exc, writer, out, ckpt, checkpointer, sim)
+    if end.status == "io_error":
+        _io_failure(exc, writer, out, ckpt, sim)
+    summary = end.summary
     if world.rank == 0:
         _print_summary(summary, out, sim)
     return 0
 
 
-#: run files whose HDF5 handle failed: kept referenced until the process ends
-_ABANDONED = []
-
-
-def _io_failure(exc, writer, out, ckpt, checkpointer, sim):
+def _io_failure(exc, writer, out, ckpt, sim):
     """End a run whose writing failed (full disk, quota, a vanished folder): exit code 4.
 
     A :class:`DiskFullError` is raised before anything of the write happened, so the run file
     is closed as usual; any other failed write leaves HDF5's handle in a failed state, which
     is abandoned: the file keeps what its last flush wrote, and ``--resume`` drops a torn row.
     """
-    clean = isinstance(exc, DiskFullError)
-    if not clean:
-        _ABANDONED.append(writer)  # never deallocated: HDF5 reports every failed handle it frees
-    if clean and writer:
-        try:
-            writer.close(status=f"failed: {exc.strerror or exc}")
-        except (OSError, RuntimeError):
-            clean = False
+    clean = close_after_io_error(writer, exc, f"failed: {getattr(exc, 'strerror', None) or exc}")
     last = "none"
     if ckpt.exists():
         try:

@@ -13,6 +13,7 @@ from collections import Counter
 
 import numpy as np
 
+from ..io import layout
 from ..io.h5md import RunFile, RunFileError
 from ..model import events as ev
 from ..model.graph import DEAD_END, FILAMENT, ROLE_NAMES, ConnectivityGraph
@@ -72,7 +73,7 @@ def analyse(run: RunFile, frame=None, t=None) -> dict:
     return {
         "file": str(run.path),
         "frame": g["frame"],
-        "frames": int(run.f["graph/step"].shape[0]),
+        "frames": int(run.f[layout.GRAPH_STEP].shape[0]),
         "step": g["step"],
         "time": g["time"],
         "conductors": {ev.CONDUCTOR_NAMES.get(c, str(c)): p for c, p in g["conductors"].items()},

@@ -25,6 +25,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from . import layout
+
 FORMAT = "selfas-graph checkpoint 1"
 
 #: snapshot arrays that must hold finite numbers for a run to continue from them
@@ -44,7 +46,7 @@ def checkpoint_path(run_path) -> Path:
 def _digest(snapshot: dict, meta: dict) -> str:
     """SHA-256 over every entry as stored (sorted names; dtype, shape and bytes of each value)."""
     h = hashlib.sha256()
-    for part, items in (("snapshot", snapshot), ("meta", meta)):
+    for part, items in ((layout.CHECKPOINT_SNAPSHOT, snapshot), (layout.CHECKPOINT_META, meta)):
         for key in sorted(items):
             value = items[key]
             if isinstance(value, bytes):
@@ -99,7 +101,7 @@ def write_checkpoint(path, snapshot: dict, meta: dict, failed: dict | None = Non
     try:
         with h5py.File(tmp, "w") as f:
             f.attrs["format"] = FORMAT
-            g = f.create_group("snapshot")
+            g = f.create_group(layout.CHECKPOINT_SNAPSHOT)
             stored = {}
             for key, value in _encode_nonfinite(snapshot).items():
                 arr = np.asarray(value)
@@ -107,7 +109,7 @@ def write_checkpoint(path, snapshot: dict, meta: dict, failed: dict | None = Non
                     g.attrs[key] = arr.item()
                 else:
                     g.create_dataset(key, data=arr)
-            m = f.create_group("meta")
+            m = f.create_group(layout.CHECKPOINT_META)
             for key, value in meta.items():
                 m.attrs[key] = value
             # the digest of what reads back (attributes come back as numpy scalars)
@@ -115,7 +117,7 @@ def write_checkpoint(path, snapshot: dict, meta: dict, failed: dict | None = Non
             stored.update({k: g[k][()] for k in g})
             f.attrs["checksum"] = _digest(stored, dict(m.attrs))
             if failed is not None:
-                _write_failed(f.create_group("failed"), failed)
+                _write_failed(f.create_group(layout.CHECKPOINT_FAILED), failed)
             f.flush()
         fd = os.open(tmp, os.O_RDONLY)
         try:
@@ -263,11 +265,11 @@ def read_checkpoint(path) -> tuple[dict, dict]:
         try:
             if f.attrs.get("format") != FORMAT:
                 raise CheckpointError(f"{path}: not a selfas-graph checkpoint (expected format {FORMAT!r})")
-            g = f["snapshot"]
+            g = f[layout.CHECKPOINT_SNAPSHOT]
             snap = {k: v for k, v in g.attrs.items()}
             for k in g:
                 snap[k] = g[k][()]
-            meta = dict(f["meta"].attrs)
+            meta = dict(f[layout.CHECKPOINT_META].attrs)
             checksum = f.attrs.get("checksum")
         except CheckpointError:
             raise

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..model.graph import ROLE_NAMES
+from . import layout
 from .h5md import RunFile, RunFileError
 
 FORMATS = ("gsd", "xyz")
@@ -104,11 +105,11 @@ class _Frames:
         self.charge = run.tip_charge
         self.steps = run.step
         self.times = run.time
-        self.has_velocity = "particles/tips/velocity/value" in run.f
-        self.graph_steps = run.f["graph/step"][:] if run.has_graph else np.zeros(0, dtype=np.int64)
+        self.has_velocity = layout.TIP_VELOCITY_VALUE in run.f
+        self.graph_steps = run.graph_steps
         self.total_current = None
-        if "total_current" in run.observable_names():
-            g = run.f["observables/total_current"]
+        if layout.TOTAL_CURRENT in run.observable_names():
+            g = run.f[layout.observable(layout.TOTAL_CURRENT)]
             self.total_current = dict(zip(g["step"][:].tolist(), g["value"][:].tolist()))
 
     def __call__(self, k):
@@ -118,14 +119,14 @@ class _Frames:
         current = np.zeros(self.n_rods)
         j = int(np.searchsorted(self.graph_steps, step))
         if j < len(self.graph_steps) and self.graph_steps[j] == step:
-            role = run.f["graph/role"][j].astype(np.int64)
-            current = run.f["graph/current"][j].astype(np.float64)
+            role = run.f[layout.graph("role")][j].astype(np.int64)
+            current = run.f[layout.graph("current")][j].astype(np.float64)
         total = self.total_current.get(step, 0.0) if self.total_current is not None else 0.0
         return {
             "step": step,
             "time": float(self.times[k]),
-            "position": run.f["particles/tips/position/value"][k],
-            "velocity": run.f["particles/tips/velocity/value"][k] if self.has_velocity else None,
+            "position": run.f[layout.TIP_POSITION_VALUE][k],
+            "velocity": run.f[layout.TIP_VELOCITY_VALUE][k] if self.has_velocity else None,
             "role": role,
             "current": current,
             "total_current": float(total),
@@ -133,7 +134,7 @@ class _Frames:
 
     def box_edge(self, frames) -> float:
         """Edge of a cube centred at the origin holding every position of the frames (1 L margin)."""
-        ds = self.run.f["particles/tips/position/value"]
+        ds = self.run.f[layout.TIP_POSITION_VALUE]
         reach = max(float(np.abs(ds[int(k)]).max(initial=0.0)) for k in frames)
         return 2.0 * reach + 2.0
 

@@ -1,42 +1,17 @@
 """HDF5 output after H5MD 1.1 (https://www.nongnu.org/h5md/h5md.html), and its reader.
 
-Layout of a run file::
+The layout of a run file (every dataset path and group name) is listed and named in
+:mod:`selfas_graph.io.layout`. ``/parameters/selfas_graph`` holds as attributes: scenario_text,
+parameters_json, version, command_line, seed, mpi_ranks, numba_threads, created, status, commit
+(git commit of the source, "+dirty" if changed), cpu_model, numba_cpu (the CPU numba compiled for
+and its widest vectors), wall_seconds (wall time of the run's segments that closed the file),
+resumed_with (JSON: commit, CPU, threads of continuations that differ). ``/graph`` attributes:
+conductor_ids, conductor_potentials (0 where conductor_per_contact is 1: a potential set per
+contact, the case (ii) filament), conductor_per_contact, role_names. A floating tip (on no path
+between conductors) has 1 in ``graph/floating`` and 0 in ``graph/potential``; :meth:`RunFile.graph`
+gives NaN there (files before 0.4 hold NaN in potential instead).
 
-    /h5md                       attrs version=[1, 1]; groups author, creator (fixed-length strings)
-    /h5md/modules/units         attrs version=[1, 0], system="reduced" (docs/model.md 'Reduced units')
-    /particles/tips/box         attrs dimension=3, boundary=[none, none, none]
-    /particles/tips/position    step (n,), time (n,), value (n, n_tips, 3)
-    /particles/tips/velocity    step, time, value (if output.velocities)
-    /particles/tips/charge      (n_tips,) magnetic charge (time-independent)
-    /particles/tips/rod         (n_tips,) rod index of each tip (tip k belongs to rod k // 2)
-    /particles/rods/box         as the tips' box (H5MD: every particles group holds one)
-    /particles/rods/charge      (n_rods,) electric charge Z_i
-    /connectivity/rods          (n_rods, 2) the two tips of each rod; attr particles_group -> /particles/tips
-    /observables/<name>         step, time, value: one row per saved frame
-    /observables/dt             step, time, value: simulated time between saved frames
-    /observables/bond_error_per_step   step, value: the largest bond error of every step
-    /parameters/selfas_graph    attrs: scenario_text, parameters_json, version, command_line,
-                                seed, mpi_ranks, numba_threads, created, status, commit (git
-                                commit of the source, "+dirty" if changed), cpu_model, numba_cpu
-                                (the CPU numba compiled for and its widest vectors), wall_seconds
-                                (wall time of the run's segments that closed the file),
-                                resumed_with (JSON: commit, CPU, threads of continuations that differ)
-    /events                     (n_events,) records (step, time, kind, a, b); attrs kind_names
-    /graph                      the connectivity graph at every saved frame (if contacts are on):
-        step, time                  (n_frames,)
-        tip_contacts                (sum m_f, 2) tip pairs in contact; tip_contacts_count (n_frames,)
-        conductor_tip, conductor_id, conductor_potential
-                                    (sum k_f,) tip-conductor contacts; conductor_contacts_count (n_frames,)
-        role                        (n_frames, n_rods) int8: 0 free, 1 cluster, 2 dead end, 3 filament
-        current                     (n_frames, n_rods) rod currents J_i (units J0), 0 without a circuit
-        potential                   (n_frames, n_tips) tip potentials (units R0 J0), 0 if floating
-        floating                    (n_frames, n_tips) int8: 1 for a tip on no path between conductors
-                                    (no potential; RunFile.graph gives NaN there; files before 0.4
-                                    hold NaN in potential instead)
-        attrs conductor_ids, conductor_potentials (0 where conductor_per_contact is 1: a potential
-              set per contact, the case (ii) filament), conductor_per_contact, role_names
-
-Every dimensionful dataset carries a ``unit`` attribute in the reduced units (symbols above, docs/output.md), except
+Every dimensionful dataset carries a ``unit`` attribute in the reduced units (the symbols below, docs/output.md), except
 the positions, velocities and their times: MDAnalysis' H5MD reader refuses any unit string
 outside its table of SI units, even with ``convert_units=False`` (docs/output.md). The
 ``particles`` group tracks creation order, so readers that take its first subgroup
@@ -61,6 +36,8 @@ import h5py
 import numpy as np
 
 from ..model.events import CONDUCTOR_NAMES, EVENT_DTYPE, KIND_NAMES, named_events
+from ..model.topology import ROLE_NAMES
+from . import layout
 
 H5MD_VERSION = (1, 1)
 
@@ -107,7 +84,7 @@ def _set_unit(obj, unit):
 
 
 def _box(group):
-    box = group.create_group("box")
+    box = group.create_group(layout.BOX)
     box.attrs["dimension"] = np.int32(3)
     box.attrs["boundary"] = np.array([b"none"] * 3)
 
@@ -207,23 +184,23 @@ def appendable_problems(f) -> list:
         elif kind is not None and ds.dtype.kind not in kind:
             problems.append(f"{name} has dtype {ds.dtype}, expected {'integers' if kind == 'iu' else 'numbers'}")
 
-    for group in ("particles/tips/position", "particles/tips/velocity"):
+    for group in ("particles/tips/position", layout.TIP_VELOCITY):
         check(f"{group}/step", "iu")
         check(f"{group}/time", "f")
         check(f"{group}/value", "f")
-    obs = f.get("observables")
+    obs = f.get(layout.OBSERVABLES)
     if isinstance(obs, h5py.Group):
 
         def visit(name, obj):
             if isinstance(obj, h5py.Group) and "value" in obj:
-                check(f"observables/{name}/step", "iu")
-                check(f"observables/{name}/value", "f")
-                if name != "bond_error_per_step":
-                    check(f"observables/{name}/time", "f")
+                check(f"{layout.observable(name)}/{layout.STEP}", "iu")
+                check(f"{layout.observable(name)}/{layout.VALUE}", "f")
+                if name != layout.BOND_ERROR_PER_STEP:
+                    check(f"{layout.observable(name)}/{layout.TIME}", "f")
 
         obs.visititems(visit)
-    check("events", dtype=EVENT_DTYPE)
-    g = f.get("graph")
+    check(layout.EVENTS, dtype=EVENT_DTYPE)
+    g = f.get(layout.GRAPH)
     if isinstance(g, h5py.Group):
         for name in (
             "step",
@@ -234,9 +211,9 @@ def appendable_problems(f) -> list:
             "conductor_id",
             "role",
         ):
-            check(f"graph/{name}", "iu")
+            check(layout.graph(name), "iu")
         for name in ("time", "current", "potential", "conductor_potential"):
-            check(f"graph/{name}", "f")
+            check(layout.graph(name), "f")
     return problems
 
 
@@ -376,26 +353,28 @@ class RunWriter(_PendingRows):
         # killed run leaves set, after which HDF5 refuses to open the file without h5clear
         self.f = h5py.File(self.path, "w")
         f = self.f
-        h = f.create_group("h5md")
+        h = f.create_group(layout.H5MD)
         h.attrs["version"] = np.array(H5MD_VERSION, dtype=np.int32)
-        h.create_group("author").attrs["name"] = _fixed(provenance.get("author", os.environ.get("USER", "unknown")))
-        c = h.create_group("creator")
+        h.create_group(layout.H5MD_AUTHOR).attrs["name"] = _fixed(
+            provenance.get("author", os.environ.get("USER", "unknown"))
+        )
+        c = h.create_group(layout.H5MD_CREATOR)
         c.attrs["name"] = _fixed("selfas-graph")
         c.attrs["version"] = _fixed(provenance.get("version", "unknown"))
-        units = h.create_group("modules/units")
+        units = h.create_group(layout.H5MD_UNITS)
         units.attrs["version"] = np.array((1, 0), dtype=np.int32)
         units.attrs["system"] = _fixed(UNIT_SYSTEM)
         # creation order tracked: readers that take the first particles group take the tips
-        particles = f.create_group("particles", track_order=True)
-        tips = particles.create_group("tips")
+        particles = f.create_group(layout.PARTICLES, track_order=True)
+        tips = particles.create_group(layout.TIPS)
         _box(tips)
         _set_unit(tips.create_dataset("charge", data=np.asarray(tip_charge, dtype=np.float64)), CHARGE)
-        tips.create_dataset("rod", data=np.arange(n_tips, dtype=np.int64) // 2)
-        rods = particles.create_group("rods")
+        tips.create_dataset(layout.TIP_ROD, data=np.arange(n_tips, dtype=np.int64) // 2)
+        rods = particles.create_group(layout.RODS)
         _box(rods)
         _set_unit(rods.create_dataset("charge", data=np.asarray(rod_charge, dtype=np.float64)), CHARGE)
-        bonds = f.create_group("connectivity").create_dataset(
-            "rods", data=np.arange(n_tips, dtype=np.int64).reshape(-1, 2)
+        bonds = f.create_group(layout.CONNECTIVITY).create_dataset(
+            layout.RODS, data=np.arange(n_tips, dtype=np.int64).reshape(-1, 2)
         )
         bonds.attrs["particles_group"] = tips.ref
         for name, values, unit in (("length", rod_length, LENGTH), ("resistance", rod_resistance, "R_0")):
@@ -412,11 +391,11 @@ class RunWriter(_PendingRows):
             )
         self._obs = {}
         self.frame_interval = frame_interval
-        self.observables = f.create_group("observables")
-        g = self.observables.create_group("bond_error_per_step")
+        self.observables = f.create_group(layout.OBSERVABLES)
+        g = self.observables.create_group(layout.BOND_ERROR_PER_STEP)
         self._per_step = (_growable(g, "step", (), "<i8"), _growable(g, "value", (), "<f8"))
         _set_unit(self._per_step[1], LENGTH)
-        p = f.create_group("parameters/selfas_graph")
+        p = f.create_group(layout.PROVENANCE)
         for key, value in provenance.items():
             p.attrs[key] = value
         p.attrs["status"] = "running"
@@ -438,7 +417,7 @@ class RunWriter(_PendingRows):
         except OSError as exc:
             raise RunFileError(f"{self.path}: cannot reopen the run file to continue it ({exc})") from None
         f = self.f
-        if "particles/tips/position/step" not in f:
+        if layout.TIP_POSITION_STEP not in f:
             f.close()
             raise RunFileError(f"{self.path}: not a selfas-graph run file")
         problems = appendable_problems(f)
@@ -451,19 +430,19 @@ class RunWriter(_PendingRows):
             return min([_rows_up_to(columns[0][:], step, strict)] + [c.shape[0] for c in columns[1:]])
 
         self._elements = {}
-        for name in ("position", "velocity"):
-            if f"particles/tips/{name}" in f:
-                g = f[f"particles/tips/{name}"]
+        for name, path in layout.TIP_ELEMENTS.items():
+            if path in f:
+                g = f[path]
                 n = keep(g["step"], g["time"], g["value"])
                 for ds in (g["step"], g["time"], g["value"]):
                     _truncate(ds, n)
                 self._elements[name] = (g["step"], g["time"], g["value"])
-        self.n_frames = f["particles/tips/position/step"].shape[0]
-        self.observables = f["observables"]
+        self.n_frames = f[layout.TIP_POSITION_STEP].shape[0]
+        self.observables = f[layout.OBSERVABLES]
         self._obs = {}
 
         def visit(name, obj):
-            if isinstance(obj, h5py.Group) and "value" in obj and name != "bond_error_per_step":
+            if isinstance(obj, h5py.Group) and "value" in obj and name != layout.BOND_ERROR_PER_STEP:
                 n = keep(obj["step"], obj["time"], obj["value"])
                 for ds in obj.values():
                     _truncate(ds, n)
@@ -471,42 +450,34 @@ class RunWriter(_PendingRows):
 
         self.observables.visititems(visit)
         self.frame_interval = (
-            float(self._obs["dt"][2][-1]) if "dt" in self._obs and self._obs["dt"][2].shape[0] else None
+            float(self._obs[layout.FRAME_INTERVAL][2][-1])
+            if layout.FRAME_INTERVAL in self._obs and self._obs[layout.FRAME_INTERVAL][2].shape[0]
+            else None
         )
-        g = self.observables["bond_error_per_step"]
+        g = self.observables[layout.BOND_ERROR_PER_STEP]
         n = keep(g["step"], g["value"])
         _truncate(g["step"], n)
         _truncate(g["value"], n)
         self._per_step = (g["step"], g["value"])
-        if "events" in f:
-            _truncate(f["events"], keep(f["events"].fields("step"), strict=False) if f["events"].shape[0] else 0)
-        self.events_written = f["events"].shape[0] if "events" in f else 0
-        if "graph" in f:
-            g = f["graph"]
-            per_frame = (
-                "step",
-                "time",
-                "tip_contacts_count",
-                "conductor_contacts_count",
-                "role",
-                "current",
-                "potential",
-            ) + (("floating",) if "floating" in g else ())
+        if layout.EVENTS in f:
+            ev = f[layout.EVENTS]
+            _truncate(ev, keep(ev.fields("step"), strict=False) if ev.shape[0] else 0)
+        self.events_written = f[layout.EVENTS].shape[0] if layout.EVENTS in f else 0
+        if layout.GRAPH in f:
+            g = f[layout.GRAPH]
+            per_frame = layout.GRAPH_PER_FRAME + ((layout.GRAPH_FLOATING,) if layout.GRAPH_FLOATING in g else ())
             n = keep(*(g[name] for name in per_frame))
             m = int(g["tip_contacts_count"][:n].sum())
             k = int(g["conductor_contacts_count"][:n].sum())
-            if (
-                g["tip_contacts"].shape[0] < m
-                or min(g[name].shape[0] for name in ("conductor_tip", "conductor_id", "conductor_potential")) < k
-            ):
+            if g["tip_contacts"].shape[0] < m or min(g[name].shape[0] for name in layout.GRAPH_CONDUCTOR_CONTACTS) < k:
                 f.close()
                 raise RunFileError(f"{self.path}: the graph data up to step {step} are incomplete (damaged file)")
             for name in per_frame:
                 _truncate(g[name], n)
             _truncate(g["tip_contacts"], m)
-            for name in ("conductor_tip", "conductor_id", "conductor_potential"):
+            for name in layout.GRAPH_CONDUCTOR_CONTACTS:
                 _truncate(g[name], k)
-        f["parameters/selfas_graph"].attrs["status"] = "running"
+        f[layout.PROVENANCE].attrs["status"] = "running"
         self._resumed_with()
         self._opened = time.monotonic()
         f.flush()
@@ -519,7 +490,7 @@ class RunWriter(_PendingRows):
 
         from ..provenance import cpu_model, source_commit
 
-        attrs = self.f["parameters/selfas_graph"].attrs
+        attrs = self.f[layout.PROVENANCE].attrs
         now = {"commit": source_commit(), "cpu_model": cpu_model(), "numba_threads": numba.get_num_threads()}
         if all(str(attrs.get(k, "")) == str(v) for k, v in now.items()):
             return
@@ -530,7 +501,7 @@ class RunWriter(_PendingRows):
     def reserve(self) -> int:
         """Bytes the next frame may need at most: one new chunk of every growable dataset, and a margin
         (computed again only when datasets were added)."""
-        key = (len(self._obs), "graph" in self.f, "events" in self.f)
+        key = (len(self._obs), layout.GRAPH in self.f, layout.EVENTS in self.f)
         if getattr(self, "_reserve", (None, 0))[0] != key:
             # before the observables and the graph exist (frame 0), room for their first chunks too
             first = 0 if key[0] and key[1] else 4 << 20
@@ -586,7 +557,7 @@ class RunWriter(_PendingRows):
         """Append one frame (positions, velocities, observables) and flush to disk."""
         self.check_space()
         if self.frame_interval is not None:
-            observables = {**observables, "dt": self.frame_interval}
+            observables = {**observables, layout.FRAME_INTERVAL: self.frame_interval}
         for name, arr in (("position", position), ("velocity", velocity)):
             if name in self._elements:
                 s, tt, v = self._elements[name]
@@ -619,12 +590,14 @@ class RunWriter(_PendingRows):
 
     def write_events(self, rows):
         """Append event rows ``(step, time, kind, a, b)``."""
-        if "events" not in self.f:
-            ds = self.f.create_dataset("events", shape=(0,), maxshape=(None,), dtype=EVENT_FILE_DTYPE, chunks=(4096,))
+        if layout.EVENTS not in self.f:
+            ds = self.f.create_dataset(
+                layout.EVENTS, shape=(0,), maxshape=(None,), dtype=EVENT_FILE_DTYPE, chunks=(4096,)
+            )
             ds.attrs["kind_names"] = json.dumps({int(k): v for k, v in KIND_NAMES.items()})
             ds.attrs["conductor_names"] = json.dumps({int(k): v for k, v in CONDUCTOR_NAMES.items()})
         if len(rows):
-            _append(self.f["events"], np.array([tuple(r) for r in rows], dtype=EVENT_DTYPE))
+            _append(self.f[layout.EVENTS], np.array([tuple(r) for r in rows], dtype=EVENT_DTYPE))
 
     def write_graph(self, step, t, arrays, role, current, potential, conductor_potential):
         """Append the graph state of one frame.
@@ -637,8 +610,8 @@ class RunWriter(_PendingRows):
         potential : (n_tips,) float64
         conductor_potential : dict conductor id -> fixed potential (None if per contact)
         """
-        if "graph" not in self.f:
-            g = self.f.create_group("graph")
+        if layout.GRAPH not in self.f:
+            g = self.f.create_group(layout.GRAPH)
             g.attrs["conductor_ids"] = np.array(sorted(conductor_potential), dtype=np.int64)
             # no NaN in the file: a conductor whose potential is set per contact (the case (ii)
             # filament, -delta_J0 z) is flagged in conductor_per_contact, its entry here 0
@@ -647,12 +620,12 @@ class RunWriter(_PendingRows):
                 [0.0 if conductor_potential[c] is None else conductor_potential[c] for c in ids], dtype=np.float64
             )
             g.attrs["conductor_per_contact"] = np.array([conductor_potential[c] is None for c in ids], dtype=np.int8)
-            g.attrs["role_names"] = json.dumps({0: "free", 1: "cluster", 2: "dead_end", 3: "filament"})
+            g.attrs["role_names"] = json.dumps(ROLE_NAMES)
             _growable(g, "step", (), "<i8")
             _set_unit(_growable(g, "time", (), "<f8"), TIME)
             _growable(g, "tip_contacts", (2,), "<i8")
             _growable(g, "tip_contacts_count", (), "<i8")
-            for name, dt in (("conductor_tip", "<i8"), ("conductor_id", "<i8"), ("conductor_potential", "<f8")):
+            for name, dt in zip(layout.GRAPH_CONDUCTOR_CONTACTS, ("<i8", "<i8", "<f8")):
                 _growable(g, name, (), dt)
             _growable(g, "conductor_contacts_count", (), "<i8")
             _growable(g, "role", role.shape, "i1")
@@ -660,7 +633,7 @@ class RunWriter(_PendingRows):
             _set_unit(_growable(g, "potential", potential.shape, "<f8"), POTENTIAL)
             _growable(g, "floating", potential.shape, "i1")
             _set_unit(g["conductor_potential"], POTENTIAL)
-        g = self.f["graph"]
+        g = self.f[layout.GRAPH]
         _append(g["step"], step)
         _append(g["time"], t)
         tc = arrays["tip_contacts"]
@@ -668,7 +641,7 @@ class RunWriter(_PendingRows):
             _append(g["tip_contacts"], tc)
         _append(g["tip_contacts_count"], len(tc))
         if len(arrays["conductor_tip"]):
-            for name in ("conductor_tip", "conductor_id", "conductor_potential"):
+            for name in layout.GRAPH_CONDUCTOR_CONTACTS:
                 _append(g[name], arrays[name])
         _append(g["conductor_contacts_count"], len(arrays["conductor_tip"]))
         _append(g["role"], role)
@@ -718,14 +691,14 @@ class RunWriter(_PendingRows):
 
     def set_attrs(self, **attrs):
         for k, v in attrs.items():
-            self.f["parameters/selfas_graph"].attrs[k] = v
+            self.f[layout.PROVENANCE].attrs[k] = v
 
     def flush(self):
         self.f.flush()
 
     def close(self, status="finished"):
         if self.f:
-            attrs = self.f["parameters/selfas_graph"].attrs
+            attrs = self.f[layout.PROVENANCE].attrs
             # wall time of every segment of the run that closed its file (a killed one adds nothing)
             spent = time.monotonic() - getattr(self, "_opened", time.monotonic())
             self.set_attrs(status=status, wall_seconds=float(attrs.get("wall_seconds", 0.0)) + spent)
@@ -798,27 +771,27 @@ class RunFile:
                 ) from None
             raise RunFileError(f"{self.path}: not a readable HDF5 file ({reason})") from None
         required = (
-            "parameters/selfas_graph",
-            "particles/tips/position/value",
-            "particles/tips/position/step",
-            "particles/tips/position/time",
-            "particles/tips/charge",
-            "particles/rods/charge",
-            "observables",
+            layout.PROVENANCE,
+            layout.TIP_POSITION_VALUE,
+            layout.TIP_POSITION_STEP,
+            layout.TIP_POSITION_TIME,
+            layout.TIP_CHARGE,
+            layout.ROD_CHARGE,
+            layout.OBSERVABLES,
         )
         missing = [name for name in required if not isinstance(self.f.get(name), (h5py.Dataset, h5py.Group))]
-        if missing or "parameters_json" not in self.f["parameters/selfas_graph"].attrs:
+        if missing or "parameters_json" not in self.f[layout.PROVENANCE].attrs:
             self.f.close()
             raise RunFileError(
                 f"{self.path}: an HDF5 file, but not a selfas-graph run "
                 f"(missing {', '.join(missing) or 'parameters_json'})"
             )
-        self.meta = dict(self.f["parameters/selfas_graph"].attrs)
-        n = self.f["particles/tips/position/value"].shape
-        if len(n) != 3 or n[2] != 3 or self.f["particles/tips/position/step"].shape[0] != n[0]:
+        self.meta = dict(self.f[layout.PROVENANCE].attrs)
+        n = self.f[layout.TIP_POSITION_VALUE].shape
+        if len(n) != 3 or n[2] != 3 or self.f[layout.TIP_POSITION_STEP].shape[0] != n[0]:
             self.f.close()
             raise RunFileError(f"{self.path}: the positions are not laid out as (frames, tips, 3)")
-        kinds = {name: self.f[f"particles/tips/position/{name}"].dtype.kind for name in ("step", "time", "value")}
+        kinds = {name: self.f[f"{layout.TIP_POSITION}/{name}"].dtype.kind for name in ("step", "time", "value")}
         if kinds["step"] not in "iu" or kinds["time"] != "f" or kinds["value"] != "f":
             self.f.close()
             raise RunFileError(
@@ -846,15 +819,15 @@ class RunFile:
 
     @property
     def n_frames(self) -> int:
-        return self.f["particles/tips/position/value"].shape[0]
+        return self.f[layout.TIP_POSITION_VALUE].shape[0]
 
     @property
     def time(self) -> np.ndarray:
-        return self.f["particles/tips/position/time"][:]
+        return self.f[layout.TIP_POSITION_TIME][:]
 
     @property
     def step(self) -> np.ndarray:
-        return self.f["particles/tips/position/step"][:]
+        return self.f[layout.TIP_POSITION_STEP][:]
 
     def frame_index(self, frame=None, t=None) -> int:
         """Index of a frame given by number (negative counts from the end) or nearest time."""
@@ -870,76 +843,74 @@ class RunFile:
             raise RunFileError(f"{self.path}: frame {k} out of range; the file has frames 0..{n - 1}")
         return k % n
 
+    def frame(self, index=None, t=None):
+        """One saved frame as a :class:`~selfas_graph.io.frame.SavedFrame`: by index (negative counts
+        from the end; default the last) or nearest time ``t``; its graph data are those of the same step."""
+        from .frame import SavedFrame
+
+        return SavedFrame(self, self.frame_index(index, t))
+
     def position(self, frame=-1) -> np.ndarray:
-        return self.f["particles/tips/position/value"][self.frame_index(frame)]
+        return self.f[layout.TIP_POSITION_VALUE][self.frame_index(frame)]
 
     def velocity(self, frame=-1) -> np.ndarray:
-        if "particles/tips/velocity" not in self.f:
+        if layout.TIP_VELOCITY not in self.f:
             raise RunFileError(f"{self.path}: velocities were not saved (output.velocities = false)")
-        return self.f["particles/tips/velocity/value"][self.frame_index(frame)]
+        return self.f[layout.TIP_VELOCITY_VALUE][self.frame_index(frame)]
 
     @property
     def tip_charge(self) -> np.ndarray:
-        return self.f["particles/tips/charge"][:]
+        return self.f[layout.TIP_CHARGE][:]
 
     @property
     def rod_charge(self) -> np.ndarray:
-        return self.f["particles/rods/charge"][:]
+        return self.f[layout.ROD_CHARGE][:]
 
     @property
     def rod_length(self) -> np.ndarray:
         """Length of each rod (units L); ones when the run had equal rods."""
-        if "particles/rods/length" in self.f:
-            return self.f["particles/rods/length"][:]
-        return np.ones(self.f["particles/rods/charge"].shape[0])
+        if layout.ROD_LENGTH in self.f:
+            return self.f[layout.ROD_LENGTH][:]
+        return np.ones(self.f[layout.ROD_CHARGE].shape[0])
 
     @property
     def rod_resistance(self) -> np.ndarray:
         """Resistance of each rod (units R0); ones when the run had R0 = 1 for every rod."""
-        if "particles/rods/resistance" in self.f:
-            return self.f["particles/rods/resistance"][:]
-        return np.ones(self.f["particles/rods/charge"].shape[0])
+        if layout.ROD_RESISTANCE in self.f:
+            return self.f[layout.ROD_RESISTANCE][:]
+        return np.ones(self.f[layout.ROD_CHARGE].shape[0])
 
     @property
     def n_tips(self) -> int:
-        return self.f["particles/tips/position/value"].shape[1]
+        return self.f[layout.TIP_POSITION_VALUE].shape[1]
 
     @property
     def bonds(self) -> np.ndarray:
         """(n_rods, 2) the tips of each rod: ``/connectivity/rods``, or the same pairs for older files."""
-        ds = self.f.get("connectivity/rods")
+        ds = self.f.get(layout.CONNECTIVITY_RODS)
         if isinstance(ds, h5py.Dataset) and ds.shape == (self.n_tips // 2, 2):
             return ds[:]
         return np.arange(self.n_tips, dtype=np.int64).reshape(-1, 2)
 
-    _GRAPH = (
-        "step",
-        "time",
-        "tip_contacts",
-        "tip_contacts_count",
-        "conductor_tip",
-        "conductor_id",
-        "conductor_potential",
-        "conductor_contacts_count",
-        "role",
-        "current",
-        "potential",
-    )
-
     @property
     def has_graph(self) -> bool:
-        g = self.f.get("graph")
+        g = self.f.get(layout.GRAPH)
         return (
             isinstance(g, h5py.Group)
-            and all(isinstance(g.get(n), h5py.Dataset) for n in self._GRAPH)
+            and all(isinstance(g.get(n), h5py.Dataset) for n in layout.GRAPH_DATASETS)
             and g["step"].shape[0] > 0
         )
 
+    @property
+    def graph_steps(self) -> np.ndarray:
+        """The steps of the frames saved with graph data (empty without any)."""
+        return self.f[layout.GRAPH_STEP][:] if self.has_graph else np.zeros(0, dtype=np.int64)
+
     def events(self, until_step=None) -> np.ndarray:
         """Event records (structured array, fields step, time, kind, a, b), optionally up to a step."""
-        if "events" not in self.f:
+        if layout.EVENTS not in self.f:
             return np.zeros(0, dtype=EVENT_DTYPE)
-        e = self.f["events"][:].astype(EVENT_DTYPE)  # the kind an enumeration in newer files, integers before
+        e = self.f[layout.EVENTS][:].astype(EVENT_DTYPE)  # the kind an enumeration in newer files, integers before
         return e if until_step is None else e[e["step"] <= until_step]
 
     def named_events(self, until_step=None) -> list:
@@ -952,11 +923,11 @@ class RunFile:
                 f"{self.path}: the file has no graph data (the run had contacts.enabled = false, "
                 f"or was written before any frame)"
             )
-        n = self.f["graph/step"].shape[0]
+        n = self.f[layout.GRAPH_STEP].shape[0]
         if t is not None:
             if not np.isfinite(t):
                 raise RunFileError(f"time {t} names no frame; give a finite simulated time")
-            return int(np.argmin(np.abs(self.f["graph/time"][:] - t)))
+            return int(np.argmin(np.abs(self.f[layout.GRAPH_TIME][:] - t)))
         k = -1 if frame is None else int(frame)
         if not -n <= k < n:
             raise RunFileError(f"{self.path}: frame {k} out of range; the file has frames 0..{n - 1}")
@@ -965,7 +936,7 @@ class RunFile:
     def graph(self, frame=None, t=None) -> dict:
         """The graph state of one frame: contact arrays, roles, currents, potentials, step and time."""
         k = self.graph_frame_index(frame, t)
-        g = self.f["graph"]
+        g = self.f[layout.GRAPH]
         tc_count = g["tip_contacts_count"][:]
         cc_count = g["conductor_contacts_count"][:]
         t0, t1 = int(tc_count[:k].sum()), int(tc_count[: k + 1].sum())
@@ -994,15 +965,15 @@ class RunFile:
     def observable_names(self):
         """Names of all observables, nested ones as ``group/name`` (e.g. ``energy/kinetic``)."""
         names = []
-        self.f["observables"].visit(
+        self.f[layout.OBSERVABLES].visit(
             lambda name: names.append(name[: -len("/value")]) if name.endswith("/value") else None
         )
         return sorted(names)
 
     def observable(self, name):
         """(time, value) arrays of a per-frame observable, or (step, value) for per-step series."""
-        if name not in self.f["observables"]:
+        if name not in self.f[layout.OBSERVABLES]:
             raise RunFileError(f"{self.path}: no observable {name!r}; present: {', '.join(self.observable_names())}")
-        g = self.f["observables"][name]
+        g = self.f[layout.OBSERVABLES][name]
         x = g["time"][:] if "time" in g else g["step"][:]
         return x, g["value"][:]
