@@ -114,3 +114,40 @@ table_times = [0.5]
     page = (tmp_path / "page.md").read_text()
     assert "| fraction of rods within R_plas |" in page
     assert "is up to date" in cli("page", "--summaries", "res", "--page", "page.md", "--check")
+
+
+def test_a_percolation_study_runs_summarises_and_tabulates(tmp_path):
+    """A percolation study: `study run` calls `bench percolation` (runs that write no file), `summarise`
+    keeps the statistics per rod count with the provenance, `page` tabulates them."""
+    (tmp_path / "studies.toml").write_text(
+        f"""
+[study.p]
+title = "Quick scene"
+kind = "percolation"
+scenario = "{(ROOT / "scenarios" / "quick.toml").as_posix()}"
+counts = [20, 40]
+seeds = 2
+t_end = 0.2
+"""
+    )
+    (tmp_path / "page.md").write_text("<!-- begin generated: table p -->\n<!-- end generated: table p -->\n")
+
+    def cli(*args):
+        res = subprocess.run(
+            [sys.executable, "-m", "selfas_graph.cli.main", "study", *args, "--studies", "studies.toml"],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert res.returncode == 0, res.stdout + res.stderr
+        return res.stdout
+
+    cli("run", "p", "--runs", "runs")
+    assert "exists" in cli("run", "p", "--runs", "runs")  # done: not run again
+    cli("summarise", "p", "--runs", "runs", "--summaries", "res")
+    summary = json.loads((tmp_path / "res" / "p.json").read_text())
+    assert [d["count"] for d in summary["densities"]] == [20, 40] and summary["commit"] is not None
+    assert all(d["runs"] == 2 for d in summary["densities"])
+    cli("page", "--summaries", "res", "--page", "page.md")
+    assert "| 20 | " in (tmp_path / "page.md").read_text()

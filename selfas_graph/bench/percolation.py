@@ -498,6 +498,7 @@ def main(argv=None):
     if not points:
         ap.error("no density left to run (every one was skipped, see above)")
     from selfas_graph import __version__
+    from selfas_graph.provenance import cpu_model, numba_target, source_commit
 
     seeds = [meta["first_seed"] + k for k in range(args.seeds)]
     tasks = [
@@ -557,6 +558,9 @@ def main(argv=None):
         "skipped": skipped,
         "runs": runs,
         "wall_seconds": time.perf_counter() - t0,
+        "commit": source_commit(),
+        "cpu_model": cpu_model(),
+        "numba_cpu": "{cpu_name} ({widest})".format(**numba_target()),
     }
     print_table(result)
     if args.output:

@@ -20,6 +20,8 @@ DEFAULT_STUDIES = "docs/studies.toml"
 DEFAULT_SUMMARIES = "docs/results"
 DEFAULT_FIGURES = "docs/figures"
 DEFAULT_PAGE = "docs/results.md"
+#: the result file of a percolation study in its run folder
+PERCOLATION_JSON = "percolation.json"
 #: frames of a study's movie at most
 MOVIE_FRAMES = 150
 
@@ -73,6 +75,18 @@ def run(args):
 
         code = 0
         for s in _pick(studies, args.names):
+            if s.kind == "percolation":
+                out = Path(args.runs) / s.name / PERCOLATION_JSON
+                if out.exists() and not args.force:
+                    print(f"study {s.name}: {out} exists (--force runs it again)")
+                    continue
+                out.parent.mkdir(parents=True, exist_ok=True)
+                argv = ["bench", "percolation", s.scenario, "--counts", *map(str, s.counts), "--seeds", str(s.seeds)]
+                argv += ["--first-seed", str(s.first_seed), "--t-max", repr(s.t_end), "--fields", s.fields]
+                argv += ["--workers", str(args.jobs), "-o", str(out)] + [f"--set={o}" for o in s.overrides]
+                print(f"study {s.name}: selfas-graph {' '.join(argv)}", flush=True)
+                code = main(argv) or code
+                continue
             argv = ["ensemble", s.scenario, "--seeds", str(s.seeds), "--first-seed", str(s.first_seed)]
             argv += ["--t-end", repr(s.t_end), "-o", str(Path(args.runs) / s.name), "--jobs", str(args.jobs)]
             argv += [f"--set={o}" for o in s.overrides] + (["--force"] if args.force else [])
@@ -85,6 +99,17 @@ def run(args):
         from ..studies import summarise_study, write_json_atomic
 
         for s in _pick(studies, args.names):
+            if s.kind == "percolation":
+                from ..studies.summary import percolation_summary
+
+                src = Path(args.runs) / s.name / PERCOLATION_JSON
+                if not src.exists():
+                    print(f"study {s.name}: no {src}; skipped")
+                    continue
+                summary = percolation_summary(s, src)
+                out = write_json_atomic(summary, Path(args.summaries) / f"{s.name}.json")
+                print(f"study {s.name}: {len(summary['densities'])} densities summarised into {out}")
+                continue
             if not (Path(args.runs) / s.name).is_dir():
                 print(f"study {s.name}: no run files in {Path(args.runs) / s.name}; skipped")
                 continue

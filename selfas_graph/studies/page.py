@@ -184,6 +184,24 @@ def study_table(summary) -> str:
     return "\n".join(rows)
 
 
+def percolation_table(summary) -> str:
+    """A percolation study's table: per rod count, how many runs short-circuited by t_max (with the 95 %
+    Wilson interval of the fraction) and the Kaplan-Meier median [quartiles] of the short-circuit time."""
+    t_max = summary["study"]["t_max"]
+    rows = [
+        f"| rods | short-circuited by t = {t_max:g} (95 % interval) | median short-circuit time [q25 to q75] |",
+        "|---|---|---|",
+    ]
+    for d in summary["densities"]:
+        lo, hi = d.get("fraction_ci95") or (math.nan, math.nan)
+        q = [">" + f"{t_max:g}" if d.get(k) is None else _fmt(d[k]) for k in ("median", "q25", "q75")]
+        rows.append(
+            f"| {d['count']} | {d['short_circuited']} of {d['runs']} ({_fmt(lo, 2)} to {_fmt(hi, 2)}) | "
+            f"{q[0]} [{q[1]} to {q[2]}] |"
+        )
+    return "\n".join(rows)
+
+
 def provenance_text(summary) -> str:
     """Version, commits, CPU, threads and wall time of a study's runs, in one paragraph."""
     seeds = summary["seeds"]
@@ -364,6 +382,15 @@ def page_blocks(studies, folder) -> dict:
                 f"Not run at this version yet: `selfas-graph study run {name} --jobs 2`, then `study summarise {name}`."
             )
             blocks[f"table {name}"] = blocks[f"runs {name}"] = todo
+            blocks[f"figures {name}"] = ""
+            continue
+        if s.get("kind") == "percolation":
+            blocks[f"table {name}"] = percolation_table(s)
+            blocks[f"runs {name}"] = (
+                f"{len(s['seeds'])} seeds a count to t = {_fmt(s['study']['t_max'])}; version {s['version']}, commit "
+                f"{(s['commit'] or 'unknown')[:10]}; {s['cpu_model'] or 'unknown CPU'}, kernels for {s['numba_cpu']}, "
+                f"{s['workers']} worker(s) of one numba thread; {_fmt((s['wall_seconds'] or 0) / 60, 2)} min in all."
+            )
             blocks[f"figures {name}"] = ""
             continue
         blocks[f"table {name}"] = study_table(s)

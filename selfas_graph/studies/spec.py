@@ -53,6 +53,11 @@ class Study:
     doc: str = ""
     sweep: str = ""
     sweep_value: float = math.nan
+    #: "ensemble" (run files, per-frame measures) or "percolation" (short-circuit times over rod
+    #: counts, runs that stop at the short circuit and write no file: ``selfas-graph bench percolation``)
+    kind: str = "ensemble"
+    counts: tuple[int, ...] = ()
+    fields: str = "on"
 
     @property
     def times(self) -> list[float]:
@@ -134,6 +139,9 @@ _STUDY_KEYS = {
     "doc": str,
     "sweep": str,
     "sweep_value": (int, float),
+    "kind": str,
+    "counts": list,
+    "fields": str,
 }
 _SWEEP_KEYS = {"title": str, "parameter": str, "base": str, "base_value": (int, float), "time": (int, float)}
 _CLAIM_KEYS = {
@@ -201,7 +209,15 @@ def load_studies(path) -> Studies:
             doc=t.get("doc", ""),
             sweep=t.get("sweep", ""),
             sweep_value=float(t.get("sweep_value", math.nan)),
+            kind=t.get("kind", "ensemble"),
+            counts=tuple(int(c) for c in t.get("counts", [])),
+            fields=t.get("fields", "on"),
         )
+        st = studies[name]
+        if st.kind not in ("ensemble", "percolation"):
+            raise StudiesError(f"{where}.kind: 'ensemble' or 'percolation', got {st.kind!r}")
+        if st.kind == "percolation" and (not st.counts or min(st.counts) < 1 or st.fields not in ("on", "off")):
+            raise StudiesError(f"{where}: a percolation study needs counts (rods, >= 1) and fields 'on' or 'off'")
     sweeps = {}
     for name, t in (raw.get("sweep") or {}).items():
         where = f"{path}: sweep.{name}"

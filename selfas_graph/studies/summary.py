@@ -234,3 +234,32 @@ def write_json_atomic(data, path) -> Path:
         fh.write("\n")
     os.replace(tmp, path)
     return path
+
+
+def percolation_summary(study, path) -> dict:
+    """The summary of a percolation study from ``selfas-graph bench percolation``'s result file: the
+    statistics per rod count (runs, short-circuited, the 95 % interval of the fraction, Kaplan-Meier
+    quartiles of the short-circuit time) and the provenance of the runs; the runs themselves and the
+    Kaplan-Meier curves stay in the result file."""
+    raw = json.loads(Path(path).read_text(encoding="utf-8"))
+    keep = ("count", "density", "fraction_volume", "phi", "runs", "short_circuited", "censored", "failed")
+    keep += ("fraction", "fraction_ci95", "q25", "median", "q75")
+    return {
+        "kind": "percolation",
+        "study": {
+            "name": study.name,
+            "title": study.title,
+            "scenario": study.scenario,
+            "overrides": list(study.overrides),
+            "t_max": raw["t_max"],
+            "fields": raw["fields"],
+        },
+        "densities": [{k: d[k] for k in keep if k in d} for d in raw["densities"]],
+        "seeds": raw["seeds"],
+        "version": raw.get("version", ""),
+        "commit": raw.get("commit", ""),
+        "cpu_model": raw.get("cpu_model", ""),
+        "numba_cpu": raw.get("numba_cpu", ""),
+        "workers": raw.get("workers"),
+        "wall_seconds": raw.get("wall_seconds"),
+    }
