@@ -63,3 +63,19 @@ def test_shipped_scenes_name_every_faster_setting_with_its_error(path):
         assert line is not None, f"{path.name}: {rule.key} is below its stated accuracy ({rule.stated}) by a default"
         assert "[accuracy knob:" in line, f"{path.name}: {rule.key} is set faster than accurate without saying so"
         assert re.search(r"\d", line.split("[accuracy knob:", 1)[1]), f"{path.name}: {rule.key} names no error"
+
+
+def test_a_null_model_is_told_what_it_still_keeps():
+    """contacts.enabled = false alone keeps aggregation (the forces make tips stick): a note says
+    which forces to remove; the free-rod null model (no tip-tip force, no tip brake) gets none of it."""
+    from selfas_graph.io.scenario import load_scenario
+    from selfas_graph.model.accuracy import null_model_notes
+
+    fig2 = Path(__file__).resolve().parent.parent / "scenarios" / "fig2.toml"
+    no_circuit = ["forces.current_field=false", "forces.current_lorentz=false", "circuit=false"]
+    notes = null_model_notes(load_scenario(fig2, overrides=["contacts.enabled=false", *no_circuit]).params)
+    assert any("forces.tip_magnetic=false and forces.tip_brake=false" in n for n in notes)
+    free = ["forces.tip_magnetic=false", "forces.tip_brake=false", "forces.current_field=false"]
+    free += ["forces.current_lorentz=false", "circuit=false"]
+    assert not any("stick" in n for n in null_model_notes(load_scenario(fig2, overrides=free).params))
+    assert null_model_notes(load_scenario(fig2).params) == []

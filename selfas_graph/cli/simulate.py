@@ -41,7 +41,7 @@ from ..io.h5md import (
 )
 from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
 from ..lifecycle import StopOnSignal, close_after_io_error, new_run_file, run_to_file
-from ..model.accuracy import short_of_accuracy
+from ..model.accuracy import null_model_notes, short_of_accuracy
 from ..model.params import plasma_current_text
 from ..model.simulation import Simulation
 from ..model.state import PlacementError
@@ -380,6 +380,8 @@ def run(args):
             print("dry run: placement succeeded, nothing written")
             if plasma_current_text(p):
                 print(plasma_current_text(p))
+            for text in null_model_notes(p):
+                print(f"note: {text}")
             for rule in short_of_accuracy(p):
                 print(f"faster than accurate: {rule.key} (stated accuracy: {rule.stated})")
             print(json.dumps(plan, indent=2))

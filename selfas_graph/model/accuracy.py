@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Callable
 
-__all__ = ["ACCURACY_RULES", "AccuracyRule", "short_of_accuracy"]
+__all__ = ["ACCURACY_RULES", "AccuracyRule", "null_model_notes", "short_of_accuracy"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -112,3 +112,24 @@ ACCURACY_RULES = (
 def short_of_accuracy(params) -> list[AccuracyRule]:
     """The rules of :data:`ACCURACY_RULES` that apply to ``params`` and that its settings do not meet."""
     return [r for r in ACCURACY_RULES if r.applies(params) and not r.meets(params)]
+
+
+def null_model_notes(params) -> list[str]:
+    """What a scene that switches a mechanism off still keeps, for a null model stated with
+    ``--set forces.TERM=false`` (docs/results.md, "Null models"): sticking comes from the forces,
+    so removing only the bookkeeping does not remove aggregation."""
+    f, notes = params.forces, []
+    if not params.contacts.enabled and (f.tip_magnetic is not None or f.tip_brake is not None):
+        notes.append(
+            "contacts.enabled = false removes the contact bookkeeping (events, structures, the circuit), not "
+            "aggregation: the tips still attract (forces.tip_magnetic) and stick (forces.tip_brake); for rods "
+            "that never stick also set forces.tip_magnetic=false and forces.tip_brake=false"
+        )
+    if f.tip_magnetic is None and f.tip_brake is not None:
+        notes.append(
+            "forces.tip_magnetic is off but forces.tip_brake is on: tips that meet by chance still stick; "
+            "set forces.tip_brake=false as well for rods that never stick"
+        )
+    if params.circuit is None and f.electrodes is not None and f.tip_magnetic is not None:
+        notes.append("no circuit: filaments may still span the electrodes, but no current flows and none acts back")
+    return notes
