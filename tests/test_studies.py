@@ -151,3 +151,50 @@ t_end = 0.2
     assert all(d["runs"] == 2 for d in summary["densities"])
     cli("page", "--summaries", "res", "--page", "page.md")
     assert "| 20 | " in (tmp_path / "page.md").read_text()
+
+
+def _fake_summary(values, t=600.0, measure="largest_alignment"):
+    return {
+        "times": [t],
+        "seeds": [{"seed": k + 1} for k in range(len(values))],
+        "n_seeds": len(values),
+        "measures": {measure: {"values": [[v] for v in values]}, "all_alignment": {"values": [[v] for v in values]}},
+    }
+
+
+@pytest.mark.parametrize(
+    "claim, null, words",
+    [
+        ([0.5, 0.6, 0.7], [0.1, 0.2, 0.3], "reproduced (+4.9 SE"),  # d = 0.4 / sqrt(2 * (0.1/sqrt3)^2) = 4.9
+        ([0.1, 0.2, 0.3], [0.5, 0.6, 0.7], "opposite to the claim (−4.9 SE"),
+        ([0.2, 0.3, 0.4], [0.1, 0.2, 0.3], "not distinguished from the null model (+1.2 SE)"),
+    ],
+)
+def test_a_verdict_needs_three_combined_standard_errors_in_the_claimed_direction(tmp_path, claim, null, words):
+    from selfas_graph.studies.page import claim_rows
+
+    (tmp_path / "s.toml").write_text(
+        """
+[study.a]
+scenario = "x"
+seeds = 3
+t_end = 600
+[study.b]
+title = "free rods"
+scenario = "x"
+seeds = 3
+t_end = 600
+[[claim]]
+id = "c"
+claim = "a bigger dipole"
+paper = "words"
+study = "a"
+measure = "largest_alignment"
+time = 600
+null = "b"
+null_measure = "all_alignment"
+"""
+    )
+    studies = load_studies(tmp_path / "s.toml")
+    table = claim_rows(studies, {"a": _fake_summary(claim), "b": _fake_summary(null)})
+    assert words in table, table
