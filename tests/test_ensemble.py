@@ -400,7 +400,7 @@ def test_fit_errors_and_current_groups_in_the_summary(scene, tmp_path, monkeypat
     summarised over the seeds carrying a current alone (k of n, median, range, mean, sem), in
     summary.json, summary.csv and the table. Hand-set values per seed; which seed carries a
     current is set by hand too (seed 3 does, seed 4 does not)."""
-    import selfas_graph.ensemble as ens
+    import selfas_graph.ensemble.summary as ens  # where summarise looks carries_current up
     from selfas_graph.ensemble import FRAME_MEASURES, Measure, write_summary
 
     Ensemble(scene, [3, 4], tmp_path, t_end=0.1).run()

@@ -72,9 +72,9 @@ def test_every_kind_writes_a_png(run_file, tmp_path, kind, capsys):
 def test_large_run_snapshot_colours_the_largest_structure(run_file, tmp_path, monkeypatch, capsys):
     """Above LARGE_RUN rods the snapshot colours the largest structure red (paper Fig. 6); the
     threshold is lowered here so that the 300-rod run takes that branch."""
-    from selfas_graph.cli import plot
+    from selfas_graph.cli.plots import frame  # where the snapshot reads LARGE_RUN
 
-    monkeypatch.setattr(plot, "LARGE_RUN", 100)
+    monkeypatch.setattr(frame, "LARGE_RUN", 100)
     out = tmp_path / "large.png"
     assert main(["plot", str(run_file), "--kind", "snapshot", "-o", str(out)]) == 0
     assert is_png(out)

@@ -46,7 +46,7 @@ def render_movie(args, Figure) -> int:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from tqdm import tqdm
 
-    from .plot import _figsize, _snapshot
+    from .plots.frame import _figsize, _snapshot
 
     out = Path(args.movie)
     kind = out.suffix.lower()

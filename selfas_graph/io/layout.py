@@ -1,9 +1,9 @@
 """The names inside selfas-graph's files: every dataset path and group name of a run file and a checkpoint.
 
-Written once here, read by the writer and reader (``io/h5md.py``, ``io/checkpoint.py``) and by
-everything else that opens a file (``io/export.py``, the CLI, ``ensemble.py``). Event kinds are
-``selfas_graph.model.events`` (``EventKind``), rod roles ``selfas_graph.model.topology``
-(``FILAMENT``, ``ROLE_NAMES``); the file stores their numbers.
+Written once here, read by the writers and readers (``io/run_writer.py``, ``io/run_reader.py``,
+``io/checkpoint.py``) and by everything else that opens a file (``io/export.py``, the CLI,
+``ensemble/``). Event kinds are ``selfas_graph.model.events`` (``EventKind``), rod roles
+``selfas_graph.model.topology`` (``FILAMENT``, ``ROLE_NAMES``); the file stores their numbers.
 
 Run file (H5MD 1.1, https://www.nongnu.org/h5md/h5md.html)::
 
@@ -22,7 +22,7 @@ Run file (H5MD 1.1, https://www.nongnu.org/h5md/h5md.html)::
     /observables/<name>         step, time, value: one row per saved frame
     /observables/dt             step, time, value: simulated time between saved frames
     /observables/bond_error_per_step   step, value: the largest bond error of every step
-    /parameters/selfas_graph    attrs: the run's provenance and status (io/h5md.py)
+    /parameters/selfas_graph    attrs: the run's provenance and status (io/run_provenance.py)
     /events                     (n_events,) records (step, time, kind, a, b); attrs kind_names, conductor_names
     /graph                      the connectivity graph at every saved frame (if contacts are on):
         step, time                  (n_frames,)

@@ -1,0 +1,247 @@
+"""One scenario over many seeds: :class:`Ensemble` (what to do with each seed, its tasks, the run and
+the summary of its folder) and :class:`SeedPlan`."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import shlex
+from pathlib import Path
+
+import numpy as np
+
+from ..io.checkpoint import (
+    CheckpointError,
+    checkpoint_path,
+    read_checkpoint,
+)
+from ..io.h5md import RunFile, RunFileError
+from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
+from ..parallel import task_pool
+from .folder import EnsembleError, FolderLock, make_folder, seed_path
+from .parameters import _get, parameter_differences
+from .pool import run_tasks
+from .summary import summarise
+from .tasks import run_seed
+
+
+@dataclasses.dataclass
+class SeedPlan:
+    """What :meth:`Ensemble.run` does with one seed.
+
+    ``action`` is "run" (a new file), "resume" (continue from the checkpoint to the end
+    time), "done" (finished at or beyond the end time: kept) or "failed" (the run failed
+    numerically before: kept, reported; rerun with ``force``). ``note`` says why.
+    """
+
+    seed: int
+    path: Path
+    action: str
+    note: str = ""
+
+
+class Ensemble:
+    """One scenario over many seeds, each in its own run file in ``folder``.
+
+    Parameters
+    ----------
+    scenario : path-like
+        Scenario file (TOML).
+    seeds : int or sequence of int
+        A count ``N`` (seeds ``first_seed .. first_seed + N - 1``) or the seeds themselves.
+    folder : path-like
+        Where the run files and the summary go; created if missing.
+    overrides : sequence of "key=value"
+        Scenario overrides for every seed (``scenario.seed`` is the ensemble's to set).
+    t_end : float, optional
+        End time of every seed (default: the scenario's ``run.t_end``).
+    first_seed : int, optional
+        Default: the scenario's ``scenario.seed``.
+    force : bool
+        Replace the seed files that cannot be reused (other parameters, failed, or
+        incomplete without a checkpoint); files that can be reused are still kept.
+
+    Raises
+    ------
+    EnsembleError
+        Bad scenario, overrides, seeds or folder.
+    """
+
+    def __init__(self, scenario, seeds, folder, overrides=(), t_end=None, first_seed=None, force=False):
+        self.scenario_path = Path(scenario)
+        self.overrides = list(overrides)
+        self.folder = Path(folder)
+        self.force = bool(force)
+        bad = [o for o in self.overrides if o.split("=", 1)[0].strip() == "scenario.seed"]
+        if bad:
+            raise EnsembleError(
+                f"--set {bad[0]}: the ensemble sets scenario.seed for each run; choose the seeds with --first-seed"
+            )
+        try:
+            self.base = load_scenario(self.scenario_path, overrides=self.overrides, t_end=t_end)
+        except ScenarioError as exc:
+            raise EnsembleError(str(exc)) from None
+        self.t_end = float(self.base.params.run.t_end)
+        if isinstance(seeds, (int, np.integer)):
+            if seeds < 1:
+                raise EnsembleError(f"--seeds must be >= 1, got {seeds}")
+            first = self.base.params.scenario.seed if first_seed is None else int(first_seed)
+            seeds = range(first, first + int(seeds))
+        self.seeds = [int(s) for s in seeds]
+        if not self.seeds or min(self.seeds) < 0 or len(set(self.seeds)) != len(self.seeds):
+            raise EnsembleError(f"seeds must be distinct integers >= 0, got {self.seeds}")
+        for s in (self.seeds[0], self.seeds[-1]):  # the seeds differ only in scenario.seed
+            try:
+                self.scenario_for(s)
+            except ScenarioError as exc:
+                raise EnsembleError(f"seed {s}: {exc}") from None
+        if self.folder.exists() and not self.folder.is_dir():
+            raise EnsembleError(f"the output folder {self.folder} is a file")
+
+    def scenario_for(self, seed):
+        """The :class:`~selfas_graph.io.scenario.Scenario` of one seed."""
+        return scenario_from_text(
+            self.base.text, path=self.base.path, overrides=self._overrides(seed), t_end=self.t_end
+        )
+
+    def _overrides(self, seed):
+        return [*self.overrides, f"scenario.seed={seed}"]
+
+    def command_for(self, seed) -> str:
+        """The ``selfas-graph simulate`` command that writes the same run file as this seed."""
+        args = ["selfas-graph", "simulate", str(self.scenario_path)]
+        for o in self._overrides(seed):
+            args += ["--set", o]
+        return shlex.join(args + ["--t-end", repr(self.t_end), "-o", str(seed_path(self.folder, seed))])
+
+    # ------------------------------------------------------------------ planning
+    def plan(self, summary_only=False) -> list[SeedPlan]:
+        """What :meth:`run` would do with each seed, from the files in the folder (nothing is written).
+
+        With ``summary_only`` (nothing will run) an incomplete seed file without a usable
+        checkpoint (one still being written, say) is planned as "partial": summarised up to
+        its last frame.
+
+        Raises
+        ------
+        EnsembleError
+            A seed file that belongs to other parameters, is not a run file, or is
+            incomplete without a checkpoint (unless ``force`` or ``summary_only``), listing
+            every such seed.
+        """
+        plans, problems = [], []
+        for s in self.seeds:
+            try:
+                plans.append(self._plan_seed(s, summary_only))
+            except EnsembleError as exc:
+                problems.append(str(exc))
+        if problems:
+            hint = "; pass --force to replace them" if not self.force else ""
+            raise EnsembleError("seed files that cannot be used:\n  " + "\n  ".join(problems) + hint)
+        return plans
+
+    def _plan_seed(self, seed, summary_only=False) -> SeedPlan:
+        path = seed_path(self.folder, seed)
+        ckpt = checkpoint_path(path)
+        if not path.exists():
+            if ckpt.exists() and not self.force:
+                raise EnsembleError(f"{ckpt} exists without its run file {path.name}")
+            return SeedPlan(seed, path, "run", "new")
+        wanted = self.scenario_for(seed).params
+        try:
+            with RunFile(path) as run:
+                stored, status = run.parameters, str(run.meta.get("status", ""))
+                t_last = float(run.time[-1]) if run.n_frames else -math.inf
+                scenario_text = run.scenario_text
+        except RunFileError as exc:
+            if self.force:
+                return SeedPlan(seed, path, "run", f"replacing: {exc}")
+            raise EnsembleError(str(exc)) from None
+        diff = parameter_differences(stored, wanted.to_dict())
+        if diff:
+            if self.force:
+                return SeedPlan(seed, path, "run", "replacing: other parameters")
+            shown = ", ".join(f"{k} = {_get(stored, k)!r} (here {_get(wanted.to_dict(), k)!r})" for k in diff[:4])
+            raise EnsembleError(
+                f"{path} belongs to other parameters: {shown}" + (f" and {len(diff) - 4} more" if len(diff) > 4 else "")
+            )
+        half_step = 0.5 * wanted.integrator.dt
+        if status == "finished" and t_last >= self.t_end - half_step:
+            return SeedPlan(seed, path, "done", f"finished at t = {t_last:.6g}")
+        if status.startswith("failed"):
+            if self.force:
+                return SeedPlan(seed, path, "run", "replacing a failed run")
+            return SeedPlan(seed, path, "failed", status)
+        try:
+            snap, meta = read_checkpoint(ckpt)
+            usable = meta.get("scenario_text") == scenario_text and float(snap["time"]) <= self.t_end + half_step
+        except CheckpointError:
+            usable = False
+        if usable:
+            return SeedPlan(
+                seed, path, "resume", f"{status} at t = {t_last:.6g}; checkpoint at t = {float(snap['time']):.6g}"
+            )
+        if summary_only:
+            return SeedPlan(seed, path, "partial", f"{status} at t = {t_last:.6g}")
+        if self.force:
+            return SeedPlan(seed, path, "run", f"replacing: {status} at t = {t_last:.6g}, no usable checkpoint")
+        raise EnsembleError(
+            f"{path} is {status} at t = {t_last:.6g} (end time {self.t_end:g}) and has no usable "
+            f"checkpoint {ckpt.name} to continue from"
+        )
+
+    # ------------------------------------------------------------------ running
+    def tasks(self, plans) -> list[dict]:
+        """The :func:`run_seed` tasks of the plans that need a run."""
+        return [
+            {
+                "seed": p.seed,
+                "path": str(p.path),
+                "action": p.action,
+                "t_end": self.t_end,
+                "text": self.base.text,
+                "scenario_path": str(self.base.path),
+                "overrides": self._overrides(p.seed),
+                "force": self.force,
+                "command": self.command_for(p.seed),
+            }
+            for p in plans
+            if p.action in ("run", "resume")
+        ]
+
+    def run(self, jobs=1, report=None, pool=None) -> list[dict]:
+        """Run every seed that is not done; returns :func:`run_seed`'s results (None: never started).
+
+        ``pool`` is an entered :class:`~selfas_graph.parallel.task_pool`; by default one of
+        ``jobs`` workers is made here. The folder is created and locked (:class:`FolderLock`:
+        EnsembleError if another ensemble runs in it); nothing is run for seeds whose files are
+        done or failed.
+        """
+        make_folder(self.folder)
+        with FolderLock(self.folder):
+            tasks = self.tasks(self.plan())
+            if pool is None:
+                with task_pool(jobs) as own:
+                    return run_tasks(run_seed, tasks, own, report)
+            return run_tasks(run_seed, tasks, pool, report)
+
+    def summarise(self, times=None, measures=None, flux_radius=None) -> dict:
+        """:func:`summarise` over the seed files present (default times: quarters of the end time)."""
+        paths = [seed_path(self.folder, s) for s in self.seeds]
+        times = default_times(self.t_end) if times is None else times
+        out = summarise(
+            [p for p in paths if p.exists()], times, t_end=self.t_end, measures=measures, flux_radius=flux_radius
+        )
+        out.update(
+            scenario=str(self.scenario_path),
+            overrides=self.overrides,
+            folder=str(self.folder),
+            seeds_requested=self.seeds,
+            missing=[str(p) for p in paths if not p.exists()],
+        )
+        return out
+
+
+def default_times(t_end):
+    """The times of the summary when none are given: a quarter, half, three quarters and all of ``t_end``."""
+    return [t_end * k / 4 for k in (1, 2, 3, 4)]

@@ -1,0 +1,143 @@
+"""The summary over seed files: mean and standard error of the short-circuit time and of the
+per-frame measures (:func:`summarise`)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._version import __version__
+from ..analysis.diagnostics import timeline
+from ..analysis.ensemble_stats import censored_times, grouped_summary, mean_sem, mean_sem_fits
+from ..io.h5md import RunFile, RunFileError
+from .measures import FRAME_MEASURES, Frame, carries_current
+
+
+def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict:
+    """Mean and standard error over seed files of the short-circuit time and of per-frame measures.
+
+    Parameters
+    ----------
+    paths : sequence of path-like
+        Run files, one per seed.
+    times : sequence of float
+        Simulated times; each seed's nearest saved frame within half an output interval
+        is used, a seed that has no such frame (it ended earlier) is left out there.
+    t_end : float, optional
+        Short circuits later than this count as censored at ``t_end`` (default: none).
+    measures : list of :class:`Measure`, optional
+        Default :data:`FRAME_MEASURES`.
+    flux_radius : float, optional
+        Disc radius of the mid-plane flux (see :class:`Frame`).
+
+    Returns
+    -------
+    dict (JSON-ready) with ``seeds`` (per seed: path, seed, status, end time, short-circuit
+    time or None; files that cannot be read are left out and listed in ``unreadable``), ``short_circuit`` (:func:`~selfas_graph.analysis.ensemble_stats.censored_times`:
+    seeds without one are censored at their end time, counted, not averaged in),
+    ``times`` and ``measures`` (name -> unit, doc, per time mean, sem, n, and ``values``
+    per seed and time, NaN as None). A measure with a fit uncertainty also has ``fit_err``
+    (per seed and time), ``sem_between`` and ``fit_err_rms`` per time, and its ``sem`` is
+    ``sqrt(sem_between^2 + fit_err_rms^2 / n)`` (docs/model.md "Measures of the paper's
+    claims"). A grouped measure (a current flows or not) has ``group`` (what the group is),
+    ``k`` (seeds in the group), ``n_seeds`` (seeds with a value), ``median``, ``min``,
+    ``max`` per time, and its ``mean``, ``sem`` and ``n`` are the group's alone; ``current``
+    per seed and time says which seeds carry a current.
+    """
+    measures = FRAME_MEASURES if measures is None else measures
+    times = [float(t) for t in times]
+    seeds, values = [], np.full((len(measures), len(paths), len(times)), np.nan)
+    errs = np.full_like(values, np.nan)
+    current = np.full((len(paths), len(times)), np.nan)
+    grouped = any(m.grouped for m in measures)
+    sc_t, sc_obs, unreadable = [], [], []
+    for j, path in enumerate(paths):
+        try:
+            run = RunFile(path)
+        except RunFileError as exc:  # e.g. still being written by a running seed: left out, named
+            unreadable.append({"path": str(path), "reason": str(exc)})
+            continue
+        with run:
+            params = run.parameters
+            interval = float(params["output"]["interval"])
+            t_run = run.time
+            end = float(t_run[-1]) if t_run.size else 0.0
+            t_sc = timeline(t_run, np.zeros_like(t_run), events=run.events()).short_circuit_time
+            cens = end if t_end is None else min(end, float(t_end))
+            seen = t_sc is not None and t_sc <= cens
+            sc_t.append(t_sc if seen else cens)
+            sc_obs.append(seen)
+            seeds.append(
+                {
+                    "path": str(path),
+                    "seed": int(params["scenario"]["seed"]),
+                    "status": str(run.meta.get("status", "")),
+                    "t_end": end,
+                    "short_circuit_time": t_sc if seen else None,
+                }
+            )
+            for k, t in enumerate(times):
+                if not t_run.size:
+                    break
+                idx = int(np.argmin(np.abs(t_run - t)))
+                if abs(t_run[idx] - t) > 0.5 * interval + 1e-9:
+                    continue
+                frame = Frame(run, idx, params, flux_radius)
+                for m, measure in enumerate(measures):
+                    values[m, j, k] = measure.fn(frame)
+                    if measure.err is not None:
+                        errs[m, j, k] = measure.err(frame)
+                if grouped:
+                    current[j, k] = carries_current(frame)
+    keep = [j for j, p in enumerate(paths) if str(p) not in {u["path"] for u in unreadable}]
+    values, errs, current = values[:, keep], errs[:, keep], current[keep]
+    sc = censored_times(sc_t, sc_obs) if seeds else None
+    out = {
+        "version": __version__,
+        "n_seeds": len(seeds),
+        "times": times,
+        "t_end": t_end,
+        "seeds": seeds,
+        "unreadable": unreadable,
+        "short_circuit": None if sc is None else {k: _plain(v) for k, v in sc.items()},
+        "measures": {},
+    }
+    if grouped:
+        out["current"] = _plain(current)
+    for m, measure in enumerate(measures):
+        extra = {}
+        if measure.grouped:
+            g = [grouped_summary(values[m][:, k], current[:, k] == 1.0) for k in range(len(times))]
+            mean, sem, n = (np.array([x[key] for x in g]) for key in ("mean", "sem", "k"))
+            extra = {"group": "seeds whose circuit carries a current"}
+            extra.update({key: _plain(np.array([x[key] for x in g])) for key in ("k", "median", "min", "max")})
+            extra["n_seeds"] = [x["n"] for x in g]
+        elif measure.err is not None:
+            mean, sem, between, rms, n = mean_sem_fits(values[m], errs[m], axis=0)
+            extra = {"sem_between": _plain(between), "fit_err_rms": _plain(rms), "fit_err": _plain(errs[m])}
+        else:
+            mean, sem, n = mean_sem(values[m], axis=0)
+        out["measures"][measure.name] = {
+            "unit": measure.unit,
+            "doc": measure.doc,
+            "mean": _plain(mean),
+            "sem": _plain(sem),
+            "n": np.asarray(n).astype(int).tolist(),
+            "values": _plain(values[m]),
+            **extra,
+        }
+    return out
+
+
+def _plain(v):
+    """JSON-ready: arrays to lists, NaN to None."""
+    if isinstance(v, np.ndarray):
+        return [_plain(x) for x in v.tolist()]
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, (float, np.floating)):
+        return None if not math.isfinite(v) else float(v)
+    if isinstance(v, np.integer):
+        return int(v)
+    return v

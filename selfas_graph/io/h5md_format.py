@@ -1,0 +1,190 @@
+"""The pieces of the run file format (H5MD 1.1, :mod:`selfas_graph.io.h5md`) that its writer and
+reader share: the reduced units' symbols and the units of observables, the events' dtype in the file,
+growable datasets, the errors, the free space a write needs, and the check that a file can be continued."""
+
+from __future__ import annotations
+
+import os
+
+import h5py
+import numpy as np
+
+from ..model.events import EVENT_DTYPE, KIND_NAMES
+from . import layout
+
+H5MD_VERSION = (1, 1)
+
+#: symbols of the reduced unit system (docs/model.md 'Reduced units'; docs/output.md lists them)
+UNIT_SYSTEM = "reduced"
+LENGTH, TIME, CHARGE, ENERGY, CURRENT, POTENTIAL = "L", "t_0", "Z_M0e", "F_M0 L", "J_0", "R_0 J_0"
+
+
+def observable_unit(name):
+    """The reduced unit of an observable, or None for counts and flags."""
+    if name.startswith(("energy", "work/")):
+        return ENERGY
+    return {
+        "momentum": "m L t_0-1",
+        "bond_error": LENGTH,
+        "bond_error_per_step": LENGTH,
+        "dt": TIME,
+        "total_current": CURRENT,
+        "effective_resistance": "R_0",
+        "effective_conductance": "R_0-1",
+    }.get(name)
+
+
+def _fixed(text):
+    """A fixed-length string (H5MD asks for them in attributes); UTF-8 bytes of at least one byte."""
+    data = str(text).encode("utf-8")
+    return np.array(data, dtype=f"S{max(1, len(data))}")
+
+
+#: the events' dtype in the file: ``kind`` an HDF5 enumeration of the names in KIND_NAMES
+EVENT_FILE_DTYPE = np.dtype(
+    [
+        (name, h5py.enum_dtype({v: k for k, v in KIND_NAMES.items()}, basetype="<i4"))
+        if name == "kind"
+        else (name, EVENT_DTYPE[name])
+        for name in EVENT_DTYPE.names
+    ]
+)
+
+
+def _set_unit(obj, unit):
+    if unit is not None:
+        obj.attrs["unit"] = _fixed(unit)
+
+
+def _box(group):
+    box = group.create_group(layout.BOX)
+    box.attrs["dimension"] = np.int32(3)
+    box.attrs["boundary"] = np.array([b"none"] * 3)
+
+
+class OutputExistsError(FileExistsError):
+    """The output file exists and overwriting was not asked for."""
+
+
+class RunFileError(ValueError):
+    """A file that is not a readable selfas-graph run."""
+
+
+class DiskFullError(OSError):
+    """Too little free space for the next write; raised before anything of it is written."""
+
+
+#: free space kept beyond the largest write a frame can make (HDF5 metadata, the file system's own)
+SPACE_MARGIN = 1 << 20
+
+
+def free_bytes(folder) -> int | None:
+    """Bytes the calling user may still write in ``folder`` (None where the file system cannot tell)."""
+    try:
+        st = os.statvfs(folder if str(folder) else ".")
+    except (OSError, AttributeError):
+        return None
+    return st.f_bavail * st.f_frsize
+
+
+def is_io_error(exc) -> bool:
+    """True for a failed write of the operating system (full disk, quota, a vanished folder), as
+    raised directly (OSError with an errno) or wrapped by HDF5 (its message carries the errno)."""
+    if isinstance(exc, OSError) and exc.errno is not None:
+        return True
+    text = str(exc)
+    return isinstance(exc, (OSError, RuntimeError)) and ("errno = " in text or "write failed" in text)
+
+
+def _growable(group, name, shape, dtype):
+    """A dataset growing along its first axis, in uncompressed chunks of about 1 MiB.
+
+    No compression on purpose: a compressed chunk is rewritten whole at every append, so a
+    kill during that write can leave it undecodable, losing frames written long before; an
+    uncompressed chunk is appended in place (seen in tests/test_restart.py's kill test).
+    """
+    rows = max(1, min(1024, 2**20 // max(1, int(np.prod(shape)) * 8)))
+    return group.create_dataset(name, shape=(0,) + shape, maxshape=(None,) + shape, dtype=dtype, chunks=(rows,) + shape)
+
+
+def _append(ds, value):
+    n = ds.shape[0]
+    value = np.asarray(value)
+    k = 1 if value.shape == ds.shape[1:] else value.shape[0]
+    ds.resize(n + k, axis=0)
+    ds[n : n + k] = value
+    return n
+
+
+def _truncate(ds, n):
+    if ds.shape[0] > n:
+        ds.resize(n, axis=0)
+
+
+def _rows_up_to(steps, step, strict=True) -> int:
+    """How many leading rows of a step column belong to a run continued after ``step``.
+
+    The rows must be at most ``step`` and increasing (strictly for frames, non-decreasing for
+    events): a row torn by a kill (its size flushed, its data not: a zero or a stale step)
+    ends the kept rows even where a binary search would skip over it.
+    """
+    s = np.asarray(steps)
+    good = s <= step
+    if len(s) > 1:
+        d = np.diff(s)
+        good[1:] &= (d > 0) if strict else (d >= 0)
+    bad = np.flatnonzero(~good)
+    return int(bad[0]) if len(bad) else len(s)
+
+
+def appendable_problems(f) -> list:
+    """What keeps an open run file from being continued: datasets that cannot grow, wrong dtypes.
+
+    Checked read-only before :meth:`RunWriter.reopen` changes anything (an empty list: none).
+    """
+    problems = []
+
+    def check(name, kind=None, dtype=None):
+        ds = f.get(name)
+        if ds is None:
+            return
+        if not isinstance(ds, h5py.Dataset):
+            problems.append(f"{name} is not a dataset")
+        elif ds.chunks is None or ds.maxshape[0] is not None or ds.ndim < 1:
+            problems.append(f"{name} is not an appendable (chunked, unlimited) dataset")
+        elif dtype is not None and ds.dtype != dtype:
+            problems.append(f"{name} has dtype {ds.dtype}, expected {np.dtype(dtype)}")
+        elif kind is not None and ds.dtype.kind not in kind:
+            problems.append(f"{name} has dtype {ds.dtype}, expected {'integers' if kind == 'iu' else 'numbers'}")
+
+    for group in ("particles/tips/position", layout.TIP_VELOCITY):
+        check(f"{group}/step", "iu")
+        check(f"{group}/time", "f")
+        check(f"{group}/value", "f")
+    obs = f.get(layout.OBSERVABLES)
+    if isinstance(obs, h5py.Group):
+
+        def visit(name, obj):
+            if isinstance(obj, h5py.Group) and "value" in obj:
+                check(f"{layout.observable(name)}/{layout.STEP}", "iu")
+                check(f"{layout.observable(name)}/{layout.VALUE}", "f")
+                if name != layout.BOND_ERROR_PER_STEP:
+                    check(f"{layout.observable(name)}/{layout.TIME}", "f")
+
+        obs.visititems(visit)
+    check(layout.EVENTS, dtype=EVENT_DTYPE)
+    g = f.get(layout.GRAPH)
+    if isinstance(g, h5py.Group):
+        for name in (
+            "step",
+            "tip_contacts_count",
+            "conductor_contacts_count",
+            "tip_contacts",
+            "conductor_tip",
+            "conductor_id",
+            "role",
+        ):
+            check(layout.graph(name), "iu")
+        for name in ("time", "current", "potential", "conductor_potential"):
+            check(layout.graph(name), "f")
+    return problems

@@ -1,0 +1,256 @@
+"""The reader of a run file (:mod:`selfas_graph.io.h5md`): :class:`RunFile`, read-only, without any
+simulation objects."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from ..model.events import EVENT_DTYPE, named_events
+from . import layout
+from .h5md_format import (
+    RunFileError,
+)
+
+
+class RunFile:
+    """Read-only access to a run file, without any simulation objects.
+
+    Parameters
+    ----------
+    path : path-like
+
+    Raises
+    ------
+    RunFileError
+        If the file is missing, not HDF5, or not written by selfas-graph.
+    """
+
+    def __init__(self, path):
+        self.path = Path(path)
+        if not self.path.exists():
+            raise RunFileError(f"{self.path}: no such file")
+        if self.path.is_dir():
+            raise RunFileError(f"{self.path}: a directory, not a run file")
+        try:
+            self.f = h5py.File(self.path, "r")
+        except OSError as exc:
+            reason = " ".join(str(exc).split())  # h5py's messages can span lines
+            if re.search(r"\block", reason.lower()) or "already open for write" in reason.lower():
+                raise RunFileError(
+                    f"{self.path}: locked by another process, most likely a simulation still "
+                    f"writing it (HDF5 file locking: {reason}); wait for it to end, or set "
+                    f"HDF5_USE_FILE_LOCKING=FALSE to read it anyway"
+                ) from None
+            raise RunFileError(f"{self.path}: not a readable HDF5 file ({reason})") from None
+        required = (
+            layout.PROVENANCE,
+            layout.TIP_POSITION_VALUE,
+            layout.TIP_POSITION_STEP,
+            layout.TIP_POSITION_TIME,
+            layout.TIP_CHARGE,
+            layout.ROD_CHARGE,
+            layout.OBSERVABLES,
+        )
+        missing = [name for name in required if not isinstance(self.f.get(name), (h5py.Dataset, h5py.Group))]
+        if missing or "parameters_json" not in self.f[layout.PROVENANCE].attrs:
+            self.f.close()
+            raise RunFileError(
+                f"{self.path}: an HDF5 file, but not a selfas-graph run "
+                f"(missing {', '.join(missing) or 'parameters_json'})"
+            )
+        self.meta = dict(self.f[layout.PROVENANCE].attrs)
+        n = self.f[layout.TIP_POSITION_VALUE].shape
+        if len(n) != 3 or n[2] != 3 or self.f[layout.TIP_POSITION_STEP].shape[0] != n[0]:
+            self.f.close()
+            raise RunFileError(f"{self.path}: the positions are not laid out as (frames, tips, 3)")
+        kinds = {name: self.f[f"{layout.TIP_POSITION}/{name}"].dtype.kind for name in ("step", "time", "value")}
+        if kinds["step"] not in "iu" or kinds["time"] != "f" or kinds["value"] != "f":
+            self.f.close()
+            raise RunFileError(
+                f"{self.path}: the positions' step, time and value datasets must hold integers, "
+                f"numbers and numbers (found dtype kinds {kinds['step']}, {kinds['time']}, "
+                f"{kinds['value']})"
+            )
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self):
+        self.f.close()
+
+    @property
+    def parameters(self) -> dict:
+        return json.loads(self.meta["parameters_json"])
+
+    @property
+    def scenario_text(self) -> str:
+        return self.meta["scenario_text"]
+
+    @property
+    def n_frames(self) -> int:
+        return self.f[layout.TIP_POSITION_VALUE].shape[0]
+
+    @property
+    def time(self) -> np.ndarray:
+        return self.f[layout.TIP_POSITION_TIME][:]
+
+    @property
+    def step(self) -> np.ndarray:
+        return self.f[layout.TIP_POSITION_STEP][:]
+
+    def frame_index(self, frame=None, t=None) -> int:
+        """Index of a frame given by number (negative counts from the end) or nearest time."""
+        n = self.n_frames
+        if n == 0:
+            raise RunFileError(f"{self.path}: the run has no saved frames")
+        if t is not None:
+            if not np.isfinite(t):
+                raise RunFileError(f"time {t} names no frame; give a finite simulated time")
+            return int(np.argmin(np.abs(self.time - t)))
+        k = -1 if frame is None else int(frame)
+        if not -n <= k < n:
+            raise RunFileError(f"{self.path}: frame {k} out of range; the file has frames 0..{n - 1}")
+        return k % n
+
+    def frame(self, index=None, t=None):
+        """One saved frame as a :class:`~selfas_graph.io.frame.SavedFrame`: by index (negative counts
+        from the end; default the last) or nearest time ``t``; its graph data are those of the same step."""
+        from .frame import SavedFrame
+
+        return SavedFrame(self, self.frame_index(index, t))
+
+    def position(self, frame=-1) -> np.ndarray:
+        return self.f[layout.TIP_POSITION_VALUE][self.frame_index(frame)]
+
+    def velocity(self, frame=-1) -> np.ndarray:
+        if layout.TIP_VELOCITY not in self.f:
+            raise RunFileError(f"{self.path}: velocities were not saved (output.velocities = false)")
+        return self.f[layout.TIP_VELOCITY_VALUE][self.frame_index(frame)]
+
+    @property
+    def tip_charge(self) -> np.ndarray:
+        return self.f[layout.TIP_CHARGE][:]
+
+    @property
+    def rod_charge(self) -> np.ndarray:
+        return self.f[layout.ROD_CHARGE][:]
+
+    @property
+    def rod_length(self) -> np.ndarray:
+        """Length of each rod (units L); ones when the run had equal rods."""
+        if layout.ROD_LENGTH in self.f:
+            return self.f[layout.ROD_LENGTH][:]
+        return np.ones(self.f[layout.ROD_CHARGE].shape[0])
+
+    @property
+    def rod_resistance(self) -> np.ndarray:
+        """Resistance of each rod (units R0); ones when the run had R0 = 1 for every rod."""
+        if layout.ROD_RESISTANCE in self.f:
+            return self.f[layout.ROD_RESISTANCE][:]
+        return np.ones(self.f[layout.ROD_CHARGE].shape[0])
+
+    @property
+    def n_tips(self) -> int:
+        return self.f[layout.TIP_POSITION_VALUE].shape[1]
+
+    @property
+    def bonds(self) -> np.ndarray:
+        """(n_rods, 2) the tips of each rod: ``/connectivity/rods``, or the same pairs for older files."""
+        ds = self.f.get(layout.CONNECTIVITY_RODS)
+        if isinstance(ds, h5py.Dataset) and ds.shape == (self.n_tips // 2, 2):
+            return ds[:]
+        return np.arange(self.n_tips, dtype=np.int64).reshape(-1, 2)
+
+    @property
+    def has_graph(self) -> bool:
+        g = self.f.get(layout.GRAPH)
+        return (
+            isinstance(g, h5py.Group)
+            and all(isinstance(g.get(n), h5py.Dataset) for n in layout.GRAPH_DATASETS)
+            and g["step"].shape[0] > 0
+        )
+
+    @property
+    def graph_steps(self) -> np.ndarray:
+        """The steps of the frames saved with graph data (empty without any)."""
+        return self.f[layout.GRAPH_STEP][:] if self.has_graph else np.zeros(0, dtype=np.int64)
+
+    def events(self, until_step=None) -> np.ndarray:
+        """Event records (structured array, fields step, time, kind, a, b), optionally up to a step."""
+        if layout.EVENTS not in self.f:
+            return np.zeros(0, dtype=EVENT_DTYPE)
+        e = self.f[layout.EVENTS][:].astype(EVENT_DTYPE)  # the kind an enumeration in newer files, integers before
+        return e if until_step is None else e[e["step"] <= until_step]
+
+    def named_events(self, until_step=None) -> list:
+        """The events as :class:`selfas_graph.model.events.Event` tuples, kinds as ``EventKind``."""
+        return named_events(self.events(until_step))
+
+    def graph_frame_index(self, frame=None, t=None) -> int:
+        if not self.has_graph:
+            raise RunFileError(
+                f"{self.path}: the file has no graph data (the run had contacts.enabled = false, "
+                f"or was written before any frame)"
+            )
+        n = self.f[layout.GRAPH_STEP].shape[0]
+        if t is not None:
+            if not np.isfinite(t):
+                raise RunFileError(f"time {t} names no frame; give a finite simulated time")
+            return int(np.argmin(np.abs(self.f[layout.GRAPH_TIME][:] - t)))
+        k = -1 if frame is None else int(frame)
+        if not -n <= k < n:
+            raise RunFileError(f"{self.path}: frame {k} out of range; the file has frames 0..{n - 1}")
+        return k % n
+
+    def graph(self, frame=None, t=None) -> dict:
+        """The graph state of one frame: contact arrays, roles, currents, potentials, step and time."""
+        k = self.graph_frame_index(frame, t)
+        g = self.f[layout.GRAPH]
+        tc_count = g["tip_contacts_count"][:]
+        cc_count = g["conductor_contacts_count"][:]
+        t0, t1 = int(tc_count[:k].sum()), int(tc_count[: k + 1].sum())
+        c0, c1 = int(cc_count[:k].sum()), int(cc_count[: k + 1].sum())
+        ids = g.attrs["conductor_ids"]
+        pots = np.array(g.attrs["conductor_potentials"], dtype=np.float64)
+        if "conductor_per_contact" in g.attrs:  # files before 0.4 hold NaN there instead
+            pots[np.asarray(g.attrs["conductor_per_contact"], dtype=bool)] = np.nan
+        potential = g["potential"][k]
+        if "floating" in g:  # files before 0.4 hold NaN for floating tips instead
+            potential = np.where(g["floating"][k] != 0, np.nan, potential)
+        return {
+            "frame": k,
+            "step": int(g["step"][k]),
+            "time": float(g["time"][k]),
+            "tip_contacts": g["tip_contacts"][t0:t1].reshape(-1, 2),
+            "conductor_tip": g["conductor_tip"][c0:c1],
+            "conductor_id": g["conductor_id"][c0:c1],
+            "conductor_potential": g["conductor_potential"][c0:c1],
+            "role": g["role"][k],
+            "current": g["current"][k],
+            "potential": potential,
+            "conductors": {int(c): (None if np.isnan(p) else float(p)) for c, p in zip(ids, pots)},
+        }
+
+    def observable_names(self):
+        """Names of all observables, nested ones as ``group/name`` (e.g. ``energy/kinetic``)."""
+        names = []
+        self.f[layout.OBSERVABLES].visit(
+            lambda name: names.append(name[: -len("/value")]) if name.endswith("/value") else None
+        )
+        return sorted(names)
+
+    def observable(self, name):
+        """(time, value) arrays of a per-frame observable, or (step, value) for per-step series."""
+        if name not in self.f[layout.OBSERVABLES]:
+            raise RunFileError(f"{self.path}: no observable {name!r}; present: {', '.join(self.observable_names())}")
+        g = self.f[layout.OBSERVABLES][name]
+        x = g["time"][:] if "time" in g else g["step"][:]
+        return x, g["value"][:]

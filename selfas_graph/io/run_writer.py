@@ -1,0 +1,532 @@
+"""The writers of a run: :class:`RunWriter` (an H5MD 1.1 run file, :mod:`selfas_graph.io.h5md`) and
+:class:`NullWriter` (nothing written), with what they hold between frames."""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from ..model.events import CONDUCTOR_NAMES, EVENT_DTYPE, KIND_NAMES
+from ..model.topology import ROLE_NAMES
+from . import layout
+from .h5md_format import (
+    CHARGE,
+    CURRENT,
+    EVENT_FILE_DTYPE,
+    H5MD_VERSION,
+    LENGTH,
+    POTENTIAL,
+    SPACE_MARGIN,
+    TIME,
+    UNIT_SYSTEM,
+    DiskFullError,
+    OutputExistsError,
+    RunFileError,
+    _append,
+    _box,
+    _fixed,
+    _growable,
+    _rows_up_to,
+    _set_unit,
+    _truncate,
+    appendable_problems,
+    free_bytes,
+    observable_unit,
+)
+from .run_provenance import run_provenance
+
+
+class _PendingRows:
+    """What a writer holds between frames: the per-step rows a simulation hands over every step,
+    and how many of the run's events are written. Shared by :class:`RunWriter` and :class:`NullWriter`."""
+
+    n_frames = 0
+    events_written = 0
+    _pending = (np.empty(0, dtype=np.int64), np.empty(0))
+    _n_pending = 0
+
+    def reserve_per_step(self, n: int) -> None:
+        """Start a buffer of up to ``n`` per-step rows (at most one output interval, +1); rows
+        not handed on by :meth:`flush_pending` are dropped."""
+        self._pending = (np.empty(n, dtype=np.int64), np.empty(n))
+        self._n_pending = 0
+
+    def buffer_per_step(self, step: int, value: float) -> None:
+        """Keep one per-step row (the step's bond error) until the next :meth:`flush_pending`."""
+        steps, values = self._pending
+        steps[self._n_pending] = step
+        values[self._n_pending] = value
+        self._n_pending += 1
+
+    def flush_pending(self, events=None) -> None:
+        """Write the buffered per-step rows and, given the run's whole event log ``events``, the
+        events not written yet (the events dataset is created at the first call)."""
+        if self._n_pending:
+            steps, values = self._pending
+            self.write_per_step(steps[: self._n_pending], values[: self._n_pending])
+            self._n_pending = 0
+        if events is not None:
+            self.write_events(events[self.events_written :])
+            self.events_written = len(events)
+
+    def state_dict(self) -> dict:
+        """Frames and events written, and the per-step rows not written yet."""
+        steps, values = self._pending
+        return {
+            "n_frames": int(self.n_frames),
+            "events_written": int(self.events_written),
+            "pending_step": steps[: self._n_pending].copy(),
+            "pending_value": values[: self._n_pending].copy(),
+        }
+
+    def load_state_dict(self, d: dict) -> None:
+        """Restore :meth:`state_dict` (the per-step buffer keeps at least the rows given)."""
+        self.n_frames = int(d["n_frames"])
+        self.events_written = int(d["events_written"])
+        steps = np.asarray(d["pending_step"], dtype=np.int64)
+        n = steps.shape[0]
+        if self._pending[0].shape[0] < n:
+            self.reserve_per_step(n)
+        self._pending[0][:n] = steps
+        self._pending[1][:n] = np.asarray(d["pending_value"], dtype=np.float64)
+        self._n_pending = n
+
+
+class RunWriter(_PendingRows):
+    """Writes frames and observables of one run.
+
+    Parameters
+    ----------
+    path : path-like
+    n_tips : int
+    tip_charge : (n_tips,) float64
+    rod_charge : (n_rods,) float64
+    provenance : dict
+        Strings and numbers stored as attributes of ``/parameters/selfas_graph``.
+    overwrite : bool
+        Replace an existing file; otherwise :class:`OutputExistsError`.
+    velocities : bool
+        Save velocities with each frame.
+    rod_length, rod_resistance : (n_rods,) float64, optional
+        Per-rod lengths and resistances (``particles/rods/length``, ``particles/rods/resistance``),
+        written only when the scene sets them (absent: every rod has length 1 and resistance R0).
+    frame_interval : float, optional
+        Simulated time between saved frames, written with every frame as ``observables/dt``
+        (MDAnalysis reads it as its time step between frames).
+    """
+
+    def __init__(
+        self,
+        path,
+        n_tips,
+        tip_charge,
+        rod_charge,
+        provenance,
+        overwrite=False,
+        velocities=True,
+        frame_interval=None,
+        rod_length=None,
+        rod_resistance=None,
+    ):
+        self.path = Path(path)
+        if self.path.exists() and not overwrite:
+            raise OutputExistsError(
+                f"output file {self.path} exists; pass --force to overwrite it or -o to choose another"
+            )
+        if not self.path.parent.exists():
+            raise FileNotFoundError(f"the folder of the output file {self.path} does not exist")
+        # default (earliest) format on purpose: the "latest" superblock carries a writer flag that a
+        # killed run leaves set, after which HDF5 refuses to open the file without h5clear
+        self.f = h5py.File(self.path, "w")
+        f = self.f
+        h = f.create_group(layout.H5MD)
+        h.attrs["version"] = np.array(H5MD_VERSION, dtype=np.int32)
+        h.create_group(layout.H5MD_AUTHOR).attrs["name"] = _fixed(
+            provenance.get("author", os.environ.get("USER", "unknown"))
+        )
+        c = h.create_group(layout.H5MD_CREATOR)
+        c.attrs["name"] = _fixed("selfas-graph")
+        c.attrs["version"] = _fixed(provenance.get("version", "unknown"))
+        units = h.create_group(layout.H5MD_UNITS)
+        units.attrs["version"] = np.array((1, 0), dtype=np.int32)
+        units.attrs["system"] = _fixed(UNIT_SYSTEM)
+        # creation order tracked: readers that take the first particles group take the tips
+        particles = f.create_group(layout.PARTICLES, track_order=True)
+        tips = particles.create_group(layout.TIPS)
+        _box(tips)
+        _set_unit(tips.create_dataset("charge", data=np.asarray(tip_charge, dtype=np.float64)), CHARGE)
+        tips.create_dataset(layout.TIP_ROD, data=np.arange(n_tips, dtype=np.int64) // 2)
+        rods = particles.create_group(layout.RODS)
+        _box(rods)
+        _set_unit(rods.create_dataset("charge", data=np.asarray(rod_charge, dtype=np.float64)), CHARGE)
+        bonds = f.create_group(layout.CONNECTIVITY).create_dataset(
+            layout.RODS, data=np.arange(n_tips, dtype=np.int64).reshape(-1, 2)
+        )
+        bonds.attrs["particles_group"] = tips.ref
+        for name, values, unit in (("length", rod_length, LENGTH), ("resistance", rod_resistance, "R_0")):
+            if values is not None:
+                _set_unit(rods.create_dataset(name, data=np.asarray(values, dtype=np.float64)), unit)
+        self._elements = {}
+        for name in ("position",) + (("velocity",) if velocities else ()):
+            g = tips.create_group(name)
+            # no unit attribute here: MDAnalysis refuses every unit outside its SI table
+            self._elements[name] = (
+                _growable(g, "step", (), "<i8"),
+                _growable(g, "time", (), "<f8"),
+                _growable(g, "value", (n_tips, 3), "<f8"),
+            )
+        self._obs = {}
+        self.frame_interval = frame_interval
+        self.observables = f.create_group(layout.OBSERVABLES)
+        g = self.observables.create_group(layout.BOND_ERROR_PER_STEP)
+        self._per_step = (_growable(g, "step", (), "<i8"), _growable(g, "value", (), "<f8"))
+        _set_unit(self._per_step[1], LENGTH)
+        p = f.create_group(layout.PROVENANCE)
+        for key, value in provenance.items():
+            p.attrs[key] = value
+        p.attrs["status"] = "running"
+        p.attrs["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+        p.attrs["wall_seconds"] = 0.0
+        self._opened = time.monotonic()
+        self.n_frames = 0
+        f.flush()
+
+    @classmethod
+    def reopen(cls, path, step):
+        """Open an existing run file to continue it after ``step``: every row written for a
+        later step (frames, observables, events, graph, per-step series) is removed first.
+        """
+        self = cls.__new__(cls)
+        self.path = Path(path)
+        try:
+            self.f = h5py.File(self.path, "r+")
+        except OSError as exc:
+            raise RunFileError(f"{self.path}: cannot reopen the run file to continue it ({exc})") from None
+        f = self.f
+        if layout.TIP_POSITION_STEP not in f:
+            f.close()
+            raise RunFileError(f"{self.path}: not a selfas-graph run file")
+        problems = appendable_problems(f)
+        if problems:
+            f.close()
+            raise RunFileError(f"{self.path}: cannot be continued: {'; '.join(problems)}")
+
+        def keep(*columns, strict=True):
+            # rows of the frames up to `step`, no more than every column of the group holds
+            return min([_rows_up_to(columns[0][:], step, strict)] + [c.shape[0] for c in columns[1:]])
+
+        self._elements = {}
+        for name, path in layout.TIP_ELEMENTS.items():
+            if path in f:
+                g = f[path]
+                n = keep(g["step"], g["time"], g["value"])
+                for ds in (g["step"], g["time"], g["value"]):
+                    _truncate(ds, n)
+                self._elements[name] = (g["step"], g["time"], g["value"])
+        self.n_frames = f[layout.TIP_POSITION_STEP].shape[0]
+        self.observables = f[layout.OBSERVABLES]
+        self._obs = {}
+
+        def visit(name, obj):
+            if isinstance(obj, h5py.Group) and "value" in obj and name != layout.BOND_ERROR_PER_STEP:
+                n = keep(obj["step"], obj["time"], obj["value"])
+                for ds in obj.values():
+                    _truncate(ds, n)
+                self._obs[name] = (obj["step"], obj["time"], obj["value"])
+
+        self.observables.visititems(visit)
+        self.frame_interval = (
+            float(self._obs[layout.FRAME_INTERVAL][2][-1])
+            if layout.FRAME_INTERVAL in self._obs and self._obs[layout.FRAME_INTERVAL][2].shape[0]
+            else None
+        )
+        g = self.observables[layout.BOND_ERROR_PER_STEP]
+        n = keep(g["step"], g["value"])
+        _truncate(g["step"], n)
+        _truncate(g["value"], n)
+        self._per_step = (g["step"], g["value"])
+        if layout.EVENTS in f:
+            ev = f[layout.EVENTS]
+            _truncate(ev, keep(ev.fields("step"), strict=False) if ev.shape[0] else 0)
+        self.events_written = f[layout.EVENTS].shape[0] if layout.EVENTS in f else 0
+        if layout.GRAPH in f:
+            g = f[layout.GRAPH]
+            per_frame = layout.GRAPH_PER_FRAME + ((layout.GRAPH_FLOATING,) if layout.GRAPH_FLOATING in g else ())
+            n = keep(*(g[name] for name in per_frame))
+            m = int(g["tip_contacts_count"][:n].sum())
+            k = int(g["conductor_contacts_count"][:n].sum())
+            if g["tip_contacts"].shape[0] < m or min(g[name].shape[0] for name in layout.GRAPH_CONDUCTOR_CONTACTS) < k:
+                f.close()
+                raise RunFileError(f"{self.path}: the graph data up to step {step} are incomplete (damaged file)")
+            for name in per_frame:
+                _truncate(g[name], n)
+            _truncate(g["tip_contacts"], m)
+            for name in layout.GRAPH_CONDUCTOR_CONTACTS:
+                _truncate(g[name], k)
+        f[layout.PROVENANCE].attrs["status"] = "running"
+        self._resumed_with()
+        self._opened = time.monotonic()
+        f.flush()
+        return self
+
+    def _resumed_with(self):
+        """Record the commit, CPU and thread count of a continuation when they differ from the ones
+        the file holds (``resumed_with``: a JSON list of them, oldest first)."""
+        import numba
+
+        from ..provenance import cpu_model, source_commit
+
+        attrs = self.f[layout.PROVENANCE].attrs
+        now = {"commit": source_commit(), "cpu_model": cpu_model(), "numba_threads": numba.get_num_threads()}
+        if all(str(attrs.get(k, "")) == str(v) for k, v in now.items()):
+            return
+        seen = json.loads(attrs.get("resumed_with", "[]"))
+        if now not in seen:
+            attrs["resumed_with"] = json.dumps(seen + [now])
+
+    def reserve(self) -> int:
+        """Bytes the next frame may need at most: one new chunk of every growable dataset, and a margin
+        (computed again only when datasets were added)."""
+        key = (len(self._obs), layout.GRAPH in self.f, layout.EVENTS in self.f)
+        if getattr(self, "_reserve", (None, 0))[0] != key:
+            # before the observables and the graph exist (frame 0), room for their first chunks too
+            first = 0 if key[0] and key[1] else 4 << 20
+            self._reserve = (key, self._chunk_bytes() + first)
+        return self._reserve[1]
+
+    def _chunk_bytes(self) -> int:
+        total = SPACE_MARGIN
+
+        def add(name, obj):
+            nonlocal total
+            if isinstance(obj, h5py.Dataset) and obj.chunks is not None:
+                total += int(np.prod(obj.chunks)) * obj.dtype.itemsize
+
+        self.f.visititems(add)
+        return total
+
+    def check_space(self):
+        """Raise :class:`DiskFullError` (nothing written) when the folder has less free space than the
+        next frame may need. Quotas the file system does not report are caught when a write fails."""
+        free = free_bytes(self.path.parent)
+        need = self.reserve()
+        if free is not None and free < need:
+            raise DiskFullError(
+                28,
+                f"{free / 2**20:.2f} MiB free in {self.path.parent or '.'}, "
+                f"the next frame may need {need / 2**20:.2f} MiB",
+            )
+        # a quota or a file-size limit does not show in the free space: ask the file system for the
+        # room (posix_fallocate), then give it back; HDF5 has written everything up to the size seen
+        try:
+            fd = os.open(self.path, os.O_WRONLY)
+        except OSError:
+            return
+        try:
+            size = os.fstat(fd).st_size
+            try:
+                os.posix_fallocate(fd, size, need)
+            except OSError as exc:
+                if exc.errno in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS, errno.ENODEV):
+                    return  # a file system without fallocate: failed writes are caught when they happen
+                raise DiskFullError(
+                    exc.errno,
+                    f"{exc.strerror}: {self.path} cannot grow by the {need / 2**20:.2f} MiB the next frame may need",
+                ) from None
+            finally:
+                if os.fstat(fd).st_size != size:
+                    os.ftruncate(fd, size)
+        finally:
+            os.close(fd)
+
+    def write_frame(self, step, t, position, velocity, observables: dict):
+        """Append one frame (positions, velocities, observables) and flush to disk."""
+        self.check_space()
+        if self.frame_interval is not None:
+            observables = {**observables, layout.FRAME_INTERVAL: self.frame_interval}
+        for name, arr in (("position", position), ("velocity", velocity)):
+            if name in self._elements:
+                s, tt, v = self._elements[name]
+                _append(s, step)
+                _append(tt, t)
+                _append(v, arr)
+        for name, value in observables.items():
+            value = np.asarray(value, dtype=np.float64)
+            if name not in self._obs:
+                g = self.observables.create_group(name)
+                self._obs[name] = (
+                    _growable(g, "step", (), "<i8"),
+                    _growable(g, "time", (), "<f8"),
+                    _growable(g, "value", value.shape, "<f8"),
+                )
+                _set_unit(self._obs[name][1], TIME)
+                _set_unit(self._obs[name][2], observable_unit(name))
+            s, tt, v = self._obs[name]
+            _append(s, step)
+            _append(tt, t)
+            _append(v, value)
+        self.n_frames += 1
+
+    def write_per_step(self, steps, values):
+        """Append a per-step series (the bond error of every step since the last call)."""
+        self.check_space()
+        if len(steps):
+            _append(self._per_step[0], np.asarray(steps, dtype=np.int64))
+            _append(self._per_step[1], np.asarray(values, dtype=np.float64))
+
+    def write_events(self, rows):
+        """Append event rows ``(step, time, kind, a, b)``."""
+        if layout.EVENTS not in self.f:
+            ds = self.f.create_dataset(
+                layout.EVENTS, shape=(0,), maxshape=(None,), dtype=EVENT_FILE_DTYPE, chunks=(4096,)
+            )
+            ds.attrs["kind_names"] = json.dumps({int(k): v for k, v in KIND_NAMES.items()})
+            ds.attrs["conductor_names"] = json.dumps({int(k): v for k, v in CONDUCTOR_NAMES.items()})
+        if len(rows):
+            _append(self.f[layout.EVENTS], np.array([tuple(r) for r in rows], dtype=EVENT_DTYPE))
+
+    def write_graph(self, step, t, arrays, role, current, potential, conductor_potential):
+        """Append the graph state of one frame.
+
+        Parameters
+        ----------
+        arrays : dict from ``ConnectivityGraph.arrays()``
+        role : (n_rods,) int8
+        current : (n_rods,) float64
+        potential : (n_tips,) float64
+        conductor_potential : dict conductor id -> fixed potential (None if per contact)
+        """
+        if layout.GRAPH not in self.f:
+            g = self.f.create_group(layout.GRAPH)
+            g.attrs["conductor_ids"] = np.array(sorted(conductor_potential), dtype=np.int64)
+            # no NaN in the file: a conductor whose potential is set per contact (the case (ii)
+            # filament, -delta_J0 z) is flagged in conductor_per_contact, its entry here 0
+            ids = sorted(conductor_potential)
+            g.attrs["conductor_potentials"] = np.array(
+                [0.0 if conductor_potential[c] is None else conductor_potential[c] for c in ids], dtype=np.float64
+            )
+            g.attrs["conductor_per_contact"] = np.array([conductor_potential[c] is None for c in ids], dtype=np.int8)
+            g.attrs["role_names"] = json.dumps(ROLE_NAMES)
+            _growable(g, "step", (), "<i8")
+            _set_unit(_growable(g, "time", (), "<f8"), TIME)
+            _growable(g, "tip_contacts", (2,), "<i8")
+            _growable(g, "tip_contacts_count", (), "<i8")
+            for name, dt in zip(layout.GRAPH_CONDUCTOR_CONTACTS, ("<i8", "<i8", "<f8")):
+                _growable(g, name, (), dt)
+            _growable(g, "conductor_contacts_count", (), "<i8")
+            _growable(g, "role", role.shape, "i1")
+            _set_unit(_growable(g, "current", current.shape, "<f8"), CURRENT)
+            _set_unit(_growable(g, "potential", potential.shape, "<f8"), POTENTIAL)
+            _growable(g, "floating", potential.shape, "i1")
+            _set_unit(g["conductor_potential"], POTENTIAL)
+        g = self.f[layout.GRAPH]
+        _append(g["step"], step)
+        _append(g["time"], t)
+        tc = arrays["tip_contacts"]
+        if len(tc):
+            _append(g["tip_contacts"], tc)
+        _append(g["tip_contacts_count"], len(tc))
+        if len(arrays["conductor_tip"]):
+            for name in layout.GRAPH_CONDUCTOR_CONTACTS:
+                _append(g[name], arrays[name])
+        _append(g["conductor_contacts_count"], len(arrays["conductor_tip"]))
+        _append(g["role"], role)
+        _append(g["current"], current)
+        # a floating tip (on no path between conductors) has no potential: 1 in ``floating`` and 0
+        # in ``potential``, so that the file holds no NaN; RunFile.graph gives NaN there again
+        floating = ~np.isfinite(potential)
+        _append(g["potential"], np.where(floating, 0.0, potential))
+        if "floating" in g:
+            _append(g["floating"], floating.astype(np.int8))
+
+    @classmethod
+    def for_simulation(cls, sim, path, overwrite=False, velocities=None, author=None):
+        """A writer for a run driven from Python: ``sim.run(t_end, writer=w)`` (in as many
+        chunks as wanted), then ``w.close()``; or ``with RunWriter.for_simulation(sim, path) as w``.
+
+        The file is the one ``selfas-graph simulate`` writes (the provenance holds the resolved
+        parameters, and the scenario text when the simulation came from a scenario), and
+        :class:`RunFile`, ``topology``, ``plot`` and ``export`` read it.
+        """
+        import shlex
+        import sys
+        import uuid
+
+        p = sim.params
+        provenance = run_provenance(sim, getattr(sim, "scenario", None), shlex.join(sys.argv), uuid.uuid4().hex)
+        if author is not None:
+            provenance["author"] = author
+        return cls(
+            path,
+            sim.state.n_tips,
+            sim.state.tip_charge,
+            sim.state.rod_charge,
+            provenance,
+            overwrite=overwrite,
+            velocities=p.output.velocities if velocities is None else velocities,
+            frame_interval=sim.frame_interval,
+            rod_length=sim.state.rod_length,
+            rod_resistance=sim.state.rod_resistance,
+        )
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        self.close(status="finished" if exc_type is None else f"failed: {exc}")
+
+    def set_attrs(self, **attrs):
+        for k, v in attrs.items():
+            self.f[layout.PROVENANCE].attrs[k] = v
+
+    def flush(self):
+        self.f.flush()
+
+    def close(self, status="finished"):
+        if self.f:
+            attrs = self.f[layout.PROVENANCE].attrs
+            # wall time of every segment of the run that closed its file (a killed one adds nothing)
+            spent = time.monotonic() - getattr(self, "_opened", time.monotonic())
+            self.set_attrs(status=status, wall_seconds=float(attrs.get("wall_seconds", 0.0)) + spent)
+            self.f.close()
+            self.f = None
+
+
+class NullWriter(_PendingRows):
+    """Takes every call a :class:`RunWriter` takes and keeps nothing: the writer of MPI ranks other than 0.
+
+    With it every rank makes the same calls in the run loop, in particular the frames'
+    observables, whose energies are sums over all ranks. ``n_frames`` counts like the
+    real writer's, starting from rank 0's count.
+    """
+
+    def __init__(self, n_frames=0):
+        self.n_frames = int(n_frames)
+        self.events_written = 0
+
+    def write_frame(self, step, t, position, velocity, observables):
+        self.n_frames += 1
+
+    def write_per_step(self, steps, values):
+        pass
+
+    def write_events(self, rows):
+        pass
+
+    def write_graph(self, step, t, arrays, role, current, potential, conductor_potential):
+        pass
+
+    def set_attrs(self, **attrs):
+        pass
+
+    def flush(self):
+        pass
+
+    def close(self, status="finished"):
+        pass
