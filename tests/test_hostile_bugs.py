@@ -367,3 +367,20 @@ def test_bug_a_dangling_symbolic_link_as_the_output(command, workdir, capsys, re
     _expect_usage_error(res, "dang.h5", "symbolic link")
     assert tree(workdir) == before
     assert link.is_symlink() and os.readlink(link) == str(workdir / "nowhere" / "x.h5")
+
+
+@pytest.mark.parametrize("option", ["-o", "--json", "--plot=", "--output="])
+def test_bug_bench_tools_leave_a_dangling_link_as_it_is(tmp_path, capsys, option):
+    """`selfas-graph bench NAME -o LINK` with LINK a symbolic link to nothing: exit 2 naming the link,
+    nothing run, the link unchanged (as simulate, plot, export and ensemble do)."""
+    from pathlib import Path
+
+    from selfas_graph.cli.main import main
+
+    quick = Path(__file__).resolve().parent.parent / "scenarios" / "quick.toml"
+    link = tmp_path / "dang.json"
+    os.symlink(tmp_path / "missing" / "x.json", link)
+    args = [option + str(link)] if option.endswith("=") else [option, str(link)]
+    code = main(["bench", "percolation", str(quick), "--counts", "10", "--seeds", "1"] + args)
+    assert code == 2 and "symbolic link" in capsys.readouterr().err
+    assert os.readlink(link) == str(tmp_path / "missing" / "x.json") and sorted(os.listdir(tmp_path)) == ["dang.json"]

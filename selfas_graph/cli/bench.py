@@ -18,6 +18,7 @@ from pathlib import Path
 import selfas_graph.bench as bench
 
 from .main import CliError
+from .paths import check_target
 
 
 def add_arguments(p):
@@ -48,6 +49,22 @@ def _program(name, argv):
         sys.argv = saved
 
 
+#: the options by which the tools name files they write
+OUTPUT_OPTIONS = ("-o", "--output", "--json", "--plot", "--csv", "--out")
+
+
+def _output_paths(argv) -> list[str]:
+    """The files a tool's arguments name for writing (after one of :data:`OUTPUT_OPTIONS`)."""
+    out = []
+    for k, a in enumerate(argv):
+        name, eq, value = a.partition("=")
+        if name in OUTPUT_OPTIONS and eq:
+            out.append(value)
+        elif a in OUTPUT_OPTIONS and k + 1 < len(argv):
+            out.append(argv[k + 1])
+    return out
+
+
 def run(args):
     known = tools()
     if args.tool is None:
@@ -58,6 +75,8 @@ def run(args):
         return 0
     if args.tool not in known:
         raise CliError(f"no tool {args.tool!r}; the tools are: {', '.join(known)}")
+    for path in _output_paths(args.tool_args):  # a link to nothing, a folder or a device: refused, untouched
+        check_target(path, "output file", force=True)
     module = importlib.import_module(f"{bench.__name__}.{args.tool}")
     for key, value in getattr(module, "COMMAND_ENV", {}).items():
         os.environ.setdefault(key, value)
