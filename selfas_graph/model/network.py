@@ -10,11 +10,14 @@ events', 'Connectivity graph and topology', 'Circuit'):
 * the topology (:func:`.topology.classify_rods`, cached until the contacts change), the
   circuit solve (:func:`.circuit.solve_circuit`, handed the topology's merge of the tips) and
   the memo of its last linear system (:class:`.circuit.SolveMemo`);
-* the rod currents last handed out.
+* the rod currents (:class:`RodCurrents`): the one store of them in a run. The force field
+  is built with this object and its current terms read it (``ForceField.currents``); nothing
+  else keeps a copy.
 
 One call per step, :meth:`Network.update`, takes the positions and the tip neighbour list
-the contact search runs over and returns the step's events and, when they changed, the rod
-currents (:class:`NetworkUpdate`). The simulation hands the currents to the force field.
+the contact search runs over, writes the new rod currents into :attr:`Network.currents` and
+returns the step's events and whether the currents changed (:class:`NetworkUpdate`). The
+simulation then tells the force field that its held current forces are stale.
 """
 
 from __future__ import annotations
@@ -29,7 +32,42 @@ from .contacts import ContactTracker
 from .topology import FILAMENT, ContactArrays, Topology, circuit_event
 from .validate import _frozen
 
-__all__ = ["Network", "NetworkUpdate"]
+__all__ = ["Network", "NetworkUpdate", "RodCurrents"]
+
+
+class RodCurrents:
+    """The rod currents of a run: written at each circuit solve, read by the current terms.
+
+    Parameters
+    ----------
+    n_rods : int
+
+    Attributes
+    ----------
+    current : (n_rods,) float64
+        J_i, positive from tip a to tip b (units J0); zero until :meth:`set` is called.
+    active_rod : (n_active,) int64
+        The rods whose current is not exactly zero, sorted: the only rods the kernels visit.
+    """
+
+    def __init__(self, n_rods: int):
+        self.n_rods = int(n_rods)
+        self.current = np.zeros(self.n_rods)
+        self.active_rod = np.zeros(0, dtype=np.int64)
+
+    def set(self, current) -> bool:
+        """Take the currents ``(n_rods,)``; rods whose current is exactly zero are left out of the kernels.
+
+        Returns False (and keeps the arrays in use) when the currents are those in use, bit for bit.
+        """
+        current = np.ascontiguousarray(current, dtype=np.float64)
+        if current.shape != (self.n_rods,):
+            raise ValueError(f"currents must have shape ({self.n_rods},), got {current.shape}")
+        if np.array_equal(current, self.current):
+            return False
+        self.current = current
+        self.active_rod = np.flatnonzero(current != 0.0).astype(np.int64)
+        return True
 
 
 @dataclasses.dataclass
@@ -41,15 +79,15 @@ class NetworkUpdate:
     events : list of (step, time, kind, a, b)
         Contact events of the step, then a SHORT_CIRCUIT / OPEN_CIRCUIT row if the batch
         made a filament appear or vanish (kinds in :mod:`.events`).
-    current : (n_rods,) float64 or None
-        The new rod currents (zero off the filament rods), or None if they did not change.
+    currents_changed : bool
+        Whether the rod currents (:attr:`Network.currents`) changed, bit for bit.
     changed : bool
         Whether the contacts or the contact potentials changed (events, or case (ii)
         contact heights that moved): the integrator's history may be reset then.
     """
 
     events: list
-    current: np.ndarray | None = None
+    currents_changed: bool = False
     changed: bool = False
 
 
@@ -125,8 +163,8 @@ class Network(ContactArrays):
         self.filament_z = np.zeros(0)
         self.memo = SolveMemo()
         self.solution: CircuitSolution | None = None
-        #: rod currents last handed out (zero off the filament rods)
-        self.current = np.zeros(self.n_rods)
+        #: the rod currents (zero off the filament rods): their one store, read by the force field
+        self.currents = RodCurrents(self.n_rods)
         #: the contacts or potentials changed since the last solve
         self.changed = True
         self._topology: Topology | None = None
@@ -169,6 +207,7 @@ class Network(ContactArrays):
             self._touch()
             rows += circuit_event(self._short, self.topology(), int(rows[-1][0]), float(rows[-1][1]))
         current = None
+        currents_changed = False
         if self.circuit and self.changed:
             if self.has_short_circuit:
                 self.solution = self.solve()
@@ -182,12 +221,11 @@ class Network(ContactArrays):
                 self.changed = False
                 if np.count_nonzero(self.current):
                     current = np.zeros(self.n_rods)
-            if current is not None:
-                self.current = current
+            currents_changed = current is not None and self.currents.set(current)
             arr = self.arrays()
             self.filament_tip = arr["conductor_tip"][arr["conductor_id"] == ev.CONDUCTOR_FILAMENT]
             self.filament_z = position[self.filament_tip, 2].copy()
-        return NetworkUpdate(rows, current, True)
+        return NetworkUpdate(rows, currents_changed, True)
 
     def _heights_moved(self, position) -> bool:
         """Case (ii): give the filament contacts that moved along z by more than the height
@@ -210,6 +248,11 @@ class Network(ContactArrays):
         self._arrays = None
 
     # ------------------------------------------------------------------ queries
+    @property
+    def current(self) -> np.ndarray:
+        """The rod currents, (n_rods,) float64 (``currents.current``)."""
+        return self.currents.current
+
     @property
     def n_contacts(self) -> int:
         """Number of tip-tip contacts."""
@@ -299,7 +342,7 @@ class Network(ContactArrays):
         if bool(d["has_solution"]) and self.circuit:
             self.solution = self.solve()
         if "current" in d:
-            self.current = np.array(d["current"], dtype=np.float64)
+            self.currents.set(np.array(d["current"], dtype=np.float64))
 
     def __repr__(self) -> str:
         return (
