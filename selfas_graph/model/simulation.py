@@ -145,7 +145,7 @@ class Simulation(HealthChecks, Observables):
 
     @property
     def contacts(self):
-        """The contact tracker of the network (None without contacts)."""
+        """The network's contacts, a :class:`~.contactset.ContactSet` (None without contacts)."""
         return self.network.contacts if self.network is not None else None
 
     @property
