@@ -13,6 +13,7 @@ import pytest
 from conftest import simulation
 from selfas_graph.model import events as ev
 from selfas_graph.model.contacts import ContactTracker
+from selfas_graph.model.contactset import ContactSet
 from selfas_graph.model.graph import CLUSTER, FILAMENT
 from selfas_graph.model.neighbours import NeighbourList
 from selfas_graph.model.state import State
@@ -88,8 +89,41 @@ def test_restart_on_events_resets_the_integrator_history():
 
 
 # --------------------------------------------------------------------------- hysteresis
+class _Tracked:
+    """A contact search and the contacts it found so far: each update's rows are applied to the
+    set (ContactSet.apply), as the network of a run applies them."""
+
+    def __init__(self, n_tips, electrodes=None, filament_radius=None):
+        self.search = ContactTracker(n_tips, RSTAR, RELEASE, electrodes, filament_radius)
+        conductors = {}
+        if electrodes is not None:
+            conductors = {ev.CONDUCTOR_CATHODE: -0.5, ev.CONDUCTOR_ANODE: 0.5}
+        if filament_radius is not None:
+            conductors[ev.CONDUCTOR_FILAMENT] = None
+        self.contacts = ContactSet.empty(n_tips // 2, conductors)
+
+    def update(self, position, nl, step, time):
+        rows = self.search.search(self.contacts, position, nl, step, time)
+        self.contacts = self.contacts.apply(rows)
+        return rows
+
+    @property
+    def n_contacts(self):
+        return self.contacts.n_contacts
+
+    @property
+    def pairs(self):
+        return self.contacts.tip_contacts
+
+    def __getattr__(self, name):  # on_cathode, on_anode, on_filament
+        c = {"on_cathode": ev.CONDUCTOR_CATHODE, "on_anode": ev.CONDUCTOR_ANODE, "on_filament": ev.CONDUCTOR_FILAMENT}
+        if name not in c:
+            raise AttributeError(name)
+        return self.contacts.on_conductor(c[name])
+
+
 def _tracker_scene(electrodes=None):
-    tracker = ContactTracker(4, RSTAR, RELEASE, electrodes)
+    tracker = _Tracked(4, electrodes)
     nl = NeighbourList(RELEASE, 0.3, exclude_same_rod=True)
     return tracker, nl
 
@@ -180,7 +214,7 @@ def test_release_and_contact_in_one_update_are_ordered():
     tips 1-2), rod 3 meets rod 2 (contact of tips 5-6) and rod 1's top tip 3 reaches the
     anode.
     """
-    tracker = ContactTracker(8, RSTAR, RELEASE, electrodes=(-3.0, 1.25))
+    tracker = _Tracked(8, electrodes=(-3.0, 1.25))
     nl = NeighbourList(RELEASE, 0.3, exclude_same_rod=True)
     position = np.zeros((8, 3))
     position[4:, 0] = 5.0
@@ -454,8 +488,8 @@ def test_quiet_step_kernel_never_hides_an_event(rng, monkeypatch):
 
     n = 160
     position = rng.uniform([-0.4, -0.4, -0.5], [0.4, 0.4, 0.5], size=(n, 3))
-    fast = ContactTracker(n, RSTAR, RELEASE, electrodes=(-0.45, 0.45), filament_radius=0.3)
-    slow = ContactTracker(n, RSTAR, RELEASE, electrodes=(-0.45, 0.45), filament_radius=0.3)
+    fast = _Tracked(n, electrodes=(-0.45, 0.45), filament_radius=0.3)
+    slow = _Tracked(n, electrodes=(-0.45, 0.45), filament_radius=0.3)
     nl = NeighbourList(RELEASE, 0.05, exclude_same_rod=True)
     answers = []
     calls = []

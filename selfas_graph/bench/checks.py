@@ -6,7 +6,7 @@ Usage: selfas-graph bench checks --checkpoint RUN.checkpoint.h5 [--repeat 15] [-
 On a state from a checkpoint (read as selfas_graph/bench/profile.py reads it) or a settled scene, times,
 on one numba thread and the thread's CPU clock, interleaved (the order alternates between repeats):
 
-- ``contact check``: ``ContactTracker.update`` on a step without events, with its one-pass
+- ``contact check``: ``ContactTracker.search`` on a step without events, with its one-pass
   kernel (``kernels/pairs.py::contacts_unchanged``) and with the kernel answering "no" (so the
   full numpy check runs, as before the kernel existed);
 - ``skin check``: a Verlet list's largest displacement since its build over all tips, by
@@ -52,14 +52,14 @@ def run(args):
     sim.step(8)
     position = sim.state.position
     nl = sim.force_field.tip_neighbours(position)
-    tracker = sim.contacts
-    tracker.update(position, nl, 0, 0.0)  # any events of this step applied: the next call is quiet
+    sim.network.update(position, nl, 0, 0.0)  # any events of this step applied: the next search is quiet
+    tracker, contacts = sim.network.tracker, sim.network.contacts
     kernel = contacts_module.contacts_unchanged
 
     def full_check():
         contacts_module.contacts_unchanged = lambda *a: False
         try:
-            tracker.update(position, nl, 0, 0.0)
+            tracker.search(contacts, position, nl, 0, 0.0)
         finally:
             contacts_module.contacts_unchanged = kernel
 
@@ -70,7 +70,7 @@ def run(args):
         return np.einsum("ij,ij->i", d, d).max(initial=0.0)
 
     rows = [
-        ("contact check, step without events", full_check, lambda: tracker.update(position, nl, 0, 0.0)),
+        ("contact check, step without events", full_check, lambda: tracker.search(contacts, position, nl, 0, 0.0)),
         (f"skin check, {len(position)} tips", skin_numpy, lambda: max_displacement2(position, reference)),
     ]
     print(machine_line())

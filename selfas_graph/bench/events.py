@@ -16,7 +16,7 @@ Usage::
       and on steps with events the graph update and circuit solve), recorded while
       the full scene runs; the median over steps without an event is the number
       to compare with the 5 % goal;
-    * ``tracker alone``: ``ContactTracker.update`` repeated on the settled positions,
+    * ``tracker alone``: ``ContactTracker.search`` repeated on the settled positions,
       where nothing changes;
     * ``frozen A/B``: velocities set to zero and every force off except a weak ambient
       brake (and the electrode walls, which define the planes), so nothing moves and
@@ -152,13 +152,14 @@ def contact_overhead(scenario_path, settle, steps):
 
     # the tracker alone on the settled positions: after the first call nothing changes
     st = on.state
-    ff, tracker = on.force_field, on.contacts
-    tracker.update(st.position, ff.tip_neighbours(st.position), st.step, st.time)
+    ff, tracker = on.force_field, on.network.tracker
+    on.network.update(st.position, ff.tip_neighbours(st.position), st.step, st.time)
+    contacts = on.network.contacts
     reps = max(200, 5 * steps)
     times = np.empty(reps)
     for i in range(reps):
         t0 = time.perf_counter()
-        rows = tracker.update(st.position, ff.tip_neighbours(st.position), st.step, st.time)
+        rows = tracker.search(contacts, st.position, ff.tip_neighbours(st.position), st.step, st.time)
         times[i] = time.perf_counter() - t0
         assert not rows, "the tracker found an event on unchanged positions"
     tracker_alone = float(np.median(times))
@@ -204,7 +205,7 @@ def contact_overhead(scenario_path, settle, steps):
         f"{ms * upd_quiet:.3f} | **{pct * upd_quiet:.2f} %** |"
     )
     print(
-        f"| ContactTracker.update alone on unchanged positions | {ms * tracker_alone:.3f} | "
+        f"| ContactTracker.search alone on unchanged positions | {ms * tracker_alone:.3f} | "
         f"{pct * tracker_alone:.2f} % |"
     )
     print(

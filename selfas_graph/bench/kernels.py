@@ -302,8 +302,7 @@ def mixed_error(checkpoint):
     ff = sim.force_field
     st = sim.state
     ff._bind(st.position, st.velocity)
-    rc = ff.rod_currents
-    act, cur, w, pos = rc.active_rod, rc.current, rc.w, st.position
+    act, cur, w, pos = ff.active_rod, ff.current, ff.wire_radius, st.position
     if not len(act):
         raise SystemExit(f"{checkpoint}: no rod carries current in this state")
 

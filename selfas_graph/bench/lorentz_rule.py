@@ -37,7 +37,7 @@ def lorentz_force(ff, active, rule, sources=None, rods=None, with_fields=True):
     kc.quadrature_points(ff.position, rods, t, pts)
     field = np.empty_like(pts)
     src = active if sources is None else sources
-    kc.rod_current_field(pts, np.repeat(rods, len(t)), ff.position, src, ff.current, ff.rod_currents.w, field)
+    kc.rod_current_field(pts, np.repeat(rods, len(t)), ff.position, src, ff.current, ff.wire_radius, field)
     if with_fields:
         extra = np.empty_like(pts)
         for source in ff.field_sources:

@@ -327,7 +327,7 @@ def contacts_unchanged(
     on_filament,
 ):
     """True only when the contact tracker's step would find no event: one pass instead of its dozen
-    numpy passes on the common step without news (``model/contacts.py::ContactTracker.update``).
+    numpy passes on the common step without news (``model/contacts.py::ContactTracker.search``).
 
     Answers True when, with every distance clear of its threshold by :data:`QUIET_MARGIN`
     (relative; a distance within the margin answers False, and the tracker decides exactly):

@@ -1,5 +1,8 @@
 """Contact detection with hysteresis, producing event records (docs/model.md 'Contacts and events').
 
+The contacts themselves are a :class:`~.contactset.ContactSet`; the search reads one and
+returns the rows that change it.
+
 Two tips of different rods come into contact when closer than r* and stay in
 contact until they are farther apart than ``release_radius`` (default 1.5 r*),
 so that a vibrating contact does not flood the event log. A tip touches an
@@ -20,7 +23,11 @@ from . import events as ev
 
 
 class ContactTracker:
-    """The current contact set and the events that change it.
+    """The contact search: the events that change a set of contacts at given positions.
+
+    The tracker keeps no contacts: :meth:`search` compares a
+    :class:`~.contactset.ContactSet` with the positions and returns the event rows, which the
+    caller applies to the set (:meth:`.ContactSet.apply`, in a run :class:`~.network.Network`).
 
     Parameters
     ----------
@@ -39,20 +46,18 @@ class ContactTracker:
         self.rstar = float(rstar)
         self.release = float(release_radius)
         self.electrodes = electrodes
-        self.pairs = np.zeros((0, 2), dtype=np.int64)  # sorted by key k * n_tips + l, k < l
-        self.on_cathode = np.zeros(n_tips, dtype=bool)
-        self.on_anode = np.zeros(n_tips, dtype=bool)
         self.filament_radius = filament_radius
-        self.on_filament = np.zeros(n_tips, dtype=bool)
 
     def _keys(self, pairs):
         return pairs[:, 0] * self.n_tips + pairs[:, 1]
 
-    def update(self, position, neighbours, step, time):
-        """Compare the contact set with ``position``; apply and return the changes as event rows.
+    def search(self, contacts, position, neighbours, step, time):
+        """The events that take ``contacts`` to the contacts at ``position``, as rows.
 
         Parameters
         ----------
+        contacts : ContactSet
+            The contacts before the step (not changed).
         position : (n_tips, 3) float64
         neighbours : NeighbourList over tips covering at least ``release_radius``
         step, time : int, float
@@ -63,6 +68,7 @@ class ContactTracker:
         list of (step, time, kind, a, b) tuples, releases first, then contacts, each
         sorted by ids (a deterministic order).
         """
+        pairs, on_cathode, on_anode, on_filament = contacts.search_arrays
         # [perf] one kernel pass answers the common step without news (kernels/pairs.py::contacts_unchanged)
         el = self.electrodes if self.electrodes is not None else (np.nan, np.nan)
         fr = self.filament_radius if self.filament_radius is not None else np.nan
@@ -70,70 +76,56 @@ class ContactTracker:
             position,
             neighbours.start,
             neighbours.index,
-            self.pairs,
+            pairs,
             self.rstar,
             self.release,
             float(el[0]),
             float(el[1]),
-            self.on_cathode,
-            self.on_anode,
+            on_cathode,
+            on_anode,
             float(fr),
-            self.on_filament,
+            on_filament,
         ):
             return []
         rows = []
         # releases: current contacts now farther apart than the release radius
-        if len(self.pairs):
-            d = position[self.pairs[:, 0]] - position[self.pairs[:, 1]]
+        if len(pairs):
+            d = position[pairs[:, 0]] - position[pairs[:, 1]]
             gone = np.einsum("ij,ij->i", d, d) > self.release**2
             if gone.any():
-                for k, l in self.pairs[gone]:
+                for k, l in pairs[gone]:
                     rows.append((step, time, ev.TIP_RELEASE, int(k), int(l)))
-                self.pairs = self.pairs[~gone]
+                pairs = pairs[~gone]
         # new contacts: listed pairs closer than r* that are not in contact yet. Fast path for
         # the common step without news: if the number of close pairs equals the number of
         # current contacts closer than r*, every close pair is already a contact.
         n_close = close_pair_count(position, neighbours.start, neighbours.index, self.rstar)
-        if len(self.pairs):
-            d = position[self.pairs[:, 0]] - position[self.pairs[:, 1]]
+        if len(pairs):
+            d = position[pairs[:, 0]] - position[pairs[:, 1]]
             n_known = int((np.einsum("ij,ij->i", d, d) < self.rstar**2).sum())
         else:
             n_known = 0
         close = close_pairs(position, neighbours.start, neighbours.index, self.rstar) if n_close > n_known else ()
         if len(close):
-            keys = self._keys(close)
-            new = ~np.isin(keys, self._keys(self.pairs), assume_unique=True)
-            if new.any():
-                added = close[new]
-                for k, l in added:
-                    rows.append((step, time, ev.TIP_CONTACT, int(k), int(l)))
-                merged = np.concatenate([self.pairs, added])
-                self.pairs = merged[np.argsort(self._keys(merged), kind="stable")]
+            new = ~np.isin(self._keys(close), self._keys(pairs), assume_unique=True)
+            for k, l in close[new]:
+                rows.append((step, time, ev.TIP_CONTACT, int(k), int(l)))
         surfaces = []
         if self.electrodes is not None:
             z = position[:, 2]
             surfaces += [
-                (self.on_cathode, z - self.electrodes[0], ev.CONDUCTOR_CATHODE),
-                (self.on_anode, self.electrodes[1] - z, ev.CONDUCTOR_ANODE),
+                (on_cathode, z - self.electrodes[0], ev.CONDUCTOR_CATHODE),
+                (on_anode, self.electrodes[1] - z, ev.CONDUCTOR_ANODE),
             ]
         if self.filament_radius is not None:
             rho = np.hypot(position[:, 0], position[:, 1])
-            surfaces.append((self.on_filament, rho - self.filament_radius, ev.CONDUCTOR_FILAMENT))
-        if surfaces:
-            for flags, h, cid in surfaces:
-                leave = flags & (h > self.release)
-                touch = ~flags & (h < self.rstar)
-                for k in np.flatnonzero(leave):
-                    rows.append((step, time, ev.CONDUCTOR_RELEASE, int(k), cid))
-                for k in np.flatnonzero(touch):
-                    rows.append((step, time, ev.CONDUCTOR_CONTACT, int(k), cid))
-                flags[leave] = False
-                flags[touch] = True
+            surfaces.append((on_filament, rho - self.filament_radius, ev.CONDUCTOR_FILAMENT))
+        for flags, h, cid in surfaces:
+            for k in np.flatnonzero(flags & (h > self.release)):
+                rows.append((step, time, ev.CONDUCTOR_RELEASE, int(k), cid))
+            for k in np.flatnonzero(~flags & (h < self.rstar)):
+                rows.append((step, time, ev.CONDUCTOR_CONTACT, int(k), cid))
         if rows:
             order = {ev.TIP_RELEASE: 0, ev.CONDUCTOR_RELEASE: 1, ev.TIP_CONTACT: 2, ev.CONDUCTOR_CONTACT: 3}
             rows.sort(key=lambda r: (order[r[2]], r[3], r[4]))
         return rows
-
-    @property
-    def n_contacts(self) -> int:
-        return len(self.pairs)

@@ -1,20 +1,25 @@
-"""The electrical network of a run: contacts, topology, conductor potentials and the circuit.
+"""The electrical network of a run: contacts, topology, conductor potentials, circuit and rod currents.
 
 :class:`Network` owns, in one object, what contact events change (docs/model.md 'Contacts and
 events', 'Connectivity graph and topology', 'Circuit'):
 
-* the contacts, stored once: the :class:`~.contacts.ContactTracker` (tip pairs, the tips on
-  each conductor) and, for the case (ii) filament, the potential of each tip's contact;
+* the contacts: one :class:`~.contactset.ContactSet` (tip pairs, tips on each conductor with the
+  potential of each contact, ``-delta_J0 z`` on the case (ii) filament), replaced by each batch
+  of events through :meth:`.ContactSet.apply`, the path a replayed event log takes too
+  (:class:`~.graph.ConnectivityGraph`); the search for them is the :class:`~.contacts.ContactTracker`;
 * the conductor potentials (electrodes of case (i), ``-delta_J0 z`` along the filament of
   case (ii)) and the filament contact heights at the last solve;
-* the topology (:func:`.topology.classify_rods`, cached until the contacts change), the
-  circuit solve (:func:`.circuit.solve_circuit`, handed the topology's merge of the tips) and
-  the memo of its last linear system (:class:`.circuit.SolveMemo`);
-* the rod currents last handed out.
+* the topology (``ContactSet.topology``, once per set of contacts), the circuit solve
+  (:func:`.contactset.solve_contacts`) and the memo of its last linear system
+  (:class:`.circuit.SolveMemo`);
+* the rod currents (:class:`RodCurrents`): the one store of them in a run. The force field
+  is built with this object and its current terms read it (``ForceField.currents``); nothing
+  else keeps a copy.
 
 One call per step, :meth:`Network.update`, takes the positions and the tip neighbour list
-the contact search runs over and returns the step's events and, when they changed, the rod
-currents (:class:`NetworkUpdate`). The simulation hands the currents to the force field.
+the contact search runs over, writes the new rod currents into :attr:`Network.currents` and
+returns the step's events and whether the currents changed (:class:`NetworkUpdate`). The
+simulation then tells the force field that its held current forces are stale.
 """
 
 from __future__ import annotations
@@ -26,10 +31,46 @@ import numpy as np
 from . import events as ev
 from .circuit import CircuitSolution, SolveMemo
 from .contacts import ContactTracker
-from .topology import FILAMENT, ContactArrays, Topology, circuit_event
+from .contactset import ContactSet, solve_contacts
+from .topology import FILAMENT, Topology, circuit_event
 from .validate import _frozen
 
-__all__ = ["Network", "NetworkUpdate"]
+__all__ = ["Network", "NetworkUpdate", "RodCurrents"]
+
+
+class RodCurrents:
+    """The rod currents of a run: written at each circuit solve, read by the current terms.
+
+    Parameters
+    ----------
+    n_rods : int
+
+    Attributes
+    ----------
+    current : (n_rods,) float64
+        J_i, positive from tip a to tip b (units J0); zero until :meth:`set` is called.
+    active_rod : (n_active,) int64
+        The rods whose current is not exactly zero, sorted: the only rods the kernels visit.
+    """
+
+    def __init__(self, n_rods: int):
+        self.n_rods = int(n_rods)
+        self.current = np.zeros(self.n_rods)
+        self.active_rod = np.zeros(0, dtype=np.int64)
+
+    def set(self, current) -> bool:
+        """Take the currents ``(n_rods,)``; rods whose current is exactly zero are left out of the kernels.
+
+        Returns False (and keeps the arrays in use) when the currents are those in use, bit for bit.
+        """
+        current = np.ascontiguousarray(current, dtype=np.float64)
+        if current.shape != (self.n_rods,):
+            raise ValueError(f"currents must have shape ({self.n_rods},), got {current.shape}")
+        if np.array_equal(current, self.current):
+            return False
+        self.current = current
+        self.active_rod = np.flatnonzero(current != 0.0).astype(np.int64)
+        return True
 
 
 @dataclasses.dataclass
@@ -41,19 +82,19 @@ class NetworkUpdate:
     events : list of (step, time, kind, a, b)
         Contact events of the step, then a SHORT_CIRCUIT / OPEN_CIRCUIT row if the batch
         made a filament appear or vanish (kinds in :mod:`.events`).
-    current : (n_rods,) float64 or None
-        The new rod currents (zero off the filament rods), or None if they did not change.
+    currents_changed : bool
+        Whether the rod currents (:attr:`Network.currents`) changed, bit for bit.
     changed : bool
         Whether the contacts or the contact potentials changed (events, or case (ii)
         contact heights that moved): the integrator's history may be reset then.
     """
 
     events: list
-    current: np.ndarray | None = None
+    currents_changed: bool = False
     changed: bool = False
 
 
-class Network(ContactArrays):
+class Network:
     """Contacts, connectivity, conductor potentials and circuit of a run.
 
     Parameters
@@ -94,8 +135,8 @@ class Network(ContactArrays):
     ):
         self.n_rods = int(n_rods)
         self.n_tips = 2 * self.n_rods
-        #: the contact search and the contact store (tip pairs, tips on each conductor)
-        self.contacts = ContactTracker(self.n_tips, rstar, release_radius, electrodes, filament_radius)
+        #: the contact search (keeps no contacts)
+        self.tracker = ContactTracker(self.n_tips, rstar, release_radius, electrodes, filament_radius)
         self.bias = float(bias)
         self.circuit = bool(circuit)
         #: linear solver of :meth:`solve` ("auto", "direct" or "cg"; see circuit.solve_circuit)
@@ -112,26 +153,17 @@ class Network(ContactArrays):
             conductors[ev.CONDUCTOR_FILAMENT] = None  # psi = -delta_J0 z per contact (docs/model.md 'Circuit')
         #: conductor id -> fixed potential (units R0 J0), None where given per contact (docs/model.md 'Circuit')
         self.conductor_potential = conductors
-        self._flags = [
-            (ev.CONDUCTOR_CATHODE, self.contacts.on_cathode),
-            (ev.CONDUCTOR_ANODE, self.contacts.on_anode),
-            (ev.CONDUCTOR_FILAMENT, self.contacts.on_filament),
-        ]
-        self._flags = [(c, f) for c, f in self._flags if c in conductors]
-        #: potential of each tip's contact with the filament (NaN off it), -delta_J0 z at contact or last move
-        self.filament_potential = np.full(self.n_tips, np.nan)
+        #: the contacts (an immutable value, replaced by each batch of events)
+        self.contacts = ContactSet.empty(self.n_rods, conductors)
         #: filament contacts at the last solve and their heights then
         self.filament_tip = np.zeros(0, dtype=np.int64)
         self.filament_z = np.zeros(0)
         self.memo = SolveMemo()
         self.solution: CircuitSolution | None = None
-        #: rod currents last handed out (zero off the filament rods)
-        self.current = np.zeros(self.n_rods)
+        #: the rod currents (zero off the filament rods): their one store, read by the force field
+        self.currents = RodCurrents(self.n_rods)
         #: the contacts or potentials changed since the last solve
         self.changed = True
-        self._topology: Topology | None = None
-        self._arrays: dict | None = None
-        self._short = False  # has_short_circuit of the last topology: the state before a batch
 
     @classmethod
     def from_params(cls, params, state) -> "Network":
@@ -156,19 +188,21 @@ class Network(ContactArrays):
     def update(self, position, neighbours, step, time) -> NetworkUpdate:
         """Search contacts at ``position`` (over ``neighbours``, a tip neighbour list covering the
         release radius), apply them, and solve the circuit if anything changed."""
-        rows = self.contacts.update(position, neighbours, step, time)
+        before = self.contacts
+        rows = self.tracker.search(before, position, neighbours, step, time)
+        if rows:
+            # a new filament contact is at -delta_J0 z of its tip (docs/model.md 'Circuit')
+            self.contacts = before.apply(rows, contact_potential=lambda k, c: -self.bias * float(position[k, 2]))
         moved = self._heights_moved(position)
         if not rows and not moved:
             return NetworkUpdate([])
+        self.changed = True
         if rows:
-            for _, _, kind, a, b in rows:
-                if b == ev.CONDUCTOR_FILAMENT and kind == ev.CONDUCTOR_CONTACT:
-                    self.filament_potential[a] = -self.bias * float(position[a, 2])
-                elif b == ev.CONDUCTOR_FILAMENT and kind == ev.CONDUCTOR_RELEASE:
-                    self.filament_potential[a] = np.nan
-            self._touch()
-            rows += circuit_event(self._short, self.topology(), int(rows[-1][0]), float(rows[-1][1]))
+            rows += circuit_event(
+                before.topology.has_short_circuit, self.topology(), int(rows[-1][0]), float(rows[-1][1])
+            )
         current = None
+        currents_changed = False
         if self.circuit and self.changed:
             if self.has_short_circuit:
                 self.solution = self.solve()
@@ -182,12 +216,11 @@ class Network(ContactArrays):
                 self.changed = False
                 if np.count_nonzero(self.current):
                     current = np.zeros(self.n_rods)
-            if current is not None:
-                self.current = current
-            arr = self.arrays()
-            self.filament_tip = arr["conductor_tip"][arr["conductor_id"] == ev.CONDUCTOR_FILAMENT]
+            currents_changed = current is not None and self.currents.set(current)
+            cs = self.contacts
+            self.filament_tip = cs.conductor_tip[cs.conductor_id == ev.CONDUCTOR_FILAMENT]
             self.filament_z = position[self.filament_tip, 2].copy()
-        return NetworkUpdate(rows, current, True)
+        return NetworkUpdate(rows, currents_changed, True)
 
     def _heights_moved(self, position) -> bool:
         """Case (ii): give the filament contacts that moved along z by more than the height
@@ -198,80 +231,62 @@ class Network(ContactArrays):
         moved = np.abs(z - self.filament_z) > self.height_tolerance
         if not moved.any():
             return False
-        for k in self.filament_tip[moved]:
-            self.filament_potential[k] = -self.bias * float(position[k, 2])
-        self.changed = True
-        self._arrays = None
+        tip = self.filament_tip[moved]
+        # contacts released in this step's events are skipped (they have no potential left)
+        self.contacts = self.contacts.with_potentials(tip, ev.CONDUCTOR_FILAMENT, -self.bias * position[tip, 2])
         return True
 
-    def _touch(self) -> None:
-        self.changed = True
-        self._topology = None
-        self._arrays = None
-
     # ------------------------------------------------------------------ queries
+    @property
+    def current(self) -> np.ndarray:
+        """The rod currents, (n_rods,) float64 (``currents.current``)."""
+        return self.currents.current
+
     @property
     def n_contacts(self) -> int:
         """Number of tip-tip contacts."""
         return self.contacts.n_contacts
 
     def arrays(self) -> dict[str, np.ndarray]:
-        """The contacts as arrays, as :meth:`.graph.ConnectivityGraph.arrays` gives them: ``tip_contacts``
-        (m, 2) sorted rows (k < l); ``conductor_tip``, ``conductor_id``, ``conductor_potential``
-        sorted by (tip, conductor)."""
-        if self._arrays is None:
-            tc = np.sort(self.contacts.pairs, axis=1)
-            tc = tc[np.lexsort((tc[:, 1], tc[:, 0]))]
-            tips = [np.flatnonzero(flag) for _, flag in self._flags]
-            kt = np.concatenate(tips + [np.zeros(0, dtype=np.int64)]).astype(np.int64)
-            kc = np.concatenate(
-                [np.full(len(t), c, dtype=np.int64) for (c, _), t in zip(self._flags, tips)]
-                + [np.zeros(0, dtype=np.int64)]
-            )
-            pot = np.concatenate(
-                [
-                    self.filament_potential[t]
-                    if self.conductor_potential[c] is None
-                    else np.full(len(t), float(self.conductor_potential[c]))
-                    for (c, _), t in zip(self._flags, tips)
-                ]
-                + [np.zeros(0)]
-            )
-            order = np.lexsort((kc, kt))
-            self._arrays = {
-                "tip_contacts": _frozen(np.ascontiguousarray(tc, dtype=np.int64)),
-                "conductor_tip": _frozen(np.ascontiguousarray(kt[order])),
-                "conductor_id": _frozen(np.ascontiguousarray(kc[order])),
-                "conductor_potential": _frozen(np.ascontiguousarray(pot[order])),
-            }
-        return dict(self._arrays)
-
-    def _conductors(self) -> tuple[set, list]:
-        return {c for c, p in self.conductor_potential.items() if p is None}, list(self.conductor_potential)
+        """The contacts as arrays (:meth:`.ContactSet.arrays`): ``tip_contacts`` (m, 2) sorted rows
+        (k < l); ``conductor_tip``, ``conductor_id``, ``conductor_potential`` sorted by (tip, conductor)."""
+        return self.contacts.arrays()
 
     def topology(self) -> Topology:
-        """Roles and structures of the rods (cached until the contacts change)."""
-        topo = super().topology()
-        self._short = topo.has_short_circuit
-        return topo
+        """Roles and structures of the rods (computed once per set of contacts)."""
+        return self.contacts.topology
+
+    @property
+    def has_short_circuit(self) -> bool:
+        """Whether a filament joins two different conductor attachments now."""
+        return self.contacts.topology.has_short_circuit
 
     def solve(self, memo: SolveMemo | None = None) -> CircuitSolution:
-        """Potentials and rod currents of the present contacts, through :attr:`memo` unless another
-        memo is given; clears :attr:`changed`."""
-        return super().solve(self.memo if memo is None else memo)
+        """Potentials and rod currents of the present contacts (:func:`.contactset.solve_contacts`),
+        through :attr:`memo` unless another memo is given; clears :attr:`changed`."""
+        sol = solve_contacts(
+            self.contacts,
+            self.solver,
+            self.rod_resistance,
+            self.contact_resistance,
+            self.memo if memo is None else memo,
+        )
+        self.changed = False
+        return sol
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict:
-        """The contacts, flags, filament heights and currents, as arrays and plain values; the
-        contacts also as ``graph_*`` arrays (:meth:`arrays`). The solution and the memo are
-        not saved: :meth:`load_state_dict` solves again (the solve is a pure function of the
-        contacts, so that is the solution the saved run held)."""
-        c = self.contacts
+        """The contacts (as ``contact_pairs`` and conductor flags, and as the ``graph_*`` arrays of
+        :meth:`arrays`), filament heights and the rod currents (``current``, the one checkpoint
+        key of the currents), as arrays and plain values. The solution and the memo are not saved:
+        :meth:`load_state_dict` solves again (the solve is a pure function of the contacts, so
+        that is the solution the saved run held)."""
+        pairs, on_cathode, on_anode, on_filament = self.contacts.search_arrays
         d = {
-            "contact_pairs": c.pairs.copy(),
-            "on_cathode": c.on_cathode.copy(),
-            "on_anode": c.on_anode.copy(),
-            "on_filament": c.on_filament.copy(),
+            "contact_pairs": pairs.copy(),
+            "on_cathode": on_cathode.copy(),
+            "on_anode": on_anode.copy(),
+            "on_filament": on_filament.copy(),
             "filament_tip": self.filament_tip.copy(),
             "filament_z": self.filament_z.copy(),
             "has_solution": self.solution is not None,
@@ -281,25 +296,42 @@ class Network(ContactArrays):
         return d
 
     def load_state_dict(self, d: dict) -> None:
-        """Restore :meth:`state_dict` (also as read back from a checkpoint of selfas-graph 0.2)."""
-        c = self.contacts
-        c.pairs = np.array(d["contact_pairs"], dtype=np.int64).reshape(-1, 2)
-        c.on_cathode[:], c.on_anode[:], c.on_filament[:] = d["on_cathode"], d["on_anode"], d["on_filament"]
-        self.filament_tip = np.array(d["filament_tip"], dtype=np.int64)
-        self.filament_z = np.array(d["filament_z"], dtype=np.float64)
-        self.filament_potential[:] = np.nan
+        """Restore :meth:`state_dict` (also as read back from a checkpoint of selfas-graph 0.2): the
+        tip pairs from ``contact_pairs``, the conductor contacts from the flags, the filament
+        contacts' potentials from the ``graph_*`` arrays."""
+        pairs = np.array(d["contact_pairs"], dtype=np.int64).reshape(-1, 2)
         cid = np.asarray(d["graph_conductor_id"])
         fil = cid == ev.CONDUCTOR_FILAMENT
-        self.filament_potential[np.asarray(d["graph_conductor_tip"])[fil]] = np.asarray(d["graph_conductor_potential"])[
-            fil
-        ]
-        self._touch()
-        self.topology()
+        filament_potential = np.full(self.n_tips, np.nan)
+        filament_potential[np.asarray(d["graph_conductor_tip"])[fil]] = np.asarray(d["graph_conductor_potential"])[fil]
+        tips, ids, pots = [], [], []
+        for c, key in (
+            (ev.CONDUCTOR_CATHODE, "on_cathode"),
+            (ev.CONDUCTOR_ANODE, "on_anode"),
+            (ev.CONDUCTOR_FILAMENT, "on_filament"),
+        ):
+            if c not in self.conductor_potential:
+                continue
+            t = np.flatnonzero(np.asarray(d[key], dtype=bool))
+            fixed = self.conductor_potential[c]
+            tips.append(t)
+            ids.append(np.full(len(t), c, dtype=np.int64))
+            pots.append(filament_potential[t] if fixed is None else np.full(len(t), float(fixed)))
+        arrays = {
+            "tip_contacts": pairs,
+            "conductor_tip": np.concatenate(tips + [np.zeros(0, dtype=np.int64)]),
+            "conductor_id": np.concatenate(ids + [np.zeros(0, dtype=np.int64)]),
+            "conductor_potential": np.concatenate(pots + [np.zeros(0)]),
+        }
+        self.contacts = ContactSet.from_arrays(self.n_rods, self.conductor_potential, arrays)
+        self.filament_tip = np.array(d["filament_tip"], dtype=np.int64)
+        self.filament_z = np.array(d["filament_z"], dtype=np.float64)
+        self.changed = True
         self.solution = None
         if bool(d["has_solution"]) and self.circuit:
             self.solution = self.solve()
         if "current" in d:
-            self.current = np.array(d["current"], dtype=np.float64)
+            self.currents.set(np.array(d["current"], dtype=np.float64))
 
     def __repr__(self) -> str:
         return (

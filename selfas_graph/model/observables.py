@@ -10,6 +10,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels.pairs import close_pair_count
+from . import events as ev
+
+#: the electrodes of case (i), whose contacts the status counts together
+ELECTRODES = (ev.CONDUCTOR_CATHODE, ev.CONDUCTOR_ANODE)
 
 
 class Observables:
@@ -73,8 +77,8 @@ class Observables:
         sol = self.solution
         return {
             "contacts": self.contact_count(),
-            "electrode_contacts": int(c.on_cathode.sum() + c.on_anode.sum()) if c is not None else 0,
-            "filament_contacts": int(c.on_filament.sum()) if c is not None else 0,
+            "electrode_contacts": int(np.isin(c.conductor_id, ELECTRODES).sum()) if c is not None else 0,
+            "filament_contacts": int((c.conductor_id == ev.CONDUCTOR_FILAMENT).sum()) if c is not None else 0,
             "short_circuit_time": self.short_circuit_time,
             "total_current": float(sol.total_current) if sol is not None else 0.0,
             "current_rods": int(np.count_nonzero(self.force_field.current)),

@@ -99,7 +99,15 @@ class Simulation(HealthChecks, Observables):
                 f"agree, e.g. params.replace(rods={{'count': {state.n_rods}}})"
             )
         self.state = random_state(params) if state is None else state
-        self.force_field = ForceField(params, self.state, timing=timing, blocks=RowBlocks(self.state.n_rods, comm))
+        #: contacts, graph, conductor potentials, circuit and the rod currents (None when contacts.enabled is false)
+        self.network = Network.from_params(params, self.state) if params.contacts.enabled else None
+        self.force_field = ForceField(
+            params,
+            self.state,
+            timing=timing,
+            blocks=RowBlocks(self.state.n_rods, comm),
+            currents=self.network.currents if self.network is not None else None,
+        )
         ip = params.integrator
         self.integrator = AdamsBashforth4(
             self.force_field,
@@ -119,11 +127,8 @@ class Simulation(HealthChecks, Observables):
         #: operations attached for every :meth:`run` (:mod:`.operations`), acted after the frame writer
         self.operations = []
         self._ops = ()
-        #: contacts, graph, conductor potentials and circuit (None when contacts.enabled is false)
-        self.network = None
-        if params.contacts.enabled:
+        if self.network is not None:
             self.force_field.extend_tip_range(params.contacts.release_factor * params.rods.rstar)
-            self.network = Network.from_params(params, self.state)
             self._update_contacts()
 
     @classmethod
@@ -140,7 +145,7 @@ class Simulation(HealthChecks, Observables):
 
     @property
     def contacts(self):
-        """The contact tracker of the network (None without contacts)."""
+        """The network's contacts, a :class:`~.contactset.ContactSet` (None without contacts)."""
         return self.network.contacts if self.network is not None else None
 
     @property
@@ -182,10 +187,8 @@ class Simulation(HealthChecks, Observables):
             short_circuit_time=np.nan if self.short_circuit_time is None else self.short_circuit_time,
         )
         if self.network is not None:
-            snap.update(self.network.state_dict())
-        snap.update(
-            self.force_field.state_dict()
-        )  # currents in use (after the network's), neighbour lists, held slow forces
+            snap.update(self.network.state_dict())  # contacts, flags, filament heights, the rod currents
+        snap.update(self.force_field.state_dict())  # neighbour lists, held slow forces
         return snap
 
     @classmethod
@@ -212,7 +215,7 @@ class Simulation(HealthChecks, Observables):
             sim.network.load_state_dict(snap)
         ff = sim.force_field
         ff._bind(state.position, state.velocity)
-        ff.load_state_dict(snap)  # currents, neighbour lists, held slow forces (missing ones: rebuilt)
+        ff.load_state_dict(snap)  # neighbour lists, held slow forces (missing ones: rebuilt)
         return sim
 
     @property
@@ -231,7 +234,8 @@ class Simulation(HealthChecks, Observables):
                 self._update_contacts()
 
     def _update_contacts(self):
-        """The network's step: events into the log, new currents into the force field."""
+        """The network's step: events into the log; new currents (written by the network into the
+        store the force field reads) make the held current forces stale."""
         st = self.state
         news = self.network.update(st.position, self.force_field.tip_neighbours(st.position), st.step, st.time)
         if not news.changed:
@@ -240,8 +244,8 @@ class Simulation(HealthChecks, Observables):
         for r in news.events:
             if r[2] == ev.SHORT_CIRCUIT and self.short_circuit_time is None:
                 self.short_circuit_time = r[1]
-        if news.current is not None:
-            self.force_field.set_currents(news.current)
+        if news.currents_changed:
+            self.force_field.currents_changed()
         if self.params.integrator.restart_on_events:
             self.integrator.reset_history()
 

@@ -2,8 +2,9 @@
 
 :func:`classify_rods` -- arrays in, :class:`Topology` out: which rods are free, in
 clusters, dead ends or current-carrying filaments, and which structure each rod
-belongs to. Its callers hold the contacts: :class:`~.network.Network` in a run,
-:class:`~.graph.ConnectivityGraph` for an event log read back from a file.
+belongs to. The contacts are a :class:`~.contactset.ContactSet`, whose ``topology``
+calls it once per set (in a run, :class:`~.network.Network`; for an event log or a
+saved frame, :class:`~.graph.ConnectivityGraph`).
 
 Topology rule
 -------------
@@ -42,7 +43,7 @@ import numpy as np
 from selfas_graph.kernels.graph import edges_in_blocks_of
 from selfas_graph.kernels.graph import structures as component_structures
 from selfas_graph.model import events as ev
-from selfas_graph.model.circuit import CircuitSolution, SolveMemo, merge_tips, solve_circuit
+from selfas_graph.model.circuit import merge_tips
 from selfas_graph.model.validate import _as_count, _as_index_array, _frozen
 
 __all__ = [
@@ -55,7 +56,6 @@ __all__ = [
     "classify_rods",
     "conductor_node_key",
     "circuit_event",
-    "ContactArrays",
 ]
 
 #: rod roles (``Topology.role``)
@@ -260,64 +260,3 @@ def circuit_event(short_before: bool, topology: Topology, step: int, time: float
     if topology.has_short_circuit:
         return [(step, time, ev.SHORT_CIRCUIT, topology.n_filament, -1)]
     return [(step, time, ev.OPEN_CIRCUIT, -1, -1)]
-
-
-class ContactArrays:
-    """The topology and the circuit solve of contacts given as arrays: what
-    :class:`~.graph.ConnectivityGraph` and :class:`~.network.Network` share.
-
-    A subclass provides ``arrays()`` (``tip_contacts``, ``conductor_tip``, ``conductor_id``,
-    ``conductor_potential``), ``_conductors()`` (the per-contact conductor ids, all conductor
-    ids), ``n_rods``, ``n_tips``, ``solver``, ``rod_resistance``, ``contact_resistance``, and sets
-    ``_topology`` to None when the contacts change.
-    """
-
-    _topology: Topology | None = None
-    changed = True
-
-    def conductor_node_key(self, arrays: dict | None = None) -> np.ndarray:
-        """Attachment key of each conductor contact of :meth:`arrays` (:func:`conductor_node_key`)."""
-        arrays = self.arrays() if arrays is None else arrays
-        return conductor_node_key(arrays["conductor_id"], *self._conductors())
-
-    def topology(self) -> Topology:
-        """Roles and structures of the rods (cached until the next contact change)."""
-        if self._topology is None:
-            arr = self.arrays()
-            self._topology = classify_rods(
-                self.n_rods, arr["tip_contacts"], arr["conductor_tip"], self.conductor_node_key(arr)
-            )
-        return self._topology
-
-    @property
-    def has_short_circuit(self) -> bool:
-        """Whether a filament joins two different conductor attachments now."""
-        return self.topology().has_short_circuit
-
-    def solve(self, memo: SolveMemo | None = None) -> CircuitSolution:
-        """Potentials and rod currents of the present contacts; clears ``changed``.
-
-        ``memo``: a :class:`~.circuit.SolveMemo` that remembers the last reduced system. The
-        tips are merged once, by the topology (:attr:`Topology.node_of_tip`). Raises ValueError
-        if a per-contact potential is unset.
-        """
-        arr = self.arrays()
-        pot = arr["conductor_potential"]
-        if np.isnan(pot).any():
-            i = np.flatnonzero(np.isnan(pot))
-            pairs = list(zip(arr["conductor_tip"][i].tolist(), arr["conductor_id"][i].tolist()))
-            raise ValueError(f"unset contact potential for (tip, conductor) {pairs[:10]}")
-        topo = self.topology()
-        sol = solve_circuit(
-            self.n_tips,
-            arr["tip_contacts"],
-            arr["conductor_tip"],
-            pot,
-            solver=self.solver,
-            rod_resistance=self.rod_resistance,
-            contact_resistance=self.contact_resistance,
-            memo=memo,
-            merged=(topo.n_nodes, topo.node_of_tip),
-        )
-        self.changed = False
-        return sol

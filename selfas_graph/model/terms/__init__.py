@@ -7,7 +7,7 @@ module                 contents
 ``pairs``              forces between rods: terms 1, 2, 6 (tip-tip magnetic, tip brake, Yukawa)
 ``fields``             one-body terms of the apparatus: 3, 4, 5, 7, 8
 ``external``           the fixed objects of case (ii): term 11
-``currents``           :class:`RodCurrents` and terms 9, 10
+``currents``           terms 9, 10 (the currents they read are the network's ``RodCurrents``)
 ``registry``           ``TERM_CLASSES``: scenario name -> term class
 ``forcefield``         :class:`ForceField`, the container (channels, sums, gather over ranks, state)
 ``mts``                :class:`MultipleTimeStepping`: the held slow forces
@@ -18,7 +18,7 @@ The term classes end in ``Force`` (``TipMagneticForce``); their parameters are t
 """
 
 from .base import FieldSource, Term, share_by_mass
-from .currents import CurrentFieldForce, CurrentLorentzForce, RodCurrents
+from .currents import CurrentFieldForce, CurrentLorentzForce
 from .external import ExternalDipoleForce, ExternalFilamentForce, external_monopoles
 from .fields import AmbientBrakeForce, ElectricFieldForce, ElectrodesForce, PlasmaFilamentForce, UniformFieldForce
 from .forcefield import ForceField
@@ -38,7 +38,6 @@ __all__ = [
     "ForceField",
     "MultipleTimeStepping",
     "PlasmaFilamentForce",
-    "RodCurrents",
     "TERM_CLASSES",
     "Term",
     "TipBrakeForce",

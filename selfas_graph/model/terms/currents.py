@@ -1,7 +1,8 @@
-"""The rod currents and the two terms that read them (docs/model.md 'Term 9', 'Term 10').
+"""The two terms that read the rod currents (docs/model.md 'Term 9', 'Term 10').
 
-:class:`RodCurrents` holds the currents of the last circuit solve and is the source of their
-magnetic field. The field of the rod currents acts on the magnetic tips (term 9,
+The currents of the last circuit solve are kept by the network
+(:class:`~selfas_graph.model.network.RodCurrents`, ``ForceField.currents``); these terms read
+them there. The field of the rod currents acts on the magnetic tips (term 9,
 :class:`CurrentFieldForce`); the Lorentz force on the currents (term 10,
 :class:`CurrentLorentzForce`) feels the rod currents' field and that of every other field
 source that is on (:class:`~selfas_graph.model.terms.base.FieldSource`), which it asks for
@@ -21,57 +22,8 @@ _FIELD_KERNEL = {"float64": kc.rod_current_field, "mixed": kc.rod_current_field_
 _TIP_KERNEL = {"float64": kc.current_force_on_tips, "mixed": kc.current_force_on_tips_mixed}
 
 
-class RodCurrents:
-    """The rod currents of the last circuit solve, and the source of their field.
-
-    Parameters
-    ----------
-    n_rods : int
-    wire_radius : float
-        w = D / 2, which keeps the field finite near a rod (docs/model.md 'Term 9').
-
-    Attributes
-    ----------
-    current : (n_rods,) float64
-        J_i, positive from tip a to tip b (units J0); zero until :meth:`set` is called.
-    active_rod : (n_active,) int64
-        The rods whose current is not exactly zero, sorted: the only rods the kernels visit.
-    position : (n_tips, 3) float64 or None
-        The tip positions the field is computed for (bound by the force field).
-    """
-
-    def __init__(self, n_rods: int, wire_radius: float):
-        self.n_rods = n_rods
-        self.w = wire_radius
-        self.current = np.zeros(n_rods)
-        self.active_rod = np.zeros(0, dtype=np.int64)
-        self.position = None
-
-    def set(self, current) -> bool:
-        """Take the currents ``(n_rods,)``; rods whose current is exactly zero are left out of the kernels.
-
-        Returns False (and keeps the arrays in use) when the currents are those in use, bit for bit.
-        """
-        current = np.ascontiguousarray(current, dtype=np.float64)
-        if current.shape != (self.n_rods,):
-            raise ValueError(f"currents must have shape ({self.n_rods},), got {current.shape}")
-        if np.array_equal(current, self.current):
-            return False
-        self.current = current
-        self.active_rod = np.flatnonzero(current != 0.0).astype(np.int64)
-        return True
-
-    def field_at(self, points, out, exclude_rod, precision="float64"):
-        """Overwrite ``out`` (m, 3) with the field of the rod currents at ``points`` (m, 3), leaving out
-        at each point the rod ``exclude_rod[p]`` ((m,) int64; -1: none), e.g. the rod the point is on.
-        ``precision``: ``"float64"``, or ``"mixed"`` (float32 law, float64 sums;
-        :func:`~selfas_graph.kernels.currents.rod_current_field_mixed`)."""
-        kernel = _FIELD_KERNEL[precision]
-        kernel(points, exclude_rod, self.position, self.active_rod, self.current, self.w, out)
-
-
 class CurrentFieldForce(Term):
-    """Term 9: q_k times the field of all other rods' currents (``ff.rod_currents``, wire radius D/2).
+    """Term 9: q_k times the field of all other rods' currents (``ff.currents``, wire radius D/2).
     No kernel call while no rod carries current. ``forces.current_field.precision`` picks the
     float64 or the mixed-precision kernel."""
 
@@ -88,10 +40,10 @@ class CurrentFieldForce(Term):
     def compute(self, ff, out):
         f = out["current_field"]
         f.fill(0.0)
-        rc = ff.rod_currents
+        rc = ff.currents
         if len(rc.active_rod):
             lo, hi = ff.blocks.tips
-            self.kernel(ff.position, ff.tip_charge, rc.active_rod, rc.current, rc.w, lo, hi, f)
+            self.kernel(ff.position, ff.tip_charge, rc.active_rod, rc.current, ff.wire_radius, lo, hi, f)
             ff.calls[self.name] += 1
 
     def blocked(self, ff):
@@ -101,7 +53,7 @@ class CurrentFieldForce(Term):
 class CurrentLorentzForce(Term):
     """Term 10: J_i s_i x B_tot on current-carrying rods, by Gauss-Legendre quadrature along each rod.
 
-    B_tot = the currents of all other rods (``ff.rod_currents``) + every field source that is
+    B_tot = the currents of all other rods (``ff.currents``, :meth:`current_field`) + every field source that is
     on (``ff.field_sources``, in term order: the uniform field, the plasma filament, the external
     filament and the dipole's monopoles). Only current-carrying rods are visited, and of them
     only those in the field's block of rods (the field at their points still sums over every
@@ -129,7 +81,7 @@ class CurrentLorentzForce(Term):
         if not len(active):
             return
         ff.calls[self.name] += 1
-        # active_rod is sorted (RodCurrents.set), so the rods of this block are one slice of it
+        # active_rod is sorted (network.RodCurrents.set), so the rods of this block are one slice of it
         mine = active[np.searchsorted(active, ff.blocks.rods[0]) : np.searchsorted(active, ff.blocks.rods[1])]
         if not len(mine):
             return
@@ -137,7 +89,7 @@ class CurrentLorentzForce(Term):
         pts = ff.buffer("gl_points", len(mine) * ng)
         kc.quadrature_points(ff.position, mine, self.t, pts)
         field = ff.buffer("gl_field", len(mine) * ng)
-        ff.rod_currents.field_at(pts, field, exclude_rod=np.repeat(mine, ng), precision=self.precision)
+        self.current_field(ff, pts, field, exclude_rod=np.repeat(mine, ng))
         extra = ff.buffer("gl_extra", len(pts))
         for source in ff.field_sources:
             source.field_at(pts, extra)
@@ -167,9 +119,17 @@ class CurrentLorentzForce(Term):
             self.wt,
             self.panel_t,
             self.panel_w,
-            ff.rod_currents.w,
+            ff.wire_radius,
             f,
         )
+
+    def current_field(self, ff, points, out, exclude_rod):
+        """Overwrite ``out`` (m, 3) with the field of the rod currents at ``points`` (m, 3), leaving out
+        at each point the rod ``exclude_rod[p]`` ((m,) int64; -1: none), e.g. the rod the point is on;
+        in the term's precision (``"mixed"``: float32 law, float64 sums;
+        :func:`~selfas_graph.kernels.currents.rod_current_field_mixed`)."""
+        rc = ff.currents
+        _FIELD_KERNEL[self.precision](points, exclude_rod, ff.position, rc.active_rod, rc.current, ff.wire_radius, out)
 
     def blocked(self, ff):
         return ("current_lorentz",) if len(ff.active_rod) else ()

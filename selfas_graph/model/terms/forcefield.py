@@ -16,8 +16,9 @@ rod and nothing is communicated. Their energies are computed as one value per ro
 gathered the same way and summed over all rows on every rank: the same float whatever
 the number of ranks.
 
-The field also holds what changes during a run besides the state: the rod currents
-(:class:`~selfas_graph.model.terms.currents.RodCurrents`), the neighbour lists, and with
+The field reads the rod currents from their owner, the network's
+:class:`~selfas_graph.model.network.RodCurrents` (``currents``), and keeps no copy of them. It
+holds what else changes during a run besides the state: the neighbour lists, and with
 multiple time stepping the held slow forces
 (:class:`~selfas_graph.model.terms.mts.MultipleTimeStepping`); :meth:`ForceField.state_dict`
 and :meth:`ForceField.load_state_dict` save and restore them for exact restarts.
@@ -33,9 +34,9 @@ import numpy as np
 from ...kernels.integrate import channel_sum, channel_sum_power
 from ...parallel import RowBlocks
 from ..neighbours import NeighbourList
+from ..network import RodCurrents
 from ..params import Parameters
 from .base import FieldSource, Term
-from .currents import RodCurrents
 from .mts import MultipleTimeStepping
 from .pairs import TipMagneticForce, YukawaForce
 from .registry import TERM_CLASSES
@@ -54,18 +55,30 @@ class ForceField:
     blocks : RowBlocks, optional
         The rods whose rows this process computes in the expensive terms (default: all of
         them, a serial run).
+    currents : RodCurrents, optional
+        The rod currents the current terms read: the network's (``Network.currents``) in a run
+        with contacts; default: zero currents of the field's own (a scene without a network,
+        or a field driven by :meth:`set_currents` in tests and tools).
 
     Attributes
     ----------
     terms : list of the active term objects, docs/model.md order ('Force terms')
     channels : list of (name, conservative)
     field_sources : the terms that are also sources of a magnetic field (FieldSource), in term order
-    rod_currents : RodCurrents, the currents of the last circuit solve
+    currents : RodCurrents, the rod currents of the last circuit solve (not a copy: their owner's)
+    wire_radius : float, w = D/2 of the rod currents' field
     mts : MultipleTimeStepping or None (``integrator.slow_every = 1``)
     calls : Counter of kernel evaluations per term (tests count these)
     """
 
-    def __init__(self, params: Parameters, state, timing: bool = False, blocks: RowBlocks | None = None):
+    def __init__(
+        self,
+        params: Parameters,
+        state,
+        timing: bool = False,
+        blocks: RowBlocks | None = None,
+        currents: RodCurrents | None = None,
+    ):
         self.params = params
         self.blocks = RowBlocks(state.n_rods) if blocks is None else blocks
         if self.blocks.n_rods != state.n_rods:
@@ -107,7 +120,10 @@ class ForceField:
         self.position = None
         self.velocity = None
         # wire radius w = D/2 of the rod currents' field (docs/model.md 'Term 9', choice A5)
-        self.rod_currents = RodCurrents(self.n_rods, wire_radius=0.5 * params.rods.diameter)
+        self.wire_radius = 0.5 * params.rods.diameter
+        self.currents = RodCurrents(self.n_rods) if currents is None else currents
+        if self.currents.n_rods != self.n_rods:
+            raise ValueError(f"the currents cover {self.currents.n_rods} rods, the state has {self.n_rods}")
         # multiple time stepping (integrator.slow_every > 1): the slow terms' channels keep their
         # last evaluation; the tip term's far part is kept apart from its fast close pairs
         self.multiple_time_stepping = params.integrator.slow_every > 1
@@ -120,30 +136,36 @@ class ForceField:
 
     @property
     def current(self) -> np.ndarray:
-        """Rod currents of the last circuit solve, (n_rods,) float64 (``rod_currents.current``)."""
-        return self.rod_currents.current
+        """Rod currents of the last circuit solve, (n_rods,) float64 (``currents.current``)."""
+        return self.currents.current
 
     @property
     def active_rod(self) -> np.ndarray:
-        """The rods that carry current, sorted (``rod_currents.active_rod``)."""
-        return self.rod_currents.active_rod
+        """The rods that carry current, sorted (``currents.active_rod``)."""
+        return self.currents.active_rod
+
+    def currents_changed(self) -> None:
+        """The owner of the currents changed them: the held current forces are computed again at
+        the next evaluation (multiple time stepping; nothing to do without it).
+
+        A solve that gives the same currents again, bit for bit (an event in a structure that
+        carries none), is not reported: the held current forces stay valid, as between any two full
+        evaluations (late in the Fig. 2 scene half the solves; docs/performance.md).
+        """
+        if self.mts is not None:
+            self.mts.currents_changed()
 
     def set_currents(self, current):
-        """Rod currents from the last circuit solve, (n_rods,) float64; used from the next evaluation on.
-
-        Rods whose current is exactly zero are left out of the current kernels. The same currents
-        again (a solve after an event in a structure that carries none) turn nothing stale: the held
-        current forces stay valid, as between any two full evaluations (late in the Fig. 2 scene half
-        the solves; docs/performance.md).
-        """
-        if self.rod_currents.set(current) and self.mts is not None:
-            self.mts.currents_changed()
+        """Write rod currents ``(n_rods,)`` float64 into :attr:`currents`, used from the next evaluation
+        on (for a field driven without a network: tests, tools). Rods whose current is exactly zero
+        are left out of the current kernels."""
+        if self.currents.set(current):
+            self.currents_changed()
 
     # -- lazily computed views of the current (position, velocity) ---------------------------------
     def _bind(self, position, velocity):
         self.position = position
         self.velocity = velocity
-        self.rod_currents.position = position
         self._soa = None
         self._centre = None
 
@@ -251,11 +273,11 @@ class ForceField:
 
     # -- the field's own state, for exact restarts -------------------------------------------------
     def state_dict(self) -> dict:
-        """What the next evaluations depend on besides the positions and velocities, as a flat dict of
-        copies (the checkpoint's keys): the rod currents (``current``), the build positions and build
-        counts of the neighbour lists (``tip_nl_*``, ``centre_nl_*``) and, with multiple time stepping,
-        the held slow forces (``mts_*``, :meth:`MultipleTimeStepping.state_dict`)."""
-        d = {"current": self.current.copy()}
+        """What the next evaluations depend on besides the positions, velocities and rod currents (the
+        network saves those, ``Network.state_dict``), as a flat dict of copies (the checkpoint's keys):
+        the build positions and build counts of the neighbour lists (``tip_nl_*``, ``centre_nl_*``) and,
+        with multiple time stepping, the held slow forces (``mts_*``, :meth:`MultipleTimeStepping.state_dict`)."""
+        d = {}
         if self.mts is not None:
             d.update(self.mts.state_dict())
         for name, nl in (("tip_nl", self._tip_nl), ("centre_nl", self._centre_nl)):
@@ -278,7 +300,6 @@ class ForceField:
         if "centre_nl_reference" in d and self._centre_nl is not None:
             self._centre_nl.build(np.array(d["centre_nl_reference"]))
             self._centre_nl.n_builds = int(d["centre_nl_builds"])
-        self.set_currents(np.array(d["current"], dtype=np.float64))
         if self.mts is not None:
             self.mts.load_state_dict(d)
 
