@@ -9,7 +9,7 @@ are short-circuited from the first step; six free rods float beside them. The sc
 4. reads the file back with ``RunFile``.
 
 Run it with ``python examples/python_api.py [OUT.h5]`` (a few seconds after the kernels are
-compiled); the tests run it too (tests/test_python_api.py).
+compiled); the tests run it too (tests/cli/test_python_api.py).
 """
 
 import sys

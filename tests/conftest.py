@@ -85,7 +85,7 @@ def rng():
 
 
 # --------------------------------------------------------------------------- hostile-input tests
-# fixtures of tests/test_hostile.py and tests/test_hostile_bugs.py (their helpers: tests/hostile.py)
+# fixtures of tests/validation/test_hostile.py and tests/validation/test_hostile_bugs.py (their helpers: tests/hostile.py)
 
 
 class RealRun(dict):

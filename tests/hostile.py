@@ -1,5 +1,5 @@
-"""Helpers of the hostile-input tests (tests/test_hostile.py, the property tests, and
-tests/test_hostile_bugs.py, the bugs they found, pinned): the in-process command line and its
+"""Helpers of the hostile-input tests (tests/validation/test_hostile.py, the property tests, and
+tests/validation/test_hostile_bugs.py, the bugs they found, pinned): the in-process command line and its
 contract, TOML writing, the walk over the scenario schema, the hypothesis strategies that
 generate scenario files and hostile HDF5 files. The fixtures both modules use, ``real_run`` and
 ``workdir``, are in tests/conftest.py.

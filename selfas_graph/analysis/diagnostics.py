@@ -39,7 +39,7 @@ Two approximations, each with its own knob:
   128 unit rods agrees with the Stokes line integral of its exact vector potential
   to rounding (<= 4e-15 relative) for discs inside the ring, wider than it, or on
   planes 1 L away, and to 2e-12 for a disc in the ring's plane whose edge is 0.2 L
-  from the wire (``tests/test_diagnostics.py``, azimuthal mean made exact there);
+  from the wire (``tests/unit/test_diagnostics.py``, azimuthal mean made exact there);
   on the quick.toml frame above, refining to 16 nodes per 0.05 L changes the flux
   by 1e-4 of its maximum, which is the rods near the plane, not smooth curvature.
 """

@@ -182,7 +182,7 @@ def mean_sem_fits(values, fit_err, axis=0):
     so the sum counts that part twice: it is an upper bound for it, chosen because most of a
     fit's uncertainty on these structures is systematic (how the slope depends on the range),
     shared between seeds and not reduced by their spread. A bias common to every seed is not
-    reduced by averaging at all; the anchors of ``tests/test_fractal.py`` bound it.
+    reduced by averaging at all; the anchors of ``tests/unit/test_fractal.py`` bound it.
 
     Parameters
     ----------

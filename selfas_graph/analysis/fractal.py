@@ -18,7 +18,7 @@ one rod length: every range starts at one rod length or above.
 Not testable at this size
 -------------------------
 A fit whose abscissa spans less than a factor :data:`MIN_RANGE` (4, 0.6 decades of length)
-returns NaN with a note saying so. 4 is where the anchors of ``tests/test_fractal.py`` (a
+returns NaN with a note saying so. 4 is where the anchors of ``tests/unit/test_fractal.py`` (a
 compact blob of 1000 rods has R_g = 4.5 L) are still recovered within their tolerances;
 below it a compact cluster gave anything from 2 to 4.5. For :func:`rg_dimension` the range
 is that of R_g (a length), not of N.
@@ -277,7 +277,7 @@ def rg_dimension(size, rg, min_size=2, min_sizes=3, rg_min=1.0, min_range=MIN_RA
     left out, and so the fit needs R_g to span a factor ``min_range``: where small structures
     are open chains and large ones compact, the slope mixes the two: off-lattice compact blobs
     of 13-1600 rods, whose density still grows with size, give 3.6 +- 0.7 over R_g = 1.25-5.1 L
-    (``tests/test_fractal.py``), consistent with 3 only through its large uncertainty.
+    (``tests/unit/test_fractal.py``), consistent with 3 only through its large uncertainty.
 
     Parameters
     ----------
@@ -328,7 +328,7 @@ def box_dimension(position, rods=None, spacing=None, eps_min=1.0, k_min=4, n_eps
     """Box-counting dimension of points sampled along the rods: occupied boxes N(eps) ~ eps^-D.
 
     Not a claim measure (dropped from :mod:`.claims`, CHANGELOG 'Unreleased'): on the anchors of
-    ``tests/test_fractal.py`` it is biased low by more than its uncertainty at the sizes of
+    ``tests/unit/test_fractal.py`` it is biased low by more than its uncertainty at the sizes of
     the runs: 1.7-1.8 for a 2-D sheet of 600-1400 rods, 2.2-2.6 for compact blobs and 1.6-1.8
     for DLA clusters (D = 2.5) of 500-2000 rods, turned at random to the grid. Boxes of one
     rod length are threaded by single rods (1-D) and the partly filled boxes at the

@@ -1,7 +1,7 @@
 """The topology and tip merge as computed before the array kernels of ``model/topology.py``:
 scipy.sparse.csgraph and networkx, kept as the oracle the kernels must match exactly.
 
-``tests/reference.py`` imports these for the tests (tests/test_graph_kernels.py); the benchmarks
+``tests/reference.py`` imports these for the tests (tests/physics/test_graph_kernels.py); the benchmarks
 time the kernels against them (``selfas-graph bench circuit``, ``selfas-graph bench events``).
 """
 

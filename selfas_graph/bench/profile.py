@@ -278,7 +278,7 @@ def compare(args):
 
 def fused_kernels(tips=2400, calls=300, repeats=15):
     """The every-step kernels that do the work of several calls, each against the calls it replaced
-    (the same numbers bit for bit, tests/test_step_kernels.py), on random tips, one thread, CPU time,
+    (the same numbers bit for bit, tests/unit/test_step_kernels.py), on random tips, one thread, CPU time,
     interleaved: {name: (before us, after us, median per-repeat speed-up)}."""
     from selfas_graph.kernels import integrate as ki
     from selfas_graph.kernels import rigid as kr

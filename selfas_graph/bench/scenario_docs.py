@@ -10,7 +10,7 @@ Usage::
     selfas-graph bench scenario_docs           # write docs/scenarios.md
     selfas-graph bench scenario_docs --check   # exit 1 if docs/scenarios.md is not up to date
 
-``render()`` returns the text; ``tests/test_docs.py`` compares it with the file.
+``render()`` returns the text; ``tests/unit/test_docs.py`` compares it with the file.
 """
 
 from __future__ import annotations
@@ -182,7 +182,7 @@ def walk(cls=None, prefix="", instance=None, intro="", optional=False) -> Sectio
 
 
 def key_paths(section: Section | None = None) -> set:
-    """Every valid dotted path of the schema: tables and keys (used by tests/test_docs.py)."""
+    """Every valid dotted path of the schema: tables and keys (used by tests/unit/test_docs.py)."""
     section = walk() if section is None else section
     out = {k.path for k in section.keys}
     for t in section.tables:

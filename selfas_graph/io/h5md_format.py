@@ -101,7 +101,7 @@ def _growable(group, name, shape, dtype):
 
     No compression on purpose: a compressed chunk is rewritten whole at every append, so a
     kill during that write can leave it undecodable, losing frames written long before; an
-    uncompressed chunk is appended in place (seen in tests/test_restart.py's kill test).
+    uncompressed chunk is appended in place (seen in tests/validation/test_restart.py's kill test).
     """
     rows = max(1, min(1024, 2**20 // max(1, int(np.prod(shape)) * 8)))
     return group.create_dataset(name, shape=(0,) + shape, maxshape=(None,) + shape, dtype=dtype, chunks=(rows,) + shape)

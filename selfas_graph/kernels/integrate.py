@@ -17,7 +17,7 @@ def dot_as_numpy(a, b, n):
     ``a0 b0 + (a2 b2 + (a4 b4 + (a6 b6 + lane)))`` (:func:`dot_block`); past the blocks one product
     per lane and pair (a missing second element counts as the product 0 * 0); then ``lane0 + lane1``,
     added to the output's 0 (:func:`dot_finish`). The kernels sum the powers and kinetic energies of a
-    step so, as the numpy code they replace did (tests/test_step_kernels.py holds them to ``np.einsum``
+    step so, as the numpy code they replace did (tests/unit/test_step_kernels.py holds them to ``np.einsum``
     bit for bit); where numpy sums otherwise (e.g. with fused multiply-adds on ARM) they differ from it
     by round-off only.
     """

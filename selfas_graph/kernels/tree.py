@@ -42,7 +42,7 @@ and the field ``E = -grad phi`` of ``phi = sum q / |r - x_l|`` at ``d = r - c``
 
 The force on tip k is ``q_k E`` (Coulomb law of term 1 outside r*). Leaving out
 the moments above order p leaves a field error falling as ``1/R^(p+3)``, a
-relative error of about ``(b/R)^(p+1)`` (tests/test_tree.py
+relative error of about ``(b/R)^(p+1)`` (tests/physics/test_tree.py
 ``test_multipole_field_falls_with_its_order``).
 
 Evaluation walks the tree once per *group* of targets (a cell with at most

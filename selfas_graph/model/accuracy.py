@@ -3,7 +3,7 @@
 Every knob that trades speed for accuracy defaults to the setting that meets the accuracy
 docs/performance.md states for it; a faster setting is a choice a scene makes and names (the
 shipped scenario files carry ``[accuracy knob: ...]`` with the error it costs on the line that
-sets it, which ``tests/test_accuracy_defaults.py`` checks). :func:`short_of_accuracy` lists the
+sets it, which ``tests/unit/test_accuracy_defaults.py`` checks). :func:`short_of_accuracy` lists the
 settings of a parameter set that are below their stated accuracy; ``selfas-graph simulate
 --dry-run`` prints them.
 """

@@ -2,7 +2,7 @@
 
 Every number of docs/results.md between ``<!-- begin generated: KEY -->`` and
 ``<!-- end generated: KEY -->`` is written by :func:`page_blocks` from the committed summaries
-(``docs/results/NAME.json``, :mod:`.summary`); ``tests/test_results_page.py`` checks that the page
+(``docs/results/NAME.json``, :mod:`.summary`); ``tests/cli/test_results_page.py`` checks that the page
 holds what this module makes of them. The statistics (docs/model.md "Measures of the paper's claims"):
 
 * a measure every seed has: mean +- standard error over the seeds with a value; for a fitted

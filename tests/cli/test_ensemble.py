@@ -1,0 +1,615 @@
+"""``selfas-graph ensemble`` and :mod:`selfas_graph.ensemble`: seeds in their own files, nothing run twice.
+
+One small ensemble of the shipped quick scene (4 seeds on 2 worker processes to t = 0.5,
+about 30 s on 2 cores) is shared by the checks of the printed table, the summary files and
+the rerun that must run nothing; the resume, refusal and summary checks use the 60-rod
+circuit scene of conftest (one seed to t = 0.6 takes about 2 s).
+"""
+
+import csv
+import json
+import math
+import shutil
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from runfiles import differing_datasets
+
+from conftest import SMALL_CIRCUIT_SCENE
+from selfas_graph import RunFile
+from selfas_graph.analysis import rod_centres
+from selfas_graph.cli.main import main
+from selfas_graph.ensemble import Ensemble, EnsembleError, format_table, seed_path, summarise
+from selfas_graph.io.checkpoint import checkpoint_path
+from selfas_graph.model import events as ev
+
+ROOT = Path(__file__).resolve().parents[2]
+QUICK = str(ROOT / "scenarios" / "quick.toml")
+T_END = 0.5  # short: the machinery, not the physics (quick.toml short-circuits near t = 1.3)
+
+
+_same_run = differing_datasets
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    """4 seeds of quick.toml on 2 processes; (folder, stdout of the run)."""
+    folder = tmp_path_factory.mktemp("ens") / "quick"
+    capture = pytest.MonkeyPatch()
+    import io
+    import sys
+
+    out = io.StringIO()
+    capture.setattr(sys, "stdout", out)
+    try:
+        rc = main(["ensemble", QUICK, "--seeds", "4", "--jobs", "2", "--t-end", str(T_END), "-o", str(folder)])
+    finally:
+        capture.undo()
+    assert rc == 0, out.getvalue()
+    return folder, out.getvalue()
+
+
+def test_quick_ensemble_prints_the_summary_table(quick):
+    folder, out = quick
+    assert "seeds 1..4 to t = 0.5" in out and "4 to run, 0 to resume, 0 done" in out
+    assert "2 processes x 1 numba threads" in out
+    assert out.count("finished at t = 0.5") == 4
+    assert "short circuit: 0 of 4 seeds (4 without one, censored at their end time)" in out
+    for name in ("filament_rods", "total_current", "inside_R_plas", "median_axis_distance", "midplane_flux"):
+        assert f"| {name} |" in out
+    assert "| t = 0.125 | t = 0.25 | t = 0.375 | t = 0.5 |" in out
+    assert sorted(p.name for p in folder.glob("seed_*.h5")) == [
+        f"seed_000{s}{x}.h5" for s in (1, 2, 3, 4) for x in (".checkpoint", "")
+    ]
+
+
+def test_summary_files(quick):
+    folder, _ = quick
+    s = json.loads((folder / "summary.json").read_text())
+    assert s["n_seeds"] == 4 and s["times"] == [0.125, 0.25, 0.375, 0.5]
+    assert [d["seed"] for d in s["seeds"]] == [1, 2, 3, 4] and {d["status"] for d in s["seeds"]} == {"finished"}
+    assert s["short_circuit"]["n_censored"] == 4 and s["short_circuit"]["median"] is None
+    med = s["measures"]["median_axis_distance"]
+    assert med["n"] == [4, 4, 4, 4] and all(v is not None for v in med["sem"])
+    # the measure recomputed from the files: median distance of rod centres from the plasma axis at t = 0.5
+    per_seed = []
+    for k in (1, 2, 3, 4):
+        with RunFile(seed_path(folder, k)) as run:
+            c = rod_centres(run.position(-1))
+            per_seed.append(np.median(np.hypot(c[:, 0], c[:, 1])))
+    assert med["values"][0][3] == per_seed[0] and med["mean"][3] == pytest.approx(np.mean(per_seed), rel=1e-14)
+    assert med["sem"][3] == pytest.approx(np.std(per_seed, ddof=1) / 2, rel=1e-12)  # sem = s / sqrt(4)
+    rows = list(csv.DictReader((folder / "summary.csv").read_text().splitlines()))
+    row = [r for r in rows if r["measure"] == "median_axis_distance" and float(r["time"]) == 0.5][0]
+    assert float(row["mean"]) == med["mean"][3] and row["n"] == "4"
+    assert [r for r in rows if r["measure"] == "seeds_without_short_circuit"][0]["mean"] == "4"
+
+
+def test_rerun_runs_nothing_new(quick, capsys):
+    folder, _ = quick
+    before = {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")}
+    assert (
+        main(
+            [
+                "ensemble",
+                QUICK,
+                "--seeds",
+                "4",
+                "--jobs",
+                "2",
+                "--t-end",
+                str(T_END),
+                "-o",
+                str(folder),
+                "--times",
+                "0.5",
+            ]
+        )
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "0 to run, 0 to resume, 4 done" in out and "[1/" not in out and "| t = 0.5 |" in out
+    assert {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")} == before
+
+
+def test_other_parameters_are_refused(quick, capsys):
+    folder, _ = quick
+    before = {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")}
+    assert (
+        main(["ensemble", QUICK, "--seeds", "2", "--t-end", str(T_END), "-o", str(folder), "--set", "rods.count=200"])
+        == 2
+    )
+    err = capsys.readouterr().err
+    assert "seed_0001.h5 belongs to other parameters: rods.count = 300 (here 200)" in err and "--force" in err
+    assert {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")} == before
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--seeds", "0"], "--seeds: 0 must be >= 1"),
+        (["--seeds", "2", "--set", "scenario.seed=5"], "the ensemble sets scenario.seed"),
+        (["--seeds", "2", "--set", "rods.cont=5"], "rods.cont"),
+        (["--seeds", "2", "--times", "1,x"], "give simulated times separated by commas"),
+        (["--seeds", "2", "--t-end", "0.5", "--times", "0.6"], "after the end time 0.5"),
+        (["--seeds", "2", "--first-seed", "-3"], "seeds must be distinct integers >= 0"),
+        (["--seeds", "2", "--first-seed", str(2**70)], "seed 1180591620717411303424: "),
+        (["--seeds", "2", "--flux-radius", "nan"], "--flux-radius must be a positive length"),
+    ],
+)
+def test_bad_input(tmp_path, capsys, argv, message):
+    """Exit code 2 (argparse's or the command's), the message names the problem, nothing is written."""
+    try:
+        rc = main(["ensemble", QUICK, "-o", str(tmp_path / "e"), *argv])
+    except SystemExit as exc:
+        rc = exc.code
+    assert rc == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "e").exists()
+
+
+def test_output_folder_that_is_a_file_is_refused(tmp_path, capsys):
+    (tmp_path / "e").write_text("precious")
+    assert main(["ensemble", QUICK, "--seeds", "1", "-o", str(tmp_path / "e")]) == 2
+    assert "the output folder" in capsys.readouterr().err and (tmp_path / "e").read_text() == "precious"
+    assert main(["ensemble", QUICK, "--seeds", "1", "-o", str(tmp_path / "e" / "sub")]) == 2
+    assert "cannot" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- the small circuit scene
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("small")
+    (folder / "scene.toml").write_text(SMALL_CIRCUIT_SCENE)
+    return folder / "scene.toml"
+
+
+def test_an_earlier_end_is_continued_from_the_checkpoint_bit_for_bit(scene, tmp_path):
+    """Seed 3 to t = 0.3, then the ensemble to 0.6 resumes it: the file equals a direct run to 0.6."""
+    short = Ensemble(scene, [3], tmp_path / "e", t_end=0.3)
+    (r,) = short.run()
+    assert r["status"] == "finished" and r["t"] == pytest.approx(0.3)
+    full = Ensemble(scene, [3], tmp_path / "e")
+    (plan,) = full.plan()
+    assert plan.action == "resume"
+    (r,) = full.run()
+    assert r["status"] == "finished" and r["action"] == "resume"
+    direct = Ensemble(scene, [3], tmp_path / "direct")
+    direct.run()
+    assert _same_run(seed_path(tmp_path / "e", 3), seed_path(tmp_path / "direct", 3)) == []
+    assert [p.action for p in full.plan()] == ["done"]
+
+
+def test_killed_seed_resumes_and_one_without_checkpoint_is_refused(scene, tmp_path):
+    ens = Ensemble(scene, [3, 4], tmp_path, t_end=0.2)
+    ens.run()
+    for s in (3, 4):  # as after kill -9 at t = 0.2: status still "running"
+        with h5py.File(seed_path(tmp_path, s), "r+") as f:
+            f["parameters/selfas_graph"].attrs["status"] = "running"
+    checkpoint_path(seed_path(tmp_path, 4)).unlink()
+    ens = Ensemble(scene, [3, 4], tmp_path, t_end=0.3)
+    with pytest.raises(EnsembleError, match=r"seed_0004.h5 is running at t = 0.2 .* no usable checkpoint"):
+        ens.plan()
+    # summarising only, a file still being written (or killed) is read up to its last frame
+    assert [(p.seed, p.action) for p in ens.plan(summary_only=True)] == [(3, "resume"), (4, "partial")]
+    forced = Ensemble(scene, [3, 4], tmp_path, t_end=0.3, force=True)
+    assert [(p.seed, p.action) for p in forced.plan()] == [(3, "resume"), (4, "run")]
+    assert [r["status"] for r in forced.run()] == ["finished", "finished"]
+
+
+def test_failed_seed_is_kept_and_reported(scene, tmp_path, capsys):
+    Ensemble(scene, [3], tmp_path, t_end=0.1).run()
+    with h5py.File(seed_path(tmp_path, 3), "r+") as f:
+        f["parameters/selfas_graph"].attrs["status"] = "failed: a test"
+    before = seed_path(tmp_path, 3).read_bytes()
+    assert main(["ensemble", str(scene), "--seeds", "1", "--t-end", "0.2", "-o", str(tmp_path)]) == 3
+    out = capsys.readouterr().out
+    assert "1 failed" in out and "seed 3: failed: a test (kept; --force reruns it)" in out
+    assert seed_path(tmp_path, 3).read_bytes() == before
+
+
+def test_summary_counts_censored_short_circuits_apart(scene, tmp_path):
+    """Seeds 3 and 4 of the circuit scene: the short-circuit times from the event records,
+    censored ones (none by t_end) counted and not averaged in."""
+    ens = Ensemble(scene, [3, 4, 5], tmp_path)
+    ens.run(jobs=1)
+    s = ens.summarise(times=[0.3, 0.6])
+    sc_times = []
+    for k in (3, 4, 5):
+        with RunFile(seed_path(tmp_path, k)) as run:
+            e = run.events()
+            t = e["time"][e["kind"] == ev.SHORT_CIRCUIT] if len(e) else []
+            sc_times.append(float(t.min()) if len(t) else None)
+    seen = [t for t in sc_times if t is not None]
+    assert seen, "the circuit scene must short-circuit in at least one seed"
+    sc = s["short_circuit"]
+    assert sc["n"] == 3 and sc["n_observed"] == len(seen) and sc["n_censored"] == 3 - len(seen)
+    assert sc["mean_observed"] == pytest.approx(np.mean(seen), rel=1e-14)
+    assert [d["short_circuit_time"] for d in s["seeds"]] == sc_times
+    # no plasma filament in this scene: the R_plas measure does not apply
+    assert s["measures"]["inside_R_plas"]["mean"] == [None, None] and s["measures"]["inside_R_plas"]["n"] == [0, 0]
+    fil = s["measures"]["filament_rods"]
+    with RunFile(seed_path(tmp_path, 3)) as run:
+        t, v = run.observable("rods/filament")
+    assert fil["values"][0][1] == v[np.argmin(np.abs(t - 0.6))]
+    flux = s["measures"]["midplane_flux"]
+    assert all(math.isfinite(x) for x in flux["values"][0] if x is not None)
+    table = format_table(s)
+    assert f"short circuit: {len(seen)} of 3 seeds" in table and "| inside_R_plas | fraction | n/a | n/a |" in table
+
+
+def test_summary_leaves_out_seeds_that_ended_early(scene, tmp_path):
+    Ensemble(scene, [3], tmp_path, t_end=0.2).run()
+    Ensemble(scene, [4], tmp_path, t_end=0.4).run()
+    s = summarise([seed_path(tmp_path, 3), seed_path(tmp_path, 4)], [0.2, 0.4])
+    assert s["measures"]["median_axis_distance"]["n"] == [2, 1]
+    assert s["short_circuit"]["censored_at"] == sorted(
+        [d["t_end"] for d in s["seeds"] if d["short_circuit_time"] is None]
+    )
+
+
+def test_seed_file_is_what_simulate_writes(scene, tmp_path):
+    """A seed's file is the run of ``simulate --set scenario.seed=S``, bit for bit, but for its provenance."""
+    ens = Ensemble(scene, [4], tmp_path / "e", t_end=0.2)
+    ens.run()
+    assert (
+        main(
+            [
+                "simulate",
+                str(scene),
+                "--set",
+                "scenario.seed=4",
+                "--t-end",
+                "0.2",
+                "-o",
+                str(tmp_path / "direct.h5"),
+                "--progress",
+                "none",
+            ]
+        )
+        == 0
+    )
+    differ = _same_run(seed_path(tmp_path / "e", 4), tmp_path / "direct.h5")
+    assert differ == []
+    with RunFile(seed_path(tmp_path / "e", 4)) as run:
+        assert run.meta["command_line"] == ens.command_for(4) and run.parameters["scenario"]["seed"] == 4
+    shutil.rmtree(tmp_path / "e")
+
+
+@pytest.mark.parametrize("sig", ["SIGTERM", "SIGINT"])
+def test_a_signal_stops_the_seeds_with_checkpoints_and_a_rerun_continues(scene, tmp_path, sig):
+    """SIGTERM or SIGINT to the launching process: the running seeds stop after a step with a checkpoint
+    (exit code 130, no further seed started), no process of the ensemble is left, and the same command
+    again resumes them."""
+    import os
+    import signal
+    import time
+
+    folder = tmp_path / "e"
+    proc = _ensemble_process(scene, folder, "--seeds", "3")
+    try:
+        first = [seed_path(folder, s) for s in (3, 4)]
+        _wait_for_seed_files(folder, (3, 4))
+        time.sleep(1.0)
+        proc.send_signal(getattr(signal, sig))
+        out, err = proc.communicate(timeout=90)  # a step and a checkpoint; 90 s: a loaded machine
+        assert proc.returncode == 130, err
+        if Path("/proc/self/stat").exists():
+            assert _group_gone(proc.pid, 10) == [], "processes of the stopped ensemble still run"
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate(timeout=30)
+    assert "rerun the same command to continue" in err and out.count("interrupted at t = ") == 2
+    assert not seed_path(folder, 5).exists()
+    for p in first:
+        assert checkpoint_path(p).exists()
+        with RunFile(p) as run:
+            assert run.meta["status"].startswith("interrupted at step")
+    plans = Ensemble(scene, 3, folder, t_end=20).plan()
+    assert [p.action for p in plans] == ["resume", "resume", "run"]
+
+
+def test_no_run_summarises_the_files_present(quick, capsys):
+    folder, _ = quick
+    assert (
+        main(
+            [
+                "ensemble",
+                QUICK,
+                "--seeds",
+                "5",
+                "--t-end",
+                str(T_END),
+                "-o",
+                str(folder),
+                "--no-run",
+                "--times",
+                "0.5",
+                "--plot",
+            ]
+        )
+        == 0
+    )
+    out = capsys.readouterr().out
+    assert "1 to run, 0 to resume, 4 done" in out and "[1/" not in out
+    png = (folder / "summary.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 1000
+    assert not seed_path(folder, 5).exists()
+    assert json.loads((folder / "summary.json").read_text())["missing"] == [str(seed_path(folder, 5))]
+
+
+def test_a_measure_is_one_more_entry(scene, tmp_path):
+    """The summary takes any list of named per-frame measures (the claim measures join this way)."""
+    from selfas_graph.ensemble import FRAME_MEASURES, Measure
+
+    Ensemble(scene, [3, 4], tmp_path, t_end=0.1).run()
+    extra = Measure("frame_time", "t0", "the frame's time", lambda f: f.time)
+    s = summarise([seed_path(tmp_path, 3), seed_path(tmp_path, 4)], [0.05, 0.1], measures=[*FRAME_MEASURES, extra])
+    m = s["measures"]["frame_time"]
+    assert m["mean"] == pytest.approx([0.05, 0.1], rel=1e-12) and m["sem"] == [0.0, 0.0] and m["n"] == [2, 2]
+    assert list(s["measures"])[-1] == "frame_time" and "| frame_time | t0 |" in format_table(s)
+
+
+def test_summary_leaves_out_an_unreadable_file_by_name(scene, tmp_path):
+    Ensemble(scene, [3], tmp_path, t_end=0.1).run()
+    seed_path(tmp_path, 4).write_bytes(b"not hdf5")
+    s = summarise([seed_path(tmp_path, 3), seed_path(tmp_path, 4)], [0.1])
+    assert s["n_seeds"] == 1 and s["measures"]["median_axis_distance"]["n"] == [1]
+    assert s["unreadable"][0]["path"] == str(seed_path(tmp_path, 4))
+    assert "left out: " in format_table(s) and "not a readable HDF5 file" in format_table(s)
+
+
+def test_a_file_of_an_earlier_version_matches_where_it_lacks_only_later_keys_at_their_default():
+    """Keys added after a run file was written (contacts.resistance, rods.length, ...) count as
+    equal when the wanted value is their default; not otherwise, and never for a force term
+    that the file has off."""
+    from selfas_graph.ensemble import parameter_differences
+    from selfas_graph.model.params import Parameters
+
+    wanted = Parameters().replace({"forces.yukawa": {}}).to_dict()
+    stored = json.loads(json.dumps(wanted))
+    del stored["contacts"]
+    assert parameter_differences(stored, wanted) == []
+    changed = Parameters().replace({"forces.yukawa": {}, "contacts.resistance": 2.0}).to_dict()
+    assert parameter_differences(stored, changed) == ["contacts.resistance"]
+    stored["forces"]["yukawa"] = None  # the term off in the file: its keys are real differences
+    assert "forces.yukawa.screening_length" in parameter_differences(stored, wanted)
+
+
+def test_a_later_key_of_an_optional_table_at_its_default_matches_a_file_that_lacks_it():
+    """A key added later to a table that is off by default (forces.tip_magnetic.precision)
+    has a default too: a file written before it, with the table on, used that default."""
+    from selfas_graph.ensemble import parameter_differences
+    from selfas_graph.model.params import Parameters
+
+    wanted = Parameters().replace({"forces.tip_magnetic": {}}).to_dict()
+    stored = json.loads(json.dumps(wanted))
+    del stored["forces"]["tip_magnetic"]["precision"]
+    assert parameter_differences(stored, wanted) == []
+    mixed = Parameters().replace({"forces.tip_magnetic": {"precision": "mixed"}}).to_dict()
+    assert parameter_differences(stored, mixed) == ["forces.tip_magnetic.precision"]
+
+
+def test_fit_errors_and_current_groups_in_the_summary(scene, tmp_path, monkeypatch):
+    """A fitted measure's standard error adds each seed's fit uncertainty; a grouped measure is
+    summarised over the seeds carrying a current alone (k of n, median, range, mean, sem), in
+    summary.json, summary.csv and the table. Hand-set values per seed; which seed carries a
+    current is set by hand too (seed 3 does, seed 4 does not)."""
+    import selfas_graph.ensemble.summary as ens  # where summarise looks carries_current up
+    from selfas_graph.ensemble import FRAME_MEASURES, Measure, write_summary
+
+    Ensemble(scene, [3, 4], tmp_path, t_end=0.1).run()
+    seed = lambda f: f.params["scenario"]["seed"]  # noqa: E731
+    monkeypatch.setattr(ens, "carries_current", lambda f: float(seed(f) == 3))
+    fit = Measure(
+        "fake_fit", "1", "a fitted value", lambda f: 2.0 + 0.2 * (seed(f) - 3), err=lambda f: 0.1 * (seed(f) - 2)
+    )
+    cur = Measure("fake_current", "J0", "a current", lambda f: 5.0 * (seed(f) == 3), grouped=True)
+    s = summarise([seed_path(tmp_path, 3), seed_path(tmp_path, 4)], [0.1], measures=[*FRAME_MEASURES, fit, cur])
+    m = s["measures"]["fake_fit"]
+    # values 2.0, 2.2: s^2 = 0.02, between = sqrt(0.02 / 2) = 0.1; errors 0.1, 0.2: mean err^2 = 0.025
+    assert m["mean"] == pytest.approx([2.1], rel=1e-14) and m["sem_between"] == pytest.approx([0.1], rel=1e-12)
+    assert m["fit_err_rms"] == pytest.approx([np.sqrt(0.025)], rel=1e-12)
+    assert m["sem"] == pytest.approx([np.sqrt(0.01 + 0.025 / 2)], rel=1e-12) and m["n"] == [2]
+    g = s["measures"]["fake_current"]
+    assert (g["k"], g["n_seeds"], g["median"], g["min"], g["max"]) == ([1], [2], [5.0], [5.0], [5.0])
+    assert g["mean"] == [5.0] and g["sem"] == [None] and g["n"] == [1]  # never the mean 2.5 of both groups
+    assert s["current"] == [[1.0], [0.0]]
+    assert "| fake_current | J0 | 1/2: 5 [5, 5], 5 (1) |" in format_table(s)
+    _, cs = write_summary(s, tmp_path)
+    rows = {r["measure"]: r for r in csv.DictReader(cs.read_text().splitlines())}
+    assert (
+        rows["fake_current"]["k"] == "1"
+        and rows["fake_current"]["n_seeds"] == "2"
+        and rows["fake_current"]["mean"] == "5.0"
+    )
+    assert float(rows["fake_fit"]["sem_between"]) == pytest.approx(0.1, rel=1e-12) and rows["fake_fit"]["k"] == ""
+    for name in ("filament_rods", "total_current", "midplane_flux", "moment_J_z"):
+        assert "k" in s["measures"][name] and "median" in s["measures"][name]
+    for name in ("fractal_dimension", "rg_dimension"):
+        assert "fit_err_rms" in s["measures"][name]
+
+
+def test_a_failed_seed_keeps_its_last_good_state_and_stores_no_nan(scene, tmp_path):
+    """Charges of 1e10 blow seed 3 up at its first step: the seed is "failed", and its failure file holds
+    the last state that passed the checks (verified, resumable) and the failed one without a NaN."""
+    from hostile import non_finite_datasets
+    from selfas_graph.io.checkpoint import read_checkpoint
+
+    ens = Ensemble(scene, [3], tmp_path, overrides=["rods.magnetic_charge.value=1e10"], t_end=0.01)
+    (r,) = ens.run()
+    assert r["status"] == "failed" and "numerical failure at step 1" in r["message"]
+    failure = tmp_path / "seed_0003.failure.h5"
+    snap, meta = read_checkpoint(failure)
+    assert int(snap["step"]) == 0 and meta["failed_step"] == 1
+    for path in tmp_path.glob("*.h5"):
+        assert non_finite_datasets(path) == [], path.name
+
+
+# ----------------------------------------------------------------------------- processes that end with the ensemble
+def _group_alive(pgid) -> list:
+    """Live processes (zombies left out: they hold no memory and wait only to be reaped) of process group ``pgid``."""
+    import os
+
+    alive = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:  # ended meanwhile
+            continue
+        if fields[0] != "Z" and int(fields[2]) == pgid:  # state, ppid, pgrp
+            alive.append(int(entry))
+    return alive
+
+
+def _group_gone(pgid, timeout) -> list:
+    """Wait up to ``timeout`` seconds for process group ``pgid`` to end; the processes still alive."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while _group_alive(pgid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    return _group_alive(pgid)
+
+
+def _ensemble_process(scene, folder, *extra):
+    """``selfas-graph ensemble`` of seeds 3.. on 2 workers to t = 20 (minutes: it is stopped long before),
+    in a session of its own, so that the test finds and, whatever happens, kills every process of it."""
+    import os
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "selfas_graph.cli.main", "ensemble", str(scene), "--jobs", "2", "--t-end", "20"]
+    env = {**os.environ, "NUMBA_NUM_THREADS": "1"}
+    return subprocess.Popen(
+        [*cmd, "-o", str(folder), *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        start_new_session=True,
+    )
+
+
+def _wait_for_seed_files(folder, seeds, timeout=90):
+    """Until the seeds' run files exist (start-up and kernel loading take 5-20 s on a loaded 2-core machine)."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while not all(seed_path(folder, s).exists() for s in seeds) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert all(seed_path(folder, s).exists() for s in seeds), "the seeds did not start"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="lists processes through /proc")
+def test_kill_9_of_the_ensemble_leaves_no_process_of_it_and_every_seed_resumes(scene, tmp_path):
+    """SIGKILL of the ensemble's process (a batch system, the OOM killer): its workers and the resource
+    tracker used to finish their seeds and then wait, idle, for good (SIGTERM did not end them). Now each
+    worker sees its launcher gone within PARENT_POLL (0.5 s), stops its seed with a checkpoint and exits:
+    10 s later (a step and a checkpoint of this 60-rod scene take milliseconds; the rest is margin for a
+    loaded machine) no process of the ensemble lives, and the same command resumes both seeds."""
+    import os
+    import signal
+    import time
+
+    folder = tmp_path / "e"
+    proc = _ensemble_process(scene, folder, "--seeds", "3")
+    try:
+        _wait_for_seed_files(folder, (3, 4))
+        time.sleep(1.0)
+        proc.kill()
+        proc.wait(timeout=30)
+        assert _group_gone(proc.pid, 10) == [], "processes of the killed ensemble still run"
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate(timeout=30)
+    plans = Ensemble(scene, 3, folder, t_end=20).plan()
+    assert [p.action for p in plans] == ["resume", "resume", "run"]
+
+
+def test_a_second_ensemble_on_the_same_folder_is_refused_before_it_starts_a_seed(scene, tmp_path, capsys):
+    """Two ensembles on one folder at once: the second stops with exit 2 naming the folder and the
+    holder, before it reads or starts any seed; the first runs on. Its lock is released on exit, and a
+    lock file left by a crash (no process holds it any more) is taken over."""
+    import os
+    import signal
+
+    from selfas_graph.ensemble import LOCK_FILE
+
+    folder = tmp_path / "e"
+    proc = _ensemble_process(scene, folder, "--seeds", "2")
+    try:
+        _wait_for_seed_files(folder, (3, 4))
+        before = {p.name: p.stat().st_mtime_ns for p in folder.iterdir() if p.name != LOCK_FILE}
+        rc = main(["ensemble", str(scene), "--seeds", "3", "--t-end", "20", "-o", str(folder)])
+        err = capsys.readouterr().err
+        assert rc == 2 and f"the output folder {folder} is in use by another ensemble (pid {proc.pid}" in err
+        assert not seed_path(folder, 5).exists()
+        assert proc.poll() is None  # the first one runs on
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=90)
+        assert proc.returncode == 130
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate(timeout=30)
+    assert set(before) <= {p.name for p in folder.iterdir()}
+    assert not (folder / LOCK_FILE).exists()  # released on exit
+    (folder / LOCK_FILE).write_text("pid 999999 on a host that crashed\n")  # stale: nobody holds it
+    assert (
+        main(["ensemble", str(scene), "--seeds", "1", "--t-end", "0.05", "-o", str(folder), "--first-seed", "9"]) == 0
+    )
+    assert not (folder / LOCK_FILE).exists()
+
+
+def test_an_ensemble_that_runs_out_of_disk_stops_with_exit_4_and_resumable_seeds(scene, tmp_path):
+    """Two seeds writing a frame every step onto a 16 MiB tmpfs: the disk fills within seconds. The
+    ensemble used to report a generic error (exit 1) and leave files no rerun could continue; now it
+    stops with exit 4, the other seed stops with a checkpoint, every seed file left is readable and
+    planned "resume" (one without a checkpoint yet is removed: planned "run"), and no summary is
+    attempted. Skipped where a tmpfs cannot be mounted."""
+    import os
+    import signal
+    import subprocess
+
+    small = tmp_path / "tmpfs"
+    small.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=16m", "tmpfs", str(small)], capture_output=True, text=True)
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs here ({r.stderr.strip() or 'not permitted'})")
+    over = ["--set", "output.interval=0.001", "--set", "output.checkpoint_interval=0.2"]
+    proc = _ensemble_process(scene, small / "e", "--seeds", "2", *over)
+    try:
+        out, err = proc.communicate(timeout=240)  # fills in 5-30 s on 2 loaded cores; a hang fails here
+        assert proc.returncode == 4, err
+        assert "I/O error" in err and "run the same command again to continue" in err and "Traceback" not in err
+        assert not (small / "e" / "summary.json").exists()
+        moved = tmp_path / "moved"  # room again: the folder copied to a larger disk
+        shutil.copytree(small / "e", moved)
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+        proc.communicate(timeout=30)
+        subprocess.run(["umount", "-l", str(small)], capture_output=True)
+    overrides = ["output.interval=0.001", "output.checkpoint_interval=0.2"]
+    plans = Ensemble(scene, 2, moved, overrides=overrides, t_end=20).plan()
+    assert {p.action for p in plans} <= {"resume", "run"} and "resume" in {p.action for p in plans}
+    for p in plans:
+        if p.path.exists():
+            with RunFile(p.path) as run:
+                assert run.n_frames > 0

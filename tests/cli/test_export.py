@@ -1,0 +1,142 @@
+"""``selfas-graph export``: GSD and extended XYZ that gsd, MDAnalysis and ASE open, with the rods as
+bonds, the roles as types and the currents; the output path rules."""
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from selfas_graph.cli.main import main
+from selfas_graph.io.export import ROLE_TYPES, ExportError, parse_frames
+from selfas_graph.io.h5md import RunFile
+
+#: a short circuit at frame 6: filament and dead-end rods, currents (tests/data/README.md)
+RUN = Path(__file__).parent.parent / "data" / "legacy_run_58b30f8.h5"
+
+
+@pytest.fixture
+def run(tmp_path):
+    path = tmp_path / "run.h5"
+    shutil.copyfile(RUN, path)
+    return path
+
+
+def _expected(path):
+    with RunFile(path) as r:
+        return {
+            "pos": r.f["particles/tips/position/value"][:],
+            "vel": r.f["particles/tips/velocity/value"][:],
+            "role": r.f["graph/role"][:],
+            "current": r.f["graph/current"][:],
+            "step": r.step,
+            "time": r.time,
+            "charge": r.tip_charge,
+        }
+
+
+def test_gsd_export_opens_in_gsd_and_mdanalysis(run, capsys):
+    gsd_hoomd = pytest.importorskip("gsd.hoomd")
+    assert main(["export", str(run), "--format", "gsd"]) == 0
+    out = run.with_suffix(".gsd")
+    assert "7 frames" in capsys.readouterr().out
+    e = _expected(run)
+    assert (e["role"][-1] == 3).any() and np.abs(e["current"][-1]).max() > 0  # the file tests what it should
+    with gsd_hoomd.open(str(out), "r") as traj:
+        assert len(traj) == 7
+        for k, frame in enumerate(traj):
+            assert frame.configuration.step == e["step"][k]
+            np.testing.assert_array_equal(frame.particles.position, e["pos"][k].astype(np.float32))
+            assert list(frame.particles.types) == ROLE_TYPES == ["free", "cluster", "dead_end", "filament"]
+            np.testing.assert_array_equal(frame.particles.typeid, np.repeat(e["role"][k], 2))
+            assert frame.bonds.N == 60
+            np.testing.assert_array_equal(frame.bonds.group, np.arange(120).reshape(60, 2))
+            np.testing.assert_array_equal(frame.bonds.typeid, e["role"][k])
+            np.testing.assert_array_equal(frame.log["bonds/current"], e["current"][k])
+            np.testing.assert_array_equal(frame.log["particles/current"], np.repeat(e["current"][k], 2))
+            assert frame.log["time"][0] == e["time"][k]
+            box = frame.configuration.box
+            assert (np.abs(frame.particles.position) < box[0] / 2).all()  # nothing wrapped
+    mda = pytest.importorskip("MDAnalysis")
+    u = mda.Universe(str(out))
+    assert len(u.atoms) == 120 and len(u.bonds) == 60 and u.trajectory.n_frames == 7
+    u.trajectory[-1]
+    np.testing.assert_array_equal(u.atoms.positions, e["pos"][-1].astype(np.float32))
+    assert set(u.atoms.types) <= set(ROLE_TYPES)
+
+
+def test_xyz_export_opens_in_ase(run):
+    ase_io = pytest.importorskip("ase.io")
+    out = run.parent / "tail.xyz"
+    assert main(["export", str(run), "--format", "xyz", "--frames=-2:", "-o", str(out)]) == 0
+    e = _expected(run)
+    frames = ase_io.read(str(out), index=":")
+    assert len(frames) == 2
+    for atoms, k in zip(frames, (5, 6)):
+        # written with 17 significant digits: the float64 values come back exactly
+        np.testing.assert_array_equal(atoms.positions, e["pos"][k])
+        np.testing.assert_array_equal(atoms.arrays["velo"], e["vel"][k])
+        np.testing.assert_array_equal(atoms.arrays["role"], np.repeat(e["role"][k], 2))
+        np.testing.assert_array_equal(atoms.arrays["current"], np.repeat(e["current"][k], 2))
+        np.testing.assert_array_equal(atoms.arrays["rod"], np.arange(120) // 2)
+        np.testing.assert_array_equal(atoms.arrays["magnetic_charge"], e["charge"])
+        assert atoms.info["Time"] == e["time"][k] and atoms.info["Step"] == e["step"][k]
+        assert not atoms.pbc.any()
+    first = out.read_text().splitlines()[2].split()[0]
+    assert first in ROLE_TYPES  # the species column: the role name (OVITO's particle type)
+
+
+def test_output_rules(run, capsys):
+    out = run.with_suffix(".gsd")
+    out.write_bytes(b"keep")
+    assert main(["export", str(run), "--format", "gsd"]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert out.read_bytes() == b"keep"
+    before = run.read_bytes()
+    for target in (run, run.parent / "." / run.name):
+        assert main(["export", str(run), "--format", "xyz", "-o", str(target), "--force"]) == 2
+        assert "run file itself" in capsys.readouterr().err
+    assert run.read_bytes() == before
+    assert main(["export", str(run), "--format", "gsd", "--force", "--frames", "0"]) == 0
+    assert out.read_bytes() != b"keep"
+    assert main(["export", str(run), "--format", "xyz", "--frames", "99"]) == 2
+    assert "out of range" in capsys.readouterr().err
+    assert main(["export", str(run.parent / "missing.h5"), "--format", "xyz"]) == 2
+    assert list(p.name for p in run.parent.iterdir() if p.suffix == ".part") == []
+
+
+@pytest.mark.parametrize(
+    "spec, frames", [("all", [0, 1, 2, 3]), ("-1", [3]), ("1:3", [1, 2]), ("::2", [0, 2]), ("0,-1", [0, 3])]
+)
+def test_parse_frames(spec, frames):
+    assert parse_frames(spec, 4).tolist() == frames
+
+
+@pytest.mark.parametrize("spec", ["x", "1:2:0", "4", "5:9", "1:2:3:4", "", "99999999999999999999999"])
+def test_parse_frames_refuses(spec):
+    with pytest.raises(ExportError):
+        parse_frames(spec, 4)
+
+
+def test_ovito_reads_the_exports(run):
+    """OVITO's Python module (pip install ovito: 260 MB, so not in the test extra) reads both exports:
+    the roles as particle types, the rods as bonds typed by role, the currents, time and total current."""
+    ovito_io = pytest.importorskip("ovito.io")
+    e = _expected(run)
+    for fmt in ("gsd", "xyz"):
+        assert main(["export", str(run), "--format", fmt]) == 0
+        pipeline = ovito_io.import_file(
+            str(run.with_suffix("." + fmt)), **({"multiple_frames": True} if fmt == "xyz" else {})
+        )
+        assert pipeline.source.num_frames == 7
+        data = pipeline.compute(6)
+        p = data.particles
+        np.testing.assert_allclose(p.positions[...], e["pos"][6], rtol=0, atol=1e-5)  # GSD: float32
+        types = {t.id: t.name for t in p.particle_types.types}
+        names = [types[i] for i in p.particle_types[...]]
+        assert names == [ROLE_TYPES[r] for r in np.repeat(e["role"][6], 2)]
+        np.testing.assert_allclose(p["current"][...], np.repeat(e["current"][6], 2), rtol=1e-6)
+        if fmt == "gsd":
+            assert p.bonds.count == 60
+            np.testing.assert_array_equal(p.bonds.topology[...], np.arange(120).reshape(60, 2))
+            assert data.attributes["time"] == pytest.approx(e["time"][6])

@@ -1,0 +1,65 @@
+"""Parameter grids: parsing, validation before anything runs (naming the key), one folder per point,
+the combined summary with the grid keys as columns, and a rerun that runs nothing new."""
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+
+from selfas_graph.ensemble import EnsembleError
+from selfas_graph.grid import Grid, parse_grid
+
+ROOT = Path(__file__).resolve().parents[2]
+QUICK = ROOT / "scenarios" / "quick.toml"
+
+
+def test_parse_grid_keeps_vectors_whole_and_refuses_bad_items():
+    g = parse_grid(["circuit.delta_J0=1,2.5", "forces.uniform_field.B=[0,0,0.5],[0,0,1]"])
+    assert g == {"circuit.delta_J0": ["1", "2.5"], "forces.uniform_field.B": ["[0,0,0.5]", "[0,0,1]"]}
+    for bad, words in [
+        (["circuit.delta_J0"], "expected KEY=V1,V2"),
+        (["circuit.delta_J0="], "empty value"),
+        (["circuit.delta_J0=1,,2"], "empty value"),
+        (["circuit.delta_J0=1,1"], "repeats"),
+        (["a=1", "a=2"], "given twice"),
+        (["scenario.seed=1,2"], "--seeds"),
+    ]:
+        with pytest.raises(EnsembleError, match=words):
+            parse_grid(bad)
+
+
+@pytest.mark.parametrize(
+    "grid, words",
+    [
+        ({"circuit.delta_j0": ["1", "2"]}, "circuit.delta_j0"),  # unknown key
+        ({"circuit.delta_J0": ["1", "-2"]}, "circuit.delta_J0"),  # a value the schema refuses
+        ({"rods.count": ["10", "many"]}, "rods.count"),
+    ],
+)
+def test_a_bad_grid_is_refused_naming_the_key_before_anything_is_written(tmp_path, grid, words):
+    with pytest.raises(EnsembleError, match=words.replace(".", r"\.")):
+        Grid(QUICK, grid, seeds=2, folder=tmp_path / "g")
+    assert not (tmp_path / "g").exists()
+
+
+def test_grid_runs_every_point_once_and_writes_the_combined_summary(tmp_path, capsys):
+    from selfas_graph.cli.main import main
+
+    argv = ["ensemble", str(QUICK), "--seeds", "2", "--grid", "circuit.delta_J0=1,2", "--jobs", "1"]
+    argv += ["--set", "rods.count=40", "--t-end", "0.2", "-o", str(tmp_path / "g"), "--times", "0.1,0.2"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    folders = sorted(p.name for p in (tmp_path / "g").iterdir() if p.is_dir())
+    assert folders == ["circuit.delta_J0=1", "circuit.delta_J0=2"]
+    for f in folders:
+        assert sorted(p.name for p in (tmp_path / "g" / f).glob("seed_*[0-9].h5")) == ["seed_0001.h5", "seed_0002.h5"]
+    rows = list(csv.DictReader((tmp_path / "g" / "grid_summary.csv").open()))
+    assert rows[0].keys() >= {"circuit.delta_J0", "measure", "time", "mean", "sem", "n"}
+    assert {r["circuit.delta_J0"] for r in rows} == {"1", "2"} and {r["n"] for r in rows} <= {"0", "2"}
+    table = json.loads((tmp_path / "g" / "grid_summary.json").read_text())
+    assert table["keys"] == ["circuit.delta_J0"] and len(table["points"]) == 2
+    assert "grid of 2 points x 2 seeds: 4 to run" in out
+    # run again: nothing new runs
+    assert main(argv) == 0
+    assert "grid of 2 points x 2 seeds: 0 to run" in capsys.readouterr().out

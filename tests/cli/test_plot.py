@@ -1,0 +1,214 @@
+"""``selfas-graph plot``: every kind writes a PNG, files are protected, errors are one line (exit 2).
+
+One small run of ``scenarios/quick.toml`` up to t = 2.5 (past its short circuit at
+t = 2.01, so there are filaments, dead ends and currents) is made once for the module.
+"""
+
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("matplotlib")
+
+from selfas_graph.cli.main import main  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[2]
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def run_file(tmp_path_factory):
+    out = tmp_path_factory.mktemp("plot") / "quick.h5"
+    rc = main(
+        ["simulate", str(REPO / "scenarios" / "quick.toml"), "-o", str(out), "--t-end", "2.5", "--progress", "none"]
+    )
+    assert rc == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def no_graph_run(tmp_path_factory):
+    """A run without contacts: positions only, no graph data (a few steps)."""
+    out = tmp_path_factory.mktemp("plot_nograph") / "nograph.h5"
+    rc = main(
+        [
+            "simulate",
+            str(REPO / "scenarios" / "quick.toml"),
+            "-o",
+            str(out),
+            "--t-end",
+            "0.01",
+            "--progress",
+            "none",
+            "--set",
+            "contacts.enabled=false",
+            "--set",
+            "circuit=false",
+            "--set",
+            "forces.current_field=false",
+            "--set",
+            "forces.current_lorentz=false",
+        ]
+    )
+    assert rc == 0
+    return out
+
+
+def is_png(path):
+    data = Path(path).read_bytes()
+    return data[:8] == PNG_SIGNATURE and len(data) > 1000
+
+
+@pytest.mark.parametrize("kind", ["snapshot", "density", "field", "flux", "timeline", "moment", "fractal", "skeleton"])
+def test_every_kind_writes_a_png(run_file, tmp_path, kind, capsys):
+    """Each figure kind of the paper (docs/model.md 'Figure diagnostics') renders headless to a non-empty PNG."""
+    out = tmp_path / f"{kind}.png"
+    assert main(["plot", str(run_file), "--kind", kind, "-o", str(out)]) == 0
+    assert is_png(out)
+    assert str(out) in capsys.readouterr().out
+
+
+def test_large_run_snapshot_colours_the_largest_structure(run_file, tmp_path, monkeypatch, capsys):
+    """Above LARGE_RUN rods the snapshot colours the largest structure red (paper Fig. 6); the
+    threshold is lowered here so that the 300-rod run takes that branch."""
+    from selfas_graph.cli.plots import frame  # where the snapshot reads LARGE_RUN
+
+    monkeypatch.setattr(frame, "LARGE_RUN", 100)
+    out = tmp_path / "large.png"
+    assert main(["plot", str(run_file), "--kind", "snapshot", "-o", str(out)]) == 0
+    assert is_png(out)
+
+
+def test_options_planes_time_and_dipole_units(run_file, tmp_path):
+    """--planes, --time, --n-phi and --z-mext are accepted and still give PNGs."""
+    out = tmp_path / "flux.png"
+    assert (
+        main(
+            [
+                "plot",
+                str(run_file),
+                "--kind",
+                "flux",
+                "--time",
+                "1.6",
+                "--planes",
+                "-1",
+                "1",
+                "--n-phi",
+                "128",
+                "--z-mext",
+                "10",
+                "-o",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    assert is_png(out)
+
+
+def test_default_name_and_no_overwrite_without_force(run_file, capsys):
+    """The default output is RUN_kind_frameK.png next to the run (K the resolved frame index, here
+    frame -5 -> 1 of 0..5); an existing file is kept unless --force."""
+    out = run_file.with_name(f"{run_file.stem}_density_frame1.png")
+    assert main(["plot", str(run_file), "--kind", "density", "--frame", "-5"]) == 0
+    assert is_png(out)
+    before = out.read_bytes()
+    out.write_bytes(b"keep me")
+    capsys.readouterr()
+    assert main(["plot", str(run_file), "--kind", "density", "--frame", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "exists" in err and "--force" in err and len(err.strip().splitlines()) == 1
+    assert out.read_bytes() == b"keep me"
+    assert main(["plot", str(run_file), "--kind", "density", "--frame", "1", "--force"]) == 0
+    assert out.read_bytes() == before
+
+
+def test_missing_file_is_a_clear_error(tmp_path, capsys):
+    """A run file that does not exist: exit 2, one line naming the file."""
+    missing = tmp_path / "nothere.h5"
+    assert main(["plot", str(missing), "--kind", "snapshot"]) == 2
+    err = capsys.readouterr().err
+    assert "no such file" in err and str(missing) in err and len(err.strip().splitlines()) == 1
+
+
+def test_not_a_run_file_is_a_clear_error(tmp_path, capsys):
+    """A file that is not HDF5: exit 2 with the reader's explanation."""
+    bad = tmp_path / "bad.h5"
+    bad.write_text("not hdf5")
+    assert main(["plot", str(bad)]) == 2
+    assert "not a readable HDF5 file" in capsys.readouterr().err
+
+
+def test_frame_out_of_range_is_a_clear_error(run_file, tmp_path, capsys):
+    """--frame beyond the saved frames (0..5): exit 2, the valid range in the message, nothing written."""
+    out = tmp_path / "x.png"
+    assert main(["plot", str(run_file), "--kind", "field", "--frame", "99", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "frame 99 out of range" in err and "0..5" in err
+    assert not out.exists()
+
+
+def test_kinds_that_need_the_graph_say_so(no_graph_run, tmp_path, capsys):
+    """Without graph data, field, flux and timeline fail with exit 2 and the reason; snapshot and
+    density still draw (all rods grey / total density only)."""
+    for kind in ("field", "flux", "timeline", "moment", "fractal", "skeleton"):
+        assert main(["plot", str(no_graph_run), "--kind", kind, "-o", str(tmp_path / f"{kind}.png")]) == 2
+        assert "no graph data" in capsys.readouterr().err
+    for kind in ("snapshot", "density"):
+        out = tmp_path / f"{kind}.png"
+        assert main(["plot", str(no_graph_run), "--kind", kind, "-o", str(out)]) == 0
+        assert is_png(out)
+
+
+def test_missing_matplotlib_names_the_extra(run_file, tmp_path, monkeypatch, capsys):
+    """Without matplotlib the command says which extra to install (exit 2)."""
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # makes `import matplotlib` raise ImportError
+    assert main(["plot", str(run_file), "-o", str(tmp_path / "x.png")]) == 2
+    assert 'pip install "selfas-graph[plot]"' in capsys.readouterr().err
+
+
+def test_ensemble_summary_plot_draws_every_measure_with_its_band(tmp_path):
+    """A hand-made summary of two measures at three times, the last with one seed left."""
+    from selfas_graph.cli.main import CliError
+    from selfas_graph.cli.plot import plot_summary
+
+    summary = {
+        "n_seeds": 3,
+        "times": [0.0, 1.0, 2.0],
+        "measures": {
+            "filament_rods": {"unit": "rods", "mean": [0.0, 10.0, 12.0], "sem": [0.0, 1.5, None], "n": [3, 3, 1]},
+            "cycle_rank": {"unit": "loops", "mean": [0.0, None, 4.0], "sem": [0.0, None, None], "n": [3, 3, 1]},
+        },
+    }
+    out = plot_summary(summary, tmp_path / "s.png", title="test")
+    assert is_png(out)
+    with pytest.raises(CliError, match="none of the measures"):
+        plot_summary(summary, tmp_path / "t.png", title="test", measures=["no_such_measure"])
+
+
+@pytest.mark.parametrize("suffix", [".gif", ".mp4"])
+def test_movie_renders_every_frame(run_file, tmp_path, suffix, capsys):
+    """``--movie OUT.gif|mp4``: one snapshot per saved frame (6 frames to t = 2.5 at interval 0.5),
+    no partial file left beside it; an existing movie is kept without --force."""
+    if suffix == ".mp4":
+        pytest.importorskip("imageio_ffmpeg")
+    out = tmp_path / f"quick{suffix}"
+    assert main(["plot", str(run_file), "--movie", str(out)]) == 0
+    assert "(6 frames" in capsys.readouterr().out
+    head = out.read_bytes()[:12]
+    assert head.startswith(b"GIF89a") if suffix == ".gif" else head[4:8] == b"ftyp"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [out.name]
+    if suffix == ".gif":
+        from PIL import Image
+
+        assert Image.open(out).n_frames == 6
+    assert main(["plot", str(run_file), "--movie", str(out)]) == 2
+
+
+def test_movie_refuses_other_formats_and_kinds(run_file, tmp_path, capsys):
+    assert main(["plot", str(run_file), "--movie", str(tmp_path / "m.avi")]) == 2
+    assert ".gif or .mp4" in capsys.readouterr().err
+    assert main(["plot", str(run_file), "--movie", str(tmp_path / "m.gif"), "--kind", "density"]) == 2
+    assert not any(tmp_path.iterdir())

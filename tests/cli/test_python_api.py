@@ -1,0 +1,198 @@
+"""The Python API: validated parameters and states, exact run ends, run files from Python, event
+kinds by name, the top-level names, and the worked example (examples/python_api.py)."""
+
+import dataclasses
+import runpy
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+import selfas_graph as sg
+from selfas_graph.io.scenario import scenario_from_text
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_parameters_replace_and_from_dict_validate_as_scenario_files_do():
+    p = sg.Parameters()
+    assert p.replace({"integrator.dt": 5e-4}).integrator.dt == 5e-4
+    assert p.replace(rods={"count": np.int64(7)}).rods.count == 7  # numpy integers accepted, stored plain
+    assert (
+        p.replace({"forces.yukawa": True}).forces.yukawa
+        == sg.Parameters.from_dict({"forces": {"yukawa": {}}}).forces.yukawa
+    )
+    assert p.replace({"forces.yukawa": True}).replace({"forces.yukawa": False}).forces.yukawa is None
+    assert sg.Parameters.from_dict(p.to_raw()) == p
+    toml = "[integrator]\ndt = -1.0\n"
+    with pytest.raises(sg.ScenarioError) as from_toml:
+        scenario_from_text(toml)
+    for attempt in (
+        lambda: p.replace(integrator={"dt": -1.0}),
+        lambda: p.replace({"integrator.dt": -1.0}),
+        lambda: sg.Parameters.from_dict({"integrator": {"dt": -1.0}}),
+        lambda: dataclasses.replace(p, integrator=dataclasses.replace(p.integrator, dt=-1.0)),
+    ):
+        with pytest.raises(sg.ScenarioError) as exc:
+            attempt()
+        assert exc.value.problems == from_toml.value.problems == ["integrator.dt: -1.0 is out of range; valid: > 0"]
+    with pytest.raises(sg.ScenarioError, match="rods.count: -5 is out of range"):
+        p.replace(rods={"count": -5})
+    with pytest.raises(sg.ScenarioError, match="did you mean 'count'"):
+        p.replace(rods={"cont": 5})
+
+
+def test_default_parameters_use_the_split_brake_and_run():
+    """The defaults run: the split brake at dt = 1e-3 (the explicit one needs dt <= 5e-4)."""
+    p = sg.Parameters()
+    assert p.integrator.brake == "split" and p.integrator.dt == 1e-3
+    p = p.replace(
+        rods={"count": 2},
+        placement={"box": [[-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]]},
+        forces={"tip_magnetic": {}, "tip_brake": {}, "ambient_brake": {}},
+    )
+    state = sg.State.from_rods([[0.0, 0.0, 0.0], [0.0, 0.0, 1.05]], [[0, 0, 1.0], [0, 0, 1.0]], [1.0, 1.0], [1.0, 1.0])
+    sim = sg.Simulation(p, state=state)
+    sim.run(1.2)  # past step 1000, where the explicit brake at this dt failed
+    assert sim.state.step == 1200 and np.isfinite(sim.state.position).all()
+
+
+def _rods(n=2):
+    centre = np.array([[3.0 * i, 0.0, 0.0] for i in range(n)])
+    return sg.State.from_rods(centre, np.tile([0.0, 0.0, 1.0], (n, 1)), np.ones(n), np.ones(n))
+
+
+def _params(n=2):
+    return sg.Parameters().replace(
+        rods={"count": n}, forces={"tip_magnetic": {}}, placement={"box": [[-1.0, 3.0 * n], [-1.0, 1.0], [-1.0, 1.0]]}
+    )
+
+
+def test_state_is_validated_and_copied():
+    state = _rods()
+    before = state.position.copy()
+    sim = sg.Simulation(_params(), state=state)
+    sim.run(0.01)
+    np.testing.assert_array_equal(state.position, before)  # the caller's arrays are untouched
+    assert sim.state.position is not state.position
+
+    same_sign = _rods()
+    same_sign.tip_charge[1] = 1.0
+    with pytest.raises(sg.StateError, match="rod 0 has tip charges 1 and 1"):
+        sg.Simulation(_params(), state=same_sign)
+    stretched = _rods()
+    stretched.position[3, 2] += 0.01  # rod 1 of length 1.01
+    with pytest.raises(sg.StateError, match="rod 1 has length 1.01"):
+        sg.Simulation(_params(), state=stretched)
+    nan = _rods()
+    nan.velocity[2, 0] = np.nan
+    with pytest.raises(sg.StateError, match="non-finite"):
+        sg.Simulation(_params(), state=nan)
+    with pytest.raises(sg.StateError, match=r"the state has 2 rods but rods.count = 3"):
+        sg.Simulation(_params(3), state=_rods(2))
+
+
+def test_run_lands_on_t_end_or_refuses():
+    p = _params().replace(integrator={"dt": 8e-3})
+    sim = sg.Simulation(p, state=_rods())
+    with pytest.raises(ValueError, match=r"not a whole number of steps .* nearest reachable times are 0.496 and 0.504"):
+        sim.run(0.5)
+    assert sim.state.step == 0
+    sim.run(0.496)
+    assert sim.state.step == 62 and sim.state.time == pytest.approx(0.496, abs=1e-15)
+    with pytest.raises(ValueError, match="before the current time"):
+        sim.run(0.2)
+    sim.run(0.496)  # no step
+    assert sim.state.step == 62
+
+
+def test_cli_refuses_an_unreachable_t_end(tmp_path, capsys):
+    scene = tmp_path / "s.toml"
+    scene.write_text("[rods]\ncount = 2\n[integrator]\ndt = 8e-3\n[run]\nt_end = 0.5\n")
+    assert sg_main(["simulate", str(scene), "-o", str(tmp_path / "s.h5"), "--progress", "none"]) == 2
+    assert "run.t_end" in capsys.readouterr().err
+    assert not (tmp_path / "s.h5").exists()
+
+
+def sg_main(argv):
+    from selfas_graph.cli.main import main
+
+    return main(argv)
+
+
+def test_run_file_from_python_with_event_names(tmp_path):
+    sim = sg.Simulation(_params(), state=_rods())
+    out = tmp_path / "py.h5"
+    with sg.RunWriter.for_simulation(sim, out) as w:
+        sim.run(0.05, writer=w)
+        sim.run(0.1, writer=w)
+    with pytest.raises(FileExistsError):
+        sg.RunWriter.for_simulation(sim, out)
+    with sg.RunFile(out) as run:
+        assert run.meta["status"] == "finished"
+        assert run.step[-1] == 100 and run.parameters["rods"]["count"] == 2
+    assert sg.EventKind.SHORT_CIRCUIT == 5 and sg.EventKind(1).label == "tip_contact"
+
+
+def test_event_kind_is_an_enumeration_in_the_file(tmp_path):
+    from selfas_graph.io.h5md import RunWriter
+
+    w = RunWriter(tmp_path / "e.h5", 4, np.ones(4), np.ones(2), {"parameters_json": "{}"})
+    w.write_events([(3, 0.3, sg.EventKind.TIP_CONTACT, 1, 2), (4, 0.4, 5, 2, -1)])
+    w.close()
+    with h5py.File(tmp_path / "e.h5", "r") as f:
+        names = h5py.check_enum_dtype(f["events"].dtype["kind"])
+        assert names == {e.label: int(e) for e in sg.EventKind}
+
+
+def test_top_level_names():
+    for name in (
+        "solve_circuit",
+        "parameters_from_dict",
+        "load_scenario",
+        "Simulation",
+        "State",
+        "RunFile",
+        "RunWriter",
+        "export_run",
+        "EventKind",
+        "named_events",
+        "ROLE_NAMES",
+        "Parameters",
+    ):
+        assert name in sg.__all__ and hasattr(sg, name)
+
+
+def test_worked_example_runs(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "column.h5"
+    monkeypatch.setattr(sys, "argv", ["python_api.py", str(out)])
+    runpy.run_path(str(ROOT / "examples" / "python_api.py"), run_name="__main__")
+    text = capsys.readouterr().out
+    assert "refused: integrator.dt" in text and "short_circuit" in text and "'filament'" in text
+    with sg.RunFile(out) as run:
+        assert run.n_frames == 7 and (run.graph(-1)["role"][:3] == 3).all()
+
+
+def test_resume_keeps_the_brake_a_run_started_with(tmp_path):
+    """A scene without integrator.brake started when the default was explicit resumes explicit."""
+    import json
+
+    from selfas_graph.io.checkpoint import checkpoint_path, read_checkpoint
+
+    scene = tmp_path / "s.toml"
+    scene.write_text(
+        "[rods]\ncount = 2\n[forces.tip_magnetic]\n[forces.tip_brake]\n[run]\nt_end = 0.01\n"
+        "[output]\ninterval = 0.005\ncheckpoint_interval = 0\n"
+    )
+    out = tmp_path / "s.h5"
+    assert sg_main(["simulate", str(scene), "-o", str(out), "--progress", "none"]) == 0
+    with h5py.File(out, "r+") as f:  # as a run file of that time says
+        attrs = f["parameters/selfas_graph"].attrs
+        resolved = json.loads(attrs["parameters_json"])
+        resolved["integrator"]["brake"] = "explicit"
+        attrs["parameters_json"] = json.dumps(resolved)
+    assert sg_main(["simulate", "--resume", str(out), "--t-end", "0.02", "--progress", "none"]) == 0
+    _, meta = read_checkpoint(checkpoint_path(out))
+    assert json.loads(meta["overrides"]) == ["integrator.brake=explicit"]

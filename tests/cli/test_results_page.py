@@ -1,0 +1,47 @@
+"""docs/results.md holds exactly what the committed summaries give: every generated block is
+regenerated from docs/studies.toml and docs/results/*.json and compared (no number on the page is
+typed by hand), and every committed summary names a commit and covers its study's seeds."""
+
+import json
+from pathlib import Path
+
+from selfas_graph.studies import load_studies
+from selfas_graph.studies.page import page_blocks, page_blocks_in
+
+ROOT = Path(__file__).resolve().parents[2]
+DOCS = ROOT / "docs"
+
+
+def test_the_results_page_is_what_the_summaries_give():
+    studies = load_studies(DOCS / "studies.toml")
+    want = page_blocks(studies, DOCS / "results")
+    have = page_blocks_in((DOCS / "results.md").read_text(encoding="utf-8"))
+    assert set(have) <= set(want), f"blocks the generator does not make: {sorted(set(have) - set(want))}"
+    needed = {"claims", "convergence"} | {f"sensitivity {name}" for name in studies.sweeps}
+    needed |= {
+        f"{kind} {name}"
+        for name in studies.studies
+        for kind in ("table", "runs")
+        if studies.studies[name].section in ("paper", "null", "contrast")
+    }
+    assert needed <= set(have), f"blocks missing from the page: {sorted(needed - set(have))}"
+    for key in have:
+        assert have[key] == want[key].rstrip("\n"), f"block '{key}' differs: run `selfas-graph study page`"
+
+
+def test_every_committed_summary_is_of_this_version_and_complete():
+    studies = load_studies(DOCS / "studies.toml")
+    for path in sorted((DOCS / "results").glob("*.json")):
+        summary = json.loads(path.read_text(encoding="utf-8"))
+        study = studies.study(path.stem)
+        if summary.get("kind") == "percolation":
+            assert len(summary["commit"].removesuffix("+dirty")) == 40 and summary["cpu_model"], path
+            assert [d["count"] for d in summary["densities"]] == list(study.counts), path
+            continue
+        assert summary["seeds"], path
+        for seed in summary["seeds"]:
+            assert len(seed["commit"].removesuffix("+dirty")) == 40, f"{path.name}: seed {seed['seed']} names no commit"
+            assert seed["cpu_model"] and seed["wall_seconds"] > 0
+        if not summary.get("missing"):
+            assert summary["n_seeds"] == study.seeds
+            assert min(s["t_end"] for s in summary["seeds"]) >= study.t_end - 1e-9, f"{path.name}: a seed ended early"

@@ -1,0 +1,111 @@
+"""Smoke test of selfas_graph/bench/same_run.py (``selfas-graph compare``): equal files agree, a one-ulp
+change or a missing dataset is found."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _write(path, value, extra=False):
+    with h5py.File(path, "w") as f:
+        f.attrs["created"] = str(path)  # wall-clock-like: ignored
+        g = f.create_group("observables/current")
+        g.create_dataset("value", data=value)
+        g.attrs["unit"] = "J0"
+        f["link"] = h5py.SoftLink("/observables")
+        f.attrs["ref"] = g.ref
+        if extra:
+            f.create_dataset("more", data=[1])
+
+
+def _run(a, b):
+    return subprocess.run(
+        [sys.executable, "-m", "selfas_graph.bench.same_run", str(a), str(b)], capture_output=True, text=True
+    )
+
+
+def test_same_run_tool(tmp_path):
+    x = np.array([1.0, np.nan, 3.0])
+    _write(tmp_path / "a.h5", x)
+    _write(tmp_path / "b.h5", x)
+    r = _run(tmp_path / "a.h5", tmp_path / "b.h5")
+    assert r.returncode == 0 and "the same, bit for bit" in r.stdout, r.stdout + r.stderr
+    _write(tmp_path / "c.h5", np.array([1.0, np.nan, np.nextafter(3.0, 4.0)]))
+    r = _run(tmp_path / "a.h5", tmp_path / "c.h5")
+    assert r.returncode == 1 and "observables/current/value: data differ (1 of 3" in r.stdout, r.stdout
+    _write(tmp_path / "d.h5", x, extra=True)
+    r = _run(tmp_path / "a.h5", tmp_path / "d.h5")
+    assert r.returncode == 1 and "more: only in" in r.stdout, r.stdout
+
+
+@pytest.mark.slow
+def test_same_as_commit_tool_finds_the_working_tree_equal_to_head(tmp_path):
+    """selfas_graph/bench/same_as_commit.py runs a short scene with HEAD's code and with the working tree (each
+    checked to import the code meant) and compares the run files; a clean tree agrees with HEAD.
+    Slow: the exported commit's kernels are compiled afresh."""
+    dirty = subprocess.run(["git", "status", "--porcelain", "selfas_graph"], capture_output=True, text=True, cwd=ROOT)
+    if dirty.returncode != 0 or dirty.stdout.strip():
+        pytest.skip("not a git checkout, or the working tree differs from HEAD in selfas_graph/")
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "selfas_graph.bench.same_as_commit",
+            "scenarios/quick.toml+run.t_end=0.02+rods.count=20",
+            "--keep",
+            str(tmp_path),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
+    assert r.returncode == 0 and "the same, bit for bit" in r.stdout, r.stdout + r.stderr
+
+
+def test_compare_command_is_the_tool(tmp_path, capsys):
+    """``selfas-graph compare A B`` is same_run on the command line (exit 0 equal, 1 different), as is
+    ``selfas-graph bench same_run A B``; a missing file is a usage error (exit 2) naming it."""
+    from selfas_graph.cli.main import main
+
+    x = np.array([1.0, 2.0, 3.0])
+    _write(tmp_path / "a.h5", x)
+    _write(tmp_path / "b.h5", x)
+    _write(tmp_path / "c.h5", np.array([1.0, 2.0, np.nextafter(3.0, 4.0)]))
+    a, b, c = (str(tmp_path / f"{n}.h5") for n in "abc")
+    assert main(["compare", a, b]) == 0 and "the same, bit for bit" in capsys.readouterr().out
+    assert main(["compare", a, c]) == 1 and "data differ (1 of 3" in capsys.readouterr().out
+    assert main(["bench", "same_run", a, c]) == 1 and "data differ (1 of 3" in capsys.readouterr().out
+    assert main(["compare", a, str(tmp_path / "nope.h5")]) == 2 and "no such run file" in capsys.readouterr().err
+
+
+BENCH = ROOT / "selfas_graph" / "bench"
+#: modules of selfas_graph/bench that other tools import and that are no tool themselves
+HELPERS = {"__init__", "peer", "oracles"}
+
+
+def test_bench_lists_every_tool(capsys):
+    """``selfas-graph bench`` alone lists every tool, one line each; an unknown name exits 2 naming them."""
+    from selfas_graph.cli.main import main
+
+    assert main(["bench"]) == 0
+    lines = capsys.readouterr().out.split("\n\n")[0].splitlines()
+    assert {line.split()[0] for line in lines} == {p.stem for p in BENCH.glob("*.py")} - HELPERS
+    assert all(len(line.split(maxsplit=1)) == 2 for line in lines)  # each with its one line
+    assert main(["bench", "nope"]) == 2 and "same_run" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", sorted({p.stem for p in BENCH.glob("*.py")} - HELPERS))
+def test_every_tool_runs_through_the_command_line(name, capsys):
+    """Every tool imports as part of the package and takes its arguments through ``selfas-graph bench``:
+    its help names the command."""
+    from selfas_graph.cli.main import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["bench", name, "--help"])
+    assert e.value.code == 0 and f"usage: selfas-graph bench {name}" in capsys.readouterr().out

@@ -1,0 +1,200 @@
+"""The results pipeline: the studies file, the statistics of the page, its generated blocks, and a
+study run, summarised and written into a page end to end (on the quick scene)."""
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from selfas_graph.studies import StudiesError, load_studies
+from selfas_graph.studies.page import grouped_stat, plain_stat, replace_blocks
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_the_shipped_studies_file_loads_and_every_claim_names_its_study():
+    studies = load_studies(ROOT / "docs" / "studies.toml")
+    assert {"fig2", "fig6", "fig8"} <= set(studies.studies)
+    assert studies.study("fig2").seeds >= 8 and studies.study("fig6").seeds >= 5 and studies.study("fig8").seeds >= 5
+    for c in studies.claims:
+        assert c.study in studies.studies and (not c.null or c.null in studies.studies)
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("[study.a]\nscenario = 'x'\nseeds = 2\n", "missing key 't_end'"),
+        ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\nsedes = 3\n", "unknown key 'sedes'"),
+        ("[study.a]\nscenario = 'x'\nseeds = 0\nt_end = 1\n", "must be positive"),
+        ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\ntable_times = [2.0]\n", "table_times"),
+        ("[[claim]]\nid='c'\nclaim='c'\npaper='p'\nstudy='nope'\nmeasure='m'\ntime=1\n", "no study named 'nope'"),
+        ("[stduy.a]\n", "unknown table"),
+        ("[study.a\n", "not a valid TOML file"),
+    ],
+)
+def test_a_bad_studies_file_is_refused_naming_the_key(tmp_path, text, words):
+    path = tmp_path / "studies.toml"
+    path.write_text(text)
+    with pytest.raises(StudiesError, match="studies.toml") as err:
+        load_studies(path)
+    assert words in str(err.value)
+
+
+def test_plain_stat_by_hand():
+    s = plain_stat([1.0, 2.0, 3.0, np.nan])
+    assert s["n"] == 3 and s["mean"] == 2.0
+    assert math.isclose(s["sem"], 1.0 / math.sqrt(3), rel_tol=1e-15)  # s = 1, n = 3
+    # each value's own uncertainty adds mean(err^2) / n to SE^2: 1/3 + (0.3^2 + 0.4^2 + 0.5^2) / 3 / 3
+    s = plain_stat([1.0, 2.0, 3.0], errors=[0.3, 0.4, 0.5])
+    assert math.isclose(s["sem"] ** 2, 1 / 3 + 0.5 / 9, rel_tol=1e-14)
+    assert plain_stat([1.0, 2.0, 3.0], errors=[0.3, 0.4, np.nan])["n"] == 2  # no uncertainty: left out
+    assert plain_stat([np.nan])["n"] == 0
+    assert math.isnan(plain_stat([5.0])["sem"])  # one seed: no spread
+
+
+def test_grouped_stat_reports_the_group_it_describes():
+    """Three seeds carry current, two do not: k = 3 of n = 5, the median and mean of the three only."""
+    g = grouped_stat([4.0, 0.0, 6.0, 0.0, 5.0], [True, False, True, False, True])
+    assert (g["k"], g["n"]) == (3, 5)
+    assert (g["median"], g["min"], g["max"], g["mean"]) == (5.0, 4.0, 6.0, 5.0)
+    g = grouped_stat([0.0, 0.0], [False, False])
+    assert (g["k"], g["n"]) == (0, 2) and math.isnan(g["mean"])
+
+
+def test_replace_blocks_changes_only_the_generated_blocks():
+    text = "a\n<!-- begin generated: x -->\nold\n<!-- end generated: x -->\nb\n<!-- begin generated: y -->\n<!-- end generated: y -->\n"
+    new, missing = replace_blocks(text, {"x": "new\nlines"})
+    assert new == text.replace("old", "new\nlines") and missing == ["y"]
+    again, _ = replace_blocks(new, {"x": "new\nlines"})
+    assert again == new
+
+
+def test_a_study_is_run_summarised_and_written_into_a_page(tmp_path):
+    """`study run`, `study summarise`, `study page`: the summary holds the per-seed values, the
+    episodes and the provenance; the page's block is what the summary gives; --check agrees."""
+    (tmp_path / "studies.toml").write_text(
+        f"""
+[study.q]
+title = "Quick scene"
+scenario = "{(ROOT / "scenarios" / "quick.toml").as_posix()}"
+overrides = ["rods.count=60"]
+seeds = 2
+t_end = 0.5
+every = 0.25
+table_times = [0.5]
+"""
+    )
+    (tmp_path / "page.md").write_text("# R\n<!-- begin generated: table q -->\n<!-- end generated: table q -->\n")
+
+    def cli(*args):
+        res = subprocess.run(
+            [sys.executable, "-m", "selfas_graph.cli.main", "study", *args, "--studies", "studies.toml"],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert res.returncode == 0, res.stdout + res.stderr
+        return res.stdout
+
+    cli("run", "q", "--runs", "runs", "--jobs", "1")
+    cli("summarise", "q", "--runs", "runs", "--summaries", "res", "--figures", "figs")
+    summary = json.loads((tmp_path / "res" / "q.json").read_text())
+    assert summary["n_seeds"] == 2 and summary["times"] == [0.0, 0.25, 0.5]
+    assert len(summary["measures"]["largest_alignment"]["values"]) == 2
+    seed = summary["seeds"][0]
+    assert seed["commit"] is not None and seed["cpu_model"] and seed["wall_seconds"] > 0
+    assert set(seed["episodes"]) == {"start", "end", "filament_rods", "opened_by"}
+    assert (tmp_path / "figs" / "q_series.png").exists() and (tmp_path / "figs" / "q_snapshot.png").exists()
+    cli("page", "--summaries", "res", "--page", "page.md")
+    page = (tmp_path / "page.md").read_text()
+    assert "| fraction of rods within R_plas |" in page
+    assert "is up to date" in cli("page", "--summaries", "res", "--page", "page.md", "--check")
+
+
+def test_a_percolation_study_runs_summarises_and_tabulates(tmp_path):
+    """A percolation study: `study run` calls `bench percolation` (runs that write no file), `summarise`
+    keeps the statistics per rod count with the provenance, `page` tabulates them."""
+    (tmp_path / "studies.toml").write_text(
+        f"""
+[study.p]
+title = "Quick scene"
+kind = "percolation"
+scenario = "{(ROOT / "scenarios" / "quick.toml").as_posix()}"
+counts = [20, 40]
+seeds = 2
+t_end = 0.2
+"""
+    )
+    (tmp_path / "page.md").write_text("<!-- begin generated: table p -->\n<!-- end generated: table p -->\n")
+
+    def cli(*args):
+        res = subprocess.run(
+            [sys.executable, "-m", "selfas_graph.cli.main", "study", *args, "--studies", "studies.toml"],
+            cwd=tmp_path,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert res.returncode == 0, res.stdout + res.stderr
+        return res.stdout
+
+    cli("run", "p", "--runs", "runs")
+    assert "exists" in cli("run", "p", "--runs", "runs")  # done: not run again
+    cli("summarise", "p", "--runs", "runs", "--summaries", "res")
+    summary = json.loads((tmp_path / "res" / "p.json").read_text())
+    assert [d["count"] for d in summary["densities"]] == [20, 40] and summary["commit"] is not None
+    assert all(d["runs"] == 2 for d in summary["densities"])
+    cli("page", "--summaries", "res", "--page", "page.md")
+    assert "| 20 | " in (tmp_path / "page.md").read_text()
+
+
+def _fake_summary(values, t=600.0, measure="largest_alignment"):
+    return {
+        "times": [t],
+        "seeds": [{"seed": k + 1} for k in range(len(values))],
+        "n_seeds": len(values),
+        "measures": {measure: {"values": [[v] for v in values]}, "all_alignment": {"values": [[v] for v in values]}},
+    }
+
+
+@pytest.mark.parametrize(
+    "claim, null, words",
+    [
+        ([0.5, 0.6, 0.7], [0.1, 0.2, 0.3], "reproduced (+4.9 SE"),  # d = 0.4 / sqrt(2 * (0.1/sqrt3)^2) = 4.9
+        ([0.1, 0.2, 0.3], [0.5, 0.6, 0.7], "opposite to the claim (−4.9 SE"),
+        ([0.2, 0.3, 0.4], [0.1, 0.2, 0.3], "not distinguished from the null model (+1.2 SE)"),
+    ],
+)
+def test_a_verdict_needs_three_combined_standard_errors_in_the_claimed_direction(tmp_path, claim, null, words):
+    from selfas_graph.studies.page import claim_rows
+
+    (tmp_path / "s.toml").write_text(
+        """
+[study.a]
+scenario = "x"
+seeds = 3
+t_end = 600
+[study.b]
+title = "free rods"
+scenario = "x"
+seeds = 3
+t_end = 600
+[[claim]]
+id = "c"
+claim = "a bigger dipole"
+paper = "words"
+study = "a"
+measure = "largest_alignment"
+time = 600
+null = "b"
+null_measure = "all_alignment"
+"""
+    )
+    studies = load_studies(tmp_path / "s.toml")
+    table = claim_rows(studies, {"a": _fake_summary(claim), "b": _fake_summary(null)})
+    assert words in table, table

@@ -1,0 +1,51 @@
+"""Smoke test of selfas_graph/bench/tradeoff.py on the quick scene (a few seconds).
+
+The tool's main() runs in this process.
+The figures are measurements, not checked here; only that each setting of a knob has its row
+with both position errors, that the knob's own reference (float64) differs from itself by
+nothing, and that the tree's knobs are left out where the scene sums the tip pairs directly.
+"""
+
+import json
+from pathlib import Path
+
+from selfas_graph import load_scenario
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _tool():
+    from selfas_graph.bench import tradeoff
+
+    return tradeoff
+
+
+def test_precision_knob_rows(tmp_path, capsys):
+    """forces.yukawa.precision on the quick scene: two rows (float64, the default and the
+    reference, with zero error; mixed, with a position error at float32 rounding, far below the
+    scene's size), the largest and the median tip's error, and the JSON."""
+    tool = _tool()
+    js = tmp_path / "t.json"
+    scene = str(ROOT / "scenarios" / "quick.toml")
+    tool.main([scene, "--from", "0.05", "--t", "0.01", "--knob", "forces.yukawa.precision", "--json", str(js)])
+    rows = json.loads(js.read_text())["rows"]
+    assert [(r["knob"], r["value"], r["default"]) for r in rows] == [
+        ("forces.yukawa.precision", "float64", True),
+        ("forces.yukawa.precision", "mixed", False),
+    ]
+    assert rows[0]["position_error"] == 0.0 and rows[0]["position_error_median"] == 0.0
+    assert 0.0 <= rows[1]["position_error_median"] <= rows[1]["position_error"] < 1e-4
+    assert "position error (median tip)" in capsys.readouterr().out
+
+
+def test_tree_knobs_only_where_the_scene_takes_the_tree():
+    """opening_angle and order apply to a scene above tree_above rods (Fig. 6) or with method =
+    tree, not to the 300 rods of the quick scene, which sums directly."""
+    tool = _tool()
+    quick = load_scenario(ROOT / "scenarios" / "quick.toml")
+    tree = load_scenario(ROOT / "scenarios" / "quick.toml", overrides=["forces.tip_magnetic.method=tree"])
+    fig6 = load_scenario(ROOT / "scenarios" / "fig6.toml")
+    for knob in tool.TREE_KNOBS:
+        assert not tool._applicable(quick, knob)
+        assert tool._applicable(tree, knob) and tool._applicable(fig6, knob)
+    assert tool._applicable(quick, "forces.tip_magnetic.precision")

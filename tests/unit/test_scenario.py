@@ -1,0 +1,150 @@
+"""Scenario validation: every rule gives a message naming the key and what is valid."""
+
+from pathlib import Path
+
+import pytest
+
+from selfas_graph.io.scenario import ScenarioError, load_scenario, scenario_from_text
+from selfas_graph.model.simulation import Simulation
+
+SCENARIOS = sorted((Path(__file__).parents[2] / "scenarios").glob("*.toml"))
+GOOD = """
+[rods]
+count = 10
+[placement]
+box = [[-3, 3], [-3, 3], [-3, 3]]
+[forces.tip_magnetic]
+[forces.electrodes]
+gap = 6.0
+"""
+
+
+def problems(text, overrides=()):
+    with pytest.raises(ScenarioError) as info:
+        scenario_from_text(text, overrides=overrides)
+    return "\n".join(info.value.problems)
+
+
+def test_good_scenario_resolves_defaults():
+    p = scenario_from_text(GOOD).params
+    assert p.rods.count == 10 and p.rods.rstar == 0.06 and p.integrator.dt == 1e-3
+    assert p.forces.active() == ["tip_magnetic", "electrodes"]
+    assert p.forces.yukawa is None  # a term not listed is off
+
+
+def test_unknown_key_suggests_the_close_one():
+    msg = problems(GOOD + "[forces.yukwa]\n")
+    assert "forces.yukwa: unknown key; did you mean 'yukawa'?" in msg
+    msg = problems(GOOD.replace("count = 10", "cuont = 10"))
+    assert "rods.cuont: unknown key; did you mean 'count'?" in msg
+    assert "valid keys here:" in msg
+
+
+def test_wrong_type_names_key_and_expected_type():
+    assert "rods.count: expected an integer, got '10' (str)" in problems(GOOD.replace("count = 10", 'count = "10"'))
+    assert "integrator.dt: expected a number, got true (bool)" in problems(GOOD + "[integrator]\ndt = true\n")
+    assert "integrator.position_projection: expected true or false" in problems(
+        GOOD + "[integrator]\nposition_projection = 1\n"
+    )
+    assert "forces.uniform_field.B: expected an array of 3 numbers" in problems(
+        GOOD + "[forces.uniform_field]\nB = [1, 2]\n"
+    )
+
+
+@pytest.mark.parametrize(
+    "line, key, valid",
+    [
+        ("[integrator]\ndt = 0.0", "integrator.dt", "> 0"),
+        ("[integrator]\ndt = -1e-3", "integrator.dt", "> 0"),
+        ("[run]\nt_end = 0", "run.t_end", "> 0"),
+        ("[rods.magnetic_charge]\nhigh_fraction = 1.5", "rods.magnetic_charge.high_fraction", "<= 1"),
+        ("[forces.yukawa]\ntolerance = 0", "forces.yukawa.tolerance", "> 0"),
+    ],
+)
+def test_out_of_range(line, key, valid):
+    msg = problems(GOOD + line + "\n")
+    assert f"{key}: " in msg and "out of range" in msg and valid in msg
+
+
+def test_zero_rods_is_an_error():
+    """A scene without rods has nothing to simulate: a clear error, not a crash in the writer."""
+    assert "rods.count: 0 is out of range; valid: >= 1" in problems(GOOD.replace("count = 10", "count = 0"))
+
+
+def test_rstar_at_or_above_half_rod_length():
+    msg = problems(GOOD.replace("count = 10", "count = 10\ntransition_radius = 0.5"))
+    assert "rods.transition_radius: 0.5 is out of range; valid: > 0 and < 0.5" in msg
+
+
+def test_choice_with_suggestion():
+    msg = problems(GOOD + '[integrator]\nbond_force = "exakt"\n')
+    assert "integrator.bond_force: 'exakt' is not valid (did you mean 'exact'?); valid: exact, paper" in msg
+
+
+def test_nan_and_inf_rejected():
+    assert "integrator.dt: expected a finite number, got nan" in problems(GOOD + "[integrator]\ndt = nan\n")
+    assert "every entry must be a finite number" in problems(GOOD + "[forces.uniform_field]\nB = [0, 0, inf]\n")
+
+
+def test_rods_that_cannot_fit_the_box():
+    msg = problems(GOOD.replace("count = 10", "count = 5000"))
+    assert "rods.count: 5000 rods cannot fit the box" in msg
+    msg = problems(GOOD.replace("[[-3, 3], [-3, 3], [-3, 3]]", "[[0, 0.5], [0, 0.5], [0, 0.5]]"))
+    assert "a rod of length 1 cannot fit in a box" in msg
+
+
+def test_box_beyond_electrodes_and_empty_range():
+    assert "reaches beyond the electrodes at z = +-2" in problems(GOOD.replace("gap = 6.0", "gap = 4.0"))
+    assert "the x range [3, -3] is empty" in problems(GOOD.replace("[[-3, 3], [-3", "[[3, -3], [-3"))
+
+
+def test_circuit_needs_contacts_and_a_conductor():
+    assert "with contacts.enabled = false it can never close" in problems(
+        GOOD + "[circuit]\ndelta_J0 = 1.0\n[contacts]\nenabled = false\n"
+    )
+    assert "the circuit needs a conductor" in problems(
+        GOOD.replace("[forces.electrodes]\ngap = 6.0\n", "").replace("[-3, 3]]", "[-3, 3]]") + "[circuit]\n"
+    )
+    assert "rod currents come from the circuit solve" in problems(GOOD + "[forces.current_field]\n")
+
+
+def test_output_interval_shorter_than_dt():
+    msg = problems(GOOD + "[integrator]\ndt = 0.01\n[output]\ninterval = 0.001\n")
+    assert "output.interval = 0.001 is shorter than integrator.dt = 0.01" in msg
+
+
+def test_all_problems_reported_together():
+    msg = problems(GOOD.replace("count = 10", "count = -1") + "[integrator]\ndt = -1\n")
+    assert "rods.count" in msg and "integrator.dt" in msg
+
+
+def test_not_toml_and_missing_file(tmp_path):
+    assert "not valid TOML" in problems("[rods\ncount = ")
+    with pytest.raises(ScenarioError, match="file not found"):
+        load_scenario(tmp_path / "nope.toml")
+    junk = tmp_path / "junk.toml"
+    junk.write_bytes(b"\xff\xfe\x00binary")
+    with pytest.raises(ScenarioError, match="not a UTF-8 text file"):
+        load_scenario(junk)
+
+
+def test_overrides_go_through_the_same_checks():
+    sc = scenario_from_text(
+        GOOD, overrides=["integrator.dt=5e-4", "forces.uniform_field.B=[0, 0, 1]", "integrator.bond_force=paper"]
+    )
+    assert sc.params.integrator.dt == 5e-4 and sc.params.forces.uniform_field.B == (0.0, 0.0, 1.0)
+    assert sc.params.integrator.bond_force == "paper"
+    assert "integrator.dt: -1.0 is out of range" in problems(GOOD, ["integrator.dt=-1"])
+    assert "integrator.dtt: unknown key; did you mean 'dt'?" in problems(GOOD, ["integrator.dtt=1"])
+    assert "expected key=value" in problems(GOOD, ["integrator.dt"])
+    # a term is switched off by an override
+    assert scenario_from_text(GOOD, overrides=["forces.electrodes=false"]).params.forces.electrodes is None
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.name)
+def test_every_shipped_scenario_loads_and_runs_a_few_steps(path):
+    """Each file in scenarios/ validates, places its rods and takes steps without failure."""
+    sc = load_scenario(path)
+    sim = Simulation.from_scenario(sc)
+    sim.step(5)
+    assert sim.state.step == 5 and sim.max_bond_error < 1e-12
