@@ -60,6 +60,7 @@ __all__ = [
     "bz_profile",
     "disc_flux",
     "flux_through_disc",
+    "flux_through_rim",
     "radial_density",
     "rod_centres",
     "timeline",
@@ -378,6 +379,69 @@ def flux_through_disc(
         return bz_profile(r, z_plane, position, active_rod, current, wire_radius, n_phi=n_phi)
 
     return disc_flux(r_values, bz_of_r, n_r=n_r, dr_max=dr_max) / unit
+
+
+def flux_through_rim(radius, z_plane, position, active_rod, current, wire_radius, n_phi=None, z_mext=None) -> float:
+    """Flux of the rod currents' B through the disc of ``radius`` on ``z = z_plane`` (normal +z),
+    by Stokes' theorem: the loop integral of their vector potential along the disc's rim.
+
+    A straight segment A -> B of length L carrying J has ``A(x) = J s_hat ln((|a| + |b| + L) /
+    (|a| + |b| - L))`` (a = x - A, b = x - B; Gaussian units with c absorbed in J0, so that an
+    infinite wire gives B = 2 J / rho as term 9's law does), and ``Phi = oint A . dl``, summed
+    with the periodic trapezoid rule over ``n_phi`` points of the rim (default :func:`auto_n_phi`:
+    at most one wire radius apart). This is the bare line current's flux: it differs from
+    :func:`flux_through_disc`, the area integral of term 9's regularised field, by terms of order
+    (w / rho)^2 from the wires near the plane, 1e-4 of the flux late in Fig. 2
+    (``tests/unit/test_diagnostics.py``), and costs one loop over the rim instead of the disc's area
+    (0.1-0.8 s against 4-6 s for 600-1000 current-carrying rods). Where a rod crosses the rim, the
+    logarithm's denominator is kept at least ``w^2 (1/|a| + 1/|b|) / 2`` (the distance to the
+    wire's line held at w), so that the result stays finite.
+
+    Parameters
+    ----------
+    radius : float
+        Disc radius R > 0 (units L).
+    z_plane : float
+    position, active_rod, current, wire_radius
+        As in :func:`bz_profile`.
+    n_phi : int, optional
+    z_mext : float, optional
+        As in :func:`flux_through_disc`.
+
+    Returns
+    -------
+    float
+        Flux in units of Phi_0 (or of ``4 pi |Z_Mext|``).
+    """
+    unit = _flux_unit(z_mext)
+    radius = float(radius)
+    if not (np.isfinite(radius) and radius > 0.0):
+        raise ValueError(f"radius must be a positive length, got {radius}")
+    position, active_rod, current, wire_radius = _sources(position, active_rod, current, wire_radius)
+    if active_rod.size == 0:
+        return 0.0
+    n_phi = auto_n_phi(radius, wire_radius) if n_phi is None else _positive_int(n_phi, "n_phi")
+    phi = 2.0 * np.pi * (np.arange(n_phi) + 0.5) / n_phi
+    rim = np.stack([radius * np.cos(phi), radius * np.sin(phi), np.full(n_phi, float(z_plane))], axis=1)
+    dl = np.stack([-np.sin(phi), np.cos(phi), np.zeros(n_phi)], axis=1) * (2.0 * np.pi * radius / n_phi)
+    a_end, b_end = position[2 * active_rod], position[2 * active_rod + 1]
+    j = current[active_rod]
+    seg = b_end - a_end
+    length = np.linalg.norm(seg, axis=1)
+    keep = length > 0.0
+    total = 0.0
+    w2 = float(wire_radius) ** 2
+    for k in range(0, active_rod.size, 256):
+        sl = slice(k, k + 256)
+        ra = np.linalg.norm(rim[None] - a_end[sl, None], axis=2)
+        rb = np.linalg.norm(rim[None] - b_end[sl, None], axis=2)
+        lk = length[sl, None]
+        den = np.maximum(ra + rb - lk, 0.5 * w2 * (1.0 / np.maximum(ra, 1e-300) + 1.0 / np.maximum(rb, 1e-300)))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            log = np.where(keep[sl, None], np.log((ra + rb + lk) / den), 0.0)
+            along = (seg[sl] / np.where(keep[sl], length[sl], 1.0)[:, None]) @ dl.T
+        total += float(np.sum(j[sl, None] * log * along))
+    return total / unit
 
 
 # --------------------------------------------------------------------------- timeline

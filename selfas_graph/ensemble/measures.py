@@ -11,7 +11,7 @@ from typing import Callable
 import numpy as np
 
 from ..analysis.claims import frame_claims
-from ..analysis.diagnostics import flux_through_disc, rod_centres
+from ..analysis.diagnostics import flux_through_rim, rod_centres
 from ..io.frame import SavedFrame
 from ..io.h5md import RunFileError
 from ..model.topology import FILAMENT
@@ -104,7 +104,7 @@ def _midplane_flux(f):
     if not np.any(current):
         return 0.0
     w = 0.5 * f.params["rods"]["diameter"]
-    return float(flux_through_disc([f.flux_radius], 0.0, f.position, None, current, w)[0])
+    return flux_through_rim(f.flux_radius, 0.0, f.position, None, current, w)
 
 
 #: the per-frame measures of a summary, in table order; a new one is one more line
