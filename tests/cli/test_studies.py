@@ -73,6 +73,23 @@ def test_replace_blocks_changes_only_the_generated_blocks():
     assert again == new
 
 
+def _study_cli(folder):
+    """``selfas-graph study ARGS --studies studies.toml`` run in ``folder``: asserts exit 0, returns stdout."""
+
+    def cli(*args):
+        res = subprocess.run(
+            [sys.executable, "-m", "selfas_graph.cli.main", "study", *args, "--studies", "studies.toml"],
+            cwd=folder,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert res.returncode == 0, res.stdout + res.stderr
+        return res.stdout
+
+    return cli
+
+
 def test_a_study_is_run_summarised_and_written_into_a_page(tmp_path):
     """`study run`, `study summarise`, `study page`: the summary holds the per-seed values, the
     episodes and the provenance; the page's block is what the summary gives; --check agrees."""
@@ -90,17 +107,7 @@ table_times = [0.5]
     )
     (tmp_path / "page.md").write_text("# R\n<!-- begin generated: table q -->\n<!-- end generated: table q -->\n")
 
-    def cli(*args):
-        res = subprocess.run(
-            [sys.executable, "-m", "selfas_graph.cli.main", "study", *args, "--studies", "studies.toml"],
-            cwd=tmp_path,
-            capture_output=True,
-            text=True,
-            timeout=600,
-        )
-        assert res.returncode == 0, res.stdout + res.stderr
-        return res.stdout
-
+    cli = _study_cli(tmp_path)
     cli("run", "q", "--runs", "runs", "--jobs", "1")
     cli("summarise", "q", "--runs", "runs", "--summaries", "res", "--figures", "figs")
     summary = json.loads((tmp_path / "res" / "q.json").read_text())
@@ -132,17 +139,7 @@ t_end = 0.2
     )
     (tmp_path / "page.md").write_text("<!-- begin generated: table p -->\n<!-- end generated: table p -->\n")
 
-    def cli(*args):
-        res = subprocess.run(
-            [sys.executable, "-m", "selfas_graph.cli.main", "study", *args, "--studies", "studies.toml"],
-            cwd=tmp_path,
-            capture_output=True,
-            text=True,
-            timeout=600,
-        )
-        assert res.returncode == 0, res.stdout + res.stderr
-        return res.stdout
-
+    cli = _study_cli(tmp_path)
     cli("run", "p", "--runs", "runs")
     assert "exists" in cli("run", "p", "--runs", "runs")  # done: not run again
     cli("summarise", "p", "--runs", "runs", "--summaries", "res")
