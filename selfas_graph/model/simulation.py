@@ -214,7 +214,7 @@ class Simulation(HealthChecks, Observables):
         if sim.network is not None:
             sim.network.load_state_dict(snap)
         ff = sim.force_field
-        ff._bind(state.position, state.velocity)
+        ff.bind(state.position, state.velocity)
         ff.load_state_dict(snap)  # neighbour lists, held slow forces (missing ones: rebuilt)
         return sim
 
