@@ -40,7 +40,9 @@ class Term:
     counts_own_calls = False
 
     def compute(self, ctx, out):  # pragma: no cover - interface
-        """Write the term's force on every tip into ``out[channel]`` for each of its channels."""
+        """Write the term's force on every tip into ``out[channel]`` (n_tips, 3) for each of its
+        channels, at the positions and velocities of ``ctx``, an
+        :class:`~selfas_graph.model.terms.context.EvalContext`."""
         raise NotImplementedError
 
     def energy(self, ctx):

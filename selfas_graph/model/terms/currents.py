@@ -22,6 +22,12 @@ _FIELD_KERNEL = {"float64": kc.rod_current_field, "mixed": kc.rod_current_field_
 _TIP_KERNEL = {"float64": kc.current_force_on_tips, "mixed": kc.current_force_on_tips_mixed}
 
 
+def wire_radius(p) -> float:
+    """The wire radius w = D/2 that regularises the field of the rod currents, D = ``rods.diameter``
+    of the parameters ``p`` (docs/model.md 'Term 9', choice A5)."""
+    return 0.5 * p.rods.diameter
+
+
 class CurrentFieldForce(Term):
     """Term 9: q_k times the field of all other rods' currents (``ctx.currents``, wire radius D/2).
     No kernel call while no rod carries current. ``forces.current_field.precision`` picks the
@@ -36,8 +42,7 @@ class CurrentFieldForce(Term):
     def __init__(self, p, state):
         self.precision = p.forces.current_field.precision
         self.kernel = _TIP_KERNEL[self.precision]
-        # wire radius w = D/2 of the rod currents' field (docs/model.md 'Term 9', choice A5)
-        self.wire_radius = 0.5 * p.rods.diameter
+        self.wire_radius = wire_radius(p)
 
     def compute(self, ctx, out):
         f = out["current_field"]
@@ -75,8 +80,7 @@ class CurrentLorentzForce(Term):
         #: pairs of current-carrying rods with centres closer than this take the adapted rule
         self.near_range = p.forces.current_lorentz.near_range
         self.panel_t, self.panel_w = kc.gauss_legendre_01(kc.NEAR_PANEL_POINTS)
-        # wire radius w = D/2 of the rod currents' field (docs/model.md 'Term 9', choice A5)
-        self.wire_radius = 0.5 * p.rods.diameter
+        self.wire_radius = wire_radius(p)
         #: the terms that are sources of a magnetic field (FieldSource), in term order: handed in by the
         #: force field that holds this term, once every term is built
         self.field_sources = ()

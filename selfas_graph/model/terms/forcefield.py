@@ -39,7 +39,7 @@ from ..network import RodCurrents
 from ..params import Parameters
 from .base import FieldSource, Term
 from .context import EvalContext, PairLists
-from .currents import CurrentLorentzForce
+from .currents import CurrentLorentzForce, wire_radius
 from .mts import MultipleTimeStepping
 from .pairs import TipMagneticForce, YukawaForce
 from .registry import TERM_CLASSES
@@ -116,8 +116,7 @@ class ForceField:
         self.lists = PairLists(
             params.rods.rstar, params.neighbours.skin, self.blocks, yukawa.cutoff if yukawa is not None else None
         )
-        # wire radius w = D/2 of the rod currents' field (docs/model.md 'Term 9', choice A5)
-        self.wire_radius = 0.5 * params.rods.diameter
+        self.wire_radius = wire_radius(params)
         self.currents = RodCurrents(self.n_rods) if currents is None else currents
         if self.currents.n_rods != self.n_rods:
             raise ValueError(f"the currents cover {self.currents.n_rods} rods, the state has {self.n_rods}")
