@@ -181,10 +181,10 @@ def run(args):
         res = {"rods": n}
         ntips = x.shape[0]
         ff = sim.force_field
-        ff._bind(st.position, st.velocity)
+        ff.bind(st.position, st.velocity)
         yk = next(t for t in ff.terms if t.name == "yukawa")
         nl = ff.centre_neighbours()
-        c = ff.centre()
+        c = ff.context.centre()
         fy = np.empty((n, 3))
         rng = np.random.default_rng(7)
         n_active = getattr(args, "active_rods", None)
@@ -301,7 +301,7 @@ def mixed_error(checkpoint):
     sim, origin = load_state(types.SimpleNamespace(checkpoint=checkpoint, extra=[], scenario=None, settle=0))
     ff = sim.force_field
     st = sim.state
-    ff._bind(st.position, st.velocity)
+    ff.bind(st.position, st.velocity)
     act, cur, w, pos = ff.active_rod, ff.current, ff.wire_radius, st.position
     if not len(act):
         raise SystemExit(f"{checkpoint}: no rod carries current in this state")

@@ -105,9 +105,9 @@ def main(argv=None):
         ff = sim.force_field
         term = next(t for t in ff.terms if t.name == "current_lorentz")
         out = {"current_lorentz": np.zeros_like(ff.position)}
-        term.compute(ff, out)
+        term.compute(ff.context, out)
         e = np.linalg.norm(out["current_lorentz"][tips] - ref[tips], axis=1) / scale
-        results.append([n, r, term, ff, out, e, []])
+        results.append([n, r, term, ff.context, out, e, []])
     for _ in range(args.rounds):
         for res in results:
             t0 = time.thread_time()

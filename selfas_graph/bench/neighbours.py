@@ -93,12 +93,12 @@ def run(args):
     for label, sim in scenes(args):
         ff = sim.force_field
         st = sim.state
-        ff._bind(st.position, st.velocity)
+        ff.bind(st.position, st.velocity)
         yk = next(t for t in ff.terms if t.name == "yukawa")
-        c = np.ascontiguousarray(ff.centre())
+        c = np.ascontiguousarray(ff.context.centre())
         tips = np.ascontiguousarray(st.position)
         skin = sim.params.neighbours.skin
-        tip_radius = ff._tip_range + skin
+        tip_radius = ff.lists.tip_range + skin
         centre_radius = yk.cutoff + skin
         n = c.shape[0]
         fy = np.empty((n, 3))

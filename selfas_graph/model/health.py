@@ -2,8 +2,8 @@
 energy balance; each failure stops the run with a diagnosis that names the likely cause
 (docs/model.md 'Work bookkeeping and the energy balance').
 
-:class:`HealthChecks` is a part of :class:`~.simulation.Simulation` (it reads the simulation's
-state, parameters, integrator and force field).
+:class:`HealthChecks` is a component of :class:`~.simulation.Simulation` (``sim.health``), built
+with the parts it reads: the parameters, the state, the integrator and the force field.
 """
 
 from __future__ import annotations
@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from .observables import energy_scale
 
 #: a bond whose length is off by more than this after a step is broken: no
 #: corrector recovers it meaningfully (typical per-step errors are < 1e-6)
@@ -34,21 +36,51 @@ class NumericalFailure(RuntimeError):
 
 
 class HealthChecks:
-    """The checks :class:`~.simulation.Simulation` runs after every step and on every frame."""
+    """The checks a simulation runs after every step (:meth:`after_step`) and on every frame
+    (:meth:`check_energy`); each failure raises :class:`NumericalFailure` with a diagnosis.
 
-    def _keep_last_good(self) -> None:
-        """Keep the state that has just passed the checks (the run's start, each frame): the failure
-        diagnosis evaluates its forces, and a failure file stores its snapshot (finite, resumable)."""
-        self._last_good = (self.state.position.copy(), self.state.velocity.copy())
-        self._last_good_snapshot = self.snapshot()
+    Parameters
+    ----------
+    params : Parameters
+    state : State
+        Advanced in place by the integrator (the same object all run long).
+    integrator : AdamsBashforth4
+        Its bond errors and largest speed after each step; its time step.
+    force_field : ForceField
+        Evaluated at the last good state to find a term out of scale.
+
+    Attributes
+    ----------
+    max_bond_error : float
+        The largest bond-length error after the constraint so far.
+    last_good_snapshot : dict or None
+        The simulation's snapshot of the last state that passed the checks of a run at its start or
+        at a frame (None before a run): finite, so a failure file can hold it in place of the failed one.
+    """
+
+    def __init__(self, params, state, integrator, force_field):
+        self.params = params
+        self.state = state
+        self.integrator = integrator
+        self.force_field = force_field
+        self.max_bond_error = 0.0
+        self.last_good_snapshot = None
+        self._last_good = None
 
     @property
-    def last_good_snapshot(self) -> dict | None:
-        """:meth:`snapshot` of the last state that passed the checks of :meth:`run` at its start or
-        at a frame (None before a run): finite, so a failure file can hold it in place of the failed one."""
-        return getattr(self, "_last_good_snapshot", None)
+    def dt(self) -> float:
+        return self.integrator.dt
 
-    def _check(self):
+    def keep_last_good(self, snapshot: dict) -> None:
+        """Keep the state that has just passed the checks (the run's start, each frame), and its
+        ``snapshot``: the failure diagnosis evaluates its forces, and a failure file stores the
+        snapshot (finite, resumable)."""
+        self._last_good = (self.state.position.copy(), self.state.velocity.copy())
+        self.last_good_snapshot = snapshot
+
+    def after_step(self):
+        """Stop with a diagnosis on a broken bond, a runaway step or a non-finite position or
+        velocity; else record the step's bond error."""
         integ = self.integrator
         err = integ.bond_error_before
         self.max_bond_error = max(self.max_bond_error, integ.bond_error_after)
@@ -124,7 +156,7 @@ class HealthChecks:
         At the failed state every force is huge (the brakes answer the runaway velocities), so
         the culprit is looked for where the run was still sane.
         """
-        good = getattr(self, "_last_good", None)
+        good = self._last_good
         if good is None:
             return None, 0.0
         ff = self.force_field
@@ -142,10 +174,6 @@ class HealthChecks:
             f"; or the slow forces, evaluated every integrator.slow_every = {k} steps, change too much "
             f"in between: try a smaller slow_every (8 or 16 in the shipped scenes)"
         )
-
-    def energy_scale(self, obs) -> float:
-        """Energy turned over so far: kinetic energy plus |work| of every non-conservative channel."""
-        return abs(obs["energy/kinetic"]) + sum(abs(v) for k, v in obs.items() if k.startswith("work/"))
 
     def check_energy(self, obs):
         """Stop when an energy or work is not finite, or the energy balance is off by more than
@@ -176,7 +204,7 @@ class HealthChecks:
                 st.step,
             )
         tol = self.params.integrator.energy_tolerance
-        scale = self.energy_scale(obs)
+        scale = energy_scale(obs)
         err = abs(obs["energy_balance"])
         if scale > 0 and not err <= tol * scale:
             st = self.state
@@ -190,8 +218,6 @@ class HealthChecks:
                 f"{self._slow_hint()}.",
                 st.step,
             )
-
-    _check_energy = check_energy  # the name of selfas-graph 0.2
 
 
 #: the scenario keys behind each force channel (for failure messages that name a term)

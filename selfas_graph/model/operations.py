@@ -18,7 +18,10 @@ on, before a checkpoint) and ``finish(sim)`` (after the last step of a run).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 __all__ = [
+    "RunSummary",
     "RunInterrupted",
     "Trigger",
     "Periodic",
@@ -32,6 +35,24 @@ __all__ = [
     "StopCheck",
     "Checkpoint",
 ]
+
+
+@dataclass
+class RunSummary:
+    """What :meth:`Simulation.run <.simulation.Simulation.run>` returns about the run it made."""
+
+    steps: int = 0
+    wall_seconds: float = 0.0
+    t_start: float = 0.0
+    t_end: float = 0.0
+    max_bond_error: float = 0.0
+    energy_balance: float = float("nan")
+    energy_scale: float = float("nan")
+    frames: int = 0
+
+    @property
+    def steps_per_second(self):
+        return self.steps / self.wall_seconds if self.wall_seconds > 0 else float("inf")
 
 
 class RunInterrupted(Exception):

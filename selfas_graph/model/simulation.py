@@ -12,17 +12,17 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
 from ..parallel import RowBlocks
 from . import events as ev
+from . import operations as op
 from .health import BOND_BREAK, FORCE_OUT_OF_SCALE, MAX_STEP_DISPLACEMENT, HealthChecks, NumericalFailure
 from .integrator import AdamsBashforth4
 from .network import Network
-from .observables import Observables
-from .operations import Checkpoint, EnergyCheck, FrameWriter, PerStepRows, Progress, RunInterrupted, StopCheck
+from .observables import Observables, energy_scale
+from .operations import RunInterrupted, RunSummary
 from .params import Parameters
 from .state import State, StateError, random_state
 from .terms import ForceField
@@ -38,23 +38,7 @@ __all__ = [
 ]
 
 
-@dataclass
-class RunSummary:
-    steps: int = 0
-    wall_seconds: float = 0.0
-    t_start: float = 0.0
-    t_end: float = 0.0
-    max_bond_error: float = 0.0
-    energy_balance: float = float("nan")
-    energy_scale: float = float("nan")
-    frames: int = 0
-
-    @property
-    def steps_per_second(self):
-        return self.steps / self.wall_seconds if self.wall_seconds > 0 else float("inf")
-
-
-class Simulation(HealthChecks, Observables):
+class Simulation:
     """Rigid magnetized rods under the scene's force terms.
 
     One call of :meth:`step` advances every rod by one time step, in the order that
@@ -64,7 +48,10 @@ class Simulation(HealthChecks, Observables):
     the operations whose trigger fires (:mod:`.operations`: a frame with observables, events
     and the graph state every ``output.interval``, the progress display, the stop check, the
     checkpoints; and those in :attr:`operations`). Contacts present in the initial state are
-    recorded as events of step 0 when the simulation is built.
+    recorded as events of step 0 when the simulation is built. Its components: :attr:`network`,
+    :attr:`force_field`, :attr:`integrator`, :attr:`health` (the checks after each step and frame,
+    :class:`~.health.HealthChecks`) and :attr:`observe` (energies, observables, status,
+    :class:`~.observables.Observables`); the methods of the last two are also the simulation's.
 
     Parameters
     ----------
@@ -119,8 +106,8 @@ class Simulation(HealthChecks, Observables):
             slow_every=ip.slow_every,
         )
         self.integrator.time_origin = (self.state.step, self.state.time)
-        self.max_bond_error = 0.0
-        self._energy0 = None
+        self.health = HealthChecks(params, self.state, self.integrator, self.force_field)
+        self.observe = Observables(params, self.state, self.force_field, self.integrator, self.network)
         #: every event so far, as (step, time, kind, a, b) rows in order
         self.events = []
         self.short_circuit_time = None
@@ -164,25 +151,15 @@ class Simulation(HealthChecks, Observables):
 
         :meth:`from_snapshot` rebuilds a simulation whose next steps are bitwise those of
         this one (same thread count). It is the union of the components' own states: the
-        state, the integrator's (:meth:`AdamsBashforth4.state_dict`), the force field's, the
-        network's (:meth:`Network.state_dict`), and the run's events and energy reference.
+        state's (:meth:`State.state_dict`), the integrator's (:meth:`AdamsBashforth4.state_dict`),
+        the force field's, the network's (:meth:`Network.state_dict`), the health checks' largest
+        bond error, the energy reference of the observables, and the run's events.
         """
-        st = self.state
-        snap = {
-            "position": st.position.copy(),
-            "velocity": st.velocity.copy(),
-            "tip_charge": st.tip_charge.copy(),
-            "rod_charge": st.rod_charge.copy(),
-            "step": st.step,
-            "time": st.time,
-        }
-        for name in ("rod_length", "rod_resistance"):
-            if getattr(st, name) is not None:
-                snap[name] = getattr(st, name).copy()
+        snap = self.state.state_dict()
         snap.update(self.integrator.state_dict())
         snap.update(
-            max_bond_error=self.max_bond_error,
-            energy0=np.nan if self._energy0 is None else self._energy0,
+            max_bond_error=self.health.max_bond_error,
+            energy0=np.nan if self.observe.energy0 is None else self.observe.energy0,
             events=np.array([tuple(r) for r in self.events], dtype=ev.EVENT_DTYPE),
             short_circuit_time=np.nan if self.short_circuit_time is None else self.short_circuit_time,
         )
@@ -194,27 +171,19 @@ class Simulation(HealthChecks, Observables):
     @classmethod
     def from_snapshot(cls, params: Parameters, snap: dict, timing: bool = False, comm=None) -> "Simulation":
         """Rebuild a simulation from :meth:`snapshot` (see there)."""
-        state = State(
-            np.array(snap["position"]),
-            np.array(snap["velocity"]),
-            np.array(snap["tip_charge"]),
-            np.array(snap["rod_charge"]),
-            int(snap["step"]),
-            float(snap["time"]),
-            *(np.array(snap[k]) if k in snap else None for k in ("rod_length", "rod_resistance")),
-        )
+        state = State.from_state_dict(snap)
         sim = cls(params, state=state, timing=timing, comm=comm, check_state=False)
         sim.integrator.load_state_dict(snap)
-        sim.max_bond_error = float(snap["max_bond_error"])
+        sim.health.max_bond_error = float(snap["max_bond_error"])
         e0 = float(snap["energy0"])
-        sim._energy0 = None if math.isnan(e0) else e0
+        sim.observe.energy0 = None if math.isnan(e0) else e0
         sct = float(snap["short_circuit_time"])
         sim.short_circuit_time = None if math.isnan(sct) else sct
         sim.events = [tuple(r.item()) for r in np.asarray(snap["events"])]
         if sim.network is not None:
             sim.network.load_state_dict(snap)
         ff = sim.force_field
-        ff._bind(state.position, state.velocity)
+        ff.bind(state.position, state.velocity)
         ff.load_state_dict(snap)  # neighbour lists, held slow forces (missing ones: rebuilt)
         return sim
 
@@ -222,14 +191,53 @@ class Simulation(HealthChecks, Observables):
     def dt(self) -> float:
         return self.integrator.dt
 
+    # ------------------------------------------------------------------ the components' methods
+    def energies(self) -> dict:
+        """Kinetic and potential energy of each conservative term (:meth:`.Observables.energies`)."""
+        return self.observe.energies()
+
+    def observables(self) -> dict:
+        """Scalars and small vectors describing the current state (:meth:`.Observables.observables`)."""
+        return self.observe.observables(len(self.events))
+
+    def status(self) -> dict:
+        """What a progress display shows (:meth:`.Observables.status`)."""
+        return self.observe.status(self.short_circuit_time)
+
+    def contact_count(self) -> int:
+        """Tip pairs of different rods in contact (:meth:`.Observables.contact_count`)."""
+        return self.observe.contact_count()
+
+    energy_scale = staticmethod(energy_scale)
+
+    def check_energy(self, obs) -> None:
+        """Stop when the energy balance is off or not finite (:meth:`.HealthChecks.check_energy`)."""
+        self.health.check_energy(obs)
+
+    _check_energy = check_energy  # the name of selfas-graph 0.2
+
+    @property
+    def max_bond_error(self) -> float:
+        """The largest bond-length error after the constraint so far (``health.max_bond_error``)."""
+        return self.health.max_bond_error
+
+    @property
+    def last_good_snapshot(self) -> dict | None:
+        """:meth:`snapshot` of the last state that passed the checks of :meth:`run` at its start or at a
+        frame (None before a run): finite, so a failure file can hold it in place of the failed one."""
+        return self.health.last_good_snapshot
+
+    def _keep_last_good(self) -> None:
+        self.health.keep_last_good(self.snapshot())
+
     # ------------------------------------------------------------------ stepping
     def step(self, n: int = 1) -> None:
         """Advance by ``n`` steps (raises :class:`NumericalFailure` on breakdown)."""
-        if self._energy0 is None:
-            self._record_initial_energy()
+        if self.observe.energy0 is None:
+            self.observe.record_initial_energy()
         for _ in range(n):
             self.integrator.step(self.state)
-            self._check()
+            self.health.after_step()
             if self.network is not None:
                 self._update_contacts()
 
@@ -315,47 +323,51 @@ class Simulation(HealthChecks, Observables):
         n_steps = self.steps_to(t_end)
         every = max(1, int(round(self.params.output.interval / self.dt)))
         summary = RunSummary(t_start=self.state.time)
-        ops = [PerStepRows(writer, every), FrameWriter(writer, every)] if writer is not None else [EnergyCheck(every)]
+        ops = (
+            [op.PerStepRows(writer, every), op.FrameWriter(writer, every)]
+            if writer is not None
+            else [op.EnergyCheck(every)]
+        )
         ops += self.operations
         if progress is not None:
-            ops.append(Progress(progress, progress_every or max(1, n_steps // 200), first_step=self.state.step))
-        checkpoint = Checkpoint(checkpointer) if checkpointer is not None else None
+            ops.append(op.Progress(progress, progress_every or max(1, n_steps // 200), first_step=self.state.step))
+        checkpoint = op.Checkpoint(checkpointer) if checkpointer is not None else None
         if stop is not None:
-            ops.append(StopCheck(stop, checkpoint))
+            ops.append(op.StopCheck(stop, checkpoint))
         if checkpoint is not None:
             ops.append(checkpoint)
-        if self._energy0 is None:
-            self._record_initial_energy()
+        if self.observe.energy0 is None:
+            self.observe.record_initial_energy()
         self._keep_last_good()
         self._ops = ops
         t0 = time.perf_counter()
         try:
-            for op in ops:
-                op.start(self, n_steps)
+            for operation in ops:
+                operation.start(self, n_steps)
             for i in range(1, n_steps + 1):
                 self.step()
-                for op in ops:
-                    if op.trigger(self.state.step) or (op.final and i == n_steps):
-                        op.act(self, i, n_steps)
+                for operation in ops:
+                    if operation.trigger(self.state.step) or (operation.final and i == n_steps):
+                        operation.act(self, i, n_steps)
                 summary.steps = i
-            for op in ops:
-                op.finish(self)
+            for operation in ops:
+                operation.finish(self)
         finally:
             summary.wall_seconds = time.perf_counter() - t0
             self._ops = ()
         summary.t_end = self.state.time
-        summary.max_bond_error = self.max_bond_error
+        summary.max_bond_error = self.health.max_bond_error
         obs = ops[1].last_observables if writer is not None and n_steps else None
         obs = obs if obs is not None else self.observables()
         summary.energy_balance = float(obs["energy_balance"])
-        summary.energy_scale = self.energy_scale(obs)
+        summary.energy_scale = energy_scale(obs)
         summary.frames = writer.n_frames if writer is not None else 0
         return summary
 
     def flush_operations(self) -> None:
         """Every operation of the running :meth:`run` hands its buffered data on (before a checkpoint)."""
-        for op in self._ops:
-            op.flush(self)
+        for operation in self._ops:
+            operation.flush(self)
 
     def flush_output(self, writer) -> None:
         """Hand ``writer`` its buffered per-step rows and the events it has not written yet

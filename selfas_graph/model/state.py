@@ -80,6 +80,35 @@ class State:
             None if self.rod_resistance is None else self.rod_resistance.copy(),
         )
 
+    def state_dict(self) -> dict:
+        """The state as a flat dict of copies (the checkpoint's keys): positions, velocities, charges,
+        step and time, and the rod lengths and resistances when given."""
+        d = {
+            "position": self.position.copy(),
+            "velocity": self.velocity.copy(),
+            "tip_charge": self.tip_charge.copy(),
+            "rod_charge": self.rod_charge.copy(),
+            "step": self.step,
+            "time": self.time,
+        }
+        for name in ("rod_length", "rod_resistance"):
+            if getattr(self, name) is not None:
+                d[name] = getattr(self, name).copy()
+        return d
+
+    @classmethod
+    def from_state_dict(cls, d: dict) -> "State":
+        """The state :meth:`state_dict` returned (``d`` may hold other keys too), in copies of its arrays."""
+        return cls(
+            np.array(d["position"]),
+            np.array(d["velocity"]),
+            np.array(d["tip_charge"]),
+            np.array(d["rod_charge"]),
+            int(d["step"]),
+            float(d["time"]),
+            *(np.array(d[k]) if k in d else None for k in ("rod_length", "rod_resistance")),
+        )
+
     def bond_length(self) -> np.ndarray:
         """The length each bond should have: ``rod_length``, or an empty array for unit rods.
 

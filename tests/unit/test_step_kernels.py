@@ -154,20 +154,20 @@ def test_electrode_split_is_the_numpy_code_bit_for_bit(electrodes, rng, gap):
     v_new = v_old.copy()
     for dt in (1e-3, 1e-3, 2e-3):
         old = old_electrode_split(term, x, v_old, dt)
-        ff._bind(x, v_new)
-        new = term.split(ff, dt)
+        ff.bind(x, v_new)
+        new = term.split(ff.context, dt)
         assert old.keys() == new.keys() == {"electrode_brake"}
         same_bits(new["electrode_brake"], old["electrode_brake"])
         same_bits(v_new, v_old)
     v_ref, w_ref = ref.electrode_brake(x, v_old, *term.z, term.rstar, term.k, 1e-3)
-    ff._bind(x, v_new)
-    w = term.split(ff, 1e-3)["electrode_brake"]
+    ff.bind(x, v_new)
+    w = term.split(ff.context, 1e-3)["electrode_brake"]
     np.testing.assert_allclose(v_new, v_ref, rtol=1e-14)  # exp here, numpy's exp there: round-off apart
     assert w == pytest.approx(w_ref, rel=1e-10)  # a difference of kinetic energies, summed in another order
     if gap is not None:
         return
     x[:, 2] = 0.0  # no tip touches: no work, no change
-    assert term.split(ff, 1e-3) == {} == old_electrode_split(term, x, v_old, 1e-3)
+    assert term.split(ff.context, 1e-3) == {} == old_electrode_split(term, x, v_old, 1e-3)
 
 
 def test_uniform_force_is_the_reference_and_the_numpy_broadcast(rng):

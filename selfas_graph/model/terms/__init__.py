@@ -4,6 +4,8 @@
 module                 contents
 =====================  =====================================================================
 ``base``               :class:`Term` (the interface), :class:`FieldSource`, shared helpers
+``context``            :class:`EvalContext`: what the terms read and write in one evaluation;
+                       :class:`PairLists`, the neighbour lists it hands out
 ``pairs``              forces between rods: terms 1, 2, 6 (tip-tip magnetic, tip brake, Yukawa)
 ``fields``             one-body terms of the apparatus: 3, 4, 5, 7, 8
 ``external``           the fixed objects of case (ii): term 11
@@ -11,6 +13,7 @@ module                 contents
 ``registry``           ``TERM_CLASSES``: scenario name -> term class
 ``forcefield``         :class:`ForceField`, the container (channels, sums, gather over ranks, state)
 ``mts``                :class:`MultipleTimeStepping`: the held slow forces
+``timing``             :class:`TermClock`: wall time per term, for the benchmarks
 =====================  =====================================================================
 
 The term classes end in ``Force`` (``TipMagneticForce``); their parameters are the classes of
@@ -18,6 +21,7 @@ The term classes end in ``Force`` (``TipMagneticForce``); their parameters are t
 """
 
 from .base import FieldSource, Term, share_by_mass
+from .context import EvalContext, PairLists
 from .currents import CurrentFieldForce, CurrentLorentzForce
 from .external import ExternalDipoleForce, ExternalFilamentForce, external_monopoles
 from .fields import AmbientBrakeForce, ElectricFieldForce, ElectrodesForce, PlasmaFilamentForce, UniformFieldForce
@@ -25,6 +29,7 @@ from .forcefield import ForceField
 from .mts import MultipleTimeStepping
 from .pairs import TipBrakeForce, TipMagneticForce, YukawaForce, yukawa_cutoff
 from .registry import TERM_CLASSES
+from .timing import TermClock
 
 __all__ = [
     "AmbientBrakeForce",
@@ -32,14 +37,17 @@ __all__ = [
     "CurrentLorentzForce",
     "ElectricFieldForce",
     "ElectrodesForce",
+    "EvalContext",
     "ExternalDipoleForce",
     "ExternalFilamentForce",
     "FieldSource",
     "ForceField",
     "MultipleTimeStepping",
+    "PairLists",
     "PlasmaFilamentForce",
     "TERM_CLASSES",
     "Term",
+    "TermClock",
     "TipBrakeForce",
     "TipMagneticForce",
     "UniformFieldForce",

@@ -3,8 +3,9 @@ terms that are sources of a magnetic field, and two helpers the terms share.
 
 A term is built from the scene's :class:`~selfas_graph.model.params.Parameters` and the
 :class:`~selfas_graph.model.state.State`; it keeps only constants. Everything that changes
-during a run (positions, velocities, currents, neighbour lists, buffers) lives in the
-:class:`~selfas_graph.model.terms.forcefield.ForceField` that calls it, passed as ``ff``.
+during a run (positions, velocities, currents, neighbour lists, buffers) comes in the
+evaluation's :class:`~selfas_graph.model.terms.context.EvalContext`, passed as ``ctx`` by the
+:class:`~selfas_graph.model.terms.forcefield.ForceField` that calls the term.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ class Term:
     uses_currents : bool
         The term reads the rod currents: new currents make its held force stale.
     counts_own_calls : bool
-        The term counts its kernel calls in ``ff.calls`` itself (only when it calls a kernel);
+        The term counts its kernel calls in ``ctx.calls`` itself (only when it calls a kernel);
         for the others the field counts every ``compute``.
     """
 
@@ -38,22 +39,24 @@ class Term:
     uses_currents = False
     counts_own_calls = False
 
-    def compute(self, ff, out):  # pragma: no cover - interface
-        """Write the term's force on every tip into ``out[channel]`` for each of its channels."""
+    def compute(self, ctx, out):  # pragma: no cover - interface
+        """Write the term's force on every tip into ``out[channel]`` (n_tips, 3) for each of its
+        channels, at the positions and velocities of ``ctx``, an
+        :class:`~selfas_graph.model.terms.context.EvalContext`."""
         raise NotImplementedError
 
-    def energy(self, ff):
-        """{channel: potential energy} of the conservative channels at ``ff.position`` (None: none)."""
+    def energy(self, ctx):
+        """{channel: potential energy} of the conservative channels at ``ctx.position`` (None: none)."""
         return None
 
-    def blocked(self, ff):
-        """Channels whose last ``compute`` filled only the rows of ``ff.blocks`` (default: none)."""
+    def blocked(self, ctx):
+        """Channels whose last ``compute`` filled only the rows of ``ctx.blocks`` (default: none)."""
         return ()
 
-    def split(self, ff, dt):
+    def split(self, ctx, dt):
         """Apply this term's stiff brake exactly over ``dt`` (``integrator.brake = "split"``).
 
-        Modifies ``ff.velocity`` in place and returns {channel: work done}; the work is the
+        Modifies ``ctx.velocity`` in place and returns {channel: work done}; the work is the
         change of kinetic energy of the tips it touched, exactly.
         """
         return {}

@@ -1,8 +1,8 @@
 """The two terms that read the rod currents (docs/model.md 'Term 9', 'Term 10').
 
 The currents of the last circuit solve are kept by the network
-(:class:`~selfas_graph.model.network.RodCurrents`, ``ForceField.currents``); these terms read
-them there. The field of the rod currents acts on the magnetic tips (term 9,
+(:class:`~selfas_graph.model.network.RodCurrents`); these terms read them in the evaluation's
+context (``ctx.currents``, :class:`~selfas_graph.model.terms.context.EvalContext`). The field of the rod currents acts on the magnetic tips (term 9,
 :class:`CurrentFieldForce`); the Lorentz force on the currents (term 10,
 :class:`CurrentLorentzForce`) feels the rod currents' field and that of every other field
 source that is on (:class:`~selfas_graph.model.terms.base.FieldSource`), which it asks for
@@ -22,8 +22,14 @@ _FIELD_KERNEL = {"float64": kc.rod_current_field, "mixed": kc.rod_current_field_
 _TIP_KERNEL = {"float64": kc.current_force_on_tips, "mixed": kc.current_force_on_tips_mixed}
 
 
+def wire_radius(p) -> float:
+    """The wire radius w = D/2 that regularises the field of the rod currents, D = ``rods.diameter``
+    of the parameters ``p`` (docs/model.md 'Term 9', choice A5)."""
+    return 0.5 * p.rods.diameter
+
+
 class CurrentFieldForce(Term):
-    """Term 9: q_k times the field of all other rods' currents (``ff.currents``, wire radius D/2).
+    """Term 9: q_k times the field of all other rods' currents (``ctx.currents``, wire radius D/2).
     No kernel call while no rod carries current. ``forces.current_field.precision`` picks the
     float64 or the mixed-precision kernel."""
 
@@ -36,25 +42,26 @@ class CurrentFieldForce(Term):
     def __init__(self, p, state):
         self.precision = p.forces.current_field.precision
         self.kernel = _TIP_KERNEL[self.precision]
+        self.wire_radius = wire_radius(p)
 
-    def compute(self, ff, out):
+    def compute(self, ctx, out):
         f = out["current_field"]
         f.fill(0.0)
-        rc = ff.currents
+        rc = ctx.currents
         if len(rc.active_rod):
-            lo, hi = ff.blocks.tips
-            self.kernel(ff.position, ff.tip_charge, rc.active_rod, rc.current, ff.wire_radius, lo, hi, f)
-            ff.calls[self.name] += 1
+            lo, hi = ctx.blocks.tips
+            self.kernel(ctx.position, ctx.tip_charge, rc.active_rod, rc.current, self.wire_radius, lo, hi, f)
+            ctx.calls[self.name] += 1
 
-    def blocked(self, ff):
-        return ("current_field",) if len(ff.active_rod) else ()
+    def blocked(self, ctx):
+        return ("current_field",) if len(ctx.currents.active_rod) else ()
 
 
 class CurrentLorentzForce(Term):
     """Term 10: J_i s_i x B_tot on current-carrying rods, by Gauss-Legendre quadrature along each rod.
 
-    B_tot = the currents of all other rods (``ff.currents``, :meth:`current_field`) + every field source that is
-    on (``ff.field_sources``, in term order: the uniform field, the plasma filament, the external
+    B_tot = the currents of all other rods (``ctx.currents``, :meth:`current_field`) + every field source that is
+    on (:attr:`field_sources`, in term order: the uniform field, the plasma filament, the external
     filament and the dipole's monopoles). Only current-carrying rods are visited, and of them
     only those in the field's block of rods (the field at their points still sums over every
     current). ``forces.current_lorentz.precision`` sets the arithmetic of the rod currents' field
@@ -73,35 +80,39 @@ class CurrentLorentzForce(Term):
         #: pairs of current-carrying rods with centres closer than this take the adapted rule
         self.near_range = p.forces.current_lorentz.near_range
         self.panel_t, self.panel_w = kc.gauss_legendre_01(kc.NEAR_PANEL_POINTS)
+        self.wire_radius = wire_radius(p)
+        #: the terms that are sources of a magnetic field (FieldSource), in term order: handed in by the
+        #: force field that holds this term, once every term is built
+        self.field_sources = ()
 
-    def compute(self, ff, out):
+    def compute(self, ctx, out):
         f = out["current_lorentz"]
         f.fill(0.0)
-        active = ff.active_rod
+        active = ctx.currents.active_rod
         if not len(active):
             return
-        ff.calls[self.name] += 1
+        ctx.calls[self.name] += 1
         # active_rod is sorted (network.RodCurrents.set), so the rods of this block are one slice of it
-        mine = active[np.searchsorted(active, ff.blocks.rods[0]) : np.searchsorted(active, ff.blocks.rods[1])]
+        mine = active[np.searchsorted(active, ctx.blocks.rods[0]) : np.searchsorted(active, ctx.blocks.rods[1])]
         if not len(mine):
             return
         ng = len(self.t)
-        pts = ff.buffer("gl_points", len(mine) * ng)
-        kc.quadrature_points(ff.position, mine, self.t, pts)
-        field = ff.buffer("gl_field", len(mine) * ng)
-        self.current_field(ff, pts, field, exclude_rod=np.repeat(mine, ng))
-        extra = ff.buffer("gl_extra", len(pts))
-        for source in ff.field_sources:
+        pts = ctx.buffer("gl_points", len(mine) * ng)
+        kc.quadrature_points(ctx.position, mine, self.t, pts)
+        field = ctx.buffer("gl_field", len(mine) * ng)
+        self.current_field(ctx, pts, field, exclude_rod=np.repeat(mine, ng))
+        extra = ctx.buffer("gl_extra", len(pts))
+        for source in self.field_sources:
             source.field_at(pts, extra)
             field += extra
-        kc.lorentz_force_on_rods(ff.position, mine, ff.current, field, self.t, self.wt, f)
+        kc.lorentz_force_on_rods(ctx.position, mine, ctx.currents.current, field, self.t, self.wt, f)
         if self.near_range > 0.0:
-            self._near_pairs(ff, active, mine, f)
+            self._near_pairs(ctx, active, mine, f)
 
-    def _near_pairs(self, ff, active, mine, f):
+    def _near_pairs(self, ctx, active, mine, f):
         """The adapted rule for the pairs closer than ``near_range`` (kernels/currents.py
         ``lorentz_near_correction``): the plain rule's share of each such pair is replaced."""
-        pos = ff.position
+        pos = ctx.position
         centre = 0.5 * (pos[2 * active] + pos[2 * active + 1])
         if not np.isfinite(centre).all():
             return  # no cell grid places NaN; the run's health check stops with a diagnosis
@@ -110,7 +121,7 @@ class CurrentLorentzForce(Term):
         kc.lorentz_near_correction(
             pos,
             active,
-            ff.current,
+            ctx.currents.current,
             start,
             index,
             r_lo,
@@ -119,17 +130,19 @@ class CurrentLorentzForce(Term):
             self.wt,
             self.panel_t,
             self.panel_w,
-            ff.wire_radius,
+            self.wire_radius,
             f,
         )
 
-    def current_field(self, ff, points, out, exclude_rod):
+    def current_field(self, ctx, points, out, exclude_rod):
         """Overwrite ``out`` (m, 3) with the field of the rod currents at ``points`` (m, 3), leaving out
         at each point the rod ``exclude_rod[p]`` ((m,) int64; -1: none), e.g. the rod the point is on;
         in the term's precision (``"mixed"``: float32 law, float64 sums;
         :func:`~selfas_graph.kernels.currents.rod_current_field_mixed`)."""
-        rc = ff.currents
-        _FIELD_KERNEL[self.precision](points, exclude_rod, ff.position, rc.active_rod, rc.current, ff.wire_radius, out)
+        rc = ctx.currents
+        _FIELD_KERNEL[self.precision](
+            points, exclude_rod, ctx.position, rc.active_rod, rc.current, self.wire_radius, out
+        )
 
-    def blocked(self, ff):
-        return ("current_lorentz",) if len(ff.active_rod) else ()
+    def blocked(self, ctx):
+        return ("current_lorentz",) if len(ctx.currents.active_rod) else ()

@@ -28,8 +28,8 @@ class ExternalFilamentForce(Term, FieldSource):
         f = p.forces.external_filament
         self.current, self.w = f.current, 0.5 * f.diameter
 
-    def compute(self, ff, out):
-        kx.filament_force_on_tips(ff.position, ff.tip_charge, self.current, self.w, out["external_filament"])
+    def compute(self, ctx, out):
+        kx.filament_force_on_tips(ctx.position, ctx.tip_charge, self.current, self.w, out["external_filament"])
 
     def field_at(self, points, out):
         kx.filament_field(points, self.current, self.w, out)
@@ -51,12 +51,12 @@ class ExternalDipoleForce(Term, FieldSource):
         self.nodes, self.weights = kc.gauss_legendre_01(d.quadrature_points)
         self.split_mode = p.integrator.brake == "split"
 
-    def compute(self, ff, out):
+    def compute(self, ctx, out):
         k = 0.0 if self.split_mode else self.k
         kx.monopoles_on_tips(
-            ff.position,
-            ff.velocity,
-            ff.tip_charge,
+            ctx.position,
+            ctx.velocity,
+            ctx.tip_charge,
             self.source,
             self.source_charge,
             self.rstar,
@@ -65,29 +65,29 @@ class ExternalDipoleForce(Term, FieldSource):
             out["external_monopoles"],
             out["external_monopole_brake"],
         )
-        f = ff.buffer("line_centre", ff.n_rods)
-        kx.line_yukawa_on_centres(ff.centre(), ff.rod_charge, *self.line, self.nodes, self.weights, f)
+        f = ctx.buffer("line_centre", ctx.n_rods)
+        kx.line_yukawa_on_centres(ctx.centre(), ctx.rod_charge, *self.line, self.nodes, self.weights, f)
         share_by_mass(f, out["external_line_charge"])
 
     def field_at(self, points, out):
         kx.monopole_field(points, self.source, self.source_charge, self.rstar, out)
 
-    def split(self, ff, dt):
-        d2 = ((ff.position[:, None, :] - self.source[None, :, :]) ** 2).sum(axis=-1)
+    def split(self, ctx, dt):
+        d2 = ((ctx.position[:, None, :] - self.source[None, :, :]) ** 2).sum(axis=-1)
         touching = (d2 < self.rstar**2).sum(axis=1).astype(np.float64)
         tips = np.flatnonzero(touching)
         if not len(tips) or self.k == 0.0:
             return {}
-        before = kinetic(ff.velocity, tips)
-        ff.velocity[tips] *= np.exp(-self.k * touching[tips] * dt)[:, None]
-        return {"external_monopole_brake": kinetic(ff.velocity, tips) - before}
+        before = kinetic(ctx.velocity, tips)
+        ctx.velocity[tips] *= np.exp(-self.k * touching[tips] * dt)[:, None]
+        return {"external_monopole_brake": kinetic(ctx.velocity, tips) - before}
 
-    def energy(self, ff):
+    def energy(self, ctx):
         return {
             "external_monopoles": kx.monopoles_energy(
-                ff.position, ff.tip_charge, self.source, self.source_charge, self.rstar, self.kappa
+                ctx.position, ctx.tip_charge, self.source, self.source_charge, self.rstar, self.kappa
             ),
             "external_line_charge": kx.line_yukawa_energy(
-                ff.centre(), ff.rod_charge, *self.line, self.nodes, self.weights
+                ctx.centre(), ctx.rod_charge, *self.line, self.nodes, self.weights
             ),
         }

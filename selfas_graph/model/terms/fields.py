@@ -22,8 +22,8 @@ class AmbientBrakeForce(Term):
     def __init__(self, p, state):
         self.k = p.forces.ambient_brake.coefficient
 
-    def compute(self, ff, out):
-        np.multiply(ff.velocity, -self.k, out=out["ambient_brake"])
+    def compute(self, ctx, out):
+        np.multiply(ctx.velocity, -self.k, out=out["ambient_brake"])
 
 
 class UniformFieldForce(Term, FieldSource):
@@ -35,11 +35,11 @@ class UniformFieldForce(Term, FieldSource):
     def __init__(self, p, state):
         self.B = np.array(p.forces.uniform_field.B, dtype=np.float64)
 
-    def compute(self, ff, out):
-        kf.uniform_force_on_tips(ff.tip_charge, self.B, out["uniform_field"])
+    def compute(self, ctx, out):
+        kf.uniform_force_on_tips(ctx.tip_charge, self.B, out["uniform_field"])
 
-    def energy(self, ff):
-        return {"uniform_field": -float(ff.tip_charge @ (ff.position @ self.B))}
+    def energy(self, ctx):
+        return {"uniform_field": -float(ctx.tip_charge @ (ctx.position @ self.B))}
 
     def field_at(self, points, out):
         out[:] = self.B
@@ -55,8 +55,8 @@ class PlasmaFilamentForce(Term, FieldSource):
         pf = p.forces.plasma_filament
         self.args = (float(pf.axis[0]), float(pf.axis[1]), pf.radius, pf.current)
 
-    def compute(self, ff, out):
-        kf.plasma_force_on_tips(ff.position, ff.tip_charge, *self.args, out["plasma_filament"])
+    def compute(self, ctx, out):
+        kf.plasma_force_on_tips(ctx.position, ctx.tip_charge, *self.args, out["plasma_filament"])
 
     def field_at(self, points, out):
         kf.plasma_field(points, *self.args, out)
@@ -71,11 +71,11 @@ class ElectricFieldForce(Term):
     def __init__(self, p, state):
         self.E = np.array(p.forces.electric_field.E, dtype=np.float64)
 
-    def compute(self, ff, out):
-        share_by_mass(ff.rod_charge[:, None] * self.E[None, :], out["electric_field"])
+    def compute(self, ctx, out):
+        share_by_mass(ctx.rod_charge[:, None] * self.E[None, :], out["electric_field"])
 
-    def energy(self, ff):
-        return {"electric_field": -float(ff.rod_charge @ (ff.centre() @ self.E))}
+    def energy(self, ctx):
+        return {"electric_field": -float(ctx.rod_charge @ (ctx.centre() @ self.E))}
 
 
 class ElectrodesForce(Term):
@@ -93,11 +93,11 @@ class ElectrodesForce(Term):
         self.split_mode = p.integrator.brake == "split"
         self._decay, self._decay_dt = None, None
 
-    def compute(self, ff, out):
+    def compute(self, ctx, out):
         k = 0.0 if self.split_mode else self.k
         kf.electrode_walls(
-            ff.position,
-            ff.velocity,
+            ctx.position,
+            ctx.velocity,
             self.z[0],
             self.z[1],
             self.rstar,
@@ -107,17 +107,17 @@ class ElectrodesForce(Term):
             out["electrode_brake"],
         )
 
-    def split(self, ff, dt):
+    def split(self, ctx, dt):
         if self.k == 0.0:
             return {}
         if self._decay_dt != dt:
             # dv/dt = -n k v, exactly, for a tip touching n planes
             self._decay = np.exp(-self.k * np.array([0.0, 1.0, 2.0]) * dt)
             self._decay_dt = dt
-        before, after = ff.buffer("electrode_before", ff.n_tips), ff.buffer("electrode_after", ff.n_tips)
+        before, after = ctx.buffer("electrode_before", ctx.n_tips), ctx.buffer("electrode_after", ctx.n_tips)
         # the work: the change of kinetic energy of the touched tips, as kinetic_of sums it
-        work, m = kf.electrode_brake_exact(ff.position, ff.velocity, *self.z, self.rstar, self._decay, before, after)
+        work, m = kf.electrode_brake_exact(ctx.position, ctx.velocity, *self.z, self.rstar, self._decay, before, after)
         return {"electrode_brake": work} if m else {}
 
-    def energy(self, ff):
-        return {"electrodes": kf.electrode_energy(ff.position, self.z[0], self.z[1], self.rstar, self.kappa)}
+    def energy(self, ctx):
+        return {"electrodes": kf.electrode_energy(ctx.position, self.z[0], self.z[1], self.rstar, self.kappa)}

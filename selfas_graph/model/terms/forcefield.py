@@ -16,18 +16,19 @@ rod and nothing is communicated. Their energies are computed as one value per ro
 gathered the same way and summed over all rows on every rank: the same float whatever
 the number of ranks.
 
-The field reads the rod currents from their owner, the network's
-:class:`~selfas_graph.model.network.RodCurrents` (``currents``), and keeps no copy of them. It
-holds what else changes during a run besides the state: the neighbour lists, and with
-multiple time stepping the held slow forces
-(:class:`~selfas_graph.model.terms.mts.MultipleTimeStepping`); :meth:`ForceField.state_dict`
-and :meth:`ForceField.load_state_dict` save and restore them for exact restarts.
+The terms receive what they use in an evaluation as one
+:class:`~selfas_graph.model.terms.context.EvalContext` (``context``), built once with the field
+and bound to each evaluation's positions and velocities. It carries the rod currents of their
+owner, the network's :class:`~selfas_graph.model.network.RodCurrents` (``currents``), of which the
+field keeps no copy. The field holds what else changes during a run besides the state: the
+neighbour lists (:class:`~selfas_graph.model.terms.context.PairLists`), and with multiple time
+stepping the held slow forces (:class:`~selfas_graph.model.terms.mts.MultipleTimeStepping`);
+:meth:`ForceField.state_dict` and :meth:`ForceField.load_state_dict` save and restore them for
+exact restarts. Wall time per term, when asked for, is measured by a
+:class:`~selfas_graph.model.terms.timing.TermClock` around each call.
 """
 
 from __future__ import annotations
-
-import time
-from collections import Counter
 
 import numpy as np
 
@@ -37,9 +38,12 @@ from ..neighbours import NeighbourList
 from ..network import RodCurrents
 from ..params import Parameters
 from .base import FieldSource, Term
+from .context import EvalContext, PairLists
+from .currents import CurrentLorentzForce, wire_radius
 from .mts import MultipleTimeStepping
 from .pairs import TipMagneticForce, YukawaForce
 from .registry import TERM_CLASSES
+from .timing import TermClock
 
 
 class ForceField:
@@ -51,7 +55,7 @@ class ForceField:
     state : State
         Supplies the per-tip and per-rod constants (charges) and the sizes.
     timing : bool
-        Accumulate wall time per term in ``self.seconds`` (for benchmarks).
+        Accumulate wall time per term in ``self.seconds`` (for benchmarks; :class:`TermClock`).
     blocks : RowBlocks, optional
         The rods whose rows this process computes in the expensive terms (default: all of
         them, a serial run).
@@ -65,10 +69,12 @@ class ForceField:
     terms : list of the active term objects, docs/model.md order ('Force terms')
     channels : list of (name, conservative)
     field_sources : the terms that are also sources of a magnetic field (FieldSource), in term order
+    context : EvalContext, what the terms read and write in an evaluation (bound to its arrays)
     currents : RodCurrents, the rod currents of the last circuit solve (not a copy: their owner's)
     wire_radius : float, w = D/2 of the rod currents' field
     mts : MultipleTimeStepping or None (``integrator.slow_every = 1``)
-    calls : Counter of kernel evaluations per term (tests count these)
+    calls : Counter of kernel evaluations per term (tests count these; ``context.calls``)
+    clock : TermClock, the wall time per term when ``timing`` (``seconds``)
     """
 
     def __init__(
@@ -90,6 +96,10 @@ class ForceField:
         self.terms = [TERM_CLASSES[name](params, state) for name in params.forces.active()]
         self.channels = [c for t in self.terms for c in t.channels]
         self.field_sources = [t for t in self.terms if isinstance(t, FieldSource)]
+        for t in self.terms:
+            if isinstance(t, CurrentLorentzForce):
+                # its field sources are terms too, some built after it (docs/model.md 'Force terms' order)
+                t.field_sources = tuple(self.field_sources)
         self.nonconservative = [name for name, cons in self.channels if not cons]
         self.conservative = [name for name, cons in self.channels if cons]
         # the channel buffers are the rows of one array, summed in one pass (kernels.integrate.channel_sum)
@@ -102,37 +112,49 @@ class ForceField:
             [j for j, (_, conservative) in enumerate(self.channels) if not conservative], dtype=np.int64
         )
         self.total = np.zeros((self.n_tips, 3))
-        self.calls = Counter()
-        self.timing = timing
-        self.seconds = Counter()
-        self._buffers = {}
-        skin = params.neighbours.skin
-        self._tip_nl = None
-        self._centre_nl = None
-        self._tip_range = params.rods.rstar
-        for t in self.terms:
-            if isinstance(t, YukawaForce) and t.cutoff > 0.0:
-                # under MPI a rank sums the Yukawa rows of its block only: it lists only those rows
-                # (half the build and the memory on 2 ranks; each row the same bit for bit)
-                rows = None if self.blocks.serial else self.blocks.rods
-                self._centre_nl = NeighbourList(t.cutoff, skin, rows=rows)
-        self._skin = skin
-        self.position = None
-        self.velocity = None
-        # wire radius w = D/2 of the rod currents' field (docs/model.md 'Term 9', choice A5)
-        self.wire_radius = 0.5 * params.rods.diameter
+        yukawa = next((t for t in self.terms if isinstance(t, YukawaForce) and t.cutoff > 0.0), None)
+        self.lists = PairLists(
+            params.rods.rstar, params.neighbours.skin, self.blocks, yukawa.cutoff if yukawa is not None else None
+        )
+        self.wire_radius = wire_radius(params)
         self.currents = RodCurrents(self.n_rods) if currents is None else currents
         if self.currents.n_rods != self.n_rods:
             raise ValueError(f"the currents cover {self.currents.n_rods} rods, the state has {self.n_rods}")
+        self.context = EvalContext(self.tip_charge, self.rod_charge, self.blocks, self.currents, self.lists)
+        self.calls = self.context.calls
+        # each term's compute, the gather and the tip term's fast part, timed if asked (else the calls themselves)
+        self.clock = TermClock(timing)
+        self._compute = [self.clock.wrap(t.name, t.compute) for t in self.terms]
+        self._gather = self.clock.wrap("gather", self.blocks.gather_rows)
         # multiple time stepping (integrator.slow_every > 1): the slow terms' channels keep their
         # last evaluation; the tip term's far part is kept apart from its fast close pairs
         self.multiple_time_stepping = params.integrator.slow_every > 1
         self.mts = None
         if self.multiple_time_stepping:
             tip_term = next((t for t in self.terms if isinstance(t, TipMagneticForce)), None)
-            self.mts = MultipleTimeStepping(params, self.terms, self.out, tip_term)
+            self.mts = MultipleTimeStepping(params, self.terms, self.out, tip_term, self.clock)
             if tip_term is not None:
                 self.extend_tip_range(self.mts.fast_range[1])
+
+    @property
+    def timing(self) -> bool:
+        """Whether wall time per term is measured (``seconds``)."""
+        return self.clock.on
+
+    @property
+    def seconds(self):
+        """Wall time per term, a Counter (empty unless ``timing``; the benchmarks read and clear it)."""
+        return self.clock.seconds
+
+    @property
+    def position(self) -> np.ndarray | None:
+        """The positions of the last evaluation (``context.position``)."""
+        return self.context.position
+
+    @property
+    def velocity(self) -> np.ndarray | None:
+        """The velocities of the last evaluation (``context.velocity``)."""
+        return self.context.velocity
 
     @property
     def current(self) -> np.ndarray:
@@ -162,28 +184,10 @@ class ForceField:
         if self.currents.set(current):
             self.currents_changed()
 
-    # -- lazily computed views of the current (position, velocity) ---------------------------------
-    def _bind(self, position, velocity):
-        self.position = position
-        self.velocity = velocity
-        self._soa = None
-        self._centre = None
-
-    def soa(self):
-        if self._soa is None:
-            self._soa = tuple(np.ascontiguousarray(self.position[:, d]) for d in range(3))
-        return self._soa
-
-    def centre(self):
-        if self._centre is None:
-            self._centre = 0.5 * (self.position[0::2] + self.position[1::2])
-        return self._centre
-
-    def buffer(self, name, rows):
-        buf = self._buffers.get(name)
-        if buf is None or buf.shape[0] != rows:
-            buf = self._buffers[name] = np.zeros((rows, 3))
-        return buf
+    def bind(self, position, velocity) -> None:
+        """Bind ``position`` and ``velocity`` (n_tips, 3) into :attr:`context` (e.g. before
+        :meth:`load_state_dict`, or to call a term by hand); :meth:`evaluate` does it itself."""
+        self.context.bind(position, velocity)
 
     def tip_neighbours(self, position=None) -> NeighbourList:
         """Tip pairs of different rods closer than the tip range (plus skin), up to date for ``position``.
@@ -191,22 +195,15 @@ class ForceField:
         The range is r*, or the contact release radius once :meth:`extend_tip_range`
         was called, so that the brake and the contact search share one list.
         """
-        if self._tip_nl is None:
-            # every rank needs the whole tip list (contacts, brakes, close pairs); under MPI each builds
-            # the rows of its block and the rows are gathered (parallel.py RowBlocks.gather_list)
-            self._tip_nl = NeighbourList(self._tip_range, self._skin, exclude_same_rod=True, share=self.blocks)
-        self._tip_nl.update(self.position if position is None else position)
-        return self._tip_nl
+        return self.lists.tips(self.context.position if position is None else position)
 
     def extend_tip_range(self, radius: float) -> None:
         """Make the tip neighbour list cover ``radius`` (the contact release radius)."""
-        if radius > self._tip_range:
-            self._tip_range = float(radius)
-            self._tip_nl = None
+        self.lists.extend_tip_range(radius)
 
     def centre_neighbours(self) -> NeighbourList:
-        self._centre_nl.update(self.centre())
-        return self._centre_nl
+        """Rod centres within the Yukawa cut-off (plus skin), up to date for the bound positions."""
+        return self.context.centre_neighbours()
 
     # -- evaluation -------------------------------------------------------------------------------
     def evaluate(self, position, velocity, power=None, full=True, step=None):
@@ -231,32 +228,27 @@ class ForceField:
         (n_tips, 3) float64
             The summed force (a buffer owned by the field; copy it to keep it).
         """
-        self._bind(position, velocity)
+        ctx = self.context
+        ctx.bind(position, velocity)
         mts = self.mts
         full = full or mts is None
-        timing, serial, out, calls = self.timing, self.blocks.serial, self.out, self.calls
+        serial, out, calls = self.blocks.serial, self.out, self.calls
         blocked = []
         refreshed = []
-        for t in self.terms:
+        for t, compute in zip(self.terms, self._compute):
             if t.slow:
                 if not (full or t.name in mts.stale):  # without mts, full is always True
                     continue
                 refreshed.append(t.name)
-            t0 = time.perf_counter() if timing else 0.0
-            t.compute(self, out)
+            compute(ctx, out)
             if not t.counts_own_calls:
                 calls[t.name] += 1
-            if timing:
-                self.seconds[t.name] += time.perf_counter() - t0
             if not serial:
-                blocked.extend(t.blocked(self))
+                blocked.extend(t.blocked(ctx))
         if not serial:
-            t0 = time.perf_counter() if self.timing else 0.0
-            self.blocks.gather_rows([self.out[name] for name in blocked], rows_per_rod=2)
-            if self.timing:
-                self.seconds["gather"] += time.perf_counter() - t0
+            self._gather([out[name] for name in blocked], rows_per_rod=2)
         if mts is not None:
-            mts.complete(self, refreshed, full, step, self.seconds if self.timing else None)
+            mts.complete(ctx, refreshed, full, step)
         total = self.total
         # ((0 + c_0) + c_1) + ..., in channel order; with the power of each non-conservative channel
         # summed as np.einsum("ij,ij->", f, velocity) sums it
@@ -280,7 +272,7 @@ class ForceField:
         d = {}
         if self.mts is not None:
             d.update(self.mts.state_dict())
-        for name, nl in (("tip_nl", self._tip_nl), ("centre_nl", self._centre_nl)):
+        for name, nl in (("tip_nl", self.lists.tip), ("centre_nl", self.lists.centre)):
             if nl is not None and nl.reference is not None:
                 d[f"{name}_reference"] = nl.reference.copy()
                 d[f"{name}_builds"] = nl.n_builds
@@ -297,9 +289,10 @@ class ForceField:
             nl = self.tip_neighbours(d["tip_nl_reference"])
             nl.build(np.array(d["tip_nl_reference"]))
             nl.n_builds = int(d["tip_nl_builds"])
-        if "centre_nl_reference" in d and self._centre_nl is not None:
-            self._centre_nl.build(np.array(d["centre_nl_reference"]))
-            self._centre_nl.n_builds = int(d["centre_nl_builds"])
+        centre = self.lists.centre
+        if "centre_nl_reference" in d and centre is not None:
+            centre.build(np.array(d["centre_nl_reference"]))
+            centre.n_builds = int(d["centre_nl_builds"])
         if self.mts is not None:
             self.mts.load_state_dict(d)
 
@@ -308,17 +301,19 @@ class ForceField:
 
         ``work`` (len(nonconservative),) is incremented by each brake's work.
         """
-        self._bind(position, velocity)
+        ctx = self.context
+        ctx.bind(position, velocity)
         for t in self._split_terms:
-            for channel, w in t.split(self, dt).items():
+            for channel, w in t.split(ctx, dt).items():
                 work[self._channel_index[channel]] += w
 
     def potential_energy(self, position) -> dict:
         """Potential energy of each conservative channel at ``position``."""
-        self._bind(position, np.zeros_like(position) if self.velocity is None else self.velocity)
+        ctx = self.context
+        ctx.bind(position, np.zeros_like(position) if ctx.velocity is None else ctx.velocity)
         energy = {}
         for t in self.terms:
-            e = t.energy(self)
+            e = t.energy(ctx)
             if e:
                 energy.update(e)
         return energy

@@ -11,8 +11,6 @@ changed (new currents) is *stale* and is computed at the next evaluation, full o
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from ...kernels.integrate import extrapolate_all
@@ -30,9 +28,11 @@ class MultipleTimeStepping:
         The field's channel buffers (the slow channels are held in place there).
     tip_term : TipMagneticForce or None
         The tip-tip term, whose fast part is evaluated at every step.
+    clock : TermClock, optional
+        Times the fast part as ``tip_magnetic_fast`` when it is on.
     """
 
-    def __init__(self, params, terms, out, tip_term=None):
+    def __init__(self, params, terms, out, tip_term=None, clock=None):
         ip = params.integrator
         self.slow_every = ip.slow_every
         self.out = out
@@ -43,6 +43,7 @@ class MultipleTimeStepping:
             self.fast_range = ((ip.fast_range - 1.0) * rstar, ip.fast_range * rstar)
             self.tip_far = np.zeros_like(out["tip_magnetic"])
             self._tip_fast = np.zeros_like(out["tip_magnetic"])
+            self._fast = tip_term.fast if clock is None else clock.wrap("tip_magnetic_fast", tip_term.fast)
         #: slow term name -> the held arrays it refreshes (``held_forces`` keys)
         self.slow_keys = {
             t.name: (["tip_far"] if t is tip_term else [c for c, _ in t.channels]) for t in terms if t.slow
@@ -72,23 +73,21 @@ class MultipleTimeStepping:
         """New rod currents: the slow terms that read them are computed at the next evaluation."""
         self.stale.update(self._uses_currents)
 
-    def complete(self, ff, refreshed, full, step, seconds=None) -> None:
-        """After the terms ran: add the tip-tip fast part, extrapolate (or keep) the held forces.
+    def complete(self, ctx, refreshed, full, step) -> None:
+        """After the terms ran on ``ctx`` (an :class:`~selfas_graph.model.terms.context.EvalContext`):
+        add the tip-tip fast part, extrapolate (or keep) the held forces.
 
-        ``refreshed`` lists the slow terms computed in this evaluation; ``seconds``, a Counter,
-        receives the wall time of the fast part (``tip_magnetic_fast``) if given.
+        ``refreshed`` lists the slow terms computed in this evaluation; ``full`` and ``step`` are
+        those of :meth:`ForceField.evaluate <selfas_graph.model.terms.forcefield.ForceField.evaluate>`.
         """
         self.stale.clear()
         fast = None
         tip_fresh = "tip_magnetic" in refreshed
         if self.tip_term is not None:
-            t0 = time.perf_counter() if seconds is not None else 0.0
             fast = self._tip_fast
-            self.tip_term.fast(ff, *self.fast_range, fast)
+            self._fast(ctx, *self.fast_range, fast)
             if tip_fresh:
                 np.subtract(self.out["tip_magnetic"], fast, out=self.tip_far)
-            if seconds is not None:
-                seconds["tip_magnetic_fast"] += time.perf_counter() - t0
         if self.extrapolate:
             self._extrapolate([k for name in refreshed for k in self.slow_keys[name]] if refreshed else (), full, step)
         if fast is not None and not tip_fresh:

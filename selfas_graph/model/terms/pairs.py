@@ -61,13 +61,13 @@ class TipMagneticForce(Term):
         self.precision = tm.precision
         self._gathered = False
 
-    def compute(self, ff, out):
-        x, y, z = ff.soa()
+    def compute(self, ctx, out):
+        x, y, z = ctx.soa()
         if self.tree:
             try:
-                tree = self._build_tree(ff, x, y, z)
+                tree = self._build_tree(ctx, x, y, z)
             except ValueError:
-                if np.isfinite(ff.position).all():
+                if np.isfinite(ctx.position).all():
                     raise
                 # NaN or inf positions: no tree can place them; the direct sum passes them on
                 # to the forces, where the run's health check stops with a diagnosis
@@ -75,49 +75,49 @@ class TipMagneticForce(Term):
                 # ranks split the tree's target groups, runs of tips in Morton order, so that each
                 # group is walked on one rank only, and gather their rows: the same forces bit for bit
                 # (docs/performance.md 'Several MPI ranks')
-                groups, tips = ktree.group_bounds(tree, ff.blocks.size)
-                r = ff.blocks.rank
+                groups, tips = ktree.group_bounds(tree, ctx.blocks.size)
+                r = ctx.blocks.rank
                 f = out["tip_magnetic"]
                 ktree.evaluate_tip_tree(
                     tree, self.rstar, self.kappa, self.theta, f, precision=self.precision, groups=groups[r : r + 2]
                 )
-                ff.blocks.gather_runs(f, tree.index, tips)
+                ctx.blocks.gather_runs(f, tree.index, tips)
                 self._gathered = True
                 return
         self._gathered = False
-        lo, hi = ff.blocks.tips
+        lo, hi = ctx.blocks.tips
         direct = kt.tip_tip_direct_mixed if self.precision == "mixed" else kt.tip_tip_direct
-        direct(x, y, z, ff.tip_charge, self.rstar, self.kappa, lo, hi, out["tip_magnetic"])
+        direct(x, y, z, ctx.tip_charge, self.rstar, self.kappa, lo, hi, out["tip_magnetic"])
 
-    def _build_tree(self, ff, x, y, z):
+    def _build_tree(self, ctx, x, y, z):
         """The tip tree; under MPI each rank computes the moments of a run of cells and the ranks
         exchange them (the work two threads would share), the same tree bit for bit."""
-        if ff.blocks.serial:
-            return ktree.build_tip_tree(x, y, z, ff.tip_charge, order=self.order)
-        tree = ktree.plan_tip_tree(x, y, z, ff.tip_charge, order=self.order)
-        bounds = ktree.cell_bounds(tree, ff.blocks.size)
-        r = ff.blocks.rank
+        if ctx.blocks.serial:
+            return ktree.build_tip_tree(x, y, z, ctx.tip_charge, order=self.order)
+        tree = ktree.plan_tip_tree(x, y, z, ctx.tip_charge, order=self.order)
+        bounds = ktree.cell_bounds(tree, ctx.blocks.size)
+        r = ctx.blocks.rank
         ktree.fill_cells(tree, bounds[r], bounds[r + 1])
         cells = np.arange(tree.start.shape[0])
         for a in (tree.box, tree.centre, tree.radius, tree.moment):
-            ff.blocks.gather_runs(a, cells, bounds)
+            ctx.blocks.gather_runs(a, cells, bounds)
         return ktree.finish_tip_tree(tree)
 
-    def blocked(self, ff):
+    def blocked(self, ctx):
         # the tree gathers its own rows (its ranks split groups, not blocks of rods)
         return () if self._gathered else ("tip_magnetic",)
 
-    def fast(self, ff, r_in, r_out, out):
+    def fast(self, ctx, r_in, r_out, out):
         """The fast part of the force, pairs closer than ``r_out`` switched off smoothly from ``r_in`` on."""
-        nl = ff.tip_neighbours()
-        kt.tip_tip_fast(ff.position, ff.tip_charge, nl.start, nl.index, self.rstar, self.kappa, r_in, r_out, out)
+        nl = ctx.tip_neighbours()
+        kt.tip_tip_fast(ctx.position, ctx.tip_charge, nl.start, nl.index, self.rstar, self.kappa, r_in, r_out, out)
 
-    def energy(self, ff):
-        x, y, z = ff.soa()
-        lo, hi = ff.blocks.tips
-        e = np.empty(ff.n_tips)
-        kt.tip_tip_energy(x, y, z, ff.tip_charge, self.rstar, self.kappa, lo, hi, e)
-        ff.blocks.gather_rows([e], rows_per_rod=2)
+    def energy(self, ctx):
+        x, y, z = ctx.soa()
+        lo, hi = ctx.blocks.tips
+        e = np.empty(ctx.n_tips)
+        kt.tip_tip_energy(x, y, z, ctx.tip_charge, self.rstar, self.kappa, lo, hi, e)
+        ctx.blocks.gather_rows([e], rows_per_rod=2)
         return {"tip_magnetic": float(e.sum())}
 
 
@@ -130,16 +130,16 @@ class TipBrakeForce(Term):
         self.k = p.forces.tip_brake.coefficient
         self.split_mode = p.integrator.brake == "split"
 
-    def compute(self, ff, out):
+    def compute(self, ctx, out):
         if self.split_mode:
             out["tip_brake"].fill(0.0)
             return
-        nl = ff.tip_neighbours()
-        kp.tip_brake(ff.position, ff.velocity, nl.start, nl.index, self.rstar, self.k, out["tip_brake"])
+        nl = ctx.tip_neighbours()
+        kp.tip_brake(ctx.position, ctx.velocity, nl.start, nl.index, self.rstar, self.k, out["tip_brake"])
 
-    def split(self, ff, dt):
-        nl = ff.tip_neighbours()
-        work, braked = kp.brake_close_pairs(ff.position, ff.velocity, nl.start, nl.index, self.rstar, self.k, dt)
+    def split(self, ctx, dt):
+        nl = ctx.tip_neighbours()
+        work, braked = kp.brake_close_pairs(ctx.position, ctx.velocity, nl.start, nl.index, self.rstar, self.k, dt)
         return {"tip_brake": work} if braked else {}
 
 
@@ -156,21 +156,21 @@ class YukawaForce(Term):
         zmax = float(np.abs(state.rod_charge).max(initial=0.0))
         self.cutoff = yukawa_cutoff(zmax, y.screening_length, y.tolerance)
 
-    def compute(self, ff, out):
+    def compute(self, ctx, out):
         if self.cutoff == 0.0:  # no rod is charged: the term is zero
             out["yukawa"].fill(0.0)
             return
-        nl = ff.centre_neighbours()
+        nl = ctx.centre_neighbours()
         nl.cell_order = True  # from the next build on, the list comes with its rows numbered by cell
         order, start, index = nl.sorted_rows
-        f = ff.buffer("yukawa_centre", ff.n_rods)
-        lo, hi = ff.blocks.rods
+        f = ctx.buffer("yukawa_centre", ctx.n_rods)
+        lo, hi = ctx.blocks.rods
         # [perf] the sum reads copies in cell order (kernels/pairs.py yukawa_centres_sorted: the same
         # forces bit for bit as yukawa_centres over the list, 1.3 times faster at 24 000 rods)
         kernel = kp.yukawa_centres_sorted_mixed if self.precision == "mixed" else kp.yukawa_centres_sorted
         kernel(
-            ff.centre()[order],
-            ff.rod_charge[order],
+            ctx.centre()[order],
+            ctx.rod_charge[order],
             order,
             start,
             index,
@@ -183,17 +183,17 @@ class YukawaForce(Term):
         )
         share_by_mass(f[lo:hi], out["yukawa"][2 * lo : 2 * hi])
 
-    def blocked(self, ff):
+    def blocked(self, ctx):
         return ("yukawa",) if self.cutoff > 0.0 else ()
 
-    def energy(self, ff):
+    def energy(self, ctx):
         if self.cutoff == 0.0:
             return {"yukawa": 0.0}
-        nl = ff.centre_neighbours()
-        lo, hi = ff.blocks.rods
-        e = np.empty(ff.n_rods)
+        nl = ctx.centre_neighbours()
+        lo, hi = ctx.blocks.rods
+        e = np.empty(ctx.n_rods)
         kp.yukawa_energy(
-            ff.centre(), ff.rod_charge, nl.start, nl.index, self.screening, self.core, self.cutoff, lo, hi, e
+            ctx.centre(), ctx.rod_charge, nl.start, nl.index, self.screening, self.core, self.cutoff, lo, hi, e
         )
-        ff.blocks.gather_rows([e], rows_per_rod=1)
+        ctx.blocks.gather_rows([e], rows_per_rod=1)
         return {"yukawa": float(e.sum())}

@@ -1,0 +1,149 @@
+"""What a force term reads and writes during one evaluation: :class:`EvalContext`, and the
+neighbour lists it hands out (:class:`PairLists`).
+
+A term keeps only the constants of its construction (its parameters). Everything else it uses
+comes in an :class:`EvalContext`: the positions and velocities of this evaluation, the tip and
+rod charges, the rows this process computes (:class:`~selfas_graph.parallel.RowBlocks`), the
+rod currents (the network's :class:`~selfas_graph.model.network.RodCurrents`, not a copy), the
+neighbour lists, work buffers and the count of kernel calls. The
+:class:`~selfas_graph.model.terms.forcefield.ForceField` builds one context and binds each
+evaluation's arrays into it (:meth:`EvalContext.bind`): no object is made per step.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...parallel import RowBlocks
+from ..neighbours import NeighbourList
+from ..network import RodCurrents
+
+
+class PairLists:
+    """The two neighbour lists of a force field: tip pairs of different rods, and rod centres.
+
+    Parameters
+    ----------
+    tip_range : float
+        The tip list's range, r* (widened by :meth:`extend_tip_range`).
+    skin : float
+        ``neighbours.skin``.
+    blocks : RowBlocks
+        Under MPI each rank builds its rows of the tip list and the rows are gathered.
+    centre_range : float or None
+        The centre list's range (the Yukawa cut-off); None: no centre list.
+    """
+
+    def __init__(self, tip_range: float, skin: float, blocks: RowBlocks, centre_range: float | None = None):
+        self.tip_range = float(tip_range)
+        self.skin = skin
+        self.blocks = blocks
+        self.tip: NeighbourList | None = None
+        self.centre: NeighbourList | None = None
+        if centre_range is not None:
+            # under MPI a rank sums the Yukawa rows of its block only: it lists only those rows
+            # (half the build and the memory on 2 ranks; each row the same bit for bit)
+            rows = None if blocks.serial else blocks.rods
+            self.centre = NeighbourList(centre_range, skin, rows=rows)
+
+    def tips(self, position) -> NeighbourList:
+        """The tip list, up to date for ``position`` (n_tips, 3); built at its first use."""
+        if self.tip is None:
+            # every rank needs the whole tip list (contacts, brakes, close pairs); under MPI each builds
+            # the rows of its block and the rows are gathered (parallel.py RowBlocks.gather_list)
+            self.tip = NeighbourList(self.tip_range, self.skin, exclude_same_rod=True, share=self.blocks)
+        self.tip.update(position)
+        return self.tip
+
+    def centres(self, centre) -> NeighbourList:
+        """The centre list, up to date for ``centre`` (n_rods, 3)."""
+        self.centre.update(centre)
+        return self.centre
+
+    def extend_tip_range(self, radius: float) -> None:
+        """Make the tip list cover ``radius``; a wider range drops the list, rebuilt at its next use."""
+        if radius > self.tip_range:
+            self.tip_range = float(radius)
+            self.tip = None
+
+
+@dataclass(eq=False)
+class EvalContext:
+    """What the terms use during one evaluation of the force field.
+
+    Not frozen: the force field keeps one context and rebinds its positions and velocities at each
+    evaluation (:meth:`bind`), so that a step makes no new object; the other fields are fixed
+    objects, whose contents their owners change (the currents, the lists, the buffers).
+
+    Attributes
+    ----------
+    position, velocity : (n_tips, 3) float64
+        The arrays of this evaluation (bound by :meth:`bind`; a split brake changes ``velocity`` in place).
+    tip_charge : (n_tips,) float64
+    rod_charge : (n_rods,) float64
+    blocks : RowBlocks
+        The rods whose rows this process computes in the expensive terms.
+    currents : RodCurrents
+        The rod currents of the last circuit solve (``currents.current``, ``currents.active_rod``).
+    lists : PairLists
+        The neighbour lists (:meth:`tip_neighbours`, :meth:`centre_neighbours`).
+    calls : Counter
+        Kernel evaluations per term; the terms that count their own calls add to it.
+    """
+
+    tip_charge: np.ndarray
+    rod_charge: np.ndarray
+    blocks: RowBlocks
+    currents: RodCurrents
+    lists: PairLists
+    calls: Counter = field(default_factory=Counter)
+    position: np.ndarray | None = None
+    velocity: np.ndarray | None = None
+    _soa: tuple | None = None
+    _centre: np.ndarray | None = None
+    _buffers: dict = field(default_factory=dict)
+
+    @property
+    def n_tips(self) -> int:
+        return self.tip_charge.shape[0]
+
+    @property
+    def n_rods(self) -> int:
+        return self.rod_charge.shape[0]
+
+    def bind(self, position, velocity) -> None:
+        """Make ``position`` and ``velocity`` the arrays of the next term calls (not copied)."""
+        self.position = position
+        self.velocity = velocity
+        self._soa = None
+        self._centre = None
+
+    def soa(self) -> tuple:
+        """The positions as three contiguous (n_tips,) arrays x, y, z (computed once per binding)."""
+        if self._soa is None:
+            self._soa = tuple(np.ascontiguousarray(self.position[:, d]) for d in range(3))
+        return self._soa
+
+    def centre(self) -> np.ndarray:
+        """Rod centres (n_rods, 3) (computed once per binding)."""
+        if self._centre is None:
+            self._centre = 0.5 * (self.position[0::2] + self.position[1::2])
+        return self._centre
+
+    def buffer(self, name: str, rows: int) -> np.ndarray:
+        """A work buffer (rows, 3) float64 kept under ``name`` between evaluations; contents undefined."""
+        buf = self._buffers.get(name)
+        if buf is None or buf.shape[0] != rows:
+            buf = self._buffers[name] = np.zeros((rows, 3))
+        return buf
+
+    def tip_neighbours(self):
+        """Tip pairs of different rods within the tip range (plus skin), up to date for :attr:`position`."""
+        return self.lists.tips(self.position)
+
+    def centre_neighbours(self):
+        """Rod centres within the centre range (plus skin), up to date for :attr:`position`."""
+        return self.lists.centres(self.centre())
