@@ -192,7 +192,7 @@ class RunWriter(_PendingRows):
             p.attrs[key] = value
         p.attrs["status"] = "running"
         p.attrs["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-        p.attrs["wall_seconds"] = 0.0
+        p.attrs["wall_seconds_total"] = 0.0
         self._opened = time.monotonic()
         self.n_frames = 0
         f.flush()
@@ -491,9 +491,10 @@ class RunWriter(_PendingRows):
     def close(self, status="finished"):
         if self.f:
             attrs = self.f[layout.PROVENANCE].attrs
-            # wall time of every segment of the run that closed its file (a killed one adds nothing)
+            # wall time of every segment of the run that closed its file (a killed one adds nothing);
+            # ``wall_seconds`` is the run loop's time in the last segment (the lifecycle sets it)
             spent = time.monotonic() - getattr(self, "_opened", time.monotonic())
-            self.set_attrs(status=status, wall_seconds=float(attrs.get("wall_seconds", 0.0)) + spent)
+            self.set_attrs(status=status, wall_seconds_total=float(attrs.get("wall_seconds_total", 0.0)) + spent)
             self.f.close()
             self.f = None
 

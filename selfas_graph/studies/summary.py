@@ -151,7 +151,7 @@ def _seed_record(path):
             "cpu_model": str(meta.get("cpu_model", "")),
             "numba_cpu": str(meta.get("numba_cpu", "")),
             "numba_threads": int(meta.get("numba_threads", 0)),
-            "wall_seconds": float(meta.get("wall_seconds", math.nan)),
+            "wall_seconds": float(meta.get("wall_seconds_total", math.nan)),
             "resumed_with": json.loads(meta.get("resumed_with", "[]")),
             "episodes": {
                 "start": [float(x) for x in ep.start],

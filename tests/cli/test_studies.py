@@ -5,6 +5,7 @@ import json
 import math
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -108,13 +109,17 @@ table_times = [0.5]
     (tmp_path / "page.md").write_text("# R\n<!-- begin generated: table q -->\n<!-- end generated: table q -->\n")
 
     cli = _study_cli(tmp_path)
+    started = time.monotonic()
     cli("run", "q", "--runs", "runs", "--jobs", "1")
+    elapsed = time.monotonic() - started
     cli("summarise", "q", "--runs", "runs", "--summaries", "res", "--figures", "figs")
     summary = json.loads((tmp_path / "res" / "q.json").read_text())
     assert summary["n_seeds"] == 2 and summary["times"] == [0.0, 0.25, 0.5]
     assert len(summary["measures"]["largest_alignment"]["values"]) == 2
     seed = summary["seeds"][0]
     assert seed["commit"] is not None and seed["cpu_model"] and seed["wall_seconds"] > 0
+    # the seeds ran one after the other inside the command: their wall times add up to less than its own
+    assert sum(x["wall_seconds"] for x in summary["seeds"]) <= elapsed
     assert set(seed["episodes"]) == {"start", "end", "filament_rods", "opened_by"}
     assert (tmp_path / "figs" / "q_series.png").exists() and (tmp_path / "figs" / "q_snapshot.png").exists()
     cli("page", "--summaries", "res", "--page", "page.md")
