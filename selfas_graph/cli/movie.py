@@ -62,6 +62,7 @@ def render_movie(args, Figure) -> int:
     check_target(out, "movie", force=args.force, inputs=[run_path])
     if not out.parent.exists():
         raise CliError(f"the folder {out.parent} of the movie does not exist")
+    out = out.resolve()  # through a symbolic link: the file it names is replaced, not the link
     tmp = out.with_name(f".{out.name}.part{out.suffix}")
     images, proc = [], None
     try:

@@ -169,9 +169,17 @@ def run(args):
         print(f"{page} is up to date with the summaries in {args.summaries}")
         return 0
     if new != text:
-        tmp = page.with_name(page.name + ".tmp")
-        tmp.write_text(new, encoding="utf-8")
-        tmp.replace(page)
+        from .paths import check_target
+
+        check_target(page, "results page", force=True)  # a regular file: not a device, folder or dangling link
+        target = page.resolve()  # through a symbolic link: the file it names changes, not the link
+        tmp = target.with_name(target.name + ".tmp")
+        try:
+            tmp.write_text(new, encoding="utf-8")
+            tmp.replace(target)
+        except OSError as exc:
+            tmp.unlink(missing_ok=True)
+            raise CliError(f"cannot write the results page {page}: {exc.strerror or exc}") from None
         print(f"wrote {page}")
     else:
         print(f"{page} already up to date")

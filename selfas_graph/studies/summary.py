@@ -229,6 +229,7 @@ def write_json_atomic(data, path) -> Path:
     """Write ``data`` as JSON to ``path`` through a temporary file renamed into place."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    path = path.resolve()  # through a symbolic link: the file it names is replaced, not the link
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "w", encoding="utf-8") as fh:
         json.dump(data, fh, indent=1, allow_nan=False)

@@ -200,3 +200,19 @@ null_measure = "all_alignment"
     studies = load_studies(tmp_path / "s.toml")
     table = claim_rows(studies, {"a": _fake_summary(claim), "b": _fake_summary(null)})
     assert words in table, table
+
+
+def test_study_page_through_a_link_writes_the_file_it_names(tmp_path):
+    """The page named through a symbolic link: the file it points to is rewritten, the link stays a
+    link (nothing the user did not name changes)."""
+    import os
+
+    from selfas_graph.cli.main import main
+
+    (tmp_path / "s.toml").write_text("[study.a]\nscenario = 'x'\nseeds = 1\nt_end = 1\n")
+    real = tmp_path / "real.md"
+    real.write_text("<!-- begin generated: table a -->\nold\n<!-- end generated: table a -->\n")
+    os.symlink(real, tmp_path / "link.md")
+    args = ["study", "page", "--studies", str(tmp_path / "s.toml"), "--summaries", str(tmp_path / "none")]
+    assert main([*args, "--page", str(tmp_path / "link.md")]) == 0
+    assert os.path.islink(tmp_path / "link.md") and "Not run at this version yet" in real.read_text()
