@@ -160,6 +160,8 @@ def test_tool_summary_table_and_json_of_a_run_file(small_run, tmp_path, capsys):
     assert "| 2 | 0.01 | 0.05 | 0.05 | 1 / 0 / 0 | since t = 0.1 " in capsys.readouterr().out
     (row,) = json.loads(out.read_text())
     assert row["episodes"] == 2 and row["closed_at_end"] and row["opened_by_tip_release"] == 1
+    # the run's own circuit log (empty: it never closed) has no row of these hand-made closings
+    assert row["closing_current"] == row["closing_rods_in_series"] == [None, None]
 
 
 def test_tool_replay_restarts_from_a_frame(small_run, capsys):
