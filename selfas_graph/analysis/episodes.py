@@ -8,7 +8,12 @@ OPEN_CIRCUIT: a tip-tip contact inside the filament (TIP_RELEASE) or a tip leavi
 or the case (ii) filament (CONDUCTOR_RELEASE). This tells a filament that breaks apart from one
 that lets go of an electrode (docs/results.md, section "Fig. 6").
 
-Arrays in, arrays out: :func:`circuit_episodes` sees the event array and never opens a file.
+Given the run's circuit log (``model.circuitlog``: the solve's total current and the rods in series
+at each SHORT_CIRCUIT, recorded in the step of the event), each episode also gets the current
+through the gap when it closed and the number of rods that carried all of it.
+
+Arrays in, arrays out: :func:`circuit_episodes` sees the event array (and the circuit log) and
+never opens a file.
 """
 
 import dataclasses
@@ -40,12 +45,21 @@ class CircuitEpisodes:
         were all of that kind, ``OPENED_BY_BOTH`` (-2) when both kinds were there,
         ``OPENED_BY_UNKNOWN`` (0) when the step holds no release, ``STILL_CLOSED`` (-1) for an
         episode that has not ended.
+    total_current : (n,) float64 or None
+        The total current through the gap when it closed (units J0), from the circuit log; NaN for
+        an episode the log holds no row of (it closed before a resume from a checkpoint older than
+        the log); None when no log was given.
+    rods_in_series : (n,) int64 or None
+        Rods carrying the whole current when the gap closed, from the circuit log; -1 where the log
+        holds no row; None when no log was given.
     """
 
     start: np.ndarray
     end: np.ndarray
     filament_rods: np.ndarray
     opened_by: np.ndarray
+    total_current: np.ndarray | None = None
+    rods_in_series: np.ndarray | None = None
 
     @property
     def duration(self) -> np.ndarray:
@@ -56,13 +70,16 @@ class CircuitEpisodes:
         return self.start.shape[0]
 
 
-def circuit_episodes(events) -> CircuitEpisodes:
+def circuit_episodes(events, circuit_log=None) -> CircuitEpisodes:
     """Split a run's events into short-circuit episodes.
 
     Parameters
     ----------
     events : structured array with fields ``step``, ``time``, ``kind``, ``a``
         The run's event records in order (``RunFile.events()``).
+    circuit_log : structured array with fields ``step``, ``kind``, ``total_current``, ``rods_in_series``, optional
+        The run's circuit log (``RunFile.circuit_log()``); each episode takes the row of the
+        SHORT_CIRCUIT that opened it (same step).
 
     Returns
     -------
@@ -83,12 +100,13 @@ def circuit_episodes(events) -> CircuitEpisodes:
     time = np.asarray(events["time"], dtype=np.float64)
     kind = np.asarray(events["kind"], dtype=np.int64)
     a = np.asarray(events["a"], dtype=np.int64)
-    start, end, rods, opened = [], [], [], []
+    start, start_step, end, rods, opened = [], [], [], [], []
     for i in np.flatnonzero((kind == SHORT_CIRCUIT) | (kind == OPEN_CIRCUIT)):
         if kind[i] == SHORT_CIRCUIT:
             if len(start) > len(end):
                 raise ValueError(f"two SHORT_CIRCUIT events without an OPEN_CIRCUIT between them (step {step[i]})")
             start.append(time[i])
+            start_step.append(step[i])
             rods.append(a[i])
             continue
         if len(start) == len(end):
@@ -99,9 +117,38 @@ def circuit_episodes(events) -> CircuitEpisodes:
     if len(start) > len(end):
         end.append(np.nan)
         opened.append(STILL_CLOSED)
+    total_current = rods_in_series = None
+    if circuit_log is not None:
+        total_current, rods_in_series = _at_closing(circuit_log, np.array(start_step, dtype=np.int64))
     return CircuitEpisodes(
         start=np.array(start, dtype=np.float64),
         end=np.array(end, dtype=np.float64),
         filament_rods=np.array(rods, dtype=np.int64),
         opened_by=np.array(opened, dtype=np.int64),
+        total_current=total_current,
+        rods_in_series=rods_in_series,
     )
+
+
+def _at_closing(circuit_log, steps):
+    """The total current and rods in series of the circuit log's SHORT_CIRCUIT rows at ``steps``
+    ((n,) int64), NaN and -1 where the log holds no such row."""
+    names = getattr(getattr(circuit_log, "dtype", None), "names", None) or ()
+    missing = [f for f in ("step", "kind", "total_current", "rods_in_series") if f not in names]
+    if missing:
+        raise ValueError(
+            "circuit_log must be a structured array with fields step, kind, total_current, rods_in_series; "
+            f"missing {missing}"
+        )
+    closing = np.asarray(circuit_log["kind"]) == SHORT_CIRCUIT
+    log_step = np.asarray(circuit_log["step"], dtype=np.int64)[closing]
+    log_current = np.asarray(circuit_log["total_current"], dtype=np.float64)[closing]
+    log_series = np.asarray(circuit_log["rods_in_series"], dtype=np.int64)[closing]
+    current = np.full(steps.shape, np.nan)
+    series = np.full(steps.shape, -1, dtype=np.int64)
+    for i, s in enumerate(steps):
+        hit = np.flatnonzero(log_step == s)
+        if hit.size:
+            current[i] = log_current[hit[0]]
+            series[i] = log_series[hit[0]]
+    return current, series

@@ -8,7 +8,8 @@ The first form reads the event records of each run file and prints, per run, the
 short-circuit episodes (docs/model.md 'Contacts and events'), the median and longest time the
 gap stayed closed, how many episodes a tip-tip release inside the filament opened and how many a
 tip leaving an electrode (or the case (ii) filament), and whether the gap is closed at the last
-event (:func:`selfas_graph.analysis.episodes.circuit_episodes`).
+event (:func:`selfas_graph.analysis.episodes.circuit_episodes`); with ``--json``, also the total
+current and the rods in series at each closing, from the run file's circuit log.
 
 The stored frames are too far apart to catch an episode of 0.05 t0, so ``--replay`` restarts
 the scene from frame K of RUN.h5 (tip positions and velocities, the rods' charges; the contacts
@@ -46,8 +47,8 @@ def summarise(path) -> dict:
     from selfas_graph.io.h5md import RunFile
 
     with RunFile(path) as run:
-        events = run.events()
-    ep = circuit_episodes(events)
+        events, log = run.events(), run.circuit_log()
+    ep = circuit_episodes(events, log)
     ended = np.isfinite(ep.end)
     d = ep.duration[ended]
     return {
@@ -62,6 +63,10 @@ def summarise(path) -> dict:
         "closed_at_end": bool(len(ep) and ep.opened_by[-1] == STILL_CLOSED),
         "closed_since": float(ep.start[-1]) if len(ep) and ep.opened_by[-1] == STILL_CLOSED else None,
         "last_event_time": float(events["time"][-1]) if len(events) else None,
+        # the current through the gap and the rods in series at each closing (files with a circuit log;
+        # null for a closing the log has no row of)
+        "closing_current": None if log is None else [float(j) if np.isfinite(j) else None for j in ep.total_current],
+        "closing_rods_in_series": None if log is None else [int(n) if n >= 0 else None for n in ep.rods_in_series],
     }
 
 

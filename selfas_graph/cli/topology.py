@@ -2,7 +2,9 @@
 
 Reads the run file alone: the structures, which rods are current-carrying
 filaments and which are dead ends, the current in each, the total current, the
-effective resistance between the electrodes and the event history up to the frame.
+effective resistance between the electrodes and the event history up to the frame (each
+short circuit with the total current and the rods in series when it closed, from the run
+file's circuit log).
 """
 
 from __future__ import annotations
@@ -59,6 +61,9 @@ def analyse(run: RunFile, frame=None, t=None) -> dict:
     events = run.events(until_step=g["step"])
     counts = Counter(ev.KIND_NAMES.get(int(k), str(k)) for k in events["kind"])
     sc = events[events["kind"] == ev.SHORT_CIRCUIT]
+    # the current through the gap at each closing, where the file has a circuit log
+    log = run.circuit_log(until_step=g["step"])
+    closing = {} if log is None else {int(r["step"]): r for r in log[log["kind"] == ev.SHORT_CIRCUIT]}
     obs = {}
     for name in ("total_current", "effective_conductance", "effective_resistance"):
         if name in run.observable_names():
@@ -94,10 +99,18 @@ def analyse(run: RunFile, frame=None, t=None) -> dict:
                 "kind": ev.KIND_NAMES.get(int(e["kind"]), "?"),
                 "a": int(e["a"]),
                 "b": int(e["b"]),
+                **(_closing(closing.get(int(e["step"]))) if int(e["kind"]) == ev.SHORT_CIRCUIT else {}),
             }
             for e in events
         ],
     }
+
+
+def _closing(row) -> dict:
+    """A SHORT_CIRCUIT's total current and rods in series from its circuit-log row (none without one)."""
+    if row is None:
+        return {}
+    return {"total_current": float(row["total_current"]), "rods_in_series": int(row["rods_in_series"])}
 
 
 def _finite_or_null(obj):
@@ -118,7 +131,10 @@ def _describe(e) -> str:
     if kind in ("conductor_contact", "conductor_release"):
         return f"a = tip (rod {a // 2}), b = conductor ({ev.CONDUCTOR_NAMES.get(b, str(b))})"
     if kind == "short_circuit":
-        return f"a = rods in current-carrying filaments ({a})"
+        text = f"a = rods in current-carrying filaments ({a})"
+        if "total_current" in e:
+            text += f"; total current {e['total_current']:.6g} J0, {e['rods_in_series']} rods in series"
+        return text
     return ""
 
 

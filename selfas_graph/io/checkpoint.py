@@ -308,6 +308,7 @@ def check_snapshot(snap: dict, path="checkpoint") -> None:
     CheckpointError
         Naming the entry and what it should hold.
     """
+    from ..model.circuitlog import CIRCUIT_LOG_DTYPE
     from ..model.events import EVENT_DTYPE
 
     pos = np.asarray(snap["position"])
@@ -341,6 +342,13 @@ def check_snapshot(snap: dict, path="checkpoint") -> None:
             raise CheckpointError(
                 f"{path}: snapshot/events must be a 1-D array of event records "
                 f"{EVENT_DTYPE.descr}, got {ev.dtype} {ev.shape}"
+            )
+    if "circuit_log" in snap:
+        log = np.asarray(snap["circuit_log"])
+        if log.dtype != CIRCUIT_LOG_DTYPE or log.ndim != 1 or not np.isfinite(log["total_current"]).all():
+            raise CheckpointError(
+                f"{path}: snapshot/circuit_log must be a 1-D array of finite circuit-log records "
+                f"{CIRCUIT_LOG_DTYPE.descr}, got {log.dtype} {log.shape}"
             )
 
 

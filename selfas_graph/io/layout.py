@@ -24,6 +24,12 @@ Run file (H5MD 1.1, https://www.nongnu.org/h5md/h5md.html)::
     /observables/bond_error_per_step   step, value: the largest bond error of every step
     /parameters/selfas_graph    attrs: the run's provenance and status (io/run_provenance.py)
     /events                     (n_events,) records (step, time, kind, a, b); attrs kind_names, conductor_names
+    /circuit_log                the current through the gap at each SHORT_CIRCUIT / OPEN_CIRCUIT (if contacts
+                                are on; model/circuitlog.py), one row each, written with the events:
+        step, time, kind            (n,) of the event; attr kind_names on kind
+        total_current               (n,) the solve's total current (units J0), 0 at an OPEN_CIRCUIT
+        rods_in_series              (n,) rods carrying the whole current, 0 at an OPEN_CIRCUIT
+        filament_rods               (n,) rods in current-carrying filaments, 0 at an OPEN_CIRCUIT
     /graph                      the connectivity graph at every saved frame (if contacts are on):
         step, time                  (n_frames,)
         tip_contacts                (sum m_f, 2) tip pairs in contact; tip_contacts_count (n_frames,)
@@ -90,6 +96,10 @@ def observable(name: str) -> str:
 PROVENANCE = "parameters/selfas_graph"
 
 EVENTS = "events"
+
+CIRCUIT_LOG = "circuit_log"
+#: the column datasets of CIRCUIT_LOG, the fields of model.circuitlog.CIRCUIT_LOG_DTYPE
+CIRCUIT_LOG_COLUMNS = ("step", "time", "kind", "total_current", "rods_in_series", "filament_rods")
 
 GRAPH = "graph"
 #: datasets of GRAPH with one row per saved frame (``floating`` only in files from 0.4 on)

@@ -10,6 +10,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from ..model.circuitlog import CIRCUIT_LOG_DTYPE
 from ..model.events import EVENT_DTYPE, named_events
 from . import layout
 from .h5md_format import (
@@ -189,6 +190,21 @@ class RunFile:
             return np.zeros(0, dtype=EVENT_DTYPE)
         e = self.f[layout.EVENTS][:].astype(EVENT_DTYPE)  # the kind an enumeration in newer files, integers before
         return e if until_step is None else e[e["step"] <= until_step]
+
+    def circuit_log(self, until_step=None) -> np.ndarray | None:
+        """The circuit log (structured array ``model.circuitlog.CIRCUIT_LOG_DTYPE``: step, time, kind,
+        total_current, rods_in_series, filament_rods), optionally up to a step; None for a file
+        without one (written before it existed, or by a run without contacts)."""
+        g = self.f.get(layout.CIRCUIT_LOG)
+        if not isinstance(g, h5py.Group) or not all(
+            isinstance(g.get(n), h5py.Dataset) for n in layout.CIRCUIT_LOG_COLUMNS
+        ):
+            return None
+        columns = [g[name][:] for name in layout.CIRCUIT_LOG_COLUMNS]
+        log = np.zeros(min(len(c) for c in columns), dtype=CIRCUIT_LOG_DTYPE)
+        for name, c in zip(layout.CIRCUIT_LOG_COLUMNS, columns):
+            log[name] = c[: len(log)]
+        return log if until_step is None else log[log["step"] <= until_step]
 
     def named_events(self, until_step=None) -> list:
         """The events as :class:`selfas_graph.model.events.Event` tuples, kinds as ``EventKind``."""

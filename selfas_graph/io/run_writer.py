@@ -12,7 +12,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..model.events import CONDUCTOR_NAMES, EVENT_DTYPE, KIND_NAMES
+from ..model.circuitlog import CIRCUIT_LOG_DTYPE, circuit_log_array
+from ..model.events import CONDUCTOR_NAMES, EVENT_DTYPE, KIND_NAMES, OPEN_CIRCUIT, SHORT_CIRCUIT
 from ..model.topology import ROLE_NAMES
 from . import layout
 from .h5md_format import (
@@ -44,10 +45,11 @@ from .run_provenance import run_provenance
 
 class _PendingRows:
     """What a writer holds between frames: the per-step rows a simulation hands over every step,
-    and how many of the run's events are written. Shared by :class:`RunWriter` and :class:`NullWriter`."""
+    and how many of the run's events and circuit-log rows are written. Shared by :class:`RunWriter` and :class:`NullWriter`."""
 
     n_frames = 0
     events_written = 0
+    circuit_rows_written = 0
     _pending = (np.empty(0, dtype=np.int64), np.empty(0))
     _n_pending = 0
 
@@ -64,9 +66,9 @@ class _PendingRows:
         values[self._n_pending] = value
         self._n_pending += 1
 
-    def flush_pending(self, events=None) -> None:
-        """Write the buffered per-step rows and, given the run's whole event log ``events``, the
-        events not written yet (the events dataset is created at the first call)."""
+    def flush_pending(self, events=None, circuit_log=None) -> None:
+        """Write the buffered per-step rows and, given the run's whole event log ``events`` (and its
+        ``circuit_log``), the rows of each not written yet (their datasets are created at the first call)."""
         if self._n_pending:
             steps, values = self._pending
             self.write_per_step(steps[: self._n_pending], values[: self._n_pending])
@@ -74,13 +76,17 @@ class _PendingRows:
         if events is not None:
             self.write_events(events[self.events_written :])
             self.events_written = len(events)
+        if circuit_log is not None:
+            self.write_circuit_log(circuit_log[self.circuit_rows_written :])
+            self.circuit_rows_written = len(circuit_log)
 
     def state_dict(self) -> dict:
-        """Frames and events written, and the per-step rows not written yet."""
+        """Frames, events and circuit-log rows written, and the per-step rows not written yet."""
         steps, values = self._pending
         return {
             "n_frames": int(self.n_frames),
             "events_written": int(self.events_written),
+            "circuit_rows_written": int(self.circuit_rows_written),
             "pending_step": steps[: self._n_pending].copy(),
             "pending_value": values[: self._n_pending].copy(),
         }
@@ -89,6 +95,7 @@ class _PendingRows:
         """Restore :meth:`state_dict` (the per-step buffer keeps at least the rows given)."""
         self.n_frames = int(d["n_frames"])
         self.events_written = int(d["events_written"])
+        self.circuit_rows_written = int(d.get("circuit_rows_written", 0))
         steps = np.asarray(d["pending_step"], dtype=np.int64)
         n = steps.shape[0]
         if self._pending[0].shape[0] < n:
@@ -200,7 +207,7 @@ class RunWriter(_PendingRows):
     @classmethod
     def reopen(cls, path, step):
         """Open an existing run file to continue it after ``step``: every row written for a
-        later step (frames, observables, events, graph, per-step series) is removed first.
+        later step (frames, observables, events, circuit log, graph, per-step series) is removed first.
         """
         self = cls.__new__(cls)
         self.path = Path(path)
@@ -255,6 +262,14 @@ class RunWriter(_PendingRows):
             ev = f[layout.EVENTS]
             _truncate(ev, keep(ev.fields("step"), strict=False) if ev.shape[0] else 0)
         self.events_written = f[layout.EVENTS].shape[0] if layout.EVENTS in f else 0
+        self.circuit_rows_written = 0
+        if layout.CIRCUIT_LOG in f:
+            g = f[layout.CIRCUIT_LOG]
+            columns = [g[name] for name in layout.CIRCUIT_LOG_COLUMNS]
+            n = keep(*columns, strict=False) if columns[0].shape[0] else 0
+            for ds in columns:
+                _truncate(ds, n)
+            self.circuit_rows_written = n
         if layout.GRAPH in f:
             g = f[layout.GRAPH]
             per_frame = layout.GRAPH_PER_FRAME + ((layout.GRAPH_FLOATING,) if layout.GRAPH_FLOATING in g else ())
@@ -293,7 +308,7 @@ class RunWriter(_PendingRows):
     def reserve(self) -> int:
         """Bytes the next frame may need at most: one new chunk of every growable dataset, and a margin
         (computed again only when datasets were added)."""
-        key = (len(self._obs), layout.GRAPH in self.f, layout.EVENTS in self.f)
+        key = (len(self._obs), layout.GRAPH in self.f, layout.EVENTS in self.f, layout.CIRCUIT_LOG in self.f)
         if getattr(self, "_reserve", (None, 0))[0] != key:
             # before the observables and the graph exist (frame 0), room for their first chunks too
             first = 0 if key[0] and key[1] else 4 << 20
@@ -390,6 +405,23 @@ class RunWriter(_PendingRows):
             ds.attrs["conductor_names"] = json.dumps({int(k): v for k, v in CONDUCTOR_NAMES.items()})
         if len(rows):
             _append(self.f[layout.EVENTS], np.array([tuple(r) for r in rows], dtype=EVENT_DTYPE))
+
+    def write_circuit_log(self, rows):
+        """Append circuit-log rows ``(step, time, kind, total_current, rods_in_series, filament_rods)``
+        (:mod:`selfas_graph.model.circuitlog`), one column dataset per field."""
+        if layout.CIRCUIT_LOG not in self.f:
+            g = self.f.create_group(layout.CIRCUIT_LOG)
+            for name in layout.CIRCUIT_LOG_COLUMNS:
+                _growable(g, name, (), CIRCUIT_LOG_DTYPE[name])
+            _set_unit(g["time"], TIME)
+            _set_unit(g["total_current"], CURRENT)
+            names = {k: KIND_NAMES[k] for k in (SHORT_CIRCUIT, OPEN_CIRCUIT)}
+            g["kind"].attrs["kind_names"] = json.dumps(names)
+        if len(rows):
+            table = circuit_log_array(rows)
+            g = self.f[layout.CIRCUIT_LOG]
+            for name in layout.CIRCUIT_LOG_COLUMNS:
+                _append(g[name], table[name])
 
     def write_graph(self, step, t, arrays, role, current, potential, conductor_potential):
         """Append the graph state of one frame.
@@ -510,6 +542,7 @@ class NullWriter(_PendingRows):
     def __init__(self, n_frames=0):
         self.n_frames = int(n_frames)
         self.events_written = 0
+        self.circuit_rows_written = 0
 
     def write_frame(self, step, t, position, velocity, observables):
         self.n_frames += 1
@@ -518,6 +551,9 @@ class NullWriter(_PendingRows):
         pass
 
     def write_events(self, rows):
+        pass
+
+    def write_circuit_log(self, rows):
         pass
 
     def write_graph(self, step, t, arrays, role, current, potential, conductor_potential):

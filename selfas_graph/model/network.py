@@ -30,6 +30,7 @@ import numpy as np
 
 from . import events as ev
 from .circuit import CircuitSolution, SolveMemo
+from .circuitlog import circuit_rows
 from .contacts import ContactTracker
 from .contactset import ContactSet, solve_contacts
 from .topology import FILAMENT, Topology, circuit_event
@@ -87,11 +88,15 @@ class NetworkUpdate:
     changed : bool
         Whether the contacts or the contact potentials changed (events, or case (ii)
         contact heights that moved): the integrator's history may be reset then.
+    circuit : list of (step, time, kind, total_current, rods_in_series, filament_rods)
+        A circuit-log row for the step's SHORT_CIRCUIT / OPEN_CIRCUIT row, if any, from the
+        step's solve (:mod:`.circuitlog`).
     """
 
     events: list
     currents_changed: bool = False
     changed: bool = False
+    circuit: list = dataclasses.field(default_factory=list)
 
 
 class Network:
@@ -220,7 +225,8 @@ class Network:
             cs = self.contacts
             self.filament_tip = cs.conductor_tip[cs.conductor_id == ev.CONDUCTOR_FILAMENT]
             self.filament_z = position[self.filament_tip, 2].copy()
-        return NetworkUpdate(rows, currents_changed, True)
+        total = self.solution.total_current if self.solution is not None else 0.0
+        return NetworkUpdate(rows, currents_changed, True, circuit_rows(rows, total, self.current))
 
     def _heights_moved(self, position) -> bool:
         """Case (ii): give the filament contacts that moved along z by more than the height

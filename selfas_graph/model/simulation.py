@@ -18,6 +18,7 @@ import numpy as np
 from ..parallel import RowBlocks
 from . import events as ev
 from . import operations as op
+from .circuitlog import circuit_log_array
 from .health import BOND_BREAK, FORCE_OUT_OF_SCALE, MAX_STEP_DISPLACEMENT, HealthChecks, NumericalFailure
 from .integrator import AdamsBashforth4
 from .network import Network
@@ -108,8 +109,8 @@ class Simulation:
         self.integrator.time_origin = (self.state.step, self.state.time)
         self.health = HealthChecks(params, self.state, self.integrator, self.force_field)
         self.observe = Observables(params, self.state, self.force_field, self.integrator, self.network)
-        #: every event so far, as (step, time, kind, a, b) rows in order
-        self.events = []
+        #: every event so far, as (step, time, kind, a, b) rows in order; ``circuit_log``: rows of :mod:`.circuitlog`
+        self.events, self.circuit_log = [], []
         self.short_circuit_time = None
         #: operations attached for every :meth:`run` (:mod:`.operations`), acted after the frame writer
         self.operations = []
@@ -161,6 +162,7 @@ class Simulation:
             max_bond_error=self.health.max_bond_error,
             energy0=np.nan if self.observe.energy0 is None else self.observe.energy0,
             events=np.array([tuple(r) for r in self.events], dtype=ev.EVENT_DTYPE),
+            circuit_log=circuit_log_array(self.circuit_log),
             short_circuit_time=np.nan if self.short_circuit_time is None else self.short_circuit_time,
         )
         if self.network is not None:
@@ -180,6 +182,7 @@ class Simulation:
         sct = float(snap["short_circuit_time"])
         sim.short_circuit_time = None if math.isnan(sct) else sct
         sim.events = [tuple(r.item()) for r in np.asarray(snap["events"])]
+        sim.circuit_log = [tuple(r.item()) for r in snap.get("circuit_log", ())]  # older checkpoints: none
         if sim.network is not None:
             sim.network.load_state_dict(snap)
         ff = sim.force_field
@@ -227,9 +230,6 @@ class Simulation:
         frame (None before a run): finite, so a failure file can hold it in place of the failed one."""
         return self.health.last_good_snapshot
 
-    def _keep_last_good(self) -> None:
-        self.health.keep_last_good(self.snapshot())
-
     # ------------------------------------------------------------------ stepping
     def step(self, n: int = 1) -> None:
         """Advance by ``n`` steps (raises :class:`NumericalFailure` on breakdown)."""
@@ -249,9 +249,9 @@ class Simulation:
         if not news.changed:
             return
         self.events.extend(news.events)
-        for r in news.events:
-            if r[2] == ev.SHORT_CIRCUIT and self.short_circuit_time is None:
-                self.short_circuit_time = r[1]
+        self.circuit_log.extend(news.circuit)
+        if self.short_circuit_time is None and news.circuit and news.circuit[0][2] == ev.SHORT_CIRCUIT:
+            self.short_circuit_time = news.circuit[0][1]
         if news.currents_changed:
             self.force_field.currents_changed()
         if self.params.integrator.restart_on_events:
@@ -338,7 +338,7 @@ class Simulation:
             ops.append(checkpoint)
         if self.observe.energy0 is None:
             self.observe.record_initial_energy()
-        self._keep_last_good()
+        self.health.keep_last_good(self.snapshot())
         self._ops = ops
         t0 = time.perf_counter()
         try:
@@ -370,9 +370,10 @@ class Simulation:
             operation.flush(self)
 
     def flush_output(self, writer) -> None:
-        """Hand ``writer`` its buffered per-step rows and the events it has not written yet
-        (e.g. after a :class:`NumericalFailure`, the rows and events up to the failure)."""
-        writer.flush_pending(self.events if self.network is not None else None)
+        """Hand ``writer`` its buffered per-step rows and the events and circuit-log rows it has not
+        written yet (e.g. after a :class:`NumericalFailure`, those up to the failure)."""
+        net = self.network is not None
+        writer.flush_pending(self.events if net else None, self.circuit_log if net else None)
 
     def write_frame(self, writer):
         """Check the observables, then write a frame with them (and the graph state) to ``writer``;
@@ -381,7 +382,7 @@ class Simulation:
         obs = self.observables()
         # checked before anything of the frame is written (frame 0 too): no NaN reaches the file
         self.check_energy(obs)
-        self._keep_last_good()
+        self.health.keep_last_good(self.snapshot())
         self.flush_output(writer)
         writer.write_frame(st.step, st.time, st.position, st.velocity, obs)
         if self.network is not None:

@@ -116,6 +116,8 @@ def test_topology_text_shows_filament_currents_and_events(chain_run, capsys):
         (step, "tip_contact", 3, 4),
         (step, "short_circuit", n_fil, -1),
     ]
+    # the closing's current from the circuit log, made at the SHORT_CIRCUIT step: all 3 rods in series
+    assert f"a = rods in current-carrying filaments (3); total current {J:.6g} J0, 3 rods in series" in out
 
 
 def test_topology_json_matches_the_simulation(chain_run, capsys):
@@ -146,6 +148,9 @@ def test_topology_json_matches_the_simulation(chain_run, capsys):
         {"id": 0, "rods": 3, "filament": 3, "dead_end": 0, "conductors": ["anode", "cathode"]}
     ]
     assert len(data["events"]) == len(sim.events)
+    (closing,) = [e for e in data["events"] if e["kind"] == "short_circuit"]
+    assert (closing["total_current"], closing["rods_in_series"]) == (sim.circuit_log[0][3], 3)
+    assert all("total_current" not in e for e in data["events"] if e["kind"] != "short_circuit")
     assert data["event_counts"] == {"tip_contact": 2, "conductor_contact": 2, "short_circuit": 1}
 
 

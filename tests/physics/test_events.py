@@ -332,6 +332,35 @@ def test_chain_closes_the_gap_with_one_short_circuit(chain_run):
     assert not _kinds(sim.events, ev.OPEN_CIRCUIT)
 
 
+def test_chain_short_circuit_is_in_the_circuit_log(chain_run):
+    """The circuit log holds one row, made at the SHORT_CIRCUIT step from that step's solve.
+
+    Its total current is the solve's, bit for bit (delta_J0 dZ / 3 R0 through the chain), and
+    all three rods are in series: each carries the whole current (counted by hand: one path,
+    cathode - rod 0 - rod 1 - rod 2 - anode); filament_rods is the SHORT_CIRCUIT's a (3).
+    """
+    sim, trace, sc_step = chain_run
+    (row,) = sim.circuit_log
+    sol = trace[sc_step]["solution"]
+    assert row == (sc_step, sim.short_circuit_time, ev.SHORT_CIRCUIT, sol.total_current, 3, 3)
+    assert row[3] == pytest.approx(DELTA_J0 * GAP / 3.0, abs=1e-12)  # round-off of one small solve
+
+
+def test_circuit_log_rows_of_an_open_circuit_and_of_parallel_branches():
+    """circuit_rows: an OPEN_CIRCUIT row carries no current and no rods in series; rods in series
+    are those whose |J_i| is the total current (a rod on one of two parallel branches is not), and
+    other event kinds give no row."""
+    from selfas_graph.model.circuitlog import circuit_rows, rods_in_series
+
+    current = np.array([-1.0, 0.5, -0.5, 1.0 - 1e-12, 0.0])  # rods 0 and 3 in series, 1 and 2 parallel
+    assert rods_in_series(current, 1.0) == 2
+    assert rods_in_series(current, 0.0) == 0
+    events = [(7, 0.7, ev.TIP_RELEASE, 3, 4), (7, 0.7, ev.OPEN_CIRCUIT, -1, -1)]
+    assert circuit_rows(events, 0.0, np.zeros(5)) == [(7, 0.7, ev.OPEN_CIRCUIT, 0.0, 0, 0)]
+    events = [(9, 0.9, ev.TIP_CONTACT, 3, 4), (9, 0.9, ev.SHORT_CIRCUIT, 4, -1)]
+    assert circuit_rows(events, 1.0, current) == [(9, 0.9, ev.SHORT_CIRCUIT, 1.0, 2, 4)]
+
+
 def test_chain_currents_act_from_the_step_after_the_short_circuit(chain_run):
     """No current before the short circuit; delta_J0 dZ / (3 R0) in every chain rod after it, used one step later.
 

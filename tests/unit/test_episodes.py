@@ -13,6 +13,7 @@ from selfas_graph.analysis.episodes import (
     STILL_CLOSED,
     circuit_episodes,
 )
+from selfas_graph.model.circuitlog import circuit_log_array
 from selfas_graph.model.events import (
     CONDUCTOR_CONTACT,
     CONDUCTOR_RELEASE,
@@ -52,6 +53,37 @@ def test_two_episodes_one_opened_by_a_tip_release_one_by_an_electrode_release_th
     np.testing.assert_allclose(ep.duration[:2], [0.050, 0.200], rtol=1e-12)  # differences of exact inputs
     np.testing.assert_array_equal(ep.filament_rods, [40, 41, 12])
     np.testing.assert_array_equal(ep.opened_by, [TIP_RELEASE, CONDUCTOR_RELEASE, STILL_CLOSED])
+
+
+@pytest.mark.jit_off_ok
+def test_circuit_log_gives_each_episode_its_current_and_rods_in_series():
+    """Each episode takes the total current and rods in series of the circuit log's SHORT_CIRCUIT
+    row of its closing step; an episode the log misses (closed before a resume from a checkpoint
+    older than the log) gets NaN and -1; without a log both are None."""
+    ev = rows(
+        (10, SHORT_CIRCUIT, 40, -1),
+        (60, TIP_RELEASE, 3, 8),
+        (60, OPEN_CIRCUIT, -1, -1),
+        (100, SHORT_CIRCUIT, 41, -1),
+        (300, CONDUCTOR_RELEASE, 5, 1),
+        (300, OPEN_CIRCUIT, -1, -1),
+        (400, SHORT_CIRCUIT, 12, -1),
+    )
+    log = circuit_log_array(
+        [
+            (100, 0.1, SHORT_CIRCUIT, 2.5, 7, 41),
+            (300, 0.3, OPEN_CIRCUIT, 0.0, 0, 0),
+            (400, 0.4, SHORT_CIRCUIT, 0.75, 12, 12),
+        ]
+    )
+    ep = circuit_episodes(ev, log)
+    np.testing.assert_array_equal(ep.total_current[1:], [2.5, 0.75])
+    assert np.isnan(ep.total_current[0])
+    np.testing.assert_array_equal(ep.rods_in_series, [-1, 7, 12])
+    plain = circuit_episodes(ev)
+    assert plain.total_current is None and plain.rods_in_series is None
+    with pytest.raises(ValueError, match="missing"):
+        circuit_episodes(ev, np.zeros(2, dtype=[("step", "i8")]))
 
 
 @pytest.mark.jit_off_ok
@@ -128,6 +160,8 @@ def test_tool_summary_table_and_json_of_a_run_file(small_run, tmp_path, capsys):
     assert "| 2 | 0.01 | 0.05 | 0.05 | 1 / 0 / 0 | since t = 0.1 " in capsys.readouterr().out
     (row,) = json.loads(out.read_text())
     assert row["episodes"] == 2 and row["closed_at_end"] and row["opened_by_tip_release"] == 1
+    # the run's own circuit log (empty: it never closed) has no row of these hand-made closings
+    assert row["closing_current"] == row["closing_rods_in_series"] == [None, None]
 
 
 def test_tool_replay_restarts_from_a_frame(small_run, capsys):

@@ -29,7 +29,9 @@ def test_checkpoint_of_version_0_2_resumes_with_the_same_state():
     the circuit again to the saved currents."""
     snap, meta = read_checkpoint(DATA / "checkpoint_0.2_case2.h5")
     scenario = scenario_from_text(meta["scenario_text"], overrides=json.loads(meta["overrides"]))
+    assert "circuit_log" not in snap
     sim = Simulation.from_snapshot(scenario.params, snap)
+    assert sim.circuit_log == []  # older than the circuit log: it starts empty
     again = sim.snapshot()
     differ = [k for k in snap if k not in again or not _same(snap[k], again[k])]
     assert not differ, differ
@@ -59,12 +61,15 @@ def test_writer_state_round_trip():
     w.reserve_per_step(4)
     w.buffer_per_step(7, 1e-16)
     w.buffer_per_step(8, 2e-16)
-    w.flush_pending([(1, 0.1, 1, 0, 2)])
-    assert w.events_written == 1
+    w.flush_pending([(1, 0.1, 1, 0, 2)], [(1, 0.1, 5, 2.0, 3, 3)])
+    assert (w.events_written, w.circuit_rows_written) == (1, 1)
     w.buffer_per_step(9, 3e-16)
     d = w.state_dict()
     v = NullWriter()
     v.load_state_dict(d)
-    assert (v.n_frames, v.events_written) == (3, 1)
+    assert (v.n_frames, v.events_written, v.circuit_rows_written) == (3, 1, 1)
+    d.pop("circuit_rows_written")  # a state from before the circuit log
+    v.load_state_dict(d)
+    assert v.circuit_rows_written == 0
     np.testing.assert_array_equal(v.state_dict()["pending_step"], [9])
     np.testing.assert_array_equal(v.state_dict()["pending_value"], [3e-16])

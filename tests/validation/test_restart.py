@@ -12,9 +12,10 @@ import pytest
 from runfiles import datasets
 
 from conftest import SMALL_CIRCUIT_SCENE
+from hostile import non_finite_datasets
 from selfas_graph.cli.main import main
 from selfas_graph.io.checkpoint import Checkpointer, CheckpointError, checkpoint_path, read_checkpoint
-from selfas_graph.io.h5md import RunWriter
+from selfas_graph.io.h5md import RunFile, RunWriter
 from selfas_graph.io.scenario import scenario_from_text
 from selfas_graph.model import events as ev
 from selfas_graph.model.simulation import RunInterrupted, Simulation
@@ -69,6 +70,29 @@ def reference(tmp_path_factory):
 def test_reference_run_has_events(reference):
     _, contact_steps, short = reference
     assert len(contact_steps) > 5 and short, "the scene must include contacts and a short circuit"
+
+
+def test_reference_run_file_holds_the_circuit_log(reference):
+    """/circuit_log holds one row per SHORT_CIRCUIT and OPEN_CIRCUIT event, at its step and time,
+    written whether or not a frame fell on that step: a closing carries a positive current, its
+    filament rods (the event's a) and at most that many rods in series; an opening carries zeros.
+    The file holds no NaN or inf."""
+    ref_path, _, short = reference
+    with RunFile(ref_path) as run:
+        log, events = run.circuit_log(), run.events()
+        frame_steps = set(run.f["observables/total_current/step"][:].tolist())
+    closing = events[(events["kind"] == ev.SHORT_CIRCUIT) | (events["kind"] == ev.OPEN_CIRCUIT)]
+    assert len(log) == len(closing) >= 1
+    for name in ("step", "time", "kind"):
+        np.testing.assert_array_equal(log[name], closing[name])
+    sc = log["kind"] == ev.SHORT_CIRCUIT
+    np.testing.assert_array_equal(log["filament_rods"][sc], closing["a"][sc])
+    assert (log["total_current"][sc] > 0).all()
+    assert ((log["rods_in_series"][sc] >= 0) & (log["rods_in_series"][sc] <= log["filament_rods"][sc])).all()
+    assert not log["total_current"][~sc].any() and not log["rods_in_series"][~sc].any()
+    assert not log["filament_rods"][~sc].any()
+    assert short[0] not in frame_steps  # the first closing falls between frames: only the log has its current
+    assert non_finite_datasets(ref_path) == []
 
 
 @pytest.mark.parametrize("where", ["startup", "after_contact", "after_short_circuit", "mid_frame"])
