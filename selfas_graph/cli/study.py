@@ -157,6 +157,11 @@ def run(args):
 
         summaries = {n: load_summary(args.summaries, n) for n in studies.studies}
         summaries = {k: v for k, v in summaries.items() if v is not None}
+        from ..studies.figures import study_figures
+
+        for name, st in studies.studies.items():  # the figures made from a summary, drawn again from it
+            if name in summaries and summaries[name].get("kind") != "percolation":
+                study_figures(st, summaries[name], args.figures)
         for name in studies.sweeps:
             if sum(summaries.get(st) is not None for _, st in studies.sweep_points(name)) >= 2:
                 print(f"wrote {plot_sweep(studies, summaries, name, Path(args.figures) / f'sweep_{name}.png')}")

@@ -62,8 +62,10 @@ def plot_series(summary, out, title) -> Path:
     for ax, name in zip(axes, names):
         m = summary["measures"][name]
         v = np.array([[np.nan if x is None else x for x in row] for row in m["values"]], dtype=float)
+        sparse = np.isfinite(v).sum(axis=1).max(initial=0) < 0.75 * len(t)  # a measure summarised at some times only
         for row in v:
-            ax.plot(t, row, color=SEED_COLOUR, lw=0.6, alpha=0.55)
+            ok = np.isfinite(row)  # joined over the times it has, not broken at the others
+            ax.plot(t[ok], row[ok], color=SEED_COLOUR, lw=0.6, alpha=0.55, marker="." if sparse else None, ms=3)
         if name == "largest_alignment" and "free_alignment" in summary["measures"]:
             f = summary["measures"]["free_alignment"]
             fv = np.array([[np.nan if x is None else x for x in row] for row in f["values"]], dtype=float)
@@ -79,8 +81,9 @@ def plot_series(summary, out, title) -> Path:
                 mean = np.nanmean(np.where(n > 0, v, 0.0), axis=0) if v.size else v
                 sem = np.nanstd(v, axis=0, ddof=1) / np.sqrt(np.maximum(n, 1))
             mean = np.where(n > 0, mean, np.nan)
-            ax.plot(t, mean, color=MEAN_COLOUR, lw=1.2)
-            ax.fill_between(t, mean - sem, mean + sem, color="0.5", alpha=0.35, lw=0)
+            ok = np.isfinite(mean)
+            ax.plot(t[ok], mean[ok], color=MEAN_COLOUR, lw=1.2)
+            ax.fill_between(t[ok], (mean - sem)[ok], (mean + sem)[ok], color="0.5", alpha=0.35, lw=0)
         words, unit = _words_unit(name)
         ax.set_title(words, fontsize="small", loc="left")
         if unit:

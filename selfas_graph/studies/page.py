@@ -124,6 +124,8 @@ def grouped_stat(values, active) -> dict:
 def _fmt(x, digits=3):
     if x is None or not math.isfinite(x):
         return "n/a"
+    if 1e3 <= abs(x) < 1e6:  # a count of rods or loops: whole, not 1.04e+03
+        return f"{x:.0f}"
     return f"{x:.{digits}g}"
 
 
