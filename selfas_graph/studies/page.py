@@ -182,6 +182,16 @@ def study_table(summary) -> str:
         text += f", median time (Kaplan-Meier) {_fmt(sc.get('median'))} t0"
         starts = [s["episodes"]["start"] for s in summary["seeds"]]
         text += f"; {sum(len(x) for x in starts)} closings of the gap in all"
+        first = [s["episodes"].get("total_current", [None])[:1] for s in summary["seeds"]]
+        first = [x[0] for x in first if x and x[0] is not None]
+        series = [s["episodes"].get("rods_in_series", [None])[:1] for s in summary["seeds"]]
+        series = [x[0] for x in series if x and x[0] is not None]
+        if first:  # runs with a circuit log (since 0.4): the first closing, seed by seed
+            text += (
+                f"; the first closing carries median {_fmt(float(np.median(first)))} J0 "
+                f"[{_fmt(min(first))} to {_fmt(max(first))}] through median {_fmt(float(np.median(series)))} "
+                f"rods in series"
+            )
     rows.append(f"| short circuit of the electrodes | {text} |" + " |" * (len(times) - 1))
     return "\n".join(rows)
 

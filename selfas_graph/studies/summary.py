@@ -140,7 +140,7 @@ def _seed_record(path):
         return None
     with run:
         meta = run.meta
-        ep = circuit_episodes(run.events())
+        ep = circuit_episodes(run.events(), run.circuit_log())
         return {
             "path": Path(path).name,
             "seed": int(run.parameters["scenario"]["seed"]),
@@ -158,6 +158,16 @@ def _seed_record(path):
                 "end": [None if not math.isfinite(x) else float(x) for x in ep.end],
                 "filament_rods": [int(x) for x in ep.filament_rods],
                 "opened_by": [int(x) for x in ep.opened_by],
+                # at each closing (runs with a circuit log, since 0.4): the current through the gap and
+                # the rods that carry all of it; NaN and -1 (an episode the log has no row for) as None
+                **(
+                    {
+                        "total_current": [None if not math.isfinite(x) else float(x) for x in ep.total_current],
+                        "rods_in_series": [None if x < 0 else int(x) for x in ep.rods_in_series],
+                    }
+                    if ep.total_current is not None
+                    else {}
+                ),
             },
         }
 
