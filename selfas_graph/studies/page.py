@@ -240,14 +240,41 @@ def provenance_text(summary) -> str:
     return text + "."
 
 
+def _claim_difference(a, b):
+    """(x - x_null) / sqrt(SE^2 + SE_null^2); infinite where both spreads are zero and the means differ
+    (every seed of both the same, e.g. no filament in any seed of the null model and the same count in
+    every seed of the scene), NaN without a spread estimate (one seed)."""
+    if not (a["n"] and b["n"]) or not (math.isfinite(a["sem"]) and math.isfinite(b["sem"])):
+        return math.nan
+    den = math.sqrt(a["sem"] ** 2 + b["sem"] ** 2)
+    if den == 0.0:
+        return 0.0 if a["mean"] == b["mean"] else math.copysign(math.inf, a["mean"] - b["mean"])
+    return (a["mean"] - b["mean"]) / den
+
+
 def _verdict(d, expect):
-    if not math.isfinite(d):
+    if math.isnan(d):
         return "not decided (too few seeds)"
+    if math.isinf(d):  # no spread in either: every seed of each gives the same value
+        same = (d > 0) == (expect == "greater")
+        return f"{'reproduced' if same else 'opposite to the claim'} (every seed differs from every seed of the null model)"
     if (d > 3 and expect == "greater") or (d < -3 and expect == "less"):
         return f"reproduced ({'+' if d > 0 else '−'}{abs(d):.1f} SE from the null model)"
     if abs(d) > 3:
         return f"opposite to the claim ({'+' if d > 0 else '−'}{abs(d):.1f} SE from the null model)"
     return f"not distinguished from the null model ({d:+.1f} SE)".replace("-", "−")
+
+
+def _window_values(summary, measure, lo, hi):
+    """Each seed's mean of ``measure`` over the summarised times in [lo, hi] (NaN: none there)."""
+    times = np.asarray(summary["times"], dtype=float)
+    pick = (times >= lo - 1e-9) & (times <= hi + 1e-9)
+    if measure not in summary["measures"] or not pick.any():
+        return np.full(len(summary["seeds"]), np.nan)
+    v = np.array([[np.nan if x is None else x for x in row] for row in summary["measures"][measure]["values"]])
+    v = v[:, pick]
+    n = np.isfinite(v).sum(axis=1)
+    return np.where(n > 0, np.nansum(v, axis=1) / np.maximum(n, 1), np.nan)
 
 
 def claim_rows(studies, summaries) -> str:
@@ -259,9 +286,16 @@ def claim_rows(studies, summaries) -> str:
     for c in studies.claims:
         s = summaries.get(c.study)
         if s is None:
-            rows.append(f"| {c.claim} | {c.paper} | {_label(c.measure)}, t = {c.time:g} | not run yet | | | |")
+            rows.append(f"| {c.claim} | {c.paper} | {_label(c.measure)} | not run yet | | | |")
             continue
-        value = measure_text(s, c.measure, c.time)
+        if c.window:
+            lo, hi = c.window
+            where = f"mean over t = {lo:g}-{hi:g}"
+            value = _pm(plain_stat(_window_values(s, c.measure, lo, hi)))
+            value += f"; at t = {c.time:g}: {measure_text(s, c.measure, c.time)}"
+        else:
+            where = f"t = {c.time:g}"
+            value = measure_text(s, c.measure, c.time)
         also = "; ".join(f"{_label(m)}: {measure_text(s, m, c.time)}" for m in c.also)
         if also:
             value += f"; {also}"
@@ -272,14 +306,20 @@ def claim_rows(studies, summaries) -> str:
             null_text, null_value, verdict = studies.study(c.null).title, "not run yet", "not yet set against its null"
         else:
             nm = c.null_measure or c.measure
-            a = plain_stat(_values(s, c.measure, c.time))
-            b = plain_stat(_values(null, nm, c.time))
-            d = (a["mean"] - b["mean"]) / math.sqrt(a["sem"] ** 2 + b["sem"] ** 2)
+            if c.window:
+                a = plain_stat(_window_values(s, c.measure, *c.window))
+                b = plain_stat(_window_values(null, nm, *c.window))
+                null_value = _pm(b)
+            else:
+                a = plain_stat(_values(s, c.measure, c.time))
+                b = plain_stat(_values(null, nm, c.time))
+                null_value = measure_text(null, nm, c.time)
+            d = _claim_difference(a, b)
             null_text = studies.study(c.null).title
-            null_value = measure_text(null, nm, c.time) + ("" if nm == c.measure else f" ({_label(nm)})")
+            null_value += "" if nm == c.measure else f" ({_label(nm)})"
             verdict = _verdict(d, c.expect)
         rows.append(
-            f"| {c.claim} | {c.paper} | {_label(c.measure)}, t = {c.time:g} | {value} | {null_text} | "
+            f"| {c.claim} | {c.paper} | {_label(c.measure)}, {where} | {value} | {null_text} | "
             f"{null_value} | {verdict} |"
         )
     return "\n".join(rows)

@@ -91,6 +91,9 @@ class Claim:
     null_measure: str = ""
     expect: str = "greater"
     also: tuple[str, ...] = ()
+    #: (t1, t2): test each seed's mean of the measure over the summarised times in [t1, t2] instead of
+    #: its value at ``time`` (for a measure that flickers, e.g. rods in filaments as the gap opens and closes)
+    window: tuple[float, ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -155,6 +158,7 @@ _CLAIM_KEYS = {
     "null_measure": str,
     "expect": str,
     "also": list,
+    "window": list,
 }
 
 
@@ -239,13 +243,17 @@ def load_studies(path) -> Studies:
         for key in ("study", "null"):
             if c.get(key) and c[key] not in studies:
                 raise StudiesError(f"{where}.{key}: no study named {c[key]!r}")
+        w = c.get("window", [])
+        if w and (len(w) != 2 or not all(isinstance(x, (int, float)) for x in w) or not w[0] < w[1]):
+            raise StudiesError(f"{where}.window: [t1, t2] with t1 < t2, got {w!r}")
         if c.get("expect", "greater") not in ("greater", "less"):
             raise StudiesError(f"{where}.expect: 'greater' or 'less', got {c['expect']!r}")
         claims.append(
             Claim(
-                **{k: v for k, v in c.items() if k not in ("time", "also")},
+                **{k: v for k, v in c.items() if k not in ("time", "also", "window")},
                 time=float(c["time"]),
                 also=tuple(c.get("also", [])),
+                window=tuple(float(x) for x in c.get("window", [])),
             )
         )
     return Studies(path=path, studies=studies, claims=tuple(claims), sweeps=sweeps)

@@ -218,3 +218,15 @@ def test_study_page_through_a_link_writes_the_file_it_names(tmp_path):
     args = ["study", "page", "--studies", str(tmp_path / "s.toml"), "--summaries", str(tmp_path / "none")]
     assert main([*args, "--page", str(tmp_path / "link.md")]) == 0
     assert os.path.islink(tmp_path / "link.md") and "Not run at this version yet" in real.read_text()
+
+
+def test_a_windowed_claim_and_a_null_without_spread():
+    """A claim's `window` averages each seed over the summarised times in it; a null model whose seeds
+    all give the same value, against seeds that all give another, differs by infinitely many SE."""
+    from selfas_graph.studies.page import _claim_difference, _verdict, _window_values, plain_stat
+
+    s = {"times": [0.0, 10.0, 20.0], "seeds": [{}, {}], "measures": {"m": {"values": [[9, 1, 3], [9, None, 5]]}}}
+    assert list(_window_values(s, "m", 5.0, 20.0)) == [2.0, 5.0]  # (1 + 3) / 2 and 5 alone
+    d = _claim_difference(plain_stat([4.0, 4.0]), plain_stat([0.0, 0.0, 0.0]))
+    assert d == math.inf and _verdict(d, "greater").startswith("reproduced (every seed")
+    assert math.isnan(_claim_difference(plain_stat([4.0]), plain_stat([0.0, 0.0])))  # one seed: no spread
