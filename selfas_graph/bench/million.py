@@ -1,6 +1,7 @@
 """A scene of 10^5-10^6 rods on one node: peak memory, the tip tree's stages and whole steps.
 
-Usage: selfas-graph bench million [--rods 250000 500000 1000000] [--steps 4] [--set KEY=VALUE ...]
+Usage: selfas-graph bench million [--rods 250000 500000 1000000] [--steps 4] [--ranks 16 64 256]
+                                  [--latency 2e-6] [--bandwidth 1e10] [--set KEY=VALUE ...]
 
 The Fig. 2 scene scaled as in selfas_graph/bench/step.py (``scene``: the box grows in x and y, the
 density stays the paper's), every term every step (``integrator.slow_every=1``) and the tip-tip
@@ -16,6 +17,7 @@ repeats (docs/performance.md 'Beyond one node'). Wall clock; run it niced on a q
 """
 
 import argparse
+import math
 import resource
 import time
 from pathlib import Path
@@ -99,12 +101,34 @@ def measure(path, n, steps, extra):
     return row
 
 
+def bytes_per_rod(cells_per_rod, channels=1):
+    """Bytes gathered per rod and evaluation (all ranks' rows): the tree's cell moments (box 6, centre 3,
+    radius 1, moments 25 doubles per cell), its tip forces (2 tips x 3 doubles) and ``channels`` more tip
+    channels in one ``gather_rows`` (the Yukawa term; 3 with the two current terms)."""
+    return 280.0 * cells_per_rod + 48.0 + 48.0 * channels
+
+
+def model(t_par, t_rep, n, per_rod, ranks, alpha=2e-6, beta=1e10, collectives=6):
+    """Modelled seconds per step on ``ranks`` ranks: ``t_par / P + t_rep + T_comm`` with
+    T_comm = collectives ceil(log2 P) alpha + (P - 1) / P n per_rod / beta (Allgatherv), and the efficiency."""
+    comm = (
+        0.0
+        if ranks == 1
+        else collectives * math.ceil(math.log2(ranks)) * alpha + (ranks - 1) / ranks * n * per_rod / beta
+    )
+    t = t_par / ranks + t_rep + comm
+    return t, comm, (t_par + t_rep) / (ranks * t)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "fig2.toml"))
     ap.add_argument("--rods", type=int, nargs="+", default=[250000, 500000, 1000000])
     ap.add_argument("--steps", type=int, default=4, help="steps timed one by one (3 RK4 steps, then AB4)")
     ap.add_argument("--set", dest="extra", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--ranks", type=int, nargs="+", default=[16, 64, 256], help="ranks of the modelled step")
+    ap.add_argument("--latency", type=float, default=2e-6, help="seconds per message of the modelled network")
+    ap.add_argument("--bandwidth", type=float, default=1e10, help="bytes per second of the modelled network")
     args = ap.parse_args(argv)
     say = print if world.rank == 0 else (lambda *a, **k: None)
     import numba
@@ -132,6 +156,14 @@ def main(argv=None):
                 f"the rest (every rank repeats it) {s['repeated']:.3f} s [{terms}]",
                 flush=True,
             )
+        last = r["steps"][-1]
+        repeated = last["repeated"] + tr["plan"] + tr["finish"]  # every rank also plans the tree itself
+        per_rod = bytes_per_rod(tr["cells"] / n)
+        cells = []
+        for p in args.ranks:
+            t, comm, eff = model(last["wall"] - repeated, repeated, n, per_rod, p, args.latency, args.bandwidth)
+            cells.append(f"{p} ranks {1e3 * t:.0f} ms (communication {1e3 * comm:.1f}), efficiency {eff:.2f}")
+        say(f"  model from the last step ({per_rod:.0f} B gathered per rod): " + "; ".join(cells), flush=True)
     return rows
 
 
