@@ -1,0 +1,171 @@
+"""A scene of 10^5-10^6 rods on one node: peak memory, the tip tree's stages and whole steps.
+
+Usage: selfas-graph bench million [--rods 250000 500000 1000000] [--steps 4] [--ranks 16 64 256]
+                                  [--latency 2e-6] [--bandwidth 1e10] [--set KEY=VALUE ...]
+
+The Fig. 2 scene scaled as in selfas_graph/bench/step.py (``scene``: the box grows in x and y, the
+density stays the paper's), every term every step (``integrator.slow_every=1``) and the tip-tip
+tree. For each size, in one process (sizes in increasing order, so that the peak resident memory
+``ru_maxrss`` after a size is that size's): the seconds to place the rods and build the simulation,
+the tree's stages once on the starting positions (``plan_tip_tree``: keys, sort and cells, which
+every MPI rank repeats; ``fill_cells``: the moments, which the ranks share; one evaluation, shared),
+then ``--steps`` steps timed one by one (the first three are the RK4 start, four evaluations each;
+AB4 steps from the fourth) with the seconds of each force term (``Simulation(timing=True)``) and the
+rest of the step: integration, constraint, contacts and events, neighbour lists, which every rank
+repeats (docs/performance.md 'Beyond one node'). Wall clock; run it niced on a quiet machine with
+``NUMBA_NUM_THREADS=1`` for the one-thread figures.
+"""
+
+import argparse
+import math
+import resource
+import time
+from pathlib import Path
+
+import numpy as np
+
+from selfas_graph import Simulation
+from selfas_graph.kernels import tree as ktree
+from selfas_graph.kernels.tips import tip_tip_energy
+from selfas_graph.parallel import world
+
+from .peer import machine_line
+from .step import scene
+
+ROOT = Path(__file__).resolve().parents[2]
+#: the terms whose rows the MPI ranks split (parallel.py RowBlocks); every other term runs whole on every rank
+SPLIT_TERMS = ("tip_magnetic", "yukawa", "current_field", "current_lorentz")
+
+
+def peak_mb():
+    """The process's peak resident memory so far, MB (Linux reports ru_maxrss in kB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def tree_stages(sim):
+    """Seconds of the tip tree's stages on the current positions: plan, fill (moments), finish, one evaluation."""
+    tm = sim.params.forces.tip_magnetic
+    x, y, z = (np.ascontiguousarray(sim.state.position[:, d]) for d in range(3))
+    q = sim.force_field.tip_charge
+    t = [time.perf_counter()]
+    tree = ktree.plan_tip_tree(x, y, z, q, order=tm.order)
+    t.append(time.perf_counter())
+    ktree.fill_cells(tree, 0, tree.start.shape[0])
+    t.append(time.perf_counter())
+    tree = ktree.finish_tip_tree(tree)
+    t.append(time.perf_counter())
+    out = np.empty((x.shape[0], 3))
+    ktree.evaluate_tip_tree(
+        tree, sim.params.rods.rstar, sim.params.rods.tip_stiffness, tm.opening_angle, out, precision=tm.precision
+    )
+    t.append(time.perf_counter())
+    s = np.diff(t)
+    return {"plan": s[0], "fill": s[1], "finish": s[2], "evaluate": s[3], "cells": int(tree.start.shape[0])}
+
+
+def tip_energy_seconds(sim, rows=2000):
+    """Seconds of the tip-tip energy (``kernels/tips.py::tip_tip_energy``, a direct sum over all pairs),
+    estimated from ``rows`` of its rows: the energy reference and every frame's energy check pay it."""
+    x, y, z = (np.ascontiguousarray(sim.state.position[:, d]) for d in range(3))
+    n = x.shape[0]
+    rows = min(rows, n)
+    e = np.empty(n)
+    t0 = time.perf_counter()
+    tip_tip_energy(
+        x, y, z, sim.force_field.tip_charge, sim.params.rods.rstar, sim.params.rods.tip_stiffness, 0, rows, e
+    )
+    return 0.5 * (time.perf_counter() - t0) * n / rows  # row k sums over the n - k later tips
+
+
+def measure(path, n, steps, extra):
+    over = [*extra, "integrator.slow_every=1", "forces.tip_magnetic.method=tree"]
+    t0 = time.perf_counter()
+    sim = Simulation.from_scenario(scene(path, n, over), timing=True, comm=world)
+    row = {"rods": n, "build_s": time.perf_counter() - t0, "mb_after_build": peak_mb()}
+    row["tree"] = tree_stages(sim)
+    row["energy_s"] = tip_energy_seconds(sim)
+    # the energy reference of the balance is the tip-tip energy, a direct O(N^2) sum (estimated above):
+    # taken as 0 here, so that the first step is a step
+    sim.observe.energy0 = 0.0
+    ff = sim.force_field
+    row["steps"] = []
+    for _ in range(steps):
+        ff.seconds.clear()
+        t0, c0 = time.perf_counter(), time.process_time()
+        sim.step(1)
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        terms = {k: float(v) for k, v in ff.seconds.items()}
+        split = sum(v for k, v in terms.items() if k in SPLIT_TERMS)
+        row["steps"].append({"wall": wall, "cpu": cpu, "split_terms": split, "repeated": wall - split, "terms": terms})
+    row["peak_mb"] = peak_mb()
+    return row
+
+
+def bytes_per_rod(cells_per_rod, channels=1):
+    """Bytes gathered per rod and evaluation (all ranks' rows): the tree's cell moments (box 6, centre 3,
+    radius 1, moments 25 doubles per cell), its tip forces (2 tips x 3 doubles) and ``channels`` more tip
+    channels in one ``gather_rows`` (the Yukawa term; 3 with the two current terms)."""
+    return 280.0 * cells_per_rod + 48.0 + 48.0 * channels
+
+
+def model(t_par, t_rep, n, per_rod, ranks, alpha=2e-6, beta=1e10, collectives=6):
+    """Modelled seconds per step on ``ranks`` ranks: ``t_par / P + t_rep + T_comm`` with
+    T_comm = collectives ceil(log2 P) alpha + (P - 1) / P n per_rod / beta (Allgatherv), and the efficiency."""
+    comm = (
+        0.0
+        if ranks == 1
+        else collectives * math.ceil(math.log2(ranks)) * alpha + (ranks - 1) / ranks * n * per_rod / beta
+    )
+    t = t_par / ranks + t_rep + comm
+    return t, comm, (t_par + t_rep) / (ranks * t)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "fig2.toml"))
+    ap.add_argument("--rods", type=int, nargs="+", default=[250000, 500000, 1000000])
+    ap.add_argument("--steps", type=int, default=4, help="steps timed one by one (3 RK4 steps, then AB4)")
+    ap.add_argument("--set", dest="extra", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--ranks", type=int, nargs="+", default=[16, 64, 256], help="ranks of the modelled step")
+    ap.add_argument("--latency", type=float, default=2e-6, help="seconds per message of the modelled network")
+    ap.add_argument("--bandwidth", type=float, default=1e10, help="bytes per second of the modelled network")
+    args = ap.parse_args(argv)
+    say = print if world.rank == 0 else (lambda *a, **k: None)
+    import numba
+
+    say(machine_line())
+    say(f"{world.size} MPI rank(s) x {numba.get_num_threads()} numba threads; {args.scenario}, slow_every=1, tree")
+    measure(args.scenario, 26000, 4, args.extra)  # compile every kernel (the threaded row kernels from 50 000 rows on)
+    rows = []
+    for n in sorted(args.rods):
+        r = measure(args.scenario, n, args.steps, args.extra)
+        rows.append(r)
+        tr = r["tree"]
+        say(
+            f"{n} rods: build {r['build_s']:.1f} s, peak {r['mb_after_build']:.0f} MB after build, "
+            f"{r['peak_mb']:.0f} MB after the steps; tree ({tr['cells']} cells): plan {tr['plan']:.3f} s, "
+            f"moments {tr['fill']:.3f} s, finish {tr['finish']:.3f} s, one evaluation {tr['evaluate']:.3f} s; "
+            f"tip-tip energy (direct sum, from 2000 rows) {r['energy_s']:.1f} s",
+            flush=True,
+        )
+        for k, s in enumerate(r["steps"]):
+            kind = "RK4" if k < 3 else "AB4"
+            terms = ", ".join(f"{a} {b:.3f}" for a, b in sorted(s["terms"].items()) if b > 5e-4)
+            say(
+                f"  step {k + 1} ({kind}): {s['wall']:.3f} s (CPU {s['cpu']:.3f}), split terms {s['split_terms']:.3f} s, "
+                f"the rest (every rank repeats it) {s['repeated']:.3f} s [{terms}]",
+                flush=True,
+            )
+        last = r["steps"][-1]
+        repeated = last["repeated"] + tr["plan"] + tr["finish"]  # every rank also plans the tree itself
+        per_rod = bytes_per_rod(tr["cells"] / n)
+        cells = []
+        for p in args.ranks:
+            t, comm, eff = model(last["wall"] - repeated, repeated, n, per_rod, p, args.latency, args.bandwidth)
+            cells.append(f"{p} ranks {1e3 * t:.0f} ms (communication {1e3 * comm:.1f}), efficiency {eff:.2f}")
+        say(f"  model from the last step ({per_rod:.0f} B gathered per rod): " + "; ".join(cells), flush=True)
+    return rows
+
+
+if __name__ == "__main__":
+    main()
