@@ -124,7 +124,7 @@ def grouped_stat(values, active) -> dict:
 def _fmt(x, digits=3):
     if x is None or not math.isfinite(x):
         return "n/a"
-    if 10 ** digits <= abs(x) < 1e6:  # whole, not 1.04e+03 or 1.3e+02
+    if 10**digits <= abs(x) < 1e6:  # whole, not 1.04e+03 or 1.3e+02
         return f"{x:.0f}"
     return f"{x:.{digits}g}"
 
