@@ -9,7 +9,9 @@ circuit scene of conftest (one seed to t = 0.6 takes about 2 s).
 import csv
 import json
 import math
+import os
 import shutil
+import signal
 from pathlib import Path
 
 import h5py
@@ -31,6 +33,15 @@ T_END = 0.5  # short: the machinery, not the physics (quick.toml short-circuits 
 
 
 _same_run = differing_datasets
+
+
+def _kill_group(proc):
+    """End an ensemble started in its own session and everything it started (a test's cleanup)."""
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    proc.communicate(timeout=30)
 
 
 @pytest.fixture(scope="module")
@@ -283,7 +294,6 @@ def test_a_signal_stops_the_seeds_with_checkpoints_and_a_rerun_continues(scene, 
     """SIGTERM or SIGINT to the launching process: the running seeds stop after a step with a checkpoint
     (exit code 130, no further seed started), no process of the ensemble is left, and the same command
     again resumes them."""
-    import os
     import signal
     import time
 
@@ -299,11 +309,7 @@ def test_a_signal_stops_the_seeds_with_checkpoints_and_a_rerun_continues(scene, 
         if Path("/proc/self/stat").exists():
             assert _group_gone(proc.pid, 10) == [], "processes of the stopped ensemble still run"
     finally:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        proc.communicate(timeout=30)
+        _kill_group(proc)
     assert "rerun the same command to continue" in err and out.count("interrupted at t = ") == 2
     assert not seed_path(folder, 5).exists()
     for p in first:
@@ -516,8 +522,6 @@ def test_kill_9_of_the_ensemble_leaves_no_process_of_it_and_every_seed_resumes(s
     worker sees its launcher gone within PARENT_POLL (0.5 s), stops its seed with a checkpoint and exits:
     10 s later (a step and a checkpoint of this 60-rod scene take milliseconds; the rest is margin for a
     loaded machine) no process of the ensemble lives, and the same command resumes both seeds."""
-    import os
-    import signal
     import time
 
     folder = tmp_path / "e"
@@ -529,11 +533,7 @@ def test_kill_9_of_the_ensemble_leaves_no_process_of_it_and_every_seed_resumes(s
         proc.wait(timeout=30)
         assert _group_gone(proc.pid, 10) == [], "processes of the killed ensemble still run"
     finally:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        proc.communicate(timeout=30)
+        _kill_group(proc)
     plans = Ensemble(scene, 3, folder, t_end=20).plan()
     assert [p.action for p in plans] == ["resume", "resume", "run"]
 
@@ -542,7 +542,6 @@ def test_a_second_ensemble_on_the_same_folder_is_refused_before_it_starts_a_seed
     """Two ensembles on one folder at once: the second stops with exit 2 naming the folder and the
     holder, before it reads or starts any seed; the first runs on. Its lock is released on exit, and a
     lock file left by a crash (no process holds it any more) is taken over."""
-    import os
     import signal
 
     from selfas_graph.ensemble import LOCK_FILE
@@ -561,11 +560,7 @@ def test_a_second_ensemble_on_the_same_folder_is_refused_before_it_starts_a_seed
         proc.communicate(timeout=90)
         assert proc.returncode == 130
     finally:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        proc.communicate(timeout=30)
+        _kill_group(proc)
     assert set(before) <= {p.name for p in folder.iterdir()}
     assert not (folder / LOCK_FILE).exists()  # released on exit
     (folder / LOCK_FILE).write_text("pid 999999 on a host that crashed\n")  # stale: nobody holds it
@@ -581,8 +576,6 @@ def test_an_ensemble_that_runs_out_of_disk_stops_with_exit_4_and_resumable_seeds
     stops with exit 4, the other seed stops with a checkpoint, every seed file left is readable and
     planned "resume" (one without a checkpoint yet is removed: planned "run"), and no summary is
     attempted. Skipped where a tmpfs cannot be mounted."""
-    import os
-    import signal
     import subprocess
 
     small = tmp_path / "tmpfs"
@@ -600,11 +593,7 @@ def test_an_ensemble_that_runs_out_of_disk_stops_with_exit_4_and_resumable_seeds
         moved = tmp_path / "moved"  # room again: the folder copied to a larger disk
         shutil.copytree(small / "e", moved)
     finally:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-        proc.communicate(timeout=30)
+        _kill_group(proc)
         subprocess.run(["umount", "-l", str(small)], capture_output=True)
     overrides = ["output.interval=0.001", "output.checkpoint_interval=0.2"]
     plans = Ensemble(scene, 2, moved, overrides=overrides, t_end=20).plan()
