@@ -310,9 +310,11 @@ def claim_rows(studies, summaries) -> str:
                 a = plain_stat(_window_values(s, c.measure, *c.window))
                 b = plain_stat(_window_values(null, nm, *c.window))
                 null_value = _pm(b)
-            else:
-                a = plain_stat(_values(s, c.measure, c.time))
-                b = plain_stat(_values(null, nm, c.time))
+            else:  # a fitted measure's standard error carries each seed's fit uncertainty, as the tables show
+                ea = _values(s, FIT_ERRORS[c.measure], c.time) if c.measure in FIT_ERRORS else None
+                eb = _values(null, FIT_ERRORS[nm], c.time) if nm in FIT_ERRORS else None
+                a = plain_stat(_values(s, c.measure, c.time), ea)
+                b = plain_stat(_values(null, nm, c.time), eb)
                 null_value = measure_text(null, nm, c.time)
             d = _claim_difference(a, b)
             null_text = studies.study(c.null).title
