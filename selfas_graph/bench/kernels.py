@@ -123,8 +123,9 @@ def timed_pair(fn_before, fn_after, repeat, clock=time.perf_counter):
 
 
 def kernels_at(ref):
-    """The kernel modules of git revision ``ref``, as a namespace with ``tips``, ``tree``, ``pairs``,
-    ``currents`` (``selfas_graph/kernels`` of that revision copied into a package of its own)."""
+    """The kernel modules of git revision ``ref``, as a namespace with ``tips``, ``tree``, ``yukawa``,
+    ``currents``, ``cells`` (``selfas_graph/kernels`` of that revision copied into a package of its own;
+    ``yukawa`` is ``pairs`` in revisions that held the Yukawa sums there)."""
     sha = subprocess.run(["git", "rev-parse", ref], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
     name = f"selfas_kernels_{sha[:12]}"
     home = Path(tempfile.gettempdir()) / "selfas_bench_kernels"
@@ -147,16 +148,16 @@ def kernels_at(ref):
         package = importlib.util.module_from_spec(spec)
         sys.modules[name] = package
         spec.loader.exec_module(package)
-    return types.SimpleNamespace(
-        **{m: importlib.import_module(f"{name}.{m}") for m in ("tips", "tree", "pairs", "currents")}
-    )
+    modules = {m: importlib.import_module(f"{name}.{m}") for m in ("tips", "tree", "currents", "cells")}
+    yukawa = "yukawa" if (pkg / "yukawa.py").exists() else "pairs"
+    return types.SimpleNamespace(yukawa=importlib.import_module(f"{name}.{yukawa}"), **modules)
 
 
 def run(args):
     import numba
 
     from selfas_graph import Simulation
-    from selfas_graph.kernels import currents, pairs, tips, tree
+    from selfas_graph.kernels import currents, tips, tree, yukawa
 
     from .peer import machine, machine_line
     from .step import scene
@@ -164,7 +165,7 @@ def run(args):
     numba.set_num_threads(args.threads)
     plain = _plain()
     clock = time.process_time if args.cpu_time else time.perf_counter
-    now = types.SimpleNamespace(tips=tips, tree=tree, pairs=pairs, currents=currents)
+    now = types.SimpleNamespace(tips=tips, tree=tree, yukawa=yukawa, currents=currents)
     before_ref = getattr(args, "before", None)
     before = kernels_at(before_ref) if before_ref else None
     fraction = getattr(args, "active_fraction", 0.72)
@@ -230,7 +231,7 @@ def run(args):
                 True,
                 args.repeat,
                 lambda K: (
-                    lambda: K.pairs.yukawa_centres(
+                    lambda: K.yukawa.yukawa_centres(
                         c, st.rod_charge, nl.start, nl.index, yk.screening, yk.core, yk.cutoff, 0, n, fy
                     )
                 ),

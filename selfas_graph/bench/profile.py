@@ -63,10 +63,10 @@ PARTS = [
         "Yukawa sum (slow)",
         lambda f: f.endswith(
             (
-                "pairs.py:yukawa_centres",
-                "pairs.py:yukawa_centres_sorted",
-                "pairs.py:yukawa_centres_sorted_mixed",
-                "pairs.py:yukawa_energy",
+                "yukawa.py:yukawa_centres",
+                "yukawa.py:yukawa_centres_sorted",
+                "yukawa.py:yukawa_centres_sorted_mixed",
+                "yukawa.py:yukawa_energy",
             )
         ),
     ),
@@ -79,13 +79,13 @@ PARTS = [
         "split brake (close pairs, exact brake)",
         lambda f: f.endswith(
             (
-                "pairs.py:close_pairs",
-                "pairs.py:_close_counts",
-                "pairs.py:_close_fill",
-                "pairs.py:brake_pairs_exact",
-                "pairs.py:close_pair_count",
-                "pairs.py:brake_close_pairs",
-                "pairs.py:brake_close_pairs_exact",
+                "contacts.py:close_pairs",
+                "contacts.py:_close_counts",
+                "contacts.py:_close_fill",
+                "brakes.py:brake_pairs_exact",
+                "contacts.py:close_pair_count",
+                "brakes.py:brake_close_pairs",
+                "brakes.py:brake_close_pairs_exact",
                 "fields.py:electrode_brake_exact",
             )
         ),

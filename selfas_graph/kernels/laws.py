@@ -146,7 +146,7 @@ def yukawa_force_over_r_f32(r2, zz, inv_s, core2):
     division against 4 float64 lanes, and the exponential is
     :func:`.expo.exp_nonpositive_f32`. The loop-invariant ``1 / R_D`` and ``a^2`` are arguments
     (rounded once to float32 by the caller). Relative rounding about 1e-7 of f; the caller keeps
-    its inputs where no product here leaves the normal float32 range (``pairs.py``
+    its inputs where no product here leaves the normal float32 range (``yukawa.py``
     ``_yukawa_mixed_ok``), except for ``r`` near 0 without a core: ``1/r^3`` overflows float32
     below ``r = 1e-13 |Z_i Z_j|^(1/3)`` (the caller then sums the row in float64), and a pair
     closer than about 3e-23, whose ``r^2`` underflows to 0, counts as coincident (0, where

@@ -12,9 +12,9 @@ import pytest
 
 import reference as ref
 from conftest import random_rods
+from selfas_graph.kernels import brakes, contacts, yukawa
 from selfas_graph.kernels import fields as kf
 from selfas_graph.kernels import integrate as ki
-from selfas_graph.kernels import pairs as kp
 from selfas_graph.kernels import rigid as kr
 from selfas_graph.kernels import tips as kt
 from selfas_graph.model.neighbours import NeighbourList
@@ -71,7 +71,7 @@ def test_tip_brake(state):
     nl = NeighbourList(RSTAR, 0.2, exclude_same_rod=True)
     nl.build(state.position)
     out = np.empty_like(state.position)
-    kp.tip_brake(state.position, state.velocity, nl.start, nl.index, RSTAR, 100.0, out)
+    brakes.tip_brake(state.position, state.velocity, nl.start, nl.index, RSTAR, 100.0, out)
     expected = ref.tip_brake(state.position, state.velocity, RSTAR, 100.0)
     assert np.abs(expected).max() > 0  # the fixture has tips in contact
     close(out, expected)
@@ -86,10 +86,10 @@ def test_yukawa(state, cutoff, core):
     nl = NeighbourList(cutoff, 0.3)
     nl.build(c)
     out = np.empty_like(c)
-    kp.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, core, cutoff, 0, len(c), out)
+    yukawa.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, core, cutoff, 0, len(c), out)
     close(out, ref.yukawa_force(c, state.rod_charge, 0.8, cutoff, core))
     rows = np.empty(len(c))
-    kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, core, cutoff, 0, len(c), rows)
+    yukawa.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, core, cutoff, 0, len(c), rows)
     e = rows.sum()
     assert e == pytest.approx(ref.yukawa_energy(c, state.rod_charge, 0.8, cutoff, core), rel=1e-12)
 
@@ -170,7 +170,7 @@ def test_ab4_update(rng):
 def test_close_pair_count(state):
     nl = NeighbourList(RSTAR, 0.3, exclude_same_rod=True)
     nl.build(state.position)
-    n = kp.close_pair_count(state.position, nl.start, nl.index, RSTAR)
+    n = contacts.close_pair_count(state.position, nl.start, nl.index, RSTAR)
     d = np.linalg.norm(state.position[:, None] - state.position[None], axis=-1)
     rod = np.arange(len(d)) // 2
     brute = np.triu((d < RSTAR) & (rod[:, None] != rod[None, :]), 1).sum()
@@ -207,8 +207,8 @@ def test_row_ranges_do_not_change_a_row(state, bounds):
     cases = [  # (kernel of (lo, hi, out), output shape, block bounds)
         (lambda lo, hi, out: kt.tip_tip_direct(x, y, z, q, RSTAR, KAPPA, lo, hi, out), (n, 3), bounds),
         (lambda lo, hi, out: kt.tip_tip_energy(x, y, z, q, RSTAR, KAPPA, lo, hi, out), (n,), bounds),
-        (lambda lo, hi, out: kp.yukawa_centres(c, zc, s, i, 0.8, 0.3, 2.0, lo, hi, out), (m, 3), rod_bounds),
-        (lambda lo, hi, out: kp.yukawa_energy(c, zc, s, i, 0.8, 0.3, 2.0, lo, hi, out), (m,), rod_bounds),
+        (lambda lo, hi, out: yukawa.yukawa_centres(c, zc, s, i, 0.8, 0.3, 2.0, lo, hi, out), (m, 3), rod_bounds),
+        (lambda lo, hi, out: yukawa.yukawa_energy(c, zc, s, i, 0.8, 0.3, 2.0, lo, hi, out), (m,), rod_bounds),
     ]
     for kernel, shape, blocks in cases:
         np.testing.assert_array_equal(blockwise(kernel, shape, blocks), blockwise(kernel, shape, [0, shape[0]]))
