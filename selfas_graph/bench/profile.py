@@ -56,7 +56,7 @@ COMMAND_ENV = {"HDF5_USE_FILE_LOCKING": "FALSE"}
 PARTS = [
     (
         "tip-tip far sum (direct or tree, slow)",
-        lambda f: f.endswith(("tips.py:tip_tip_direct", "tips.py:tip_tip_direct_mixed")) or "kernels/tree.py" in f,
+        lambda f: f.endswith(("tips.py:tip_tip_direct", "tips.py:tip_tip_direct_mixed")) or "kernels/tree" in f,
     ),
     ("tip-tip close pairs (fast, every step)", lambda f: f.endswith("tips.py:tip_tip_fast")),
     (

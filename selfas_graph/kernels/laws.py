@@ -63,7 +63,7 @@ def tip_force_over_r_f32(r2, p, rstar, kappa):
     """:func:`tip_force_over_r` in float32: every argument float32, every constant float32.
 
     The same law and branches (the core below ``r*``), for the mixed-precision near field of the
-    tip tree (``tree.evaluate_groups``) and the mixed direct sum: AVX2 takes 8 float32 lanes per
+    tip tree (``treewalk.evaluate_groups``) and the mixed direct sum: AVX2 takes 8 float32 lanes per
     square root and division against 4 float64 lanes. Where float64 gives 0 at ``r2 = 0``, this
     gives 0 for every ``r2`` below ``1e-37``, the smallest round float32 power of ten that is
     normal: a tip pair closer than ``3e-19`` is not resolved in float32 anyway, and the one select

@@ -371,3 +371,55 @@ def test_a_kernel_cached_from_other_sources_is_not_loaded(tmp_path):
     assert run("A") == (1, 0)  # the same sources: loaded from the cache
     assert run("B") == (0, 1)  # other sources: not loaded, compiled afresh
     assert run("A") == (1, 0)  # both entries kept side by side
+
+
+_VARIANTS = """
+from selfas_graph.kernels._jit import inline, njit
+
+
+@inline
+def law(x):
+    return x + x
+
+
+def make(scale, f):
+    @njit
+    def kernel(x):
+        return f(x) * scale
+
+    return kernel
+
+
+twice, thrice = make(1.0, law), make(1.5, law)
+"""
+
+_VARIANTS_PROBE = """
+import sys
+sys.path.insert(0, sys.argv[1])
+import probe_variants as m
+assert (m.twice(2.0), m.thrice(2.0)) == (4.0, 6.0)
+print(*(sum(getattr(k.stats, s).values()) for k in (m.twice, m.thrice) for s in ("cache_hits", "cache_misses")))
+"""
+
+
+@pytest.mark.skipif(os.environ.get("NUMBA_DISABLE_JIT", "0") != "0", reason="no compiled kernels without the JIT")
+def test_the_variants_of_a_factory_are_cached_apart_and_found_again(tmp_path):
+    """Kernel variants built by a factory (the pattern of ``multipole.make_fields`` and the tree's far
+    loops: an inner function closing over the variant) share their bytecode and their cache index.
+    Each is saved under a key of its own (the values it closes over: a wrong variant loaded would
+    give the other's result), and a second process loads both, although they close over another
+    kernel, which numba's own key would pickle with an identifier drawn afresh in every process."""
+    import subprocess
+    import sys
+
+    (tmp_path / "probe_variants.py").write_text(_VARIANTS)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+
+    def run():
+        out = subprocess.run(
+            [sys.executable, "-c", _VARIANTS_PROBE, str(tmp_path)], env=env, capture_output=True, text=True, check=True
+        ).stdout.split()
+        return tuple(int(v) for v in out)  # (hits, misses) of the first variant, then of the second
+
+    assert run() == (0, 1, 0, 1)  # each compiled and saved
+    assert run() == (1, 0, 1, 0)  # each loaded, the right one
