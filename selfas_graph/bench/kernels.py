@@ -157,7 +157,7 @@ def run(args):
     import numba
 
     from selfas_graph import Simulation
-    from selfas_graph.kernels import currents, tips, tree, yukawa
+    from selfas_graph.kernels import currents, lorentz, tips, tree, yukawa
 
     from .peer import machine, machine_line
     from .step import scene
@@ -196,9 +196,9 @@ def run(args):
         else:
             current = np.where(rng.random(n) < fraction, rng.uniform(-3.0, 3.0, n), 0.0)
         active = np.flatnonzero(current != 0.0).astype(np.int64)
-        gl_t, _ = currents.gauss_legendre_01(4)
+        gl_t, _ = lorentz.gauss_legendre_01(4)
         pts = np.empty((len(active) * len(gl_t), 3))
-        currents.quadrature_points(st.position, active, gl_t, pts)
+        lorentz.quadrature_points(st.position, active, gl_t, pts)
         excl = np.repeat(active, len(gl_t))
         fb = np.empty_like(pts)
         w = 0.5 * p.rods.diameter
@@ -296,6 +296,7 @@ def mixed_error(checkpoint):
     """Rows (quantity, median, p99, max, max diff / max force) of the mixed current kernels
     against the float64 ones on the state of ``checkpoint`` (see the module docstring)."""
     from selfas_graph.kernels import currents as kc
+    from selfas_graph.kernels import lorentz as kl
 
     from .profile import load_state
 
@@ -317,9 +318,9 @@ def mixed_error(checkpoint):
     kc.current_force_on_tips(pos, st.tip_charge, act, cur, w, 0, len(pos), f64)
     kc.current_force_on_tips_mixed(pos, st.tip_charge, act, cur, w, 0, len(pos), f32)
     rows.append(row("term 9 force on the tips", f64, f32))
-    t, wt = kc.gauss_legendre_01(sim.params.forces.current_lorentz.quadrature_points)
+    t, wt = kl.gauss_legendre_01(sim.params.forces.current_lorentz.quadrature_points)
     pts = np.empty((len(act) * len(t), 3))
-    kc.quadrature_points(pos, act, t, pts)
+    kl.quadrature_points(pos, act, t, pts)
     excl = np.repeat(act, len(t))
     b64, b32 = np.empty_like(pts), np.empty_like(pts)
     kc.rod_current_field(pts, excl, pos, act, cur, w, b64)
@@ -330,8 +331,8 @@ def mixed_error(checkpoint):
         source.field_at(pts, extra)
         other += extra
     l64, l32 = np.zeros_like(pos), np.zeros_like(pos)
-    kc.lorentz_force_on_rods(pos, act, cur, b64 + other, t, wt, l64)
-    kc.lorentz_force_on_rods(pos, act, cur, b32 + other, t, wt, l32)
+    kl.lorentz_force_on_rods(pos, act, cur, b64 + other, t, wt, l64)
+    kl.lorentz_force_on_rods(pos, act, cur, b32 + other, t, wt, l32)
     rows.append(row("term 10 force (all fields)", l64, l32))
     return origin, len(act), st.n_rods, rows
 

@@ -74,7 +74,10 @@ PARTS = [
         "current field on tips (term 9, slow)",
         lambda f: f.endswith(("currents.py:current_force_on_tips", "currents.py:current_force_on_tips_mixed")),
     ),
-    ("current field at Lorentz points (term 10, slow)", lambda f: "kernels/currents.py" in f),
+    (
+        "current field at Lorentz points (term 10, slow)",
+        lambda f: "kernels/currents.py" in f or "kernels/lorentz.py" in f,
+    ),
     (
         "split brake (close pairs, exact brake)",
         lambda f: f.endswith(

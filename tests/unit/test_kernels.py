@@ -279,7 +279,7 @@ def _rows_kernel_cases(rng):
 
 
 def kc_nodes(n):
-    from selfas_graph.kernels.currents import gauss_legendre_01
+    from selfas_graph.kernels.lorentz import gauss_legendre_01
 
     return gauss_legendre_01(n)
 
