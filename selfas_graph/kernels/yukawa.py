@@ -20,6 +20,8 @@ from .laws import yukawa_force_over_r, yukawa_force_over_r_f32, yukawa_potential
 def _yukawa_row(centre, rod_charge, i, start, index, screening, core, rc2):
     """The Yukawa force on row ``i`` of ``centre`` from its listed neighbours (:func:`yukawa_centres`),
     as (fx, fy, fz); inlined, so that the loop vectorises in the kernel that calls it."""
+    inv_s = 1.0 / screening
+    core2 = core * core
     fx = 0.0
     fy = 0.0
     fz = 0.0
@@ -29,7 +31,7 @@ def _yukawa_row(centre, rod_charge, i, start, index, screening, core, rc2):
         dy = centre[i, 1] - centre[l, 1]
         dz = centre[i, 2] - centre[l, 2]
         r2 = dx * dx + dy * dy + dz * dz
-        g = yukawa_force_over_r(r2, rod_charge[i] * rod_charge[l], screening, core)
+        g = yukawa_force_over_r(r2, rod_charge[i] * rod_charge[l], inv_s, core2)
         g = g if r2 < rc2 else 0.0  # a select, not a branch: the loop vectorises
         fx += g * dx
         fy += g * dy
