@@ -524,7 +524,7 @@ def test_force_field_precision():
 
 # ------------------------------------------------------------------ mixed far field
 # precision="mixed" also takes each accepted cell's field in float32 (offsets and moments in
-# units of the cell's distance from the group, kernels/tree.py _field_octupole_f32), added in
+# units of the cell's distance from the group, kernels/multipole.py make_fields, float32), added in
 # float64 over the cells. Measured on the Fig. 2 scene at 6000 and 24 000 rods: it moves the
 # forces by a median 2e-8 and at most 2e-6 of a tip's force, inside the bounds above.
 
