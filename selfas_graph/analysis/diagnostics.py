@@ -51,7 +51,8 @@ import operator
 
 import numpy as np
 
-from ..kernels.currents import gauss_legendre_01, rod_current_field
+from ..kernels.currents import rod_current_field
+from ..kernels.lorentz import gauss_legendre_01
 from ..model.events import SHORT_CIRCUIT
 
 __all__ = [

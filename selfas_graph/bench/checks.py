@@ -7,7 +7,7 @@ On a state from a checkpoint (read as selfas_graph/bench/profile.py reads it) or
 on one numba thread and the thread's CPU clock, interleaved (the order alternates between repeats):
 
 - ``contact check``: ``ContactTracker.search`` on a step without events, with its one-pass
-  kernel (``kernels/pairs.py::contacts_unchanged``) and with the kernel answering "no" (so the
+  kernel (``kernels/contacts.py::contacts_unchanged``) and with the kernel answering "no" (so the
   full numpy check runs, as before the kernel existed);
 - ``skin check``: a Verlet list's largest displacement since its build over all tips, by
   ``kernels/cells.py::max_displacement2`` and by the three numpy passes it replaced.

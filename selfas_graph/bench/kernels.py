@@ -123,8 +123,9 @@ def timed_pair(fn_before, fn_after, repeat, clock=time.perf_counter):
 
 
 def kernels_at(ref):
-    """The kernel modules of git revision ``ref``, as a namespace with ``tips``, ``tree``, ``pairs``,
-    ``currents`` (``selfas_graph/kernels`` of that revision copied into a package of its own)."""
+    """The kernel modules of git revision ``ref``, as a namespace with ``tips``, ``tree``, ``yukawa``,
+    ``currents``, ``cells`` (``selfas_graph/kernels`` of that revision copied into a package of its own;
+    ``yukawa`` is ``pairs`` in revisions that held the Yukawa sums there)."""
     sha = subprocess.run(["git", "rev-parse", ref], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
     name = f"selfas_kernels_{sha[:12]}"
     home = Path(tempfile.gettempdir()) / "selfas_bench_kernels"
@@ -147,16 +148,16 @@ def kernels_at(ref):
         package = importlib.util.module_from_spec(spec)
         sys.modules[name] = package
         spec.loader.exec_module(package)
-    return types.SimpleNamespace(
-        **{m: importlib.import_module(f"{name}.{m}") for m in ("tips", "tree", "pairs", "currents")}
-    )
+    modules = {m: importlib.import_module(f"{name}.{m}") for m in ("tips", "tree", "currents", "cells")}
+    yukawa = "yukawa" if (pkg / "yukawa.py").exists() else "pairs"
+    return types.SimpleNamespace(yukawa=importlib.import_module(f"{name}.{yukawa}"), **modules)
 
 
 def run(args):
     import numba
 
     from selfas_graph import Simulation
-    from selfas_graph.kernels import currents, pairs, tips, tree
+    from selfas_graph.kernels import currents, lorentz, tips, tree, yukawa
 
     from .peer import machine, machine_line
     from .step import scene
@@ -164,7 +165,7 @@ def run(args):
     numba.set_num_threads(args.threads)
     plain = _plain()
     clock = time.process_time if args.cpu_time else time.perf_counter
-    now = types.SimpleNamespace(tips=tips, tree=tree, pairs=pairs, currents=currents)
+    now = types.SimpleNamespace(tips=tips, tree=tree, yukawa=yukawa, currents=currents)
     before_ref = getattr(args, "before", None)
     before = kernels_at(before_ref) if before_ref else None
     fraction = getattr(args, "active_fraction", 0.72)
@@ -195,9 +196,9 @@ def run(args):
         else:
             current = np.where(rng.random(n) < fraction, rng.uniform(-3.0, 3.0, n), 0.0)
         active = np.flatnonzero(current != 0.0).astype(np.int64)
-        gl_t, _ = currents.gauss_legendre_01(4)
+        gl_t, _ = lorentz.gauss_legendre_01(4)
         pts = np.empty((len(active) * len(gl_t), 3))
-        currents.quadrature_points(st.position, active, gl_t, pts)
+        lorentz.quadrature_points(st.position, active, gl_t, pts)
         excl = np.repeat(active, len(gl_t))
         fb = np.empty_like(pts)
         w = 0.5 * p.rods.diameter
@@ -230,7 +231,7 @@ def run(args):
                 True,
                 args.repeat,
                 lambda K: (
-                    lambda: K.pairs.yukawa_centres(
+                    lambda: K.yukawa.yukawa_centres(
                         c, st.rod_charge, nl.start, nl.index, yk.screening, yk.core, yk.cutoff, 0, n, fy
                     )
                 ),
@@ -295,6 +296,7 @@ def mixed_error(checkpoint):
     """Rows (quantity, median, p99, max, max diff / max force) of the mixed current kernels
     against the float64 ones on the state of ``checkpoint`` (see the module docstring)."""
     from selfas_graph.kernels import currents as kc
+    from selfas_graph.kernels import lorentz as kl
 
     from .profile import load_state
 
@@ -316,9 +318,9 @@ def mixed_error(checkpoint):
     kc.current_force_on_tips(pos, st.tip_charge, act, cur, w, 0, len(pos), f64)
     kc.current_force_on_tips_mixed(pos, st.tip_charge, act, cur, w, 0, len(pos), f32)
     rows.append(row("term 9 force on the tips", f64, f32))
-    t, wt = kc.gauss_legendre_01(sim.params.forces.current_lorentz.quadrature_points)
+    t, wt = kl.gauss_legendre_01(sim.params.forces.current_lorentz.quadrature_points)
     pts = np.empty((len(act) * len(t), 3))
-    kc.quadrature_points(pos, act, t, pts)
+    kl.quadrature_points(pos, act, t, pts)
     excl = np.repeat(act, len(t))
     b64, b32 = np.empty_like(pts), np.empty_like(pts)
     kc.rod_current_field(pts, excl, pos, act, cur, w, b64)
@@ -329,8 +331,8 @@ def mixed_error(checkpoint):
         source.field_at(pts, extra)
         other += extra
     l64, l32 = np.zeros_like(pos), np.zeros_like(pos)
-    kc.lorentz_force_on_rods(pos, act, cur, b64 + other, t, wt, l64)
-    kc.lorentz_force_on_rods(pos, act, cur, b32 + other, t, wt, l32)
+    kl.lorentz_force_on_rods(pos, act, cur, b64 + other, t, wt, l64)
+    kl.lorentz_force_on_rods(pos, act, cur, b32 + other, t, wt, l32)
     rows.append(row("term 10 force (all fields)", l64, l32))
     return origin, len(act), st.n_rods, rows
 

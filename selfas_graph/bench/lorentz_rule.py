@@ -23,6 +23,7 @@ import numpy as np
 
 import selfas_graph  # noqa: F401  before any kernel runs: it sets the OpenMP wait policy
 from selfas_graph.kernels import currents as kc
+from selfas_graph.kernels import lorentz as kl
 
 from .peer import machine_line
 from .profile import load_state
@@ -34,7 +35,7 @@ def lorentz_force(ff, active, rule, sources=None, rods=None, with_fields=True):
     t, wt = rule
     rods = active if rods is None else rods
     pts = np.empty((len(rods) * len(t), 3))
-    kc.quadrature_points(ff.position, rods, t, pts)
+    kl.quadrature_points(ff.position, rods, t, pts)
     field = np.empty_like(pts)
     src = active if sources is None else sources
     kc.rod_current_field(pts, np.repeat(rods, len(t)), ff.position, src, ff.current, ff.wire_radius, field)
@@ -44,12 +45,12 @@ def lorentz_force(ff, active, rule, sources=None, rods=None, with_fields=True):
             source.field_at(pts, extra)
             field += extra
     out = np.zeros_like(ff.position)
-    kc.lorentz_force_on_rods(ff.position, rods, ff.current, field, t, wt, out)
+    kl.lorentz_force_on_rods(ff.position, rods, ff.current, field, t, wt, out)
     return out
 
 
 def composite(panels, points=4):
-    t4, w4 = kc.gauss_legendre_01(points)
+    t4, w4 = kl.gauss_legendre_01(points)
     edges = np.linspace(0.0, 1.0, panels + 1)
     t = np.concatenate([a + (b - a) * t4 for a, b in zip(edges[:-1], edges[1:])])
     wt = np.concatenate([(b - a) * w4 for a, b in zip(edges[:-1], edges[1:])])
@@ -58,7 +59,7 @@ def composite(panels, points=4):
 
 def reference(ff, active, near=3.0, panels=2048):
     """The converged term: 64 points for far pairs, ``panels`` panels of 4 points for near ones."""
-    far = kc.gauss_legendre_01(64)
+    far = kl.gauss_legendre_01(64)
     fine = composite(panels)
     out = lorentz_force(ff, active, far)
     centre = 0.5 * (ff.position[2 * active] + ff.position[2 * active + 1])

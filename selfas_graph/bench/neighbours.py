@@ -13,11 +13,11 @@ time (``time.process_time``: on a shared machine it counts only the cycles the k
   rows numbered by cell where the revision has them);
 - ``tip list``: the tip list, radius the tip range (r*, or the contact release radius when
   larger) + skin, without the pairs of one rod;
-- ``yukawa``: the Yukawa sum as the term calls it over that list (``kernels/pairs.py::
+- ``yukawa``: the Yukawa sum as the term calls it over that list (``kernels/yukawa.py::
   yukawa_centres_sorted`` with the copies in cell order it reads, or ``yukawa_centres`` in a
   revision without it), also in ns per listed pair;
 - ``yukawa mixed``: the same sum with the pair law in float32 (``forces.yukawa.precision =
-  "mixed"``, ``kernels/pairs.py::yukawa_centres_sorted_mixed``), always interleaved with the
+  "mixed"``, ``kernels/yukawa.py::yukawa_centres_sorted_mixed``), always interleaved with the
   float64 sum of the working tree (rounds in which the two take turns, the order alternating), and
   printed in a table of its own: both times, the speed-up (median [min-max] of the per-round
   ratios float64 / mixed) and the largest difference of a rod's force over the largest force.
@@ -79,16 +79,12 @@ def run(args):
     clock = time.process_time
     now = kernels
     import selfas_graph.kernels.cells  # noqa: F401  (loaded as attributes of the package)
-    import selfas_graph.kernels.pairs  # noqa: F401
+    import selfas_graph.kernels.yukawa  # noqa: F401
 
     chosen = getattr(args, "kernels", None) or [*KERNELS, MIXED]
     before = None
     if args.before:
         before = kernels_at(args.before)
-        import importlib
-
-        mod = before.pairs.__name__.rsplit(".", 1)[0]
-        before.cells = importlib.import_module(f"{mod}.cells")
     rows = []
     for label, sim in scenes(args):
         ff = sim.force_field
@@ -105,8 +101,8 @@ def run(args):
         lists = {}
 
         def sorted_sum(K):
-            """True where the revision sums over copies in cell order (pairs.yukawa_centres_sorted)."""
-            return hasattr(K.pairs, "yukawa_centres_sorted")
+            """True where the revision sums over copies in cell order (yukawa.yukawa_centres_sorted)."""
+            return hasattr(K.yukawa, "yukawa_centres_sorted")
 
         def centre_list(K):
             if id(K) not in lists:
@@ -125,12 +121,12 @@ def run(args):
                 return lambda: K.cells.neighbour_rows(tips, tip_radius, True)
             if sorted_sum(K):  # as the Yukawa term calls it: copies in cell order made per call
                 _, _, (order, s, i) = centre_list(K)
-                kernel = K.pairs.yukawa_centres_sorted_mixed if name == MIXED else K.pairs.yukawa_centres_sorted
+                kernel = K.yukawa.yukawa_centres_sorted_mixed if name == MIXED else K.yukawa.yukawa_centres_sorted
                 return lambda: kernel(
                     c[order], st.rod_charge[order], order, s, i, yk.screening, yk.core, yk.cutoff, 0, n, fy
                 )
             s, i = centre_list(K)
-            return lambda: K.pairs.yukawa_centres(c, st.rod_charge, s, i, yk.screening, yk.core, yk.cutoff, 0, n, fy)
+            return lambda: K.yukawa.yukawa_centres(c, st.rod_charge, s, i, yk.screening, yk.core, yk.cutoff, 0, n, fy)
 
         res = {"scene": label, "rods": n, "centre_radius": centre_radius, "tip_radius": tip_radius}
         for name in KERNELS:

@@ -56,17 +56,17 @@ COMMAND_ENV = {"HDF5_USE_FILE_LOCKING": "FALSE"}
 PARTS = [
     (
         "tip-tip far sum (direct or tree, slow)",
-        lambda f: f.endswith(("tips.py:tip_tip_direct", "tips.py:tip_tip_direct_mixed")) or "kernels/tree.py" in f,
+        lambda f: f.endswith(("tips.py:tip_tip_direct", "tips.py:tip_tip_direct_mixed")) or "kernels/tree" in f,
     ),
     ("tip-tip close pairs (fast, every step)", lambda f: f.endswith("tips.py:tip_tip_fast")),
     (
         "Yukawa sum (slow)",
         lambda f: f.endswith(
             (
-                "pairs.py:yukawa_centres",
-                "pairs.py:yukawa_centres_sorted",
-                "pairs.py:yukawa_centres_sorted_mixed",
-                "pairs.py:yukawa_energy",
+                "yukawa.py:yukawa_centres",
+                "yukawa.py:yukawa_centres_sorted",
+                "yukawa.py:yukawa_centres_sorted_mixed",
+                "yukawa.py:yukawa_energy",
             )
         ),
     ),
@@ -74,18 +74,21 @@ PARTS = [
         "current field on tips (term 9, slow)",
         lambda f: f.endswith(("currents.py:current_force_on_tips", "currents.py:current_force_on_tips_mixed")),
     ),
-    ("current field at Lorentz points (term 10, slow)", lambda f: "kernels/currents.py" in f),
+    (
+        "current field at Lorentz points (term 10, slow)",
+        lambda f: "kernels/currents.py" in f or "kernels/lorentz.py" in f,
+    ),
     (
         "split brake (close pairs, exact brake)",
         lambda f: f.endswith(
             (
-                "pairs.py:close_pairs",
-                "pairs.py:_close_counts",
-                "pairs.py:_close_fill",
-                "pairs.py:brake_pairs_exact",
-                "pairs.py:close_pair_count",
-                "pairs.py:brake_close_pairs",
-                "pairs.py:brake_close_pairs_exact",
+                "contacts.py:close_pairs",
+                "contacts.py:_close_counts",
+                "contacts.py:_close_fill",
+                "brakes.py:brake_pairs_exact",
+                "contacts.py:close_pair_count",
+                "brakes.py:brake_close_pairs",
+                "brakes.py:brake_close_pairs_exact",
                 "fields.py:electrode_brake_exact",
             )
         ),

@@ -21,6 +21,13 @@ times the hot kernels for both; docs/performance.md has the figures.
 Compiled kernels are cached on disk, keyed also by the digest of all kernel sources
 (:class:`SourcesKeyedCache`, docs/model.md 'Assumptions and project choices', B27): a kernel
 compiled before a law it inlines changed is never loaded. Importing the package deletes nothing.
+
+Variants of one law or loop (float64 and float32, a multipole order) are written once, as a
+factory: a Python function that takes the variant as a value, defines the kernel inside it,
+closing over that value (numba freezes closed-over values and globals as constants when it
+compiles), and returns it; each variant is built once, at import (``multipole.make_fields``,
+``treewalk._make_cell_on_targets``). Their cache keys tell them apart by what they close over
+(:class:`SourcesKeyedCache`).
 """
 
 import functools
@@ -43,6 +50,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numba  # noqa: E402
 from numba.core.caching import FunctionCache  # noqa: E402
 from numba.core.dispatcher import Dispatcher  # noqa: E402
+from numba.core.serialize import dumps  # noqa: E402
 
 
 def _warn_if_spinning():
@@ -92,6 +100,20 @@ def sources_digest(folder=None) -> str:
 SOURCES_DIGEST = sources_digest()
 
 
+def _stable(value):
+    """``value`` with every function in it (a kernel or a plain one) replaced by its module, its
+    qualified name and the values it closes over: what a variant's cache key holds of it."""
+    fn = value.py_func if isinstance(value, Dispatcher) else value
+    if isinstance(fn, types.FunctionType):
+        return ("function", fn.__module__, fn.__qualname__, closure_values(fn))
+    return value
+
+
+def closure_values(fn):
+    """The values a function closes over, functions among them named (:func:`_stable`), as a tuple."""
+    return tuple(_stable(cell.cell_contents) for cell in fn.__closure__ or ())
+
+
 class SourcesKeyedCache(FunctionCache):
     """numba's on-disk cache of one kernel, with :data:`SOURCES_DIGEST` in the index key.
 
@@ -102,10 +124,21 @@ class SourcesKeyedCache(FunctionCache):
     kernel is compiled afresh and saved beside it. Nothing is deleted (numba itself drops an
     index when the kernel's own file changes; ``NUMBA_CACHE_DIR`` moves the cache, and deleting
     that folder, or the ``__pycache__`` folder of the kernels, clears it).
+
+    The variants a factory builds (one law or loop for float64 and float32, or per multipole
+    order: a function defined inside the factory, closing over the variant) share their bytecode
+    and their index file; the key tells them apart by the values they close over, as numba's does.
+    numba pickles those values, and a pickled kernel carries an identifier drawn afresh in every
+    process: a variant that closes over another kernel would never be found again, and each
+    process would add an entry to its index. Here a kernel among the closed-over values counts by
+    its module, its qualified name and its own closed-over values (:func:`closure_values`), which
+    with :data:`SOURCES_DIGEST` name the same code in every process.
     """
 
     def _index_key(self, sig, codegen):
-        return super()._index_key(sig, codegen) + (SOURCES_DIGEST,)
+        code = hashlib.sha256(self._py_func.__code__.co_code).hexdigest()
+        closure = hashlib.sha256(dumps(closure_values(self._py_func))).hexdigest()
+        return (sig, codegen.magic_tuple(), (code, closure), SOURCES_DIGEST)
 
 
 def _jit(**flags):

@@ -63,7 +63,7 @@ def tip_force_over_r_f32(r2, p, rstar, kappa):
     """:func:`tip_force_over_r` in float32: every argument float32, every constant float32.
 
     The same law and branches (the core below ``r*``), for the mixed-precision near field of the
-    tip tree (``tree.evaluate_groups``) and the mixed direct sum: AVX2 takes 8 float32 lanes per
+    tip tree (``treewalk.evaluate_groups``) and the mixed direct sum: AVX2 takes 8 float32 lanes per
     square root and division against 4 float64 lanes. Where float64 gives 0 at ``r2 = 0``, this
     gives 0 for every ``r2`` below ``1e-37``, the smallest round float32 power of ten that is
     normal: a tip pair closer than ``3e-19`` is not resolved in float32 anyway, and the one select
@@ -102,63 +102,64 @@ def tip_potential(r2, p, rstar, kappa):
     return (p * (3.0 * rs2 - r2) + kappa * d * d) / (2.0 * rs3)
 
 
-@inline
-def yukawa_force_over_r(r2, zz, screening, core):
-    """Screened electric repulsion between rod centres (docs/model.md 'Term 6'), divided by r.
+def make_yukawa_force_over_r(ft, exp):
+    """The Yukawa law :func:`yukawa_force_over_r` in the float type ``ft`` with the exponential
+    ``exp`` (:func:`.expo.exp_nonpositive` for float64, :func:`.expo.exp_nonpositive_f32` for
+    float32): one definition of the law, every constant of type ``ft``, built once per type below."""
+    one = ft(1.0)
+    zero = ft(0.0)
 
-    ``f(r) = Z_i Z_j exp(-r/R_D) (1/r^2 + 1/(R_D r))``, the negative derivative of
-    ``U = Z_i Z_j exp(-r/R_D) / r``, for ``r >= a``. Inside the core radius ``a``
-    (``forces.yukawa.core_radius``; 0 means no core) the force falls linearly to zero,
-    ``f(r) = f(a) r / a``, as for a point charge inside a uniformly charged ball of radius a
-    (the same softening as the tip law, term 1): two rods of diameter
-    D cannot bring their centres closer than about D, and without the core two crossing
-    rods feel an unbounded 1/r^2 force. Clamping r^2 to a^2 gives exactly this,
-    because the returned factor is f/r. ``r = 0`` without a core gives 0.
+    @inline
+    def law(r2, zz, inv_s, core2):
+        """``f(r) / r`` of the Yukawa force (:data:`yukawa_force_over_r`)."""
+        rr = max(r2, core2)
+        coincident = rr == zero  # NaN is not zero: it propagates
+        rs = one if coincident else rr
+        r = math.sqrt(rs)
+        inv_r = one / r
+        f = zz * exp(-r * inv_s) * (inv_r * inv_r + inv_s * inv_r) * inv_r
+        return zero if coincident else f
 
-    The exponential is :func:`.expo.exp_nonpositive` (within 2 ulp of ``math.exp``) and
-    ``r = 0`` is a select, not a branch, so that the neighbour loop vectorises: measured
-    at 24 000 rods (5.0e6 directed pairs) on one core of the 2-core machine, the pair loop
-    of ``pairs.yukawa_centres`` went from 9.0 to 7.5 ns per pair (the same loop with the
-    exponential left out takes 4.1: the rest is the gathers of the neighbours' centres).
-    Results differ from those with ``math.exp`` by at most 2e-16 of the largest force.
-    One square root and one division per pair (``1 / R_D`` is loop-invariant and hoisted),
-    where the earlier form had four divisions: on one core of an AVX2 Zen 3, with the
-    exponential's vector conversion (``expo.py``), 9.4-9.8 against 11.0-11.6 ns per
-    listed pair at 1200 rods, within the spread between runs at 6000 and 24 000
-    (docs/performance.md). The two forms round differently: a few ulp of f.
-    """
-    rr = max(r2, core * core)
-    zero = rr == 0.0  # NaN is not zero: it propagates
-    rs = 1.0 if zero else rr
-    r = math.sqrt(rs)
-    inv_r = 1.0 / r
-    inv_s = 1.0 / screening  # loop-invariant: hoisted out of the pair loop
-    f = zz * exp_nonpositive(-r * inv_s) * (inv_r * inv_r + inv_s * inv_r) * inv_r
-    return 0.0 if zero else f
+    return law
 
 
-@inline
-def yukawa_force_over_r_f32(r2, zz, inv_s, core2):
-    """:func:`yukawa_force_over_r` in float32: every argument float32, every constant float32.
+#: Screened electric repulsion between rod centres (docs/model.md 'Term 6'), divided by r:
+#: ``yukawa_force_over_r(r2, zz, inv_s, core2)`` with ``r2`` the squared distance, ``zz = Z_i Z_j``,
+#: ``inv_s = 1 / R_D`` and ``core2 = a^2`` (the last two loop-invariant, taken once by the caller).
+#:
+#: ``f(r) = Z_i Z_j exp(-r/R_D) (1/r^2 + 1/(R_D r))``, the negative derivative of
+#: ``U = Z_i Z_j exp(-r/R_D) / r``, for ``r >= a``. Inside the core radius ``a``
+#: (``forces.yukawa.core_radius``; 0 means no core) the force falls linearly to zero,
+#: ``f(r) = f(a) r / a``, as for a point charge inside a uniformly charged ball of radius a
+#: (the same softening as the tip law, term 1): two rods of diameter
+#: D cannot bring their centres closer than about D, and without the core two crossing
+#: rods feel an unbounded 1/r^2 force. Clamping r^2 to a^2 gives exactly this,
+#: because the returned factor is f/r. ``r = 0`` without a core gives 0.
+#:
+#: The exponential is :func:`.expo.exp_nonpositive` (within 2 ulp of ``math.exp``) and
+#: ``r = 0`` is a select, not a branch, so that the neighbour loop vectorises: measured
+#: at 24 000 rods (5.0e6 directed pairs) on one core of the 2-core machine, the pair loop
+#: of ``yukawa.yukawa_centres`` went from 9.0 to 7.5 ns per pair (the same loop with the
+#: exponential left out takes 4.1: the rest is the gathers of the neighbours' centres).
+#: Results differ from those with ``math.exp`` by at most 2e-16 of the largest force.
+#: One square root and one division per pair (``1 / R_D`` is loop-invariant),
+#: where the earlier form had four divisions: on one core of an AVX2 Zen 3, with the
+#: exponential's vector conversion (``expo.py``), 9.4-9.8 against 11.0-11.6 ns per
+#: listed pair at 1200 rods, within the spread between runs at 6000 and 24 000
+#: (docs/performance.md). The two forms round differently: a few ulp of f.
+yukawa_force_over_r = make_yukawa_force_over_r(np.float64, exp_nonpositive)
 
-    The same law, core clamp and ``r = 0`` select, for the mixed-precision Yukawa sum
-    (``pairs.yukawa_centres_sorted_mixed``): AVX2 takes 8 float32 lanes per square root and
-    division against 4 float64 lanes, and the exponential is
-    :func:`.expo.exp_nonpositive_f32`. The loop-invariant ``1 / R_D`` and ``a^2`` are arguments
-    (rounded once to float32 by the caller). Relative rounding about 1e-7 of f; the caller keeps
-    its inputs where no product here leaves the normal float32 range (``pairs.py``
-    ``_yukawa_mixed_ok``), except for ``r`` near 0 without a core: ``1/r^3`` overflows float32
-    below ``r = 1e-13 |Z_i Z_j|^(1/3)`` (the caller then sums the row in float64), and a pair
-    closer than about 3e-23, whose ``r^2`` underflows to 0, counts as coincident (0, where
-    float64 gives more than 1e45).
-    """
-    rr = max(r2, core2)
-    zero = rr == _F32_ZERO  # NaN is not zero: it propagates
-    rs = _F32_ONE if zero else rr
-    r = math.sqrt(rs)
-    inv_r = _F32_ONE / r
-    f = zz * exp_nonpositive_f32(-r * inv_s) * (inv_r * inv_r + inv_s * inv_r) * inv_r
-    return _F32_ZERO if zero else f
+#: :func:`yukawa_force_over_r` in float32: every argument float32 (``inv_s`` and ``core2`` rounded
+#: once to float32 by the caller), every constant float32, the exponential
+#: :func:`.expo.exp_nonpositive_f32`; for the mixed-precision Yukawa sum
+#: (``yukawa.yukawa_centres_sorted_mixed``): AVX2 takes 8 float32 lanes per square root and
+#: division against 4 float64 lanes. Relative rounding about 1e-7 of f; the caller keeps
+#: its inputs where no product here leaves the normal float32 range (``yukawa.py``
+#: ``_yukawa_mixed_ok``), except for ``r`` near 0 without a core: ``1/r^3`` overflows float32
+#: below ``r = 1e-13 |Z_i Z_j|^(1/3)`` (the caller then sums the row in float64), and a pair
+#: closer than about 3e-23, whose ``r^2`` underflows to 0, counts as coincident (0, where
+#: float64 gives more than 1e45).
+yukawa_force_over_r_f32 = make_yukawa_force_over_r(np.float32, exp_nonpositive_f32)
 
 
 @inline

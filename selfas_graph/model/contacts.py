@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.pairs import close_pair_count, close_pairs, contacts_unchanged
+from ..kernels.contacts import close_pair_count, close_pairs, contacts_unchanged
 from . import events as ev
 
 
@@ -69,7 +69,7 @@ class ContactTracker:
         sorted by ids (a deterministic order).
         """
         pairs, on_cathode, on_anode, on_filament = contacts.search_arrays
-        # [perf] one kernel pass answers the common step without news (kernels/pairs.py::contacts_unchanged)
+        # [perf] one kernel pass answers the common step without news (kernels/contacts.py::contacts_unchanged)
         el = self.electrodes if self.electrodes is not None else (np.nan, np.nan)
         fr = self.filament_radius if self.filament_radius is not None else np.nan
         if contacts_unchanged(

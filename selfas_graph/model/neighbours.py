@@ -4,14 +4,14 @@ A list holds every pair closer than ``cutoff + skin`` and is rebuilt only when
 some point has moved more than ``skin / 2`` since the last build, so between
 rebuilds it still contains every pair closer than ``cutoff``. Pairs are stored
 in compressed rows with both directions, the layout the kernels in
-:mod:`selfas_graph.kernels.pairs` take. The rows come straight out of the cell
+:mod:`selfas_graph.kernels.yukawa` and :mod:`selfas_graph.kernels.brakes` take. The rows come straight out of the cell
 list's two passes; measured at 24 000 rod centres (cut-off plus skin 6.86, 5.0e6
 directed pairs) on one core, 118 ms per build against 465 ms for scipy's k-d tree
 ``query_pairs`` followed by a sort into rows (523 against 2738 ms at 10^5 rods).
 
 A list with ``cell_order`` set (the Yukawa term sets it on the rod-centre list) also keeps its
 rows numbered by cell (:attr:`NeighbourList.sorted_rows`), written by the same build, for a sum
-that reads its inputs from copies in cell order (``kernels/pairs.py::yukawa_centres_sorted``).
+that reads its inputs from copies in cell order (``kernels/yukawa.py::yukawa_centres_sorted``).
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.pairs import close_pair_count
+from ..kernels.contacts import close_pair_count
 from . import events as ev
 
 #: the electrodes of case (i), whose contacts the status counts together

@@ -509,11 +509,11 @@ def test_ten_thousand_contacts_in_one_step():
 
 
 def test_quiet_step_kernel_never_hides_an_event(rng, monkeypatch):
-    """The one-pass check (kernels/pairs.py::contacts_unchanged) answers True only on steps where the
+    """The one-pass check (kernels/contacts.py::contacts_unchanged) answers True only on steps where the
     full check finds no event: two trackers, with and without it, follow a random walk of tips that
     keeps crossing r*, the release radius, the electrodes and the filament surface, and stay equal."""
     import selfas_graph.model.contacts as contacts_module
-    from selfas_graph.kernels.pairs import contacts_unchanged
+    from selfas_graph.kernels.contacts import contacts_unchanged
 
     n = 160
     position = rng.uniform([-0.4, -0.4, -0.5], [0.4, 0.4, 0.5], size=(n, 3))

@@ -115,6 +115,7 @@ def test_lorentz_term_sums_the_rod_currents_and_every_source_in_term_order(rng):
     from selfas_graph.kernels import currents as kc
     from selfas_graph.kernels import external as kx
     from selfas_graph.kernels import fields as kf
+    from selfas_graph.kernels import lorentz as kl
 
     state, sim = _source_scene(rng)
     ff = sim.force_field
@@ -123,9 +124,9 @@ def test_lorentz_term_sums_the_rod_currents_and_every_source_in_term_order(rng):
     ff.set_currents(current)
     ff.evaluate(state.position, state.velocity)
     active = np.flatnonzero(current)
-    t, wt = kc.gauss_legendre_01(4)
+    t, wt = kl.gauss_legendre_01(4)
     pts = np.empty((len(active) * 4, 3))
-    kc.quadrature_points(state.position, active, t, pts)
+    kl.quadrature_points(state.position, active, t, pts)
     field, extra = np.empty_like(pts), np.empty_like(pts)
     kc.rod_current_field(pts, np.repeat(active, 4), state.position, active, ff.current, 0.03, field)
     field += np.array(SOURCES["uniform_field"]["B"])
@@ -136,7 +137,7 @@ def test_lorentz_term_sums_the_rod_currents_and_every_source_in_term_order(rng):
     kx.monopole_field(pts, np.array([[0, 0, 1.0], [0, 0, -1.0]]), np.array([3.0, -3.0]), 0.06, extra)
     field += extra
     want = np.zeros_like(state.position)
-    kc.lorentz_force_on_rods(state.position, active, ff.current, field, t, wt, want)
+    kl.lorentz_force_on_rods(state.position, active, ff.current, field, t, wt, want)
     assert np.abs(want).max() > 1e-3
     np.testing.assert_array_equal(ff.out["current_lorentz"], want)
 
@@ -146,7 +147,7 @@ def test_lorentz_term_near_range_adds_the_pair_correction_to_the_plain_rule(rng)
     kernel's correction of the pairs of current-carrying rods with centres closer than the range
     (docs/model.md 'Term 10'), bit for bit; near_range = 0 leaves the plain rule."""
     from selfas_graph.kernels import cells
-    from selfas_graph.kernels import currents as kc
+    from selfas_graph.kernels import lorentz as kl
 
     state, plain_sim = _source_scene(rng)
     _, near_sim = _source_scene(None, state.copy(), forces_override={"quadrature_points": 3, "near_range": 1.2})
@@ -163,9 +164,9 @@ def test_lorentz_term_near_range_adds_the_pair_correction_to_the_plain_rule(rng)
     centre = 0.5 * (state.position[2 * active] + state.position[2 * active + 1])
     start, index = cells.neighbour_rows(centre, 1.2)
     assert len(index) > 0  # some pairs are near
-    t, wt = kc.gauss_legendre_01(3)
-    pt, pw = kc.gauss_legendre_01(kc.NEAR_PANEL_POINTS)
-    kc.lorentz_near_correction(state.position, active, current, start, index, 0, len(active), t, wt, pt, pw, 0.03, want)
+    t, wt = kl.gauss_legendre_01(3)
+    pt, pw = kl.gauss_legendre_01(kl.NEAR_PANEL_POINTS)
+    kl.lorentz_near_correction(state.position, active, current, start, index, 0, len(active), t, wt, pt, pw, 0.03, want)
     np.testing.assert_array_equal(near_sim.force_field.out["current_lorentz"], want)
     assert not np.array_equal(want, plain3.force_field.out["current_lorentz"])
 

@@ -10,14 +10,8 @@ import pytest
 from scipy import integrate
 
 import reference
-from selfas_graph.kernels.currents import (
-    current_force_on_tips,
-    gauss_legendre_01,
-    lorentz_force_on_rods,
-    quadrature_points,
-    rod_current_field,
-    segment_field,
-)
+from selfas_graph.kernels.currents import current_force_on_tips, rod_current_field, segment_field
+from selfas_graph.kernels.lorentz import gauss_legendre_01, lorentz_force_on_rods, quadrature_points
 
 #: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
 pytestmark = pytest.mark.jit_off_ok

@@ -12,14 +12,14 @@ import pytest
 
 import reference
 from selfas_graph.kernels import cells
-from selfas_graph.kernels.currents import (
+from selfas_graph.kernels.currents import rod_current_field
+from selfas_graph.kernels.lorentz import (
     NEAR_PANEL_POINTS,
     closest_parameter,
     gauss_legendre_01,
     lorentz_force_on_rods,
     lorentz_near_correction,
     quadrature_points,
-    rod_current_field,
 )
 
 #: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)

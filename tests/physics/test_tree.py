@@ -132,7 +132,7 @@ def test_multipole_field_falls_with_its_order(order):
     by 2^(p+3): 32, 64, 128 for orders 2, 3, 4 (measured 32-33, 65 and 122-125; a wrong term of
     order n <= p would leave an error falling as 1/d^(n+2) instead). The float32 field, in units of
     the distance as the tree takes it, equals the float64 one to float32 rounding."""
-    from selfas_graph.kernels import tree as ktree
+    from selfas_graph.kernels import multipole as km
 
     tips, points = cluster_and_targets(np.random.default_rng(11))
     t = build_tip_tree(*tips, leaf_size=len(tips[0]), order=order)  # one cell: the root
@@ -141,15 +141,15 @@ def test_multipole_field_falls_with_its_order(order):
     for p in points:
         d = p - c
         exact = sum(qk * (p - xk) / np.linalg.norm(p - xk) ** 3 for qk, xk in zip(tips[3], np.stack(tips[:3], 1)))
-        field = np.array(ktree._field_hexadecapole(*d, mc) if order == 4 else ktree._field_octupole(*d, *mc[:16]))
+        field = np.array(km.field_hexadecapole(*d, *mc) if order == 4 else km.field_octupole(*d, *mc[:16]))
         if order == 2:
             # order 2 leaves the octupoles zero: the octupole kernel is the quadrupole one but for
             # the order of its float64 operations (a few ulp, 1e-13 leaves room for cancellation)
-            np.testing.assert_allclose(field, ktree._field_quadrupole(*d, *mc[:9]), rtol=1e-13)
+            np.testing.assert_allclose(field, km.field_quadrupole(*d, *mc[:9]), rtol=1e-13)
         s = np.linalg.norm(d)
         u = (d / s).astype(np.float32)
         m32 = (mc * s ** -np.repeat([0, 1, 2, 3, 4], [1, 3, 5, 7, 9])).astype(np.float32)
-        f32 = ktree._field_hexadecapole_f32(*u, *m32) if order == 4 else ktree._field_octupole_f32(*u, *m32[:16])
+        f32 = km.field_hexadecapole_f32(*u, *m32) if order == 4 else km.field_octupole_f32(*u, *m32[:16])
         # float32 rounding (6e-8) of the inputs and of some 100 operations, with cancellation between
         # the moments' terms: 1e-5 is well above it (the float64 truncation is checked below)
         np.testing.assert_allclose(np.array(f32, dtype=np.float64) / s**2, field, rtol=1e-5)
@@ -227,7 +227,7 @@ def test_argsort_keys_is_the_stable_argsort():
     """The radix sort of the Morton keys is numpy's stable argsort, ties in tip order: random keys
     over all 63 bits, many equal keys, keys that differ only in their low or only in their high
     digits (passes skipped), one key, none."""
-    from selfas_graph.kernels.tree import argsort_keys
+    from selfas_graph.kernels.treebuild import argsort_keys
 
     rng = np.random.default_rng(12)
     cases = [
@@ -524,7 +524,7 @@ def test_force_field_precision():
 
 # ------------------------------------------------------------------ mixed far field
 # precision="mixed" also takes each accepted cell's field in float32 (offsets and moments in
-# units of the cell's distance from the group, kernels/tree.py _field_octupole_f32), added in
+# units of the cell's distance from the group, kernels/multipole.py make_fields, float32), added in
 # float64 over the cells. Measured on the Fig. 2 scene at 6000 and 24 000 rods: it moves the
 # forces by a median 2e-8 and at most 2e-6 of a tip's force, inside the bounds above.
 

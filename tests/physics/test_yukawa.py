@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import reference as ref
-from selfas_graph.kernels import pairs as kp
+from selfas_graph.kernels import yukawa as ky
 from selfas_graph.model.neighbours import NeighbourList
 
 #: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
@@ -31,7 +31,7 @@ def kernel(centre, charge, cutoff, core=0.0, skin=0.3, lo=0, hi=None):
     nl = NeighbourList(cutoff, skin)
     nl.build(centre)
     out = np.full((len(centre), 3), np.nan)
-    kp.yukawa_centres(centre, charge, nl.start, nl.index, SCREENING, core, cutoff, lo, hi, out)
+    ky.yukawa_centres(centre, charge, nl.start, nl.index, SCREENING, core, cutoff, lo, hi, out)
     return out
 
 
@@ -107,9 +107,9 @@ def test_sorted_copies_same_bit_for_bit(rng, lo, hi):
     nl.build(c)
     order, start, index = nl.sorted_rows
     plain = np.full((200, 3), np.nan)
-    kp.yukawa_centres(c, z, nl.start, nl.index, SCREENING, 0.06, 3.0, lo, hi, plain)
+    ky.yukawa_centres(c, z, nl.start, nl.index, SCREENING, 0.06, 3.0, lo, hi, plain)
     out = np.full((200, 3), np.nan)
-    kp.yukawa_centres_sorted(c[order], z[order], order, start, index, SCREENING, 0.06, 3.0, lo, hi, out)
+    ky.yukawa_centres_sorted(c[order], z[order], order, start, index, SCREENING, 0.06, 3.0, lo, hi, out)
     np.testing.assert_array_equal(out, plain)  # NaN (untouched) rows compare equal too
     rows = [k for k in range(lo, hi) if k not in (7, 8)]  # the reference has no answer for the coincident pair
     with np.errstate(invalid="ignore"):
@@ -125,5 +125,5 @@ def test_sorted_copies_one_rod_and_no_rods():
         nl.build(c)
         order, start, index = nl.sorted_rows
         out = np.full((n, 3), np.nan)
-        kp.yukawa_centres_sorted(c[order], np.ones(n)[order], order, start, index, SCREENING, 0.0, 3.0, 0, n, out)
+        ky.yukawa_centres_sorted(c[order], np.ones(n)[order], order, start, index, SCREENING, 0.0, 3.0, 0, n, out)
         np.testing.assert_array_equal(out, np.zeros((n, 3)))

@@ -1,5 +1,5 @@
 """The mixed-precision Yukawa sum (``forces.yukawa.precision = "mixed"``,
-``kernels/pairs.py::yukawa_centres_sorted_mixed``, docs/model.md 'Term 6') against the float64
+``kernels/yukawa.py::yukawa_centres_sorted_mixed``, docs/model.md 'Term 6') against the float64
 kernel and the oracle (tests/reference.py ``yukawa_force``), at the extremes float32 must survive or
 hand over to float64.
 
@@ -18,7 +18,7 @@ import pytest
 
 import reference as ref
 from conftest import random_rods, simulation
-from selfas_graph.kernels import pairs as kp
+from selfas_graph.kernels import yukawa as ky
 from selfas_graph.model.neighbours import NeighbourList
 
 #: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
@@ -36,7 +36,7 @@ def both(centre, charge, screening=1.0, core=0.0, cutoff=3.0, lo=0, hi=None, ski
     nl.build(centre)
     order, start, index = nl.sorted_rows
     out = []
-    for kernel in (kp.yukawa_centres_sorted, kp.yukawa_centres_sorted_mixed):
+    for kernel in (ky.yukawa_centres_sorted, ky.yukawa_centres_sorted_mixed):
         f = np.full((n, 3), np.nan)
         kernel(centre[order], charge[order], order, start, index, screening, core, cutoff, lo, hi, f)
         out.append(f)
@@ -112,25 +112,25 @@ def test_far_from_the_origin(rng, shift):
     assert_close(mixed, f64, pair_force_sum(c, z, core=0.06))
 
 
-#: (name, settings, positions scale) where float32 still runs: at each bound of kp.MIXED_* exactly
+#: (name, settings, positions scale) where float32 still runs: at each bound of ky.MIXED_* exactly
 INSIDE = [
-    ("smallest and largest charges", dict(charge=(kp.MIXED_CHARGE_MIN, kp.MIXED_CHARGE_MAX)), 1.0),
-    ("cut-off at the most screening lengths", dict(screening=3.0 / kp.MIXED_RANGE_MAX), 1.0),
-    ("shortest lengths", dict(screening=kp.MIXED_LENGTH_MIN, core=kp.MIXED_LENGTH_MIN), 1e-2),
-    ("longest lengths", dict(screening=kp.MIXED_LENGTH_MAX, core=kp.MIXED_LENGTH_MAX), 1e3 / 3),
+    ("smallest and largest charges", dict(charge=(ky.MIXED_CHARGE_MIN, ky.MIXED_CHARGE_MAX)), 1.0),
+    ("cut-off at the most screening lengths", dict(screening=3.0 / ky.MIXED_RANGE_MAX), 1.0),
+    ("shortest lengths", dict(screening=ky.MIXED_LENGTH_MIN, core=ky.MIXED_LENGTH_MIN), 1e-2),
+    ("longest lengths", dict(screening=ky.MIXED_LENGTH_MAX, core=ky.MIXED_LENGTH_MAX), 1e3 / 3),
 ]
 #: the same a step beyond: the float64 sum, bit for bit
 OUTSIDE = [
-    ("charge too small", dict(charge=(np.nextafter(kp.MIXED_CHARGE_MIN, 0), 1.0)), 1.0),
-    ("charge too large", dict(charge=(1.0, np.nextafter(kp.MIXED_CHARGE_MAX, np.inf))), 1.0),
+    ("charge too small", dict(charge=(np.nextafter(ky.MIXED_CHARGE_MIN, 0), 1.0)), 1.0),
+    ("charge too large", dict(charge=(1.0, np.nextafter(ky.MIXED_CHARGE_MAX, np.inf))), 1.0),
     ("charge NaN", dict(charge=(1.0, np.nan)), 1.0),
-    ("cut-off beyond the most screening lengths", dict(screening=np.nextafter(3.0 / kp.MIXED_RANGE_MAX, 0)), 1.0),
-    ("screening length too short", dict(screening=np.nextafter(kp.MIXED_LENGTH_MIN, 0)), 1e-2),
-    ("core radius too short", dict(screening=kp.MIXED_LENGTH_MIN, core=np.nextafter(kp.MIXED_LENGTH_MIN, 0)), 1e-2),
-    ("cut-off too short", dict(screening=kp.MIXED_LENGTH_MIN, cutoff=np.nextafter(kp.MIXED_LENGTH_MIN, 0)), 3e-4),
-    ("screening length too long", dict(screening=np.nextafter(kp.MIXED_LENGTH_MAX, np.inf)), 1e3 / 3),
-    ("core radius too long", dict(core=np.nextafter(kp.MIXED_LENGTH_MAX, np.inf)), 1e3 / 3),
-    ("cut-off too long", dict(screening=100.0, cutoff=np.nextafter(kp.MIXED_LENGTH_MAX, np.inf)), 1e3 / 3),
+    ("cut-off beyond the most screening lengths", dict(screening=np.nextafter(3.0 / ky.MIXED_RANGE_MAX, 0)), 1.0),
+    ("screening length too short", dict(screening=np.nextafter(ky.MIXED_LENGTH_MIN, 0)), 1e-2),
+    ("core radius too short", dict(screening=ky.MIXED_LENGTH_MIN, core=np.nextafter(ky.MIXED_LENGTH_MIN, 0)), 1e-2),
+    ("cut-off too short", dict(screening=ky.MIXED_LENGTH_MIN, cutoff=np.nextafter(ky.MIXED_LENGTH_MIN, 0)), 3e-4),
+    ("screening length too long", dict(screening=np.nextafter(ky.MIXED_LENGTH_MAX, np.inf)), 1e3 / 3),
+    ("core radius too long", dict(core=np.nextafter(ky.MIXED_LENGTH_MAX, np.inf)), 1e3 / 3),
+    ("cut-off too long", dict(screening=100.0, cutoff=np.nextafter(ky.MIXED_LENGTH_MAX, np.inf)), 1e3 / 3),
 ]
 
 

@@ -63,13 +63,13 @@ _YUKAWA_PROBE = r"""
 import json, re, warnings
 warnings.simplefilter("ignore")
 import numpy as np, numba
-from selfas_graph.kernels import pairs
+from selfas_graph.kernels import yukawa
 n = 8
 c = np.zeros((n, 3)); q = np.ones(n); order = np.arange(n); out = np.zeros((n, 3))
 start = np.zeros(n + 1, dtype=np.int64); index = np.zeros(0, dtype=np.int64)
 args = (c, q, order, start, index, 1.0, 0.06, 3.0, 0, n, out)
 sig = tuple(numba.typeof(a) for a in args)
-disp = pairs.yukawa_centres_sorted_mixed
+disp = yukawa.yukawa_centres_sorted_mixed
 disp.compile(sig)
 lib = disp.overloads[sig].library
 asm = "".join(l.get_asm_str() for l in [lib] + list(getattr(lib, "_linking_libraries", ())))
@@ -79,7 +79,7 @@ print(json.dumps({k: len(re.findall(p, asm)) for k, p in patterns.items()}))
 
 
 def test_mixed_yukawa_law_runs_on_8_float32_lanes_with_avx2(tmp_path):
-    """The mixed Yukawa sum's law (``kernels/pairs.py::yukawa_centres_sorted_mixed``) compiled for
+    """The mixed Yukawa sum's law (``kernels/yukawa.py::yukawa_centres_sorted_mixed``) compiled for
     AVX2: its square root and division are packed float32 on ymm registers, 8 lanes, and nothing
     is widened from float32 to float64 (``vcvtps2pd``: a float64 constant in the float32 law or
     exponential would promote the loop to float64)."""

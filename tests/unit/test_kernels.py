@@ -12,9 +12,9 @@ import pytest
 
 import reference as ref
 from conftest import random_rods
+from selfas_graph.kernels import brakes, contacts, yukawa
 from selfas_graph.kernels import fields as kf
 from selfas_graph.kernels import integrate as ki
-from selfas_graph.kernels import pairs as kp
 from selfas_graph.kernels import rigid as kr
 from selfas_graph.kernels import tips as kt
 from selfas_graph.model.neighbours import NeighbourList
@@ -71,7 +71,7 @@ def test_tip_brake(state):
     nl = NeighbourList(RSTAR, 0.2, exclude_same_rod=True)
     nl.build(state.position)
     out = np.empty_like(state.position)
-    kp.tip_brake(state.position, state.velocity, nl.start, nl.index, RSTAR, 100.0, out)
+    brakes.tip_brake(state.position, state.velocity, nl.start, nl.index, RSTAR, 100.0, out)
     expected = ref.tip_brake(state.position, state.velocity, RSTAR, 100.0)
     assert np.abs(expected).max() > 0  # the fixture has tips in contact
     close(out, expected)
@@ -86,10 +86,10 @@ def test_yukawa(state, cutoff, core):
     nl = NeighbourList(cutoff, 0.3)
     nl.build(c)
     out = np.empty_like(c)
-    kp.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, core, cutoff, 0, len(c), out)
+    yukawa.yukawa_centres(c, state.rod_charge, nl.start, nl.index, 0.8, core, cutoff, 0, len(c), out)
     close(out, ref.yukawa_force(c, state.rod_charge, 0.8, cutoff, core))
     rows = np.empty(len(c))
-    kp.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, core, cutoff, 0, len(c), rows)
+    yukawa.yukawa_energy(c, state.rod_charge, nl.start, nl.index, 0.8, core, cutoff, 0, len(c), rows)
     e = rows.sum()
     assert e == pytest.approx(ref.yukawa_energy(c, state.rod_charge, 0.8, cutoff, core), rel=1e-12)
 
@@ -170,7 +170,7 @@ def test_ab4_update(rng):
 def test_close_pair_count(state):
     nl = NeighbourList(RSTAR, 0.3, exclude_same_rod=True)
     nl.build(state.position)
-    n = kp.close_pair_count(state.position, nl.start, nl.index, RSTAR)
+    n = contacts.close_pair_count(state.position, nl.start, nl.index, RSTAR)
     d = np.linalg.norm(state.position[:, None] - state.position[None], axis=-1)
     rod = np.arange(len(d)) // 2
     brute = np.triu((d < RSTAR) & (rod[:, None] != rod[None, :]), 1).sum()
@@ -207,8 +207,8 @@ def test_row_ranges_do_not_change_a_row(state, bounds):
     cases = [  # (kernel of (lo, hi, out), output shape, block bounds)
         (lambda lo, hi, out: kt.tip_tip_direct(x, y, z, q, RSTAR, KAPPA, lo, hi, out), (n, 3), bounds),
         (lambda lo, hi, out: kt.tip_tip_energy(x, y, z, q, RSTAR, KAPPA, lo, hi, out), (n,), bounds),
-        (lambda lo, hi, out: kp.yukawa_centres(c, zc, s, i, 0.8, 0.3, 2.0, lo, hi, out), (m, 3), rod_bounds),
-        (lambda lo, hi, out: kp.yukawa_energy(c, zc, s, i, 0.8, 0.3, 2.0, lo, hi, out), (m,), rod_bounds),
+        (lambda lo, hi, out: yukawa.yukawa_centres(c, zc, s, i, 0.8, 0.3, 2.0, lo, hi, out), (m, 3), rod_bounds),
+        (lambda lo, hi, out: yukawa.yukawa_energy(c, zc, s, i, 0.8, 0.3, 2.0, lo, hi, out), (m,), rod_bounds),
     ]
     for kernel, shape, blocks in cases:
         np.testing.assert_array_equal(blockwise(kernel, shape, blocks), blockwise(kernel, shape, [0, shape[0]]))
@@ -279,7 +279,7 @@ def _rows_kernel_cases(rng):
 
 
 def kc_nodes(n):
-    from selfas_graph.kernels.currents import gauss_legendre_01
+    from selfas_graph.kernels.lorentz import gauss_legendre_01
 
     return gauss_legendre_01(n)
 
@@ -371,3 +371,55 @@ def test_a_kernel_cached_from_other_sources_is_not_loaded(tmp_path):
     assert run("A") == (1, 0)  # the same sources: loaded from the cache
     assert run("B") == (0, 1)  # other sources: not loaded, compiled afresh
     assert run("A") == (1, 0)  # both entries kept side by side
+
+
+_VARIANTS = """
+from selfas_graph.kernels._jit import inline, njit
+
+
+@inline
+def law(x):
+    return x + x
+
+
+def make(scale, f):
+    @njit
+    def kernel(x):
+        return f(x) * scale
+
+    return kernel
+
+
+twice, thrice = make(1.0, law), make(1.5, law)
+"""
+
+_VARIANTS_PROBE = """
+import sys
+sys.path.insert(0, sys.argv[1])
+import probe_variants as m
+assert (m.twice(2.0), m.thrice(2.0)) == (4.0, 6.0)
+print(*(sum(getattr(k.stats, s).values()) for k in (m.twice, m.thrice) for s in ("cache_hits", "cache_misses")))
+"""
+
+
+@pytest.mark.skipif(os.environ.get("NUMBA_DISABLE_JIT", "0") != "0", reason="no compiled kernels without the JIT")
+def test_the_variants_of_a_factory_are_cached_apart_and_found_again(tmp_path):
+    """Kernel variants built by a factory (the pattern of ``multipole.make_fields`` and the tree's far
+    loops: an inner function closing over the variant) share their bytecode and their cache index.
+    Each is saved under a key of its own (the values it closes over: a wrong variant loaded would
+    give the other's result), and a second process loads both, although they close over another
+    kernel, which numba's own key would pickle with an identifier drawn afresh in every process."""
+    import subprocess
+    import sys
+
+    (tmp_path / "probe_variants.py").write_text(_VARIANTS)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+
+    def run():
+        out = subprocess.run(
+            [sys.executable, "-c", _VARIANTS_PROBE, str(tmp_path)], env=env, capture_output=True, text=True, check=True
+        ).stdout.split()
+        return tuple(int(v) for v in out)  # (hits, misses) of the first variant, then of the second
+
+    assert run() == (0, 1, 0, 1)  # each compiled and saved
+    assert run() == (1, 0, 1, 0)  # each loaded, the right one

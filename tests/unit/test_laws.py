@@ -85,7 +85,7 @@ def test_yukawa_force_is_minus_gradient(r, screening):
     zz = 1.7
     numeric = _central_difference(lambda s: yukawa_potential(s * s, zz, screening, 0.0), r, 1e-6 * r)
     analytic = zz * math.exp(-r / screening) * (1 / r**2 + 1 / (screening * r))
-    assert yukawa_force_over_r(r * r, zz, screening, 0.0) * r == pytest.approx(analytic, rel=1e-14)
+    assert yukawa_force_over_r(r * r, zz, 1.0 / screening, 0.0) * r == pytest.approx(analytic, rel=1e-14)
     assert analytic == pytest.approx(numeric, rel=1e-7)  # central-difference truncation ~1e-10
 
 
@@ -95,7 +95,7 @@ def test_yukawa_core_is_bounded_continuous_and_minus_gradient(r):
     the bare law outside, f = -dU/dr on both sides, and f and U continuous at a."""
     zz, screening, core = 4.0, 1.0, 0.06
     f_core = zz * math.exp(-core / screening) * (1 / core**2 + 1 / (screening * core))
-    f = yukawa_force_over_r(r * r, zz, screening, core) * r
+    f = yukawa_force_over_r(r * r, zz, 1.0 / screening, core * core) * r
     expected = f_core * r / core if r < core else zz * math.exp(-r / screening) * (1 / r**2 + 1 / (screening * r))
     assert f == pytest.approx(expected, rel=1e-14, abs=1e-300)
     assert abs(f) <= f_core * (1 + 1e-14)
@@ -105,8 +105,8 @@ def test_yukawa_core_is_bounded_continuous_and_minus_gradient(r):
         assert f == pytest.approx(numeric, rel=1e-6)  # truncation O(h^2) and round-off U/h * 1e-16 < 1e-7
     for rc in (core,):  # continuity at the core radius, to round-off
         below, above = rc * (1 - 1e-12), rc * (1 + 1e-12)
-        assert yukawa_force_over_r(below**2, zz, screening, core) * below == pytest.approx(
-            yukawa_force_over_r(above**2, zz, screening, core) * above, rel=1e-9
+        assert yukawa_force_over_r(below**2, zz, 1.0 / screening, core * core) * below == pytest.approx(
+            yukawa_force_over_r(above**2, zz, 1.0 / screening, core * core) * above, rel=1e-9
         )
         assert yukawa_potential(below**2, zz, screening, core) == pytest.approx(
             yukawa_potential(above**2, zz, screening, core), rel=1e-9

@@ -9,9 +9,9 @@ import pytest
 import reference as ref
 from conftest import random_rods
 from selfas_graph import load_scenario
+from selfas_graph.kernels import brakes, contacts
 from selfas_graph.kernels import fields as kf
 from selfas_graph.kernels import integrate as ki
-from selfas_graph.kernels import pairs as kp
 from selfas_graph.kernels import rigid as kr
 from selfas_graph.model.neighbours import NeighbourList
 from selfas_graph.model.simulation import Simulation
@@ -88,10 +88,10 @@ def crowded(rng):
 def test_fused_split_brake_is_the_two_calls_bit_for_bit(crowded, k_dt):
     s, nl = crowded
     v_old, v_new = s.velocity.copy(), s.velocity.copy()
-    pairs = kp.close_pairs(s.position, nl.start, nl.index, RADIUS)
+    pairs = contacts.close_pairs(s.position, nl.start, nl.index, RADIUS)
     assert len(pairs) > 20
-    w_old = kp.brake_pairs_exact(v_old, pairs, k_dt / 1e-3, 1e-3)
-    w_new, m = kp.brake_close_pairs_exact(s.position, v_new, nl.start, nl.index, RADIUS, k_dt / 1e-3, 1e-3)
+    w_old = brakes.brake_pairs_exact(v_old, pairs, k_dt / 1e-3, 1e-3)
+    w_new, m = brakes.brake_close_pairs_exact(s.position, v_new, nl.start, nl.index, RADIUS, k_dt / 1e-3, 1e-3)
     assert m == len(pairs)
     same_bits(v_new, v_old)
     same_bits(w_new, w_old)
@@ -102,7 +102,7 @@ def test_fused_split_brake_is_the_reference(crowded):
     # pair after pair, the order matters: rows sorted, the kernel brakes in the reference's (k, l) order
     index = np.concatenate([np.sort(nl.index[a:b]) for a, b in zip(nl.start[:-1], nl.start[1:])])
     v = s.velocity.copy()
-    work, m = kp.brake_close_pairs_exact(s.position, v, nl.start, index, RADIUS, 100.0, 1e-3)
+    work, m = brakes.brake_close_pairs_exact(s.position, v, nl.start, index, RADIUS, 100.0, 1e-3)
     v_ref, w_ref, m_ref = ref.brake_close_pairs(s.position, s.velocity, RADIUS, 100.0, 1e-3)
     assert m == m_ref > 20
     np.testing.assert_allclose(v, v_ref, rtol=1e-12, atol=1e-14)  # the same arithmetic; numpy floats vs Python
@@ -113,13 +113,13 @@ def test_both_paths_of_the_split_brake_agree_bit_for_bit(crowded, monkeypatch):
     """Above PARALLEL_ROWS tips the pairs are listed on all threads first: the same result."""
     s, nl = crowded
     v_serial, v_listed = s.velocity.copy(), s.velocity.copy()
-    got_serial = kp.brake_close_pairs(s.position, v_serial, nl.start, nl.index, RADIUS, 100.0, 1e-3)
-    monkeypatch.setattr(kp, "PARALLEL_ROWS", 0)
-    got_listed = kp.brake_close_pairs(s.position, v_listed, nl.start, nl.index, RADIUS, 100.0, 1e-3)
+    got_serial = brakes.brake_close_pairs(s.position, v_serial, nl.start, nl.index, RADIUS, 100.0, 1e-3)
+    monkeypatch.setattr(brakes, "PARALLEL_ROWS", 0)
+    got_listed = brakes.brake_close_pairs(s.position, v_listed, nl.start, nl.index, RADIUS, 100.0, 1e-3)
     assert got_serial == got_listed
     same_bits(v_serial, v_listed)
     far = s.position * 100.0  # no pair close: nothing braked
-    assert kp.brake_close_pairs(far, v_listed, nl.start, nl.index, RADIUS, 100.0, 1e-3) == (0.0, 0)
+    assert brakes.brake_close_pairs(far, v_listed, nl.start, nl.index, RADIUS, 100.0, 1e-3) == (0.0, 0)
 
 
 def old_electrode_split(term, position, velocity, dt):

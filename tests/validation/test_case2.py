@@ -6,7 +6,7 @@ import pytest
 import reference as ref
 from conftest import simulation
 from selfas_graph.kernels import external as kx
-from selfas_graph.kernels.currents import gauss_legendre_01
+from selfas_graph.kernels.lorentz import gauss_legendre_01
 from selfas_graph.model import events as ev
 from selfas_graph.model.state import State
 

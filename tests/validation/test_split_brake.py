@@ -7,7 +7,7 @@ import pytest
 import test_restart
 
 from selfas_graph.io.scenario import scenario_from_text
-from selfas_graph.kernels.pairs import brake_pairs_exact
+from selfas_graph.kernels.brakes import brake_pairs_exact
 from selfas_graph.model.simulation import NumericalFailure, Simulation
 
 

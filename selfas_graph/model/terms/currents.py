@@ -15,6 +15,7 @@ import numpy as np
 
 from ...kernels import cells
 from ...kernels import currents as kc
+from ...kernels import lorentz as kl
 from .base import Term
 
 #: the kernels of each precision (forces.current_field.precision, forces.current_lorentz.precision)
@@ -75,11 +76,11 @@ class CurrentLorentzForce(Term):
     counts_own_calls = True
 
     def __init__(self, p, state):
-        self.t, self.wt = kc.gauss_legendre_01(p.forces.current_lorentz.quadrature_points)
+        self.t, self.wt = kl.gauss_legendre_01(p.forces.current_lorentz.quadrature_points)
         self.precision = p.forces.current_lorentz.precision
         #: pairs of current-carrying rods with centres closer than this take the adapted rule
         self.near_range = p.forces.current_lorentz.near_range
-        self.panel_t, self.panel_w = kc.gauss_legendre_01(kc.NEAR_PANEL_POINTS)
+        self.panel_t, self.panel_w = kl.gauss_legendre_01(kl.NEAR_PANEL_POINTS)
         self.wire_radius = wire_radius(p)
         #: the terms that are sources of a magnetic field (FieldSource), in term order: handed in by the
         #: force field that holds this term, once every term is built
@@ -98,14 +99,14 @@ class CurrentLorentzForce(Term):
             return
         ng = len(self.t)
         pts = ctx.buffer("gl_points", len(mine) * ng)
-        kc.quadrature_points(ctx.position, mine, self.t, pts)
+        kl.quadrature_points(ctx.position, mine, self.t, pts)
         field = ctx.buffer("gl_field", len(mine) * ng)
         self.current_field(ctx, pts, field, exclude_rod=np.repeat(mine, ng))
         extra = ctx.buffer("gl_extra", len(pts))
         for source in self.field_sources:
             source.field_at(pts, extra)
             field += extra
-        kc.lorentz_force_on_rods(ctx.position, mine, ctx.currents.current, field, self.t, self.wt, f)
+        kl.lorentz_force_on_rods(ctx.position, mine, ctx.currents.current, field, self.t, self.wt, f)
         if self.near_range > 0.0:
             self._near_pairs(ctx, active, mine, f)
 
@@ -118,7 +119,7 @@ class CurrentLorentzForce(Term):
             return  # no cell grid places NaN; the run's health check stops with a diagnosis
         start, index = cells.neighbour_rows(centre, self.near_range)
         r_lo = int(np.searchsorted(active, mine[0]))
-        kc.lorentz_near_correction(
+        kl.lorentz_near_correction(
             pos,
             active,
             ctx.currents.current,

@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...kernels import currents as kc
 from ...kernels import external as kx
+from ...kernels import lorentz as kl
 from .base import FieldSource, Term, kinetic, share_by_mass
 
 
@@ -48,7 +48,7 @@ class ExternalDipoleForce(Term, FieldSource):
         self.rstar, self.kappa = p.rods.rstar, p.rods.tip_stiffness
         self.k = p.forces.tip_brake.coefficient if p.forces.tip_brake is not None else 0.0
         self.line = (-0.5 * d.length, 0.5 * d.length, d.line_charge, d.screening_length, d.radius)
-        self.nodes, self.weights = kc.gauss_legendre_01(d.quadrature_points)
+        self.nodes, self.weights = kl.gauss_legendre_01(d.quadrature_points)
         self.split_mode = p.integrator.brake == "split"
 
     def compute(self, ctx, out):

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from ...kernels import pairs as kp
+from ...kernels import brakes, yukawa
 from ...kernels import tips as kt
 from ...kernels import tree as ktree
 from .base import Term, share_by_mass
@@ -135,11 +135,11 @@ class TipBrakeForce(Term):
             out["tip_brake"].fill(0.0)
             return
         nl = ctx.tip_neighbours()
-        kp.tip_brake(ctx.position, ctx.velocity, nl.start, nl.index, self.rstar, self.k, out["tip_brake"])
+        brakes.tip_brake(ctx.position, ctx.velocity, nl.start, nl.index, self.rstar, self.k, out["tip_brake"])
 
     def split(self, ctx, dt):
         nl = ctx.tip_neighbours()
-        work, braked = kp.brake_close_pairs(ctx.position, ctx.velocity, nl.start, nl.index, self.rstar, self.k, dt)
+        work, braked = brakes.brake_close_pairs(ctx.position, ctx.velocity, nl.start, nl.index, self.rstar, self.k, dt)
         return {"tip_brake": work} if braked else {}
 
 
@@ -165,9 +165,9 @@ class YukawaForce(Term):
         order, start, index = nl.sorted_rows
         f = ctx.buffer("yukawa_centre", ctx.n_rods)
         lo, hi = ctx.blocks.rods
-        # [perf] the sum reads copies in cell order (kernels/pairs.py yukawa_centres_sorted: the same
+        # [perf] the sum reads copies in cell order (kernels/yukawa.py yukawa_centres_sorted: the same
         # forces bit for bit as yukawa_centres over the list, 1.3 times faster at 24 000 rods)
-        kernel = kp.yukawa_centres_sorted_mixed if self.precision == "mixed" else kp.yukawa_centres_sorted
+        kernel = yukawa.yukawa_centres_sorted_mixed if self.precision == "mixed" else yukawa.yukawa_centres_sorted
         kernel(
             ctx.centre()[order],
             ctx.rod_charge[order],
@@ -192,7 +192,7 @@ class YukawaForce(Term):
         nl = ctx.centre_neighbours()
         lo, hi = ctx.blocks.rods
         e = np.empty(ctx.n_rods)
-        kp.yukawa_energy(
+        yukawa.yukawa_energy(
             ctx.centre(), ctx.rod_charge, nl.start, nl.index, self.screening, self.core, self.cutoff, lo, hi, e
         )
         ctx.blocks.gather_rows([e], rows_per_rod=1)

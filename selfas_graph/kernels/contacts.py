@@ -1,0 +1,185 @@
+"""Close pairs in a neighbour list: the contact search's pairs and its one-pass check.
+
+:func:`close_pairs` lists the pairs of a compressed-row neighbour list (both directions of every
+pair: the neighbours of point ``k`` are ``index[start[k]:start[k + 1]]``) closer than a radius, in
+two passes that keep the parallel loop a gather; :func:`contacts_unchanged` answers in one pass
+whether a step changes no contact (``model/contacts.py``).
+"""
+
+import numpy as np
+
+from ._jit import inline, njit, njit_rows, prange
+
+
+@inline
+def closer(position, k, l, r2max):
+    """True when points k and l are closer than sqrt(r2max)."""
+    dx = position[k, 0] - position[l, 0]
+    dy = position[k, 1] - position[l, 1]
+    dz = position[k, 2] - position[l, 2]
+    return dx * dx + dy * dy + dz * dz < r2max
+
+
+@njit_rows
+def _close_counts(position, start, index, radius, counts):
+    n = position.shape[0]
+    r2max = radius * radius
+    for k in prange(n):
+        c = 0
+        for j in range(start[k], start[k + 1]):
+            l = index[j]
+            if l > k and closer(position, k, l, r2max):
+                c += 1
+        counts[k] = c
+
+
+@njit_rows
+def _close_fill(position, start, index, radius, offset, out):
+    n = position.shape[0]
+    r2max = radius * radius
+    for k in prange(n):
+        c = offset[k]
+        for j in range(start[k], start[k + 1]):
+            l = index[j]
+            if l > k and closer(position, k, l, r2max):
+                out[c, 0] = k
+                out[c, 1] = l
+                c += 1
+
+
+#: relative margin by which every distance must clear its threshold for :func:`contacts_unchanged`
+#: to answer True (its squared distances may differ from the contact tracker's in the last bit)
+QUIET_MARGIN = 1e-9
+
+
+@njit
+def contacts_unchanged(
+    position,
+    start,
+    index,
+    pairs,
+    rstar,
+    release,
+    z_cathode,
+    z_anode,
+    on_cathode,
+    on_anode,
+    filament_radius,
+    on_filament,
+):
+    """True only when the contact tracker's step would find no event: one pass instead of its dozen
+    numpy passes on the common step without news (``model/contacts.py::ContactTracker.search``).
+
+    Answers True when, with every distance clear of its threshold by :data:`QUIET_MARGIN`
+    (relative; a distance within the margin answers False, and the tracker decides exactly):
+    no contact pair is beyond the release radius; the listed pairs closer than r* number as many
+    as the contact pairs closer than r* (so every close pair is a contact already); no tip off an
+    electrode is within r* of it and none on it beyond the release radius; likewise for the
+    plasma filament's surface. A NaN anywhere answers False. False is always safe (the tracker
+    then does its full check); True is given only where the full check finds nothing.
+
+    Parameters
+    ----------
+    position : (n_tips, 3) float64
+    start, index : the tip neighbour list (compressed rows, both directions), covering r*
+    pairs : (m, 2) int64
+        Current contacts.
+    rstar, release : float
+    z_cathode, z_anode : float
+        Electrode planes (NaN: no electrodes).
+    on_cathode, on_anode, on_filament : (n_tips,) bool
+    filament_radius : float
+        Surface radius of the plasma filament about the z axis (NaN: none).
+    """
+    lo = 1.0 - QUIET_MARGIN
+    hi = 1.0 + QUIET_MARGIN
+    r2 = rstar * rstar
+    n_known = 0
+    for p in range(pairs.shape[0]):
+        k = pairs[p, 0]
+        l = pairs[p, 1]
+        dx = position[k, 0] - position[l, 0]
+        dy = position[k, 1] - position[l, 1]
+        dz = position[k, 2] - position[l, 2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if not d2 <= release * release * lo:
+            return False
+        if d2 < r2 * lo:
+            n_known += 1
+        elif d2 <= r2 * hi:
+            return False
+    n_close = 0
+    for k in range(position.shape[0]):
+        for j in range(start[k], start[k + 1]):
+            l = index[j]
+            if l > k:
+                dx = position[k, 0] - position[l, 0]
+                dy = position[k, 1] - position[l, 1]
+                dz = position[k, 2] - position[l, 2]
+                d2 = dx * dx + dy * dy + dz * dz
+                if d2 < r2 * lo:
+                    n_close += 1
+                elif not d2 > r2 * hi:  # within the margin, or NaN
+                    return False
+    if n_close != n_known:
+        return False
+    if z_cathode == z_cathode:
+        for k in range(position.shape[0]):
+            z = position[k, 2]
+            # the tracker's differences, z - z_cathode and z_anode - z, computed alike (no margin needed)
+            hc = z - z_cathode
+            ha = z_anode - z
+            if on_cathode[k]:
+                if not hc <= release:
+                    return False
+            elif not hc >= rstar:
+                return False
+            if on_anode[k]:
+                if not ha <= release:
+                    return False
+            elif not ha >= rstar:
+                return False
+    if filament_radius == filament_radius:
+        for k in range(position.shape[0]):
+            rho = np.sqrt(position[k, 0] * position[k, 0] + position[k, 1] * position[k, 1])
+            h = rho - filament_radius
+            tol = QUIET_MARGIN * (rho + abs(filament_radius) + release)  # the tracker takes np.hypot
+            if on_filament[k]:
+                if not h <= release - tol:
+                    return False
+            elif not h >= rstar + tol:
+                return False
+    return True
+
+
+def close_pair_count(position, start, index, radius):
+    """Number of distinct pairs in the list closer than ``radius`` (each pair once)."""
+    counts = np.zeros(position.shape[0], dtype=np.int64)
+    _close_counts(position, start, index, radius, counts)
+    return int(counts.sum())
+
+
+def close_pairs(position, start, index, radius):
+    """All listed pairs ``(k, l)``, ``k < l``, closer than ``radius``, sorted by (k, l).
+
+    Two passes (count, then fill at prefix-sum offsets) keep the parallel loop a
+    gather with no shared counter and no fixed capacity to overflow.
+
+    Parameters
+    ----------
+    position : (n, 3) float64
+    start, index : int64 arrays, the compressed-row neighbour list
+    radius : float
+
+    Returns
+    -------
+    (m, 2) int64
+    """
+    n = position.shape[0]
+    counts = np.zeros(n, dtype=np.int64)
+    _close_counts(position, start, index, radius, counts)
+    offset = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(counts, out=offset[1:])
+    out = np.empty((offset[-1], 2), dtype=np.int64)
+    _close_fill(position, start, index, radius, offset, out)
+    return out
