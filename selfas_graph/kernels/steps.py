@@ -1,5 +1,5 @@
-"""Runs of fast steps in one compiled call (``integrator.compiled_steps``, docs/model.md 'Order of one
-step', 'Multiple time stepping (`integrator.slow_every`)').
+"""Runs of fast steps in one compiled call (docs/model.md 'Order of one step', 'Multiple time stepping
+(`integrator.slow_every`)'; docs/performance.md 'Fast steps in one compiled call').
 
 Under multiple time stepping most steps evaluate only the fast terms and extrapolate the held slow
 forces. :func:`fast_steps` runs such steps one after another, each in the order of the Python step
@@ -240,7 +240,7 @@ def fast_steps(
     fil_current, fil_w, pole_k, pole_split = scalars[9], scalars[10], scalars[11], scalars[12]
     r_in, r_out, half_skin2, release = scalars[13], scalars[14], scalars[15], scalars[16]
     network = limits[0] == 1.0
-    c_zc, c_za, c_fil, height_tol = limits[1], limits[2], limits[3], limits[4]
+    c_zc, c_za, c_surface, height_tol = limits[1], limits[2], limits[3], limits[4]
     bond_break, max_move, max_bond = limits[5], limits[6], limits[7]
     c_tip, c_tb, c_amb, c_pl, c_wall, c_wb, c_fil, c_pole, c_pb, c_line = (
         channel[0],
@@ -369,7 +369,7 @@ def fast_steps(
             if lists[2] and _list_due(x, reference, half_skin2):
                 return done, NEEDS_CONTACTS, head, max_bond, err_after, speed
             if not contacts_unchanged(
-                x, start, index, pairs, rstar, release, c_zc, c_za, on_cathode, on_anode, c_fil, on_filament
+                x, start, index, pairs, rstar, release, c_zc, c_za, on_cathode, on_anode, c_surface, on_filament
             ):
                 return done, NEEDS_CONTACTS, head, max_bond, err_after, speed
             for j in range(filament_tip.shape[0]):

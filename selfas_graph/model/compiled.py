@@ -1,5 +1,4 @@
-"""Runs of fast steps in one compiled call (``integrator.compiled_steps``; docs/performance.md
-'Fast steps in one compiled call').
+"""Runs of fast steps in one compiled call (docs/performance.md 'Fast steps in one compiled call').
 
 Between two things that need Python (a slow evaluation, a contact that may change, a list build,
 a frame, a checkpoint, a progress line) a run under multiple time stepping makes ``slow_every - 1``
@@ -11,7 +10,8 @@ counts; the per-step bond errors go to the caller (the run file's per-step rows)
 
 The compiled steps are used in serial runs below ``kernels/_jit.py::PARALLEL_ROWS`` tips, without
 per-term timing, under multiple time stepping, when every fast term is one :data:`FAST_TERMS` names;
-otherwise (and under MPI) every step runs in Python.
+otherwise (and under MPI) every step runs in Python. ``sim.compiled = None`` makes every step of a
+simulation in Python (the slow reference of the tests, tests/unit/test_compiled_steps.py).
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ _EMPTY3 = np.zeros((0, 3))
 def compiled_steps_for(sim) -> "CompiledSteps | None":
     """The compiled steps of ``sim``, or None when its steps must all run in Python."""
     ff = sim.force_field
-    if not sim.params.integrator.compiled_steps or ff.mts is None or not ff.blocks.serial:
+    if ff.mts is None or not ff.blocks.serial:
         return None
     if ff.clock.on or ff.n_tips >= PARALLEL_ROWS:
         return None
@@ -285,31 +285,30 @@ class CompiledSteps:
 
 
 def advance(sim, n_max: int, rows=None) -> int:
-    """Make up to ``n_max`` steps of ``sim``: compiled ones while they can run, else one Python step
-    (:meth:`Simulation.python_step <.simulation.Simulation.python_step>`); returns how many were made.
+    """Make up to ``n_max`` steps of ``sim``: compiled ones while they can run, and the Python step
+    (:meth:`Simulation.python_step <.simulation.Simulation.python_step>`) where one is needed; returns
+    how many were made.
 
     ``rows(first_step, errors)``, if given, receives the bond errors before the constraint of the steps
-    made (the run file's per-step rows), before the Python part of the last compiled one (the contact
-    update, or the diagnosis of a failed step, whose own row is not handed on, as after a failed
-    Python step).
+    made (the run file's per-step rows), each before the Python part of its step (the contact update,
+    or the diagnosis of a failed step, whose own row is not handed on, as after a failed Python step).
+    A step the compiled call left undone (the split brake needed a list build) is made in Python at
+    once: what the attempt left in the integrator's ring buffer and the channels is then overwritten.
     """
     cs = sim.compiled
     done = reason = 0
-    if cs is not None and n_max > 1 and not sim._python_next and cs.ready():
+    if cs is not None and n_max > 1 and cs.ready():
         first = sim.state.step + 1
         done, reason = cs.advance(n_max)
-    if done == 0:
-        sim._python_next = False
-        sim.python_step()
-        if rows is not None:
-            rows(sim.state.step, (sim.integrator.bond_error_before,))
-        return 1
-    # the next step needs Python: no call to find that out again
-    sim._python_next = reason == NEEDS_STEP
+        if done and rows is not None:
+            rows(first, cs.bond_before[: done - 1 if reason == NEEDS_HEALTH else done])
+        if reason == NEEDS_HEALTH:
+            sim.health.after_step()  # raises the diagnosis of the failed step
+        elif reason == NEEDS_CONTACTS and sim.network is not None:
+            sim._update_contacts()
+        if reason != NEEDS_STEP:
+            return done
+    sim.python_step()
     if rows is not None:
-        rows(first, cs.bond_before[: done - 1 if reason == NEEDS_HEALTH else done])
-    if reason == NEEDS_HEALTH:
-        sim.health.after_step()  # raises the diagnosis of the failed step
-    elif reason == NEEDS_CONTACTS and sim.network is not None:
-        sim._update_contacts()
-    return done
+        rows(sim.state.step, (sim.integrator.bond_error_before,))
+    return done + 1

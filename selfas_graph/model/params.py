@@ -200,12 +200,6 @@ class IntegratorParams:
         ge=2.0,
         le=100.0,
     )
-    compiled_steps: bool = spec(
-        True,
-        "with slow_every > 1, in a serial run: make the fast steps between two steps that need Python (a slow "
-        "evaluation, a possible contact event, a neighbour-list build, a frame) in one compiled call, bit for "
-        "bit the Python step (docs/performance.md 'Fast steps in one compiled call'); false: every step in Python",
-    )
 
 
 @dataclass(frozen=True)

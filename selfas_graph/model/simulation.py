@@ -116,7 +116,7 @@ class Simulation:
         if self.network is not None:
             self.force_field.extend_tip_range(params.contacts.release_factor * params.rods.rstar)
             self._update_contacts()
-        self.compiled, self._python_next = compiled_steps_for(self), False  # fast steps in one call (.compiled)
+        self.compiled = compiled_steps_for(self)  # the fast steps in one call (.compiled); None: in Python
 
     @classmethod
     def from_scenario(cls, scenario, **kw):
