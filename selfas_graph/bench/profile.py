@@ -91,6 +91,7 @@ PARTS = [
         ),
     ),
     ("neighbour-list builds", lambda f: "kernels/cells.py" in f),
+    ("fast steps in one compiled call (kernels)", lambda f: f.endswith("steps.py:fast_steps")),
     (
         "cheap O(n) kernels (walls, fields, integration, bonds)",
         lambda f: "selfas_graph/kernels/" in f and not f.endswith("_jit.py:__call__"),

@@ -376,3 +376,23 @@ def fast_steps(
                 if abs(x[filament_tip[j], 2] - filament_z[j]) > height_tol:
                     return done, NEEDS_CONTACTS, head, max_bond, err_after, speed
     return done, DONE, head, max_bond, err_after, speed
+
+
+@njit
+def add_work(work, ab4_work, brake_work, brake_hit, split_channel):
+    """The integrator's work of a run of steps, added in the Python step's order: for each step its AB4
+    sum of the channels' powers (``ab4_work[i]``, as numpy's product gives it), then the work of each
+    split brake that acted (``brake_work[i, j]`` into channel ``split_channel[j]``, -1: none).
+
+    Parameters
+    ----------
+    work : (n_power,) float64, added to in place
+    ab4_work : (n_steps, n_power) float64
+    brake_work : (n_steps, 3) float64; brake_hit : (n_steps, 3) bool; split_channel : (3,) int64
+    """
+    for i in range(ab4_work.shape[0]):
+        for c in range(work.shape[0]):
+            work[c] += ab4_work[i, c]
+        for j in range(split_channel.shape[0]):
+            if split_channel[j] >= 0 and brake_hit[i, j]:
+                work[split_channel[j]] += brake_work[i, j]

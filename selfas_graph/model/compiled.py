@@ -19,7 +19,16 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels._jit import PARALLEL_ROWS
-from ..kernels.steps import CHANNELS, DONE, NEEDS_CONTACTS, NEEDS_HEALTH, NEEDS_STEP, SPLIT_BRAKES, fast_steps
+from ..kernels.steps import (
+    CHANNELS,
+    DONE,
+    NEEDS_CONTACTS,
+    NEEDS_HEALTH,
+    NEEDS_STEP,
+    SPLIT_BRAKES,
+    add_work,
+    fast_steps,
+)
 from .health import BOND_BREAK, MAX_STEP_DISPLACEMENT
 from .integrator import AB4_WEIGHTS
 
@@ -135,7 +144,9 @@ class CompiledSteps:
             ]
         )
         self.slot_table = np.array(integ._slots, dtype=np.int64)
-        self.split_channel = [ff._channel_index.get(c) for c in SPLIT_BRAKES]
+        self.split_channel = np.array([ff._channel_index.get(c, -1) for c in SPLIT_BRAKES], dtype=np.int64)
+        #: the rows of f_n, f_{n-1}, f_{n-2}, f_{n-3} of step i in the powers oldest first
+        self._windows = np.arange(CHUNK)[:, None] + np.array([3, 2, 1, 0])[None, :]
         self.fast_names = [t.name for t in ff.terms if not t.slow and not t.counts_own_calls]
         self.centre = np.zeros((n_rods, 3))
         self.centre_force = np.zeros((n_rods, 3))
@@ -265,20 +276,15 @@ class CompiledSteps:
         return done, reason
 
     def _account(self, done, head0, hist_p0):
-        """The work of the steps made, added as the Python step adds it: the AB4 sum of the channels'
-        powers (numpy's matrix product), then each split brake's work, step after step; and the
-        fast terms' call counts."""
+        """The work of the steps made, added as the Python step adds it (``kernels/steps.py::add_work``):
+        the AB4 sums of the channels' powers by numpy's product, one stacked call (the same numbers as
+        one call per step, the windows being the same contiguous (4, n_power) blocks), then each split
+        brake's work; and the fast terms' call counts."""
         integ = self.sim.integrator
-        work, dt = integ.work, integ.dt
-        # the powers of f_{n-3} ... f_n for every step, oldest first: three from the ring, then the log
+        # the powers f_{n-3} ... f_n of every step, oldest first: three from the ring, then the log
         seq = np.concatenate([hist_p0[[(head0 - j) % 4 for j in (2, 1, 0)]], self.power_log[:done]])
-        split = [(c, j) for j, c in enumerate(self.split_channel) if c is not None]
-        hit, brake = self.brake_hit, self.brake_work
-        for i in range(done):
-            work += dt * (AB4_WEIGHTS @ seq[[i + 3, i + 2, i + 1, i]])  # a copy, as hist_p[slots]
-            for c, j in split:
-                if hit[i, j]:
-                    work[c] += brake[i, j]
+        ab4_work = integ.dt * np.matmul(AB4_WEIGHTS, seq[self._windows[:done]])
+        add_work(integ.work, ab4_work, self.brake_work, self.brake_hit, self.split_channel)
         calls = self.sim.force_field.calls
         for name in self.fast_names:
             calls[name] += done
