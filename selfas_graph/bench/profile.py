@@ -106,7 +106,8 @@ PARTS = [
     (
         "integrator and run loop (Python)",
         lambda f: any(
-            f"model/{m}.py" in f for m in ("integrator", "simulation", "operations", "health", "observables")
+            f"model/{m}.py" in f
+            for m in ("integrator", "simulation", "operations", "health", "observables", "compiled")
         ),
     ),
     ("numpy and other", lambda f: True),
