@@ -156,7 +156,14 @@ def run_to_file(sim, writer, checkpointer, stop, path, progress=None, keeps_file
     ``KeyboardInterrupt`` closes both (the file "interrupted") and is raised again.
     """
     try:
-        summary = sim.run(writer=writer, progress=progress, checkpointer=checkpointer, stop=stop)
+        # the stop hook and the checkpointer are asked at the slow steps: the fast steps between run in one call
+        summary = sim.run(
+            writer=writer,
+            progress=progress,
+            checkpointer=checkpointer,
+            stop=stop,
+            check_every=sim.params.integrator.slow_every,
+        )
     except RunInterrupted as exc:
         if progress:
             progress.close()

@@ -94,6 +94,7 @@ PARTS = [
         ),
     ),
     ("neighbour-list builds", lambda f: "kernels/cells.py" in f),
+    ("fast steps in one compiled call (kernels)", lambda f: f.endswith("steps.py:fast_steps")),
     (
         "cheap O(n) kernels (walls, fields, integration, bonds)",
         lambda f: "selfas_graph/kernels/" in f and not f.endswith("_jit.py:__call__"),
@@ -108,7 +109,8 @@ PARTS = [
     (
         "integrator and run loop (Python)",
         lambda f: any(
-            f"model/{m}.py" in f for m in ("integrator", "simulation", "operations", "health", "observables")
+            f"model/{m}.py" in f
+            for m in ("integrator", "simulation", "operations", "health", "observables", "compiled")
         ),
     ),
     ("numpy and other", lambda f: True),

@@ -92,13 +92,16 @@ class Always(Trigger):
 
 
 class When(Trigger):
-    """True when ``predicate()`` is (the time step is not looked at)."""
+    """True when ``predicate()`` is, asked on the time steps that are multiples of ``period`` (default:
+    every step); a period lets the steps between run without Python (:mod:`.compiled`)."""
 
-    def __init__(self, predicate):
+    def __init__(self, predicate, period: int = 1):
         self.predicate = predicate
+        self.period = max(1, int(period))
+        self.phase = 0
 
     def __call__(self, timestep: int) -> bool:
-        return bool(self.predicate())
+        return timestep % self.period == 0 and bool(self.predicate())
 
 
 class Operation:
@@ -135,6 +138,11 @@ class PerStepRows(Operation):
 
     def act(self, sim, i, n_steps):
         self.writer.buffer_per_step(sim.state.step, sim.integrator.bond_error_before)
+
+    def act_steps(self, first_step, errors):
+        """The rows of a run of compiled steps from ``first_step`` on (their bond errors ``errors``)."""
+        for j, err in enumerate(errors):
+            self.writer.buffer_per_step(first_step + j, float(err))
 
 
 class FrameWriter(Operation):
@@ -193,12 +201,12 @@ class Progress(Operation):
 
 
 class Checkpoint(Operation):
-    """Writes a checkpoint when ``checkpointer.due()`` (a wall clock) and after the last step,
-    each time after every operation has flushed its buffered data."""
+    """Writes a checkpoint when ``checkpointer.due()`` (a wall clock, asked every ``every`` steps) and
+    after the last step, each time after every operation has flushed its buffered data."""
 
-    def __init__(self, checkpointer):
+    def __init__(self, checkpointer, every: int = 1):
         self.checkpointer = checkpointer
-        self.trigger = When(checkpointer.due)
+        self.trigger = When(checkpointer.due, every)
 
     def act(self, sim, i, n_steps):
         sim.flush_operations()
@@ -209,14 +217,37 @@ class Checkpoint(Operation):
 
 
 class StopCheck(Operation):
-    """Stops the run when ``stop()`` is true: writes a checkpoint (with ``checkpoint``, a
+    """Stops the run when ``stop()`` is true (asked every ``every`` steps): writes a checkpoint (with ``checkpoint``, a
     :class:`Checkpoint`) and raises :class:`RunInterrupted`."""
 
-    def __init__(self, stop, checkpoint: Checkpoint | None = None):
-        self.trigger = When(stop)
+    def __init__(self, stop, checkpoint: Checkpoint | None = None, every: int = 1):
+        self.trigger = When(stop, every)
         self.checkpoint = checkpoint
 
     def act(self, sim, i, n_steps):
         if self.checkpoint is not None:
             self.checkpoint.act(sim, i, n_steps)
         raise RunInterrupted(sim.state.step)
+
+
+def steps_to_next_act(ops, step: int, remaining: int) -> int:
+    """Steps from ``step`` to the first one after which an operation of ``ops`` may act (at most
+    ``remaining``, the run's last step, where the final operations act): exact for :class:`Periodic`
+    and :class:`When` triggers (the steps their predicate is asked on), 1 for any other; an operation with ``act_steps`` (:class:`PerStepRows`) takes the rows
+    of a run of steps at once and does not count."""
+    h = remaining
+    for operation in ops:
+        if hasattr(operation, "act_steps"):
+            continue
+        t = operation.trigger
+        h = min(h, (t.phase - step - 1) % t.period + 1 if isinstance(t, (Periodic, When)) else 1)
+    return max(h, 1)
+
+
+def per_step_rows(ops):
+    """``(operations, rows)``: the operations of ``ops`` that take a run of steps' rows at once
+    (``act_steps``), and a ``rows(first_step, errors)`` handing them on (None without any)."""
+    per_step = [o for o in ops if hasattr(o, "act_steps")]
+    if not per_step:
+        return per_step, None
+    return per_step, lambda first, errors: [o.act_steps(first, errors) for o in per_step]

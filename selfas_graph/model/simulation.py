@@ -19,6 +19,7 @@ from ..parallel import RowBlocks
 from . import events as ev
 from . import operations as op
 from .circuitlog import circuit_log_array
+from .compiled import advance, compiled_steps_for
 from .health import BOND_BREAK, FORCE_OUT_OF_SCALE, MAX_STEP_DISPLACEMENT, HealthChecks, NumericalFailure
 from .integrator import AdamsBashforth4
 from .network import Network
@@ -42,17 +43,16 @@ __all__ = [
 class Simulation:
     """Rigid magnetized rods under the scene's force terms.
 
-    One call of :meth:`step` advances every rod by one time step, in the order that
-    docs/model.md 'Order of one step' states (forces, Adams-Bashforth update, split
-    brake, bond constraint, health check, then the :class:`~.network.Network`: contact
-    search, events, graph, circuit); :meth:`run` is the step loop, and after each step acts
-    the operations whose trigger fires (:mod:`.operations`: a frame with observables, events
-    and the graph state every ``output.interval``, the progress display, the stop check, the
-    checkpoints; and those in :attr:`operations`). Contacts present in the initial state are
-    recorded as events of step 0 when the simulation is built. Its components: :attr:`network`,
-    :attr:`force_field`, :attr:`integrator`, :attr:`health` (the checks after each step and frame,
-    :class:`~.health.HealthChecks`) and :attr:`observe` (energies, observables, status,
-    :class:`~.observables.Observables`); the methods of the last two are also the simulation's.
+    One step advances every rod in the order docs/model.md 'Order of one step' states (forces,
+    Adams-Bashforth update, split brake, bond constraint, health check, then the
+    :class:`~.network.Network`: contact search, events, graph, circuit); :meth:`step` makes ``n`` and
+    :meth:`run` is the step loop, acting after each step the operations whose trigger fires
+    (:mod:`.operations`: frames, progress, stop check, checkpoints, and those in :attr:`operations`).
+    The fast steps between two that need Python run in one compiled call (:attr:`compiled`,
+    :mod:`.compiled`), bit for bit. Contacts present in the initial state are events of step 0.
+    Components: :attr:`network`, :attr:`force_field`, :attr:`integrator`, :attr:`health`
+    (:class:`~.health.HealthChecks`) and :attr:`observe` (:class:`~.observables.Observables`);
+    the methods of the last two are also the simulation's.
 
     Parameters
     ----------
@@ -62,12 +62,10 @@ class Simulation:
     timing : bool
         Record wall time per force term (``force_field.seconds``).
     comm : MPI communicator or the serial stub, optional
-        Ranks that share the force work (``selfas_graph.parallel.world`` under ``mpiexec``;
-        default: none, a serial run). Every rank must then make the same calls; each
-        ends every step with the same state, bit for bit.
+        Ranks that share the force work (``parallel.world`` under ``mpiexec``; default: a serial run).
+        Every rank must then make the same calls; each ends every step with the same state, bit for bit.
     check_state : bool
-        Validate ``state`` and work on a copy of it (:meth:`State.checked`); False adopts the
-        object as it is (:meth:`from_snapshot`).
+        Validate ``state`` and work on a copy (:meth:`State.checked`); False adopts it (:meth:`from_snapshot`).
 
     Raises
     ------
@@ -118,6 +116,7 @@ class Simulation:
         if self.network is not None:
             self.force_field.extend_tip_range(params.contacts.release_factor * params.rods.rstar)
             self._update_contacts()
+        self.compiled = compiled_steps_for(self)  # the fast steps in one call (.compiled); None: in Python
 
     @classmethod
     def from_scenario(cls, scenario, **kw):
@@ -150,11 +149,10 @@ class Simulation:
     def snapshot(self) -> dict:
         """Everything the next step depends on, as a flat dict of numpy arrays and scalars.
 
-        :meth:`from_snapshot` rebuilds a simulation whose next steps are bitwise those of
-        this one (same thread count). It is the union of the components' own states: the
-        state's (:meth:`State.state_dict`), the integrator's (:meth:`AdamsBashforth4.state_dict`),
-        the force field's, the network's (:meth:`Network.state_dict`), the health checks' largest
-        bond error, the energy reference of the observables, and the run's events.
+        :meth:`from_snapshot` rebuilds a simulation whose next steps are bitwise those of this one (same
+        thread count): the union of the components' states (:meth:`State.state_dict`,
+        :meth:`AdamsBashforth4.state_dict`, the force field's, :meth:`Network.state_dict`), the largest
+        bond error, the energy reference, and the run's events.
         """
         snap = self.state.state_dict()
         snap.update(self.integrator.state_dict())
@@ -235,11 +233,16 @@ class Simulation:
         """Advance by ``n`` steps (raises :class:`NumericalFailure` on breakdown)."""
         if self.observe.energy0 is None:
             self.observe.record_initial_energy()
-        for _ in range(n):
-            self.integrator.step(self.state)
-            self.health.after_step()
-            if self.network is not None:
-                self._update_contacts()
+        done = 0
+        while done < n:
+            done += advance(self, n - done)
+
+    def python_step(self) -> None:
+        """One step in Python (:mod:`.compiled` makes fast steps in one call, the same numbers)."""
+        self.integrator.step(self.state)
+        self.health.after_step()
+        if self.network is not None:
+            self._update_contacts()
 
     def _update_contacts(self):
         """The network's step: events into the log; new currents (written by the network into the
@@ -268,9 +271,8 @@ class Simulation:
         return int(round(duration / self.dt))
 
     def steps_to(self, t_end: float) -> int:
-        """Number of steps from the current time to ``t_end``, which must lie a whole number of
-        steps ahead (to round-off) and not in the past; ValueError otherwise, naming the times
-        that can be reached."""
+        """Steps from the current time to ``t_end``, a whole number of steps ahead (to round-off), not in the
+        past; ValueError otherwise, naming the times that can be reached."""
         t_end, t, dt = float(t_end), self.state.time, self.dt
         if not math.isfinite(t_end):
             raise ValueError(f"t_end = {t_end} is not a finite time")
@@ -288,36 +290,32 @@ class Simulation:
         return n
 
     def run(
-        self, t_end=None, writer=None, progress=None, progress_every=None, checkpointer=None, stop=None
+        self, t_end=None, writer=None, progress=None, progress_every=None, checkpointer=None, stop=None, check_every=1
     ) -> RunSummary:
         """Run from the current time to ``t_end`` (default ``run.t_end``).
 
-        Can be called again to continue in chunks (``sim.run(1.0); sim.run(2.0)`` takes the
-        steps of ``sim.run(2.0)``; a writer gets a frame at the end of each chunk). The
-        arguments become operations for this call (:mod:`.operations`); those in
-        :attr:`operations` act in every call.
+        Can be called again to continue in chunks (``sim.run(1.0); sim.run(2.0)`` takes the steps of
+        ``sim.run(2.0)``; a writer gets a frame at the end of each chunk). The arguments become operations
+        for this call (:mod:`.operations`); those in :attr:`operations` act in every call.
 
         Parameters
         ----------
         t_end : float, optional
-            A whole number of steps ahead of the current time (ValueError otherwise, and for
-            a time in the past; see :meth:`steps_to`).
+            A whole number of steps ahead of the current time (ValueError otherwise; :meth:`steps_to`).
         writer : RunWriter-like, optional
-            Receives a frame at the start (if it has none yet), every
-            ``output.interval`` of simulated time (nearest step), and at the end
-            (:class:`~.operations.FrameWriter`).
-        progress : callable(sim, done, total), optional
-            Called every ``progress_every`` steps (default: about 200 times a run).
+            Receives a frame at the start (if it has none yet), every ``output.interval`` of simulated
+            time (nearest step), and at the end (:class:`~.operations.FrameWriter`).
+        progress : callable(sim, done, total), optional; called every ``progress_every`` steps (about 200 a run)
         checkpointer : object with ``due() -> bool`` and ``write(sim)``, optional
-            Asked after every step; when due, the writer's pending per-step rows and
-            events are flushed and a checkpoint is written. One is also written at the end.
+            When due, the writer's pending rows and events are flushed and a checkpoint is written;
+            one is also written at the end.
         stop : callable() -> bool, optional
-            Checked after every step; when true, pending data are flushed, a checkpoint
-            is written and :class:`RunInterrupted` is raised.
+            When true, pending data are flushed, a checkpoint is written and :class:`RunInterrupted` raised.
+        check_every : int
+            ``checkpointer`` and ``stop`` are asked after the steps that are multiples of this (default
+            every step; ``integrator.slow_every`` lets the fast steps between run in one call).
 
-        Returns
-        -------
-        RunSummary
+        Returns a :class:`RunSummary`.
         """
         t_end = self.params.run.t_end if t_end is None else t_end
         n_steps = self.steps_to(t_end)
@@ -331,9 +329,9 @@ class Simulation:
         ops += self.operations
         if progress is not None:
             ops.append(op.Progress(progress, progress_every or max(1, n_steps // 200), first_step=self.state.step))
-        checkpoint = op.Checkpoint(checkpointer) if checkpointer is not None else None
+        checkpoint = op.Checkpoint(checkpointer, check_every) if checkpointer is not None else None
         if stop is not None:
-            ops.append(op.StopCheck(stop, checkpoint))
+            ops.append(op.StopCheck(stop, checkpoint, check_every))
         if checkpoint is not None:
             ops.append(checkpoint)
         if self.observe.energy0 is None:
@@ -344,9 +342,13 @@ class Simulation:
         try:
             for operation in ops:
                 operation.start(self, n_steps)
-            for i in range(1, n_steps + 1):
-                self.step()
+            (per_step, rows), i = op.per_step_rows(ops), 0
+            while i < n_steps:
+                # the steps up to the next one after which an operation acts, compiled where they can be
+                i += advance(self, op.steps_to_next_act(ops, self.state.step, n_steps - i), rows)
                 for operation in ops:
+                    if operation in per_step:
+                        continue
                     if operation.trigger(self.state.step) or (operation.final and i == n_steps):
                         operation.act(self, i, n_steps)
                 summary.steps = i
@@ -370,14 +372,12 @@ class Simulation:
             operation.flush(self)
 
     def flush_output(self, writer) -> None:
-        """Hand ``writer`` its buffered per-step rows and the events and circuit-log rows it has not
-        written yet (e.g. after a :class:`NumericalFailure`, those up to the failure)."""
+        """Hand ``writer`` its buffered per-step rows, events and circuit-log rows (e.g. up to a failure)."""
         net = self.network is not None
         writer.flush_pending(self.events if net else None, self.circuit_log if net else None)
 
     def write_frame(self, writer):
-        """Check the observables, then write a frame with them (and the graph state) to ``writer``;
-        returns the observables."""
+        """Check the observables, then write a frame with them (and the graph state); returns them."""
         st = self.state
         obs = self.observables()
         # checked before anything of the frame is written (frame 0 too): no NaN reaches the file

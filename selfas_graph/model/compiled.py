@@ -1,0 +1,320 @@
+"""Runs of fast steps in one compiled call (docs/performance.md 'Fast steps in one compiled call').
+
+Between two things that need Python (a slow evaluation, a contact that may change, a list build,
+a frame, a checkpoint, a progress line) a run under multiple time stepping makes ``slow_every - 1``
+fast steps. :class:`CompiledSteps` hands them to ``kernels/steps.py::fast_steps``, which makes them
+as :meth:`Simulation.step <.simulation.Simulation.step>` would, bit for bit, and puts back into the
+Python objects what the steps changed there: the state's step and time, the integrator's ring
+buffer head, work and bond errors, the health checks' largest bond error, the force field's call
+counts; the per-step bond errors go to the caller (the run file's per-step rows).
+
+The compiled steps are used in serial runs below ``kernels/_jit.py::PARALLEL_ROWS`` tips, without
+per-term timing, under multiple time stepping, when every fast term is one :data:`FAST_TERMS` names;
+otherwise (and under MPI) every step runs in Python. ``sim.compiled = None`` makes every step of a
+simulation in Python (the slow reference of the tests, tests/unit/test_compiled_steps.py).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..kernels._jit import PARALLEL_ROWS
+from ..kernels.steps import (
+    CHANNELS,
+    DONE,
+    NEEDS_CONTACTS,
+    NEEDS_HEALTH,
+    NEEDS_STEP,
+    SPLIT_BRAKES,
+    add_work,
+    fast_steps,
+)
+from .health import BOND_BREAK, MAX_STEP_DISPLACEMENT
+from .integrator import AB4_WEIGHTS
+
+__all__ = ["CompiledSteps", "FAST_TERMS", "DONE", "NEEDS_STEP", "NEEDS_CONTACTS", "NEEDS_HEALTH"]
+
+#: the terms evaluated at every step that the compiled steps know (the slow terms are held)
+FAST_TERMS = (
+    "tip_brake",
+    "ambient_brake",
+    "uniform_field",
+    "plasma_filament",
+    "electric_field",
+    "electrodes",
+    "external_filament",
+    "external_dipole",
+)
+#: the steps one call makes at most (the size of its logs)
+CHUNK = 256
+
+_EMPTY = np.zeros(0)
+_EMPTY3 = np.zeros((0, 3))
+
+
+def compiled_steps_for(sim) -> "CompiledSteps | None":
+    """The compiled steps of ``sim``, or None when its steps must all run in Python."""
+    ff = sim.force_field
+    if ff.mts is None or not ff.blocks.serial:
+        return None
+    if ff.clock.on or ff.n_tips >= PARALLEL_ROWS:
+        return None
+    if any(not t.slow and t.name not in FAST_TERMS for t in ff.terms):
+        return None
+    return CompiledSteps(sim)
+
+
+class CompiledSteps:
+    """The arguments of ``fast_steps`` for one simulation, and the bookkeeping after a call.
+
+    Built once per :class:`~.simulation.Simulation` (its arrays are the simulation's own, not
+    copies); :meth:`advance` takes the arrays that change from one call to the next (neighbour
+    list, contacts) afresh.
+    """
+
+    def __init__(self, sim):
+        self.sim = sim
+        ff, integ, st = sim.force_field, sim.integrator, sim.state
+        p = sim.params
+        terms = {t.name: t for t in ff.terms}
+        index = {name: j for j, (name, _) in enumerate(ff.channels)}
+        self.channel = np.array([index.get(c, -1) for c in CHANNELS], dtype=np.int64)
+        mts = ff.mts
+        tip = mts.tip_term
+        if tip is None:
+            self.channel[0] = -1
+        tb = terms.get("tip_brake")
+        el = terms.get("electrodes")
+        fil = terms.get("external_filament")
+        dip = terms.get("external_dipole")
+        nan = np.nan
+        amb = terms.get("ambient_brake")
+        split = p.integrator.brake == "split"
+        self.scalars = np.array(
+            [
+                amb.k if amb is not None else 0.0,
+                p.rods.rstar,
+                p.rods.tip_stiffness,
+                tb.k if tb is not None and not split else nan,
+                tb.k if tb is not None and split else 0.0,
+                el.z[0] if el is not None else nan,
+                el.z[1] if el is not None else nan,
+                (0.0 if el.split_mode else el.k) if el is not None else 0.0,
+                el.k if el is not None and el.split_mode else 0.0,
+                fil.current if fil is not None else 0.0,
+                fil.w if fil is not None else 0.0,
+                (0.0 if dip.split_mode else dip.k) if dip is not None else 0.0,
+                dip.k if dip is not None and dip.split_mode else 0.0,
+                mts.fast_range[0] if tip is not None else 0.0,
+                mts.fast_range[1] if tip is not None else 0.0,
+                (0.5 * p.neighbours.skin) ** 2,
+                sim.network.tracker.release if sim.network is not None else 0.0,
+            ]
+        )
+        pl = terms.get("plasma_filament")
+        self.plasma = np.array(pl.args, dtype=np.float64) if pl is not None else _EMPTY
+        self.el = el
+        self.decay_poles = np.zeros(3)
+        if dip is not None:
+            # the decay of ExternalDipoleForce.split, exp(-k n dt) for n poles touched, as numpy computes it
+            self.decay_poles[1:] = np.exp(-dip.k * np.array([1.0, 2.0]) * integ.dt)
+            self.source, self.source_charge = dip.source, dip.source_charge
+            self.line = np.array(dip.line, dtype=np.float64)
+            self.nodes, self.weights = dip.nodes, dip.weights
+        else:
+            self.source, self.source_charge, self.line = _EMPTY3, _EMPTY, _EMPTY
+            self.nodes, self.weights = _EMPTY, _EMPTY
+        # the held slow forces, in the order MultipleTimeStepping extrapolates them
+        keys = list(mts.held_forces())
+        self.held = np.array([-1 if k == "tip_far" else index[k] for k in keys], dtype=np.int64)
+        self.held_keys = keys
+        n, n_rods = st.n_tips, st.n_rods
+        self.tip_far = mts.tip_far if tip is not None else np.zeros((n, 3))
+        self.tip_fast = mts._tip_fast if tip is not None else np.zeros((n, 3))
+        if mts.extrapolate and keys:
+            self.rate, self.base = mts._rate_block, mts._base_block
+        else:
+            self.rate = self.base = np.zeros((len(keys), n, 3))
+        # where the Python step asks the tip list for an update: evaluation, split tip brake, contact test
+        self.lists = np.array(
+            [
+                tip is not None or (tb is not None and not split),
+                tb is not None and split,
+                sim.network is not None,
+            ]
+        )
+        self.slot_table = np.array(integ._slots, dtype=np.int64)
+        self.split_channel = np.array([ff._channel_index.get(c, -1) for c in SPLIT_BRAKES], dtype=np.int64)
+        #: the rows of f_n, f_{n-1}, f_{n-2}, f_{n-3} of step i in the powers oldest first
+        self._windows = np.arange(CHUNK)[:, None] + np.array([3, 2, 1, 0])[None, :]
+        self.fast_names = [t.name for t in ff.terms if not t.slow and not t.counts_own_calls]
+        self.centre = np.zeros((n_rods, 3))
+        self.centre_force = np.zeros((n_rods, 3))
+        self.before, self.after = np.zeros((n, 3)), np.zeros((n, 3))
+        self.save_x, self.save_v = np.zeros((n, 3)), np.zeros((n, 3))
+        self.bond_before = np.zeros(CHUNK)
+        self.power_log = np.zeros((CHUNK, len(ff.nonconservative)))
+        self.brake_work = np.zeros((CHUNK, 3))
+        self.brake_hit = np.zeros((CHUNK, 3), dtype=bool)
+        self._no_tips = np.zeros(0, dtype=np.int64)
+
+    def ready(self) -> bool:
+        """Whether the next step can be a compiled one as far as Python's state goes: the AB4 history is
+        full, no slow term is stale, the tip list is built (the step count is the kernel's to check)."""
+        sim = self.sim
+        ff = sim.force_field
+        if sim.integrator.count < 4 or ff.mts.stale or ff.lists.tip is None:
+            return False
+        return ff.lists.tip.reference is not None and ff.lists.tip.reference.shape == sim.state.position.shape
+
+    def advance(self, n_max: int):
+        """Up to ``n_max`` (at most :data:`CHUNK`) compiled steps; returns ``(steps, reason)`` (reasons
+        of ``kernels/steps.py``), the bond errors before the constraint of those steps in
+        ``bond_before[:steps]``. After ``NEEDS_CONTACTS`` the caller runs the network's update of the
+        last step, after ``NEEDS_HEALTH`` the health check (which raises), after ``NEEDS_STEP`` a
+        Python step."""
+        sim = self.sim
+        st, integ, ff, net = sim.state, sim.integrator, sim.force_field, sim.network
+        mts, health = ff.mts, sim.health
+        nl = ff.lists.tip
+        n_max = min(int(n_max), CHUNK)
+        if net is not None:
+            pairs, on_c, on_a, on_f = net.contacts.search_arrays
+            tr = net.tracker
+            el = tr.electrodes if tr.electrodes is not None else (np.nan, np.nan)
+            fr = tr.filament_radius if tr.filament_radius is not None else np.nan
+            circuit_heights = net.circuit and len(net.filament_tip)
+            fil_tip = np.asarray(net.filament_tip, dtype=np.int64) if circuit_heights else self._no_tips
+            fil_z = np.asarray(net.filament_z, dtype=np.float64) if circuit_heights else _EMPTY
+            limits = (1.0, float(el[0]), float(el[1]), float(fr), net.height_tolerance)
+        else:
+            pairs, on_c = np.zeros((0, 2), dtype=np.int64), np.zeros(st.n_tips, dtype=bool)
+            on_a = on_f = on_c
+            fil_tip, fil_z = self._no_tips, _EMPTY
+            limits = (0.0, np.nan, np.nan, np.nan, 0.0)
+        limits = np.array(limits + (BOND_BREAK, MAX_STEP_DISPLACEMENT, health.max_bond_error))
+        base_step = (
+            np.array([-1 if b is None else b for b in mts._base_step.values()], dtype=np.int64)
+            if (mts.extrapolate)
+            else np.full(len(self.held), -1, dtype=np.int64)
+        )
+        el = self.el
+        decay_walls = el._decay if el is not None and el._decay is not None else np.zeros(3)
+        if el is not None and el.split_mode and el.k != 0.0 and el._decay_dt != integ.dt:
+            return 0, NEEDS_STEP  # the electrode brake's decay is made by its first split step
+        hist_p0 = integ.hist_p.copy()
+        head0 = integ.head
+        done, reason, head, max_bond, err_after, speed = fast_steps(
+            st.position,
+            st.velocity,
+            integ.hist_v,
+            integ.hist_a,
+            integ.hist_p,
+            integ.head,
+            self.slot_table,
+            st.step,
+            n_max,
+            integ.slow_every,
+            integ.dt,
+            st.bond_length(),
+            integ.exact_bond,
+            integ.project,
+            integ.correct_velocity,
+            ff._channel_block,
+            ff.total,
+            ff._powered,
+            self.channel,
+            st.tip_charge,
+            st.rod_charge,
+            self.scalars,
+            self.plasma,
+            decay_walls,
+            self.decay_poles,
+            self.source,
+            self.source_charge,
+            self.line,
+            self.nodes,
+            self.weights,
+            self.held,
+            self.tip_far,
+            self.tip_fast,
+            self.rate,
+            self.base,
+            base_step,
+            bool(mts.extrapolate),
+            self.lists,
+            nl.start,
+            nl.index,
+            nl.reference,
+            pairs,
+            on_c,
+            on_a,
+            on_f,
+            fil_tip,
+            fil_z,
+            self.centre,
+            self.centre_force,
+            self.before,
+            self.after,
+            self.save_x,
+            self.save_v,
+            self.bond_before,
+            self.power_log,
+            self.brake_work,
+            self.brake_hit,
+            limits,
+        )
+        if done:
+            self._account(done, head0, hist_p0)
+            integ.head = head
+            integ.bond_error_before = float(self.bond_before[done - 1])
+            integ.bond_error_after, integ.speed_max = float(err_after), float(speed)
+            health.max_bond_error = float(max_bond)
+            st.step += done
+            st.time = integ.time_origin[1] + (st.step - integ.time_origin[0]) * integ.dt
+            ff.context.bind(st.position, st.velocity)
+        return done, reason
+
+    def _account(self, done, head0, hist_p0):
+        """The work of the steps made, added as the Python step adds it (``kernels/steps.py::add_work``):
+        the AB4 sums of the channels' powers by numpy's product, one stacked call (the same numbers as
+        one call per step, the windows being the same contiguous (4, n_power) blocks), then each split
+        brake's work; and the fast terms' call counts."""
+        integ = self.sim.integrator
+        # the powers f_{n-3} ... f_n of every step, oldest first: three from the ring, then the log
+        seq = np.concatenate([hist_p0[[(head0 - j) % 4 for j in (2, 1, 0)]], self.power_log[:done]])
+        ab4_work = integ.dt * np.matmul(AB4_WEIGHTS, seq[self._windows[:done]])
+        add_work(integ.work, ab4_work, self.brake_work, self.brake_hit, self.split_channel)
+        calls = self.sim.force_field.calls
+        for name in self.fast_names:
+            calls[name] += done
+
+
+def advance(sim, n_max: int, rows=None) -> int:
+    """Make up to ``n_max`` steps of ``sim``: compiled ones while they can run, and the Python step
+    (:meth:`Simulation.python_step <.simulation.Simulation.python_step>`) where one is needed; returns
+    how many were made.
+
+    ``rows(first_step, errors)``, if given, receives the bond errors before the constraint of the steps
+    made (the run file's per-step rows), each before the Python part of its step (the contact update,
+    or the diagnosis of a failed step, whose own row is not handed on, as after a failed Python step).
+    A step the compiled call left undone (the split brake needed a list build) is made in Python at
+    once: what the attempt left in the integrator's ring buffer and the channels is then overwritten.
+    """
+    cs = sim.compiled
+    done = reason = 0
+    if cs is not None and n_max > 1 and cs.ready():
+        first = sim.state.step + 1
+        done, reason = cs.advance(n_max)
+        if done and rows is not None:
+            rows(first, cs.bond_before[: done - 1 if reason == NEEDS_HEALTH else done])
+        if reason == NEEDS_HEALTH:
+            sim.health.after_step()  # raises the diagnosis of the failed step
+        elif reason == NEEDS_CONTACTS and sim.network is not None:
+            sim._update_contacts()
+        if reason != NEEDS_STEP:
+            return done
+    sim.python_step()
+    if rows is not None:
+        rows(sim.state.step, (sim.integrator.bond_error_before,))
+    return done + 1

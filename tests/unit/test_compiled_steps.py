@@ -1,0 +1,143 @@
+"""The fast steps in one compiled call (``Simulation.compiled``, model/compiled.py,
+kernels/steps.py) against the Python step, their slow reference: the same state, bit for bit, after
+every call, through contact events, list builds, slow evaluations and a short circuit."""
+
+import numpy as np
+import pytest
+
+from conftest import SMALL_CIRCUIT_SCENE
+from selfas_graph import load_scenario
+from selfas_graph.io.scenario import scenario_from_text
+from selfas_graph.model import operations as op
+from selfas_graph.model.compiled import advance
+from selfas_graph.model.simulation import Simulation
+
+
+def pair(params, **integrator):
+    """Two simulations of the same scene: every step in Python, and with the compiled steps."""
+    params = params.replace(integrator=integrator) if integrator else params
+    slow, fast = Simulation(params), Simulation(params)
+    slow.compiled = None
+    assert fast.compiled is not None
+    return slow, fast
+
+
+def same_snapshots(a, b):
+    """Every entry of the two simulations' snapshots equal to the last bit (NaN where NaN)."""
+    sa, sb = a.snapshot(), b.snapshot()
+    assert sa.keys() == sb.keys()
+    for k in sa:
+        x, y = np.asarray(sa[k]), np.asarray(sb[k])
+        assert x.shape == y.shape, k
+        if x.dtype.kind == "f":
+            np.testing.assert_array_equal(x.view(np.int64), y.view(np.int64), err_msg=k)
+        else:
+            assert np.array_equal(x, y), k
+
+
+def step_for_step(slow, fast, n_steps):
+    """Advance ``fast`` by calls of the compiled steps (as many steps as each call makes) and ``slow``
+    by as many Python steps, comparing after each call; returns the number of calls that made more
+    than one step."""
+    runs = 0
+    while fast.state.step < n_steps:
+        k = advance(fast, n_steps - fast.state.step)
+        runs += k > 1
+        for _ in range(k):
+            slow.python_step()
+        same_snapshots(slow, fast)
+        assert slow.force_field.calls == fast.force_field.calls
+        assert slow.events == fast.events and slow.circuit_log == fast.circuit_log
+    return runs
+
+
+@pytest.mark.jit_off_ok
+def test_compiled_steps_are_the_python_steps_early():
+    """The first 160 steps of a small circuit scene under multiple time stepping (slow_every = 8): the
+    RK4 start, tip-list builds and the first contacts, the state the same bit for bit after every call."""
+    params = scenario_from_text(SMALL_CIRCUIT_SCENE).params.replace(rods={"count": 30})
+    slow, fast = pair(params, slow_every=8)
+    assert step_for_step(slow, fast, 160) > 5
+
+
+@pytest.mark.parametrize("brake", ["split", "explicit"])
+def test_compiled_steps_are_the_python_steps_through_a_short_circuit(brake):
+    """The whole small circuit scene (contacts from step 91, a short circuit at step 567 whose currents
+    make the held current forces stale): bit for bit with the split and the explicit brakes."""
+    params = scenario_from_text(SMALL_CIRCUIT_SCENE).params
+    slow, fast = pair(params, slow_every=8, brake=brake)
+    runs = step_for_step(slow, fast, 1200)
+    assert runs > 50
+    assert fast.short_circuit_time is not None and np.count_nonzero(fast.force_field.current)
+
+
+def test_compiled_steps_are_the_python_steps_in_case_ii():
+    """Case (ii), the quick Fig. 8 scene with fewer rods: external filament, the dipole's monopoles with
+    their split brake and its screened line charge, the filament's contact heights."""
+    params = load_scenario("scenarios/fig8_quick.toml").params.replace(rods={"count": 60})
+    slow, fast = pair(params)
+    assert step_for_step(slow, fast, 600) > 20
+
+
+class Recorder:
+    """A writer that records what a run hands it (per-step rows, frames)."""
+
+    n_frames = 0
+
+    def __init__(self):
+        self.rows, self.frames = [], []
+
+    def reserve_per_step(self, n):
+        pass
+
+    def buffer_per_step(self, step, err):
+        self.rows.append((step, err))
+
+    def flush_pending(self, events, circuit_log):
+        pass
+
+    def write_frame(self, step, time, position, velocity, obs):
+        self.n_frames += 1
+        self.frames.append((step, time, position.copy(), float(obs["energy_balance"])))
+
+    def write_graph(self, *args):
+        pass
+
+    def flush(self):
+        pass
+
+
+def test_run_hands_the_same_rows_and_frames():
+    """``run`` with the compiled steps: the same per-step rows, frames and observables as with every
+    step in Python; the stop check, asked every 8 steps, stops after the first such step it is true."""
+    params = scenario_from_text(SMALL_CIRCUIT_SCENE).params.replace(output={"interval": 0.02})
+    slow, fast = pair(params, slow_every=8)
+    ws, wf = Recorder(), Recorder()
+    slow.run(t_end=0.3, writer=ws)
+    fast.run(t_end=0.3, writer=wf)
+    assert ws.rows == wf.rows and len(ws.rows) == 600
+    assert [f[:2] + f[3:] for f in ws.frames] == [f[:2] + f[3:] for f in wf.frames]
+    for a, b in zip(ws.frames, wf.frames):
+        np.testing.assert_array_equal(a[2], b[2])
+    same_snapshots(slow, fast)
+    with pytest.raises(op.RunInterrupted) as exc:
+        fast.run(t_end=0.4, stop=lambda: fast.state.step >= 603, check_every=8)
+    assert exc.value.step == 608
+
+
+def test_steps_to_next_act_counts_to_the_next_trigger():
+    """The run's horizon: the next step of a Periodic trigger (with its phase), of a When trigger's
+    period, 1 for an Always trigger; operations that take per-step rows do not count."""
+
+    class Every(op.Operation):
+        def __init__(self, trigger):
+            self.trigger = trigger
+
+    assert op.steps_to_next_act([Every(op.Periodic(10))], 0, 100) == 10
+    assert op.steps_to_next_act([Every(op.Periodic(10, phase=3))], 3, 100) == 10
+    assert op.steps_to_next_act([Every(op.Periodic(10, phase=3))], 4, 100) == 9
+    assert op.steps_to_next_act([Every(op.When(lambda: True, 16))], 17, 100) == 15
+    assert op.steps_to_next_act([Every(op.Periodic(10))], 0, 4) == 4
+    assert op.steps_to_next_act([Every(op.Always())], 0, 100) == 1
+    assert op.steps_to_next_act([op.PerStepRows(None, 5)], 0, 100) == 100
+    assert op.When(lambda: True, 4)(8) and not op.When(lambda: True, 4)(9)
