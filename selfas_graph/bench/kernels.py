@@ -431,7 +431,7 @@ def main(argv=None):
     results = merge_rounds(rounds)
     args.targets = [t for t in args.targets if t in results]
     print(
-        f"\n{'CPU' if args.cpu_time else 'wall'} ms per call on {args.threads} thread(s), median [min-max] of {args.repeat}; "
+        f"\n{'CPU' if args.cpu_time else 'wall'} ms per call on {args.threads} thread(s), median [min-max] of {args.repeat} x {args.rounds} round(s); "
         "direct and plain also in 1e9 tip pairs/s/thread (median)"
     )
     kernels = [
