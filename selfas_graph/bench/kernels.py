@@ -1,7 +1,8 @@
 """Kernel benchmark: the hot kernels of a step, one at a time, per instruction set.
 
 Usage: selfas-graph bench kernels [--rods 1200 6000 24000] [--repeat 7] [--threads 1]
-                                     [--targets host haswell znver3] [--before REF] [--json OUT.json]
+                                     [--targets host haswell znver3] [--rounds 1] [--before REF]
+                                     [--json OUT.json]
 
 On the tips of the Fig. 2 scene scaled to each size (as selfas_graph/bench/step.py), it times, each
 ``--repeat`` times (median [min-max] ms per call), on ``--threads`` numba threads:
@@ -12,7 +13,8 @@ On the tips of the Fig. 2 scene scaled to each size (as selfas_graph/bench/step.
 - ``plain``: the same all-pairs loop reduced to a bare Coulomb law (``q_k q_l d / r^3``, no
   soft core, no same-rod select), a reference for what the CPU does with one sqrt and one
   division per pair (up to 6000 rods);
-- ``tree build`` and ``tree eval``: the tip tree (kernels/tree.py) at its defaults;
+- ``tree build`` and ``tree eval``: the tip tree (kernels/tree.py) at its defaults; ``tree eval
+  mixed`` the same evaluation in mixed precision, as the Fig. 2 and Fig. 6 scenes run it;
 - ``yukawa``: the screened rod-centre sum over the scene's neighbour list.
 
 - ``current tips`` and ``current field``: the field of the rod currents (docs/model.md 'Term 9',
@@ -42,6 +44,12 @@ a loaded machine.
 
 ``--cpu-time`` times by the process's CPU time instead of the wall clock: on a shared machine
 under load it counts only the cycles the kernel got (with one thread).
+
+``--rounds R`` runs the processes of the targets R times in turns (the order reversed every
+other round), so that the builds see the same machine load and each build is timed in R processes
+(the same machine code can run some percent faster or slower from one process to the next); each
+figure is then over all rounds' repeats, and a last table gives, per kernel, every other target's
+time over the first's: median [min-max] over the rounds of the ratio of the rounds' medians.
 
 ``--targets`` runs the timings once per instruction set, each in a fresh process with
 ``NUMBA_CPU_NAME`` set to the target and ``NUMBA_CPU_FEATURES`` set empty, so that numba uses
@@ -227,6 +235,14 @@ def run(args):
                 lambda K: lambda: K.tree.evaluate_tip_tree(tree_of(K), rstar, kappa, K.tree.THETA, f),
             ),
             (
+                "tree eval mixed",
+                True,
+                args.repeat,
+                lambda K: (
+                    lambda: K.tree.evaluate_tip_tree(tree_of(K), rstar, kappa, K.tree.THETA, f, precision="mixed")
+                ),
+            ),
+            (
                 "yukawa",
                 True,
                 args.repeat,
@@ -360,6 +376,12 @@ def main(argv=None):
     ap.add_argument("--kernels", nargs="+", help="time only these kernels (names as in the table)")
     ap.add_argument("--active-rods", type=int, nargs="+", help="current-carrying rods for each --rods size")
     ap.add_argument("--mixed-error", metavar="CHECKPOINT", help="error of the mixed current kernels on this state")
+    ap.add_argument(
+        "--rounds",
+        type=int,
+        default=1,
+        help="run the targets' processes this many times in turns; ratios per round (module docstring)",
+    )
     ap.add_argument("--json", help="write all results to this file")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -377,10 +399,10 @@ def main(argv=None):
     if args.child:
         print(json.dumps(run(args)))
         return
-    results = {}
+    rounds = {t: [] for t in args.targets}
     from .peer import target_env, tool_command, tool_env
 
-    for target in args.targets:
+    for target in (t for r in range(args.rounds) for t in (args.targets if r % 2 == 0 else args.targets[::-1])):
         env = tool_env(target_env(target))
         cmd = [
             *tool_command("kernels"),
@@ -403,13 +425,15 @@ def main(argv=None):
         if got.returncode:
             print(f"{target}: failed, left out of the table:\n{got.stderr}", file=sys.stderr, flush=True)
             continue
-        results[target] = json.loads(got.stdout.strip().splitlines()[-1])
-        print(f"{target}: {results[target]['line']}", flush=True)
+        rounds[target].append(json.loads(got.stdout.strip().splitlines()[-1]))
+        print(f"{target}: {rounds[target][-1]['line']}", flush=True)
+        results = merge_rounds(rounds)
         if args.json:  # after every target, so that a failure later keeps the figures
             Path(args.json).write_text(json.dumps(results, indent=1))
+    results = merge_rounds(rounds)
     args.targets = [t for t in args.targets if t in results]
     print(
-        f"\n{'CPU' if args.cpu_time else 'wall'} ms per call on {args.threads} thread(s), median [min-max] of {args.repeat}; "
+        f"\n{'CPU' if args.cpu_time else 'wall'} ms per call on {args.threads} thread(s), median [min-max] of {args.repeat} x {args.rounds} round(s); "
         "direct and plain also in 1e9 tip pairs/s/thread (median)"
     )
     kernels = [
@@ -418,6 +442,7 @@ def main(argv=None):
         "plain",
         "tree build",
         "tree eval",
+        "tree eval mixed",
         "yukawa",
         "current tips",
         "current field",
@@ -464,6 +489,48 @@ def main(argv=None):
                     cells.append(cell(row, k, n, k))
             if any(cells):
                 print(f"| {n} | {k} | " + " | ".join(cells) + " |")
+    if len(args.targets) > 1 and not args.before:
+        first = args.targets[0]
+        print(f"\nms of each target over {first}'s, median [min-max] over {args.rounds} round(s)")
+        print("| rods | kernel | " + " | ".join(f"{t} / {first}" for t in args.targets[1:]) + " |")
+        print("|---|---|" + "---|" * (len(args.targets) - 1))
+        for i, n in enumerate(args.rods):
+            for k in kernels:
+                ratios = [target_ratios(rounds, first, t, i, k) for t in args.targets[1:]]
+                if all(len(r) for r in ratios):
+                    cells = [f"{np.median(r):.2f} [{r.min():.2f}-{r.max():.2f}]" for r in ratios]
+                    print(f"| {n} | {k} | " + " | ".join(cells) + " |")
+
+
+def merge_rounds(rounds):
+    """One result per target from its rounds (``{target: [result, ...]}``, each a :func:`run`
+    result): the lists of times of every kernel concatenated over the rounds, the rest of the
+    first round's result; targets without a round are left out."""
+    merged = {}
+    for target, results in rounds.items():
+        if not results:
+            continue
+        first = results[0]
+        rows = []
+        for i, row in enumerate(first["rows"]):
+            out = dict(row)
+            for key, value in row.items():
+                if isinstance(value, list):
+                    out[key] = [t for r in results for t in r["rows"][i][key]]
+            rows.append(out)
+        merged[target] = {**first, "rows": rows, "rounds": len(results)}
+    return merged
+
+
+def target_ratios(rounds, first, other, i, kernel):
+    """Per round, the median time of ``kernel`` in row ``i`` of target ``other`` over that of
+    ``first`` (rounds where both timed it); an array, empty if none."""
+    out = []
+    for a, b in zip(rounds.get(first, []), rounds.get(other, [])):
+        ta, tb = a["rows"][i].get(kernel), b["rows"][i].get(kernel)
+        if ta and tb:
+            out.append(np.median(tb) / np.median(ta))
+    return np.array(out)
 
 
 if __name__ == "__main__":

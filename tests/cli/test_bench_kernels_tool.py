@@ -24,10 +24,27 @@ def test_every_kernel_timed_with_machine_and_target():
     got = tool.run(args)
     row = got["rows"][0]
     kernels = ("direct", "plain", "tree build", "tree eval", "yukawa", "current tips", "current field")
-    for kernel in kernels + ("direct mixed", "current tips mixed", "current field mixed"):
+    for kernel in kernels + ("direct mixed", "tree eval mixed", "current tips mixed", "current field mixed"):
         assert len(row[kernel]) == 2 and all(t >= 0 for t in row[kernel])
     assert row["yukawa_pairs"] > 0 and row["active_rods"] > 0
     assert got["machine"]["cpu_name"] and "compiles for" in got["line"]
+
+
+def test_rounds_merge_and_give_one_ratio_per_round():
+    """``--rounds``: each target's repeats are pooled over its rounds, and the ratio of two targets
+    is taken round by round from the rounds' medians (hand-made timings, no process started)."""
+    tool = _tool()
+
+    def result(ms):
+        return {"line": "x", "rows": [{"rods": 60, "tree eval": ms, "yukawa_pairs": 5}]}
+
+    rounds = {"host": [result([1.0, 3.0]), result([2.0, 2.0])], "haswell": [result([4.0, 4.0]), result([3.0, 5.0])]}
+    merged = tool.merge_rounds({**rounds, "znver3": []})
+    assert set(merged) == {"host", "haswell"}
+    assert merged["host"]["rows"][0]["tree eval"] == [1.0, 3.0, 2.0, 2.0] and merged["host"]["rounds"] == 2
+    assert merged["haswell"]["rows"][0]["yukawa_pairs"] == 5
+    assert list(tool.target_ratios(rounds, "host", "haswell", 0, "tree eval")) == [2.0, 2.0]
+    assert len(tool.target_ratios(rounds, "host", "haswell", 0, "yukawa")) == 0
 
 
 def test_a_named_target_compiles_with_its_own_features_only():
