@@ -4,6 +4,7 @@ event time, and a snapshot of one seed's last frame (matplotlib, PNG; one style 
 from __future__ import annotations
 
 import math
+import textwrap
 import warnings
 from pathlib import Path
 
@@ -94,8 +95,9 @@ def plot_series(summary, out, title) -> Path:
     for ax in axes[max(0, len(names) - ncols) : len(names)]:
         ax.set_xlabel("Time ($t_0$)", fontsize="small")
         ax.tick_params(labelbottom=True)
+    # wrapped: a study's title and the legend in words outrun the figure's width
     fig.suptitle(
-        f"{title}: each seed (thin lines); mean and one standard error over seeds (black, grey)",
+        textwrap.fill(f"{title}: each seed (thin lines); mean and one standard error over seeds (black, grey)", 90),
         fontsize="medium",
     )
     return _save(fig, out)
@@ -119,7 +121,12 @@ def plot_episodes(summary, out, title) -> Path:
     ax.set_ylim(-0.6, len(seeds) - 0.4)
     ax.invert_yaxis()
     ax.set_xlabel("Time ($t_0$)", fontsize="small")
-    ax.set_title(f"{title}: electrodes short-circuited (bars; number of closings at the right)", fontsize="medium")
+    ax.set_title(
+        textwrap.fill(
+            f"{title}: electrodes short-circuited (bars; number of closings at the right)", 80, break_on_hyphens=False
+        ),
+        fontsize="medium",
+    )
     return _save(fig, out)
 
 
