@@ -14,6 +14,7 @@ from ..analysis.claims import frame_claims
 from ..analysis.diagnostics import flux_through_rim, rod_centres
 from ..io.frame import SavedFrame
 from ..io.h5md import RunFileError
+from ..io.scenario import scenario_from_text
 from ..model.topology import FILAMENT
 
 
@@ -21,8 +22,9 @@ class Frame(SavedFrame):
     """One saved frame of a run file (:class:`~selfas_graph.io.frame.SavedFrame`), with what the
     measures need computed once (lazily).
 
-    Adds to the saved frame: ``centres`` (rod centres), ``rho`` (their distance from the plasma
-    axis, or the z axis), ``flux_radius``, ``claims`` (``frame_claims(run, index)``).
+    Adds to the saved frame: ``centres`` (rod centres), ``channel`` (the plasma channel of the scene),
+    ``rho`` (their distance from its axis, or the z axis), ``flux_radius``, ``claims``
+    (``frame_claims(run, index)``).
     """
 
     def __init__(self, run, index, params, flux_radius=None):
@@ -34,8 +36,22 @@ class Frame(SavedFrame):
         return rod_centres(self.position)
 
     @functools.cached_property
+    def channel(self):
+        """The plasma channel the measures refer to, ``{"axis": (x0, y0), "radius": R_plas}``: the run's
+        plasma filament, or, in a null model that switched it off (``--set forces.plasma_filament=false``),
+        the channel its scenario file states, so that "within R_plas" means the same region in both;
+        None where neither has one."""
+        if self.plasma:
+            return {"axis": tuple(self.plasma["axis"]), "radius": float(self.plasma["radius"])}
+        try:
+            stated = scenario_from_text(self.run.scenario_text).params.forces.plasma_filament
+        except (KeyError, ValueError):  # no scenario text, or one this version cannot read
+            return None
+        return None if stated is None else {"axis": tuple(stated.axis), "radius": float(stated.radius)}
+
+    @functools.cached_property
     def rho(self):
-        ax = self.plasma["axis"] if self.plasma else (0.0, 0.0)
+        ax = self.channel["axis"] if self.channel else (0.0, 0.0)
         return np.hypot(self.centres[:, 0] - ax[0], self.centres[:, 1] - ax[1])
 
     @property
@@ -94,7 +110,7 @@ def _total_current(f):
 
 
 def _inside_plasma(f):
-    return float(np.mean(f.rho < f.plasma["radius"])) if f.plasma else math.nan
+    return float(np.mean(f.rho < f.channel["radius"])) if f.channel else math.nan
 
 
 def _midplane_flux(f):

@@ -602,3 +602,19 @@ def test_an_ensemble_that_runs_out_of_disk_stops_with_exit_4_and_resumable_seeds
         if p.path.exists():
             with RunFile(p.path) as run:
                 assert run.n_frames > 0
+
+
+def test_a_null_model_without_the_plasma_filament_measures_the_same_channel(tmp_path):
+    """`--set forces.plasma_filament=false` removes the force, not the region the claim is about: the
+    fraction within R_plas is taken about the channel the scenario file states (R_plas = 6 L in
+    quick.toml), as in the full scene."""
+    root = Path(__file__).resolve().parents[2]
+    out = tmp_path / "no_plasma.h5"
+    args = ["simulate", str(root / "scenarios/quick.toml"), "--set", "forces.plasma_filament=false"]
+    assert main([*args, "--t-end", "0.01", "-o", str(out), "--progress", "none"]) == 0
+    s = summarise([out], [0.01])
+    with RunFile(out) as run:
+        assert run.parameters["forces"].get("plasma_filament") is None
+        centres = rod_centres(run.position(-1))
+    expected = float(np.mean(np.hypot(centres[:, 0], centres[:, 1]) < 6.0))
+    assert s["measures"]["inside_R_plas"]["mean"] == [expected] and 0.0 < expected < 1.0
