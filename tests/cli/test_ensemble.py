@@ -488,8 +488,11 @@ def _group_gone(pgid, timeout) -> list:
 
 def _ensemble_process(scene, folder, *extra):
     """``selfas-graph ensemble`` of seeds 3.. on 2 workers to t = 20 (minutes: it is stopped long before),
-    in a session of its own, so that the test finds and, whatever happens, kills every process of it."""
+    in a session of its own, so that the test finds and, whatever happens, kills every process of it.
+    SIGINT as a terminal gives it: a shell without job control starts a background job (``pytest &``,
+    ``nohup``) with SIGINT ignored, which the child would inherit and Python then leaves ignored."""
     import os
+    import signal
     import subprocess
     import sys
 
@@ -502,6 +505,7 @@ def _ensemble_process(scene, folder, *extra):
         text=True,
         env=env,
         start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
 
 
