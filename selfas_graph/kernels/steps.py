@@ -76,6 +76,19 @@ def _list_due(position, reference, half_skin2):
 
 
 @njit
+def _sources_within(position, k, source, r2):
+    """How many of ``source`` lie closer than sqrt(r2) to tip ``k``."""
+    n = 0
+    for s in range(source.shape[0]):
+        dx = position[k, 0] - source[s, 0]
+        dy = position[k, 1] - source[s, 1]
+        dz = position[k, 2] - source[s, 2]
+        if (dx * dx + dy * dy) + dz * dz < r2:
+            n += 1
+    return n
+
+
+@njit
 def _monopole_brake_exact(position, velocity, source, rstar, decay, before, after):
     """The split brake of the external dipole's monopoles (``model/terms/external.py``,
     ``ExternalDipoleForce.split``) over one step, bit for bit: a tip within r* of n monopoles has
@@ -85,13 +98,7 @@ def _monopole_brake_exact(position, velocity, source, rstar, decay, before, afte
     r2 = rstar * rstar
     m = 0
     for k in range(position.shape[0]):
-        n = 0
-        for s in range(source.shape[0]):
-            dx = position[k, 0] - source[s, 0]
-            dy = position[k, 1] - source[s, 1]
-            dz = position[k, 2] - source[s, 2]
-            if (dx * dx + dy * dy) + dz * dz < r2:
-                n += 1
+        n = _sources_within(position, k, source, r2)
         if n:
             for d in range(3):
                 before[m, d] = velocity[k, d]
@@ -102,13 +109,7 @@ def _monopole_brake_exact(position, velocity, source, rstar, decay, before, afte
     kinetic_before = 0.5 * dot_as_numpy(flat_before, flat_before, 3 * m)
     m = 0
     for k in range(position.shape[0]):
-        n = 0
-        for s in range(source.shape[0]):
-            dx = position[k, 0] - source[s, 0]
-            dy = position[k, 1] - source[s, 1]
-            dz = position[k, 2] - source[s, 2]
-            if (dx * dx + dy * dy) + dz * dz < r2:
-                n += 1
+        n = _sources_within(position, k, source, r2)
         if n:
             for d in range(3):
                 velocity[k, d] = velocity[k, d] * decay[n]
