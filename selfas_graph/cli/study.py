@@ -113,7 +113,7 @@ def run(args):
             if not (Path(args.runs) / s.name).is_dir():
                 print(f"study {s.name}: no run files in {Path(args.runs) / s.name}; skipped")
                 continue
-            summary = summarise_study(s, args.runs)
+            summary = summarise_study(s, args.runs, studies)
             if not summary["n_seeds"]:
                 print(f"study {s.name}: no readable seed file; skipped")
                 continue

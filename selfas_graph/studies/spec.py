@@ -122,6 +122,15 @@ class Studies:
         pts = [(sw.base_value, sw.base)] + [(s.sweep_value, s.name) for s in self.studies.values() if s.sweep == name]
         return sorted(pts)
 
+    def compared_times(self, name) -> list[float]:
+        """The times at which other entries set a study against ``name``: the table times of the
+        studies whose ``null_of`` names it (null models and convergence settings), the time of each
+        sweep it is the base of, and the times of the claims on it."""
+        times = {t for s in self.studies.values() if s.null_of == name for t in s.table_times}
+        times |= {sw.time for sw in self.sweeps.values() if sw.base == name}
+        times |= {c.time for c in self.claims if c.study == name or c.null == name}
+        return sorted(times)
+
     def study(self, name) -> Study:
         if name not in self.studies:
             raise StudiesError(f"{self.path}: no study named {name!r}; the studies are {', '.join(self.studies)}")

@@ -187,18 +187,25 @@ def _sparse(measure, times):
     return dataclasses.replace(measure, fn=fn)
 
 
-def study_measures(study) -> list:
-    """:data:`STUDY_MEASURES` for ``study``: the flux measures only at its table times and every
-    :data:`FLUX_EVERY` t0 (and its end time)."""
+def study_measures(study, compared_times=()) -> list:
+    """:data:`STUDY_MEASURES` for ``study``: the flux measures only at its table times, every
+    :data:`FLUX_EVERY` t0, its end time and ``compared_times`` (where other studies are set against
+    it, :meth:`~.spec.Studies.compared_times`) that fall on its summarised times."""
     every = max(FLUX_EVERY, study.every)
+    on_frames = [t for t in compared_times if any(abs(t - u) <= 1e-9 * max(1.0, t) for u in study.times)]
     flux_times = sorted(
-        set(study.table_times) | {study.t_end} | {k * every for k in range(int(study.t_end // every) + 1)}
+        set(study.table_times)
+        | {study.t_end}
+        | {k * every for k in range(int(study.t_end // every) + 1)}
+        | set(on_frames)
     )
     return [_sparse(m, flux_times) if m.name in FLUX_MEASURES else m for m in STUDY_MEASURES]
 
 
-def summarise_study(study, runs) -> dict:
-    """The summary of ``study`` (a :class:`~.spec.Study`) from its run files in ``runs/study.name``.
+def summarise_study(study, runs, studies=None) -> dict:
+    """The summary of ``study`` (a :class:`~.spec.Study`) from its run files in ``runs/study.name``;
+    with ``studies`` (the :class:`~.spec.Studies` it belongs to), the flux measures also at the
+    times other studies are set against it.
 
     Seeds whose file is missing or unreadable are listed in ``missing``; the statistics of the page
     count only seeds with a frame at each time.
@@ -208,7 +215,12 @@ def summarise_study(study, runs) -> dict:
     paths = [seed_path(folder, s) for s in seeds]
     present = [p for p in paths if p.exists()]
     started = time.perf_counter()
-    out = summarise(present, study.times, t_end=study.t_end, measures=study_measures(study))
+    out = summarise(
+        present,
+        study.times,
+        t_end=study.t_end,
+        measures=study_measures(study, studies.compared_times(study.name) if studies else ()),
+    )
     records = [r for r in (_seed_record(p) for p in present) if r is not None]
     out["seeds"] = [
         s | r for s, r in zip(out["seeds"], records)

@@ -230,3 +230,23 @@ def test_a_windowed_claim_and_a_null_without_spread():
     d = _claim_difference(plain_stat([4.0, 4.0]), plain_stat([0.0, 0.0, 0.0]))
     assert d == math.inf and _verdict(d, "greater").startswith("reproduced (every seed")
     assert math.isnan(_claim_difference(plain_stat([4.0]), plain_stat([0.0, 0.0])))  # one seed: no spread
+
+
+def test_the_flux_is_summarised_where_other_studies_are_set_against_a_study():
+    """The rod currents' flux, costly, is summarised at a few times only; those include the times a
+    convergence setting, a sweep or a claim compares with the study (t = 150 for the Fig. 2
+    convergence settings), or their tables read n/a for the default."""
+    from types import SimpleNamespace
+
+    from selfas_graph.studies.summary import study_measures
+
+    studies = load_studies(ROOT / "docs" / "studies.toml")
+    fig2 = studies.study("fig2")
+    compared = studies.compared_times("fig2")
+    assert 150.0 in compared and 300.0 in compared
+    flux = {m.name: m for m in study_measures(fig2, compared)}["midplane_flux"]
+    frame = SimpleNamespace(time=150.0, _study_flux=1.25)  # the flux cached on the frame
+    assert flux.fn(frame) == 1.25
+    assert 130.0 not in compared  # neither compared with, nor a table time, nor on the 20 t0 grid
+    assert math.isnan(flux.fn(SimpleNamespace(time=130.0, _study_flux=1.25)))
+    assert 150.0 not in {t for t in studies.compared_times("fig6")}
