@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .page import CLAIM_MEASURES, GROUPED, LABELS, sweep_points
+from .page import CLAIM_MEASURES, GROUPED, LABELS, has_electrodes, sweep_points
 
 __all__ = ["SERIES_MEASURES", "plot_episodes", "plot_series", "study_figures"]
 
@@ -104,7 +104,8 @@ def plot_series(summary, out, title) -> Path:
 
 
 def plot_episodes(summary, out, title) -> Path:
-    """When the gap was closed, seed by seed, at the times of the events (not of the frames)."""
+    """When the gap was closed (case (ii): the circuit through the external filament), seed by seed, at
+    the times of the events (not of the frames)."""
     seeds = summary["seeds"]
     fig = _figure(figsize=(7.2, 0.35 * len(seeds) + 1.3))
     ax = fig.subplots()
@@ -121,10 +122,9 @@ def plot_episodes(summary, out, title) -> Path:
     ax.set_ylim(-0.6, len(seeds) - 0.4)
     ax.invert_yaxis()
     ax.set_xlabel("Time ($t_0$)", fontsize="small")
+    closed = "electrodes short-circuited" if has_electrodes(summary) else "circuit closed through the external filament"
     ax.set_title(
-        textwrap.fill(
-            f"{title}: electrodes short-circuited (bars; number of closings at the right)", 80, break_on_hyphens=False
-        ),
+        textwrap.fill(f"{title}: {closed} (bars; number of closings at the right)", 80, break_on_hyphens=False),
         fontsize="medium",
     )
     return _save(fig, out)

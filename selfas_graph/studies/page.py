@@ -32,6 +32,7 @@ __all__ = [
     "LABELS",
     "claim_rows",
     "grouped_stat",
+    "has_electrodes",
     "load_summary",
     "page_blocks",
     "plain_stat",
@@ -166,22 +167,44 @@ def _label(measure):
     return f"{words} ({unit})" if unit else words
 
 
+def has_electrodes(summary) -> bool:
+    """Whether the study's scene closes its circuit between electrodes (case (i)) rather than through
+    the external filament (case (ii)), from its scenario file and overrides; True if that file cannot
+    be read here."""
+    from ..io.scenario import ScenarioError, load_scenario
+
+    study = summary.get("study", {})
+    try:
+        params = load_scenario(study["scenario"], overrides=list(study.get("overrides", ()))).params
+    except (KeyError, OSError, ScenarioError):  # a summary read away from its scenario file
+        return True
+    return params.forces.electrodes is not None or params.forces.external_filament is None
+
+
 def study_table(summary) -> str:
-    """The table of a study: a row per measure, a column per table time, and the short circuits."""
+    """The table of a study: a row per measure, a column per table time, and the short circuits
+    (between the electrodes, or through the external filament in case (ii))."""
+    electrodes = has_electrodes(summary)
     times = summary["study"]["table_times"]
     head = "| measure | " + " | ".join(f"t = {t:g}" for t in times) + " |"
     rows = [head, "|---|" + "---|" * len(times)]
     for m in TABLE_MEASURES:
         if m not in summary["measures"]:
             continue
-        rows.append(f"| {_label(m)} | " + " | ".join(measure_text(summary, m, t) for t in times) + " |")
+        cells = [measure_text(summary, m, t) for t in times]
+        if all(c == "n/a" for c in cells):
+            continue  # a measure the scene does not have (R_plas without a plasma filament)
+        label = _label(m)
+        if not electrodes:  # case (ii): the current enters and leaves through the external filament
+            label = label.replace("through the gap", "through the network")
+        rows.append(f"| {label} | " + " | ".join(cells) + " |")
     sc = summary.get("short_circuit") or {}
     n_obs, n = sc.get("n_observed", 0), summary["n_seeds"]
     text = f"{n_obs} of {n} seeds"
     if n_obs:
         text += f", median time (Kaplan-Meier) {_fmt(sc.get('median'))} t0"
         starts = [s["episodes"]["start"] for s in summary["seeds"]]
-        text += f"; {sum(len(x) for x in starts)} closings of the gap in all"
+        text += f"; {sum(len(x) for x in starts)} closings of the {'gap' if electrodes else 'circuit'} in all"
         first = [s["episodes"].get("total_current", [None])[:1] for s in summary["seeds"]]
         first = [x[0] for x in first if x and x[0] is not None]
         series = [s["episodes"].get("rods_in_series", [None])[:1] for s in summary["seeds"]]
@@ -190,9 +213,10 @@ def study_table(summary) -> str:
             text += (
                 f"; the first closing carries median {_fmt(float(np.median(first)))} J0 "
                 f"[{_fmt(min(first))} to {_fmt(max(first))}] through median {_fmt(float(np.median(series)))} "
-                f"rods in series"
+                f"{'rod' if float(np.median(series)) == 1.0 else 'rods'} in series"
             )
-    rows.append(f"| short circuit of the electrodes | {text} |" + " |" * (len(times) - 1))
+    label = "short circuit of the electrodes" if electrodes else "circuit closed through the external filament"
+    rows.append(f"| {label} | {text} |" + " |" * (len(times) - 1))
     return "\n".join(rows)
 
 
@@ -234,7 +258,8 @@ def provenance_text(summary) -> str:
         f"{', '.join(targets)}, {'/'.join(str(t) for t in threads)} numba thread(s) a seed"
     )
     if wall:
-        text += f"; wall time a seed {_fmt(min(wall) / 60, 2)}-{_fmt(max(wall) / 60, 2)} min"
+        lo, hi = _fmt(min(wall) / 60, 2), _fmt(max(wall) / 60, 2)
+        text += f"; wall time a seed {lo if lo == hi else f'{lo}-{hi}'} min"
     if summary.get("missing"):
         text += f". Not yet run: {', '.join(summary['missing'])}"
     return text + "."

@@ -250,3 +250,35 @@ def test_the_flux_is_summarised_where_other_studies_are_set_against_a_study():
     assert 130.0 not in compared  # neither compared with, nor a table time, nor on the 20 t0 grid
     assert math.isnan(flux.fn(SimpleNamespace(time=130.0, _study_flux=1.25)))
     assert 150.0 not in {t for t in studies.compared_times("fig6")}
+
+
+def test_a_study_table_words_its_circuit_by_the_scene_and_leaves_out_measures_it_lacks():
+    """Case (i) closes between the electrodes; case (ii) (Fig. 8) through the external filament, with
+    no gap and no R_plas: the table says so, and a measure that is n/a at every time has no row."""
+    from selfas_graph.studies.page import has_electrodes, provenance_text, study_table
+
+    def summary(scenario):
+        s = _fake_summary([0.3, 0.4], t=10.0, measure="largest_alignment")
+        s["measures"]["inside_plasma_fraction"] = {"values": [[None], [None]]}
+        s["measures"]["total_current"] = {"values": [[2.0], [1.0]]}
+        s["study"] = {"scenario": str(ROOT / "scenarios" / scenario), "overrides": [], "table_times": [10.0]}
+        s["short_circuit"] = {"n_observed": 2, "median": 3.0}
+        for k, seed in enumerate(s["seeds"]):
+            seed["episodes"] = {"start": [3.0], "end": [None], "total_current": [1.0], "rods_in_series": [1]}
+            seed["t_end"], seed["wall_seconds"] = 10.0, 60.0 * (k + 1)
+        return s
+
+    fig2, fig8 = summary("fig2.toml"), summary("fig8.toml")
+    assert has_electrodes(fig2) and not has_electrodes(fig8)
+    assert has_electrodes({"study": {"scenario": "no/such/file.toml"}})  # away from its scenario file
+    two = study_table(fig2)
+    assert "short circuit of the electrodes" in two and "current through the gap" in two
+    assert "through median 1 rod in series" in two
+    eight = study_table(fig8)
+    assert "circuit closed through the external filament" in eight and "closings of the circuit" in eight
+    assert "current through the network" in eight and "gap" not in eight
+    assert "R_plas" not in eight  # n/a at every table time: no row
+    assert "wall time a seed 1-2 min" in provenance_text(fig8)
+    for s in fig8["seeds"]:
+        s["wall_seconds"] = 120.0
+    assert "wall time a seed 2 min" in provenance_text(fig8)
