@@ -12,7 +12,7 @@ import numpy as np
 
 from .page import CLAIM_MEASURES, GROUPED, LABELS, has_electrodes, sweep_points
 
-__all__ = ["SERIES_MEASURES", "plot_episodes", "plot_series", "study_figures"]
+__all__ = ["SERIES_MEASURES", "plot_episodes", "plot_series", "series_panels", "study_figures"]
 
 #: the panels of a study's time-series figure
 SERIES_MEASURES = (
@@ -51,10 +51,22 @@ def _save(fig, path):
     return path
 
 
+def series_panels(summary) -> list:
+    """The measures of :data:`SERIES_MEASURES` the study has, a value somewhere (no R_plas without a
+    plasma filament: the median distance from the axis takes its panel)."""
+
+    def present(m):
+        return m in summary["measures"] and any(x is not None for row in summary["measures"][m]["values"] for x in row)
+
+    names = [m if present(m) or m != "inside_R_plas" else "median_axis_distance" for m in SERIES_MEASURES]
+    return [m for m in names if present(m)]
+
+
 def plot_series(summary, out, title) -> Path:
     """Each measure against time: every seed as a thin line, the mean over seeds and one standard
     error as a band where the measure is not split by the circuit (module :mod:`.page`)."""
-    names = [m for m in SERIES_MEASURES if m in summary["measures"]]
+    names = series_panels(summary)
+    electrodes = has_electrodes(summary)
     t = np.asarray(summary["times"], dtype=float)
     ncols = 2
     nrows = math.ceil(len(names) / ncols)
@@ -86,6 +98,8 @@ def plot_series(summary, out, title) -> Path:
             ax.plot(t[ok], mean[ok], color=MEAN_COLOUR, lw=1.2)
             ax.fill_between(t[ok], (mean - sem)[ok], (mean + sem)[ok], color="0.5", alpha=0.35, lw=0)
         words, unit = _words_unit(name)
+        if not electrodes:  # case (ii): the current enters and leaves through the external filament
+            words = words.replace("through the gap", "through the network")
         ax.set_title(words, fontsize="small", loc="left")
         if unit:
             ax.set_ylabel(unit, fontsize="small")

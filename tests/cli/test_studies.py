@@ -255,11 +255,12 @@ def test_the_flux_is_summarised_where_other_studies_are_set_against_a_study():
 def test_a_study_table_words_its_circuit_by_the_scene_and_leaves_out_measures_it_lacks():
     """Case (i) closes between the electrodes; case (ii) (Fig. 8) through the external filament, with
     no gap and no R_plas: the table says so, and a measure that is n/a at every time has no row."""
+    from selfas_graph.studies.figures import series_panels
     from selfas_graph.studies.page import has_electrodes, provenance_text, study_table
 
     def summary(scenario):
         s = _fake_summary([0.3, 0.4], t=10.0, measure="largest_alignment")
-        s["measures"]["inside_plasma_fraction"] = {"values": [[None], [None]]}
+        s["measures"]["inside_R_plas"] = {"values": [[None], [None]]}
         s["measures"]["total_current"] = {"values": [[2.0], [1.0]]}
         s["study"] = {"scenario": str(ROOT / "scenarios" / scenario), "overrides": [], "table_times": [10.0]}
         s["short_circuit"] = {"n_observed": 2, "median": 3.0}
@@ -278,6 +279,10 @@ def test_a_study_table_words_its_circuit_by_the_scene_and_leaves_out_measures_it
     assert "circuit closed through the external filament" in eight and "closings of the circuit" in eight
     assert "current through the network" in eight and "gap" not in eight
     assert "R_plas" not in eight  # n/a at every table time: no row
+    fig8["measures"]["median_axis_distance"] = {"values": [[3.0], [4.0]]}
+    assert series_panels(fig8) == ["total_current", "median_axis_distance", "largest_alignment"]
+    fig8["measures"]["inside_R_plas"] = {"values": [[0.5], [None]]}
+    assert series_panels(fig8) == ["total_current", "inside_R_plas", "largest_alignment"]
     assert "wall time a seed 1-2 min" in provenance_text(fig8)
     for s in fig8["seeds"]:
         s["wall_seconds"] = 120.0
