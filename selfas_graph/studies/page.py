@@ -40,7 +40,15 @@ __all__ = [
 ]
 
 #: measures that are zero in a seed whose circuit is open: reported as "k of n seeds" (module docstring)
-GROUPED = ("filament_rods", "total_current", "midplane_flux", "flux_over_external", "moment_J_z", "largest_moment_J_z")
+GROUPED = (
+    "filament_rods",
+    "total_current",
+    "midplane_flux",
+    "flux_over_external",
+    "flux_over_dipole",
+    "moment_J_z",
+    "largest_moment_J_z",
+)
 #: fitted measures and their own uncertainty
 FIT_ERRORS = {
     "fractal_dimension": "fractal_dimension_err",
@@ -54,6 +62,7 @@ LABELS = {
     "median_axis_distance": ("median distance of rods from the axis", "L"),
     "midplane_flux": ("flux of the rod currents through the mid-plane", "Phi_0"),
     "flux_over_external": ("that flux over the flux of B_ext", ""),
+    "flux_over_dipole": ("that flux over the external dipole's flux Phi_ext = 4 pi Z_Mext", ""),
     "largest_structure_rods": ("rods in the largest structure", ""),
     "largest_moment_ratio": ("largest structure's monopole moment, magnitude", "rod moments"),
     "largest_alignment": ("alignment of the largest structure's rods", ""),
@@ -73,6 +82,7 @@ TABLE_MEASURES = (
     "filament_rods",
     "total_current",
     "midplane_flux",
+    "flux_over_dipole",
     "moment_J_z",
     "inside_R_plas",
     "median_axis_distance",

@@ -90,6 +90,16 @@ def _flux_over_external(f):
     return flux / phi_ext
 
 
+def _flux_over_dipole(f):
+    """Case (ii): the rod currents' mid-plane flux over the external dipole's flux 4 pi |Z_Mext|
+    (the paper's Phi_ext of Fig. 11; docs/model.md '7b. Figure diagnostics'); NaN without the dipole."""
+    d = f.params["forces"].get("external_dipole")
+    if not d or not d["magnetic_charge"]:
+        return math.nan
+    # Phi_0 = 4 pi B0 L^2 (docs/model.md 'Reduced units'): 4 pi |Z_Mext| is |Z_Mext| Phi_0
+    return _flux(f) / abs(d["magnetic_charge"])
+
+
 FRAME_BY_NAME = {m.name: m for m in FRAME_MEASURES}
 
 #: the measures of a study's summary: the ensemble's, the fits' uncertainties and the alignment measures
@@ -128,6 +138,12 @@ STUDY_MEASURES += [
         "1",
         "rod currents' flux through the mid-plane disc over B_ext's flux through it",
         _flux_over_external,
+    ),
+    Measure(
+        "flux_over_dipole",
+        "1",
+        "case (ii): rod currents' flux through the mid-plane disc over the external dipole's flux 4 pi |Z_Mext|",
+        _flux_over_dipole,
     ),
 ]
 
@@ -175,7 +191,7 @@ def _seed_record(path):
 #: the flux measures are summarised at the table times and every FLUX_EVERY t0 only (their cost:
 #: 0.1-0.8 s a frame for 600-1000 current-carrying rods, analysis.diagnostics.flux_through_rim)
 FLUX_EVERY = 20.0
-FLUX_MEASURES = ("midplane_flux", "flux_over_external")
+FLUX_MEASURES = ("midplane_flux", "flux_over_external", "flux_over_dipole")
 
 
 def _sparse(measure, times):

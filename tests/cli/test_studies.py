@@ -287,3 +287,16 @@ def test_a_study_table_words_its_circuit_by_the_scene_and_leaves_out_measures_it
     for s in fig8["seeds"]:
         s["wall_seconds"] = 120.0
     assert "wall time a seed 2 min" in provenance_text(fig8)
+
+
+def test_case_ii_flux_is_also_given_over_the_external_dipoles_flux():
+    """The paper's Fig. 11 gives the rod currents' flux in units of Phi_ext = 4 pi |Z_Mext|; with
+    Phi_0 = 4 pi (docs/model.md '1. Reduced units') that is the flux in Phi_0 over |Z_Mext|."""
+    from types import SimpleNamespace
+
+    from selfas_graph.studies.summary import STUDY_MEASURES
+
+    fn = {m.name: m for m in STUDY_MEASURES}["flux_over_dipole"].fn
+    dipole = {"forces": {"external_dipole": {"magnetic_charge": -10.0}}}
+    assert fn(SimpleNamespace(params=dipole, _study_flux=2.5)) == 0.25
+    assert math.isnan(fn(SimpleNamespace(params={"forces": {}}, _study_flux=2.5)))
