@@ -71,6 +71,13 @@ KNOBS = {
     "integrator.slow_extrapolation": ([False, True], {"integrator.slow_every": 1}),
     # only with slow_every > 1 in the base (--set integrator.slow_every=8): each range against no splitting
     "integrator.fast_range": ([2.0, 3.0, 4.0, 6.0, 8.0, 12.0], {"integrator.slow_every": 1}),
+    # case (ii): the line charge's quadrature against a converged one; held with the slow sums or
+    # not, each against no splitting (the row at false is the other slow terms' own error)
+    "forces.external_dipole.quadrature_points": (
+        [8, 12, 16, 24, 32],
+        {"forces.external_dipole.quadrature_points": 128},
+    ),
+    "forces.external_dipole.line_charge_slow": ([False, True], {"integrator.slow_every": 1}),
 }
 
 
@@ -91,8 +98,10 @@ TREE_KNOBS = ("forces.tip_magnetic.opening_angle", "forces.tip_magnetic.order")
 
 
 def _applicable(scenario, knob):
-    if knob == "integrator.fast_range" and scenario.params.integrator.slow_every == 1:
-        return False  # the range splits nothing without multiple time stepping
+    if knob in ("integrator.fast_range", "forces.external_dipole.line_charge_slow") and (
+        scenario.params.integrator.slow_every == 1
+    ):
+        return False  # they split nothing without multiple time stepping
     if knob in TREE_KNOBS:
         tm = scenario.params.forces.tip_magnetic
         if tm is None or not (

@@ -198,7 +198,8 @@ def fast_steps(
         The force field's channel buffers; ``total`` (n_tips, 3) their sum; ``powered`` the
         non-conservative channels' rows.
     channel : (len(CHANNELS),) int64
-        Each channel's row in ``block``, -1 for a channel that is off.
+        Each channel's row in ``block``, -1 for a channel that is off (or, for the line charge, slow:
+        then it is one of the held forces).
     tip_charge : (n_tips,) float64; rod_charge : (n_rods,) float64
     scalars : (17,) float64
         ambient brake coefficient; tip law r*, kappa; tip brake coefficient (explicit; NaN: split);
@@ -294,6 +295,7 @@ def fast_steps(
             _monopoles_on_tips(
                 x, v, tip_charge, source, source_charge, rstar, kappa, pole_k, block[c_pole], block[c_pb]
             )
+        if c_line >= 0:  # -1 also when the line charge is slow (held with the slow forces)
             for i in range(n // 2):
                 for d in range(3):
                     centre[i, d] = 0.5 * (x[2 * i, d] + x[2 * i + 1, d])

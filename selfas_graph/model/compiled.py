@@ -44,6 +44,7 @@ FAST_TERMS = (
     "electrodes",
     "external_filament",
     "external_dipole",
+    "external_line_charge",
 )
 #: the steps one call makes at most (the size of its logs)
 CHUNK = 256
@@ -87,6 +88,7 @@ class CompiledSteps:
         el = terms.get("electrodes")
         fil = terms.get("external_filament")
         dip = terms.get("external_dipole")
+        line = terms.get("external_line_charge")
         nan = np.nan
         amb = terms.get("ambient_brake")
         split = p.integrator.brake == "split"
@@ -119,11 +121,14 @@ class CompiledSteps:
             # the decay of ExternalDipoleForce.split, exp(-k n dt) for n poles touched, as numpy computes it
             self.decay_poles[1:] = np.exp(-dip.k * np.array([1.0, 2.0]) * integ.dt)
             self.source, self.source_charge = dip.source, dip.source_charge
-            self.line = np.array(dip.line, dtype=np.float64)
-            self.nodes, self.weights = dip.nodes, dip.weights
         else:
-            self.source, self.source_charge, self.line = _EMPTY3, _EMPTY, _EMPTY
-            self.nodes, self.weights = _EMPTY, _EMPTY
+            self.source, self.source_charge = _EMPTY3, _EMPTY
+        if line is not None and not line.slow:
+            self.line = np.array(line.line, dtype=np.float64)
+            self.nodes, self.weights = line.nodes, line.weights
+        else:  # no line charge, or a slow one: held with the slow forces
+            self.channel[CHANNELS.index("external_line_charge")] = -1
+            self.line, self.nodes, self.weights = _EMPTY, _EMPTY, _EMPTY
         # the held slow forces, in the order MultipleTimeStepping extrapolates them
         keys = list(mts.held_forces())
         self.held = np.array([-1 if k == "tip_far" else index[k] for k in keys], dtype=np.int64)

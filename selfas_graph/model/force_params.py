@@ -224,6 +224,12 @@ class ExternalDipole:
     quadrature_points: int = spec(
         32, "Gauss-Legendre points of the line-charge integral; an accuracy knob", ge=1, le=1000
     )
+    line_charge_slow: bool = spec(
+        False,
+        "with multiple time stepping (integrator.slow_every > 1), the line charge with the slow sums, "
+        "extrapolated between them, instead of at every step; an accuracy knob (docs/performance.md "
+        "'The line charge's quadrature (Fig. 8)')",
+    )
 
 
 @dataclass(frozen=True)

@@ -235,6 +235,9 @@ _CHANNEL_KEYS = {
     "current_lorentz": "circuit.delta_J0 and the fields the currents sit in",
     "external_filament": "forces.external_filament.current, forces.external_filament.diameter",
     "external_dipole": "forces.external_dipole.*, rods.magnetic_charge, rods.electric_charge",
+    "external_monopole": "forces.external_dipole.magnetic_charge, forces.external_dipole.length, rods.magnetic_charge",
+    "external_line_charge": "forces.external_dipole.line_charge, forces.external_dipole.screening_length, "
+    "forces.external_dipole.radius, rods.electric_charge",
 }
 
 

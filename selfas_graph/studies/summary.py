@@ -92,7 +92,7 @@ def _flux_over_external(f):
 
 def _flux_over_dipole(f):
     """Case (ii): the rod currents' mid-plane flux over the external dipole's flux 4 pi |Z_Mext|
-    (the paper's Phi_ext of Fig. 11; docs/model.md '7b. Figure diagnostics'); NaN without the dipole."""
+    (the paper's Phi_ext of Fig. 11; docs/model.md 'Figure diagnostics'); NaN without the dipole."""
     d = f.params["forces"].get("external_dipole")
     if not d or not d["magnetic_charge"]:
         return math.nan

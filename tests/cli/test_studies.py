@@ -291,7 +291,7 @@ def test_a_study_table_words_its_circuit_by_the_scene_and_leaves_out_measures_it
 
 def test_case_ii_flux_is_also_given_over_the_external_dipoles_flux():
     """The paper's Fig. 11 gives the rod currents' flux in units of Phi_ext = 4 pi |Z_Mext|; with
-    Phi_0 = 4 pi (docs/model.md '1. Reduced units') that is the flux in Phi_0 over |Z_Mext|."""
+    Phi_0 = 4 pi (docs/model.md 'Reduced units') that is the flux in Phi_0 over |Z_Mext|."""
     from types import SimpleNamespace
 
     from selfas_graph.studies.summary import STUDY_MEASURES

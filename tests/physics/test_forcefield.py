@@ -198,3 +198,36 @@ def test_state_dict_restores_the_next_evaluations_bit_for_bit(rng):
     other.force_field.set_currents(ff.current)
     other.force_field.load_state_dict({})
     assert other.force_field.mts.stale == set(other.force_field.mts.slow_keys)
+
+
+def test_a_slow_line_charge_is_held_between_full_evaluations_and_the_same_without_them(rng):
+    """``forces.external_dipole.line_charge_slow``: under multiple time stepping the line charge is
+    computed on full evaluations only and extrapolated between them, as the other slow terms; every
+    evaluation is full without multiple time stepping, so the knob then changes nothing, bit for bit."""
+    state = random_rods(30, rng)
+    dipole = dict(CONSERVATIVE_SCENES["external_dipole"]["external_dipole"])
+    x, v = state.position.copy(), rng.normal(0.0, 0.3, state.position.shape)
+
+    def field(slow, **integrator):
+        sim = simulation(
+            state.copy(), forces={"external_dipole": dipole | {"line_charge_slow": slow}}, integrator=integrator
+        )
+        return sim.force_field
+
+    every, held = field(False), field(True)
+    for step in range(3):
+        y = x + 1e-3 * step * v
+        np.testing.assert_array_equal(every.evaluate(y, v), held.evaluate(y, v))
+    every, held = field(False, slow_every=4), field(True, slow_every=4)
+    assert "external_line_charge" in held.mts.slow_keys and "external_line_charge" not in every.mts.slow_keys
+    for step in range(6):
+        y = x + 1e-3 * step * v
+        every.evaluate(y, v, full=step % 4 == 0, step=step)
+        held.evaluate(y, v, full=step % 4 == 0, step=step)
+        line_every, line_held = every.out["external_line_charge"], held.out["external_line_charge"]
+        if step % 4 == 0:
+            np.testing.assert_array_equal(line_held, line_every)  # computed on a full evaluation
+        else:  # held (extrapolated once two full evaluations are there): not today's force, but near it
+            assert not np.array_equal(line_held, line_every)
+            np.testing.assert_allclose(line_held, line_every, rtol=0, atol=1e-2 * np.abs(line_every).max())
+    assert held.calls["external_line_charge"] == 2 and every.calls["external_line_charge"] == 6

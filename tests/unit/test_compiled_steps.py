@@ -71,12 +71,18 @@ def test_compiled_steps_are_the_python_steps_through_a_short_circuit(brake):
     assert fast.short_circuit_time is not None and np.count_nonzero(fast.force_field.current)
 
 
-def test_compiled_steps_are_the_python_steps_in_case_ii():
+@pytest.mark.parametrize("line_slow", [False, True])
+def test_compiled_steps_are_the_python_steps_in_case_ii(line_slow):
     """Case (ii), the quick Fig. 8 scene with fewer rods: external filament, the dipole's monopoles with
-    their split brake and its screened line charge, the filament's contact heights."""
+    their split brake and its screened line charge (at every step, or held with the slow forces:
+    ``forces.external_dipole.line_charge_slow``), the filament's contact heights."""
     params = load_scenario("scenarios/fig8_quick.toml").params.replace(rods={"count": 60})
+    params = params.replace(forces={"external_dipole": {"line_charge_slow": line_slow}})
     slow, fast = pair(params)
     assert step_for_step(slow, fast, 600) > 20
+    evaluations = fast.force_field.calls["external_line_charge"]
+    # at every evaluation, or only on the full ones (one in slow_every, and the RK4 start)
+    assert (evaluations < 600 // params.integrator.slow_every + 20) == line_slow
 
 
 class Recorder:

@@ -10,7 +10,8 @@ module                 contents
 ``fields``             one-body terms of the apparatus: 3, 4, 5, 7, 8
 ``external``           the fixed objects of case (ii): term 11
 ``currents``           terms 9, 10 (the currents they read are the network's ``RodCurrents``)
-``registry``           ``TERM_CLASSES``: scenario name -> term class
+``registry``           ``TERM_CLASSES``: scenario name -> term class (``term_classes``: and the
+                       terms its table also turns on)
 ``forcefield``         :class:`ForceField`, the container (channels, sums, gather over ranks, state)
 ``mts``                :class:`MultipleTimeStepping`: the held slow forces
 ``timing``             :class:`TermClock`: wall time per term, for the benchmarks
@@ -23,12 +24,12 @@ The term classes end in ``Force`` (``TipMagneticForce``); their parameters are t
 from .base import FieldSource, Term, share_by_mass
 from .context import EvalContext, PairLists
 from .currents import CurrentFieldForce, CurrentLorentzForce
-from .external import ExternalDipoleForce, ExternalFilamentForce, external_monopoles
+from .external import ExternalDipoleForce, ExternalFilamentForce, ExternalLineChargeForce, external_monopoles
 from .fields import AmbientBrakeForce, ElectricFieldForce, ElectrodesForce, PlasmaFilamentForce, UniformFieldForce
 from .forcefield import ForceField
 from .mts import MultipleTimeStepping
 from .pairs import TipBrakeForce, TipMagneticForce, YukawaForce, yukawa_cutoff
-from .registry import TERM_CLASSES
+from .registry import FOLLOWING_TERMS, TERM_CLASSES, term_classes
 from .timing import TermClock
 
 __all__ = [
@@ -40,6 +41,8 @@ __all__ = [
     "EvalContext",
     "ExternalDipoleForce",
     "ExternalFilamentForce",
+    "ExternalLineChargeForce",
+    "FOLLOWING_TERMS",
     "FieldSource",
     "ForceField",
     "MultipleTimeStepping",
@@ -48,6 +51,7 @@ __all__ = [
     "TERM_CLASSES",
     "Term",
     "TermClock",
+    "term_classes",
     "TipBrakeForce",
     "TipMagneticForce",
     "UniformFieldForce",

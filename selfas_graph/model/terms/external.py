@@ -36,19 +36,18 @@ class ExternalFilamentForce(Term, FieldSource):
 
 
 class ExternalDipoleForce(Term, FieldSource):
-    """Term 11: the dipole's end monopoles on tips (tip law and brake) and its screened line charge on
-    rods. Its field (:meth:`field_at`) is that of the two monopoles, smeared inside r*."""
+    """Term 11: the dipole's end monopoles on tips (tip law and brake). Its field (:meth:`field_at`) is
+    that of the two monopoles, smeared inside r*. Its screened line charge is the term that follows it,
+    :class:`ExternalLineChargeForce`, built from the same scenario table."""
 
     name = "external_dipole"
-    channels = [("external_monopoles", True), ("external_monopole_brake", False), ("external_line_charge", True)]
+    channels = [("external_monopoles", True), ("external_monopole_brake", False)]
 
     def __init__(self, p, state):
         d = p.forces.external_dipole
         self.source, self.source_charge = external_monopoles(d)
         self.rstar, self.kappa = p.rods.rstar, p.rods.tip_stiffness
         self.k = p.forces.tip_brake.coefficient if p.forces.tip_brake is not None else 0.0
-        self.line = (-0.5 * d.length, 0.5 * d.length, d.line_charge, d.screening_length, d.radius)
-        self.nodes, self.weights = kl.gauss_legendre_01(d.quadrature_points)
         self.split_mode = p.integrator.brake == "split"
 
     def compute(self, ctx, out):
@@ -65,9 +64,6 @@ class ExternalDipoleForce(Term, FieldSource):
             out["external_monopoles"],
             out["external_monopole_brake"],
         )
-        f = ctx.buffer("line_centre", ctx.n_rods)
-        kx.line_yukawa_on_centres(ctx.centre(), ctx.rod_charge, *self.line, self.nodes, self.weights, f)
-        share_by_mass(f, out["external_line_charge"])
 
     def field_at(self, points, out):
         kx.monopole_field(points, self.source, self.source_charge, self.rstar, out)
@@ -86,8 +82,32 @@ class ExternalDipoleForce(Term, FieldSource):
         return {
             "external_monopoles": kx.monopoles_energy(
                 ctx.position, ctx.tip_charge, self.source, self.source_charge, self.rstar, self.kappa
-            ),
+            )
+        }
+
+
+class ExternalLineChargeForce(Term):
+    """Term 11: the external dipole's screened line charge on rod charges, shared half to each tip
+    (``[forces.external_dipole]``, built after :class:`ExternalDipoleForce`). A slow term when
+    ``forces.external_dipole.line_charge_slow`` is set (with ``integrator.slow_every > 1``)."""
+
+    name = "external_line_charge"
+    channels = [("external_line_charge", True)]
+
+    def __init__(self, p, state):
+        d = p.forces.external_dipole
+        self.line = (-0.5 * d.length, 0.5 * d.length, d.line_charge, d.screening_length, d.radius)
+        self.nodes, self.weights = kl.gauss_legendre_01(d.quadrature_points)
+        self.slow = bool(d.line_charge_slow)
+
+    def compute(self, ctx, out):
+        f = ctx.buffer("line_centre", ctx.n_rods)
+        kx.line_yukawa_on_centres(ctx.centre(), ctx.rod_charge, *self.line, self.nodes, self.weights, f)
+        share_by_mass(f, out["external_line_charge"])
+
+    def energy(self, ctx):
+        return {
             "external_line_charge": kx.line_yukawa_energy(
                 ctx.centre(), ctx.rod_charge, *self.line, self.nodes, self.weights
-            ),
+            )
         }

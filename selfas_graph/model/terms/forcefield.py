@@ -42,7 +42,7 @@ from .context import EvalContext, PairLists
 from .currents import CurrentLorentzForce, wire_radius
 from .mts import MultipleTimeStepping
 from .pairs import TipMagneticForce, YukawaForce
-from .registry import TERM_CLASSES
+from .registry import term_classes
 from .timing import TermClock
 
 
@@ -93,7 +93,7 @@ class ForceField:
         self.rod_charge = state.rod_charge
         self.n_tips = state.n_tips
         self.n_rods = state.n_rods
-        self.terms = [TERM_CLASSES[name](params, state) for name in params.forces.active()]
+        self.terms = [cls(params, state) for name in params.forces.active() for cls in term_classes(name)]
         self.channels = [c for t in self.terms for c in t.channels]
         self.field_sources = [t for t in self.terms if isinstance(t, FieldSource)]
         for t in self.terms:
