@@ -226,3 +226,13 @@ def test_case2_scene_is_symmetric_under_rotation_about_x_with_tips_swapped():
     np.testing.assert_allclose(b.state.position, _mirror(a.state.position), rtol=0, atol=1e-10)
     assert [r[:3] for r in a.events] == [r[:3] for r in b.events]
     assert ev.OPEN_CIRCUIT in [r[2] for r in a.events]
+
+
+def test_a_failure_in_the_dipoles_channels_names_their_scenario_keys():
+    """A run stopped by a non-finite or out-of-scale force names the keys behind the channel that
+    failed; the dipole's channels are named after its parts, not after its table."""
+    from selfas_graph.model.health import _term_keys
+
+    assert "forces.external_dipole.line_charge" in _term_keys("external_line_charge")
+    assert "forces.external_dipole.magnetic_charge" in _term_keys("external_monopoles")
+    assert "forces.external_dipole.magnetic_charge" in _term_keys("external_monopole_brake")
