@@ -56,7 +56,7 @@ def main(argv=None):
     print(machine_line())
     sim, note = load_state(args)
     print(note)
-    term = next((t for t in sim.force_field.terms if t.name == "external_dipole"), None)
+    term = next((t for t in sim.force_field.terms if t.name == "external_line_charge"), None)
     if term is None:
         raise SystemExit("the scene has no [forces.external_dipole]: no line charge to measure")
     pos = sim.state.position
