@@ -53,13 +53,15 @@ def _save(fig, path):
 
 def series_panels(summary) -> list:
     """The measures of :data:`SERIES_MEASURES` the study has, a value somewhere (no R_plas without a
-    plasma filament: the median distance from the axis takes its panel)."""
+    plasma filament: the median distance from the axis takes its panel; the alignment panel wherever
+    the largest structure's or the free rods' alignment has one)."""
 
     def present(m):
         return m in summary["measures"] and any(x is not None for row in summary["measures"][m]["values"] for x in row)
 
     names = [m if present(m) or m != "inside_R_plas" else "median_axis_distance" for m in SERIES_MEASURES]
-    return [m for m in names if present(m)]
+    # the alignment panel also draws the rods in no structure (all of them where none stick)
+    return [m for m in names if present(m) or (m == "largest_alignment" and present("free_alignment"))]
 
 
 def plot_series(summary, out, title) -> Path:

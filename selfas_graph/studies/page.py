@@ -168,7 +168,8 @@ def measure_text(summary, measure, t) -> str:
         s = plain_stat(v, _values(summary, FIT_ERRORS[measure], t))
         if s["n"] == 0:
             return "not testable at this size (no fit over a factor 4 in scale)"
-        return _pm(s) if s["n"] == len(v) else f"{_pm(s)}; not testable in {len(v) - s['n']} seeds"
+        k = len(v) - s["n"]
+        return _pm(s) if not k else f"{_pm(s)}; not testable in {k} seed{'' if k == 1 else 's'}"
     return _pm(plain_stat(v))
 
 

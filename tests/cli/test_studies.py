@@ -283,6 +283,9 @@ def test_a_study_table_words_its_circuit_by_the_scene_and_leaves_out_measures_it
     assert series_panels(fig8) == ["total_current", "median_axis_distance", "largest_alignment"]
     fig8["measures"]["inside_R_plas"] = {"values": [[0.5], [None]]}
     assert series_panels(fig8) == ["total_current", "inside_R_plas", "largest_alignment"]
+    fig8["measures"]["largest_alignment"] = {"values": [[None], [None]]}  # no structure: free rods only
+    fig8["measures"]["free_alignment"] = {"values": [[0.3], [0.4]]}
+    assert "largest_alignment" in series_panels(fig8)
     assert "wall time a seed 1-2 min" in provenance_text(fig8)
     for s in fig8["seeds"]:
         s["wall_seconds"] = 120.0
