@@ -2,7 +2,8 @@
 
 ``docs/studies.toml`` names each study (a scenario, overrides, seeds, end time, the times to
 summarise) and each claim. ``study run NAME`` runs the study's seeds into ``RUNS/NAME/`` (the
-``ensemble`` command with the study's arguments: resumable, locked, the same files);
+``ensemble`` command with the study's arguments: resumable, locked, the same files; several
+studies' seeds share one pool of ``--jobs`` workers, so no worker waits for the end of a study);
 ``study summarise NAME`` reads the run files and writes the study's small summary
 ``docs/results/NAME.json`` (per-seed values of every measure at every time, the short-circuit
 episodes at event time, and the version, commit, CPU, threads and wall time of the runs) and its
@@ -61,6 +62,84 @@ def _pick(studies, names):
         raise CliError(str(exc)) from None
 
 
+def _run_together(picked, args) -> int:
+    """``study run A B ...``: the seeds of the ensemble studies ``picked`` in one pool of ``--jobs``
+    workers (local processes or the ranks of ``mpiexec``), each study's folder locked throughout;
+    then each folder's ensemble summary, as ``selfas-graph ensemble`` writes it."""
+    import sys
+    import time
+
+    from ..ensemble import EnsembleError, write_summary
+    from ..parallel import task_pool
+    from ..studies import run_studies
+    from .main import EXIT_NUMERICAL
+
+    with task_pool(args.jobs) as pool:
+        if pool.is_worker:
+            return 0  # an MPI rank that ran seeds for rank 0
+        where = (
+            f"{pool.workers} MPI worker ranks"
+            if pool.mpi
+            else "this process"
+            if pool.serial
+            else f"{pool.workers} processes x {pool.threads} numba threads"
+        )
+        done, total = [0], [0]
+
+        def report(r):
+            done[0] += 1
+            extra = f": {r['message']}" if r.get("message") else ""
+            t = f" at t = {r['t']:.6g}" if r.get("t") is not None else ""
+            print(
+                f"[{done[0]}/{total[0]}] {Path(r.get('path', '?')).parent.name} seed {r.get('seed', '?')}: "
+                f"{r.get('status')}{t} ({r.get('wall_seconds', 0.0):.1f} s){extra}",
+                flush=True,
+            )
+
+        def announce(planned):  # each study's plan, before the first seed starts
+            for ens, plan in planned:
+                count = {a: sum(p.action == a for p in plan) for a in ("run", "resume", "done", "failed")}
+                total[0] += count["run"] + count["resume"]
+                print(
+                    f"study {ens.folder.name}: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {ens.t_end:g}: "
+                    f"{count['run']} to run, {count['resume']} to resume, {count['done']} done, "
+                    f"{count['failed']} failed",
+                    flush=True,
+                )
+            print(f"{total[0]} seeds of {len(planned)} studies on {where}", flush=True)
+
+        started = time.perf_counter()
+        try:
+            ran = run_studies(picked, args.runs, pool=pool, force=args.force, report=report, announce=announce)
+        except EnsembleError as exc:
+            raise CliError(str(exc)) from None
+    print(f"ran {done[0]} seeds in {time.perf_counter() - started:.1f} s", flush=True)
+    statuses = []
+    for ens, results in ran:
+        statuses += [r.get("status") if r is not None else None for r in results]
+        summary = ens.summarise()
+        if summary["n_seeds"]:
+            try:
+                js, _ = write_summary(summary, ens.folder)
+            except (EnsembleError, OSError) as exc:
+                raise CliError(f"cannot write the summary into {ens.folder}: {exc}") from None
+            print(f"study {ens.folder.name}: wrote {js} (selfas-graph study summarise {ens.folder.name}: the page's)")
+    if "io_error" in statuses:
+        print(
+            "selfas-graph study run: a seed could not write its file (above); every seed file keeps its frames "
+            "and checkpoint: free some space (or fix the folder) and run the same command again to continue",
+            file=sys.stderr,
+        )
+        return 130
+    if "interrupted" in statuses or None in statuses:
+        print("selfas-graph study run: interrupted; run the same command again to continue", file=sys.stderr)
+        return 130
+    if "error" in statuses:
+        print("selfas-graph study run: some seeds stopped with an error (above)", file=sys.stderr)
+        return 1
+    return EXIT_NUMERICAL if "failed" in statuses else 0
+
+
 def run(args):
     studies = _studies(args)
     if args.action == "list":
@@ -74,7 +153,14 @@ def run(args):
         from .main import main
 
         code = 0
-        for s in _pick(studies, args.names):
+        picked = _pick(studies, args.names)
+        several = [s for s in picked if s.kind != "percolation"]
+        if len(several) > 1:  # their seeds in one pool: no worker waits for the end of a study
+            code = _run_together(several, args)
+            if code in (2, 4, 130):
+                return code
+            picked = [s for s in picked if s.kind == "percolation"]
+        for s in picked:
             if s.kind == "percolation":
                 out = Path(args.runs) / s.name / PERCOLATION_JSON
                 if out.exists() and not args.force:

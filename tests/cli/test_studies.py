@@ -303,3 +303,60 @@ def test_case_ii_flux_is_also_given_over_the_external_dipoles_flux():
     dipole = {"forces": {"external_dipole": {"magnetic_charge": -10.0}}}
     assert fn(SimpleNamespace(params=dipole, _study_flux=2.5)) == 0.25
     assert math.isnan(fn(SimpleNamespace(params={"forces": {}}, _study_flux=2.5)))
+
+
+def test_several_studies_run_in_one_pool_and_again_run_nothing(tmp_path):
+    """`study run a b --jobs 2`: the seeds of both studies share the two workers (no worker waits for
+    the end of a study), each folder gets its seed files and ensemble summary; run again, nothing
+    is left to run."""
+    quick = (ROOT / "scenarios" / "quick.toml").as_posix()
+    (tmp_path / "studies.toml").write_text(
+        "".join(
+            f"""
+[study.{name}]
+title = "Quick scene {name}"
+scenario = "{quick}"
+overrides = ["rods.count=40"{extra}]
+seeds = {seeds}
+t_end = 0.2
+every = 0.1
+table_times = [0.2]
+"""
+            for name, extra, seeds in (("a", "", 3), ("b", ', "circuit.delta_J0=1.5"', 1))
+        )
+    )
+    cli = _study_cli(tmp_path)
+    out = cli("run", "a", "b", "--runs", "runs", "--jobs", "2")
+    assert "4 seeds of 2 studies on 2 processes" in out, out
+    assert "[4/4]" in out and "a seed 3: finished" in out and "b seed 1: finished" in out
+    for name, seeds in (("a", 3), ("b", 1)):
+        folder = tmp_path / "runs" / name
+        assert sorted(p.name for p in folder.glob("seed_*[0-9].h5")) == [
+            f"seed_{k:04d}.h5" for k in range(1, seeds + 1)
+        ]
+        assert (folder / "summary.json").exists() and not (folder / ".ensemble.lock").exists()
+    again = cli("run", "a", "b", "--runs", "runs", "--jobs", "2")
+    assert "0 seeds of 2 studies" in again and "3 done" in again
+
+
+def test_an_unusable_seed_file_in_one_study_stops_all_before_anything_runs(tmp_path):
+    quick = (ROOT / "scenarios" / "quick.toml").as_posix()
+    (tmp_path / "studies.toml").write_text(
+        "".join(
+            f'\n[study.{n}]\nscenario = "{quick}"\noverrides = ["rods.count=40"]\nseeds = 1\nt_end = 0.1\n'
+            for n in ("a", "b")
+        )
+    )
+    (tmp_path / "runs" / "b").mkdir(parents=True)
+    (tmp_path / "runs" / "b" / "seed_0001.h5").write_text("not a run file")
+    res = subprocess.run(
+        [sys.executable, "-m", "selfas_graph.cli.main", "study", "run", "a", "b", "--runs", "runs", "--jobs", "2"]
+        + ["--studies", "studies.toml"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert res.returncode == 2 and "seed_0001.h5" in res.stderr, res.stdout + res.stderr
+    assert not list((tmp_path / "runs" / "a").glob("seed_*.h5"))  # nothing ran
+    assert (tmp_path / "runs" / "b" / "seed_0001.h5").read_text() == "not a run file"  # nothing overwritten
