@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import sys
 import time
+from pathlib import Path
 
 from ..ensemble import Ensemble, EnsembleError, format_table, write_summary
 from ..parallel import task_pool
@@ -115,6 +116,40 @@ def add_arguments(p):
     )
 
 
+def pool_text(pool) -> str:
+    """Where the seeds run, as the commands print it."""
+    if pool.mpi:
+        return f"{pool.workers} MPI worker ranks"
+    if pool.serial:
+        import numba
+
+        return f"this process ({numba.get_num_threads()} numba threads)"
+    return f"{pool.workers} processes x {pool.threads} numba threads"
+
+
+class SeedReport:
+    """The ``report`` of :func:`~selfas_graph.ensemble.run_tasks` of the commands: one line as each
+    seed ends, ``[k/total] [FOLDER ]seed S: what at t = T (W s): message`` (``folders``: the seed
+    file's folder first, for seeds of several ensembles). ``total`` may be set once known."""
+
+    WORDS = {"io_error": "stopped by an I/O error"}
+
+    def __init__(self, total=0, folders=False):
+        self.done, self.total, self.folders = 0, total, folders
+
+    def __call__(self, r):
+        self.done += 1
+        what = self.WORDS.get(r.get("status"), str(r.get("status")))
+        extra = f": {r['message']}" if r.get("message") else ""
+        t = f" at t = {r['t']:.6g}" if r.get("t") is not None else ""
+        where = f"{Path(r.get('path', '?')).parent.name} " if self.folders else ""
+        print(
+            f"[{self.done}/{self.total}] {where}seed {r.get('seed', '?')}: {what}{t} "
+            f"({r.get('wall_seconds', 0.0):.1f} s){extra}",
+            flush=True,
+        )
+
+
 def run(args):
     with task_pool(args.jobs) as pool:
         if pool.is_worker:
@@ -153,8 +188,6 @@ def _run(args, pool):
 
 
 def _run_locked(args, pool, held):
-    from pathlib import Path
-
     if args.grid:
         return _run_grid(args, pool, held)
     try:
@@ -180,14 +213,7 @@ def _run_locked(args, pool, held):
     if times is not None and max(times) > ens.t_end:
         raise CliError(f"--times {max(times):g} is after the end time {ens.t_end:g}; give times up to it")
     count = {a: sum(p.action == a for p in plans) for a in ("run", "resume", "done", "failed", "partial")}
-    if pool.mpi:
-        where = f"{pool.workers} MPI worker ranks"
-    elif pool.serial:
-        import numba
-
-        where = f"this process ({numba.get_num_threads()} numba threads)"
-    else:
-        where = f"{pool.workers} processes x {pool.threads} numba threads"
+    where = pool_text(pool)
     p = ens.base.params
     print(
         f"{p.scenario.name}: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {ens.t_end:g} in {folder}/: "
@@ -204,25 +230,7 @@ def _run_locked(args, pool, held):
         _make(folder)
         _lock(folder, held)
         tasks = ens.tasks(plans)
-        done = [0]
-
-        def report(r):
-            done[0] += 1
-            what = {
-                "finished": "finished",
-                "interrupted": "interrupted",
-                "failed": "failed",
-                "error": "error",
-                "io_error": "stopped by an I/O error",
-            }.get(r.get("status"), str(r.get("status")))
-            extra = f": {r['message']}" if r.get("message") else ""
-            t = f" at t = {r['t']:.6g}" if r.get("t") is not None else ""
-            print(
-                f"[{done[0]}/{len(tasks)}] seed {r.get('seed', '?')}: {what}{t} "
-                f"({r.get('wall_seconds', 0.0):.1f} s){extra}",
-                flush=True,
-            )
-
+        report = SeedReport(len(tasks))
         t0 = time.perf_counter()
         from ..ensemble import run_seed, run_tasks
 
@@ -275,8 +283,6 @@ def _run_locked(args, pool, held):
 
 def _run_grid(args, pool, held):
     """``--grid``: an ensemble at every grid point, all seeds in one pool, the combined summary."""
-    from pathlib import Path
-
     from ..ensemble import run_seed, run_tasks, write_summary
     from ..grid import GRID_PNG, Grid, parse_grid, plot_grid, write_grid_summary
 

@@ -72,48 +72,33 @@ def _run_together(picked, args) -> int:
     from ..ensemble import EnsembleError, write_summary
     from ..parallel import task_pool
     from ..studies import run_studies
+    from .ensemble import SeedReport, pool_text
     from .main import EXIT_NUMERICAL
 
     with task_pool(args.jobs) as pool:
         if pool.is_worker:
             return 0  # an MPI rank that ran seeds for rank 0
-        where = (
-            f"{pool.workers} MPI worker ranks"
-            if pool.mpi
-            else "this process"
-            if pool.serial
-            else f"{pool.workers} processes x {pool.threads} numba threads"
-        )
-        done, total = [0], [0]
-
-        def report(r):
-            done[0] += 1
-            extra = f": {r['message']}" if r.get("message") else ""
-            t = f" at t = {r['t']:.6g}" if r.get("t") is not None else ""
-            print(
-                f"[{done[0]}/{total[0]}] {Path(r.get('path', '?')).parent.name} seed {r.get('seed', '?')}: "
-                f"{r.get('status')}{t} ({r.get('wall_seconds', 0.0):.1f} s){extra}",
-                flush=True,
-            )
+        where = pool_text(pool)
+        report = SeedReport(folders=True)
 
         def announce(planned):  # each study's plan, before the first seed starts
             for ens, plan in planned:
                 count = {a: sum(p.action == a for p in plan) for a in ("run", "resume", "done", "failed")}
-                total[0] += count["run"] + count["resume"]
+                report.total += count["run"] + count["resume"]
                 print(
                     f"study {ens.folder.name}: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {ens.t_end:g}: "
                     f"{count['run']} to run, {count['resume']} to resume, {count['done']} done, "
                     f"{count['failed']} failed",
                     flush=True,
                 )
-            print(f"{total[0]} seeds of {len(planned)} studies on {where}", flush=True)
+            print(f"{report.total} seeds of {len(planned)} studies on {where}", flush=True)
 
         started = time.perf_counter()
         try:
             ran = run_studies(picked, args.runs, pool=pool, force=args.force, report=report, announce=announce)
         except EnsembleError as exc:
             raise CliError(str(exc)) from None
-    print(f"ran {done[0]} seeds in {time.perf_counter() - started:.1f} s", flush=True)
+    print(f"ran {report.done} seeds in {time.perf_counter() - started:.1f} s", flush=True)
     statuses = []
     for ens, results in ran:
         statuses += [r.get("status") if r is not None else None for r in results]
