@@ -140,7 +140,7 @@ def load_state(args):
             snap, meta = read_checkpoint(args.checkpoint)
         except CheckpointError as exc:
             if "checksum" not in str(exc):
-                raise
+                raise SystemExit(str(exc)) from None  # a missing or unreadable file: its message, no traceback
             import h5py
 
             with h5py.File(args.checkpoint, "r") as f:
@@ -153,7 +153,12 @@ def load_state(args):
         sc = scenario_from_text(meta["scenario_text"], overrides=json.loads(meta["overrides"]) + list(args.extra))
         sim = Simulation.from_snapshot(sc.params, snap)
         return sim, f"checkpoint {args.checkpoint} at t = {float(snap['time']):.3f}{note}"
-    sc = load_scenario(args.scenario, overrides=args.extra)
+    from selfas_graph.io.scenario import ScenarioError
+
+    try:
+        sc = load_scenario(args.scenario, overrides=args.extra)
+    except ScenarioError as exc:
+        raise SystemExit(str(exc)) from None
     sim = Simulation.from_scenario(sc)
     sim.step(args.settle)
     return sim, f"{args.scenario} after {args.settle} steps"

@@ -30,3 +30,10 @@ def test_points_table_on_a_fig8_state(capsys):
 def test_a_scene_without_the_line_charge_is_refused():
     with pytest.raises(SystemExit, match="no \\[forces.external_dipole\\]"):
         _tool().main(["--scenario", str(ROOT / "scenarios" / "quick.toml"), "--set", "rods.count=20", "--rounds", "1"])
+
+
+def test_a_missing_checkpoint_or_a_bad_scene_is_refused_by_name(tmp_path):
+    with pytest.raises(SystemExit, match="no such checkpoint file"):
+        _tool().main(["--checkpoint", str(tmp_path / "none.checkpoint.h5")])
+    with pytest.raises(SystemExit, match="rods.count"):
+        _tool().main(["--scenario", str(ROOT / "scenarios" / "fig8_quick.toml"), "--set", "rods.count=-3"])
