@@ -4,6 +4,7 @@ Usage: selfas-graph bench profile --checkpoint RUN.checkpoint.h5 [--steps 2000] 
        selfas-graph bench profile --kernels [--rounds 8] [--steps 3000]
        selfas-graph bench profile --scenario scenarios/fig2.toml --settle 2000 [--steps 2000]
        selfas-graph bench profile --checkpoint RUN.checkpoint.h5 --before REF [--rounds 8] [--steps 250]
+       selfas-graph bench profile --checkpoint RUN.checkpoint.h5 --steps 3000 --sample
 
 Steps the simulation ``--steps`` times after 48 warm-up steps under cProfile on the thread's CPU
 clock (on a machine loaded by other jobs the wall clock counts their time too), and sorts the time
@@ -13,6 +14,13 @@ rest (integrator, force-field bookkeeping, numpy glue). Kernel calls are counted
 per call and the calls per step are both printed. The profile adds some overhead per Python call
 (about 1 us); the first line gives the CPU time per step without it, measured on the same steps'
 successors.
+
+``--sample`` also runs ``--steps`` more steps under Linux ``perf`` (sampling the CPU clock of every
+thread, when ``perf`` is installed and allowed) and splits their CPU time by the code it runs in:
+numba's compiled kernels, the Python interpreter, numpy, numba's dispatch, scipy, the C library, the
+operating system. Sampling costs nothing per call, so this is the measure of the glue's share; the
+profiled table above charges the profiler's own cost of each Python call (two reads of the thread's
+clock, about 1.6 us) to the Python parts.
 
 A checkpoint is read as the run left it (read only: a copy of a running job's checkpoint is
 fine). One written by an older version without a checksum is read without verification, with a
@@ -162,6 +170,100 @@ def load_state(args):
     sim = Simulation.from_scenario(sc)
     sim.step(args.settle)
     return sim, f"{args.scenario} after {args.settle} steps"
+
+
+#: (part, test on the path of a shared object as ``perf report -v --sort dso`` names it) in order; the
+#: first match wins. Numba's compiled code has no file: perf names it ``[JIT] tid N`` (``perf-N.map``
+#: with ``-v``, from the map numba's LLVM leaves).
+SAMPLED_PARTS = [
+    (
+        "compiled kernels (numba)",
+        lambda d: d.startswith("[JIT]") or (Path(d).name.startswith("perf-") and d.endswith(".map")),
+    ),
+    ("Python interpreter", lambda d: "libpython" in d or "lib-dynload" in d or Path(d).name.startswith("python")),
+    ("numpy", lambda d: "/numpy/" in d or "numpy.libs" in d),
+    (
+        "numba's dispatch, runtime and threads",
+        lambda d: "/numba/" in d or any(k in d for k in ("libgomp", "libiomp", "libtbb")),
+    ),
+    ("scipy (the circuit's sparse solve)", lambda d: "/scipy/" in d or "scipy.libs" in d),
+    ("HDF5", lambda d: "h5py" in d or "hdf5" in d),
+    (
+        "C library (allocation, memory copies, maths)",
+        lambda d: any(k in Path(d).name for k in ("libc.", "libm.", "ld-linux", "libstdc++", "libgcc")),
+    ),
+    ("operating system", lambda d: d.startswith("[kernel") or d in ("[vdso]", "[vsyscall]")),
+    ("other", lambda d: True),
+]
+#: the parts that count as Python and numpy, the glue around the kernels; the C library's share
+#: (the allocations and copies of numpy and of numba's runtime alike) is an upper bound beside them
+GLUE_PARTS = ("Python interpreter", "numpy", "numba's dispatch, runtime and threads")
+
+
+def sampled_part_of(dso: str) -> str:
+    """The part of :data:`SAMPLED_PARTS` a shared object (its path) belongs to."""
+    for part, test in SAMPLED_PARTS:
+        if test(dso):
+            return part
+    return SAMPLED_PARTS[-1][0]
+
+
+def parse_dso_samples(report: str) -> dict:
+    """{shared object: samples} from ``perf report --stdio -v --sort dso -F sample,dso`` text."""
+    counts = {}
+    for line in report.splitlines():
+        fields = line.split(None, 1)
+        if len(fields) == 2 and fields[0].isdigit() and not line.lstrip().startswith("#"):
+            counts[fields[1].strip()] = counts.get(fields[1].strip(), 0) + int(fields[0])
+    return counts
+
+
+def sampled_shares(counts: dict) -> dict:
+    """{part: share of the samples} of :func:`parse_dso_samples`' counts, in :data:`SAMPLED_PARTS` order."""
+    total = sum(counts.values())
+    shares = dict.fromkeys((p for p, _ in SAMPLED_PARTS), 0.0)
+    for dso, n in counts.items():
+        shares[sampled_part_of(dso)] += n / total if total else 0.0
+    return shares
+
+
+def sample(sim, steps, frequency=4000):
+    """``({shared object: samples}, None)`` of ``steps`` steps of ``sim`` sampled by Linux perf on the
+    CPU clock (every thread of this process), or ``(None, why not)``.
+
+    The split of the CPU time by the code it runs in, without cProfile's cost per Python call (which
+    lands in the Python parts of the profiled table): perf attaches to this process, the steps run,
+    perf stops. The process sleeps while perf starts and stops, and a sleeping thread draws no sample.
+    """
+    perf = shutil.which("perf")
+    if perf is None:
+        return None, "perf not found (Debian and Ubuntu: the linux-perf or linux-tools package)"
+    import signal
+
+    with tempfile.TemporaryDirectory() as tmp:
+        data = Path(tmp) / "perf.data"
+        rec = [perf, "record", "-q", "-e", "cpu-clock", "-F", str(frequency), "-p", str(os.getpid()), "-o", str(data)]
+        proc = subprocess.Popen(rec, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        for _ in range(50):  # perf writes its file's header once it is attached
+            if proc.poll() is not None or (data.exists() and data.stat().st_size > 0):
+                break
+            time.sleep(0.1)
+        time.sleep(0.2)
+        if proc.poll() is not None:
+            err = proc.stderr.read().strip().splitlines()
+            return None, "perf record failed: " + (err[0] if err else f"exit {proc.returncode}")
+        sim.step(steps)
+        proc.send_signal(signal.SIGINT)
+        proc.communicate()
+        report = subprocess.run(
+            [perf, "report", "-i", str(data), "--stdio", "-v", "--sort", "dso", "-F", "sample,dso"],
+            capture_output=True,
+            text=True,
+        )
+    counts = parse_dso_samples(report.stdout)
+    if not counts:
+        return None, "perf recorded no samples (too few steps?)"
+    return counts, None
 
 
 def part_of(key):
@@ -368,6 +470,12 @@ def main(argv=None):
     ap.add_argument(
         "--kernels", action="store_true", help="time the fused every-step kernels against the calls they replaced"
     )
+    ap.add_argument(
+        "--sample",
+        action="store_true",
+        help="also sample --steps more steps with Linux perf: the CPU time by the code it runs in "
+        "(compiled kernels, Python, numpy, ...), without the profiler's cost per Python call",
+    )
     ap.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.serve:
@@ -414,6 +522,28 @@ def main(argv=None):
     print(f"| total (profiled) | {1e3 * total / args.steps:.3f} | 100 % |\n")
     top = sorted(calls.items(), key=lambda kv: -kv[1])
     print("kernel calls per 1000 steps: " + ", ".join(f"{k} {1000 * v / args.steps:.0f}" for k, v in top[:14]))
+    shares = None
+    if args.sample:
+        counts, why = sample(sim, args.steps)
+        if counts is None:
+            print(f"\nno sampled profile: {why}")
+        else:
+            shares = sampled_shares(counts)
+            print(
+                f"\nCPU time by the code it runs in, {args.steps} more steps sampled by perf ({sum(counts.values())} "
+                "samples, no cost per Python call):\n"
+            )
+            print("| code | share |")
+            print("|---|---|")
+            for part, share in shares.items():
+                if share > 0.0:
+                    print(f"| {part} | {100 * share:.1f} % |")
+            glue = sum(shares[p] for p in GLUE_PARTS)
+            libc = shares["C library (allocation, memory copies, maths)"]
+            print(
+                f"\nPython and numpy ({', '.join(GLUE_PARTS)}): {100 * glue:.1f} %; with the C library's "
+                f"allocations and copies, at most {100 * (glue + libc):.1f} %"
+            )
     if args.json:
         Path(args.json).write_text(
             json.dumps(
@@ -425,6 +555,7 @@ def main(argv=None):
                     "active_rods": active,
                     "parts_ms_per_step": {k: 1e3 * v / args.steps for k, v in parts.items()},
                     "kernel_calls": calls,
+                    "sampled_shares": shares,
                 },
                 indent=1,
             )

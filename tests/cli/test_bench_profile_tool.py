@@ -46,3 +46,41 @@ def test_checks_tool_times_both_checks(capsys):
     )
     assert len(got) == 2 and all(v[0] > 0 and v[1] > 0 for v in got.values())
     assert "compiles for" in capsys.readouterr().out
+
+
+_REPORT = """# Samples: 100 of event 'cpu-clock'
+#
+#       Samples  Shared Object
+# ............  .............
+#
+            80  /tmp/perf-4242.map
+             6  /root/.pyenv/versions/3.11.7/lib/libpython3.11.so.1.0
+             5  /v/lib/python3.11/site-packages/numpy/_core/_multiarray_umath.cpython-311-x86_64-linux-gnu.so
+             1  /v/lib/python3.11/site-packages/numba/_dispatcher.cpython-311-x86_64-linux-gnu.so
+             2  /v/lib/python3.11/site-packages/scipy/sparse/linalg/_dsolve/_superlu.cpython-311-x86_64-linux-gnu.so
+             4  /usr/lib/x86_64-linux-gnu/libc.so.6
+             2  [kernel.kallsyms]
+"""
+
+
+def test_sampled_shares_sort_each_shared_object_into_its_part():
+    tool = _tool()
+    counts = tool.parse_dso_samples(_REPORT)
+    assert sum(counts.values()) == 100 and counts["/tmp/perf-4242.map"] == 80
+    shares = tool.sampled_shares(counts)
+    assert shares["compiled kernels (numba)"] == 0.80
+    assert shares["Python interpreter"] == 0.06 and shares["numpy"] == 0.05
+    assert shares["numba's dispatch, runtime and threads"] == 0.01
+    assert shares["scipy (the circuit's sparse solve)"] == 0.02
+    assert shares["C library (allocation, memory copies, maths)"] == 0.04
+    assert shares["operating system"] == 0.02 and shares["other"] == 0.0
+    assert tool.sampled_part_of("[JIT] tid 4242") == "compiled kernels (numba)"
+    assert tool.sampled_part_of("/usr/bin/python3.11") == "Python interpreter"
+
+
+def test_sampled_profile_or_its_reason(capsys):
+    """With perf installed and allowed, the sampled table; without, one line saying why (no traceback)."""
+    tool = _tool()
+    tool.main(["--scenario", str(ROOT / "scenarios" / "quick.toml"), "--settle", "4", "--steps", "40", "--sample"])
+    out = capsys.readouterr().out
+    assert ("| compiled kernels (numba) |" in out and "Python and numpy (" in out) or "no sampled profile: " in out
