@@ -78,6 +78,9 @@ KNOBS = {
         {"forces.external_dipole.quadrature_points": 128},
     ),
     "forces.external_dipole.line_charge_slow": ([False, True], {"integrator.slow_every": 1}),
+    # the rod-current terms every M steps (0: with the other slow sums), each against no splitting: the
+    # row at 0 is the other slow terms' own error
+    "integrator.current_every": ([0, 32, 48, 64], {"integrator.slow_every": 1}),
 }
 
 
@@ -98,7 +101,7 @@ TREE_KNOBS = ("forces.tip_magnetic.opening_angle", "forces.tip_magnetic.order")
 
 
 def _applicable(scenario, knob):
-    if knob in ("integrator.fast_range", "forces.external_dipole.line_charge_slow") and (
+    if knob in ("integrator.fast_range", "forces.external_dipole.line_charge_slow", "integrator.current_every") and (
         scenario.params.integrator.slow_every == 1
     ):
         return False  # they split nothing without multiple time stepping

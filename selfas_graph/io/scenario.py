@@ -423,6 +423,13 @@ def check_consistency(p: P.Parameters):
                 f"rods.length: the shortest rod ({shortest:g}) is shorter than its diameter "
                 f"rods.diameter = {rods.diameter:g}"
             )
+    ip = p.integrator
+    if ip.current_every and (ip.slow_every == 1 or ip.current_every % ip.slow_every):
+        out.append(
+            f"integrator.current_every: {ip.current_every} must be 0 (with the other slow forces) or a multiple of "
+            f"integrator.slow_every = {ip.slow_every} greater than 1 (e.g. {2 * max(ip.slow_every, 8)} with "
+            f"slow_every = {max(ip.slow_every, 8)})"
+        )
     el = p.forces.electrodes
     if el is not None:
         zlo, zhi = box[2]

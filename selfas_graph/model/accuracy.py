@@ -55,6 +55,15 @@ ACCURACY_RULES = (
         lambda p: p.integrator.slow_every == 1,
     ),
     AccuracyRule(
+        "integrator.current_every",
+        "0: the rod-current terms with the other slow sums (docs/performance.md 'Multiple time stepping: "
+        "the slow sums every K steps')",
+        lambda p: (
+            p.integrator.slow_every > 1 and (p.forces.current_field is not None or p.forces.current_lorentz is not None)
+        ),
+        lambda p: p.integrator.current_every in (0, p.integrator.slow_every),
+    ),
+    AccuracyRule(
         "forces.tip_magnetic.opening_angle",
         "<= 0.475 with order 4 (median relative force error 5e-4 to 8e-4; docs/performance.md 'Tip-tip force by a multipole tree')",
         lambda p: p.forces.tip_magnetic is not None and p.forces.tip_magnetic.method != "direct",

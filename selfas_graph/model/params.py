@@ -188,6 +188,15 @@ class IntegratorParams:
         ge=1,
         le=1000,
     )
+    current_every: int = spec(
+        0,
+        "with slow_every > 1: evaluate the rod-current terms 9 and 10 every this many steps (a multiple of "
+        "slow_every; still on the first step after the currents change) and extrapolate them in between like "
+        "the other slow forces; 0 evaluates them with the other slow forces, every slow_every steps; an "
+        "accuracy knob (docs/model.md 'Multiple time stepping (`integrator.slow_every`)')",
+        ge=0,
+        le=100000,
+    )
     slow_extrapolation: bool = spec(
         True,
         "with slow_every > 1: extrapolate the slow forces linearly in time from the last two full "

@@ -239,6 +239,8 @@ class ForceField:
             if t.slow:
                 if not (full or t.name in mts.stale):  # without mts, full is always True
                     continue
+                if mts is not None and mts.skips(t.name, step):  # integrator.current_every
+                    continue
                 refreshed.append(t.name)
             compute(ctx, out)
             if not t.counts_own_calls:

@@ -6,7 +6,9 @@ pairs, the Yukawa sum, the rod-current terms) are evaluated on full evaluations 
 between, their forces are held, or extrapolated linearly in time from their last two full
 evaluations. The tip-tip force is split: its close pairs (within the fast range) are
 evaluated at every step, its far part (``tip_far``) is held. A slow term whose inputs
-changed (new currents) is *stale* and is computed at the next evaluation, full or not.
+changed (new currents) is *stale* and is computed at the next evaluation, full or not. With
+``integrator.current_every = M`` (a multiple of K) the terms that read the currents are computed only
+on the full evaluations of every M-th step (and when stale), and extrapolated on the others.
 """
 
 from __future__ import annotations
@@ -51,6 +53,14 @@ class MultipleTimeStepping:
         #: slow terms whose inputs changed (new currents): computed at the next evaluation, full or not
         self.stale = set(self.slow_keys)
         self._uses_currents = [t.name for t in terms if t.slow and t.uses_currents]
+        #: steps between the full evaluations of the terms that read the currents (``current_every``, or K)
+        self.current_every = ip.current_every or ip.slow_every
+        #: each held array's own interval between evaluations: the longest gap across which a rate is taken is twice it
+        self._interval = {
+            key: (self.current_every if name in self._uses_currents else self.slow_every)
+            for name, keys in self.slow_keys.items()
+            for key in keys
+        }
         #: the held arrays by name (fixed objects, written in place): what held_forces returns
         self._held = {
             key: (self.tip_far if key == "tip_far" else self.out[key])
@@ -68,6 +78,18 @@ class MultipleTimeStepping:
             self._rate = {k: self._rate_block[j] for j, k in enumerate(keys)}
             self._base_step = {k: None for k in self._base}
             self._steps = np.full(len(keys), np.nan)
+
+    def skips(self, name, step) -> bool:
+        """Whether the full evaluation at ``step`` leaves the slow term ``name`` to be extrapolated: a term
+        that reads the currents, off its ``current_every`` pattern (counted from step 0, as K) and not
+        stale. Never inside the RK4 stages (``step`` None)."""
+        return (
+            self.current_every != self.slow_every
+            and step is not None
+            and step % self.current_every != 0
+            and name in self._uses_currents
+            and name not in self.stale
+        )
 
     def currents_changed(self) -> None:
         """New rod currents: the slow terms that read them are computed at the next evaluation."""
@@ -108,7 +130,7 @@ class MultipleTimeStepping:
             steps[j] = np.nan
             if key in refreshed:
                 gap = None if (prev is None or step is None or not full) else step - prev
-                if gap is not None and 0 < gap <= 2 * self.slow_every:
+                if gap is not None and 0 < gap <= 2 * self._interval[key]:
                     np.subtract(arr, base, out=rate)
                     rate /= gap
                 else:
