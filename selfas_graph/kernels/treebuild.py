@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from ._jit import njit, njit_parallel, prange
+from ._jit import njit, njit_parallel, njit_rows, prange
 
 #: bits of the Morton key per axis; also the depth cap of the tree
 KEY_BITS = 21
@@ -30,9 +30,13 @@ def _spread_bits(v):
     return v
 
 
-@njit_parallel
+@njit_rows
 def morton_keys(x, y, z, out):
     """63-bit Morton keys of points over the cube that holds them all.
+
+    Serial below ``_jit.PARALLEL_ROWS`` points: in parallel, its six extrema and the key loop are each a
+    parallel region, and waking the idle threads for them cost more than the loop (Zen 5, 48 000 tips,
+    2 threads: 0.46 against 0.16 ms on one). The keys are integers, the same in either build.
 
     Parameters
     ----------

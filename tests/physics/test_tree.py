@@ -243,6 +243,19 @@ def test_argsort_keys_is_the_stable_argsort():
         assert np.array_equal(argsort_keys(key), np.argsort(key, kind="stable"))
 
 
+def test_morton_keys_of_both_builds_agree():
+    """The serial and the parallel build of ``morton_keys`` (``njit_rows``) give the same integer keys."""
+    from selfas_graph.kernels.treebuild import morton_keys
+
+    rng = np.random.default_rng(13)
+    x, y, z = (rng.normal(size=1000) for _ in range(3))
+    keys = {}
+    for build in ("serial", "parallel"):
+        keys[build] = np.empty(1000, np.int64)
+        getattr(morton_keys, build)(x, y, z, keys[build])
+    assert np.array_equal(keys["serial"], keys["parallel"]) and len(np.unique(keys["serial"])) > 990
+
+
 def test_one_rod():
     """A single rod: its two tips do not interact, the force is exactly zero."""
     tips = rods_to_tips(np.zeros((1, 3)), np.array([[0, 0, 1.0]]), np.array([1.3]))
