@@ -107,13 +107,13 @@ class AdamsBashforth4:
         self.bond_error_before = float(d["bond_error_before"])
         self.bond_error_after = float(d["bond_error_after"])
 
-    def acceleration(self, position, velocity, out, power, full=True, step=None):
+    def acceleration(self, position, velocity, out, power, full=True, step=None, starting=False):
         """Tip accelerations (forces plus rigid bonds) at (position, velocity).
 
         ``full=False``: the slow forces are those held from the last full evaluation
-        (multiple time stepping, see :meth:`step`).
+        (multiple time stepping, see :meth:`step`); ``starting``: a step of the RK4 start.
         """
-        force = self.ff.evaluate(position, velocity, power, full=full, step=step)
+        force = self.ff.evaluate(position, velocity, power, full=full, step=step, starting=starting)
         bond_acceleration(force, velocity, position, self.exact_bond, out)
         return out
 
@@ -127,7 +127,7 @@ class AdamsBashforth4:
         # from step 0, so a resumed run keeps the pattern) and in the self-starting RK4 steps; in
         # between they are extrapolated (the current terms are also recomputed after new currents)
         full = state.step % self.slow_every == 0 or self.count < 3
-        self.acceleration(x, v, self.hist_a[h], self.hist_p[h], full=full, step=state.step)
+        self.acceleration(x, v, self.hist_a[h], self.hist_p[h], full=full, step=state.step, starting=self.count < 3)
         self.count = min(self.count + 1, 4)
         ell = state.bond_length()
         # the bond error of the updated positions is the step's own; the brakes below change velocities only

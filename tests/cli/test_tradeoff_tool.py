@@ -49,3 +49,21 @@ def test_tree_knobs_only_where_the_scene_takes_the_tree():
         assert not tool._applicable(quick, knob)
         assert tool._applicable(tree, knob) and tool._applicable(fig6, knob)
     assert tool._applicable(quick, "forces.tip_magnetic.precision")
+
+
+def test_current_every_applies_with_current_terms_and_a_refused_setting_is_a_row(tmp_path):
+    """integrator.current_every applies to a scene with multiple time stepping and current terms only;
+    a setting the scene refuses (here 12 with slow_every = 8) comes back as a failed row naming the key,
+    and the sweep goes on, instead of the tool stopping with a traceback."""
+    tool = _tool()
+    quick = load_scenario(ROOT / "scenarios" / "quick.toml")  # slow_every = 8, terms 9 and 10
+    no_currents = load_scenario(
+        ROOT / "scenarios" / "quick.toml", overrides=["forces.current_field=false", "forces.current_lorentz=false"]
+    )
+    assert tool._applicable(quick, "integrator.current_every")
+    assert not tool._applicable(no_currents, "integrator.current_every")
+    from selfas_graph import Simulation
+
+    snap = Simulation.from_scenario(quick).snapshot()
+    got = tool.run_once(str(ROOT / "scenarios" / "quick.toml"), ["integrator.current_every=12"], 0.01, snap)
+    assert got["failed"].startswith("refused: ") and "integrator.current_every" in got["failed"]

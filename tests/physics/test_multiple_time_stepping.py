@@ -276,26 +276,90 @@ def _current_sim(rng, slow_every, current_every, extrapolate=True):
 
 
 def test_current_every_evaluates_the_current_terms_every_mth_step(rng):
-    """Counted, not timed: with K = 4 and M = 12 the current terms run on the full evaluations of the
-    steps that are multiples of 12 and on the step after new currents, the tip-tip sum on every 4th;
-    between their evaluations the current forces are extrapolated (they change), not held."""
+    """Counted, not timed: with K = 4 and M = 12 the current terms run on the step after new currents,
+    on the next full evaluation (their first rate after the change), then on the full evaluations of
+    the multiples of 12 only, the tip-tip sum on every 4th; in between the current forces are
+    extrapolated from their last two evaluations, the same numbers as the held base plus rate times
+    the steps since."""
     s, sim = _current_sim(rng, 4, 12)
-    sim.step(4)  # RK4 start (steps 0-2, every term), step 3 fast
-    ff = sim.force_field
+    sim.step(4)  # RK4 start (steps 0-2), step 3 fast
+    ff, mts = sim.force_field, sim.force_field.mts
     ff.set_currents(np.linspace(0.5, 1.0, s.n_rods))
-    sim.step(1)  # step 4: full, and the currents are new: the current terms too
+    sim.step(1)  # step 4: full, and the currents are new: computed, no rate (a jump)
     calls = dict(ff.calls)
-    sim.step(8)  # steps 5-12: full at 8 (tip-tip only) and at 12 (everything)
-    assert ff.calls["tip_magnetic"] == calls["tip_magnetic"] + 2
-    assert ff.calls["current_field"] == calls["current_field"] + 1
-    assert ff.calls["current_lorentz"] == calls["current_lorentz"] + 1
-    sim.step(12)  # steps 13-24: full at 16 and 20 (tip-tip), 24 (everything)
+    assert not mts._rated["current_field"]
+    sim.step(4)  # steps 5-8: full at 8, not a multiple of 12, but the current terms have no rate yet
+    assert ff.calls["current_field"] == calls["current_field"] + 1 and mts._rated["current_field"]
+    sim.step(4)  # steps 9-12: full at 12, everything
     assert ff.calls["current_field"] == calls["current_field"] + 2
+    sim.step(12)  # steps 13-24: full at 16 and 20 (tip-tip only), 24 (everything)
+    assert ff.calls["current_field"] == calls["current_field"] + 3
+    assert ff.calls["current_lorentz"] == calls["current_lorentz"] + 3
     assert ff.calls["tip_magnetic"] == calls["tip_magnetic"] + 5
-    before = ff.out["current_field"].copy()
     sim.step(4)  # steps 25-28, full at 28 for the tip-tip sum: the current force extrapolated from 12 and 24
-    assert ff.calls["current_field"] == calls["current_field"] + 2
-    assert not np.array_equal(ff.out["current_field"], before)
+    assert ff.calls["current_field"] == calls["current_field"] + 3
+    assert mts._base_step["current_field"] == 24
+    want = mts._rate["current_field"] * 4.0 + mts._base["current_field"]
+    np.testing.assert_array_equal(ff.out["current_field"], want)
+    assert not np.array_equal(want, mts._base["current_field"])
+
+
+def test_current_every_new_currents_before_a_fast_step(rng):
+    """K = 4, M = 16: currents changed before a fast step are computed there with no rate, again at the
+    next full evaluation (the first rate after the change), and then only on the multiples of 16."""
+    s, sim = _current_sim(rng, 4, 16)
+    sim.step(17)  # RK4 start, steps up to 16, now at step 17
+    ff, mts = sim.force_field, sim.force_field.mts
+    ff.set_currents(np.linspace(0.5, 1.0, s.n_rods))
+    sim.step(1)  # step 17: fast, the new currents
+    assert ff.calls["current_field"] == 1 and mts._base_step["current_field"] is None
+    sim.step(3)  # steps 18-20: full at 20, the current terms too (no base at a step start yet)
+    assert ff.calls["current_field"] == 2 and not mts._rated["current_field"]
+    sim.step(4)  # step 24: again (a rate needs two evaluations at step starts)
+    assert ff.calls["current_field"] == 3 and mts._rated["current_field"]
+    sim.step(8)  # steps 25-32: full at 28 (skipped) and 32 (computed)
+    assert ff.calls["current_field"] == 4
+
+
+def test_current_every_new_currents_on_a_full_step_start_without_a_rate(rng):
+    """With current_every, currents changed right before a full evaluation start a base with no rate
+    (the known defect of K alone does not carry over), and the next full evaluation takes the rate."""
+    s, sim = _current_sim(rng, 4, 16)
+    sim.step(5)
+    ff, mts = sim.force_field, sim.force_field.mts
+    ff.set_currents(np.linspace(0.5, 1.0, s.n_rods))
+    sim.step(12)  # steps 5-16: a rate from 12 and 16
+    assert mts._rated["current_field"] and np.abs(mts._rate["current_field"]).max() > 0.0
+    sim.step(3)  # to step 20
+    ff.set_currents(3.0 * np.linspace(0.5, 1.0, s.n_rods))
+    sim.step(1)  # step 20: full (not a multiple of 16), and the currents are new
+    assert np.abs(mts._rate["current_field"]).max() == 0.0 and not mts._rated["current_field"]
+    n = ff.calls["current_field"]
+    sim.step(4)  # step 24: full, computed for its rate
+    assert ff.calls["current_field"] == n + 1 and mts._rated["current_field"]
+
+
+def test_current_every_computes_the_current_terms_in_the_rk4_start(rng):
+    """The RK4 start (steps 0-2, four evaluations each) computes every slow term at every evaluation,
+    whatever M: the first stage of steps 1 and 2 as well as the others."""
+    s, sim = _current_sim(rng, 4, 12)
+    sim.force_field.set_currents(np.linspace(0.5, 1.0, s.n_rods))
+    sim.step(3)
+    assert sim.force_field.calls["current_field"] == 12
+
+
+def test_current_every_compiled_and_python_steps_agree(rng):
+    """The fast steps in one compiled call and the Python step give the same run with M = 8."""
+    runs = []
+    for compiled in (True, False):
+        s, sim = _current_sim(np.random.default_rng(4), 4, 8)
+        if not compiled:
+            sim.compiled = None
+        sim.step(6)
+        sim.force_field.set_currents(np.linspace(0.5, 1.0, s.n_rods))
+        sim.step(60)
+        runs.append(sim.state.position.copy())
+    np.testing.assert_array_equal(runs[0], runs[1])
 
 
 def test_current_every_of_slow_every_is_the_default_bit_for_bit(rng):
@@ -340,6 +404,7 @@ def test_resume_with_current_every_is_bit_for_bit(tmp_path):
     second = Simulation.from_snapshot(sc.params, read_checkpoint(path)[0])
     second.step(299)
     np.testing.assert_array_equal(second.state.position, whole.state.position)
+    np.testing.assert_array_equal(second.force_field.current, whole.force_field.current)
     assert second.events == whole.events
 
 

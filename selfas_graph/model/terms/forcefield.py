@@ -206,7 +206,7 @@ class ForceField:
         return self.context.centre_neighbours()
 
     # -- evaluation -------------------------------------------------------------------------------
-    def evaluate(self, position, velocity, power=None, full=True, step=None):
+    def evaluate(self, position, velocity, power=None, full=True, step=None, starting=False):
         """Total force on every tip at (position, velocity).
 
         Parameters
@@ -222,6 +222,9 @@ class ForceField:
         step : int, optional
             The step this evaluation starts (None inside the RK4 stages): the clock of the
             extrapolation.
+        starting : bool
+            The step is one of the integrator's RK4 start: every slow term that a full evaluation
+            computes is computed (``integrator.current_every`` skips none).
 
         Returns
         -------
@@ -239,7 +242,7 @@ class ForceField:
             if t.slow:
                 if not (full or t.name in mts.stale):  # without mts, full is always True
                     continue
-                if mts is not None and mts.skips(t.name, step):  # integrator.current_every
+                if mts is not None and mts.skips(t.name, step, starting):  # integrator.current_every
                     continue
                 refreshed.append(t.name)
             compute(ctx, out)

@@ -8,7 +8,9 @@ evaluations. The tip-tip force is split: its close pairs (within the fast range)
 evaluated at every step, its far part (``tip_far``) is held. A slow term whose inputs
 changed (new currents) is *stale* and is computed at the next evaluation, full or not. With
 ``integrator.current_every = M`` (a multiple of K) the terms that read the currents are computed only
-on the full evaluations of every M-th step (and when stale), and extrapolated on the others.
+on the full evaluations of every M-th step, and extrapolated on the others; also when stale, and on
+every full evaluation until their rate is taken from two evaluations after the last change of the
+currents (new currents start a base with no rate: a jump, not a trend), and in the RK4 start steps.
 """
 
 from __future__ import annotations
@@ -77,19 +79,22 @@ class MultipleTimeStepping:
             self._base = {k: self._base_block[j] for j, k in enumerate(keys)}
             self._rate = {k: self._rate_block[j] for j, k in enumerate(keys)}
             self._base_step = {k: None for k in self._base}
+            #: whether a held array's rate was taken over a gap of evaluations (not zeroed by a start,
+            #: a long gap or, with current_every, new currents): with current_every a term whose rate
+            #: is not is computed at every full evaluation (:meth:`skips`)
+            self._rated = {k: False for k in self._base}
             self._steps = np.full(len(keys), np.nan)
 
-    def skips(self, name, step) -> bool:
-        """Whether the full evaluation at ``step`` leaves the slow term ``name`` to be extrapolated: a term
-        that reads the currents, off its ``current_every`` pattern (counted from step 0, as K) and not
-        stale. Never inside the RK4 stages (``step`` None)."""
-        return (
-            self.current_every != self.slow_every
-            and step is not None
-            and step % self.current_every != 0
-            and name in self._uses_currents
-            and name not in self.stale
-        )
+    def skips(self, name, step, starting=False) -> bool:
+        """Whether the full evaluation at ``step`` leaves the slow term ``name`` to be extrapolated
+        (``integrator.current_every``): a term that reads the currents, off its pattern (every M-th step,
+        counted from step 0 as K is), not stale and, with extrapolation, with a rate taken since the last
+        change of the currents. Never in the RK4 start (``starting``) or its stages (``step`` None)."""
+        if self.current_every == self.slow_every or step is None or starting:
+            return False
+        if name not in self._uses_currents or name in self.stale or step % self.current_every == 0:
+            return False
+        return not self.extrapolate or all(self._rated[k] for k in self.slow_keys[name])
 
     def currents_changed(self) -> None:
         """New rod currents: the slow terms that read them are computed at the next evaluation."""
@@ -102,6 +107,8 @@ class MultipleTimeStepping:
         ``refreshed`` lists the slow terms computed in this evaluation; ``full`` and ``step`` are
         those of :meth:`ForceField.evaluate <selfas_graph.model.terms.forcefield.ForceField.evaluate>`.
         """
+        # the held arrays of the terms computed because the currents changed: with current_every, no rate
+        jumped = [k for name in self.stale if name in refreshed for k in self.slow_keys[name]]
         self.stale.clear()
         fast = None
         tip_fresh = "tip_magnetic" in refreshed
@@ -111,17 +118,24 @@ class MultipleTimeStepping:
             if tip_fresh:
                 np.subtract(self.out["tip_magnetic"], fast, out=self.tip_far)
         if self.extrapolate:
-            self._extrapolate([k for name in refreshed for k in self.slow_keys[name]] if refreshed else (), full, step)
+            self._extrapolate(
+                [k for name in refreshed for k in self.slow_keys[name]] if refreshed else (), full, step, jumped
+            )
         if fast is not None and not tip_fresh:
             np.add(self.tip_far, fast, out=self.out["tip_magnetic"])
 
-    def _extrapolate(self, refreshed, full, step):
+    def _extrapolate(self, refreshed, full, step, jumped=()):
         """Linear extrapolation in time of each held slow force from its last two evaluations.
 
         A force just ``refreshed`` becomes the new base; its rate is the difference from the
         previous base over the steps between them when both were full evaluations at step
-        starts at most 2 K apart, else zero (after an RK4 start, or when the currents changed:
-        a jump, not a trend). The others are extrapolated to ``step``.
+        starts at most two of its intervals apart (K, or M = ``current_every`` for the current
+        terms), else zero (after an RK4 start, or when the currents changed before a fast step:
+        a jump, not a trend). With ``current_every`` the arrays in ``jumped`` (computed because
+        the currents changed) get no rate either; without it, a change before a full
+        evaluation still takes one (docs/model.md 'Multiple time stepping
+        (`integrator.slow_every`)', a known defect kept so that the runs stay as they were).
+        The others are extrapolated to ``step``.
         """
         steps = self._steps  # steps since each held force's base, NaN: left as it is
         extrapolated = False
@@ -130,11 +144,15 @@ class MultipleTimeStepping:
             steps[j] = np.nan
             if key in refreshed:
                 gap = None if (prev is None or step is None or not full) else step - prev
+                if key in jumped and self._interval[key] != self.slow_every:
+                    gap = None  # new currents (current_every): a jump, not a trend
                 if gap is not None and 0 < gap <= 2 * self._interval[key]:
                     np.subtract(arr, base, out=rate)
                     rate /= gap
+                    self._rated[key] = True
                 else:
                     rate.fill(0.0)
+                    self._rated[key] = False
                 base[:] = arr
                 self._base_step[key] = step if full else None
             elif prev is not None and step is not None:
@@ -158,13 +176,15 @@ class MultipleTimeStepping:
             snap.update({f"mts_base_{k}": v.copy() for k, v in self._base.items()})
             snap.update({f"mts_rate_{k}": v.copy() for k, v in self._rate.items()})
             snap["mts_base_step"] = np.array([-1 if b is None else b for b in self._base_step.values()], dtype=np.int64)
+            snap["mts_rated"] = np.array(list(self._rated.values()), dtype=bool)
         return snap
 
     def load_state_dict(self, snap: dict) -> bool:
         """Put back what :meth:`state_dict` returned; False (every slow term then computed at the next
         evaluation) when ``snap`` was taken with other settings, e.g. without multiple time stepping."""
         mine = self.state_dict()
-        if set(mine) - set(snap) or np.shape(snap["mts_stale"]) != mine["mts_stale"].shape:
+        optional = {"mts_rated"}  # checkpoints before current_every lack it
+        if set(mine) - set(snap) - optional or np.shape(snap["mts_stale"]) != mine["mts_stale"].shape:
             return False
         for k, v in self.held_forces().items():
             v[:] = snap[f"mts_held_{k}"]
@@ -175,4 +195,6 @@ class MultipleTimeStepping:
                 self._rate[k][:] = snap[f"mts_rate_{k}"]
             steps = np.asarray(snap["mts_base_step"])
             self._base_step = {k: (None if b < 0 else int(b)) for k, b in zip(self._base, steps)}
+            rated = np.asarray(snap["mts_rated"]) if "mts_rated" in snap else (steps >= 0)
+            self._rated = {k: bool(r) for k, r in zip(self._base, rated)}
         return True
