@@ -12,7 +12,7 @@ spent in each function into the parts of a step: the force kernels (each slow su
 pairs, the split brake), neighbour-list builds, contact search, events (graph, circuit), and the
 rest (integrator, force-field bookkeeping, numpy glue). Kernel calls are counted, so that the cost
 per call and the calls per step are both printed. The profile adds some overhead per Python call
-(about 1 us); the first line gives the CPU time per step without it, measured on the same steps'
+(1-2 us); the first line gives the CPU time per step without it, measured on the same steps'
 successors.
 
 ``--sample`` also runs ``--steps`` more steps under Linux ``perf`` (sampling the CPU clock of every
@@ -20,7 +20,7 @@ thread, when ``perf`` is installed and allowed) and splits their CPU time by the
 numba's compiled kernels, the Python interpreter, numpy, numba's dispatch, scipy, the C library, the
 operating system. Sampling costs nothing per call, so this is the measure of the glue's share; the
 profiled table above charges the profiler's own cost of each Python call (two reads of the thread's
-clock, about 1.6 us) to the Python parts.
+clock, 1-2 us) to the Python parts.
 
 A checkpoint is read as the run left it (read only: a copy of a running job's checkpoint is
 fine). One written by an older version without a checksum is read without verification, with a
@@ -227,39 +227,58 @@ def sampled_shares(counts: dict) -> dict:
     return shares
 
 
-def sample(sim, steps, frequency=4000):
+def sample(sim, steps, frequency=4000, timeout=120.0):
     """``({shared object: samples}, None)`` of ``steps`` steps of ``sim`` sampled by Linux perf on the
     CPU clock (every thread of this process), or ``(None, why not)``.
 
     The split of the CPU time by the code it runs in, without cProfile's cost per Python call (which
     lands in the Python parts of the profiled table): perf attaches to this process, the steps run,
     perf stops. The process sleeps while perf starts and stops, and a sleeping thread draws no sample.
+    perf is stopped whatever happens to the steps, each perf command is given ``timeout`` seconds,
+    nothing is written outside a temporary folder (``--no-buildid-cache``), which is removed.
     """
     perf = shutil.which("perf")
     if perf is None:
         return None, "perf not found (Debian and Ubuntu: the linux-perf or linux-tools package)"
     import signal
 
+    def reason(text, default):
+        lines = [line.strip() for line in text.splitlines() if line.strip() and line.strip() != "Error:"]
+        return lines[0] if lines else default
+
     with tempfile.TemporaryDirectory() as tmp:
         data = Path(tmp) / "perf.data"
-        rec = [perf, "record", "-q", "-e", "cpu-clock", "-F", str(frequency), "-p", str(os.getpid()), "-o", str(data)]
+        rec = [perf, "record", "-q", "--no-buildid-cache", "-e", "cpu-clock", "-F", str(frequency)]
+        rec += ["-p", str(os.getpid()), "-o", str(data)]
         proc = subprocess.Popen(rec, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-        for _ in range(50):  # perf writes its file's header once it is attached
-            if proc.poll() is not None or (data.exists() and data.stat().st_size > 0):
-                break
-            time.sleep(0.1)
-        time.sleep(0.2)
-        if proc.poll() is not None:
-            err = proc.stderr.read().strip().splitlines()
-            return None, "perf record failed: " + (err[0] if err else f"exit {proc.returncode}")
-        sim.step(steps)
-        proc.send_signal(signal.SIGINT)
-        proc.communicate()
-        report = subprocess.run(
-            [perf, "report", "-i", str(data), "--stdio", "-v", "--sort", "dso", "-F", "sample,dso"],
-            capture_output=True,
-            text=True,
-        )
+        try:
+            for _ in range(50):  # perf writes its file's header once it is attached
+                if proc.poll() is not None or (data.exists() and data.stat().st_size > 0):
+                    break
+                time.sleep(0.1)
+            time.sleep(0.2)
+            if proc.poll() is not None:
+                return None, "perf record failed: " + reason(proc.stderr.read(), f"exit {proc.returncode}")
+            sim.step(steps)
+        finally:
+            if proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.communicate(timeout=timeout)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.communicate()
+        try:
+            report = subprocess.run(
+                [perf, "report", "-i", str(data), "--stdio", "-v", "--sort", "dso", "-F", "sample,dso"],
+                capture_output=True,
+                text=True,
+                timeout=timeout,
+            )
+        except subprocess.TimeoutExpired:
+            return None, f"perf report took more than {timeout:g} s"
+    if report.returncode != 0:
+        return None, "perf report failed: " + reason(report.stderr, f"exit {report.returncode}")
     counts = parse_dso_samples(report.stdout)
     if not counts:
         return None, "perf recorded no samples (too few steps?)"

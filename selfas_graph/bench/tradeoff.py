@@ -181,7 +181,10 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if not args.t > 0:
         ap.error("--t must be positive")
-    base = load_scenario(args.scenario, overrides=args.base_set)
+    try:
+        base = load_scenario(args.scenario, overrides=args.base_set)
+    except ScenarioError as exc:
+        ap.error(str(exc))
     knobs = [k for k in (args.knob or KNOBS) if _applicable(base, k)]
     if args.checkpoint:
         try:
@@ -207,7 +210,7 @@ def main(argv=None):
         run_once(args.scenario, args.base_set + _overrides(KNOBS[knob][1]), min(args.t, 0.01), snap)
         ref = refs[knob] = run_once(args.scenario, args.base_set + _overrides(KNOBS[knob][1]), args.t, snap)
         if "failed" in ref:
-            if ref["failed"].startswith("refused: "):  # e.g. --set integrator.current_every=M: no K = 1 reference
+            if ref["failed"].startswith("refused: "):  # a reference the scene refuses with the base --set
                 print(f"{knob}: not measured, its reference run is {ref['failed']}", flush=True)
                 del refs[knob]
                 continue

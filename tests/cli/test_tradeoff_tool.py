@@ -51,10 +51,10 @@ def test_tree_knobs_only_where_the_scene_takes_the_tree():
     assert tool._applicable(quick, "forces.tip_magnetic.precision")
 
 
-def test_current_every_applies_with_current_terms_and_a_refused_setting_is_a_row(tmp_path):
+def test_current_every_applies_with_current_terms_and_a_refused_setting_is_a_failed_run(tmp_path):
     """integrator.current_every applies to a scene with multiple time stepping and current terms only;
-    a setting the scene refuses (here 12 with slow_every = 8) comes back as a failed row naming the key,
-    and the sweep goes on, instead of the tool stopping with a traceback."""
+    a setting the scene refuses (here 12 with slow_every = 8) comes back from ``run_once`` as a failed
+    run naming the key (the sweep prints it as a row and goes on), not as a traceback."""
     tool = _tool()
     quick = load_scenario(ROOT / "scenarios" / "quick.toml")  # slow_every = 8, terms 9 and 10
     no_currents = load_scenario(

@@ -394,6 +394,7 @@ def test_resume_with_current_every_is_bit_for_bit(tmp_path):
     sc = scenario_from_text(text)
     whole = Simulation.from_scenario(sc)
     whole.step(1200)
+    # the circuit closes before the interruption at step 901 (t = 0.4505): currents flow across it
     assert whole.short_circuit_time is not None and whole.short_circuit_time < 0.4
     first = Simulation.from_scenario(sc)
     first.step(901)
