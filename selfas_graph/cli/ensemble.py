@@ -320,18 +320,7 @@ def _run_grid(args, pool, held):
         _lock(folder, held)
         for ens in grid.ensembles:
             _make(ens.folder)
-        done = [0]
-
-        def report(r):
-            done[0] += 1
-            extra = f": {r['message']}" if r.get("message") else ""
-            print(
-                f"[{done[0]}/{len(tasks)}] {Path(r.get('path', '?')).parent.name} seed {r.get('seed', '?')}: "
-                f"{r.get('status')}{extra}",
-                flush=True,
-            )
-
-        results = run_tasks(run_seed, tasks, pool, report)
+        results = run_tasks(run_seed, tasks, pool, SeedReport(len(tasks), folders=True))
         io = [r for r in results if r is not None and r.get("status") == "io_error"]
         if io:
             from ..lifecycle import ABANDONED
