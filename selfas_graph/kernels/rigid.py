@@ -94,39 +94,10 @@ def constrain_bonds(position, velocity, project, correct_velocity, length):
     """
     n_rods = position.shape[0] // 2
     unit = length.shape[0] == 0
+    p = position.reshape(n_rods, 6)
+    w = velocity.reshape(n_rods, 6)
     for i in prange(n_rods):
-        _constrain_rod(position, velocity, 2 * i, project, correct_velocity, 1.0 if unit else length[i])
-
-
-@inline
-def _constrain_rod(position, velocity, a, project, correct_velocity, ell):
-    """The constraint of the rod with tips a and a + 1 (:func:`constrain_bonds`), in place; returns
-    ``|r12|^2`` of the positions as they leave."""
-    b = a + 1
-    r2 = 0.0
-    for d in range(3):
-        r = position[a, d] - position[b, d]
-        r2 += r * r
-    if project:
-        s = 0.5 * (ell / math.sqrt(r2) - 1.0)
-        for d in range(3):
-            r = position[a, d] - position[b, d]
-            position[a, d] += s * r
-            position[b, d] -= s * r
-        r2 = 0.0
-        for d in range(3):
-            r = position[a, d] - position[b, d]
-            r2 += r * r
-    if correct_velocity:
-        vr = 0.0
-        for d in range(3):
-            vr += (velocity[a, d] - velocity[b, d]) * (position[a, d] - position[b, d])
-        c = -0.5 * vr / r2
-        for d in range(3):
-            r = position[a, d] - position[b, d]
-            velocity[a, d] += c * r
-            velocity[b, d] -= c * r
-    return r2
+        _constrain_row(p[i], w[i], project, correct_velocity, 1.0 if unit else length[i])
 
 
 @njit_rows
@@ -144,23 +115,57 @@ def constrain_bonds_checked(position, velocity, project, correct_velocity, lengt
     """
     n_rods = position.shape[0] // 2
     unit = length.shape[0] == 0
+    # a rod as a row of six (tip a's x, y, z, then tip b's), each loop from 0 with constant columns,
+    # and the largest velocity over the flat array in a loop of its own (the same maxima: a maximum
+    # does not depend on the order it is taken in): 77 against 101 us at 12 000 tips for the loop over
+    # the tips of each rod (Zen 5, one thread)
+    p = position.reshape(n_rods, 6)
+    w = velocity.reshape(n_rods, 6)
     worst = 0.0
-    fastest = 0.0
-    n_nan = 0
     for i in prange(n_rods):
-        a = 2 * i
-        b = a + 1
         ell = 1.0 if unit else length[i]
         # r2 is that of the positions as they leave: the sum bond_length_error forms
-        r2 = _constrain_rod(position, velocity, a, project, correct_velocity, ell)
+        r2 = _constrain_row(p[i], w[i], project, correct_velocity, ell)
         worst = max(worst, abs(math.sqrt(r2) - ell))
-        for d in range(3):
-            for k in (a, b):
-                u = abs(velocity[k, d])
-                if u != u:
-                    n_nan += 1
-                else:
-                    fastest = max(fastest, u)
+    flat = velocity.reshape(-1)
+    fastest = 0.0
+    n_nan = 0
+    for k in prange(6 * n_rods):
+        u = abs(flat[k])
+        if u != u:
+            n_nan += 1
+        else:
+            fastest = max(fastest, u)
     if n_nan:
         return worst, math.nan
     return worst, fastest
+
+
+@inline
+def _constrain_row(p, w, project, correct_velocity, ell):
+    """The constraint of one rod (:func:`constrain_bonds`), a row of six positions ``p`` and
+    velocities ``w`` (tip a's x, y, z, then tip b's), in place; returns ``|r12|^2`` of the positions as they leave."""
+    r2 = 0.0
+    for d in range(3):
+        r = p[d] - p[d + 3]
+        r2 += r * r
+    if project:
+        s = 0.5 * (ell / math.sqrt(r2) - 1.0)
+        for d in range(3):
+            r = p[d] - p[d + 3]
+            p[d] += s * r
+            p[d + 3] -= s * r
+        r2 = 0.0
+        for d in range(3):
+            r = p[d] - p[d + 3]
+            r2 += r * r
+    if correct_velocity:
+        vr = 0.0
+        for d in range(3):
+            vr += (w[d] - w[d + 3]) * (p[d] - p[d + 3])
+        c = -0.5 * vr / r2
+        for d in range(3):
+            r = p[d] - p[d + 3]
+            w[d] += c * r
+            w[d + 3] -= c * r
+    return r2

@@ -49,9 +49,12 @@ def test_channel_sum_is_the_reference(rng):
 
 
 def test_channel_sum_is_the_numpy_loop_bit_for_bit(rng):
-    """The loop the force field ran: fill with 0, add each channel in order (numpy's a + b + c is (a + b) + c)."""
-    for n_ch in (0, 1, 2, 11):
-        c = channels(rng, n_ch=max(n_ch, 8))[:n_ch]
+    """The loop the force field ran: fill with 0, add each channel in order (numpy's a + b + c is (a + b) + c);
+    the kernel adds four channels a pass: every remainder, and an element of -0 in every channel (0 + -0 is
+    +0: the sum must start from 0, not from the first channel)."""
+    for n_ch in (0, 1, 2, 4, 5, 7, 8, 11):
+        c = channels(rng, n_ch=max(n_ch, 8))[:n_ch].copy()
+        c[:, 7, 1] = -0.0
         before = np.zeros((500, 3))
         before.fill(0.0)
         for j in range(n_ch):
@@ -203,8 +206,10 @@ def test_dot_is_numpys_einsum_bit_for_bit(rng):
 
 
 def test_channel_sum_power_is_the_sum_and_the_einsum_loop_bit_for_bit(rng):
-    """The force field's evaluation: channel_sum, then the power of each non-conservative channel."""
-    for n_ch, powered in ((11, [1, 2, 4, 7, 9, 10]), (3, [0]), (2, [])):
+    """The force field's evaluation: channel_sum, then the power of each non-conservative channel (the
+    channels summed four at a time and their powers three at a time: every remainder of both)."""
+    cases = ((11, [1, 2, 4, 7, 9, 10]), (3, [0]), (2, []), (4, [3, 0]), (8, [0, 1, 2, 3]), (5, [4, 0, 1, 2, 3]), (9, []))
+    for n_ch, powered in cases:
         c = channels(rng, n_ch=max(n_ch, 8))[:n_ch].copy()
         v = rng.normal(size=(500, 3))
         total_old = np.full((500, 3), np.nan)
