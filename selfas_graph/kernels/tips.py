@@ -194,7 +194,12 @@ def tip_tip_energy(x, y, z, charge, rstar, kappa, lo, hi, out):
     total independent of how rows are split over threads or ranks.
     """
     n = x.shape[0]
-    for k in prange(lo, hi):
+    m = hi - lo
+    for t in prange(m):
+        # row k has n - k pairs: rows taken from both ends in turn, so that equal blocks of t (the
+        # threads' shares) hold equal work (2 threads at 12 000 tips: 1.31 times one, before, as rows
+        # in order give one thread three quarters of the pairs)
+        k = lo + t // 2 if t % 2 == 0 else hi - 1 - t // 2
         acc = 0.0
         for l in range(k - (k % 2) + 2, n):
             dx = x[k] - x[l]
