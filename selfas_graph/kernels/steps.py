@@ -29,6 +29,8 @@ this path below ``_jit.PARALLEL_ROWS`` tips only, where the Python step calls th
 
 import math
 
+import numpy as np
+
 from ._jit import njit
 from .brakes import brake_close_pairs_exact, tip_brake
 from .cells import max_displacement2
@@ -67,6 +69,16 @@ _filament_force_on_tips = filament_force_on_tips.serial
 _monopoles_on_tips = monopoles_on_tips.serial
 _line_yukawa_on_centres = line_yukawa_on_centres.serial
 _tip_tip_fast = tip_tip_fast.serial
+
+
+@njit
+def _all_plus_zero(a):
+    """Whether every element of the C-contiguous array ``a`` is +0.0 (the bits of +0.0 are all 0)."""
+    bits = a.reshape(-1).view(np.int64)
+    for k in range(bits.shape[0]):
+        if bits[k] != 0:
+            return False
+    return True
 
 
 @njit
@@ -261,12 +273,21 @@ def fast_steps(
     err_after = 0.0
     speed = 0.0
     done = 0
+    checked = False  # the tip list's update test already made at the current positions
+    # held forces whose rate and base are all +0 (the current terms while no rod carries current):
+    # rate * s + base is then +0 on every step, written on the first step of the call only
+    zero = np.zeros(held.shape[0], dtype=np.bool_)
+    if extrapolate:
+        for j in range(held.shape[0]):
+            zero[j] = base_step[j] >= 0 and _all_plus_zero(rate[j]) and _all_plus_zero(base[j])
     while done < n_max:
         # the Python step runs the slow evaluations, the RK4 start and the list builds
         if step % slow_every == 0:
             return done, NEEDS_STEP, head, max_bond, err_after, speed
-        if lists[0] and _list_due(x, reference, half_skin2):
+        # (not again when the contact test of the step before found the list fresh at these positions)
+        if lists[0] and not checked and _list_due(x, reference, half_skin2):
             return done, NEEDS_STEP, head, max_bond, err_after, speed
+        checked = False
         if lists[1]:
             for k in range(n):
                 for d in range(3):
@@ -312,7 +333,7 @@ def fast_steps(
             _tip_tip_fast(x, tip_charge, start, index, rstar, kappa, r_in, r_out, tip_fast)
         if extrapolate:
             for j in range(held.shape[0]):
-                if base_step[j] < 0:
+                if base_step[j] < 0 or (zero[j] and done > 0):
                     continue
                 s = float(step - base_step[j])
                 o = tip_far if held[j] < 0 else block[held[j]]
@@ -370,8 +391,10 @@ def fast_steps(
             return done, NEEDS_HEALTH, head, max_bond, err_after, speed
         # -- the network's contact test (Network.update on a step without news)
         if network:
-            if lists[2] and _list_due(x, reference, half_skin2):
-                return done, NEEDS_CONTACTS, head, max_bond, err_after, speed
+            if lists[2]:
+                if _list_due(x, reference, half_skin2):
+                    return done, NEEDS_CONTACTS, head, max_bond, err_after, speed
+                checked = True
             if not contacts_unchanged(
                 x, start, index, pairs, rstar, release, c_zc, c_za, on_cathode, on_anode, c_surface, on_filament
             ):
