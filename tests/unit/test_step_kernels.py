@@ -208,7 +208,15 @@ def test_dot_is_numpys_einsum_bit_for_bit(rng):
 def test_channel_sum_power_is_the_sum_and_the_einsum_loop_bit_for_bit(rng):
     """The force field's evaluation: channel_sum, then the power of each non-conservative channel (the
     channels summed four at a time and their powers three at a time: every remainder of both)."""
-    cases = ((11, [1, 2, 4, 7, 9, 10]), (3, [0]), (2, []), (4, [3, 0]), (8, [0, 1, 2, 3]), (5, [4, 0, 1, 2, 3]), (9, []))
+    cases = (
+        (11, [1, 2, 4, 7, 9, 10]),
+        (3, [0]),
+        (2, []),
+        (4, [3, 0]),
+        (8, [0, 1, 2, 3]),
+        (5, [4, 0, 1, 2, 3]),
+        (9, []),
+    )
     for n_ch, powered in cases:
         c = channels(rng, n_ch=max(n_ch, 8))[:n_ch].copy()
         v = rng.normal(size=(500, 3))
