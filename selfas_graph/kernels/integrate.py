@@ -1,9 +1,8 @@
 """Linear combinations used by the time integrators, without temporaries, and the sums of a step
 that must come out as numpy computed them before (:func:`dot_as_numpy`)."""
 
-import math
-
 from ._jit import inline, njit_rows, prange
+from .rigid import worst_bond_error
 
 
 @inline
@@ -91,22 +90,7 @@ def ab4_step(x, v, hist_v, hist_a, slots, dt, length):
     for k in prange(6 * n_rods):
         xf[k] = xf[k] + c * (55.0 * v0[k] - 59.0 * v1[k] + 37.0 * v2[k] - 9.0 * v3[k])
         vf[k] = vf[k] + c * (55.0 * a0[k] - 59.0 * a1[k] + 37.0 * a2[k] - 9.0 * a3[k])
-    return _worst_bond(x.reshape(n_rods, 6), length)
-
-
-@inline
-def _worst_bond(rods, length):
-    """``rigid.bond_length_error`` over ``rods`` (n_rods, 6): tip a's x, y, z then tip b's."""
-    unit = length.shape[0] == 0
-    worst = 0.0
-    for i in prange(rods.shape[0]):
-        r2 = 0.0
-        for d in range(3):
-            r = rods[i, d] - rods[i, d + 3]
-            r2 += r * r
-        ell = 1.0 if unit else length[i]
-        worst = max(worst, abs(math.sqrt(r2) - ell))
-    return worst
+    return worst_bond_error(x[: 2 * n_rods].reshape(n_rods, 6), length)
 
 
 @njit_rows

@@ -64,13 +64,19 @@ def bond_acceleration(force, velocity, position, exact, out):
 def bond_length_error(position, length):
     """Largest ``| |x_a - x_b| - l_i |`` over all rods (``length`` empty: l_i = 1)."""
     n_rods = position.shape[0] // 2
+    return worst_bond_error(position[: 2 * n_rods].reshape(n_rods, 6), length)
+
+
+@inline
+def worst_bond_error(rods, length):
+    """:func:`bond_length_error` of rods given as rows of six (tip a's x, y, z, then tip b's): a loop
+    from 0 with constant columns, which a loop over each rod's two tip rows is not."""
     unit = length.shape[0] == 0
     worst = 0.0
-    for i in prange(n_rods):
-        a = 2 * i
+    for i in prange(rods.shape[0]):
         r2 = 0.0
         for d in range(3):
-            r = position[a, d] - position[a + 1, d]
+            r = rods[i, d] - rods[i, d + 3]
             r2 += r * r
         ell = 1.0 if unit else length[i]
         worst = max(worst, abs(math.sqrt(r2) - ell))
