@@ -15,7 +15,12 @@ On the tips of the Fig. 2 scene scaled to each size (as selfas_graph/bench/step.
   division per pair (up to 6000 rods);
 - ``tree build`` and ``tree eval``: the tip tree (kernels/tree.py) at its defaults; ``tree eval
   mixed`` the same evaluation in mixed precision, as the Fig. 2 and Fig. 6 scenes run it;
-- ``yukawa``: the screened rod-centre sum over the scene's neighbour list.
+- ``yukawa``: the screened rod-centre sum over the scene's neighbour list;
+- ``ab4 step``, ``constraint`` and ``channel sums``: the O(n) kernels of every step (the AB4 update
+  with its bond check, the rigid-bond constraint with its checks, the sum of the scene's force
+  channels with the powers of its non-conservative ones), each as the run calls it (serial below
+  ``kernels/_jit.py::PARALLEL_ROWS`` tips);
+- ``tip energy``: the tip-tip energy of a frame (a direct sum over all pairs, up to ``--direct-max``).
 
 - ``current tips`` and ``current field``: the field of the rod currents (docs/model.md 'Term 9',
   'Term 10') on every tip and at the 4 Gauss-Legendre points of every current-carrying rod,
@@ -133,7 +138,7 @@ def timed_pair(fn_before, fn_after, repeat, clock=time.perf_counter):
 def kernels_at(ref):
     """The kernel modules of git revision ``ref``, as a namespace with ``tips``, ``tree``, ``yukawa``,
     ``currents``, ``cells`` (``selfas_graph/kernels`` of that revision copied into a package of its own;
-    ``yukawa`` is ``pairs`` in revisions that held the Yukawa sums there)."""
+    ``integrate``, ``rigid``; ``yukawa`` is ``pairs`` in revisions that held the Yukawa sums there)."""
     sha = subprocess.run(["git", "rev-parse", ref], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
     name = f"selfas_kernels_{sha[:12]}"
     home = Path(tempfile.gettempdir()) / "selfas_bench_kernels"
@@ -156,7 +161,9 @@ def kernels_at(ref):
         package = importlib.util.module_from_spec(spec)
         sys.modules[name] = package
         spec.loader.exec_module(package)
-    modules = {m: importlib.import_module(f"{name}.{m}") for m in ("tips", "tree", "currents", "cells")}
+    modules = {
+        m: importlib.import_module(f"{name}.{m}") for m in ("tips", "tree", "currents", "cells", "integrate", "rigid")
+    }
     yukawa = "yukawa" if (pkg / "yukawa.py").exists() else "pairs"
     return types.SimpleNamespace(yukawa=importlib.import_module(f"{name}.{yukawa}"), **modules)
 
@@ -165,7 +172,7 @@ def run(args):
     import numba
 
     from selfas_graph import Simulation
-    from selfas_graph.kernels import currents, lorentz, tips, tree, yukawa
+    from selfas_graph.kernels import currents, integrate, lorentz, rigid, tips, tree, yukawa
 
     from .peer import machine, machine_line
     from .step import scene
@@ -173,7 +180,9 @@ def run(args):
     numba.set_num_threads(args.threads)
     plain = _plain()
     clock = time.process_time if args.cpu_time else time.perf_counter
-    now = types.SimpleNamespace(tips=tips, tree=tree, yukawa=yukawa, currents=currents)
+    now = types.SimpleNamespace(
+        tips=tips, tree=tree, yukawa=yukawa, currents=currents, integrate=integrate, rigid=rigid
+    )
     before_ref = getattr(args, "before", None)
     before = kernels_at(before_ref) if before_ref else None
     fraction = getattr(args, "active_fraction", 0.72)
@@ -218,6 +227,15 @@ def run(args):
             return trees[id(K)]
 
         direct = n <= args.direct_max
+        # the every-step kernels on copies of the state (each call moves them a little: its cost does not
+        # depend on the values), the scene's own channels and powered rows
+        xs, vs = st.position.copy(), st.velocity.copy()
+        hist = np.random.default_rng(3).normal(size=(4, ntips, 3))
+        slots = np.arange(4, dtype=np.int64)
+        ell = st.bond_length()
+        ff.evaluate(st.position, st.velocity, np.zeros(len(ff._powered)))
+        block, powered, power = ff._channel_block, ff._powered, np.zeros(len(ff._powered))
+        e = np.empty(ntips)
         rep_big = args.repeat if n <= 6000 else max(2, args.repeat // 3)
         jobs = [
             ("direct", direct, rep_big, lambda K: lambda: K.tips.tip_tip_direct(x, y, z, q, rstar, kappa, 0, ntips, f)),
@@ -251,6 +269,30 @@ def run(args):
                         c, st.rod_charge, nl.start, nl.index, yk.screening, yk.core, yk.cutoff, 0, n, fy
                     )
                 ),
+            ),
+            (
+                "ab4 step",
+                True,
+                args.repeat,
+                lambda K: lambda: K.integrate.ab4_step(xs, vs, hist, hist, slots, 1e-9, ell),
+            ),
+            (
+                "constraint",
+                True,
+                args.repeat,
+                lambda K: lambda: K.rigid.constrain_bonds_checked(xs, vs, True, True, ell),
+            ),
+            (
+                "channel sums",
+                True,
+                args.repeat,
+                lambda K: lambda: K.integrate.channel_sum_power(f, block, vs, powered, power),
+            ),
+            (
+                "tip energy",
+                direct,
+                rep_big,
+                lambda K: lambda: K.tips.tip_tip_energy(x, y, z, q, rstar, kappa, 0, ntips, e),
             ),
             (
                 "current tips",
@@ -444,6 +486,10 @@ def main(argv=None):
         "tree eval",
         "tree eval mixed",
         "yukawa",
+        "ab4 step",
+        "constraint",
+        "channel sums",
+        "tip energy",
         "current tips",
         "current field",
         "current tips mixed",

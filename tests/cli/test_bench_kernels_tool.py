@@ -24,6 +24,7 @@ def test_every_kernel_timed_with_machine_and_target():
     got = tool.run(args)
     row = got["rows"][0]
     kernels = ("direct", "plain", "tree build", "tree eval", "yukawa", "current tips", "current field")
+    kernels += ("ab4 step", "constraint", "channel sums", "tip energy")
     for kernel in kernels + ("direct mixed", "tree eval mixed", "current tips mixed", "current field mixed"):
         assert len(row[kernel]) == 2 and all(t >= 0 for t in row[kernel])
     assert row["yukawa_pairs"] > 0 and row["active_rods"] > 0
