@@ -117,8 +117,8 @@ print(json.dumps(found))
 def test_step_updates_are_vectorised(cpu, tmp_path):
     """The AB4 update and the channel sum, every step over all tips, run packed double arithmetic: loops
     from 0 over flat arrays. Written as a loop over each rod's two tip rows (``range(2 i, 2 i + 2)``), the
-    AB4 update kept numba's negative-index check and had no packed arithmetic at all (64 against 41 us at
-    12 000 tips, docs/performance.md 'The Fig. 6 run and its fast steps')."""
+    AB4 update kept numba's negative-index check and had no packed arithmetic at all (2.0 times slower at
+    6000 rods, docs/performance.md 'The Fig. 6 run and its fast steps')."""
     env = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_")}
     env.update(NUMBA_CPU_NAME=cpu, NUMBA_CPU_FEATURES="", NUMBA_CACHE_DIR=str(tmp_path))
     got = subprocess.run([sys.executable, "-c", _STEP_PROBE], env=env, capture_output=True, text=True, timeout=600)
