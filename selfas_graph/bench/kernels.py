@@ -111,6 +111,26 @@ def _plain():
     return plain_coulomb
 
 
+#: the kernels the tool times, in the order of its table (``--kernels`` takes these names)
+KERNELS = (
+    "direct",
+    "direct mixed",
+    "plain",
+    "tree build",
+    "tree eval",
+    "tree eval mixed",
+    "yukawa",
+    "ab4 step",
+    "constraint",
+    "channel sums",
+    "tip energy",
+    "current tips",
+    "current field",
+    "current tips mixed",
+    "current field mixed",
+)
+
+
 def timed(fn, repeat, clock=time.perf_counter):
     fn()  # compile / warm
     t = []
@@ -427,6 +447,9 @@ def main(argv=None):
     ap.add_argument("--json", help="write all results to this file")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    unknown = [k for k in args.kernels or () if k not in KERNELS]
+    if unknown:
+        ap.error(f"--kernels: unknown {', '.join(map(repr, unknown))}; the kernels are {', '.join(map(repr, KERNELS))}")
     if args.mixed_error:
         from .peer import machine_line
 
@@ -478,23 +501,7 @@ def main(argv=None):
         f"\n{'CPU' if args.cpu_time else 'wall'} ms per call on {args.threads} thread(s), median [min-max] of {args.repeat} x {args.rounds} round(s); "
         "direct and plain also in 1e9 tip pairs/s/thread (median)"
     )
-    kernels = [
-        "direct",
-        "direct mixed",
-        "plain",
-        "tree build",
-        "tree eval",
-        "tree eval mixed",
-        "yukawa",
-        "ab4 step",
-        "constraint",
-        "channel sums",
-        "tip energy",
-        "current tips",
-        "current field",
-        "current tips mixed",
-        "current field mixed",
-    ]
+    kernels = KERNELS
     cols = [(t, k) for t in args.targets for k in (("before", "after", "speed-up") if args.before else ("",))]
     if args.before:
         print(

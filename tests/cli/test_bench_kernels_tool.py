@@ -9,6 +9,8 @@ import argparse
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -84,3 +86,19 @@ def test_a_named_target_compiles_with_its_own_features_only():
         assert name_only["widest"] == "AVX-512"
     else:
         assert name_only["widest"] in ("AVX2", "AVX", "SSE")
+
+
+def test_unknown_kernel_is_refused_with_the_valid_names(capsys):
+    tool = _tool()
+    with pytest.raises(SystemExit) as exc:
+        tool.main(["--rods", "60", "--kernels", "bogus", "tree eval"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "--kernels: unknown 'bogus'" in err and "'ab4 step'" in err and "'tip energy'" in err
+
+
+def test_every_named_kernel_is_timed():
+    """The table's names (``KERNELS``, what ``--kernels`` takes) are those of the timed rows."""
+    tool = _tool()
+    row = tool.run(argparse.Namespace(rods=[60], repeat=1, threads=1, direct_max=100, cpu_time=True))["rows"][0]
+    assert {k for k in row if isinstance(row[k], list)} == set(tool.KERNELS)
