@@ -5,6 +5,7 @@ Usage: selfas-graph bench profile --checkpoint RUN.checkpoint.h5 [--steps 2000] 
        selfas-graph bench profile --scenario scenarios/fig2.toml --settle 2000 [--steps 2000]
        selfas-graph bench profile --checkpoint RUN.checkpoint.h5 --before REF [--rounds 8] [--steps 250]
        selfas-graph bench profile --checkpoint RUN.checkpoint.h5 --steps 3000 --sample
+       selfas-graph bench profile --checkpoint RUN.checkpoint.h5 --team [--threads 2] [--rounds 8] [--steps 250]
 
 Steps the simulation ``--steps`` times after 48 warm-up steps under cProfile on the thread's CPU
 clock (on a machine loaded by other jobs the wall clock counts their time too), and sorts the time
@@ -32,6 +33,8 @@ take turns of ``--steps`` steps (``--rounds`` turns each, the first of each disc
 and report their CPU time per step (the thread's with one thread, the process's with more): the two codes see the same machine load, interleaved.
 The ratio is the median of the per-round ratios. The wall clock per step is printed too: it counts the
 machine's other jobs, so it means something only on a quiet machine (the load average is printed).
+
+``--team``: the compiled fast steps on all threads against on one (``team_steps.py``).
 
 ``--kernels`` times the every-step kernels that do the work of several calls (``ab4_step``,
 ``constrain_bonds_checked``, ``channel_sum_power``, ``extrapolate_all``) against those calls, on
@@ -102,7 +105,7 @@ PARTS = [
         ),
     ),
     ("neighbour-list builds", lambda f: "kernels/cells.py" in f),
-    ("fast steps in one compiled call (kernels)", lambda f: f.endswith("steps.py:fast_steps")),
+    ("fast steps in one compiled call (kernels)", lambda f: "steps.py:fast_steps" in f),
     (
         "cheap O(n) kernels (walls, fields, integration, bonds)",
         lambda f: "selfas_graph/kernels/" in f and not f.endswith("_jit.py:__call__"),
@@ -495,6 +498,12 @@ def main(argv=None):
         help="also sample --steps more steps with Linux perf: the CPU time by the code it runs in "
         "(compiled kernels, Python, numpy, ...), without the profiler's cost per Python call",
     )
+    ap.add_argument(
+        "--team",
+        action="store_true",
+        help="whole steps with the compiled fast steps on all --threads threads (default 2) against on one, "
+        "interleaved, wall time",
+    )
     ap.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.serve:
@@ -513,6 +522,10 @@ def main(argv=None):
         return None
     if args.before:
         return compare(args)
+    if args.team:
+        from .team_steps import team
+
+        return team(args)
     from .peer import machine, machine_line
 
     start_threads(args.threads)

@@ -8,7 +8,7 @@ skin); the kernels test the distance.
 
 import math
 
-from ._jit import PARALLEL_ROWS, njit, njit_parallel, prange
+from ._jit import PARALLEL_ROWS, inline, njit, njit_parallel, prange
 from .contacts import close_pairs, closer
 
 
@@ -30,23 +30,36 @@ def tip_brake(position, velocity, start, index, rstar, k_br, out):
         Overwritten with the brake force on each tip.
     """
     n = position.shape[0]
-    rs2 = rstar * rstar
     for k in prange(n):
-        fx = 0.0
-        fy = 0.0
-        fz = 0.0
-        for j in range(start[k], start[k + 1]):
-            l = index[j]
-            dx = position[k, 0] - position[l, 0]
-            dy = position[k, 1] - position[l, 1]
-            dz = position[k, 2] - position[l, 2]
-            if dx * dx + dy * dy + dz * dz < rs2:
-                fx -= k_br * (velocity[k, 0] - velocity[l, 0])
-                fy -= k_br * (velocity[k, 1] - velocity[l, 1])
-                fz -= k_br * (velocity[k, 2] - velocity[l, 2])
-        out[k, 0] = fx
-        out[k, 1] = fy
-        out[k, 2] = fz
+        _tip_brake_row(position, velocity, start, index, rstar, k_br, k, out)
+
+
+@inline
+def _tip_brake_row(position, velocity, start, index, rstar, k_br, k, out):
+    """Row ``k`` of :func:`tip_brake`."""
+    rs2 = rstar * rstar
+    fx = 0.0
+    fy = 0.0
+    fz = 0.0
+    for j in range(start[k], start[k + 1]):
+        l = index[j]
+        dx = position[k, 0] - position[l, 0]
+        dy = position[k, 1] - position[l, 1]
+        dz = position[k, 2] - position[l, 2]
+        if dx * dx + dy * dy + dz * dz < rs2:
+            fx -= k_br * (velocity[k, 0] - velocity[l, 0])
+            fy -= k_br * (velocity[k, 1] - velocity[l, 1])
+            fz -= k_br * (velocity[k, 2] - velocity[l, 2])
+    out[k, 0] = fx
+    out[k, 1] = fy
+    out[k, 2] = fz
+
+
+@njit
+def tip_brake_rows(position, velocity, start, index, rstar, k_br, lo, hi, out):
+    """:func:`tip_brake` of the tips ``lo`` to ``hi`` only, serial."""
+    for k in range(lo, hi):
+        _tip_brake_row(position, velocity, start, index, rstar, k_br, k, out)
 
 
 @njit
@@ -126,6 +139,40 @@ def brake_close_pairs_exact(position, velocity, start, index, radius, k_br, dt):
                 m += 1
                 work -= 0.25 * (1.0 - decay * decay) * _brake_pair(velocity, k, l, decay)
     return work, m
+
+
+@njit
+def close_pairs_rows(position, start, index, radius, lo, hi, pair_k, pair_l, offset):
+    """The listed pairs ``k < l`` closer than ``radius`` with ``k`` from ``lo`` to ``hi``, in the order
+    :func:`brake_close_pairs_exact` meets them, written from ``offset`` on into ``pair_k``, ``pair_l``;
+    returns how many. (``offset = start[lo]`` leaves room for all: a row's pairs are at most its entries.)"""
+    r2max = radius * radius
+    m = offset
+    # the tips' own rows through slices from lo (loops from 0: `kernels/tips.py::tip_tip_fast_rows`)
+    own, s = position[lo:hi], start[lo : hi + 1]
+    for i in range(hi - lo):
+        k = lo + i
+        for j in range(s[i], s[i + 1]):
+            l = index[j]
+            if l > k:
+                dx = own[i, 0] - position[l, 0]
+                dy = own[i, 1] - position[l, 1]
+                dz = own[i, 2] - position[l, 2]
+                if dx * dx + dy * dy + dz * dz < r2max:  # contacts.py::closer
+                    pair_k[m] = k
+                    pair_l[m] = l
+                    m += 1
+    return m - offset
+
+
+@inline
+def brake_found_pairs(velocity, pair_k, pair_l, offset, count, k_br, dt, work):
+    """The exact brake of the pairs :func:`close_pairs_rows` found (``count`` from ``offset`` on), added
+    to ``work`` and returned, with the arithmetic of :func:`brake_close_pairs_exact`, pair after pair."""
+    decay = math.exp(-2.0 * k_br * dt)
+    for j in range(offset, offset + count):
+        work -= 0.25 * (1.0 - decay * decay) * _brake_pair(velocity, pair_k[j], pair_l[j], decay)
+    return work
 
 
 def brake_close_pairs(position, velocity, start, index, radius, k_br, dt):

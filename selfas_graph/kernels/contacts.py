@@ -91,11 +91,56 @@ def contacts_unchanged(
     filament_radius : float
         Surface radius of the plasma filament about the z axis (NaN: none).
     """
+    ok, n_known, n_close = contacts_part(
+        position,
+        start,
+        index,
+        pairs,
+        0,
+        pairs.shape[0],
+        0,
+        position.shape[0],
+        rstar,
+        release,
+        z_cathode,
+        z_anode,
+        on_cathode,
+        on_anode,
+        filament_radius,
+        on_filament,
+    )
+    return ok and n_close == n_known
+
+
+@njit
+def contacts_part(
+    position,
+    start,
+    index,
+    pairs,
+    p_lo,
+    p_hi,
+    k_lo,
+    k_hi,
+    rstar,
+    release,
+    z_cathode,
+    z_anode,
+    on_cathode,
+    on_anode,
+    filament_radius,
+    on_filament,
+):
+    """The tests of :func:`contacts_unchanged` on the contacts ``p_lo`` to ``p_hi`` and the tips ``k_lo``
+    to ``k_hi``: ``(ok, n_known, n_close)``, ``ok`` False when one of them fails, else the contacts among
+    them closer than r* and the listed pairs ``k < l`` from those tips closer than r*. Over any split of
+    the contacts and the tips into parts, :func:`contacts_unchanged` is True exactly when every part is
+    ok and the counts add up to the same number."""
     lo = 1.0 - QUIET_MARGIN
     hi = 1.0 + QUIET_MARGIN
     r2 = rstar * rstar
     n_known = 0
-    for p in range(pairs.shape[0]):
+    for p in range(p_lo, p_hi):
         k = pairs[p, 0]
         l = pairs[p, 1]
         dx = position[k, 0] - position[l, 0]
@@ -103,53 +148,56 @@ def contacts_unchanged(
         dz = position[k, 2] - position[l, 2]
         d2 = dx * dx + dy * dy + dz * dz
         if not d2 <= release * release * lo:
-            return False
+            return False, 0, 0
         if d2 < r2 * lo:
             n_known += 1
         elif d2 <= r2 * hi:
-            return False
+            return False, 0, 0
     n_close = 0
-    for k in range(position.shape[0]):
-        for j in range(start[k], start[k + 1]):
+    # the tips' own rows through slices from k_lo (loops from 0: `kernels/tips.py::tip_tip_fast_rows`)
+    own, s = position[k_lo:k_hi], start[k_lo : k_hi + 1]
+    for i in range(k_hi - k_lo):
+        k = k_lo + i
+        for j in range(s[i], s[i + 1]):
             l = index[j]
             if l > k:
-                dx = position[k, 0] - position[l, 0]
-                dy = position[k, 1] - position[l, 1]
-                dz = position[k, 2] - position[l, 2]
+                dx = own[i, 0] - position[l, 0]
+                dy = own[i, 1] - position[l, 1]
+                dz = own[i, 2] - position[l, 2]
                 d2 = dx * dx + dy * dy + dz * dz
                 if d2 < r2 * lo:
                     n_close += 1
                 elif not d2 > r2 * hi:  # within the margin, or NaN
-                    return False
-    if n_close != n_known:
-        return False
+                    return False, 0, 0
     if z_cathode == z_cathode:
-        for k in range(position.shape[0]):
-            z = position[k, 2]
+        c, a = on_cathode[k_lo:k_hi], on_anode[k_lo:k_hi]
+        for i in range(k_hi - k_lo):
+            z = own[i, 2]
             # the tracker's differences, z - z_cathode and z_anode - z, computed alike (no margin needed)
             hc = z - z_cathode
             ha = z_anode - z
-            if on_cathode[k]:
+            if c[i]:
                 if not hc <= release:
-                    return False
+                    return False, 0, 0
             elif not hc >= rstar:
-                return False
-            if on_anode[k]:
+                return False, 0, 0
+            if a[i]:
                 if not ha <= release:
-                    return False
+                    return False, 0, 0
             elif not ha >= rstar:
-                return False
+                return False, 0, 0
     if filament_radius == filament_radius:
-        for k in range(position.shape[0]):
-            rho = np.sqrt(position[k, 0] * position[k, 0] + position[k, 1] * position[k, 1])
+        f = on_filament[k_lo:k_hi]
+        for i in range(k_hi - k_lo):
+            rho = np.sqrt(own[i, 0] * own[i, 0] + own[i, 1] * own[i, 1])
             h = rho - filament_radius
             tol = QUIET_MARGIN * (rho + abs(filament_radius) + release)  # the tracker takes np.hypot
-            if on_filament[k]:
+            if f[i]:
                 if not h <= release - tol:
-                    return False
+                    return False, 0, 0
             elif not h >= rstar + tol:
-                return False
-    return True
+                return False, 0, 0
+    return True, n_known, n_close
 
 
 def close_pair_count(position, start, index, radius):

@@ -94,6 +94,25 @@ def ab4_step(x, v, hist_v, hist_a, slots, dt, length):
     return worst_bond_error(x[: 2 * n_rods].reshape(n_rods, 6), length)
 
 
+@inline
+def ab4_rods(x, v, hist_v, hist_a, slots, dt, length, lo, hi):
+    """:func:`ab4_step` of the rods ``lo`` to ``hi`` (their tips ``2 lo`` to ``2 hi``), serial: the same
+    numbers for them as :func:`ab4_step` of all rods; returns the largest bond-length error among them
+    (``length`` empty: rods of length 1)."""
+    c = dt / 24.0
+    a, b = 6 * lo, 6 * hi
+    xf, vf = x.reshape(-1)[a:b], v.reshape(-1)[a:b]
+    v0, v1 = hist_v[slots[0]].reshape(-1)[a:b], hist_v[slots[1]].reshape(-1)[a:b]
+    v2, v3 = hist_v[slots[2]].reshape(-1)[a:b], hist_v[slots[3]].reshape(-1)[a:b]
+    a0, a1 = hist_a[slots[0]].reshape(-1)[a:b], hist_a[slots[1]].reshape(-1)[a:b]
+    a2, a3 = hist_a[slots[2]].reshape(-1)[a:b], hist_a[slots[3]].reshape(-1)[a:b]
+    for k in range(b - a):
+        xf[k] = xf[k] + c * (55.0 * v0[k] - 59.0 * v1[k] + 37.0 * v2[k] - 9.0 * v3[k])
+        vf[k] = vf[k] + c * (55.0 * a0[k] - 59.0 * a1[k] + 37.0 * a2[k] - 9.0 * a3[k])
+    rods = x[2 * lo : 2 * hi].reshape(hi - lo, 6)
+    return worst_bond_error(rods, length if length.shape[0] == 0 else length[lo:hi])
+
+
 @njit_rows
 def axpy(y, d, h, out):
     """``out = y + h d`` for (n, 3) arrays; ``out`` may be ``y``."""
@@ -121,6 +140,26 @@ def _sum_rows(flat, rows):
         r0 = rows[j]
         for i in prange(flat.shape[0]):
             flat[i] += r0[i]
+        j += 1
+
+
+@inline
+def sum_rows_range(flat, rows, a, b):
+    """:func:`_sum_rows` of the elements ``a`` to ``b`` only (each the same additions in the same order)."""
+    f = flat[a:b]
+    for i in range(b - a):
+        f[i] = 0.0
+    n_rows = rows.shape[0]
+    j = 0
+    while n_rows - j >= 4:
+        r0, r1, r2, r3 = rows[j][a:b], rows[j + 1][a:b], rows[j + 2][a:b], rows[j + 3][a:b]
+        for i in range(b - a):
+            f[i] = (((f[i] + r0[i]) + r1[i]) + r2[i]) + r3[i]
+        j += 4
+    while j < n_rows:
+        r0 = rows[j][a:b]
+        for i in range(b - a):
+            f[i] += r0[i]
         j += 1
 
 
@@ -162,29 +201,36 @@ def channel_sum_power(out, channels, velocity, powered, power):
     rows = channels.reshape(channels.shape[0], flat.shape[0])
     vel = velocity.reshape(-1)
     _sum_rows(flat, rows)
-    # the powers, each the sum dot_as_numpy forms, three channels in one pass over the blocks of eight
-    # elements: the chains of dependent additions of the three overlap (one channel after another, each
-    # waits on the latency of its own: measured 1.7 times slower at 6 channels of 2400 tips; three at a
-    # time 7 % faster than two at 12 000 tips, Zen 5)
+    # the powers, each the sum dot_as_numpy forms, three channels at a time
+    for j in range(0, powered.shape[0], 3):
+        power_group(rows, vel, powered, power, j)
+
+
+@inline
+def power_group(rows, vel, powered, power, j):
+    """The powers of :func:`channel_sum_power` of ``powered[j]`` to ``powered[j + 2]`` (as many as there
+    are), into ``power[j:j + 3]``: ``rows`` the channels and ``vel`` the velocities, both flat."""
+    # the three sums in one pass over the blocks of eight elements: their chains of dependent
+    # additions overlap (one channel after another, each waits on the latency of its own: measured 1.7
+    # times slower at 6 channels of 2400 tips; three at a time 7 % faster than two at 12 000 tips, Zen 5)
     m = powered.shape[0]
-    n = flat.shape[0]
-    for j in range(0, m, 3):
-        # the last one again when fewer are left, its sum discarded
-        a = rows[powered[j]]
-        b = rows[powered[min(j + 1, m - 1)]]
-        e = rows[powered[min(j + 2, m - 1)]]
-        a0 = a1 = b0 = b1 = e0 = e1 = 0.0
-        i = 0
-        while n - i >= 8:
-            a0, a1 = dot_block(a, vel, i, a0, a1)
-            b0, b1 = dot_block(b, vel, i, b0, b1)
-            e0, e1 = dot_block(e, vel, i, e0, e1)
-            i += 8
-        power[j] = dot_finish(a, vel, i, n, a0, a1)
-        if j + 1 < m:
-            power[j + 1] = dot_finish(b, vel, i, n, b0, b1)
-        if j + 2 < m:
-            power[j + 2] = dot_finish(e, vel, i, n, e0, e1)
+    n = vel.shape[0]
+    # the last one again when fewer are left, its sum discarded
+    a = rows[powered[j]]
+    b = rows[powered[min(j + 1, m - 1)]]
+    e = rows[powered[min(j + 2, m - 1)]]
+    a0 = a1 = b0 = b1 = e0 = e1 = 0.0
+    i = 0
+    while n - i >= 8:
+        a0, a1 = dot_block(a, vel, i, a0, a1)
+        b0, b1 = dot_block(b, vel, i, b0, b1)
+        e0, e1 = dot_block(e, vel, i, e0, e1)
+        i += 8
+    power[j] = dot_finish(a, vel, i, n, a0, a1)
+    if j + 1 < m:
+        power[j + 1] = dot_finish(b, vel, i, n, b0, b1)
+    if j + 2 < m:
+        power[j + 2] = dot_finish(e, vel, i, n, e0, e1)
 
 
 @njit_rows

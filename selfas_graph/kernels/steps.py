@@ -13,7 +13,7 @@ returns at the first step that needs Python:
   or, for the split tip brake, after its update: the step is then undone, positions and velocities
   put back);
 - ``NEEDS_CONTACTS``: after a step whose contact test needs Python (the quiet-step test
-  ``pairs.py::contacts_unchanged`` is not sure, a filament contact moved along z, or the list is
+  ``contacts.py::contacts_unchanged`` is not sure, a filament contact moved along z, or the list is
   due for a rebuild at the new positions);
 - ``NEEDS_HEALTH``: after a step that fails the run's health check (Python then raises the diagnosis);
 - ``DONE``: after ``n_max`` steps.
@@ -25,21 +25,44 @@ there with numpy's matrix product, as the Python step sums it).
 
 The O(n) kernels are called in their serial builds (``njit_rows``'s ``serial``): the caller uses
 this path below ``_jit.PARALLEL_ROWS`` tips only, where the Python step calls those builds too.
+
+**On several threads** (:func:`fast_steps_team`, docs/performance.md 'Fast steps on both cores'). A
+step is a sequence of phases (:data:`DUE` ... :data:`CONTACTS`), each a set of tasks that may run in
+any order on any thread: the rods in blocks (forces, update, constraint, the pair search of the split
+tip brake, the contact test, each reading all positions but writing the rows of its block only), the
+channels' powers by groups of three, the split brakes as one task (they act pair after pair, in order).
+``kernels/team.py`` forks the threads once per call and hands out the tasks; the call's control flow
+(:func:`_lead`) runs on one of them and decides between phases from what the tasks left in
+``partial`` and ``counts`` (per block: the largest displacement, bond error and velocity, the pairs
+found, the contact test's counts), combining them as the kernels over all rows would: the maxima the
+same, the contact counts the same sums. Every number is computed by the same operations as on one
+thread; :func:`fast_steps` is the same code on the calling thread with one block.
 """
 
 import math
 
 import numpy as np
 
-from ._jit import njit
-from .brakes import brake_close_pairs_exact, tip_brake
-from .cells import max_displacement2
-from .contacts import contacts_unchanged
-from .external import filament_force_on_tips, line_yukawa_on_centres, monopoles_on_tips
-from .fields import electrode_brake_exact, electrode_walls, plasma_force_on_tips
-from .integrate import ab4_step, channel_sum_power, dot_as_numpy
-from .rigid import bond_acceleration, constrain_bonds_checked
-from .tips import tip_tip_fast
+from . import team
+from ._jit import njit, njit_parallel, prange
+from .step_tasks import (
+    BRAKES,
+    CONSTRAIN,
+    CONTACTS,
+    DUE,
+    FORCES,
+    P_BOND,
+    P_BOND_AFTER,
+    P_DUE,
+    P_DUE_AFTER,
+    P_DUE_SPLIT,
+    P_SPEED,
+    PAIRS,
+    PHASES_PER_STEP,
+    UNDO,
+    UPDATE,
+    run_tasks,
+)
 
 DONE, NEEDS_STEP, NEEDS_CONTACTS, NEEDS_HEALTH = 0, 1, 2, 3
 
@@ -59,17 +82,6 @@ CHANNELS = (
 #: the split brakes whose work is logged, in the order of the terms (the column of ``brake_work``)
 SPLIT_BRAKES = ("tip_brake", "electrode_brake", "external_monopole_brake")
 
-_ab4_step = ab4_step.serial
-_channel_sum_power = channel_sum_power.serial
-_bond_acceleration = bond_acceleration.serial
-_constrain_bonds_checked = constrain_bonds_checked.serial
-_electrode_walls = electrode_walls.serial
-_plasma_force_on_tips = plasma_force_on_tips.serial
-_filament_force_on_tips = filament_force_on_tips.serial
-_monopoles_on_tips = monopoles_on_tips.serial
-_line_yukawa_on_centres = line_yukawa_on_centres.serial
-_tip_tip_fast = tip_tip_fast.serial
-
 
 @njit
 def _all_plus_zero(a):
@@ -82,122 +94,14 @@ def _all_plus_zero(a):
 
 
 @njit
-def _list_due(position, reference, half_skin2):
-    """``NeighbourList.update``'s test: True when a point moved by ``skin / 2`` or more since the build."""
-    return not max_displacement2(position, reference) < half_skin2
-
-
-@njit
-def _sources_within(position, k, source, r2):
-    """How many of ``source`` lie closer than sqrt(r2) to tip ``k``."""
-    n = 0
-    for s in range(source.shape[0]):
-        dx = position[k, 0] - source[s, 0]
-        dy = position[k, 1] - source[s, 1]
-        dz = position[k, 2] - source[s, 2]
-        if (dx * dx + dy * dy) + dz * dz < r2:
-            n += 1
-    return n
-
-
-@njit
-def _monopole_brake_exact(position, velocity, source, rstar, decay, before, after):
-    """The split brake of the external dipole's monopoles (``model/terms/external.py``,
-    ``ExternalDipoleForce.split``) over one step, bit for bit: a tip within r* of n monopoles has
-    its velocity multiplied by ``decay[n]`` (computed by the caller with numpy's ``exp``); the work is
-    the change of the touched tips' kinetic energy, summed as numpy's ``einsum`` sums it. Returns
-    (work, touched tips)."""
-    r2 = rstar * rstar
-    m = 0
-    for k in range(position.shape[0]):
-        n = _sources_within(position, k, source, r2)
-        if n:
-            for d in range(3):
-                before[m, d] = velocity[k, d]
-            m += 1
-    if not m:
-        return 0.0, 0
-    flat_before = before.reshape(-1)
-    kinetic_before = 0.5 * dot_as_numpy(flat_before, flat_before, 3 * m)
-    m = 0
-    for k in range(position.shape[0]):
-        n = _sources_within(position, k, source, r2)
-        if n:
-            for d in range(3):
-                velocity[k, d] = velocity[k, d] * decay[n]
-                after[m, d] = velocity[k, d]
-            m += 1
-    flat_after = after.reshape(-1)
-    kinetic_after = 0.5 * dot_as_numpy(flat_after, flat_after, 3 * m)
-    return kinetic_after - kinetic_before, m
-
-
-@njit
-def fast_steps(
-    x,
-    v,
-    hist_v,
-    hist_a,
-    hist_p,
-    head,
-    slot_table,
-    step,
-    n_max,
-    slow_every,
-    dt,
-    length,
-    exact_bond,
-    project,
-    correct_velocity,
-    block,
-    total,
-    powered,
-    channel,
-    tip_charge,
-    rod_charge,
-    scalars,
-    plasma,
-    decay_walls,
-    decay_poles,
-    source,
-    source_charge,
-    line,
-    nodes,
-    weights,
-    held,
-    tip_far,
-    tip_fast,
-    rate,
-    base,
-    base_step,
-    extrapolate,
-    lists,
-    start,
-    index,
-    reference,
-    pairs,
-    on_cathode,
-    on_anode,
-    on_filament,
-    filament_tip,
-    filament_z,
-    centre,
-    centre_force,
-    before,
-    after,
-    save_x,
-    save_v,
-    bond_before,
-    power_log,
-    brake_work,
-    brake_hit,
-    limits,
-):
+def fast_steps(args):
     """Up to ``n_max`` fast steps from ``step``, in place; returns ``(steps, reason, head, max_bond_error,
     bond_error_after, speed_max)`` with ``reason`` one of the module's codes.
 
     Parameters
     ----------
+    args : tuple
+        The arrays and values below, in this order (``model/compiled.py::CompiledSteps.advance``).
     x, v : (n_tips, 3) float64, positions and velocities, advanced in place
     hist_v, hist_a : (4, n_tips, 3) float64; hist_p : (4, n_power) float64
         The integrator's ring buffers; ``head`` the slot of the last step's derivatives;
@@ -250,33 +154,273 @@ def fast_steps(
         radius (NaN: none), height tolerance, health limits BOND_BREAK and MAX_STEP_DISPLACEMENT,
         the largest bond error so far.
     """
-    amb_k, rstar, kappa, tb_k, tb_split = scalars[0], scalars[1], scalars[2], scalars[3], scalars[4]
-    z_c, z_a, wall_k, wall_split = scalars[5], scalars[6], scalars[7], scalars[8]
-    fil_current, fil_w, pole_k, pole_split = scalars[9], scalars[10], scalars[11], scalars[12]
-    r_in, r_out, half_skin2, release = scalars[13], scalars[14], scalars[15], scalars[16]
-    network = limits[0] == 1.0
-    c_zc, c_za, c_surface, height_tol = limits[1], limits[2], limits[3], limits[4]
-    bond_break, max_move, max_bond = limits[5], limits[6], limits[7]
-    c_tip, c_tb, c_amb, c_pl, c_wall, c_wb, c_fil, c_pole, c_pb, c_line = (
-        channel[0],
-        channel[1],
-        channel[2],
-        channel[3],
-        channel[4],
-        channel[5],
-        channel[6],
-        channel[7],
-        channel[8],
-        channel[9],
+    a, run, result, result_f = _prepare(args, 1)
+    _join(a, run, result, result_f)
+    return result[0], result[1], result[2], result_f[0], result_f[1], result_f[2]
+
+
+@njit_parallel
+def fast_steps_team(threads, chunks, args):
+    """:func:`fast_steps` on ``threads`` threads (``kernels/team.py``), the rods in ``chunks`` blocks: the
+    same numbers bit for bit, on any number of threads."""
+    a, run, result, result_f = _prepare(args, chunks)
+    for _ in prange(threads):
+        _join(a, run, result, result_f)
+    return result[0], result[1], result[2], result_f[0], result_f[1], result_f[2]
+
+
+@njit
+def _prepare(args, chunks):
+    """The scratch of a call: ``(a, run, result, result_f)``, the tasks' arrays and values, what only the
+    call's control flow reads (:func:`_lead`), and the call's results (ints: steps, reason, head;
+    floats: largest bond error, bond error, speed)."""
+    (
+        x,
+        v,
+        hist_v,
+        hist_a,
+        hist_p,
+        head,
+        slot_table,
+        step,
+        n_max,
+        slow_every,
+        dt,
+        length,
+        exact_bond,
+        project,
+        correct_velocity,
+        block,
+        total,
+        powered,
+        channel,
+        tip_charge,
+        rod_charge,
+        scalars,
+        plasma,
+        decay_walls,
+        decay_poles,
+        source,
+        source_charge,
+        line,
+        nodes,
+        weights,
+        held,
+        tip_far,
+        tip_fast,
+        rate,
+        base,
+        base_step,
+        extrapolate,
+        lists,
+        start,
+        index,
+        reference,
+        pairs,
+        on_cathode,
+        on_anode,
+        on_filament,
+        filament_tip,
+        filament_z,
+        centre,
+        centre_force,
+        before,
+        after,
+        save_x,
+        save_v,
+        bond_before,
+        power_log,
+        brake_work,
+        brake_hit,
+        limits,
+    ) = args
+    ctl = np.zeros(team.control_size(PHASES_PER_STEP * max(1, min(n_max, slow_every)) + 1), dtype=np.int64)
+    chunks = max(1, min(chunks, x.shape[0] // 2))
+    partial = np.zeros((chunks, 6))
+    counts = np.zeros((chunks, 4), dtype=np.int64)
+    zero = np.zeros(held.shape[0], dtype=np.bool_)
+    n_pairs = index.shape[0] if scalars[4] != 0.0 else 0
+    pair_k = np.empty(n_pairs, dtype=np.int64)
+    pair_l = np.empty(n_pairs, dtype=np.int64)
+    result = np.zeros(3, dtype=np.int64)
+    result_f = np.zeros(3)
+    a = (
+        x,
+        v,
+        hist_v,
+        hist_a,
+        hist_p,
+        slot_table,
+        dt,
+        length,
+        exact_bond,
+        project,
+        correct_velocity,
+        block,
+        total,
+        powered,
+        channel,
+        tip_charge,
+        rod_charge,
+        scalars,
+        plasma,
+        decay_walls,
+        decay_poles,
+        source,
+        source_charge,
+        line,
+        nodes,
+        weights,
+        held,
+        tip_far,
+        tip_fast,
+        rate,
+        base,
+        base_step,
+        extrapolate,
+        lists,
+        start,
+        index,
+        reference,
+        pairs,
+        on_cathode,
+        on_anode,
+        on_filament,
+        centre,
+        centre_force,
+        before,
+        after,
+        save_x,
+        save_v,
+        brake_work,
+        brake_hit,
+        limits,
+        ctl,
+        partial,
+        counts,
+        zero,
+        pair_k,
+        pair_l,
+        chunks,
     )
-    n = x.shape[0]
+    run = (head, step, n_max, slow_every, filament_tip, filament_z, bond_before, power_log)
+    return a, run, result, result_f
+
+
+@njit
+def _join(a, run, result, result_f):
+    """One thread's part of a call: the first to come leads (:func:`_lead`), the others work on the
+    phases it opens until it closes the call. ``a``: the arrays and values the tasks read (:func:`_call`)."""
+    ctl = a[50]
+    if team.fetch_add(ctl, team.JOINED, 1) == 0:
+        done, reason, head, max_bond, err_after, speed = _lead(a, run)
+        result[0], result[1], result[2] = done, reason, head
+        result_f[0], result_f[1], result_f[2] = max_bond, err_after, speed
+        team.close(ctl)
+        return
+    seen = 0
+    while team.load(ctl, team.CLOSED) == 0:
+        p = team.load(ctl, team.OPENED)
+        if p == seen:
+            continue
+        run_tasks(p, a)
+        seen = p
+
+
+@njit
+def _phase(p, kind, tasks, w0, w1, w2, a):
+    """Open phase ``p`` of ``kind`` with ``tasks`` tasks (words ``w0``-``w2``), work on it and wait until it is done."""
+    ctl = a[50]
+    team.open_phase(ctl, p, tasks, kind, w0, w1, w2)
+    run_tasks(p, a)
+    team.wait(ctl, p)
+
+
+@njit
+def _largest(partial, column):
+    """The largest of a column of ``partial``, as the kernels take a maximum (a NaN is passed over)."""
+    m = 0.0
+    for c in range(partial.shape[0]):
+        m = max(m, partial[c, column])
+    return m
+
+
+@njit
+def _lead(a, run):
+    """The steps of a call in the Python step's order, each part a phase of tasks (``step_tasks.py::run_tasks``); the
+    decisions between them from the tasks' results."""
+    (
+        x,
+        v,
+        hist_v,
+        hist_a,
+        hist_p,
+        slot_table,
+        dt,
+        length,
+        exact_bond,
+        project,
+        correct_velocity,
+        block,
+        total,
+        powered,
+        channel,
+        tip_charge,
+        rod_charge,
+        scalars,
+        plasma,
+        decay_walls,
+        decay_poles,
+        source,
+        source_charge,
+        line,
+        nodes,
+        weights,
+        held,
+        tip_far,
+        tip_fast,
+        rate,
+        base,
+        base_step,
+        extrapolate,
+        lists,
+        start,
+        index,
+        reference,
+        pairs,
+        on_cathode,
+        on_anode,
+        on_filament,
+        centre,
+        centre_force,
+        before,
+        after,
+        save_x,
+        save_v,
+        brake_work,
+        brake_hit,
+        limits,
+        ctl,
+        partial,
+        counts,
+        zero,
+        pair_k,
+        pair_l,
+        chunks,
+    ) = a
+    head, step, n_max, slow_every, filament_tip, filament_z, bond_before, power_log = run
+    tb_split, half_skin2 = scalars[4], scalars[15]
+    network = limits[0] == 1.0
+    height_tol = limits[4]
+    bond_break, max_move, max_bond = limits[5], limits[6], limits[7]
+    groups = (powered.shape[0] + 2) // 3
     err_after = 0.0
     speed = 0.0
     done = 0
+    p = 0
     checked = False  # the tip list's update test already made at the current positions
     # held forces whose rate and base are all +0 (the current terms while no rod carries current):
     # rate * s + base is then +0 on every step, written on the first step of the call only
-    zero = np.zeros(held.shape[0], dtype=np.bool_)
     if extrapolate:
         for j in range(held.shape[0]):
             zero[j] = base_step[j] >= 0 and _all_plus_zero(rate[j]) and _all_plus_zero(base[j])
@@ -285,97 +429,41 @@ def fast_steps(
         if step % slow_every == 0:
             return done, NEEDS_STEP, head, max_bond, err_after, speed
         # (not again when the contact test of the step before found the list fresh at these positions)
-        if lists[0] and not checked and _list_due(x, reference, half_skin2):
-            return done, NEEDS_STEP, head, max_bond, err_after, speed
+        if lists[0] and not checked:
+            p += 1
+            _phase(p, DUE, chunks, 0, 0, 0, a)
+            if not _largest(partial, P_DUE) < half_skin2:
+                return done, NEEDS_STEP, head, max_bond, err_after, speed
         checked = False
-        if lists[1]:
-            for k in range(n):
-                for d in range(3):
-                    save_x[k, d] = x[k, d]
-                    save_v[k, d] = v[k, d]
         h = (head + 1) % 4
-        for k in range(n):
-            for d in range(3):
-                hist_v[h, k, d] = v[k, d]
-        # -- the fast terms (ForceField.evaluate, full=False), each into its channel; the constant
-        # channels (uniform field, electric field, the split tip brake's zeros) keep their values
-        if c_tb >= 0 and tb_k == tb_k:
-            tip_brake(x, v, start, index, rstar, tb_k, block[c_tb])
-        if c_amb >= 0:
-            out = block[c_amb]
-            for k in range(n):
-                for d in range(3):
-                    out[k, d] = v[k, d] * -amb_k
-        if c_pl >= 0:
-            _plasma_force_on_tips(x, tip_charge, plasma[0], plasma[1], plasma[2], plasma[3], block[c_pl])
-        if c_wall >= 0:
-            _electrode_walls(x, v, z_c, z_a, rstar, kappa, wall_k, block[c_wall], block[c_wb])
-        if c_fil >= 0:
-            _filament_force_on_tips(x, tip_charge, fil_current, fil_w, block[c_fil])
-        if c_pole >= 0:
-            _monopoles_on_tips(
-                x, v, tip_charge, source, source_charge, rstar, kappa, pole_k, block[c_pole], block[c_pb]
-            )
-        if c_line >= 0:  # -1 also when the line charge is slow (held with the slow forces)
-            for i in range(n // 2):
-                for d in range(3):
-                    centre[i, d] = 0.5 * (x[2 * i, d] + x[2 * i + 1, d])
-            _line_yukawa_on_centres(
-                centre, rod_charge, line[0], line[1], line[2], line[3], line[4], nodes, weights, centre_force
-            )
-            out = block[c_line]
-            for i in range(n // 2):
-                for d in range(3):
-                    out[2 * i, d] = 0.5 * centre_force[i, d]
-                    out[2 * i + 1, d] = 0.5 * centre_force[i, d]
-        # -- MultipleTimeStepping.complete: the tip-tip fast part, the held forces extrapolated
-        if c_tip >= 0:
-            _tip_tip_fast(x, tip_charge, start, index, rstar, kappa, r_in, r_out, tip_fast)
-        if extrapolate:
-            for j in range(held.shape[0]):
-                if base_step[j] < 0 or (zero[j] and done > 0):
-                    continue
-                s = float(step - base_step[j])
-                o = tip_far if held[j] < 0 else block[held[j]]
-                r, b = rate[j], base[j]
-                for k in range(n):
-                    for d in range(3):
-                        o[k, d] = r[k, d] * s + b[k, d]
-        if c_tip >= 0:
-            out = block[c_tip]
-            for k in range(n):
-                for d in range(3):
-                    out[k, d] = tip_far[k, d] + tip_fast[k, d]
-        _channel_sum_power(total, block, v, powered, hist_p[h])
-        # -- AdamsBashforth4.step
-        _bond_acceleration(total, v, x, exact_bond, hist_a[h])
-        err_before = _ab4_step(x, v, hist_v, hist_a, slot_table[h], dt, length)
+        p += 1
+        _phase(p, FORCES, chunks, h, step, done, a)
+        p += 1
+        _phase(p, UPDATE, groups + chunks, h, step, done, a)
+        err_before = _largest(partial, P_BOND)
         for c in range(3):
             brake_hit[done, c] = False
             brake_work[done, c] = 0.0
         if tb_split != 0.0:
-            if _list_due(x, reference, half_skin2):
+            if not _largest(partial, P_DUE_SPLIT) < half_skin2:
                 # the split brake would rebuild the list here: undo the step, Python takes it
-                for k in range(n):
-                    for d in range(3):
-                        x[k, d] = save_x[k, d]
-                        v[k, d] = save_v[k, d]
+                p += 1
+                _phase(p, UNDO, chunks, h, step, done, a)
                 return done, NEEDS_STEP, head, max_bond, err_after, speed
-            w, m = brake_close_pairs_exact(x, v, start, index, rstar, tb_split, dt)
-            if m:
-                brake_work[done, 0] = w
-                brake_hit[done, 0] = True
-        if wall_split != 0.0:
-            w, m = electrode_brake_exact(x, v, z_c, z_a, rstar, decay_walls, before, after)
-            if m:
-                brake_work[done, 1] = w
-                brake_hit[done, 1] = True
-        if pole_split != 0.0:
-            w, m = _monopole_brake_exact(x, v, source, rstar, decay_poles, before, after)
-            if m:
-                brake_work[done, 2] = w
-                brake_hit[done, 2] = True
-        err_after, speed = _constrain_bonds_checked(x, v, project, correct_velocity, length)
+            p += 1
+            _phase(p, PAIRS, chunks, h, step, done, a)
+        if tb_split != 0.0 or scalars[8] != 0.0 or scalars[12] != 0.0:
+            p += 1
+            _phase(p, BRAKES, 1, h, step, done, a)
+        p += 1
+        _phase(p, CONSTRAIN, chunks, h, step, done, a)
+        err_after = _largest(partial, P_BOND_AFTER)
+        speed = 0.0
+        for c in range(chunks):
+            if partial[c, P_SPEED] != partial[c, P_SPEED]:
+                speed = math.nan
+                break
+            speed = max(speed, partial[c, P_SPEED])
         for c in range(power_log.shape[1]):
             power_log[done, c] = hist_p[h, c]
         bond_before[done] = err_before
@@ -392,12 +480,19 @@ def fast_steps(
         # -- the network's contact test (Network.update on a step without news)
         if network:
             if lists[2]:
-                if _list_due(x, reference, half_skin2):
+                if not _largest(partial, P_DUE_AFTER) < half_skin2:
                     return done, NEEDS_CONTACTS, head, max_bond, err_after, speed
                 checked = True
-            if not contacts_unchanged(
-                x, start, index, pairs, rstar, release, c_zc, c_za, on_cathode, on_anode, c_surface, on_filament
-            ):
+            p += 1
+            _phase(p, CONTACTS, chunks, h, step, done, a)
+            n_known = 0
+            n_close = 0
+            for c in range(chunks):
+                if counts[c, 1] == 0:
+                    return done, NEEDS_CONTACTS, head, max_bond, err_after, speed
+                n_known += counts[c, 2]
+                n_close += counts[c, 3]
+            if n_known != n_close:
                 return done, NEEDS_CONTACTS, head, max_bond, err_after, speed
             for j in range(filament_tip.shape[0]):
                 if abs(x[filament_tip[j], 2] - filament_z[j]) > height_tol:

@@ -272,20 +272,37 @@ def tip_tip_fast(position, charge, start, index, rstar, kappa, r_in, r_out, out)
     """
     n = position.shape[0]
     for k in prange(n):
-        fx = 0.0
-        fy = 0.0
-        fz = 0.0
-        for j in range(start[k], start[k + 1]):
-            l = index[j]
-            dx = position[k, 0] - position[l, 0]
-            dy = position[k, 1] - position[l, 1]
-            dz = position[k, 2] - position[l, 2]
-            r2 = dx * dx + dy * dy + dz * dz
-            if r2 < r_out * r_out:
-                g = tip_force_over_r(r2, charge[k] * charge[l], rstar, kappa) * fast_switch(r2, r_in, r_out)
-                fx += g * dx
-                fy += g * dy
-                fz += g * dz
-        out[k, 0] = fx
-        out[k, 1] = fy
-        out[k, 2] = fz
+        _tip_fast_row(position, charge, start, index, rstar, kappa, r_in, r_out, position[k], charge[k], k, out[k])
+
+
+@inline
+def _tip_fast_row(position, charge, start, index, rstar, kappa, r_in, r_out, p, q, k, out):
+    """Row ``k`` of :func:`tip_tip_fast` (``p`` its position, ``q`` its charge, ``out`` its output row)."""
+    fx = 0.0
+    fy = 0.0
+    fz = 0.0
+    for j in range(start[k], start[k + 1]):
+        l = index[j]
+        dx = p[0] - position[l, 0]
+        dy = p[1] - position[l, 1]
+        dz = p[2] - position[l, 2]
+        r2 = dx * dx + dy * dy + dz * dz
+        if r2 < r_out * r_out:
+            g = tip_force_over_r(r2, q * charge[l], rstar, kappa) * fast_switch(r2, r_in, r_out)
+            fx += g * dx
+            fy += g * dy
+            fz += g * dz
+    out[0] = fx
+    out[1] = fy
+    out[2] = fz
+
+
+@njit
+def tip_tip_fast_rows(position, charge, start, index, rstar, kappa, r_in, r_out, lo, hi, out):
+    """:func:`tip_tip_fast` of the tips ``lo`` to ``hi`` only (rows of ``out`` past them untouched), serial.
+
+    The rows are read through slices from ``lo`` (a loop from 0): a loop over ``range(lo, hi)`` was
+    1.13 times slower (75 against 66 us for the 12 000 tips of the Fig. 6 scene at t = 100, Zen 5)."""
+    own, q, s, o = position[lo:hi], charge[lo:hi], start[lo : hi + 1], out[lo:hi]
+    for i in range(hi - lo):
+        _tip_fast_row(position, charge, s, index, rstar, kappa, r_in, r_out, own[i], q[i], i, o[i])

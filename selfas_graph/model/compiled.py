@@ -10,12 +10,14 @@ counts; the per-step bond errors go to the caller (the run file's per-step rows)
 
 The compiled steps are used in serial runs below ``kernels/_jit.py::PARALLEL_ROWS`` tips, without
 per-term timing, under multiple time stepping, when every fast term is one :data:`FAST_TERMS` names;
-otherwise (and under MPI) every step runs in Python. ``sim.compiled = None`` makes every step of a
+otherwise (and under MPI) every step runs in Python. With several numba threads and at least
+:data:`TEAM_TIPS` tips they run on all threads (``kernels/steps.py::fast_steps_team``), the same numbers. ``sim.compiled = None`` makes every step of a
 simulation in Python (the slow reference of the tests, tests/unit/test_compiled_steps.py).
 """
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from ..kernels._jit import PARALLEL_ROWS
@@ -28,6 +30,7 @@ from ..kernels.steps import (
     SPLIT_BRAKES,
     add_work,
     fast_steps,
+    fast_steps_team,
 )
 from .health import BOND_BREAK, MAX_STEP_DISPLACEMENT
 from .integrator import AB4_WEIGHTS
@@ -48,6 +51,11 @@ FAST_TERMS = (
 )
 #: the steps one call makes at most (the size of its logs)
 CHUNK = 256
+#: tips from which a run on several numba threads makes its compiled steps on all of them
+#: (``kernels/steps.py::fast_steps_team``; docs/performance.md 'Fast steps on both cores'), and the
+#: blocks of rods per thread
+TEAM_TIPS = 1000
+TEAM_CHUNKS = 2
 
 _EMPTY = np.zeros(0)
 _EMPTY3 = np.zeros((0, 3))
@@ -209,7 +217,7 @@ class CompiledSteps:
             return 0, NEEDS_STEP  # the electrode brake's decay is made by its first split step
         hist_p0 = integ.hist_p.copy()
         head0 = integ.head
-        done, reason, head, max_bond, err_after, speed = fast_steps(
+        args = (
             st.position,
             st.velocity,
             integ.hist_v,
@@ -269,6 +277,12 @@ class CompiledSteps:
             self.brake_hit,
             limits,
         )
+        threads = numba.get_num_threads()
+        if threads > 1 and st.n_tips >= TEAM_TIPS:
+            result = fast_steps_team(threads, TEAM_CHUNKS * threads, args)
+        else:
+            result = fast_steps(args)
+        done, reason, head, max_bond, err_after, speed = result
         if done:
             self._account(done, head0, hist_p0)
             integ.head = head

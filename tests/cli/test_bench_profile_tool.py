@@ -23,6 +23,37 @@ def test_profile_table_of_a_few_steps(capsys):
     assert "kernel calls per 1000 steps:" in out and "ab4_step" in out
 
 
+def test_team_table(capsys):
+    """``--team``: both ways timed, TEAM_TIPS put back."""
+    import numba
+    import pytest
+
+    from selfas_graph.model import compiled
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has one thread here")
+
+    tool = _tool()
+    threads, limit = numba.get_num_threads(), compiled.TEAM_TIPS
+    tool.main(
+        [
+            "--team",
+            "--scenario",
+            str(ROOT / "scenarios" / "quick.toml"),
+            "--settle",
+            "4",
+            "--steps",
+            "8",
+            "--rounds",
+            "1",
+        ]
+    )
+    out = capsys.readouterr().out
+    assert "| on all threads |" in out and "| on one thread |" in out and "speed-up of the whole step (wall):" in out
+    assert compiled.TEAM_TIPS == limit
+    numba.set_num_threads(threads)
+
+
 def test_fused_kernels_table(capsys):
     tool = _tool()
     tool.main(["--kernels", "--rounds", "1", "--steps", "10"])

@@ -1,16 +1,35 @@
 """The fast steps in one compiled call (``Simulation.compiled``, model/compiled.py,
 kernels/steps.py) against the Python step, their slow reference: the same state, bit for bit, after
-every call, through contact events, list builds, slow evaluations and a short circuit."""
+every call, through contact events, list builds, slow evaluations and a short circuit; on one thread
+and on a team of two (kernels/team.py) with the rods in as many blocks as threads or three times as
+many (blocks of unequal sizes)."""
 
+import numba
 import numpy as np
 import pytest
 
 from conftest import SMALL_CIRCUIT_SCENE
 from selfas_graph import load_scenario
 from selfas_graph.io.scenario import scenario_from_text
+from selfas_graph.model import compiled
 from selfas_graph.model import operations as op
 from selfas_graph.model.compiled import advance
 from selfas_graph.model.simulation import Simulation
+
+
+@pytest.fixture(params=["one thread", "team", "team, 3 blocks a thread"])
+def team(request, monkeypatch):
+    """The compiled steps on the calling thread only, or on two threads for every number of tips."""
+    if request.param == "one thread":
+        monkeypatch.setattr(compiled, "TEAM_TIPS", 2**62)
+        return
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("numba has one thread here (NUMBA_NUM_THREADS)")
+    monkeypatch.setattr(compiled, "TEAM_TIPS", 0)
+    monkeypatch.setattr(compiled, "TEAM_CHUNKS", 1 if request.param == "team" else 3)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(2)
+    request.addfinalizer(lambda: numba.set_num_threads(threads))
 
 
 def pair(params, **integrator):
@@ -57,7 +76,7 @@ def step_for_step(slow, fast, n_steps):
 
 
 @pytest.mark.jit_off_ok
-def test_compiled_steps_are_the_python_steps_early():
+def test_compiled_steps_are_the_python_steps_early(team):
     """The first 160 steps of a small circuit scene under multiple time stepping (slow_every = 8): the
     RK4 start, tip-list builds and the first contacts, the state the same bit for bit after every call."""
     params = scenario_from_text(SMALL_CIRCUIT_SCENE).params.replace(rods={"count": 30})
@@ -66,7 +85,7 @@ def test_compiled_steps_are_the_python_steps_early():
 
 
 @pytest.mark.parametrize("brake", ["split", "explicit"])
-def test_compiled_steps_are_the_python_steps_through_a_short_circuit(brake):
+def test_compiled_steps_are_the_python_steps_through_a_short_circuit(brake, team):
     """The whole small circuit scene (contacts from step 91, a short circuit at step 567 whose currents
     make the held current forces stale): bit for bit with the split and the explicit brakes."""
     params = scenario_from_text(SMALL_CIRCUIT_SCENE).params
@@ -77,7 +96,7 @@ def test_compiled_steps_are_the_python_steps_through_a_short_circuit(brake):
 
 
 @pytest.mark.parametrize("line_slow", [False, True])
-def test_compiled_steps_are_the_python_steps_in_case_ii(line_slow):
+def test_compiled_steps_are_the_python_steps_in_case_ii(line_slow, team):
     """Case (ii), the quick Fig. 8 scene with fewer rods: external filament, the dipole's monopoles with
     their split brake and its screened line charge (at every step, or held with the slow forces:
     ``forces.external_dipole.line_charge_slow``), the filament's contact heights."""

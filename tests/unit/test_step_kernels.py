@@ -306,3 +306,139 @@ def test_constrain_bonds_checked_reports_nan_and_inf_as_numpy_does(rng):
         _, vmax = kr.constrain_bonds_checked(s.position.copy(), v, False, False, np.zeros(0))
         same_bits(vmax, np.abs(v).max(initial=0.0))
     assert kr.constrain_bonds_checked(np.zeros((0, 3)), np.zeros((0, 3)), True, True, np.zeros(0)) == (0.0, 0.0)
+
+
+# -- the kernels of the compiled steps by blocks of rods (kernels/steps.py, kernels/team.py): over any
+# split of the rods into blocks, the same numbers as the kernel over all of them, bit for bit
+
+
+def splits(n_rods, rng, count=4):
+    """Block edges (in rods) for ``count`` random splits of ``n_rods`` rods, one block and empty blocks among them."""
+    out = [np.array([0, n_rods])]
+    for _ in range(count - 1):
+        inner = np.sort(rng.integers(0, n_rods + 1, size=rng.integers(1, 6)))
+        out.append(np.concatenate([[0], inner, [n_rods]]))
+    return out
+
+
+def test_tip_fast_by_blocks_is_tip_tip_fast(crowded, rng):
+    from selfas_graph.kernels import tips
+
+    s, nl = crowded
+    args = (s.position, s.tip_charge, nl.start, nl.index, RSTAR, 30.0, 0.05, 0.12)
+    whole = np.full_like(s.position, np.nan)
+    tips.tip_tip_fast(*args, whole)
+    assert np.count_nonzero(whole) > 100
+    for edges in splits(s.n_rods, rng):
+        parts = np.full_like(s.position, np.nan)
+        for r0, r1 in zip(edges[:-1], edges[1:]):
+            tips.tip_tip_fast_rows(*args, 2 * r0, 2 * r1, parts)
+        same_bits(parts, whole)
+
+
+@pytest.mark.parametrize("k_dt", [0.1, 3.0])
+def test_split_brake_by_blocks_is_the_one_pass(crowded, rng, k_dt):
+    """The pairs found block by block (each block's from ``start`` of its first tip on), then braked in
+    that order: the velocities, work and count of :func:`brake_close_pairs_exact`."""
+    s, nl = crowded
+    k_br, dt = k_dt / 1e-3, 1e-3
+    v_one = s.velocity.copy()
+    w_one, m_one = brakes.brake_close_pairs_exact(s.position, v_one, nl.start, nl.index, RADIUS, k_br, dt)
+    assert m_one > 20
+    for edges in splits(s.n_rods, rng):
+        v = s.velocity.copy()
+        pair_k = np.full(nl.index.shape[0], -1)
+        pair_l = np.full(nl.index.shape[0], -1)
+        found = []
+        for r0, r1 in zip(edges[:-1], edges[1:]):
+            t0 = 2 * r0
+            found.append(
+                (
+                    t0,
+                    brakes.close_pairs_rows(
+                        s.position, nl.start, nl.index, RADIUS, t0, 2 * r1, pair_k, pair_l, nl.start[t0]
+                    ),
+                )
+            )
+        work, m = 0.0, 0
+        for t0, count in found:
+            work = brakes.brake_found_pairs(v, pair_k, pair_l, nl.start[t0], count, k_br, dt, work)
+            m += count
+        assert m == m_one
+        same_bits(v, v_one)
+        same_bits(work, w_one)
+
+
+def test_contact_test_by_blocks_is_the_one_pass(rng):
+    """contacts_part over blocks of contacts and tips: every part ok and the counts equal exactly when
+    contacts_unchanged is True, on states where it is True and where each of its tests fails."""
+    s = random_rods(150, rng, box=1.2)
+    nl = NeighbourList(RADIUS, 0.05, exclude_same_rod=True)
+    nl.build(s.position)
+    close = contacts.close_pairs(s.position, nl.start, nl.index, RSTAR)
+    assert len(close) > 5
+    n = s.n_tips
+    z = s.position[:, 2]
+    z_c, z_a = z.min() - 0.5 * RSTAR, z.max() + 0.5 * RSTAR
+    on_c = z - z_c < RSTAR
+    on_a = z_a - z < RSTAR
+    no = np.zeros(n, dtype=bool)
+    cases = {
+        "quiet": (close, on_c, on_a),
+        "a close pair not a contact": (close[1:], on_c, on_a),
+        "a contact beyond release": (np.vstack([close, [[0, n - 1]]]), on_c, on_a),
+        "a tip on the cathode not listed": (close, no, on_a),
+    }
+    for name, (pairs, oc, oa) in cases.items():
+        args = (RSTAR, 1.5 * RSTAR, z_c, z_a, oc, oa, np.nan, no)
+        whole = contacts.contacts_unchanged(s.position, nl.start, nl.index, pairs, *args)
+        assert whole == (name == "quiet"), name
+        for edges in splits(s.n_rods, rng):
+            ok, known, near = True, 0, 0
+            blocks = len(edges) - 1
+            m = len(pairs)
+            for j, (r0, r1) in enumerate(zip(edges[:-1], edges[1:])):
+                part = contacts.contacts_part(
+                    s.position, nl.start, nl.index, pairs, j * m // blocks, (j + 1) * m // blocks, 2 * r0, 2 * r1, *args
+                )
+                ok &= part[0]
+                known += part[1]
+                near += part[2]
+            assert (ok and known == near) == whole, name
+
+
+@pytest.mark.parametrize("unit", [True, False])
+def test_ab4_by_blocks_is_ab4_step(rng, unit):
+    s = random_rods(200, rng)
+    length = np.zeros(0) if unit else rng.uniform(0.5, 2.0, size=200)
+    hist_v, hist_a = rng.normal(size=(4, 400, 3)), rng.normal(size=(4, 400, 3)) * 10.0
+    slots = np.array([3, 2, 1, 0], dtype=np.int64)
+    x1, v1 = s.position.copy(), s.velocity.copy()
+    err = ki.ab4_step(x1, v1, hist_v, hist_a, slots, 1e-3, length)
+    for edges in splits(200, rng):
+        x, v = s.position.copy(), s.velocity.copy()
+        worst = 0.0
+        for r0, r1 in zip(edges[:-1], edges[1:]):
+            worst = max(worst, ki.ab4_rods(x, v, hist_v, hist_a, slots, 1e-3, length, r0, r1))
+        same_bits(x, x1)
+        same_bits(v, v1)
+        same_bits(worst, err)
+
+
+def test_channel_sums_by_blocks_and_powers_by_group_are_channel_sum_power(rng):
+    for n_ch, powered in ((11, [0, 2, 3, 5, 9]), (8, [1]), (9, [0, 1, 2, 3, 4, 5])):
+        c = channels(rng, n_ch=n_ch)
+        v = rng.normal(size=(500, 3))
+        powered = np.array(powered, dtype=np.int64)
+        out1, p1 = np.zeros((500, 3)), np.zeros(len(powered))
+        ki.channel_sum_power(out1, c, v, powered, p1)
+        rows = c.reshape(n_ch, 1500)
+        for edges in splits(250, rng):
+            out = np.full((500, 3), np.nan)
+            for r0, r1 in zip(edges[:-1], edges[1:]):
+                ki.sum_rows_range(out.reshape(-1), rows, 6 * r0, 6 * r1)
+            same_bits(out, out1)
+        p = np.full(len(powered), np.nan)
+        for j in range(0, len(powered), 3):
+            ki.power_group(rows, v.reshape(-1), powered, p, j)
+        same_bits(p, p1)
