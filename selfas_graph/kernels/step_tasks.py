@@ -108,7 +108,7 @@ def block_rows(c, chunks, n):
 
 @njit
 def run_tasks(p, a):
-    """Claim and run tasks of phase ``p`` until none is left (``a`` as :func:`_join` takes it)."""
+    """Claim and run tasks of phase ``p`` until none is left (``a``: the tuple ``steps.py::_prepare`` builds)."""
     (
         x,
         v,
