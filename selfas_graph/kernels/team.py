@@ -17,7 +17,7 @@ numbers do not depend on the thread count.
 
 The control block ``ctl`` (int64, zeroed by the caller): :data:`JOINED`, :data:`OPENED` (the number of
 the phase open now, 0 before the first), :data:`CLOSED`; from :data:`ROW` on one row of :data:`WIDTH`
-per phase (phase ``p`` at ``ROW + WIDTH (p - 1)``): tasks claimed, tasks done, the number of tasks, then
+per phase (phase ``p``, from 1, at ``ROW + WIDTH p``): tasks claimed, tasks done, the number of tasks, then
 the phase's own words (what the caller's task function reads). Claims and the phase counter are
 atomic read-modify-writes (sequentially consistent); a task reads its phase's words after its claim
 succeeded, when they can no longer change.
@@ -31,7 +31,7 @@ from numba.extending import intrinsic
 from ._jit import njit
 
 JOINED, OPENED, CLOSED = 0, 1, 2
-#: the first row of the phases, and the words of a row (64 bytes: one cache line)
+#: the first row of the phases, and the words of a row (64 bytes)
 ROW, WIDTH = 8, 8
 #: the words of a row before the phase's own: claimed, done, tasks
 CLAIMED, DONE, TASKS, WORDS = 0, 1, 2, 3
