@@ -154,8 +154,8 @@ def fast_steps(args):
         radius (NaN: none), height tolerance, health limits BOND_BREAK and MAX_STEP_DISPLACEMENT,
         the largest bond error so far.
     """
-    a, run, result, result_f = _prepare(args, 1)
-    _join(a, run, result, result_f)
+    a, ctl, run, result, result_f = _prepare(args, 1)
+    _join(a, ctl, run, result, result_f)
     return result[0], result[1], result[2], result_f[0], result_f[1], result_f[2]
 
 
@@ -163,16 +163,16 @@ def fast_steps(args):
 def fast_steps_team(threads, chunks, args):
     """:func:`fast_steps` on ``threads`` threads (``kernels/team.py``), the rods in ``chunks`` blocks: the
     same numbers bit for bit, on any number of threads."""
-    a, run, result, result_f = _prepare(args, chunks)
+    a, ctl, run, result, result_f = _prepare(args, chunks)
     for _ in prange(threads):
-        _join(a, run, result, result_f)
+        _join(a, ctl, run, result, result_f)
     return result[0], result[1], result[2], result_f[0], result_f[1], result_f[2]
 
 
 @njit
 def _prepare(args, chunks):
-    """The scratch of a call: ``(a, run, result, result_f)``, the tasks' arrays and values, what only the
-    call's control flow reads (:func:`_lead`), and the call's results (ints: steps, reason, head;
+    """The scratch of a call: ``(a, ctl, run, result, result_f)``, the tasks' arrays and values, the
+    control block (``team.py``), what only the call's control flow reads (:func:`_lead`), and the call's results (ints: steps, reason, head;
     floats: largest bond error, bond error, speed)."""
     (
         x,
@@ -304,14 +304,13 @@ def _prepare(args, chunks):
         chunks,
     )
     run = (head, step, n_max, slow_every, filament_tip, filament_z, bond_before, power_log)
-    return a, run, result, result_f
+    return a, ctl, run, result, result_f
 
 
 @njit
-def _join(a, run, result, result_f):
+def _join(a, ctl, run, result, result_f):
     """One thread's part of a call: the first to come leads (:func:`_lead`), the others work on the
-    phases it opens until it closes the call. ``a``: the arrays and values the tasks read (:func:`_call`)."""
-    ctl = a[50]
+    phases it opens until it closes the call (the arguments as :func:`_prepare` returns them)."""
     if team.fetch_add(ctl, team.JOINED, 1) == 0:
         done, reason, head, max_bond, err_after, speed = _lead(a, run)
         result[0], result[1], result[2] = done, reason, head
@@ -328,9 +327,8 @@ def _join(a, run, result, result_f):
 
 
 @njit
-def _phase(p, kind, tasks, w0, w1, w2, a):
+def _phase(p, kind, tasks, w0, w1, w2, ctl, a):
     """Open phase ``p`` of ``kind`` with ``tasks`` tasks (words ``w0``-``w2``), work on it and wait until it is done."""
-    ctl = a[50]
     team.open_phase(ctl, p, tasks, kind, w0, w1, w2)
     run_tasks(p, a)
     team.wait(ctl, p)
@@ -431,15 +429,15 @@ def _lead(a, run):
         # (not again when the contact test of the step before found the list fresh at these positions)
         if lists[0] and not checked:
             p += 1
-            _phase(p, DUE, chunks, 0, 0, 0, a)
+            _phase(p, DUE, chunks, 0, 0, 0, ctl, a)
             if not _largest(partial, P_DUE) < half_skin2:
                 return done, NEEDS_STEP, head, max_bond, err_after, speed
         checked = False
         h = (head + 1) % 4
         p += 1
-        _phase(p, FORCES, chunks, h, step, done, a)
+        _phase(p, FORCES, chunks, h, step, done, ctl, a)
         p += 1
-        _phase(p, UPDATE, groups + chunks, h, step, done, a)
+        _phase(p, UPDATE, groups + chunks, h, step, done, ctl, a)
         err_before = _largest(partial, P_BOND)
         for c in range(3):
             brake_hit[done, c] = False
@@ -448,15 +446,15 @@ def _lead(a, run):
             if not _largest(partial, P_DUE_SPLIT) < half_skin2:
                 # the split brake would rebuild the list here: undo the step, Python takes it
                 p += 1
-                _phase(p, UNDO, chunks, h, step, done, a)
+                _phase(p, UNDO, chunks, h, step, done, ctl, a)
                 return done, NEEDS_STEP, head, max_bond, err_after, speed
             p += 1
-            _phase(p, PAIRS, chunks, h, step, done, a)
+            _phase(p, PAIRS, chunks, h, step, done, ctl, a)
         if tb_split != 0.0 or scalars[8] != 0.0 or scalars[12] != 0.0:
             p += 1
-            _phase(p, BRAKES, 1, h, step, done, a)
+            _phase(p, BRAKES, 1, h, step, done, ctl, a)
         p += 1
-        _phase(p, CONSTRAIN, chunks, h, step, done, a)
+        _phase(p, CONSTRAIN, chunks, h, step, done, ctl, a)
         err_after = _largest(partial, P_BOND_AFTER)
         speed = 0.0
         for c in range(chunks):
@@ -484,7 +482,7 @@ def _lead(a, run):
                     return done, NEEDS_CONTACTS, head, max_bond, err_after, speed
                 checked = True
             p += 1
-            _phase(p, CONTACTS, chunks, h, step, done, a)
+            _phase(p, CONTACTS, chunks, h, step, done, ctl, a)
             n_known = 0
             n_close = 0
             for c in range(chunks):
