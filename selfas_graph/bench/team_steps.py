@@ -26,6 +26,8 @@ def team(args):
     from .peer import machine_line
 
     threads = 2 if args.threads == 1 else args.threads
+    if threads < 1:
+        raise SystemExit(f"--threads must be a positive number of numba threads, not {threads}")
     if threads > numba.config.NUMBA_NUM_THREADS:
         raise SystemExit(f"--team needs {threads} numba threads; this machine gives {numba.config.NUMBA_NUM_THREADS}")
     start_threads(threads)

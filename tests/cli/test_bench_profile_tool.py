@@ -54,6 +54,19 @@ def test_team_table(capsys):
     numba.set_num_threads(threads)
 
 
+def test_team_refuses_a_thread_count_numba_cannot_give():
+    import numba
+    import pytest
+
+    tool = _tool()
+    for bad, message in (
+        (0, "--threads must be a positive number"),
+        (numba.config.NUMBA_NUM_THREADS + 1, "--team needs"),
+    ):
+        with pytest.raises(SystemExit, match=message):
+            tool.main(["--team", "--threads", str(bad), "--scenario", str(ROOT / "scenarios" / "quick.toml")])
+
+
 def test_fused_kernels_table(capsys):
     tool = _tool()
     tool.main(["--kernels", "--rounds", "1", "--steps", "10"])
