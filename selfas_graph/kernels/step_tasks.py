@@ -107,67 +107,19 @@ def block_rows(c, chunks, n):
 
 
 @njit
-def run_tasks(p, a):
-    """Claim and run tasks of phase ``p`` until none is left (``a``: the tuple ``steps.py::_prepare`` builds)."""
-    (
-        x,
-        v,
-        hist_v,
-        hist_a,
-        hist_p,
-        slot_table,
-        dt,
-        length,
-        exact_bond,
-        project,
-        correct_velocity,
-        block,
-        total,
-        powered,
-        channel,
-        tip_charge,
-        rod_charge,
-        scalars,
-        plasma,
-        decay_walls,
-        decay_poles,
-        source,
-        source_charge,
-        line,
-        nodes,
-        weights,
-        held,
-        tip_far,
-        tip_fast,
-        rate,
-        base,
-        base_step,
-        extrapolate,
-        lists,
-        start,
-        index,
-        reference,
-        pairs,
-        on_cathode,
-        on_anode,
-        on_filament,
-        centre,
-        centre_force,
-        before,
-        after,
-        save_x,
-        save_v,
-        brake_work,
-        brake_hit,
-        limits,
-        ctl,
-        partial,
-        counts,
-        zero,
-        pair_k,
-        pair_l,
-        chunks,
-    ) = a
+def run_tasks(p, args, s):
+    """Claim and run tasks of phase ``p`` until none is left (``args``: the call's
+    :class:`~.step_args.FastStepArgs`, ``s`` its :class:`~.step_args.Scratch`)."""
+    ctl, partial, counts, chunks = s.ctl, s.partial, s.counts, s.chunks
+    x, v, scalars, limits, start, index, reference = (
+        args.x,
+        args.v,
+        args.scalars,
+        args.limits,
+        args.start,
+        args.index,
+        args.reference,
+    )
     row = team.ROW + team.WIDTH * p + team.WORDS
     while True:
         j = team.claim(ctl, p)
@@ -176,10 +128,16 @@ def run_tasks(p, a):
         kind, h, step, done = ctl[row], ctl[row + 1], ctl[row + 2], ctl[row + 3]
         n = x.shape[0]
         if kind == UPDATE:
-            groups = (powered.shape[0] + 2) // 3
+            groups = (args.powered.shape[0] + 2) // 3
             if j < groups:  # the channels' powers, from the velocities before the update (kept in hist_v[h])
-                n_el = 3 * n
-                power_group(block.reshape(block.shape[0], n_el), hist_v[h].reshape(-1), powered, hist_p[h], 3 * j)
+                block = args.block
+                power_group(
+                    block.reshape(block.shape[0], 3 * n),
+                    args.hist_v[h].reshape(-1),
+                    args.powered,
+                    args.hist_p[h],
+                    3 * j,
+                )
                 team.finish(ctl, p)
                 continue
             j -= groups
@@ -187,19 +145,19 @@ def run_tasks(p, a):
             split_brakes(
                 x,
                 v,
-                dt,
+                args.dt,
                 scalars,
-                decay_walls,
-                decay_poles,
-                source,
+                args.decay_walls,
+                args.decay_poles,
+                args.source,
                 start,
-                before,
-                after,
-                brake_work,
-                brake_hit,
+                args.before,
+                args.after,
+                args.brake_work,
+                args.brake_hit,
                 counts,
-                pair_k,
-                pair_l,
+                s.pair_k,
+                s.pair_l,
                 chunks,
                 done,
             )
@@ -212,37 +170,37 @@ def run_tasks(p, a):
             forces(
                 x,
                 v,
-                hist_v[h],
-                hist_a[h],
-                length,
-                exact_bond,
-                block,
-                total,
-                channel,
-                tip_charge,
-                rod_charge,
+                args.hist_v[h],
+                args.hist_a[h],
+                args.length,
+                args.exact_bond,
+                args.block,
+                args.total,
+                args.channel,
+                args.tip_charge,
+                args.rod_charge,
                 scalars,
-                plasma,
-                source,
-                source_charge,
-                line,
-                nodes,
-                weights,
-                held,
-                tip_far,
-                tip_fast,
-                rate,
-                base,
-                base_step,
-                extrapolate,
-                lists,
+                args.plasma,
+                args.source,
+                args.source_charge,
+                args.line,
+                args.nodes,
+                args.weights,
+                args.held,
+                args.tip_far,
+                args.tip_fast,
+                args.rate,
+                args.base,
+                args.base_step,
+                args.extrapolate,
+                args.lists,
                 start,
                 index,
-                centre,
-                centre_force,
-                save_x,
-                save_v,
-                zero,
+                args.centre,
+                args.centre_force,
+                args.save_x,
+                args.save_v,
+                s.zero,
                 step,
                 done,
                 r0,
@@ -251,28 +209,31 @@ def run_tasks(p, a):
                 t1,
             )
         elif kind == UPDATE:
-            partial[j, P_BOND] = ab4_rods(x, v, hist_v, hist_a, slot_table[h], dt, length, r0, r1)
+            partial[j, P_BOND] = ab4_rods(
+                x, v, args.hist_v, args.hist_a, args.slot_table[h], args.dt, args.length, r0, r1
+            )
             if scalars[4] != 0.0:
                 partial[j, P_DUE_SPLIT] = max_displacement2(x[t0:t1], reference[t0:t1])
         elif kind == UNDO:
-            _copy_rows(x, save_x, t0, t1)
-            _copy_rows(v, save_v, t0, t1)
+            _copy_rows(x, args.save_x, t0, t1)
+            _copy_rows(v, args.save_v, t0, t1)
         elif kind == PAIRS:
-            counts[j, 0] = close_pairs_rows(x, start, index, scalars[1], t0, t1, pair_k, pair_l, start[t0])
+            counts[j, 0] = close_pairs_rows(x, start, index, scalars[1], t0, t1, s.pair_k, s.pair_l, start[t0])
         elif kind == CONSTRAIN:
+            length = args.length
             ell = length if length.shape[0] == 0 else length[r0:r1]
-            err, speed = _constrain_bonds_checked(x[t0:t1], v[t0:t1], project, correct_velocity, ell)
+            err, speed = _constrain_bonds_checked(x[t0:t1], v[t0:t1], args.project, args.correct_velocity, ell)
             partial[j, P_BOND_AFTER] = err
             partial[j, P_SPEED] = speed
-            if lists[2] and limits[0] == 1.0:
+            if args.lists[2] and limits[0] == 1.0:
                 partial[j, P_DUE_AFTER] = max_displacement2(x[t0:t1], reference[t0:t1])
         elif kind == CONTACTS:
-            m = pairs.shape[0]
+            m = args.pairs.shape[0]
             ok, n_known, n_close = contacts_part(
                 x,
                 start,
                 index,
-                pairs,
+                args.pairs,
                 j * m // chunks,
                 (j + 1) * m // chunks,
                 t0,
@@ -281,10 +242,10 @@ def run_tasks(p, a):
                 scalars[16],
                 limits[1],
                 limits[2],
-                on_cathode,
-                on_anode,
+                args.on_cathode,
+                args.on_anode,
                 limits[3],
-                on_filament,
+                args.on_filament,
             )
             counts[j, 1] = 1 if ok else 0
             counts[j, 2] = n_known

@@ -45,6 +45,7 @@ import numpy as np
 
 from . import team
 from ._jit import njit, njit_parallel, prange
+from .step_args import Scratch
 from .step_tasks import (
     BRAKES,
     CONSTRAIN,
@@ -95,224 +96,62 @@ def _all_plus_zero(a):
 
 @njit
 def fast_steps(args):
-    """Up to ``n_max`` fast steps from ``step``, in place; returns ``(steps, reason, head, max_bond_error,
-    bond_error_after, speed_max)`` with ``reason`` one of the module's codes.
+    """Up to ``args.n_max`` fast steps from ``args.step``, in place; returns ``(steps, reason, head,
+    max_bond_error, bond_error_after, speed_max)`` with ``reason`` one of the module's codes.
 
-    Parameters
-    ----------
-    args : tuple
-        The arrays and values below, in this order (``model/compiled.py::CompiledSteps.advance``).
-    x, v : (n_tips, 3) float64, positions and velocities, advanced in place
-    hist_v, hist_a : (4, n_tips, 3) float64; hist_p : (4, n_power) float64
-        The integrator's ring buffers; ``head`` the slot of the last step's derivatives;
-        ``slot_table`` (4, 4) int64, row h: the slots of f_n, ..., f_{n-3} when f_n is in slot h.
-    step, n_max, slow_every : int
-    dt : float
-    length : (n_rods,) float64 or empty; exact_bond, project, correct_velocity : bool
-        As ``AdamsBashforth4`` takes them.
-    block : (n_channels, n_tips, 3) float64
-        The force field's channel buffers; ``total`` (n_tips, 3) their sum; ``powered`` the
-        non-conservative channels' rows.
-    channel : (len(CHANNELS),) int64
-        Each channel's row in ``block``, -1 for a channel that is off (or, for the line charge, slow:
-        then it is one of the held forces).
-    tip_charge : (n_tips,) float64; rod_charge : (n_rods,) float64
-    scalars : (17,) float64
-        ambient brake coefficient; tip law r*, kappa; tip brake coefficient (explicit; NaN: split);
-        split tip brake coefficient (0: none); electrode planes z_c, z_a, explicit electrode
-        brake; split electrode brake (0: none); filament current and radius; monopole brake
-        (explicit); split monopole brake (0: none); fast range r_in, r_out; neighbour list
-        (skin / 2)^2; contact release radius.
-    plasma : (4,) float64 or empty
-        Axis x, y, radius and current of the plasma filament.
-    decay_walls, decay_poles : (3,) float64
-        The split brakes' decay per planes or poles touched.
-    source, source_charge : (2, 3), (2,) float64
-        The external dipole's monopoles (empty without).
-    line : (5,) float64; nodes, weights : float64
-        The line charge's ends, density, screening length and radius; its quadrature (empty without).
-    held : (n_held,) int64
-        Each held slow force's row in ``block``, -1 for ``tip_far`` (the tip-tip force less its fast part).
-    tip_far, tip_fast : (n_tips, 3) float64 (empty rows without the tip-tip term)
-    rate, base : (n_held, n_tips, 3) float64; base_step : (n_held,) int64, -1: held, not extrapolated
-    extrapolate : bool
-    lists : (3,) bool
-        Where the Python step asks the tip list for an update: in the evaluation (tip-tip fast part,
-        explicit tip brake), in the split tip brake, in the contact test.
-    start, index, reference : the tip list and the positions of its build
-    pairs, on_cathode, on_anode, on_filament : the contacts as the contact test reads them
-        (``ContactSet.search_arrays``); ``limits[0]`` 1.0 when a network tests contacts
-    filament_tip, filament_z : the case (ii) filament contacts and their heights at the last solve
-    centre, centre_force : (n_rods, 3) float64 scratch (the line charge's rod centres and forces)
-    before, after, save_x, save_v : (n_tips, 3) float64 scratch
-    bond_before : (n_max,) float64; power_log : (n_max, n_power); brake_work : (n_max, 3) float64;
-    brake_hit : (n_max, 3) bool
-        Per step: the bond error before the constraint, the channels' power, the split brakes' work
-        and whether each brake acted (the logs the caller replays).
-    limits : (8,) float64
-        network on (1.0) or off, electrode planes for the contact test (NaN: none), filament surface
-        radius (NaN: none), height tolerance, health limits BOND_BREAK and MAX_STEP_DISPLACEMENT,
-        the largest bond error so far.
+    ``args`` is a :class:`~.step_args.FastStepArgs` (``model/compiled.py::CompiledSteps.advance`` builds it;
+    its docstring lists the arrays and values).
     """
-    a, ctl, run, result, result_f = _prepare(args, 1)
-    _join(a, ctl, run, result, result_f)
+    s, result, result_f = _prepare(args, 1)
+    _join(args, s, result, result_f)
+    return result[0], result[1], result[2], result_f[0], result_f[1], result_f[2]
+
+
+@njit
+def fast_steps_team(threads, chunks, args):
+    """:func:`fast_steps` on ``threads`` threads (``kernels/team.py``), the rods in ``chunks`` blocks: the
+    same numbers bit for bit, on any number of threads."""
+    s, result, result_f = _prepare(args, chunks)
+    _fork(threads, args, s, result, result_f)
     return result[0], result[1], result[2], result_f[0], result_f[1], result_f[2]
 
 
 @njit_parallel
-def fast_steps_team(threads, chunks, args):
-    """:func:`fast_steps` on ``threads`` threads (``kernels/team.py``), the rods in ``chunks`` blocks: the
-    same numbers bit for bit, on any number of threads."""
-    a, ctl, run, result, result_f = _prepare(args, chunks)
+def _fork(threads, args, s, result, result_f):
+    """:func:`_join` on ``threads`` threads. (A function of its own: numba's parallel loop takes a named
+    tuple from the function's arguments, not from the result of a call.)"""
     for _ in prange(threads):
-        _join(a, ctl, run, result, result_f)
-    return result[0], result[1], result[2], result_f[0], result_f[1], result_f[2]
+        _join(args, s, result, result_f)
 
 
 @njit
 def _prepare(args, chunks):
-    """The scratch of a call: ``(a, ctl, run, result, result_f)``, the tasks' arrays and values, the
-    control block (``team.py``), what only the call's control flow reads (:func:`_lead`), and the call's results (ints: steps, reason, head;
-    floats: largest bond error, bond error, speed)."""
-    (
-        x,
-        v,
-        hist_v,
-        hist_a,
-        hist_p,
-        head,
-        slot_table,
-        step,
-        n_max,
-        slow_every,
-        dt,
-        length,
-        exact_bond,
-        project,
-        correct_velocity,
-        block,
-        total,
-        powered,
-        channel,
-        tip_charge,
-        rod_charge,
-        scalars,
-        plasma,
-        decay_walls,
-        decay_poles,
-        source,
-        source_charge,
-        line,
-        nodes,
-        weights,
-        held,
-        tip_far,
-        tip_fast,
-        rate,
-        base,
-        base_step,
-        extrapolate,
-        lists,
-        start,
-        index,
-        reference,
-        pairs,
-        on_cathode,
-        on_anode,
-        on_filament,
-        filament_tip,
-        filament_z,
-        centre,
-        centre_force,
-        before,
-        after,
-        save_x,
-        save_v,
-        bond_before,
-        power_log,
-        brake_work,
-        brake_hit,
-        limits,
-    ) = args
+    """The scratch of a call: ``(s, result, result_f)``, the :class:`~.step_args.Scratch` of the tasks
+    (with the control block of ``team.py``) and the call's results (ints: steps, reason, head; floats:
+    largest bond error, bond error, speed)."""
+    n_max, slow_every = args.n_max, args.slow_every
     ctl = np.zeros(team.control_size(PHASES_PER_STEP * max(1, min(n_max, slow_every)) + 1), dtype=np.int64)
-    chunks = max(1, min(chunks, x.shape[0] // 2))
-    partial = np.zeros((chunks, 6))
-    counts = np.zeros((chunks, 4), dtype=np.int64)
-    zero = np.zeros(held.shape[0], dtype=np.bool_)
-    n_pairs = index.shape[0] if scalars[4] != 0.0 else 0
-    pair_k = np.empty(n_pairs, dtype=np.int64)
-    pair_l = np.empty(n_pairs, dtype=np.int64)
-    result = np.zeros(3, dtype=np.int64)
-    result_f = np.zeros(3)
-    a = (
-        x,
-        v,
-        hist_v,
-        hist_a,
-        hist_p,
-        slot_table,
-        dt,
-        length,
-        exact_bond,
-        project,
-        correct_velocity,
-        block,
-        total,
-        powered,
-        channel,
-        tip_charge,
-        rod_charge,
-        scalars,
-        plasma,
-        decay_walls,
-        decay_poles,
-        source,
-        source_charge,
-        line,
-        nodes,
-        weights,
-        held,
-        tip_far,
-        tip_fast,
-        rate,
-        base,
-        base_step,
-        extrapolate,
-        lists,
-        start,
-        index,
-        reference,
-        pairs,
-        on_cathode,
-        on_anode,
-        on_filament,
-        centre,
-        centre_force,
-        before,
-        after,
-        save_x,
-        save_v,
-        brake_work,
-        brake_hit,
-        limits,
+    chunks = max(1, min(chunks, args.x.shape[0] // 2))
+    n_pairs = args.index.shape[0] if args.scalars[4] != 0.0 else 0
+    s = Scratch(
         ctl,
-        partial,
-        counts,
-        zero,
-        pair_k,
-        pair_l,
+        np.zeros((chunks, 6)),
+        np.zeros((chunks, 4), dtype=np.int64),
+        np.zeros(args.held.shape[0], dtype=np.bool_),
+        np.empty(n_pairs, dtype=np.int64),
+        np.empty(n_pairs, dtype=np.int64),
         chunks,
     )
-    run = (head, step, n_max, slow_every, filament_tip, filament_z, bond_before, power_log)
-    return a, ctl, run, result, result_f
+    return s, np.zeros(3, dtype=np.int64), np.zeros(3)
 
 
 @njit
-def _join(a, ctl, run, result, result_f):
+def _join(args, s, result, result_f):
     """One thread's part of a call: the first to come leads (:func:`_lead`), the others work on the
     phases it opens until it closes the call (the arguments as :func:`_prepare` returns them)."""
+    ctl = s.ctl
     if team.fetch_add(ctl, team.JOINED, 1) == 0:
-        done, reason, head, max_bond, err_after, speed = _lead(a, run)
+        done, reason, head, max_bond, err_after, speed = _lead(args, s)
         result[0], result[1], result[2] = done, reason, head
         result_f[0], result_f[1], result_f[2] = max_bond, err_after, speed
         team.close(ctl)
@@ -322,16 +161,16 @@ def _join(a, ctl, run, result, result_f):
         p = team.load(ctl, team.OPENED)
         if p == seen:
             continue
-        run_tasks(p, a)
+        run_tasks(p, args, s)
         seen = p
 
 
 @njit
-def _phase(p, kind, tasks, w0, w1, w2, ctl, a):
+def _phase(p, kind, tasks, w0, w1, w2, args, s):
     """Open phase ``p`` of ``kind`` with ``tasks`` tasks (words ``w0``-``w2``), work on it and wait until it is done."""
-    team.open_phase(ctl, p, tasks, kind, w0, w1, w2)
-    run_tasks(p, a)
-    team.wait(ctl, p)
+    team.open_phase(s.ctl, p, tasks, kind, w0, w1, w2)
+    run_tasks(p, args, s)
+    team.wait(s.ctl, p)
 
 
 @njit
@@ -344,74 +183,31 @@ def _largest(partial, column):
 
 
 @njit
-def _lead(a, run):
+def _lead(args, s):
     """The steps of a call in the Python step's order, each part a phase of tasks (``step_tasks.py::run_tasks``); the
     decisions between them from the tasks' results."""
-    (
-        x,
-        v,
-        hist_v,
-        hist_a,
-        hist_p,
-        slot_table,
-        dt,
-        length,
-        exact_bond,
-        project,
-        correct_velocity,
-        block,
-        total,
-        powered,
-        channel,
-        tip_charge,
-        rod_charge,
-        scalars,
-        plasma,
-        decay_walls,
-        decay_poles,
-        source,
-        source_charge,
-        line,
-        nodes,
-        weights,
-        held,
-        tip_far,
-        tip_fast,
-        rate,
-        base,
-        base_step,
-        extrapolate,
-        lists,
-        start,
-        index,
-        reference,
-        pairs,
-        on_cathode,
-        on_anode,
-        on_filament,
-        centre,
-        centre_force,
-        before,
-        after,
-        save_x,
-        save_v,
-        brake_work,
-        brake_hit,
-        limits,
-        ctl,
-        partial,
-        counts,
-        zero,
-        pair_k,
-        pair_l,
-        chunks,
-    ) = a
-    head, step, n_max, slow_every, filament_tip, filament_z, bond_before, power_log = run
+    x, held, rate, base, base_step = args.x, args.held, args.rate, args.base, args.base_step
+    scalars, limits, lists, filament_tip, filament_z = (
+        args.scalars,
+        args.limits,
+        args.lists,
+        args.filament_tip,
+        args.filament_z,
+    )
+    head, step, n_max, slow_every, dt = args.head, args.step, args.n_max, args.slow_every, args.dt
+    bond_before, power_log, brake_work, brake_hit, hist_p = (
+        args.bond_before,
+        args.power_log,
+        args.brake_work,
+        args.brake_hit,
+        args.hist_p,
+    )
+    partial, counts, zero, chunks = s.partial, s.counts, s.zero, s.chunks
     tb_split, half_skin2 = scalars[4], scalars[15]
     network = limits[0] == 1.0
     height_tol = limits[4]
     bond_break, max_move, max_bond = limits[5], limits[6], limits[7]
-    groups = (powered.shape[0] + 2) // 3
+    groups = (args.powered.shape[0] + 2) // 3
     err_after = 0.0
     speed = 0.0
     done = 0
@@ -419,7 +215,7 @@ def _lead(a, run):
     checked = False  # the tip list's update test already made at the current positions
     # held forces whose rate and base are all +0 (the current terms while no rod carries current):
     # rate * s + base is then +0 on every step, written on the first step of the call only
-    if extrapolate:
+    if args.extrapolate:
         for j in range(held.shape[0]):
             zero[j] = base_step[j] >= 0 and _all_plus_zero(rate[j]) and _all_plus_zero(base[j])
     while done < n_max:
@@ -429,15 +225,15 @@ def _lead(a, run):
         # (not again when the contact test of the step before found the list fresh at these positions)
         if lists[0] and not checked:
             p += 1
-            _phase(p, DUE, chunks, 0, 0, 0, ctl, a)
+            _phase(p, DUE, chunks, 0, 0, 0, args, s)
             if not _largest(partial, P_DUE) < half_skin2:
                 return done, NEEDS_STEP, head, max_bond, err_after, speed
         checked = False
         h = (head + 1) % 4
         p += 1
-        _phase(p, FORCES, chunks, h, step, done, ctl, a)
+        _phase(p, FORCES, chunks, h, step, done, args, s)
         p += 1
-        _phase(p, UPDATE, groups + chunks, h, step, done, ctl, a)
+        _phase(p, UPDATE, groups + chunks, h, step, done, args, s)
         err_before = _largest(partial, P_BOND)
         for c in range(3):
             brake_hit[done, c] = False
@@ -446,15 +242,15 @@ def _lead(a, run):
             if not _largest(partial, P_DUE_SPLIT) < half_skin2:
                 # the split brake would rebuild the list here: undo the step, Python takes it
                 p += 1
-                _phase(p, UNDO, chunks, h, step, done, ctl, a)
+                _phase(p, UNDO, chunks, h, step, done, args, s)
                 return done, NEEDS_STEP, head, max_bond, err_after, speed
             p += 1
-            _phase(p, PAIRS, chunks, h, step, done, ctl, a)
+            _phase(p, PAIRS, chunks, h, step, done, args, s)
         if tb_split != 0.0 or scalars[8] != 0.0 or scalars[12] != 0.0:
             p += 1
-            _phase(p, BRAKES, 1, h, step, done, ctl, a)
+            _phase(p, BRAKES, 1, h, step, done, args, s)
         p += 1
-        _phase(p, CONSTRAIN, chunks, h, step, done, ctl, a)
+        _phase(p, CONSTRAIN, chunks, h, step, done, args, s)
         err_after = _largest(partial, P_BOND_AFTER)
         speed = 0.0
         for c in range(chunks):
@@ -482,7 +278,7 @@ def _lead(a, run):
                     return done, NEEDS_CONTACTS, head, max_bond, err_after, speed
                 checked = True
             p += 1
-            _phase(p, CONTACTS, chunks, h, step, done, ctl, a)
+            _phase(p, CONTACTS, chunks, h, step, done, args, s)
             n_known = 0
             n_close = 0
             for c in range(chunks):
