@@ -142,3 +142,20 @@ def test_console_script_installed():
     assert exe, "the selfas-graph console script is not on PATH (pip install -e .)"
     res = subprocess.run([exe, "--version"], capture_output=True, text=True, timeout=60)
     assert res.returncode == 0 and "selfas-graph" in res.stdout
+
+
+def test_python_m_runs_the_command():
+    """``python -m selfas_graph`` is the console script (for a PATH without it, or under mpiexec)."""
+    import sys
+
+    res = subprocess.run(
+        [sys.executable, "-m", "selfas_graph", "--version"], capture_output=True, text=True, timeout=60
+    )
+    assert res.returncode == 0 and "selfas-graph" in res.stdout
+    res = subprocess.run(
+        [sys.executable, "-m", "selfas_graph", "simulate", "no_such_scene.toml"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert res.returncode == 2 and "no_such_scene.toml" in res.stderr
