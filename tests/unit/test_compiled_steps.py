@@ -110,6 +110,41 @@ def test_compiled_steps_are_the_python_steps_in_case_ii(line_slow, team):
     assert (evaluations < 600 // params.integrator.slow_every + 20) == line_slow
 
 
+@pytest.mark.parametrize("brake", ["split", "explicit"])
+@pytest.mark.parametrize("fault", ["speed", "nan"])
+def test_compiled_steps_stop_at_a_failing_step_with_the_python_diagnosis(fault, brake, team):
+    """A tip thrown far in one step (its velocity 1e6) or made NaN: the compiled steps stop after that
+    step with the Python step's diagnosis (the same message, step and rods), the state the same bit for
+    bit. With the explicit brake the compiled step fails the health check; with the split brake the
+    tip's move calls for a list build first, so the step is undone and made in Python."""
+    from selfas_graph.model.health import NumericalFailure
+
+    params = scenario_from_text(SMALL_CIRCUIT_SCENE).params
+    slow, fast = pair(params, slow_every=8, brake=brake)
+    step_for_step(slow, fast, 41)  # past the RK4 start; the next step is a fast one (slow_every = 8)
+    for sim in (slow, fast):
+        sim.state.velocity[7] = (1e6, 0.0, 0.0) if fault == "speed" else (np.nan, 0.0, 0.0)
+    with pytest.raises(NumericalFailure) as python:
+        while True:
+            slow.python_step()
+    reasons = []
+    make = compiled.CompiledSteps.advance
+
+    def spy(self, n_max):
+        reasons.append(make(self, n_max))
+        return reasons[-1]
+
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(compiled.CompiledSteps, "advance", spy)
+        with pytest.raises(NumericalFailure) as comp:
+            while True:
+                advance(fast, 64)
+    assert reasons[-1] == ((1, compiled.NEEDS_HEALTH) if brake == "explicit" else (0, compiled.NEEDS_STEP))
+    assert str(comp.value) == str(python.value) and comp.value.step == python.value.step
+    assert tuple(comp.value.rods) == tuple(python.value.rods)
+    same_snapshots(slow, fast)
+
+
 class Recorder:
     """A writer that records what a run hands it (per-step rows, frames)."""
 
