@@ -95,7 +95,8 @@ def run(args):
         tips = np.ascontiguousarray(st.position)
         skin = sim.params.neighbours.skin
         tip_radius = ff.lists.tip_range + skin
-        centre_radius = yk.cutoff + skin
+        centre_skin = sim.params.neighbours.centre_skin
+        centre_radius = yk.cutoff + (skin if centre_skin is None else centre_skin)
         n = c.shape[0]
         fy = np.empty((n, 3))
         lists = {}

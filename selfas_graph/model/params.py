@@ -252,6 +252,14 @@ class NeighbourParams:
     skin: float = spec(
         0.3, "Verlet skin of the neighbour lists; rebuilt when a point moved more than skin/2", gt=0.0, le=100.0
     )
+    centre_skin: Optional[float] = spec(
+        None,
+        "Verlet skin of the rod-centre list of the Yukawa sum (default: skin); a longer one means fewer builds "
+        "and longer rows; the same forces, summed in another order (docs/performance.md 'The rod-centre "
+        "list's own skin')",
+        gt=0.0,
+        le=100.0,
+    )
 
 
 @dataclass(frozen=True)

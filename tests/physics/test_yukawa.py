@@ -127,3 +127,33 @@ def test_sorted_copies_one_rod_and_no_rods():
         out = np.full((n, 3), np.nan)
         ky.yukawa_centres_sorted(c[order], np.ones(n)[order], order, start, index, SCREENING, 0.0, 3.0, 0, n, out)
         np.testing.assert_array_equal(out, np.zeros((n, 3)))
+
+
+def test_the_centre_list_takes_its_own_skin():
+    """``neighbours.centre_skin``: the rod-centre list of the Yukawa sum takes its own skin, the tip list keeps
+    ``neighbours.skin``; the Yukawa force of a state is the same to rounding (its rows hold the same pairs
+    within the cut-off, summed in another order: ``close``'s tolerance), and over a run the list is built
+    less often. Without it the centre list takes ``skin``."""
+    from conftest import SMALL_CIRCUIT_SCENE
+    from selfas_graph.io.scenario import scenario_from_text
+    from selfas_graph.model.simulation import Simulation
+
+    # a short skin, so that the centre list of the plain run is built often in a short run
+    params = scenario_from_text(SMALL_CIRCUIT_SCENE).params.replace(rods={"count": 40}, neighbours={"skin": 0.02})
+    plain = Simulation(params)
+    assert plain.force_field.lists.centre.skin == params.neighbours.skin == 0.02
+    wide = Simulation(params.replace(neighbours={"centre_skin": 1.5}))
+    assert wide.force_field.lists.centre.skin == 1.5
+    forces = []
+    for sim in (plain, wide):
+        ff = sim.force_field
+        ff.evaluate(sim.state.position, sim.state.velocity)
+        assert ff.lists.tip.skin == 0.02
+        forces.append(ff.out["yukawa"].copy())
+    assert np.abs(forces[0]).max() > 0.0
+    close(forces[1], forces[0])
+    builds = []
+    for sim in (plain, wide):
+        sim.run(t_end=0.25)
+        builds.append(sim.force_field.lists.centre.n_builds)
+    assert builds[1] == 1 and builds[0] > 3

@@ -35,9 +35,18 @@ class PairLists:
         Under MPI each rank builds its rows of the tip list and the rows are gathered.
     centre_range : float or None
         The centre list's range (the Yukawa cut-off); None: no centre list.
+    centre_skin : float or None
+        ``neighbours.centre_skin``, the centre list's skin; None: ``skin``.
     """
 
-    def __init__(self, tip_range: float, skin: float, blocks: RowBlocks, centre_range: float | None = None):
+    def __init__(
+        self,
+        tip_range: float,
+        skin: float,
+        blocks: RowBlocks,
+        centre_range: float | None = None,
+        centre_skin: float | None = None,
+    ):
         self.tip_range = float(tip_range)
         self.skin = skin
         self.blocks = blocks
@@ -47,7 +56,7 @@ class PairLists:
             # under MPI a rank sums the Yukawa rows of its block only: it lists only those rows
             # (half the build and the memory on 2 ranks; each row the same bit for bit)
             rows = None if blocks.serial else blocks.rods
-            self.centre = NeighbourList(centre_range, skin, rows=rows)
+            self.centre = NeighbourList(centre_range, skin if centre_skin is None else centre_skin, rows=rows)
 
     def tips(self, position) -> NeighbourList:
         """The tip list, up to date for ``position`` (n_tips, 3); built at its first use."""

@@ -114,7 +114,11 @@ class ForceField:
         self.total = np.zeros((self.n_tips, 3))
         yukawa = next((t for t in self.terms if isinstance(t, YukawaForce) and t.cutoff > 0.0), None)
         self.lists = PairLists(
-            params.rods.rstar, params.neighbours.skin, self.blocks, yukawa.cutoff if yukawa is not None else None
+            params.rods.rstar,
+            params.neighbours.skin,
+            self.blocks,
+            yukawa.cutoff if yukawa is not None else None,
+            params.neighbours.centre_skin,
         )
         self.wire_radius = wire_radius(params)
         self.currents = RodCurrents(self.n_rods) if currents is None else currents
