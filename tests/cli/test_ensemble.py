@@ -575,16 +575,20 @@ def test_a_second_ensemble_on_the_same_folder_is_refused_before_it_starts_a_seed
 
 
 def test_an_ensemble_that_runs_out_of_disk_stops_with_exit_4_and_resumable_seeds(scene, tmp_path):
-    """Two seeds writing a frame every step onto a 16 MiB tmpfs: the disk fills within seconds. The
+    """Two seeds writing a frame every step onto a 32 MiB tmpfs: the disk fills within seconds. The
     ensemble used to report a generic error (exit 1) and leave files no rerun could continue; now it
     stops with exit 4, the other seed stops with a checkpoint, every seed file left is readable and
     planned "resume" (one without a checkpoint yet is removed: planned "run"), and no summary is
-    attempted. Skipped where a tmpfs cannot be mounted."""
+    attempted. Skipped where a tmpfs cannot be mounted.
+
+    The size: a seed file starts at about 5 MiB and asks for 5.5 MiB of room before each frame (its next
+    chunk), so that on 16 MiB both seeds could stop at their first step, before their first checkpoint
+    (right after it), as it happened when both started together; 32 MiB holds both seeds' first chunks."""
     import subprocess
 
     small = tmp_path / "tmpfs"
     small.mkdir()
-    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=16m", "tmpfs", str(small)], capture_output=True, text=True)
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=32m", "tmpfs", str(small)], capture_output=True, text=True)
     if r.returncode != 0:
         pytest.skip(f"cannot mount a tmpfs here ({r.stderr.strip() or 'not permitted'})")
     over = ["--set", "output.interval=0.001", "--set", "output.checkpoint_interval=0.2"]
