@@ -5,7 +5,7 @@ Usage: selfas-graph bench profile --checkpoint RUN.checkpoint.h5 [--steps 2000] 
        selfas-graph bench profile --scenario scenarios/fig2.toml --settle 2000 [--steps 2000]
        selfas-graph bench profile --checkpoint RUN.checkpoint.h5 --before REF [--rounds 8] [--steps 250]
        selfas-graph bench profile --checkpoint RUN.checkpoint.h5 --steps 3000 --sample
-       selfas-graph bench profile --checkpoint RUN.checkpoint.h5 --team [--threads 2] [--rounds 8] [--steps 250]
+       selfas-graph bench profile --checkpoint RUN.checkpoint.h5 --team [--phases] [--threads 2] [--rounds 8] [--steps 250]
 
 Steps the simulation ``--steps`` times after 48 warm-up steps under cProfile on the thread's CPU
 clock (on a machine loaded by other jobs the wall clock counts their time too), and sorts the time
@@ -503,6 +503,12 @@ def main(argv=None):
         action="store_true",
         help="whole steps with the compiled fast steps on all --threads threads (default 2) against on one, "
         "interleaved, wall time",
+    )
+    ap.add_argument(
+        "--phases",
+        action="store_true",
+        help="with --team: also time each phase of the compiled fast steps (forces, update, ...) both ways, "
+        "by the CPU's cycle counter (x86-64)",
     )
     ap.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)

@@ -1,4 +1,4 @@
-"""``selfas-graph bench profile --checkpoint RUN.checkpoint.h5 --team [--threads 2] [--rounds 8] [--steps 250]``:
+"""``selfas-graph bench profile --checkpoint RUN.checkpoint.h5 --team [--phases] [--threads 2] [--rounds 8] [--steps 250]``:
 what the threads buy in the compiled fast steps (docs/performance.md 'Fast steps on both cores').
 
 In one process on ``--threads`` threads (default 2), turns of ``--steps`` steps with the fast steps on
@@ -7,9 +7,17 @@ slow sums and list builds on all threads in both), ``--rounds`` turns each, inte
 each discarded; prints the wall and CPU time per step and the median ratio of the wall times. The two
 give the same numbers bit for bit (tests/unit/test_compiled_steps.py), so the state goes on from turn
 to turn. Meaningful on an otherwise idle machine only.
+
+``--phases``: then as many turns again with the phases of the compiled calls timed
+(``FastStepArgs.phase_time``: the cycle counter read by the leading thread around each phase and each
+call, x86-64 only) and a table of the microseconds per fast step of each kind of phase both ways: what
+the threads buy per part. The ticks are turned into seconds by the calls' own wall time (the counter of
+x86-64 CPUs since about 2008 runs at a fixed rate); "between phases" is the rest of a call (the control
+flow, the serial checks between phases).
 """
 
 import os
+import platform
 import time
 
 import numpy as np
@@ -60,4 +68,71 @@ def team(args):
         print(f"| on {mode} | {np.median(w):.3f} [{w.min():.3f}-{w.max():.3f}] | {np.median(c):.3f} |")
     ratio = np.array(walls["one thread"]) / np.array(walls["all threads"])
     print(f"speed-up of the whole step (wall): {np.median(ratio):.3f} [{ratio.min():.3f}-{ratio.max():.3f}]")
+    if args.phases:
+        phases(sim, args)
     return None
+
+
+#: the kinds of phase of kernels/step_tasks.py, by their number
+PHASE_NAMES = {
+    1: "tip-list test before the step",
+    2: "forces",
+    3: "AB4 update and powers",
+    4: "step undone",
+    5: "split brake's pair search",
+    6: "split brakes (one task)",
+    7: "constraint",
+    8: "contact test",
+}
+
+
+def phases(sim, args):
+    """``--phases``: the compiled calls' phases timed, the fast steps on all threads and on one in turns."""
+    from selfas_graph.model import compiled
+
+    if platform.machine().lower() not in ("x86_64", "amd64"):
+        print(f"--phases: the cycle counter is read on x86-64 only, not on {platform.machine()}")
+        return
+    cs = sim.compiled
+    make = compiled.CompiledSteps.advance
+    totals = {mode: np.zeros(len(PHASE_NAMES) + 1) for mode in ("all threads", "one thread")}
+    seconds = dict.fromkeys(totals, 0.0)
+    steps = dict.fromkeys(totals, 0)
+    mode = "all threads"
+
+    def timed(self, n_max):
+        nonlocal mode
+        t0 = time.perf_counter()
+        done, reason = make(self, n_max)
+        seconds[mode] += time.perf_counter() - t0
+        steps[mode] += done
+        return done, reason
+
+    limit = compiled.TEAM_TIPS
+    compiled.CompiledSteps.advance = timed
+    try:
+        for r in range(args.rounds):
+            for mode in ("all threads", "one thread") if r % 2 == 0 else ("one thread", "all threads"):
+                compiled.TEAM_TIPS = 0 if mode == "all threads" else 2**62
+                cs.phase_time = totals[mode]
+                sim.step(args.steps)
+    finally:
+        compiled.CompiledSteps.advance = make
+        compiled.TEAM_TIPS = limit
+        cs.phase_time = np.zeros(0)
+    print("\nphases of the compiled calls, us per fast step (the leading thread's view; cycle counter):")
+    print("| phase | on all threads | on one thread | speed-up |")
+    print("|---|---|---|---|")
+    per = {}
+    for m, t in totals.items():
+        if steps[m] == 0 or t[0] <= 0:
+            print(f"no compiled fast steps on {m}")
+            return
+        per[m] = t * (seconds[m] / t[0]) / steps[m] * 1e6  # ticks -> seconds by the calls' wall time
+    rows = [(PHASE_NAMES[k], k) for k in PHASE_NAMES] + [("between phases", None), ("whole call", 0)]
+    for name, k in rows:
+        a, o = ((per[m][0] - per[m][1:].sum() if k is None else per[m][k]) for m in ("all threads", "one thread"))
+        if k is not None and k > 0 and a == 0.0 and o == 0.0:
+            continue  # a kind of phase these steps never opened
+        print(f"| {name} | {a:.1f} | {o:.1f} | {o / a if a > 0 else float('nan'):.2f} |")
+    print(f"(fast steps timed: {steps['all threads']} on all threads, {steps['one thread']} on one)")

@@ -74,6 +74,7 @@ FastStepArgs = namedtuple(
         "brake_work",
         "brake_hit",
         "limits",
+        "phase_time",
     ],
 )
 FastStepArgs.__doc__ = """The state, parameters and scratch of a run of fast steps (``steps.py::fast_steps``).
@@ -130,6 +131,10 @@ limits : (8,) float64
     network on (1.0) or off, electrode planes for the contact test (NaN: none), filament surface
     radius (NaN: none), height tolerance, health limits BOND_BREAK and MAX_STEP_DISPLACEMENT,
     the largest bond error so far.
+phase_time : (9,) float64 or empty
+    Empty: no timing. Otherwise, added to: the ticks of the cycle counter (``team.py::ticks``) of the
+    whole call at [0] and of each phase at [kind] (``step_tasks.DUE`` ... ``CONTACTS``), as the leading
+    thread sees them (from opening a phase to its last task done).
 """
 
 Scratch = namedtuple("Scratch", ["ctl", "partial", "counts", "zero", "pair_k", "pair_l", "chunks"])

@@ -151,7 +151,11 @@ def _join(args, s, result, result_f):
     phases it opens until it closes the call (the arguments as :func:`_prepare` returns them)."""
     ctl = s.ctl
     if team.fetch_add(ctl, team.JOINED, 1) == 0:
+        timed = args.phase_time.shape[0] > 0
+        t0 = team.ticks() if timed else 0
         done, reason, head, max_bond, err_after, speed = _lead(args, s)
+        if timed:
+            args.phase_time[0] += team.ticks() - t0
         result[0], result[1], result[2] = done, reason, head
         result_f[0], result_f[1], result_f[2] = max_bond, err_after, speed
         team.close(ctl)
@@ -167,10 +171,15 @@ def _join(args, s, result, result_f):
 
 @njit
 def _phase(p, kind, tasks, w0, w1, w2, args, s):
-    """Open phase ``p`` of ``kind`` with ``tasks`` tasks (words ``w0``-``w2``), work on it and wait until it is done."""
+    """Open phase ``p`` of ``kind`` with ``tasks`` tasks (words ``w0``-``w2``), work on it and wait until it is done
+    (its ticks added to ``args.phase_time[kind]`` when that is given)."""
+    timed = args.phase_time.shape[0] > 0
+    t0 = team.ticks() if timed else 0
     team.open_phase(s.ctl, p, tasks, kind, w0, w1, w2)
     run_tasks(p, args, s)
     team.wait(s.ctl, p)
+    if timed:
+        args.phase_time[kind] += team.ticks() - t0
 
 
 @njit

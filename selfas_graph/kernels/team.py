@@ -23,7 +23,10 @@ atomic read-modify-writes (sequentially consistent); a task reads its phase's wo
 succeeded, when they can no longer change.
 """
 
+import time
+
 import numba
+from llvmlite import ir
 from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
@@ -76,6 +79,20 @@ def _load(typingctx, arr, i):
     return sig, codegen
 
 
+@intrinsic
+def _ticks(typingctx):
+    """The CPU's cycle counter (``llvm.readcyclecounter``: ``rdtsc`` on x86-64), for timing the phases of
+    a call (``steps.py``, docs/performance.md 'Fast steps on both cores'); only x86-64 is known to give it
+    to user code (``bench profile --team --phases`` checks)."""
+    sig = types.int64()
+
+    def codegen(context, builder, signature, args):
+        fn = builder.module.declare_intrinsic("llvm.readcyclecounter", fnty=ir.FunctionType(ir.IntType(64), []))
+        return builder.call(fn, [])
+
+    return sig, codegen
+
+
 if numba.config.DISABLE_JIT:  # plain Python: one thread, nothing to make atomic
 
     def fetch_add(arr, i, value):
@@ -86,9 +103,13 @@ if numba.config.DISABLE_JIT:  # plain Python: one thread, nothing to make atomic
     def load(arr, i):
         return arr[i]
 
+    def ticks():
+        return time.perf_counter_ns()
+
 else:
     fetch_add = _fetch_add
     load = _load
+    ticks = _ticks
 
 
 @njit

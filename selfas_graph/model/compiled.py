@@ -171,6 +171,9 @@ class CompiledSteps:
         self.brake_work = np.zeros((CHUNK, 3))
         self.brake_hit = np.zeros((CHUNK, 3), dtype=bool)
         self._no_tips = np.zeros(0, dtype=np.int64)
+        #: (9,) float64 to time the phases of the calls (``kernels/step_args.py::FastStepArgs.phase_time``,
+        #: ``bench profile --team --phases``); empty: no timing
+        self.phase_time = _EMPTY
 
     def ready(self) -> bool:
         """Whether the next step can be a compiled one as far as Python's state goes: the AB4 history is
@@ -277,6 +280,7 @@ class CompiledSteps:
             brake_work=self.brake_work,
             brake_hit=self.brake_hit,
             limits=limits,
+            phase_time=self.phase_time,
         )
         threads = numba.get_num_threads()
         if threads > 1 and st.n_tips >= TEAM_TIPS:

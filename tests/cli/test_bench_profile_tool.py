@@ -24,7 +24,9 @@ def test_profile_table_of_a_few_steps(capsys):
 
 
 def test_team_table(capsys):
-    """``--team``: both ways timed, TEAM_TIPS put back."""
+    """``--team --phases``: both ways timed, each phase too; TEAM_TIPS and the calls put back."""
+    import platform
+
     import numba
     import pytest
 
@@ -46,11 +48,25 @@ def test_team_table(capsys):
             "8",
             "--rounds",
             "1",
+            "--phases",
         ]
     )
     out = capsys.readouterr().out
     assert "| on all threads |" in out and "| on one thread |" in out and "speed-up of the whole step (wall):" in out
     assert compiled.TEAM_TIPS == limit
+    # --phases: each kind of phase both ways, the whole call, and timing off again afterwards
+    assert compiled.CompiledSteps.advance.__name__ == "advance"
+    if platform.machine().lower() in ("x86_64", "amd64"):
+        for row in (
+            "| forces |",
+            "| AB4 update and powers |",
+            "| constraint |",
+            "| between phases |",
+            "| whole call |",
+        ):
+            assert row in out, row
+    else:
+        assert "x86-64 only" in out
     numba.set_num_threads(threads)
 
 

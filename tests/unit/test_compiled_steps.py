@@ -84,6 +84,18 @@ def test_compiled_steps_are_the_python_steps_early(team):
     assert step_for_step(slow, fast, 160) > 5
 
 
+@pytest.mark.jit_off_ok
+def test_timed_phases_change_nothing(team):
+    """With the phases timed (``FastStepArgs.phase_time``, ``bench profile --team --phases``) the steps are
+    the same bit for bit; the call's ticks are counted, each phase's within them."""
+    params = scenario_from_text(SMALL_CIRCUIT_SCENE).params.replace(rods={"count": 30})
+    slow, fast = pair(params, slow_every=8)
+    fast.compiled.phase_time = np.zeros(9)
+    assert step_for_step(slow, fast, 160) > 5
+    t = fast.compiled.phase_time
+    assert t[0] > 0 and t[2] > 0 and t[3] > 0 and t[1:].sum() <= t[0]
+
+
 @pytest.mark.parametrize("brake", ["split", "explicit"])
 def test_compiled_steps_are_the_python_steps_through_a_short_circuit(brake, team):
     """The whole small circuit scene (contacts from step 91, a short circuit at step 567 whose currents
