@@ -109,3 +109,34 @@ def test_every_tool_runs_through_the_command_line(name, capsys):
     with pytest.raises(SystemExit) as e:
         main(["bench", name, "--help"])
     assert e.value.code == 0 and f"usage: selfas-graph bench {name}" in capsys.readouterr().out
+
+
+def test_same_as_commit_passes_over_a_parameter_added_at_its_default(tmp_path):
+    """A run file of the working tree whose stored parameters only add a key at its default (a parameter
+    added since the commit, e.g. ``neighbours.centre_skin``) is the same run: the key is named; one set
+    otherwise, or another value changed, is a difference."""
+    import json
+
+    import h5py
+
+    from selfas_graph.bench.same_as_commit import _parameters_added_at_default
+    from selfas_graph.model.params import Parameters
+
+    new = Parameters().to_dict()
+    old = json.loads(json.dumps(new))
+    del old["neighbours"]["centre_skin"]
+
+    def write(name, params):
+        with h5py.File(tmp_path / name, "w") as f:
+            f.create_group("parameters/selfas_graph").attrs["parameters_json"] = json.dumps(params)
+        return tmp_path / name
+
+    commit, tree = write("commit.h5", old), write("tree.h5", new)
+    assert _parameters_added_at_default(commit, tree) == ["neighbours.centre_skin"]
+    assert _parameters_added_at_default(tree, tree) == []
+    set_to = json.loads(json.dumps(new))
+    set_to["neighbours"]["centre_skin"] = 1.0
+    assert _parameters_added_at_default(commit, write("set.h5", set_to)) == []
+    other = json.loads(json.dumps(new))
+    other["integrator"]["dt"] = 2e-3
+    assert _parameters_added_at_default(commit, write("other.h5", other)) == []
