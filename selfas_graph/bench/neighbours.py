@@ -9,7 +9,7 @@ the state of ``--checkpoint`` when given), it times on one numba thread, by the 
 time (``time.process_time``: on a shared machine it counts only the cycles the kernel got):
 
 - ``centre list``: the rod-centre list (kernels/cells.py ``neighbour_rows``), radius Yukawa
-  cut-off + ``neighbours.skin``, as model/neighbours.py builds it for the Yukawa term (with the
+  cut-off + ``neighbours.centre_skin`` (``neighbours.skin`` where unset), as model/neighbours.py builds it for the Yukawa term (with the
   rows numbered by cell where the revision has them);
 - ``tip list``: the tip list, radius the tip range (r*, or the contact release radius when
   larger) + skin, without the pairs of one rod;

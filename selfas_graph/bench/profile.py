@@ -498,18 +498,9 @@ def main(argv=None):
         help="also sample --steps more steps with Linux perf: the CPU time by the code it runs in "
         "(compiled kernels, Python, numpy, ...), without the profiler's cost per Python call",
     )
-    ap.add_argument(
-        "--team",
-        action="store_true",
-        help="whole steps with the compiled fast steps on all --threads threads (default 2) against on one, "
-        "interleaved, wall time",
-    )
-    ap.add_argument(
-        "--phases",
-        action="store_true",
-        help="with --team: also time each phase of the compiled fast steps (forces, update, ...) both ways, "
-        "by the CPU's cycle counter (x86-64)",
-    )
+    from .team_steps import add_team_arguments, team  # team_steps imports this module
+
+    add_team_arguments(ap)
     ap.add_argument("--serve", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.serve:
@@ -528,9 +519,7 @@ def main(argv=None):
         return None
     if args.before:
         return compare(args)
-    if args.team:
-        from .team_steps import team
-
+    if args.team or args.phases:
         return team(args)
     from .peer import machine, machine_line
 

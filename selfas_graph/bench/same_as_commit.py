@@ -32,6 +32,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from ..io.layout import PROVENANCE
 from .same_run import compare
 
 #: the folder that holds the working tree's package (and its git checkout)
@@ -70,25 +71,27 @@ def _simulate(code: Path, scenario: str, sets: list[str], out: Path, threads: in
         raise SystemExit(f"{code}: simulate {scenario} failed (exit {r.returncode}):\n{r.stdout}{r.stderr}")
 
 
-#: the attribute that holds a run's parameters (``io/runfile.py``), as ``same_run.compare`` names it
-PARAMETERS = "parameters/selfas_graph@parameters_json"
+#: the attribute that holds a run's parameters (``io/layout.py::PROVENANCE``), as ``same_run.compare`` names it
+PARAMETERS = f"{PROVENANCE}@parameters_json"
 
 
 def _parameters_added_at_default(before: Path, after: Path) -> list[str]:
     """The parameter keys the working tree's run file stores and the commit's lacks, when those are all
     that differ and each is at its default (a parameter added since the commit that leaves a run as it
-    was, ``ensemble/parameters.py``); otherwise []."""
+    was, as ``ensemble/parameters.py`` counts it); otherwise []. Every key of the commit's file must be in
+    the working tree's with the same value (no key is exempt, unlike an ensemble's ``run.t_end``)."""
     import json
 
     import h5py
 
-    from ..ensemble.parameters import _flat, parameter_differences
+    from ..ensemble.parameters import _flat, _newer_key_at_default
 
     with h5py.File(before, "r") as a, h5py.File(after, "r") as b:
-        old, new = (json.loads(f["parameters/selfas_graph"].attrs["parameters_json"]) for f in (a, b))
-    if old == new or parameter_differences(old, new):
+        old, new = (_flat(json.loads(f[PROVENANCE].attrs["parameters_json"])) for f in (a, b))
+    added = sorted(set(new) - set(old))
+    if not added or any(k not in new or new[k] != v for k, v in old.items()):
         return []
-    return sorted(set(_flat(new)) - set(_flat(old)))
+    return added if all(_newer_key_at_default(k, old, new) for k in added) else []
 
 
 def main(argv=None) -> int:

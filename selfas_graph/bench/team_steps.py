@@ -9,11 +9,12 @@ give the same numbers bit for bit (tests/unit/test_compiled_steps.py), so the st
 to turn. Meaningful on an otherwise idle machine only.
 
 ``--phases``: then as many turns again with the phases of the compiled calls timed
-(``FastStepArgs.phase_time``: the cycle counter read by the leading thread around each phase and each
-call, x86-64 only) and a table of the microseconds per fast step of each kind of phase both ways: what
-the threads buy per part. The ticks are turned into seconds by the calls' own wall time (the counter of
-x86-64 CPUs since about 2008 runs at a fixed rate); "between phases" is the rest of a call (the control
-flow, the serial checks between phases).
+(``FastStepArgs.phase_time``: the cycle counter read by the leading thread around each phase and around
+its whole part of each call, x86-64 only) and a table of the microseconds per fast step of each kind of
+phase both ways: what the threads buy per part. The counter's rate is measured against
+``time.perf_counter`` over the turns (on x86-64 CPUs since about 2008 it runs at a fixed rate); "whole
+call" is the compiled part of the calls (not the Python that builds their arguments and books their
+results), "between phases" its rest (the control flow, the serial checks between phases).
 """
 
 import os
@@ -25,9 +26,28 @@ import numpy as np
 from .profile import load_state, start_threads
 
 
+def add_team_arguments(ap):
+    """``--team`` and ``--phases`` on the argument parser of ``bench profile``."""
+    ap.add_argument(
+        "--team",
+        action="store_true",
+        help="whole steps with the compiled fast steps on all --threads threads (default 2) against on one, "
+        "interleaved, wall time",
+    )
+    ap.add_argument(
+        "--phases",
+        action="store_true",
+        help="with --team: also time each phase of the compiled fast steps (forces, update, ...) both ways, "
+        "by the CPU's cycle counter (x86-64)",
+    )
+
+
 def team(args):
     """``--team``: whole steps with the compiled fast steps on all threads and on one, interleaved."""
     import numba
+
+    if not args.team:
+        raise SystemExit("--phases times the phases of --team; give both")
 
     from selfas_graph.model import compiled
 
@@ -93,23 +113,22 @@ def phases(sim, args):
     if platform.machine().lower() not in ("x86_64", "amd64"):
         print(f"--phases: the cycle counter is read on x86-64 only, not on {platform.machine()}")
         return
+    from selfas_graph.kernels.team import read_ticks
+
     cs = sim.compiled
     make = compiled.CompiledSteps.advance
     totals = {mode: np.zeros(len(PHASE_NAMES) + 1) for mode in ("all threads", "one thread")}
-    seconds = dict.fromkeys(totals, 0.0)
     steps = dict.fromkeys(totals, 0)
     mode = "all threads"
 
-    def timed(self, n_max):
-        nonlocal mode
-        t0 = time.perf_counter()
+    def counted(self, n_max):
         done, reason = make(self, n_max)
-        seconds[mode] += time.perf_counter() - t0
         steps[mode] += done
         return done, reason
 
-    limit = compiled.TEAM_TIPS
-    compiled.CompiledSteps.advance = timed
+    limit, kept = compiled.TEAM_TIPS, cs.phase_time
+    compiled.CompiledSteps.advance = counted
+    t0, k0 = time.perf_counter(), read_ticks()
     try:
         for r in range(args.rounds):
             for mode in ("all threads", "one thread") if r % 2 == 0 else ("one thread", "all threads"):
@@ -119,8 +138,11 @@ def phases(sim, args):
     finally:
         compiled.CompiledSteps.advance = make
         compiled.TEAM_TIPS = limit
-        cs.phase_time = np.zeros(0)
-    print("\nphases of the compiled calls, us per fast step (the leading thread's view; cycle counter):")
+        cs.phase_time = kept
+    rate = (read_ticks() - k0) / (time.perf_counter() - t0)  # ticks per second
+    print(
+        f"\nphases of the compiled calls, us per fast step (the leading thread's view; cycle counter at {rate / 1e9:.2f} GHz):"
+    )
     print("| phase | on all threads | on one thread | speed-up |")
     print("|---|---|---|---|")
     per = {}
@@ -128,7 +150,7 @@ def phases(sim, args):
         if steps[m] == 0 or t[0] <= 0:
             print(f"no compiled fast steps on {m}")
             return
-        per[m] = t * (seconds[m] / t[0]) / steps[m] * 1e6  # ticks -> seconds by the calls' wall time
+        per[m] = t / rate / steps[m] * 1e6
     rows = [(PHASE_NAMES[k], k) for k in PHASE_NAMES] + [("between phases", None), ("whole call", 0)]
     for name, k in rows:
         a, o = ((per[m][0] - per[m][1:].sum() if k is None else per[m][k]) for m in ("all threads", "one thread"))

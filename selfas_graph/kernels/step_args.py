@@ -99,7 +99,7 @@ scalars : (17,) float64
     ambient brake coefficient; tip law r*, kappa; tip brake coefficient (explicit; NaN: split);
     split tip brake coefficient (0: none); electrode planes z_c, z_a, explicit electrode
     brake; split electrode brake (0: none); filament current and radius; monopole brake
-    (explicit); split monopole brake (0: none); fast range r_in, r_out; neighbour list
+    (explicit); split monopole brake (0: none); fast range r_in, r_out; the tip list's
     (skin / 2)^2; contact release radius.
 plasma : (4,) float64 or empty
     Axis x, y, radius and current of the plasma filament.
@@ -140,14 +140,14 @@ phase_time : (9,) float64 or empty
 Scratch = namedtuple("Scratch", ["ctl", "partial", "counts", "zero", "pair_k", "pair_l", "chunks"])
 Scratch.__doc__ = """What a call of fast steps adds to its arguments (``steps.py::_prepare``).
 
-ctl : int64
+ctl : (n,) int64 array
     The control block of the call's threads (``team.py``).
 partial : (chunks, 6) float64; counts : (chunks, 4) int64
     Each block's results: maxima (columns ``step_tasks.P_*``) and the split brake's pairs and the contact
     test's counts.
 zero : (n_held,) bool
     The held forces whose rate and base are +0 throughout the call (written on its first step only).
-pair_k, pair_l : int64
+pair_k, pair_l : int64 arrays
     The close tip pairs the blocks found for the split tip brake, each block's from its first tip's row
     start.
 chunks : int

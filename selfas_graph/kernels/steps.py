@@ -134,13 +134,13 @@ def _prepare(args, chunks):
     chunks = max(1, min(chunks, args.x.shape[0] // 2))
     n_pairs = args.index.shape[0] if args.scalars[4] != 0.0 else 0
     s = Scratch(
-        ctl,
-        np.zeros((chunks, 6)),
-        np.zeros((chunks, 4), dtype=np.int64),
-        np.zeros(args.held.shape[0], dtype=np.bool_),
-        np.empty(n_pairs, dtype=np.int64),
-        np.empty(n_pairs, dtype=np.int64),
-        chunks,
+        ctl=ctl,
+        partial=np.zeros((chunks, 6)),
+        counts=np.zeros((chunks, 4), dtype=np.int64),
+        zero=np.zeros(args.held.shape[0], dtype=np.bool_),
+        pair_k=np.empty(n_pairs, dtype=np.int64),
+        pair_l=np.empty(n_pairs, dtype=np.int64),
+        chunks=chunks,
     )
     return s, np.zeros(3, dtype=np.int64), np.zeros(3)
 

@@ -113,6 +113,12 @@ else:
 
 
 @njit
+def read_ticks():
+    """:func:`ticks` from Python (to measure the counter's rate)."""
+    return ticks()
+
+
+@njit
 def open_phase(ctl, p, tasks, w0, w1, w2, w3):
     """Open phase ``p`` (the one after the phase open now) with ``tasks`` tasks and its four words."""
     r = ROW + WIDTH * p

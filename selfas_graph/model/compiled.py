@@ -172,7 +172,7 @@ class CompiledSteps:
         self.brake_hit = np.zeros((CHUNK, 3), dtype=bool)
         self._no_tips = np.zeros(0, dtype=np.int64)
         #: (9,) float64 to time the phases of the calls (``kernels/step_args.py::FastStepArgs.phase_time``,
-        #: ``bench profile --team --phases``); empty: no timing
+        #: ``bench profile --team --phases``; the CPU's cycle counter, x86-64 only); empty: no timing
         self.phase_time = _EMPTY
 
     def ready(self) -> bool:
@@ -219,6 +219,8 @@ class CompiledSteps:
         decay_walls = el._decay if el is not None and el._decay is not None else np.zeros(3)
         if el is not None and el.split_mode and el.k != 0.0 and el._decay_dt != integ.dt:
             return 0, NEEDS_STEP  # the electrode brake's decay is made by its first split step
+        if self.phase_time.shape not in ((0,), (9,)):
+            raise ValueError(f"phase_time must be empty or (9,) float64, not of shape {self.phase_time.shape}")
         hist_p0 = integ.hist_p.copy()
         head0 = integ.head
         args = FastStepArgs(

@@ -37,24 +37,27 @@ def test_team_table(capsys):
 
     tool = _tool()
     threads, limit = numba.get_num_threads(), compiled.TEAM_TIPS
-    tool.main(
-        [
-            "--team",
-            "--scenario",
-            str(ROOT / "scenarios" / "quick.toml"),
-            "--settle",
-            "4",
-            "--steps",
-            "8",
-            "--rounds",
-            "1",
-            "--phases",
-        ]
-    )
+    try:
+        tool.main(
+            [
+                "--team",
+                "--scenario",
+                str(ROOT / "scenarios" / "quick.toml"),
+                "--settle",
+                "4",
+                "--steps",
+                "8",
+                "--rounds",
+                "1",
+                "--phases",
+            ]
+        )
+    finally:
+        numba.set_num_threads(threads)
     out = capsys.readouterr().out
     assert "| on all threads |" in out and "| on one thread |" in out and "speed-up of the whole step (wall):" in out
     assert compiled.TEAM_TIPS == limit
-    # --phases: each kind of phase both ways, the whole call, and timing off again afterwards
+    # --phases: each kind of phase both ways and the whole call; the compiled calls put back as they were
     assert compiled.CompiledSteps.advance.__name__ == "advance"
     if platform.machine().lower() in ("x86_64", "amd64"):
         for row in (
@@ -67,7 +70,8 @@ def test_team_table(capsys):
             assert row in out, row
     else:
         assert "x86-64 only" in out
-    numba.set_num_threads(threads)
+    with pytest.raises(SystemExit, match="--phases times the phases of --team"):
+        tool.main(["--phases", "--scenario", str(ROOT / "scenarios" / "quick.toml")])
 
 
 def test_team_refuses_a_thread_count_numba_cannot_give():

@@ -582,8 +582,9 @@ def test_an_ensemble_that_runs_out_of_disk_stops_with_exit_4_and_resumable_seeds
     attempted. Skipped where a tmpfs cannot be mounted.
 
     The size: a seed file starts at about 5 MiB and asks for 5.5 MiB of room before each frame (its next
-    chunk), so that on 16 MiB both seeds could stop at their first step, before their first checkpoint
-    (right after it), as it happened when both started together; 32 MiB holds both seeds' first chunks."""
+    chunk). On 16 MiB both seeds could stop at their first step, before the first checkpoint (which is
+    written right after the first step), when both started together; 32 MiB holds both seeds' first
+    chunks."""
     import subprocess
 
     small = tmp_path / "tmpfs"

@@ -137,6 +137,7 @@ def test_same_as_commit_passes_over_a_parameter_added_at_its_default(tmp_path):
     set_to = json.loads(json.dumps(new))
     set_to["neighbours"]["centre_skin"] = 1.0
     assert _parameters_added_at_default(commit, write("set.h5", set_to)) == []
-    other = json.loads(json.dumps(new))
-    other["integrator"]["dt"] = 2e-3
-    assert _parameters_added_at_default(commit, write("other.h5", other)) == []
+    for key, value in (("integrator", ("dt", 2e-3)), ("run", ("t_end", 99.0))):  # run.t_end too: no key exempt
+        other = json.loads(json.dumps(new))
+        other[key][value[0]] = value[1]
+        assert _parameters_added_at_default(commit, write("other.h5", other)) == []

@@ -139,7 +139,7 @@ def test_the_centre_list_takes_its_own_skin():
     from selfas_graph.model.simulation import Simulation
 
     # a short skin, so that the centre list of the plain run is built often in a short run
-    params = scenario_from_text(SMALL_CIRCUIT_SCENE).params.replace(rods={"count": 40}, neighbours={"skin": 0.02})
+    params = scenario_from_text(SMALL_CIRCUIT_SCENE).params.replace(rods={"count": 20}, neighbours={"skin": 0.02})
     plain = Simulation(params)
     assert plain.force_field.lists.centre.skin == params.neighbours.skin == 0.02
     wide = Simulation(params.replace(neighbours={"centre_skin": 1.5}))
@@ -154,6 +154,6 @@ def test_the_centre_list_takes_its_own_skin():
     close(forces[1], forces[0])
     builds = []
     for sim in (plain, wide):
-        sim.run(t_end=0.25)
+        sim.run(t_end=0.15)
         builds.append(sim.force_field.lists.centre.n_builds)
     assert builds[1] == 1 and builds[0] > 3

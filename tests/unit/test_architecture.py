@@ -53,6 +53,7 @@ ALLOWED = {
         "__init__",
     },
     "__init__": {"analysis", "ensemble", "io", "model", "kernels", "parallel", "_version", "provenance"},
+    "__main__": {"cli"},
 }
 #: the one upward import, inside functions: the schema walk of Parameters lives with the scenario files
 EXCEPTIONS = {("model/params.py", "io")}

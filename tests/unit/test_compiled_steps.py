@@ -4,6 +4,8 @@ every call, through contact events, list builds, slow evaluations and a short ci
 and on a team of two (kernels/team.py) with the rods in as many blocks as threads or three times as
 many (blocks of unequal sizes)."""
 
+import platform
+
 import numba
 import numpy as np
 import pytest
@@ -85,15 +87,22 @@ def test_compiled_steps_are_the_python_steps_early(team):
 
 
 @pytest.mark.jit_off_ok
+@pytest.mark.skipif(
+    platform.machine().lower() not in ("x86_64", "amd64"), reason="the cycle counter is read on x86-64 only"
+)
 def test_timed_phases_change_nothing(team):
     """With the phases timed (``FastStepArgs.phase_time``, ``bench profile --team --phases``) the steps are
-    the same bit for bit; the call's ticks are counted, each phase's within them."""
+    the same bit for bit; the call's ticks are counted, each phase's within them; a timing array of another
+    length is refused."""
     params = scenario_from_text(SMALL_CIRCUIT_SCENE).params.replace(rods={"count": 30})
     slow, fast = pair(params, slow_every=8)
     fast.compiled.phase_time = np.zeros(9)
     assert step_for_step(slow, fast, 160) > 5
     t = fast.compiled.phase_time
     assert t[0] > 0 and t[2] > 0 and t[3] > 0 and t[1:].sum() <= t[0]
+    fast.compiled.phase_time = np.zeros(8)
+    with pytest.raises(ValueError, match="phase_time must be empty or"):
+        fast.compiled.advance(8)
 
 
 @pytest.mark.parametrize("brake", ["split", "explicit"])
