@@ -42,14 +42,31 @@ def add_team_arguments(ap):
     )
 
 
+#: the two ways of making the compiled fast steps, timed in turns
+MODES = ("all threads", "one thread")
+
+
+def _turns(rounds):
+    """``(round, mode)`` for ``rounds`` rounds of both :data:`MODES`, their order swapped every other round,
+    ``model/compiled.py::TEAM_TIPS`` set for each mode and put back at the end."""
+    from selfas_graph.model import compiled
+
+    limit = compiled.TEAM_TIPS
+    try:
+        for r in range(rounds):
+            for mode in MODES if r % 2 == 0 else MODES[::-1]:
+                compiled.TEAM_TIPS = 0 if mode == MODES[0] else 2**62
+                yield r, mode
+    finally:
+        compiled.TEAM_TIPS = limit
+
+
 def team(args):
     """``--team``: whole steps with the compiled fast steps on all threads and on one, interleaved."""
     import numba
 
     if not args.team:
         raise SystemExit("--phases times the phases of --team; give both")
-
-    from selfas_graph.model import compiled
 
     from .peer import machine_line
 
@@ -63,19 +80,13 @@ def team(args):
     sim.step(48)
     if sim.compiled is None:
         raise SystemExit(f"{origin}: this scene's steps all run in Python (no compiled fast steps to compare)")
-    walls, cpus = {"all threads": [], "one thread": []}, {"all threads": [], "one thread": []}
-    limit = compiled.TEAM_TIPS
-    try:
-        for r in range(args.rounds + 1):
-            for mode in ("all threads", "one thread") if r % 2 == 0 else ("one thread", "all threads"):
-                compiled.TEAM_TIPS = 0 if mode == "all threads" else 2**62
-                t0, c0 = time.perf_counter(), time.process_time()
-                sim.step(args.steps)
-                if r > 0:
-                    walls[mode].append((time.perf_counter() - t0) / args.steps)
-                    cpus[mode].append((time.process_time() - c0) / args.steps)
-    finally:
-        compiled.TEAM_TIPS = limit
+    walls, cpus = {m: [] for m in MODES}, {m: [] for m in MODES}
+    for r, mode in _turns(args.rounds + 1):
+        t0, c0 = time.perf_counter(), time.process_time()
+        sim.step(args.steps)
+        if r > 0:
+            walls[mode].append((time.perf_counter() - t0) / args.steps)
+            cpus[mode].append((time.process_time() - c0) / args.steps)
     print(machine_line())
     print(
         f"{origin}; {sim.state.n_rods} rods; {threads} numba threads; {args.rounds} rounds of {args.steps} steps "
@@ -117,27 +128,24 @@ def phases(sim, args):
 
     cs = sim.compiled
     make = compiled.CompiledSteps.advance
-    totals = {mode: np.zeros(len(PHASE_NAMES) + 1) for mode in ("all threads", "one thread")}
-    steps = dict.fromkeys(totals, 0)
-    mode = "all threads"
+    totals = {m: np.zeros(len(PHASE_NAMES) + 1) for m in MODES}
+    steps = dict.fromkeys(MODES, 0)
+    mode = MODES[0]
 
     def counted(self, n_max):
         done, reason = make(self, n_max)
         steps[mode] += done
         return done, reason
 
-    limit, kept = compiled.TEAM_TIPS, cs.phase_time
+    kept = cs.phase_time
     compiled.CompiledSteps.advance = counted
     t0, k0 = time.perf_counter(), read_ticks()
     try:
-        for r in range(args.rounds):
-            for mode in ("all threads", "one thread") if r % 2 == 0 else ("one thread", "all threads"):
-                compiled.TEAM_TIPS = 0 if mode == "all threads" else 2**62
-                cs.phase_time = totals[mode]
-                sim.step(args.steps)
+        for _, mode in _turns(args.rounds):
+            cs.phase_time = totals[mode]
+            sim.step(args.steps)
     finally:
         compiled.CompiledSteps.advance = make
-        compiled.TEAM_TIPS = limit
         cs.phase_time = kept
     rate = (read_ticks() - k0) / (time.perf_counter() - t0)  # ticks per second
     print(
@@ -153,7 +161,7 @@ def phases(sim, args):
         per[m] = t / rate / steps[m] * 1e6
     rows = [(PHASE_NAMES[k], k) for k in PHASE_NAMES] + [("between phases", None), ("whole call", 0)]
     for name, k in rows:
-        a, o = ((per[m][0] - per[m][1:].sum() if k is None else per[m][k]) for m in ("all threads", "one thread"))
+        a, o = ((per[m][0] - per[m][1:].sum() if k is None else per[m][k]) for m in MODES)
         if k is not None and k > 0 and a == 0.0 and o == 0.0:
             continue  # a kind of phase these steps never opened
         print(f"| {name} | {a:.1f} | {o:.1f} | {o / a if a > 0 else float('nan'):.2f} |")
