@@ -325,7 +325,7 @@ def test_current_every_new_currents_before_a_fast_step(rng):
 
 def test_current_every_new_currents_on_a_full_step_start_without_a_rate(rng):
     """With current_every, currents changed right before a full evaluation start a base with no rate
-    (the known defect of K alone does not carry over), and the next full evaluation takes the rate."""
+    as without it, and the next full evaluation takes the rate."""
     s, sim = _current_sim(rng, 4, 16)
     sim.step(5)
     ff, mts = sim.force_field, sim.force_field.mts
@@ -389,12 +389,6 @@ def test_current_every_off_the_slow_pattern_is_refused_naming_both_keys(slow_eve
     assert "integrator.current_every" in msg and "integrator.slow_every" in msg and "multiple" in msg
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="known defect (docs/model.md 'Multiple time stepping (`integrator.slow_every`)'): new currents "
-    "computed on a full evaluation take a rate from the evaluation before the change; the fix moves "
-    "trajectories and waits for the next regeneration of the results",
-)
 def test_new_currents_on_a_full_step_start_without_a_rate(rng):
     """Currents changed right before a full evaluation: the current forces computed there start a new
     base with no rate (a jump, not a trend), as after a change before a fast step."""

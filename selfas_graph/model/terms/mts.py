@@ -130,11 +130,8 @@ class MultipleTimeStepping:
         A force just ``refreshed`` becomes the new base; its rate is the difference from the
         previous base over the steps between them when both were full evaluations at step
         starts at most two of its intervals apart (K, or M = ``current_every`` for the current
-        terms), else zero (after an RK4 start, or when the currents changed before a fast step:
-        a jump, not a trend). With ``current_every`` the arrays in ``jumped`` (computed because
-        the currents changed) get no rate either; without it, a change before a full
-        evaluation still takes one (docs/model.md 'Multiple time stepping
-        (`integrator.slow_every`)', a known defect kept so that the runs stay as they were).
+        terms), else zero: after an RK4 start, and for the arrays in ``jumped`` (computed because
+        the currents changed, before a fast step or a full one: a jump, not a trend).
         The others are extrapolated to ``step``.
         """
         steps = self._steps  # steps since each held force's base, NaN: left as it is
@@ -144,8 +141,8 @@ class MultipleTimeStepping:
             steps[j] = np.nan
             if key in refreshed:
                 gap = None if (prev is None or step is None or not full) else step - prev
-                if key in jumped and self._interval[key] != self.slow_every:
-                    gap = None  # new currents (current_every): a jump, not a trend
+                if key in jumped:
+                    gap = None  # new currents: a jump, not a trend
                 if gap is not None and 0 < gap <= 2 * self._interval[key]:
                     np.subtract(arr, base, out=rate)
                     rate /= gap
