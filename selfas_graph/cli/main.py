@@ -86,11 +86,24 @@ def build_parser():
     return parser
 
 
+def parse_args(parser, argv=None):
+    """``parser.parse_args(argv)``, but names given after options still count for a command whose
+    trailing positional list is named by its ``_rest`` default (``study run fig2 --jobs 2 fig6``);
+    an unknown option is refused as by argparse."""
+    args, extra = parser.parse_known_args(argv)
+    rest = getattr(args, "_rest", None)
+    if extra and rest and not any(a.startswith("-") for a in extra):
+        getattr(args, rest).extend(extra)
+    elif extra:
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
+    return args
+
+
 def main(argv=None) -> int:
     from ..parallel import world
 
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parse_args(parser, argv)
     try:
         return int(args._run(args) or 0)
     except CliError as exc:

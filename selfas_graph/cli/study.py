@@ -30,6 +30,7 @@ MOVIE_FRAMES = 150
 def add_arguments(p):
     p.add_argument("action", choices=("list", "run", "summarise", "page"), help="what to do")
     p.add_argument("names", nargs="*", metavar="NAME", help="studies (run, summarise; default for summarise: all)")
+    p.set_defaults(_rest="names")  # names after the options count too (cli/main.py::parse_args)
     p.add_argument("--studies", default=DEFAULT_STUDIES, help=f"the studies file (default {DEFAULT_STUDIES})")
     p.add_argument("--runs", default="runs", help="folder of the run files, one subfolder per study (default runs)")
     p.add_argument("--jobs", type=int, default=1, help="run: seeds at once on this machine (as ensemble --jobs)")

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.ensemble_stats import grouped_summary, mean_sem, mean_sem_fits
+from .spec import version_key
 
 __all__ = [
     "GROUPED",
@@ -249,8 +250,46 @@ def percolation_table(summary) -> str:
     return "\n".join(rows)
 
 
-def provenance_text(summary) -> str:
-    """Version, commits, CPU, threads and wall time of a study's runs, in one paragraph."""
+def older_runs(summary, since) -> list:
+    """The versions of a summary's runs older than ``since`` (docs/studies.toml ``trajectories_since``,
+    the first version whose trajectories the code follows now), an unreadable version counted as older;
+    [] when there are none, or ``since`` is ""."""
+    if not since or summary is None:
+        return []
+    seeds = [summary] if summary.get("kind") == "percolation" else summary["seeds"]
+    versions = {str(x.get("version", "")) for x in seeds}
+    return sorted(v or "unknown" for v in versions if (version_key(v) or ()) < version_key(since))
+
+
+def _older_note(summaries, names, since) -> str:
+    """ "; from runs of older versions (NAME: 0.3.0): to be run again" for the studies among ``names``
+    made of runs older than ``since``, or ""."""
+    old = {n: older_runs(summaries.get(n), since) for n in dict.fromkeys(names) if n}
+    old = {n: v for n, v in old.items() if v}
+    if not old:
+        return ""
+    which = ", ".join(f"{n}: {', '.join(v)}" for n, v in old.items())
+    return f"; from runs older than version {since} ({which}): to be run again"
+
+
+def status_text(studies, summaries) -> str:
+    """Which studies are still made of runs older than the trajectories of the code now."""
+    since = studies.trajectories_since
+    old = {n: older_runs(s, since) for n, s in summaries.items()}
+    old = {n: v for n, v in old.items() if v}
+    if not since or not old:
+        return f"Every summarised study is made of runs of version {since or 'any'} or later."
+    return (
+        f"**Runs to be made again.** Trajectories changed in version {since} (CHANGELOG); these studies are "
+        f"still made of runs of older versions, and every number and verdict that uses them is marked: "
+        + ", ".join(f"{n} ({', '.join(v)})" for n, v in old.items())
+        + ". `selfas-graph study run NAME --jobs 2`, then `study summarise NAME`, makes each again."
+    )
+
+
+def provenance_text(summary, since="") -> str:
+    """Version, commits, CPU, threads and wall time of a study's runs, in one paragraph; marked when
+    they are older than version ``since``."""
     seeds = summary["seeds"]
     if not seeds:
         return "No run files were summarised."
@@ -273,7 +312,18 @@ def provenance_text(summary) -> str:
         text += f"; wall time a seed {lo if lo == hi else f'{lo}-{hi}'} min"
     if summary.get("missing"):
         text += f". Not yet run: {', '.join(summary['missing'])}"
-    return text + "."
+    return text + "." + _older_text(summary, since)
+
+
+def _older_text(summary, since) -> str:
+    old = older_runs(summary, since)
+    if not old:
+        return ""
+    name = summary["study"]["name"]
+    return (
+        f" **Runs of version {', '.join(old)}, older than the trajectories of version {since} (CHANGELOG): "
+        f"to be run again (`selfas-graph study run {name}`).**"
+    )
 
 
 def _claim_difference(a, b):
@@ -356,6 +406,7 @@ def claim_rows(studies, summaries) -> str:
             null_text = studies.study(c.null).title
             null_value += "" if nm == c.measure else f" ({_label(nm)})"
             verdict = _verdict(d, c.expect)
+        verdict += _older_note(summaries, (c.study, c.null), studies.trajectories_since)
         rows.append(
             f"| {c.claim} | {c.paper} | {_label(c.measure)}, {where} | {value} | {null_text} | "
             f"{null_value} | {verdict} |"
@@ -415,6 +466,7 @@ def convergence_rows(studies, summaries) -> str:
             verdict = "marginal (a difference of 2-3 SE)"
         else:
             verdict = "safe for these statistics (every difference within 2 SE)"
+        verdict += _older_note(summaries, (st.name, st.null_of), studies.trajectories_since)
         for k, (m, b, a, d) in enumerate(cells):
             name = st.title if k == 0 else ""
             text = "n/a" if not math.isfinite(d) else f"{d:+.1f}".replace("-", "−")
@@ -438,7 +490,9 @@ def sweep_rows(studies, summaries, name) -> str:
             )
             continue
         cells = [measure_text(s, m, sw.time) for m in CLAIM_MEASURES]
-        rows.append(f"| {value:g}{mark} | {s['n_seeds']} | " + " | ".join(cells) + " |")
+        old = older_runs(s, studies.trajectories_since)
+        seeds = f"{s['n_seeds']}" + (f" (runs of {', '.join(old)}: to be run again)" if old else "")
+        rows.append(f"| {value:g}{mark} | {seeds} | " + " | ".join(cells) + " |")
     if sum(summaries.get(study) is not None for _, study in studies.sweep_points(name)) >= 2:
         rows.append(f"\n![{sw.title}: the claim measures at t = {sw.time:g}](figures/sweep_{name}.png)")
     return "\n".join(rows)
@@ -462,7 +516,11 @@ def page_blocks(studies, folder) -> dict:
     yet says how to make it)."""
     summaries = {name: load_summary(folder, name) for name in studies.studies}
     summaries = {k: v for k, v in summaries.items() if v is not None}
-    blocks = {"claims": claim_rows(studies, summaries), "convergence": convergence_rows(studies, summaries)}
+    blocks = {
+        "claims": claim_rows(studies, summaries),
+        "convergence": convergence_rows(studies, summaries),
+        "status": status_text(studies, summaries),
+    }
     for name in studies.sweeps:
         blocks[f"sensitivity {name}"] = sweep_rows(studies, summaries, name)
     for name, study in studies.studies.items():
@@ -480,11 +538,12 @@ def page_blocks(studies, folder) -> dict:
                 f"{len(s['seeds'])} seeds a count to t = {_fmt(s['study']['t_max'])}; version {s['version']}, commit "
                 f"{(s['commit'] or 'unknown')[:10]}; {s['cpu_model'] or 'unknown CPU'}, kernels for {s['numba_cpu']}, "
                 f"{s['workers']} worker(s) of one numba thread; {_fmt((s['wall_seconds'] or 0) / 60, 2)} min in all."
+                + _older_text(s, studies.trajectories_since)
             )
             blocks[f"figures {name}"] = ""
             continue
         blocks[f"table {name}"] = study_table(s)
-        blocks[f"runs {name}"] = provenance_text(s)
+        blocks[f"runs {name}"] = provenance_text(s, studies.trajectories_since)
         blocks[f"figures {name}"] = (
             f"| {study.title}: every measure over time | short-circuit episodes | seed {s['seeds'][0]['seed']} at "
             f"t = {_fmt(s['seeds'][0]['t_end'])} |\n|---|---|---|\n"

@@ -19,16 +19,20 @@ the direction the paper's claim predicts). ``selfas-graph study run NAME`` runs 
     [[claim]]
     id = "filaments"
     ...
+
+A top-level ``trajectories_since = "0.4.0"`` names the first version whose trajectories the code
+follows now; the page marks a study still made of runs of an older version.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import tomllib
 from pathlib import Path
 
-__all__ = ["Claim", "Study", "StudiesError", "Studies", "Sweep", "load_studies"]
+__all__ = ["Claim", "Study", "StudiesError", "Studies", "Sweep", "load_studies", "version_key"]
 
 
 class StudiesError(ValueError):
@@ -115,6 +119,9 @@ class Studies:
     studies: dict
     claims: tuple
     sweeps: dict = dataclasses.field(default_factory=dict)
+    #: the first version whose trajectories the code follows now (the top-level key
+    #: ``trajectories_since``): the page marks a study made of runs of an older version ("" marks none)
+    trajectories_since: str = ""
 
     def sweep_points(self, name) -> list:
         """(value, study name) of a sweep, the base included, in order of the value."""
@@ -191,9 +198,14 @@ def load_studies(path) -> Studies:
         raise StudiesError(f"{path}: cannot read the studies file ({exc.strerror or exc})") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise StudiesError(f"{path}: not a valid TOML file ({exc})") from None
-    extra = set(raw) - {"study", "claim", "sweep"}
+    extra = set(raw) - {"study", "claim", "sweep", "trajectories_since"}
     if extra:
-        raise StudiesError(f"{path}: unknown table(s) {sorted(extra)}; valid: [study.NAME], [sweep.NAME], [[claim]]")
+        raise StudiesError(
+            f"{path}: unknown key(s) {sorted(extra)}; valid: trajectories_since, [study.NAME], [sweep.NAME], [[claim]]"
+        )
+    since = raw.get("trajectories_since", "")
+    if not isinstance(since, str) or (since and version_key(since) is None):
+        raise StudiesError(f'{path}: trajectories_since: a version such as "0.4.0", got {since!r}')
     studies = {}
     for name, t in (raw.get("study") or {}).items():
         where = f"{path}: study.{name}"
@@ -265,4 +277,11 @@ def load_studies(path) -> Studies:
                 window=tuple(float(x) for x in c.get("window", [])),
             )
         )
-    return Studies(path=path, studies=studies, claims=tuple(claims), sweeps=sweeps)
+    return Studies(path=path, studies=studies, claims=tuple(claims), sweeps=sweeps, trajectories_since=since)
+
+
+def version_key(version):
+    """The release numbers of a version string as a tuple of ints ("0.4.0+source" -> (0, 4, 0)), to
+    order versions; None when it does not start with one ("", "unknown")."""
+    m = re.match(r"\d+(\.\d+)*", str(version))
+    return tuple(int(x) for x in m.group(0).split(".")) if m else None

@@ -13,6 +13,7 @@ import pytest
 
 from selfas_graph.studies import StudiesError, load_studies
 from selfas_graph.studies.page import grouped_stat, plain_stat, replace_blocks
+from selfas_graph.studies.spec import version_key
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -33,7 +34,9 @@ def test_the_shipped_studies_file_loads_and_every_claim_names_its_study():
         ("[study.a]\nscenario = 'x'\nseeds = 0\nt_end = 1\n", "must be positive"),
         ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\ntable_times = [2.0]\n", "table_times"),
         ("[[claim]]\nid='c'\nclaim='c'\npaper='p'\nstudy='nope'\nmeasure='m'\ntime=1\n", "no study named 'nope'"),
-        ("[stduy.a]\n", "unknown table"),
+        ("[stduy.a]\n", "unknown key(s) ['stduy']"),
+        ("trajectories_since = 'new'\n", "trajectories_since"),
+        ("trajectories_since = 4\n", "trajectories_since"),
         ("[study.a\n", "not a valid TOML file"),
     ],
 )
@@ -43,6 +46,35 @@ def test_a_bad_studies_file_is_refused_naming_the_key(tmp_path, text, words):
     with pytest.raises(StudiesError, match="studies.toml") as err:
         load_studies(path)
     assert words in str(err.value)
+
+
+def test_versions_are_ordered_by_their_release_numbers():
+    assert version_key("0.4.0+source") == (0, 4, 0) and version_key("0.10.1") > version_key("0.9.9")
+    assert version_key("") is None and version_key("unknown") is None
+
+
+def test_studies_of_runs_older_than_the_trajectories_are_marked_where_they_are_used():
+    """With ``trajectories_since`` newer than a study's runs, its provenance, the status paragraph,
+    each claim and convergence row that uses it and its sweep rows say it is to be run again; with
+    the runs' own version nothing is marked. The committed summaries serve as runs of known version."""
+    import dataclasses
+
+    from selfas_graph.studies.page import older_runs, page_blocks
+
+    shipped = load_studies(ROOT / "docs" / "studies.toml")
+    docs = ROOT / "docs" / "results"
+    old = json.loads((docs / "fig2.json").read_text())["seeds"][0]["version"]
+    same = page_blocks(dataclasses.replace(shipped, trajectories_since=old), docs)
+    assert "to be run again" not in "".join(same.values()) and old in same["status"]
+    newer = ".".join(map(str, version_key(old)[:-1] + (version_key(old)[-1] + 1,)))
+    blocks = page_blocks(dataclasses.replace(shipped, trajectories_since=newer), docs)
+    assert older_runs(json.loads((docs / "fig2.json").read_text()), newer) == [old]
+    assert "fig2 (" + old in blocks["status"] and "Runs to be made again" in blocks["status"]
+    assert f"Runs of version {old}, older than the trajectories of version {newer}" in blocks["runs fig2"]
+    assert "`selfas-graph study run fig2`" in blocks["runs fig2"]
+    claims = [r for r in blocks["claims"].splitlines()[2:]]
+    assert claims and all(f"fig2: {old}" in r and "to be run again" in r for r in claims)
+    assert "to be run again" in blocks["convergence"] and "to be run again" in blocks["sensitivity fig2_rods"]
 
 
 def test_plain_stat_by_hand():
@@ -360,3 +392,16 @@ def test_an_unusable_seed_file_in_one_study_stops_all_before_anything_runs(tmp_p
     assert res.returncode == 2 and "seed_0001.h5" in res.stderr, res.stdout + res.stderr
     assert not list((tmp_path / "runs" / "a").glob("seed_*.h5"))  # nothing ran
     assert (tmp_path / "runs" / "b" / "seed_0001.h5").read_text() == "not a run file"  # nothing overwritten
+
+
+def test_study_names_after_the_options_count_and_unknown_options_are_refused(capsys):
+    from selfas_graph.cli.main import build_parser, parse_args
+
+    parser = build_parser()
+    args = parse_args(parser, ["study", "run", "fig2", "--jobs", "2", "fig6", "fig8", "--runs", "r"])
+    assert args.names == ["fig2", "fig6", "fig8"] and args.jobs == 2 and args.runs == "r"
+    with pytest.raises(SystemExit) as info:
+        parse_args(parser, ["study", "run", "fig2", "--jbos", "2"])
+    assert info.value.code == 2 and "unrecognized arguments: --jbos" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # a command without a trailing list takes no extra names
+        parse_args(parser, ["simulate", "a.toml", "b.toml"])
