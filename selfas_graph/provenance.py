@@ -4,11 +4,36 @@ summaries and the benchmarks in ``selfas_graph/bench/`` record them."""
 
 import os
 import platform
+import re
 import subprocess
 from functools import lru_cache
 from pathlib import Path
 
-__all__ = ["cpu_model", "machine", "numba_target", "source_commit"]
+__all__ = ["cpu_model", "machine", "numba_target", "older_version", "source_commit", "version_key"]
+
+
+def version_key(version):
+    """A version string as a key that orders versions: its release numbers without trailing zeros,
+    then 0 for a pre-release (``a``, ``b``, ``rc``, ``.dev``) and 1 for the release itself
+    ("0.4.0+source" -> ((0, 4), 1), "0.4.0.dev1" -> ((0, 4), 0)); None when the string does not start
+    with a release number ("", "unknown")."""
+    m = re.match(r"(\d+(?:\.\d+)*)(.*)", str(version or "").strip())
+    if not m:
+        return None
+    release = [int(x) for x in m.group(1).split(".")]
+    while len(release) > 1 and release[-1] == 0:
+        release.pop()
+    pre = re.match(r"[.-]?(a|b|rc|alpha|beta|c|pre|preview|dev)\d*", m.group(2).lower())
+    return tuple(release), 0 if pre else 1
+
+
+def older_version(version, since) -> bool:
+    """Whether ``version`` (a run's) is older than ``since``; an unreadable one counts as older,
+    and nothing is older than an empty ``since``."""
+    if not since:
+        return False
+    key = version_key(version)
+    return key is None or key < version_key(since)
 
 
 @lru_cache(maxsize=None)

@@ -3,7 +3,9 @@
 ``docs/studies.toml`` names each study (a scenario, overrides, seeds, end time, the times to
 summarise) and each claim. ``study run NAME`` runs the study's seeds into ``RUNS/NAME/`` (the
 ``ensemble`` command with the study's arguments: resumable, locked, the same files; several
-studies' seeds share one pool of ``--jobs`` workers, so no worker waits for the end of a study);
+studies' seeds share one pool of ``--jobs`` workers, so no worker waits for the end of a study; a
+seed file made by a version older than the studies file's ``trajectories_since`` is not reused:
+``--force`` replaces it);
 ``study summarise NAME`` reads the run files and writes the study's small summary
 ``docs/results/NAME.json`` (per-seed values of every measure at every time, the short-circuit
 episodes at event time, and the version, commit, CPU, threads and wall time of the runs) and its
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..provenance import older_version
 from .main import CliError
 
 DEFAULT_STUDIES = "docs/studies.toml"
@@ -63,7 +66,17 @@ def _pick(studies, names):
         raise CliError(str(exc)) from None
 
 
-def _run_together(picked, args) -> int:
+def _percolation_version(path) -> str:
+    """The version that wrote a percolation result file ("unknown" when it cannot be read)."""
+    import json
+
+    try:
+        return str(json.loads(Path(path).read_text(encoding="utf-8")).get("version") or "unknown")
+    except (OSError, ValueError, AttributeError):
+        return "unknown"
+
+
+def _run_together(picked, args, older_than="") -> int:
     """``study run A B ...``: the seeds of the ensemble studies ``picked`` in one pool of ``--jobs``
     workers (local processes or the ranks of ``mpiexec``), each study's folder locked throughout;
     then each folder's ensemble summary, as ``selfas-graph ensemble`` writes it."""
@@ -96,7 +109,9 @@ def _run_together(picked, args) -> int:
 
         started = time.perf_counter()
         try:
-            ran = run_studies(picked, args.runs, pool=pool, force=args.force, report=report, announce=announce)
+            ran = run_studies(
+                picked, args.runs, pool=pool, force=args.force, report=report, announce=announce, older_than=older_than
+            )
         except EnsembleError as exc:
             raise CliError(str(exc)) from None
     print(f"ran {report.done} seeds in {time.perf_counter() - started:.1f} s", flush=True)
@@ -140,32 +155,32 @@ def run(args):
 
         code = 0
         picked = _pick(studies, args.names)
-        several = [s for s in picked if s.kind != "percolation"]
-        if len(several) > 1:  # their seeds in one pool: no worker waits for the end of a study
-            code = _run_together(several, args)
+        since = studies.trajectories_since
+        ensembles = [s for s in picked if s.kind != "percolation"]
+        if ensembles:  # their seeds in one pool: no worker waits for the end of a study
+            code = _run_together(ensembles, args, since)
             if code in (2, 4, 130):
                 return code
-            picked = [s for s in picked if s.kind == "percolation"]
         for s in picked:
-            if s.kind == "percolation":
-                out = Path(args.runs) / s.name / PERCOLATION_JSON
-                if out.exists() and not args.force:
-                    print(f"study {s.name}: {out} exists (--force runs it again)")
-                    continue
-                out.parent.mkdir(parents=True, exist_ok=True)
-                argv = ["bench", "percolation", s.scenario, "--counts", *map(str, s.counts), "--seeds", str(s.seeds)]
-                argv += ["--first-seed", str(s.first_seed), "--t-max", repr(s.t_end), "--fields", s.fields]
-                argv += ["--workers", str(args.jobs), "-o", str(out)] + [f"--set={o}" for o in s.overrides]
-                print(f"study {s.name}: selfas-graph {' '.join(argv)}", flush=True)
-                code = main(argv) or code
+            if s.kind != "percolation":
                 continue
-            argv = ["ensemble", s.scenario, "--seeds", str(s.seeds), "--first-seed", str(s.first_seed)]
-            argv += ["--t-end", repr(s.t_end), "-o", str(Path(args.runs) / s.name), "--jobs", str(args.jobs)]
-            argv += [f"--set={o}" for o in s.overrides] + (["--force"] if args.force else [])
+            out = Path(args.runs) / s.name / PERCOLATION_JSON
+            if out.exists() and not args.force:
+                made_by = _percolation_version(out)
+                if older_version(made_by, since):
+                    print(
+                        f"study {s.name}: {out} was made by version {made_by}, before the trajectories of version "
+                        f"{since} (docs/studies.toml trajectories_since): --force runs it again"
+                    )
+                else:
+                    print(f"study {s.name}: {out} exists (--force runs it again)")
+                continue
+            out.parent.mkdir(parents=True, exist_ok=True)
+            argv = ["bench", "percolation", s.scenario, "--counts", *map(str, s.counts), "--seeds", str(s.seeds)]
+            argv += ["--first-seed", str(s.first_seed), "--t-max", repr(s.t_end), "--fields", s.fields]
+            argv += ["--workers", str(args.jobs), "-o", str(out)] + [f"--set={o}" for o in s.overrides]
             print(f"study {s.name}: selfas-graph {' '.join(argv)}", flush=True)
             code = main(argv) or code
-            if code in (2, 4, 130):
-                return code
         return code
     if args.action == "summarise":
         from ..studies import summarise_study, write_json_atomic

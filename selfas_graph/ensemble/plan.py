@@ -18,6 +18,7 @@ from ..io.checkpoint import (
 from ..io.h5md import RunFile, RunFileError
 from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
 from ..parallel import task_pool
+from ..provenance import older_version
 from .folder import EnsembleError, FolderLock, make_folder, seed_path
 from .parameters import _get, parameter_differences
 from .pool import run_tasks
@@ -58,8 +59,11 @@ class Ensemble:
     first_seed : int, optional
         Default: the scenario's ``scenario.seed``.
     force : bool
-        Replace the seed files that cannot be reused (other parameters, failed, or
-        incomplete without a checkpoint); files that can be reused are still kept.
+        Replace the seed files that cannot be reused (other parameters, failed, incomplete
+        without a checkpoint, or older than ``older_than``); files that can be reused are still kept.
+    older_than : str
+        A version (docs/studies.toml ``trajectories_since``): a seed file made by an older version
+        followed other trajectories and cannot be reused ("": any version can).
 
     Raises
     ------
@@ -67,11 +71,12 @@ class Ensemble:
         Bad scenario, overrides, seeds or folder.
     """
 
-    def __init__(self, scenario, seeds, folder, overrides=(), t_end=None, first_seed=None, force=False):
+    def __init__(self, scenario, seeds, folder, overrides=(), t_end=None, first_seed=None, force=False, older_than=""):
         self.scenario_path = Path(scenario)
         self.overrides = list(overrides)
         self.folder = Path(folder)
         self.force = bool(force)
+        self.older_than = str(older_than or "")
         bad = [o for o in self.overrides if o.split("=", 1)[0].strip() == "scenario.seed"]
         if bad:
             raise EnsembleError(
@@ -151,12 +156,18 @@ class Ensemble:
         try:
             with RunFile(path) as run:
                 stored, status = run.parameters, str(run.meta.get("status", ""))
+                made_by = str(run.meta.get("version") or "unknown")
                 t_last = float(run.time[-1]) if run.n_frames else -math.inf
                 scenario_text = run.scenario_text
         except RunFileError as exc:
             if self.force:
                 return SeedPlan(seed, path, "run", f"replacing: {exc}")
             raise EnsembleError(str(exc)) from None
+        if older_version(made_by, self.older_than):
+            why = f"made by version {made_by}, before the trajectories of version {self.older_than}"
+            if self.force:
+                return SeedPlan(seed, path, "run", f"replacing: {why}")
+            raise EnsembleError(f"{path} was {why} (docs/studies.toml trajectories_since)")
         diff = parameter_differences(stored, wanted.to_dict())
         if diff:
             if self.force:

@@ -424,12 +424,8 @@ def check_consistency(p: P.Parameters):
                 f"rods.diameter = {rods.diameter:g}"
             )
     ip = p.integrator
-    if ip.current_every and ip.slow_every == 1:
-        out.append(
-            f"integrator.current_every: {ip.current_every} needs multiple time stepping, integrator.slow_every > 1 "
-            f"(here 1); set current_every to a multiple of slow_every (e.g. 32 with slow_every = 16), or 0"
-        )
-    elif ip.current_every and ip.current_every % ip.slow_every:
+    # with slow_every = 1 every force is evaluated at every step and current_every has no effect
+    if ip.current_every and ip.current_every % ip.slow_every:
         out.append(
             f"integrator.current_every: {ip.current_every} must be 0 (with the other slow forces) or a multiple of "
             f"integrator.slow_every = {ip.slow_every} (e.g. {2 * ip.slow_every})"

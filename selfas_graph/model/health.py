@@ -173,6 +173,11 @@ class HealthChecks:
         return (
             f"; or the slow forces, evaluated every integrator.slow_every = {k} steps, change too much "
             f"in between: try a smaller slow_every (8 or 16 in the shipped scenes)"
+            + (
+                f" with integrator.current_every = {m} a multiple of it, or 0"
+                if (m := self.params.integrator.current_every)
+                else ""
+            )
         )
 
     def check_energy(self, obs):

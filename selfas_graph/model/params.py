@@ -192,8 +192,8 @@ class IntegratorParams:
         0,
         "with slow_every > 1: evaluate the rod-current terms 9 and 10 every this many steps (a multiple of "
         "slow_every; still on the first step after the currents change) and extrapolate them in between like "
-        "the other slow forces; 0 evaluates them with the other slow forces, every slow_every steps; an "
-        "accuracy knob (docs/model.md 'Multiple time stepping (`integrator.slow_every`)')",
+        "the other slow forces; 0 evaluates them with the other slow forces, every slow_every steps; no "
+        "effect with slow_every = 1 (every force every step); an accuracy knob (docs/model.md 'Multiple time stepping (`integrator.slow_every`)')",
         ge=0,
         le=100000,
     )

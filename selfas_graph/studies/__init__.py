@@ -28,8 +28,9 @@ __all__ = [
 ]
 
 
-def study_ensemble(study, runs, force=False):
-    """The :class:`selfas_graph.ensemble.Ensemble` of ``study``: its seeds in ``runs/NAME``."""
+def study_ensemble(study, runs, force=False, older_than=""):
+    """The :class:`selfas_graph.ensemble.Ensemble` of ``study``: its seeds in ``runs/NAME``; a seed
+    file made by a version older than ``older_than`` (``Studies.trajectories_since``) is not reused."""
     from pathlib import Path
 
     from ..ensemble import Ensemble
@@ -42,16 +43,18 @@ def study_ensemble(study, runs, force=False):
         t_end=study.t_end,
         first_seed=study.first_seed,
         force=force,
+        older_than=older_than,
     )
 
 
-def run_study(study, runs, jobs=1, report=None, pool=None, force=False):
-    """Run (or continue) the seeds of ``study`` into ``runs/NAME`` with :class:`selfas_graph.ensemble.Ensemble`."""
-    ens = study_ensemble(study, runs, force)
+def run_study(study, runs, jobs=1, report=None, pool=None, force=False, older_than=""):
+    """Run (or continue) the seeds of ``study`` into ``runs/NAME`` with :class:`selfas_graph.ensemble.Ensemble`
+    (``older_than``: as :func:`study_ensemble`)."""
+    ens = study_ensemble(study, runs, force, older_than)
     return ens, ens.run(jobs=jobs, report=report, pool=pool)
 
 
-def run_studies(studies, runs, jobs=1, report=None, pool=None, force=False, announce=None):
+def run_studies(studies, runs, jobs=1, report=None, pool=None, force=False, announce=None, older_than=""):
     """Run (or continue) the seeds of several ensemble studies in one pool of ``jobs`` workers, so
     that no worker waits for the last seeds of one study before the next study starts.
 
@@ -60,14 +63,14 @@ def run_studies(studies, runs, jobs=1, report=None, pool=None, force=False, anno
     before it starts (:class:`~selfas_graph.ensemble.EnsembleError` listing them). The seeds are
     handed out in the order of ``studies``; ``announce([(ensemble, plan), ...])``, if given, is called
     once they are planned, before anything runs. Returns ``[(ensemble, results)]``, the results in
-    each ensemble's task order (None: never started).
+    each ensemble's task order (None: never started). ``older_than``: as :func:`study_ensemble`.
     """
     import contextlib
 
     from ..ensemble import EnsembleError, FolderLock, make_folder, run_seed, run_tasks
     from ..parallel import task_pool
 
-    ensembles = [study_ensemble(s, runs, force) for s in studies]
+    ensembles = [study_ensemble(s, runs, force, older_than) for s in studies]
     with contextlib.ExitStack() as stack:
         for e in ensembles:
             make_folder(e.folder)

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.ensemble_stats import grouped_summary, mean_sem, mean_sem_fits
-from .spec import version_key
+from ..provenance import older_version
 
 __all__ = [
     "GROUPED",
@@ -257,19 +257,19 @@ def older_runs(summary, since) -> list:
     if not since or summary is None:
         return []
     seeds = [summary] if summary.get("kind") == "percolation" else summary["seeds"]
-    versions = {str(x.get("version", "")) for x in seeds}
-    return sorted(v or "unknown" for v in versions if (version_key(v) or ()) < version_key(since))
+    versions = {str(x.get("version") or "unknown") for x in seeds}
+    return sorted(v for v in versions if older_version(v, since))
 
 
 def _older_note(summaries, names, since) -> str:
-    """ "; from runs of older versions (NAME: 0.3.0): to be run again" for the studies among ``names``
-    made of runs older than ``since``, or ""."""
+    """ "; made before the trajectory change of 0.4.0 (NAME: 0.3.0): to be run again" for the studies
+    among ``names`` made of runs older than ``since``, or ""."""
     old = {n: older_runs(summaries.get(n), since) for n in dict.fromkeys(names) if n}
     old = {n: v for n, v in old.items() if v}
     if not old:
         return ""
     which = ", ".join(f"{n}: {', '.join(v)}" for n, v in old.items())
-    return f"; from runs older than version {since} ({which}): to be run again"
+    return f"; made before the trajectory change of {since} ({which}): to be run again"
 
 
 def status_text(studies, summaries) -> str:
@@ -277,13 +277,17 @@ def status_text(studies, summaries) -> str:
     since = studies.trajectories_since
     old = {n: older_runs(s, since) for n, s in summaries.items()}
     old = {n: v for n, v in old.items() if v}
-    if not since or not old:
-        return f"Every summarised study is made of runs of version {since or 'any'} or later."
+    if not old:
+        return "Every summarised study is made of runs of the trajectories the code follows now" + (
+            f" (version {since} or later)." if since else "."
+        )
     return (
         f"**Runs to be made again.** Trajectories changed in version {since} (CHANGELOG); these studies are "
-        f"still made of runs of older versions, and every number and verdict that uses them is marked: "
+        f"still made of runs of older versions, and their runs lines and every claim, convergence and "
+        f"sensitivity row that uses them say so: "
         + ", ".join(f"{n} ({', '.join(v)})" for n, v in old.items())
-        + ". `selfas-graph study run NAME --jobs 2`, then `study summarise NAME`, makes each again."
+        + ". `selfas-graph study run NAME --jobs 2 --force` (it replaces the older run files), then "
+        "`study summarise NAME` and `study page`, makes each again."
     )
 
 
@@ -321,8 +325,8 @@ def _older_text(summary, since) -> str:
         return ""
     name = summary["study"]["name"]
     return (
-        f" **Runs of version {', '.join(old)}, older than the trajectories of version {since} (CHANGELOG): "
-        f"to be run again (`selfas-graph study run {name}`).**"
+        f" **Runs of version {', '.join(old)}, made before the trajectory change of version {since} (CHANGELOG): "
+        f"to be run again (`selfas-graph study run {name} --force`).**"
     )
 
 

@@ -28,11 +28,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import re
 import tomllib
 from pathlib import Path
 
-__all__ = ["Claim", "Study", "StudiesError", "Studies", "Sweep", "load_studies", "version_key"]
+from ..provenance import version_key
+
+__all__ = ["Claim", "Study", "StudiesError", "Studies", "Sweep", "load_studies"]
 
 
 class StudiesError(ValueError):
@@ -278,10 +279,3 @@ def load_studies(path) -> Studies:
             )
         )
     return Studies(path=path, studies=studies, claims=tuple(claims), sweeps=sweeps, trajectories_since=since)
-
-
-def version_key(version):
-    """The release numbers of a version string as a tuple of ints ("0.4.0+source" -> (0, 4, 0)), to
-    order versions; None when it does not start with one ("", "unknown")."""
-    m = re.match(r"\d+(\.\d+)*", str(version))
-    return tuple(int(x) for x in m.group(0).split(".")) if m else None

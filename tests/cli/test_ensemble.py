@@ -137,6 +137,26 @@ def test_other_parameters_are_refused(quick, capsys):
     assert {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")} == before
 
 
+def test_seed_files_of_a_version_before_the_trajectories_are_not_reused(quick):
+    """``older_than`` (docs/studies.toml ``trajectories_since``): finished seed files made by an older
+    version are refused, naming the file and both versions, and planned to be replaced with force;
+    at their own version they are done. Planning writes nothing."""
+    from selfas_graph import __version__
+
+    folder, _ = quick
+    before = {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")}
+    same = Ensemble(QUICK, 4, folder, t_end=T_END, older_than=__version__.split("+")[0])
+    assert [p.action for p in same.plan()] == ["done"] * 4
+    with pytest.raises(EnsembleError) as info:
+        Ensemble(QUICK, 4, folder, t_end=T_END, older_than="99.0").plan()
+    msg = str(info.value)
+    assert "seed_0001.h5 was made by version " + __version__ in msg and "trajectories of version 99.0" in msg
+    assert "trajectories_since" in msg and "--force" in msg
+    plans = Ensemble(QUICK, 4, folder, t_end=T_END, older_than="99.0", force=True).plan()
+    assert [p.action for p in plans] == ["run"] * 4 and all("replacing: made by version" in p.note for p in plans)
+    assert {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")} == before
+
+
 @pytest.mark.parametrize(
     "argv, message",
     [

@@ -17,7 +17,7 @@ def test_the_results_page_is_what_the_summaries_give():
     want = page_blocks(studies, DOCS / "results")
     have = page_blocks_in((DOCS / "results.md").read_text(encoding="utf-8"))
     assert set(have) <= set(want), f"blocks the generator does not make: {sorted(set(have) - set(want))}"
-    needed = {"claims", "convergence"} | {f"sensitivity {name}" for name in studies.sweeps}
+    needed = {"claims", "convergence", "status"} | {f"sensitivity {name}" for name in studies.sweeps}
     needed |= {
         f"{kind} {name}"
         for name in studies.studies
@@ -29,7 +29,7 @@ def test_the_results_page_is_what_the_summaries_give():
         assert have[key] == want[key].rstrip("\n"), f"block '{key}' differs: run `selfas-graph study page`"
 
 
-def test_every_committed_summary_is_of_this_version_and_complete():
+def test_every_committed_summary_names_its_commits_and_is_complete():
     studies = load_studies(DOCS / "studies.toml")
     for path in sorted((DOCS / "results").glob("*.json")):
         summary = json.loads(path.read_text(encoding="utf-8"))

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from selfas_graph.provenance import older_version, version_key
 from selfas_graph.studies import StudiesError, load_studies
 from selfas_graph.studies.page import grouped_stat, plain_stat, replace_blocks
-from selfas_graph.studies.spec import version_key
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -49,8 +49,12 @@ def test_a_bad_studies_file_is_refused_naming_the_key(tmp_path, text, words):
 
 
 def test_versions_are_ordered_by_their_release_numbers():
-    assert version_key("0.4.0+source") == (0, 4, 0) and version_key("0.10.1") > version_key("0.9.9")
+    assert version_key("0.4.0+source") == version_key("0.4") == version_key("0.4.0")
+    assert version_key("0.10.1") > version_key("0.9.9") > version_key("0.9.9rc1")
+    assert version_key("0.4.0.dev1") < version_key("0.4.0") and version_key("0.4.0a2") < version_key("0.4.0")
     assert version_key("") is None and version_key("unknown") is None
+    assert older_version("0.3.0", "0.4.0") and older_version(None, "0.4.0") and older_version("unknown", "0.4.0")
+    assert not older_version("0.4.0+source", "0.4.0") and not older_version("0.3.0", "")
 
 
 def test_studies_of_runs_older_than_the_trajectories_are_marked_where_they_are_used():
@@ -66,12 +70,13 @@ def test_studies_of_runs_older_than_the_trajectories_are_marked_where_they_are_u
     old = json.loads((docs / "fig2.json").read_text())["seeds"][0]["version"]
     same = page_blocks(dataclasses.replace(shipped, trajectories_since=old), docs)
     assert "to be run again" not in "".join(same.values()) and old in same["status"]
-    newer = ".".join(map(str, version_key(old)[:-1] + (version_key(old)[-1] + 1,)))
+    major, minor, *_ = (int(x) for x in old.split("+")[0].split("."))
+    newer = f"{major}.{minor + 1}.0"
     blocks = page_blocks(dataclasses.replace(shipped, trajectories_since=newer), docs)
     assert older_runs(json.loads((docs / "fig2.json").read_text()), newer) == [old]
     assert "fig2 (" + old in blocks["status"] and "Runs to be made again" in blocks["status"]
-    assert f"Runs of version {old}, older than the trajectories of version {newer}" in blocks["runs fig2"]
-    assert "`selfas-graph study run fig2`" in blocks["runs fig2"]
+    assert f"Runs of version {old}, made before the trajectory change of version {newer}" in blocks["runs fig2"]
+    assert "`selfas-graph study run fig2 --force`" in blocks["runs fig2"]
     claims = [r for r in blocks["claims"].splitlines()[2:]]
     assert claims and all(f"fig2: {old}" in r and "to be run again" in r for r in claims)
     assert "to be run again" in blocks["convergence"] and "to be run again" in blocks["sensitivity fig2_rods"]

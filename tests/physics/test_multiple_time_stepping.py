@@ -376,7 +376,22 @@ def test_current_every_of_slow_every_is_the_default_bit_for_bit(rng):
     np.testing.assert_array_equal(runs[0], runs[1])
 
 
-@pytest.mark.parametrize(("slow_every", "current_every"), [(1, 8), (4, 6)])
+def test_current_every_has_no_effect_without_multiple_time_stepping(rng):
+    """slow_every = 1 turns multiple time stepping off whatever current_every says (a scene that sets
+    both, as Fig. 2 does, runs every force every step with slow_every = 1 alone): the same run bit for
+    bit as with current_every = 0."""
+    runs = []
+    for m in (0, 8):
+        s, sim = _current_sim(np.random.default_rng(4), 1, m)
+        assert sim.force_field.mts is None
+        sim.step(3)
+        sim.force_field.set_currents(np.linspace(0.5, 1.0, s.n_rods))
+        sim.step(12)
+        runs.append(sim.state.position.copy())
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+@pytest.mark.parametrize(("slow_every", "current_every"), [(4, 6), (16, 40)])
 def test_current_every_off_the_slow_pattern_is_refused_naming_both_keys(slow_every, current_every):
     from selfas_graph.io.scenario import ScenarioError
 
@@ -397,6 +412,7 @@ def test_new_currents_on_a_full_step_start_without_a_rate(rng):
     ff = sim.force_field
     ff.set_currents(np.linspace(0.5, 1.0, s.n_rods))
     sim.step(10)  # steps 5-14: full at 5 (new currents) and 10, a rate from the two
+    assert np.abs(ff.mts._rate["current_field"]).max() > 0.0
     ff.set_currents(3.0 * np.linspace(0.5, 1.0, s.n_rods))
     sim.step(1)  # step 15: full, and the currents are new
     assert np.abs(ff.mts._rate["current_field"]).max() == 0.0

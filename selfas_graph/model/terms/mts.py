@@ -80,7 +80,7 @@ class MultipleTimeStepping:
             self._rate = {k: self._rate_block[j] for j, k in enumerate(keys)}
             self._base_step = {k: None for k in self._base}
             #: whether a held array's rate was taken over a gap of evaluations (not zeroed by a start,
-            #: a long gap or, with current_every, new currents): with current_every a term whose rate
+            #: a long gap or new currents): with current_every a term whose rate
             #: is not is computed at every full evaluation (:meth:`skips`)
             self._rated = {k: False for k in self._base}
             self._steps = np.full(len(keys), np.nan)
@@ -107,7 +107,7 @@ class MultipleTimeStepping:
         ``refreshed`` lists the slow terms computed in this evaluation; ``full`` and ``step`` are
         those of :meth:`ForceField.evaluate <selfas_graph.model.terms.forcefield.ForceField.evaluate>`.
         """
-        # the held arrays of the terms computed because the currents changed: with current_every, no rate
+        # the held arrays of the terms computed because the currents changed: no rate (a jump)
         jumped = [k for name in self.stale if name in refreshed for k in self.slow_keys[name]]
         self.stale.clear()
         fast = None
