@@ -1,0 +1,173 @@
+"""Time a scene end to end with the working tree against a git commit, in turns, in one session.
+
+Usage::
+
+    selfas-graph bench against_commit SCENARIO --commit REV [--threads N] [--rounds R]
+        [--t-end T] [--set KEY=VALUE ...] [--scene own|tree] [--json FILE] [--keep DIR]
+
+Exports ``REV``'s package (and, with ``--scene own``, the default, its copy of SCENARIO: each
+version runs the scene file it shipped, as a user of that version would) with ``git archive``
+into a temporary folder, and runs ``selfas-graph simulate`` with that code and with the working
+tree, in turns: round 1 the commit first, round 2 the working tree first, and so on, each run
+checked to import the code meant (as ``same_as_commit``). Before the timed runs each code runs
+the scene for ``--warm-up`` t0 untimed, so that its compiled kernels are in its cache. Each run
+is a fresh process with ``NUMBA_NUM_THREADS`` = ``OMP_NUM_THREADS`` = ``--threads``.
+
+It prints the CPU model and the instruction set numba compiles for, each run's wall and CPU
+time (the child's user + system time) and its end state (rods in current-carrying filaments
+and the current through the gap: runs that take other paths do other work), and the ratio of
+the commit's time to the working tree's (above 1: the working tree is faster), the median over
+the rounds. Use it on an otherwise idle machine; the ratio of two builds,
+``NUMBA_CPU_NAME=haswell NUMBA_CPU_FEATURES= selfas-graph bench against_commit ...``, is the
+AVX2 build's. Example, the goal of docs/performance.md 'Where the speed goals stand'::
+
+    selfas-graph bench against_commit scenarios/fig2.toml --commit c2989a3 --threads 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from ..provenance import machine
+from .same_as_commit import ROOT, RUNNER
+
+
+def export(commit: str, into: Path, paths: list[str]) -> None:
+    """``git archive COMMIT PATHS`` unpacked into ``into`` (SystemExit naming the commit and paths
+    when git refuses, e.g. an unknown commit or a path the commit lacks)."""
+    got = subprocess.run(["git", "archive", commit, *paths], cwd=ROOT, capture_output=True)
+    if got.returncode != 0:
+        raise SystemExit(f"git archive {commit} {' '.join(paths)}: {got.stderr.decode(errors='replace').strip()}")
+    subprocess.run(["tar", "-x", "-C", str(into)], input=got.stdout, check=True)
+
+
+def timed_simulate(code: Path, scenario: Path, sets: list[str], out: Path, threads: int, cwd: Path) -> dict:
+    """One ``simulate`` run of ``scenario`` with the package in ``code``: wall and CPU seconds."""
+    env = dict(os.environ, PYTHONPATH=str(code), NUMBA_NUM_THREADS=str(threads), OMP_NUM_THREADS=str(threads))
+    cmd = [sys.executable, "-c", RUNNER, str(code), "simulate", str(scenario), "-o", str(out)]
+    cmd += ["--progress", "none", "--force"] + [a for s in sets for a in ("--set", s)]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    started = time.perf_counter()
+    r = subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True)
+    wall = time.perf_counter() - started
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if r.returncode != 0:
+        raise SystemExit(f"{code}: simulate {scenario} failed (exit {r.returncode}):\n{r.stdout}{r.stderr}")
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return {"wall_seconds": wall, "cpu_seconds": cpu, **end_state(out)}
+
+
+def end_state(path: Path) -> dict:
+    """The last frame's time, rods in current-carrying filaments and current through the gap of a run
+    file (None for what the file lacks)."""
+    import h5py
+
+    out = {"t": None, "filament_rods": None, "total_current": None}
+    with h5py.File(path, "r") as h:
+        for key, name in (
+            ("t", "observables/total_current/time"),
+            ("filament_rods", "observables/rods/filament/value"),
+        ):
+            if name in h and len(h[name]):
+                out[key] = float(h[name][-1])
+        if "observables/total_current/value" in h and len(h["observables/total_current/value"]):
+            out["total_current"] = float(h["observables/total_current/value"][-1])
+    return out
+
+
+def _run_text(run: dict) -> str:
+    state = (
+        f"at t = {run['t']:g}: {run['filament_rods']:.0f} rods carry {run['total_current']:.3g} J0"
+        if run["t"] is not None and run["filament_rods"] is not None and run["total_current"] is not None
+        else "no current observables"
+    )
+    return f"wall {run['wall_seconds']:.1f} s, CPU {run['cpu_seconds']:.1f} s; {state}"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("scenario", help="the scene (a path in the repository for --scene own)")
+    ap.add_argument("--commit", required=True, help="the commit to time against (e.g. c2989a3, version 0.3.0)")
+    ap.add_argument("--threads", type=int, default=1, help="numba threads of every run (default 1)")
+    ap.add_argument("--rounds", type=int, default=1, help="timed runs of each code, in turns (default 1)")
+    ap.add_argument("--t-end", type=float, help="end time of every run (default: the scene's)")
+    ap.add_argument("--warm-up", type=float, default=0.05, help="untimed first run of each code to this t (0: none)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override for both codes")
+    ap.add_argument(
+        "--scene",
+        choices=("own", "tree"),
+        default="own",
+        help="each code's own copy of the scene (default) or the tree's",
+    )
+    ap.add_argument("--json", type=Path, help="write the runs and ratios to this file")
+    ap.add_argument("--keep", type=Path, help="keep the run files in this folder")
+    args = ap.parse_args(argv)
+    if args.threads < 1 or args.rounds < 1 or (args.t_end is not None and not args.t_end > 0) or args.warm_up < 0:
+        ap.error("--threads and --rounds must be >= 1, --t-end > 0 and --warm-up >= 0")
+    scene_tree = Path(args.scenario).resolve()
+    if not scene_tree.is_file():
+        ap.error(f"no scenario file {args.scenario}")
+    with tempfile.TemporaryDirectory(prefix="against_commit_") as tmp:
+        tmp = Path(tmp)
+        base = tmp / "code"
+        base.mkdir()
+        paths = ["selfas_graph"]
+        scene_commit = scene_tree
+        if args.scene == "own":
+            try:
+                rel = scene_tree.relative_to(ROOT)
+            except ValueError:
+                ap.error(f"--scene own: {args.scenario} is not in the repository {ROOT}; pass --scene tree")
+            paths.append(rel.as_posix())
+            scene_commit = base / rel
+        export(args.commit, base, paths)
+        out_dir = (args.keep or tmp).resolve()
+        out_dir.mkdir(parents=True, exist_ok=True)
+        codes = {args.commit: (base, scene_commit), "tree": (ROOT, scene_tree)}
+        sets = args.set + ([f"run.t_end={args.t_end!r}"] if args.t_end is not None else [])
+        m = machine()
+        print(
+            f"{m['cpu_model']}, {m['cores']} cores; numba target {m['cpu_name']} ({m['widest']}); "
+            f"{args.threads} thread(s) a run; {args.rounds} round(s)"
+        )
+        if args.warm_up > 0:
+            for name, (code, scene) in codes.items():
+                timed_simulate(
+                    code, scene, args.set + [f"run.t_end={args.warm_up!r}"], out_dir / "warm.h5", args.threads, tmp
+                )
+        runs = {name: [] for name in codes}
+        for r in range(args.rounds):
+            order = list(codes) if r % 2 == 0 else list(codes)[::-1]
+            for name in order:
+                code, scene = codes[name]
+                run = timed_simulate(code, scene, sets, out_dir / f"round{r + 1}_{name}.h5", args.threads, tmp)
+                runs[name].append(run)
+                print(f"round {r + 1}, {name if name != 'tree' else 'working tree'}: {_run_text(run)}", flush=True)
+    ratios = {
+        key: [a[key] / b[key] for a, b in zip(runs[args.commit], runs["tree"])]
+        for key in ("wall_seconds", "cpu_seconds")
+    }
+    for key, label in (("wall_seconds", "wall"), ("cpu_seconds", "CPU")):
+        rs = ratios[key]
+        spread = f" [{min(rs):.3f}-{max(rs):.3f}]" if len(rs) > 1 else ""
+        print(f"{label} time, {args.commit} over the working tree: {statistics.median(rs):.3f}{spread}")
+    if args.json:
+        args.json.write_text(
+            json.dumps(
+                {"machine": m, "commit": args.commit, "threads": args.threads, "runs": runs, "ratios": ratios}, indent=1
+            )
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
