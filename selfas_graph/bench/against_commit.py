@@ -3,13 +3,15 @@
 Usage::
 
     selfas-graph bench against_commit SCENARIO --commit REV [--threads N] [--rounds R]
-        [--t-end T] [--set KEY=VALUE ...] [--scene own|tree] [--json FILE] [--keep DIR]
+        [--seeds S [S ...]] [--t-end T] [--set KEY=VALUE ...] [--scene own|tree] [--json FILE] [--keep DIR]
 
 Exports ``REV``'s package (and, with ``--scene own``, the default, its copy of SCENARIO: each
 version runs the scene file it shipped, as a user of that version would) with ``git archive``
 into a temporary folder, and runs ``selfas-graph simulate`` with that code and with the working
-tree, in turns: round 1 the commit first, round 2 the working tree first, and so on, each run
-checked to import the code meant (as ``same_as_commit``). Before the timed runs each code runs
+tree, in turns: in round 1 the commit first, in round 2 the working tree first, and so on, each run
+checked to import the code meant (as ``same_as_commit``). With ``--seeds`` a round runs each seed
+(``scenario.seed``) with both codes, and its ratio is that of the summed times: a change that moves
+trajectories (another path, other work) is judged on several paths, not one. Before the timed runs each code runs
 the scene for ``--warm-up`` t0 untimed, so that its compiled kernels are in its cache. Each run
 is a fresh process with ``NUMBA_NUM_THREADS`` = ``OMP_NUM_THREADS`` = ``--threads``.
 
@@ -99,6 +101,9 @@ def main(argv=None) -> int:
     ap.add_argument("--commit", required=True, help="the commit to time against (e.g. c2989a3, version 0.3.0)")
     ap.add_argument("--threads", type=int, default=1, help="numba threads of every run (default 1)")
     ap.add_argument("--rounds", type=int, default=1, help="timed runs of each code, in turns (default 1)")
+    ap.add_argument(
+        "--seeds", type=int, nargs="+", help="run each of these seeds in every round (default: the scene's)"
+    )
     ap.add_argument("--t-end", type=float, help="end time of every run (default: the scene's)")
     ap.add_argument("--warm-up", type=float, default=0.05, help="untimed first run of each code to this t (0: none)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override for both codes")
@@ -113,6 +118,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.threads < 1 or args.rounds < 1 or (args.t_end is not None and not args.t_end > 0) or args.warm_up < 0:
         ap.error("--threads and --rounds must be >= 1, --t-end > 0 and --warm-up >= 0")
+    if args.seeds and (min(args.seeds) < 0 or len(set(args.seeds)) != len(args.seeds)):
+        ap.error(f"--seeds: distinct integers >= 0, got {args.seeds}")
     scene_tree = Path(args.scenario).resolve()
     if not scene_tree.is_file():
         ap.error(f"no scenario file {args.scenario}")
@@ -145,15 +152,31 @@ def main(argv=None) -> int:
                     code, scene, args.set + [f"run.t_end={args.warm_up!r}"], out_dir / "warm.h5", args.threads, tmp
                 )
         runs = {name: [] for name in codes}
+        seeds = args.seeds or [None]
         for r in range(args.rounds):
             order = list(codes) if r % 2 == 0 else list(codes)[::-1]
-            for name in order:
-                code, scene = codes[name]
-                run = timed_simulate(code, scene, sets, out_dir / f"round{r + 1}_{name}.h5", args.threads, tmp)
-                runs[name].append(run)
-                print(f"round {r + 1}, {name if name != 'tree' else 'working tree'}: {_run_text(run)}", flush=True)
+            for seed in seeds:
+                own = [] if seed is None else [f"scenario.seed={seed}"]
+                tag = "" if seed is None else f"_seed{seed}"
+                for name in order:
+                    code, scene = codes[name]
+                    out = out_dir / f"round{r + 1}{tag}_{name}.h5"
+                    run = {
+                        "round": r + 1,
+                        "seed": seed,
+                        **timed_simulate(code, scene, sets + own, out, args.threads, tmp),
+                    }
+                    runs[name].append(run)
+                    who = name if name != "tree" else "working tree"
+                    print(
+                        f"round {r + 1}{'' if seed is None else f', seed {seed}'}, {who}: {_run_text(run)}", flush=True
+                    )
+
+    def per_round(name, key):
+        return [sum(x[key] for x in runs[name] if x["round"] == r + 1) for r in range(args.rounds)]
+
     ratios = {
-        key: [a[key] / b[key] for a, b in zip(runs[args.commit], runs["tree"])]
+        key: [a / b for a, b in zip(per_round(args.commit, key), per_round("tree", key))]
         for key in ("wall_seconds", "cpu_seconds")
     }
     for key, label in (("wall_seconds", "wall"), ("cpu_seconds", "CPU")):

@@ -31,34 +31,36 @@ def test_an_unknown_commit_is_named(capsys):
 
 
 @pytest.mark.slow
-def test_each_code_runs_in_turns_and_the_ratios_are_printed(tmp_path):
-    """Two rounds of a 20-rod quick scene against HEAD: each code's runs in the kept folder, each
-    round's line, the ratios, and the same in the JSON file. Slow: the exported commit's kernels are
+def test_each_code_runs_each_seed_in_turns_and_the_ratios_are_printed(tmp_path):
+    """Two rounds of two seeds of a 20-rod quick scene against HEAD: the codes in turns (the commit first
+    in round 1, the working tree first in round 2), each run's file kept, each run's line, the ratios of
+    the rounds' summed times, and the same in the JSON file. Slow: the exported commit's kernels are
     compiled afresh."""
     if subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, cwd=ROOT).returncode != 0:
         pytest.skip("not a git checkout")
     r = subprocess.run(
         [sys.executable, "-m", "selfas_graph.bench.against_commit", "scenarios/quick.toml", "--commit", "HEAD"]
-        + ["--set", "rods.count=20", "--t-end", "0.02", "--warm-up", "0", "--rounds", "2"]
+        + ["--set", "rods.count=20", "--t-end", "0.02", "--warm-up", "0", "--rounds", "2", "--seeds", "3", "4"]
         + ["--keep", str(tmp_path), "--json", str(tmp_path / "r.json")],
         capture_output=True,
         text=True,
         cwd=ROOT,
     )
     assert r.returncode == 0, r.stdout + r.stderr
-    lines = r.stdout.splitlines()
-    assert [line.split(":")[0] for line in lines[1:5]] == [
-        "round 1, HEAD",
-        "round 1, working tree",
-        "round 2, working tree",
-        "round 2, HEAD",
+    lines = [line.split(":")[0] for line in r.stdout.splitlines()[1:9]]
+    assert lines == [
+        "round 1, seed 3, HEAD",
+        "round 1, seed 3, working tree",
+        "round 1, seed 4, HEAD",
+        "round 1, seed 4, working tree",
+        "round 2, seed 3, working tree",
+        "round 2, seed 3, HEAD",
+        "round 2, seed 4, working tree",
+        "round 2, seed 4, HEAD",
     ]
     assert "wall time, HEAD over the working tree: " in r.stdout and "at t = 0.02: 0 rods carry 0 J0" in r.stdout
     got = json.loads((tmp_path / "r.json").read_text())
-    assert len(got["runs"]["HEAD"]) == len(got["runs"]["tree"]) == 2 and len(got["ratios"]["wall_seconds"]) == 2
-    assert sorted(p.name for p in tmp_path.glob("round*.h5") if "checkpoint" not in p.name) == [
-        "round1_HEAD.h5",
-        "round1_tree.h5",
-        "round2_HEAD.h5",
-        "round2_tree.h5",
-    ]
+    assert [(x["round"], x["seed"]) for x in got["runs"]["tree"]] == [(1, 3), (1, 4), (2, 3), (2, 4)]
+    assert len(got["ratios"]["wall_seconds"]) == len(got["ratios"]["cpu_seconds"]) == 2
+    kept = sorted(p.name for p in tmp_path.glob("round*.h5") if "checkpoint" not in p.name)
+    assert kept == sorted(f"round{r}_seed{s}_{c}.h5" for r in (1, 2) for s in (3, 4) for c in ("HEAD", "tree"))
