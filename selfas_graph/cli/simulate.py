@@ -46,6 +46,7 @@ from ..model.params import plasma_current_text
 from ..model.simulation import Simulation
 from ..model.state import PlacementError
 from ..parallel import fit_threads_to_cores, world
+from ..provenance import version_key
 from .main import EXIT_NUMERICAL, CliError, CliIOError
 from .paths import check_target
 
@@ -176,6 +177,14 @@ def _load_resume(args):
         snap, meta = read_checkpoint(ckpt)
     except CheckpointError as exc:
         raise CliError(f"cannot resume: {exc}") from None
+    made_by = str(meta.get("version") or "unknown")
+    if version_key(made_by) != version_key(__version__):
+        print(
+            f"note: {ckpt} was written by version {made_by} and version {__version__} continues it: where the model "
+            f"changed between them (CHANGELOG), the rest of the run follows {__version__}; the run file records the "
+            f"continuation (resumed_with)",
+            file=sys.stderr,
+        )
     if out is None:
         name = str(meta.get("run_name") or ckpt.name[: -len(".checkpoint.h5")] + ".h5")
         if Path(name).name != name or name in (".", ".."):

@@ -6,7 +6,7 @@ parameters_json, version, command_line, seed, mpi_ranks, numba_threads, created,
 (git commit of the source, "+dirty" if changed), cpu_model, numba_cpu (the CPU numba compiled for
 and its widest vectors), wall_seconds_total (wall time of the run's segments that closed the file;
 wall_seconds: the run loop's, last segment),
-resumed_with (JSON: commit, CPU, threads of continuations that differ). ``/graph`` attributes:
+resumed_with (JSON: version, commit, CPU, threads of continuations that differ). ``/graph`` attributes:
 conductor_ids, conductor_potentials (0 where conductor_per_contact is 1: a potential set per
 contact, the case (ii) filament), conductor_per_contact, role_names. A floating tip (on no path
 between conductors) has 1 in ``graph/floating`` and 0 in ``graph/potential``; :meth:`RunFile.graph`

@@ -291,14 +291,20 @@ class RunWriter(_PendingRows):
         return self
 
     def _resumed_with(self):
-        """Record the commit, CPU and thread count of a continuation when they differ from the ones
-        the file holds (``resumed_with``: a JSON list of them, oldest first)."""
+        """Record the version, commit, CPU and thread count of a continuation when they differ from the
+        ones the file holds (``resumed_with``: a JSON list of them, oldest first)."""
         import numba
 
+        from .._version import __version__
         from ..provenance import cpu_model, source_commit
 
         attrs = self.f[layout.PROVENANCE].attrs
-        now = {"commit": source_commit(), "cpu_model": cpu_model(), "numba_threads": numba.get_num_threads()}
+        now = {
+            "version": __version__,
+            "commit": source_commit(),
+            "cpu_model": cpu_model(),
+            "numba_threads": numba.get_num_threads(),
+        }
         if all(str(attrs.get(k, "")) == str(v) for k, v in now.items()):
             return
         seen = json.loads(attrs.get("resumed_with", "[]"))

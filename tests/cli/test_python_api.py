@@ -196,3 +196,35 @@ def test_resume_keeps_the_brake_a_run_started_with(tmp_path):
     assert sg_main(["simulate", "--resume", str(out), "--t-end", "0.02", "--progress", "none"]) == 0
     _, meta = read_checkpoint(checkpoint_path(out))
     assert json.loads(meta["overrides"]) == ["integrator.brake=explicit"]
+
+
+def test_resume_by_another_version_is_noted_and_recorded(tmp_path, capsys):
+    """A checkpoint written by another version is continued with a note that names both versions, and
+    the run file records the continuation's version in ``resumed_with``."""
+    import json
+
+    from selfas_graph import __version__
+    from selfas_graph.io.checkpoint import checkpoint_path, read_checkpoint, write_checkpoint
+
+    scene = tmp_path / "s.toml"
+    scene.write_text(
+        "[rods]\ncount = 2\n[forces.tip_magnetic]\n[forces.tip_brake]\n[run]\nt_end = 0.01\n"
+        "[output]\ninterval = 0.005\ncheckpoint_interval = 0\n"
+    )
+    out = tmp_path / "s.h5"
+    assert sg_main(["simulate", str(scene), "-o", str(out), "--progress", "none"]) == 0
+    ckpt = checkpoint_path(out)
+    snap, meta = read_checkpoint(ckpt)
+    write_checkpoint(ckpt, snap, {**meta, "version": "0.0.1"})
+    with h5py.File(out, "r+") as f:  # the run file of that version
+        f["parameters/selfas_graph"].attrs["version"] = "0.0.1"
+    capsys.readouterr()
+    assert sg_main(["simulate", "--resume", str(out), "--t-end", "0.02", "--progress", "none"]) == 0
+    err = capsys.readouterr().err
+    assert f"was written by version 0.0.1 and version {__version__} continues it" in err
+    with sg.RunFile(out) as run:
+        assert run.meta["version"] == "0.0.1"
+        assert [r["version"] for r in json.loads(run.meta["resumed_with"])] == [__version__]
+    capsys.readouterr()
+    assert sg_main(["simulate", "--resume", str(out), "--t-end", "0.03", "--progress", "none"]) == 0
+    assert "was written by version" not in capsys.readouterr().err  # its own checkpoint now
