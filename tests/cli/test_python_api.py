@@ -175,12 +175,8 @@ def test_worked_example_runs(tmp_path, monkeypatch, capsys):
         assert run.n_frames == 7 and (run.graph(-1)["role"][:3] == 3).all()
 
 
-def test_resume_keeps_the_brake_a_run_started_with(tmp_path):
-    """A scene without integrator.brake started when the default was explicit resumes explicit."""
-    import json
-
-    from selfas_graph.io.checkpoint import checkpoint_path, read_checkpoint
-
+def _two_rod_run(tmp_path):
+    """A finished run of two rods to t = 0.01 (its checkpoint beside it): the run file's path."""
     scene = tmp_path / "s.toml"
     scene.write_text(
         "[rods]\ncount = 2\n[forces.tip_magnetic]\n[forces.tip_brake]\n[run]\nt_end = 0.01\n"
@@ -188,6 +184,16 @@ def test_resume_keeps_the_brake_a_run_started_with(tmp_path):
     )
     out = tmp_path / "s.h5"
     assert sg_main(["simulate", str(scene), "-o", str(out), "--progress", "none"]) == 0
+    return out
+
+
+def test_resume_keeps_the_brake_a_run_started_with(tmp_path):
+    """A scene without integrator.brake started when the default was explicit resumes explicit."""
+    import json
+
+    from selfas_graph.io.checkpoint import checkpoint_path, read_checkpoint
+
+    out = _two_rod_run(tmp_path)
     with h5py.File(out, "r+") as f:  # as a run file of that time says
         attrs = f["parameters/selfas_graph"].attrs
         resolved = json.loads(attrs["parameters_json"])
@@ -206,13 +212,7 @@ def test_resume_by_another_version_is_noted_and_recorded(tmp_path, capsys):
     from selfas_graph import __version__
     from selfas_graph.io.checkpoint import checkpoint_path, read_checkpoint, write_checkpoint
 
-    scene = tmp_path / "s.toml"
-    scene.write_text(
-        "[rods]\ncount = 2\n[forces.tip_magnetic]\n[forces.tip_brake]\n[run]\nt_end = 0.01\n"
-        "[output]\ninterval = 0.005\ncheckpoint_interval = 0\n"
-    )
-    out = tmp_path / "s.h5"
-    assert sg_main(["simulate", str(scene), "-o", str(out), "--progress", "none"]) == 0
+    out = _two_rod_run(tmp_path)
     ckpt = checkpoint_path(out)
     snap, meta = read_checkpoint(ckpt)
     write_checkpoint(ckpt, snap, {**meta, "version": "0.0.1"})
