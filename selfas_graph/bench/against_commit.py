@@ -12,8 +12,11 @@ tree, in turns: in round 1 the commit first, in round 2 the working tree first, 
 checked to import the code meant (as ``same_as_commit``). With ``--seeds`` a round runs each seed
 (``scenario.seed``) with both codes, and its ratio is that of the summed times: a change that moves
 trajectories (another path, other work) is judged on several paths, not one. Before the timed runs each code runs
-the scene for ``--warm-up`` t0 untimed, so that its compiled kernels are in its cache. Each run
-is a fresh process with ``NUMBA_NUM_THREADS`` = ``OMP_NUM_THREADS`` = ``--threads``.
+the scene for ``--warm-up`` t0 untimed, so that the kernels it reaches are compiled into its cache;
+kernels first used later (the circuit and the current terms, after the first short circuit, t = 7-23
+in Fig. 2) are compiled in each code's first timed run: take ``--rounds 2`` or more (the ratio is the
+median over rounds), or a warm-up past the first short circuit. Each run is a fresh process with
+``NUMBA_NUM_THREADS`` = ``OMP_NUM_THREADS`` = ``--threads``.
 
 It prints the CPU model and the instruction set numba compiles for, each run's wall and CPU
 time (the child's user + system time) and its end state (rods in current-carrying filaments
@@ -39,7 +42,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from ..provenance import machine
+from ..provenance import machine, source_commit
 from .same_as_commit import ROOT, RUNNER
 
 
@@ -120,9 +123,22 @@ def main(argv=None) -> int:
         ap.error("--threads and --rounds must be >= 1, --t-end > 0 and --warm-up >= 0")
     if args.seeds and (min(args.seeds) < 0 or len(set(args.seeds)) != len(args.seeds)):
         ap.error(f"--seeds: distinct integers >= 0, got {args.seeds}")
-    scene_tree = Path(args.scenario).resolve()
+    if args.json is not None and not args.json.resolve().parent.is_dir():
+        ap.error(f"--json {args.json}: no folder {args.json.resolve().parent}")
+    scene_tree = Path(os.path.abspath(args.scenario))
+    if not scene_tree.is_file() and (ROOT / args.scenario).is_file():
+        scene_tree = ROOT / args.scenario  # a path relative to the repository
     if not scene_tree.is_file():
         ap.error(f"no scenario file {args.scenario}")
+    got = subprocess.run(
+        ["git", "rev-parse", "--verify", "--quiet", f"{args.commit}^{{commit}}"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+    )
+    if got.returncode != 0:
+        raise SystemExit(f"git archive {args.commit}: no such commit in {ROOT}")
+    commit = got.stdout.strip()
     with tempfile.TemporaryDirectory(prefix="against_commit_") as tmp:
         tmp = Path(tmp)
         base = tmp / "code"
@@ -136,22 +152,42 @@ def main(argv=None) -> int:
                 ap.error(f"--scene own: {args.scenario} is not in the repository {ROOT}; pass --scene tree")
             paths.append(rel.as_posix())
             scene_commit = base / rel
-        export(args.commit, base, paths)
+            listed = subprocess.run(
+                ["git", "cat-file", "-e", f"{commit}:{rel.as_posix()}"], cwd=ROOT, capture_output=True
+            )
+            if listed.returncode != 0:
+                ap.error(f"--scene own: commit {args.commit} has no {rel.as_posix()}; pass --scene tree")
+        export(commit, base, paths)
         out_dir = (args.keep or tmp).resolve()
         out_dir.mkdir(parents=True, exist_ok=True)
-        codes = {args.commit: (base, scene_commit), "tree": (ROOT, scene_tree)}
+        # fixed keys and file names, whatever the commit is called (origin/main, tree, ...)
+        codes = {"commit": (base, scene_commit), "tree": (ROOT, scene_tree)}
+        names = {"commit": args.commit, "tree": "working tree"}
         sets = args.set + ([f"run.t_end={args.t_end!r}"] if args.t_end is not None else [])
         m = machine()
         print(
             f"{m['cpu_model']}, {m['cores']} cores; numba target {m['cpu_name']} ({m['widest']}); "
-            f"{args.threads} thread(s) a run; {args.rounds} round(s)"
+            f"{args.threads} thread(s) a run; {args.rounds} round(s); {args.commit} = {commit[:10]}"
         )
         if args.warm_up > 0:
-            for name, (code, scene) in codes.items():
-                timed_simulate(
-                    code, scene, args.set + [f"run.t_end={args.warm_up!r}"], out_dir / "warm.h5", args.threads, tmp
-                )
-        runs = {name: [] for name in codes}
+            for code, scene in codes.values():
+                warm = args.set + [f"run.t_end={args.warm_up!r}"]
+                timed_simulate(code, scene, warm, out_dir / "warm.h5", args.threads, tmp)
+        record = {
+            "machine": m,
+            "commit": args.commit,
+            "commit_hash": commit,
+            "tree_commit": source_commit(),
+            "scenario": str(args.scenario),
+            "scene": args.scene,
+            "threads": args.threads,
+            "seeds": args.seeds,
+            "t_end": args.t_end,
+            "set": args.set,
+            "warm_up": args.warm_up,
+            "runs": {name: [] for name in codes},
+        }
+        runs = record["runs"]
         seeds = args.seeds or [None]
         for r in range(args.rounds):
             order = list(codes) if r % 2 == 0 else list(codes)[::-1]
@@ -167,16 +203,18 @@ def main(argv=None) -> int:
                         **timed_simulate(code, scene, sets + own, out, args.threads, tmp),
                     }
                     runs[name].append(run)
-                    who = name if name != "tree" else "working tree"
                     print(
-                        f"round {r + 1}{'' if seed is None else f', seed {seed}'}, {who}: {_run_text(run)}", flush=True
+                        f"round {r + 1}{'' if seed is None else f', seed {seed}'}, {names[name]}: {_run_text(run)}",
+                        flush=True,
                     )
+                    if args.json:  # after every run: a later failure loses nothing measured
+                        args.json.write_text(json.dumps(record, indent=1))
 
     def per_round(name, key):
         return [sum(x[key] for x in runs[name] if x["round"] == r + 1) for r in range(args.rounds)]
 
-    ratios = {
-        key: [a / b for a, b in zip(per_round(args.commit, key), per_round("tree", key))]
+    record["ratios"] = ratios = {
+        key: [a / b for a, b in zip(per_round("commit", key), per_round("tree", key))]
         for key in ("wall_seconds", "cpu_seconds")
     }
     for key, label in (("wall_seconds", "wall"), ("cpu_seconds", "CPU")):
@@ -184,11 +222,7 @@ def main(argv=None) -> int:
         spread = f" [{min(rs):.3f}-{max(rs):.3f}]" if len(rs) > 1 else ""
         print(f"{label} time, {args.commit} over the working tree: {statistics.median(rs):.3f}{spread}")
     if args.json:
-        args.json.write_text(
-            json.dumps(
-                {"machine": m, "commit": args.commit, "threads": args.threads, "runs": runs, "ratios": ratios}, indent=1
-            )
-        )
+        args.json.write_text(json.dumps(record, indent=1))
     return 0
 
 

@@ -177,14 +177,6 @@ def _load_resume(args):
         snap, meta = read_checkpoint(ckpt)
     except CheckpointError as exc:
         raise CliError(f"cannot resume: {exc}") from None
-    made_by = str(meta.get("version") or "unknown")
-    if version_key(made_by) != version_key(__version__):
-        print(
-            f"note: {ckpt} was written by version {made_by} and version {__version__} continues it: where the model "
-            f"changed between them (CHANGELOG), the rest of the run follows {__version__}; the run file records the "
-            f"continuation (resumed_with)",
-            file=sys.stderr,
-        )
     if out is None:
         name = str(meta.get("run_name") or ckpt.name[: -len(".checkpoint.h5")] + ".h5")
         if Path(name).name != name or name in (".", ".."):
@@ -238,6 +230,14 @@ def _load_resume(args):
         raise CliError(f"cannot resume: {out} is not the run of checkpoint {ckpt} (different scenario or rod count)")
     if not len(steps) or steps[0] > int(snap["step"]):
         raise CliError(f"cannot resume: {out} has no frame at or before the checkpoint's step {int(snap['step'])}")
+    made_by = str(meta.get("version") or "unknown")
+    if version_key(made_by) != version_key(__version__):
+        print(
+            f"note: {ckpt} was written by version {made_by} and version {__version__} continues it: where the model "
+            f"changed between them (CHANGELOG), the rest of the run follows {__version__}; the run file records the "
+            f"continuation (resumed_with)",
+            file=sys.stderr,
+        )
     return scenario, snap, out, ckpt, str(run_id)
 
 

@@ -76,10 +76,12 @@ def _percolation_version(path) -> str:
         return "unknown"
 
 
-def _run_together(picked, args, older_than="") -> int:
+def _run_together(picked, args, older_than=""):
     """``study run A B ...``: the seeds of the ensemble studies ``picked`` in one pool of ``--jobs``
     workers (local processes or the ranks of ``mpiexec``), each study's folder locked throughout;
-    then each folder's ensemble summary, as ``selfas-graph ensemble`` writes it."""
+    then each folder's ensemble summary, as ``selfas-graph ensemble`` writes it. The exit code, as the
+    ``ensemble`` command's (4 when a seed could not write, with no summary; 3 for failed seeds, also
+    those kept from before), or None on an MPI worker rank."""
     import sys
     import time
 
@@ -87,11 +89,12 @@ def _run_together(picked, args, older_than="") -> int:
     from ..parallel import task_pool
     from ..studies import run_studies
     from .ensemble import SeedReport, pool_text
-    from .main import EXIT_NUMERICAL
+    from .main import EXIT_NUMERICAL, CliIOError
 
+    kept_failed = []
     with task_pool(args.jobs) as pool:
         if pool.is_worker:
-            return 0  # an MPI rank that ran seeds for rank 0
+            return None  # an MPI rank that ran seeds for rank 0
         where = pool_text(pool)
         report = SeedReport(folders=True)
 
@@ -105,6 +108,10 @@ def _run_together(picked, args, older_than="") -> int:
                     f"{count['failed']} failed",
                     flush=True,
                 )
+                for p in plan:
+                    if p.action == "failed":
+                        kept_failed.append(p)
+                        print(f"  seed {p.seed}: {p.note} (kept; --force reruns it)", flush=True)
             print(f"{report.total} seeds of {len(planned)} studies on {where}", flush=True)
 
         started = time.perf_counter()
@@ -115,9 +122,16 @@ def _run_together(picked, args, older_than="") -> int:
         except EnsembleError as exc:
             raise CliError(str(exc)) from None
     print(f"ran {report.done} seeds in {time.perf_counter() - started:.1f} s", flush=True)
-    statuses = []
+    statuses = [r.get("status") if r is not None else None for _, results in ran for r in results]
+    if "io_error" in statuses:  # no summary: there is no room for it either
+        from ..lifecycle import ABANDONED
+
+        raise CliIOError(
+            "a seed could not write its file (above); every seed file keeps its frames and checkpoint: free "
+            "some space (or fix the folder) and run the same command again to continue",
+            hard_exit=bool(ABANDONED),
+        )
     for ens, results in ran:
-        statuses += [r.get("status") if r is not None else None for r in results]
         summary = ens.summarise()
         if summary["n_seeds"]:
             try:
@@ -125,20 +139,13 @@ def _run_together(picked, args, older_than="") -> int:
             except (EnsembleError, OSError) as exc:
                 raise CliError(f"cannot write the summary into {ens.folder}: {exc}") from None
             print(f"study {ens.folder.name}: wrote {js} (selfas-graph study summarise {ens.folder.name}: the page's)")
-    if "io_error" in statuses:
-        print(
-            "selfas-graph study run: a seed could not write its file (above); every seed file keeps its frames "
-            "and checkpoint: free some space (or fix the folder) and run the same command again to continue",
-            file=sys.stderr,
-        )
-        return 130
     if "interrupted" in statuses or None in statuses:
         print("selfas-graph study run: interrupted; run the same command again to continue", file=sys.stderr)
         return 130
     if "error" in statuses:
         print("selfas-graph study run: some seeds stopped with an error (above)", file=sys.stderr)
         return 1
-    return EXIT_NUMERICAL if "failed" in statuses else 0
+    return EXIT_NUMERICAL if "failed" in statuses or kept_failed else 0
 
 
 def run(args):
@@ -151,14 +158,35 @@ def run(args):
     if args.action == "run":
         if not args.names:
             raise CliError("study run needs the names of the studies to run (selfas-graph study list shows them)")
+        from .._version import __version__
         from .main import main
 
         code = 0
         picked = _pick(studies, args.names)
         since = studies.trajectories_since
+        if older_version(__version__, since):
+            raise CliError(
+                f"this installation reports version {__version__}, older than trajectories_since = {since} in "
+                f"{args.studies}: its runs would be taken for older ones; install the package again (pip install -e .)"
+            )
+        old = [
+            f"{out} was made by version {made_by}, before the trajectories of version {since}"
+            for s in picked
+            if s.kind == "percolation" and not args.force
+            for out in [Path(args.runs) / s.name / PERCOLATION_JSON]
+            if out.exists() and older_version(made_by := _percolation_version(out), since)
+        ]
+        if old:  # refused before anything runs, as a seed file of an older version is
+            raise CliError(
+                "result files that cannot be used (docs/studies.toml trajectories_since):\n  "
+                + "\n  ".join(old)
+                + "\npass --force to run them again"
+            )
         ensembles = [s for s in picked if s.kind != "percolation"]
         if ensembles:  # their seeds in one pool: no worker waits for the end of a study
             code = _run_together(ensembles, args, since)
+            if code is None:
+                return 0  # an MPI worker rank: rank 0 runs the rest
             if code in (2, 4, 130):
                 return code
         for s in picked:
@@ -166,14 +194,7 @@ def run(args):
                 continue
             out = Path(args.runs) / s.name / PERCOLATION_JSON
             if out.exists() and not args.force:
-                made_by = _percolation_version(out)
-                if older_version(made_by, since):
-                    print(
-                        f"study {s.name}: {out} was made by version {made_by}, before the trajectories of version "
-                        f"{since} (docs/studies.toml trajectories_since): --force runs it again"
-                    )
-                else:
-                    print(f"study {s.name}: {out} exists (--force runs it again)")
+                print(f"study {s.name}: {out} exists (--force runs it again)")
                 continue
             out.parent.mkdir(parents=True, exist_ok=True)
             argv = ["bench", "percolation", s.scenario, "--counts", *map(str, s.counts), "--seeds", str(s.seeds)]

@@ -18,7 +18,7 @@ from ..io.checkpoint import (
 from ..io.h5md import RunFile, RunFileError
 from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
 from ..parallel import task_pool
-from ..provenance import older_version
+from ..provenance import older_version, version_key
 from .folder import EnsembleError, FolderLock, make_folder, seed_path
 from .parameters import _get, parameter_differences
 from .pool import run_tasks
@@ -77,6 +77,8 @@ class Ensemble:
         self.folder = Path(folder)
         self.force = bool(force)
         self.older_than = str(older_than or "")
+        if self.older_than and version_key(self.older_than) is None:
+            raise EnsembleError(f"older_than: a version such as '0.4.0', got {self.older_than!r}")
         bad = [o for o in self.overrides if o.split("=", 1)[0].strip() == "scenario.seed"]
         if bad:
             raise EnsembleError(

@@ -221,7 +221,7 @@ def study_table(summary) -> str:
         first = [x[0] for x in first if x and x[0] is not None]
         series = [s["episodes"].get("rods_in_series", [None])[:1] for s in summary["seeds"]]
         series = [x[0] for x in series if x and x[0] is not None]
-        if first:  # runs with a circuit log (since 0.4): the first closing, seed by seed
+        if any(x > 0 for x in first):  # runs with a circuit log that carry current: the first closing, seed by seed
             text += (
                 f"; the first closing carries median {_fmt(float(np.median(first)))} J0 "
                 f"[{_fmt(min(first))} to {_fmt(max(first))}] through median {_fmt(float(np.median(series)))} "

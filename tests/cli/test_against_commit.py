@@ -21,13 +21,29 @@ def test_a_scene_outside_the_repository_needs_the_trees_copy(tmp_path, capsys):
     assert info.value.code == 2 and "is not in the repository" in capsys.readouterr().err
 
 
+def test_a_json_file_in_a_missing_folder_is_refused_before_anything_runs(tmp_path, capsys):
+    with pytest.raises(SystemExit) as info:
+        main(
+            [
+                "bench",
+                "against_commit",
+                "scenarios/quick.toml",
+                "--commit",
+                "HEAD",
+                "--json",
+                str(tmp_path / "no" / "r.json"),
+            ]
+        )
+    assert info.value.code == 2 and "no folder" in capsys.readouterr().err
+
+
 def test_an_unknown_commit_is_named(capsys):
     dirty = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, cwd=ROOT)
     if dirty.returncode != 0:
         pytest.skip("not a git checkout")
     with pytest.raises(SystemExit) as info:
         main(["bench", "against_commit", str(ROOT / "scenarios" / "quick.toml"), "--commit", "no-such-rev"])
-    assert "git archive no-such-rev" in str(info.value.code)
+    assert "git archive no-such-rev: no such commit" in str(info.value.code)
 
 
 @pytest.mark.slow
@@ -61,6 +77,7 @@ def test_each_code_runs_each_seed_in_turns_and_the_ratios_are_printed(tmp_path):
     assert "wall time, HEAD over the working tree: " in r.stdout and "at t = 0.02: 0 rods carry 0 J0" in r.stdout
     got = json.loads((tmp_path / "r.json").read_text())
     assert [(x["round"], x["seed"]) for x in got["runs"]["tree"]] == [(1, 3), (1, 4), (2, 3), (2, 4)]
+    assert len(got["runs"]["commit"]) == 4 and len(got["commit_hash"]) == 40 and got["seeds"] == [3, 4]
     assert len(got["ratios"]["wall_seconds"]) == len(got["ratios"]["cpu_seconds"]) == 2
     kept = sorted(p.name for p in tmp_path.glob("round*.h5") if "checkpoint" not in p.name)
-    assert kept == sorted(f"round{r}_seed{s}_{c}.h5" for r in (1, 2) for s in (3, 4) for c in ("HEAD", "tree"))
+    assert kept == sorted(f"round{r}_seed{s}_{c}.h5" for r in (1, 2) for s in (3, 4) for c in ("commit", "tree"))

@@ -412,3 +412,67 @@ def test_study_names_after_the_options_count_and_unknown_options_are_refused(cap
     assert info.value.code == 2 and "unrecognized arguments: --jbos" in capsys.readouterr().err
     with pytest.raises(SystemExit):  # a command without a trailing list takes no extra names
         parse_args(parser, ["simulate", "a.toml", "b.toml"])
+
+
+def _studies_file(folder, text):
+    (folder / "studies.toml").write_text(text)
+    return str(folder / "studies.toml")
+
+
+def test_a_kept_failed_seed_makes_one_study_exit_3(tmp_path, capsys):
+    """One study runs in the pool as several do, with the ensemble command's codes: a failed seed kept
+    from before is listed and the run exits 3, its file untouched."""
+    import h5py
+
+    from conftest import SMALL_CIRCUIT_SCENE
+    from selfas_graph.cli.main import main
+    from selfas_graph.ensemble import seed_path
+
+    (tmp_path / "scene.toml").write_text(SMALL_CIRCUIT_SCENE)
+    studies = _studies_file(
+        tmp_path,
+        f"[study.s]\nscenario = '{(tmp_path / 'scene.toml').as_posix()}'\nseeds = 1\nfirst_seed = 3\nt_end = 0.1\n",
+    )
+    runs = tmp_path / "runs"
+    assert main(["study", "run", "s", "--studies", studies, "--runs", str(runs)]) == 0
+    with h5py.File(seed_path(runs / "s", 3), "r+") as f:
+        f["parameters/selfas_graph"].attrs["status"] = "failed: a test"
+    before = seed_path(runs / "s", 3).read_bytes()
+    capsys.readouterr()
+    assert main(["study", "run", "s", "--studies", studies, "--runs", str(runs)]) == 3
+    assert "seed 3: failed: a test (kept; --force reruns it)" in capsys.readouterr().out
+    assert seed_path(runs / "s", 3).read_bytes() == before
+
+
+def test_an_older_percolation_result_or_installation_is_refused_before_anything_runs(tmp_path, capsys):
+    """A percolation result made before trajectories_since is refused (exit 2, naming the file and both
+    versions) unless --force; an installation that reports an older version than trajectories_since
+    is refused, since its runs would be taken for older ones."""
+    from selfas_graph.cli.main import main
+
+    body = (
+        f"[study.p]\nkind = 'percolation'\nscenario = '{(ROOT / 'scenarios' / 'quick.toml').as_posix()}'\n"
+        "seeds = 1\nt_end = 0.1\ncounts = [10]\n"
+    )
+    runs = tmp_path / "runs"
+    (runs / "p").mkdir(parents=True)
+    (runs / "p" / "percolation.json").write_text(json.dumps({"version": "0.0.1"}))
+    studies = _studies_file(tmp_path, 'trajectories_since = "0.4.0"\n' + body)
+    assert main(["study", "run", "p", "--studies", studies, "--runs", str(runs)]) == 2
+    err = capsys.readouterr().err
+    assert "percolation.json was made by version 0.0.1, before the trajectories of version 0.4.0" in err
+    assert "--force" in err
+    studies = _studies_file(tmp_path, 'trajectories_since = "99.0"\n' + body)
+    assert main(["study", "run", "p", "--studies", studies, "--runs", str(runs)]) == 2
+    assert "older than trajectories_since = 99.0" in capsys.readouterr().err
+
+
+def test_the_first_closing_is_left_out_where_no_seed_carries_current():
+    """The study without the circuit closes the gap but carries no current: its table gives the closings,
+    not a first closing of 0 J0; the Fig. 2 study's gives it."""
+    from selfas_graph.studies.page import page_blocks
+
+    blocks = page_blocks(load_studies(ROOT / "docs" / "studies.toml"), ROOT / "docs" / "results")
+    assert "closings of the gap in all" in blocks["table fig2_no_circuit"]
+    assert "first closing carries" not in blocks["table fig2_no_circuit"]
+    assert "first closing carries" in blocks["table fig2"]

@@ -391,6 +391,13 @@ def test_current_every_has_no_effect_without_multiple_time_stepping(rng):
     np.testing.assert_array_equal(runs[0], runs[1])
 
 
+def test_a_scene_with_current_every_and_slow_every_1_is_accepted():
+    """slow_every = 1 alone turns multiple time stepping off in a scene that sets current_every (as
+    the Fig. 2 scene does): accepted, current_every kept and without effect."""
+    text = SCENE.replace('brake = "split"', 'brake = "split"\nslow_every = 1\ncurrent_every = 8')
+    assert scenario_from_text(text).params.integrator.current_every == 8
+
+
 @pytest.mark.parametrize(("slow_every", "current_every"), [(4, 6), (16, 40)])
 def test_current_every_off_the_slow_pattern_is_refused_naming_both_keys(slow_every, current_every):
     from selfas_graph.io.scenario import ScenarioError
