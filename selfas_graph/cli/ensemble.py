@@ -23,6 +23,7 @@ import sys
 import time
 from pathlib import Path
 
+from .._version import __version__
 from ..ensemble import Ensemble, EnsembleError, format_table, write_summary
 from ..parallel import task_pool
 from .main import EXIT_NUMERICAL, CliError, CliIOError
@@ -225,6 +226,10 @@ def _run_locked(args, pool, held):
     for plan in plans:
         if plan.action == "failed":
             print(f"  seed {plan.seed}: {plan.note} (kept; --force reruns it)", flush=True)
+        elif plan.action == "done" and " by version " in plan.note:  # kept, but the model may have changed since
+            print(
+                f"  seed {plan.seed}: {plan.note}, not this version {__version__} (kept; see the CHANGELOG)", flush=True
+            )
     results = []
     if not args.no_run and count["run"] + count["resume"]:
         _make(folder)

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._version import __version__
 from ..io.checkpoint import (
     CheckpointError,
     checkpoint_path,
@@ -180,7 +181,10 @@ class Ensemble:
             )
         half_step = 0.5 * wanted.integrator.dt
         if status == "finished" and t_last >= self.t_end - half_step:
-            return SeedPlan(seed, path, "done", f"finished at t = {t_last:.6g}")
+            other = version_key(made_by) != version_key(__version__)
+            return SeedPlan(
+                seed, path, "done", f"finished at t = {t_last:.6g}" + (f" by version {made_by}" if other else "")
+            )
         if status.startswith("failed"):
             if self.force:
                 return SeedPlan(seed, path, "run", "replacing a failed run")

@@ -137,6 +137,23 @@ def test_other_parameters_are_refused(quick, capsys):
     assert {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")} == before
 
 
+def test_a_finished_seed_of_another_version_is_kept_and_named(quick, tmp_path, capsys):
+    """``selfas-graph ensemble`` keeps a finished seed file made by another version (no trajectories_since
+    here) and says which version made it."""
+    from selfas_graph import __version__
+
+    folder, _ = quick
+    copy = tmp_path / "copy"
+    shutil.copytree(folder, copy)
+    with h5py.File(seed_path(copy, 2), "r+") as f:
+        f["parameters/selfas_graph"].attrs["version"] = "0.0.1"
+    argv = ["ensemble", QUICK, "--seeds", "4", "--t-end", str(T_END), "-o", str(copy), "--no-run"]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert f"seed 2: finished at t = {T_END:g} by version 0.0.1, not this version {__version__}" in out
+    assert "seed 1: finished" not in out
+
+
 def test_seed_files_of_a_version_before_the_trajectories_are_not_reused(quick):
     """``older_than`` (docs/studies.toml ``trajectories_since``): finished seed files made by an older
     version are refused, naming the file and both versions, and planned to be replaced with force;
