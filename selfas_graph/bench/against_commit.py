@@ -43,16 +43,7 @@ import time
 from pathlib import Path
 
 from ..provenance import machine, source_commit
-from .same_as_commit import ROOT, RUNNER
-
-
-def export(commit: str, into: Path, paths: list[str]) -> None:
-    """``git archive COMMIT PATHS`` unpacked into ``into`` (SystemExit naming the commit and paths
-    when git refuses, e.g. an unknown commit or a path the commit lacks)."""
-    got = subprocess.run(["git", "archive", commit, *paths], cwd=ROOT, capture_output=True)
-    if got.returncode != 0:
-        raise SystemExit(f"git archive {commit} {' '.join(paths)}: {got.stderr.decode(errors='replace').strip()}")
-    subprocess.run(["tar", "-x", "-C", str(into)], input=got.stdout, check=True)
+from .same_as_commit import ROOT, RUNNER, export
 
 
 def timed_simulate(code: Path, scenario: Path, sets: list[str], out: Path, threads: int, cwd: Path) -> dict:

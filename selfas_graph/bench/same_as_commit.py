@@ -49,6 +49,15 @@ sys.exit(main())
 """
 
 
+def export(commit: str, into: Path, paths: list[str]) -> None:
+    """``git archive COMMIT PATHS`` unpacked into ``into`` (SystemExit naming the commit and paths
+    when git refuses, e.g. an unknown commit or a path the commit lacks)."""
+    got = subprocess.run(["git", "archive", commit, *paths], cwd=ROOT, capture_output=True)
+    if got.returncode != 0:
+        raise SystemExit(f"git archive {commit} {' '.join(paths)}: {got.stderr.decode(errors='replace').strip()}")
+    subprocess.run(["tar", "-x", "-C", str(into)], input=got.stdout, check=True)
+
+
 def _simulate(code: Path, scenario: str, sets: list[str], out: Path, threads: int, cwd: Path) -> None:
     env = dict(os.environ, PYTHONPATH=str(code), NUMBA_NUM_THREADS=str(threads), OMP_NUM_THREADS=str(threads))
     cmd = [
@@ -106,10 +115,7 @@ def main(argv=None) -> int:
         tmp = Path(tmp)
         base = tmp / "code"
         base.mkdir()
-        archive = subprocess.run(
-            ["git", "archive", args.commit, "selfas_graph"], cwd=ROOT, capture_output=True, check=True
-        ).stdout
-        subprocess.run(["tar", "-x", "-C", str(base)], input=archive, check=True)
+        export(args.commit, base, ["selfas_graph"])
         out_dir = (args.keep or tmp).resolve()
         out_dir.mkdir(parents=True, exist_ok=True)
         failed = 0
