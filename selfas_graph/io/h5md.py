@@ -4,8 +4,8 @@ The layout of a run file (every dataset path and group name) is listed and named
 :mod:`selfas_graph.io.layout`. ``/parameters/selfas_graph`` holds as attributes: scenario_text,
 parameters_json, version, command_line, seed, mpi_ranks, numba_threads, created, status, commit
 (git commit of the source, "+dirty" if changed), cpu_model, numba_cpu (the CPU numba compiled for
-and its widest vectors), wall_seconds_total (wall time of the run's segments that closed the file;
-wall_seconds: the run loop's, last segment),
+and its widest vectors), wall_seconds_total (wall time of the run's segments, a killed one's up to its last frame or
+checkpoint; wall_seconds: the run loop's, last segment),
 resumed_with (JSON: version, commit, CPU, threads of continuations that differ). ``/graph`` attributes:
 conductor_ids, conductor_potentials (0 where conductor_per_contact is 1: a potential set per
 contact, the case (ii) filament), conductor_per_contact, role_names. A floating tip (on no path

@@ -200,7 +200,7 @@ class RunWriter(_PendingRows):
         p.attrs["status"] = "running"
         p.attrs["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
         p.attrs["wall_seconds_total"] = 0.0
-        self._opened = time.monotonic()
+        self._start_clock(0.0)
         self.n_frames = 0
         f.flush()
 
@@ -286,7 +286,7 @@ class RunWriter(_PendingRows):
                 _truncate(g[name], k)
         f[layout.PROVENANCE].attrs["status"] = "running"
         self._resumed_with()
-        self._opened = time.monotonic()
+        self._start_clock(float(f[layout.PROVENANCE].attrs.get("wall_seconds_total", 0.0)))
         f.flush()
         return self
 
@@ -523,16 +523,24 @@ class RunWriter(_PendingRows):
         for k, v in attrs.items():
             self.f[layout.PROVENANCE].attrs[k] = v
 
+    def _start_clock(self, before):
+        """Count this segment's wall time on top of ``before``, the earlier segments' total."""
+        self._wall_before = before
+        self._opened = time.monotonic()
+
+    def _wall_total(self):
+        opened = getattr(self, "_opened", None)  # None: closed before its clock started
+        return getattr(self, "_wall_before", 0.0) + (0.0 if opened is None else time.monotonic() - opened)
+
     def flush(self):
+        # wall time of every segment of the run, a killed one up to its last flush (a frame or a
+        # checkpoint); ``wall_seconds`` is the run loop's time in the last segment (the lifecycle sets it)
+        self.set_attrs(wall_seconds_total=self._wall_total())
         self.f.flush()
 
     def close(self, status="finished"):
         if self.f:
-            attrs = self.f[layout.PROVENANCE].attrs
-            # wall time of every segment of the run that closed its file (a killed one adds nothing);
-            # ``wall_seconds`` is the run loop's time in the last segment (the lifecycle sets it)
-            spent = time.monotonic() - getattr(self, "_opened", time.monotonic())
-            self.set_attrs(status=status, wall_seconds_total=float(attrs.get("wall_seconds_total", 0.0)) + spent)
+            self.set_attrs(status=status, wall_seconds_total=self._wall_total())
             self.f.close()
             self.f = None
 

@@ -244,3 +244,27 @@ def test_kill_9_keeps_the_file_readable_and_resume_completes_it(tmp_path):
     ref, got = datasets(tmp_path / "full.h5"), datasets(out)
     for name in ref:
         assert _same(ref[name], got[name]), name
+
+
+def test_wall_time_of_a_killed_segment_counts_up_to_its_last_flush(tmp_path):
+    """``wall_seconds_total`` sums the wall time of every segment of a run: a segment killed after a
+    flush (a frame or a checkpoint) keeps its time up to there, and a resumed segment adds its own.
+    The sleeps set lower bounds only (a busy machine makes the totals larger, never smaller)."""
+    sc = scenario_from_text(SCENE)
+    sim = Simulation.from_scenario(sc)
+    path = tmp_path / "run.h5"
+    writer = RunWriter(path, sim.state.n_tips, sim.state.tip_charge, sim.state.rod_charge, {"scenario_text": sc.text})
+    sim.write_frame(writer)
+    time.sleep(0.2)
+    writer.flush()
+    writer.f.close()  # killed: the file never closed by the writer, its status still "running"
+    with h5py.File(path, "r") as f:
+        attrs = f["parameters/selfas_graph"].attrs
+        assert attrs["status"] == "running"
+        first = float(attrs["wall_seconds_total"])
+    assert first >= 0.2
+    writer = RunWriter.reopen(path, 0)
+    time.sleep(0.1)
+    writer.close()
+    with h5py.File(path, "r") as f:
+        assert float(f["parameters/selfas_graph"].attrs["wall_seconds_total"]) >= first + 0.1
