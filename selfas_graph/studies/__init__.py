@@ -1,8 +1,8 @@
 """Studies: the ensembles the results page is made from, their summaries and the page itself.
 
 ``docs/studies.toml`` lists the studies and claims (:mod:`.spec`); a study's run files give its
-summary (:mod:`.summary`); the summaries give every table of docs/results.md (:mod:`.page`). From
-Python::
+summary (:mod:`.summary`); the summaries give every table of docs/results.md (:mod:`.page`, with the
+statistics of :mod:`.stats` and the verdicts of :mod:`.verdicts`). From Python::
 
     from selfas_graph.studies import load_studies, run_study, summarise_study
     studies = load_studies("docs/studies.toml")

@@ -10,7 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .page import CLAIM_MEASURES, GROUPED, LABELS, has_electrodes, sweep_points
+from .page import has_electrodes
+from .stats import GROUPED, LABELS
+from .verdicts import CLAIM_MEASURES, sweep_points
 
 __all__ = ["SERIES_MEASURES", "plot_episodes", "plot_series", "series_panels", "study_figures"]
 

@@ -13,7 +13,8 @@ import pytest
 
 from selfas_graph.provenance import older_version, version_key
 from selfas_graph.studies import StudiesError, load_studies
-from selfas_graph.studies.page import grouped_stat, plain_stat, replace_blocks
+from selfas_graph.studies.page import replace_blocks
+from selfas_graph.studies.stats import grouped_stat, plain_stat
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -64,7 +65,8 @@ def test_studies_of_runs_older_than_the_trajectories_are_marked_where_they_are_u
     serve as runs of known version."""
     import dataclasses
 
-    from selfas_graph.studies.page import older_runs, page_blocks
+    from selfas_graph.studies.page import page_blocks
+    from selfas_graph.studies.stats import older_runs
 
     shipped = load_studies(ROOT / "docs" / "studies.toml")
     for path in (ROOT / "docs" / "results").glob("*.json"):
@@ -214,7 +216,7 @@ def _fake_summary(values, t=600.0, measure="largest_alignment"):
     ],
 )
 def test_a_verdict_needs_three_combined_standard_errors_in_the_claimed_direction(tmp_path, claim, null, words):
-    from selfas_graph.studies.page import claim_rows
+    from selfas_graph.studies.verdicts import claim_rows
 
     (tmp_path / "s.toml").write_text(
         """
@@ -262,10 +264,11 @@ def test_study_page_through_a_link_writes_the_file_it_names(tmp_path):
 def test_a_windowed_claim_and_a_null_without_spread():
     """A claim's `window` averages each seed over the summarised times in it; a null model whose seeds
     all give the same value, against seeds that all give another, differs by infinitely many SE."""
-    from selfas_graph.studies.page import _claim_difference, _verdict, _window_values, plain_stat
+    from selfas_graph.studies.stats import plain_stat, window_values
+    from selfas_graph.studies.verdicts import _claim_difference, _verdict
 
     s = {"times": [0.0, 10.0, 20.0], "seeds": [{}, {}], "measures": {"m": {"values": [[9, 1, 3], [9, None, 5]]}}}
-    assert list(_window_values(s, "m", 5.0, 20.0)) == [2.0, 5.0]  # (1 + 3) / 2 and 5 alone
+    assert list(window_values(s, "m", 5.0, 20.0)) == [2.0, 5.0]  # (1 + 3) / 2 and 5 alone
     d = _claim_difference(plain_stat([4.0, 4.0]), plain_stat([0.0, 0.0, 0.0]))
     assert d == math.inf and _verdict(d, "greater").startswith("reproduced (every seed")
     assert math.isnan(_claim_difference(plain_stat([4.0]), plain_stat([0.0, 0.0])))  # one seed: no spread

@@ -1,0 +1,181 @@
+"""The statistics of the results page: a measure of a study's summary at a time, over its seeds.
+
+docs/model.md "Measures of the paper's claims":
+
+* a measure every seed has: mean +- standard error over the seeds with a value; for a fitted
+  dimension the standard error also carries each fit's own uncertainty,
+  ``SE^2 = s^2 / n + mean(err_i^2) / n``;
+* a measure that splits the seeds into two groups (the circuit carries current or not):
+  "k of n seeds", and the median [range] and mean +- SE of the k seeds it describes, never a mean
+  over both groups.
+
+The summaries are those of :mod:`.summary` (``docs/results/NAME.json``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..analysis.ensemble_stats import grouped_summary, mean_sem, mean_sem_fits
+from ..provenance import older_version
+
+__all__ = [
+    "FIT_ERRORS",
+    "GROUPED",
+    "LABELS",
+    "fmt",
+    "grouped_stat",
+    "measure_label",
+    "measure_text",
+    "older_runs",
+    "plain_stat",
+    "pm",
+    "values_at",
+    "window_values",
+]
+
+#: measures that are zero in a seed whose circuit is open: reported as "k of n seeds" (module docstring)
+GROUPED = (
+    "filament_rods",
+    "total_current",
+    "midplane_flux",
+    "flux_over_external",
+    "flux_over_dipole",
+    "moment_J_z",
+    "largest_moment_J_z",
+)
+
+
+#: fitted measures and their own uncertainty
+FIT_ERRORS = {
+    "fractal_dimension": "fractal_dimension_err",
+    "rg_dimension": "rg_dimension_err",
+}
+
+
+#: words and units of the measures, as the tables and figures show them
+LABELS = {
+    "filament_rods": ("rods in current-carrying filaments", ""),
+    "total_current": ("current through the gap", "J0"),
+    "inside_R_plas": ("fraction of rods within R_plas", ""),
+    "median_axis_distance": ("median distance of rods from the axis", "L"),
+    "midplane_flux": ("flux of the rod currents through the mid-plane", "Phi_0"),
+    "flux_over_external": ("that flux over the flux of B_ext", ""),
+    "flux_over_dipole": ("that flux over the external dipole's flux Phi_ext = 4 pi Z_Mext", ""),
+    "largest_structure_rods": ("rods in the largest structure", ""),
+    "largest_moment_ratio": ("largest structure's monopole moment, magnitude", "rod moments"),
+    "largest_alignment": ("alignment of the largest structure's rods", ""),
+    "free_alignment": ("alignment of the rods in no structure", ""),
+    "all_alignment": ("alignment of all rods", ""),
+    "free_rods": ("rods in no structure", ""),
+    "moment_J_z": ("moment of the rod currents m_J,z", "J0 L^2"),
+    "largest_moment_J_z": ("m_J,z of the largest structure", "J0 L^2"),
+    "fractal_dimension": ("mass-radius dimension of the largest structure", ""),
+    "rg_dimension": ("dimension from R_g ~ N^(1/D) over the structures", ""),
+    "cycle_rank": ("independent loops (cycle rank)", ""),
+    "cycle_rank_largest": ("independent loops of the largest structure", ""),
+    "structures": ("structures", ""),
+}
+
+
+def values_at(summary, measure, t):
+    """Per-seed values of ``measure`` at time ``t`` (NaN where a seed has none)."""
+    times = summary["times"]
+    k = int(np.argmin([abs(x - t) for x in times]))
+    if abs(times[k] - t) > 1e-9 * max(1.0, abs(t)) or measure not in summary["measures"]:
+        return np.full(len(summary["seeds"]), np.nan)
+    return np.array([np.nan if v[k] is None else v[k] for v in summary["measures"][measure]["values"]], dtype=float)
+
+
+def plain_stat(values, errors=None) -> dict:
+    """Mean, standard error and count over the finite values
+    (:func:`~selfas_graph.analysis.ensemble_stats.mean_sem`); with ``errors``, each value's own
+    fit uncertainty, the standard error is sqrt(s^2 / n + mean(err^2) / n)
+    (:func:`~selfas_graph.analysis.ensemble_stats.mean_sem_fits`)."""
+    v = np.asarray(values, dtype=float).reshape(-1, 1)
+    if errors is None:
+        mean, sem, n = mean_sem(v)
+    else:
+        mean, sem, _, _, n = mean_sem_fits(v, np.asarray(errors, dtype=float).reshape(-1, 1))
+    return {"n": int(n[0]), "mean": float(mean[0]), "sem": float(sem[0])}
+
+
+def grouped_stat(values, active) -> dict:
+    """:func:`~selfas_graph.analysis.ensemble_stats.grouped_summary`: k of n seeds, and the median,
+    range, mean and standard error of the k seeds where ``active`` holds."""
+    return grouped_summary(values, active)
+
+
+def fmt(x, digits=3):
+    """``x`` with ``digits`` significant digits as the page prints it: whole from 10^digits to 10^6,
+    "n/a" for None or a value that is not finite."""
+    if x is None or not math.isfinite(x):
+        return "n/a"
+    if 10**digits <= abs(x) < 1e6:  # whole, not 1.04e+03 or 1.3e+02
+        return f"{x:.0f}"
+    return f"{x:.{digits}g}"
+
+
+def pm(s):
+    """A :func:`plain_stat` as "mean ± SE (n)" ("(1 seed)" without a spread, "n/a" with no value)."""
+    if s["n"] == 0:
+        return "n/a"
+    if not math.isfinite(s["sem"]):
+        return f"{fmt(s['mean'])} (1 seed)"
+    return f"{fmt(s['mean'])} ± {fmt(s['sem'], 2)} ({s['n']})"
+
+
+def measure_text(summary, measure, t) -> str:
+    """A measure of a summary at a time as the page prints it (module docstring)."""
+    v = values_at(summary, measure, t)
+    if measure in GROUPED:
+        cur = values_at(summary, "total_current", t)
+        g = grouped_stat(v, np.abs(cur) > 0)
+        if g["n"] == 0:
+            return "n/a"
+        if g["k"] == 0:
+            return f"0 of {g['n']} seeds carry current"
+        return (
+            f"{g['k']} of {g['n']} seeds carry current: median {fmt(g['median'])} "
+            f"[{fmt(g['min'])} to {fmt(g['max'])}], mean {pm(g | {'n': g['k']})}"
+        )
+    if measure in FIT_ERRORS:
+        # a fit over less than a factor 4 in scale is refused (NaN) by the estimator
+        # (analysis/fractal.py, MIN_RANGE): where every seed's is, the dimension is not testable
+        s = plain_stat(v, values_at(summary, FIT_ERRORS[measure], t))
+        if s["n"] == 0:
+            return "not testable at this size (no fit over a factor 4 in scale)"
+        k = len(v) - s["n"]
+        return pm(s) if not k else f"{pm(s)}; not testable in {k} seed{'' if k == 1 else 's'}"
+    return pm(plain_stat(v))
+
+
+def measure_label(measure):
+    """The words and unit of a measure as the tables show them (:data:`LABELS`)."""
+    words, unit = LABELS.get(measure, (measure.replace("_", " "), ""))
+    return f"{words} ({unit})" if unit else words
+
+
+def window_values(summary, measure, lo, hi):
+    """Each seed's mean of ``measure`` over the summarised times in [lo, hi] (NaN: none there)."""
+    times = np.asarray(summary["times"], dtype=float)
+    pick = (times >= lo - 1e-9) & (times <= hi + 1e-9)
+    if measure not in summary["measures"] or not pick.any():
+        return np.full(len(summary["seeds"]), np.nan)
+    v = np.array([[np.nan if x is None else x for x in row] for row in summary["measures"][measure]["values"]])
+    v = v[:, pick]
+    n = np.isfinite(v).sum(axis=1)
+    return np.where(n > 0, np.nansum(v, axis=1) / np.maximum(n, 1), np.nan)
+
+
+def older_runs(summary, since) -> list:
+    """The versions of a summary's runs older than ``since`` (docs/studies.toml ``trajectories_since``,
+    the first version whose trajectories the code follows now), an unreadable version counted as older;
+    [] when there are none, or ``since`` is ""."""
+    if not since or summary is None:
+        return []
+    seeds = [summary] if summary.get("kind") == "percolation" else summary["seeds"]
+    versions = {str(x.get("version") or "unknown") for x in seeds}
+    return sorted(v for v in versions if older_version(v, since))

@@ -1,0 +1,199 @@
+"""The verdicts of the results page: each claim against its null model, each numerical knob against
+the default it varies, and each sweep of a scene's parameter.
+
+A claim's verdict compares the study with its null model at the paper's end time in units of the
+combined standard error, d = (x - x_null) / sqrt(SE^2 + SE_null^2): "reproduced" only for |d| > 3 in
+the direction the claim predicts (docs/model.md "Measures of the paper's claims"). The statistics are
+those of :mod:`.stats`.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .stats import FIT_ERRORS, measure_label, measure_text, older_runs, plain_stat, pm, values_at, window_values
+
+__all__ = ["CLAIM_MEASURES", "claim_rows", "convergence_rows", "sweep_points", "sweep_rows"]
+
+
+def _claim_difference(a, b):
+    """(x - x_null) / sqrt(SE^2 + SE_null^2); infinite where both spreads are zero and the means differ
+    (every seed of both the same, e.g. no filament in any seed of the null model and the same count in
+    every seed of the scene), NaN without a spread estimate (one seed)."""
+    if not (a["n"] and b["n"]) or not (math.isfinite(a["sem"]) and math.isfinite(b["sem"])):
+        return math.nan
+    den = math.sqrt(a["sem"] ** 2 + b["sem"] ** 2)
+    if den == 0.0:
+        return 0.0 if a["mean"] == b["mean"] else math.copysign(math.inf, a["mean"] - b["mean"])
+    return (a["mean"] - b["mean"]) / den
+
+
+def _verdict(d, expect):
+    if math.isnan(d):
+        return "not decided (too few seeds)"
+    if math.isinf(d):  # no spread in either: every seed of each gives the same value
+        same = (d > 0) == (expect == "greater")
+        return f"{'reproduced' if same else 'opposite to the claim'} (every seed differs from every seed of the null model)"
+    if (d > 3 and expect == "greater") or (d < -3 and expect == "less"):
+        return f"reproduced ({'+' if d > 0 else '−'}{abs(d):.1f} SE from the null model)"
+    if abs(d) > 3:
+        return f"opposite to the claim ({'+' if d > 0 else '−'}{abs(d):.1f} SE from the null model)"
+    return f"not distinguished from the null model ({d:+.1f} SE)".replace("-", "−")
+
+
+def _older_note(summaries, names, since) -> str:
+    """ "; made before the trajectory change of 0.4.0 (NAME: 0.3.0): to be run again" for the studies
+    among ``names`` made of runs older than ``since``, or ""."""
+    old = {n: older_runs(summaries.get(n), since) for n in dict.fromkeys(names) if n}
+    old = {n: v for n, v in old.items() if v}
+    if not old:
+        return ""
+    which = ", ".join(f"{n}: {', '.join(v)}" for n, v in old.items())
+    return f"; made before the trajectory change of {since} ({which}): to be run again"
+
+
+def claim_rows(studies, summaries) -> str:
+    """The claims table: each claim's measure at the paper's end time, its null model and the verdict."""
+    rows = [
+        "| claim | what the paper shows | measure at t | selfas-graph | null model | null model's value | verdict |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for c in studies.claims:
+        s = summaries.get(c.study)
+        if s is None:
+            rows.append(f"| {c.claim} | {c.paper} | {measure_label(c.measure)} | not run yet | | | |")
+            continue
+        if c.window:
+            lo, hi = c.window
+            where = f"mean over t = {lo:g}-{hi:g}"
+            value = pm(plain_stat(window_values(s, c.measure, lo, hi)))
+            value += f"; at t = {c.time:g}: {measure_text(s, c.measure, c.time)}"
+        else:
+            where = f"t = {c.time:g}"
+            value = measure_text(s, c.measure, c.time)
+        also = "; ".join(f"{measure_label(m)}: {measure_text(s, m, c.time)}" for m in c.also)
+        if also:
+            value += f"; {also}"
+        null = summaries.get(c.null) if c.null else None
+        if not c.null:
+            null_text, null_value, verdict = "none yet", "", "not yet set against a null model"
+        elif null is None:
+            null_text, null_value, verdict = studies.study(c.null).title, "not run yet", "not yet set against its null"
+        else:
+            nm = c.null_measure or c.measure
+            if c.window:
+                a = plain_stat(window_values(s, c.measure, *c.window))
+                b = plain_stat(window_values(null, nm, *c.window))
+                null_value = pm(b)
+            else:  # a fitted measure's standard error carries each seed's fit uncertainty, as the tables show
+                ea = values_at(s, FIT_ERRORS[c.measure], c.time) if c.measure in FIT_ERRORS else None
+                eb = values_at(null, FIT_ERRORS[nm], c.time) if nm in FIT_ERRORS else None
+                a = plain_stat(values_at(s, c.measure, c.time), ea)
+                b = plain_stat(values_at(null, nm, c.time), eb)
+                null_value = measure_text(null, nm, c.time)
+            d = _claim_difference(a, b)
+            null_text = studies.study(c.null).title
+            null_value += "" if nm == c.measure else f" ({measure_label(nm)})"
+            verdict = _verdict(d, c.expect)
+        verdict += _older_note(summaries, (c.study, c.null), studies.trajectories_since)
+        rows.append(
+            f"| {c.claim} | {c.paper} | {measure_label(c.measure)}, {where} | {value} | {null_text} | "
+            f"{null_value} | {verdict} |"
+        )
+    return "\n".join(rows)
+
+
+#: the measures of the convergence and sensitivity tables: one per claim
+CLAIM_MEASURES = (
+    "filament_rods",
+    "inside_R_plas",
+    "midplane_flux",
+    "largest_alignment",
+    "fractal_dimension",
+    "cycle_rank",
+)
+
+
+def _difference(a, b):
+    """(x_a - x_b) / sqrt(SE_a^2 + SE_b^2) of two plain statistics (NaN without a spread)."""
+    den = math.sqrt(a["sem"] ** 2 + b["sem"] ** 2) if a["n"] and b["n"] else math.nan
+    return (a["mean"] - b["mean"]) / den if den > 0 else math.nan
+
+
+def convergence_rows(studies, summaries) -> str:
+    """For each variant of a numerical knob, each claim measure at the variant's end time against the
+    study it varies (same time): both means with their standard errors, the difference in combined
+    standard errors, and what follows for a user."""
+    rows = [
+        "| setting | measure | default | this setting | difference (combined SE) | conclusion |",
+        "|---|---|---|---|---|---|",
+    ]
+    for st in studies.studies.values():
+        if st.section != "convergence":
+            continue
+        s, base = summaries.get(st.name), summaries.get(st.null_of)
+        if s is None or base is None:
+            missing = st.name if s is None else st.null_of
+            rows.append(f"| {st.title} | | | | | not run yet (`selfas-graph study run {missing}`) |")
+            continue
+        t = st.t_end
+        ds = []
+        cells = []
+        for m in CLAIM_MEASURES:
+            errs = values_at(s, FIT_ERRORS[m], t) if m in FIT_ERRORS else None
+            berrs = values_at(base, FIT_ERRORS[m], t) if m in FIT_ERRORS else None
+            a, b = plain_stat(values_at(s, m, t), errs), plain_stat(values_at(base, m, t), berrs)
+            d = _difference(a, b)
+            ds.append(d)
+            cells.append((m, b, a, d))
+        finite = [abs(d) for d in ds if math.isfinite(d)]
+        if not finite:
+            verdict = "not decided (too few seeds)"
+        elif max(finite) > 3:
+            verdict = "moves these statistics: not safe for them"
+        elif max(finite) > 2:
+            verdict = "marginal (a difference of 2-3 SE)"
+        else:
+            verdict = "safe for these statistics (every difference within 2 SE)"
+        verdict += _older_note(summaries, (st.name, st.null_of), studies.trajectories_since)
+        for k, (m, b, a, d) in enumerate(cells):
+            name = st.title if k == 0 else ""
+            text = "n/a" if not math.isfinite(d) else f"{d:+.1f}".replace("-", "−")
+            rows.append(
+                f"| {name} | {measure_label(m)}, t = {t:g} | {pm(b)} | {pm(a)} | {text} | {verdict if k == 0 else ''} |"
+            )
+    return "\n".join(rows)
+
+
+def sweep_rows(studies, summaries, name) -> str:
+    """A sweep's table: a row per value of its parameter, the claim measures at the sweep's time."""
+    sw = studies.sweeps[name]
+    head = f"| {sw.parameter} | seeds | " + " | ".join(measure_label(m) for m in CLAIM_MEASURES) + " |"
+    rows = [head, "|---|---|" + "---|" * len(CLAIM_MEASURES)]
+    for value, study in studies.sweep_points(name):
+        s = summaries.get(study)
+        mark = " (the paper's)" if study == sw.base else ""
+        if s is None:
+            rows.append(
+                f"| {value:g}{mark} | not run yet (`selfas-graph study run {study}`) |" + " |" * len(CLAIM_MEASURES)
+            )
+            continue
+        cells = [measure_text(s, m, sw.time) for m in CLAIM_MEASURES]
+        old = older_runs(s, studies.trajectories_since)
+        seeds = f"{s['n_seeds']}" + (f" (runs of {', '.join(old)}: to be run again)" if old else "")
+        rows.append(f"| {value:g}{mark} | {seeds} | " + " | ".join(cells) + " |")
+    if sum(summaries.get(study) is not None for _, study in studies.sweep_points(name)) >= 2:
+        rows.append(f"\n![{sw.title}: the claim measures at t = {sw.time:g}](figures/sweep_{name}.png)")
+    return "\n".join(rows)
+
+
+def sweep_points(studies, summaries, name, measure):
+    """(value, plain statistic) of a measure over a sweep's points that have a summary."""
+    sw = studies.sweeps[name]
+    out = []
+    for value, study in studies.sweep_points(name):
+        s = summaries.get(study)
+        if s is not None:
+            errs = values_at(s, FIT_ERRORS[measure], sw.time) if measure in FIT_ERRORS else None
+            out.append((value, plain_stat(values_at(s, measure, sw.time), errs)))
+    return out
