@@ -226,7 +226,7 @@ def _run_locked(args, pool, held):
     for plan in plans:
         if plan.action == "failed":
             print(f"  seed {plan.seed}: {plan.note} (kept; --force reruns it)", flush=True)
-        elif plan.action == "done" and " by version " in plan.note:  # kept, but the model may have changed since
+        elif plan.action == "done" and plan.other_version:  # kept, but the model may have changed since
             print(
                 f"  seed {plan.seed}: {plan.note}, not this version {__version__} (kept; see the CHANGELOG)", flush=True
             )

@@ -34,12 +34,14 @@ class SeedPlan:
     ``action`` is "run" (a new file), "resume" (continue from the checkpoint to the end
     time), "done" (finished at or beyond the end time: kept) or "failed" (the run failed
     numerically before: kept, reported; rerun with ``force``). ``note`` says why.
+    ``other_version`` names the version that made a kept file when it is not the running one.
     """
 
     seed: int
     path: Path
     action: str
     note: str = ""
+    other_version: str | None = None
 
 
 class Ensemble:
@@ -181,10 +183,9 @@ class Ensemble:
             )
         half_step = 0.5 * wanted.integrator.dt
         if status == "finished" and t_last >= self.t_end - half_step:
-            other = version_key(made_by) != version_key(__version__)
-            return SeedPlan(
-                seed, path, "done", f"finished at t = {t_last:.6g}" + (f" by version {made_by}" if other else "")
-            )
+            other = made_by if version_key(made_by) != version_key(__version__) else None
+            note = f"finished at t = {t_last:.6g}" + (f" by version {other}" if other else "")
+            return SeedPlan(seed, path, "done", note, other_version=other)
         if status.startswith("failed"):
             if self.force:
                 return SeedPlan(seed, path, "run", "replacing a failed run")

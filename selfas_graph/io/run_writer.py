@@ -529,8 +529,7 @@ class RunWriter(_PendingRows):
         self._opened = time.monotonic()
 
     def _wall_total(self):
-        opened = getattr(self, "_opened", None)  # None: closed before its clock started
-        return getattr(self, "_wall_before", 0.0) + (0.0 if opened is None else time.monotonic() - opened)
+        return self._wall_before + (time.monotonic() - self._opened)
 
     def flush(self):
         # wall time of every segment of the run, a killed one up to its last flush (a frame or a
