@@ -1,7 +1,9 @@
 """A scene of 10^5-10^6 rods on one node: peak memory, the tip tree's stages and whole steps.
 
 Usage: selfas-graph bench million [--rods 250000 500000 1000000] [--steps 4] [--ranks 16 64 256]
-                                  [--latency 2e-6] [--bandwidth 1e10] [--set KEY=VALUE ...]
+                                  [--latency 2e-6] [--bandwidth 1e10] [--energy-check RODS]
+                                  [--set KEY=VALUE ...]
+       selfas-graph bench million --checkpoint RUN.checkpoint.h5 [...]
 
 The Fig. 2 scene scaled as in selfas_graph/bench/step.py (``scene``: the box grows in x and y, the
 density stays the paper's), every term every step (``integrator.slow_every=1``) and the tip-tip
@@ -9,11 +11,16 @@ tree. For each size, in one process (sizes in increasing order, so that the peak
 ``ru_maxrss`` after a size is that size's): the seconds to place the rods and build the simulation,
 the tree's stages once on the starting positions (``plan_tip_tree``: keys, sort and cells, which
 every MPI rank repeats; ``fill_cells``: the moments, which the ranks share; one evaluation, shared),
-then ``--steps`` steps timed one by one (the first three are the RK4 start, four evaluations each;
+the tip-tip energy of a frame by the direct sum (estimated from 2000 rows, or whole below
+``--energy-check`` rods) and by the tree (the energy of every frame from
+``forces.tip_magnetic.energy_tree_above`` rods on), then ``--steps`` steps timed one by one (the first three are the RK4 start, four evaluations each;
 AB4 steps from the fourth) with the seconds of each force term (``Simulation(timing=True)``) and the
 rest of the step: integration, constraint, contacts and events, neighbour lists, which every rank
 repeats (docs/performance.md 'Beyond one node'). Wall clock; run it niced on a quiet machine with
 ``NUMBA_NUM_THREADS=1`` for the one-thread figures.
+
+``--checkpoint`` compares instead, at the states runs left, the tip-tip energy by the tree with the
+direct sum, against the run's own energy balance.
 """
 
 import argparse
@@ -63,29 +70,61 @@ def tree_stages(sim):
     return {"plan": s[0], "fill": s[1], "finish": s[2], "evaluate": s[3], "cells": int(tree.start.shape[0])}
 
 
-def tip_energy_seconds(sim, rows=2000):
-    """Seconds of the tip-tip energy (``kernels/tips.py::tip_tip_energy``, a direct sum over all pairs),
-    estimated from ``rows`` of its rows: the energy reference and every frame's energy check pay it."""
+def tip_energy(sim, rows=2000, full_below=0):
+    """The tip-tip energy of the starting positions, as the energy reference and every frame pay it:
+    ``direct_s``, seconds of the direct sum (``kernels/tips.py::tip_tip_energy``) estimated from ``rows``
+    of its rows, or timed whole below ``full_below`` rods; ``tree_s``, seconds of the tree's
+    (``kernels/tree.py::tip_tree_energy``, build included); ``difference``, tree less direct in units
+    of the sum of |row| of the direct sum (where it ran whole, else NaN)."""
     x, y, z = (np.ascontiguousarray(sim.state.position[:, d]) for d in range(3))
     n = x.shape[0]
-    rows = min(rows, n)
+    q, rstar, kappa = sim.force_field.tip_charge, sim.params.rods.rstar, sim.params.rods.tip_stiffness
+    tm = sim.params.forces.tip_magnetic
     e = np.empty(n)
+    full = sim.state.n_rods < full_below
+    rows = n if full else min(rows, n)
     t0 = time.perf_counter()
-    tip_tip_energy(
-        x, y, z, sim.force_field.tip_charge, sim.params.rods.rstar, sim.params.rods.tip_stiffness, 0, rows, e
-    )
-    return 0.5 * (time.perf_counter() - t0) * n / rows  # row k sums over the n - k later tips
+    tip_tip_energy(x, y, z, q, rstar, kappa, 0, rows, e)
+    direct_s = (time.perf_counter() - t0) * (1.0 if full else 0.5 * n / rows)  # row k sums the n - k later tips
+    t0 = time.perf_counter()
+    tree = ktree.build_tip_tree(x, y, z, q, order=tm.order)
+    f = ktree.tip_tree_energy(tree, rstar, kappa, tm.opening_angle, np.empty(n))
+    tree_s = time.perf_counter() - t0
+    difference = (f.sum() - e.sum()) / np.abs(e).sum() if full else math.nan
+    return {"direct_s": direct_s, "tree_s": tree_s, "difference": float(difference), "energy": float(f.sum())}
 
 
-def measure(path, n, steps, extra):
+def energy_at_checkpoint(path):
+    """The tip-tip energy of a run's checkpoint by the direct sum and by the tree (the term's own
+    ``energy``, the threshold ``energy_tree_above`` set either way): both values and seconds (best of
+    3), and the run's energy balance and its scale there (``Simulation.energy_scale``), against which
+    the difference counts."""
+    from .profile import load_state
+
+    out = {}
+    for how, above in (("direct", 2**62), ("tree", 1)):
+        args = argparse.Namespace(checkpoint=path, extra=[f"forces.tip_magnetic.energy_tree_above={above}"])
+        sim, origin = load_state(args)
+        term = next(t for t in sim.force_field.terms if t.name == "tip_magnetic")
+        seconds = []
+        for _ in range(4):  # the first call compiles
+            t0 = time.perf_counter()
+            e = term.energy(sim.force_field.context)["tip_magnetic"]
+            seconds.append(time.perf_counter() - t0)
+        out[how] = {"energy": e, "seconds": min(seconds[1:])}
+    obs = sim.observables()
+    out.update(origin=origin, rods=sim.state.n_rods, balance=obs["energy_balance"], scale=sim.energy_scale(obs))
+    return out
+
+
+def measure(path, n, steps, extra, full_below=0):
     over = [*extra, "integrator.slow_every=1", "forces.tip_magnetic.method=tree"]
     t0 = time.perf_counter()
     sim = Simulation.from_scenario(scene(path, n, over), timing=True, comm=world)
     row = {"rods": n, "build_s": time.perf_counter() - t0, "mb_after_build": peak_mb()}
     row["tree"] = tree_stages(sim)
-    row["energy_s"] = tip_energy_seconds(sim)
-    # the energy reference of the balance is the tip-tip energy, a direct O(N^2) sum (estimated above):
-    # taken as 0 here, so that the first step is a step
+    row["energy"] = tip_energy(sim, full_below=full_below)
+    # the energy reference of the balance (timed above) taken as 0 here, so that the first step is a step
     sim.observe.energy0 = 0.0
     ff = sim.force_field
     row["steps"] = []
@@ -129,8 +168,34 @@ def main(argv=None):
     ap.add_argument("--ranks", type=int, nargs="+", default=[16, 64, 256], help="ranks of the modelled step")
     ap.add_argument("--latency", type=float, default=2e-6, help="seconds per message of the modelled network")
     ap.add_argument("--bandwidth", type=float, default=1e10, help="bytes per second of the modelled network")
+    ap.add_argument(
+        "--energy-check",
+        type=int,
+        default=0,
+        metavar="RODS",
+        help="below this many rods also sum the direct energy whole and print the tree energy's difference from it",
+    )
+    ap.add_argument(
+        "--checkpoint",
+        nargs="+",
+        default=[],
+        help="only compare the tip-tip energy by the tree with the direct sum at these runs' checkpoints",
+    )
     args = ap.parse_args(argv)
     say = print if world.rank == 0 else (lambda *a, **k: None)
+    if args.checkpoint:
+        say(machine_line())
+        rows = [energy_at_checkpoint(path) for path in args.checkpoint]
+        for r in rows:
+            d, t = r["direct"], r["tree"]
+            diff = t["energy"] - d["energy"]
+            say(
+                f"{r['origin']}: {r['rods']} rods; tip-tip energy direct {d['energy']:.6f} ({1e3 * d['seconds']:.1f} ms), "
+                f"tree {t['energy']:.6f} ({1e3 * t['seconds']:.1f} ms); tree less direct {diff:.3e}: "
+                f"{abs(diff) / abs(d['energy']):.1e} of the tip-tip energy, {abs(diff) / r['scale']:.1e} of the energy "
+                f"scale {r['scale']:.4e}, where the run's balance is {abs(r['balance']) / r['scale']:.1e} of it"
+            )
+        return rows
     import numba
 
     say(machine_line())
@@ -138,14 +203,17 @@ def main(argv=None):
     measure(args.scenario, 26000, 4, args.extra)  # compile every kernel (the threaded row kernels from 50 000 rows on)
     rows = []
     for n in sorted(args.rods):
-        r = measure(args.scenario, n, args.steps, args.extra)
+        r = measure(args.scenario, n, args.steps, args.extra, args.energy_check)
         rows.append(r)
-        tr = r["tree"]
+        tr, en = r["tree"], r["energy"]
+        how = "whole" if math.isfinite(en["difference"]) else "from 2000 rows"
+        check = f", tree less direct {en['difference']:.1e} of the sum of |row|" if how == "whole" else ""
         say(
             f"{n} rods: build {r['build_s']:.1f} s, peak {r['mb_after_build']:.0f} MB after build, "
             f"{r['peak_mb']:.0f} MB after the steps; tree ({tr['cells']} cells): plan {tr['plan']:.3f} s, "
             f"moments {tr['fill']:.3f} s, finish {tr['finish']:.3f} s, one evaluation {tr['evaluate']:.3f} s; "
-            f"tip-tip energy (direct sum, from 2000 rows) {r['energy_s']:.1f} s",
+            f"tip-tip energy: direct sum ({how}) {en['direct_s']:.1f} s, tree (build included) "
+            f"{en['tree_s']:.2f} s{check}",
             flush=True,
         )
         for k, s in enumerate(r["steps"]):

@@ -107,6 +107,7 @@ import numpy as np
 
 from ._jit import set_parallel_chunksize
 from .treebuild import N_MOMENT, argsort_keys, build_cells, cell_moments, morton_keys, split_hi_lo, target_groups
+from .treeenergy import tree_energy_groups
 from .treewalk import evaluate_groups
 
 # Defaults from selfas_graph/bench/tree.py (docs/performance.md): the fastest setting
@@ -432,3 +433,47 @@ def tip_tip_tree(
     """
     tree = build_tip_tree(x, y, z, charge, leaf_size, group_size, order)
     return evaluate_tip_tree(tree, rstar, kappa, theta, out, lo, hi, precision)
+
+
+def tip_tree_energy(tree, rstar, kappa, theta, out, groups=None):
+    """Tip-tip potential energy by rows (docs/model.md 'Term 1'), by the tree: ``out[k]`` is half the
+    energy of tip k with the tips of all other rods (:mod:`.treeenergy`), so that ``out.sum()`` is
+    the energy, up to the tree's truncation error (exact at ``theta = 0``).
+
+    Parameters
+    ----------
+    tree : TipTree
+        From :func:`build_tip_tree` on the positions of the frame.
+    rstar, kappa, theta : float
+        As for :func:`evaluate_tip_tree`.
+    out : (n_tips,) float64, C-contiguous
+        The rows of the evaluated groups' tips are overwritten (original tip numbers); others untouched.
+    groups : (g0, g1), optional
+        Only the tips of groups ``g0..g1-1`` (:func:`group_bounds`); default all.
+
+    Raises
+    ------
+    ValueError
+        On theta out of [0, 1), a bad ``out`` or groups out of range.
+    """
+    n = tree.x.shape[0]
+    if not 0.0 <= theta < 1.0:
+        raise ValueError(f"theta must be in [0, 1), got {theta}")
+    if out.shape != (n,) or out.dtype != np.float64 or not out.flags.c_contiguous:
+        raise ValueError(f"out must be a C-contiguous float64 array of shape ({n},)")
+    n_groups = tree.group.shape[0]
+    g_lo, g_hi = (0, n_groups) if groups is None else (int(groups[0]), int(groups[1]))
+    if not 0 <= g_lo <= g_hi <= n_groups:
+        raise ValueError(f"need 0 <= g0 <= g1 <= {n_groups} groups, got {groups}")
+    if g_lo == g_hi:
+        return out
+    chunk = set_parallel_chunksize(1)  # groups differ in cost: one at a time (evaluate_tip_tree)
+    try:
+        tree_energy_groups(
+            tree.x, tree.y, tree.z, tree.charge, tree.rod, tree.index, tree.rank, tree.start, tree.end, tree.next,
+            tree.box, tree.centre, tree.radius, tree.moment, tree.group, float(theta), float(rstar), float(kappa),
+            g_lo, g_hi, out,
+        )  # fmt: skip
+    finally:
+        set_parallel_chunksize(chunk)
+    return out

@@ -67,7 +67,7 @@ _ZERO32 = np.float32(0.0)
 
 
 @njit
-def _append(buf, n, value):
+def append_grown(buf, n, value):
     """``buf[n] = value``, doubling the buffer when full; returns the buffer."""
     if n == buf.shape[0]:
         grown = np.empty(2 * n, buf.dtype)
@@ -299,6 +299,23 @@ def _near_on_target_f32(i, near32, charge32, rod32, fx, fy, fz, lx, ly, lz, fq, 
     return bx, by, bz
 
 
+@inline
+def accepts(centre, radius, c, xl, yl, zl, xh, yh, zh, theta2, rstar):
+    """The acceptance test of the walk (the tree's docstring): whether cell ``c`` acts on a group of
+    box ``xl, yl, zl``-``xh, yh, zh`` through its moments (its radius below the opening angle times the
+    distance d of its centre from the box, ``theta2`` the angle squared, and no tip of it within r* of
+    the box), and d^2."""
+    cx = centre[c, 0]
+    cy = centre[c, 1]
+    cz = centre[c, 2]
+    wx = max(xl - cx, 0.0, cx - xh)
+    wy = max(yl - cy, 0.0, cy - yh)
+    wz = max(zl - cz, 0.0, cz - zh)
+    d2 = wx * wx + wy * wy + wz * wz
+    b = radius[c]
+    return d2 * theta2 > b * b and d2 > (b + rstar) * (b + rstar), d2
+
+
 @inline_sum
 def _walk(start, end, nxt, centre, radius, moment, order, mixed, theta2, rstar, xl, yl, zl, xh, yh, zh, tx, ty, tz):
     """Stage 2, the interaction lists and the far field: one walk of the tree for a group (its box,
@@ -337,12 +354,8 @@ def _walk(start, end, nxt, centre, radius, moment, order, mixed, theta2, rstar, 
         cx = centre[c, 0]
         cy = centre[c, 1]
         cz = centre[c, 2]
-        wx = max(xl - cx, 0.0, cx - xh)
-        wy = max(yl - cy, 0.0, cy - yh)
-        wz = max(zl - cz, 0.0, cz - zh)
-        d2 = wx * wx + wy * wy + wz * wz
-        b = radius[c]
-        if d2 * theta2 > b * b and d2 > (b + rstar) * (b + rstar):
+        take, d2 = accepts(centre, radius, c, xl, yl, zl, xh, yh, zh, theta2, rstar)
+        if take:
             mc = moment[c]
             # d2 > 0 here: dist is the cell centre's distance from the group's box, which
             # every target is at least as far from
@@ -388,8 +401,8 @@ def _walk(start, end, nxt, centre, radius, moment, order, mixed, theta2, rstar, 
             if n_near > 0 and near_end[n_near - 1] == start[c]:
                 near_end[n_near - 1] = end[c]
             else:
-                near_start = _append(near_start, n_near, start[c])
-                near_end = _append(near_end, n_near, end[c])
+                near_start = append_grown(near_start, n_near, start[c])
+                near_end = append_grown(near_end, n_near, end[c])
                 n_near += 1
             n_near_tips += end[c] - start[c]
             c += 1

@@ -75,9 +75,11 @@ def test_ranks_give_the_serial_run_bit_for_bit(scene, ranks):
 
 
 def test_tree_on_two_ranks_gives_the_serial_tree_run_bit_for_bit(scene):
-    """With the tip-tip force by the multipole tree, 2 ranks equal 1 rank bit for bit: every
-    rank builds the same tree and a target's force does not depend on the rows asked for."""
-    tree = ["--set", "forces.tip_magnetic.method=tree", "--t-end", "0.3"]
+    """With the tip-tip force and the energy by the multipole tree, 2 ranks equal 1 rank bit for bit:
+    every rank builds the same tree and a target's force and energy row do not depend on the rows
+    asked for."""
+    tree = ["--set", "forces.tip_magnetic.method=tree", "--set", "forces.tip_magnetic.energy_tree_above=1"]
+    tree += ["--t-end", "0.3"]
     serial = _launch(0, ["scene.toml", "-o", "tree1.h5", *tree], scene)
     assert serial.returncode == 0, serial.stderr
     res = _launch(2, ["scene.toml", "-o", "tree2.h5", *tree], scene)

@@ -59,6 +59,8 @@ class TipMagneticForce(Term):
         self.theta = tm.opening_angle
         self.order = tm.order
         self.precision = tm.precision
+        #: the energy of a frame by the tree (docs/model.md 'Term 1'), else by the direct sum
+        self.tree_energy = state.n_rods >= tm.energy_tree_above
         self._gathered = False
 
     def compute(self, ctx, out):
@@ -114,8 +116,16 @@ class TipMagneticForce(Term):
 
     def energy(self, ctx):
         x, y, z = ctx.soa()
-        lo, hi = ctx.blocks.tips
         e = np.empty(ctx.n_tips)
+        if self.tree_energy and np.isfinite(ctx.position).all():
+            # by the tree (kernels/treeenergy.py): its ranks split the target groups as for the force
+            tree = self._build_tree(ctx, x, y, z)
+            groups, tips = ktree.group_bounds(tree, ctx.blocks.size)
+            r = ctx.blocks.rank
+            ktree.tip_tree_energy(tree, self.rstar, self.kappa, self.theta, e, groups=groups[r : r + 2])
+            ctx.blocks.gather_runs(e, tree.index, tips)
+            return {"tip_magnetic": float(e.sum())}
+        lo, hi = ctx.blocks.tips
         kt.tip_tip_energy(x, y, z, ctx.tip_charge, self.rstar, self.kappa, lo, hi, e)
         ctx.blocks.gather_rows([e], rows_per_rod=2)
         return {"tip_magnetic": float(e.sum())}
