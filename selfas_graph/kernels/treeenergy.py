@@ -15,7 +15,7 @@ Row k holds ``E_k = (1/2) sum_l U(r_kl)`` over the tips l of other rods, so that
 the energy with each pair counted once; one value per row keeps the total independent of how the
 groups are split over threads or ranks. With ``theta = 0`` no cell is accepted and every row is the
 exact sum; otherwise the rows carry the tree's truncation error (measured in docs/performance.md
-'Beyond one node: 10^6 rods and many ranks').
+'The energy of a frame by the tree').
 """
 
 import math
