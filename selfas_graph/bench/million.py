@@ -55,7 +55,7 @@ def tree_stages(sim):
     x, y, z = (np.ascontiguousarray(sim.state.position[:, d]) for d in range(3))
     q = sim.force_field.tip_charge
     t = [time.perf_counter()]
-    tree = ktree.plan_tip_tree(x, y, z, q, order=tm.order)
+    tree = ktree.plan_tip_tree(x, y, z, q, group_size=tm.group_size, order=tm.order)
     t.append(time.perf_counter())
     ktree.fill_cells(tree, 0, tree.start.shape[0])
     t.append(time.perf_counter())
@@ -87,7 +87,7 @@ def tip_energy(sim, rows=2000, full_below=0):
     tip_tip_energy(x, y, z, q, rstar, kappa, 0, rows, e)
     direct_s = (time.perf_counter() - t0) * (1.0 if full else 0.5 * n / rows)  # row k sums the n - k later tips
     t0 = time.perf_counter()
-    tree = ktree.build_tip_tree(x, y, z, q, order=tm.order)
+    tree = ktree.build_tip_tree(x, y, z, q, group_size=tm.group_size, order=tm.order)
     f = ktree.tip_tree_energy(tree, rstar, kappa, tm.opening_angle, np.empty(n))
     tree_s = time.perf_counter() - t0
     difference = (f.sum() - e.sum()) / np.abs(e).sum() if full else math.nan

@@ -61,7 +61,19 @@ def tree_error(sim, rng):
     direct = np.empty((rows.shape[0], 3))
     tip_tip_direct_rows(x, y, z, q, rstar, kappa, rows.astype(np.int64), direct)
     tree = np.empty((n, 3))
-    tip_tip_tree(x, y, z, q, rstar, kappa, tm.opening_angle, tree, precision=tm.precision)
+    tip_tip_tree(
+        x,
+        y,
+        z,
+        q,
+        rstar,
+        kappa,
+        tm.opening_angle,
+        tree,
+        group_size=tm.group_size,
+        order=tm.order,
+        precision=tm.precision,
+    )
     err = np.linalg.norm(tree[rows] - direct, axis=1) / np.linalg.norm(direct, axis=1)
     return float(np.median(err)), float(np.percentile(err, 99))
 

@@ -24,7 +24,8 @@ the bare law: what the core changes), forces.current_lorentz.quadrature_points,
 integrator.bond_force (exact/paper), integrator.position_projection, integrator.slow_every
 (multiple time stepping, against evaluating every force every step), integrator.fast_range and
 integrator.current_every (with ``--set integrator.slow_every=K``; also against no splitting), the tree's
-forces.tip_magnetic.opening_angle and forces.tip_magnetic.order (against the direct sum; only
+forces.tip_magnetic.opening_angle, forces.tip_magnetic.group_size and forces.tip_magnetic.order (against
+the direct sum; only
 where the scene takes the tree, e.g. ``--set forces.tip_magnetic.method=tree``) and the
 ``precision`` of forces.tip_magnetic, forces.yukawa, forces.current_field and
 forces.current_lorentz (mixed against float64). Prints a markdown table and writes JSON and a
@@ -65,7 +66,8 @@ KNOBS = {
     # against the exact direct sum
     "forces.tip_magnetic.method": (["direct", "tree"], {"forces.tip_magnetic.method": "direct"}),
     # the tree's knobs, where the scene takes the tree: each against the exact direct sum
-    "forces.tip_magnetic.opening_angle": ([0.3, 0.4, 0.475, 0.55], {"forces.tip_magnetic.method": "direct"}),
+    "forces.tip_magnetic.opening_angle": ([0.3, 0.4, 0.475, 0.55, 0.65], {"forces.tip_magnetic.method": "direct"}),
+    "forces.tip_magnetic.group_size": ([128, 512, 1024, 4096], {"forces.tip_magnetic.method": "direct"}),
     "forces.tip_magnetic.order": ([2, 3, 4], {"forces.tip_magnetic.method": "direct"}),
     # float32 arithmetic against float64, with everything else as the scene has it
     "forces.tip_magnetic.precision": (["float64", "mixed"], {"forces.tip_magnetic.precision": "float64"}),
@@ -101,7 +103,7 @@ def _overrides(values):
 
 
 #: knobs of the tip-tip tree: they change nothing where the scene sums the tip pairs directly
-TREE_KNOBS = ("forces.tip_magnetic.opening_angle", "forces.tip_magnetic.order")
+TREE_KNOBS = ("forces.tip_magnetic.opening_angle", "forces.tip_magnetic.group_size", "forces.tip_magnetic.order")
 
 
 def _applicable(scenario, knob):

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..provenance import older_version
+from ..provenance import older_version, version_key
 from .main import CliError
 
 DEFAULT_STUDIES = "docs/studies.toml"
@@ -164,9 +164,10 @@ def run(args):
         code = 0
         picked = _pick(studies, args.names)
         since = studies.trajectories_since
-        if older_version(__version__, since):
+        newest = max((studies.since(s.name) for s in picked), key=lambda v: version_key(v) or (), default=since)
+        if older_version(__version__, newest):
             raise CliError(
-                f"this installation reports version {__version__}, older than trajectories_since = {since} in "
+                f"this installation reports version {__version__}, older than trajectories_since = {newest} in "
                 f"{args.studies}: its runs would be taken for older ones; install the package again (pip install -e .)"
             )
         old = [
@@ -174,7 +175,7 @@ def run(args):
             for s in picked
             if s.kind == "percolation" and not args.force
             for out in [Path(args.runs) / s.name / PERCOLATION_JSON]
-            if out.exists() and older_version(made_by := _percolation_version(out), since)
+            if out.exists() and older_version(made_by := _percolation_version(out), studies.since(s.name))
         ]
         if old:  # refused before anything runs, as a seed file of an older version is
             raise CliError(

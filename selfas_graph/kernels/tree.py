@@ -71,13 +71,14 @@ loop over them, vectorised across cells, in float32 (:func:`.multipole.make_fiel
 float32 variant), like the near pairs. Both float32 sums are added
 in float64. The float64 path is unchanged by it, bit for bit.
 
-The defaults (hexadecapoles, leaves of at most 64 tips, groups of at most 128,
-theta 0.475) reach the median error of octupoles at theta 0.4 (5e-4 to 8e-4 in a
-uniform rod gas and the Fig. 2 slab of 6000 to 10^5 rods) 1.0 to 1.25 times
-faster on AVX2 (docs/performance.md, selfas_graph/bench/tree.py). On one AVX2 core of a
-Zen 4 (mixed) a near pair costs about 0.67 ns, an accepted cell about 4 ns per
-target; at the defaults and 24 000 rods of the Fig. 2 slab a target sees about
-1650 near tips and 160 cells, and the near pairs are about 55 % of the evaluation,
+The defaults (hexadecapoles, leaves of at most 64 tips, groups of at most 1024,
+theta 0.55; ``GROUP_SIZE`` and ``THETA`` below) err as little as groups of 128 at
+theta 0.475 (median 2e-4 to 9.6e-4 in a uniform rod gas and the Fig. 2 slab of 3000
+to 10^5 rods) and evaluate 1.0 to 2.2 times faster (docs/performance.md 'Tip-tip
+force by a multipole tree', selfas_graph/bench/tree.py). On one AVX2 core of a
+Zen 4 (mixed), at groups of 128 and theta 0.475, a near pair cost about 0.67 ns and
+an accepted cell about 4 ns per target; at 24 000 rods of the Fig. 2 slab a target
+saw about 1650 near tips and 160 cells, the near pairs about 55 % of the evaluation,
 the far field 35 %.
 
 Limits: coordinates must be finite (the front end raises on NaN or inf);
@@ -110,15 +111,17 @@ from .treebuild import N_MOMENT, argsort_keys, build_cells, cell_moments, morton
 from .treeenergy import tree_energy_groups
 from .treewalk import evaluate_groups
 
-# Defaults from selfas_graph/bench/tree.py (docs/performance.md): the fastest setting
-# with median relative error <= 1e-3 in a uniform rod gas at 1e4 and 1e5 rods,
-# the hardest of the measured configurations (in aggregates the contact forces
-# dominate and the relative error is 30 times smaller). Octupoles reach that
-# error 1.2 (1e4 rods) to 2 (1e5) times faster than quadrupoles.
+# Defaults from selfas_graph/bench/tree.py (docs/performance.md 'Tip-tip force by a multipole
+# tree'): hexadecapoles, and groups of up to 1024 tips at opening angle 0.55, 1.0 to 2.2 times faster
+# than groups of 128 at 0.475 with a median relative error as small or smaller (2e-4 to 9.6e-4 in a
+# uniform rod gas and the Fig. 2 slab of 3000 to 10^5 rods; in aggregates the contact
+# forces dominate and the relative error is 30 times smaller). A cell is accepted for a whole group
+# by its distance from the group's box, so the tips of a larger group sit farther from the cells
+# they take as multipoles: a larger opening angle for the same error, and one walk for more tips.
 LEAF_SIZE = 64
-GROUP_SIZE = 128
+GROUP_SIZE = 1024
 ORDER = 4
-THETA = 0.475
+THETA = 0.55
 #: precisions of the evaluation (:func:`evaluate_tip_tree`)
 PRECISIONS = ("float64", "mixed")
 
@@ -313,9 +316,10 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None, precision="
     theta : float
         Opening angle in [0, 1): a cell is used as a multipole when its radius is
         below ``theta`` times its distance to the target group; 0 gives the direct
-        sum. ``THETA`` (0.475) with the default knobs (hexadecapoles) gives a median
-        relative error of 5e-4 to 8e-4 in a uniform rod gas and in the Fig. 2 slab of
-        6000 to 1e5 rods, 30 to 100 times less in aggregates (docs/performance.md).
+        sum. ``THETA`` (0.55) with the default knobs (hexadecapoles, groups of up to
+        1024 tips) gives a median relative error of 2e-4 to 9.6e-4 in a uniform rod gas
+        and in the Fig. 2 slab of 3000 to 1e5 rods, 30 to 100 times less in aggregates
+        (docs/performance.md).
     out : (n_tips, 3) float64, C-contiguous
         Rows ``lo:hi`` (original tip numbers) are overwritten; others untouched.
     lo, hi : int

@@ -11,7 +11,7 @@ statistics of :mod:`.stats` and the verdicts of :mod:`.verdicts`). From Python::
     summary = summarise_study(studies.study("fig2"), runs="runs")
 """
 
-from .spec import Claim, Studies, StudiesError, Study, load_studies
+from .spec import Claim, Studies, StudiesError, Study, later_version, load_studies
 from .summary import STUDY_MEASURES, summarise_study, write_json_atomic
 
 __all__ = [
@@ -30,7 +30,8 @@ __all__ = [
 
 def study_ensemble(study, runs, force=False, older_than=""):
     """The :class:`selfas_graph.ensemble.Ensemble` of ``study``: its seeds in ``runs/NAME``; a seed
-    file made by a version older than ``older_than`` (``Studies.trajectories_since``) is not reused."""
+    file made by a version older than ``older_than`` (``Studies.trajectories_since``), or than the study's
+    own ``trajectories_since`` where that is later, is not reused."""
     from pathlib import Path
 
     from ..ensemble import Ensemble
@@ -43,7 +44,7 @@ def study_ensemble(study, runs, force=False, older_than=""):
         t_end=study.t_end,
         first_seed=study.first_seed,
         force=force,
-        older_than=older_than,
+        older_than=later_version(study.trajectories_since, older_than),
     )
 
 

@@ -122,17 +122,25 @@ def percolation_table(summary) -> str:
 def status_text(studies, summaries) -> str:
     """Which studies are still made of runs older than the trajectories of the code now."""
     since = studies.trajectories_since
-    old = {n: older_runs(s, since) for n, s in summaries.items()}
+    old = {n: older_runs(s, studies.since(n)) for n, s in summaries.items()}
     old = {n: v for n, v in old.items() if v}
+    later = sorted({studies.since(n) for n in summaries} - {since})
     if not old:
         return "Every summarised study is made of runs of the trajectories the code follows now" + (
-            f" (version {since} or later)." if since else "."
+            f" (version {since} or later"
+            + (f"; {', '.join(later)} or later where its study says so)." if later else ").")
+            if since
+            else "."
         )
     return (
-        f"**Runs to be made again.** Trajectories changed in version {since} (CHANGELOG); these studies are "
-        f"still made of runs of older versions, and their runs lines and every claim, convergence and "
-        f"sensitivity row that uses them say so: "
-        + ", ".join(f"{n} ({', '.join(v)})" for n, v in old.items())
+        f"**Runs to be made again.** Trajectories changed in version {since}"
+        + (f" ({', '.join(later)} for some studies, docs/studies.toml)" if later else "")
+        + " (CHANGELOG); these studies are still made of runs of older versions, and their runs lines and "
+        "every claim, convergence and sensitivity row that uses them say so: "
+        + ", ".join(
+            f"{n} ({', '.join(v)}" + ("" if studies.since(n) == since else f"; since {studies.since(n)}") + ")"
+            for n, v in old.items()
+        )
         + ". `selfas-graph study run NAME --jobs 2 --force` (it replaces the older run files), then "
         "`study summarise NAME` and `study page`, makes each again."
     )
@@ -205,12 +213,12 @@ def page_blocks(studies, folder) -> dict:
                 f"{len(s['seeds'])} seeds a count to t = {fmt(s['study']['t_max'])}; version {s['version']}, commit "
                 f"{(s['commit'] or 'unknown')[:10]}; {s['cpu_model'] or 'unknown CPU'}, kernels for {s['numba_cpu']}, "
                 f"{s['workers']} worker(s) of one numba thread; {fmt((s['wall_seconds'] or 0) / 60, 2)} min in all."
-                + _older_text(s, studies.trajectories_since)
+                + _older_text(s, studies.since(name))
             )
             blocks[f"figures {name}"] = ""
             continue
         blocks[f"table {name}"] = study_table(s)
-        blocks[f"runs {name}"] = provenance_text(s, studies.trajectories_since)
+        blocks[f"runs {name}"] = provenance_text(s, studies.since(name))
         blocks[f"figures {name}"] = (
             f"| {study.title}: every measure over time | short-circuit episodes | seed {s['seeds'][0]['seed']} at "
             f"t = {fmt(s['seeds'][0]['t_end'])} |\n|---|---|---|\n"

@@ -21,7 +21,10 @@ the direction the paper's claim predicts). ``selfas-graph study run NAME`` runs 
     ...
 
 A top-level ``trajectories_since = "0.4.0"`` names the first version whose trajectories the code
-follows now; the page marks a study still made of runs of an older version.
+follows now; the page marks a study still made of runs of an older version. A study may name a later
+one of its own (``trajectories_since = "0.4.1"`` in its table), where a change moved only some
+scenes' trajectories (the tip-tip tree's defaults move only scenes of more than
+``forces.tip_magnetic.tree_above`` rods).
 """
 
 from __future__ import annotations
@@ -33,7 +36,14 @@ from pathlib import Path
 
 from ..provenance import version_key
 
-__all__ = ["Claim", "Study", "StudiesError", "Studies", "Sweep", "load_studies"]
+__all__ = ["Claim", "Study", "StudiesError", "Studies", "Sweep", "later_version", "load_studies"]
+
+
+def later_version(a, b) -> str:
+    """The later of two versions ("" is earlier than any)."""
+    if not a or not b:
+        return a or b
+    return a if version_key(a) > version_key(b) else b
 
 
 class StudiesError(ValueError):
@@ -63,6 +73,9 @@ class Study:
     kind: str = "ensemble"
     counts: tuple[int, ...] = ()
     fields: str = "on"
+    #: the study's own ``trajectories_since`` ("" for none): a later first version than the file's
+    #: for its runs (``Studies.since`` takes the later of the two)
+    trajectories_since: str = ""
 
     @property
     def times(self) -> list[float]:
@@ -139,6 +152,12 @@ class Studies:
         times |= {c.time for c in self.claims if c.study == name or c.null == name}
         return sorted(times)
 
+    def since(self, name) -> str:
+        """The first version whose runs study ``name`` takes: the later of its own ``trajectories_since``
+        and the file's."""
+        s = self.studies.get(name)
+        return later_version(s.trajectories_since if s is not None else "", self.trajectories_since)
+
     def study(self, name) -> Study:
         if name not in self.studies:
             raise StudiesError(f"{self.path}: no study named {name!r}; the studies are {', '.join(self.studies)}")
@@ -154,6 +173,7 @@ _STUDY_KEYS = {
     "t_end": (int, float),
     "every": (int, float),
     "table_times": list,
+    "trajectories_since": str,
     "section": str,
     "null_of": str,
     "doc": str,
@@ -218,6 +238,12 @@ def load_studies(path) -> Studies:
         if not (t_end > 0 and every > 0 and t["seeds"] >= 1):
             raise StudiesError(f"{where}: t_end, every and seeds must be positive")
         table_times = tuple(float(x) for x in t.get("table_times", [t_end]))
+        own = t.get("trajectories_since", "")
+        if own and (version_key(own) is None or (since and version_key(own) < version_key(since))):
+            raise StudiesError(
+                f'{where}.trajectories_since: a version such as "0.4.1", not earlier than the file\'s '
+                f"trajectories_since ({since or 'none'}), got {own!r}"
+            )
         if any(not 0 <= x <= t_end for x in table_times):
             raise StudiesError(f"{where}.table_times: every time must lie in [0, t_end = {t_end:g}]")
         studies[name] = Study(
@@ -238,6 +264,7 @@ def load_studies(path) -> Studies:
             kind=t.get("kind", "ensemble"),
             counts=tuple(int(c) for c in t.get("counts", [])),
             fields=t.get("fields", "on"),
+            trajectories_since=own,
         )
         st = studies[name]
         if st.kind not in ("ensemble", "percolation"):

@@ -41,15 +41,16 @@ def _verdict(d, expect):
     return f"not distinguished from the null model ({d:+.1f} SE)".replace("-", "−")
 
 
-def _older_note(summaries, names, since) -> str:
+def _older_note(summaries, names, studies) -> str:
     """ "; made before the trajectory change of 0.4.0 (NAME: 0.3.0): to be run again" for the studies
-    among ``names`` made of runs older than ``since``, or ""."""
-    old = {n: older_runs(summaries.get(n), since) for n in dict.fromkeys(names) if n}
+    among ``names`` made of runs older than their ``trajectories_since`` (``studies.since``), or ""."""
+    old = {n: older_runs(summaries.get(n), studies.since(n)) for n in dict.fromkeys(names) if n}
     old = {n: v for n, v in old.items() if v}
     if not old:
         return ""
+    since = sorted({studies.since(n) for n in old})
     which = ", ".join(f"{n}: {', '.join(v)}" for n, v in old.items())
-    return f"; made before the trajectory change of {since} ({which}): to be run again"
+    return f"; made before the trajectory change of {' and '.join(since)} ({which}): to be run again"
 
 
 def claim_rows(studies, summaries) -> str:
@@ -95,7 +96,7 @@ def claim_rows(studies, summaries) -> str:
             null_text = studies.study(c.null).title
             null_value += "" if nm == c.measure else f" ({measure_label(nm)})"
             verdict = _verdict(d, c.expect)
-        verdict += _older_note(summaries, (c.study, c.null), studies.trajectories_since)
+        verdict += _older_note(summaries, (c.study, c.null), studies)
         rows.append(
             f"| {c.claim} | {c.paper} | {measure_label(c.measure)}, {where} | {value} | {null_text} | "
             f"{null_value} | {verdict} |"
@@ -155,7 +156,7 @@ def convergence_rows(studies, summaries) -> str:
             verdict = "marginal (a difference of 2-3 SE)"
         else:
             verdict = "safe for these statistics (every difference within 2 SE)"
-        verdict += _older_note(summaries, (st.name, st.null_of), studies.trajectories_since)
+        verdict += _older_note(summaries, (st.name, st.null_of), studies)
         for k, (m, b, a, d) in enumerate(cells):
             name = st.title if k == 0 else ""
             text = "n/a" if not math.isfinite(d) else f"{d:+.1f}".replace("-", "−")
@@ -179,7 +180,7 @@ def sweep_rows(studies, summaries, name) -> str:
             )
             continue
         cells = [measure_text(s, m, sw.time) for m in CLAIM_MEASURES]
-        old = older_runs(s, studies.trajectories_since)
+        old = older_runs(s, studies.since(study))
         seeds = f"{s['n_seeds']}" + (f" (runs of {', '.join(old)}: to be run again)" if old else "")
         rows.append(f"| {value:g}{mark} | {seeds} | " + " | ".join(cells) + " |")
     if sum(summaries.get(study) is not None for _, study in studies.sweep_points(name)) >= 2:

@@ -38,6 +38,11 @@ def test_the_shipped_studies_file_loads_and_every_claim_names_its_study():
         ("[stduy.a]\n", "unknown key(s) ['stduy']"),
         ("trajectories_since = 'new'\n", "trajectories_since"),
         ("trajectories_since = 4\n", "trajectories_since"),
+        (
+            "trajectories_since = '0.4.0'\n[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\ntrajectories_since = '0.3.0'\n",
+            "study.a.trajectories_since",
+        ),
+        ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\ntrajectories_since = 'soon'\n", "not earlier than"),
         ("[study.a\n", "not a valid TOML file"),
     ],
 )
@@ -84,6 +89,45 @@ def test_studies_of_runs_older_than_the_trajectories_are_marked_where_they_are_u
     claims = blocks["claims"].splitlines()[2:]
     assert claims and all("fig2: 1.0.0" in r and "to be run again" in r for r in claims)
     assert "to be run again" in blocks["convergence"] and "to be run again" in blocks["sensitivity fig2_rods"]
+
+
+def test_a_study_of_its_own_later_trajectories_is_marked_alone(tmp_path):
+    """A study's own ``trajectories_since`` (a change that moved only its scenes) marks its runs of
+    an older version, and the claims and sweep rows that use them, while the other studies of that
+    version stay unmarked; ``Studies.since`` falls back on the file's value."""
+    import dataclasses
+
+    from selfas_graph.studies.page import page_blocks
+
+    shipped = load_studies(ROOT / "docs" / "studies.toml")
+    for path in (ROOT / "docs" / "results").glob("*.json"):
+        summary = json.loads(path.read_text())
+        for entry in [summary] if summary.get("kind") == "percolation" else summary["seeds"]:
+            entry["version"] = "1.0.0"
+        (tmp_path / path.name).write_text(json.dumps(summary))
+    own = {
+        n: dataclasses.replace(s, trajectories_since="1.1" if n == "fig6" else "1.0.0")
+        for n, s in shipped.studies.items()
+    }
+    studies = dataclasses.replace(shipped, trajectories_since="1.0.0", studies=own)
+    assert studies.since("fig6") == "1.1" and studies.since("fig2") == "1.0.0" and studies.since("nope") == "1.0.0"
+    blocks = page_blocks(studies, tmp_path)
+    assert "fig6 (1.0.0; since 1.1)" in blocks["status"] and "fig2 (" not in blocks["status"]
+    assert "made before the trajectory change of version 1.1" in blocks["runs fig6"]
+    assert "to be run again" not in blocks["runs fig2"]
+    assert "to be run again" in blocks["sensitivity fig6_delta_J0"]
+    assert "to be run again" not in blocks["sensitivity fig2_rods"]
+    rows = blocks["claims"].splitlines()[2:]  # no claim uses the Fig. 6 scene
+    assert rows and not any("to be run again" in r for r in rows)
+    text = "trajectories_since = '0.4.0'\n[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\n[study.b]\nscenario = 'x'\n"
+    (tmp_path / "s.toml").write_text(text + "seeds = 2\nt_end = 1\ntrajectories_since = '0.4.1'\n")
+    loaded = load_studies(tmp_path / "s.toml")
+    assert (loaded.since("a"), loaded.since("b"), loaded.study("a").trajectories_since) == ("0.4.0", "0.4.1", "")
+    from selfas_graph.studies import study_ensemble
+
+    b = dataclasses.replace(loaded.study("b"), scenario=str(ROOT / "scenarios" / "quick.toml"))
+    assert study_ensemble(b, tmp_path, older_than="0.4.0").older_than == "0.4.1"  # its seed files: from 0.4.1 on
+    assert study_ensemble(b, tmp_path, older_than="0.5").older_than == "0.5"
 
 
 def test_plain_stat_by_hand():

@@ -364,6 +364,22 @@ def test_force_field_tree_matches_direct_within_its_error():
     np.testing.assert_allclose(f[2], f[0], rtol=1e-10, atol=1e-10)
 
 
+def test_group_size_reaches_the_tree():
+    """forces.tip_magnetic.group_size sets the tree's target groups: the force field's tip-tip channel
+    equals the kernel's with that group size bit for bit, and differs from the default's (a cell is
+    accepted for a whole group by its distance from the group's box)."""
+    ff_g, state = _field(400, "tree", group_size=16)
+    ff_d, _ = _field(400, "tree")
+    f_g, f_d = [(ff.evaluate(state.position, state.velocity), ff.out["tip_magnetic"].copy())[1] for ff in (ff_g, ff_d)]
+    term = next(t for t in ff_g.terms if t.name == "tip_magnetic")
+    x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
+    out = np.empty((len(x), 3))
+    expected = tip_tip_tree(x, y, z, ff_g.tip_charge, term.rstar, term.kappa, term.theta, out, group_size=16)
+    assert np.array_equal(f_g, expected)
+    assert not np.array_equal(f_g, f_d)
+    assert "groups of up to 16 tips" in ff_g.describe()["tip_magnetic_sum"]
+
+
 def test_force_field_tree_passes_nan_on_to_the_health_check():
     """A NaN position (a run gone wrong) gives NaN forces, as with the direct sum, instead of
     an error from the tree build: the run's health check then stops it with a diagnosis."""
@@ -381,6 +397,7 @@ def test_force_field_tree_passes_nan_on_to_the_health_check():
 # that partly cancel). The bounds are ten times (MIXED_ATOL) and four times (MIXED_MEDIAN) that.
 MIXED_ATOL = 1e-5
 MIXED_MEDIAN = 2e-6
+MIXED_P99 = 1e-5
 
 
 def mixed(x, y, z, charge, theta, **knobs):
@@ -397,8 +414,9 @@ def close_mixed(actual, expected):
 def test_mixed_matches_float64(config, theta, request):
     """The mixed tree equals the float64 tree to float32 rounding, and its error against the
     direct sum is the tree's own: measured median and p99 within 1.3 % of the float64 tree's in
-    the gas (the float32 difference, 4e-7 of a force, adds to a truncation error of 1e-4), and
-    within 1e-7 of it in the chains (median, truncation error 1e-6)."""
+    the gas (the float32 difference, 4e-7 of a force, adds to a truncation error of 1e-5 to 1e-4),
+    and within 2.3e-7 (median, truncation error 1.3e-7) and 3.6e-6 (p99, 2.8e-5) of it in the
+    chains."""
     tips = request.getfixturevalue(config)
     f64 = tree(*tips, theta)
     f32 = mixed(*tips, theta)
@@ -407,10 +425,11 @@ def test_mixed_matches_float64(config, theta, request):
     if theta > 0:
         expected = direct(*tips)
         e64, e32 = relative_error(f64, expected), relative_error(f32, expected)
-        for stat in (np.median, lambda e: np.percentile(e, 99)):
-            # in the chains the hexadecapole tree errs only 1e-6 (median), where the float32
-            # rounding of the near pairs (MIXED_MEDIAN) is as large: it may add that much
-            assert abs(stat(e32) - stat(e64)) < 0.05 * stat(e64) + MIXED_MEDIAN
+        # in the chains the hexadecapole tree errs only 1e-7 to 1e-6 (median) and 3e-5 (p99), where
+        # the float32 rounding of the near pairs is as large (MIXED_MEDIAN; its p99 is 6.9e-6 of a
+        # tip's force in the chains, MIXED_P99): it may add that much
+        for stat, rounding in ((np.median, MIXED_MEDIAN), (lambda e: np.percentile(e, 99), MIXED_P99)):
+            assert abs(stat(e32) - stat(e64)) < 0.05 * stat(e64) + rounding
 
 
 def test_mixed_far_from_the_origin(chains):
@@ -531,7 +550,10 @@ def test_force_field_precision():
     equal those with float64 to float32 rounding, and the dry run's settings say so."""
     ff_64, state = _field(400, "tree")
     ff_32, _ = _field(400, "tree", precision="mixed")
-    assert ff_32.describe()["tip_magnetic_sum"] == "tree (order 4, opening angle 0.475, mixed near field)"
+    assert (
+        ff_32.describe()["tip_magnetic_sum"]
+        == "tree (order 4, opening angle 0.55, groups of up to 1024 tips, mixed near field)"
+    )
     f = [ff.evaluate(state.position, state.velocity).copy() for ff in (ff_64, ff_32)]
     close_mixed(f[1], f[0])
 

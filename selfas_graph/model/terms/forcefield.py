@@ -348,7 +348,8 @@ class ForceField:
         for t in self.terms:
             if isinstance(t, TipMagneticForce):
                 d["tip_magnetic_sum"] = (
-                    f"tree (order {t.order}, opening angle {t.theta:g}, {t.precision} near field)"
+                    f"tree (order {t.order}, opening angle {t.theta:g}, groups of up to {t.group_size} tips, "
+                    f"{t.precision} near field)"
                     if t.tree
                     else "direct"
                 )
