@@ -72,7 +72,7 @@ class TipMagnetic:
         "order, from this many rods on, whatever method says; below, by the direct sum over all tip pairs, "
         "exact (measured on 2 "
         "threads: the direct sum 0.8 s a frame at 24 000 rods and 14 s at 10^5, the tree 0.08 s and 0.4 s; "
-        "late in Fig. 6 the tree errs 7e-8 of the tip-tip energy, 10^5 times below the run's energy "
+        "late in Fig. 6 the tree errs 9e-8 of the tip-tip energy, 10^5 times below the run's energy "
         "balance, docs/performance.md)",
         ge=1,
     )
