@@ -240,10 +240,13 @@ def run(args):
         fb = np.empty_like(pts)
         w = 0.5 * p.rods.diameter
         trees = {}
+        # the scene's tree settings for both revisions, whatever their defaults were
+        tm = p.forces.tip_magnetic
+        groups, theta = (tm.group_size, tm.opening_angle) if tm is not None else (1024, 0.55)
 
         def tree_of(K):
             if id(K) not in trees:
-                trees[id(K)] = K.tree.build_tip_tree(x, y, z, q)
+                trees[id(K)] = K.tree.build_tip_tree(x, y, z, q, group_size=groups)
             return trees[id(K)]
 
         direct = n <= args.direct_max
@@ -265,20 +268,18 @@ def run(args):
                 rep_big,
                 lambda K: lambda: K.tips.tip_tip_direct_mixed(x, y, z, q, rstar, kappa, 0, ntips, f),
             ),
-            ("tree build", True, args.repeat, lambda K: lambda: K.tree.build_tip_tree(x, y, z, q)),
+            ("tree build", True, args.repeat, lambda K: lambda: K.tree.build_tip_tree(x, y, z, q, group_size=groups)),
             (
                 "tree eval",
                 True,
                 args.repeat,
-                lambda K: lambda: K.tree.evaluate_tip_tree(tree_of(K), rstar, kappa, K.tree.THETA, f),
+                lambda K: lambda: K.tree.evaluate_tip_tree(tree_of(K), rstar, kappa, theta, f),
             ),
             (
                 "tree eval mixed",
                 True,
                 args.repeat,
-                lambda K: (
-                    lambda: K.tree.evaluate_tip_tree(tree_of(K), rstar, kappa, K.tree.THETA, f, precision="mixed")
-                ),
+                lambda K: lambda: K.tree.evaluate_tip_tree(tree_of(K), rstar, kappa, theta, f, precision="mixed"),
             ),
             (
                 "yukawa",

@@ -37,7 +37,7 @@ import numpy as np
 
 from selfas_graph import Simulation, load_scenario
 from selfas_graph.kernels.tips import tip_tip_direct_rows
-from selfas_graph.kernels.tree import THETA, tip_tip_tree
+from selfas_graph.kernels.tree import tip_tip_tree
 from selfas_graph.parallel import world
 
 from .peer import OpenMMPeer, machine, machine_line, summary
@@ -145,10 +145,11 @@ def main(argv=None):
     elif not args.no_peer and not OpenMMPeer.available():
         say(OpenMMPeer.missing())
     say(machine_line())
+    tm = load_scenario(args.scenario, overrides=list(args.extra)).params.forces.tip_magnetic
+    tree = f"tree opening angle {tm.opening_angle:g}, groups of up to {tm.group_size} tips; " if tm else ""
     say(
-        f"{world.size} MPI rank(s) x {threads} numba threads; scenario {args.scenario}; "
-        f"tree opening angle {THETA} (the default); {args.repeat} repeats, median [min-max]"
-        + (f"; {' '.join(args.extra)}" if args.extra else "")
+        f"{world.size} MPI rank(s) x {threads} numba threads; scenario {args.scenario}; {tree}{args.repeat} repeats, "
+        "median [min-max]" + (f"; {' '.join(args.extra)}" if args.extra else "")
     )
     rng = np.random.default_rng(0)
     rows = []

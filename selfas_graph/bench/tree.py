@@ -50,7 +50,7 @@ import numba
 import numpy as np
 
 from selfas_graph.kernels.tips import tip_tip_direct, tip_tip_direct_rows
-from selfas_graph.kernels.tree import PRECISIONS, build_tip_tree, evaluate_tip_tree
+from selfas_graph.kernels.tree import GROUP_SIZE, PRECISIONS, build_tip_tree, evaluate_tip_tree
 from selfas_graph.model.state import State
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -221,7 +221,7 @@ def main(argv=None):
     ap.add_argument("--rods", type=int, nargs="+", default=[1000, 3000, 10000, 30000, 100000])
     ap.add_argument("--theta", type=float, nargs="+", default=[0.3, 0.4, 0.5, 0.6])
     ap.add_argument("--leaf", type=int, nargs="+", default=[32, 64, 128])
-    ap.add_argument("--group", type=int, nargs="+", default=[128])
+    ap.add_argument("--group", type=int, nargs="+", default=[GROUP_SIZE])
     ap.add_argument("--order", type=int, nargs="+", default=[2, 3])
     ap.add_argument("--precision", nargs="+", default=["float64"], choices=list(PRECISIONS))
     ap.add_argument("--config", nargs="+", default=["uniform", "chains"], choices=["uniform", "chains", "fig2"])

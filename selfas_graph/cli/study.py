@@ -4,8 +4,8 @@
 summarise) and each claim. ``study run NAME`` runs the study's seeds into ``RUNS/NAME/`` (the
 ``ensemble`` command with the study's arguments: resumable, locked, the same files; several
 studies' seeds share one pool of ``--jobs`` workers, so no worker waits for the end of a study; a
-seed file made by a version older than the studies file's ``trajectories_since`` is not reused:
-``--force`` replaces it);
+seed file made by a version older than the studies file's ``trajectories_since``, or than the
+study's own later one, is not reused: ``--force`` replaces it);
 ``study summarise NAME`` reads the run files and writes the study's small summary
 ``docs/results/NAME.json`` (per-seed values of every measure at every time, the short-circuit
 episodes at event time, and the version, commit, CPU, threads and wall time of the runs) and its
@@ -171,7 +171,7 @@ def run(args):
                 f"{args.studies}: its runs would be taken for older ones; install the package again (pip install -e .)"
             )
         old = [
-            f"{out} was made by version {made_by}, before the trajectories of version {since}"
+            f"{out} was made by version {made_by}, before the trajectories of version {studies.since(s.name)}"
             for s in picked
             if s.kind == "percolation" and not args.force
             for out in [Path(args.runs) / s.name / PERCOLATION_JSON]

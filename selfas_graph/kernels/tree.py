@@ -73,8 +73,9 @@ in float64. The float64 path is unchanged by it, bit for bit.
 
 The defaults (hexadecapoles, leaves of at most 64 tips, groups of at most 1024,
 theta 0.55; ``GROUP_SIZE`` and ``THETA`` below) err as little as groups of 128 at
-theta 0.475 (median 2e-4 to 9.6e-4 in a uniform rod gas and the Fig. 2 slab of 3000
-to 10^5 rods) and evaluate 1.0 to 2.2 times faster (docs/performance.md 'Tip-tip
+theta 0.475 but for a uniform gas of 10^5 rods (7.9e-4 against 7.4e-4; median 2e-4 to
+9.6e-4 in a uniform rod gas and the Fig. 2 slab of 3000 to 10^5 rods) and evaluate
+1.05 to 2.2 times faster (docs/performance.md 'Tip-tip
 force by a multipole tree', selfas_graph/bench/tree.py). On one AVX2 core of a
 Zen 4 (mixed), at groups of 128 and theta 0.475, a near pair cost about 0.67 ns and
 an accepted cell about 4 ns per target; at 24 000 rods of the Fig. 2 slab a target
@@ -112,10 +113,11 @@ from .treeenergy import tree_energy_groups
 from .treewalk import evaluate_groups
 
 # Defaults from selfas_graph/bench/tree.py (docs/performance.md 'Tip-tip force by a multipole
-# tree'): hexadecapoles, and groups of up to 1024 tips at opening angle 0.55, 1.0 to 2.2 times faster
-# than groups of 128 at 0.475 with a median relative error as small or smaller (2e-4 to 9.6e-4 in a
+# tree'): hexadecapoles, and groups of up to 1024 tips at opening angle 0.55, 1.05 to 2.2 times faster
+# than groups of 128 at 0.475 with a median relative error as small or smaller but in a gas of 10^5
+# rods (7.9e-4 against 7.4e-4; 2e-4 to 9.6e-4 in a
 # uniform rod gas and the Fig. 2 slab of 3000 to 10^5 rods; in aggregates the contact
-# forces dominate and the relative error is 30 times smaller). A cell is accepted for a whole group
+# forces dominate and the relative error is 30 to 100 times smaller). A cell is accepted for a whole group
 # by its distance from the group's box, so the tips of a larger group sit farther from the cells
 # they take as multipoles: a larger opening angle for the same error, and one walk for more tips.
 LEAF_SIZE = 64

@@ -39,7 +39,7 @@ class TipMagnetic:
         "tree: targets walk the tree together in groups, the largest cells of at most this many tips; "
         "an accuracy and speed knob (a cell is accepted for the whole group by its distance from the "
         "group's box, so larger groups err less at a given opening_angle and share one walk; 1024 at "
-        "opening_angle 0.55 evaluates 1.0 to 2.2 times faster than groups of 128 at 0.475, with a median "
+        "opening_angle 0.55 evaluates 1.05 to 2.2 times faster than groups of 128 at 0.475, with a median "
         "error as small or smaller but for a uniform gas of 10^5 rods (7.9e-4 against 7.4e-4), docs/performance.md 'Tip-tip force by a multipole tree')",
         ge=1,
     )
@@ -62,14 +62,14 @@ class TipMagnetic:
     )
     tree_above: int = spec(
         2000,
-        "auto: use the tree from this many rods on (measured: the tree costs what the direct sum "
-        "does near 500 rods and half of it at 2000-3000, docs/performance.md)",
+        "auto: use the tree from this many rods on (measured: at 2000 rods an evaluation at the defaults "
+        "costs a third of the float64 direct sum's, docs/performance.md 'Tip-tip force by a multipole tree')",
         ge=1,
     )
     energy_tree_above: int = spec(
         20000,
-        "the energy of a frame (and the energy balance's reference) by the tree, with opening_angle and "
-        "order, from this many rods on, whatever method says; below, by the direct sum over all tip pairs, "
+        "the energy of a frame (and the energy balance's reference) by the tree, with opening_angle, "
+        "group_size and order, from this many rods on, whatever method says; below, by the direct sum over all tip pairs, "
         "exact (measured on 2 "
         "threads: the direct sum 0.8 s a frame at 24 000 rods and 14 s at 10^5, the tree 0.08 s and 0.4 s; "
         "late in Fig. 6 the tree errs 9e-8 of the tip-tip energy, 10^5 times below the run's energy "

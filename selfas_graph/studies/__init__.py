@@ -20,6 +20,7 @@ __all__ = [
     "Studies",
     "StudiesError",
     "Study",
+    "later_version",
     "load_studies",
     "run_studies",
     "run_study",

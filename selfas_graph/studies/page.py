@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..provenance import version_key
 from .stats import fmt, measure_label, measure_text, older_runs
 from .verdicts import claim_rows, convergence_rows, sweep_rows
 
@@ -120,27 +121,24 @@ def percolation_table(summary) -> str:
 
 
 def status_text(studies, summaries) -> str:
-    """Which studies are still made of runs older than the trajectories of the code now."""
+    """Which studies are still made of runs older than the trajectories of the code now (the file's
+    ``trajectories_since``, or a study's own later one)."""
     since = studies.trajectories_since
     old = {n: older_runs(s, studies.since(n)) for n, s in summaries.items()}
     old = {n: v for n, v in old.items() if v}
-    later = sorted({studies.since(n) for n in summaries} - {since})
     if not old:
+        later = sorted({studies.since(n) for n in summaries} - {since}, key=version_key)
+        versions = ([f"version {since} or later"] if since else []) + [
+            f"{', '.join(later)} or later for the studies that name it in docs/studies.toml"
+        ] * bool(later)
         return "Every summarised study is made of runs of the trajectories the code follows now" + (
-            f" (version {since} or later"
-            + (f"; {', '.join(later)} or later where its study says so)." if later else ").")
-            if since
-            else "."
+            f" ({'; '.join(versions)})." if versions else "."
         )
     return (
-        f"**Runs to be made again.** Trajectories changed in version {since}"
-        + (f" ({', '.join(later)} for some studies, docs/studies.toml)" if later else "")
-        + " (CHANGELOG); these studies are still made of runs of older versions, and their runs lines and "
-        "every claim, convergence and sensitivity row that uses them say so: "
-        + ", ".join(
-            f"{n} ({', '.join(v)}" + ("" if studies.since(n) == since else f"; since {studies.since(n)}") + ")"
-            for n, v in old.items()
-        )
+        "**Runs to be made again.** These studies are still made of runs of versions older than the "
+        "trajectories the code follows now (CHANGELOG), and their runs lines and every claim, convergence "
+        "and sensitivity row that uses them say so: "
+        + ", ".join(f"{n} (runs of {', '.join(v)}; trajectories since {studies.since(n)})" for n, v in old.items())
         + ". `selfas-graph study run NAME --jobs 2 --force` (it replaces the older run files), then "
         "`study summarise NAME` and `study page`, makes each again."
     )

@@ -40,10 +40,13 @@ __all__ = ["Claim", "Study", "StudiesError", "Studies", "Sweep", "later_version"
 
 
 def later_version(a, b) -> str:
-    """The later of two versions ("" is earlier than any)."""
+    """The later of two versions ("" is earlier than any); ValueError for one that cannot be read."""
     if not a or not b:
         return a or b
-    return a if version_key(a) > version_key(b) else b
+    ka, kb = version_key(a), version_key(b)
+    if ka is None or kb is None:
+        raise ValueError(f"a version such as '0.4.0', got {(a if ka is None else b)!r}")
+    return a if ka > kb else b
 
 
 class StudiesError(ValueError):

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+from ..provenance import version_key
 from .stats import FIT_ERRORS, measure_label, measure_text, older_runs, plain_stat, pm, values_at, window_values
 
 __all__ = ["CLAIM_MEASURES", "claim_rows", "convergence_rows", "sweep_points", "sweep_rows"]
@@ -48,7 +49,7 @@ def _older_note(summaries, names, studies) -> str:
     old = {n: v for n, v in old.items() if v}
     if not old:
         return ""
-    since = sorted({studies.since(n) for n in old})
+    since = sorted({studies.since(n) for n in old}, key=version_key)
     which = ", ".join(f"{n}: {', '.join(v)}" for n, v in old.items())
     return f"; made before the trajectory change of {' and '.join(since)} ({which}): to be run again"
 

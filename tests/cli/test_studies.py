@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from selfas_graph.provenance import older_version, version_key
-from selfas_graph.studies import StudiesError, load_studies
+from selfas_graph.studies import StudiesError, later_version, load_studies
 from selfas_graph.studies.page import replace_blocks
 from selfas_graph.studies.stats import grouped_stat, plain_stat
 
@@ -42,7 +42,7 @@ def test_the_shipped_studies_file_loads_and_every_claim_names_its_study():
             "trajectories_since = '0.4.0'\n[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\ntrajectories_since = '0.3.0'\n",
             "study.a.trajectories_since",
         ),
-        ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\ntrajectories_since = 'soon'\n", "not earlier than"),
+        ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\ntrajectories_since = 'soon'\n", "got 'soon'"),
         ("[study.a\n", "not a valid TOML file"),
     ],
 )
@@ -83,7 +83,10 @@ def test_studies_of_runs_older_than_the_trajectories_are_marked_where_they_are_u
     assert "to be run again" not in "".join(same.values()) and "1.0.0 or later" in same["status"]
     blocks = page_blocks(dataclasses.replace(shipped, trajectories_since="1.1"), tmp_path)
     assert older_runs(json.loads((tmp_path / "fig2.json").read_text()), "1.1") == ["1.0.0"]
-    assert "fig2 (1.0.0)" in blocks["status"] and "Runs to be made again" in blocks["status"]
+    assert (
+        "fig2 (runs of 1.0.0; trajectories since 1.1)" in blocks["status"]
+        and "Runs to be made again" in blocks["status"]
+    )
     assert "Runs of version 1.0.0, made before the trajectory change of version 1.1" in blocks["runs fig2"]
     assert "`selfas-graph study run fig2 --force`" in blocks["runs fig2"]
     claims = blocks["claims"].splitlines()[2:]
@@ -112,13 +115,23 @@ def test_a_study_of_its_own_later_trajectories_is_marked_alone(tmp_path):
     studies = dataclasses.replace(shipped, trajectories_since="1.0.0", studies=own)
     assert studies.since("fig6") == "1.1" and studies.since("fig2") == "1.0.0" and studies.since("nope") == "1.0.0"
     blocks = page_blocks(studies, tmp_path)
-    assert "fig6 (1.0.0; since 1.1)" in blocks["status"] and "fig2 (" not in blocks["status"]
+    assert "fig6 (runs of 1.0.0; trajectories since 1.1)" in blocks["status"] and "fig2 (" not in blocks["status"]
     assert "made before the trajectory change of version 1.1" in blocks["runs fig6"]
     assert "to be run again" not in blocks["runs fig2"]
     assert "to be run again" in blocks["sensitivity fig6_delta_J0"]
     assert "to be run again" not in blocks["sensitivity fig2_rods"]
     rows = blocks["claims"].splitlines()[2:]  # no claim uses the Fig. 6 scene
     assert rows and not any("to be run again" in r for r in rows)
+    # a claim whose study and null model changed in two versions names both, in version order
+    own["fig2"] = dataclasses.replace(own["fig2"], trajectories_since="1.10")
+    own["fig2_free"] = dataclasses.replace(own["fig2_free"], trajectories_since="1.9")
+    rows = page_blocks(dataclasses.replace(studies, studies=own), tmp_path)["claims"].splitlines()[2:]
+    assert any("made before the trajectory change of 1.9 and 1.10 (fig2: 1.0.0, fig2_free: 1.0.0)" in r for r in rows)
+    fresh = page_blocks(dataclasses.replace(shipped, trajectories_since="", studies=own), tmp_path)["status"]
+    assert "Runs to be made again" in fresh
+    assert later_version("0.4.1", "0.4.0") == later_version("0.4.0", "0.4.1") == "0.4.1" == later_version("", "0.4.1")
+    with pytest.raises(ValueError, match="'garbage'"):
+        later_version("0.4.1", "garbage")
     text = "trajectories_since = '0.4.0'\n[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\n[study.b]\nscenario = 'x'\n"
     (tmp_path / "s.toml").write_text(text + "seeds = 2\nt_end = 1\ntrajectories_since = '0.4.1'\n")
     loaded = load_studies(tmp_path / "s.toml")

@@ -39,12 +39,13 @@ def test_precision_knob_rows(tmp_path, capsys):
 
 
 def test_tree_knobs_only_where_the_scene_takes_the_tree():
-    """opening_angle and order apply to a scene above tree_above rods (Fig. 6) or with method =
-    tree, not to the 300 rods of the quick scene, which sums directly."""
+    """opening_angle, group_size and order apply to a scene of tree_above rods or more (Fig. 6) or with
+    method = tree, not to the 300 rods of the quick scene, which sums directly."""
     tool = _tool()
     quick = load_scenario(ROOT / "scenarios" / "quick.toml")
     tree = load_scenario(ROOT / "scenarios" / "quick.toml", overrides=["forces.tip_magnetic.method=tree"])
     fig6 = load_scenario(ROOT / "scenarios" / "fig6.toml")
+    assert "forces.tip_magnetic.group_size" in tool.TREE_KNOBS
     for knob in tool.TREE_KNOBS:
         assert not tool._applicable(quick, knob)
         assert tool._applicable(tree, knob) and tool._applicable(fig6, knob)

@@ -43,6 +43,26 @@ def test_the_defaults_meet_every_stated_accuracy():
     assert short_of_accuracy(p) == []
 
 
+@pytest.mark.parametrize(
+    "angle, groups, short",
+    [
+        (0.55, 1024, []),
+        (0.55, 4096, []),
+        (0.475, 128, []),
+        (0.3, 16, []),
+        (0.55, 128, ["forces.tip_magnetic.group_size"]),
+        (0.6, 1024, ["forces.tip_magnetic.opening_angle"]),
+        (0.6, 128, ["forces.tip_magnetic.opening_angle", "forces.tip_magnetic.group_size"]),
+    ],
+)
+def test_the_tree_is_short_of_its_accuracy_by_its_angle_or_its_groups(angle, groups, short):
+    """The tree meets its stated error at the default groups of 1024 up to opening angle 0.55, and at
+    any group size up to 0.475 (groups of 128 at 0.475 were the defaults before 0.4.1, measured alike)."""
+    tm = {"opening_angle": angle, "group_size": groups}
+    p = Parameters.from_dict({"rods": {"count": 10}, "forces": {"tip_magnetic": tm}})
+    assert [r.key for r in short_of_accuracy(p) if r.key.startswith("forces.tip_magnetic")] == short
+
+
 def test_every_rule_names_a_real_key():
     p = Parameters()
     for rule in ACCURACY_RULES:
@@ -60,6 +80,8 @@ def test_shipped_scenes_name_every_faster_setting_with_its_error(path):
         line = lines.get(rule.key)
         if line is None and rule.key == "forces.current_lorentz.near_range":
             line = lines.get("forces.current_lorentz.quadrature_points")
+        if line is None and rule.key == "forces.tip_magnetic.group_size":
+            line = lines.get("forces.tip_magnetic.opening_angle")
         assert line is not None, f"{path.name}: {rule.key} is below its stated accuracy ({rule.stated}) by a default"
         assert "[accuracy knob:" in line, f"{path.name}: {rule.key} is set faster than accurate without saying so"
         assert re.search(r"\d", line.split("[accuracy knob:", 1)[1]), f"{path.name}: {rule.key} names no error"
