@@ -63,6 +63,17 @@ def test_versions_are_ordered_by_their_release_numbers():
     assert not older_version("0.4.0+source", "0.4.0") and not older_version("0.3.0", "")
 
 
+def _shipped_with_runs_of_version(folder, version):
+    """The shipped studies file, with the committed summaries copied into ``folder``, every run's
+    version set to ``version`` (runs of known version)."""
+    for path in (ROOT / "docs" / "results").glob("*.json"):
+        summary = json.loads(path.read_text())
+        for entry in [summary] if summary.get("kind") == "percolation" else summary["seeds"]:
+            entry["version"] = version
+        (folder / path.name).write_text(json.dumps(summary))
+    return load_studies(ROOT / "docs" / "studies.toml")
+
+
 def test_studies_of_runs_older_than_the_trajectories_are_marked_where_they_are_used(tmp_path):
     """With ``trajectories_since`` newer than a study's runs, its provenance, the status paragraph,
     each claim and convergence row that uses it and its sweep rows say it is to be run again; with
@@ -73,12 +84,7 @@ def test_studies_of_runs_older_than_the_trajectories_are_marked_where_they_are_u
     from selfas_graph.studies.page import page_blocks
     from selfas_graph.studies.stats import older_runs
 
-    shipped = load_studies(ROOT / "docs" / "studies.toml")
-    for path in (ROOT / "docs" / "results").glob("*.json"):
-        summary = json.loads(path.read_text())
-        for entry in [summary] if summary.get("kind") == "percolation" else summary["seeds"]:
-            entry["version"] = "1.0.0"
-        (tmp_path / path.name).write_text(json.dumps(summary))
+    shipped = _shipped_with_runs_of_version(tmp_path, "1.0.0")
     same = page_blocks(dataclasses.replace(shipped, trajectories_since="1.0.0"), tmp_path)
     assert "to be run again" not in "".join(same.values()) and "1.0.0 or later" in same["status"]
     blocks = page_blocks(dataclasses.replace(shipped, trajectories_since="1.1"), tmp_path)
@@ -102,12 +108,7 @@ def test_a_study_of_its_own_later_trajectories_is_marked_alone(tmp_path):
 
     from selfas_graph.studies.page import page_blocks
 
-    shipped = load_studies(ROOT / "docs" / "studies.toml")
-    for path in (ROOT / "docs" / "results").glob("*.json"):
-        summary = json.loads(path.read_text())
-        for entry in [summary] if summary.get("kind") == "percolation" else summary["seeds"]:
-            entry["version"] = "1.0.0"
-        (tmp_path / path.name).write_text(json.dumps(summary))
+    shipped = _shipped_with_runs_of_version(tmp_path, "1.0.0")
     own = {
         n: dataclasses.replace(s, trajectories_since="1.1" if n == "fig6" else "1.0.0")
         for n, s in shipped.studies.items()
