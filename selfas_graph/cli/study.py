@@ -15,9 +15,10 @@ the summaries (``--check``: exit 1 if the page differs from what the summaries g
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
-from ..provenance import older_version, version_key
+from ..provenance import older_version
 from .main import CliError
 
 DEFAULT_STUDIES = "docs/studies.toml"
@@ -164,7 +165,9 @@ def run(args):
         code = 0
         picked = _pick(studies, args.names)
         since = studies.trajectories_since
-        newest = max((studies.since(s.name) for s in picked), key=lambda v: version_key(v) or (), default=since)
+        from ..studies import later_version
+
+        newest = functools.reduce(later_version, (studies.since(s.name) for s in picked), since)
         if older_version(__version__, newest):
             raise CliError(
                 f"this installation reports version {__version__}, older than trajectories_since = {newest} in "

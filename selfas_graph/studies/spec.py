@@ -23,8 +23,8 @@ the direction the paper's claim predicts). ``selfas-graph study run NAME`` runs 
 A top-level ``trajectories_since = "0.4.0"`` names the first version whose trajectories the code
 follows now; the page marks a study still made of runs of an older version. A study may name a later
 one of its own (``trajectories_since = "0.4.1"`` in its table), where a change moved only some
-scenes' trajectories (the tip-tip tree's defaults move only scenes of more than
-``forces.tip_magnetic.tree_above`` rods).
+scenes' trajectories (the tip-tip tree's defaults move only scenes of
+``forces.tip_magnetic.tree_above`` rods or more).
 """
 
 from __future__ import annotations
