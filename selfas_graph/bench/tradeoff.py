@@ -61,7 +61,7 @@ KNOBS = {
     "forces.current_lorentz.quadrature_points": ([1, 2, 4, 8], {"forces.current_lorentz.quadrature_points": 16}),
     "integrator.bond_force": (["paper", "exact"], {"integrator.bond_force": "exact"}),
     "integrator.position_projection": ([False, True], {"integrator.position_projection": True}),
-    "integrator.slow_every": ([1, 2, 4, 8, 16, 32], NO_SPLITTING),
+    "integrator.slow_every": ([1, 2, 4, 8, 16, 24, 32], NO_SPLITTING),
     # the tip-tip sum: the tree (at its near-field precision, --set forces.tip_magnetic.precision=...)
     # against the exact direct sum
     "forces.tip_magnetic.method": (["direct", "tree"], {"forces.tip_magnetic.method": "direct"}),
