@@ -4,8 +4,9 @@ Usage: selfas-graph bench tradeoff SCENARIO [--from T0] [--checkpoint FILE] [--t
        [--set KEY=VALUE ...] [--json OUT] [--plot OUT.png]
 
 The scene is first run at its defaults to ``--from T0`` (e.g. past the short circuit, so
-that the current knobs matter); every run then branches from that state with a fresh
-Adams-Bashforth start. For each knob, the scene is run for a further time ``--t`` at several
+that the current knobs matter), or read from ``--checkpoint`` with the overrides its run was made
+with (``simulate --set``; ``--set`` comes after them); every run then branches from that state with a
+fresh Adams-Bashforth start. For each knob, the scene is run for a further time ``--t`` at several
 settings around its default, one knob changed at a time, and compared with that knob's
 reference: the defaults with only this knob at its tightest setting, so that each row
 shows the error of its own knob (all measured in this run):
@@ -128,6 +129,16 @@ def _applicable(scenario, knob):
     return True
 
 
+def checkpoint_overrides(meta) -> list[str]:
+    """The ``--set KEY=VALUE`` overrides a checkpoint's run was made with (its ``overrides`` record)."""
+    raw = meta.get("overrides", "[]")
+    try:
+        own = json.loads(raw) if isinstance(raw, str | bytes) else list(raw)
+    except ValueError:
+        return []
+    return [str(o) for o in own]
+
+
 def run_once(path, overrides, duration, snap):
     """One branch from snapshot ``snap`` for ``duration``; positions, new events and cost, or the failure
     (also a setting the scene refuses, e.g. a current_every that its slow_every does not divide)."""
@@ -183,16 +194,24 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if not args.t > 0:
         ap.error("--t must be positive")
+    snap0 = None
+    if args.checkpoint:
+        try:
+            snap0, meta = read_checkpoint(args.checkpoint)
+        except CheckpointError as exc:
+            ap.error(f"--checkpoint: {exc}")
+        # the run's own overrides first (a checkpoint of `simulate --set circuit.delta_J0=2.23` branches
+        # at that bias, not at the scene file's), then --set
+        own = checkpoint_overrides(meta)
+        if own:
+            print(f"the checkpoint's run was made with --set {' '.join(own)}: every run takes them", flush=True)
+        args.base_set = own + args.base_set
     try:
         base = load_scenario(args.scenario, overrides=args.base_set)
     except ScenarioError as exc:
         ap.error(str(exc))
     knobs = [k for k in (args.knob or KNOBS) if _applicable(base, k)]
-    if args.checkpoint:
-        try:
-            snap0 = read_checkpoint(args.checkpoint)[0]
-        except CheckpointError as exc:
-            ap.error(f"--checkpoint: {exc}")
+    if snap0 is not None:
         sim0 = Simulation.from_snapshot(base.params, snap0)
     else:
         sim0 = Simulation.from_scenario(base)

@@ -68,3 +68,27 @@ def test_current_every_applies_with_current_terms_and_a_refused_setting_is_a_fai
     snap = Simulation.from_scenario(quick).snapshot()
     got = tool.run_once(str(ROOT / "scenarios" / "quick.toml"), ["integrator.current_every=12"], 0.01, snap)
     assert got["failed"].startswith("refused: ") and "integrator.current_every" in got["failed"]
+
+
+def test_a_checkpoint_branches_with_its_own_run_overrides(tmp_path, capsys):
+    """A checkpoint of ``simulate --set circuit.delta_J0=3`` branches at that bias: the tool takes the
+    run's own overrides before --set (the scene file alone would give every branch the file's bias, a
+    state the run never had), and says so."""
+    from selfas_graph.cli.main import main as cli
+    from selfas_graph.io.checkpoint import read_checkpoint
+
+    tool = _tool()
+    run = tmp_path / "run.h5"
+    scene = str(ROOT / "scenarios" / "quick.toml")
+    assert cli(
+        ["simulate", scene, "-o", str(run), "--set", "circuit.delta_J0=3.0", "--t-end", "0.02", "--progress", "none"]
+    ) in (0, None)
+    ckpt = tmp_path / "run.checkpoint.h5"
+    assert tool.checkpoint_overrides(read_checkpoint(ckpt)[1]) == ["circuit.delta_J0=3.0"]
+    capsys.readouterr()
+    js = tmp_path / "t.json"
+    tool.main(
+        [scene, "--checkpoint", str(ckpt), "--t", "0.005", "--knob", "forces.yukawa.precision", "--json", str(js)]
+    )
+    assert "made with --set circuit.delta_J0=3.0: every run takes them" in capsys.readouterr().out
+    assert len(json.loads(js.read_text())["rows"]) == 2
