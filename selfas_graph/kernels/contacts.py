@@ -231,3 +231,97 @@ def close_pairs(position, start, index, radius):
     out = np.empty((offset[-1], 2), dtype=np.int64)
     _close_fill(position, start, index, radius, offset, out)
     return out
+
+
+#: new tip contacts :func:`contact_news` holds in one call; more answer "not sure" (the tracker's numpy path)
+NEWS_CAPACITY = 512
+
+
+@njit
+def contact_news(position, start, index, pairs, rstar, release, z_cathode, z_anode, on_cathode, on_anode):
+    """The tip-pair and electrode events of a step in one serial pass, for the contact tracker's step
+    with news (``model/contacts.py::ContactTracker.search``; its numpy path is the reference).
+
+    Returns ``(sure, gone, new, cathode_off, cathode_on, anode_off, anode_on)``: ``gone`` the indices
+    of the contacts beyond the release radius (in the order of ``pairs``), ``new`` (m, 2) the listed
+    pairs ``k < l`` closer than r* that are not contacts (row by row, each row in list order), and the
+    tips that leave or touch each electrode (ascending). The close pairs are those of
+    :func:`close_pairs` (the same arithmetic); a contact's distance is taken as the tracker's numpy
+    path takes it only to the last bit, so ``sure`` is False (and the caller takes the numpy path)
+    when one lies within :data:`QUIET_MARGIN` of r* or of the release radius, is NaN, or when more than
+    :data:`NEWS_CAPACITY` new pairs are found. The electrodes' heights are the tracker's differences,
+    computed alike. ``z_cathode`` NaN: no electrodes (empty arrays).
+
+    Parameters
+    ----------
+    position : (n_tips, 3) float64
+    start, index : the tip neighbour list (compressed rows, both directions), covering the release radius
+    pairs : (m, 2) int64
+        Current contacts, sorted by ``k n_tips + l`` (``ContactSet.search_arrays``).
+    rstar, release, z_cathode, z_anode : float
+    on_cathode, on_anode : (n_tips,) bool
+    """
+    n = position.shape[0]
+    m = pairs.shape[0]
+    lo = 1.0 - QUIET_MARGIN
+    hi = 1.0 + QUIET_MARGIN
+    r2 = rstar * rstar
+    rel2 = release * release
+    empty = np.zeros(0, dtype=np.int64)
+    none = np.zeros((0, 2), dtype=np.int64)
+    gone = np.empty(m, dtype=np.int64)
+    n_gone = 0
+    keys = np.empty(m, dtype=np.int64)
+    for p in range(m):
+        k = pairs[p, 0]
+        l = pairs[p, 1]
+        keys[p] = k * n + l
+        dx = position[k, 0] - position[l, 0]
+        dy = position[k, 1] - position[l, 1]
+        dz = position[k, 2] - position[l, 2]
+        d2 = dx * dx + dy * dy + dz * dz
+        if not (d2 < rel2 * lo or d2 > rel2 * hi) or (r2 * lo <= d2 <= r2 * hi):
+            return False, empty, none, empty, empty, empty, empty
+        if d2 > rel2:
+            gone[n_gone] = p
+            n_gone += 1
+    new = np.empty((NEWS_CAPACITY, 2), dtype=np.int64)
+    n_new = 0
+    for k in range(n):
+        for j in range(start[k], start[k + 1]):
+            l = index[j]
+            if l > k and closer(position, k, l, r2):
+                key = k * n + l
+                at = np.searchsorted(keys, key)
+                if at < m and keys[at] == key:
+                    continue
+                if n_new == NEWS_CAPACITY:
+                    return False, empty, none, empty, empty, empty, empty
+                new[n_new, 0] = k
+                new[n_new, 1] = l
+                n_new += 1
+    if not z_cathode == z_cathode:
+        return True, gone[:n_gone].copy(), new[:n_new].copy(), empty, empty, empty, empty
+    flags = np.zeros(n, dtype=np.int8)  # bit 0 leaves the cathode, 1 touches it, 2 leaves the anode, 3 touches it
+    for k in range(n):
+        hc = position[k, 2] - z_cathode
+        ha = z_anode - position[k, 2]
+        if on_cathode[k]:
+            if hc > release:
+                flags[k] |= 1
+        elif hc < rstar:
+            flags[k] |= 2
+        if on_anode[k]:
+            if ha > release:
+                flags[k] |= 4
+        elif ha < rstar:
+            flags[k] |= 8
+    return (
+        True,
+        gone[:n_gone].copy(),
+        new[:n_new].copy(),
+        np.flatnonzero(flags & 1),
+        np.flatnonzero(flags & 2),
+        np.flatnonzero(flags & 4),
+        np.flatnonzero(flags & 8),
+    )

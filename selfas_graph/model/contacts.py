@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.contacts import close_pair_count, close_pairs, contacts_unchanged
+from ..kernels.contacts import close_pair_count, close_pairs, contact_news, contacts_unchanged
 from . import events as ev
 
 
@@ -87,6 +87,68 @@ class ContactTracker:
             on_filament,
         ):
             return []
+        # [perf] the step with news by one more kernel pass, where it is sure (kernels/contacts.py::contact_news)
+        rows = self._news(pairs, on_cathode, on_anode, position, neighbours, step, time, el)
+        if rows is not None:
+            return self._sorted(rows + self._filament_rows(on_filament, position, step, time))
+        return self.search_numpy(contacts, position, neighbours, step, time)
+
+    def _news(self, pairs, on_cathode, on_anode, position, neighbours, step, time, el):
+        """The tip-pair and electrode rows by one kernel pass (``kernels/contacts.py::contact_news``), or
+        None where it is not sure and :meth:`search_numpy` decides."""
+        sure, gone, new, c_off, c_on, a_off, a_on = contact_news(
+            position,
+            neighbours.start,
+            neighbours.index,
+            pairs,
+            self.rstar,
+            self.release,
+            float(el[0]),
+            float(el[1]),
+            on_cathode,
+            on_anode,
+        )
+        if not sure:
+            return None
+        rows = [(step, time, ev.TIP_RELEASE, int(k), int(l)) for k, l in pairs[gone].tolist()]
+        rows += [(step, time, ev.TIP_CONTACT, int(k), int(l)) for k, l in new.tolist()]
+        for tips, kind, cid in (
+            (c_off, ev.CONDUCTOR_RELEASE, ev.CONDUCTOR_CATHODE),
+            (c_on, ev.CONDUCTOR_CONTACT, ev.CONDUCTOR_CATHODE),
+            (a_off, ev.CONDUCTOR_RELEASE, ev.CONDUCTOR_ANODE),
+            (a_on, ev.CONDUCTOR_CONTACT, ev.CONDUCTOR_ANODE),
+        ):
+            rows += [(step, time, kind, int(k), cid) for k in tips.tolist()]
+        return rows
+
+    def _filament_rows(self, on_filament, position, step, time):
+        """The rows of the case (ii) filament's surface (none without it)."""
+        if self.filament_radius is None:
+            return []
+        rho = np.hypot(position[:, 0], position[:, 1])
+        h = rho - self.filament_radius
+        rows = [
+            (step, time, ev.CONDUCTOR_RELEASE, int(k), ev.CONDUCTOR_FILAMENT)
+            for k in np.flatnonzero(on_filament & (h > self.release))
+        ]
+        rows += [
+            (step, time, ev.CONDUCTOR_CONTACT, int(k), ev.CONDUCTOR_FILAMENT)
+            for k in np.flatnonzero(~on_filament & (h < self.rstar))
+        ]
+        return rows
+
+    @staticmethod
+    def _sorted(rows):
+        """Releases first, then contacts, each sorted by ids (a deterministic order)."""
+        if rows:
+            order = {ev.TIP_RELEASE: 0, ev.CONDUCTOR_RELEASE: 1, ev.TIP_CONTACT: 2, ev.CONDUCTOR_CONTACT: 3}
+            rows.sort(key=lambda r: (order[r[2]], r[3], r[4]))
+        return rows
+
+    def search_numpy(self, contacts, position, neighbours, step, time):
+        """:meth:`search`'s events by numpy passes over the arrays, without the one-pass kernels: the
+        reference of the kernel path, and its path where that is not sure."""
+        pairs, on_cathode, on_anode, on_filament = contacts.search_arrays
         rows = []
         # releases: current contacts now farther apart than the release radius
         if len(pairs):
@@ -125,7 +187,4 @@ class ContactTracker:
                 rows.append((step, time, ev.CONDUCTOR_RELEASE, int(k), cid))
             for k in np.flatnonzero(~flags & (h < self.rstar)):
                 rows.append((step, time, ev.CONDUCTOR_CONTACT, int(k), cid))
-        if rows:
-            order = {ev.TIP_RELEASE: 0, ev.CONDUCTOR_RELEASE: 1, ev.TIP_CONTACT: 2, ev.CONDUCTOR_CONTACT: 3}
-            rows.sort(key=lambda r: (order[r[2]], r[3], r[4]))
-        return rows
+        return self._sorted(rows)

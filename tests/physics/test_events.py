@@ -542,3 +542,61 @@ def test_quiet_step_kernel_never_hides_an_event(rng, monkeypatch):
             assert got == []
         busy += bool(got)
     assert 0 < sum(answers) < len(answers) and busy > 50  # both answers exercised, many steps with events
+
+
+@pytest.mark.parametrize("electrodes, filament_radius", [((-0.45, 0.45), None), (None, None), (None, 0.3)])
+def test_news_kernel_finds_the_numpy_paths_events(rng, monkeypatch, electrodes, filament_radius):
+    """The step with news by one kernel pass (kernels/contacts.py::contact_news) gives the rows of the
+    numpy path (``ContactTracker.search_numpy``, its reference) on every step: two trackers follow a
+    random walk of tips that keeps crossing r*, the release radius, the electrodes or the filament
+    surface; the kernel must be sure on most steps with news (not falling back on them all)."""
+    import selfas_graph.model.contacts as contacts_module
+    from selfas_graph.kernels.contacts import contact_news
+
+    n = 160
+    position = rng.uniform([-0.4, -0.4, -0.5], [0.4, 0.4, 0.5], size=(n, 3))
+    fast = _Tracked(n, electrodes=electrodes, filament_radius=filament_radius)
+    slow = _Tracked(n, electrodes=electrodes, filament_radius=filament_radius)
+    nl = NeighbourList(RELEASE, 0.05, exclude_same_rod=True)
+    sure = []
+    monkeypatch.setattr(contacts_module, "contact_news", lambda *a: sure.append(contact_news(*a)) or sure[-1])
+    busy = 0
+    for step in range(400):
+        position += rng.normal(scale=0.004, size=position.shape)
+        nl.update(position)
+        got = fast.update(position, nl, step, 0.0)
+        with monkeypatch.context() as m:
+            m.setattr(ContactTracker, "_news", lambda self, *a: None)
+            want = slow.update(position, nl, step, 0.0)
+        assert got == want
+        np.testing.assert_array_equal(fast.pairs, slow.pairs)
+        busy += bool(got)
+    answers = [s[0] for s in sure]
+    assert busy > 50 and sum(answers) > 0.9 * len(answers)
+
+
+def test_news_kernel_is_not_sure_at_the_thresholds_and_past_its_capacity():
+    """A contact within the margin of r* or of the release radius, or more new pairs than
+    NEWS_CAPACITY, answers "not sure" (the tracker then takes the numpy path)."""
+    from selfas_graph.kernels.contacts import NEWS_CAPACITY, contact_news
+
+    nan = float("nan")
+    none = np.zeros(4, dtype=bool)
+    for d in (RSTAR, RELEASE):
+        position = np.array([[0.0, 0, 0], [5.0, 0, 0], [d, 0, 0], [5.0, 1.0, 0]])
+        nl = NeighbourList(RELEASE, 0.3, exclude_same_rod=True)
+        nl.update(position)
+        pairs = np.array([[0, 2]], dtype=np.int64)
+        got = contact_news(position, nl.start, nl.index, pairs, RSTAR, RELEASE, nan, nan, none, none)
+        assert not got[0], d
+    m = NEWS_CAPACITY + 1  # m rods side by side along x, each pair of neighbours' bottom tips touching
+    centre = np.stack([np.arange(2 * m) * 2.5, np.zeros(2 * m), np.zeros(2 * m)], axis=1)
+    position = np.empty((4 * m, 3))
+    position[0::2] = centre
+    position[1::2] = centre + [0.0, 0.0, 1.0]
+    position[2::4, 0] = position[0::4, 0] + 0.5 * RSTAR  # tip 4p+2 beside tip 4p
+    nl = NeighbourList(RELEASE, 0.3, exclude_same_rod=True)
+    nl.update(position)
+    flags = np.zeros(4 * m, dtype=bool)
+    got = contact_news(position, nl.start, nl.index, np.zeros((0, 2), np.int64), RSTAR, RELEASE, nan, nan, flags, flags)
+    assert not got[0]
