@@ -125,16 +125,14 @@ class ContactTracker:
         """The rows of the case (ii) filament's surface (none without it)."""
         if self.filament_radius is None:
             return []
-        rho = np.hypot(position[:, 0], position[:, 1])
-        h = rho - self.filament_radius
-        rows = [
-            (step, time, ev.CONDUCTOR_RELEASE, int(k), ev.CONDUCTOR_FILAMENT)
-            for k in np.flatnonzero(on_filament & (h > self.release))
-        ]
-        rows += [
-            (step, time, ev.CONDUCTOR_CONTACT, int(k), ev.CONDUCTOR_FILAMENT)
-            for k in np.flatnonzero(~on_filament & (h < self.rstar))
-        ]
+        h = np.hypot(position[:, 0], position[:, 1]) - self.filament_radius
+        return self._surface_rows(on_filament, h, ev.CONDUCTOR_FILAMENT, step, time)
+
+    def _surface_rows(self, flags, h, cid, step, time):
+        """The rows of conductor ``cid``: the tips on it (``flags``) now beyond the release radius of its
+        surface, the tips off it now within r* (``h``: each tip's distance from the surface)."""
+        rows = [(step, time, ev.CONDUCTOR_RELEASE, int(k), cid) for k in np.flatnonzero(flags & (h > self.release))]
+        rows += [(step, time, ev.CONDUCTOR_CONTACT, int(k), cid) for k in np.flatnonzero(~flags & (h < self.rstar))]
         return rows
 
     @staticmethod
@@ -172,19 +170,8 @@ class ContactTracker:
             new = ~np.isin(self._keys(close), self._keys(pairs), assume_unique=True)
             for k, l in close[new]:
                 rows.append((step, time, ev.TIP_CONTACT, int(k), int(l)))
-        surfaces = []
         if self.electrodes is not None:
             z = position[:, 2]
-            surfaces += [
-                (on_cathode, z - self.electrodes[0], ev.CONDUCTOR_CATHODE),
-                (on_anode, self.electrodes[1] - z, ev.CONDUCTOR_ANODE),
-            ]
-        if self.filament_radius is not None:
-            rho = np.hypot(position[:, 0], position[:, 1])
-            surfaces.append((on_filament, rho - self.filament_radius, ev.CONDUCTOR_FILAMENT))
-        for flags, h, cid in surfaces:
-            for k in np.flatnonzero(flags & (h > self.release)):
-                rows.append((step, time, ev.CONDUCTOR_RELEASE, int(k), cid))
-            for k in np.flatnonzero(~flags & (h < self.rstar)):
-                rows.append((step, time, ev.CONDUCTOR_CONTACT, int(k), cid))
-        return self._sorted(rows)
+            rows += self._surface_rows(on_cathode, z - self.electrodes[0], ev.CONDUCTOR_CATHODE, step, time)
+            rows += self._surface_rows(on_anode, self.electrodes[1] - z, ev.CONDUCTOR_ANODE, step, time)
+        return self._sorted(rows + self._filament_rows(on_filament, position, step, time))
