@@ -69,45 +69,24 @@ class ContactTracker:
         sorted by ids (a deterministic order).
         """
         pairs, on_cathode, on_anode, on_filament = contacts.search_arrays
-        # [perf] one kernel pass answers the common step without news (kernels/contacts.py::contacts_unchanged)
         el = self.electrodes if self.electrodes is not None else (np.nan, np.nan)
         fr = self.filament_radius if self.filament_radius is not None else np.nan
-        if contacts_unchanged(
-            position,
-            neighbours.start,
-            neighbours.index,
-            pairs,
-            self.rstar,
-            self.release,
-            float(el[0]),
-            float(el[1]),
-            on_cathode,
-            on_anode,
-            float(fr),
-            on_filament,
-        ):
+        # the arguments both kernels take: tips, list, contacts, radii, electrodes and the tips on them
+        common = (position, neighbours.start, neighbours.index, pairs, self.rstar, self.release)
+        common += (float(el[0]), float(el[1]), on_cathode, on_anode)
+        # [perf] one kernel pass answers the common step without news (kernels/contacts.py::contacts_unchanged)
+        if contacts_unchanged(*common, float(fr), on_filament):
             return []
         # [perf] the step with news by one more kernel pass, where it is sure (kernels/contacts.py::contact_news)
-        rows = self._news(pairs, on_cathode, on_anode, position, neighbours, step, time, el)
+        rows = self._news(common, pairs, step, time)
         if rows is not None:
             return self._sorted(rows + self._filament_rows(on_filament, position, step, time))
         return self.search_numpy(contacts, position, neighbours, step, time)
 
-    def _news(self, pairs, on_cathode, on_anode, position, neighbours, step, time, el):
-        """The tip-pair and electrode rows by one kernel pass (``kernels/contacts.py::contact_news``), or
-        None where it is not sure and :meth:`search_numpy` decides."""
-        sure, gone, new, c_off, c_on, a_off, a_on = contact_news(
-            position,
-            neighbours.start,
-            neighbours.index,
-            pairs,
-            self.rstar,
-            self.release,
-            float(el[0]),
-            float(el[1]),
-            on_cathode,
-            on_anode,
-        )
+    def _news(self, common, pairs, step, time):
+        """The tip-pair and electrode rows by one kernel pass (``kernels/contacts.py::contact_news``, on the
+        arguments ``common`` of :meth:`search`), or None where it is not sure and :meth:`search_numpy` decides."""
+        sure, gone, new, c_off, c_on, a_off, a_on = contact_news(*common)
         if not sure:
             return None
         rows = [(step, time, ev.TIP_RELEASE, int(k), int(l)) for k, l in pairs[gone].tolist()]
