@@ -68,27 +68,39 @@ class ContactTracker:
         list of (step, time, kind, a, b) tuples, releases first, then contacts, each
         sorted by ids (a deterministic order).
         """
+        common, fr, on_filament = self._kernel_args(contacts, position, neighbours)
+        # [perf] one kernel pass answers the common step without news (kernels/contacts.py::contacts_unchanged)
+        if contacts_unchanged(*common, fr, on_filament):
+            return []
+        return self.search_news(contacts, position, neighbours, step, time, common)
+
+    def _kernel_args(self, contacts, position, neighbours):
+        """``(common, filament_radius, on_filament)``: the arguments both kernels take (tips, list, contacts,
+        radii, electrodes and the tips on them; NaN planes without electrodes), and the filament's."""
         pairs, on_cathode, on_anode, on_filament = contacts.search_arrays
         el = self.electrodes if self.electrodes is not None else (np.nan, np.nan)
         fr = self.filament_radius if self.filament_radius is not None else np.nan
-        # the arguments both kernels take: tips, list, contacts, radii, electrodes and the tips on them
         common = (position, neighbours.start, neighbours.index, pairs, self.rstar, self.release)
-        common += (float(el[0]), float(el[1]), on_cathode, on_anode)
-        # [perf] one kernel pass answers the common step without news (kernels/contacts.py::contacts_unchanged)
-        if contacts_unchanged(*common, float(fr), on_filament):
-            return []
-        # [perf] the step with news by one more kernel pass, where it is sure (kernels/contacts.py::contact_news)
-        rows = self._news(common, pairs, step, time)
+        return common + (float(el[0]), float(el[1]), on_cathode, on_anode), float(fr), on_filament
+
+    def search_news(self, contacts, position, neighbours, step, time, common=None):
+        """:meth:`search` on a step its one-pass check is not sure of: one more kernel pass where that is
+        sure (``kernels/contacts.py::contact_news``), else :meth:`search_numpy`. ``common``: the kernels'
+        arguments, if the caller has them."""
+        if common is None:
+            common = self._kernel_args(contacts, position, neighbours)[0]
+        rows = self._news(common, step, time)
         if rows is not None:
-            return self._sorted(rows + self._filament_rows(on_filament, position, step, time))
+            return self._sorted(rows + self._filament_rows(contacts.search_arrays[3], position, step, time))
         return self.search_numpy(contacts, position, neighbours, step, time)
 
-    def _news(self, common, pairs, step, time):
+    def _news(self, common, step, time):
         """The tip-pair and electrode rows by one kernel pass (``kernels/contacts.py::contact_news``, on the
-        arguments ``common`` of :meth:`search`), or None where it is not sure and :meth:`search_numpy` decides."""
+        arguments ``common`` of :meth:`_kernel_args`), or None where it is not sure and :meth:`search_numpy` decides."""
         sure, gone, new, c_off, c_on, a_off, a_on = contact_news(*common)
         if not sure:
             return None
+        pairs = common[3]
         rows = [(step, time, ev.TIP_RELEASE, int(k), int(l)) for k, l in pairs[gone].tolist()]
         rows += [(step, time, ev.TIP_CONTACT, int(k), int(l)) for k, l in new.tolist()]
         for tips, kind, cid in (

@@ -571,6 +571,8 @@ def test_news_kernel_finds_the_numpy_paths_events(rng, monkeypatch, electrodes, 
         assert got == want
         np.testing.assert_array_equal(fast.pairs, slow.pairs)
         busy += bool(got)
+    # a contact within 1e-9 (relative) of r* or the release radius is rare on this walk, so nearly every
+    # call is sure; 0.9 fails a kernel that falls back on every step and leaves room for those few
     answers = [s[0] for s in sure]
     assert busy > 50 and sum(answers) > 0.9 * len(answers)
 
