@@ -17,7 +17,8 @@ Usage::
       the full scene runs; the median over steps without an event is the number
       to compare with the 5 % goal;
     * ``tracker alone``: ``ContactTracker.search`` repeated on the settled positions,
-      where nothing changes;
+      where nothing changes; and its path for a step with news both ways on them, the kernel
+      pass (``search_news``) and the numpy passes (``search_numpy``);
     * ``frozen A/B``: velocities set to zero and every force off except a weak ambient
       brake (and the electrode walls, which define the planes), so nothing moves and
       no event happens; steps with ``contacts.enabled``
@@ -83,13 +84,16 @@ COMMAND_ENV = {"HDF5_USE_FILE_LOCKING": "FALSE"}
 
 # --------------------------------------------------------------------------- (a)
 def _with(params, contacts=None, forces=None):
-    """A copy of frozen parameters with the contact switch and/or the force terms replaced."""
-    p = params
+    """A copy of frozen parameters with the contact switch and/or the force terms replaced. Without
+    contacts the circuit can never close, and the scene refuses it and the rod-current terms: they go
+    too (they cost nothing before a short circuit)."""
+    changes = {} if forces is None else {"forces": forces}
     if contacts is not None:
-        p = dataclasses.replace(p, contacts=dataclasses.replace(p.contacts, enabled=contacts))
-    if forces is not None:
-        p = dataclasses.replace(p, forces=forces)
-    return p
+        changes["contacts"] = dataclasses.replace(params.contacts, enabled=contacts)
+        if not contacts:
+            f = changes.get("forces", params.forces)
+            changes.update(circuit=None, forces=dataclasses.replace(f, current_field=None, current_lorentz=None))
+    return dataclasses.replace(params, **changes)
 
 
 def _interleaved(sims, steps, warmup=5):
@@ -163,6 +167,14 @@ def contact_overhead(scenario_path, settle, steps):
         times[i] = time.perf_counter() - t0
         assert not rows, "the tracker found an event on unchanged positions"
     tracker_alone = float(np.median(times))
+    # a step with news, both ways on the same positions: the kernel pass and the numpy passes it replaced
+    news = {}
+    for name, path in (("kernel", tracker.search_news), ("numpy", tracker.search_numpy)):
+        for i in range(reps):
+            t0 = time.perf_counter()
+            path(contacts, st.position, ff.tip_neighbours(st.position), st.step, st.time)
+            times[i] = time.perf_counter() - t0
+        news[name] = float(np.median(times))
 
     # frozen A/B: nothing moves, no event can happen. The electrode walls stay on: the
     # tracker takes its planes from them (they only push tips closer than r* to a plane,
@@ -207,6 +219,11 @@ def contact_overhead(scenario_path, settle, steps):
     print(
         f"| ContactTracker.search alone on unchanged positions | {ms * tracker_alone:.3f} | "
         f"{pct * tracker_alone:.2f} % |"
+    )
+    print(
+        f"| ContactTracker on a step with news (the one-pass check not sure): one kernel pass "
+        f"(`search_news`) / the numpy passes (`search_numpy`), unchanged positions | "
+        f"{ms * news['kernel']:.3f} / {ms * news['numpy']:.3f} | {pct * news['kernel']:.2f} / {pct * news['numpy']:.2f} % |"
     )
     print(
         f"| frozen scene (v = 0, weak ambient brake): step with contacts on - off | "
