@@ -41,10 +41,12 @@ Usage::
 (c) Topology and circuit per event in the run: from the Fig. 2 scene after ``--settle``
     steps, or from a checkpoint (``--checkpoint RUN.checkpoint.h5``, read only; e.g. a
     late state of a Fig. 2 run, after the short circuit), ``--run-steps`` steps are run
-    with every ``classify_rods`` and ``ConnectivityGraph.solve`` call timed (thread CPU
-    time, which the other processes on a shared machine disturb little): calls per 1000
-    steps, median cost per call split into its parts (tip merge, components, filament
-    search, the rest being input checks and numpy glue), and their share of the CPU time of the steps. The graphs of the first
+    with the network's work on each step with events timed (thread CPU time, which the other
+    processes on a shared machine disturb little): ``Network.update`` as a whole, and within it
+    the new contact set (``ContactSet.apply``), ``classify_rods`` with its parts (tip merge,
+    components, filament search, the rest being input checks and numpy glue) and the circuit
+    (``Network.solve``): calls per 1000 steps, median cost per call, and their share of the CPU
+    time of the steps. The graphs of the first
     ``--peer-graphs`` calls are kept and classified again by the scipy/networkx
     implementation the kernels replaced (``selfas_graph/bench/oracles.py``), the peer of the ratio,
     and the two results are checked to be the same.
@@ -68,8 +70,11 @@ from selfas_graph import Simulation, load_scenario
 from selfas_graph.io.checkpoint import read_checkpoint
 from selfas_graph.io.scenario import scenario_from_text
 from selfas_graph.model import events as ev
-from selfas_graph.model import graph as graph_module
+from selfas_graph.model import contactset as contactset_module
+from selfas_graph.model import topology as topology_module
+from selfas_graph.model.contactset import ContactSet
 from selfas_graph.model.graph import ConnectivityGraph
+from selfas_graph.model.network import Network
 from selfas_graph.model.params import AmbientBrake, ForceParams
 
 from . import oracles
@@ -179,12 +184,16 @@ def contact_overhead(scenario_path, settle, steps):
     # frozen A/B: nothing moves, no event can happen. The electrode walls stay on: the
     # tracker takes its planes from them (they only push tips closer than r* to a plane,
     # by less than r*, far from any release)
+    # the walls push the tips within r* of a plane, which in a few hundred steps of the scene's own
+    # dt can carry a tip across a contact's release radius: the frozen scenes take a time step so
+    # short that no tip moves measurably (a step costs the same whatever dt is)
     frozen = ForceParams(ambient_brake=AmbientBrake(coefficient=1e-3), electrodes=params.forces.electrodes)
+    still = dataclasses.replace(params, integrator=dataclasses.replace(params.integrator, dt=1e-9))
     fsims = []
     for enabled in (True, False):
         state = settled.copy()
         state.velocity[:] = 0.0
-        fsims.append(Simulation(_with(params, contacts=enabled, forces=frozen), state=state))
+        fsims.append(Simulation(_with(still, contacts=enabled, forces=frozen), state=state))
     before = len(fsims[0].events)
     frozen_on, frozen_off = np.median(_interleaved(fsims, steps), axis=0)
     assert len(fsims[0].events) == before, "an event happened in the frozen scene"
@@ -329,36 +338,53 @@ def _simulation_at(scenario_path, settle, checkpoint):
     return sim, f"{scenario_path} after {settle} steps"
 
 
+def _patched(calls, graphs, peer_graphs):
+    """The functions an event calls, each wrapped to time it: ``[(owner, name, original)]``, patched
+    where the run's code looks them up (the contact set's ``classify_rods``, the topology module's
+    parts, the network's update and solve, the contact set's apply). The first ``peer_graphs``
+    arguments of ``classify_rods`` go to ``graphs``."""
+    inner = _timed(calls, "classify_rods", contactset_module.classify_rods)
+
+    def classify(*args):
+        if len(graphs) < peer_graphs:
+            graphs.append(tuple(np.array(a) if isinstance(a, np.ndarray) else a for a in args))
+        return inner(*args)
+
+    patches = [(contactset_module, "classify_rods", classify)]
+    for name in ("merge_tips", "component_structures", "_filament_rods"):
+        patches.append((topology_module, name, _timed(calls, name, getattr(topology_module, name))))
+    for owner, name in ((Network, "solve"), (ContactSet, "apply")):
+        patches.append((owner, name, _timed(calls, name, getattr(owner, name))))
+    update = Network.update
+
+    def timed_update(self, *args, **kwargs):
+        t0 = time.thread_time()
+        out = update(self, *args, **kwargs)
+        if out.events:  # a step with contact events: the whole of what the network did for it
+            calls.setdefault("update", []).append(time.thread_time() - t0)
+        return out
+
+    patches.append((Network, "update", timed_update))
+    saved = [(owner, name, getattr(owner, name)) for owner, name, _ in patches]
+    for owner, name, fn in patches:
+        setattr(owner, name, fn)
+    return saved
+
+
 def events_in_run(scenario_path, settle, checkpoint, steps, peer_graphs):
     sim, origin = _simulation_at(scenario_path, settle, checkpoint)
     sim.step(20)  # compiled kernels, warm caches
     calls: dict[str, list[float]] = {}
     graphs = []
-    g = graph_module
-    saved = {
-        name: getattr(g, name) for name in ("classify_rods", "merge_tips", "component_structures", "_filament_rods")
-    }
-    solve = type(sim.graph).solve
-    inner_classify = _timed(calls, "classify_rods", saved["classify_rods"])
-
-    def classify(*args):
-        if len(graphs) < peer_graphs:
-            graphs.append(tuple(np.array(a) if isinstance(a, np.ndarray) else a for a in args))
-        return inner_classify(*args)
-
+    saved = _patched(calls, graphs, peer_graphs)
     try:
-        g.classify_rods = classify
-        for name in ("merge_tips", "component_structures", "_filament_rods"):
-            setattr(g, name, _timed(calls, name, saved[name]))
-        type(sim.graph).solve = _timed(calls, "solve", solve)
         n_events = len(sim.events)
         t0 = time.process_time()
         sim.step(steps)
         cpu = time.process_time() - t0
     finally:
-        for name, fn in saved.items():
-            setattr(g, name, fn)
-        type(sim.graph).solve = solve
+        for owner, name, fn in saved:
+            setattr(owner, name, fn)
     topo = sim.graph.topology()
     # the peer: the scipy/networkx classification on the same graphs, checked to agree
     peer, ours = [], []
@@ -366,7 +392,7 @@ def events_in_run(scenario_path, settle, checkpoint, steps, peer_graphs):
         t0 = time.thread_time()
         want = oracles.classify_rods_scipy_networkx(*args)
         t1 = time.thread_time()
-        got = g.classify_rods(*args)
+        got = topology_module.classify_rods(*args)
         t2 = time.thread_time()
         peer.append(t1 - t0)
         ours.append(t2 - t1)
@@ -383,7 +409,7 @@ def events_in_run(scenario_path, settle, checkpoint, steps, peer_graphs):
     def total(name):
         return float(np.sum(calls.get(name, [])))
 
-    n_cls = len(calls["classify_rods"])
+    n_cls = len(calls.get("classify_rods", []))
     print(
         f"\n(c) topology and circuit per event, {sim.state.n_rods} rods, from {origin}: {steps} steps "
         f"t = {sim.state.time - steps * sim.dt:.1f} .. {sim.state.time:.1f}, "
@@ -394,11 +420,13 @@ def events_in_run(scenario_path, settle, checkpoint, steps, peer_graphs):
     print("| part | calls per 1000 steps | ms per call (median) | share of the steps' CPU time |")
     print("|---|---|---|---|")
     for name, label in (
-        ("classify_rods", "classify_rods (all of it)"),
-        ("merge_tips", "  tip merge (merge_tips)"),
-        ("component_structures", "  components, structures, attachments (one kernel)"),
-        ("_filament_rods", "  filament search (blocks through X)"),
-        ("solve", "ConnectivityGraph.solve (circuit)"),
+        ("update", "Network.update on a step with events (all of it)"),
+        ("apply", "  ContactSet.apply (the new set of contacts)"),
+        ("classify_rods", "  classify_rods (all of it)"),
+        ("merge_tips", "    tip merge (merge_tips)"),
+        ("component_structures", "    components, structures, attachments (one kernel)"),
+        ("_filament_rods", "    filament search (blocks through X)"),
+        ("solve", "  Network.solve (circuit)"),
     ):
         calls_k = per_k(name) if name != "merge_tips" else 1000.0 * n_cls / steps
         print(f"| {label} | {calls_k:.1f} | {med(name):.3f} | {100 * total(name) / cpu:.1f} % |")
