@@ -69,8 +69,8 @@ import numpy as np
 from selfas_graph import Simulation, load_scenario
 from selfas_graph.io.checkpoint import read_checkpoint
 from selfas_graph.io.scenario import scenario_from_text
-from selfas_graph.model import events as ev
 from selfas_graph.model import contactset as contactset_module
+from selfas_graph.model import events as ev
 from selfas_graph.model import topology as topology_module
 from selfas_graph.model.contactset import ContactSet
 from selfas_graph.model.graph import ConnectivityGraph
