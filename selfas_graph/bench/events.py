@@ -351,7 +351,7 @@ def _patched(calls, graphs, peer_graphs):
         return inner(*args)
 
     patches = [(contactset_module, "classify_rods", classify)]
-    for name in ("merge_tips", "component_structures", "_filament_rods"):
+    for name in ("merge_tips", "component_structures", "filament_rods"):
         patches.append((topology_module, name, _timed(calls, name, getattr(topology_module, name))))
     for owner, name in ((Network, "solve"), (ContactSet, "apply")):
         patches.append((owner, name, _timed(calls, name, getattr(owner, name))))
@@ -425,7 +425,7 @@ def events_in_run(scenario_path, settle, checkpoint, steps, peer_graphs):
         ("classify_rods", "  classify_rods (all of it)"),
         ("merge_tips", "    tip merge (merge_tips)"),
         ("component_structures", "    components, structures, attachments (one kernel)"),
-        ("_filament_rods", "    filament search (blocks through X)"),
+        ("filament_rods", "    filament search (blocks through X, one kernel)"),
         ("solve", "  Network.solve (circuit)"),
     ):
         calls_k = per_k(name) if name != "merge_tips" else 1000.0 * n_cls / steps

@@ -71,19 +71,32 @@ def report(path, frames):
             g = rf.graph(frame=fr)
             fil = g["role"] == FILAMENT
             for name, rad in radial_parts(params, rf.position(fr), g["role"], g["current"]).items():
-                rows.setdefault(name, []).append((rad[fil].mean(), rad.mean()))
+                # a frame without filament rods (before the first short circuit) has no filament mean
+                rows.setdefault(name, []).append((rad[fil].mean() if fil.any() else np.nan, rad.mean()))
         last = rf.graph(frame=-1)
         x = rf.position(-1)
     fil = last["role"] == FILAMENT
     _, rho, _ = _axis_frame(x)
-    print(f"last frame: {fil.sum()} rods in current-carrying filaments, median distance {np.median(rho[fil]):.2f} L")
+    where = f", median distance {np.median(rho[fil]):.2f} L" if fil.any() else ""
+    print(f"last frame: {fil.sum()} rods in current-carrying filaments{where}")
     m = len(next(iter(rows.values())))
-    print(f"radial force per rod (+ outwards), mean over the last {m} frames +- its standard error over the frames")
+    with_fil = int(np.isfinite(np.array(next(iter(rows.values())))[:, 0]).sum())
+    print(
+        f"radial force per rod (+ outwards), mean over the last {m} frames ({with_fil} with filament rods) "
+        "+- its standard error over the frames"
+    )
     print(f"  {'term':34s} {'filament rods':>20s} {'all rods':>20s}")
+
+    def mean_err(col):
+        col = col[np.isfinite(col)]
+        if not len(col):
+            return np.nan, np.nan
+        return col.mean(), col.std(ddof=1) / np.sqrt(len(col)) if len(col) > 1 else np.nan
+
     for name, vals in rows.items():
         v = np.array(vals)
-        err = v.std(axis=0, ddof=1) / np.sqrt(len(v)) if len(v) > 1 else np.full(2, np.nan)
-        print(f"  {name:34s} {v[:, 0].mean():+9.4f} +- {err[0]:.4f} {v[:, 1].mean():+9.4f} +- {err[1]:.4f}")
+        (f_mean, f_err), (a_mean, a_err) = mean_err(v[:, 0]), mean_err(v[:, 1])
+        print(f"  {name:34s} {f_mean:+9.4f} +- {f_err:.4f} {a_mean:+9.4f} +- {a_err:.4f}")
     s = x[1::2] - x[0::2]
     J = np.where(fil, last["current"], 0.0)
     print(

@@ -199,3 +199,72 @@ def structures(n_rods, node_of_tip, n_nodes, tip_contacts, conductor_tip, key_in
         elif first_key[c] != key_index[j]:
             candidate[c] = True
     return comp, n_comp, free, structure, structure_size, comp_touch, candidate
+
+
+@njit
+def filament_rods(n_nodes, u, v, comp, candidate, cnode, key_index, n_keys):
+    """The rods in a block (biconnected component) with the virtual node X: the filament rods of
+    ``model/topology.py::classify_rods`` (its module docstring gives the rule and the graph H).
+
+    ``u``, ``v`` (n_rods,) the merged nodes of each rod's tips, ``comp`` (n_nodes,) their components,
+    ``candidate`` (n_comp,) the components touching two or more keys, ``cnode`` (k,) the merged node
+    and ``key_index`` (k,) the key (``0 .. n_keys-1``) of each conductor contact. Returns (n_rods,)
+    bool.
+
+    H's nodes: the merged nodes, attachment node ``n_nodes + key`` of each key, X = ``n_nodes +
+    n_keys``; a merged node touching exactly one key is replaced by that key's attachment. Its
+    edges, each once (parallel rods collapse to one edge, which is exact: they share its block or
+    form one of their own without X): the rods of candidate components whose ends differ, an edge
+    from each merged node touching two or more keys to each of those keys' attachments, and X to
+    each attachment in use; coded ``lo * (n_h) + hi``. One depth-first search from X
+    (:func:`edges_in_blocks_of`) then marks the edges in X's blocks. The sets are those of the numpy
+    steps it replaced (tests/physics/test_graph_kernels.py holds it to networkx).
+    """
+    n_keys = np.int64(n_keys)
+    x_node = n_nodes + n_keys
+    stride = np.int64(x_node + 1)
+    k = cnode.shape[0]
+    # the distinct (merged node, key) pairs of the contacts in candidate components
+    pair = np.empty(k, dtype=np.int64)
+    m = 0
+    for j in range(k):
+        if candidate[comp[cnode[j]]]:
+            pair[m] = cnode[j] * n_keys + key_index[j]
+            m += 1
+    node_key = np.unique(pair[:m])
+    keys_of = np.zeros(n_nodes, dtype=np.int64)
+    key_used = np.zeros(n_keys, dtype=np.bool_)
+    for c in node_key:
+        keys_of[c // n_keys] += 1
+        key_used[c % n_keys] = True
+    rep = np.arange(n_nodes)
+    for c in node_key:
+        if keys_of[c // n_keys] == 1:
+            rep[c // n_keys] = n_nodes + c % n_keys
+    n_rods = u.shape[0]
+    code = np.empty(n_rods + node_key.shape[0] + n_keys, dtype=np.int64)
+    rod_code = np.empty(n_rods, dtype=np.int64)
+    rod_in = np.zeros(n_rods, dtype=np.bool_)
+    e = 0
+    for i in range(n_rods):
+        ru, rv = rep[u[i]], rep[v[i]]
+        rod_code[i] = min(ru, rv) * stride + max(ru, rv)
+        if candidate[comp[u[i]]] and ru != rv:
+            rod_in[i] = True
+            code[e] = rod_code[i]
+            e += 1
+    for c in node_key:
+        if keys_of[c // n_keys] >= 2:
+            code[e] = (c // n_keys) * stride + n_nodes + c % n_keys
+            e += 1
+    for key in range(n_keys):
+        if key_used[key]:  # attachment < X, so (attachment, X) is (lo, hi)
+            code[e] = (n_nodes + key) * stride + x_node
+            e += 1
+    code = np.unique(code[:e])
+    in_x = edges_in_blocks_of(x_node + 1, code // stride, code % stride, x_node)
+    out = np.zeros(n_rods, dtype=np.bool_)
+    for i in range(n_rods):
+        if rod_in[i]:
+            out[i] = in_x[np.searchsorted(code, rod_code[i])]
+    return out

@@ -40,7 +40,7 @@ import dataclasses
 
 import numpy as np
 
-from selfas_graph.kernels.graph import edges_in_blocks_of
+from selfas_graph.kernels.graph import filament_rods
 from selfas_graph.kernels.graph import structures as component_structures
 from selfas_graph.model import events as ev
 from selfas_graph.model.circuit import merge_tips
@@ -168,7 +168,7 @@ def classify_rods(n_rods, tip_contacts, conductor_tip, conductor_node_key) -> To
 
     filament = np.zeros(n_rods, dtype=bool)
     if candidate.any():
-        filament = _filament_rods(
+        filament = filament_rods(
             n_nodes, u, node_of_tip[1::2], comp, candidate, node_of_tip[conductor_tip], key_index, n_keys
         )
 
@@ -190,51 +190,6 @@ def classify_rods(n_rods, tip_contacts, conductor_tip, conductor_node_key) -> To
         n_nodes=int(n_nodes),
         node_of_tip=_frozen(node_of_tip),
     )
-
-
-def _filament_rods(n_nodes, u, v, comp, candidate, cnode, key_index, n_keys) -> np.ndarray:
-    """Rods in a biconnected component with the virtual node X (see module docstring).
-
-    Auxiliary simple graph H: merged nodes ``0 .. n_nodes-1`` of the candidate
-    components, attachment of key ``j`` as node ``n_nodes + j``, X as node
-    ``n_nodes + n_keys``; a merged node that touches exactly one key is replaced by
-    that key's attachment node. Edges are the rods, the contacts of merged nodes that
-    touch two or more keys (merged node -> attachment) and X -> attachment. Edges are
-    coded ``lo * stride + hi``.
-
-    Parallel rods collapse to one edge of H. That is exact: two parallel rods
-    share the block of their common edge (or form a block of their own, which
-    cannot contain X). Self-loop rods are never filament.
-
-    The blocks through X come from one depth-first search from X over H
-    (:func:`selfas_graph.kernels.graph.edges_in_blocks_of`).
-    """
-    x_node = n_nodes + n_keys
-    n_h = x_node + 1
-    stride = np.int64(n_h)
-    att_in = candidate[comp[cnode]]
-    # contacts are ideal, so a merged node touching exactly one attachment key is that
-    # attachment electrically: it becomes the attachment node itself. A path through it
-    # then ends there, and a loop that leaves an electrode and comes back to it (both ends
-    # pinned at the same potential, no current) is a cycle through that attachment alone.
-    # Nodes touching two or more keys keep one edge to each attachment.
-    node_key = np.unique(cnode[att_in] * np.int64(n_keys) + key_index[att_in])  # distinct (node, key)
-    nk_node, nk_key = node_key // n_keys, node_key % n_keys
-    keys_per_node = np.bincount(nk_node, minlength=n_nodes)
-    rep = np.arange(n_nodes, dtype=np.int64)
-    single = keys_per_node[nk_node] == 1
-    rep[nk_node[single]] = n_nodes + nk_key[single]
-    ru, rv = rep[u], rep[v]
-    rod_in = candidate[comp[u]] & (ru != rv)
-    rod_code = np.minimum(ru, rv) * stride + np.maximum(ru, rv)
-    multi = keys_per_node[nk_node] >= 2
-    att_code = nk_node[multi] * stride + (n_nodes + nk_key[multi])
-    keys_used = np.unique(key_index[att_in]) + n_nodes
-    # unique edges of H; attachment < X, so (attachment, X) is (lo, hi)
-    code = np.unique(np.concatenate([rod_code[rod_in], att_code, keys_used * stride + x_node]))
-    edge_in_x = edges_in_blocks_of(n_h, code // stride, code % stride, x_node)
-    where = np.minimum(np.searchsorted(code, rod_code), code.shape[0] - 1)
-    return rod_in & edge_in_x[where]
 
 
 def conductor_node_key(conductor_id: np.ndarray, per_contact, conductor_ids) -> np.ndarray:

@@ -196,3 +196,28 @@ def test_solve_with_the_topologys_tip_merge_gives_the_same_bits():
     for name in ("potential", "current", "node_of_tip", "injected_current"):
         np.testing.assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
     assert (b.total_current, b.dissipated_power) == (a.total_current, a.dissipated_power)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_filament_rods_kernel_matches_networkx(seed):
+    """kernels/graph.py::filament_rods, the blocks through X in one kernel, marks the rods the
+    networkx version of the same rule marks (selfas_graph/bench/oracles.py), in case (i) and with
+    per-contact keys, on the arguments classify_rods hands it."""
+    from selfas_graph.bench.oracles import _filament_rods_networkx
+    from selfas_graph.kernels.graph import filament_rods, structures
+
+    rng = np.random.default_rng(2000 + seed)
+    n_rods = 400
+    tc, ct, cid = aggregate(n_rods, rng, loops=[0.0, 0.05, 0.3, 0.8][seed % 4])
+    key = cid if seed % 3 else np.where(rng.random(cid.size) < 0.4, 10 + np.arange(cid.size), cid)
+    n_nodes, node_of_tip = merge_tips(2 * n_rods, tc)
+    _, key_index = np.unique(key, return_inverse=True)
+    key_index = key_index.astype(np.int64)
+    n_keys = int(key_index.max()) + 1 if key_index.size else 0
+    comp, _, _, _, _, _, candidate = structures(n_rods, node_of_tip, n_nodes, tc, ct, key_index)
+    args = (n_nodes, node_of_tip[0::2], node_of_tip[1::2], comp, candidate, node_of_tip[ct], key_index, n_keys)
+    got = filament_rods(*args)
+    if not candidate.any():  # no component touches two keys (classify_rods calls neither version then)
+        assert not got.any()
+        return
+    np.testing.assert_array_equal(got, _filament_rods_networkx(*args))

@@ -1,0 +1,55 @@
+"""Smoke tests of the bench tools that have no test of their own, each at a small size: it runs to the
+end and prints its table (a tool that stopped running would otherwise be found only by its next
+user). The figures are measurements, not checked."""
+
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+QUICK = str(ROOT / "scenarios" / "quick.toml")
+
+
+@pytest.fixture(scope="module")
+def quick_run(tmp_path_factory):
+    """The quick scene to t = 2.5, past its first short circuit (t = 2.01): a run file with current."""
+    from selfas_graph.cli.main import main
+
+    run = tmp_path_factory.mktemp("quick_run") / "quick.h5"
+    assert main(["simulate", QUICK, "-o", str(run), "--t-end", "2.5", "--progress", "none"]) == 0
+    return run
+
+
+def _main(name):
+    import importlib
+
+    return importlib.import_module(f"selfas_graph.bench.{name}").main
+
+
+@pytest.mark.parametrize(
+    "name, argv, printed",
+    [
+        ("circuit", ["--sizes", "1000", "--repeat", "1"], "chain"),
+        ("rods", ["--steps", "5", "--rounds", "1", "--tips", "600"], "quick.toml (equal rods)"),
+        ("checks", ["--scenario", QUICK, "--settle", "10", "--repeat", "1", "--calls", "5"], "skin check"),
+        (
+            "tree",
+            ["--rods", "400", "--theta", "0.5", "--leaf", "64", "--order", "2", "--reps", "1", "--config", "uniform"],
+            "crossover (uniform)",
+        ),
+        ("step", ["--scenario", QUICK, "--rods", "300", "--steps", "10", "--repeat", "1"], "| 300 |"),
+    ],
+)
+def test_a_tool_runs_to_its_table(name, argv, printed, capsys):
+    _main(name)(argv)
+    assert printed in capsys.readouterr().out
+
+
+def test_run_file_tools(quick_run, capsys):
+    """The tools that read a run file: the radial forces of its last frames and its short circuits."""
+    _main("radial_forces")([str(quick_run), "--frames", "2"])
+    out = capsys.readouterr().out
+    assert "current_lorentz" in out and "sum of J s_z over the filament rods" in out
+    _main("short_circuits")([str(quick_run)])
+    out = capsys.readouterr().out
+    assert "| run | episodes | first |" in out and "quick.h5 | 1 | 2.01 |" in out
