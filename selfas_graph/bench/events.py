@@ -19,9 +19,9 @@ Usage::
     * ``tracker alone``: ``ContactTracker.search`` repeated on the settled positions,
       where nothing changes; and its path for a step with news both ways on them, the kernel
       pass (``search_news``) and the numpy passes (``search_numpy``);
-    * ``frozen A/B``: velocities set to zero and every force off except a weak ambient
-      brake (and the electrode walls, which define the planes), so nothing moves and
-      no event happens; steps with ``contacts.enabled``
+    * ``frozen A/B``: velocities set to zero, every force off except a weak ambient
+      brake (and the electrode walls, which define the planes) and dt = 1e-9, so nothing
+      moves and no event happens; steps with ``contacts.enabled``
       true minus false, against a full Fig. 2 step;
     * ``Fig. 2 A/B``: the full scene with contacts on minus off, stepped alternately
       (the tip list then also grows from r* to 1.5 r* for the brake; events happen).
@@ -181,12 +181,10 @@ def contact_overhead(scenario_path, settle, steps):
             times[i] = time.perf_counter() - t0
         news[name] = float(np.median(times))
 
-    # frozen A/B: nothing moves, no event can happen. The electrode walls stay on: the
-    # tracker takes its planes from them (they only push tips closer than r* to a plane,
-    # by less than r*, far from any release)
-    # the walls push the tips within r* of a plane, which in a few hundred steps of the scene's own
-    # dt can carry a tip across a contact's release radius: the frozen scenes take a time step so
-    # short that no tip moves measurably (a step costs the same whatever dt is)
+    # frozen A/B: nothing moves, no event can happen. The electrode walls stay on: the tracker
+    # takes its planes from them. They push the tips within r* of a plane, which in a few hundred
+    # steps of the scene's own dt can carry a tip across a contact's release radius: the frozen
+    # scenes take a time step so short that no tip moves measurably (a step costs the same at any dt)
     frozen = ForceParams(ambient_brake=AmbientBrake(coefficient=1e-3), electrodes=params.forces.electrodes)
     still = dataclasses.replace(params, integrator=dataclasses.replace(params.integrator, dt=1e-9))
     fsims = []
