@@ -14,15 +14,16 @@ checked to import the code meant (as ``same_as_commit``). With ``--seeds`` a rou
 trajectories (another path, other work) is judged on several paths, not one. Before the timed runs each code runs
 the scene for ``--warm-up`` t0 untimed, so that the kernels it reaches are compiled into its cache;
 kernels first used later (the circuit and the current terms, after the first short circuit, t = 7-23
-in Fig. 2) are compiled in each code's first timed run: take ``--rounds 2`` or more (the ratio is the
-median over rounds), or a warm-up past the first short circuit. Each run is a fresh process with
-``NUMBA_NUM_THREADS`` = ``OMP_NUM_THREADS`` = ``--threads``.
+in Fig. 2) are compiled in the first timed run that reaches them, and so is every kernel of a source
+file edited since the warm-up: each run times numba's compilations (its ``numba:compile`` events,
+which fire only on a cache miss) and the tool prints the ratio of the wall times less them too. Each
+run is a fresh process with ``NUMBA_NUM_THREADS`` = ``OMP_NUM_THREADS`` = ``--threads``.
 
 It prints the CPU model and the instruction set numba compiles for, each run's wall and CPU
-time (the child's user + system time) and its end state (rods in current-carrying filaments
-and the current through the gap: runs that take other paths do other work), and the ratio of
-the commit's time to the working tree's (above 1: the working tree is faster), the median over
-the rounds. Use it on an otherwise idle machine; the ratio of two builds,
+time (the child's user + system time), its seconds compiling kernels and its end state (rods in
+current-carrying filaments and the current through the gap: runs that take other paths do other
+work), and the ratios of the commit's times to the working tree's (above 1: the working tree is
+faster; wall, CPU, and wall less compiling), the median over the rounds. Use it on an otherwise idle machine; the ratio of two builds,
 ``NUMBA_CPU_NAME=haswell NUMBA_CPU_FEATURES= selfas-graph bench against_commit ...``, is the
 AVX2 build's. Example, the goal of docs/performance.md 'Where the speed goals stand'::
 
@@ -45,11 +46,33 @@ from pathlib import Path
 from ..provenance import machine, source_commit
 from .same_as_commit import ROOT, RUNNER, export
 
+#: :data:`~.same_as_commit.RUNNER` with numba's compilations timed (its ``numba:compile`` events, which
+#: fire only for kernels not found in the cache; nested compilations counted once), the seconds written
+#: at exit to the file named by ``SELFAS_COMPILE_SECONDS``
+TIMED_RUNNER = (
+    """import atexit, os
+from numba.core import event
+_compiling = event.TimingListener()
+event.register("numba:compile", _compiling)
+_to = os.environ["SELFAS_COMPILE_SECONDS"]
+atexit.register(lambda: open(_to, "w").write(repr(_compiling.duration if _compiling.done else 0.0)))
+"""
+    + RUNNER
+)
+
 
 def timed_simulate(code: Path, scenario: Path, sets: list[str], out: Path, threads: int, cwd: Path) -> dict:
-    """One ``simulate`` run of ``scenario`` with the package in ``code``: wall and CPU seconds."""
-    env = dict(os.environ, PYTHONPATH=str(code), NUMBA_NUM_THREADS=str(threads), OMP_NUM_THREADS=str(threads))
-    cmd = [sys.executable, "-c", RUNNER, str(code), "simulate", str(scenario), "-o", str(out)]
+    """One ``simulate`` run of ``scenario`` with the package in ``code``: wall and CPU seconds, and the
+    seconds numba spent compiling kernels its cache did not hold (``compile_seconds``)."""
+    seconds_file = out.with_suffix(".compile_seconds")
+    env = dict(
+        os.environ,
+        PYTHONPATH=str(code),
+        NUMBA_NUM_THREADS=str(threads),
+        OMP_NUM_THREADS=str(threads),
+        SELFAS_COMPILE_SECONDS=str(seconds_file),
+    )
+    cmd = [sys.executable, "-c", TIMED_RUNNER, str(code), "simulate", str(scenario), "-o", str(out)]
     cmd += ["--progress", "none", "--force"] + [a for s in sets for a in ("--set", s)]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     started = time.perf_counter()
@@ -59,7 +82,15 @@ def timed_simulate(code: Path, scenario: Path, sets: list[str], out: Path, threa
     if r.returncode != 0:
         raise SystemExit(f"{code}: simulate {scenario} failed (exit {r.returncode}):\n{r.stdout}{r.stderr}")
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return {"wall_seconds": wall, "cpu_seconds": cpu, **end_state(out)}
+    compiling = float(seconds_file.read_text())
+    seconds_file.unlink()
+    return {
+        "wall_seconds": wall,
+        "cpu_seconds": cpu,
+        "compile_seconds": compiling,
+        "wall_less_compile_seconds": wall - compiling,
+        **end_state(out),
+    }
 
 
 def end_state(path: Path) -> dict:
@@ -86,7 +117,10 @@ def _run_text(run: dict) -> str:
         if run["t"] is not None and run["filament_rods"] is not None and run["total_current"] is not None
         else "no current observables"
     )
-    return f"wall {run['wall_seconds']:.1f} s, CPU {run['cpu_seconds']:.1f} s; {state}"
+    return (
+        f"wall {run['wall_seconds']:.1f} s, CPU {run['cpu_seconds']:.1f} s, compiling kernels "
+        f"{run['compile_seconds']:.1f} s; {state}"
+    )
 
 
 def main(argv=None) -> int:
@@ -206,9 +240,13 @@ def main(argv=None) -> int:
 
     record["ratios"] = ratios = {
         key: [a / b for a, b in zip(per_round("commit", key), per_round("tree", key))]
-        for key in ("wall_seconds", "cpu_seconds")
+        for key in ("wall_seconds", "cpu_seconds", "wall_less_compile_seconds")
     }
-    for key, label in (("wall_seconds", "wall"), ("cpu_seconds", "CPU")):
+    for key, label in (
+        ("wall_seconds", "wall"),
+        ("cpu_seconds", "CPU"),
+        ("wall_less_compile_seconds", "wall less compiling"),
+    ):
         rs = ratios[key]
         spread = f" [{min(rs):.3f}-{max(rs):.3f}]" if len(rs) > 1 else ""
         print(f"{label} time, {args.commit} over the working tree: {statistics.median(rs):.3f}{spread}")

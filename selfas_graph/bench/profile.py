@@ -93,11 +93,9 @@ PARTS = [
         "split brake (close pairs, exact brake)",
         lambda f: f.endswith(
             (
-                "contacts.py:close_pairs",
-                "contacts.py:_close_counts",
-                "contacts.py:_close_fill",
+                # the close-pair kernels of kernels/contacts.py serve the brake from Python only from
+                # PARALLEL_ROWS tips on; below, the contact search's numpy path calls them (next part)
                 "brakes.py:brake_pairs_exact",
-                "contacts.py:close_pair_count",
                 "brakes.py:brake_close_pairs",
                 "brakes.py:brake_close_pairs_exact",
                 "fields.py:electrode_brake_exact",
@@ -107,13 +105,25 @@ PARTS = [
     ("neighbour-list builds", lambda f: "kernels/cells.py" in f),
     ("fast steps in one compiled call (kernels)", lambda f: "steps.py:fast_steps" in f),
     (
-        "cheap O(n) kernels (walls, fields, integration, bonds)",
-        lambda f: "selfas_graph/kernels/" in f and not f.endswith("_jit.py:__call__"),
+        "contact search and events",
+        lambda f: any(p in f for p in ("model/contacts.py", "model/events.py", "kernels/contacts.py")),
     ),
-    ("contact search and events (Python)", lambda f: "model/contacts.py" in f or "model/events.py" in f),
     (
         "graph and circuit on events",
-        lambda f: any(f"model/{m}.py" in f for m in ("graph", "circuit", "network", "topology", "linear", "validate")),
+        lambda f: (
+            any(
+                f"model/{m}.py" in f
+                for m in ("graph", "circuit", "network", "topology", "linear", "validate", "contactset")
+            )
+            or "kernels/graph.py" in f
+            or "scipy/sparse/" in f
+            or "_superlu" in f  # the circuit's sparse LU: its factorisation (named by module) ...
+            or "'SuperLU'" in f
+        ),  # ... and its solve, a method of the factors' type
+    ),
+    (
+        "cheap O(n) kernels (walls, fields, integration, bonds)",
+        lambda f: "selfas_graph/kernels/" in f and not f.endswith("_jit.py:__call__"),
     ),
     ("force field bookkeeping (Python)", lambda f: "model/terms/" in f),
     ("neighbour-list checks (Python)", lambda f: "model/neighbours.py" in f),

@@ -66,13 +66,26 @@ def report(path, frames):
             _, rho, _ = _axis_frame(rf.position(fr))
             print(f"t = {times[fr]:7.1f}: median distance of rod centres from the axis {np.median(rho):6.2f} L")
         params = scenario_from_text(rf.scenario_text).params
-        rows = {}
+        per_frame = []
         for fr in range(max(0, n - frames), n):
             g = rf.graph(frame=fr)
             fil = g["role"] == FILAMENT
-            for name, rad in radial_parts(params, rf.position(fr), g["role"], g["current"]).items():
-                # a frame without filament rods (before the first short circuit) has no filament mean
-                rows.setdefault(name, []).append((rad[fil].mean() if fil.any() else np.nan, rad.mean()))
+            # a frame without filament rods (before the first short circuit) has no filament mean
+            per_frame.append(
+                {
+                    name: (rad[fil].mean() if fil.any() else np.nan, rad.mean())
+                    for name, rad in radial_parts(params, rf.position(fr), g["role"], g["current"]).items()
+                }
+            )
+        # a term that is zero in a frame (the current terms without current) is left out of its parts:
+        # it counts as 0 for all rods there, and has no filament mean
+        rows = {}
+        for parts in per_frame:
+            for name in parts:
+                rows.setdefault(name, [])
+        for parts in per_frame:
+            for name, vals in rows.items():
+                vals.append(parts.get(name, (np.nan, 0.0)))
         last = rf.graph(frame=-1)
         x = rf.position(-1)
     fil = last["role"] == FILAMENT
@@ -80,7 +93,7 @@ def report(path, frames):
     where = f", median distance {np.median(rho[fil]):.2f} L" if fil.any() else ""
     print(f"last frame: {fil.sum()} rods in current-carrying filaments{where}")
     m = len(next(iter(rows.values())))
-    with_fil = int(np.isfinite(np.array(next(iter(rows.values())))[:, 0]).sum())
+    with_fil = sum(1 for parts in per_frame if any(np.isfinite(f) for f, _ in parts.values()))
     print(
         f"radial force per rod (+ outwards), mean over the last {m} frames ({with_fil} with filament rods) "
         "+- its standard error over the frames"

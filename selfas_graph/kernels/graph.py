@@ -1,6 +1,6 @@
 """Graph kernels of the topology and the circuit: connected components and the blocks through a node.
 
-Both run once per contact event (``model/graph.py``, ``model/circuit.py``), on graphs of
+They run once per contact event (``model/topology.py``, ``model/circuit.py``), on graphs of
 a few thousand nodes in the Fig. 2 scene: there the cost of building a scipy sparse matrix
 and walking a networkx graph is mostly interpreter overhead, which these serial loops do
 not have (docs/performance.md, "Topology and circuit per event").
@@ -143,7 +143,7 @@ def edges_in_blocks_of(n, a, b, root):
 
 @njit
 def structures(n_rods, node_of_tip, n_nodes, tip_contacts, conductor_tip, key_index):
-    """Structures of the rods and which of them touch conductors (``model/graph.py::classify_rods``).
+    """Structures of the rods and which of them touch conductors (``model/topology.py::classify_rods``).
 
     ``node_of_tip`` (2 n_rods,) the merged node of each tip (:func:`component_labels` of the
     tip contacts), ``tip_contacts`` (m, 2) those contacts; ``conductor_tip`` (k,) the tip of
@@ -216,7 +216,7 @@ def filament_rods(n_nodes, u, v, comp, candidate, cnode, key_index, n_keys):
     edges, each once (parallel rods collapse to one edge, which is exact: they share its block or
     form one of their own without X): the rods of candidate components whose ends differ, an edge
     from each merged node touching two or more keys to each of those keys' attachments, and X to
-    each attachment in use; coded ``lo * (n_h) + hi``. One depth-first search from X
+    each attachment in use; coded ``lo * stride + hi`` with ``stride`` the number of H's nodes. One depth-first search from X
     (:func:`edges_in_blocks_of`) then marks the edges in X's blocks. The sets are those of the numpy
     steps it replaced (tests/physics/test_graph_kernels.py holds it to networkx).
     """
@@ -237,7 +237,7 @@ def filament_rods(n_nodes, u, v, comp, candidate, cnode, key_index, n_keys):
     for c in node_key:
         keys_of[c // n_keys] += 1
         key_used[c % n_keys] = True
-    rep = np.arange(n_nodes)
+    rep = np.arange(n_nodes, dtype=np.int64)
     for c in node_key:
         if keys_of[c // n_keys] == 1:
             rep[c // n_keys] = n_nodes + c % n_keys

@@ -148,3 +148,23 @@ def test_sampled_profile_or_its_reason(capsys):
     tool.main(["--scenario", str(ROOT / "scenarios" / "quick.toml"), "--settle", "4", "--steps", "40", "--sample"])
     out = capsys.readouterr().out
     assert ("| compiled kernels (numba) |" in out and "Python and numpy (" in out) or "no sampled profile: " in out
+
+
+def test_the_parts_a_function_is_counted_in():
+    """cProfile's keys (path, line, function) to the table's parts: the event path's kernels and scipy's
+    sparse LU (its factorisation and its solve) in the graph and circuit, the contact search's close-pair
+    kernels in the search (the brake calls them from Python only from PARALLEL_ROWS tips on)."""
+    part_of = _tool().part_of
+    kernels = "/x/selfas_graph/kernels/"
+    cases = {
+        ("~", 0, "<built-in method scipy.sparse.linalg._dsolve._superlu.gstrf>"): "graph and circuit on events",
+        ("~", 0, "<method 'solve' of 'SuperLU' objects>"): "graph and circuit on events",
+        (kernels + "graph.py", 1, "filament_rods"): "graph and circuit on events",
+        ("/x/selfas_graph/model/contactset.py", 1, "apply"): "graph and circuit on events",
+        (kernels + "contacts.py", 1, "contact_news"): "contact search and events",
+        (kernels + "contacts.py", 1, "close_pairs"): "contact search and events",
+        (kernels + "brakes.py", 1, "brake_close_pairs_exact"): "split brake (close pairs, exact brake)",
+        (kernels + "integrate.py", 1, "ab4_step"): "cheap O(n) kernels (walls, fields, integration, bonds)",
+    }
+    for key, part in cases.items():
+        assert part_of(key) == part, key
