@@ -319,14 +319,16 @@ def graph_update(sizes, batches, repeat, seed):
 
 
 # --------------------------------------------------------------------------- (c)
-def _timed(table, name, fn):
-    """``fn`` wrapped to append its thread CPU time (s) to ``table[name]``."""
+def _timed(table, name, fn, keep=None):
+    """``fn`` wrapped to append its thread CPU time (s) to ``table[name]`` (only for the calls whose
+    result ``keep(result)`` accepts, when given)."""
     table.setdefault(name, [])
 
     def wrapper(*args, **kwargs):
         t0 = time.thread_time()
         out = fn(*args, **kwargs)
-        table[name].append(time.thread_time() - t0)
+        if keep is None or keep(out):
+            table[name].append(time.thread_time() - t0)
         return out
 
     return wrapper
@@ -361,16 +363,8 @@ def _patched(calls, graphs, peer_graphs):
         patches.append((topology_module, name, _timed(calls, name, getattr(topology_module, name))))
     for owner, name in ((Network, "solve"), (ContactSet, "apply")):
         patches.append((owner, name, _timed(calls, name, getattr(owner, name))))
-    update = Network.update
-
-    def timed_update(self, *args, **kwargs):
-        t0 = time.thread_time()
-        out = update(self, *args, **kwargs)
-        if out.events:  # a step with contact events: the whole of what the network did for it
-            calls.setdefault("update", []).append(time.thread_time() - t0)
-        return out
-
-    patches.append((Network, "update", timed_update))
+    # the steps with contact events: the whole of what the network did for each
+    patches.append((Network, "update", _timed(calls, "update", Network.update, keep=lambda out: bool(out.events))))
     saved = [(owner, name, getattr(owner, name)) for owner, name, _ in patches]
     for owner, name, fn in patches:
         setattr(owner, name, fn)

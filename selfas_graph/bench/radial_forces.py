@@ -79,13 +79,8 @@ def report(path, frames):
             )
         # a term that is zero in a frame (the current terms without current) is left out of its parts:
         # it counts as 0 for all rods there, and has no filament mean
-        rows = {}
-        for parts in per_frame:
-            for name in parts:
-                rows.setdefault(name, [])
-        for parts in per_frame:
-            for name, vals in rows.items():
-                vals.append(parts.get(name, (np.nan, 0.0)))
+        names = dict.fromkeys(name for parts in per_frame for name in parts)  # in the order first met
+        rows = {name: [parts.get(name, (np.nan, 0.0)) for parts in per_frame] for name in names}
         last = rf.graph(frame=-1)
         x = rf.position(-1)
     fil = last["role"] == FILAMENT
