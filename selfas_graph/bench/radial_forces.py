@@ -118,7 +118,14 @@ def main(argv=None):
     ap.add_argument("run", help="run file (HDF5)")
     ap.add_argument("--frames", type=int, default=20, help="average over this many last frames (default 20)")
     a = ap.parse_args(argv)
-    report(a.run, a.frames)
+    if a.frames < 1:
+        ap.error(f"--frames: at least 1 frame to average over, got {a.frames}")
+    from selfas_graph.io.h5md import RunFileError
+
+    try:
+        report(a.run, a.frames)
+    except RunFileError as exc:  # a missing or unreadable run file: its message, no traceback
+        raise SystemExit(str(exc)) from None
 
 
 if __name__ == "__main__":

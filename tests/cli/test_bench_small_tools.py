@@ -53,3 +53,14 @@ def test_run_file_tools(quick_run, capsys):
     _main("short_circuits")([str(quick_run)])
     out = capsys.readouterr().out
     assert "| run | episodes | first |" in out and "quick.h5 | 1 | 2.01 |" in out
+
+
+def test_radial_forces_refuses_bad_input(tmp_path, capsys):
+    """No frames to average over, or no run file: a message naming the flag or the file, no traceback."""
+    tool = _main("radial_forces")
+    with pytest.raises(SystemExit) as info:
+        tool([str(tmp_path / "none.h5"), "--frames", "0"])
+    assert info.value.code == 2 and "--frames: at least 1 frame" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as info:
+        tool([str(tmp_path / "none.h5")])
+    assert "none.h5" in str(info.value.code) and "no such file" in str(info.value.code)
