@@ -375,7 +375,9 @@ def evaluate_tip_tree(tree, rstar, kappa, theta, out, lo=0, hi=None, precision="
     # groups differ in cost (dense clusters, the edge of the system): threads take
     # one group at a time. Measured on 2 threads: 428 against 469 ms for 1e5 uniform
     # rods, 192 against 227 ms for three clusters of chains with numba's static
-    # blocks. Set here, not in the kernel, which could then not be cached.
+    # blocks. Set here, not in the kernel, which could then not be cached. The groups
+    # go in tree (Morton) order: largest first, tried at t = 100 of Fig. 6 (44 groups of
+    # 5-549 tips, Zen 4, 2 threads), took 10.7 against 7.0 ms, a random order 7.6.
     chunk = set_parallel_chunksize(1)
     try:
         evaluate_groups(
