@@ -21,7 +21,7 @@ otherwise misses the cache at every point). The counting pass is a branch-free c
 that vectorises; the fill pass keeps a branch (a branch-free store measured slower: 8.8
 against 6.7 ms for the late Fig. 2 rod centres, each store waiting on the previous). Cutting each
 column's run of cells to the slab the radius allows (a square root and two floors per column; the
-same rows in the same order) measured slower too, on one core with `bench neighbours --before`:
+same rows in the same order) measured slower too, on one Zen 4 core with `bench neighbours --before`:
 0.88 times at 6000 rod centres of Fig. 6, 0.50 for its 12 000 tips, whose cells hold a point or two.
 
 Glossary: ``n`` points, ``g`` (3,) int64 cells per axis, ``h`` cell side, ``span`` cells
