@@ -188,6 +188,17 @@ def segment_field(x, A, B, J, w):
     return J * rho / (rho**2 + w**2) * (cos1 - cos2) * phi
 
 
+def segment_vector_potential(x, A, B, J):
+    """Vector potential of a finite wire, closed form: ``J s_hat ln((|a| + s_hat.a) / (|b| + s_hat.b))``
+    (``a = x - A``, ``b = x - B``; the integral of ``J dl / |x - x'|`` along the wire), whose curl
+    is :func:`segment_field` with ``w = 0`` (docs/model.md 'The rod currents by a tree')."""
+    x, A, B = (np.asarray(v, dtype=float) for v in (x, A, B))
+    s = B - A
+    sh = s / np.linalg.norm(s)
+    a, b = x - A, x - B
+    return J * sh * np.log((np.linalg.norm(a) + sh @ a) / (np.linalg.norm(b) + sh @ b))
+
+
 def rod_current_field(points, exclude, position, active, current, w):
     """Field of the active rods at each point, skipping exclude[p], by explicit loops."""
     out = np.zeros((len(points), 3))

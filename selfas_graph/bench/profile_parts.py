@@ -23,6 +23,11 @@ PARTS = [
         ),
     ),
     (
+        # the Morton keys and their sort (kernels/treebuild.py) count with the tip tree above
+        "tree of the rod currents (terms 9 and 10, method tree, slow)",
+        lambda f: "kernels/currenttree.py" in f,
+    ),
+    (
         "current field on tips (term 9, slow)",
         lambda f: f.endswith(("currents.py:current_force_on_tips", "currents.py:current_force_on_tips_mixed")),
     ),

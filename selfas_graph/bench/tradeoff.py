@@ -29,7 +29,9 @@ forces.tip_magnetic.opening_angle, forces.tip_magnetic.group_size and forces.tip
 the direct sum; only
 where the scene takes the tree, e.g. ``--set forces.tip_magnetic.method=tree``) and the
 ``precision`` of forces.tip_magnetic, forces.yukawa, forces.current_field and
-forces.current_lorentz (mixed against float64). Prints a markdown table and writes JSON and a
+forces.current_lorentz (mixed against float64), the ``method`` of forces.current_field and
+forces.current_lorentz (the tree of the rod currents against the direct sum) and their
+``opening_angle`` (against the direct sum; only where the scene takes the tree). Prints a markdown table and writes JSON and a
 plot of error against cost, one curve per knob.
 """
 
@@ -75,6 +77,12 @@ KNOBS = {
     "forces.yukawa.precision": (["float64", "mixed"], {"forces.yukawa.precision": "float64"}),
     "forces.current_field.precision": (["float64", "mixed"], {"forces.current_field.precision": "float64"}),
     "forces.current_lorentz.precision": (["float64", "mixed"], {"forces.current_lorentz.precision": "float64"}),
+    # the rod currents' field by the tree against the direct sum; its opening angle where the scene
+    # takes the tree (--set forces.current_field.method=tree --set forces.current_lorentz.method=tree)
+    "forces.current_field.method": (["direct", "tree"], {"forces.current_field.method": "direct"}),
+    "forces.current_lorentz.method": (["direct", "tree"], {"forces.current_lorentz.method": "direct"}),
+    "forces.current_field.opening_angle": ([0.3, 0.4, 0.5, 0.6, 0.7], {"forces.current_field.method": "direct"}),
+    "forces.current_lorentz.opening_angle": ([0.3, 0.4, 0.5, 0.6, 0.7], {"forces.current_lorentz.method": "direct"}),
     "integrator.slow_extrapolation": ([False, True], NO_SPLITTING),
     # only with slow_every > 1 in the base (--set integrator.slow_every=8): each range against no splitting
     "integrator.fast_range": ([2.0, 3.0, 4.0, 6.0, 8.0, 12.0], NO_SPLITTING),
@@ -115,6 +123,10 @@ def _applicable(scenario, knob):
     f = scenario.params.forces
     if knob == "integrator.current_every" and f.current_field is None and f.current_lorentz is None:
         return False
+    if knob.startswith("forces.current_") and knob.endswith(".opening_angle"):
+        term = getattr(f, knob.split(".")[1])
+        if term is None or term.method != "tree":
+            return False
     if knob in TREE_KNOBS:
         tm = scenario.params.forces.tip_magnetic
         if tm is None or not (

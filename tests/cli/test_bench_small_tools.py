@@ -38,6 +38,7 @@ def _main(name):
             "crossover (uniform)",
         ),
         ("step", ["--scenario", QUICK, "--rods", "300", "--steps", "10", "--repeat", "1"], "| 300 |"),
+        ("current_tree", ["--rods", "300", "--theta", "0.5", "--reps", "1"], "| tree | mixed | 0.5 |"),
     ],
 )
 def test_a_tool_runs_to_its_table(name, argv, printed, capsys):
@@ -53,6 +54,23 @@ def test_run_file_tools(quick_run, capsys):
     _main("short_circuits")([str(quick_run)])
     out = capsys.readouterr().out
     assert "| run | episodes | first |" in out and "quick.h5 | 1 | 2.01 |" in out
+
+
+def test_current_tree_tool_reads_a_checkpoint_and_refuses_bad_input(quick_run, capsys):
+    """The current tree's bench on a run's checkpoint (its rods and currents), and its refusals."""
+    tool = _main("current_tree")
+    checkpoint = str(quick_run).replace(".h5", ".checkpoint.h5")
+    assert tool(["--checkpoint", checkpoint, "--theta", "0", "--precision", "float64", "--reps", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "rods carrying current" in out and "| tree | float64 | 0 |" in out
+    for argv, named in (
+        (["--theta", "1.0", "--rods", "10"], "--theta"),
+        ([], "--checkpoint"),
+        (["--rods", "10", "--carrying", "0"], "--carrying"),
+    ):
+        with pytest.raises(SystemExit):
+            tool(argv)
+        assert named in capsys.readouterr().err
 
 
 def test_radial_forces_refuses_bad_input(tmp_path, capsys):

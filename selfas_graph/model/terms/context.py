@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...kernels.currenttree import build_current_tree
 from ...parallel import RowBlocks
 from ..neighbours import NeighbourList
 from ..network import RodCurrents
@@ -114,6 +115,7 @@ class EvalContext:
     _soa: tuple | None = None
     _centre: np.ndarray | None = None
     _buffers: dict = field(default_factory=dict)
+    _current_tree: tuple | None = None
 
     @property
     def n_tips(self) -> int:
@@ -129,6 +131,7 @@ class EvalContext:
         self.velocity = velocity
         self._soa = None
         self._centre = None
+        self._current_tree = None
 
     def soa(self) -> tuple:
         """The positions as three contiguous (n_tips,) arrays x, y, z (computed once per binding)."""
@@ -141,6 +144,21 @@ class EvalContext:
         if self._centre is None:
             self._centre = 0.5 * (self.position[0::2] + self.position[1::2])
         return self._centre
+
+    def current_tree(self):
+        """The multipole tree of the rod currents at :attr:`position` (:func:`~selfas_graph.kernels.currenttree.build_current_tree`),
+        built once per binding and set of currents and shared by terms 9 and 10; None while no rod
+        carries current or a position is not finite (the direct sums then carry the NaN to the run's
+        health check)."""
+        rc = self.currents
+        cached = self._current_tree
+        if cached is not None and cached[0] is rc.current:
+            return cached[1]
+        tree = None
+        if len(rc.active_rod) and np.isfinite(self.position).all():
+            tree = build_current_tree(self.position, rc.active_rod, rc.current)
+        self._current_tree = (rc.current, tree)
+        return tree
 
     def buffer(self, name: str, rows: int) -> np.ndarray:
         """A work buffer (rows, 3) float64 kept under ``name`` between evaluations; contents undefined."""

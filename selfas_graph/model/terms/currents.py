@@ -15,6 +15,7 @@ import numpy as np
 
 from ...kernels import cells
 from ...kernels import currents as kc
+from ...kernels import currenttree as kt
 from ...kernels import lorentz as kl
 from .base import Term
 
@@ -32,7 +33,8 @@ def wire_radius(p) -> float:
 class CurrentFieldForce(Term):
     """Term 9: q_k times the field of all other rods' currents (``ctx.currents``, wire radius D/2).
     No kernel call while no rod carries current. ``forces.current_field.precision`` picks the
-    float64 or the mixed-precision kernel."""
+    float64 or the mixed-precision kernel, ``forces.current_field.method`` the direct sum or the tree
+    of the currents (``ctx.current_tree()``, docs/model.md 'The rod currents by a tree')."""
 
     name = "current_field"
     channels = [("current_field", False)]
@@ -44,6 +46,8 @@ class CurrentFieldForce(Term):
         self.precision = p.forces.current_field.precision
         self.kernel = _TIP_KERNEL[self.precision]
         self.wire_radius = wire_radius(p)
+        self.tree = p.forces.current_field.method == "tree"
+        self.opening_angle = p.forces.current_field.opening_angle
 
     def compute(self, ctx, out):
         f = out["current_field"]
@@ -51,7 +55,17 @@ class CurrentFieldForce(Term):
         rc = ctx.currents
         if len(rc.active_rod):
             lo, hi = ctx.blocks.tips
-            self.kernel(ctx.position, ctx.tip_charge, rc.active_rod, rc.current, self.wire_radius, lo, hi, f)
+            tree = ctx.current_tree() if self.tree else None
+            if tree is None:
+                self.kernel(ctx.position, ctx.tip_charge, rc.active_rod, rc.current, self.wire_radius, lo, hi, f)
+            else:
+                field = f[lo:hi]
+                own_rod = np.arange(lo, hi, dtype=np.int64) // 2
+                mixed = self.precision == "mixed"
+                kt.current_tree_field(
+                    tree, ctx.position[lo:hi], own_rod, self.opening_angle, self.wire_radius, field, mixed
+                )
+                field *= ctx.tip_charge[lo:hi, None]
             ctx.calls[self.name] += 1
 
     def blocked(self, ctx):
@@ -82,6 +96,8 @@ class CurrentLorentzForce(Term):
         self.near_range = p.forces.current_lorentz.near_range
         self.panel_t, self.panel_w = kl.gauss_legendre_01(kl.NEAR_PANEL_POINTS)
         self.wire_radius = wire_radius(p)
+        self.tree = p.forces.current_lorentz.method == "tree"
+        self.opening_angle = p.forces.current_lorentz.opening_angle
         #: the terms that are sources of a magnetic field (FieldSource), in term order: handed in by the
         #: force field that holds this term, once every term is built
         self.field_sources = ()
@@ -139,8 +155,14 @@ class CurrentLorentzForce(Term):
         """Overwrite ``out`` (m, 3) with the field of the rod currents at ``points`` (m, 3), leaving out
         at each point the rod ``exclude_rod[p]`` ((m,) int64; -1: none), e.g. the rod the point is on;
         in the term's precision (``"mixed"``: float32 law, float64 sums;
-        :func:`~selfas_graph.kernels.currents.rod_current_field_mixed`)."""
+        :func:`~selfas_graph.kernels.currents.rod_current_field_mixed`) and by its method (the tree:
+        :func:`~selfas_graph.kernels.currenttree.current_tree_field`)."""
         rc = ctx.currents
+        tree = ctx.current_tree() if self.tree else None
+        if tree is not None:
+            mixed = self.precision == "mixed"
+            kt.current_tree_field(tree, points, exclude_rod, self.opening_angle, self.wire_radius, out, mixed)
+            return
         _FIELD_KERNEL[self.precision](
             points, exclude_rod, ctx.position, rc.active_rod, rc.current, self.wire_radius, out
         )

@@ -355,4 +355,10 @@ class ForceField:
                 )
             if isinstance(t, YukawaForce):
                 d["yukawa_cutoff"] = t.cutoff
+            if t.name in ("current_field", "current_lorentz"):
+                d[f"{t.name}_sum"] = (
+                    f"tree (opening angle {t.opening_angle:g}, octupoles, {t.precision} near rods)"
+                    if t.tree
+                    else "direct"
+                )
         return d

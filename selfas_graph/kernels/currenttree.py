@@ -1,0 +1,430 @@
+"""The field of the rod currents by a multipole tree (docs/model.md 'Term 9', 'The rod currents by a
+tree'): what ``method = "tree"`` of ``[forces.current_field]`` and ``[forces.current_lorentz]`` runs
+instead of the all-pairs sums of :mod:`.currents`.
+
+The field of a straight current is the curl of its vector potential: with the rod ``x' = A + t s``,
+t in [0, 1], carrying J, ``A(x) = J s int_0^1 dt / |x - x'(t)|`` (reduced units; ``curl A`` is the
+Biot-Savart law of :func:`.currents.segment_field` with ``w = 0``). Each component ``A_d`` is the
+Coulomb potential of a line charge of density ``J s_d`` along the rod, so that a cell of rods
+carries three sets of Cartesian multipole moments, one per channel d = x, y, z, in the layout of
+:mod:`.multipole` (M, P, Q, O: up to octupoles), and a far cell acts through
+``B = curl A``: with ``E_d = -grad A_d`` the field of channel d's moments,
+``B = (E_y,z - E_z,y, E_z,x - E_x,z, E_x,y - E_y,x)`` (``E_d,c`` the c component of ``E_d``).
+
+Moments. A channel's moment of order n is the integral along the rod of a polynomial of degree n
+in t: the 3-point Gauss-Legendre rule (:data:`GL_T`, :data:`GL_W`, exact to degree 5) gives the
+moments of a straight rod exactly up to octupoles. A cell's box, centre and radius are those of
+its rods' ends, so that the whole of every rod lies within the cell's radius of its centre.
+
+Walk. Targets (tips, or term 10's quadrature points) are sorted by the Morton key of their
+position and taken in groups of :data:`GROUP_SIZE`. A group walks the tree once: a cell acts
+through its moments on all the group's targets when its radius is below ``opening_angle`` times
+the distance of its centre from the group's box; a leaf that is not accepted is near, and its
+rods act by the regularised segment law (float64, or ``segment_field_f32`` relative to the
+group's box centre for ``mixed``), as in the direct sum. A target's own rod (``exclude_rod``) is
+within the radius of every cell that holds it, so for opening angles below 1 that cell is never
+accepted: the own rod is always near and is left out exactly. The regularisation by the wire
+radius changes a rod's field by about ``(w / d)^2`` at distance d; an accepted cell is at least
+its radius over the opening angle away, half a rod length for a single rod at 1.
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ._jit import inline_sum, njit, njit_parallel, njit_parallel_sum, prange
+from .currents import segment_field, segment_field_f32
+from .multipole import field_octupole, field_quadrupole
+from .treebuild import argsort_keys, build_cells, morton_keys
+from .treewalk import append_grown
+
+#: rods per leaf and targets per walk: of leaves of 16, 32, 64 and groups of 32, 128, 64 and 128 were
+#: the fastest at a given median error at t = 100 of a Fig. 6 run with 3150 rods carrying current
+#: (docs/performance.md 'A tree of the rod currents')
+LEAF_SIZE = 64
+GROUP_SIZE = 128
+#: moments per channel: M, P (3), Q (5 independent), O (7 independent)
+N_CHANNEL = 16
+#: the highest moment (3: octupoles; 2 stops at quadrupoles)
+ORDER = 3
+
+_S = np.sqrt(0.6)
+#: the 3-point Gauss-Legendre rule on [0, 1]: exact for the moments up to octupoles
+GL_T = np.array([0.5 - 0.5 * _S, 0.5, 0.5 + 0.5 * _S])
+GL_W = np.array([5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0])
+
+
+class CurrentTree(NamedTuple):
+    """A tree of the rods that carry current (:func:`build_current_tree`).
+
+    Attributes
+    ----------
+    seg : (7, n) float64
+        The rods in Morton order of their centres: rows tip a x y z, tip b x y z, current J.
+    rod : (n,) int64
+        The rod index of each column of ``seg``.
+    start, end, nxt : (n_cells,) int64
+        Each cell's range of columns and the cell after its subtree (depth-first preorder).
+    centre : (n_cells, 3) float64
+        The centre of the box of the cell's rod ends (the expansion centre).
+    radius : (n_cells,) float64
+        The largest distance of a rod end from the centre.
+    moment : (n_cells, 3 N_CHANNEL) float64
+        Channel d's moments (of the line charge ``J s_d``) in columns ``N_CHANNEL d`` onward.
+    order : int
+        The highest moment (2 or 3).
+    """
+
+    seg: np.ndarray
+    rod: np.ndarray
+    start: np.ndarray
+    end: np.ndarray
+    nxt: np.ndarray
+    centre: np.ndarray
+    radius: np.ndarray
+    moment: np.ndarray
+    order: int
+
+
+@njit
+def _centres(position, active_rod, x, y, z):
+    """The centres of the active rods into ``x, y, z``."""
+    for r in range(active_rod.shape[0]):
+        ia = 2 * active_rod[r]
+        x[r] = 0.5 * (position[ia, 0] + position[ia + 1, 0])
+        y[r] = 0.5 * (position[ia, 1] + position[ia + 1, 1])
+        z[r] = 0.5 * (position[ia, 2] + position[ia + 1, 2])
+
+
+@njit
+def _sorted_segments(position, active_rod, current, perm, seg, rod):
+    """The active rods in the order ``perm`` as columns of ``seg`` and ``rod``."""
+    for k in range(perm.shape[0]):
+        j = active_rod[perm[k]]
+        ia = 2 * j
+        for d in range(3):
+            seg[d, k] = position[ia, d]
+            seg[3 + d, k] = position[ia + 1, d]
+        seg[6, k] = current[j]
+        rod[k] = j
+
+
+@inline_sum
+def _add_moments(row, base, q, sx, sy, sz, order):
+    """Add the moments of a charge ``q`` at offset ``s`` from the centre to ``row[base:base + 16]``
+    (the layout and normalisation of :func:`.treebuild.cell_moments`)."""
+    s2 = sx * sx + sy * sy + sz * sz
+    row[base] += q
+    row[base + 1] += q * sx
+    row[base + 2] += q * sy
+    row[base + 3] += q * sz
+    row[base + 4] += q * (3.0 * sx * sx - s2)
+    row[base + 5] += 3.0 * q * sx * sy
+    row[base + 6] += 3.0 * q * sx * sz
+    row[base + 7] += q * (3.0 * sy * sy - s2)
+    row[base + 8] += 3.0 * q * sy * sz
+    if order >= 3:
+        t = 3.0 * q * s2
+        row[base + 9] += 15.0 * q * sx * sx * sx - 3.0 * t * sx
+        row[base + 10] += 15.0 * q * sx * sx * sy - t * sy
+        row[base + 11] += 15.0 * q * sx * sx * sz - t * sz
+        row[base + 12] += 15.0 * q * sx * sy * sy - t * sx
+        row[base + 13] += 15.0 * q * sx * sy * sz
+        row[base + 14] += 15.0 * q * sy * sy * sy - 3.0 * t * sy
+        row[base + 15] += 15.0 * q * sy * sy * sz - t * sz
+
+
+@njit_parallel
+def _cell_moments(seg, start, end, order, gl_t, gl_w, centre, radius, moment):
+    """Centre, radius and the three channels' moments of every cell (the module docstring)."""
+    for c in prange(start.shape[0]):
+        s = start[c]
+        e = end[c]
+        lo = np.empty(3)
+        hi = np.empty(3)
+        for d in range(3):
+            lo[d] = min(seg[d, s], seg[3 + d, s])
+            hi[d] = max(seg[d, s], seg[3 + d, s])
+        for r in range(s + 1, e):
+            for d in range(3):
+                lo[d] = min(lo[d], seg[d, r], seg[3 + d, r])
+                hi[d] = max(hi[d], seg[d, r], seg[3 + d, r])
+        cx = 0.5 * (lo[0] + hi[0])
+        cy = 0.5 * (lo[1] + hi[1])
+        cz = 0.5 * (lo[2] + hi[2])
+        centre[c, 0] = cx
+        centre[c, 1] = cy
+        centre[c, 2] = cz
+        b2 = 0.0
+        row = moment[c]
+        row[:] = 0.0
+        for r in range(s, e):
+            ax = seg[0, r] - cx
+            ay = seg[1, r] - cy
+            az = seg[2, r] - cz
+            bx = seg[3, r] - cx
+            by = seg[4, r] - cy
+            bz = seg[5, r] - cz
+            b2 = max(b2, ax * ax + ay * ay + az * az, bx * bx + by * by + bz * bz)
+            sx = bx - ax
+            sy = by - ay
+            sz = bz - az
+            for g in range(gl_t.shape[0]):
+                t = gl_t[g]
+                px = ax + t * sx
+                py = ay + t * sy
+                pz = az + t * sz
+                jw = seg[6, r] * gl_w[g]
+                _add_moments(row, 0, jw * sx, px, py, pz, order)
+                _add_moments(row, N_CHANNEL, jw * sy, px, py, pz, order)
+                _add_moments(row, 2 * N_CHANNEL, jw * sz, px, py, pz, order)
+        radius[c] = np.sqrt(b2)
+
+
+def build_current_tree(position, active_rod, current, leaf_size=LEAF_SIZE, order=ORDER):
+    """The tree of the rods ``active_rod`` (distinct, at least one) with their ``current``.
+
+    Parameters
+    ----------
+    position : (n_tips, 3) float64
+        Tip positions (rod i: rows 2 i and 2 i + 1), finite.
+    active_rod : (n_active,) int64
+        Distinct indices of the rods carrying a current, n_active >= 1.
+    current : (n_rods,) float64
+        Rod currents, positive from tip a to tip b.
+    leaf_size : int
+        Rods per leaf.
+    order : int
+        2 (quadrupoles) or 3 (octupoles).
+
+    Returns
+    -------
+    CurrentTree
+    """
+    if order not in (2, 3):
+        raise ValueError(f"the current tree's order must be 2 or 3, got {order}")
+    n = active_rod.shape[0]
+    x, y, z = np.empty(n), np.empty(n), np.empty(n)
+    _centres(position, active_rod, x, y, z)
+    key = np.empty(n, np.int64)
+    morton_keys(x, y, z, key)
+    perm = argsort_keys(key)
+    start, end, nxt = build_cells(key[perm], leaf_size)
+    seg = np.empty((7, n))
+    rod = np.empty(n, np.int64)
+    _sorted_segments(position, active_rod, current, perm, seg, rod)
+    nc = start.shape[0]
+    centre = np.empty((nc, 3))
+    radius = np.empty(nc)
+    moment = np.empty((nc, 3 * N_CHANNEL))
+    _cell_moments(seg, start, end, order, GL_T, GL_W, centre, radius, moment)
+    return CurrentTree(seg, rod, start, end, nxt, centre, radius, moment, order)
+
+
+@inline_sum
+def _cell_field(dx, dy, dz, row, base, order):
+    """The field ``E = -grad phi`` at offset ``d`` of one channel's moments ``row[base:]``."""
+    if order >= 3:
+        return field_octupole(
+            dx, dy, dz, row[base], row[base + 1], row[base + 2], row[base + 3], row[base + 4],
+            row[base + 5], row[base + 6], row[base + 7], row[base + 8], row[base + 9], row[base + 10],
+            row[base + 11], row[base + 12], row[base + 13], row[base + 14], row[base + 15],
+        )  # fmt: skip
+    return field_quadrupole(
+        dx, dy, dz, row[base], row[base + 1], row[base + 2], row[base + 3], row[base + 4],
+        row[base + 5], row[base + 6], row[base + 7], row[base + 8],
+    )  # fmt: skip
+
+
+@njit_parallel_sum
+def _evaluate(
+    seg, rod, start, end, nxt, centre, radius, moment, order, tx, ty, tz, texcl, index, group, theta2, w, mixed, out
+):
+    """The walk of every target group (the module docstring); writes ``out[index[k]]``."""
+    n_cells = start.shape[0]
+    w2 = w * w
+    for g in prange(group.shape[0] - 1):
+        g0 = group[g]
+        g1 = group[g + 1]
+        m = g1 - g0
+        xl = xh = tx[g0]
+        yl = yh = ty[g0]
+        zl = zh = tz[g0]
+        for k in range(g0 + 1, g1):
+            xl = min(xl, tx[k])
+            xh = max(xh, tx[k])
+            yl = min(yl, ty[k])
+            yh = max(yh, ty[k])
+            zl = min(zl, tz[k])
+            zh = max(zh, tz[k])
+        bx = np.zeros(m)
+        by = np.zeros(m)
+        bz = np.zeros(m)
+        near = np.empty(16, np.int64)
+        n_near = 0
+        n_seg = 0
+        c = 0
+        while c < n_cells:
+            cx = centre[c, 0]
+            cy = centre[c, 1]
+            cz = centre[c, 2]
+            ux = max(xl - cx, 0.0, cx - xh)
+            uy = max(yl - cy, 0.0, cy - yh)
+            uz = max(zl - cz, 0.0, cz - zh)
+            d2 = ux * ux + uy * uy + uz * uz
+            if radius[c] * radius[c] < theta2 * d2:
+                row = moment[c]
+                for k in range(m):
+                    dx = tx[g0 + k] - cx
+                    dy = ty[g0 + k] - cy
+                    dz = tz[g0 + k] - cz
+                    exx, exy, exz = _cell_field(dx, dy, dz, row, 0, order)
+                    eyx, eyy, eyz = _cell_field(dx, dy, dz, row, N_CHANNEL, order)
+                    ezx, ezy, ezz = _cell_field(dx, dy, dz, row, 2 * N_CHANNEL, order)
+                    bx[k] += eyz - ezy
+                    by[k] += ezx - exz
+                    bz[k] += exy - eyx
+                c = nxt[c]
+            elif nxt[c] == c + 1:
+                near = append_grown(near, n_near, c)
+                n_near += 1
+                n_seg += end[c] - start[c]
+                c += 1
+            else:
+                c += 1
+        # the near rods, copied into one contiguous block (relative to the group's box centre)
+        ox = 0.5 * (xl + xh)
+        oy = 0.5 * (yl + yh)
+        oz = 0.5 * (zl + zh)
+        ns = np.empty((7, n_seg))
+        nrod = np.empty(n_seg, np.int64)
+        q = 0
+        for i in range(n_near):
+            for r in range(start[near[i]], end[near[i]]):
+                ns[0, q] = seg[0, r] - ox
+                ns[1, q] = seg[1, r] - oy
+                ns[2, q] = seg[2, r] - oz
+                ns[3, q] = seg[3, r] - ox
+                ns[4, q] = seg[4, r] - oy
+                ns[5, q] = seg[5, r] - oz
+                ns[6, q] = seg[6, r]
+                nrod[q] = rod[r]
+                q += 1
+        if mixed:
+            n32 = np.empty((11, n_seg), np.float32)
+            # int32 rod indices: a comparison as wide as the float32 lanes (int64 halves them on AVX2)
+            rod32 = np.empty(n_seg, np.int32)
+            for r in range(n_seg):
+                rod32[r] = nrod[r]
+                for d in range(6):
+                    n32[d, r] = np.float32(ns[d, r])
+                sx = ns[3, r] - ns[0, r]
+                sy = ns[4, r] - ns[1, r]
+                sz = ns[5, r] - ns[2, r]
+                n32[6, r] = np.float32(sx)
+                n32[7, r] = np.float32(sy)
+                n32[8, r] = np.float32(sz)
+                n32[9, r] = np.float32(w2 * (sx * sx + sy * sy + sz * sz))
+                n32[10, r] = np.float32(ns[6, r])
+            for k in range(m):
+                px = np.float32(tx[g0 + k] - ox)
+                py = np.float32(ty[g0 + k] - oy)
+                pz = np.float32(tz[g0 + k] - oz)
+                skip = np.int32(texcl[g0 + k])
+                hx = np.float32(0.0)
+                hy = np.float32(0.0)
+                hz = np.float32(0.0)
+                for r in range(n_seg):
+                    fx, fy, fz = segment_field_f32(
+                        px - n32[0, r], py - n32[1, r], pz - n32[2, r], px - n32[3, r], py - n32[4, r],
+                        pz - n32[5, r], n32[6, r], n32[7, r], n32[8, r], n32[9, r], n32[10, r],
+                    )  # fmt: skip
+                    keep = rod32[r] != skip
+                    hx += fx if keep else np.float32(0.0)
+                    hy += fy if keep else np.float32(0.0)
+                    hz += fz if keep else np.float32(0.0)
+                bx[k] += np.float64(hx)
+                by[k] += np.float64(hy)
+                bz[k] += np.float64(hz)
+        else:
+            for k in range(m):
+                px = tx[g0 + k] - ox
+                py = ty[g0 + k] - oy
+                pz = tz[g0 + k] - oz
+                skip = texcl[g0 + k]
+                hx = 0.0
+                hy = 0.0
+                hz = 0.0
+                for r in range(n_seg):
+                    fx, fy, fz = segment_field(
+                        px, py, pz, ns[0, r], ns[1, r], ns[2, r], ns[3, r], ns[4, r], ns[5, r], ns[6, r], w
+                    )
+                    keep = 0.0 if nrod[r] == skip else 1.0
+                    hx += keep * fx
+                    hy += keep * fy
+                    hz += keep * fz
+                bx[k] += hx
+                by[k] += hy
+                bz[k] += hz
+        for k in range(m):
+            i = index[g0 + k]
+            out[i, 0] = bx[k]
+            out[i, 1] = by[k]
+            out[i, 2] = bz[k]
+
+
+@njit
+def _sorted_targets(point, exclude_rod, index, tx, ty, tz, texcl, group_size):
+    """The targets in the order ``index`` into ``tx, ty, tz, texcl``; returns the group bounds."""
+    m = point.shape[0]
+    for k in range(m):
+        i = index[k]
+        tx[k] = point[i, 0]
+        ty[k] = point[i, 1]
+        tz[k] = point[i, 2]
+        texcl[k] = exclude_rod[i]
+    n_group = (m + group_size - 1) // group_size
+    group = np.empty(n_group + 1, np.int64)
+    for g in range(n_group):
+        group[g] = g * group_size
+    group[n_group] = m
+    return group
+
+
+def current_tree_field(tree, point, exclude_rod, opening_angle, wire_radius, out, mixed=False, group_size=GROUP_SIZE):
+    """Overwrite ``out`` with the field of the tree's currents at ``point``, leaving out at each point
+    the rod ``exclude_rod[p]`` (-1: none); :func:`.currents.rod_current_field` by the tree.
+
+    Parameters
+    ----------
+    tree : CurrentTree
+    point : (m, 3) float64
+        Finite field points.
+    exclude_rod : (m,) int64
+    opening_angle : float
+        In [0, 1): a cell acts through its moments when its radius is below this times its
+        distance from the target group's box; 0: every rod by the segment law (the direct sum).
+    wire_radius : float
+        w = D / 2 (docs/model.md 'Term 9'), for the near rods.
+    out : (m, 3) float64
+    mixed : bool
+        The near rods by the float32 law (float32 sums per group, added in float64).
+    group_size : int
+        Targets per walk.
+    """
+    m = point.shape[0]
+    if m == 0:
+        return
+    key = np.empty(m, np.int64)
+    morton_keys(
+        np.ascontiguousarray(point[:, 0]), np.ascontiguousarray(point[:, 1]), np.ascontiguousarray(point[:, 2]), key
+    )
+    index = argsort_keys(key)
+    tx, ty, tz = np.empty(m), np.empty(m), np.empty(m)
+    texcl = np.empty(m, np.int64)
+    group = _sorted_targets(point, exclude_rod, index, tx, ty, tz, texcl, group_size)
+    t = tree
+    _evaluate(
+        t.seg, t.rod, t.start, t.end, t.nxt, t.centre, t.radius, t.moment, t.order,
+        tx, ty, tz, texcl, index, group, opening_angle * opening_angle, wire_radius, mixed, out,
+    )  # fmt: skip

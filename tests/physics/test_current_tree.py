@@ -1,0 +1,230 @@
+"""Tests of the tree of the rod currents (docs/model.md 'The rod currents by a tree';
+``selfas_graph/kernels/currenttree.py``), held against the direct sums of ``kernels/currents.py``
+and the oracles of tests/reference.py.
+
+Tolerances: at opening angle 0 the tree sums every rod by the same law as the direct sum, in
+another order: round-off, 1e-12 of the sum of the magnitudes ``sum_j |B_j|``. A far cell's
+moments stop at octupoles, so its field errs by about ``(b / d)^4`` of itself (b its radius, d
+the distance), quadrupoles by ``(b / d)^3``: the tests hold the rates, not a fixed number.
+"""
+
+import numpy as np
+import pytest
+
+import reference
+from conftest import random_rods, simulation
+from selfas_graph.kernels import currenttree as ct
+from selfas_graph.kernels.currents import rod_current_field, rod_current_field_mixed
+
+#: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
+pytestmark = pytest.mark.jit_off_ok
+
+W = 0.03
+
+
+def scene(seed, n_rods=300, box=8.0, points_off_rods=50):
+    """Random rods with random currents (about a quarter zero), their tips as targets (each
+    leaving out its own rod) and some points on no rod."""
+    rng = np.random.default_rng(seed)
+    state = random_rods(n_rods, rng, box=box)
+    position = np.ascontiguousarray(state.position)
+    current = rng.uniform(-3, 3, size=n_rods)
+    current[rng.random(n_rods) < 0.25] = 0.0
+    active = np.flatnonzero(current != 0.0).astype(np.int64)
+    extra = rng.uniform(-box / 2, box / 2, (points_off_rods, 3))
+    points = np.ascontiguousarray(np.vstack([position, extra]))
+    exclude = np.concatenate([np.arange(2 * n_rods) // 2, np.full(points_off_rods, -1)]).astype(np.int64)
+    return position, current, active, points, exclude
+
+
+def tree_field(position, current, active, points, exclude, theta, mixed=False, order=ct.ORDER, leaf=ct.LEAF_SIZE):
+    tree = ct.build_current_tree(position, active, current, leaf_size=leaf, order=order)
+    out = np.full((len(points), 3), np.nan)
+    ct.current_tree_field(tree, points, exclude, theta, W, out, mixed=mixed)
+    return out
+
+
+def magnitude_sum(points, exclude, position, active, current):
+    """``sum_j |B_j|`` at each point: the scale of the round-off of a sum of fields."""
+    total = np.zeros(len(points))
+    for j in active:
+        one = np.empty((len(points), 3))
+        rod_current_field(points, exclude, position, np.array([j]), current, W, one)
+        total += np.linalg.norm(one, axis=1)
+    return total
+
+
+def test_zero_opening_angle_is_the_direct_sum():
+    """At opening angle 0 every rod acts by the segment law: the direct sum up to round-off, in
+    float64 and mixed, with each point's own rod left out; small leaves and groups too."""
+    position, current, active, points, exclude = scene(1)
+    want = np.empty_like(points)
+    rod_current_field(points, exclude, position, active, current, W, want)
+    scale = magnitude_sum(points, exclude, position, active, current)
+    for leaf in (1, 4, ct.LEAF_SIZE):
+        got = tree_field(position, current, active, points, exclude, 0.0, leaf=leaf)
+        assert np.all(np.abs(got - want) <= 1e-12 * scale[:, None])
+    mixed_want = np.empty_like(points)
+    rod_current_field_mixed(points, exclude, position, active, current, W, mixed_want)
+    got = tree_field(position, current, active, points, exclude, 0.0, mixed=True)
+    # both float32 laws: a few 1e-7 of the magnitudes each (tests/physics/test_currents_mixed.py)
+    assert np.all(np.abs(got - want) <= 2e-6 * scale[:, None])
+    # the oracle of explicit loops on a few points
+    few = slice(0, 40)
+    np.testing.assert_allclose(
+        want[few],
+        reference.rod_current_field(points[few], exclude[few], position, active, current, W),
+        rtol=0,
+        atol=1e-12 * scale[few].max(),
+    )
+
+
+def test_vector_potential_curl_is_the_segment_law():
+    """The far field's premise: the curl of the closed-form vector potential of a wire (central
+    differences) is the w = 0 segment law, at points beside, beyond and along the wire."""
+    A, B, J = np.array([0.1, -0.2, 0.3]), np.array([0.7, 0.4, -0.2]), 1.7
+    h = 1e-5
+    for x in ([2.0, 0.5, 1.0], [1.5, 1.1, -0.9], [-0.5, -0.8, 1.2], [0.4, 0.1, 0.45]):
+        x = np.array(x)
+        jac = np.empty((3, 3))  # jac[d, c] = d A_d / d x_c
+        for c in range(3):
+            e = np.zeros(3)
+            e[c] = h
+            jac[:, c] = (
+                reference.segment_vector_potential(x + e, A, B, J) - reference.segment_vector_potential(x - e, A, B, J)
+            ) / (2 * h)
+        curl = np.array([jac[2, 1] - jac[1, 2], jac[0, 2] - jac[2, 0], jac[1, 0] - jac[0, 1]])
+        want = reference.segment_field(x, A, B, J, 0.0)
+        # central differences err by h^2 times third derivatives of order 1: 1e-9 here
+        np.testing.assert_allclose(curl, want, rtol=0, atol=1e-8 * np.linalg.norm(want) + 1e-10)
+
+
+@pytest.mark.parametrize("order, rate", [(2, 3), (3, 4)])
+def test_far_cell_error_falls_at_the_rate_of_its_order(order, rate):
+    """A cell of rods seen from farther and farther away: the tree's field against the w = 0
+    direct sum errs about (b / d)^(order + 1) of the field; doubling d divides the error by about
+    2^(order + 1) (held: by more than 2^(order + 1) / 2)."""
+    rng = np.random.default_rng(7)
+    n = 12
+    centre = rng.uniform(-0.5, 0.5, (n, 3))
+    axis = rng.normal(size=(n, 3))
+    axis *= 0.3 / np.linalg.norm(axis, axis=1)[:, None]
+    position = np.empty((2 * n, 3))
+    position[0::2], position[1::2] = centre - axis, centre + axis
+    current = rng.uniform(-2, 2, n)
+    active = np.arange(n, dtype=np.int64)
+    tree = ct.build_current_tree(position, active, current, leaf_size=64, order=order)
+    direction = np.array([0.48, -0.6, 0.64])
+    errors = []
+    for d in (8.0, 16.0, 32.0):
+        point = np.ascontiguousarray((d * direction)[None, :])
+        got = np.empty((1, 3))
+        ct.current_tree_field(tree, point, np.array([-1]), 0.99, 0.0, got)
+        want = np.empty((1, 3))
+        rod_current_field(point, np.array([-1]), position, active, current, 0.0, want)
+        errors.append(np.linalg.norm(got - want) / np.linalg.norm(want))
+    assert errors[0] < 1e-2
+    for near, far in zip(errors, errors[1:]):
+        assert near / far > 2 ** (order + 1) / 2
+
+
+def test_error_falls_with_the_opening_angle_and_is_small_at_the_default():
+    """Median error per point against the direct sum (relative to the point's field): smaller at a
+    smaller opening angle and at octupoles than quadrupoles, under 1e-3 at the default."""
+    position, current, active, points, exclude = scene(2, n_rods=600, box=12.0)
+    want = np.empty_like(points)
+    rod_current_field(points, exclude, position, active, current, W, want)
+    size = np.linalg.norm(want, axis=1)
+
+    def median_error(theta, order=3):
+        got = tree_field(position, current, active, points, exclude, theta, order=order, leaf=16)
+        return np.median(np.linalg.norm(got - want, axis=1) / size)
+
+    e3, e5, e8 = median_error(0.3), median_error(0.5), median_error(0.8)
+    assert 0.0 < e3 < e5 < e8
+    assert e5 < 1e-3
+    assert median_error(0.5, order=2) > e5
+
+
+def test_own_rod_is_left_out_exactly_at_any_opening_angle_below_one():
+    """A point's own rod is within the radius of every cell holding it, so no cell holding it is
+    accepted: its tips and quadrature points feel no field of their own rod (exactly zero with it
+    the only current), and one far rod's field is seen at all of them."""
+    position, current, active, points, exclude = scene(3, n_rods=200)
+    only = active[:1]
+    for theta in (0.5, 0.9, 0.999):
+        got = tree_field(position, current, only, position, np.arange(len(position)) // 2, theta, leaf=1)
+        own = 2 * only[0]
+        np.testing.assert_array_equal(got[own : own + 2], 0.0)
+        assert np.all(np.linalg.norm(np.delete(got, [own, own + 1], axis=0), axis=1) > 0)
+
+
+def test_the_terms_by_the_tree_match_the_direct_terms():
+    """``method = "tree"`` of both current terms in a force field: at opening angle 0 the direct
+    terms up to round-off; at 0.5 within the tree's error; the tree is built once per evaluation."""
+    rng = np.random.default_rng(4)
+    state = random_rods(120, rng, box=5.0, q=(0.5, 1.5))
+    electrodes = {"electrodes": {"gap": 8.0}}
+    current = rng.uniform(-2, 2, state.n_rods)
+
+    def forces(method, theta, precision="float64"):
+        terms = {"method": method, "opening_angle": theta, "precision": precision}
+        sim = simulation(
+            state.copy(),
+            forces={
+                "tip_magnetic": {},
+                **electrodes,
+                "current_field": terms,
+                "current_lorentz": {**terms, "near_range": 1.5},
+            },
+            circuit={"delta_J0": 1.0},
+        )
+        ff = sim.force_field
+        ff.set_currents(current)
+        ff.evaluate(state.position, state.velocity)
+        return {name: ff.out[name].copy() for name in ("current_field", "current_lorentz")}, ff
+
+    direct, ff = forces("direct", 0.5)
+    assert ff.describe()["current_field_sum"] == "direct"
+    exact, ff = forces("tree", 0.0)
+    assert ff.describe()["current_lorentz_sum"].startswith("tree (opening angle 0,")
+    for name in direct:
+        scale = np.abs(direct[name]).max()
+        assert scale > 1e-3
+        np.testing.assert_allclose(exact[name], direct[name], rtol=0, atol=1e-11 * scale)
+    for precision in ("float64", "mixed"):
+        approx, _ = forces("tree", 0.5, precision)
+        for name in direct:
+            err = np.linalg.norm(approx[name] - direct[name], axis=1)
+            rms = np.sqrt(np.mean(np.sum(direct[name] ** 2, axis=1)))
+            assert np.median(err) < 1e-3 * rms
+            assert err.max() < 3e-2 * rms
+
+
+def test_context_builds_the_tree_once_and_skips_it_for_nan():
+    """The evaluation context builds one tree per binding and set of currents; a position that is
+    not finite gives no tree (the direct sums carry the NaN to the run's health check)."""
+    rng = np.random.default_rng(5)
+    state = random_rods(30, rng, box=3.0)
+    terms = {"method": "tree"}
+    forces = {"electrodes": {"gap": 6.0}, "current_field": terms, "current_lorentz": terms}
+    sim = simulation(state, forces=forces, circuit={"delta_J0": 1.0})
+    ff = sim.force_field
+    ff.set_currents(np.linspace(0.5, 1.5, state.n_rods))
+    ff.bind(state.position, state.velocity)
+    tree = ff.context.current_tree()
+    assert tree is not None and ff.context.current_tree() is tree
+    ff.set_currents(np.linspace(0.6, 1.5, state.n_rods))
+    assert ff.context.current_tree() is not tree  # new currents, new tree
+    bad = state.position.copy()
+    bad[3, 1] = np.nan
+    ff.bind(bad, state.velocity)
+    assert ff.context.current_tree() is None
+    total = ff.evaluate(bad, state.velocity)
+    assert np.isnan(total).any()
+
+
+def test_build_rejects_an_order_it_does_not_have():
+    position, current, active, _, _ = scene(6, n_rods=10)
+    with pytest.raises(ValueError, match="order must be 2 or 3"):
+        ct.build_current_tree(position, active, current, order=4)
