@@ -20,8 +20,11 @@ Walk. Targets (tips, or term 10's quadrature points) are sorted by the Morton ke
 position and taken in groups of :data:`GROUP_SIZE`. A group walks the tree once: a cell acts
 through its moments on all the group's targets when its radius is below ``opening_angle`` times
 the distance of its centre from the group's box; a leaf that is not accepted is near, and its
-rods act by the regularised segment law (float64, or ``segment_field_f32`` relative to the
-group's box centre for ``mixed``), as in the direct sum. A target's own rod (``exclude_rod``) is
+rods act by the regularised segment law, as in the direct sum. ``mixed``: the near rods by
+``segment_field_f32`` relative to the group's box centre, summed in float32 per target; each
+accepted cell's field in float32 in units of its distance d from the group's box (offsets and
+moments scaled by powers of 1/d, as the tip tree's, :mod:`.treewalk`; float64 where the group's
+span exceeds ``SPAN32`` d), added in float64. A target's own rod (``exclude_rod``) is
 within the radius of every cell that holds it, so for opening angles below 1 that cell is never
 accepted: the own rod is always near and is left out exactly. The regularisation by the wire
 radius changes a rod's field by about ``(w / d)^2`` at distance d; an accepted cell is at least
@@ -34,13 +37,13 @@ import numpy as np
 
 from ._jit import inline_sum, njit, njit_parallel, njit_parallel_sum, prange
 from .currents import segment_field, segment_field_f32
-from .multipole import field_octupole, field_quadrupole
+from .multipole import field_octupole, field_octupole_f32, field_quadrupole
 from .treebuild import argsort_keys, build_cells, morton_keys
-from .treewalk import append_grown
+from .treewalk import SPAN32, append_grown
 
-#: rods per leaf and targets per walk: of leaves of 16, 32, 64 and groups of 32, 128, 64 and 128 were
-#: the fastest at a given median error at t = 100 of a Fig. 6 run with 3150 rods carrying current
-#: (docs/performance.md 'A tree of the rod currents')
+#: rods per leaf and targets per walk: leaves of 16 to 128 rods and groups of 32 to 256 points ran
+#: within 10 % of each other at a given median error at t = 100 of a Fig. 6 run with 3150 rods
+#: carrying current, 64 and 128 among the fastest (docs/performance.md 'A tree of the rod currents')
 LEAF_SIZE = 64
 GROUP_SIZE = 128
 #: moments per channel: M, P (3), Q (5 independent), O (7 independent)
@@ -236,6 +239,16 @@ def _cell_field(dx, dy, dz, row, base, order):
     )  # fmt: skip
 
 
+@inline_sum
+def _cell_field_f32(dx, dy, dz, row, base):
+    """:func:`_cell_field` in float32 at octupole order (a quadrupole tree's octupoles are zero)."""
+    return field_octupole_f32(
+        dx, dy, dz, row[base], row[base + 1], row[base + 2], row[base + 3], row[base + 4],
+        row[base + 5], row[base + 6], row[base + 7], row[base + 8], row[base + 9], row[base + 10],
+        row[base + 11], row[base + 12], row[base + 13], row[base + 14], row[base + 15],
+    )  # fmt: skip
+
+
 @njit_parallel_sum
 def _evaluate(
     seg, rod, start, end, nxt, centre, radius, moment, order, tx, ty, tz, texcl, index, group, theta2, w, mixed, out
@@ -257,6 +270,11 @@ def _evaluate(
             yh = max(yh, ty[k])
             zl = min(zl, tz[k])
             zh = max(zh, tz[k])
+        ox = 0.5 * (xl + xh)
+        oy = 0.5 * (yl + yh)
+        oz = 0.5 * (zl + zh)
+        half = 0.5 * max(xh - xl, yh - yl, zh - zl)
+        m32 = np.zeros(3 * N_CHANNEL, np.float32)
         bx = np.zeros(m)
         by = np.zeros(m)
         bz = np.zeros(m)
@@ -274,16 +292,43 @@ def _evaluate(
             d2 = ux * ux + uy * uy + uz * uz
             if radius[c] * radius[c] < theta2 * d2:
                 row = moment[c]
-                for k in range(m):
-                    dx = tx[g0 + k] - cx
-                    dy = ty[g0 + k] - cy
-                    dz = tz[g0 + k] - cz
-                    exx, exy, exz = _cell_field(dx, dy, dz, row, 0, order)
-                    eyx, eyy, eyz = _cell_field(dx, dy, dz, row, N_CHANNEL, order)
-                    ezx, ezy, ezz = _cell_field(dx, dy, dz, row, 2 * N_CHANNEL, order)
-                    bx[k] += eyz - ezy
-                    by[k] += ezx - exz
-                    bz[k] += exy - eyx
+                dist = np.sqrt(d2)
+                span = half + max(abs(cx - ox), abs(cy - oy), abs(cz - oz))
+                if mixed and span < SPAN32 * dist:
+                    # float32, in units of dist (offsets >= 1, moments cut by (b / dist)^n, the field
+                    # in units of 1 / dist^2), each cell's field on a target added in float64
+                    inv = 1.0 / dist
+                    for ch in range(3):
+                        base = N_CHANNEL * ch
+                        m32[base] = np.float32(row[base])
+                        for r in range(1, 4):
+                            m32[base + r] = np.float32(row[base + r] * inv)
+                        for r in range(4, 9):
+                            m32[base + r] = np.float32(row[base + r] * (inv * inv))
+                        for r in range(9, 16):
+                            m32[base + r] = np.float32(row[base + r] * (inv * inv * inv))
+                    unit = inv * inv
+                    for k in range(m):
+                        dx = np.float32((tx[g0 + k] - cx) * inv)
+                        dy = np.float32((ty[g0 + k] - cy) * inv)
+                        dz = np.float32((tz[g0 + k] - cz) * inv)
+                        exx, exy, exz = _cell_field_f32(dx, dy, dz, m32, 0)
+                        eyx, eyy, eyz = _cell_field_f32(dx, dy, dz, m32, N_CHANNEL)
+                        ezx, ezy, ezz = _cell_field_f32(dx, dy, dz, m32, 2 * N_CHANNEL)
+                        bx[k] += unit * np.float64(eyz - ezy)
+                        by[k] += unit * np.float64(ezx - exz)
+                        bz[k] += unit * np.float64(exy - eyx)
+                else:
+                    for k in range(m):
+                        dx = tx[g0 + k] - cx
+                        dy = ty[g0 + k] - cy
+                        dz = tz[g0 + k] - cz
+                        exx, exy, exz = _cell_field(dx, dy, dz, row, 0, order)
+                        eyx, eyy, eyz = _cell_field(dx, dy, dz, row, N_CHANNEL, order)
+                        ezx, ezy, ezz = _cell_field(dx, dy, dz, row, 2 * N_CHANNEL, order)
+                        bx[k] += eyz - ezy
+                        by[k] += ezx - exz
+                        bz[k] += exy - eyx
                 c = nxt[c]
             elif nxt[c] == c + 1:
                 near = append_grown(near, n_near, c)
@@ -293,9 +338,6 @@ def _evaluate(
             else:
                 c += 1
         # the near rods, copied into one contiguous block (relative to the group's box centre)
-        ox = 0.5 * (xl + xh)
-        oy = 0.5 * (yl + yh)
-        oz = 0.5 * (zl + zh)
         ns = np.empty((7, n_seg))
         nrod = np.empty(n_seg, np.int64)
         q = 0

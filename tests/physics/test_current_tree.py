@@ -79,6 +79,21 @@ def test_zero_opening_angle_is_the_direct_sum():
     )
 
 
+@pytest.mark.parametrize("shift", [0.0, 1e4])
+def test_mixed_tree_matches_the_float64_tree(shift):
+    """``mixed``: the near rods by the float32 law and the accepted cells' fields in float32 (in units
+    of their distance) are the float64 tree's up to float32 rounding, a few 1e-7 of the sum of the
+    magnitudes (the float32 law's bound, tests/physics/test_currents_mixed.py), also for a scene
+    10^4 rod lengths from the origin."""
+    position, current, active, points, exclude = scene(8, n_rods=400, box=10.0)
+    position, points = position + shift, points + shift
+    scale = magnitude_sum(points, exclude, position, active, current)
+    f64 = tree_field(position, current, active, points, exclude, 0.5)
+    f32 = tree_field(position, current, active, points, exclude, 0.5, mixed=True)
+    assert np.all(np.abs(f32 - f64) <= 2e-6 * scale[:, None])
+    assert not np.array_equal(f32, f64)
+
+
 def test_vector_potential_curl_is_the_segment_law():
     """The far field's premise: the curl of the closed-form vector potential of a wire (central
     differences) is the w = 0 segment law, at points beside, beyond and along the wire."""
