@@ -185,8 +185,8 @@ _CURRENT_PRECISION_HELP = (
 _CURRENT_METHOD_HELP = (
     "how the rod currents' field {where} is summed: direct (every current-carrying rod by the segment law, "
     "O(N_points N_current)) or tree (a multipole tree of the rods' vector potential, docs/model.md 'The rod "
-    "currents by a tree'; with 3150 rods carrying current 2.4 to 2.7 times faster than the direct sum of the same "
-    "precision at a median error of 1.4e-4 of the field, 11 to 13 times with 5 x 10^4, no faster with 1000; "
+    "currents by a tree'; with 3150 rods carrying current 2.5 to 2.7 times faster than the direct sum of the same "
+    "precision at a median error of 1.4e-4 of the field, 16 to 21 times with 5 x 10^4, no faster with 1000; "
     "docs/performance.md 'A tree of the rod currents'); a speed knob for large networks"
 )
 _CURRENT_THETA_HELP = (
