@@ -216,6 +216,49 @@ def test_the_terms_by_the_tree_match_the_direct_terms():
             assert err.max() < 3e-2 * rms
 
 
+class _Rank:
+    """A communicator stub: rank ``rank`` of ``size`` (only what RowBlocks reads)."""
+
+    def __init__(self, rank, size):
+        self.rank, self.size = rank, size
+
+
+def test_each_rank_sums_its_rows_as_one_rank_does():
+    """Under MPI each rank computes its block of rows; with the tree it asks for every point, so that
+    its rows are those of one rank bit for bit (the groups of a block's points alone would differ)."""
+    import dataclasses
+
+    from selfas_graph.parallel import RowBlocks
+
+    rng = np.random.default_rng(9)
+    state = random_rods(400, rng, box=12.0, q=(0.5, 1.5))
+    terms = {"method": "tree", "opening_angle": 0.9}
+    forces = {"electrodes": {"gap": 20.0}, "current_field": terms, "current_lorentz": {**terms, "near_range": 1.5}}
+    sim = simulation(state, forces=forces, circuit={"delta_J0": 1.0})
+    ff = sim.force_field
+    ff.set_currents(rng.uniform(-2, 2, state.n_rods))
+    ff.evaluate(state.position, state.velocity)
+    serial = {name: ff.out[name].copy() for name in ("current_field", "current_lorentz")}
+    ctx = ff.context
+    for rank in range(3):
+        blocks = RowBlocks(state.n_rods, _Rank(rank, 3))
+        ranked = dataclasses.replace(ctx, blocks=blocks, _buffers={}, _current_tree=None)
+        ranked.bind(state.position, state.velocity)
+        lo, hi = blocks.tips
+        for term in ff.terms:
+            if term.name in serial:
+                out = {term.name: np.full_like(serial[term.name], np.nan)}
+                term.compute(ranked, out)
+                np.testing.assert_array_equal(out[term.name][lo:hi], serial[term.name][lo:hi])
+    # the test means something: the block's tips alone form other groups, and sum otherwise
+    tree = ctx.current_tree()
+    block = np.empty((hi - lo, 3))
+    ct.current_tree_field(tree, state.position[lo:hi], np.arange(lo, hi) // 2, 0.9, W, block)
+    full = np.empty_like(state.position)
+    ct.current_tree_field(tree, state.position, np.arange(len(full)) // 2, 0.9, W, full)
+    assert not np.array_equal(block, full[lo:hi])
+
+
 def test_context_builds_the_tree_once_and_skips_it_for_nan():
     """The evaluation context builds one tree per binding and set of currents; a position that is
     not finite gives no tree (the direct sums carry the NaN to the run's health check)."""

@@ -59,13 +59,12 @@ class CurrentFieldForce(Term):
             if tree is None:
                 self.kernel(ctx.position, ctx.tip_charge, rc.active_rod, rc.current, self.wire_radius, lo, hi, f)
             else:
-                field = f[lo:hi]
-                own_rod = np.arange(lo, hi, dtype=np.int64) // 2
+                # every tip on every rank: the tree's groups are drawn from the points it is asked for,
+                # so a rank that asked for its rows alone would sum them otherwise than one rank does
+                own_rod = np.arange(ctx.n_tips, dtype=np.int64) // 2
                 mixed = self.precision == "mixed"
-                kt.current_tree_field(
-                    tree, ctx.position[lo:hi], own_rod, self.opening_angle, self.wire_radius, field, mixed
-                )
-                field *= ctx.tip_charge[lo:hi, None]
+                kt.current_tree_field(tree, ctx.position, own_rod, self.opening_angle, self.wire_radius, f, mixed)
+                f *= ctx.tip_charge[:, None]
             ctx.calls[self.name] += 1
 
     def blocked(self, ctx):
@@ -117,7 +116,16 @@ class CurrentLorentzForce(Term):
         pts = ctx.buffer("gl_points", len(mine) * ng)
         kl.quadrature_points(ctx.position, mine, self.t, pts)
         field = ctx.buffer("gl_field", len(mine) * ng)
-        self.current_field(ctx, pts, field, exclude_rod=np.repeat(mine, ng))
+        if self.tree and len(mine) < len(active):
+            # under MPI the tree is asked for every rod's points, as on one rank (CurrentFieldForce.compute)
+            every = ctx.buffer("gl_points_all", len(active) * ng)
+            kl.quadrature_points(ctx.position, active, self.t, every)
+            every_field = ctx.buffer("gl_field_all", len(active) * ng)
+            self.current_field(ctx, every, every_field, exclude_rod=np.repeat(active, ng))
+            r_lo = int(np.searchsorted(active, mine[0]))
+            field[:] = every_field[r_lo * ng : (r_lo + len(mine)) * ng]
+        else:
+            self.current_field(ctx, pts, field, exclude_rod=np.repeat(mine, ng))
         extra = ctx.buffer("gl_extra", len(pts))
         for source in self.field_sources:
             source.field_at(pts, extra)
