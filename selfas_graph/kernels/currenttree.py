@@ -38,8 +38,8 @@ import numpy as np
 from ._jit import inline_sum, njit, njit_parallel, njit_parallel_sum, njit_sum, prange
 from .currents import segment_field, segment_field_f32
 from .multipole import field_octupole, field_octupole_f32, field_quadrupole
-from .treebuild import argsort_keys, build_cells, morton_keys
-from .treewalk import SPAN32, append_grown
+from .treebuild import argsort_keys, bounding_box, build_cells, morton_keys
+from .treewalk import SPAN32, accepts, append_grown
 
 #: rods per leaf and targets per walk: leaves of 16 to 128 rods and groups of 32 to 256 points ran
 #: within 10 % of each other at a given median error at t = 100 of a Fig. 6 run with 3150 rods
@@ -317,16 +317,7 @@ def _evaluate(
         g0 = group[g]
         g1 = group[g + 1]
         m = g1 - g0
-        xl = xh = tx[g0]
-        yl = yh = ty[g0]
-        zl = zh = tz[g0]
-        for k in range(g0 + 1, g1):
-            xl = min(xl, tx[k])
-            xh = max(xh, tx[k])
-            yl = min(yl, ty[k])
-            yh = max(yh, ty[k])
-            zl = min(zl, tz[k])
-            zh = max(zh, tz[k])
+        xl, yl, zl, xh, yh, zh = bounding_box(tx, ty, tz, g0, g1)
         ox = 0.5 * (xl + xh)
         oy = 0.5 * (yl + yh)
         oz = 0.5 * (zl + zh)
@@ -340,14 +331,12 @@ def _evaluate(
         n_seg = 0
         c = 0
         while c < n_cells:
-            cx = centre[c, 0]
-            cy = centre[c, 1]
-            cz = centre[c, 2]
-            ux = max(xl - cx, 0.0, cx - xh)
-            uy = max(yl - cy, 0.0, cy - yh)
-            uz = max(zl - cz, 0.0, cz - zh)
-            d2 = ux * ux + uy * uy + uz * uz
-            if radius[c] * radius[c] < theta2 * d2:
+            # the tip tree's test without its core (r* = 0): the radius below theta times the distance
+            take, d2 = accepts(centre, radius, c, xl, yl, zl, xh, yh, zh, theta2, 0.0)
+            if take:
+                cx = centre[c, 0]
+                cy = centre[c, 1]
+                cz = centre[c, 2]
                 row = moment[c]
                 dist = np.sqrt(d2)
                 span = half + max(abs(cx - ox), abs(cy - oy), abs(cz - oz))

@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from ._jit import njit, njit_parallel, njit_rows, prange
+from ._jit import inline, njit, njit_parallel, njit_rows, prange
 
 #: bits of the Morton key per axis; also the depth cap of the tree
 KEY_BITS = 21
@@ -182,6 +182,22 @@ def build_cells(key, leaf_size):
     return start[:nc].copy(), end[:nc].copy(), nxt
 
 
+@inline
+def bounding_box(x, y, z, s, e):
+    """``(xl, yl, zl, xh, yh, zh)``: the box of the points ``s:e`` (``e > s``) of ``x, y, z``."""
+    xl = xh = x[s]
+    yl = yh = y[s]
+    zl = zh = z[s]
+    for i in range(s + 1, e):
+        xl = min(xl, x[i])
+        xh = max(xh, x[i])
+        yl = min(yl, y[i])
+        yh = max(yh, y[i])
+        zl = min(zl, z[i])
+        zh = max(zh, z[i])
+    return xl, yl, zl, xh, yh, zh
+
+
 @njit_parallel
 def cell_moments(x, y, z, charge, start, end, order, box, centre, radius, moment):
     """Bounding box, expansion centre, radius and multipole moments of every cell.
@@ -203,16 +219,7 @@ def cell_moments(x, y, z, charge, start, end, order, box, centre, radius, moment
     for c in prange(start.shape[0]):
         s = start[c]
         e = end[c]
-        xl = xh = x[s]
-        yl = yh = y[s]
-        zl = zh = z[s]
-        for i in range(s + 1, e):
-            xl = min(xl, x[i])
-            xh = max(xh, x[i])
-            yl = min(yl, y[i])
-            yh = max(yh, y[i])
-            zl = min(zl, z[i])
-            zh = max(zh, z[i])
+        xl, yl, zl, xh, yh, zh = bounding_box(x, y, z, s, e)
         box[c, 0] = xl
         box[c, 1] = yl
         box[c, 2] = zl
