@@ -54,7 +54,8 @@ def from_checkpoint(path):
 
 
 def measure(position, current, w, thetas, precisions, reps):
-    """Rows of (method, precision, theta, ms, median error, p99 error) and the direct times."""
+    """``(n_points, n_active, rows)``: a row (method, precision, theta, ms, median and 99th-percentile
+    error) per sum timed."""
     from selfas_graph.kernels import currenttree as ct
     from selfas_graph.kernels.currents import rod_current_field, rod_current_field_mixed
 

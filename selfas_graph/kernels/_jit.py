@@ -160,10 +160,10 @@ njit = _jit(fastmath=False)
 njit_parallel = _jit(parallel=True, fastmath=False)
 #: all-pairs reductions: vectorisable sums, NaN/inf kept (see module docstring)
 njit_parallel_sum = _jit(parallel=True, fastmath=_SUM_FLAGS)
-#: scalar laws: always inlined into the loops that call them
 #: a loop of a kernel kept as a function of its own (not inlined): the vector code LLVM makes of it
 #: then does not depend on the kernel around it
 njit_sum = _jit(fastmath=_SUM_FLAGS)
+#: scalar laws: always inlined into the loops that call them
 inline = _jit(inline="always", fastmath=False)
 inline_sum = _jit(inline="always", fastmath=_SUM_FLAGS)
 prange = numba.prange

@@ -153,7 +153,7 @@ def segment_field(px, py, pz, ax, ay, az, bx, by, bz, current, wire_radius):
 
 
 @njit
-def _segments(position, active_rod, current):
+def packed_segments(position, active_rod, current):
     """The active rods as packed segment arrays (ends A, B, current, rod index), so that
     the loops over sources read contiguous memory instead of gathering tip rows."""
     n = active_rod.shape[0]
@@ -182,7 +182,7 @@ def _active_rod_field(px, py, pz, skip_rod, seg, active_rod, wire_radius):
     skip_rod : int
         Rod whose own segment is left out (-1: none).
     seg : ndarray, shape (7, n_active), float64
-        From :func:`_segments`: rows A (3), B (3) and the current of each active rod.
+        From :func:`packed_segments`: rows A (3), B (3) and the current of each active rod.
     active_rod : ndarray, shape (n_active,), int64
         Rods that carry a current, in the order of ``seg``.
     wire_radius : float
@@ -394,7 +394,7 @@ def rod_current_field(point, exclude_rod, position, active_rod, current, wire_ra
     out : ndarray, shape (m, 3), float64
         Overwritten with the total field at each point (reduced units, B0).
     """
-    seg = _segments(position, active_rod, current)
+    seg = packed_segments(position, active_rod, current)
     for p in prange(point.shape[0]):
         fx, fy, fz = _active_rod_field(
             point[p, 0],
@@ -439,7 +439,7 @@ def current_force_on_tips(position, charge, active_rod, current, wire_radius, lo
     """
     if active_rod.shape[0] == 0:
         return
-    seg = _segments(position, active_rod, current)
+    seg = packed_segments(position, active_rod, current)
     for k in prange(lo, hi):
         q = charge[k]
         if q == 0.0:

@@ -36,7 +36,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ._jit import inline_sum, njit, njit_parallel, njit_parallel_sum, njit_sum, prange
-from .currents import segment_field, segment_field_f32
+from .currents import packed_segments, segment_field, segment_field_f32
 from .multipole import field_octupole, field_octupole_f32, field_quadrupole
 from .treebuild import argsort_keys, bounding_box, build_cells, morton_keys
 from .treewalk import SPAN32, accepts, append_grown
@@ -87,29 +87,6 @@ class CurrentTree(NamedTuple):
     radius: np.ndarray
     moment: np.ndarray
     order: int
-
-
-@njit
-def _centres(position, active_rod, x, y, z):
-    """The centres of the active rods into ``x, y, z``."""
-    for r in range(active_rod.shape[0]):
-        ia = 2 * active_rod[r]
-        x[r] = 0.5 * (position[ia, 0] + position[ia + 1, 0])
-        y[r] = 0.5 * (position[ia, 1] + position[ia + 1, 1])
-        z[r] = 0.5 * (position[ia, 2] + position[ia + 1, 2])
-
-
-@njit
-def _sorted_segments(position, active_rod, current, perm, seg, rod):
-    """The active rods in the order ``perm`` as columns of ``seg`` and ``rod``."""
-    for k in range(perm.shape[0]):
-        j = active_rod[perm[k]]
-        ia = 2 * j
-        for d in range(3):
-            seg[d, k] = position[ia, d]
-            seg[3 + d, k] = position[ia + 1, d]
-        seg[6, k] = current[j]
-        rod[k] = j
 
 
 @inline_sum
@@ -206,16 +183,14 @@ def build_current_tree(position, active_rod, current, leaf_size=LEAF_SIZE, order
     """
     if order not in (2, 3):
         raise ValueError(f"the current tree's order must be 2 or 3, got {order}")
-    n = active_rod.shape[0]
-    x, y, z = np.empty(n), np.empty(n), np.empty(n)
-    _centres(position, active_rod, x, y, z)
-    key = np.empty(n, np.int64)
-    morton_keys(x, y, z, key)
+    packed = packed_segments(position, active_rod, current)
+    middle = 0.5 * (packed[0:3] + packed[3:6])  # the rods' centres, rows x, y, z
+    key = np.empty(active_rod.shape[0], np.int64)
+    morton_keys(middle[0], middle[1], middle[2], key)
     perm = argsort_keys(key)
     start, end, nxt = build_cells(key[perm], leaf_size)
-    seg = np.empty((7, n))
-    rod = np.empty(n, np.int64)
-    _sorted_segments(position, active_rod, current, perm, seg, rod)
+    seg = packed[:, perm]
+    rod = active_rod[perm]
     nc = start.shape[0]
     centre = np.empty((nc, 3))
     radius = np.empty(nc)
