@@ -38,7 +38,7 @@ import numpy as np
 from ._jit import inline_sum, njit, njit_parallel, njit_parallel_sum, njit_sum, prange
 from .currents import packed_segments, segment_field, segment_field_f32
 from .multipole import field_octupole, field_octupole_f32, field_quadrupole
-from .treebuild import argsort_keys, bounding_box, build_cells, morton_keys
+from .treebuild import add_moments, argsort_keys, bounding_box, build_cells, morton_keys
 from .treewalk import SPAN32, accepts, append_grown
 
 #: rods per leaf and targets per walk: leaves of 16 to 128 rods and groups of 32 to 256 points ran
@@ -89,31 +89,6 @@ class CurrentTree(NamedTuple):
     order: int
 
 
-@inline_sum
-def _add_moments(row, base, q, sx, sy, sz, order):
-    """Add the moments of a charge ``q`` at offset ``s`` from the centre to ``row[base:base + 16]``
-    (the layout and normalisation of :func:`.treebuild.cell_moments`)."""
-    s2 = sx * sx + sy * sy + sz * sz
-    row[base] += q
-    row[base + 1] += q * sx
-    row[base + 2] += q * sy
-    row[base + 3] += q * sz
-    row[base + 4] += q * (3.0 * sx * sx - s2)
-    row[base + 5] += 3.0 * q * sx * sy
-    row[base + 6] += 3.0 * q * sx * sz
-    row[base + 7] += q * (3.0 * sy * sy - s2)
-    row[base + 8] += 3.0 * q * sy * sz
-    if order >= 3:
-        t = 3.0 * q * s2
-        row[base + 9] += 15.0 * q * sx * sx * sx - 3.0 * t * sx
-        row[base + 10] += 15.0 * q * sx * sx * sy - t * sy
-        row[base + 11] += 15.0 * q * sx * sx * sz - t * sz
-        row[base + 12] += 15.0 * q * sx * sy * sy - t * sx
-        row[base + 13] += 15.0 * q * sx * sy * sz
-        row[base + 14] += 15.0 * q * sy * sy * sy - 3.0 * t * sy
-        row[base + 15] += 15.0 * q * sy * sy * sz - t * sz
-
-
 @njit_parallel
 def _cell_moments(seg, start, end, order, gl_t, gl_w, centre, radius, moment):
     """Centre, radius and the three channels' moments of every cell (the module docstring)."""
@@ -155,9 +130,9 @@ def _cell_moments(seg, start, end, order, gl_t, gl_w, centre, radius, moment):
                 py = ay + t * sy
                 pz = az + t * sz
                 jw = seg[6, r] * gl_w[g]
-                _add_moments(row, 0, jw * sx, px, py, pz, order)
-                _add_moments(row, N_CHANNEL, jw * sy, px, py, pz, order)
-                _add_moments(row, 2 * N_CHANNEL, jw * sz, px, py, pz, order)
+                add_moments(row, 0, jw * sx, px, py, pz, order)
+                add_moments(row, N_CHANNEL, jw * sy, px, py, pz, order)
+                add_moments(row, 2 * N_CHANNEL, jw * sz, px, py, pz, order)
         radius[c] = np.sqrt(b2)
 
 

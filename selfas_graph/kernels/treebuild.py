@@ -198,6 +198,47 @@ def bounding_box(x, y, z, s, e):
     return xl, yl, zl, xh, yh, zh
 
 
+@inline
+def add_moments(row, base, q, sx, sy, sz, order):
+    """Add the moments of a charge ``q`` at offset ``s`` from a cell's centre to ``row[base:]``, up to
+    ``order`` (2: M, P, Q; 3: and O; 4: and H), in the layout of :class:`.tree.TipTree` (the
+    normalisation in :mod:`.multipole`); :func:`cell_moments` and the tree of the rod currents
+    (:mod:`.currenttree`, a row per channel) sum them."""
+    s2 = sx * sx + sy * sy + sz * sz
+    row[base] += q
+    row[base + 1] += q * sx
+    row[base + 2] += q * sy
+    row[base + 3] += q * sz
+    row[base + 4] += q * (3.0 * sx * sx - s2)
+    row[base + 5] += q * 3.0 * sx * sy
+    row[base + 6] += q * 3.0 * sx * sz
+    row[base + 7] += q * (3.0 * sy * sy - s2)
+    row[base + 8] += q * 3.0 * sy * sz
+    if order >= 3:
+        t = 3.0 * q * s2
+        row[base + 9] += q * 15.0 * sx * sx * sx - 3.0 * t * sx
+        row[base + 10] += q * 15.0 * sx * sx * sy - t * sy
+        row[base + 11] += q * 15.0 * sx * sx * sz - t * sz
+        row[base + 12] += q * 15.0 * sx * sy * sy - t * sx
+        row[base + 13] += q * 15.0 * sx * sy * sz
+        row[base + 14] += q * 15.0 * sy * sy * sy - 3.0 * t * sy
+        row[base + 15] += q * 15.0 * sy * sy * sz - t * sz
+    if order >= 4:
+        u = 15.0 * q * s2
+        v = 3.0 * q * s2 * s2
+        xx = sx * sx
+        yy = sy * sy
+        row[base + 16] += 105.0 * q * xx * xx - 6.0 * u * xx + 3.0 * v
+        row[base + 17] += 105.0 * q * xx * sx * sy - 3.0 * u * sx * sy
+        row[base + 18] += 105.0 * q * xx * sx * sz - 3.0 * u * sx * sz
+        row[base + 19] += 105.0 * q * xx * yy - u * (xx + yy) + v
+        row[base + 20] += 105.0 * q * xx * sy * sz - u * sy * sz
+        row[base + 21] += 105.0 * q * sx * yy * sy - 3.0 * u * sx * sy
+        row[base + 22] += 105.0 * q * sx * yy * sz - u * sx * sz
+        row[base + 23] += 105.0 * q * yy * yy - 6.0 * u * yy + 3.0 * v
+        row[base + 24] += 105.0 * q * yy * sy * sz - 3.0 * u * sy * sz
+
+
 @njit_parallel
 def cell_moments(x, y, z, charge, start, end, order, box, centre, radius, moment):
     """Bounding box, expansion centre, radius and multipole moments of every cell.
@@ -233,76 +274,15 @@ def cell_moments(x, y, z, charge, start, end, order, box, centre, radius, moment
         centre[c, 1] = cy
         centre[c, 2] = cz
         b2 = 0.0
-        m = px = py = pz = 0.0
-        qxx = qxy = qxz = qyy = qyz = 0.0
-        oxxx = oxxy = oxxz = oxyy = oxyz = oyyy = oyyz = 0.0
-        hxxxx = hxxxy = hxxxz = hxxyy = hxxyz = hxyyy = hxyyz = hyyyy = hyyyz = 0.0
+        mc = moment[c]
+        mc[:] = 0.0
         for i in range(s, e):
             sx = x[i] - cx
             sy = y[i] - cy
             sz = z[i] - cz
-            q = charge[i]
-            s2 = sx * sx + sy * sy + sz * sz
-            b2 = max(b2, s2)
-            m += q
-            px += q * sx
-            py += q * sy
-            pz += q * sz
-            qxx += q * (3.0 * sx * sx - s2)
-            qxy += q * 3.0 * sx * sy
-            qxz += q * 3.0 * sx * sz
-            qyy += q * (3.0 * sy * sy - s2)
-            qyz += q * 3.0 * sy * sz
-            if order >= 3:
-                t = 3.0 * q * s2
-                oxxx += q * 15.0 * sx * sx * sx - 3.0 * t * sx
-                oxxy += q * 15.0 * sx * sx * sy - t * sy
-                oxxz += q * 15.0 * sx * sx * sz - t * sz
-                oxyy += q * 15.0 * sx * sy * sy - t * sx
-                oxyz += q * 15.0 * sx * sy * sz
-                oyyy += q * 15.0 * sy * sy * sy - 3.0 * t * sy
-                oyyz += q * 15.0 * sy * sy * sz - t * sz
-            if order >= 4:
-                u = 15.0 * q * s2
-                v = 3.0 * q * s2 * s2
-                xx = sx * sx
-                yy = sy * sy
-                hxxxx += 105.0 * q * xx * xx - 6.0 * u * xx + 3.0 * v
-                hxxxy += 105.0 * q * xx * sx * sy - 3.0 * u * sx * sy
-                hxxxz += 105.0 * q * xx * sx * sz - 3.0 * u * sx * sz
-                hxxyy += 105.0 * q * xx * yy - u * (xx + yy) + v
-                hxxyz += 105.0 * q * xx * sy * sz - u * sy * sz
-                hxyyy += 105.0 * q * sx * yy * sy - 3.0 * u * sx * sy
-                hxyyz += 105.0 * q * sx * yy * sz - u * sx * sz
-                hyyyy += 105.0 * q * yy * yy - 6.0 * u * yy + 3.0 * v
-                hyyyz += 105.0 * q * yy * sy * sz - 3.0 * u * sy * sz
+            b2 = max(b2, sx * sx + sy * sy + sz * sz)
+            add_moments(mc, 0, charge[i], sx, sy, sz, order)
         radius[c] = math.sqrt(b2)
-        mc = moment[c]
-        mc[0] = m
-        mc[1] = px
-        mc[2] = py
-        mc[3] = pz
-        mc[4] = qxx
-        mc[5] = qxy
-        mc[6] = qxz
-        mc[7] = qyy
-        mc[8] = qyz
-        mc[9] = oxxx
-        mc[10] = oxxy
-        mc[11] = oxxz
-        mc[12] = oxyy
-        mc[13] = oxyz
-        mc[14] = oyyy
-        mc[15] = oyyz
-        mc[16] = hxxxx
-        mc[17] = hxxxy
-        mc[18] = hxxxz
-        mc[19] = hxxyy
-        mc[20] = hxxyz
-        mc[21] = hxyyy
-        mc[22] = hxyyz
-        mc[23] = hyyyy
-        mc[24] = hyyyz
 
 
 @njit_parallel
