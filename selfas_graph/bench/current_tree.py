@@ -18,6 +18,11 @@ of its last circuit solve), and ``--rods N``: N rods with centres uniform in a c
 density (0.19 rods per unit volume, unit length, random axes), a fraction ``--carrying`` of them,
 drawn at random, carrying currents uniform in (-3, 3) J0 (a gas: the tree's least favourable case;
 a network of filaments is more clustered).
+
+Under ``mpiexec -n P`` every rank times every sum whole, and the tree once more as a run does under
+MPI, the ranks sharing its walks by runs of groups of points and gathering them
+(``model/terms/currents.py::tree_field``); each time is the slowest rank's, and a line per
+opening angle and precision gives the whole walk's time over the shared one's.
 """
 
 import argparse
@@ -28,6 +33,7 @@ import numpy as np
 
 from selfas_graph.bench.peer import machine, machine_line
 from selfas_graph.bench.profile import load_state, start_threads
+from selfas_graph.parallel import SERIAL, RowBlocks, world
 
 #: rods per unit volume of the Fig. 2 scene
 DENSITY = 0.19
@@ -53,9 +59,11 @@ def from_checkpoint(path):
     return sim.state.position.copy(), sim.network.current.copy(), 0.5 * sim.params.rods.diameter, origin
 
 
-def measure(position, current, w, thetas, precisions, reps):
+def measure(position, current, w, thetas, precisions, reps, comm=SERIAL):
     """``(n_points, n_active, rows)``: a row (method, precision, theta, ms, median and 99th-percentile
-    error) per sum timed."""
+    error) per sum timed. Under MPI (``comm`` of more than one rank) every rank times every sum
+    whole, and the tree once more with the ranks sharing its walks
+    (``model/terms/currents.py::tree_field``); each time is the slowest rank's."""
     from selfas_graph.kernels import currenttree as ct
     from selfas_graph.kernels.currents import rod_current_field, rod_current_field_mixed
 
@@ -77,13 +85,35 @@ def measure(position, current, w, thetas, precisions, reps):
                 return o
 
             runs[("tree", prec, theta)] = tree
+        if comm.size > 1:
+            blocks = RowBlocks(len(current), comm)
+            for theta in thetas:
+
+                def shared(theta=theta, mixed=prec == "mixed", o=np.empty_like(points)):
+                    t = ct.build_current_tree(position, active, current)
+                    targets = ct.sort_targets(points, exclude)
+                    bounds, rows = ct.target_runs(targets, comm.size)
+                    r = comm.rank
+                    ct.evaluate_current_tree(t, targets, theta, w, o, mixed, groups=bounds[r : r + 2])
+                    blocks.gather_runs(o, targets.index, rows)
+                    return o
+
+                runs[("tree, ranks share the walks", prec, theta)] = shared
+    slowest = None
+    if comm.size > 1:
+        from mpi4py import MPI
+
+        slowest = MPI.MAX
     best = {key: np.inf for key in runs}
     for _ in range(max(reps, 1) + 1):  # the first round also compiles
         for key, run in runs.items():
+            comm.Barrier()
             t0 = time.perf_counter()
             run()
-            best[key] = min(best[key], time.perf_counter() - t0)
-    ref = runs[("direct", "float64", None)]().copy()
+            # under MPI the slowest rank's time: the ranks wait for it at the next gather
+            best[key] = min(best[key], comm.allreduce(time.perf_counter() - t0, op=slowest))
+    ref = np.empty_like(points)  # the float64 direct sum, whether timed or not
+    rod_current_field(points, exclude, position, active, current, w, ref)
     size = np.linalg.norm(ref, axis=1)
     size[size == 0.0] = 1.0
     rows = []
@@ -117,30 +147,43 @@ def main(argv=None):
         start_threads(args.threads)
     import numba
 
-    print(machine_line())
-    print(f"numba threads: {numba.get_num_threads()}")
+    lead = world.rank == 0  # under mpiexec rank 0 prints and writes
+
+    def say(*a):
+        if lead:
+            print(*a)
+
+    say(machine_line())
+    say(f"numba threads: {numba.get_num_threads()}" + (f" x {world.size} MPI ranks" if world.size > 1 else ""))
     scenes = [lambda p=p: from_checkpoint(p) for p in args.checkpoint]
     scenes += [lambda n=n: gas(n, args.carrying) for n in args.rods]
     results = []
     for make in scenes:
         position, current, w, name = make()
         if not np.any(current != 0.0):
-            print(f"\n{name}: no rod carries current, nothing to time")
+            say(f"\n{name}: no rod carries current, nothing to time")
             continue
-        n_tips, n_active, rows = measure(position, current, w, args.theta, args.precision, args.reps)
-        print(f"\n{name}: {n_tips} tips, {n_active} rods carrying current\n")
-        print("| method | precision | opening angle | ms | direct / this (same precision) | median error | 99th pct |")
-        print("|---|---|---|---|---|---|---|")
+        n_tips, n_active, rows = measure(position, current, w, args.theta, args.precision, args.reps, world)
+        say(f"\n{name}: {n_tips} tips, {n_active} rods carrying current\n")
+        say("| method | precision | opening angle | ms | direct / this (same precision) | median error | 99th pct |")
+        say("|---|---|---|---|---|---|---|")
         direct_ms = {r["precision"]: r["ms"] for r in rows if r["method"] == "direct"}
         for r in rows:
             theta = "" if r["theta"] is None else f"{r['theta']:g}"
             ratio = direct_ms[r["precision"]] / r["ms"]
-            print(f"| {r['method']} | {r['precision']} | {theta} | {r['ms']:.2f} | {ratio:.2f} | "
-                  f"{r['median_error']:.1e} | {r['p99_error']:.1e} |")  # fmt: skip
+            say(f"| {r['method']} | {r['precision']} | {theta} | {r['ms']:.2f} | {ratio:.2f} | "
+                f"{r['median_error']:.1e} | {r['p99_error']:.1e} |")  # fmt: skip
+        whole = {(r["precision"], r["theta"]): r["ms"] for r in rows if r["method"] == "tree"}
+        for r in rows:
+            if r["method"].endswith("share the walks"):
+                key = (r["precision"], r["theta"])
+                say(f"{world.size} ranks sharing the walks, {key[0]}, opening angle {key[1]:g}: "
+                    f"{whole[key] / r['ms']:.2f} times faster than every rank walking every group")  # fmt: skip
         results.append(dict(scene=name, tips=n_tips, carrying=n_active, rows=rows))
-    if args.json:
+    if args.json and lead:
         with open(args.json, "w") as f:
-            json.dump(dict(machine=machine(), threads=numba.get_num_threads(), scenes=results), f, indent=1)
+            out = dict(machine=machine(), threads=numba.get_num_threads(), ranks=world.size, scenes=results)
+            json.dump(out, f, indent=1)
     return 0
 
 

@@ -17,7 +17,8 @@ moments of a straight rod exactly up to octupoles. A cell's box, centre and radi
 its rods' ends, so that the whole of every rod lies within the cell's radius of its centre.
 
 Walk. Targets (tips, or term 10's quadrature points) are sorted by the Morton key of their
-position and taken in groups of :data:`GROUP_SIZE`. A group walks the tree once: a cell acts
+position and taken in groups of :data:`GROUP_SIZE` (:func:`sort_targets`). A group walks the tree
+once, alone (processes may share the groups out by runs, :func:`target_runs`): a cell acts
 through its moments on all the group's targets when its radius is below ``opening_angle`` times
 the distance of its centre from the group's box; a leaf that is not accepted is near, and its
 rods act by the regularised segment law, as in the direct sum. ``mixed``: the near rods by
@@ -382,6 +383,29 @@ def _evaluate(
             out[i, 2] = bz[k]
 
 
+class CurrentTargets(NamedTuple):
+    """Field points sorted for the walk (:func:`sort_targets`).
+
+    Attributes
+    ----------
+    index : (m,) int64
+        The points in Morton order of their positions: sorted point k is ``point[index[k]]``.
+    tx, ty, tz : (m,) float64
+        The sorted points' coordinates.
+    exclude : (m,) int64
+        The rod each sorted point leaves out (-1: none).
+    group : (n_groups + 1,) int64
+        Group g is sorted points ``group[g]:group[g + 1]``.
+    """
+
+    index: np.ndarray
+    tx: np.ndarray
+    ty: np.ndarray
+    tz: np.ndarray
+    exclude: np.ndarray
+    group: np.ndarray
+
+
 @njit
 def _sorted_targets(point, exclude_rod, index, tx, ty, tz, texcl, group_size):
     """The targets in the order ``index`` into ``tx, ty, tz, texcl``; returns the group bounds."""
@@ -400,9 +424,57 @@ def _sorted_targets(point, exclude_rod, index, tx, ty, tz, texcl, group_size):
     return group
 
 
+def sort_targets(point, exclude_rod, group_size=GROUP_SIZE):
+    """The field points ``point`` ((m, 3) float64, finite, m >= 1), each leaving out the rod
+    ``exclude_rod[p]`` ((m,) int64, -1: none), sorted by their Morton keys into groups of ``group_size``
+    for :func:`evaluate_current_tree`. Returns a :class:`CurrentTargets`."""
+    m = point.shape[0]
+    key = np.empty(m, np.int64)
+    morton_keys(
+        np.ascontiguousarray(point[:, 0]), np.ascontiguousarray(point[:, 1]), np.ascontiguousarray(point[:, 2]), key
+    )
+    index = argsort_keys(key)
+    tx, ty, tz = np.empty(m), np.empty(m), np.empty(m)
+    texcl = np.empty(m, np.int64)
+    group = _sorted_targets(point, exclude_rod, index, tx, ty, tz, texcl, group_size)
+    return CurrentTargets(index, tx, ty, tz, texcl, group)
+
+
+def target_runs(targets, parts):
+    """Cut the groups of ``targets`` into ``parts`` runs of about equal numbers of points, for
+    :func:`evaluate_current_tree`'s ``groups`` (the work of ``parts`` processes): run r is groups
+    ``bounds[r]:bounds[r + 1]``, sorted points ``rows[r]:rows[r + 1]``.
+
+    Returns
+    -------
+    bounds, rows : (parts + 1,) int64
+    """
+    n_group = targets.group.shape[0] - 1
+    bounds = (n_group * np.arange(parts + 1, dtype=np.int64)) // parts
+    return bounds, targets.group[bounds]
+
+
+def evaluate_current_tree(tree, targets, opening_angle, wire_radius, out, mixed=False, groups=None):
+    """Overwrite the rows ``out[targets.index[k]]`` with the field of the tree's currents at the sorted
+    points k of the groups ``groups`` (``(g0, g1)``: groups g0 to g1 - 1; None: every group). Each
+    group is walked alone, so that the field at a point is the same bit for bit whichever run of
+    groups it is evaluated in (:func:`target_runs` shares the walks out). The arguments as
+    :func:`current_tree_field`'s."""
+    g0, g1 = (0, targets.group.shape[0] - 1) if groups is None else (int(groups[0]), int(groups[1]))
+    if g1 <= g0:
+        return
+    t = tree
+    _evaluate(
+        t.seg, t.rod, t.start, t.end, t.nxt, t.centre, t.radius, t.moment, t.order,
+        targets.tx, targets.ty, targets.tz, targets.exclude, targets.index, targets.group[g0 : g1 + 1],
+        opening_angle * opening_angle, wire_radius, mixed, out,
+    )  # fmt: skip
+
+
 def current_tree_field(tree, point, exclude_rod, opening_angle, wire_radius, out, mixed=False, group_size=GROUP_SIZE):
     """Overwrite ``out`` with the field of the tree's currents at ``point``, leaving out at each point
     the rod ``exclude_rod[p]`` (-1: none); :func:`.currents.rod_current_field` by the tree.
+    (:func:`sort_targets` and :func:`evaluate_current_tree` of every group.)
 
     Parameters
     ----------
@@ -421,19 +493,7 @@ def current_tree_field(tree, point, exclude_rod, opening_angle, wire_radius, out
     group_size : int
         Targets per walk.
     """
-    m = point.shape[0]
-    if m == 0:
+    if point.shape[0] == 0:
         return
-    key = np.empty(m, np.int64)
-    morton_keys(
-        np.ascontiguousarray(point[:, 0]), np.ascontiguousarray(point[:, 1]), np.ascontiguousarray(point[:, 2]), key
-    )
-    index = argsort_keys(key)
-    tx, ty, tz = np.empty(m), np.empty(m), np.empty(m)
-    texcl = np.empty(m, np.int64)
-    group = _sorted_targets(point, exclude_rod, index, tx, ty, tz, texcl, group_size)
-    t = tree
-    _evaluate(
-        t.seg, t.rod, t.start, t.end, t.nxt, t.centre, t.radius, t.moment, t.order,
-        tx, ty, tz, texcl, index, group, opening_angle * opening_angle, wire_radius, mixed, out,
-    )  # fmt: skip
+    targets = sort_targets(point, exclude_rod, group_size)
+    evaluate_current_tree(tree, targets, opening_angle, wire_radius, out, mixed)

@@ -103,6 +103,21 @@ def test_tree_force_and_energy_split_over_two_ranks_give_the_serial_run(tmp_path
     _assert_same_run(tmp_path / "q2.h5", tmp_path / "q1.h5")
 
 
+def test_current_tree_on_three_ranks_gives_the_serial_run_bit_for_bit(scene):
+    """With both rod-current terms by the tree of the currents, 3 ranks equal 1 rank bit for bit
+    through the short circuit: the ranks share the tree's groups of points (here one group, which
+    the last rank walks while the others send nothing; tests/physics/test_current_tree.py shares many
+    among threads standing in for ranks) and gather them."""
+    tree = ["--set", "forces.current_field.method=tree", "--set", "forces.current_lorentz.method=tree"]
+    serial = _launch(0, ["scene.toml", "-o", "ctree1.h5", *tree], scene)
+    assert serial.returncode == 0, serial.stderr
+    res = _launch(3, ["scene.toml", "-o", "ctree3.h5", *tree], scene)
+    assert res.returncode == 0, res.stderr
+    with h5py.File(scene / "ctree1.h5", "r") as f:
+        assert np.count_nonzero(f["graph/current"][-1]) > 0
+    _assert_same_run(scene / "ctree3.h5", scene / "ctree1.h5")
+
+
 def test_multiple_time_stepping_on_two_ranks_gives_the_serial_run_bit_for_bit(scene):
     """With the slow forces held between full evaluations, 2 ranks equal 1 rank bit for bit: the
     fast part is computed whole on every rank, the slow part only on full steps and gathered."""
@@ -200,3 +215,19 @@ def test_an_io_error_under_mpi_aborts_every_rank_with_exit_4(scene):
     with h5py.File(scene / "quota.h5", "r") as f:
         assert f["particles/tips/position/value"].shape[0] >= 1
         assert np.isfinite(f["particles/tips/position/value"][()]).all()
+
+
+def test_bench_current_tree_times_the_walks_the_ranks_share(tmp_path):
+    """``mpiexec -n 2 selfas-graph bench current_tree`` times the tree as a run shares it over the
+    ranks (rank 0 alone prints and writes), with the error of the whole walk: the gathered field is
+    the one-rank field."""
+    import json
+
+    args = ["bench", "current_tree", "--rods", "400", "--theta", "0.5", "--precision", "mixed"]
+    res = launch(["-m", "selfas_graph.cli.main", *args, "--reps", "1", "--json", "ct.json"], tmp_path, 2)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.count("2 ranks sharing the walks, mixed, opening angle 0.5:") == 1
+    assert "x 2 MPI ranks" in res.stdout
+    rows = {r["method"]: r for r in json.loads((tmp_path / "ct.json").read_text())["scenes"][0]["rows"]}
+    shared, whole = rows["tree, ranks share the walks"], rows["tree"]
+    assert shared["median_error"] == whole["median_error"] and shared["p99_error"] == whole["p99_error"]

@@ -8,6 +8,8 @@ moments stop at octupoles, so its field errs by about ``(b / d)^4`` of itself (b
 the distance), quadrupoles by ``(b / d)^3``: the tests hold the rates, not a fixed number.
 """
 
+import threading
+
 import numpy as np
 import pytest
 
@@ -216,16 +218,66 @@ def test_the_terms_by_the_tree_match_the_direct_terms():
             assert err.max() < 3e-2 * rms
 
 
-class _Rank:
-    """A communicator stub: rank ``rank`` of ``size`` (only what RowBlocks reads)."""
+class _ThreadRanks:
+    """``size`` ranks as Python threads, with mpi4py's buffer-form ``Allgatherv`` (all RowBlocks uses
+    of a communicator). The ranks take turns (one holds ``turn`` at a time; numba's workqueue
+    threading layer does not take calls from two threads at once) and meet in each collective."""
 
-    def __init__(self, rank, size):
-        self.rank, self.size = rank, size
+    def __init__(self, size):
+        self.size = size
+        self.parts = [None] * size
+        self.barrier = threading.Barrier(size, timeout=60)
+        self.turn = threading.Lock()
+
+    def comm(self, rank):
+        ranks = self
+
+        class Comm:
+            def __init__(self):
+                self.rank, self.size = rank, ranks.size
+
+            def Allgatherv(self, send, recv):
+                buf, (counts, displs) = recv
+                ranks.parts[rank] = np.array(send, copy=True).ravel()
+                ranks.turn.release()
+                ranks.barrier.wait()  # every rank has sent
+                with ranks.turn:
+                    for r in range(ranks.size):
+                        buf[displs[r] : displs[r] + counts[r]] = ranks.parts[r]
+                ranks.barrier.wait()  # every rank has received, before any sends again
+                ranks.turn.acquire()
+
+        return Comm()
+
+    def run(self, work):
+        """``work(comm)`` on every rank; returns the ranks' results."""
+        results, errors = [None] * self.size, []
+
+        def one(rank):
+            with self.turn:
+                try:
+                    results[rank] = work(self.comm(rank))
+                except BaseException as e:  # pragma: no cover - reported below
+                    errors.append(e)
+                    self.barrier.abort()
+
+        threads = [threading.Thread(target=one, args=(r,)) for r in range(self.size)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        if errors:
+            raise errors[0]
+        return results
 
 
-def test_each_rank_sums_its_rows_as_one_rank_does():
-    """Under MPI each rank computes its block of rows; with the tree it asks for every point, so that
-    its rows are those of one rank bit for bit (the groups of a block's points alone would differ)."""
+@pytest.mark.parametrize("ranks, carrying", [(2, "every rod"), (3, "every rod"), (3, "the first block")])
+def test_ranks_share_the_walks_and_give_one_rank_bit_for_bit(ranks, carrying):
+    """Under MPI the ranks sort the points into groups as one rank does, each walks a run of groups
+    (``target_runs``) and the runs are gathered: every rank ends with the serial field at every tip
+    (term 9) and the serial rows of its block (term 10), bit for bit; each walked its own groups only
+    (the points of a block alone would form other groups and sum otherwise). A rank whose block
+    holds no rod carrying current takes its share of term 10's walks all the same."""
     import dataclasses
 
     from selfas_graph.parallel import RowBlocks
@@ -236,22 +288,53 @@ def test_each_rank_sums_its_rows_as_one_rank_does():
     forces = {"electrodes": {"gap": 20.0}, "current_field": terms, "current_lorentz": {**terms, "near_range": 1.5}}
     sim = simulation(state, forces=forces, circuit={"delta_J0": 1.0})
     ff = sim.force_field
-    ff.set_currents(rng.uniform(-2, 2, state.n_rods))
+    current = rng.uniform(-2, 2, state.n_rods)
+    if carrying == "the first block":
+        current[state.n_rods // ranks :] = 0.0
+    ff.set_currents(current)
     ff.evaluate(state.position, state.velocity)
     serial = {name: ff.out[name].copy() for name in ("current_field", "current_lorentz")}
     ctx = ff.context
-    for rank in range(3):
-        blocks = RowBlocks(state.n_rods, _Rank(rank, 3))
+    walked = []
+    evaluate = ct.evaluate_current_tree
+
+    def counting(tree, targets, *args, groups=None, **kw):
+        walked.append((targets.group.shape[0] - 1, tuple(int(g) for g in groups)))
+        return evaluate(tree, targets, *args, groups=groups, **kw)
+
+    def rank_work(comm):
+        blocks = RowBlocks(state.n_rods, comm)
         ranked = dataclasses.replace(ctx, blocks=blocks, _buffers={}, _current_tree=None)
         ranked.bind(state.position, state.velocity)
-        lo, hi = blocks.tips
+        out = {}
         for term in ff.terms:
             if term.name in serial:
-                out = {term.name: np.full_like(serial[term.name], np.nan)}
+                out[term.name] = np.full_like(serial[term.name], np.nan)
                 term.compute(ranked, out)
-                np.testing.assert_array_equal(out[term.name][lo:hi], serial[term.name][lo:hi])
-    # the test means something: the block's tips alone form other groups, and sum otherwise
+                out[term.name + " blocked"] = term.blocked(ranked)
+        return blocks, out
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(ct, "evaluate_current_tree", counting)
+    try:
+        results = _ThreadRanks(ranks).run(rank_work)
+    finally:
+        mp.undo()
+    for blocks, out in results:
+        np.testing.assert_array_equal(out["current_field"], serial["current_field"])  # every row, gathered
+        assert out["current_field blocked"] == ()
+        lo, hi = blocks.tips
+        np.testing.assert_array_equal(out["current_lorentz"][lo:hi], serial["current_lorentz"][lo:hi])
+        assert out["current_lorentz blocked"] == ("current_lorentz",)
+    # each of the two evaluations (tips, quadrature points) cut its groups into one run per rank
+    assert len(walked) == 2 * ranks
+    for n_group in {n for n, _ in walked}:
+        runs = sorted(run for n, run in walked if n == n_group)
+        cut = [(n_group * r // ranks, n_group * (r + 1) // ranks) for r in range(ranks)]
+        assert n_group >= ranks and runs == sorted(cut * (len(runs) // ranks))
+    # the test means something: a block's tips alone form other groups, and sum otherwise
     tree = ctx.current_tree()
+    lo, hi = results[-1][0].tips
     block = np.empty((hi - lo, 3))
     ct.current_tree_field(tree, state.position[lo:hi], np.arange(lo, hi) // 2, 0.9, W, block)
     full = np.empty_like(state.position)

@@ -30,6 +30,26 @@ def wire_radius(p) -> float:
     return 0.5 * p.rods.diameter
 
 
+def tree_field(ctx, tree, points, exclude_rod, opening_angle, wire_radius, out, mixed):
+    """Overwrite ``out`` (m, 3), C-contiguous, with the field of the rod currents by ``tree`` at every
+    one of ``points`` (m, 3) on every rank, each point leaving out the rod ``exclude_rod[p]``
+    (:func:`~selfas_graph.kernels.currenttree.current_tree_field`).
+
+    The ranks of ``ctx.blocks`` share the walks: the points are sorted into groups as one rank sorts
+    them, each rank walks one run of groups (:func:`~selfas_graph.kernels.currenttree.target_runs`)
+    and the runs are gathered (:meth:`~selfas_graph.parallel.RowBlocks.gather_runs`). The field at a
+    point is that of its group's walk, so a run is the same bit for bit on any number of ranks. A
+    rank that walked the groups of its own rows alone would group them otherwise than one rank does,
+    and sum them otherwise."""
+    if points.shape[0] == 0:
+        return
+    targets = kt.sort_targets(points, exclude_rod)
+    bounds, rows = kt.target_runs(targets, ctx.blocks.size)
+    r = ctx.blocks.rank
+    kt.evaluate_current_tree(tree, targets, opening_angle, wire_radius, out, mixed, groups=bounds[r : r + 2])
+    ctx.blocks.gather_runs(out, targets.index, rows)
+
+
 class CurrentFieldForce(Term):
     """Term 9: q_k times the field of all other rods' currents (``ctx.currents``, wire radius D/2).
     No kernel call while no rod carries current. ``forces.current_field.precision`` picks the
@@ -48,6 +68,7 @@ class CurrentFieldForce(Term):
         self.wire_radius = wire_radius(p)
         self.tree = p.forces.current_field.method == "tree"
         self.opening_angle = p.forces.current_field.opening_angle
+        self._gathered = False
 
     def compute(self, ctx, out):
         f = out["current_field"]
@@ -56,19 +77,19 @@ class CurrentFieldForce(Term):
         if len(rc.active_rod):
             lo, hi = ctx.blocks.tips
             tree = ctx.current_tree() if self.tree else None
+            self._gathered = tree is not None
             if tree is None:
                 self.kernel(ctx.position, ctx.tip_charge, rc.active_rod, rc.current, self.wire_radius, lo, hi, f)
             else:
-                # every tip on every rank: the tree's groups are drawn from the points it is asked for,
-                # so a rank that asked for its rows alone would sum them otherwise than one rank does
                 own_rod = np.arange(ctx.n_tips, dtype=np.int64) // 2
                 mixed = self.precision == "mixed"
-                kt.current_tree_field(tree, ctx.position, own_rod, self.opening_angle, self.wire_radius, f, mixed)
+                tree_field(ctx, tree, ctx.position, own_rod, self.opening_angle, self.wire_radius, f, mixed)
                 f *= ctx.tip_charge[:, None]
             ctx.calls[self.name] += 1
 
     def blocked(self, ctx):
-        return ("current_field",) if len(ctx.currents.active_rod) else ()
+        # the tree gathers its own rows (its ranks split groups of tips, not blocks of rods)
+        return ("current_field",) if len(ctx.currents.active_rod) and not self._gathered else ()
 
 
 class CurrentLorentzForce(Term):
@@ -109,22 +130,26 @@ class CurrentLorentzForce(Term):
             return
         ctx.calls[self.name] += 1
         # active_rod is sorted (network.RodCurrents.set), so the rods of this block are one slice of it
-        mine = active[np.searchsorted(active, ctx.blocks.rods[0]) : np.searchsorted(active, ctx.blocks.rods[1])]
-        if not len(mine):
-            return
+        r_lo, r_hi = np.searchsorted(active, ctx.blocks.rods)
+        mine = active[r_lo:r_hi]
         ng = len(self.t)
-        pts = ctx.buffer("gl_points", len(mine) * ng)
-        kl.quadrature_points(ctx.position, mine, self.t, pts)
-        field = ctx.buffer("gl_field", len(mine) * ng)
-        if self.tree and len(mine) < len(active):
-            # under MPI the tree is asked for every rod's points, as on one rank (CurrentFieldForce.compute)
+        if self.tree and not ctx.blocks.serial:
+            # under MPI the tree is asked for every rod's points, the ranks sharing the walks
+            # (tree_field): a rank whose block holds no rod carrying current takes its share too
             every = ctx.buffer("gl_points_all", len(active) * ng)
             kl.quadrature_points(ctx.position, active, self.t, every)
             every_field = ctx.buffer("gl_field_all", len(active) * ng)
             self.current_field(ctx, every, every_field, exclude_rod=np.repeat(active, ng))
-            r_lo = int(np.searchsorted(active, mine[0]))
-            field[:] = every_field[r_lo * ng : (r_lo + len(mine)) * ng]
+            if not len(mine):
+                return
+            pts = every[r_lo * ng : r_hi * ng]
+            field = every_field[r_lo * ng : r_hi * ng]
         else:
+            if not len(mine):
+                return
+            pts = ctx.buffer("gl_points", len(mine) * ng)
+            kl.quadrature_points(ctx.position, mine, self.t, pts)
+            field = ctx.buffer("gl_field", len(mine) * ng)
             self.current_field(ctx, pts, field, exclude_rod=np.repeat(mine, ng))
         extra = ctx.buffer("gl_extra", len(pts))
         for source in self.field_sources:
@@ -169,7 +194,7 @@ class CurrentLorentzForce(Term):
         tree = ctx.current_tree() if self.tree else None
         if tree is not None:
             mixed = self.precision == "mixed"
-            kt.current_tree_field(tree, points, exclude_rod, self.opening_angle, self.wire_radius, out, mixed)
+            tree_field(ctx, tree, points, exclude_rod, self.opening_angle, self.wire_radius, out, mixed)
             return
         _FIELD_KERNEL[self.precision](
             points, exclude_rod, ctx.position, rc.active_rod, rc.current, self.wire_radius, out
