@@ -2,7 +2,7 @@
 
 Usage: selfas-graph bench million [--rods 250000 500000 1000000] [--steps 4] [--ranks 16 64 256]
                                   [--latency 2e-6] [--bandwidth 1e10] [--energy-check RODS]
-                                  [--set KEY=VALUE ...]
+                                  [--carrying 0.5] [--set KEY=VALUE ...]
        selfas-graph bench million --checkpoint RUN.checkpoint.h5 [...]
 
 The Fig. 2 scene scaled as in selfas_graph/bench/step.py (``scene``: the box grows in x and y, the
@@ -18,6 +18,12 @@ AB4 steps from the fourth) with the seconds of each force term (``Simulation(tim
 rest of the step: integration, constraint, contacts and events, neighbour lists, which every rank
 repeats (docs/performance.md 'Beyond one node'). Wall clock; run it niced on a quiet machine with
 ``NUMBA_NUM_THREADS=1`` for the one-thread figures.
+
+``--carrying F`` gives a fraction F of the rods, drawn at random, currents uniform in (-3, 3) J0 (the
+gas of ``selfas-graph bench current_tree``), set again before every timed step: the scene has no
+path between its electrodes, so its circuit would zero them at its next event. The current terms
+then take their share of each step; ``--set forces.current_field.method=tree --set
+forces.current_lorentz.method=tree`` times them by the tree of the rod currents.
 
 ``--checkpoint`` compares instead, at the states runs left, the tip-tip energy by the tree with the
 direct sum, against the run's own energy balance.
@@ -119,10 +125,18 @@ def energy_at_checkpoint(path):
     return out
 
 
-def measure(path, n, steps, extra, full_below=0):
+def rod_currents(n, carrying, seed=1):
+    """Currents uniform in (-3, 3) J0 on a fraction ``carrying`` of ``n`` rods drawn at random (the
+    synthetic gas of ``selfas-graph bench current_tree``), zero on the others."""
+    rng = np.random.default_rng(seed)
+    return np.where(rng.random(n) < carrying, rng.uniform(-3, 3, n), 0.0)
+
+
+def measure(path, n, steps, extra, full_below=0, carrying=0.0):
     over = [*extra, "integrator.slow_every=1", "forces.tip_magnetic.method=tree"]
     t0 = time.perf_counter()
     sim = Simulation.from_scenario(scene(path, n, over), timing=True, comm=world)
+    current = rod_currents(n, carrying) if carrying > 0.0 else None
     row = {"rods": n, "build_s": time.perf_counter() - t0, "mb_after_build": peak_mb()}
     row["tree"] = tree_stages(sim)
     row["energy"] = tip_energy(sim, full_below=full_below)
@@ -131,6 +145,10 @@ def measure(path, n, steps, extra, full_below=0):
     ff = sim.force_field
     row["steps"] = []
     for _ in range(steps):
+        if current is not None:
+            # before every step: the scene's circuit, with no path between the electrodes, zeroes them
+            # at its next event (from the next evaluation on)
+            ff.set_currents(current)
         ff.seconds.clear()
         t0, c0 = time.perf_counter(), time.process_time()
         sim.step(1)
@@ -139,13 +157,15 @@ def measure(path, n, steps, extra, full_below=0):
         split = sum(v for k, v in terms.items() if k in SPLIT_TERMS)
         row["steps"].append({"wall": wall, "cpu": cpu, "split_terms": split, "repeated": wall - split, "terms": terms})
     row["peak_mb"] = peak_mb()
+    row["carrying"] = 0 if current is None else int(np.count_nonzero(current))
     return row
 
 
 def bytes_per_rod(cells_per_rod, channels=1):
     """Bytes gathered per rod and evaluation (all ranks' rows): the tree's cell moments (box 6, centre 3,
     radius 1, moments 25 doubles per cell), its tip forces (2 tips x 3 doubles) and ``channels`` more tip
-    channels in one ``gather_rows`` (the Yukawa term; 3 with the two current terms)."""
+    channels (the Yukawa term; 3 with the two current terms, and the fraction of rods carrying current
+    more for term 10's field at 2 points of each by the tree of the currents)."""
     return 280.0 * cells_per_rod + 48.0 + 48.0 * channels
 
 
@@ -167,6 +187,12 @@ def main(argv=None):
     ap.add_argument("--rods", type=int, nargs="+", default=[250000, 500000, 1000000])
     ap.add_argument("--steps", type=int, default=4, help="steps timed one by one (3 RK4 steps, then AB4)")
     ap.add_argument("--set", dest="extra", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument(
+        "--carrying",
+        type=float,
+        default=0.0,
+        help="fraction of the rods carrying current (uniform in (-3, 3) J0, drawn at random; 0: none)",
+    )
     ap.add_argument("--ranks", type=int, nargs="+", default=[16, 64, 256], help="ranks of the modelled step")
     ap.add_argument("--latency", type=float, default=2e-6, help="seconds per message of the modelled network")
     ap.add_argument("--bandwidth", type=float, default=1e10, help="bytes per second of the modelled network")
@@ -184,6 +210,8 @@ def main(argv=None):
         help="only compare the tip-tip energy by the tree with the direct sum at these runs' checkpoints",
     )
     args = ap.parse_args(argv)
+    if not 0.0 <= args.carrying <= 1.0:
+        ap.error("--carrying: a fraction in [0, 1]")
     say = print if world.rank == 0 else (lambda *a, **k: None)
     if args.checkpoint:
         say(machine_line())
@@ -202,10 +230,13 @@ def main(argv=None):
 
     say(machine_line())
     say(f"{world.size} MPI rank(s) x {numba.get_num_threads()} numba threads; {args.scenario}, slow_every=1, tree")
-    measure(args.scenario, 26000, 4, args.extra)  # compile every kernel (the threaded row kernels from 50 000 rows on)
+    if args.carrying:
+        say(f"a fraction {args.carrying:g} of the rods carrying current, held through the timed steps")
+    # compile every kernel (the threaded row kernels from 50 000 rows on)
+    measure(args.scenario, 26000, 4, args.extra, carrying=args.carrying)
     rows = []
     for n in sorted(args.rods):
-        r = measure(args.scenario, n, args.steps, args.extra, args.energy_check)
+        r = measure(args.scenario, n, args.steps, args.extra, args.energy_check, args.carrying)
         rows.append(r)
         tr, en = r["tree"], r["energy"]
         how = "whole" if math.isfinite(en["difference"]) else "from 2000 rows"
@@ -215,7 +246,7 @@ def main(argv=None):
             f"{r['peak_mb']:.0f} MB after the steps; tree ({tr['cells']} cells): plan {tr['plan']:.3f} s, "
             f"moments {tr['fill']:.3f} s, finish {tr['finish']:.3f} s, one evaluation {tr['evaluate']:.3f} s; "
             f"tip-tip energy: direct sum ({how}) {en['direct_s']:.1f} s, tree (build included) "
-            f"{en['tree_s']:.2f} s{check}",
+            f"{en['tree_s']:.2f} s{check}" + (f"; {r['carrying']} rods carrying current" if r["carrying"] else ""),
             flush=True,
         )
         for k, s in enumerate(r["steps"]):
@@ -228,7 +259,7 @@ def main(argv=None):
             )
         last = r["steps"][-1]
         repeated = last["repeated"] + tr["plan"] + tr["finish"]  # every rank also plans the tree itself
-        per_rod = bytes_per_rod(tr["cells"] / n)
+        per_rod = bytes_per_rod(tr["cells"] / n, channels=3 + r["carrying"] / n if r["carrying"] else 1)
         cells = []
         for p in args.ranks:
             t, comm, eff = model(last["wall"] - repeated, repeated, n, per_rod, p, args.latency, args.bandwidth)

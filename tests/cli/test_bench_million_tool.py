@@ -27,6 +27,19 @@ def test_one_size_measures_memory_tree_energy_and_steps():
     assert step["wall"] > 0 and set(million.SPLIT_TERMS) & set(step["terms"])
 
 
+def test_steps_with_currents_held_time_the_current_terms():
+    """``carrying``: a fraction of the rods carries current through every timed step (set again before
+    each; the scene's circuit, with no path between the electrodes, would zero them), so that the two
+    current terms are timed in each step, here by the tree of the currents."""
+    from selfas_graph.bench import million
+
+    tree = ["forces.current_field.method=tree", "forces.current_lorentz.method=tree"]
+    row = million.measure(str(ROOT / "scenarios" / "fig2.toml"), 400, 2, tree, carrying=0.5)
+    assert 150 < row["carrying"] < 250
+    for step in row["steps"]:
+        assert step["terms"]["current_field"] > 0 and step["terms"]["current_lorentz"] > 0
+
+
 def test_energy_at_a_checkpoint(tmp_path, capsys):
     """``--checkpoint``: the tip-tip energy of a run's state by the tree and by the direct sum, their
     difference printed against the run's energy balance (a step taken first, so that its scale is
