@@ -76,6 +76,31 @@ def tree_stages(sim):
     return {"plan": s[0], "fill": s[1], "finish": s[2], "evaluate": s[3], "cells": int(tree.start.shape[0])}
 
 
+def current_tree_stages(sim):
+    """Seconds of what every MPI rank repeats in an evaluation by the tree of the rod currents, on the
+    current positions and currents: the tree's build and the sorts of the points of term 9 (the tips)
+    and term 10 (its quadrature points), with the placing of those points; the walks, which the
+    ranks share, are the terms' other time."""
+    from selfas_graph.kernels import currenttree as kt
+    from selfas_graph.kernels import lorentz as kl
+
+    position = sim.state.position
+    current = sim.force_field.currents.current
+    active = np.flatnonzero(current != 0.0).astype(np.int64)
+    t = [time.perf_counter()]
+    kt.build_current_tree(position, active, current)
+    t.append(time.perf_counter())
+    kt.sort_targets(position, np.arange(position.shape[0], dtype=np.int64) // 2)
+    t.append(time.perf_counter())
+    nodes, _ = kl.gauss_legendre_01(sim.params.forces.current_lorentz.quadrature_points)
+    points = np.empty((len(active) * len(nodes), 3))
+    kl.quadrature_points(position, active, nodes, points)
+    kt.sort_targets(points, np.repeat(active, len(nodes)))
+    t.append(time.perf_counter())
+    s = np.diff(t)
+    return {"build": s[0], "sort_tips": s[1], "sort_points": s[2]}
+
+
 def tip_energy(sim, rows=2000, full_below=0):
     """The tip-tip energy of the starting positions, as the energy reference and every frame pay it:
     ``direct_s``, seconds of the direct sum (``kernels/tips.py::tip_tip_energy``) estimated from ``rows``
@@ -158,6 +183,16 @@ def measure(path, n, steps, extra, full_below=0, carrying=0.0):
         row["steps"].append({"wall": wall, "cpu": cpu, "split_terms": split, "repeated": wall - split, "terms": terms})
     row["peak_mb"] = peak_mb()
     row["carrying"] = 0 if current is None else int(np.count_nonzero(current))
+    if current is not None and "tree" in (
+        sim.params.forces.current_field.method,
+        sim.params.forces.current_lorentz.method,
+    ):
+        ff.set_currents(current)
+        row["current_tree"] = current_tree_stages(sim)
+        fp = sim.params.forces
+        row["current_tree_terms"] = [
+            name for name in ("current_field", "current_lorentz") if getattr(fp, name).method == "tree"
+        ]
     return row
 
 
@@ -259,6 +294,18 @@ def main(argv=None):
             )
         last = r["steps"][-1]
         repeated = last["repeated"] + tr["plan"] + tr["finish"]  # every rank also plans the tree itself
+        ct = r.get("current_tree")
+        if ct is not None:
+            # and builds the tree of the currents and sorts the points of each term that takes it
+            on_tree = r["current_tree_terms"]
+            repeated += ct["build"] + ct["sort_tips"] * ("current_field" in on_tree)
+            repeated += ct["sort_points"] * ("current_lorentz" in on_tree)
+            say(
+                f"  tree of the rod currents (every rank repeats it): build {ct['build']:.3f} s, sort of the "
+                f"tips {ct['sort_tips']:.3f} s, of term 10's points {ct['sort_points']:.3f} s"
+                f" (terms on the tree: {', '.join(on_tree)})",
+                flush=True,
+            )
         per_rod = bytes_per_rod(tr["cells"] / n, channels=3 + r["carrying"] / n if r["carrying"] else 1)
         cells = []
         for p in args.ranks:

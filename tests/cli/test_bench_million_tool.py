@@ -38,6 +38,8 @@ def test_steps_with_currents_held_time_the_current_terms():
     assert 150 < row["carrying"] < 250
     for step in row["steps"]:
         assert step["terms"]["current_field"] > 0 and step["terms"]["current_lorentz"] > 0
+    assert row["current_tree_terms"] == ["current_field", "current_lorentz"]
+    assert all(row["current_tree"][k] > 0 for k in ("build", "sort_tips", "sort_points"))
 
 
 def test_energy_at_a_checkpoint(tmp_path, capsys):
