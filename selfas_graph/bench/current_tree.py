@@ -33,6 +33,7 @@ import numpy as np
 
 from selfas_graph.bench.peer import machine, machine_line
 from selfas_graph.bench.profile import load_state, start_threads
+from selfas_graph.model.terms.currents import tree_field
 from selfas_graph.parallel import SERIAL, RowBlocks, world
 
 #: rods per unit volume of the Fig. 2 scene
@@ -91,11 +92,7 @@ def measure(position, current, w, thetas, precisions, reps, comm=SERIAL):
 
                 def shared(theta=theta, mixed=prec == "mixed", o=np.empty_like(points)):
                     t = ct.build_current_tree(position, active, current)
-                    targets = ct.sort_targets(points, exclude)
-                    bounds, rows = ct.target_runs(targets, comm.size)
-                    r = comm.rank
-                    ct.evaluate_current_tree(t, targets, theta, w, o, mixed, groups=bounds[r : r + 2])
-                    blocks.gather_runs(o, targets.index, rows)
+                    tree_field(blocks, t, points, exclude, theta, w, o, mixed)
                     return o
 
                 runs[("tree, ranks share the walks", prec, theta)] = shared

@@ -30,12 +30,12 @@ def wire_radius(p) -> float:
     return 0.5 * p.rods.diameter
 
 
-def tree_field(ctx, tree, points, exclude_rod, opening_angle, wire_radius, out, mixed):
+def tree_field(blocks, tree, points, exclude_rod, opening_angle, wire_radius, out, mixed):
     """Overwrite ``out`` (m, 3), C-contiguous, with the field of the rod currents by ``tree`` at every
     one of ``points`` (m, 3) on every rank, each point leaving out the rod ``exclude_rod[p]``
     (:func:`~selfas_graph.kernels.currenttree.current_tree_field`).
 
-    The ranks of ``ctx.blocks`` share the walks: the points are sorted into groups as one rank sorts
+    The ranks of ``blocks`` (:class:`~selfas_graph.parallel.RowBlocks`) share the walks: the points are sorted into groups as one rank sorts
     them, each rank walks one run of groups (:func:`~selfas_graph.kernels.currenttree.target_runs`)
     and the runs are gathered (:meth:`~selfas_graph.parallel.RowBlocks.gather_runs`). The field at a
     point is that of its group's walk, so a run is the same bit for bit on any number of ranks. A
@@ -44,10 +44,10 @@ def tree_field(ctx, tree, points, exclude_rod, opening_angle, wire_radius, out, 
     if points.shape[0] == 0:
         return
     targets = kt.sort_targets(points, exclude_rod)
-    bounds, rows = kt.target_runs(targets, ctx.blocks.size)
-    r = ctx.blocks.rank
+    bounds, rows = kt.target_runs(targets, blocks.size)
+    r = blocks.rank
     kt.evaluate_current_tree(tree, targets, opening_angle, wire_radius, out, mixed, groups=bounds[r : r + 2])
-    ctx.blocks.gather_runs(out, targets.index, rows)
+    blocks.gather_runs(out, targets.index, rows)
 
 
 class CurrentFieldForce(Term):
@@ -83,7 +83,7 @@ class CurrentFieldForce(Term):
             else:
                 own_rod = np.arange(ctx.n_tips, dtype=np.int64) // 2
                 mixed = self.precision == "mixed"
-                tree_field(ctx, tree, ctx.position, own_rod, self.opening_angle, self.wire_radius, f, mixed)
+                tree_field(ctx.blocks, tree, ctx.position, own_rod, self.opening_angle, self.wire_radius, f, mixed)
                 f *= ctx.tip_charge[:, None]
             ctx.calls[self.name] += 1
 
@@ -194,7 +194,7 @@ class CurrentLorentzForce(Term):
         tree = ctx.current_tree() if self.tree else None
         if tree is not None:
             mixed = self.precision == "mixed"
-            tree_field(ctx, tree, points, exclude_rod, self.opening_angle, self.wire_radius, out, mixed)
+            tree_field(ctx.blocks, tree, points, exclude_rod, self.opening_angle, self.wire_radius, out, mixed)
             return
         _FIELD_KERNEL[self.precision](
             points, exclude_rod, ctx.position, rc.active_rod, rc.current, self.wire_radius, out
