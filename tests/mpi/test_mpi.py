@@ -231,3 +231,23 @@ def test_bench_current_tree_times_the_walks_the_ranks_share(tmp_path):
     rows = {r["method"]: r for r in json.loads((tmp_path / "ct.json").read_text())["scenes"][0]["rows"]}
     shared, whole = rows["tree, ranks share the walks"], rows["tree"]
     assert shared["median_error"] == whole["median_error"] and shared["p99_error"] == whole["p99_error"]
+
+
+@pytest.mark.slow
+def test_fig2_with_the_current_tree_on_two_and_three_ranks_gives_the_serial_run(tmp_path):
+    """The Fig. 2 scene to t = 30 (through its first short circuit, 229 rods carrying current at the
+    end) with both rod-current terms by the tree: the ranks share 19 groups of tips and up to 4 groups
+    of term 10's points, and 2 and 3 ranks give the serial run file bit for bit. About a minute."""
+    from pathlib import Path
+
+    (tmp_path / "fig2.toml").write_text((Path(__file__).parents[2] / "scenarios" / "fig2.toml").read_text())
+    tree = ["--set", "forces.current_field.method=tree", "--set", "forces.current_lorentz.method=tree"]
+    args = ["fig2.toml", "--t-end", "30", *tree]
+    serial = _launch(0, [*args, "-o", "f1.h5"], tmp_path)
+    assert serial.returncode == 0, serial.stderr
+    with h5py.File(tmp_path / "f1.h5", "r") as f:
+        assert np.count_nonzero(f["graph/current"][-1]) > 128  # more than one group of term 10's points
+    for ranks in (2, 3):
+        res = _launch(ranks, [*args, "-o", f"f{ranks}.h5"], tmp_path)
+        assert res.returncode == 0, res.stderr
+        _assert_same_run(tmp_path / f"f{ranks}.h5", tmp_path / "f1.h5")
