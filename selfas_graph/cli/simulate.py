@@ -45,6 +45,7 @@ from ..model.accuracy import null_model_notes, short_of_accuracy
 from ..model.params import plasma_current_text
 from ..model.simulation import Simulation
 from ..model.state import PlacementError
+from ..model.terms.currents import tree_note
 from ..parallel import fit_threads_to_cores, world
 from ..provenance import version_key
 from .main import EXIT_NUMERICAL, CliError, CliIOError
@@ -520,5 +521,8 @@ def _print_summary(s, out, sim):
             )
             + f"; at the end {st['current_rods']} rods carry current, total {st['total_current']:.4g} J0"
         )
+        note = tree_note(sim.params, st["current_rods"])
+        if note:
+            lines.append(f"  note: {note}")
     lines.append(f"  output: {out} ({s.frames} frames); checkpoint {checkpoint_path(out)}")
     print("\n".join(lines))

@@ -369,3 +369,23 @@ def test_build_rejects_an_order_it_does_not_have():
     position, current, active, _, _ = scene(6, n_rods=10)
     with pytest.raises(ValueError, match="order must be 2 or 3"):
         ct.build_current_tree(position, active, current, order=4)
+
+
+def test_a_run_with_thousands_of_rods_carrying_current_names_the_tree():
+    """The end of a run names the tree's settings for the current terms still on the direct sums once
+    at least TREE_PAYS_FROM rods carry current (the direct sum is as fast below it); none otherwise."""
+    from conftest import params
+    from selfas_graph.model.terms.currents import TREE_PAYS_FROM, tree_note
+
+    electrodes = {"electrodes": {"gap": 12.0}}
+
+    def p(field, lorentz):
+        forces = {**electrodes, "current_field": {"method": field}, "current_lorentz": {"method": lorentz}}
+        return params(forces=forces, circuit={"delta_J0": 1.0})
+
+    assert tree_note(p("direct", "direct"), TREE_PAYS_FROM - 1) is None
+    note = tree_note(p("direct", "direct"), TREE_PAYS_FROM)
+    assert "--set forces.current_field.method=tree --set forces.current_lorentz.method=tree" in note
+    assert "forces.current_field" not in tree_note(p("tree", "direct"), 5000)
+    assert tree_note(p("tree", "tree"), 5000) is None
+    assert tree_note(params(forces={"tip_magnetic": {}}), 5000) is None  # no current terms

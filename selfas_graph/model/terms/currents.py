@@ -24,6 +24,30 @@ _FIELD_KERNEL = {"float64": kc.rod_current_field, "mixed": kc.rod_current_field_
 _TIP_KERNEL = {"float64": kc.current_force_on_tips, "mixed": kc.current_force_on_tips_mixed}
 
 
+#: rods carrying current from which the tree of the currents sums their field faster than the direct
+#: sums: 0.90-0.99 times the direct sum's speed with 1009 rods (Fig. 2), 2.5 times with 3150 (Fig. 6),
+#: docs/performance.md 'A tree of the rod currents'
+TREE_PAYS_FROM = 2000
+
+
+def tree_note(p, carrying: int) -> str | None:
+    """A note for the end of a run of the parameters ``p`` in which ``carrying`` rods carry current:
+    where a current term on the direct sums would run faster by the tree (``method = "tree"``,
+    :data:`TREE_PAYS_FROM`), which settings to change; else None."""
+    direct = [
+        name
+        for name in ("current_field", "current_lorentz")
+        if getattr(p.forces, name, None) is not None and getattr(p.forces, name).method == "direct"
+    ]
+    if carrying < TREE_PAYS_FROM or not direct:
+        return None
+    sets = " ".join(f"--set forces.{name}.method=tree" for name in direct)
+    return (
+        f"{carrying} rods carry current: from about {TREE_PAYS_FROM} on, the tree of the rod currents sums "
+        f"their field faster than the direct sums ({sets}; docs/performance.md 'A tree of the rod currents')"
+    )
+
+
 def wire_radius(p) -> float:
     """The wire radius w = D/2 that regularises the field of the rod currents, D = ``rods.diameter``
     of the parameters ``p`` (docs/model.md 'Term 9', choice A5)."""
