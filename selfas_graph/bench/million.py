@@ -77,10 +77,10 @@ def tree_stages(sim):
 
 
 def current_tree_stages(sim):
-    """Seconds of what every MPI rank repeats in an evaluation by the tree of the rod currents, on the
-    current positions and currents: the tree's build and the sorts of the points of term 9 (the tips)
-    and term 10 (its quadrature points), with the placing of those points; the walks, which the
-    ranks share, are the terms' other time."""
+    """Seconds of the stages of an evaluation by the tree of the rod currents on the current positions
+    and currents: what every MPI rank repeats, the tree's plan (its rods sorted, its cells cut) and the
+    sorts of the points of term 9 (the tips) and term 10 (its quadrature points, with their placing),
+    and the moments of its cells (``fill``), which the ranks share as they share the walks."""
     from selfas_graph.kernels import currenttree as kt
     from selfas_graph.kernels import lorentz as kl
 
@@ -88,7 +88,9 @@ def current_tree_stages(sim):
     current = sim.force_field.currents.current
     active = np.flatnonzero(current != 0.0).astype(np.int64)
     t = [time.perf_counter()]
-    kt.build_current_tree(position, active, current)
+    tree = kt.plan_current_tree(position, active, current)
+    t.append(time.perf_counter())
+    kt.fill_current_cells(tree, 0, tree.start.shape[0])
     t.append(time.perf_counter())
     kt.sort_targets(position, np.arange(position.shape[0], dtype=np.int64) // 2)
     t.append(time.perf_counter())
@@ -98,7 +100,7 @@ def current_tree_stages(sim):
     kt.sort_targets(points, np.repeat(active, len(nodes)))
     t.append(time.perf_counter())
     s = np.diff(t)
-    return {"build": s[0], "sort_tips": s[1], "sort_points": s[2]}
+    return {"plan": s[0], "fill": s[1], "sort_tips": s[2], "sort_points": s[3]}
 
 
 def tip_energy(sim, rows=2000, full_below=0):
@@ -296,13 +298,14 @@ def main(argv=None):
         repeated = last["repeated"] + tr["plan"] + tr["finish"]  # every rank also plans the tree itself
         ct = r.get("current_tree")
         if ct is not None:
-            # and builds the tree of the currents and sorts the points of each term that takes it
+            # and plans the tree of the currents and sorts the points of each term that takes it
             on_tree = r["current_tree_terms"]
-            repeated += ct["build"] + ct["sort_tips"] * ("current_field" in on_tree)
+            repeated += ct["plan"] + ct["sort_tips"] * ("current_field" in on_tree)
             repeated += ct["sort_points"] * ("current_lorentz" in on_tree)
             say(
-                f"  tree of the rod currents (every rank repeats it): build {ct['build']:.3f} s, sort of the "
-                f"tips {ct['sort_tips']:.3f} s, of term 10's points {ct['sort_points']:.3f} s"
+                f"  tree of the rod currents: every rank repeats its plan {ct['plan']:.3f} s, the sort of the "
+                f"tips {ct['sort_tips']:.3f} s, of term 10's points {ct['sort_points']:.3f} s; the ranks share "
+                f"its moments {ct['fill']:.3f} s"
                 f" (terms on the tree: {', '.join(on_tree)})",
                 flush=True,
             )

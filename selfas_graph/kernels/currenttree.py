@@ -91,9 +91,10 @@ class CurrentTree(NamedTuple):
 
 
 @njit_parallel
-def _cell_moments(seg, start, end, order, gl_t, gl_w, centre, radius, moment):
-    """Centre, radius and the three channels' moments of every cell (the module docstring)."""
-    for c in prange(start.shape[0]):
+def _cell_moments(seg, start, end, order, gl_t, gl_w, centre, radius, moment, c0, c1):
+    """Centre, radius and the three channels' moments of cells ``c0`` to ``c1 - 1`` (the module
+    docstring); each cell from its own rods, so that a cell is the same whichever run fills it."""
+    for c in prange(c0, c1):
         s = start[c]
         e = end[c]
         lo = np.empty(3)
@@ -138,7 +139,8 @@ def _cell_moments(seg, start, end, order, gl_t, gl_w, centre, radius, moment):
 
 
 def build_current_tree(position, active_rod, current, leaf_size=LEAF_SIZE, order=ORDER):
-    """The tree of the rods ``active_rod`` (distinct, at least one) with their ``current``.
+    """The tree of the rods ``active_rod`` (distinct, at least one) with their ``current``
+    (:func:`plan_current_tree`, then :func:`fill_current_cells` of every cell).
 
     Parameters
     ----------
@@ -157,6 +159,15 @@ def build_current_tree(position, active_rod, current, leaf_size=LEAF_SIZE, order
     -------
     CurrentTree
     """
+    tree = plan_current_tree(position, active_rod, current, leaf_size, order)
+    fill_current_cells(tree, 0, tree.start.shape[0])
+    return tree
+
+
+def plan_current_tree(position, active_rod, current, leaf_size=LEAF_SIZE, order=ORDER):
+    """The tree of :func:`build_current_tree` with its rods sorted and its cells cut, their centres,
+    radii and moments not yet computed (:func:`fill_current_cells`; processes may share the cells
+    out by runs, :func:`.tree.cell_bounds`, and gather them)."""
     if order not in (2, 3):
         raise ValueError(f"the current tree's order must be 2 or 3, got {order}")
     packed = packed_segments(position, active_rod, current)
@@ -171,8 +182,13 @@ def build_current_tree(position, active_rod, current, leaf_size=LEAF_SIZE, order
     centre = np.empty((nc, 3))
     radius = np.empty(nc)
     moment = np.empty((nc, 3 * N_CHANNEL))
-    _cell_moments(seg, start, end, order, GL_T, GL_W, centre, radius, moment)
     return CurrentTree(seg, rod, start, end, nxt, centre, radius, moment, order)
+
+
+def fill_current_cells(tree, c0, c1):
+    """Compute the centre, radius and moments of cells ``c0`` to ``c1 - 1`` of a planned tree, in place."""
+    t = tree
+    _cell_moments(t.seg, t.start, t.end, t.order, GL_T, GL_W, t.centre, t.radius, t.moment, int(c0), int(c1))
 
 
 @inline_sum

@@ -39,7 +39,7 @@ def test_steps_with_currents_held_time_the_current_terms():
     for step in row["steps"]:
         assert step["terms"]["current_field"] > 0 and step["terms"]["current_lorentz"] > 0
     assert row["current_tree_terms"] == ["current_field", "current_lorentz"]
-    assert all(row["current_tree"][k] > 0 for k in ("build", "sort_tips", "sort_points"))
+    assert all(row["current_tree"][k] > 0 for k in ("plan", "fill", "sort_tips", "sort_points"))
 
 
 def test_energy_at_a_checkpoint(tmp_path, capsys):

@@ -389,3 +389,19 @@ def test_a_run_with_thousands_of_rods_carrying_current_names_the_tree():
     assert "forces.current_field" not in tree_note(p("tree", "direct"), 5000)
     assert tree_note(p("tree", "tree"), 5000) is None
     assert tree_note(params(forces={"tip_magnetic": {}}), 5000) is None  # no current terms
+
+
+def test_cells_filled_by_runs_are_the_built_tree():
+    """Each cell's moments come from its own rods, so a tree whose cells are filled by runs (as MPI
+    ranks share them, ``tree.cell_bounds``) is the built tree bit for bit."""
+    from selfas_graph.kernels.tree import cell_bounds
+
+    position, current, active, _, _ = scene(12, n_rods=500)
+    built = ct.build_current_tree(position, active, current, leaf_size=8)
+    planned = ct.plan_current_tree(position, active, current, leaf_size=8)
+    bounds = cell_bounds(planned, 3)
+    assert np.all(np.diff(bounds) > 0) and bounds[-1] == planned.start.shape[0] > 3
+    for r in (2, 0, 1):
+        ct.fill_current_cells(planned, bounds[r], bounds[r + 1])
+    for name in ("seg", "rod", "start", "end", "nxt", "centre", "radius", "moment"):
+        np.testing.assert_array_equal(getattr(planned, name), getattr(built, name))

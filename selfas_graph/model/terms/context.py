@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...kernels.currenttree import build_current_tree
+from ...kernels import currenttree as kct
+from ...kernels.tree import cell_bounds
 from ...parallel import RowBlocks
 from ..neighbours import NeighbourList
 from ..network import RodCurrents
@@ -147,7 +148,8 @@ class EvalContext:
 
     def current_tree(self):
         """The multipole tree of the rod currents at :attr:`position` (:func:`~selfas_graph.kernels.currenttree.build_current_tree`),
-        built once per binding and set of currents and shared by terms 9 and 10; None while no rod
+        built once per binding and set of currents and shared by terms 9 and 10 (under MPI the
+        ranks share the moments of its cells); None while no rod
         carries current or a position is not finite (the direct sums then carry the NaN to the run's
         health check)."""
         rc = self.currents
@@ -156,7 +158,18 @@ class EvalContext:
             return cached[1]
         tree = None
         if len(rc.active_rod) and np.isfinite(self.position).all():
-            tree = build_current_tree(self.position, rc.active_rod, rc.current)
+            if self.blocks.serial:
+                tree = kct.build_current_tree(self.position, rc.active_rod, rc.current)
+            else:
+                # under MPI each rank computes the moments of a run of cells and the ranks exchange
+                # them (a cell's moments come from its own rods): the same tree bit for bit
+                tree = kct.plan_current_tree(self.position, rc.active_rod, rc.current)
+                bounds = cell_bounds(tree, self.blocks.size)
+                r = self.blocks.rank
+                kct.fill_current_cells(tree, bounds[r], bounds[r + 1])
+                cells = np.arange(tree.start.shape[0])
+                for a in (tree.centre, tree.radius, tree.moment):
+                    self.blocks.gather_runs(a, cells, bounds)
         self._current_tree = (rc.current, tree)
         return tree
 
