@@ -20,9 +20,10 @@ drawn at random, carrying currents uniform in (-3, 3) J0 (a gas: the tree's leas
 a network of filaments is more clustered).
 
 Under ``mpiexec -n P`` every rank times every sum whole, and the tree once more as a run does under
-MPI, the ranks sharing its walks by runs of groups of points and gathering them
-(``model/terms/currents.py::tree_field``); each time is the slowest rank's, and a line per
-opening angle and precision gives the whole walk's time over the shared one's.
+MPI, the ranks sharing the moments of its cells and its walks by runs of groups of points and
+gathering them (``model/terms/context.py::shared_current_tree``,
+``model/terms/currents.py::tree_field``); each time is the slowest rank's, and a line per opening
+angle and precision gives the time of the tree whole on every rank over the shared one's.
 """
 
 import argparse
@@ -33,6 +34,7 @@ import numpy as np
 
 from selfas_graph.bench.peer import machine, machine_line
 from selfas_graph.bench.profile import load_state, start_threads
+from selfas_graph.model.terms.context import shared_current_tree
 from selfas_graph.model.terms.currents import tree_field
 from selfas_graph.parallel import SERIAL, RowBlocks, world
 
@@ -63,8 +65,8 @@ def from_checkpoint(path):
 def measure(position, current, w, thetas, precisions, reps, comm=SERIAL):
     """``(n_points, n_active, rows)``: a row (method, precision, theta, ms, median and 99th-percentile
     error) per sum timed. Under MPI (``comm`` of more than one rank) every rank times every sum
-    whole, and the tree once more with the ranks sharing its walks
-    (``model/terms/currents.py::tree_field``); each time is the slowest rank's."""
+    whole, and the tree once more with the ranks sharing its moments and walks as a run does (the
+    module docstring); each time is the slowest rank's."""
     from selfas_graph.kernels import currenttree as ct
     from selfas_graph.kernels.currents import rod_current_field, rod_current_field_mixed
 
@@ -91,7 +93,7 @@ def measure(position, current, w, thetas, precisions, reps, comm=SERIAL):
             for theta in thetas:
 
                 def shared(theta=theta, mixed=prec == "mixed", o=np.empty_like(points)):
-                    t = ct.build_current_tree(position, active, current)
+                    t = shared_current_tree(blocks, position, active, current)
                     tree_field(blocks, t, points, exclude, theta, w, o, mixed)
                     return o
 
@@ -175,7 +177,7 @@ def main(argv=None):
             if r["method"].endswith("share the walks"):
                 key = (r["precision"], r["theta"])
                 say(f"{world.size} ranks sharing the walks, {key[0]}, opening angle {key[1]:g}: "
-                    f"{whole[key] / r['ms']:.2f} times faster than every rank walking every group")  # fmt: skip
+                    f"{whole[key] / r['ms']:.2f} times faster than the whole tree on every rank")  # fmt: skip
         results.append(dict(scene=name, tips=n_tips, carrying=n_active, rows=rows))
     if args.json and lead:
         with open(args.json, "w") as f:

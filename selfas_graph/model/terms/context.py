@@ -24,6 +24,23 @@ from ..neighbours import NeighbourList
 from ..network import RodCurrents
 
 
+def shared_current_tree(blocks, position, active_rod, current):
+    """:func:`~selfas_graph.kernels.currenttree.build_current_tree` on every rank of ``blocks``
+    (:class:`~selfas_graph.parallel.RowBlocks`), the ranks sharing the moments of its cells: each
+    plans the tree, computes the moments of one run of cells (:func:`~selfas_graph.kernels.tree.cell_bounds`)
+    and the runs are gathered. A cell's moments come from its own rods: the same tree bit for bit."""
+    if blocks.serial:
+        return kct.build_current_tree(position, active_rod, current)
+    tree = kct.plan_current_tree(position, active_rod, current)
+    bounds = cell_bounds(tree, blocks.size)
+    r = blocks.rank
+    kct.fill_current_cells(tree, bounds[r], bounds[r + 1])
+    cells = np.arange(tree.start.shape[0])
+    for a in (tree.centre, tree.radius, tree.moment):
+        blocks.gather_runs(a, cells, bounds)
+    return tree
+
+
 class PairLists:
     """The two neighbour lists of a force field: tip pairs of different rods, and rod centres.
 
@@ -158,18 +175,7 @@ class EvalContext:
             return cached[1]
         tree = None
         if len(rc.active_rod) and np.isfinite(self.position).all():
-            if self.blocks.serial:
-                tree = kct.build_current_tree(self.position, rc.active_rod, rc.current)
-            else:
-                # under MPI each rank computes the moments of a run of cells and the ranks exchange
-                # them (a cell's moments come from its own rods): the same tree bit for bit
-                tree = kct.plan_current_tree(self.position, rc.active_rod, rc.current)
-                bounds = cell_bounds(tree, self.blocks.size)
-                r = self.blocks.rank
-                kct.fill_current_cells(tree, bounds[r], bounds[r + 1])
-                cells = np.arange(tree.start.shape[0])
-                for a in (tree.centre, tree.radius, tree.moment):
-                    self.blocks.gather_runs(a, cells, bounds)
+            tree = shared_current_tree(self.blocks, self.position, rc.active_rod, rc.current)
         self._current_tree = (rc.current, tree)
         return tree
 
