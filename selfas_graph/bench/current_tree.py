@@ -97,7 +97,7 @@ def measure(position, current, w, thetas, precisions, reps, comm=SERIAL):
                     tree_field(blocks, t, points, exclude, theta, w, o, mixed)
                     return o
 
-                runs[("tree, ranks share the walks", prec, theta)] = shared
+                runs[("tree, shared by the ranks", prec, theta)] = shared
     slowest = None
     if comm.size > 1:
         from mpi4py import MPI
@@ -174,9 +174,9 @@ def main(argv=None):
                 f"{r['median_error']:.1e} | {r['p99_error']:.1e} |")  # fmt: skip
         whole = {(r["precision"], r["theta"]): r["ms"] for r in rows if r["method"] == "tree"}
         for r in rows:
-            if r["method"].endswith("share the walks"):
+            if r["method"] == "tree, shared by the ranks":
                 key = (r["precision"], r["theta"])
-                say(f"{world.size} ranks sharing the walks, {key[0]}, opening angle {key[1]:g}: "
+                say(f"{world.size} ranks sharing the tree, {key[0]}, opening angle {key[1]:g}: "
                     f"{whole[key] / r['ms']:.2f} times faster than the whole tree on every rank")  # fmt: skip
         results.append(dict(scene=name, tips=n_tips, carrying=n_active, rows=rows))
     if args.json and lead:
