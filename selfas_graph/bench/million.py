@@ -185,16 +185,16 @@ def measure(path, n, steps, extra, full_below=0, carrying=0.0):
         row["steps"].append({"wall": wall, "cpu": cpu, "split_terms": split, "repeated": wall - split, "terms": terms})
     row["peak_mb"] = peak_mb()
     row["carrying"] = 0 if current is None else int(np.count_nonzero(current))
-    if current is not None and "tree" in (
-        sim.params.forces.current_field.method,
-        sim.params.forces.current_lorentz.method,
-    ):
+    fp = sim.params.forces
+    on_tree = [
+        n
+        for n in ("current_field", "current_lorentz")
+        if getattr(fp, n) is not None and getattr(fp, n).method == "tree"
+    ]
+    if current is not None and on_tree:
         ff.set_currents(current)
         row["current_tree"] = current_tree_stages(sim)
-        fp = sim.params.forces
-        row["current_tree_terms"] = [
-            name for name in ("current_field", "current_lorentz") if getattr(fp, name).method == "tree"
-        ]
+        row["current_tree_terms"] = on_tree
     return row
 
 

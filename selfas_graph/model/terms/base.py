@@ -1,5 +1,5 @@
 """What a force term is: the :class:`Term` interface, the :class:`FieldSource` interface of the
-terms that are sources of a magnetic field, and two helpers the terms share.
+terms that are sources of a magnetic field, and the helpers the terms share.
 
 A term is built from the scene's :class:`~selfas_graph.model.params.Parameters` and the
 :class:`~selfas_graph.model.state.State`; it keeps only constants. Everything that changes
@@ -11,6 +11,8 @@ evaluation's :class:`~selfas_graph.model.terms.context.EvalContext`, passed as `
 from __future__ import annotations
 
 import numpy as np
+
+from ...kernels.tree import cell_bounds
 
 
 class Term:
@@ -73,6 +75,21 @@ class FieldSource:
     def field_at(self, points, out):  # pragma: no cover - interface
         """Overwrite ``out`` (m, 3) with the source's magnetic field at ``points`` (m, 3) (units B0)."""
         raise NotImplementedError
+
+
+def fill_cells_shared(blocks, tree, fill, arrays):
+    """Fill the cells of a planned tree (the tip tree's or the rod currents') on every rank of
+    ``blocks`` (:class:`~selfas_graph.parallel.RowBlocks`): each rank calls ``fill(tree, c0, c1)`` on
+    one run of cells of about equal work (:func:`~selfas_graph.kernels.tree.cell_bounds`, from
+    ``tree.start`` and ``tree.end``) and the runs of each of ``arrays`` (per-cell rows) are gathered.
+    A cell is filled from its own points alone, so the tree is the same bit for bit on any number
+    of ranks."""
+    bounds = cell_bounds(tree, blocks.size)
+    r = blocks.rank
+    fill(tree, bounds[r], bounds[r + 1])
+    cells = np.arange(tree.start.shape[0])
+    for a in arrays:
+        blocks.gather_runs(a, cells, bounds)
 
 
 def share_by_mass(centre_force, tip_out):

@@ -18,26 +18,21 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...kernels import currenttree as kct
-from ...kernels.tree import cell_bounds
 from ...parallel import RowBlocks
 from ..neighbours import NeighbourList
 from ..network import RodCurrents
+from .base import fill_cells_shared
 
 
 def shared_current_tree(blocks, position, active_rod, current):
     """:func:`~selfas_graph.kernels.currenttree.build_current_tree` on every rank of ``blocks``
     (:class:`~selfas_graph.parallel.RowBlocks`), the ranks sharing the moments of its cells: each
-    plans the tree, computes the moments of one run of cells (:func:`~selfas_graph.kernels.tree.cell_bounds`)
-    and the runs are gathered. A cell's moments come from its own rods: the same tree bit for bit."""
+    plans the tree, computes the moments of one run of cells and the runs are gathered
+    (:func:`~selfas_graph.model.terms.base.fill_cells_shared`): the same tree bit for bit."""
     if blocks.serial:
         return kct.build_current_tree(position, active_rod, current)
     tree = kct.plan_current_tree(position, active_rod, current)
-    bounds = cell_bounds(tree, blocks.size)
-    r = blocks.rank
-    kct.fill_current_cells(tree, bounds[r], bounds[r + 1])
-    cells = np.arange(tree.start.shape[0])
-    for a in (tree.centre, tree.radius, tree.moment):
-        blocks.gather_runs(a, cells, bounds)
+    fill_cells_shared(blocks, tree, kct.fill_current_cells, (tree.centre, tree.radius, tree.moment))
     return tree
 
 

@@ -14,7 +14,7 @@ import numpy as np
 from ...kernels import brakes, yukawa
 from ...kernels import tips as kt
 from ...kernels import tree as ktree
-from .base import Term, share_by_mass
+from .base import Term, fill_cells_shared, share_by_mass
 
 
 def yukawa_cutoff(z_max: float, screening: float, tolerance: float) -> float:
@@ -98,12 +98,7 @@ class TipMagneticForce(Term):
         if ctx.blocks.serial:
             return ktree.build_tip_tree(x, y, z, ctx.tip_charge, group_size=self.group_size, order=self.order)
         tree = ktree.plan_tip_tree(x, y, z, ctx.tip_charge, group_size=self.group_size, order=self.order)
-        bounds = ktree.cell_bounds(tree, ctx.blocks.size)
-        r = ctx.blocks.rank
-        ktree.fill_cells(tree, bounds[r], bounds[r + 1])
-        cells = np.arange(tree.start.shape[0])
-        for a in (tree.box, tree.centre, tree.radius, tree.moment):
-            ctx.blocks.gather_runs(a, cells, bounds)
+        fill_cells_shared(ctx.blocks, tree, ktree.fill_cells, (tree.box, tree.centre, tree.radius, tree.moment))
         return ktree.finish_tip_tree(tree)
 
     def blocked(self, ctx):
