@@ -14,7 +14,9 @@ its whole part of each call, x86-64 only) and a table of the microseconds per fa
 phase both ways: what the threads buy per part. The counter's rate is measured against
 ``time.perf_counter`` over the turns (on x86-64 CPUs since about 2008 it runs at a fixed rate); "whole
 call" is the compiled part of the calls (not the Python that builds their arguments and books their
-results), "between phases" its rest (the control flow, the serial checks between phases).
+results), "between phases" its rest (the control flow, the serial checks between phases); the last row
+is the calls on the wall clock, with that Python and the fork and join of the threads: far above "whole
+call" on all threads, a thread was late to come or away (another job on its core).
 """
 
 import os
@@ -130,10 +132,13 @@ def phases(sim, args):
     make = compiled.CompiledSteps.advance
     totals = {m: np.zeros(len(PHASE_NAMES) + 1) for m in MODES}
     steps = dict.fromkeys(MODES, 0)
+    walls = dict.fromkeys(MODES, 0.0)
     mode = MODES[0]
 
     def counted(self, n_max):
+        w0 = time.perf_counter()
         done, reason = make(self, n_max)
+        walls[mode] += time.perf_counter() - w0
         steps[mode] += done
         return done, reason
 
@@ -165,4 +170,8 @@ def phases(sim, args):
         if k is not None and k > 0 and a == 0.0 and o == 0.0:
             continue  # a kind of phase these steps never opened
         print(f"| {name} | {a:.1f} | {o:.1f} | {o / a if a > 0 else float('nan'):.2f} |")
+    # the caller's view: the whole call on the wall clock, with the Python that builds its arguments, the fork
+    # of the threads and their join; far above "whole call" on all threads, a thread came late or was away
+    a, o = (walls[m] / steps[m] * 1e6 for m in MODES)
+    print(f"| the call, wall clock (fork and join of the threads, Python) | {a:.1f} | {o:.1f} | {o / a:.2f} |")
     print(f"(fast steps timed: {steps['all threads']} on all threads, {steps['one thread']} on one)")

@@ -66,8 +66,20 @@ def test_team_table(capsys):
             "| constraint |",
             "| between phases |",
             "| whole call |",
+            "| the call, wall clock (fork and join of the threads, Python) |",
         ):
             assert row in out, row
+
+        def times(name):
+            line = next(x for x in out.splitlines() if x.startswith(f"| {name} |"))
+            return [float(v) for v in line.split("|")[2:4]]
+
+        # the wall clock around a call holds the leading thread's compiled part of it (the cycle counter's
+        # rate is measured over the same turns, to well under the Python around each call)
+        for wall, compiled_part in zip(
+            times("the call, wall clock (fork and join of the threads, Python)"), times("whole call")
+        ):
+            assert wall > compiled_part > 0.0
     else:
         assert "x86-64 only" in out
     with pytest.raises(SystemExit, match="--phases times the phases of --team"):
