@@ -47,7 +47,7 @@ class TipMagnetic:
         4,
         "tree: the highest multipole moment of a cell, 2 (quadrupole), 3 (octupole) or 4 (hexadecapole); an "
         "accuracy knob (the error falls about as opening_angle^(order + 1); with 4 the tree reaches the error "
-        "of order 3 at opening angle 0.4 1.0 to 1.25 times faster, docs/performance.md)",
+        "of order 3 at opening angle 0.4 1.06 to 1.25 times faster, docs/performance.md)",
         ge=2,
         le=4,
     )
