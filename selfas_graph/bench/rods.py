@@ -14,7 +14,7 @@ Two tables, each with its peer measured in the same run:
   its other dynamics). Each is timed after warm-up steps, in rounds that alternate the
   scenes (a shared machine's load then hits all alike), best round kept.
 
-The CPU model and instruction-set flags are printed first.
+The CPU model and the instruction set numba compiles for are printed first.
 """
 
 import argparse
@@ -27,24 +27,16 @@ import numpy as np
 from selfas_graph import Simulation, load_scenario
 from selfas_graph.kernels.rigid import bond_length_error, constrain_bonds
 
+from .peer import machine_line
+
 ROOT = Path(__file__).resolve().parents[2]
 
 DEFAULT_KEYS = ["rods.length=1.0", "rods.resistance=1.0", "contacts.resistance=0.0"]
 
 
 def cpu():
-    """CPU model and the vector instruction sets it reports (Linux /proc/cpuinfo)."""
-    model, flags = "unknown CPU", set()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name") and model == "unknown CPU":
-                model = line.split(":", 1)[1].strip()
-            if line.startswith("flags") and not flags:
-                flags = set(line.split(":", 1)[1].split())
-    except OSError:
-        pass
-    isa = [f for f in ("sse4_2", "avx", "avx2", "fma", "avx512f") if f in flags]
-    return f"{model}; {' '.join(isa) or 'flags unknown'}; {numba.get_num_threads()} numba threads"
+    """The CPU, the instruction set numba compiles for (``NUMBA_CPU_NAME``) and the thread count."""
+    return f"{machine_line()}; {numba.get_num_threads()} numba threads"
 
 
 def bench_kernels(n_tips, repeat=50):

@@ -30,6 +30,8 @@ from selfas_graph import Simulation, load_scenario
 from selfas_graph.kernels.tips import tip_tip_direct
 from selfas_graph.parallel import world
 
+from .peer import machine_line
+
 ROOT = Path(__file__).resolve().parents[2]
 
 #: (label, ranks, numba threads) of ``--compare``
@@ -79,6 +81,7 @@ def main(argv=None):
         return compare(args)
     say = print if world.rank == 0 and not args.json else (lambda *a, **k: None)
     threads = numba.get_num_threads()
+    say(machine_line())
     say(f"numba threads: {threads} x {world.size} MPI ranks; scenario {args.scenario}")
     rows = []
     for n in args.rods:
@@ -155,6 +158,7 @@ def compare(args):
             got = json.loads(res.stdout.strip().splitlines()[-1])
             print(f"round {r + 1}, {label}: {got}", file=sys.stderr, flush=True)
             rounds[r][c] = got
+    print(machine_line())
     print(
         "| rods | "
         + " | ".join(f"{label} (ms/step)" for label, _, _ in CONFIGS)

@@ -47,6 +47,9 @@ from selfas_graph import NumericalFailure, Simulation, load_scenario
 from selfas_graph.io.checkpoint import CheckpointError, read_checkpoint
 from selfas_graph.io.scenario import ScenarioError
 from selfas_graph.model import events as ev
+from selfas_graph.provenance import source_commit
+
+from .peer import machine, machine_line
 
 #: the reference of the multiple-time-stepping knobs: every force every step
 NO_SPLITTING = {"integrator.slow_every": 1, "integrator.current_every": 0}
@@ -227,6 +230,7 @@ def main(argv=None):
     snap = sim0.snapshot()
     # warm-up: compile the scene's kernels before timing
     run_once(args.scenario, args.base_set, min(args.t, 0.01), snap)
+    print(machine_line(), flush=True)
     print(
         f"branch point t = {sim0.state.time:g} ({len(sim0.force_field.active_rod)} rods carry current); "
         f"each run {args.t} t0; each knob against the defaults with that knob at its tightest",
@@ -281,6 +285,8 @@ def main(argv=None):
             json.dumps(
                 {
                     "scenario": args.scenario,
+                    "machine": machine(),
+                    "commit": source_commit(),
                     "from": args.t0,
                     "t": args.t,
                     "references": {k: KNOBS[k][1] for k in refs},

@@ -28,14 +28,18 @@ def test_precision_knob_rows(tmp_path, capsys):
     js = tmp_path / "t.json"
     scene = str(ROOT / "scenarios" / "quick.toml")
     tool.main([scene, "--from", "0.05", "--t", "0.01", "--knob", "forces.yukawa.precision", "--json", str(js)])
-    rows = json.loads(js.read_text())["rows"]
+    written = json.loads(js.read_text())
+    rows = written["rows"]
+    # the CPU and instruction set the costs were taken on, and the code's commit, with the figures
+    assert written["machine"]["cpu_model"] and written["machine"]["cpu_name"] and "commit" in written
     assert [(r["knob"], r["value"], r["default"]) for r in rows] == [
         ("forces.yukawa.precision", "float64", True),
         ("forces.yukawa.precision", "mixed", False),
     ]
     assert rows[0]["position_error"] == 0.0 and rows[0]["position_error_median"] == 0.0
     assert 0.0 <= rows[1]["position_error_median"] <= rows[1]["position_error"] < 1e-4
-    assert "position error (median tip)" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "position error (median tip)" in out and "CPU: " in out
 
 
 def test_tree_knobs_only_where_the_scene_takes_the_tree():
