@@ -400,7 +400,7 @@ def run(args):
     def open_writer():
         if snap is not None:
             try:
-                writer = RunWriter.reopen(out, int(snap["step"]))
+                writer = RunWriter.reopen(out, int(snap["step"]), t_end=scenario.params.run.t_end)
             except RunFileError as exc:
                 raise CliError(f"cannot resume: {exc}") from None
             print(

@@ -139,12 +139,21 @@ class _Frames:
         return 2.0 * reach + 2.0
 
 
+def _default_mode() -> int:
+    """The permissions a new file gets from ``open``: 0o666 less the process's umask."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
 def _atomic_write(path: Path, write):
-    """Write through a temporary file in the same folder, renamed over ``path`` when complete."""
+    """Write through a temporary file in the same folder, renamed over ``path`` when complete, with
+    the permissions of a file the user creates (``mkstemp`` makes its file private, 0o600)."""
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
     os.close(fd)
     try:
         write(Path(tmp))
+        os.chmod(tmp, _default_mode())
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

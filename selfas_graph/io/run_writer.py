@@ -205,9 +205,11 @@ class RunWriter(_PendingRows):
         f.flush()
 
     @classmethod
-    def reopen(cls, path, step):
+    def reopen(cls, path, step, t_end=None):
         """Open an existing run file to continue it after ``step``: every row written for a
         later step (frames, observables, events, circuit log, graph, per-step series) is removed first.
+        ``t_end``: the continuation's end time, where it differs from the one the file states (a resume
+        that extends the run): stored in ``parameters_json``, the earlier ones in ``t_end_before``.
         """
         self = cls.__new__(cls)
         self.path = Path(path)
@@ -286,6 +288,8 @@ class RunWriter(_PendingRows):
                 _truncate(g[name], k)
         f[layout.PROVENANCE].attrs["status"] = "running"
         self._resumed_with()
+        if t_end is not None:
+            self._new_end_time(float(t_end))
         self._start_clock(float(f[layout.PROVENANCE].attrs.get("wall_seconds_total", 0.0)))
         f.flush()
         return self
@@ -310,6 +314,18 @@ class RunWriter(_PendingRows):
         seen = json.loads(attrs.get("resumed_with", "[]"))
         if now not in seen:
             attrs["resumed_with"] = json.dumps(seen + [now])
+
+    def _new_end_time(self, t_end):
+        """State the continuation's end time in ``parameters_json`` (the only parameter a resume may
+        change) and keep each earlier one, oldest first, in ``t_end_before`` (JSON)."""
+        attrs = self.f[layout.PROVENANCE].attrs
+        params = json.loads(attrs["parameters_json"])
+        before = float(params["run"]["t_end"])
+        if before == t_end:
+            return
+        params["run"]["t_end"] = t_end
+        attrs["parameters_json"] = json.dumps(params)
+        attrs["t_end_before"] = json.dumps(json.loads(attrs.get("t_end_before", "[]")) + [before])
 
     def reserve(self) -> int:
         """Bytes the next frame may need at most: one new chunk of every growable dataset, and a margin

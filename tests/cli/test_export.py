@@ -1,7 +1,9 @@
 """``selfas-graph export``: GSD and extended XYZ that gsd, MDAnalysis and ASE open, with the rods as
 bonds, the roles as types and the currents; the output path rules."""
 
+import os
 import shutil
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -103,6 +105,19 @@ def test_output_rules(run, capsys):
     assert "out of range" in capsys.readouterr().err
     assert main(["export", str(run.parent / "missing.h5"), "--format", "xyz"]) == 2
     assert list(p.name for p in run.parent.iterdir() if p.suffix == ".part") == []
+
+
+def test_exports_get_the_permissions_of_a_new_file(run):
+    """An export is written through a private temporary file (``mkstemp``: 0o600) and renamed: it
+    used to keep those permissions, unreadable by the group where the run file beside it is not."""
+    old = os.umask(0o022)
+    try:
+        for fmt in ("gsd", "xyz"):
+            out = run.parent / f"mode.{fmt}"
+            assert main(["export", str(run), "--format", fmt, "--frames", "0", "-o", str(out)]) == 0
+            assert stat.S_IMODE(out.stat().st_mode) == 0o644
+    finally:
+        os.umask(old)
 
 
 @pytest.mark.parametrize(

@@ -8,6 +8,7 @@ the code before its fix, where it failed) and pins the behaviour now.
 
 from __future__ import annotations
 
+import json
 import shutil
 
 import h5py
@@ -96,6 +97,27 @@ def test_resume_of_a_copied_folder_continues_the_copy(scen, tmp_path, capsys):
     assert simulate(capsys, "--resume", b / "run.h5", "--t-end", "0.008")[0] == 0
     assert ((a / "run.h5").read_bytes(), (a / "run.checkpoint.h5").read_bytes()) == before
     assert frame_times(b / "run.h5")[-1] == pytest.approx(0.008)
+
+
+def test_a_resume_that_extends_the_run_states_its_end_time(scen, tmp_path, capsys):
+    """A resume with a later --t-end used to leave the first end time in ``parameters_json``: the file
+    said it ended at t = 0.004 and held frames to 0.008. The file now states the end time it was last
+    continued to, keeps the earlier one in ``t_end_before``, and is bit for bit the run made to the
+    later end time at once, but for that record."""
+    a = tmp_path / "a.h5"
+    assert simulate(capsys, scen, "-o", a)[0] == 0
+    assert simulate(capsys, "--resume", a, "--t-end", "0.008")[0] == 0
+    assert simulate(capsys, scen, "-o", tmp_path / "b.h5", "--t-end", "0.008")[0] == 0
+    with h5py.File(a, "r") as fa, h5py.File(tmp_path / "b.h5", "r") as fb:
+        attrs_a, attrs_b = fa["parameters/selfas_graph"].attrs, fb["parameters/selfas_graph"].attrs
+        assert json.loads(attrs_a["parameters_json"]) == json.loads(attrs_b["parameters_json"])
+        assert json.loads(attrs_a["parameters_json"])["run"]["t_end"] == 0.008
+        assert json.loads(attrs_a["t_end_before"]) == [0.004] and "t_end_before" not in attrs_b
+        np.testing.assert_array_equal(fa["particles/tips/position/value"][:], fb["particles/tips/position/value"][:])
+    # a plain resume of the finished run (same end time) adds nothing
+    assert simulate(capsys, "--resume", a)[0] == 0
+    with h5py.File(a, "r") as fa:
+        assert json.loads(fa["parameters/selfas_graph"].attrs["t_end_before"]) == [0.004]
 
 
 def test_resume_of_a_moved_folder(scen, tmp_path, capsys):
