@@ -24,6 +24,7 @@ import math
 from pathlib import Path
 
 from .ensemble import Ensemble, EnsembleError, run_seed, run_tasks, summarise
+from .ensemble.plan import scenario_source
 from .io.scenario import ScenarioError, load_scenario
 from .parallel import task_pool
 
@@ -80,6 +81,7 @@ class Grid:
     def __init__(self, scenario, grid: dict, seeds, folder, overrides=(), t_end=None, first_seed=None, force=False):
         if not grid:
             raise EnsembleError("a grid needs at least one --grid KEY=V1,V2,...")
+        scenario, overrides, t_end = scenario_source(scenario, overrides, t_end)
         self.keys = list(grid)
         self.folder = Path(folder)
         base = [o.split("=", 1)[0].strip() for o in overrides]

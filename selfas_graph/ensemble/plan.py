@@ -17,7 +17,7 @@ from ..io.checkpoint import (
     read_checkpoint,
 )
 from ..io.h5md import RunFile, RunFileError
-from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
+from ..io.scenario import Scenario, ScenarioError, load_scenario, scenario_from_text
 from ..parallel import task_pool
 from ..provenance import older_version, version_key
 from .folder import EnsembleError, FolderLock, make_folder, seed_path
@@ -25,6 +25,22 @@ from .parameters import _get, parameter_differences
 from .pool import run_tasks
 from .summary import summarise
 from .tasks import run_seed
+
+
+def scenario_source(scenario, overrides=(), t_end=None):
+    """``(path, overrides, t_end)`` of an ensemble's scenario, given as a file's path or as a
+    :class:`~selfas_graph.io.scenario.Scenario` loaded from a file (``load_scenario(path, overrides,
+    t_end)``): its file, its overrides before ``overrides``, and its end time unless ``t_end`` is given.
+    Each seed runs from the file, so a scenario built from text alone is refused."""
+    if isinstance(scenario, Scenario):
+        if scenario.path is None:
+            raise EnsembleError(
+                "the scenario was built from text and has no file each seed can run from: "
+                "give the scenario file's path, or a Scenario from load_scenario(path)"
+            )
+        t_end = scenario.params.run.t_end if t_end is None else t_end
+        return Path(scenario.path), [*scenario.overrides, *overrides], t_end
+    return Path(scenario), list(overrides), t_end
 
 
 @dataclasses.dataclass
@@ -49,8 +65,9 @@ class Ensemble:
 
     Parameters
     ----------
-    scenario : path-like
-        Scenario file (TOML).
+    scenario : path-like or Scenario
+        Scenario file (TOML), or a scenario loaded from one (``load_scenario``: its overrides and end
+        time are kept, before ``overrides`` and unless ``t_end`` is given).
     seeds : int or sequence of int
         A count ``N`` (seeds ``first_seed .. first_seed + N - 1``) or the seeds themselves.
     folder : path-like
@@ -75,8 +92,7 @@ class Ensemble:
     """
 
     def __init__(self, scenario, seeds, folder, overrides=(), t_end=None, first_seed=None, force=False, older_than=""):
-        self.scenario_path = Path(scenario)
-        self.overrides = list(overrides)
+        self.scenario_path, self.overrides, t_end = scenario_source(scenario, overrides, t_end)
         self.folder = Path(folder)
         self.force = bool(force)
         self.older_than = str(older_than or "")

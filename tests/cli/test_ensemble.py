@@ -24,7 +24,9 @@ from selfas_graph import RunFile
 from selfas_graph.analysis import rod_centres
 from selfas_graph.cli.main import main
 from selfas_graph.ensemble import Ensemble, EnsembleError, format_table, seed_path, summarise
+from selfas_graph.grid import Grid
 from selfas_graph.io.checkpoint import checkpoint_path
+from selfas_graph.io.scenario import load_scenario, scenario_from_text
 from selfas_graph.model import events as ev
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -228,6 +230,28 @@ def test_an_earlier_end_is_continued_from_the_checkpoint_bit_for_bit(scene, tmp_
     direct.run()
     assert _same_run(seed_path(tmp_path / "e", 3), seed_path(tmp_path / "direct", 3)) == []
     assert [p.action for p in full.plan()] == ["done"]
+
+
+def test_a_loaded_scenario_runs_as_its_file_with_its_overrides_and_end_time(scene, tmp_path):
+    """``Ensemble(load_scenario(path, ...), ...)`` and ``Grid`` of it used to fail with a TypeError (a
+    path was expected): a loaded scenario is its file, its overrides and its end time; one built from
+    text alone has no file for the seeds and is refused by name."""
+    loaded = load_scenario(scene, overrides=["circuit.delta_J0=3"], t_end=0.3)
+    a = Ensemble(loaded, [3], tmp_path / "a")
+    b = Ensemble(scene, [3], tmp_path / "b", overrides=["circuit.delta_J0=3"], t_end=0.3)
+    assert (
+        (a.scenario_path, a.overrides, a.t_end)
+        == (b.scenario_path, b.overrides, b.t_end)
+        == (
+            Path(scene),
+            ["circuit.delta_J0=3"],
+            0.3,
+        )
+    )
+    (point,) = Grid(loaded, {"integrator.dt": ["2.5e-4"]}, seeds=[3], folder=tmp_path / "g").ensembles
+    assert point.overrides == ["circuit.delta_J0=3", "integrator.dt=2.5e-4"] and point.t_end == 0.3
+    with pytest.raises(EnsembleError, match="built from text"):
+        Ensemble(scenario_from_text(Path(scene).read_text()), [3], tmp_path / "c")
 
 
 def test_killed_seed_resumes_and_one_without_checkpoint_is_refused(scene, tmp_path):
