@@ -88,7 +88,7 @@ def add_arguments(p):
         "--times",
         type=_times,
         metavar="T1,T2,...",
-        help="times of the summary (default: a quarter, half, three quarters and all of the end time)",
+        help="times of the summary, each seed's nearest frame within half an output interval (default: a quarter, half, three quarters and all of the end time, each at its nearest frame)",
     )
     p.add_argument(
         "--flux-radius",

@@ -262,7 +262,7 @@ class Ensemble:
     def summarise(self, times=None, measures=None, flux_radius=None) -> dict:
         """:func:`summarise` over the seed files present (default times: quarters of the end time)."""
         paths = [seed_path(self.folder, s) for s in self.seeds]
-        times = default_times(self.t_end) if times is None else times
+        times = default_times(self.t_end, self.base.params.output.interval) if times is None else times
         out = summarise(
             [p for p in paths if p.exists()], times, t_end=self.t_end, measures=measures, flux_radius=flux_radius
         )
@@ -276,6 +276,12 @@ class Ensemble:
         return out
 
 
-def default_times(t_end):
-    """The times of the summary when none are given: a quarter, half, three quarters and all of ``t_end``."""
-    return [t_end * k / 4 for k in (1, 2, 3, 4)]
+def default_times(t_end, interval=None):
+    """The times of the summary when none are given: a quarter, half, three quarters and all of ``t_end``,
+    each moved to the nearest frame time (a multiple of the output ``interval``, up to ``t_end``) and
+    each taken once. A time between two frames used to take one of them and be labelled with its own
+    value (frames every 0.5 to t = 1: the 0.25 column was the frame at t = 0)."""
+    times = [t_end * k / 4 for k in (1, 2, 3)]
+    if interval:
+        times = [min(math.floor(t / interval + 0.5) * interval, t_end) for t in times]
+    return sorted(set(times + [t_end]))  # the end: the last frame

@@ -50,7 +50,7 @@ def format_table(summary) -> str:
     head = "| measure | unit | " + " | ".join(f"t = {t:g}" for t in times) + " |"
     lines += [
         "",
-        "mean +- standard error over seeds (seeds with a frame at that time)",
+        "mean +- standard error over seeds (seeds with a frame within half an output interval of that time)",
         "",
         head,
         "|" + "---|" * (len(times) + 2),

@@ -23,7 +23,7 @@ from conftest import SMALL_CIRCUIT_SCENE
 from selfas_graph import RunFile
 from selfas_graph.analysis import rod_centres
 from selfas_graph.cli.main import main
-from selfas_graph.ensemble import Ensemble, EnsembleError, format_table, seed_path, summarise
+from selfas_graph.ensemble import Ensemble, EnsembleError, default_times, format_table, seed_path, summarise
 from selfas_graph.grid import Grid
 from selfas_graph.io.checkpoint import checkpoint_path
 from selfas_graph.io.scenario import load_scenario, scenario_from_text
@@ -72,7 +72,8 @@ def test_quick_ensemble_prints_the_summary_table(quick):
     assert "short circuit: 0 of 4 seeds (4 without one, censored at their end time)" in out
     for name in ("filament_rods", "total_current", "inside_R_plas", "median_axis_distance", "midplane_flux"):
         assert f"| {name} |" in out
-    assert "| t = 0.125 | t = 0.25 | t = 0.375 | t = 0.5 |" in out
+    # the quarters of t = 0.5 at their nearest frames (every 0.5): t = 0 and t = 0.5, each once
+    assert "| t = 0 | t = 0.5 |" in out
     assert sorted(p.name for p in folder.glob("seed_*.h5")) == [
         f"seed_000{s}{x}.h5" for s in (1, 2, 3, 4) for x in (".checkpoint", "")
     ]
@@ -81,23 +82,34 @@ def test_quick_ensemble_prints_the_summary_table(quick):
 def test_summary_files(quick):
     folder, _ = quick
     s = json.loads((folder / "summary.json").read_text())
-    assert s["n_seeds"] == 4 and s["times"] == [0.125, 0.25, 0.375, 0.5]
+    assert s["n_seeds"] == 4 and s["times"] == [0.0, 0.5]
     assert [d["seed"] for d in s["seeds"]] == [1, 2, 3, 4] and {d["status"] for d in s["seeds"]} == {"finished"}
     assert s["short_circuit"]["n_censored"] == 4 and s["short_circuit"]["median"] is None
     med = s["measures"]["median_axis_distance"]
-    assert med["n"] == [4, 4, 4, 4] and all(v is not None for v in med["sem"])
+    assert med["n"] == [4, 4] and all(v is not None for v in med["sem"])
     # the measure recomputed from the files: median distance of rod centres from the plasma axis at t = 0.5
     per_seed = []
     for k in (1, 2, 3, 4):
         with RunFile(seed_path(folder, k)) as run:
             c = rod_centres(run.position(-1))
             per_seed.append(np.median(np.hypot(c[:, 0], c[:, 1])))
-    assert med["values"][0][3] == per_seed[0] and med["mean"][3] == pytest.approx(np.mean(per_seed), rel=1e-14)
-    assert med["sem"][3] == pytest.approx(np.std(per_seed, ddof=1) / 2, rel=1e-12)  # sem = s / sqrt(4)
+    assert med["values"][0][1] == per_seed[0] and med["mean"][1] == pytest.approx(np.mean(per_seed), rel=1e-14)
+    assert med["sem"][1] == pytest.approx(np.std(per_seed, ddof=1) / 2, rel=1e-12)  # sem = s / sqrt(4)
     rows = list(csv.DictReader((folder / "summary.csv").read_text().splitlines()))
     row = [r for r in rows if r["measure"] == "median_axis_distance" and float(r["time"]) == 0.5][0]
-    assert float(row["mean"]) == med["mean"][3] and row["n"] == "4"
+    assert float(row["mean"]) == med["mean"][1] and row["n"] == "4"
     assert [r for r in rows if r["measure"] == "seeds_without_short_circuit"][0]["mean"] == "4"
+
+
+def test_default_times_are_frame_times():
+    """The default summary times are the quarters of the end time at their nearest frames, each once:
+    frames every 0.5 to t = 1 give 0.5 and 1 (the quarter 0.25 used to be the frame at t = 0, labelled
+    0.25, and 0.75 the frame at 0.5); an end time off the frame grid stays the last time."""
+    assert default_times(1.0, 0.5) == [0.5, 1.0]
+    assert default_times(100.0, 2.0) == [26.0, 50.0, 76.0, 100.0]
+    assert default_times(600.0, 10.0) == [150.0, 300.0, 450.0, 600.0]
+    assert default_times(1.1, 0.5) == [0.5, 1.0, 1.1]
+    assert default_times(1.0) == [0.25, 0.5, 0.75, 1.0]
 
 
 def test_rerun_runs_nothing_new(quick, capsys):
