@@ -26,7 +26,7 @@ NAN = float("nan")
 CLAIM_KEYS = {
     "time": "simulated time of the frame (t0)",
     "step": "time step of the frame",
-    "structures": "structures (rods joined by tip contacts)",
+    "structures": "structures of 2 or more rods joined by tip contacts (topology also counts a lone rod on a conductor)",
     "largest_structure_rods": "rods in the largest structure",
     "largest_moment_q": "|m_q| of the largest structure, m_q = sum q_k x_k (Z_M0 e L)",
     "largest_moment_q_z": "m_q,z of the largest structure (Z_M0 e L)",

@@ -81,8 +81,10 @@ def print_summary(rows):
 
     for r in rows:
         closed = f"since t = {r['closed_since']:.4g}" if r["closed_at_end"] else "no"
+        file = Path(r["file"])
+        label = f"{file.parent.name}/{file.name}" if file.parent.name else file.name  # "run.h5", not "/run.h5"
         print(
-            f"| {Path(r['file']).parent.name}/{Path(r['file']).name} | {r['episodes']} | {f(r['first_short_circuit'])} | {f(r['median_duration'])} | "
+            f"| {label} | {r['episodes']} | {f(r['first_short_circuit'])} | {f(r['median_duration'])} | "
             f"{f(r['longest_duration'])} | {r['opened_by_tip_release']} / {r['opened_by_electrode_release']} / "
             f"{r['opened_otherwise']} | {closed} (last event t = {f(r['last_event_time'])}) |"
         )

@@ -2,10 +2,10 @@
 
 For a saved frame (default the last): the magnetic moment of the largest structure from its
 tips' monopoles and from its rod currents, in units of the mean single-rod moment too; the
-unpaired monopole charge at its free tips; its mass-radius and box-counting dimensions and
+unpaired monopole charge at its free tips; its mass-radius dimension and
 the R_g ~ N^(1/D) dimension over all structures, each with its uncertainty and fit range;
 the cycle rank, loop lengths and junction degrees of the contact graph (docs/model.md
-section 7a). ``--series`` (or ``--csv`` without ``--frame``/``--time``) gives one row per
+"Measures of the paper's claims"). ``--series`` (or ``--csv`` without ``--frame``/``--time``) gives one row per
 frame (every K-th with ``--every K``). NaN (null in JSON, empty in CSV) where a measure is
 undefined. A thin layer over :func:`selfas_graph.analysis.claims.frame_claims`.
 """
@@ -108,7 +108,7 @@ def run(args):
     elif series:
         print(
             f"{path}: {len(rows)} frames; largest structure: rods, |m_q| (Z_M0 e L), |m_q| per mean rod moment, "
-            f"m_J,z (J0 L^2), mass-radius and box dimensions; D_Rg over all structures"
+            f"m_J,z (J0 L^2), mass-radius dimension; D_Rg over all structures"
         )
         print("  ".join(f"{c:>10}" for c in SERIES_COLUMNS.values()))
         for r in rows:

@@ -17,15 +17,15 @@ Kinds, after the paper's figures (docs/model.md 'Figure diagnostics'):
   time marked.
 * ``moment``   -- the largest structure's magnetic moment vs time: |m_q| in units of the
   mean single-rod moment, and m_J,z of its rod currents (docs/model.md "Measures of the paper's claims").
-* ``fractal``  -- the mass-radius and box-counting dimensions of the largest structure and
+* ``fractal``  -- the mass-radius dimension of the largest structure and
   the R_g ~ N^(1/D) dimension over all structures vs time, with their uncertainties.
 * ``skeleton`` -- the cycle rank of the contact graph (and of the largest structure) vs time.
 
 The last three read :func:`selfas_graph.analysis.claims.claims_series` (``--every K``: every
 K-th frame; default at most 200 frames).
 
-The output goes next to the run file as ``RUN_KIND_frameK.png`` (``RUN_timeline.png``
-for the timeline) unless ``-o`` says otherwise; an existing file is kept unless
+The output goes next to the run file as ``RUN_KIND_frameK.png`` (``RUN_KIND.png`` for the
+kinds over time: timeline, moment, fractal, skeleton) unless ``-o`` says otherwise; an existing file is kept unless
 ``--force``. Needs matplotlib (``pip install "selfas-graph[plot]"``); draws headless.
 
 This module holds the command (its options, their checks, the table of kinds); the figures are
@@ -68,7 +68,12 @@ NEEDS_GRAPH = ("field", "flux", "timeline", "moment", "fractal", "skeleton")
 def add_arguments(p):
     add_run_and_frame(p)
     p.add_argument("--kind", choices=KINDS, default="snapshot", help="which figure (default: snapshot)")
-    p.add_argument("-o", "--output", help="PNG file to write (default: RUN_KIND_frameK.png next to the run file)")
+    p.add_argument(
+        "-o",
+        "--output",
+        help="PNG file to write (default next to the run file: RUN_KIND_frameK.png, or RUN_KIND.png for the "
+        "kinds over time: timeline, moment, fractal, skeleton)",
+    )
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
     p.add_argument(
         "--planes",
@@ -103,7 +108,8 @@ def add_arguments(p):
         "--every",
         type=int,
         metavar="K",
-        help="moment, fractal, skeleton: every K-th frame (default: at most 200 frames)",
+        help="moment, fractal, skeleton: every K-th frame (default: at most 200 frames); --movie: every K-th frame "
+        "(default: every frame)",
     )
 
 

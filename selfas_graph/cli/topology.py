@@ -144,6 +144,18 @@ def _fmt(x, unit=""):
     return ("inf" if np.isinf(x) else f"{x:.6g}") + unit
 
 
+def _resistance_line(data) -> str:
+    """The total current and the effective resistance between the conductors the frame has: n/a
+    where the run has no circuit, infinite where its circuit is open."""
+    where = "the electrodes" if set(data["conductors"]) <= {"anode", "cathode"} else "the conductors"
+    r = data["effective_resistance"]
+    if r is None and data["total_current"] is not None:
+        resistance = "infinite (open: no current-carrying path)"
+    else:
+        resistance = _fmt(r, " R0")
+    return f"total current: {_fmt(data['total_current'], ' J0')}; effective resistance between {where}: {resistance}"
+
+
 def run(args):
     if args.time is not None and not np.isfinite(args.time):
         raise CliError(f"--time {args.time} names no frame; give a finite simulated time")
@@ -173,7 +185,8 @@ def run(args):
         ),
         f"rods: {r['total']} = {r['filament']} in current-carrying filaments + {r['dead_end']} dead ends + "
         f"{r['cluster']} in floating clusters + {r['free']} free",
-        f"structures: {len(data['structures'])} (largest: {data['largest_structure']} rods)",
+        f"structures: {len(data['structures'])}, rods joined by tip contacts or touching a conductor alone "
+        f"(largest: {data['largest_structure']} rods)",
         "short circuit: "
         + ("yes" if data["short_circuit"] else "no")
         + (
@@ -181,8 +194,7 @@ def run(args):
             if data["first_short_circuit"]
             else ""
         ),
-        f"total current: {_fmt(data['total_current'], ' J0')}; effective resistance between the electrodes: "
-        f"{_fmt(data['effective_resistance'], ' R0')}",
+        _resistance_line(data),
     ]
     touching = [s for s in data["structures"] if s["conductors"]]
     if touching:

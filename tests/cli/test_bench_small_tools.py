@@ -49,14 +49,18 @@ def test_a_tool_runs_to_its_table(name, argv, printed, capsys):
         assert "CPU" in out
 
 
-def test_run_file_tools(quick_run, capsys):
+def test_run_file_tools(quick_run, capsys, monkeypatch):
     """The tools that read a run file: the radial forces of its last frames and its short circuits."""
     _main("radial_forces")([str(quick_run), "--frames", "2"])
     out = capsys.readouterr().out
     assert "current_lorentz" in out and "sum of J s_z over the filament rods" in out
     _main("short_circuits")([str(quick_run)])
     out = capsys.readouterr().out
-    assert "| run | episodes | first |" in out and "quick.h5 | 1 | 2.01 |" in out
+    assert "| run | episodes | first |" in out and f"| {quick_run.parent.name}/quick.h5 | 1 | 2.01 |" in out
+    # a file named without a folder is labelled by its name alone (it read "/quick.h5")
+    monkeypatch.chdir(quick_run.parent)
+    _main("short_circuits")(["quick.h5"])
+    assert "| quick.h5 | 1 | 2.01 |" in capsys.readouterr().out
 
 
 def test_current_tree_tool_reads_a_checkpoint_and_refuses_bad_input(quick_run, capsys):

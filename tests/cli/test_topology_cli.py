@@ -88,6 +88,15 @@ def test_chain_run_file_is_complete(chain_run):
         assert [tuple(r) for r in e.tolist()] == [tuple(r) for r in sim.events]
 
 
+def test_topology_text_names_an_open_circuit(chain_run, capsys):
+    """Before the chain spans the gap the circuit is open: no finite resistance, which the text
+    said as "n/a (no circuit)", as for a run without a circuit."""
+    path, _ = chain_run
+    assert main(["topology", str(path), "--frame", "0"]) == 0
+    out = capsys.readouterr().out
+    assert "effective resistance between the electrodes: infinite (open: no current-carrying path)" in out
+
+
 def test_topology_text_shows_filament_currents_and_events(chain_run, capsys):
     """The last frame: 3 filament rods with their currents, total current, R_eff = 3 R0, short-circuit time, events.
 
