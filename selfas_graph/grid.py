@@ -17,6 +17,7 @@ bars, one line per value of the other keys. From Python::
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import itertools
@@ -24,7 +25,8 @@ import math
 from pathlib import Path
 
 from .ensemble import Ensemble, EnsembleError, run_seed, run_tasks, summarise
-from .ensemble.plan import scenario_source
+from .ensemble.folder import FolderLock, make_folder
+from .ensemble.plan import default_times, scenario_source
 from .io.scenario import ScenarioError, load_scenario
 from .parallel import task_pool
 
@@ -83,6 +85,10 @@ class Grid:
             raise EnsembleError("a grid needs at least one --grid KEY=V1,V2,...")
         scenario, overrides, t_end = scenario_source(scenario, overrides, t_end)
         self.keys = list(grid)
+        for key in self.keys:
+            values = grid[key]
+            if isinstance(values, str) or not len(values):
+                raise EnsembleError(f"grid key {key}: give a non-empty list of values, e.g. ['1', '2'], got {values!r}")
         self.folder = Path(folder)
         base = [o.split("=", 1)[0].strip() for o in overrides]
         for key in self.keys:
@@ -116,21 +122,29 @@ class Grid:
     def tasks(self, plans):
         return [t for e, p in zip(self.ensembles, plans) for t in e.tasks(p)]
 
+    def lock(self, stack: contextlib.ExitStack) -> None:
+        """Create and lock the grid's folder and every point's folder (:class:`FolderLock`, held until
+        ``stack`` closes): EnsembleError naming the folder if another ensemble or grid runs in one."""
+        for folder in [self.folder, *(e.folder for e in self.ensembles)]:
+            make_folder(folder)
+            stack.enter_context(FolderLock(folder))
+
     def run(self, jobs=1, report=None, pool=None) -> list:
-        """Run what is missing at every point, all points' seeds in one pool."""
-        plans = self.plans()
-        for e in self.ensembles:
-            e.folder.mkdir(parents=True, exist_ok=True)
-        tasks = self.tasks(plans)
-        if pool is None:
-            with task_pool(jobs) as own:
-                return run_tasks(run_seed, tasks, own, report)
-        return run_tasks(run_seed, tasks, pool, report)
+        """Run what is missing at every point, all points' seeds in one pool, with the grid's folder and
+        every point's locked (:meth:`lock`; EnsembleError if another ensemble runs in one of them)."""
+        with contextlib.ExitStack() as stack:
+            self.lock(stack)
+            tasks = self.tasks(self.plans())
+            if pool is None:
+                with task_pool(jobs) as own:
+                    return run_tasks(run_seed, tasks, own, report)
+            return run_tasks(run_seed, tasks, pool, report)
 
     def summarise(self, times=None, flux_radius=None) -> dict:
         """Each point's :func:`~selfas_graph.ensemble.summarise`, and the rows of the combined table:
         one per point, measure and time, with the grid keys as columns."""
-        times = [self.t_end * k / 4 for k in (1, 2, 3, 4)] if times is None else [float(t) for t in times]
+        interval = self.ensembles[0].base.params.output.interval
+        times = default_times(self.t_end, interval) if times is None else [float(t) for t in times]
         points, rows = [], []
         for point, ens in zip(self.points, self.ensembles):
             paths = [p for p in (ens.folder / f"seed_{s:04d}.h5" for s in ens.seeds) if p.exists()]

@@ -288,7 +288,7 @@ def _run_locked(args, pool, held):
 
 def _run_grid(args, pool, held):
     """``--grid``: an ensemble at every grid point, all seeds in one pool, the combined summary."""
-    from ..ensemble import run_seed, run_tasks, write_summary
+    from ..ensemble import FolderLock, run_seed, run_tasks, write_summary
     from ..grid import GRID_PNG, Grid, parse_grid, plot_grid, write_grid_summary
 
     folder = Path(args.output) if args.output else Path(f"{Path(args.scenario).stem}_grid")
@@ -325,6 +325,10 @@ def _run_grid(args, pool, held):
         _lock(folder, held)
         for ens in grid.ensembles:
             _make(ens.folder)
+            try:  # each point's folder too: an ensemble run there alone takes its lock
+                held.append(FolderLock(ens.folder).acquire())
+            except EnsembleError as exc:
+                raise CliError(str(exc)) from None
         results = run_tasks(run_seed, tasks, pool, SeedReport(len(tasks), folders=True))
         io = [r for r in results if r is not None and r.get("status") == "io_error"]
         if io:

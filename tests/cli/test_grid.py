@@ -35,6 +35,8 @@ def test_parse_grid_keeps_vectors_whole_and_refuses_bad_items():
         ({"circuit.delta_j0": ["1", "2"]}, "circuit.delta_j0"),  # unknown key
         ({"circuit.delta_J0": ["1", "-2"]}, "circuit.delta_J0"),  # a value the schema refuses
         ({"rods.count": ["10", "many"]}, "rods.count"),
+        ({"circuit.delta_J0": []}, "circuit.delta_J0"),  # an empty list (it was an IndexError)
+        ({"circuit.delta_J0": "12"}, "circuit.delta_J0"),  # a string, not a list of values
     ],
 )
 def test_a_bad_grid_is_refused_naming_the_key_before_anything_is_written(tmp_path, grid, words):
@@ -63,3 +65,29 @@ def test_grid_runs_every_point_once_and_writes_the_combined_summary(tmp_path, ca
     # run again: nothing new runs
     assert main(argv) == 0
     assert "grid of 2 points x 2 seeds: 0 to run" in capsys.readouterr().out
+
+
+def test_grid_from_python_locks_its_folders_and_summarises_at_frame_times(tmp_path):
+    """``Grid.run`` ran seeds in a point's folder that another ensemble held locked (the command
+    line locked, the Python call did not); and ``Grid.summarise()``'s default times were the
+    quarters of the end time wherever they fell, labelling one frame's values with two times."""
+    from selfas_graph.ensemble import FolderLock
+
+    grid = Grid(QUICK, {"circuit.delta_J0": ["1"]}, seeds=1, folder=tmp_path / "g", overrides=["rods.count=20"])
+    point = tmp_path / "g" / "circuit.delta_J0=1"
+    point.mkdir(parents=True)
+    with FolderLock(point):
+        with pytest.raises(EnsembleError, match="in use by another ensemble"):
+            grid.run(jobs=1)
+    assert not list(point.glob("seed_*.h5"))
+    grid = Grid(
+        QUICK,
+        {"circuit.delta_J0": ["1"]},
+        seeds=1,
+        folder=tmp_path / "g",
+        overrides=["rods.count=20", "output.interval=0.04"],
+        t_end=0.1,
+    )
+    grid.run(jobs=1)
+    assert grid.summarise()["times"] == [0.04, 0.08, 0.1]  # frames at 0, 0.04, 0.08 and the end
+    assert not list(tmp_path.rglob(".ensemble.lock"))  # every lock released
