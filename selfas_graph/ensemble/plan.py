@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import operator
 import shlex
 from pathlib import Path
 
@@ -108,12 +109,17 @@ class Ensemble:
         except ScenarioError as exc:
             raise EnsembleError(str(exc)) from None
         self.t_end = float(self.base.params.run.t_end)
-        if isinstance(seeds, (int, np.integer)):
+        if isinstance(seeds, (int, np.integer)) and not isinstance(seeds, bool):
             if seeds < 1:
-                raise EnsembleError(f"--seeds must be >= 1, got {seeds}")
+                raise EnsembleError(f"seeds (--seeds) must be >= 1, got {seeds}")
             first = self.base.params.scenario.seed if first_seed is None else int(first_seed)
             seeds = range(first, first + int(seeds))
-        self.seeds = [int(s) for s in seeds]
+        try:
+            if isinstance(seeds, (str, bytes)):
+                raise TypeError
+            self.seeds = [operator.index(s) for s in seeds]
+        except TypeError:
+            raise EnsembleError(f"seeds: give a count N or a list of integer seeds, got {seeds!r}") from None
         if not self.seeds or min(self.seeds) < 0 or len(set(self.seeds)) != len(self.seeds):
             raise EnsembleError(f"seeds must be distinct integers >= 0, got {self.seeds}")
         for s in (self.seeds[0], self.seeds[-1]):  # the seeds differ only in scenario.seed

@@ -19,6 +19,7 @@ rod's role. Positions are in rod lengths, times in t0 (docs/output.md).
 
 from __future__ import annotations
 
+import operator
 import os
 import tempfile
 from pathlib import Path
@@ -39,10 +40,15 @@ class ExportError(ValueError):
 
 
 def parse_frames(spec, n_frames) -> np.ndarray:
-    """Frame indices from ``all``, ``K``, ``A:B`` or ``A:B:S`` (Python slices) or ``K1,K2,...``;
-    negative numbers count from the end."""
+    """Frame indices from ``all``, ``K``, ``A:B`` or ``A:B:S`` (Python slices) or ``K1,K2,...``
+    (also, from Python, an integer or a sequence of integers); negative numbers count from the end."""
     if n_frames == 0:
         raise ExportError("the run has no saved frames")
+    if not isinstance(spec, (str, type(None))) and np.ndim(spec) in (0, 1):
+        try:  # from Python: a frame number or a sequence of them, written as the command line's list
+            spec = ",".join(str(operator.index(k)) for k in np.atleast_1d(spec).tolist())
+        except TypeError:
+            pass  # refused below with the forms that are valid
     text = "all" if spec is None else str(spec).strip()
     every = np.arange(n_frames)
     if text == "all":
@@ -57,8 +63,8 @@ def parse_frames(spec, n_frames) -> np.ndarray:
             picked = np.array([int(p) for p in text.split(",")], dtype=np.int64)
     except (ValueError, OverflowError):
         raise ExportError(
-            f"--frames {text!r}: write all, a frame number, a slice A:B or A:B:S, or a list "
-            f"K1,K2 (negative numbers count from the end)"
+            f"frames (--frames) {text!r}: write all, a frame number, a slice A:B or A:B:S, or a list "
+            f"K1,K2 (negative numbers count from the end; from Python also a list of integers)"
         ) from None
     if ":" not in text:
         bad = picked[(picked < -n_frames) | (picked >= n_frames)]
@@ -88,7 +94,7 @@ def output_path(run_path, out, fmt, force=False) -> Path:
     if path.is_dir():
         raise ExportError(f"{path} is a directory; give a file name with -o")
     if path.exists() and not force:
-        raise ExportError(f"{path} exists; pass --force to overwrite it or -o to choose another")
+        raise ExportError(f"{path} exists; pass --force (force=True) to overwrite it or -o (out=) to choose another")
     if not path.parent.exists():
         raise ExportError(f"the folder of the output file {path} does not exist")
     return path
@@ -242,6 +248,10 @@ def write_xyz(run: RunFile, path, frames):
 
 def export_run(run_path, fmt, out=None, frames=None, force=False) -> tuple[Path, int]:
     """Export a run file; returns the output path and the number of frames written.
+
+    ``fmt`` is "gsd" or "xyz"; ``frames`` "all" (default), a frame number, "A:B[:S]", "K1,K2", or a
+    list of frame numbers; ``out`` the output path (default: the run's name with the format's
+    suffix), which must not exist unless ``force``.
 
     Raises
     ------

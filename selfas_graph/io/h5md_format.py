@@ -4,7 +4,9 @@ growable datasets, the errors, the free space a write needs, and the check that 
 
 from __future__ import annotations
 
+import errno
 import os
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -85,6 +87,41 @@ def free_bytes(folder) -> int | None:
     except (OSError, AttributeError):
         return None
     return st.f_bavail * st.f_frsize
+
+
+def check_room(path, need) -> None:
+    """Raise :class:`DiskFullError` (nothing written) when the folder of ``path`` has less free space
+    than ``need`` bytes, or the file system refuses ``path`` that much room (a quota or a file-size
+    limit). Quotas the file system does not report either are caught when a write fails."""
+    path = Path(path)
+    free = free_bytes(path.parent)
+    if free is not None and free < need:
+        raise DiskFullError(
+            28,
+            f"{free / 2**20:.2f} MiB free in {path.parent or '.'}, the next frame may need {need / 2**20:.2f} MiB",
+        )
+    # a quota or a file-size limit does not show in the free space: ask the file system for the
+    # room (posix_fallocate), then give it back; HDF5 has written everything up to the size seen
+    try:
+        fd = os.open(path, os.O_WRONLY)
+    except OSError:
+        return
+    try:
+        size = os.fstat(fd).st_size
+        try:
+            os.posix_fallocate(fd, size, need)
+        except OSError as exc:
+            if exc.errno in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS, errno.ENODEV):
+                return  # a file system without fallocate: failed writes are caught when they happen
+            raise DiskFullError(
+                exc.errno,
+                f"{exc.strerror}: {path} cannot grow by the {need / 2**20:.2f} MiB the next frame may need",
+            ) from None
+        finally:
+            if os.fstat(fd).st_size != size:
+                os.ftruncate(fd, size)
+    finally:
+        os.close(fd)
 
 
 def is_io_error(exc) -> bool:

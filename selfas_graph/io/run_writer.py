@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import errno
 import json
 import os
 import time
@@ -26,7 +25,6 @@ from .h5md_format import (
     SPACE_MARGIN,
     TIME,
     UNIT_SYSTEM,
-    DiskFullError,
     OutputExistsError,
     RunFileError,
     _append,
@@ -37,7 +35,7 @@ from .h5md_format import (
     _set_unit,
     _truncate,
     appendable_problems,
-    free_bytes,
+    check_room,
     observable_unit,
 )
 from .run_provenance import run_provenance
@@ -144,7 +142,7 @@ class RunWriter(_PendingRows):
         self.path = Path(path)
         if self.path.exists() and not overwrite:
             raise OutputExistsError(
-                f"output file {self.path} exists; pass --force to overwrite it or -o to choose another"
+                f"output file {self.path} exists; pass --force (overwrite=True) to overwrite it or -o to choose another"
             )
         if not self.path.parent.exists():
             raise FileNotFoundError(f"the folder of the output file {self.path} does not exist")
@@ -348,43 +346,31 @@ class RunWriter(_PendingRows):
         self.f.visititems(add)
         return total
 
-    def check_space(self):
-        """Raise :class:`DiskFullError` (nothing written) when the folder has less free space than the
-        next frame may need. Quotas the file system does not report are caught when a write fails."""
-        free = free_bytes(self.path.parent)
-        need = self.reserve()
-        if free is not None and free < need:
-            raise DiskFullError(
-                28,
-                f"{free / 2**20:.2f} MiB free in {self.path.parent or '.'}, "
-                f"the next frame may need {need / 2**20:.2f} MiB",
+    def _check_open(self):
+        """RunFileError when the writer was closed (after a ``with`` block, or ``close``)."""
+        if self.f is None:
+            raise RunFileError(
+                f"{self.path}: this writer is closed; to write more frames keep it open (one with block "
+                f"around every sim.run), or continue the file with RunWriter.reopen"
             )
-        # a quota or a file-size limit does not show in the free space: ask the file system for the
-        # room (posix_fallocate), then give it back; HDF5 has written everything up to the size seen
-        try:
-            fd = os.open(self.path, os.O_WRONLY)
-        except OSError:
-            return
-        try:
-            size = os.fstat(fd).st_size
-            try:
-                os.posix_fallocate(fd, size, need)
-            except OSError as exc:
-                if exc.errno in (errno.EOPNOTSUPP, errno.EINVAL, errno.ENOSYS, errno.ENODEV):
-                    return  # a file system without fallocate: failed writes are caught when they happen
-                raise DiskFullError(
-                    exc.errno,
-                    f"{exc.strerror}: {self.path} cannot grow by the {need / 2**20:.2f} MiB the next frame may need",
-                ) from None
-            finally:
-                if os.fstat(fd).st_size != size:
-                    os.ftruncate(fd, size)
-        finally:
-            os.close(fd)
+
+    def check_space(self):
+        """Raise :class:`DiskFullError` (nothing written) when the next frame may not fit
+        (:func:`~.h5md_format.check_room`)."""
+        self._check_open()
+        check_room(self.path, self.reserve())
 
     def write_frame(self, step, t, position, velocity, observables: dict):
         """Append one frame (positions, velocities, observables) and flush to disk."""
         self.check_space()
+        for name, arr in (("position", position), ("velocity", velocity)):
+            if name in self._elements and np.shape(arr) != self._elements[name][2].shape[1:]:
+                # before anything of the frame is written: a frame of another system would leave the
+                # file's columns of unequal length
+                raise ValueError(
+                    f"{self.path}: the {name}s have shape {np.shape(arr)}, the file's frames "
+                    f"{self._elements[name][2].shape[1:]}: this writer was made for another simulation"
+                )
         if self.frame_interval is not None:
             observables = {**observables, layout.FRAME_INTERVAL: self.frame_interval}
         for name, arr in (("position", position), ("velocity", velocity)):
@@ -419,6 +405,7 @@ class RunWriter(_PendingRows):
 
     def write_events(self, rows):
         """Append event rows ``(step, time, kind, a, b)``."""
+        self._check_open()
         if layout.EVENTS not in self.f:
             ds = self.f.create_dataset(
                 layout.EVENTS, shape=(0,), maxshape=(None,), dtype=EVENT_FILE_DTYPE, chunks=(4096,)
@@ -431,6 +418,7 @@ class RunWriter(_PendingRows):
     def write_circuit_log(self, rows):
         """Append circuit-log rows ``(step, time, kind, total_current, rods_in_series, filament_rods)``
         (:mod:`selfas_graph.model.circuitlog`), one column dataset per field."""
+        self._check_open()
         if layout.CIRCUIT_LOG not in self.f:
             g = self.f.create_group(layout.CIRCUIT_LOG)
             for name in layout.CIRCUIT_LOG_COLUMNS:
@@ -456,6 +444,7 @@ class RunWriter(_PendingRows):
         potential : (n_tips,) float64
         conductor_potential : dict conductor id -> fixed potential (None if per contact)
         """
+        self._check_open()
         if layout.GRAPH not in self.f:
             g = self.f.create_group(layout.GRAPH)
             g.attrs["conductor_ids"] = np.array(sorted(conductor_potential), dtype=np.int64)

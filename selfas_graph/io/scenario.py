@@ -100,6 +100,11 @@ def scenario_from_text(text, path=None, overrides=(), t_end=None) -> Scenario:
         raise ScenarioError([f"not a usable scenario: {exc}"], source=path) from None
     except RecursionError:
         raise ScenarioError(["not valid TOML: arrays or tables nested too deeply"], source=path) from None
+    if isinstance(overrides, (str, bytes)) or overrides is None:
+        raise ScenarioError(
+            [f"overrides: give a list of 'key=value' strings, e.g. ['integrator.dt=5e-4'], got {overrides!r}"],
+            source=path,
+        )
     overrides = tuple(overrides)
     problems = []
     for item in overrides:

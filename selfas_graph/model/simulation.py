@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import math
+import operator
 import time
 
 import numpy as np
@@ -230,7 +231,13 @@ class Simulation:
 
     # ------------------------------------------------------------------ stepping
     def step(self, n: int = 1) -> None:
-        """Advance by ``n`` steps (raises :class:`NumericalFailure` on breakdown)."""
+        """Advance by ``n`` steps, an integer >= 0 (raises :class:`NumericalFailure` on breakdown)."""
+        try:
+            n = operator.index(n)
+        except TypeError:
+            raise TypeError(f"Simulation.step(n): n is a whole number of steps, got {n!r}") from None
+        if n < 0:
+            raise ValueError(f"Simulation.step(n): n is a number of steps >= 0, got {n}")
         if self.observe.energy0 is None:
             self.observe.record_initial_energy()
         done = 0

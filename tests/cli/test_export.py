@@ -121,13 +121,26 @@ def test_exports_get_the_permissions_of_a_new_file(run):
 
 
 @pytest.mark.parametrize(
-    "spec, frames", [("all", [0, 1, 2, 3]), ("-1", [3]), ("1:3", [1, 2]), ("::2", [0, 2]), ("0,-1", [0, 3])]
+    "spec, frames",
+    [
+        ("all", [0, 1, 2, 3]),
+        ("-1", [3]),
+        ("1:3", [1, 2]),
+        ("::2", [0, 2]),
+        ("0,-1", [0, 3]),
+        # from Python: integers as the command line's list (a list was refused)
+        ([0, 2], [0, 2]),
+        (np.array([1, -1]), [1, 3]),
+        (2, [2]),
+    ],
 )
 def test_parse_frames(spec, frames):
     assert parse_frames(spec, 4).tolist() == frames
 
 
-@pytest.mark.parametrize("spec", ["x", "1:2:0", "4", "5:9", "1:2:3:4", "", "99999999999999999999999"])
+@pytest.mark.parametrize(
+    "spec", ["x", "1:2:0", "4", "5:9", "1:2:3:4", "", "99999999999999999999999", [0.5], [4], [[0, 1]]]
+)
 def test_parse_frames_refuses(spec):
     with pytest.raises(ExportError):
         parse_frames(spec, 4)

@@ -136,6 +136,44 @@ def test_run_file_from_python_with_event_names(tmp_path):
     assert sg.EventKind.SHORT_CIRCUIT == 5 and sg.EventKind(1).label == "tip_contact"
 
 
+def test_a_writer_used_wrongly_is_refused_and_the_file_stays_readable(tmp_path):
+    """A closed writer handed to ``sim.run`` gave a TypeError from deep inside; a writer made for
+    another simulation wrote part of a frame and left the file unreadable. Both are refused by name
+    before anything is written, and the file keeps its frames."""
+    sim = sg.Simulation(_params(), state=_rods())
+    out = tmp_path / "py.h5"
+    with sg.RunWriter.for_simulation(sim, out) as w:
+        sim.run(0.02, writer=w)
+        other = sg.Simulation(_params(3), state=_rods(3))
+        with pytest.raises(ValueError, match="made for another simulation"):
+            other.run(0.02, writer=w)
+    with pytest.raises(sg.RunFileError, match="this writer is closed"):
+        sim.run(0.04, writer=w)
+    with sg.RunFile(out) as run:
+        assert list(run.step) == [0, 20] and run.position(-1).shape == (4, 3)
+
+
+def test_step_count_and_overrides_are_checked():
+    """``step(n)`` took -3 as nothing and 2.5 as three steps; a string of overrides was read one
+    character at a time, and a string of seeds digit by digit."""
+    sim = sg.Simulation(_params(), state=_rods())
+    for bad, kind in ((-3, ValueError), (2.5, TypeError), ("3", TypeError)):
+        with pytest.raises(kind, match="Simulation.step"):
+            sim.step(bad)
+    sim.step(np.int64(2))
+    assert sim.state.step == 2
+    quick = Path(__file__).resolve().parents[2] / "scenarios" / "quick.toml"
+    for bad in ("integrator.dt=5e-4", None):
+        with pytest.raises(sg.ScenarioError, match="overrides: give a list"):
+            sg.load_scenario(quick, overrides=bad)
+    from selfas_graph.ensemble import Ensemble, EnsembleError
+
+    for seeds in ("12", 2.0, [1.5]):
+        with pytest.raises(EnsembleError, match="seeds: give a count N or a list of integer seeds"):
+            Ensemble(quick, seeds, "never_made")
+    assert not Path("never_made").exists()
+
+
 def test_event_kind_is_an_enumeration_in_the_file(tmp_path):
     from selfas_graph.io.h5md import RunWriter
 
