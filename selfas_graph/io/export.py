@@ -221,7 +221,7 @@ def write_xyz(run: RunFile, path, frames):
                 out.write(f"{data.n_tips}\n")
                 out.write(
                     f'Lattice="{edge:.17g} 0 0 0 {edge:.17g} 0 0 0 {edge:.17g}" Origin="{-edge / 2:.17g} '
-                    f'{-edge / 2:.17g} {-edge / 2:.17g}" Properties={props} Time={d["time"]:.17g} '
+                    f'{-edge / 2:.17g} {-edge / 2:.17g}" Properties={props} Time={float(d["time"])!r} '
                     f'Step={d["step"]} total_current={d["total_current"]:.17g} pbc="F F F"\n'
                 )
                 x, v = d["position"], d["velocity"]

@@ -4,6 +4,7 @@ simulation objects."""
 from __future__ import annotations
 
 import json
+import operator
 import re
 from pathlib import Path
 
@@ -38,7 +39,7 @@ class RunFile:
         if self.path.is_dir():
             raise RunFileError(f"{self.path}: a directory, not a run file")
         try:
-            self.f = h5py.File(self.path, "r")
+            self._f = h5py.File(self.path, "r")
         except OSError as exc:
             reason = " ".join(str(exc).split())  # h5py's messages can span lines
             if re.search(r"\block", reason.lower()) or "already open for write" in reason.lower():
@@ -85,7 +86,16 @@ class RunFile:
         self.close()
 
     def close(self):
-        self.f.close()
+        self._f.close()
+
+    @property
+    def f(self) -> h5py.File:
+        """The open HDF5 file (RunFileError once the run file was closed)."""
+        if not self._f:
+            raise RunFileError(
+                f"{self.path}: the run file is closed; read it inside its with block, or open it again with RunFile"
+            )
+        return self._f
 
     @property
     def parameters(self) -> dict:
@@ -116,7 +126,12 @@ class RunFile:
             if not np.isfinite(t):
                 raise RunFileError(f"time {t} names no frame; give a finite simulated time")
             return int(np.argmin(np.abs(self.time - t)))
-        k = -1 if frame is None else int(frame)
+        try:
+            k = -1 if frame is None else operator.index(frame)
+        except TypeError:
+            raise RunFileError(
+                f"frame {frame!r}: give a frame number (an integer; negative counts from the end)"
+            ) from None
         if not -n <= k < n:
             raise RunFileError(f"{self.path}: frame {k} out of range; the file has frames 0..{n - 1}")
         return k % n
@@ -221,7 +236,12 @@ class RunFile:
             if not np.isfinite(t):
                 raise RunFileError(f"time {t} names no frame; give a finite simulated time")
             return int(np.argmin(np.abs(self.f[layout.GRAPH_TIME][:] - t)))
-        k = -1 if frame is None else int(frame)
+        try:
+            k = -1 if frame is None else operator.index(frame)
+        except TypeError:
+            raise RunFileError(
+                f"frame {frame!r}: give a frame number (an integer; negative counts from the end)"
+            ) from None
         if not -n <= k < n:
             raise RunFileError(f"{self.path}: frame {k} out of range; the file has frames 0..{n - 1}")
         return k % n
@@ -265,7 +285,7 @@ class RunFile:
 
     def observable(self, name):
         """(time, value) arrays of a per-frame observable, or (step, value) for per-step series."""
-        if name not in self.f[layout.OBSERVABLES]:
+        if name not in self.observable_names():  # a group of observables (energy) is not one
             raise RunFileError(f"{self.path}: no observable {name!r}; present: {', '.join(self.observable_names())}")
         g = self.f[layout.OBSERVABLES][name]
         x = g["time"][:] if "time" in g else g["step"][:]

@@ -131,6 +131,10 @@ def check_parameters(params: P.Parameters) -> None:
 
 def parameters_from_dict(raw: dict, source=None) -> P.Parameters:
     """Validate a nested dict (as from TOML) into :class:`Parameters`; raises :class:`ScenarioError`."""
+    if not isinstance(raw, dict):
+        raise ScenarioError(
+            [f"parameters: expected a table (a dict of sections), got {type(raw).__name__}"], source=source
+        )
     problems = []
     params = _build(P.Parameters, raw, "", problems)
     if not problems:

@@ -313,7 +313,7 @@ def solve_circuit(
         Given potential of each conductor contact (units R0 J0): ``-/+ delta_J0 dZ/2``
         for cathode/anode in case (i), ``-delta_J0 z_contact`` on the filament in
         case (ii).
-    solver : {"direct", "cg"}
+    solver : {"direct", "cg", "auto"}
         Linear solver of the reduced system (symmetric positive definite).
         ``"direct"`` (default): sparse LU (SuperLU) with a symmetric minimum-degree
         ordering, exact to round-off; fast for the branched, quasi-one-dimensional
@@ -322,7 +322,8 @@ def solve_circuit(
         ``"cg"``: Jacobi-preconditioned conjugate gradients to a relative residual
         ``CG_RTOL`` (round-off level): 0.14 s on that lattice, slower than
         "direct" on chains; it falls back to the direct solver if it has not
-        converged after ``min(2 n, 2000)`` iterations.
+        converged after ``min(2 n, 2000)`` iterations. ``"auto"`` (a run's circuit): "direct" below
+        ``linear.AUTO_CG_UNKNOWNS`` unknowns, "cg" from there.
     rod_resistance : float or (n_rods,) float64, optional
         Resistance R_i of each rod (units R0, > 0); default 1 for every rod.
     contact_resistance : float

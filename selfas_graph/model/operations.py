@@ -124,6 +124,55 @@ class Operation:
         pass
 
 
+class _Hooks(Operation):
+    """An operation that defines only some of :class:`Operation`'s methods (its ``trigger`` and
+    ``act``), with the others doing nothing."""
+
+    def __init__(self, inner):
+        self.inner = inner
+        self.trigger = inner.trigger
+        self.final = bool(getattr(inner, "final", False))
+
+    def start(self, sim, n_steps):
+        getattr(self.inner, "start", lambda *a: None)(sim, n_steps)
+
+    def act(self, sim, i, n_steps):
+        self.inner.act(sim, i, n_steps)
+
+    def flush(self, sim):
+        getattr(self.inner, "flush", lambda *a: None)(sim)
+
+    def finish(self, sim):
+        getattr(self.inner, "finish", lambda *a: None)(sim)
+
+
+def as_operation(obj, where: str) -> Operation:
+    """``obj`` as an :class:`Operation`: itself if it is one, else with the methods it lacks doing
+    nothing; TypeError naming ``where`` if it has no callable ``trigger`` and ``act``."""
+    if isinstance(obj, Operation):
+        return obj
+    if not (callable(getattr(obj, "trigger", None)) and callable(getattr(obj, "act", None))):
+        raise TypeError(
+            f"{where}: an operation needs a trigger (e.g. Periodic(10)) and act(sim, i, n_steps), got {obj!r}"
+        )
+    return _Hooks(obj)
+
+
+def run_operations(sim, writer, every, n_steps, progress, progress_every, checkpointer, stop, check_every) -> list:
+    """The operations of one :meth:`Simulation.run <.simulation.Simulation.run>` call, in their order
+    (module docstring): those its arguments make around the attached ``sim.operations``."""
+    ops = [PerStepRows(writer, every), FrameWriter(writer, every)] if writer is not None else [EnergyCheck(every)]
+    ops += [as_operation(o, f"sim.operations[{k}]") for k, o in enumerate(sim.operations)]
+    if progress is not None:
+        ops.append(Progress(progress, progress_every or max(1, n_steps // 200), first_step=sim.state.step))
+    checkpoint = Checkpoint(checkpointer, check_every) if checkpointer is not None else None
+    if stop is not None:
+        ops.append(StopCheck(stop, checkpoint, check_every))
+    if checkpoint is not None:
+        ops.append(checkpoint)
+    return ops
+
+
 class PerStepRows(Operation):
     """Hands the writer the bond error of every step; the writer buffers the rows until the
     next frame or checkpoint (``writer.buffer_per_step``, ``writer.flush_pending``)."""

@@ -350,7 +350,7 @@ class Parameters:
 
             p.replace({"integrator.dt": 5e-4, "forces.yukawa": False})   # False: the term off
             p.replace(integrator={"dt": 5e-4}, rods={"count": 50})      # merged into the section
-            p.replace(circuit={"delta_J0": 2.0})                         # True or {} switches a table on
+            p.replace({"forces.electrodes": True}, circuit={"delta_J0": 2.0})   # True or {} switches a table on
 
         Raises :class:`selfas_graph.ScenarioError` with the messages of a scenario file.
         """

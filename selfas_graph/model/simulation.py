@@ -285,6 +285,8 @@ class Simulation:
             raise ValueError(f"t_end = {t_end} is not a finite time")
         x = (t_end - t) / dt
         n = int(round(x))
+        if n < 0 or x < -0.5:
+            raise ValueError(f"t_end = {t_end:.10g} lies before the current time t = {t:.10g}; a run goes forward only")
         # round-off of t_end - t: a few ulps of the step count, and no more than 1e-6 of a step below 1e10 steps
         if abs(x - n) > 1e-6 + 4 * np.finfo(float).eps * abs(x):
             lo = t + math.floor(x) * dt
@@ -292,8 +294,6 @@ class Simulation:
                 f"t_end = {t_end:.10g} is not a whole number of steps dt = {dt:g} from t = {t:.10g} "
                 f"({x:.6g} steps); the nearest reachable times are {lo:.10g} and {lo + dt:.10g}"
             )
-        if n < 0:
-            raise ValueError(f"t_end = {t_end:.10g} lies before the current time t = {t:.10g}; a run goes forward only")
         return n
 
     def run(
@@ -328,19 +328,7 @@ class Simulation:
         n_steps = self.steps_to(t_end)
         every = max(1, int(round(self.params.output.interval / self.dt)))
         summary = RunSummary(t_start=self.state.time)
-        ops = (
-            [op.PerStepRows(writer, every), op.FrameWriter(writer, every)]
-            if writer is not None
-            else [op.EnergyCheck(every)]
-        )
-        ops += self.operations
-        if progress is not None:
-            ops.append(op.Progress(progress, progress_every or max(1, n_steps // 200), first_step=self.state.step))
-        checkpoint = op.Checkpoint(checkpointer, check_every) if checkpointer is not None else None
-        if stop is not None:
-            ops.append(op.StopCheck(stop, checkpoint, check_every))
-        if checkpoint is not None:
-            ops.append(checkpoint)
+        ops = op.run_operations(self, writer, every, n_steps, progress, progress_every, checkpointer, stop, check_every)
         if self.observe.energy0 is None:
             self.observe.record_initial_energy()
         self.health.keep_last_good(self.snapshot())

@@ -70,11 +70,11 @@ def test_gsd_export_opens_in_gsd_and_mdanalysis(run, capsys):
 def test_xyz_export_opens_in_ase(run):
     ase_io = pytest.importorskip("ase.io")
     out = run.parent / "tail.xyz"
-    assert main(["export", str(run), "--format", "xyz", "--frames=-2:", "-o", str(out)]) == 0
+    assert main(["export", str(run), "--format", "xyz", "--frames=0,-2,-1", "-o", str(out)]) == 0
     e = _expected(run)
     frames = ase_io.read(str(out), index=":")
-    assert len(frames) == 2
-    for atoms, k in zip(frames, (5, 6)):
+    assert len(frames) == 3
+    for atoms, k in zip(frames, (0, 5, 6)):
         # written with 17 significant digits: the float64 values come back exactly
         np.testing.assert_array_equal(atoms.positions, e["pos"][k])
         np.testing.assert_array_equal(atoms.arrays["velo"], e["vel"][k])
@@ -83,6 +83,7 @@ def test_xyz_export_opens_in_ase(run):
         np.testing.assert_array_equal(atoms.arrays["rod"], np.arange(120) // 2)
         np.testing.assert_array_equal(atoms.arrays["magnetic_charge"], e["charge"])
         assert atoms.info["Time"] == e["time"][k] and atoms.info["Step"] == e["step"][k]
+        assert isinstance(atoms.info["Time"], float)  # a float at t = 0 too (written "0.0", the shortest exact form)
         assert not atoms.pbc.any()
     first = out.read_text().splitlines()[2].split()[0]
     assert first in ROLE_TYPES  # the species column: the role name (OVITO's particle type)

@@ -104,6 +104,8 @@ def test_run_lands_on_t_end_or_refuses():
     assert sim.state.step == 62 and sim.state.time == pytest.approx(0.496, abs=1e-15)
     with pytest.raises(ValueError, match="before the current time"):
         sim.run(0.2)
+    with pytest.raises(ValueError, match="before the current time"):  # not "the nearest reachable times" in the past
+        sim.run(0.3)
     sim.run(0.496)  # no step
     assert sim.state.step == 62
 
@@ -151,6 +153,25 @@ def test_a_writer_used_wrongly_is_refused_and_the_file_stays_readable(tmp_path):
         sim.run(0.04, writer=w)
     with sg.RunFile(out) as run:
         assert list(run.step) == [0, 20] and run.position(-1).shape == (4, 3)
+
+
+def test_run_file_reads_refuse_by_name(tmp_path):
+    """A group of observables (``energy``), a frame number that is not an integer and a read after the
+    file was closed gave raw h5py errors or took the integer part; each is a RunFileError now."""
+    sim = sg.Simulation(_params(), state=_rods())
+    out = tmp_path / "r.h5"
+    with sg.RunWriter.for_simulation(sim, out) as w:
+        sim.run(0.04, writer=w)
+    with sg.RunFile(out) as run:
+        assert "energy/kinetic" in run.observable_names()
+        with pytest.raises(sg.RunFileError, match="no observable 'energy'; present: .*energy/kinetic"):
+            run.observable("energy")
+        with pytest.raises(sg.RunFileError, match="give a frame number"):
+            run.position(1.7)
+        first = run.position(0)
+    with pytest.raises(sg.RunFileError, match="the run file is closed"):
+        run.position(0)
+    assert first.shape == (4, 3)
 
 
 def test_step_count_and_overrides_are_checked():

@@ -50,6 +50,30 @@ def test_attached_operations_act_on_their_trigger_in_every_run_and_run_is_the_st
     assert writer.n_frames == 2  # frame 0 and the end of the first run (no multiple of 100 in 1..40)
 
 
+def test_an_operation_need_not_subclass_operation_and_one_without_act_is_refused_by_name():
+    """The docs make start, flush and finish optional: an object with only a trigger and act used to
+    fail with AttributeError: 'start'. One without act is refused naming its place in sim.operations."""
+
+    class Duck:
+        trigger = Periodic(5)
+
+        def __init__(self):
+            self.steps = []
+
+        def act(self, sim, i, n_steps):
+            self.steps.append(sim.state.step)
+
+    sim = _sim()
+    duck = Duck()
+    sim.operations.append(duck)
+    sim.run(t_end=0.01)  # 20 steps
+    assert duck.steps == [5, 10, 15, 20]
+    sim.operations.append(object())
+    with pytest.raises(TypeError, match=r"sim.operations\[1\]: an operation needs a trigger"):
+        sim.run(t_end=0.02)
+    assert sim.state.step == 20
+
+
 def test_progress_counts_steps_of_the_run_and_stop_raises_after_a_checkpoint():
     sim = _sim()
     sim.step(3)
