@@ -322,8 +322,7 @@ def solve_circuit(
         ``"cg"``: Jacobi-preconditioned conjugate gradients to a relative residual
         ``CG_RTOL`` (round-off level): 0.14 s on that lattice, slower than
         "direct" on chains; it falls back to the direct solver if it has not
-        converged after ``min(2 n, 2000)`` iterations. ``"auto"`` (a run's circuit): "direct" below
-        ``linear.AUTO_CG_UNKNOWNS`` unknowns, "cg" from there.
+        converged after ``min(2 n, 2000)`` iterations. ``"auto"``: "direct" below ``AUTO_CG_UNKNOWNS``.
     rod_resistance : float or (n_rods,) float64, optional
         Resistance R_i of each rod (units R0, > 0); default 1 for every rod.
     contact_resistance : float
