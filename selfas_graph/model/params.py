@@ -354,6 +354,10 @@ class Parameters:
 
         Raises :class:`selfas_graph.ScenarioError` with the messages of a scenario file.
         """
+        if changes is not None and not isinstance(changes, dict):
+            raise TypeError(
+                f"Parameters.replace: changes by dotted key in a dict, e.g. {{'integrator.dt': 5e-4}}, got {changes!r}"
+            )
         raw = self.to_raw()
         for key, value in list((changes or {}).items()) + list(sections.items()):
             node, parts = raw, key.split(".")

@@ -30,15 +30,8 @@ from .params import Parameters
 from .state import State, StateError, random_state
 from .terms import ForceField
 
-__all__ = [
-    "Simulation",
-    "RunSummary",
-    "RunInterrupted",
-    "NumericalFailure",
-    "BOND_BREAK",
-    "MAX_STEP_DISPLACEMENT",
-    "FORCE_OUT_OF_SCALE",
-]
+__all__ = ["Simulation", "RunSummary", "RunInterrupted", "NumericalFailure"]
+__all__ += ["BOND_BREAK", "MAX_STEP_DISPLACEMENT", "FORCE_OUT_OF_SCALE"]
 
 
 class Simulation:
@@ -77,6 +70,10 @@ class Simulation:
     def __init__(
         self, params: Parameters, state: State | None = None, timing: bool = False, comm=None, check_state: bool = True
     ):
+        if not isinstance(params, Parameters):
+            raise TypeError(
+                f"Simulation(params): a Parameters (Parameters.from_dict(d) for a dict), got {type(params).__name__}"
+            )
         self.params = params
         if state is not None and check_state:
             state = state.checked()
@@ -121,6 +118,8 @@ class Simulation:
 
     @classmethod
     def from_scenario(cls, scenario, **kw):
+        if not isinstance(getattr(scenario, "params", None), Parameters):
+            raise TypeError(f"Simulation.from_scenario: a Scenario (load_scenario(path)), got {scenario!r}")
         sim = cls(scenario.params, **kw)
         sim.scenario = scenario  # its text goes into run files written from Python
         return sim

@@ -174,6 +174,17 @@ def test_run_file_reads_refuse_by_name(tmp_path):
     assert first.shape == (4, 3)
 
 
+def test_objects_of_the_wrong_kind_are_refused_by_name():
+    """A dict for the parameters, a path for a loaded scenario and a string of changes gave
+    AttributeErrors from inside; each names what to give instead."""
+    with pytest.raises(TypeError, match=r"Simulation\(params\): a Parameters .*got dict"):
+        sg.Simulation({"rods": {"count": 3}})
+    with pytest.raises(TypeError, match=r"from_scenario: a Scenario \(load_scenario\(path\)\)"):
+        sg.Simulation.from_scenario("scenarios/quick.toml")
+    with pytest.raises(TypeError, match="changes by dotted key in a dict"):
+        sg.Parameters().replace("integrator.dt=5e-4")
+
+
 def test_step_count_and_overrides_are_checked():
     """``step(n)`` took -3 as nothing and 2.5 as three steps; a string of overrides was read one
     character at a time, and a string of seeds digit by digit."""
