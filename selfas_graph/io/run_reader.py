@@ -19,6 +19,22 @@ from .h5md_format import (
 )
 
 
+def _pick_frame(path, n, frame, t, times) -> int:
+    """Index of one of ``n`` frames: number ``frame`` (negative counts from the end; default the last)
+    or the one nearest time ``t`` (``times()`` gives the frames' times); RunFileError otherwise."""
+    if t is not None:
+        if not np.isfinite(t):
+            raise RunFileError(f"time {t} names no frame; give a finite simulated time")
+        return int(np.argmin(np.abs(times() - t)))
+    try:
+        k = -1 if frame is None else operator.index(frame)
+    except TypeError:
+        raise RunFileError(f"frame {frame!r}: give a frame number (an integer; negative counts from the end)") from None
+    if not -n <= k < n:
+        raise RunFileError(f"{path}: frame {k} out of range; the file has frames 0..{n - 1}")
+    return k % n
+
+
 class RunFile:
     """Read-only access to a run file, without any simulation objects.
 
@@ -122,19 +138,7 @@ class RunFile:
         n = self.n_frames
         if n == 0:
             raise RunFileError(f"{self.path}: the run has no saved frames")
-        if t is not None:
-            if not np.isfinite(t):
-                raise RunFileError(f"time {t} names no frame; give a finite simulated time")
-            return int(np.argmin(np.abs(self.time - t)))
-        try:
-            k = -1 if frame is None else operator.index(frame)
-        except TypeError:
-            raise RunFileError(
-                f"frame {frame!r}: give a frame number (an integer; negative counts from the end)"
-            ) from None
-        if not -n <= k < n:
-            raise RunFileError(f"{self.path}: frame {k} out of range; the file has frames 0..{n - 1}")
-        return k % n
+        return _pick_frame(self.path, n, frame, t, lambda: self.time)
 
     def frame(self, index=None, t=None):
         """One saved frame as a :class:`~selfas_graph.io.frame.SavedFrame`: by index (negative counts
@@ -232,19 +236,7 @@ class RunFile:
                 f"or was written before any frame)"
             )
         n = self.f[layout.GRAPH_STEP].shape[0]
-        if t is not None:
-            if not np.isfinite(t):
-                raise RunFileError(f"time {t} names no frame; give a finite simulated time")
-            return int(np.argmin(np.abs(self.f[layout.GRAPH_TIME][:] - t)))
-        try:
-            k = -1 if frame is None else operator.index(frame)
-        except TypeError:
-            raise RunFileError(
-                f"frame {frame!r}: give a frame number (an integer; negative counts from the end)"
-            ) from None
-        if not -n <= k < n:
-            raise RunFileError(f"{self.path}: frame {k} out of range; the file has frames 0..{n - 1}")
-        return k % n
+        return _pick_frame(self.path, n, frame, t, lambda: self.f[layout.GRAPH_TIME][:])
 
     def graph(self, frame=None, t=None) -> dict:
         """The graph state of one frame: contact arrays, roles, currents, potentials, step and time."""
