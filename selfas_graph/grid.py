@@ -26,7 +26,7 @@ from pathlib import Path
 
 from .ensemble import Ensemble, EnsembleError, run_seed, run_tasks, summarise
 from .ensemble.folder import FolderLock, make_folder
-from .ensemble.plan import default_times, scenario_source
+from .ensemble.plan import check_jobs, default_times, scenario_source
 from .io.scenario import ScenarioError, load_scenario
 from .parallel import task_pool
 
@@ -132,6 +132,8 @@ class Grid:
     def run(self, jobs=1, report=None, pool=None) -> list:
         """Run what is missing at every point, all points' seeds in one pool, with the grid's folder and
         every point's locked (:meth:`lock`; EnsembleError if another ensemble runs in one of them)."""
+        if pool is None:
+            check_jobs(jobs)
         with contextlib.ExitStack() as stack:
             self.lock(stack)
             tasks = self.tasks(self.plans())

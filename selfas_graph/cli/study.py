@@ -19,6 +19,7 @@ import functools
 from pathlib import Path
 
 from ..provenance import older_version
+from .ensemble import _positive_int
 from .main import CliError
 
 DEFAULT_STUDIES = "docs/studies.toml"
@@ -37,7 +38,9 @@ def add_arguments(p):
     p.set_defaults(_rest="names")  # names after the options count too (cli/main.py::parse_args)
     p.add_argument("--studies", default=DEFAULT_STUDIES, help=f"the studies file (default {DEFAULT_STUDIES})")
     p.add_argument("--runs", default="runs", help="folder of the run files, one subfolder per study (default runs)")
-    p.add_argument("--jobs", type=int, default=1, help="run: seeds at once on this machine (as ensemble --jobs)")
+    p.add_argument(
+        "--jobs", type=_positive_int, default=1, help="run: seeds at once on this machine (as ensemble --jobs)"
+    )
     p.add_argument("--force", action="store_true", help="run: replace seed files that cannot be reused")
     p.add_argument(
         "--summaries", default=DEFAULT_SUMMARIES, help=f"folder of the summaries (default {DEFAULT_SUMMARIES})"

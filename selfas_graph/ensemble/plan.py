@@ -44,6 +44,16 @@ def scenario_source(scenario, overrides=(), t_end=None):
     return Path(scenario), list(overrides), t_end
 
 
+def check_jobs(jobs) -> None:
+    """EnsembleError unless ``jobs`` (worker processes) is an integer >= 1."""
+    try:
+        ok = operator.index(jobs) >= 1
+    except TypeError:
+        ok = False
+    if not ok:
+        raise EnsembleError(f"jobs: the number of worker processes, an integer >= 1, got {jobs!r}")
+
+
 @dataclasses.dataclass
 class SeedPlan:
     """What :meth:`Ensemble.run` does with one seed.
@@ -257,6 +267,8 @@ class Ensemble:
         EnsembleError if another ensemble runs in it); nothing is run for seeds whose files are
         done or failed.
         """
+        if pool is None:
+            check_jobs(jobs)
         make_folder(self.folder)
         with FolderLock(self.folder):
             tasks = self.tasks(self.plan())

@@ -244,6 +244,16 @@ def test_an_earlier_end_is_continued_from_the_checkpoint_bit_for_bit(scene, tmp_
     assert [p.action for p in full.plan()] == ["done"]
 
 
+def test_jobs_below_one_are_refused_before_anything_is_made(scene, tmp_path):
+    """``run(jobs=0)`` or ``jobs=-1`` ran the seeds serially without a word."""
+    for jobs in (0, -1, 1.5, "2"):
+        with pytest.raises(EnsembleError, match="jobs: the number of worker processes"):
+            Ensemble(scene, [3], tmp_path / "e").run(jobs=jobs)
+        with pytest.raises(EnsembleError, match="jobs: the number of worker processes"):
+            Grid(scene, {"integrator.dt": ["2.5e-4"]}, seeds=[3], folder=tmp_path / "g").run(jobs=jobs)
+    assert not (tmp_path / "e").exists() and not (tmp_path / "g").exists()
+
+
 def test_a_loaded_scenario_runs_as_its_file_with_its_overrides_and_end_time(scene, tmp_path):
     """``Ensemble(load_scenario(path, ...), ...)`` and ``Grid`` of it used to fail with a TypeError (a
     path was expected): a loaded scenario is its file, its overrides and its end time; one built from
