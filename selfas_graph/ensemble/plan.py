@@ -278,7 +278,7 @@ class Ensemble:
             return run_tasks(run_seed, tasks, pool, report)
 
     def summarise(self, times=None, measures=None, flux_radius=None) -> dict:
-        """:func:`summarise` over the seed files present (default times: quarters of the end time)."""
+        """:func:`summarise` over the seed files present (default times: :func:`default_times`, at frames)."""
         paths = [seed_path(self.folder, s) for s in self.seeds]
         times = default_times(self.t_end, self.base.params.output.interval) if times is None else times
         out = summarise(
