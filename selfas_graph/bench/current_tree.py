@@ -98,11 +98,6 @@ def measure(position, current, w, thetas, precisions, reps, comm=SERIAL):
                     return o
 
                 runs[("tree, shared by the ranks", prec, theta)] = shared
-    slowest = None
-    if comm.size > 1:
-        from mpi4py import MPI
-
-        slowest = MPI.MAX
     best = {key: np.inf for key in runs}
     for _ in range(max(reps, 1) + 1):  # the first round also compiles
         for key, run in runs.items():
@@ -110,7 +105,7 @@ def measure(position, current, w, thetas, precisions, reps, comm=SERIAL):
             t0 = time.perf_counter()
             run()
             # under MPI the slowest rank's time: the ranks wait for it at the next gather
-            best[key] = min(best[key], comm.allreduce(time.perf_counter() - t0, op=slowest))
+            best[key] = min(best[key], max(comm.allgather(time.perf_counter() - t0)))
     ref = np.empty_like(points)  # the float64 direct sum, whether timed or not
     rod_current_field(points, exclude, position, active, current, w, ref)
     size = np.linalg.norm(ref, axis=1)

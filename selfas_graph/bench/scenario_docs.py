@@ -304,17 +304,21 @@ term that is off is not computed at all.
 
 Besides each key's own range, `selfas_graph.io.scenario.check_consistency` requires:
 
-- each range of `placement.box` is `[low, high]` with `low < high`, and the box is large enough
-  for a rod of length 1;
+- each range of `placement.box` is `[low, high]` with `low < high` and within +-1e6, and the box's
+  diagonal is longer than the longest rod (length 1, or the largest `rods.length` allows);
 - the rods fit the box: the exclusion volume `2 count (pi/6) min_tip_distance^3 / box volume`
   is at most 0.3 (beyond that the random placement stalls);
 - with `[forces.electrodes]`, the z range of `placement.box` lies between the planes
   `z = -gap/2` and `z = +gap/2`;
 - `distribution = "magnetic"` is valid for `rods.electric_charge` only; with
-  `distribution = "uniform"`, `low <= high`;
-- `[circuit]` needs a conductor to apply its bias: {conductors};
+  `distribution = "uniform"`, `low <= high` (charges, lengths and resistances alike);
+- `rods.length`, where set, has mean 1 (the unit of length) and its shortest rod is at least
+  `rods.diameter`;
+- `integrator.current_every` is 0 or a multiple of `integrator.slow_every`;
+- `[circuit]` needs a conductor to apply its bias: {conductors}; and `contacts.enabled`;
 - `[forces.current_field]` and `[forces.current_lorentz]` need `[circuit]` (rod currents come
   from the circuit solve);
+- `run.t_end` is at most 1e12 steps of `integrator.dt`;
 - `output.interval >= integrator.dt`.
 
 The placement can still fail at run time (no free spot for a rod in `placement.max_attempts`

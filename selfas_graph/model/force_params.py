@@ -55,9 +55,10 @@ class TipMagnetic:
         "float64",
         "arithmetic of the sum: float64, or mixed (direct: a float32 pair law on coordinates "
         "relative to the tips' box centre as float32 hi + lo pairs, sums of 128 pairs added in float64; "
-        "tree: float32 near pairs relative to the target group's centre and float32 multipole "
-        "fields, each summed in float64; both differ from float64 by about 1e-7 to 4e-7 of a "
-        "tip's force, docs/performance.md)",
+        "tree: float32 near pairs on coordinates relative to the root cell's centre as float32 hi + lo "
+        "pairs and float32 multipole fields, each summed per target in float32 and added in float64; "
+        "both differ from float64 by about 1e-7 of the largest pair force in a tip's sum, docs/model.md "
+        "'Term 1', docs/performance.md 'Mixed precision')",
         choices=("float64", "mixed"),
     )
     tree_above: int = spec(

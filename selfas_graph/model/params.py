@@ -160,7 +160,9 @@ class IntegratorParams:
         choices=("exact", "paper"),
     )
     velocity_correction: bool = spec(True, "apply the paper's velocity correction, Eqs. (14-15), after each step")
-    position_projection: bool = spec(True, "restore each bond length to 1 about the rod centre after each step")
+    position_projection: bool = spec(
+        True, "restore each bond length to the rod's length l_i about the rod centre after each step"
+    )
     brake: str = spec(
         "split",
         "how the stiff contact brakes (tip brake, electrode and monopole brakes) are integrated: "
@@ -182,9 +184,10 @@ class IntegratorParams:
     )
     slow_every: int = spec(
         1,
-        "multiple time stepping: evaluate the slow forces (tip-tip pairs beyond fast_range, the Yukawa sum, the "
-        "rod-current terms 9 and 10) every this many steps and hold them in between, while the stiff short-range "
-        "forces are evaluated every step; 1 evaluates everything every step; an accuracy knob",
+        "multiple time stepping: evaluate the slow forces (the far part of the tip-tip pairs, switched on from "
+        "(fast_range - 1) r* to fast_range r*, the Yukawa sum, the rod-current terms 9 and 10) every this many steps and "
+        "extrapolate them in between (slow_extrapolation), while the stiff short-range forces are evaluated every "
+        "step; 1 evaluates everything every step; an accuracy knob",
         ge=1,
         le=1000,
     )
@@ -213,7 +216,7 @@ class IntegratorParams:
 
 @dataclass(frozen=True)
 class ContactParams:
-    enabled: bool = spec(True, "detect tip and electrode contacts and record them as events")
+    enabled: bool = spec(True, "detect tip-tip and tip-conductor contacts (electrodes, external filament) as events")
     release_factor: float = spec(
         1.5, "a contact is released when the tips are farther apart than release_factor * r* (hysteresis)", ge=1.0
     )
@@ -310,7 +313,9 @@ class Parameters:
     integrator: IntegratorParams = spec(None, "time integration", factory=IntegratorParams)
     neighbours: NeighbourParams = spec(None, "neighbour lists", factory=NeighbourParams)
     contacts: ContactParams = spec(None, "contact detection and events", factory=ContactParams)
-    circuit: Optional[CircuitParams] = spec(None, "circuit solve between the electrodes (off when absent)")
+    circuit: Optional[CircuitParams] = spec(
+        None, "circuit solve between the conductors: the electrodes, or the external filament (off when absent)"
+    )
     run: RunParams = spec(None, "run length", factory=RunParams)
     output: OutputParams = spec(None, "output file", factory=OutputParams)
 

@@ -5,7 +5,7 @@ to summarise) and every claim (a measure of a study at a time, the null model it
 the direction the paper's claim predicts). ``selfas-graph study run NAME`` runs a study's seeds,
 ``selfas-graph study summarise NAME`` writes its small summary from the run files, and
 ``selfas-graph study page`` writes the tables of docs/results.md from the summaries
-(docs/results.md, "How this page is made")::
+(docs/results.md, the paragraph "How this page is made")::
 
     [study.fig2]
     title = "Fig. 2, case (i)"
