@@ -41,16 +41,17 @@ Z95 = 1.959963984540054
 
 
 def mean_sem(values, axis=0):
-    """Mean, standard error of the mean and count along ``axis``, ignoring NaN.
+    """Mean, standard error of the mean and count along ``axis``, over the finite values only.
 
     The standard error is ``s / sqrt(n)`` with ``s`` the sample standard deviation
     (``ddof = 1``) of the ``n`` finite values; it is NaN for ``n < 2``, and the mean is
-    NaN for ``n = 0``.
+    NaN for ``n = 0``. NaN (no value) and +-inf (no finite value, e.g. an infinite
+    resistance) are left out alike and not counted in ``n``.
 
     Parameters
     ----------
     values : array_like of float
-        One row per seed along ``axis`` (NaN: no value for that seed).
+        One row per seed along ``axis`` (NaN or inf: no finite value for that seed).
     axis : int
 
     Returns
@@ -187,7 +188,7 @@ def mean_sem_fits(values, fit_err, axis=0):
     Parameters
     ----------
     values, fit_err : array_like of float, same shape
-        One row per seed along ``axis`` (NaN: no value for that seed).
+        One row per seed along ``axis`` (NaN or inf: no finite value for that seed).
     axis : int
 
     Returns

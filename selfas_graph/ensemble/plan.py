@@ -44,6 +44,20 @@ def scenario_source(scenario, overrides=(), t_end=None):
     return Path(scenario), list(overrides), t_end
 
 
+def check_times(times, t_end) -> list[float]:
+    """``times`` of a summary as a list of floats in ``[0, t_end]`` (a single time is taken as a list
+    of one); EnsembleError naming the first that is not."""
+    times = [times] if np.ndim(times) == 0 else list(times)
+    for t in times:
+        try:
+            ok = 0.0 <= float(t) <= t_end * (1 + 1e-12)
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise EnsembleError(f"times: {t!r} is not a simulated time between 0 and the end time {t_end:g}")
+    return [float(t) for t in times]
+
+
 def check_jobs(jobs) -> None:
     """EnsembleError unless ``jobs`` (worker processes) is an integer >= 1."""
     try:
@@ -280,7 +294,11 @@ class Ensemble:
     def summarise(self, times=None, measures=None, flux_radius=None) -> dict:
         """:func:`summarise` over the seed files present (default times: :func:`default_times`, at frames)."""
         paths = [seed_path(self.folder, s) for s in self.seeds]
-        times = default_times(self.t_end, self.base.params.output.interval) if times is None else times
+        times = (
+            default_times(self.t_end, self.base.params.output.interval)
+            if times is None
+            else check_times(times, self.t_end)
+        )
         out = summarise(
             [p for p in paths if p.exists()], times, t_end=self.t_end, measures=measures, flux_radius=flux_radius
         )

@@ -254,6 +254,18 @@ def test_jobs_below_one_are_refused_before_anything_is_made(scene, tmp_path):
     assert not (tmp_path / "e").exists() and not (tmp_path / "g").exists()
 
 
+def test_summary_times_are_checked(scene, tmp_path):
+    """``summarise(times=0.3)`` failed with a TypeError, and a time after the end gave columns of n/a
+    without a word (the command line refuses it)."""
+    ens = Ensemble(scene, [3], tmp_path / "e")
+    assert ens.summarise(times=0.3)["times"] == [0.3]
+    for bad in ([5.0], [-1.0], ["x"], [float("nan")]):
+        with pytest.raises(EnsembleError, match="is not a simulated time between 0 and the end time 0.6"):
+            ens.summarise(times=bad)
+        with pytest.raises(EnsembleError, match="is not a simulated time"):
+            Grid(scene, {"integrator.dt": ["2.5e-4"]}, seeds=[3], folder=tmp_path / "g").summarise(times=bad)
+
+
 def test_a_loaded_scenario_runs_as_its_file_with_its_overrides_and_end_time(scene, tmp_path):
     """``Ensemble(load_scenario(path, ...), ...)`` and ``Grid`` of it used to fail with a TypeError (a
     path was expected): a loaded scenario is its file, its overrides and its end time; one built from
