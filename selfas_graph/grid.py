@@ -26,7 +26,7 @@ from pathlib import Path
 
 from .ensemble import Ensemble, EnsembleError, run_seed, run_tasks, summarise
 from .ensemble.folder import FolderLock, make_folder
-from .ensemble.plan import check_jobs, check_times, default_times, scenario_source
+from .ensemble.plan import check_jobs, scenario_source, summary_times
 from .io.scenario import ScenarioError, load_scenario
 from .parallel import task_pool
 
@@ -145,8 +145,7 @@ class Grid:
     def summarise(self, times=None, flux_radius=None) -> dict:
         """Each point's :func:`~selfas_graph.ensemble.summarise`, and the rows of the combined table:
         one per point, measure and time, with the grid keys as columns."""
-        interval = self.ensembles[0].base.params.output.interval
-        times = default_times(self.t_end, interval) if times is None else check_times(times, self.t_end)
+        times = summary_times(times, self.t_end, self.ensembles[0].base.params.output.interval)
         points, rows = [], []
         for point, ens in zip(self.points, self.ensembles):
             paths = [p for p in (ens.folder / f"seed_{s:04d}.h5" for s in ens.seeds) if p.exists()]

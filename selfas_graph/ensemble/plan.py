@@ -58,6 +58,11 @@ def check_times(times, t_end) -> list[float]:
     return [float(t) for t in times]
 
 
+def summary_times(times, t_end, interval) -> list[float]:
+    """The times of a summary: ``times`` checked (:func:`check_times`), or :func:`default_times` when None."""
+    return default_times(t_end, interval) if times is None else check_times(times, t_end)
+
+
 def check_jobs(jobs) -> None:
     """EnsembleError unless ``jobs`` (worker processes) is an integer >= 1."""
     try:
@@ -294,11 +299,7 @@ class Ensemble:
     def summarise(self, times=None, measures=None, flux_radius=None) -> dict:
         """:func:`summarise` over the seed files present (default times: :func:`default_times`, at frames)."""
         paths = [seed_path(self.folder, s) for s in self.seeds]
-        times = (
-            default_times(self.t_end, self.base.params.output.interval)
-            if times is None
-            else check_times(times, self.t_end)
-        )
+        times = summary_times(times, self.t_end, self.base.params.output.interval)
         out = summarise(
             [p for p in paths if p.exists()], times, t_end=self.t_end, measures=measures, flux_radius=flux_radius
         )
