@@ -346,6 +346,20 @@ def line_yukawa_force(p, z1, z2, lam, R, w, Z=1.0):
     return np.array([comp(i) for i in range(3)])
 
 
+def line_yukawa_energy(p, z1, z2, lam, R, w, Z=1.0):
+    """Direct numerical integral of the screened line charge's potential energy, ``Z lam int exp(-r/R) / r dz``
+    with ``r^2 = rho^2 + w^2 + (z_p - z)^2`` (scipy.quad, tight tolerances); minus its gradient is
+    :func:`line_yukawa_force`."""
+
+    def integrand(zl):
+        r = math.sqrt(p[0] ** 2 + p[1] ** 2 + w * w + (p[2] - zl) ** 2)
+        return Z * lam * math.exp(-r / R) / r
+
+    return scipy.integrate.quad(
+        integrand, z1, z2, epsabs=1e-14, epsrel=1e-11, limit=400, points=[p[2]] if z1 < p[2] < z2 else None
+    )[0]
+
+
 # ----------------------------------------------------------------------------- filament rule, literally
 # docs/model.md 'Connectivity graph and topology' on netlists, with networkx: every simple path
 # (exponential, small graphs only) and the biconnected-component rule without reductions.
@@ -468,6 +482,52 @@ def electrode_brake(position, velocity, z_lo, z_hi, rstar, k_br, dt):
             v[k] = v[k] * math.exp(-n * k_br * dt)
             work += 0.5 * float(v[k] @ v[k]) - e0
     return v, work
+
+
+def monopole_brake(position, velocity, source, rstar, k_br, dt):
+    """The exact brake of fixed monopoles on tips (term 11 with term 2's brake; a monopole does not
+    move): a tip within r* of n of ``source`` has dv/dt = -n k_br v over dt. Returns (velocity after,
+    change of kinetic energy)."""
+    v = np.array(velocity, dtype=float)
+    work = 0.0
+    for k in range(len(v)):
+        n = sum(int(np.linalg.norm(position[k] - s) < rstar) for s in source)
+        if n:
+            e0 = 0.5 * float(v[k] @ v[k])
+            v[k] = v[k] * math.exp(-n * k_br * dt)
+            work += 0.5 * float(v[k] @ v[k]) - e0
+    return v, work
+
+
+def monopoles_energy(position, charge, source, source_charge, rstar, kappa):
+    """Energy of tips among fixed monopoles: term 1's potential of every tip-source pair (math.fsum)."""
+    return math.fsum(
+        tip_law_potential(float(np.linalg.norm(p - s)), float(q) * float(Q), rstar, kappa)
+        for p, q in zip(position, charge)
+        for s, Q in zip(source, source_charge)
+    )
+
+
+def monopole_field(point, source, source_charge, rstar):
+    """B of fixed monopoles: ``Q d / r^3``, and ``Q d / r*^3`` inside r* (the charge smeared over a ball)."""
+    out = np.zeros((len(point), 3))
+    for k, p in enumerate(point):
+        for s, Q in zip(source, source_charge):
+            d = p - s
+            r = float(np.linalg.norm(d))
+            out[k] += Q * d / (r**3 if r >= rstar else rstar**3)
+    return out
+
+
+def electrode_energy(position, z_lo, z_hi, rstar, kappa):
+    """Elastic energy of the electrode planes (term 8): ``kappa (r* - h)^2 / (2 r*^3)`` for each tip
+    and plane at height ``h < r*`` from it (h < 0 beyond the plane)."""
+    terms = []
+    for p in position:
+        for h in (p[2] - z_lo, z_hi - p[2]):
+            if h < rstar:
+                terms.append(kappa * (rstar - h) ** 2 / (2 * rstar**3))
+    return math.fsum(terms)
 
 
 def uniform_force(charge, B):

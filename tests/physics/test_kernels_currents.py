@@ -199,8 +199,9 @@ def test_segment_field_matches_numerical_biot_savart():
             [integrate.quad(integrand, 0.0, 1.0, args=(k,), epsabs=0, epsrel=1e-13, limit=200)[0] for k in range(3)]
         )
         got = np.array(segment_field(*x, *A, *B, J, 0.0))
-        # 1e-9 relative to |B|: quad is converged to ~1e-13; atol covers a component near zero
-        np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-9 * np.linalg.norm(ref))
+        # quad is converged to ~1e-13 relative (epsrel), the closed form to round-off (measured 7e-16):
+        # 1e-12 of |B|, on every component (atol covers a component near zero)
+        np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12 * np.linalg.norm(ref))
 
 
 def test_wire_radius_regularises_near_wire_and_vanishes_far():
@@ -234,8 +235,9 @@ def test_wire_radius_regularises_near_wire_and_vanishes_far():
         with_w = np.array(segment_field(*x, *A, *B, J, w))
         bare = np.array(segment_field(*x, *A, *B, J, 0.0))
         rel = np.linalg.norm(with_w - bare) / np.linalg.norm(bare)
-        # 1e-6 relative on the ratio: both are closed forms, only round-off differs
-        assert rel == pytest.approx(w**2 / (rho**2 + w**2), rel=1e-6)
+        # both are closed forms: the difference cancels all but (w / rho)^2 >= 9e-6 of the field, so
+        # float64 round-off (1e-16) becomes at most ~1e-11 of the ratio; 1e-9 leaves room
+        assert rel == pytest.approx(w**2 / (rho**2 + w**2), rel=1e-9)
         assert rel < 1.01 * (w / rho) ** 2
 
 

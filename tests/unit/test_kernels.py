@@ -113,6 +113,25 @@ def test_electrode_walls(state):
     close(brake, eb)
 
 
+def test_electrode_energy(state):
+    """The walls' energy, its constant included (zero beyond r*, continuous at r*), tips beyond a plane too."""
+    z_lo, z_hi = state.position[:, 2].min() + 0.03, state.position[:, 2].max() - 0.05
+    got = kf.electrode_energy(state.position, z_lo, z_hi, RSTAR, KAPPA)
+    expect = ref.electrode_energy(state.position, z_lo, z_hi, RSTAR, KAPPA)
+    assert expect > 0
+    assert got == pytest.approx(expect, rel=1e-12)  # positive terms: round-off relative to the sum
+
+
+def test_axpy(rng):
+    """``out = y + h d``, one product and one sum per element: bit for bit numpy's, also in place."""
+    y, d = rng.normal(size=(50, 3)), rng.normal(size=(50, 3))
+    out = np.empty_like(y)
+    ki.axpy(y, d, 0.01, out)
+    assert np.array_equal(out, y + 0.01 * d)
+    ki.axpy(y, d, 0.01, y)
+    assert np.array_equal(y, out)
+
+
 @pytest.mark.parametrize("exact", [True, False])
 def test_bond_acceleration(state, rng, exact):
     force = rng.normal(size=state.position.shape)

@@ -173,6 +173,56 @@ def test_electrode_split_is_the_numpy_code_bit_for_bit(electrodes, rng, gap):
     assert term.split(ff.context, 1e-3) == {} == old_electrode_split(term, x, v_old, 1e-3)
 
 
+@pytest.fixture
+def monopoles():
+    sim = Simulation.from_scenario(load_scenario("scenarios/fig8_quick.toml", overrides=["rods.count=60"]))
+    ff = sim.force_field
+    return ff, next(t for t in ff.terms if t.name == "external_dipole")
+
+
+@pytest.mark.parametrize("sources", ["the scene's", "within 2 r* of each other"])
+def test_monopole_split_is_the_exact_brake_and_the_compiled_kernel(monopoles, rng, sources):
+    """The split brake of the external dipole's monopoles (``ExternalDipoleForce.split``) is the exact brake
+    (a tip within r* of n poles: v exp(-n k_br dt), the work its change of kinetic energy), and the compiled
+    steps' kernel (``step_tasks._monopole_brake_exact``) is that code bit for bit; with the poles closer than
+    2 r*, tips inside both cores are braked twice as hard."""
+    from selfas_graph.kernels.step_tasks import _monopole_brake_exact
+
+    ff, term = monopoles
+    assert ff.params.integrator.brake == "split" and term.k > 0
+    if sources != "the scene's":
+        term.source = np.array([[0.0, 0.0, 0.02], [0.0, 0.0, -0.02]])
+    n = ff.n_tips
+    x = rng.normal(size=(n, 3))
+    near = rng.choice(2, size=n // 2)  # half the tips within r* of a pole (of both when the poles are close)
+    x[: n // 2] = term.source[near] + rng.uniform(-0.034, 0.034, size=(n // 2, 3))
+    touching = (np.linalg.norm(x[:, None, :] - term.source[None], axis=-1) < term.rstar).sum(axis=1)
+    assert (touching >= 1).sum() >= n // 2 and ((touching == 2).any() == (sources != "the scene's"))
+    v0 = rng.normal(size=(n, 3))
+    dt = 1e-3
+    v_ref, w_ref = ref.monopole_brake(x, v0, term.source, term.rstar, term.k, dt)
+    v = v0.copy()
+    ff.bind(x, v)
+    w = term.split(ff.context, dt)["external_monopole_brake"]
+    np.testing.assert_allclose(v, v_ref, rtol=1e-14)  # exp here, math.exp there: round-off apart
+    assert w == pytest.approx(w_ref, rel=1e-12)  # a difference of kinetic energies (both ~1), summed in another order
+    assert w < 0
+    # the compiled kernel with the decay factors the compiled steps compute (model/compiled.py)
+    decay = np.zeros(3)
+    decay[1:] = np.exp(-term.k * np.array([1.0, 2.0]) * dt)
+    v_kernel = v0.copy()
+    w_kernel, m = _monopole_brake_exact(x, v_kernel, term.source, term.rstar, decay, np.empty((n, 3)), np.empty((n, 3)))
+    assert m == np.count_nonzero(touching)
+    same_bits(v_kernel, v)
+    same_bits(w_kernel, w)
+    x[:, 2] += 100.0  # no tip touches: no work, no change
+    ff.bind(x, v)
+    assert term.split(ff.context, dt) == {}
+    assert (
+        _monopole_brake_exact(x, v_kernel, term.source, term.rstar, decay, np.empty((n, 3)), np.empty((n, 3)))[1] == 0
+    )
+
+
 def test_uniform_force_is_the_reference_and_the_numpy_broadcast(rng):
     q = rng.normal(size=301)
     B = np.array([0.1, -0.0, 0.5])

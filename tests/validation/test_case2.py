@@ -49,6 +49,58 @@ def test_monopoles_on_tips_match_tip_law(rng):
     assert np.abs(brake[3]).max() > 0
 
 
+def test_monopoles_energy_is_the_tip_law_potential(rng):
+    """The energy kernel of the dipole's monopoles is term 1's potential of every tip-source pair, tips
+    inside a core included: its constant (continuity at r*, zero at infinity) is checked, not only its slope.
+    Tolerance 1e-13 of the sum of the pair terms' magnitudes: float64 round-off of 60 terms of both signs."""
+    pos = rng.uniform(-1, 1, (30, 3))
+    src, qs = np.array([[0, 0, 1.0], [0, 0, -1.0]]), np.array([10.0, -10.0])
+    pos[3] = src[0] + [0.0, 0.01, 0.02]  # inside the upper core
+    pos[4] = src[1] + [0.03, -0.02, 0.0]  # inside the lower core
+    pos[5] = src[0] + [0.0, 0.0, RSTAR]  # on the core's edge
+    q = rng.uniform(-2, 2, 30)
+    got = kx.monopoles_energy(pos, q, src, qs, RSTAR, 1.0)
+    scale = sum(
+        abs(ref.monopoles_energy(pos[k : k + 1], q[k : k + 1], src[j : j + 1], qs[j : j + 1], RSTAR, 1.0))
+        for k in range(30)
+        for j in range(2)
+    )
+    assert got == pytest.approx(ref.monopoles_energy(pos, q, src, qs, RSTAR, 1.0), rel=0, abs=1e-13 * scale)
+
+
+def test_monopole_field_inside_and_outside_the_cores(rng):
+    """B of the dipole's monopoles: Q d / r^3 outside r*, Q d / r*^3 inside (docs/model.md 'Term 11'),
+    continuous at r*. Round-off of a two-term sum: 1e-13 relative to the larger term."""
+    src, qs = np.array([[0, 0, 1.0], [0, 0, -1.0]]), np.array([10.0, -10.0])
+    pts = rng.uniform(-1.5, 1.5, (40, 3))
+    pts[:10] = src[0] + rng.uniform(-0.034, 0.034, (10, 3))  # inside the upper core (|d| < sqrt(3) 0.034 < r*)
+    pts[10:20] = src[1] + rng.uniform(-0.034, 0.034, (10, 3))  # and the lower one
+    out = np.empty_like(pts)
+    kx.monopole_field(pts, src, qs, RSTAR, out)
+    expect = ref.monopole_field(pts, src, qs, RSTAR)
+    scale = np.abs(ref.monopole_field(pts, src[:1], qs[:1], RSTAR)) + np.abs(
+        ref.monopole_field(pts, src[1:], qs[1:], RSTAR)
+    )
+    np.testing.assert_array_less(np.abs(out - expect), 1e-13 * scale + 1e-300)
+    # continuous at the core's edge: the two sides differ by the step in r, 2e-12 of r*, times dB/dr
+    edge = src[0] + RSTAR * np.array([[0.6, 0.0, 0.8]])
+    inner, outer = np.empty((1, 3)), np.empty((1, 3))
+    kx.monopole_field(edge * (1 - 1e-12) + src[0] * 1e-12, src, qs, RSTAR, inner)
+    kx.monopole_field(edge * (1 + 1e-12) - src[0] * 1e-12, src, qs, RSTAR, outer)
+    np.testing.assert_allclose(inner, outer, rtol=1e-10)
+
+
+@pytest.mark.parametrize("point", [[0.5, 0.2, 0.3], [0.05, 0.0, 9.0], [2.0, -1.0, -12.0], [0.3, -0.2, -3.0]])
+def test_line_charge_energy_against_direct_integration(point):
+    """The energy of the line charge by the same sinh-substituted quadrature as its force, against a direct
+    integral: its constant, which the finite-difference test below cannot see. At these points (0.05 or more
+    from the axis) 64 nodes meet quad to 2e-15 of U (measured); 1e-12 is round-off with room to spare."""
+    p = np.array([point], dtype=float)
+    t, w = gauss_legendre_01(64)
+    got = kx.line_yukawa_energy(p, np.ones(1), -10.0, 10.0, 3.2, 2.4, 0.09, t, w)
+    assert got == pytest.approx(ref.line_yukawa_energy(p[0], -10.0, 10.0, 3.2, 2.4, 0.09), rel=1e-12)
+
+
 # quad warns about round-off near the axis where the integrand in z is a narrow peak; its
 # result there agrees with a smooth-variable quad to 1e-15, so the warning is not a failure
 @pytest.mark.filterwarnings("ignore::scipy.integrate.IntegrationWarning")
