@@ -152,7 +152,8 @@ def run_to_short_circuit(task: dict) -> dict:
     the seed's), ``seed``, ``t_max`` and ``chunk`` (simulated time per
     :meth:`Simulation.run` call: the granularity of the stop check; results do not depend
     on it); the task keys named in ``echo`` are copied into the result. Returns ``status`` "short_circuit" (``time``), "censored" (none by ``t_max``),
-    "failed" (numerical failure at ``t_end``), "unplaceable" or "error" (``message``),
+    "failed" (numerical failure at ``t_end``), "interrupted" (a signal, ``message``),
+    "unplaceable" or "error" (``message``),
     with ``t_end``, ``steps``, ``events``, ``filament_rods``, ``wall_seconds``.
     """
     seed, t_max = task["seed"], float(task["t_max"])

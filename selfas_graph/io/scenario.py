@@ -274,8 +274,8 @@ def _check_number(path, value, tp, meta, problems):
         if value != 0.0 and not MIN_MAGNITUDE <= abs(value) <= MAX_MAGNITUDE:
             problems.append(
                 f"{path}: {value!r} is out of scale; every number of a scenario is 0 or between "
-                f"{MIN_MAGNITUDE:g} and {MAX_MAGNITUDE:g} in magnitude (reduced units, docs/model.md "
-                f"section 1), so that the forces and energies derived from it stay finite"
+                f"{MIN_MAGNITUDE:g} and {MAX_MAGNITUDE:g} in magnitude (docs/model.md "
+                f"'Reduced units'), so that the forces and energies derived from it stay finite"
             )
             return _INVALID
     elif tp is str:

@@ -139,14 +139,14 @@ ACCURACY_RULES = (
     AccuracyRule(
         "forces.external_dipole.quadrature_points",
         ">= 32 (1.9e-13 of the term's rms force at worst late in Fig. 8, 1.9e-10 nearer the line; "
-        "docs/performance.md 'The line charge's quadrature (Fig. 8)')",
+        'docs/performance.md "The line charge\'s quadrature (Fig. 8)")',
         _term("external_dipole"),
         lambda p: p.forces.external_dipole.quadrature_points >= 32,
     ),
     AccuracyRule(
         "forces.external_dipole.line_charge_slow",
         "false: the line charge at every step (held between the slow sums it errs as they do; "
-        "docs/performance.md 'The line charge's quadrature (Fig. 8)')",
+        'docs/performance.md "The line charge\'s quadrature (Fig. 8)")',
         lambda p: p.forces.external_dipole is not None and p.integrator.slow_every > 1,
         lambda p: not p.forces.external_dipole.line_charge_slow,
     ),

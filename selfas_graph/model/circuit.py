@@ -1,7 +1,8 @@
 """Nodal analysis of the rod network: potentials and rod currents (docs/model.md 'Circuit').
 
 Arrays in, arrays out. The callers (``network.Network.solve`` in a run,
-``graph.ConnectivityGraph.solve`` for a saved graph) hand over the contacts as arrays.
+``graph.ConnectivityGraph.solve`` for a saved graph) hand over the contacts as arrays, both through
+``contactset.solve_contacts``.
 The reduced system is assembled and solved in :mod:`.linear`.
 :func:`solve_network` solves any resistor network; :func:`solve_circuit` turns
 rods and contacts into one.
@@ -42,7 +43,7 @@ import math
 import numpy as np
 
 from selfas_graph.kernels.graph import component_labels
-from selfas_graph.model.linear import AUTO_CG_UNKNOWNS, CG_RTOL, SolveMemo, _potentials, _solve_spd_new  # noqa: F401
+from selfas_graph.model.linear import SolveMemo, _potentials
 from selfas_graph.model.validate import (  # noqa: F401
     _as_count,
     _as_index_array,
@@ -249,7 +250,7 @@ def solve_network(
     """Solve Kirchhoff's laws on any network of resistors with nodes of fixed potential.
 
     The general form of the nodal analysis of :func:`solve_circuit` (docs/model.md
-    section 7), for netlists of any origin: per-edge resistances, parallel edges
+    'Circuit'), for netlists of any origin: per-edge resistances, parallel edges
     (multi-edges), self-loops (they carry 0), isolated nodes (potential NaN), zero
     applied voltage (every node at it, no current).
 
@@ -335,7 +336,7 @@ def solve_circuit(
         holds one); without it every call solves afresh, with the same bits.
     merged : (n_nodes, node_of_tip), optional
         The merge of the tips by their contacts (:func:`merge_tips`), when the caller has it
-        already (:class:`~.graph.Topology` carries it); used with ideal contacts only.
+        already (:class:`~.topology.Topology` carries it); used with ideal contacts only.
 
     Returns
     -------

@@ -18,8 +18,8 @@ Tips are numbered ``2 i`` (tip a, magnetic charge +q_i) and ``2 i + 1``
 (tip b, -q_i) for rod ``i`` (docs/model.md 'Rods').
 
 SHORT_CIRCUIT is emitted when the network goes from carrying no current-carrying
-filament to carrying one (a conducting path now joins two conductor contacts at
-different potentials); OPEN_CIRCUIT when the last such path is broken
+filament to carrying one (a conducting path now joins two different conductor
+attachments, docs/model.md 'Connectivity graph and topology'); OPEN_CIRCUIT when the last such path is broken
 (docs/model.md 'Contacts and events').
 """
 

@@ -101,7 +101,7 @@ class PlasmaFilament:
         -7.5,
         "I_plas, total current, signed along +z (units J0): negative runs from the anode (z = +dZ/2) to "
         "the cathode, parallel to the current of a rod filament spanning the gap, as the paper's discharge "
-        "(docs/model.md term 5)",
+        "(docs/model.md 'Term 5')",
     )
     axis: tuple = spec(None, "(x0, y0) of the channel axis", length=2, factory=lambda: (0.0, 0.0))
 
@@ -268,7 +268,7 @@ class ExternalDipole:
         False,
         "with multiple time stepping (integrator.slow_every > 1), the line charge with the slow sums, "
         "extrapolated between them, instead of at every step; an accuracy knob (docs/performance.md "
-        "'The line charge's quadrature (Fig. 8)')",
+        '"The line charge\'s quadrature (Fig. 8)")',
     )
 
 

@@ -21,8 +21,8 @@ velocity component after it (what the run's health check reads).
 
 The update, the bond check, the constraint and the second check run as two kernels
 (``ab4_step``, ``constrain_bonds_checked``), bit for bit the five calls they replace: at 2400
-tips a kernel call costs more in dispatch than its loop (docs/performance.md, 'Less serial work
-per step').
+tips a kernel call costs more in dispatch than its loop (measured in docs/log/performance-2025-2026.md
+'Less serial work per step').
 """
 
 from __future__ import annotations

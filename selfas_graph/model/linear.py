@@ -90,8 +90,9 @@ def _solve_spd_new(A: sp.csc_matrix, b: np.ndarray, solver: str) -> np.ndarray:
     return _solve_direct(A, b)
 
 
-def _potentials(n_nodes, u, v, g, is_dir, psi_dir, solver, memo=None) -> np.ndarray:
-    """Node potentials of a resistor network with Dirichlet nodes (NaN where floating).
+def _potentials(n_nodes, u, v, g, is_dir, psi_dir, solver, memo=None) -> tuple:
+    """Node potentials of a resistor network with Dirichlet nodes (NaN where floating), as ``(psi, comp,
+    comp_active)``: the potentials, each node's connected component and which components were solved.
 
     ``u``, ``v`` are the resistors' end nodes (``u != v``), ``g`` their conductances.
     Only the connected components with two different Dirichlet values are solved;

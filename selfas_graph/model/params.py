@@ -258,8 +258,8 @@ class NeighbourParams:
     centre_skin: Optional[float] = spec(
         None,
         "Verlet skin of the rod-centre list of the Yukawa sum (default: skin); a longer one means fewer builds "
-        "and longer rows; the same forces, summed in another order (docs/performance.md 'The rod-centre "
-        "list's own skin')",
+        'and longer rows; the same forces, summed in another order (docs/performance.md "The rod-centre '
+        "list's own skin\")",
         gt=0.0,
         le=100.0,
     )

@@ -62,7 +62,7 @@ __all__ = [
 FREE = 0  #: no contacts at all
 CLUSTER = 1  #: stuck to other rods; the structure touches no conductor
 DEAD_END = 2  #: in a structure touching a conductor, on no path between different attachments
-FILAMENT = 3  #: on a path between conductor attachments of different potential
+FILAMENT = 3  #: on a path between different conductor attachments
 ROLE_NAMES = {FREE: "free", CLUSTER: "cluster", DEAD_END: "dead_end", FILAMENT: "filament"}
 
 

@@ -204,14 +204,25 @@ _QUOTED = re.compile("'([^'\\n]+)'|\"([^\"\\n]+)\"")
 OLD_NAME = "MODEL" + ".md"  # the project's model text, which users do not have
 
 
-def _model_md_headings():
-    """Headings of docs/model.md without their numbers, and the part of each before a colon."""
+def _model_md_headings(page="model.md"):
+    """Headings of docs/model.md (or another page of docs/) without their numbers, and the part of each
+    before a colon."""
     names = set()
-    for line in (DOCS / "model.md").read_text(encoding="utf-8").splitlines():
+    for line in (DOCS / page).read_text(encoding="utf-8").splitlines():
         if line.startswith("#"):
             title = re.sub(r"^\d+[a-z]?(\.\d+)?\.?\s+", "", line.lstrip("#").strip())
             names |= {title, title.split(":")[0].strip()}
     return names
+
+
+def _joined(path):
+    """The text of ``path`` with a citation that runs over lines made one line: adjacent string literals
+    (a heading cut between two f-strings of a message) and comment lines continued are joined, spaces
+    collapsed."""
+    text = re.sub(r"""["']\s*\n\s*[rfbu]*["']""", "", path.read_text(encoding="utf-8"))
+    text = text.replace("\\'", "'").replace('\\"', '"')  # escaped quotes inside a literal
+    text = re.sub(r"\n\s*#\s*", " ", text)
+    return re.sub(r"\s+", " ", text)
 
 
 def _citing_files():
@@ -231,10 +242,28 @@ def test_every_docs_model_md_section_cited_in_the_code_exists():
     headings = _model_md_headings()
     bad = []
     for path in _citing_files():
-        for group in MODEL_CITE.findall(path.read_text(encoding="utf-8")):
+        for group in MODEL_CITE.findall(_joined(path)):
             names = [a or b for a, b in re.findall(_QUOTED, group)]
             bad += [f"{path.relative_to(ROOT)}: {name!r}" for name in names if name not in headings]
     assert not bad, f"citations of docs/model.md sections that do not exist: {sorted(set(bad))}"
+
+
+#: the code cites docs/performance.md the same way, with or without a comma before the heading
+PERF_CITE = re.compile(rf"docs/performance\.md,?\s+({_NAME}(?:(?:,\s*|\s+or\s+|\s+and\s+){_NAME})*)")
+
+
+def test_every_docs_performance_md_section_cited_in_the_code_exists():
+    """Every docs/performance.md section cited in the code, tests and scenes is a heading of that page
+    (sections move to the dated log when their figures are superseded)."""
+    headings = _model_md_headings("performance.md")
+    cited, bad = 0, []
+    for path in _citing_files():
+        for group in PERF_CITE.findall(_joined(path)):
+            names = [a or b for a, b in re.findall(_QUOTED, group)]
+            cited += len(names)
+            bad += [f"{path.relative_to(ROOT)}: {name!r}" for name in names if name not in headings]
+    assert cited > 30  # not vacuous
+    assert not bad, f"citations of docs/performance.md sections that do not exist: {sorted(set(bad))}"
 
 
 def test_code_cites_docs_model_md_sections_by_name():

@@ -184,7 +184,7 @@ class CurrentLorentzForce(Term):
             self._near_pairs(ctx, active, mine, f)
 
     def _near_pairs(self, ctx, active, mine, f):
-        """The adapted rule for the pairs closer than ``near_range`` (kernels/currents.py
+        """The adapted rule for the pairs closer than ``near_range`` (kernels/lorentz.py
         ``lorentz_near_correction``): the plain rule's share of each such pair is replaced."""
         pos = ctx.position
         centre = 0.5 * (pos[2 * active] + pos[2 * active + 1])
