@@ -385,7 +385,7 @@ def events_in_run(scenario_path, settle, checkpoint, steps, peer_graphs):
     finally:
         for owner, name, fn in saved:
             setattr(owner, name, fn)
-    topo = sim.graph.topology()
+    topo = sim.network.topology()
     # the peer: the scipy/networkx classification on the same graphs, checked to agree
     peer, ours = [], []
     for args in graphs:

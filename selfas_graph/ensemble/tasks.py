@@ -201,7 +201,7 @@ def run_to_short_circuit(task: dict) -> dict:
         out["status"], out["message"] = "error", f"{type(exc).__name__}: {exc}"
     if sim is not None:
         out["t_end"], out["steps"], out["events"] = float(sim.state.time), int(sim.state.step), len(sim.events)
-        if sim.graph is not None:
-            out["filament_rods"] = int(sim.graph.topology().n_filament)
+        if sim.network is not None:
+            out["filament_rods"] = int(sim.network.topology().n_filament)
     out["wall_seconds"] = time.perf_counter() - t0
     return out

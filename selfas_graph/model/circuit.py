@@ -1,8 +1,7 @@
 """Nodal analysis of the rod network: potentials and rod currents (docs/model.md 'Circuit').
 
-Arrays in, arrays out. The callers (``network.Network.solve`` in a run,
-``graph.ConnectivityGraph.solve`` for a saved graph) hand over the contacts as arrays, both through
-``contactset.solve_contacts``.
+Arrays in, arrays out: ``contactset.solve_contacts`` hands over the contacts as arrays (for
+``network.Network.solve`` in a run and ``graph.ConnectivityGraph.solve`` for a saved graph).
 The reduced system is assembled and solved in :mod:`.linear`.
 :func:`solve_network` solves any resistor network; :func:`solve_circuit` turns
 rods and contacts into one.

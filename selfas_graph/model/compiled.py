@@ -158,7 +158,7 @@ class CompiledSteps:
             ]
         )
         self.slot_table = np.array(integ._slots, dtype=np.int64)
-        self.split_channel = np.array([ff._channel_index.get(c, -1) for c in SPLIT_BRAKES], dtype=np.int64)
+        self.split_channel = np.array([ff._work_index.get(c, -1) for c in SPLIT_BRAKES], dtype=np.int64)
         #: the rows of f_n, f_{n-1}, f_{n-2}, f_{n-3} of step i in the powers oldest first
         self._windows = np.arange(CHUNK)[:, None] + np.array([3, 2, 1, 0])[None, :]
         self.fast_names = [t.name for t in ff.terms if not t.slow and not t.counts_own_calls]

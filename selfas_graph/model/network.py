@@ -208,7 +208,7 @@ class Network:
             )
         current = None
         currents_changed = False
-        if self.circuit and self.changed:
+        if self.circuit:  # something changed (else the update returned above)
             if self.has_short_circuit:
                 self.solution = self.solve()
                 # rods off every conductor-to-conductor path carry no current by topology; the

@@ -13,7 +13,9 @@ model): :class:`Periodic` (every ``period`` steps, at ``phase``), :class:`Always
 :class:`When` (a predicate of no arguments, e.g. a wall clock or a signal flag). An
 operation has a ``trigger`` and ``act(sim, i, n_steps)``; it may also define
 ``start(sim, n_steps)`` (before the first step of a run), ``flush(sim)`` (hand buffered data
-on, before a checkpoint) and ``finish(sim)`` (after the last step of a run).
+on, before a checkpoint) and ``finish(sim)`` (after the last step of a run). An operation with
+``act_steps(first_step, errors)`` is handed the bond errors of every step, a run of steps at a
+time, instead of acting on a trigger (:class:`PerStepRows`).
 """
 
 from __future__ import annotations
@@ -175,7 +177,9 @@ def run_operations(sim, writer, every, n_steps, progress, progress_every, checkp
 
 class PerStepRows(Operation):
     """Hands the writer the bond error of every step; the writer buffers the rows until the
-    next frame or checkpoint (``writer.buffer_per_step``, ``writer.flush_pending``)."""
+    next frame or checkpoint (``writer.buffer_per_step``, ``writer.flush_pending``). The rows come
+    by :meth:`act_steps`, a run of steps at a time (:func:`per_step_rows`); ``run`` does not call
+    :meth:`act` of an operation that takes them so."""
 
     def __init__(self, writer, every: int):
         self.writer = writer
@@ -184,9 +188,6 @@ class PerStepRows(Operation):
     def start(self, sim, n_steps):
         # frames fall at least every `every` steps: the buffer never holds more rows
         self.writer.reserve_per_step(min(self.every, n_steps) + 1)
-
-    def act(self, sim, i, n_steps):
-        self.writer.buffer_per_step(sim.state.step, sim.integrator.bond_error_before)
 
     def act_steps(self, first_step, errors):
         """The rows of a run of compiled steps from ``first_step`` on (their bond errors ``errors``)."""

@@ -268,9 +268,14 @@ class Simulation:
 
     # ------------------------------------------------------------------ run loop
     @property
+    def frame_steps(self) -> int:
+        """Steps between saved frames: ``output.interval`` rounded to whole steps, at least one."""
+        return max(1, int(round(self.params.output.interval / self.dt)))
+
+    @property
     def frame_interval(self) -> float:
-        """Simulated time between saved frames: ``output.interval`` rounded to whole steps."""
-        return max(1, int(round(self.params.output.interval / self.dt))) * self.dt
+        """Simulated time between saved frames: :attr:`frame_steps` steps."""
+        return self.frame_steps * self.dt
 
     def steps_for(self, duration: float) -> int:
         """Number of steps that cover ``duration`` (rounded to the nearest step)."""
@@ -325,7 +330,7 @@ class Simulation:
         """
         t_end = self.params.run.t_end if t_end is None else t_end
         n_steps = self.steps_to(t_end)
-        every = max(1, int(round(self.params.output.interval / self.dt)))
+        every = self.frame_steps
         summary = RunSummary(t_start=self.state.time)
         ops = op.run_operations(self, writer, every, n_steps, progress, progress_every, checkpointer, stop, check_every)
         if self.observe.energy0 is None:
@@ -353,7 +358,8 @@ class Simulation:
             self._ops = ()
         summary.t_end = self.state.time
         summary.max_bond_error = self.health.max_bond_error
-        obs = ops[1].last_observables if writer is not None and n_steps else None
+        frames = next((o for o in ops if isinstance(o, op.FrameWriter)), None)
+        obs = frames.last_observables if frames is not None and n_steps else None
         obs = obs if obs is not None else self.observables()
         summary.energy_balance = float(obs["energy_balance"])
         summary.energy_scale = energy_scale(obs)

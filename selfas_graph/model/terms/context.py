@@ -74,11 +74,15 @@ class PairLists:
 
     def tips(self, position) -> NeighbourList:
         """The tip list, up to date for ``position`` (n_tips, 3); built at its first use."""
+        self.tip_list().update(position)
+        return self.tip
+
+    def tip_list(self) -> NeighbourList:
+        """The tip list as it is, made (not built) if there is none yet."""
         if self.tip is None:
             # every rank needs the whole tip list (contacts, brakes, close pairs); under MPI each builds
             # the rows of its block and the rows are gathered (parallel.py RowBlocks.gather_list)
             self.tip = NeighbourList(self.tip_range, self.skin, exclude_same_rod=True, share=self.blocks)
-        self.tip.update(position)
         return self.tip
 
     def centres(self, centre) -> NeighbourList:

@@ -90,7 +90,7 @@ class CurrentFieldForce(Term):
         self.precision = p.forces.current_field.precision
         self.kernel = _TIP_KERNEL[self.precision]
         self.wire_radius = wire_radius(p)
-        self.tree = p.forces.current_field.method == "tree"
+        self.use_tree = p.forces.current_field.method == "tree"
         self.opening_angle = p.forces.current_field.opening_angle
         self._gathered = False
 
@@ -100,7 +100,7 @@ class CurrentFieldForce(Term):
         rc = ctx.currents
         if len(rc.active_rod):
             lo, hi = ctx.blocks.tips
-            tree = ctx.current_tree() if self.tree else None
+            tree = ctx.current_tree() if self.use_tree else None
             self._gathered = tree is not None
             if tree is None:
                 self.kernel(ctx.position, ctx.tip_charge, rc.active_rod, rc.current, self.wire_radius, lo, hi, f)
@@ -140,7 +140,7 @@ class CurrentLorentzForce(Term):
         self.near_range = p.forces.current_lorentz.near_range
         self.panel_t, self.panel_w = kl.gauss_legendre_01(kl.NEAR_PANEL_POINTS)
         self.wire_radius = wire_radius(p)
-        self.tree = p.forces.current_lorentz.method == "tree"
+        self.use_tree = p.forces.current_lorentz.method == "tree"
         self.opening_angle = p.forces.current_lorentz.opening_angle
         #: the terms that are sources of a magnetic field (FieldSource), in term order: handed in by the
         #: force field that holds this term, once every term is built
@@ -157,7 +157,7 @@ class CurrentLorentzForce(Term):
         r_lo, r_hi = np.searchsorted(active, ctx.blocks.rods)
         mine = active[r_lo:r_hi]
         ng = len(self.t)
-        if self.tree and not ctx.blocks.serial:
+        if self.use_tree and not ctx.blocks.serial:
             # under MPI the tree is asked for every rod's points, the ranks sharing the walks
             # (tree_field): a rank whose block holds no rod carrying current takes its share too
             every = ctx.buffer("gl_points_all", len(active) * ng)
@@ -215,7 +215,7 @@ class CurrentLorentzForce(Term):
         :func:`~selfas_graph.kernels.currents.rod_current_field_mixed`) and by its method (the tree:
         :func:`~selfas_graph.kernels.currenttree.current_tree_field`)."""
         rc = ctx.currents
-        tree = ctx.current_tree() if self.tree else None
+        tree = ctx.current_tree() if self.use_tree else None
         if tree is not None:
             mixed = self.precision == "mixed"
             tree_field(ctx.blocks, tree, points, exclude_rod, self.opening_angle, self.wire_radius, out, mixed)

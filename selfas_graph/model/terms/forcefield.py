@@ -106,7 +106,9 @@ class ForceField:
         self._channel_block = np.zeros((len(self.channels), self.n_tips, 3))
         self.out = {name: self._channel_block[j] for j, (name, _) in enumerate(self.channels)}
         self._split_terms = [t for t in self.terms if type(t).split is not Term.split]
-        self._channel_index = {name: j for j, name in enumerate(self.nonconservative)}
+        self._work_index = {
+            name: j for j, name in enumerate(self.nonconservative)
+        }  # channel -> its slot in work and power
         #: the rows of the non-conservative channels in the channel block, whose powers evaluate returns
         self._powered = np.array(
             [j for j, (_, conservative) in enumerate(self.channels) if not conservative], dtype=np.int64
@@ -282,9 +284,8 @@ class ForceField:
         if self.mts is not None:
             d.update(self.mts.state_dict())
         for name, nl in (("tip_nl", self.lists.tip), ("centre_nl", self.lists.centre)):
-            if nl is not None and nl.reference is not None:
-                d[f"{name}_reference"] = nl.reference.copy()
-                d[f"{name}_builds"] = nl.n_builds
+            if nl is not None:  # tip_nl_reference, tip_nl_builds, ... (NeighbourList.state_dict)
+                d.update({f"{name}_{k}": v for k, v in nl.state_dict().items()})
         return d
 
     def load_state_dict(self, d: dict) -> None:
@@ -294,14 +295,10 @@ class ForceField:
         as built: a neighbour list is then built at its next use, and without matching held forces
         every slow term is computed at the next evaluation.
         """
-        if "tip_nl_reference" in d:
-            nl = self.tip_neighbours(d["tip_nl_reference"])
-            nl.build(np.array(d["tip_nl_reference"]))
-            nl.n_builds = int(d["tip_nl_builds"])
-        centre = self.lists.centre
-        if "centre_nl_reference" in d and centre is not None:
-            centre.build(np.array(d["centre_nl_reference"]))
-            centre.n_builds = int(d["centre_nl_builds"])
+        tip = self.lists.tip_list() if "tip_nl_reference" in d else None
+        for name, nl in (("tip_nl", tip), ("centre_nl", self.lists.centre)):
+            if nl is not None:
+                nl.load_state_dict({k[len(name) + 1 :]: v for k, v in d.items() if k.startswith(f"{name}_")})
         if self.mts is not None:
             self.mts.load_state_dict(d)
 
@@ -314,7 +311,7 @@ class ForceField:
         ctx.bind(position, velocity)
         for t in self._split_terms:
             for channel, w in t.split(ctx, dt).items():
-                work[self._channel_index[channel]] += w
+                work[self._work_index[channel]] += w
 
     def potential_energy(self, position) -> dict:
         """Potential energy of each conservative channel at ``position``."""
@@ -350,7 +347,7 @@ class ForceField:
                 d["tip_magnetic_sum"] = (
                     f"tree (order {t.order}, opening angle {t.theta:g}, groups of up to {t.group_size} tips, "
                     f"{t.precision} near field)"
-                    if t.tree
+                    if t.use_tree
                     else "direct"
                 )
             if isinstance(t, YukawaForce):
@@ -358,7 +355,7 @@ class ForceField:
             if t.name in ("current_field", "current_lorentz"):
                 d[f"{t.name}_sum"] = (
                     f"tree (opening angle {t.opening_angle:g}, octupoles, {t.precision} near rods)"
-                    if t.tree
+                    if t.use_tree
                     else "direct"
                 )
         return d

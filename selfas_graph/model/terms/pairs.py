@@ -55,7 +55,7 @@ class TipMagneticForce(Term):
         self.rstar = p.rods.rstar
         self.kappa = p.rods.tip_stiffness
         tm = p.forces.tip_magnetic
-        self.tree = tm.method == "tree" or (tm.method == "auto" and state.n_rods >= tm.tree_above)
+        self.use_tree = tm.method == "tree" or (tm.method == "auto" and state.n_rods >= tm.tree_above)
         self.theta = tm.opening_angle
         self.order = tm.order
         self.group_size = tm.group_size
@@ -66,7 +66,7 @@ class TipMagneticForce(Term):
 
     def compute(self, ctx, out):
         x, y, z = ctx.soa()
-        if self.tree:
+        if self.use_tree:
             try:
                 tree = self._build_tree(ctx, x, y, z)
             except ValueError:
