@@ -12,7 +12,7 @@ import h5py
 import numpy as np
 
 from ..model.circuitlog import CIRCUIT_LOG_DTYPE, circuit_log_array
-from ..model.events import CONDUCTOR_NAMES, EVENT_DTYPE, KIND_NAMES, OPEN_CIRCUIT, SHORT_CIRCUIT
+from ..model.events import CONDUCTOR_NAMES, KIND_NAMES, OPEN_CIRCUIT, SHORT_CIRCUIT, event_array
 from ..model.topology import ROLE_NAMES
 from . import layout
 from .h5md_format import (
@@ -413,7 +413,7 @@ class RunWriter(_PendingRows):
             ds.attrs["kind_names"] = json.dumps({int(k): v for k, v in KIND_NAMES.items()})
             ds.attrs["conductor_names"] = json.dumps({int(k): v for k, v in CONDUCTOR_NAMES.items()})
         if len(rows):
-            _append(self.f[layout.EVENTS], np.array([tuple(r) for r in rows], dtype=EVENT_DTYPE))
+            _append(self.f[layout.EVENTS], event_array(rows))
 
     def write_circuit_log(self, rows):
         """Append circuit-log rows ``(step, time, kind, total_current, rods_in_series, filament_rods)``

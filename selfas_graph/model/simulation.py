@@ -159,7 +159,7 @@ class Simulation:
         snap.update(
             max_bond_error=self.health.max_bond_error,
             energy0=np.nan if self.observe.energy0 is None else self.observe.energy0,
-            events=np.array([tuple(r) for r in self.events], dtype=ev.EVENT_DTYPE),
+            events=ev.event_array(self.events),
             circuit_log=circuit_log_array(self.circuit_log),
             short_circuit_time=np.nan if self.short_circuit_time is None else self.short_circuit_time,
         )
