@@ -256,8 +256,8 @@ def run(args):
         hist = np.random.default_rng(3).normal(size=(4, ntips, 3))
         slots = np.arange(4, dtype=np.int64)
         ell = st.bond_length()
-        ff.evaluate(st.position, st.velocity, np.zeros(len(ff._powered)))
-        block, powered, power = ff._channel_block, ff._powered, np.zeros(len(ff._powered))
+        ff.evaluate(st.position, st.velocity, np.zeros(len(ff.powered)))
+        block, powered, power = ff.channel_block, ff.powered, np.zeros(len(ff.powered))
         e = np.empty(ntips)
         rep_big = args.repeat if n <= 6000 else max(2, args.repeat // 3)
         jobs = [

@@ -144,9 +144,9 @@ class CompiledSteps:
         self.held_keys = keys
         n, n_rods = st.n_tips, st.n_rods
         self.tip_far = mts.tip_far if tip is not None else np.zeros((n, 3))
-        self.tip_fast = mts._tip_fast if tip is not None else np.zeros((n, 3))
+        self.tip_fast = mts.tip_fast if tip is not None else np.zeros((n, 3))
         if mts.extrapolate and keys:
-            self.rate, self.base = mts._rate_block, mts._base_block
+            self.rate, self.base = mts.rate_block, mts.base_block
         else:
             self.rate = self.base = np.zeros((len(keys), n, 3))
         # where the Python step asks the tip list for an update: evaluation, split tip brake, contact test
@@ -157,8 +157,8 @@ class CompiledSteps:
                 sim.network is not None,
             ]
         )
-        self.slot_table = np.array(integ._slots, dtype=np.int64)
-        self.split_channel = np.array([ff._work_index.get(c, -1) for c in SPLIT_BRAKES], dtype=np.int64)
+        self.slot_table = np.array(integ.slots, dtype=np.int64)
+        self.split_channel = np.array([ff.work_index.get(c, -1) for c in SPLIT_BRAKES], dtype=np.int64)
         #: the rows of f_n, f_{n-1}, f_{n-2}, f_{n-3} of step i in the powers oldest first
         self._windows = np.arange(CHUNK)[:, None] + np.array([3, 2, 1, 0])[None, :]
         self.fast_names = [t.name for t in ff.terms if not t.slow and not t.counts_own_calls]
@@ -211,13 +211,13 @@ class CompiledSteps:
             limits = (0.0, np.nan, np.nan, np.nan, 0.0)
         limits = np.array(limits + (BOND_BREAK, MAX_STEP_DISPLACEMENT, health.max_bond_error))
         base_step = (
-            np.array([-1 if b is None else b for b in mts._base_step.values()], dtype=np.int64)
+            np.array([-1 if b is None else b for b in mts.base_step.values()], dtype=np.int64)
             if (mts.extrapolate)
             else np.full(len(self.held), -1, dtype=np.int64)
         )
         el = self.el
-        decay_walls = el._decay if el is not None and el._decay is not None else np.zeros(3)
-        if el is not None and el.split_mode and el.k != 0.0 and el._decay_dt != integ.dt:
+        decay_walls = el.decay if el is not None and el.decay is not None else np.zeros(3)
+        if el is not None and el.split_mode and el.k != 0.0 and el.decay_dt != integ.dt:
             return 0, NEEDS_STEP  # the electrode brake's decay is made by its first split step
         if self.phase_time.shape not in ((0,), (9,)):
             raise ValueError(f"phase_time must be empty or (9,) float64, not of shape {self.phase_time.shape}")
@@ -239,9 +239,9 @@ class CompiledSteps:
             exact_bond=integ.exact_bond,
             project=integ.project,
             correct_velocity=integ.correct_velocity,
-            block=ff._channel_block,
+            block=ff.channel_block,
             total=ff.total,
-            powered=ff._powered,
+            powered=ff.powered,
             channel=self.channel,
             tip_charge=st.tip_charge,
             rod_charge=st.rod_charge,

@@ -76,7 +76,7 @@ class AdamsBashforth4:
         self._tmp = [np.zeros((n, 3)) for _ in range(4)]
         self._p = np.zeros(n_ch)
         #: the history slots of f_n, f_{n-1}, f_{n-2}, f_{n-3} for each head
-        self._slots = [np.array([(h - j) % 4 for j in range(4)], dtype=np.int64) for h in range(4)]
+        self.slots = [np.array([(h - j) % 4 for j in range(4)], dtype=np.int64) for h in range(4)]
 
     def reset_history(self):
         """Forget the derivative history; the next three steps are RK4 again."""
@@ -132,7 +132,7 @@ class AdamsBashforth4:
         ell = state.bond_length()
         # the bond error of the updated positions is the step's own; the brakes below change velocities only
         if self.count == 4:
-            slots = self._slots[h]
+            slots = self.slots[h]
             self.work += self.dt * (AB4_WEIGHTS @ self.hist_p[slots])
             self.bond_error_before = ab4_step(x, v, self.hist_v, self.hist_a, slots, self.dt, ell)
         else:

@@ -300,7 +300,7 @@ def test_current_every_evaluates_the_current_terms_every_mth_step(rng):
     assert ff.calls["tip_magnetic"] == calls["tip_magnetic"] + 5
     sim.step(4)  # steps 25-28, full at 28 for the tip-tip sum: the current force extrapolated from 12 and 24
     assert ff.calls["current_field"] == calls["current_field"] + 3
-    assert mts._base_step["current_field"] == 24
+    assert mts.base_step["current_field"] == 24
     want = mts._rate["current_field"] * 4.0 + mts._base["current_field"]
     np.testing.assert_array_equal(ff.out["current_field"], want)
     assert not np.array_equal(want, mts._base["current_field"])
@@ -314,7 +314,7 @@ def test_current_every_new_currents_before_a_fast_step(rng):
     ff, mts = sim.force_field, sim.force_field.mts
     ff.set_currents(np.linspace(0.5, 1.0, s.n_rods))
     sim.step(1)  # step 17: fast, the new currents
-    assert ff.calls["current_field"] == 1 and mts._base_step["current_field"] is None
+    assert ff.calls["current_field"] == 1 and mts.base_step["current_field"] is None
     sim.step(3)  # steps 18-20: full at 20, the current terms too (no base at a step start yet)
     assert ff.calls["current_field"] == 2 and not mts._rated["current_field"]
     sim.step(4)  # step 24: again (a rate needs two evaluations at step starts)

@@ -91,7 +91,9 @@ class ElectrodesForce(Term):
         self.kappa = p.rods.tip_stiffness
         self.k = p.forces.tip_brake.coefficient if p.forces.tip_brake is not None else 0.0
         self.split_mode = p.integrator.brake == "split"
-        self._decay, self._decay_dt = None, None
+        #: exp(-n k_br dt) for n = 0, 1, 2 planes touched, and the dt it was computed for (the compiled steps
+        #: take it from here, model/compiled.py)
+        self.decay, self.decay_dt = None, None
 
     def compute(self, ctx, out):
         k = 0.0 if self.split_mode else self.k
@@ -110,13 +112,13 @@ class ElectrodesForce(Term):
     def split(self, ctx, dt):
         if self.k == 0.0:
             return {}
-        if self._decay_dt != dt:
+        if self.decay_dt != dt:
             # dv/dt = -n k v, exactly, for a tip touching n planes
-            self._decay = np.exp(-self.k * np.array([0.0, 1.0, 2.0]) * dt)
-            self._decay_dt = dt
+            self.decay = np.exp(-self.k * np.array([0.0, 1.0, 2.0]) * dt)
+            self.decay_dt = dt
         before, after = ctx.buffer("electrode_before", ctx.n_tips), ctx.buffer("electrode_after", ctx.n_tips)
         # the work: the change of kinetic energy of the touched tips, as kinetic_of sums it
-        work, m = kf.electrode_brake_exact(ctx.position, ctx.velocity, *self.z, self.rstar, self._decay, before, after)
+        work, m = kf.electrode_brake_exact(ctx.position, ctx.velocity, *self.z, self.rstar, self.decay, before, after)
         return {"electrode_brake": work} if m else {}
 
     def energy(self, ctx):

@@ -102,15 +102,15 @@ class ForceField:
                 t.field_sources = tuple(self.field_sources)
         self.nonconservative = [name for name, cons in self.channels if not cons]
         self.conservative = [name for name, cons in self.channels if cons]
-        # the channel buffers are the rows of one array, summed in one pass (kernels.integrate.channel_sum)
-        self._channel_block = np.zeros((len(self.channels), self.n_tips, 3))
-        self.out = {name: self._channel_block[j] for j, (name, _) in enumerate(self.channels)}
+        #: the channel buffers as the rows of one array, summed in one pass (kernels.integrate.channel_sum);
+        #: this and the two below are read by the compiled steps (model/compiled.py)
+        self.channel_block = np.zeros((len(self.channels), self.n_tips, 3))
+        self.out = {name: self.channel_block[j] for j, (name, _) in enumerate(self.channels)}
         self._split_terms = [t for t in self.terms if type(t).split is not Term.split]
-        self._work_index = {
-            name: j for j, name in enumerate(self.nonconservative)
-        }  # channel -> its slot in work and power
+        #: a non-conservative channel's slot in the work and power arrays
+        self.work_index = {name: j for j, name in enumerate(self.nonconservative)}
         #: the rows of the non-conservative channels in the channel block, whose powers evaluate returns
-        self._powered = np.array(
+        self.powered = np.array(
             [j for j, (_, conservative) in enumerate(self.channels) if not conservative], dtype=np.int64
         )
         self.total = np.zeros((self.n_tips, 3))
@@ -264,9 +264,9 @@ class ForceField:
         # ((0 + c_0) + c_1) + ..., in channel order; with the power of each non-conservative channel
         # summed as np.einsum("ij,ij->", f, velocity) sums it
         if power is None:
-            channel_sum(total, self._channel_block)
+            channel_sum(total, self.channel_block)
         else:
-            channel_sum_power(total, self._channel_block, velocity, self._powered, power)
+            channel_sum_power(total, self.channel_block, velocity, self.powered, power)
         return total
 
     def held_forces(self) -> dict:
@@ -311,7 +311,7 @@ class ForceField:
         ctx.bind(position, velocity)
         for t in self._split_terms:
             for channel, w in t.split(ctx, dt).items():
-                work[self._work_index[channel]] += w
+                work[self.work_index[channel]] += w
 
     def potential_energy(self, position) -> dict:
         """Potential energy of each conservative channel at ``position``."""

@@ -46,7 +46,8 @@ class MultipleTimeStepping:
             #: close tip pairs: full force below r_in, switched off smoothly up to r_out
             self.fast_range = ((ip.fast_range - 1.0) * rstar, ip.fast_range * rstar)
             self.tip_far = np.zeros_like(out["tip_magnetic"])
-            self._tip_fast = np.zeros_like(out["tip_magnetic"])
+            #: the fast part of the tip-tip force (also written by the compiled steps, model/compiled.py)
+            self.tip_fast = np.zeros_like(out["tip_magnetic"])
             self._fast = tip_term.fast if clock is None else clock.wrap("tip_magnetic_fast", tip_term.fast)
         #: slow term name -> the held arrays it refreshes (``held_forces`` keys)
         self.slow_keys = {
@@ -71,14 +72,15 @@ class MultipleTimeStepping:
         }
         self.extrapolate = ip.slow_extrapolation
         if self.extrapolate:
-            # bases and rates as the rows of two blocks, so that one kernel call extrapolates them all
+            #: bases and rates as the rows of two blocks, so that one kernel call extrapolates them all; with
+            #: base_step (the step of each base, None before one) read by the compiled steps
             keys = list(self._held)
             self._held_arrays = tuple(self._held[k] for k in keys)
-            self._base_block = np.zeros((len(keys),) + self._held_arrays[0].shape) if keys else None
-            self._rate_block = np.zeros_like(self._base_block) if keys else None
-            self._base = {k: self._base_block[j] for j, k in enumerate(keys)}
-            self._rate = {k: self._rate_block[j] for j, k in enumerate(keys)}
-            self._base_step = {k: None for k in self._base}
+            self.base_block = np.zeros((len(keys),) + self._held_arrays[0].shape) if keys else None
+            self.rate_block = np.zeros_like(self.base_block) if keys else None
+            self._base = {k: self.base_block[j] for j, k in enumerate(keys)}
+            self._rate = {k: self.rate_block[j] for j, k in enumerate(keys)}
+            self.base_step = {k: None for k in self._base}
             #: whether a held array's rate was taken over a gap of evaluations (not zeroed by a start,
             #: a long gap or new currents): with current_every a term whose rate
             #: is not is computed at every full evaluation (:meth:`skips`)
@@ -113,7 +115,7 @@ class MultipleTimeStepping:
         fast = None
         tip_fresh = "tip_magnetic" in refreshed
         if self.tip_term is not None:
-            fast = self._tip_fast
+            fast = self.tip_fast
             self._fast(ctx, *self.fast_range, fast)
             if tip_fresh:
                 np.subtract(self.out["tip_magnetic"], fast, out=self.tip_far)
@@ -137,7 +139,7 @@ class MultipleTimeStepping:
         steps = self._steps  # steps since each held force's base, NaN: left as it is
         extrapolated = False
         for j, (key, arr) in enumerate(self._held.items()):
-            base, rate, prev = self._base[key], self._rate[key], self._base_step[key]
+            base, rate, prev = self._base[key], self._rate[key], self.base_step[key]
             steps[j] = np.nan
             if key in refreshed:
                 gap = None if (prev is None or step is None or not full) else step - prev
@@ -151,13 +153,13 @@ class MultipleTimeStepping:
                     rate.fill(0.0)
                     self._rated[key] = False
                 base[:] = arr
-                self._base_step[key] = step if full else None
+                self.base_step[key] = step if full else None
             elif prev is not None and step is not None:
                 steps[j] = step - prev
                 extrapolated = True
         if extrapolated:
             # rate * (step - prev) + base of each, as np.multiply(rate, steps, out=arr); arr += base
-            extrapolate_all(self._held_arrays, self._rate_block, self._base_block, steps)
+            extrapolate_all(self._held_arrays, self.rate_block, self.base_block, steps)
 
     def held_forces(self) -> dict:
         """The slow forces held between full evaluations, by name (the slow channels and ``tip_far``,
@@ -172,7 +174,7 @@ class MultipleTimeStepping:
         if self.extrapolate:
             snap.update({f"mts_base_{k}": v.copy() for k, v in self._base.items()})
             snap.update({f"mts_rate_{k}": v.copy() for k, v in self._rate.items()})
-            snap["mts_base_step"] = np.array([-1 if b is None else b for b in self._base_step.values()], dtype=np.int64)
+            snap["mts_base_step"] = np.array([-1 if b is None else b for b in self.base_step.values()], dtype=np.int64)
             snap["mts_rated"] = np.array(list(self._rated.values()), dtype=bool)
         return snap
 
@@ -191,7 +193,7 @@ class MultipleTimeStepping:
                 self._base[k][:] = snap[f"mts_base_{k}"]
                 self._rate[k][:] = snap[f"mts_rate_{k}"]
             steps = np.asarray(snap["mts_base_step"])
-            self._base_step = {k: (None if b < 0 else int(b)) for k, b in zip(self._base, steps)}
+            self.base_step = {k: (None if b < 0 else int(b)) for k, b in zip(self._base, steps)}
             rated = np.asarray(snap["mts_rated"]) if "mts_rated" in snap else (steps >= 0)
             self._rated = {k: bool(r) for k, r in zip(self._base, rated)}
         return True
