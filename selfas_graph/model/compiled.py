@@ -195,20 +195,7 @@ class CompiledSteps:
         mts, health = ff.mts, sim.health
         nl = ff.lists.tip
         n_max = min(int(n_max), CHUNK)
-        if net is not None:
-            pairs, on_c, on_a, on_f = net.contacts.search_arrays
-            tr = net.tracker
-            el = tr.electrodes if tr.electrodes is not None else (np.nan, np.nan)
-            fr = tr.filament_radius if tr.filament_radius is not None else np.nan
-            circuit_heights = net.circuit and len(net.filament_tip)
-            fil_tip = np.asarray(net.filament_tip, dtype=np.int64) if circuit_heights else self._no_tips
-            fil_z = np.asarray(net.filament_z, dtype=np.float64) if circuit_heights else _EMPTY
-            limits = (1.0, float(el[0]), float(el[1]), float(fr), net.height_tolerance)
-        else:
-            pairs, on_c = np.zeros((0, 2), dtype=np.int64), np.zeros(st.n_tips, dtype=bool)
-            on_a = on_f = on_c
-            fil_tip, fil_z = self._no_tips, _EMPTY
-            limits = (0.0, np.nan, np.nan, np.nan, 0.0)
+        (pairs, on_c, on_a, on_f, fil_tip, fil_z), limits = self._contact_args(net, st.n_tips)
         limits = np.array(limits + (BOND_BREAK, MAX_STEP_DISPLACEMENT, health.max_bond_error))
         base_step = (
             np.array([-1 if b is None else b for b in mts.base_step.values()], dtype=np.int64)
@@ -300,6 +287,29 @@ class CompiledSteps:
             st.time = integ.time_origin[1] + (st.step - integ.time_origin[0]) * integ.dt
             ff.context.bind(st.position, st.velocity)
         return done, reason
+
+    def _contact_args(self, net, n_tips):
+        """The contact test's arguments: the contacts as the search holds them (tip pairs, the flags of
+        the tips on the cathode, anode and filament), the filament contacts whose heights the circuit
+        follows (tips and heights), and the test's scalars (on or off, the planes, the filament's
+        radius, the height tolerance); a scene without contacts gives empty ones, the test off."""
+        if net is None:
+            off = np.zeros(n_tips, dtype=bool)
+            return (np.zeros((0, 2), dtype=np.int64), off, off, off, self._no_tips, _EMPTY), (
+                0.0,
+                np.nan,
+                np.nan,
+                np.nan,
+                0.0,
+            )
+        tr = net.tracker
+        el = tr.electrodes if tr.electrodes is not None else (np.nan, np.nan)
+        fr = tr.filament_radius if tr.filament_radius is not None else np.nan
+        circuit_heights = net.circuit and len(net.filament_tip)
+        fil_tip = np.asarray(net.filament_tip, dtype=np.int64) if circuit_heights else self._no_tips
+        fil_z = np.asarray(net.filament_z, dtype=np.float64) if circuit_heights else _EMPTY
+        limits = (1.0, float(el[0]), float(el[1]), float(fr), net.height_tolerance)
+        return (*net.contacts.search_arrays, fil_tip, fil_z), limits
 
     def _account(self, done, head0, hist_p0):
         """The work of the steps made, added as the Python step adds it (``kernels/steps.py::add_work``):
