@@ -156,6 +156,10 @@ def run_to_file(sim, writer, checkpointer, stop, path, progress=None, keeps_file
     ``KeyboardInterrupt`` closes both (the file "interrupted") and is raised again.
     """
     try:
+        if checkpointer is not None and checkpointer.interval > 0 and not checkpointer.written:
+            # the first checkpoint before the first step (and the compilation of its kernels, a minute
+            # on a cold cache): a run whose file exists can always be resumed
+            checkpointer.write(sim)
         # the stop hook and the checkpointer are asked at the slow steps: the fast steps between run in one call
         summary = sim.run(
             writer=writer,

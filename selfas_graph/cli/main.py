@@ -100,6 +100,14 @@ def parse_args(parser, argv=None):
 
 
 def main(argv=None) -> int:
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:  # Ctrl-C while the command starts (MPI, the parser): no traceback
+        print("selfas-graph: interrupted", file=sys.stderr)
+        return 130
+
+
+def _main(argv) -> int:
     from ..parallel import world
 
     parser = build_parser()

@@ -40,7 +40,7 @@ from ..io.h5md import (
     is_io_error,
 )
 from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
-from ..lifecycle import StopOnSignal, close_after_io_error, new_run_file, run_to_file
+from ..lifecycle import StopOnSignal, close_after_io_error, failure_path, new_run_file, run_to_file
 from ..model.accuracy import null_model_notes, short_of_accuracy
 from ..model.params import plasma_current_text
 from ..model.simulation import Simulation
@@ -212,8 +212,16 @@ def _load_resume(args):
             brake = _started_brake(run_file)
             run_id = run_file.meta.get("run_id")
             problems = appendable_problems(run_file.f)
+            status = str(run_file.meta.get("status", ""))
     except RunFileError as exc:
         raise CliError(f"cannot resume into {out}: {exc}") from None
+    if status.startswith("failed: numerical failure"):  # not a full disk, which a resume with room overcomes
+        # the steps from the checkpoint are the same bit for bit: they would fail again at the same step
+        raise CliError(
+            f"cannot resume: the run of {out} ended in a {status.removeprefix('failed: ')} (its "
+            f"state is in {failure_path(out)}); a resume would take the same steps from the checkpoint and "
+            f"fail again. Start the run again with other settings (e.g. a smaller integrator.dt) and --force"
+        )
     if problems:
         raise CliError(f"cannot resume into {out}: it cannot be continued: {'; '.join(problems)}")
     if not run_id or run_id != meta.get("run_id"):
@@ -229,7 +237,7 @@ def _load_resume(args):
         )
     if not same:
         raise CliError(f"cannot resume: {out} is not the run of checkpoint {ckpt} (different scenario or rod count)")
-    if not len(steps) or steps[0] > int(snap["step"]):
+    if (len(steps) and steps[0] > int(snap["step"])) or (not len(steps) and int(snap["step"]) != 0):
         raise CliError(f"cannot resume: {out} has no frame at or before the checkpoint's step {int(snap['step'])}")
     made_by = str(meta.get("version") or "unknown")
     if version_key(made_by) != version_key(__version__):
@@ -343,6 +351,14 @@ def _prepare(args):
             raise CliError(f"the folder {parent} of the output file does not exist")
         if not os.access(parent, os.W_OK):
             raise CliError(f"the folder {parent} of the output file is not writable")
+        stale = failure_path(out)  # an earlier run's failed state: beside this run it would be taken for its own
+        if stale.exists() and not args.force:
+            raise CliError(
+                f"{stale} exists (an earlier run's failed state); pass --force to remove it with the run, or -o "
+                f"to choose another name"
+            )
+        if stale.is_file() and not stale.is_symlink():
+            stale.unlink()
     return scenario, snap, out, ckpt, run_id
 
 
@@ -400,7 +416,9 @@ def run(args):
     def open_writer():
         if snap is not None:
             try:
-                writer = RunWriter.reopen(out, int(snap["step"]), t_end=scenario.params.run.t_end)
+                writer = RunWriter.reopen(
+                    out, int(snap["step"]), t_end=scenario.params.run.t_end, frame_interval=sim.frame_interval
+                )
             except RunFileError as exc:
                 raise CliError(f"cannot resume: {exc}") from None
             print(
@@ -503,9 +521,11 @@ def _io_failure(exc, writer, out, ckpt, sim):
 
 def _print_summary(s, out, sim):
     rel = s.energy_balance / s.energy_scale if s.energy_scale > 0 else float("nan")
+    speed = (
+        f"{s.steps_per_second:.0f} steps/s, {1e3 / s.steps_per_second:.2f} ms/step" if s.steps else "no step to take"
+    )
     lines = [
-        f"done: {s.steps} steps, t = {s.t_start:.4g} -> {s.t_end:.4g} in {_fmt_time(s.wall_seconds)} "
-        f"({s.steps_per_second:.0f} steps/s, {1e3 / max(s.steps_per_second, 1e-9):.2f} ms/step)",
+        f"done: {s.steps} steps, t = {s.t_start:.4g} -> {s.t_end:.4g} in {_fmt_time(s.wall_seconds)} ({speed})",
         f"  max bond-length error after constraint: {s.max_bond_error:.3g}",
         f"  energy balance E - E0 - W: {s.energy_balance:.3g} ({rel:.2g} of kinetic energy + |work|)",
         f"  contacts (tip pairs closer than r*): {sim.contact_count()}",

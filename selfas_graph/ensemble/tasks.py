@@ -68,7 +68,9 @@ def run_seed(task: dict) -> dict:
                     meta["scenario_text"], overrides=json.loads(meta["overrides"]), t_end=t_end
                 )
                 sim = Simulation.from_snapshot(scenario.params, snap)
-                writer = RunWriter.reopen(path, int(snap["step"]), t_end=scenario.params.run.t_end)
+                writer = RunWriter.reopen(
+                    path, int(snap["step"]), t_end=scenario.params.run.t_end, frame_interval=sim.frame_interval
+                )
             else:
                 scenario = scenario_from_text(
                     task["text"], path=Path(task["scenario_path"]), overrides=task["overrides"], t_end=t_end

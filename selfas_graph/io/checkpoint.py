@@ -369,8 +369,9 @@ def checkpoint_meta(scenario, run_id, run_name, t_end, version) -> dict:
 
 
 class Checkpointer:
-    """Writes the simulation's snapshot to a checkpoint file after the first step, then every
-    ``interval`` wall seconds (0: only on demand).
+    """Writes the simulation's snapshot to a checkpoint file, the first when it is first asked
+    (:func:`~selfas_graph.lifecycle.run_to_file` asks before the first step), then every ``interval``
+    wall seconds (0: only on demand).
 
     The first one comes at once so that a run killed in its first interval (900 s by default)
     can be resumed too.

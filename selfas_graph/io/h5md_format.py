@@ -225,3 +225,28 @@ def appendable_problems(f) -> list:
         for name in ("time", "current", "potential", "conductor_potential"):
             check(layout.graph(name), "f")
     return problems
+
+
+def in_use(path) -> bool:
+    """True if another process holds a lock on the file ``path``: HDF5 locks a file it has open
+    (``flock``, exclusive for a writer, shared for a reader) until it closes it, so a running
+    simulation's run file is in use until the run ends. False where locks are not available."""
+    try:
+        import fcntl
+    except ImportError:  # not a POSIX system
+        return False
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    except OSError:  # no flock on this file system
+        return False
+    else:
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        return False
+    finally:
+        os.close(fd)

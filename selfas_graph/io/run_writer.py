@@ -31,14 +31,13 @@ from .h5md_format import (
     _box,
     _fixed,
     _growable,
-    _rows_up_to,
     _set_unit,
-    _truncate,
-    appendable_problems,
     check_room,
+    in_use,
     observable_unit,
 )
 from .run_provenance import run_provenance
+from .trim import apply_plan, room_for_copy, trim_in_a_copy, trim_plan
 
 
 class _PendingRows:
@@ -144,6 +143,11 @@ class RunWriter(_PendingRows):
             raise OutputExistsError(
                 f"output file {self.path} exists; pass --force (overwrite=True) to overwrite it or -o to choose another"
             )
+        if self.path.exists() and in_use(self.path):
+            raise OutputExistsError(
+                f"output file {self.path} is open in another process (a simulation still writing it?); it is not "
+                f"replaced, even with --force (overwrite=True): wait for that process to end, or give another name"
+            )
         if not self.path.parent.exists():
             raise FileNotFoundError(f"the folder of the output file {self.path} does not exist")
         # default (earliest) format on purpose: the "latest" superblock carries a writer flag that a
@@ -203,87 +207,59 @@ class RunWriter(_PendingRows):
         f.flush()
 
     @classmethod
-    def reopen(cls, path, step, t_end=None):
+    def reopen(cls, path, step, t_end=None, frame_interval=None):
         """Open an existing run file to continue it after ``step``: every row written for a
         later step (frames, observables, events, circuit log, graph, per-step series) is removed first.
         ``t_end``: the continuation's end time, where it differs from the one the file states (a resume
         that extends the run): stored in ``parameters_json``, the earlier ones in ``t_end_before``.
+        ``frame_interval``: the one a new file would state, for a file that has no frame yet (a run
+        stopped before its first step).
+
+        The rows are removed in a copy of the file that then replaces it (``os.replace``): HDF5 shrinks
+        a file in place before it rewrites the superblock that states its new end, and a kill between
+        the two leaves a file it no longer opens. Where the folder has no room for the copy, the rows
+        are removed in place.
         """
+        path = Path(path)
+        try:
+            with h5py.File(path, "r") as f:
+                plan = trim_plan(f, step, path)
+        except OSError as exc:
+            raise RunFileError(f"{path}: cannot reopen the run file to continue it ({exc})") from None
+        if plan and room_for_copy(path):
+            trim_in_a_copy(path, plan)
+            plan = []
         self = cls.__new__(cls)
-        self.path = Path(path)
+        self.path = path
         try:
             self.f = h5py.File(self.path, "r+")
         except OSError as exc:
             raise RunFileError(f"{self.path}: cannot reopen the run file to continue it ({exc})") from None
         f = self.f
-        if layout.TIP_POSITION_STEP not in f:
-            f.close()
-            raise RunFileError(f"{self.path}: not a selfas-graph run file")
-        problems = appendable_problems(f)
-        if problems:
-            f.close()
-            raise RunFileError(f"{self.path}: cannot be continued: {'; '.join(problems)}")
-
-        def keep(*columns, strict=True):
-            # rows of the frames up to `step`, no more than every column of the group holds
-            return min([_rows_up_to(columns[0][:], step, strict)] + [c.shape[0] for c in columns[1:]])
-
-        self._elements = {}
-        for name, path in layout.TIP_ELEMENTS.items():
-            if path in f:
-                g = f[path]
-                n = keep(g["step"], g["time"], g["value"])
-                for ds in (g["step"], g["time"], g["value"]):
-                    _truncate(ds, n)
-                self._elements[name] = (g["step"], g["time"], g["value"])
+        apply_plan(f, plan)
+        self._elements = {
+            name: (f[p]["step"], f[p]["time"], f[p]["value"]) for name, p in layout.TIP_ELEMENTS.items() if p in f
+        }
         self.n_frames = f[layout.TIP_POSITION_STEP].shape[0]
         self.observables = f[layout.OBSERVABLES]
         self._obs = {}
 
         def visit(name, obj):
             if isinstance(obj, h5py.Group) and "value" in obj and name != layout.BOND_ERROR_PER_STEP:
-                n = keep(obj["step"], obj["time"], obj["value"])
-                for ds in obj.values():
-                    _truncate(ds, n)
                 self._obs[name] = (obj["step"], obj["time"], obj["value"])
 
         self.observables.visititems(visit)
         self.frame_interval = (
             float(self._obs[layout.FRAME_INTERVAL][2][-1])
             if layout.FRAME_INTERVAL in self._obs and self._obs[layout.FRAME_INTERVAL][2].shape[0]
-            else None
+            else frame_interval
         )
         g = self.observables[layout.BOND_ERROR_PER_STEP]
-        n = keep(g["step"], g["value"])
-        _truncate(g["step"], n)
-        _truncate(g["value"], n)
         self._per_step = (g["step"], g["value"])
-        if layout.EVENTS in f:
-            ev = f[layout.EVENTS]
-            _truncate(ev, keep(ev.fields("step"), strict=False) if ev.shape[0] else 0)
         self.events_written = f[layout.EVENTS].shape[0] if layout.EVENTS in f else 0
-        self.circuit_rows_written = 0
-        if layout.CIRCUIT_LOG in f:
-            g = f[layout.CIRCUIT_LOG]
-            columns = [g[name] for name in layout.CIRCUIT_LOG_COLUMNS]
-            n = keep(*columns, strict=False) if columns[0].shape[0] else 0
-            for ds in columns:
-                _truncate(ds, n)
-            self.circuit_rows_written = n
-        if layout.GRAPH in f:
-            g = f[layout.GRAPH]
-            per_frame = layout.GRAPH_PER_FRAME + ((layout.GRAPH_FLOATING,) if layout.GRAPH_FLOATING in g else ())
-            n = keep(*(g[name] for name in per_frame))
-            m = int(g["tip_contacts_count"][:n].sum())
-            k = int(g["conductor_contacts_count"][:n].sum())
-            if g["tip_contacts"].shape[0] < m or min(g[name].shape[0] for name in layout.GRAPH_CONDUCTOR_CONTACTS) < k:
-                f.close()
-                raise RunFileError(f"{self.path}: the graph data up to step {step} are incomplete (damaged file)")
-            for name in per_frame:
-                _truncate(g[name], n)
-            _truncate(g["tip_contacts"], m)
-            for name in layout.GRAPH_CONDUCTOR_CONTACTS:
-                _truncate(g[name], k)
+        self.circuit_rows_written = (
+            f[layout.CIRCUIT_LOG][layout.CIRCUIT_LOG_COLUMNS[0]].shape[0] if layout.CIRCUIT_LOG in f else 0
+        )
         f[layout.PROVENANCE].attrs["status"] = "running"
         self._resumed_with()
         if t_end is not None:

@@ -87,6 +87,35 @@ def test_existing_output_is_never_overwritten_without_force(scenario, tmp_path, 
         assert run.n_frames == 6
 
 
+def test_a_file_another_process_is_writing_is_not_replaced_even_with_force(scenario, tmp_path, capsys):
+    """A run file still open for writing (HDF5 locks it: here held by this process through another file
+    description, as a running simulation holds it) is refused by name with --force too, and left as it
+    was; before, it was emptied before its lock was tried, and the running simulation ended with an
+    unreadable file. Once closed it may be replaced."""
+    out = tmp_path / "running.h5"
+    with h5py.File(out, "w") as f:
+        f["x"] = np.arange(3)
+        f.flush()
+        for argv in (
+            ["simulate", str(scenario), "-o", str(out), "--force", "--progress", "none"],
+            ["export", str(finished_run(tmp_path, scenario)), "--format", "xyz", "-o", str(out), "--force"],
+        ):
+            assert main(argv) == 2
+            assert "is open in another process" in capsys.readouterr().err
+        np.testing.assert_array_equal(f["x"][()], np.arange(3))
+    with h5py.File(out, "r") as f:
+        np.testing.assert_array_equal(f["x"][()], np.arange(3))
+    assert main(["simulate", str(scenario), "-o", str(out), "--force", "--progress", "none"]) == 0
+
+
+def finished_run(tmp_path, scenario):
+    """A finished run file of the test scene to export from (made once per test)."""
+    path = tmp_path / "source.h5"
+    if not path.exists():
+        assert main(["simulate", str(scenario), "-o", str(path), "--progress", "none"]) == 0
+    return path
+
+
 def test_bad_scenario_exits_2_and_writes_nothing(scenario, tmp_path, capsys):
     out = tmp_path / "run.h5"
     code = main(["simulate", str(scenario), "-o", str(out), "--set", "integrator.dt=0"])
@@ -135,6 +164,18 @@ def test_numerical_failure_exits_3_with_diagnosis_and_no_nan_in_file(scenario, t
 
     snap, meta = read_checkpoint(tmp_path / "run.failure.h5")
     assert "numerical failure" in meta["failure"] and snap["position"].shape == (16, 3)
+    # a resume would take the same steps and fail again: refused, naming the failure and what to do
+    assert main(["simulate", "--resume", str(out), "--progress", "none"]) == 2
+    err = capsys.readouterr().err
+    assert "ended in a numerical failure" in err and "run.failure.h5" in err and "--force" in err
+    # a new run under the same name: the old failed state is not left beside it unless asked to be removed
+    argv = ["simulate", str(scenario), "-o", str(out), "--progress", "none"]
+    assert main(argv) == 2 and "exists" in capsys.readouterr().err
+    assert main(argv + ["--force"]) == 0
+    assert not (tmp_path / "run.failure.h5").exists()
+    # resuming the finished run takes no step, and says so (not a speed of 1e12 ms a step)
+    assert main(["simulate", "--resume", str(out), "--progress", "none"]) == 0
+    assert "no step to take" in capsys.readouterr().out
 
 
 def test_console_script_installed():

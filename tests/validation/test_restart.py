@@ -120,8 +120,18 @@ def test_interrupted_and_resumed_run_is_bitwise_identical(reference, tmp_path, w
         assert _same(ref[name], got[name]), name
 
 
-def test_resume_truncates_frames_written_after_the_checkpoint(reference, tmp_path):
-    """Frames written after the last checkpoint (a kill between checkpoint and frame) are dropped and redone."""
+@pytest.mark.parametrize("room", [True, False])
+def test_resume_truncates_frames_written_after_the_checkpoint(reference, tmp_path, monkeypatch, room):
+    """Frames written after the last checkpoint (a kill between checkpoint and frame) are dropped and redone.
+
+    They are dropped in a copy that replaces the file (a new inode, the file's permissions kept, no copy
+    left behind): HDF5 shrinks a file before it rewrites the superblock that states its end, and a
+    kill in between left a file nothing opens. Without room for the copy, in place; the same result."""
+    import os
+
+    from selfas_graph.io import run_writer
+
+    monkeypatch.setattr(run_writer, "room_for_copy", lambda path: room)
     ref_path, _, _ = reference
     path = tmp_path / "run.h5"
     _run(path, stop_at=300)
@@ -129,6 +139,13 @@ def test_resume_truncates_frames_written_after_the_checkpoint(reference, tmp_pat
     saved = ckpt.read_bytes()
     _run(path, resume_from=ckpt, stop_at=900)  # the file now holds frames up to step 900
     ckpt.write_bytes(saved)  # as if killed before the step-900 checkpoint replaced the step-300 one
+    os.chmod(path, 0o640)
+    before = os.stat(path)
+    writer = RunWriter.reopen(path, 300)
+    after = os.stat(path)
+    writer.close("interrupted")
+    assert (after.st_ino != before.st_ino) == room and after.st_mode == before.st_mode
+    assert [p.name for p in tmp_path.iterdir() if "part" in p.name] == []
     _run(path, resume_from=ckpt)
     ref, got = datasets(ref_path), datasets(path)
     for name in ref:
@@ -268,3 +285,28 @@ def test_wall_time_of_a_killed_segment_counts_up_to_its_last_flush(tmp_path):
     writer.close()
     with h5py.File(path, "r") as f:
         assert float(f["parameters/selfas_graph"].attrs["wall_seconds_total"]) >= first + 0.1
+
+
+def test_a_run_killed_before_its_first_step_can_be_resumed(tmp_path, monkeypatch):
+    """The first checkpoint is written before the first step (and before the kernels compile, a
+    minute on a cold cache): a run killed at any time after its file appeared resumes, to the same
+    data as a run never interrupted. Before, a kill in that minute left a file without a checkpoint,
+    which neither a resume nor a new run without --force would take."""
+    scen = tmp_path / "s.toml"
+    scen.write_text(SCENE.replace("checkpoint_interval = 0", "checkpoint_interval = 900"))
+    argv = ["simulate", str(scen), "--progress", "none"]
+    assert main(argv + ["-o", str(tmp_path / "full.h5")]) == 0
+    out = tmp_path / "cut.h5"
+
+    def killed(self, *args, **kwargs):
+        raise KeyboardInterrupt  # as a kill would stop it: before any step
+
+    with monkeypatch.context() as m:
+        m.setattr(Simulation, "run", killed)
+        assert main(argv + ["-o", str(out)]) == 130
+    snap, meta = read_checkpoint(checkpoint_path(out))
+    assert int(snap["step"]) == 0 and meta["step"] == 0
+    assert main(["simulate", "--resume", str(out), "--progress", "none"]) == 0
+    ref, got = datasets(tmp_path / "full.h5"), datasets(out)
+    for name in ref:
+        assert _same(ref[name], got[name]), name
