@@ -22,6 +22,7 @@ import numpy as np
 from ..analysis.claims import CLAIM_KEYS, frame_claims
 from ..io.h5md import RunFile, RunFileError
 from .main import CliError, add_run_and_frame
+from .paths import status_note
 
 #: the columns of the --series table (the full set goes to --csv and --json)
 SERIES_COLUMNS = {
@@ -92,6 +93,7 @@ def run(args):
             except (KeyError, IndexError, TypeError, ValueError) as exc:
                 raise RunFileError(f"{f.path}: inconsistent run data ({type(exc).__name__}: {exc})") from None
             path = str(f.path)
+            note = status_note(f.status)
     except RunFileError as exc:
         raise CliError(str(exc)) from None
     keys = ["frame"] + list(CLAIM_KEYS)
@@ -107,7 +109,7 @@ def run(args):
             w.writerow([_cell(r[k]) for k in keys])
     elif series:
         print(
-            f"{path}: {len(rows)} frames; largest structure: rods, |m_q| (Z_M0 e L), |m_q| per mean rod moment, "
+            f"{path}: {len(rows)} frames{note}; largest structure: rods, |m_q| (Z_M0 e L), |m_q| per mean rod moment, "
             f"m_J,z (J0 L^2), mass-radius dimension; D_Rg over all structures"
         )
         print("  ".join(f"{c:>10}" for c in SERIES_COLUMNS.values()))
@@ -115,7 +117,7 @@ def run(args):
             print("  ".join(f"{_fmt(r[c]):>10}" for c in SERIES_COLUMNS))
     else:
         r = rows[0]
-        print(f"{path}: frame {int(r['frame'])}, step {int(r['step'])}, t = {r['time']:.6g}")
+        print(f"{path}: frame {int(r['frame'])}, step {int(r['step'])}, t = {r['time']:.6g}{note}")
         for k, meaning in CLAIM_KEYS.items():
             if k in ("time", "step") or k.endswith(("_err", "_se")) or k in _RANGE_KEYS:
                 continue

@@ -95,3 +95,14 @@ def _name_max(folder) -> int:
         return os.pathconf(folder if str(folder) else ".", "PC_NAME_MAX")
     except (OSError, ValueError):
         return 255
+
+
+def status_note(status) -> str:
+    """What a reader of a run file should know of a run that did not finish ("" for a finished one)."""
+    if status == "finished":
+        return ""
+    if status.startswith("interrupted"):
+        return f" (the run was {status}; simulate --resume continues it)"
+    if status == "running":
+        return " (the run has not finished: it is still running, or was killed; simulate --resume continues it)"
+    return f" (the run {status})" if status.startswith("failed") else f" (run status: {status})"

@@ -20,6 +20,7 @@ from ..io.h5md import RunFile, RunFileError
 from ..model import events as ev
 from ..model.graph import DEAD_END, FILAMENT, ROLE_NAMES, ConnectivityGraph
 from .main import CliError, add_run_and_frame
+from .paths import status_note
 
 
 def add_arguments(p):
@@ -77,6 +78,7 @@ def analyse(run: RunFile, frame=None, t=None) -> dict:
         obs["effective_resistance"] = None  # files before 0.4: inf for an open circuit
     return {
         "file": str(run.path),
+        "run_status": run.status,
         "frame": g["frame"],
         "frames": int(run.f[layout.GRAPH_STEP].shape[0]),
         "step": g["step"],
@@ -174,7 +176,8 @@ def run(args):
         return 0
     r = data["rods"]
     lines = [
-        f"{data['file']}: frame {data['frame']} of 0..{data['frames'] - 1}, step {data['step']}, t = {data['time']:.6g}",
+        f"{data['file']}: frame {data['frame']} of 0..{data['frames'] - 1}, step {data['step']}, t = {data['time']:.6g}"
+        + status_note(data["run_status"]),
         "conductors: "
         + (
             ", ".join(

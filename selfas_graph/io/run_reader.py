@@ -114,6 +114,12 @@ class RunFile:
         return self._f
 
     @property
+    def status(self) -> str:
+        """How the run stands: "finished", "interrupted at step N", "failed: ...", or "running" (still
+        running, or killed before it could say otherwise)."""
+        return str(self.meta.get("status", "unknown"))
+
+    @property
     def parameters(self) -> dict:
         return json.loads(self.meta["parameters_json"])
 

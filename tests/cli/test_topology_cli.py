@@ -273,3 +273,24 @@ def test_time_nan_is_rejected(chain_run, capsys):
     """``--time nan`` names no frame; it should be a usage error (exit 2), not frame 0."""
     path, _ = chain_run
     assert main(["topology", str(path), "--time", "nan"]) == 2
+
+
+def test_topology_and_analyze_say_a_run_did_not_finish(tmp_path, capsys):
+    """A file of an interrupted, killed or failed run is read as any other, and its first line says so
+    (with what continues it); the JSON carries the status too. A finished run's line is as before."""
+    path = tmp_path / "cut.h5"
+    write_run(path)
+    for status, said in (
+        ("interrupted at step 50", "the run was interrupted at step 50; simulate --resume continues it"),
+        ("running", "the run has not finished: it is still running, or was killed"),
+        ("failed: numerical failure at step 9", "the run failed: numerical failure at step 9"),
+        ("finished", None),
+    ):
+        with h5py.File(path, "r+") as f:
+            f["parameters/selfas_graph"].attrs["status"] = status
+        for command in ("topology", "analyze"):
+            assert main([command, str(path)]) == 0
+            first = capsys.readouterr().out.splitlines()[0]
+            assert (said in first) if said else first.endswith("t = 0.1"), (command, first)
+        assert main(["topology", str(path), "--json"]) == 0
+        assert json.loads(capsys.readouterr().out)["run_status"] == status
