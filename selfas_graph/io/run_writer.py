@@ -37,7 +37,7 @@ from .h5md_format import (
     observable_unit,
 )
 from .run_provenance import run_provenance
-from .trim import apply_plan, room_for_copy, trim_in_a_copy, trim_plan
+from .trim import apply_plan, trim_plan, trim_safely
 
 
 class _PendingRows:
@@ -217,18 +217,19 @@ class RunWriter(_PendingRows):
 
         The rows are removed in a copy of the file that then replaces it (``os.replace``): HDF5 shrinks
         a file in place before it rewrites the superblock that states its new end, and a kill between
-        the two leaves a file it no longer opens. Where the folder has no room for the copy, the rows
-        are removed in place.
+        the two leaves a file it no longer opens. The copy replaces the file a symbolic link points to;
+        the rows are removed in place where the file has other names (hard links) or the copy cannot be
+        made (no room, a quota, a folder that is not writable). A resume from step 0 drops frame 0 too
+        and writes it again (a kill while it was written could have torn it unseen).
         """
         path = Path(path)
         try:
             with h5py.File(path, "r") as f:
-                plan = trim_plan(f, step, path)
+                plan = trim_plan(f, step if step > 0 else -1, path)
         except OSError as exc:
             raise RunFileError(f"{path}: cannot reopen the run file to continue it ({exc})") from None
-        if plan and room_for_copy(path):
-            trim_in_a_copy(path, plan)
-            plan = []
+        if plan:
+            plan = trim_safely(path, plan)
         self = cls.__new__(cls)
         self.path = path
         try:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import shutil
+from pathlib import Path
 
 import h5py
 
@@ -89,3 +90,17 @@ def trim_in_a_copy(path, plan) -> None:
     finally:
         if tmp.exists():
             tmp.unlink()
+
+
+def trim_safely(path, plan) -> list:
+    """Apply ``plan`` to the run file ``path`` in a copy that replaces it (:func:`trim_in_a_copy`) where
+    it can be; returns the plan still to apply in place: empty, or ``plan`` itself for a file with
+    other names (a copy would part them), without room for a copy, or whose copy failed."""
+    real = Path(os.path.realpath(path))  # through a symbolic link: the copy replaces the file, not the link
+    if os.stat(real).st_nlink > 1 or not room_for_copy(real):
+        return plan
+    try:
+        trim_in_a_copy(real, plan)
+    except OSError:  # a quota the free space does not show, a folder that is not writable, a long name
+        return plan
+    return []

@@ -120,34 +120,51 @@ def test_interrupted_and_resumed_run_is_bitwise_identical(reference, tmp_path, w
         assert _same(ref[name], got[name]), name
 
 
-@pytest.mark.parametrize("room", [True, False])
-def test_resume_truncates_frames_written_after_the_checkpoint(reference, tmp_path, monkeypatch, room):
+@pytest.mark.parametrize("how", ["copy", "no room", "copy fails", "through a link"])
+def test_resume_truncates_frames_written_after_the_checkpoint(reference, tmp_path, monkeypatch, how):
     """Frames written after the last checkpoint (a kill between checkpoint and frame) are dropped and redone.
 
     They are dropped in a copy that replaces the file (a new inode, the file's permissions kept, no copy
     left behind): HDF5 shrinks a file before it rewrites the superblock that states its end, and a
-    kill in between left a file nothing opens. Without room for the copy, in place; the same result."""
+    kill in between left a file nothing opens. Without room for the copy, or when the copy fails (a
+    quota), in place; through a symbolic link, the copy replaces the file the link points to. The same
+    data every way."""
+    import errno
     import os
 
-    from selfas_graph.io import run_writer
+    from selfas_graph.io import trim
 
-    monkeypatch.setattr(run_writer, "room_for_copy", lambda path: room)
+    if how == "no room":
+        monkeypatch.setattr(trim, "room_for_copy", lambda path: False)
+    if how == "copy fails":
+
+        def quota(*args, **kwargs):
+            raise OSError(errno.EDQUOT, "Disk quota exceeded")
+
+        monkeypatch.setattr(trim.shutil, "copy2", quota)
     ref_path, _, _ = reference
+    folder = tmp_path / "store" if how == "through a link" else tmp_path
+    folder.mkdir(exist_ok=True)
+    real = folder / "run.h5"
+    _run(real, stop_at=300)
     path = tmp_path / "run.h5"
-    _run(path, stop_at=300)
+    if how == "through a link":
+        path.symlink_to(real)
+        checkpoint_path(real).rename(checkpoint_path(path))
     ckpt = checkpoint_path(path)
     saved = ckpt.read_bytes()
     _run(path, resume_from=ckpt, stop_at=900)  # the file now holds frames up to step 900
     ckpt.write_bytes(saved)  # as if killed before the step-900 checkpoint replaced the step-300 one
-    os.chmod(path, 0o640)
-    before = os.stat(path)
+    os.chmod(real, 0o640)
+    before = os.stat(real)
     writer = RunWriter.reopen(path, 300)
-    after = os.stat(path)
+    after = os.stat(real)
     writer.close("interrupted")
-    assert (after.st_ino != before.st_ino) == room and after.st_mode == before.st_mode
-    assert [p.name for p in tmp_path.iterdir() if "part" in p.name] == []
+    assert (after.st_ino != before.st_ino) == (how in ("copy", "through a link")) and after.st_mode == before.st_mode
+    assert path.is_symlink() == (how == "through a link")
+    assert [p.name for p in folder.iterdir() if "part" in p.name] == []
     _run(path, resume_from=ckpt)
-    ref, got = datasets(ref_path), datasets(path)
+    ref, got = datasets(ref_path), datasets(real)
     for name in ref:
         assert _same(ref[name], got[name]), name
 
@@ -310,3 +327,18 @@ def test_a_run_killed_before_its_first_step_can_be_resumed(tmp_path, monkeypatch
     ref, got = datasets(tmp_path / "full.h5"), datasets(out)
     for name in ref:
         assert _same(ref[name], got[name]), name
+
+
+def test_a_resume_from_step_0_writes_frame_0_again(reference, tmp_path):
+    """A run continued from the checkpoint before its first step drops frame 0 and everything after it
+    (a kill while frame 0 was written could leave it torn, with a step of 0 that looks whole), so the
+    continuation writes it again."""
+    import shutil
+
+    path = tmp_path / "run.h5"
+    shutil.copy(reference[0], path)
+    writer = RunWriter.reopen(path, 0)
+    try:
+        assert writer.n_frames == 0 and writer.events_written == 0 and writer.circuit_rows_written == 0
+    finally:
+        writer.close("interrupted")
