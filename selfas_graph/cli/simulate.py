@@ -357,8 +357,6 @@ def _prepare(args):
                 f"{stale} exists (an earlier run's failed state); pass --force to remove it with the run, or -o "
                 f"to choose another name"
             )
-        if stale.is_file() and not stale.is_symlink():
-            stale.unlink()
     return scenario, snap, out, ckpt, run_id
 
 
@@ -428,6 +426,9 @@ def run(args):
             )
             return writer
         existed = os.path.lexists(out)
+        stale = failure_path(out)
+        if stale.is_file() and not stale.is_symlink():
+            stale.unlink()  # an earlier run's failed state (--force): with the run it belonged to
         try:
             return new_run_file(
                 sim, scenario, out, run_id, shlex.join(sys.argv), args.scenario, args.force, mpi_ranks=world.size
