@@ -473,10 +473,16 @@ def brake_close_pairs(position, velocity, radius, k_br, dt, exclude_same_rod=Tru
 def electrode_brake(position, velocity, z_lo, z_hi, rstar, k_br, dt):
     """The exact electrode brake: a tip within r* of n planes has dv/dt = -n k_br v over dt.
     Returns (velocity after, change of kinetic energy)."""
+    touching = [int(p[2] - z_lo < rstar) + int(z_hi - p[2] < rstar) for p in position]
+    return _brake_touching(velocity, touching, k_br, dt)
+
+
+def _brake_touching(velocity, touching, k_br, dt):
+    """The exact brake of tips each touching ``touching[k]`` fixed objects: ``v exp(-n k_br dt)``;
+    returns (velocity after, change of kinetic energy)."""
     v = np.array(velocity, dtype=float)
     work = 0.0
-    for k in range(len(v)):
-        n = int(position[k, 2] - z_lo < rstar) + int(z_hi - position[k, 2] < rstar)
+    for k, n in enumerate(touching):
         if n:
             e0 = 0.5 * float(v[k] @ v[k])
             v[k] = v[k] * math.exp(-n * k_br * dt)
@@ -488,15 +494,8 @@ def monopole_brake(position, velocity, source, rstar, k_br, dt):
     """The exact brake of fixed monopoles on tips (term 11 with term 2's brake; a monopole does not
     move): a tip within r* of n of ``source`` has dv/dt = -n k_br v over dt. Returns (velocity after,
     change of kinetic energy)."""
-    v = np.array(velocity, dtype=float)
-    work = 0.0
-    for k in range(len(v)):
-        n = sum(int(np.linalg.norm(position[k] - s) < rstar) for s in source)
-        if n:
-            e0 = 0.5 * float(v[k] @ v[k])
-            v[k] = v[k] * math.exp(-n * k_br * dt)
-            work += 0.5 * float(v[k] @ v[k]) - e0
-    return v, work
+    touching = [sum(int(np.linalg.norm(p - s) < rstar) for s in source) for p in position]
+    return _brake_touching(velocity, touching, k_br, dt)
 
 
 def monopoles_energy(position, charge, source, source_charge, rstar, kappa):
