@@ -75,6 +75,8 @@ def test_closest_parameter_matches_the_oracle_and_a_dense_search():
         t_ref, d_ref = reference.closest_parameter(A, s, C, u)
         # the same minimum from two formulas: equal to rounding (1e-12 of the unit lengths)
         assert d == pytest.approx(d_ref, abs=1e-12)
+        # the parameter of a minimum is set less sharply than the distance: near-parallel segments move it
+        # by round-off over the small curvature of d(t), so 1e-9 (the distance itself is checked to 1e-12)
         assert t == pytest.approx(t_ref, abs=1e-9)
         grid = np.linspace(0, 1, 401)
         dense = np.linalg.norm(A + grid[:, None, None] * s - C - grid[None, :, None] * u, axis=-1).min()

@@ -40,6 +40,8 @@ def pair_force_sum(position, charge):
 def test_mixed_sum_matches_the_oracle_to_float32_rounding(rng, box):
     state = random_rods(150, rng, box=box)
     f64, mixed = both(state.position, state.tip_charge)
+    # the float64 sum against the loop oracle: sums of 300 pair forces (up to ~1e3 in the cores) in
+    # another order, round-off ~1e-13 of the terms; 1e-9 leaves room (the mixed sum's bound follows)
     np.testing.assert_allclose(
         f64, reference.tip_tip_force(state.position, state.tip_charge, RSTAR, KAPPA), rtol=1e-9, atol=1e-9
     )

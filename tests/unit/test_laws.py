@@ -74,8 +74,9 @@ def test_tip_force_is_minus_gradient(r):
     p, kappa = -1.3, 2.0
     h = 1e-6 * max(r, RSTAR)
     numeric = _central_difference(lambda s: tip_potential(s * s, p, RSTAR, kappa), r, h)
-    # central difference error O(h^2 U''') plus round-off U/h * 1e-16: both < 1e-7 relative here
-    assert tip_force_over_r(r * r, p, RSTAR, kappa) * r == pytest.approx(numeric, rel=1e-6)
+    # central difference error O(h^2 U''') plus round-off U/h * 1e-16: both below 1e-9 relative here
+    # (measured at most 3.9e-10 over these r)
+    assert tip_force_over_r(r * r, p, RSTAR, kappa) * r == pytest.approx(numeric, rel=1e-8)
 
 
 @pytest.mark.parametrize("r", [0.1, 0.5, 1.0, 2.5, 7.0])
@@ -85,8 +86,10 @@ def test_yukawa_force_is_minus_gradient(r, screening):
     zz = 1.7
     numeric = _central_difference(lambda s: yukawa_potential(s * s, zz, screening, 0.0), r, 1e-6 * r)
     analytic = zz * math.exp(-r / screening) * (1 / r**2 + 1 / (screening * r))
+    # the same law written another way: a few ulp apart
     assert yukawa_force_over_r(r * r, zz, 1.0 / screening, 0.0) * r == pytest.approx(analytic, rel=1e-14)
-    assert analytic == pytest.approx(numeric, rel=1e-7)  # central-difference truncation ~1e-10
+    # central-difference truncation ~1e-10 and round-off U/h * 1e-16 ~1e-10 (measured at most 6.9e-11)
+    assert analytic == pytest.approx(numeric, rel=1e-9)
 
 
 @pytest.mark.parametrize("r", [0.0, 0.01, 0.03, 0.0599, 0.0601, 0.2])
@@ -97,19 +100,22 @@ def test_yukawa_core_is_bounded_continuous_and_minus_gradient(r):
     f_core = zz * math.exp(-core / screening) * (1 / core**2 + 1 / (screening * core))
     f = yukawa_force_over_r(r * r, zz, 1.0 / screening, core * core) * r
     expected = f_core * r / core if r < core else zz * math.exp(-r / screening) * (1 / r**2 + 1 / (screening * r))
-    assert f == pytest.approx(expected, rel=1e-14, abs=1e-300)
+    assert f == pytest.approx(expected, rel=1e-14, abs=1e-300)  # the same formulas in another order: round-off
     assert abs(f) <= f_core * (1 + 1e-14)
     if r > 0.0:
         h = 1e-6 * r
         numeric = _central_difference(lambda s: yukawa_potential(s * s, zz, screening, core), r, h)
-        assert f == pytest.approx(numeric, rel=1e-6)  # truncation O(h^2) and round-off U/h * 1e-16 < 1e-7
-    for rc in (core,):  # continuity at the core radius, to round-off
+        # truncation O(h^2 f'') and round-off U/h * 1e-16, below 1e-8 (measured at most 4.1e-9, next to a)
+        assert f == pytest.approx(numeric, rel=1e-7)
+    # continuity at the core radius: the two sides are 2e-12 of a apart, over which f and U change by
+    # about 1e-12 of themselves (measured 1.0e-12 and 2.1e-12); a jump would be of order 1
+    for rc in (core,):
         below, above = rc * (1 - 1e-12), rc * (1 + 1e-12)
         assert yukawa_force_over_r(below**2, zz, 1.0 / screening, core * core) * below == pytest.approx(
-            yukawa_force_over_r(above**2, zz, 1.0 / screening, core * core) * above, rel=1e-9
+            yukawa_force_over_r(above**2, zz, 1.0 / screening, core * core) * above, rel=1e-10
         )
         assert yukawa_potential(below**2, zz, screening, core) == pytest.approx(
-            yukawa_potential(above**2, zz, screening, core), rel=1e-9
+            yukawa_potential(above**2, zz, screening, core), rel=1e-10
         )
 
 
@@ -118,7 +124,8 @@ def test_wall_push_is_minus_gradient(h):
     """Term 8: the wall push kappa (r* - h)/r*^3 is -dU/dh and vanishes for h >= r*."""
     kappa = 1.5
     numeric = _central_difference(lambda s: wall_potential(s, RSTAR, kappa), h, 1e-7)
-    assert wall_push(h, RSTAR, kappa) == pytest.approx(numeric, rel=1e-6, abs=1e-6)
+    # a quadratic: no truncation error; round-off U eps / h with U up to 22 here, 2e-8 (measured 4.1e-8)
+    assert wall_push(h, RSTAR, kappa) == pytest.approx(numeric, rel=0, abs=2e-7)
     if h >= RSTAR:
         assert wall_push(h, RSTAR, kappa) == 0.0
 

@@ -36,6 +36,7 @@ def test_overlapping_start_is_resolved_by_the_core(rng):
     state = random_rods(20, rng, box=1.5)
     sim = simulation(state, forces=ALL_PAIR_TERMS, integrator={"dt": 2e-4})
     sim.run(t_end=0.1)
+    # the projection restores each bond to round-off (a few ulp of 1); a failed one would leave 1e-3 or more
     assert _finite(sim) and sim.max_bond_error < 1e-12
 
 
@@ -46,6 +47,8 @@ def test_tiny_and_huge_charges(rng, q, runs):
     sim = simulation(state, forces=ALL_PAIR_TERMS, integrator={"dt": 5e-4})
     if runs:
         sim.run(t_end=0.2)
+        # every force scales with q^2 = 1e-12: the energies, and so their balance, are 1e-12 of those of
+        # unit charges, whose balance over 400 steps is well below 1
         assert _finite(sim) and abs(sim.observables()["energy_balance"]) < 1e-12
     else:
         with pytest.raises(NumericalFailure, match="integrator.dt"):
@@ -61,6 +64,8 @@ def test_extreme_screening_lengths(rng, screening):
         state, forces={"yukawa": {"screening_length": screening, "tolerance": 1e-6}}, integrator={"dt": 5e-4}
     )
     sim.run(t_end=0.1)
+    # AB4 over 200 steps of a smooth, weak force (charges 0.5, a Yukawa term alone): an integration error
+    # many decades below 1e-9; a term that jumped at its cut-off would break it
     assert _finite(sim) and abs(sim.observables()["energy_balance"]) < 1e-9
 
 
