@@ -13,7 +13,7 @@ import os
 import stat
 from pathlib import Path
 
-from ..io.h5md_format import in_use
+from ..io.h5md_format import in_use, in_use_message
 from .main import CliError
 
 
@@ -78,10 +78,7 @@ def check_target(path, what="output file", force=False, inputs=()) -> Path:
         if not force:
             raise CliError(f"{what} {path} exists; pass --force to overwrite it or -o to choose another name")
         if in_use(path):
-            raise CliError(
-                f"{what} {path} is open in another process (a simulation still writing it?); it is not "
-                f"replaced, even with --force: wait for that process to end, or give another name"
-            )
+            raise CliError(in_use_message(path, what, "--force"))
     elif len(path.name.encode("utf-8", "surrogateescape")) > _name_max(path.parent):
         raise CliError(
             f"the {what} name {path.name[:40]}... is too long for the file system "

@@ -29,7 +29,7 @@ import numpy as np
 from ..model.graph import ROLE_NAMES
 from . import layout
 from .h5md import RunFile, RunFileError
-from .h5md_format import in_use
+from .h5md_format import in_use, in_use_message
 
 FORMATS = ("gsd", "xyz")
 #: particle and bond type names, indexed by role code
@@ -97,10 +97,7 @@ def output_path(run_path, out, fmt, force=False) -> Path:
     if path.exists() and not force:
         raise ExportError(f"{path} exists; pass --force (force=True) to overwrite it or -o (out=) to choose another")
     if path.exists() and in_use(path):
-        raise ExportError(
-            f"{path} is open in another process (a simulation still writing it?); it is not replaced, even "
-            f"with --force (force=True): wait for that process to end, or give another name"
-        )
+        raise ExportError(in_use_message(path, "output file", "--force (force=True)"))
     if not path.parent.exists():
         raise ExportError(f"the folder of the output file {path} does not exist")
     return path

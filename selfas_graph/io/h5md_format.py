@@ -227,6 +227,15 @@ def appendable_problems(f) -> list:
     return problems
 
 
+def in_use_message(path, what, force) -> str:
+    """Why ``path``, which :func:`in_use` found open in another process, is not replaced; ``what`` names
+    the file, ``force`` the option that replaces an existing one (``--force``, ``overwrite=True``)."""
+    return (
+        f"{what} {path} is open in another process (a simulation still writing it?); it is not replaced, "
+        f"even with {force}: wait for that process to end, or give another name"
+    )
+
+
 def in_use(path) -> bool:
     """True if another process holds a lock on the file ``path``: HDF5 locks a file it has open
     (``flock``, exclusive for a writer, shared for a reader) until it closes it, so a running

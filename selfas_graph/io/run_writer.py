@@ -34,6 +34,7 @@ from .h5md_format import (
     _set_unit,
     check_room,
     in_use,
+    in_use_message,
     observable_unit,
 )
 from .run_provenance import run_provenance
@@ -144,10 +145,7 @@ class RunWriter(_PendingRows):
                 f"output file {self.path} exists; pass --force (overwrite=True) to overwrite it or -o to choose another"
             )
         if self.path.exists() and in_use(self.path):
-            raise OutputExistsError(
-                f"output file {self.path} is open in another process (a simulation still writing it?); it is not "
-                f"replaced, even with --force (overwrite=True): wait for that process to end, or give another name"
-            )
+            raise OutputExistsError(in_use_message(self.path, "output file", "--force (overwrite=True)"))
         if not self.path.parent.exists():
             raise FileNotFoundError(f"the folder of the output file {self.path} does not exist")
         # default (earliest) format on purpose: the "latest" superblock carries a writer flag that a
