@@ -100,9 +100,11 @@ class StopOnSignal:
 
 def new_run_file(sim, scenario, path, run_id, command_line, scenario_path, overwrite, mpi_ranks=1) -> RunWriter:
     """A new run file for ``sim``: its provenance (:func:`~selfas_graph.io.h5md.run_provenance`),
-    the tips' and rods' constants, velocities if the scenario saves them."""
+    the tips' and rods' constants, velocities if the scenario saves them. An earlier run's failed state
+    beside it (``RUN.failure.h5``) goes with the run this one replaces: beside it, it would be taken for
+    this run's (``simulate`` asks for --force first)."""
     provenance = run_provenance(sim, scenario, command_line, run_id, scenario_path=scenario_path, mpi_ranks=mpi_ranks)
-    return RunWriter(
+    writer = RunWriter(
         path,
         sim.state.n_tips,
         sim.state.tip_charge,
@@ -114,6 +116,10 @@ def new_run_file(sim, scenario, path, run_id, command_line, scenario_path, overw
         rod_length=sim.state.rod_length,
         rod_resistance=sim.state.rod_resistance,
     )
+    stale = failure_path(path)  # once the new file is made: a refused one leaves the old run whole
+    if stale.is_file() and not stale.is_symlink():
+        stale.unlink()
+    return writer
 
 
 def failure_path(path) -> Path:
@@ -156,8 +162,8 @@ def run_to_file(sim, writer, checkpointer, stop, path, progress=None, keeps_file
     ``KeyboardInterrupt`` closes both (the file "interrupted") and is raised again.
     """
     try:
-        if checkpointer is not None and checkpointer.interval > 0 and not checkpointer.written:
-            # the first checkpoint before the first step (and the compilation of its kernels, a minute
+        if checkpointer is not None and checkpointer.due():
+            # the first checkpoint (due at once) before the first step (and the compilation of its kernels, a minute
             # on a cold cache): a run whose file exists can always be resumed
             checkpointer.write(sim)
         # the stop hook and the checkpointer are asked at the slow steps: the fast steps between run in one call

@@ -426,9 +426,6 @@ def run(args):
             )
             return writer
         existed = os.path.lexists(out)
-        stale = failure_path(out)
-        if stale.is_file() and not stale.is_symlink():
-            stale.unlink()  # an earlier run's failed state (--force): with the run it belonged to
         try:
             return new_run_file(
                 sim, scenario, out, run_id, shlex.join(sys.argv), args.scenario, args.force, mpi_ranks=world.size

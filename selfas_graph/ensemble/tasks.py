@@ -17,7 +17,7 @@ from ..io.checkpoint import (
 )
 from ..io.h5md import RunFile, RunWriter, is_io_error
 from ..io.scenario import scenario_from_text
-from ..lifecycle import StopOnSignal, close_after_io_error, failure_path, new_run_file, run_to_file
+from ..lifecycle import StopOnSignal, close_after_io_error, new_run_file, run_to_file
 from ..model.simulation import NumericalFailure, RunInterrupted, Simulation
 from ..model.state import PlacementError
 from ..parallel import is_pool_worker
@@ -77,9 +77,6 @@ def run_seed(task: dict) -> dict:
                 )
                 sim = Simulation.from_scenario(scenario)
                 run_id = uuid.uuid4().hex
-                stale = failure_path(path)
-                if stale.is_file() and not stale.is_symlink():
-                    stale.unlink()  # the failed state of the seed's run this one replaces
                 writer = new_run_file(
                     sim, scenario, path, run_id, task.get("command", ""), task["scenario_path"], bool(task.get("force"))
                 )
