@@ -178,7 +178,7 @@ class RowBlocks:
         Each rank has listed only the rows of its block (``rows_per_rod * lo`` to ``rows_per_rod *
         hi``; the others empty, as ``kernels/cells.py::neighbour_rows(..., rows=...)`` leaves them).
         Two ``Allgatherv``: the row lengths, then the rows. Returns ``(start, index)``, the list
-        the whole build would have made, bit for bit.
+        the whole build would have made, bit for bit (int64 offsets, entries of ``index``'s type).
         """
         if self.size == 1:
             return start, index
@@ -188,13 +188,13 @@ class RowBlocks:
         lengths = np.empty(n, dtype=np.int64)
         row_counts = np.diff(bounds)
         self.comm.Allgatherv(
-            np.ascontiguousarray(np.diff(start[lo : hi + 1])),
+            np.ascontiguousarray(np.diff(start[lo : hi + 1]), dtype=np.int64),
             [lengths, (row_counts.tolist(), bounds[:-1].tolist())],
         )
         full = np.zeros(n + 1, dtype=np.int64)
         np.cumsum(lengths, out=full[1:])
         counts = full[bounds[1:]] - full[bounds[:-1]]
-        out = np.empty(int(full[-1]), dtype=np.int64)
+        out = np.empty(int(full[-1]), dtype=index.dtype)  # the entries' type is every rank's (it follows n)
         self.comm.Allgatherv(
             np.ascontiguousarray(index[start[lo] : start[hi]]),
             [out, (counts.tolist(), full[bounds[:-1]].tolist())],

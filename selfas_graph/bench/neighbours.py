@@ -20,7 +20,9 @@ time (``time.process_time``: on a shared machine it counts only the cycles the k
   "mixed"``, ``kernels/yukawa.py::yukawa_centres_sorted_mixed``), always interleaved with the
   float64 sum of the working tree (rounds in which the two take turns, the order alternating), and
   printed in a table of its own: both times, the speed-up (median [min-max] of the per-round
-  ratios float64 / mixed) and the largest difference of a rod's force over the largest force.
+  ratios float64 / mixed) and the largest difference of a rod's force over the largest force; with
+  ``--before``, also the mixed sum of REF and of the working tree in rounds of their own, and the
+  speed-up before / after.
 
 ``--kernels`` times only the named ones (default: all four).
 
@@ -145,6 +147,10 @@ def run(args):
             job(MIXED, now)()
             norm = np.linalg.norm(f64, axis=1)
             res["mixed_error"] = float(np.linalg.norm(fy - f64, axis=1).max() / norm.max())
+            if before is not None and hasattr(before.yukawa, "yukawa_centres_sorted_mixed"):
+                res[MIXED + " before"], res[MIXED + " after"] = timed_pair(
+                    job(MIXED, before), job(MIXED, now), args.repeat, clock
+                )
         res["yukawa_pairs"] = int(centre_list(now)[0][-1])  # start[n] of either form
         res["tip_pairs"] = int(kernels.cells.neighbour_rows(tips, tip_radius, True)[0][-1])
         rows.append(res)
@@ -225,16 +231,32 @@ def main(argv=None):
             f"{args.repeat} rounds; speed-up = median [min-max] of the per-round float64 / mixed; error = the "
             "largest difference of a rod's force / the largest force"
         )
-        print("| rods | target | float64 | mixed | speed-up | error |")
-        print("|---|---|---|---|---|---|")
+        against = any(MIXED + " before" in row for t in targets for row in results[t]["rows"])
+        if against:
+            print(
+                f"and the mixed sum of {args.before} and of the working tree taking turns (their own rounds): "
+                "before, after, speed-up = median [min-max] of the per-round before / after"
+            )
+        extra = " mixed before | mixed after | speed-up over before |" if against else ""
+        print("| rods | target | float64 | mixed | speed-up | error |" + extra)
+        print("|---|---|---|---|---|---|" + "---|" * (3 if against else 0))
         for i, row0 in enumerate(results[targets[0]]["rows"]):
             for target in targets:
                 row = results[target]["rows"][i]
                 r = np.array(row["float64"]) / np.array(row[MIXED])
-                print(
+                line = (
                     f"| {row0['scene']} | {target} | {cell(row, 'float64', 'yukawa')} | {cell(row, MIXED, 'yukawa')} | "
                     f"{np.median(r):.2f} [{r.min():.2f}-{r.max():.2f}] | {row['mixed_error']:.1e} |"
                 )
+                if against and MIXED + " before" in row:
+                    b = np.array(row[MIXED + " before"]) / np.array(row[MIXED + " after"])
+                    line += (
+                        f" {cell(row, MIXED + ' before', 'before')} | {cell(row, MIXED + ' after', 'yukawa')} | "
+                        f"{np.median(b):.2f} [{b.min():.2f}-{b.max():.2f}] |"
+                    )
+                elif against:
+                    line += " | | |"
+                print(line)
     for row in results[targets[0]]["rows"]:
         print(
             f"{row['scene']}: centre list radius {row['centre_radius']:.3f}, {row['yukawa_pairs']} directed pairs; "

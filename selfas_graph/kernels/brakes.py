@@ -22,7 +22,7 @@ def tip_brake(position, velocity, start, index, rstar, k_br, out):
     ----------
     position, velocity : (n_tips, 3) float64
     start : (n_tips + 1,) int64
-    index : (n_pairs * 2,) int64
+    index : (n_pairs * 2,) int32 or int64 (``cells.list_dtype``)
         Tip neighbour list (tips of the same rod excluded by the caller).
     rstar, k_br : float
         Range of the brake and its coefficient (units m / t0).
@@ -120,7 +120,7 @@ def brake_close_pairs_exact(position, velocity, start, index, radius, k_br, dt):
     ----------
     position : (n_tips, 3) float64
     velocity : (n_tips, 3) float64, modified in place
-    start, index : int64 arrays, the compressed-row neighbour list
+    start, index : the compressed-row neighbour list, int64 offsets and int32 or int64 entries (``cells.list_dtype``)
     radius, k_br, dt : float
 
     Returns

@@ -254,6 +254,25 @@ def cell_grid(position, side, max_cells):
     return lo, h, g
 
 
+#: the largest point number an int32 holds: a list's entries are int32 up to it (:func:`list_dtype`)
+INT32_MAX = 2**31 - 1
+
+
+def list_dtype(n):
+    """The integer type of the entries (point numbers) of a list of ``n`` points: int32 up to
+    2^31 - 1 points, else int64. The row offsets stay int64.
+
+    [perf] The same numbers in half the bytes, so the kernels give the same results bit for bit. On
+    the rod-centre lists of the Fig. 2 scene at 1200-24 000 rods (one thread of a Zen 4, against
+    int64 entries; ``selfas-graph bench neighbours --before``): the mixed Yukawa sum (the scenes')
+    1.09-1.15 times faster on the host build and 1.01-1.05 on the AVX2 build, the float64 sum
+    1.06-1.11 and 0.98-1.01, the list's build 1.00-1.11 and 1.00-1.06. int32 offsets as well made
+    the AVX2 float64 sum 0.92 times as fast (its loop bounds), so they stay int64. A list takes
+    about half the memory (docs/performance.md 'The Yukawa sum and the neighbour lists').
+    """
+    return np.int32 if n <= INT32_MAX else np.int64
+
+
 def neighbour_rows(position, radius, exclude_same_rod=False, max_cells=None, cell_order=False, rows=None):
     """All ordered pairs closer than ``radius`` as compressed rows (order: see the module docstring).
 
@@ -282,19 +301,20 @@ def neighbour_rows(position, radius, exclude_same_rod=False, max_cells=None, cel
     Returns
     -------
     start : (n + 1,) int64
-    index : (start[n],) int64
+    index : (start[n],) int32 (int64 from 2^31 points, :func:`list_dtype`)
         The neighbours of point k are ``index[start[k]:start[k + 1]]``;
         both directions of every pair are listed.
     cell_rows : tuple, with ``cell_order`` only
-        ``(order, start_t, index_t)``: the points in cell order (``cell_point``) and the rows
-        renumbered by it: row t is the row of point ``order[t]``, in the same order,
-        each neighbour l written as its place in ``order`` (``t`` with ``order[t] = l``).
+        ``(order, start_t, index_t)``: the points in cell order (``cell_point``, int64) and the rows
+        renumbered by it (of the types of ``start`` and ``index``): row t is the row of point
+        ``order[t]``, in the same order, each neighbour l written as its place in ``order`` (``t``
+        with ``order[t] = l``).
     """
     position = np.ascontiguousarray(position, dtype=np.float64)
     n = position.shape[0]
     start = np.zeros(n + 1, dtype=np.int64)
     if n < 2:
-        empty = np.zeros(0, dtype=np.int64)
+        empty = np.zeros(0, dtype=list_dtype(n))
         if cell_order:
             return start, empty, (np.arange(n, dtype=np.int64), start.copy(), empty.copy())
         return start, empty
@@ -313,9 +333,9 @@ def neighbour_rows(position, radius, exclude_same_rod=False, max_cells=None, cel
     row_lo, row_hi = (0, n) if rows is None else (int(rows[0]), int(rows[1]))
     _row_counts(position, sx, sy, sz, lo, h, g, span, cell_start, cell_point, r2max, ex, row_lo, row_hi, counts)
     np.cumsum(counts, out=start[1:])
-    index = np.empty(start[-1], dtype=np.int64)
+    index = np.empty(start[-1], dtype=list_dtype(n))
     start_t = np.zeros(n + 1 if cell_order else 1, dtype=np.int64)
-    index_t = np.empty(start[-1] if cell_order else 0, dtype=np.int64)
+    index_t = np.empty(start[-1] if cell_order else 0, dtype=list_dtype(n))
     if cell_order:
         np.cumsum(counts[cell_point], out=start_t[1:])
     _row_fill(

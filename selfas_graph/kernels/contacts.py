@@ -216,7 +216,7 @@ def close_pairs(position, start, index, radius):
     Parameters
     ----------
     position : (n, 3) float64
-    start, index : int64 arrays, the compressed-row neighbour list
+    start, index : the compressed-row neighbour list, int64 offsets and int32 or int64 entries (``cells.list_dtype``)
     radius : float
 
     Returns

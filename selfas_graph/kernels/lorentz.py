@@ -265,7 +265,7 @@ def lorentz_near_correction(
     active_rod : (n_active,) int64
         Distinct indices of the current-carrying rods.
     current : (n_rods,) float64
-    start, index : int64 arrays
+    start, index : int64 offsets and int32 or int64 entries (``cells.list_dtype``)
         Compressed rows over ``active_rod`` (``start`` has ``n_active + 1`` entries): the near
         rods of each active rod, as places in ``active_rod``, never the rod itself.
     r_lo, r_hi : int

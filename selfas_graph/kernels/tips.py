@@ -260,7 +260,7 @@ def tip_tip_fast(position, charge, start, index, rstar, kappa, r_in, r_out, out)
     ----------
     position : (n_tips, 3) float64
     charge : (n_tips,) float64
-    start, index : int64 arrays
+    start, index : int64 offsets and int32 or int64 entries (``cells.list_dtype``)
         Compressed-row tip neighbour list (both directions, tips of one rod excluded,
         covering at least ``r_out``).
     rstar, kappa : float

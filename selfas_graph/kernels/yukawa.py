@@ -52,7 +52,7 @@ def yukawa_centres(centre, rod_charge, start, index, screening, core, cutoff, lo
         Rod centres.
     rod_charge : (n_rods,) float64
         Electric charge Z_i of each rod.
-    start, index : int64 arrays
+    start, index : int64 offsets and int32 or int64 entries (``cells.list_dtype``)
         Rod neighbour list (compressed rows, both directions).
     screening, core, cutoff : float
         Screening length R_D, core radius a (0: none) and the cut-off radius.

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.cells import max_displacement2, neighbour_rows
+from ..kernels.cells import list_dtype, max_displacement2, neighbour_rows
 
 
 class NeighbourList:
@@ -66,8 +66,9 @@ class NeighbourList:
         self.cutoff = float(cutoff)
         self.skin = float(skin)
         self.exclude_same_rod = exclude_same_rod
+        #: the list in compressed rows: int64 offsets, int32 entries (``kernels/cells.py::list_dtype``)
         self.start = np.zeros(1, dtype=np.int64)
-        self.index = np.zeros(0, dtype=np.int64)
+        self.index = np.zeros(0, dtype=list_dtype(0))
         self.cell_order = cell_order
         self._pairs = None
         self._sorted = (np.zeros(0, dtype=np.int64), self.start.copy(), self.index.copy())
@@ -86,7 +87,7 @@ class NeighbourList:
             n = self.start.shape[0] - 1
             k = np.repeat(np.arange(n, dtype=np.int64), np.diff(self.start))
             once = self.index > k
-            k, l = k[once], self.index[once]
+            k, l = k[once], self.index[once].astype(np.int64)
             order = np.lexsort((l, k))
             self._pairs = np.ascontiguousarray(np.stack([k[order], l[order]], axis=1))
         return self._pairs
@@ -137,7 +138,7 @@ class NeighbourList:
                 self.start, self.index = self.share.gather_list(self.start, self.index, self.rows_per_rod)
         else:
             self.start = np.zeros(n + 1, dtype=np.int64)
-            self.index = np.zeros(0, dtype=np.int64)
+            self.index = np.zeros(0, dtype=list_dtype(n))
             self._sorted = (np.arange(n, dtype=np.int64), self.start.copy(), self.index.copy())
         self._pairs = None
         self._reference = points.copy()

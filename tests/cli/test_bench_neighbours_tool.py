@@ -26,3 +26,12 @@ def test_every_kernel_timed_with_machine_and_target():
     assert 0.0 < row["mixed_error"] < 1e-5  # float32 ran, within its rounding of the float64 sum
     assert row["yukawa_pairs"] > 0 and row["tip_radius"] > 0
     assert got["machine"]["cpu_name"] and "compiles for" in got["line"]
+
+
+def test_before_times_the_mixed_sum_of_both_revisions(capsys):
+    """With ``--before`` the mixed Yukawa sum of the revision is timed against the working tree's
+    too (here the revision is HEAD, exported by git archive as the tool does for any)."""
+    tool = _tool()
+    got = tool.run(argparse.Namespace(rods=[60], repeat=1, checkpoint=None, before="HEAD", kernels=[tool.MIXED]))
+    row = got["rows"][0]
+    assert len(row[tool.MIXED + " before"]) == len(row[tool.MIXED + " after"]) == 1

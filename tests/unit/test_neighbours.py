@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import reference as ref
-from selfas_graph.kernels.cells import max_displacement2, neighbour_rows
+from selfas_graph.kernels.cells import INT32_MAX, list_dtype, max_displacement2, neighbour_rows
 from selfas_graph.model.neighbours import NeighbourList
 
 #: small inputs: also run with NUMBA_DISABLE_JIT=1, the kernels as Python (.ci/run)
@@ -241,3 +241,57 @@ def test_a_block_of_rows_is_those_rows_of_the_whole_list_bit_for_bit(rng, rows):
     nl = NeighbourList(0.6, 0.3, rows=rows)
     nl.build(x)
     assert np.array_equal(nl.start, s) and np.array_equal(nl.index, i)
+
+
+def test_list_entries_are_int32_while_the_point_numbers_fit():
+    """A list's entries are int32 up to 2^31 - 1 points and int64 beyond (no entry wraps around);
+    its offsets int64, for every list the model makes (empty ones too: one compiled version of each
+    kernel)."""
+    assert list_dtype(0) == np.int32 and list_dtype(INT32_MAX) == np.int32
+    assert list_dtype(INT32_MAX + 1) == np.int64
+    x = np.random.default_rng(1).uniform(0, 2, (50, 3))
+    start, index, (order, start_t, index_t) = neighbour_rows(x, 0.7, cell_order=True)
+    assert index.dtype == index_t.dtype == np.int32 and start.dtype == start_t.dtype == order.dtype == np.int64
+    for n in (0, 1):
+        start, index = neighbour_rows(np.zeros((n, 3)), 0.7)
+        assert index.dtype == np.int32 and start.dtype == np.int64
+    nl = NeighbourList(0.5, 0.1)
+    assert nl.index.dtype == np.int32 and nl.start.dtype == np.int64
+    for points in (x, np.full((4, 3), np.nan)):
+        nl.build(points)
+        assert nl.index.dtype == np.int32 and nl.start.dtype == np.int64
+    assert nl.pairs.dtype == np.int64
+
+
+def test_int32_and_int64_lists_give_the_same_forces_bit_for_bit(rng):
+    """The kernels read the same numbers whatever their integer type: every sum over a list is the
+    same bit for bit with the list as int32 (the builds') and as int64 (exact equality: the same
+    operations on the same numbers)."""
+    from selfas_graph.kernels import brakes, contacts, tips, yukawa
+
+    x = rng.uniform(0, 3, (200, 3))
+    v = rng.normal(size=x.shape)
+    q = rng.uniform(-1, 1, x.shape[0])
+    start, index, (order, start_t, index_t) = neighbour_rows(x, 1.2, cell_order=True)
+    wide = [(start, index, start_t, index_t), (start, index.astype(np.int64), start_t, index_t.astype(np.int64))]
+    assert index.dtype == np.int32
+    got = []
+    for s, i, st, it in wide:
+        r = {}
+        for name, kernel in (("f64", yukawa.yukawa_centres_sorted), ("mixed", yukawa.yukawa_centres_sorted_mixed)):
+            r[name] = np.zeros((x.shape[0], 3))
+            kernel(x[order], q[order], order, st, it, 1.0, 0.06, 1.2, 0, x.shape[0], r[name])
+        r["yukawa"] = np.zeros((x.shape[0], 3))
+        yukawa.yukawa_centres(x, q, s, i, 1.0, 0.06, 1.2, 0, x.shape[0], r["yukawa"])
+        r["energy"] = np.zeros(x.shape[0])
+        yukawa.yukawa_energy(x, q, s, i, 1.0, 0.06, 1.2, 0, x.shape[0], r["energy"])
+        r["fast"] = np.zeros((x.shape[0], 3))
+        tips.tip_tip_fast(x, q, s, i, 0.06, 100.0, 0.6, 0.9, r["fast"])
+        r["brake"] = np.zeros((x.shape[0], 3))
+        brakes.tip_brake(x, v, s, i, 0.5, 3.0, r["brake"])
+        r["pairs"] = contacts.close_pairs(x, s, i, 0.5)
+        got.append(r)
+    assert got[0]["pairs"].shape[0] > 0
+    for key in got[0]:
+        assert np.any(got[0][key]), key
+        np.testing.assert_array_equal(got[0][key], got[1][key], err_msg=key)
