@@ -262,7 +262,9 @@ def list_dtype(n):
     """The integer type of the entries (point numbers) of a list of ``n`` points: int32 up to
     2^31 - 1 points, else int64. The row offsets stay int64.
 
-    [perf] The same numbers in half the bytes, so the kernels give the same results bit for bit. On
+    [perf] The same numbers in half the bytes; the kernels give the same results bit for bit (their
+    sums may be reordered by the compiler, so this is measured: tests/unit/test_neighbours.py, and
+    ``bench same_as_commit`` on the shipped scenes, docs/performance.md). On
     the rod-centre lists of the Fig. 2 scene at 1200-24 000 rods (one thread of a Zen 4, against
     int64 entries; ``selfas-graph bench neighbours --before``): the mixed Yukawa sum (the scenes')
     1.09-1.15 times faster on the host build and 1.01-1.05 on the AVX2 build, the float64 sum

@@ -291,7 +291,7 @@ def contact_news(position, start, index, pairs, rstar, release, z_cathode, z_ano
         for j in range(start[k], start[k + 1]):
             l = index[j]
             if l > k and closer(position, k, l, r2):
-                key = k * n + l
+                key = k * n + np.int64(l)  # int64 with JIT off too (l may be an int32 entry)
                 at = np.searchsorted(keys, key)
                 if at < m and keys[at] == key:
                     continue

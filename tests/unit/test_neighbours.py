@@ -265,8 +265,8 @@ def test_list_entries_are_int32_while_the_point_numbers_fit():
 
 def test_int32_and_int64_lists_give_the_same_forces_bit_for_bit(rng):
     """The kernels read the same numbers whatever their integer type: every sum over a list is the
-    same bit for bit with the list as int32 (the builds') and as int64 (exact equality: the same
-    operations on the same numbers)."""
+    same bit for bit with the entries as int32 (the builds') and as int64 (exact equality: the
+    compiler may order a sum as it likes, and must not order it by the entries' type)."""
     from selfas_graph.kernels import brakes, contacts, tips, yukawa
 
     x = rng.uniform(0, 3, (200, 3))
@@ -290,6 +290,11 @@ def test_int32_and_int64_lists_give_the_same_forces_bit_for_bit(rng):
         r["brake"] = np.zeros((x.shape[0], 3))
         brakes.tip_brake(x, v, s, i, 0.5, 3.0, r["brake"])
         r["pairs"] = contacts.close_pairs(x, s, i, 0.5)
+        r["fast rows"] = np.zeros((x.shape[0], 3))
+        tips.tip_tip_fast_rows(x, q, s, i, 0.06, 100.0, 0.6, 0.9, 20, 150, r["fast rows"])
+        r["pair k"], r["pair l"] = np.zeros(s[-1], np.int64), np.zeros(s[-1], np.int64)
+        m = brakes.close_pairs_rows(x, s, i, 0.5, 20, 150, r["pair k"], r["pair l"], s[20])
+        r["pair k"], r["pair l"] = r["pair k"][s[20] : s[20] + m], r["pair l"][s[20] : s[20] + m]
         got.append(r)
     assert got[0]["pairs"].shape[0] > 0
     for key in got[0]:
