@@ -15,7 +15,7 @@ On the tips of the Fig. 2 scene scaled to each size (as selfas_graph/bench/step.
   division per pair (up to 6000 rods);
 - ``tree build`` and ``tree eval``: the tip tree (kernels/tree.py) at its defaults; ``tree eval
   mixed`` the same evaluation in mixed precision, as the Fig. 2 and Fig. 6 scenes run it;
-- ``yukawa``: the screened rod-centre sum over the scene's neighbour list;
+- ``yukawa``: the screened rod-centre sum over the scene's rod-centre list, as each revision builds it;
 - ``ab4 step``, ``constraint`` and ``channel sums``: the O(n) kernels of every step (the AB4 update
   with its bond check, the rigid-bond constraint with its checks, the sum of the scene's force
   channels with the powers of its non-conservative ones), each as the run calls it (serial below
@@ -192,7 +192,7 @@ def run(args):
     import numba
 
     from selfas_graph import Simulation
-    from selfas_graph.kernels import currents, integrate, lorentz, rigid, tips, tree, yukawa
+    from selfas_graph.kernels import cells, currents, integrate, lorentz, rigid, tips, tree, yukawa
 
     from .peer import machine, machine_line
     from .step import scene
@@ -201,7 +201,7 @@ def run(args):
     plain = _plain()
     clock = time.process_time if args.cpu_time else time.perf_counter
     now = types.SimpleNamespace(
-        tips=tips, tree=tree, yukawa=yukawa, currents=currents, integrate=integrate, rigid=rigid
+        tips=tips, tree=tree, yukawa=yukawa, currents=currents, integrate=integrate, rigid=rigid, cells=cells
     )
     before_ref = getattr(args, "before", None)
     before = kernels_at(before_ref) if before_ref else None
@@ -223,6 +223,14 @@ def run(args):
         yk = next(t for t in ff.terms if t.name == "yukawa")
         nl = ff.centre_neighbours()
         c = ff.context.centre()
+        own_lists = {}
+
+        def centre_list(K):
+            """The rod-centre list as revision K builds it (its own integer types), made once."""
+            if id(K) not in own_lists:
+                own_lists[id(K)] = K.cells.neighbour_rows(c, nl.cutoff + nl.skin)
+            return own_lists[id(K)]
+
         fy = np.empty((n, 3))
         rng = np.random.default_rng(7)
         n_active = getattr(args, "active_rods", None)
@@ -287,7 +295,7 @@ def run(args):
                 args.repeat,
                 lambda K: (
                     lambda: K.yukawa.yukawa_centres(
-                        c, st.rod_charge, nl.start, nl.index, yk.screening, yk.core, yk.cutoff, 0, n, fy
+                        c, st.rod_charge, *centre_list(K), yk.screening, yk.core, yk.cutoff, 0, n, fy
                     )
                 ),
             ),
