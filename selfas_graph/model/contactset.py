@@ -26,7 +26,7 @@ from .circuit import CircuitSolution, SolveMemo, solve_circuit
 from .topology import Topology, classify_rods, conductor_node_key
 from .validate import _as_count, _as_index_array, _frozen, conductor_id, finite_potential, tip_index, tip_pair
 
-__all__ = ["ContactSet", "solve_contacts", "DERIVED_KINDS"]
+__all__ = ["ContactSet", "ContactQueries", "solve_contacts", "DERIVED_KINDS"]
 
 #: event kinds derived from a batch (not contacts): skipped by :meth:`ContactSet.apply`
 DERIVED_KINDS = (ev.SHORT_CIRCUIT, ev.OPEN_CIRCUIT)
@@ -354,3 +354,36 @@ def solve_contacts(
         memo=memo,
         merged=(topo.n_nodes, topo.node_of_tip),
     )
+
+
+class ContactQueries:
+    """What an object that holds its contacts asks of them: the queries and the solve that
+    :class:`~.graph.ConnectivityGraph` and :class:`~.network.Network` share.
+
+    The object keeps the present contacts as ``contacts`` (a :class:`ContactSet`, replaced by each
+    batch of events) and the circuit's ``solver``, ``rod_resistance`` and ``contact_resistance``, and
+    a ``changed`` flag that :meth:`solve` clears.
+    """
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The contacts as arrays (:meth:`ContactSet.arrays`): ``tip_contacts`` (m, 2) int64 rows
+        ``(k, l)`` with ``k < l``, sorted; ``conductor_tip``, ``conductor_id`` (k,) int64 and
+        ``conductor_potential`` (k,) float64 (NaN where a per-contact potential is unset), sorted by
+        (tip, conductor)."""
+        return self.contacts.arrays()
+
+    def topology(self) -> Topology:
+        """Roles and structures of the rods (computed once per set of contacts)."""
+        return self.contacts.topology
+
+    @property
+    def has_short_circuit(self) -> bool:
+        """Whether a filament joins two different conductor attachments now."""
+        return self.contacts.topology.has_short_circuit
+
+    def solve(self, memo: SolveMemo | None = None) -> CircuitSolution:
+        """Potentials and rod currents of the present contacts (:func:`solve_contacts`, through
+        ``memo`` when given); clears ``changed``. Raises ValueError if a per-contact potential is unset."""
+        sol = solve_contacts(self.contacts, self.solver, self.rod_resistance, self.contact_resistance, memo)
+        self.changed = False
+        return sol

@@ -18,8 +18,7 @@ from collections.abc import Callable, Iterable, Mapping
 import numpy as np
 
 from selfas_graph.model import events as ev
-from selfas_graph.model.circuit import CircuitSolution, SolveMemo
-from selfas_graph.model.contactset import ContactSet, solve_contacts
+from selfas_graph.model.contactset import ContactQueries, ContactSet
 from selfas_graph.model.topology import (
     CLUSTER,
     DEAD_END,
@@ -35,7 +34,7 @@ from selfas_graph.model.validate import _as_resistance, _frozen, tip_index
 __all__ = ["FREE", "CLUSTER", "DEAD_END", "FILAMENT", "ROLE_NAMES", "Topology", "classify_rods", "ConnectivityGraph"]
 
 
-class ConnectivityGraph:
+class ConnectivityGraph(ContactQueries):
     """Connectivity state of the rods: the rods (fixed) and the contacts, changed by events only.
 
     Tips ``0 .. n_tips-1``; rod ``i`` joins tips ``2 i`` and ``2 i + 1``. A contact joins two
@@ -189,38 +188,9 @@ class ConnectivityGraph:
         return circuit_event(before.topology.has_short_circuit, self.topology(), int(step), float(time))
 
     # ------------------------------------------------------------------ queries
-    def arrays(self) -> dict[str, np.ndarray]:
-        """The contacts as arrays (for HDF5 and for the solvers): :meth:`.ContactSet.arrays`.
-
-        Returns
-        -------
-        dict with
-            ``tip_contacts`` (m, 2) int64, rows ``(k, l)`` with ``k < l``, sorted;
-            ``conductor_tip`` (k,) int64, ``conductor_id`` (k,) int64 and
-            ``conductor_potential`` (k,) float64 (NaN where a per-contact potential
-            is unset), sorted by (tip, conductor).
-        """
-        return self.contacts.arrays()
-
     def conductor_node_key(self) -> np.ndarray:
         """Attachment key of each conductor contact (:meth:`.ContactSet.node_key`)."""
         return self.contacts.node_key()
-
-    def topology(self) -> Topology:
-        """Roles and structures of the rods (computed once per set of contacts)."""
-        return self.contacts.topology
-
-    @property
-    def has_short_circuit(self) -> bool:
-        """Whether a filament joins two different conductor attachments now."""
-        return self.contacts.topology.has_short_circuit
-
-    def solve(self, memo: SolveMemo | None = None) -> CircuitSolution:
-        """Potentials and rod currents of the present contacts (:func:`.contactset.solve_contacts`);
-        clears :attr:`changed`. Raises ValueError if a per-contact potential is unset."""
-        sol = solve_contacts(self.contacts, self.solver, self.rod_resistance, self.contact_resistance, memo)
-        self.changed = False
-        return sol
 
     def to_networkx(self):
         """The graph as a new ``networkx.Graph`` (a copy: changing it does not change this object).

@@ -32,8 +32,8 @@ from . import events as ev
 from .circuit import CircuitSolution, SolveMemo
 from .circuitlog import circuit_rows
 from .contacts import ContactTracker
-from .contactset import ContactSet, solve_contacts
-from .topology import FILAMENT, Topology, circuit_event
+from .contactset import ContactQueries, ContactSet
+from .topology import FILAMENT, circuit_event
 from .validate import _frozen
 
 __all__ = ["Network", "NetworkUpdate", "RodCurrents"]
@@ -99,7 +99,7 @@ class NetworkUpdate:
     circuit: list = dataclasses.field(default_factory=list)
 
 
-class Network:
+class Network(ContactQueries):
     """Contacts, connectivity, conductor potentials and circuit of a run.
 
     Parameters
@@ -253,32 +253,9 @@ class Network:
         """Number of tip-tip contacts."""
         return self.contacts.n_contacts
 
-    def arrays(self) -> dict[str, np.ndarray]:
-        """The contacts as arrays (:meth:`.ContactSet.arrays`): ``tip_contacts`` (m, 2) sorted rows
-        (k < l); ``conductor_tip``, ``conductor_id``, ``conductor_potential`` sorted by (tip, conductor)."""
-        return self.contacts.arrays()
-
-    def topology(self) -> Topology:
-        """Roles and structures of the rods (computed once per set of contacts)."""
-        return self.contacts.topology
-
-    @property
-    def has_short_circuit(self) -> bool:
-        """Whether a filament joins two different conductor attachments now."""
-        return self.contacts.topology.has_short_circuit
-
     def solve(self, memo: SolveMemo | None = None) -> CircuitSolution:
-        """Potentials and rod currents of the present contacts (:func:`.contactset.solve_contacts`),
-        through :attr:`memo` unless another memo is given; clears :attr:`changed`."""
-        sol = solve_contacts(
-            self.contacts,
-            self.solver,
-            self.rod_resistance,
-            self.contact_resistance,
-            self.memo if memo is None else memo,
-        )
-        self.changed = False
-        return sol
+        """:meth:`.ContactQueries.solve` through :attr:`memo` unless another memo is given."""
+        return super().solve(self.memo if memo is None else memo)
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict:
