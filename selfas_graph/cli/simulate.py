@@ -212,7 +212,7 @@ def _load_resume(args):
             brake = _started_brake(run_file)
             run_id = run_file.meta.get("run_id")
             problems = appendable_problems(run_file.f)
-            status = str(run_file.meta.get("status", ""))
+            status = run_file.status
     except RunFileError as exc:
         raise CliError(f"cannot resume into {out}: {exc}") from None
     if status.startswith("failed: numerical failure"):  # not a full disk, which a resume with room overcomes

@@ -67,11 +67,13 @@ def trim_plan(f, step, path) -> list:
 
 
 def apply_plan(f, plan) -> None:
+    """Cut each dataset of ``plan`` (from :func:`trim_plan`) to its rows, in the file ``f`` opened for writing."""
     for name, n in plan:
         _truncate(f[name], n)
 
 
 def room_for_copy(path) -> bool:
+    """Whether the folder of ``path`` has room for a copy of it and the copy's trimmed rewrite (unknown: yes)."""
     free = free_bytes(path.parent)
     return free is None or free > 2 * os.path.getsize(path) + 2**24
 
