@@ -47,52 +47,24 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
     """
     measures = FRAME_MEASURES if measures is None else measures
     times = [float(t) for t in times]
-    seeds, values = [], np.full((len(measures), len(paths), len(times)), np.nan)
-    errs = np.full_like(values, np.nan)
-    current = np.full((len(paths), len(times)), np.nan)
     grouped = any(m.grouped for m in measures)
-    sc_t, sc_obs, unreadable = [], [], []
-    for j, path in enumerate(paths):
+    seeds, unreadable, rows = [], [], []
+    for path in paths:
         try:
             run = RunFile(path)
         except RunFileError as exc:  # e.g. still being written by a running seed: left out, named
             unreadable.append({"path": str(path), "reason": str(exc)})
             continue
         with run:
-            params = run.parameters
-            interval = float(params["output"]["interval"])
-            t_run = run.time
-            end = float(t_run[-1]) if t_run.size else 0.0
-            t_sc = timeline(t_run, np.zeros_like(t_run), events=run.events()).short_circuit_time
-            cens = end if t_end is None else min(end, float(t_end))
-            seen = t_sc is not None and t_sc <= cens
-            sc_t.append(t_sc if seen else cens)
-            sc_obs.append(seen)
-            seeds.append(
-                {
-                    "path": str(path),
-                    "seed": int(params["scenario"]["seed"]),
-                    "status": str(run.meta.get("status", "")),
-                    "t_end": end,
-                    "short_circuit_time": t_sc if seen else None,
-                }
-            )
-            for k, t in enumerate(times):
-                if not t_run.size:
-                    break
-                idx = int(np.argmin(np.abs(t_run - t)))
-                if abs(t_run[idx] - t) > 0.5 * interval + 1e-9:
-                    continue
-                frame = Frame(run, idx, params, flux_radius)
-                for m, measure in enumerate(measures):
-                    values[m, j, k] = measure.fn(frame)
-                    if measure.err is not None:
-                        errs[m, j, k] = measure.err(frame)
-                if grouped:
-                    current[j, k] = carries_current(frame)
-    keep = [j for j, p in enumerate(paths) if str(p) not in {u["path"] for u in unreadable}]
-    values, errs, current = values[:, keep], errs[:, keep], current[keep]
-    sc = censored_times(sc_t, sc_obs) if seeds else None
+            seed, row = _read_seed(run, path, times, t_end, measures, flux_radius, grouped)
+        seeds.append(seed)
+        rows.append(row)
+    # (measure, seed, time) arrays over the readable seeds; a seed with no frame near a time has NaN there
+    shape = (len(measures), len(seeds), len(times))
+    values = np.stack([r[0] for r in rows], axis=1) if rows else np.full(shape, np.nan)
+    errs = np.stack([r[1] for r in rows], axis=1) if rows else np.full(shape, np.nan)
+    current = np.stack([r[2] for r in rows]) if rows else np.full(shape[1:], np.nan)
+    sc = censored_times([r[3] for r in rows], [r[4] for r in rows]) if seeds else None
     out = {
         "version": __version__,
         "n_seeds": len(seeds),
@@ -106,28 +78,69 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
     if grouped:
         out["current"] = _plain(current)
     for m, measure in enumerate(measures):
-        extra = {}
-        if measure.grouped:
-            g = [grouped_summary(values[m][:, k], current[:, k] == 1.0) for k in range(len(times))]
-            mean, sem, n = (np.array([x[key] for x in g]) for key in ("mean", "sem", "k"))
-            extra = {"group": "seeds whose circuit carries a current"}
-            extra.update({key: _plain(np.array([x[key] for x in g])) for key in ("k", "median", "min", "max")})
-            extra["n_seeds"] = [x["n"] for x in g]
-        elif measure.err is not None:
-            mean, sem, between, rms, n = mean_sem_fits(values[m], errs[m], axis=0)
-            extra = {"sem_between": _plain(between), "fit_err_rms": _plain(rms), "fit_err": _plain(errs[m])}
-        else:
-            mean, sem, n = mean_sem(values[m], axis=0)
-        out["measures"][measure.name] = {
-            "unit": measure.unit,
-            "doc": measure.doc,
-            "mean": _plain(mean),
-            "sem": _plain(sem),
-            "n": np.asarray(n).astype(int).tolist(),
-            "values": _plain(values[m]),
-            **extra,
-        }
+        out["measures"][measure.name] = _measure_summary(measure, values[m], errs[m], current)
     return out
+
+
+def _read_seed(run, path, times, t_end, measures, flux_radius, grouped):
+    """One seed's entry of ``seeds`` and its row: (values, fit errors) per measure and time, whether
+    it carries a current per time, its short-circuit time or censoring time, and whether it was seen."""
+    params = run.parameters
+    interval = float(params["output"]["interval"])
+    t_run = run.time
+    end = float(t_run[-1]) if t_run.size else 0.0
+    t_sc = timeline(t_run, np.zeros_like(t_run), events=run.events()).short_circuit_time
+    cens = end if t_end is None else min(end, float(t_end))
+    seen = t_sc is not None and t_sc <= cens
+    seed = {
+        "path": str(path),
+        "seed": int(params["scenario"]["seed"]),
+        "status": str(run.meta.get("status", "")),
+        "t_end": end,
+        "short_circuit_time": t_sc if seen else None,
+    }
+    values = np.full((len(measures), len(times)), np.nan)
+    errs = np.full_like(values, np.nan)
+    current = np.full(len(times), np.nan)
+    for k, t in enumerate(times):
+        if not t_run.size:
+            break
+        idx = int(np.argmin(np.abs(t_run - t)))
+        if abs(t_run[idx] - t) > 0.5 * interval + 1e-9:
+            continue
+        frame = Frame(run, idx, params, flux_radius)
+        for m, measure in enumerate(measures):
+            values[m, k] = measure.fn(frame)
+            if measure.err is not None:
+                errs[m, k] = measure.err(frame)
+        if grouped:
+            current[k] = carries_current(frame)
+    return seed, (values, errs, current, t_sc if seen else cens, seen)
+
+
+def _measure_summary(measure, values, errs, current) -> dict:
+    """The entry of one measure in ``measures`` from its (seed, time) values and fit errors."""
+    extra = {}
+    if measure.grouped:
+        g = [grouped_summary(values[:, k], current[:, k] == 1.0) for k in range(values.shape[1])]
+        mean, sem, n = (np.array([x[key] for x in g]) for key in ("mean", "sem", "k"))
+        extra = {"group": "seeds whose circuit carries a current"}
+        extra.update({key: _plain(np.array([x[key] for x in g])) for key in ("k", "median", "min", "max")})
+        extra["n_seeds"] = [x["n"] for x in g]
+    elif measure.err is not None:
+        mean, sem, between, rms, n = mean_sem_fits(values, errs, axis=0)
+        extra = {"sem_between": _plain(between), "fit_err_rms": _plain(rms), "fit_err": _plain(errs)}
+    else:
+        mean, sem, n = mean_sem(values, axis=0)
+    return {
+        "unit": measure.unit,
+        "doc": measure.doc,
+        "mean": _plain(mean),
+        "sem": _plain(sem),
+        "n": np.asarray(n).astype(int).tolist(),
+        "values": _plain(values),
+        **extra,
+    }
 
 
 def _plain(v):
