@@ -402,9 +402,15 @@ def test_force_field_tree_passes_nan_on_to_the_health_check():
 # Measured with the fixtures here (theta 0.4 and 0): |F_mixed - F_float64| at most 1.1e-6 of
 # the largest force, median 4e-7 - 5e-7 of each tip's force (float32 rounding, 6e-8, of terms
 # that partly cancel). The bounds are ten times (MIXED_ATOL) and four times (MIXED_MEDIAN) that.
+# The 99th percentile of |F_mixed - F_float64| / |F| in the chains depends on the vector width
+# the build compiles the float32 law for: LLVM takes 1/sqrt from the reciprocal square root
+# estimate and one Newton step, vrsqrt14ps (14 bits) on 512-bit vectors, vrsqrtps (12 bits) on
+# 256-bit ones (the AVX2 build, and the host build of Intel's AVX-512 CPUs, whose LLVM tuning
+# prefers 256-bit vectors): measured 6.9e-6 with the first (Zen 4, Zen 5), 1.33e-5 with the second
+# (Intel Xeon, host and AVX2 builds). MIXED_P99 is 1.5 times the larger.
 MIXED_ATOL = 1e-5
 MIXED_MEDIAN = 2e-6
-MIXED_P99 = 1e-5
+MIXED_P99 = 2e-5
 
 
 def mixed(x, y, z, charge, theta, **knobs):
@@ -423,7 +429,7 @@ def test_mixed_matches_float64(config, theta, request):
     direct sum is the tree's own: measured median and p99 within 1.3 % of the float64 tree's in
     the gas (the float32 difference, 4e-7 of a force, adds to a truncation error of 1e-5 to 1e-4),
     and within 2.3e-7 (median, truncation error 1.3e-7) and 3.6e-6 (p99, 2.8e-5) of it in the
-    chains."""
+    chains with 512-bit vectors, 3.7e-7 and 1.35e-5 with 256-bit ones (MIXED_P99)."""
     tips = request.getfixturevalue(config)
     f64 = tree(*tips, theta)
     f32 = mixed(*tips, theta)
@@ -433,8 +439,8 @@ def test_mixed_matches_float64(config, theta, request):
         expected = direct(*tips)
         e64, e32 = relative_error(f64, expected), relative_error(f32, expected)
         # in the chains the hexadecapole tree errs only 1e-7 to 1e-6 (median) and 3e-5 (p99), where
-        # the float32 rounding of the near pairs is as large (MIXED_MEDIAN; its p99 is 6.9e-6 of a
-        # tip's force in the chains, MIXED_P99): it may add that much
+        # the float32 rounding of the near pairs is as large (MIXED_MEDIAN; its p99 is 6.9e-6 or
+        # 1.33e-5 of a tip's force in the chains by the build's vector width, MIXED_P99): it may add that much
         for stat, rounding in ((np.median, MIXED_MEDIAN), (lambda e: np.percentile(e, 99), MIXED_P99)):
             assert abs(stat(e32) - stat(e64)) < 0.05 * stat(e64) + rounding
 
