@@ -75,22 +75,30 @@ class TipMagneticForce(Term):
                 # NaN or inf positions: no tree can place them; the direct sum passes them on
                 # to the forces, where the run's health check stops with a diagnosis
             else:
-                # ranks split the tree's target groups, runs of tips in Morton order, so that each
-                # group is walked on one rank only, and gather their rows: the same forces bit for bit
-                # (docs/performance.md 'Several MPI ranks')
-                groups, tips = ktree.group_bounds(tree, ctx.blocks.size)
-                r = ctx.blocks.rank
-                f = out["tip_magnetic"]
-                ktree.evaluate_tip_tree(
-                    tree, self.rstar, self.kappa, self.theta, f, precision=self.precision, groups=groups[r : r + 2]
-                )
-                ctx.blocks.gather_runs(f, tree.index, tips)
+                self._walk_shared(ctx, tree, self._evaluate, out["tip_magnetic"])
                 self._gathered = True
                 return
         self._gathered = False
         lo, hi = ctx.blocks.tips
         direct = kt.tip_tip_direct_mixed if self.precision == "mixed" else kt.tip_tip_direct
         direct(x, y, z, ctx.tip_charge, self.rstar, self.kappa, lo, hi, out["tip_magnetic"])
+
+    def _evaluate(self, tree, groups, f):
+        ktree.evaluate_tip_tree(tree, self.rstar, self.kappa, self.theta, f, precision=self.precision, groups=groups)
+
+    def _energies(self, tree, groups, e):
+        ktree.tip_tree_energy(tree, self.rstar, self.kappa, self.theta, e, groups=groups)
+
+    @staticmethod
+    def _walk_shared(ctx, tree, walk, rows):
+        """``walk(tree, groups, rows)`` over this rank's run of the tree's target groups, then the
+        rows gathered from every rank. The ranks split the groups, runs of tips in Morton order, so
+        that each group is walked on one rank only: the same rows bit for bit on any number of ranks
+        (docs/performance.md 'Several MPI ranks')."""
+        groups, tips = ktree.group_bounds(tree, ctx.blocks.size)
+        r = ctx.blocks.rank
+        walk(tree, groups[r : r + 2], rows)
+        ctx.blocks.gather_runs(rows, tree.index, tips)
 
     def _build_tree(self, ctx, x, y, z):
         """The tip tree; under MPI each rank computes the moments of a run of cells and the ranks
@@ -115,11 +123,7 @@ class TipMagneticForce(Term):
         e = np.empty(ctx.n_tips)
         if self.tree_energy and np.isfinite(ctx.position).all():
             # by the tree (kernels/treeenergy.py): its ranks split the target groups as for the force
-            tree = self._build_tree(ctx, x, y, z)
-            groups, tips = ktree.group_bounds(tree, ctx.blocks.size)
-            r = ctx.blocks.rank
-            ktree.tip_tree_energy(tree, self.rstar, self.kappa, self.theta, e, groups=groups[r : r + 2])
-            ctx.blocks.gather_runs(e, tree.index, tips)
+            self._walk_shared(ctx, self._build_tree(ctx, x, y, z), self._energies, e)
             return {"tip_magnetic": float(e.sum())}
         lo, hi = ctx.blocks.tips
         kt.tip_tip_energy(x, y, z, ctx.tip_charge, self.rstar, self.kappa, lo, hi, e)
