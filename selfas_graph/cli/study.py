@@ -9,8 +9,10 @@ study's own later one, is not reused: ``--force`` replaces it);
 ``study summarise NAME`` reads the run files and writes the study's small summary
 ``docs/results/NAME.json`` (per-seed values of every measure at every time, the short-circuit
 episodes at event time, and the version, commit, CPU, threads and wall time of the runs) and its
-figures into ``docs/figures/``; ``study page`` writes every generated table of docs/results.md from
-the summaries (``--check``: exit 1 if the page differs from what the summaries give).
+figures into ``docs/figures/`` (``--figures``; by default ``figures/`` beside ``--page``); ``study page``
+writes every generated table of docs/results.md from the summaries and draws the figures made from
+them again, naming each file (``--check``: write nothing, exit 1 if the page differs from what the
+summaries give). The paths of a studies file, and the defaults, are read from the working directory.
 """
 
 from __future__ import annotations
@@ -24,7 +26,8 @@ from .main import CliError
 
 DEFAULT_STUDIES = "docs/studies.toml"
 DEFAULT_SUMMARIES = "docs/results"
-DEFAULT_FIGURES = "docs/figures"
+#: the figures' folder, beside the results page that shows them (docs/figures for docs/results.md)
+FIGURES_BESIDE_PAGE = "figures"
 DEFAULT_PAGE = "docs/results.md"
 #: the result file of a percolation study in its run folder
 PERCOLATION_JSON = "percolation.json"
@@ -45,7 +48,11 @@ def add_arguments(p):
     p.add_argument(
         "--summaries", default=DEFAULT_SUMMARIES, help=f"folder of the summaries (default {DEFAULT_SUMMARIES})"
     )
-    p.add_argument("--figures", default=DEFAULT_FIGURES, help=f"folder of the figures (default {DEFAULT_FIGURES})")
+    p.add_argument(
+        "--figures",
+        default=None,
+        help=f"folder of the figures (default: {FIGURES_BESIDE_PAGE}/ beside the --page, {DEFAULT_PAGE})",
+    )
     p.add_argument("--page", default=DEFAULT_PAGE, help=f"the results page (default {DEFAULT_PAGE})")
     p.add_argument("--check", action="store_true", help="page: write nothing; exit 1 if the page is not up to date")
     p.add_argument("--no-figures", action="store_true", help="summarise: the summary only")
@@ -58,7 +65,13 @@ def _studies(args):
     try:
         return load_studies(args.studies)
     except StudiesError as exc:
-        raise CliError(str(exc)) from None
+        hint = ""
+        if not Path(args.studies).exists():
+            hint = (
+                f"; the default paths are read from the working directory, {Path.cwd()}: run the command from "
+                "the repository's root, or name the studies file with --studies"
+            )
+        raise CliError(f"{exc}{hint}") from None
 
 
 def _pick(studies, names):
@@ -153,7 +166,18 @@ def _run_together(picked, args, older_than=""):
 
 
 def run(args):
+    from ..studies import StudiesError
+
+    try:
+        return _run(args)
+    except StudiesError as exc:  # a study's scenario file that cannot be read, for its tables and figures
+        raise CliError(str(exc)) from None
+
+
+def _run(args):
     studies = _studies(args)
+    if args.figures is None:  # beside the page whose figures they are
+        args.figures = str(Path(args.page).parent / FIGURES_BESIDE_PAGE)
     if args.action == "list":
         for s in studies.studies.values():
             extra = f" {' '.join('--set ' + o for o in s.overrides)}" if s.overrides else ""
@@ -276,7 +300,8 @@ def run(args):
 
         for name, st in studies.studies.items():  # the figures made from a summary, drawn again from it
             if name in summaries and summaries[name].get("kind") != "percolation":
-                study_figures(st, summaries[name], args.figures)
+                for path in study_figures(st, summaries[name], args.figures):
+                    print(f"wrote {path}")
         for name in studies.sweeps:
             if sum(summaries.get(st) is not None for _, st in studies.sweep_points(name)) >= 2:
                 print(f"wrote {plot_sweep(studies, summaries, name, Path(args.figures) / f'sweep_{name}.png')}")

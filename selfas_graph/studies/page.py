@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..provenance import version_key
+from .spec import StudiesError
 from .stats import fmt, measure_label, measure_text, older_runs
 from .verdicts import claim_rows, convergence_rows, sweep_rows
 
@@ -51,15 +52,24 @@ def load_summary(folder, name):
 
 def has_electrodes(summary) -> bool:
     """Whether the study's scene closes its circuit between electrodes (case (i)) rather than through
-    the external filament (case (ii)), from its scenario file and overrides; True if that file cannot
-    be read here."""
+    the external filament (case (ii)), from its scenario file and overrides.
+
+    The scenario path is read as the studies file gives it, from the working directory (as
+    ``study run`` reads it); :class:`~.spec.StudiesError` if the file cannot be read there, since a
+    guess would word case (ii)'s closings of the circuit as short circuits of the electrodes."""
     from ..io.scenario import ScenarioError, load_scenario
 
     study = summary.get("study", {})
+    if "scenario" not in study:
+        raise StudiesError("the summary names no scenario file (its 'study' entry has no 'scenario')")
     try:
         params = load_scenario(study["scenario"], overrides=list(study.get("overrides", ()))).params
-    except (KeyError, OSError, ScenarioError):  # a summary read away from its scenario file
-        return True
+    except ScenarioError as exc:
+        raise StudiesError(
+            f"{study['scenario']}: cannot read the study's scenario file from {Path.cwd()} ({'; '.join(exc.problems)}); "
+            "run the command from the folder the studies file's scenario paths are relative to "
+            "(the repository's root for docs/studies.toml)"
+        ) from None
     return params.forces.electrodes is not None or params.forces.external_filament is None
 
 

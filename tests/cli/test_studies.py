@@ -223,7 +223,8 @@ table_times = [0.5]
     for key in ("total_current", "rods_in_series"):  # the circuit log's row at each closing
         assert len(seed["episodes"].get(key, seed["episodes"]["start"])) == len(seed["episodes"]["start"])
     assert (tmp_path / "figs" / "q_series.png").exists() and (tmp_path / "figs" / "q_snapshot.png").exists()
-    cli("page", "--summaries", "res", "--page", "page.md")
+    out = cli("page", "--summaries", "res", "--page", "page.md")  # the figures beside the page, each named
+    assert f"wrote {Path('figures') / 'q_series.png'}" in out and (tmp_path / "figures" / "q_series.png").exists()
     page = (tmp_path / "page.md").read_text()
     assert "| fraction of rods within R_plas |" in page
     assert "is up to date" in cli("page", "--summaries", "res", "--page", "page.md", "--check")
@@ -303,6 +304,28 @@ null_measure = "all_alignment"
     assert words in table, table
 
 
+def test_study_commands_away_from_their_files_say_which_file_and_what_to_do(tmp_path):
+    """Run outside the repository's root, `study list` names --studies; `study page` of a study whose
+    scenario file cannot be read from here stops, naming the file, and writes nothing (it would
+    otherwise word case (ii)'s closings of the circuit as short circuits of the electrodes)."""
+    from selfas_graph.cli.main import main
+
+    res = subprocess.run(
+        [sys.executable, "-m", "selfas_graph.cli.main", "study", "list"], cwd=tmp_path, capture_output=True, text=True
+    )
+    assert res.returncode == 2 and "--studies" in res.stderr and "Traceback" not in res.stderr
+    (tmp_path / "s.toml").write_text("[study.a]\nscenario = 'no/such.toml'\nseeds = 1\nt_end = 1\n")
+    (tmp_path / "res").mkdir()
+    (tmp_path / "res" / "a.json").write_text(
+        json.dumps(_fake_summary([0.3, 0.4], t=1.0) | {"study": {"scenario": "no/such.toml", "table_times": [1.0]}})
+    )
+    page = tmp_path / "page.md"
+    page.write_text("<!-- begin generated: table a -->\nold\n<!-- end generated: table a -->\n")
+    args = ["study", "page", "--studies", str(tmp_path / "s.toml"), "--summaries", str(tmp_path / "res")]
+    assert main([*args, "--page", str(page), "--figures", str(tmp_path / "figs")]) == 2
+    assert "old" in page.read_text() and not (tmp_path / "figs").exists()
+
+
 def test_study_page_through_a_link_writes_the_file_it_names(tmp_path):
     """The page named through a symbolic link: the file it points to is rewritten, the link stays a
     link (nothing the user did not name changes)."""
@@ -371,7 +394,8 @@ def test_a_study_table_words_its_circuit_by_the_scene_and_leaves_out_measures_it
 
     fig2, fig8 = summary("fig2.toml"), summary("fig8.toml")
     assert has_electrodes(fig2) and not has_electrodes(fig8)
-    assert has_electrodes({"study": {"scenario": "no/such/file.toml"}})  # away from its scenario file
+    with pytest.raises(StudiesError, match="no/such/file.toml: cannot read the study's scenario file"):
+        has_electrodes({"study": {"scenario": "no/such/file.toml"}})  # no guess at the circuit: it words the table
     two = study_table(fig2)
     assert "short circuit of the electrodes" in two and "current through the gap" in two
     assert "through median 1 rod in series" in two
