@@ -38,6 +38,18 @@ SERIES_COLUMNS = {
 }
 #: integer columns of --json and --csv
 _INTEGER = ("frame", "step")
+#: counts, integers in --json and --csv where the frame has them (null or empty where not)
+_COUNTS = (
+    "structures",
+    "largest_structure_rods",
+    "rg_n_min",
+    "rg_n_max",
+    "cycle_rank",
+    "cycle_rank_largest",
+    "loop_length_max",
+    "junctions",
+    "junction_degree_max",
+)
 
 
 def add_arguments(p):
@@ -99,6 +111,7 @@ def run(args):
     keys = ["frame"] + list(CLAIM_KEYS)
     for r in rows:
         r.update({k: int(r[k]) for k in _INTEGER})
+        r.update({k: int(r[k]) for k in _COUNTS if math.isfinite(r[k])})
     if args.json:
         data = [{k: _null(r[k]) for k in keys} for r in rows]
         print(json.dumps(data if series else data[0], indent=1, allow_nan=False))

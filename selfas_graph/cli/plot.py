@@ -174,6 +174,8 @@ def run(args):
                 out = _output_path(args, f.path, frame.index)
                 fig = Figure(figsize=_figsize(args.kind, frame), layout="constrained")
                 DRAW[args.kind](fig, f, frame, args)
+            except RunFileError:
+                raise  # the reader's own explanation (a frame or time the run does not have)
             except (KeyError, IndexError, TypeError, AttributeError, ValueError) as exc:
                 # a file with the run layout but inconsistent contents (foreign or damaged; a
                 # parameters_json that is not JSON is a ValueError)

@@ -13,6 +13,7 @@ that every rank stops together, with one message and the serial exit code.
 from __future__ import annotations
 
 import json
+import math
 import os
 import shlex
 import signal
@@ -386,7 +387,7 @@ def run(args):
         "dt": p.integrator.dt,
         "t_end": p.run.t_end,
         "steps": n_steps,
-        "frames": n_steps // max(1, round(p.output.interval / p.integrator.dt)) + 1,
+        "frames": -(-n_steps // sim.frame_steps) + 1,  # every frame_steps steps from the first, and the last
         "output": str(out),
         "threads": numba.get_num_threads(),
         "mpi_ranks": world.size,
@@ -399,6 +400,13 @@ def run(args):
             f"({n_steps} steps); {plan['threads']} threads x {world.size} ranks",
             flush=True,
         )
+        if not math.isclose(sim.frame_interval, p.output.interval, rel_tol=1e-9):
+            print(
+                f"note: output.interval = {p.output.interval:g} is {p.output.interval / p.integrator.dt:.6g} steps of "
+                f"integrator.dt = {p.integrator.dt:g}: a frame every {sim.frame_steps} steps "
+                f"(t = {sim.frame_interval:.6g}), and one at the end",
+                flush=True,
+            )
     if args.dry_run:
         if world.rank == 0:
             print("dry run: placement succeeded, nothing written")

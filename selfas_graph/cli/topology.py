@@ -165,6 +165,8 @@ def run(args):
         with RunFile(args.run) as f:
             try:
                 data = analyse(f, frame=args.frame, t=args.time)
+            except RunFileError:
+                raise  # the reader's own explanation (a frame or time the run does not have)
             except (KeyError, IndexError, TypeError, ValueError) as exc:
                 # a file with the run layout but inconsistent contents (foreign or damaged)
                 raise RunFileError(f"{f.path}: inconsistent graph data ({type(exc).__name__}: {exc})") from None

@@ -176,6 +176,21 @@ class Ensemble:
         return shlex.join(args + ["--t-end", repr(self.t_end), "-o", str(seed_path(self.folder, seed))])
 
     # ------------------------------------------------------------------ planning
+    def files_end_time(self):
+        """The latest end time (``run.t_end``) the seed files in the folder were run to, or None
+        where there is no readable one: what a summary of the files present reaches."""
+        ends = []
+        for s in self.seeds:
+            path = seed_path(self.folder, s)
+            if not path.exists():
+                continue
+            try:
+                with RunFile(path) as run:
+                    ends.append(float(run.parameters["run"]["t_end"]))
+            except (RunFileError, KeyError, TypeError, ValueError):
+                continue  # the plan names a file it cannot use
+        return max(ends) if ends else None
+
     def plan(self, summary_only=False) -> list[SeedPlan]:
         """What :meth:`run` would do with each seed, from the files in the folder (nothing is written).
 

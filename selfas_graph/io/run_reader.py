@@ -25,7 +25,17 @@ def _pick_frame(path, n, frame, t, times) -> int:
     if t is not None:
         if not np.isfinite(t):
             raise RunFileError(f"time {t} names no frame; give a finite simulated time")
-        return int(np.argmin(np.abs(times() - t)))
+        ts = np.asarray(times(), dtype=float)
+        # the nearest frame, within the run's frames or at most one frame spacing beyond them: a time
+        # further out names no frame of this run (a typo, or another run's time), not its first or last
+        reach = float(np.max(np.diff(ts))) if ts.size > 1 else 0.0
+        slack = reach + 1e-9 * max(1.0, abs(t))
+        if not ts[0] - slack <= t <= ts[-1] + slack:
+            raise RunFileError(
+                f"{path}: time {t:g} lies outside the run's frames, t = {ts[0]:g} .. {ts[-1]:g}; "
+                "give a time between them"
+            )
+        return int(np.argmin(np.abs(ts - t)))
     try:
         k = -1 if frame is None else operator.index(frame)
     except TypeError:

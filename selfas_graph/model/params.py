@@ -276,14 +276,14 @@ class RunParams:
 
 @dataclass(frozen=True)
 class OutputParams:
-    interval: float = spec(1.0, "simulated time between saved frames; data are flushed to disk at each", gt=0.0)
+    interval: float = spec(1.0, "simulated time between saved frames, in whole steps; data are flushed at each", gt=0.0)
     file: Optional[str] = spec(
         None, "output HDF5 path (default: the scenario file name with .h5, in the working directory)"
     )
     velocities: bool = spec(True, "save tip velocities with every frame")
     checkpoint_interval: float = spec(
         900.0,
-        "wall-clock seconds between checkpoints (RUN.checkpoint.h5), the first right after the first step; "
+        "wall-clock seconds between checkpoints (RUN.checkpoint.h5), the first before the first step; "
         "one is also written at the end and on SIGTERM/SIGINT; 0 writes only those",
         ge=0.0,
     )

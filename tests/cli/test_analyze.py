@@ -93,6 +93,8 @@ def test_analyze_table_json_csv_and_series(run_file, capsys):
         expected = frame_claims(run, -1)
         n_frames = run.n_frames
     assert data["largest_moment_q"] == pytest.approx(expected["largest_moment_q"]) and data["frame"] == n_frames - 1
+    for key in ("structures", "largest_structure_rods", "cycle_rank", "junctions"):  # counts are integers
+        assert type(data[key]) is int and data[key] == expected[key]
     assert main(["analyze", str(run_file), "--json", "--frame", "0"]) == 0
     assert json.loads(capsys.readouterr().out)["largest_moment_q"] is None  # NaN -> null: strict JSON
     assert main(["analyze", str(run_file), "--csv"]) == 0

@@ -135,6 +135,18 @@ def test_dry_run_writes_nothing(scenario, tmp_path, capsys, monkeypatch):
     assert not list(tmp_path.glob("*.h5"))
 
 
+def test_an_output_interval_of_no_whole_number_of_steps_is_named_with_the_one_used(scenario, tmp_path, capsys):
+    """Frames come every whole number of steps: an interval between two is rounded, and simulate
+    says to what, as the plan's frame count does."""
+    argv = ["simulate", str(scenario), "--dry-run", "--t-end", "1", "--set", "integrator.dt=1e-3"]
+    assert main([*argv, "--set", "output.interval=0.1234"]) == 0
+    out = capsys.readouterr().out
+    assert "note: output.interval = 0.1234 is 123.4 steps of integrator.dt = 0.001: a frame every 123 steps" in out
+    assert '"frames": 10' in out  # steps 0, 123, ..., 984 and the last, 1000
+    assert main([*argv, "--set", "output.interval=0.25"]) == 0
+    assert "note: output.interval" not in capsys.readouterr().out
+
+
 def test_numerical_failure_exits_3_with_diagnosis_and_no_nan_in_file(scenario, tmp_path, capsys):
     out = tmp_path / "run.h5"
     code = main(

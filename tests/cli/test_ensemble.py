@@ -168,6 +168,22 @@ def test_a_finished_seed_of_another_version_is_kept_and_named(quick, tmp_path, c
     assert "seed 1: finished" not in out
 
 
+def test_no_run_without_t_end_summarises_to_the_end_of_the_seed_files(quick, tmp_path, capsys):
+    """``--no-run`` without the ``--t-end`` the seeds were run with summarises them to their own end
+    time, and says so, not to the scene's end (where nothing was run and every seed would count as
+    unfinished); the summary is the one ``--t-end`` gives."""
+    folder, _ = quick
+    copy = tmp_path / "copy"
+    shutil.copytree(folder, copy)
+    assert main(["ensemble", QUICK, "--seeds", "4", "-o", str(copy), "--no-run"]) == 0
+    out = capsys.readouterr().out
+    assert f"summarising to t = {T_END:g}, the end time of the seed files" in out and "4 done" in out
+    first = json.loads((copy / "summary.json").read_text())
+    assert main(["ensemble", QUICK, "--seeds", "4", "--t-end", str(T_END), "-o", str(copy), "--no-run"]) == 0
+    assert "summarising to" not in capsys.readouterr().out
+    assert json.loads((copy / "summary.json").read_text()) == first
+
+
 def test_seed_files_of_a_version_before_the_trajectories_are_not_reused(quick):
     """``older_than`` (docs/studies.toml ``trajectories_since``): finished seed files made by an older
     version are refused, naming the file and both versions, and planned to be replaced with force;

@@ -192,7 +192,11 @@ def test_frame_and_time_select_frames(chain_run, capsys):
     assert late["frame"] == 5 and late["step"] == 50 and late["rods"]["filament"] == 3
     assert late == query("--frame", "-6")
     assert query("--frame", "0")["step"] == 0
-    assert query("--time", "1e9")["frame"] == N_FRAMES - 1  # nearest: the last frame
+    last = query("--frame", "-1")["time"]
+    assert query("--time", repr(last + 0.005))["frame"] == N_FRAMES - 1  # within a frame spacing: the nearest
+    # far beyond the frames it names no frame of this run (not silently the last one)
+    assert main(["topology", str(path), "--time", "1e9"]) == 2
+    assert "time 1e+09 lies outside the run's frames" in capsys.readouterr().err
     assert main(["topology", str(path), "--frame", "2"]) == 0
     assert "short circuit: yes" in capsys.readouterr().out
 
@@ -294,3 +298,22 @@ def test_topology_and_analyze_say_a_run_did_not_finish(tmp_path, capsys):
             assert (said in first) if said else first.endswith("t = 0.1"), (command, first)
         assert main(["topology", str(path), "--json"]) == 0
         assert json.loads(capsys.readouterr().out)["run_status"] == status
+
+
+def test_snapshot_legend_counts_every_dead_end_topology_counts(chain_run):
+    """Frame 1 holds three dead ends on single electrodes and no filament: the snapshot's red is the
+    dead ends of filament networks (none), and its grey rods name the three that ``topology`` counts."""
+    from matplotlib.figure import Figure
+
+    from selfas_graph.cli.plots.frame import _snapshot
+
+    path, _ = chain_run
+    with RunFile(path) as run:
+        frame = run.frame(1)
+        fig = Figure(layout="constrained")
+        _snapshot(fig, run, frame, None)
+        labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "dead ends of filament networks (0)" in labels
+    assert any(
+        t.startswith("other rods (") and t.endswith("3 of them dead ends off the filament networks)") for t in labels
+    )

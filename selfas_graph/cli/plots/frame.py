@@ -54,8 +54,15 @@ def _snapshot(fig, run, frame, args):
             red = (role == DEAD_END) & np.isin(frame.structure, networks)
             red_label = "dead ends of filament networks"
         rest = ~(fil | red)
+        # the dead ends that are not red (topology counts every dead end): named in the grey rods' count
+        grey_dead = int(((role == DEAD_END) & rest).sum())
+        other = (
+            f"other rods ({{n}}; {grey_dead} of them dead ends off the filament networks)"
+            if grey_dead
+            else "other rods"
+        )
         groups += [
-            (rest, OTHER_COLOUR, 0.6, "other rods"),
+            (rest, OTHER_COLOUR, 0.6, other),
             (fil, FILAMENT_COLOUR, 1.6, "current-carrying filaments"),
             (red, DEAD_END_COLOUR if not large else LARGEST_COLOUR, 1.6, red_label),
         ]
@@ -64,7 +71,8 @@ def _snapshot(fig, run, frame, args):
         alpha = 0.6 if colour is OTHER_COLOUR and role is not None else 1.0
         if mask.any():
             ax.add_collection3d(Line3DCollection(seg[mask], colors=[colour], linewidths=width, alpha=alpha, zorder=2))
-        handles.append(Line2D([], [], color=colour, lw=2, alpha=alpha, label=f"{label} ({int(mask.sum())})"))
+        text = label.format(n=int(mask.sum())) if "{n}" in label else f"{label} ({int(mask.sum())})"
+        handles.append(Line2D([], [], color=colour, lw=2, alpha=alpha, label=text))
     lo, hi = frame.position.min(axis=0), frame.position.max(axis=0)
     plasma = frame.plasma
     if plasma:  # the R_plas cylinder is drawn: the box holds it
