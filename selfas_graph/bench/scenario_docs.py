@@ -319,7 +319,8 @@ Besides each key's own range, `selfas_graph.io.scenario.check_consistency` requi
 - `[forces.current_field]` and `[forces.current_lorentz]` need `[circuit]` (rod currents come
   from the circuit solve);
 - `run.t_end` is at most 1e12 steps of `integrator.dt`;
-- `output.interval >= integrator.dt`.
+- `output.interval >= integrator.dt`; an interval that is no whole number of steps is rounded to
+  the nearest one, and `simulate` prints the interval it uses (a frame is also written at the end).
 
 The placement can still fail at run time (no free spot for a rod in `placement.max_attempts`
 draws); the message names the keys to change.
