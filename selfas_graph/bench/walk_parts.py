@@ -1,0 +1,192 @@
+"""The tip tree's walk by part: its lists, near field and far field, and the pairs each group takes.
+
+Usage: selfas-graph bench walk_parts [--rods 6000 24000] [--config fig2] [--reps 5]
+
+The evaluation of the tip tree as the scenes take it (``kernels/treewalk.py::evaluate_groups``,
+mixed precision, the tree's defaults: leaves of 64, groups of 1024, hexadecapoles, opening angle
+0.55) on the tips of a configuration of selfas_graph/bench/tree.py, timed whole and in parts by a
+kernel of this module that runs the walk's own stages (inlined functions of kernels/treewalk.py)
+with the near sum, the far sum or both left out:
+
+- ``lists``: per group the targets, the walk of the tree (the interaction lists, the far cells
+  recorded) and the copies of the near tips, stages 1-3;
+- ``near``: the near field's pair sums, ``(lists + near) - lists``;
+- ``far``: the recorded far cells summed on every target, ``(lists + far) - lists``;
+- ``rest``: the shipped kernel less the three (the rod partner's exact force, writing the rows).
+
+It also counts, over all targets, the near pairs and the far cells evaluated, and prints the most a
+near field that counts each pair once (a walk over pairs of groups, the reaction added to the other
+group's tips) could save: half the near pairs' time, if a pair then cost what it costs now. With
+both sums on, the parts' kernel must give the shipped kernel's forces bit for bit; the tool says
+whether it does, so that the parts are those of the code a run executes.
+
+Each figure is the shortest of ``--reps`` runs (wall time, all numba threads), the five calls
+timed in turns. The header names the
+CPU and the instruction set numba compiled for; run it again with ``NUMBA_CPU_NAME=haswell
+NUMBA_CPU_FEATURES=`` for the AVX2 build.
+"""
+
+import argparse
+import time
+
+import numba
+import numpy as np
+
+from selfas_graph.kernels._jit import njit_parallel_sum, prange, set_parallel_chunksize
+from selfas_graph.kernels.laws import tip_force_over_r
+from selfas_graph.kernels.tree import build_tip_tree, evaluate_tip_tree
+from selfas_graph.kernels.treewalk import (
+    _far32_on_target_3,
+    _far32_on_target_4,
+    _near_copies,
+    _near_on_target_f32,
+    _targets,
+    _walk,
+)
+
+from .tree import KAPPA, RSTAR, chains, fig2, uniform
+
+#: the parts' kernel: which sums it takes
+LISTS, NEAR, FAR = 0, 1, 2
+
+
+@njit_parallel_sum
+def walk_parts(
+    x, y, z, charge, rod, index, rank, start, end, nxt, box, centre, radius, moment, group, order,
+    near32, charge32, rod32, theta, rstar, kappa, parts, out, counts,
+):  # fmt: skip
+    """``kernels/treewalk.py::evaluate_groups`` in mixed precision over all tips, its stages in its
+    order, with the near sum (``parts & NEAR``) and the far sum (``parts & FAR``) each taken or left
+    out; ``counts[gi]`` gets group gi's near pairs and far cells (over its targets)."""
+    theta2 = theta * theta
+    rstar32 = np.float32(rstar)
+    kappa32 = np.float32(kappa)
+    n_tips = x.shape[0]
+    for gi in prange(group.shape[0]):
+        g = group[gi]
+        gs = start[g]
+        ge = end[g]
+        xl = box[g, 0]
+        yl = box[g, 1]
+        zl = box[g, 2]
+        xh = box[g, 3]
+        yh = box[g, 4]
+        zh = box[g, 5]
+        gcx = 0.5 * (xl + xh)
+        gcy = 0.5 * (yl + yh)
+        gcz = 0.5 * (zl + zh)
+        sel, n_w, tx, ty, tz, partner = _targets(x, y, z, index, rank, gs, ge, 0, n_tips, gcx, gcy, gcz)
+        if n_w == 0:
+            continue
+        ex, ey, ez, far32, n_chunks, near_start, near_end, n_near, n_near_tips = _walk(
+            start, end, nxt, centre, radius, moment, order, True, theta2, rstar, xl, yl, zl, xh, yh, zh, tx, ty, tz
+        )
+        partner_near, fx, fy, fz, lx, ly, lz, fq, frod, nx, ny, nz, nq, nrod = _near_copies(
+            near_start, near_end, n_near, n_near_tips, partner, True, x, y, z, charge, rod, near32, charge32, rod32
+        )
+        counts[gi, 0] = n_w * n_near_tips
+        counts[gi, 1] = n_w * n_chunks * 64
+        for w in range(n_w):
+            i = sel[w]
+            qk = charge[i]
+            bx = by = bz = np.float32(0.0)
+            cx32 = cy32 = cz32 = np.float32(0.0)
+            if parts & NEAR:
+                bx, by, bz = _near_on_target_f32(
+                    i, near32, charge32, rod32, fx, fy, fz, lx, ly, lz, fq, frod, n_near_tips, rstar32, kappa32
+                )
+            if parts & FAR:
+                gx32 = np.float32(tx[w] - gcx)
+                gy32 = np.float32(ty[w] - gcy)
+                gz32 = np.float32(tz[w] - gcz)
+                if order >= 4:
+                    cx32, cy32, cz32 = _far32_on_target_4(far32, n_chunks, gx32, gy32, gz32)
+                else:
+                    cx32, cy32, cz32 = _far32_on_target_3(far32, n_chunks, gx32, gy32, gz32)
+            sx = np.float64(bx) + qk * np.float64(cx32)
+            sy = np.float64(by) + qk * np.float64(cy32)
+            sz = np.float64(bz) + qk * np.float64(cz32)
+            sx += qk * ex[w]
+            sy += qk * ey[w]
+            sz += qk * ez[w]
+            if not partner_near[w]:  # the rod partner in an accepted cell's moments: its exact force out
+                p = partner[w]
+                dx = tx[w] - x[p]
+                dy = ty[w] - y[p]
+                dz = tz[w] - z[p]
+                gp = tip_force_over_r(dx * dx + dy * dy + dz * dz, qk * charge[p], rstar, kappa)
+                sx -= gp * dx
+                sy -= gp * dy
+                sz -= gp * dz
+            k = index[i]
+            out[k, 0] = sx
+            out[k, 1] = sy
+            out[k, 2] = sz
+
+
+def run_parts(tree, theta, parts, out, counts):
+    chunk = set_parallel_chunksize(1)  # one group at a time, as evaluate_tip_tree hands them out
+    try:
+        walk_parts(
+            tree.x, tree.y, tree.z, tree.charge, tree.rod, tree.index, tree.rank, tree.start, tree.end, tree.next,
+            tree.box, tree.centre, tree.radius, tree.moment, tree.group, tree.order, tree.near32, tree.charge32,
+            tree.rod32, float(theta), RSTAR, KAPPA, parts, out, counts,
+        )  # fmt: skip
+    finally:
+        set_parallel_chunksize(chunk)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rods", type=int, nargs="+", default=[6000, 24000])
+    ap.add_argument("--config", nargs="+", default=["fig2"], choices=["uniform", "chains", "fig2"])
+    ap.add_argument("--theta", type=float, default=0.55, help="opening angle (default 0.55, the tree's)")
+    ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--seed", type=int, default=1)
+    args = ap.parse_args(argv)
+    from .peer import machine_line
+
+    print(machine_line())
+    print(f"numba threads: {numba.get_num_threads()}; mixed precision, opening angle {args.theta:g}")
+    print(
+        "| config | rods | groups | whole ms | parts' kernel, both sums | lists | near | far | rest "
+        "| near pairs / far cells per target | the tip term, near counted once, at least |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    make = {"uniform": uniform, "chains": chains, "fig2": fig2}
+    for config in args.config:
+        for n_rods in args.rods:
+            tips = make[config](n_rods, np.random.default_rng(args.seed))
+            tree = build_tip_tree(*tips)
+            n = tree.x.shape[0]
+            whole, mine = np.empty((n, 3)), np.empty((n, 3))
+            counts = np.zeros((tree.group.shape[0], 2), np.int64)
+            calls = {"whole": lambda: evaluate_tip_tree(tree, RSTAR, KAPPA, args.theta, whole, precision="mixed")}
+            for name, parts in (("lists", LISTS), ("near", NEAR), ("far", FAR), ("both", NEAR | FAR)):
+                calls[name] = lambda parts=parts: run_parts(tree, args.theta, parts, mine, counts)
+            for call in calls.values():
+                call()  # compiled, caches warm
+            ms = {name: np.inf for name in calls}
+            for _ in range(args.reps):  # in turns, so that a slow spell of the machine hits them alike
+                for name, call in calls.items():
+                    t0 = time.perf_counter()
+                    call()
+                    ms[name] = min(ms[name], 1e3 * (time.perf_counter() - t0))
+            run_parts(tree, args.theta, NEAR | FAR, mine, counts)
+            same = bool(np.array_equal(whole, mine))
+            near, far = ms["near"] - ms["lists"], ms["far"] - ms["lists"]
+            rest = ms["whole"] - ms["lists"] - near - far
+            pairs, cells = counts.sum(axis=0) / n
+            print(
+                f"| {config} | {n_rods} | {tree.group.shape[0]} | {ms['whole']:.2f} | {ms['both']:.2f} | {ms['lists']:.2f} | {near:.2f} | "
+                f"{far:.2f} | {rest:.2f} | {pairs:.0f} / {cells:.0f} | {(ms['whole'] - near / 2) / ms['whole']:.2f} "
+                f"of it |"
+            )
+            if not same:
+                print(f"  note: with both sums the parts' kernel differs from the shipped one here "
+                      f"(largest {np.abs(whole - mine).max():.3g}): its parts are not the shipped code's")  # fmt: skip
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
