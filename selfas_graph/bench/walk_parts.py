@@ -14,11 +14,13 @@ with the near sum, the far sum or both left out:
 - ``far``: the recorded far cells summed on every target, ``(lists + far) - lists``;
 - ``rest``: the shipped kernel less the three (the rod partner's exact force, writing the rows).
 
-It also counts, over all targets, the near pairs and the far cells evaluated, and prints the most a
-near field that counts each pair once (a walk over pairs of groups, the reaction added to the other
-group's tips) could save: half the near pairs' time, if a pair then cost what it costs now. With
-both sums on, the parts' kernel must give the shipped kernel's forces bit for bit; the tool says
-whether it does, so that the parts are those of the code a run executes.
+It also counts, over all targets, the near pairs and the far cells evaluated, and weighs a near
+field that counts each pair once: at best (half the near pairs' time gone, if a pair then cost what
+it costs now) and as a prototype, :func:`near_once`, which takes each target's pairs with the near
+tips after it in Morton order only (about half the pairs) and adds each pair's reaction to the
+other tip (its forces are not the tree's: it is there for its time). With both sums on, the parts'
+kernel must give the shipped kernel's forces bit for bit; the tool says whether it does, so that
+the parts are those of the code a run executes.
 
 Each figure is the shortest of ``--reps`` runs (wall time, all numba threads), the five calls
 timed in turns. The header names the
@@ -32,8 +34,8 @@ import time
 import numba
 import numpy as np
 
-from selfas_graph.kernels._jit import njit_parallel_sum, prange, set_parallel_chunksize
-from selfas_graph.kernels.laws import tip_force_over_r
+from selfas_graph.kernels._jit import inline_sum, njit_parallel_sum, prange, set_parallel_chunksize
+from selfas_graph.kernels.laws import tip_force_over_r, tip_force_over_r_f32
 from selfas_graph.kernels.tree import build_tip_tree, evaluate_tip_tree
 from selfas_graph.kernels.treewalk import (
     _far32_on_target_3,
@@ -124,6 +126,130 @@ def walk_parts(
             out[k, 2] = sz
 
 
+_ZERO32 = np.float32(0.0)
+
+
+@inline_sum
+def _pairs_once(i, near32, charge32, rod32, buf, j0, n, rstar32, kappa32, react):
+    """The near pairs of the target at sorted position ``i`` with the copied tips ``j0..n-1``
+    (``buf``: rows hi x, y, z, lo x, y, z, charge, rod as float32), the law of the near field; each
+    pair's force is also taken from the other tip's row of ``react`` (its reaction). One loop from 0
+    over views: a loop from ``j0`` keeps numba's negative-index check, and LLVM then does not
+    vectorise the stores."""
+    xk32 = near32[0, i]
+    yk32 = near32[1, i]
+    zk32 = near32[2, i]
+    xl32 = near32[3, i]
+    yl32 = near32[4, i]
+    zl32 = near32[5, i]
+    qk32 = charge32[i]
+    rk32 = np.float32(rod32[i])
+    fx, fy, fz, lx, ly, lz = buf[0, j0:n], buf[1, j0:n], buf[2, j0:n], buf[3, j0:n], buf[4, j0:n], buf[5, j0:n]
+    fq, frod = buf[6, j0:n], buf[7, j0:n]
+    rx, ry, rz = react[0, j0:n], react[1, j0:n], react[2, j0:n]
+    bx = _ZERO32
+    by = _ZERO32
+    bz = _ZERO32
+    for j in range(n - j0):
+        ux = (xk32 - fx[j]) + (xl32 - lx[j])
+        uy = (yk32 - fy[j]) + (yl32 - ly[j])
+        uz = (zk32 - fz[j]) + (zl32 - lz[j])
+        g32 = tip_force_over_r_f32(ux * ux + uy * uy + uz * uz, qk32 * fq[j], rstar32, kappa32)
+        g32 = _ZERO32 if frod[j] == rk32 else g32
+        px = g32 * ux
+        py = g32 * uy
+        pz = g32 * uz
+        bx += px
+        by += py
+        bz += pz
+        rx[j] -= px
+        ry[j] -= py
+        rz[j] -= pz
+    return bx, by, bz
+
+
+@njit_parallel_sum
+def near_once(
+    x, y, z, charge, rod, index, rank, start, end, nxt, box, centre, radius, moment, group, order,
+    near32, charge32, rod32, theta, rstar, kappa, out,
+):  # fmt: skip
+    """A prototype, for its time only: each group's walk and near copies as
+    :func:`walk_parts` makes them, then the pairs of each target with the near tips after it in
+    Morton order only (about half the near pairs: the tips of the group itself after the target,
+    and of the groups after it), each pair's reaction added to the other tip's row. The forces are
+    not the tree's (the near sets of two groups are not each other's); ``out[t]`` holds thread t's
+    sums (rows in original order), zeroed by the caller."""
+    theta2 = theta * theta
+    rstar32 = np.float32(rstar)
+    kappa32 = np.float32(kappa)
+    n_tips = x.shape[0]
+    for gi in prange(group.shape[0]):
+        t = numba.get_thread_id()
+        g = group[gi]
+        gs = start[g]
+        ge = end[g]
+        xl, yl, zl, xh, yh, zh = box[g, 0], box[g, 1], box[g, 2], box[g, 3], box[g, 4], box[g, 5]
+        gcx = 0.5 * (xl + xh)
+        gcy = 0.5 * (yl + yh)
+        gcz = 0.5 * (zl + zh)
+        sel, n_w, tx, ty, tz, partner = _targets(x, y, z, index, rank, gs, ge, 0, n_tips, gcx, gcy, gcz)
+        if n_w == 0:
+            continue
+        _, _, _, _, _, near_start, near_end, n_near, _ = _walk(
+            start, end, nxt, centre, radius, moment, order, True, theta2, rstar, xl, yl, zl, xh, yh, zh, tx, ty, tz
+        )
+        m = 0
+        n_after = 0
+        for a in range(n_near):  # the runs from the group's first tip on
+            s = max(near_start[a], gs)
+            if near_end[a] > s:
+                near_start[m] = s
+                near_end[m] = near_end[a]
+                n_after += near_end[a] - s
+                m += 1
+        buf = np.empty((8, n_after), np.float32)
+        pos = np.empty(n_after, np.int64)
+        j = 0
+        for a in range(m):
+            for p in range(near_start[a], near_end[a]):
+                for r in range(6):
+                    buf[r, j] = near32[r, p]
+                buf[6, j] = charge32[p]
+                buf[7, j] = np.float32(rod32[p])
+                pos[j] = p
+                j += 1
+        react = np.zeros((3, n_after), np.float32)
+        j0 = 0
+        for w in range(n_w):
+            i = sel[w]
+            while j0 < n_after and pos[j0] <= i:
+                j0 += 1
+            bx, by, bz = _pairs_once(i, near32, charge32, rod32, buf, j0, n_after, rstar32, kappa32, react)
+            k = index[i]
+            out[t, k, 0] += bx
+            out[t, k, 1] += by
+            out[t, k, 2] += bz
+        for j in range(n_after):
+            k = index[pos[j]]
+            out[t, k, 0] += react[0, j]
+            out[t, k, 1] += react[1, j]
+            out[t, k, 2] += react[2, j]
+
+
+def run_once(tree, theta, out):
+    """:func:`near_once` over the tree, ``out`` (threads, tips, 3) zeroed first."""
+    out[:] = 0.0
+    chunk = set_parallel_chunksize(1)
+    try:
+        near_once(
+            tree.x, tree.y, tree.z, tree.charge, tree.rod, tree.index, tree.rank, tree.start, tree.end, tree.next,
+            tree.box, tree.centre, tree.radius, tree.moment, tree.group, tree.order, tree.near32, tree.charge32,
+            tree.rod32, float(theta), RSTAR, KAPPA, out,
+        )  # fmt: skip
+    finally:
+        set_parallel_chunksize(chunk)
+
+
 def run_parts(tree, theta, parts, out, counts):
     chunk = set_parallel_chunksize(1)  # one group at a time, as evaluate_tip_tree hands them out
     try:
@@ -149,8 +275,8 @@ def main(argv=None):
     print(machine_line())
     print(f"numba threads: {numba.get_num_threads()}; mixed precision, opening angle {args.theta:g}")
     print(
-        "| config | rods | groups | whole ms | parts' kernel, both sums | lists | near | far | rest "
-        "| near pairs / far cells per target | the tip term, near counted once, at least |"
+        "| config | rods | groups | whole ms | lists | near | far | rest | near pairs / far cells a target "
+        "| near, each pair once (prototype) | the whole with it: at best / prototype |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     make = {"uniform": uniform, "chains": chains, "fig2": fig2}
@@ -164,6 +290,8 @@ def main(argv=None):
             calls = {"whole": lambda: evaluate_tip_tree(tree, RSTAR, KAPPA, args.theta, whole, precision="mixed")}
             for name, parts in (("lists", LISTS), ("near", NEAR), ("far", FAR), ("both", NEAR | FAR)):
                 calls[name] = lambda parts=parts: run_parts(tree, args.theta, parts, mine, counts)
+            per_thread = np.zeros((numba.get_num_threads(), n, 3))
+            calls["once"] = lambda: run_once(tree, args.theta, per_thread)
             for call in calls.values():
                 call()  # compiled, caches warm
             ms = {name: np.inf for name in calls}
@@ -176,11 +304,12 @@ def main(argv=None):
             same = bool(np.array_equal(whole, mine))
             near, far = ms["near"] - ms["lists"], ms["far"] - ms["lists"]
             rest = ms["whole"] - ms["lists"] - near - far
+            once = ms["once"] - ms["lists"]
             pairs, cells = counts.sum(axis=0) / n
+            best, proto = (ms["whole"] - near / 2) / ms["whole"], (ms["whole"] - near + once) / ms["whole"]
             print(
-                f"| {config} | {n_rods} | {tree.group.shape[0]} | {ms['whole']:.2f} | {ms['both']:.2f} | {ms['lists']:.2f} | {near:.2f} | "
-                f"{far:.2f} | {rest:.2f} | {pairs:.0f} / {cells:.0f} | {(ms['whole'] - near / 2) / ms['whole']:.2f} "
-                f"of it |"
+                f"| {config} | {n_rods} | {tree.group.shape[0]} | {ms['whole']:.2f} | {ms['lists']:.2f} | {near:.2f} | "
+                f"{far:.2f} | {rest:.2f} | {pairs:.0f} / {cells:.0f} | {once:.2f} | {best:.2f} / {proto:.2f} |"
             )
             if not same:
                 print(f"  note: with both sums the parts' kernel differs from the shipped one here "
