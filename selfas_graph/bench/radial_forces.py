@@ -12,6 +12,7 @@ the Fig. 2 runs in docs/results.md.
 """
 
 import argparse
+import json
 
 import numpy as np
 
@@ -65,7 +66,8 @@ def report(path, frames):
         for fr in sorted({0, n // 40, n // 20, n // 10, n // 5, n // 2, n - 1}):
             _, rho, _ = _axis_frame(rf.position(fr))
             print(f"t = {times[fr]:7.1f}: median distance of rod centres from the axis {np.median(rho):6.2f} L")
-        params = scenario_from_text(rf.scenario_text).params
+        # the run's own parameters: its scenario with the overrides it ran with (--set, --t-end)
+        params = scenario_from_text(rf.scenario_text, overrides=json.loads(rf.meta.get("overrides", "[]"))).params
         per_frame = []
         for fr in range(max(0, n - frames), n):
             g = rf.graph(frame=fr)

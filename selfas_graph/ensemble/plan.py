@@ -203,7 +203,8 @@ class Ensemble:
         EnsembleError
             A seed file that belongs to other parameters, is not a run file, or is
             incomplete without a checkpoint (unless ``force`` or ``summary_only``), listing
-            every such seed.
+            every such seed. With ``summary_only`` ``force`` replaces nothing: a file of other
+            parameters or not a run file still stops the plan.
         """
         plans, problems = [], []
         for s in self.seeds:
@@ -212,15 +213,18 @@ class Ensemble:
             except EnsembleError as exc:
                 problems.append(str(exc))
         if problems:
-            hint = "; pass --force to replace them" if not self.force else ""
+            hint = "; pass --force to replace them" if not (self.force or summary_only) else ""
             raise EnsembleError("seed files that cannot be used:\n  " + "\n  ".join(problems) + hint)
         return plans
 
     def _plan_seed(self, seed, summary_only=False) -> SeedPlan:
         path = seed_path(self.folder, seed)
         ckpt = checkpoint_path(path)
+        # force replaces a file only where seeds will run: a summary takes the files as they are, and one
+        # that cannot be used stops it (files of other parameters must not be summarised as these)
+        replace = self.force and not summary_only
         if not path.exists():
-            if ckpt.exists() and not self.force:
+            if ckpt.exists() and not replace:
                 raise EnsembleError(f"{ckpt} exists without its run file {path.name}")
             return SeedPlan(seed, path, "run", "new")
         wanted = self.scenario_for(seed).params
@@ -231,17 +235,17 @@ class Ensemble:
                 t_last = float(run.time[-1]) if run.n_frames else -math.inf
                 scenario_text = run.scenario_text
         except RunFileError as exc:
-            if self.force:
+            if replace:
                 return SeedPlan(seed, path, "run", f"replacing: {exc}")
             raise EnsembleError(str(exc)) from None
         if older_version(made_by, self.older_than):
             why = f"made by version {made_by}, before the trajectories of version {self.older_than}"
-            if self.force:
+            if replace:
                 return SeedPlan(seed, path, "run", f"replacing: {why}")
             raise EnsembleError(f"{path} was {why} (docs/studies.toml trajectories_since)")
         diff = parameter_differences(stored, wanted.to_dict())
         if diff:
-            if self.force:
+            if replace:
                 return SeedPlan(seed, path, "run", "replacing: other parameters")
             shown = ", ".join(f"{k} = {_get(stored, k)!r} (here {_get(wanted.to_dict(), k)!r})" for k in diff[:4])
             raise EnsembleError(
@@ -253,7 +257,7 @@ class Ensemble:
             note = f"finished at t = {t_last:.6g}" + (f" by version {other}" if other else "")
             return SeedPlan(seed, path, "done", note, other_version=other)
         if status.startswith("failed"):
-            if self.force:
+            if replace:
                 return SeedPlan(seed, path, "run", "replacing a failed run")
             return SeedPlan(seed, path, "failed", status)
         try:
@@ -267,7 +271,7 @@ class Ensemble:
             )
         if summary_only:
             return SeedPlan(seed, path, "partial", f"{status} at t = {t_last:.6g}")
-        if self.force:
+        if replace:
             return SeedPlan(seed, path, "run", f"replacing: {status} at t = {t_last:.6g}, no usable checkpoint")
         raise EnsembleError(
             f"{path} is {status} at t = {t_last:.6g} (end time {self.t_end:g}) and has no usable "

@@ -66,6 +66,20 @@ def test_run_file_tools(quick_run, capsys, monkeypatch):
     assert "| quick.h5 | 1 | 2.01 |" in capsys.readouterr().out
 
 
+def test_radial_forces_takes_the_runs_overrides(tmp_path, capsys):
+    """A run made with --set (fewer rods, no plasma filament) is read with its own parameters: the
+    tool neither fails on the rod count nor reports the force of a filament the run did not have."""
+    from selfas_graph.cli.main import main
+
+    run = tmp_path / "noplasma.h5"
+    argv = ["simulate", QUICK, "-o", str(run), "--t-end", "0.5", "--progress", "none"]
+    assert main([*argv, "--set", "rods.count=30", "--set", "forces.plasma_filament=false"]) == 0
+    capsys.readouterr()
+    _main("radial_forces")([str(run), "--frames", "2"])
+    out = capsys.readouterr().out
+    assert "tip_magnetic" in out and "plasma" not in out
+
+
 def test_current_tree_tool_reads_a_checkpoint_and_refuses_bad_input(quick_run, capsys):
     """The current tree's bench on a run's checkpoint (its rods and currents), and its refusals."""
     tool = _main("current_tree")

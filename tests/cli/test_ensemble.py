@@ -184,6 +184,20 @@ def test_no_run_without_t_end_summarises_to_the_end_of_the_seed_files(quick, tmp
     assert json.loads((copy / "summary.json").read_text()) == first
 
 
+def test_no_run_with_force_does_not_summarise_files_of_other_parameters(quick, tmp_path, capsys):
+    """``--no-run --force`` runs nothing, so it replaces nothing: seed files of other parameters stop
+    it (naming the keys), with no advice to pass --force, and no summary is written for them."""
+    folder, _ = quick
+    copy = tmp_path / "copy"
+    shutil.copytree(folder, copy)
+    (copy / "summary.json").unlink()
+    argv = ["ensemble", QUICK, "--seeds", "2", "--t-end", str(T_END), "-o", str(copy), "--no-run", "--force"]
+    assert main([*argv, "--set", "rods.count=200"]) == 2
+    err = capsys.readouterr().err
+    assert "belongs to other parameters: rods.count" in err and "pass --force" not in err
+    assert not (copy / "summary.json").exists()
+
+
 def test_seed_files_of_a_version_before_the_trajectories_are_not_reused(quick):
     """``older_than`` (docs/studies.toml ``trajectories_since``): finished seed files made by an older
     version are refused, naming the file and both versions, and planned to be replaced with force;
