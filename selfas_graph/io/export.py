@@ -24,6 +24,7 @@ import os
 import tempfile
 from pathlib import Path
 
+import h5py
 import numpy as np
 
 from ..model.graph import ROLE_NAMES
@@ -79,9 +80,17 @@ def parse_frames(spec, n_frames) -> np.ndarray:
     return np.asarray(picked, dtype=np.int64)
 
 
+def _is_hdf5(path) -> bool:
+    try:
+        return bool(h5py.is_hdf5(path))
+    except OSError:
+        return False
+
+
 def output_path(run_path, out, fmt, force=False) -> Path:
     """The export's path (default: the run's name with the format's suffix), checked: never the
-    input file, never an existing file without ``force``, never a symbolic link to nothing (it would be
+    input file or any other HDF5 file (its checkpoint), never a name with the other format's suffix,
+    never an existing file without ``force``, never a symbolic link to nothing (it would be
     replaced), in an existing folder."""
     run_path = Path(run_path)
     path = Path(out) if out is not None else run_path.with_suffix("." + fmt)
@@ -94,6 +103,12 @@ def output_path(run_path, out, fmt, force=False) -> Path:
         raise ExportError(f"{path} is the run file itself; choose another output with -o")
     if path.is_dir():
         raise ExportError(f"{path} is a directory; give a file name with -o")
+    other = path.suffix.lower().lstrip(".")
+    if other in FORMATS and other != fmt:
+        raise ExportError(f"{path} names a .{other} file, but the format is {fmt}; give a name ending in .{fmt}")
+    if path.is_file() and _is_hdf5(path):
+        # never replaced, force or not: a run file or its checkpoint (an export is GSD or XYZ)
+        raise ExportError(f"{path} is an HDF5 file (a run file or checkpoint?); an export never replaces one")
     if path.exists() and not force:
         raise ExportError(f"{path} exists; pass --force (force=True) to overwrite it or -o (out=) to choose another")
     if path.exists() and in_use(path):
@@ -225,7 +240,7 @@ def write_xyz(run: RunFile, path, frames):
                 out.write(
                     f'Lattice="{edge:.17g} 0 0 0 {edge:.17g} 0 0 0 {edge:.17g}" Origin="{-edge / 2:.17g} '
                     f'{-edge / 2:.17g} {-edge / 2:.17g}" Properties={props} Time={float(d["time"])!r} '
-                    f'Step={d["step"]} total_current={d["total_current"]:.17g} pbc="F F F"\n'
+                    f'Step={d["step"]} total_current={float(d["total_current"])!r} pbc="F F F"\n'
                 )
                 x, v = d["position"], d["velocity"]
                 columns = [

@@ -6,6 +6,7 @@ import shutil
 import stat
 from pathlib import Path
 
+import h5py
 import numpy as np
 import pytest
 
@@ -84,6 +85,7 @@ def test_xyz_export_opens_in_ase(run):
         np.testing.assert_array_equal(atoms.arrays["magnetic_charge"], e["charge"])
         assert atoms.info["Time"] == e["time"][k] and atoms.info["Step"] == e["step"][k]
         assert isinstance(atoms.info["Time"], float)  # a float at t = 0 too (written "0.0", the shortest exact form)
+        assert isinstance(atoms.info["total_current"], float)  # a float when 0 too, in every frame alike
         assert not atoms.pbc.any()
     first = out.read_text().splitlines()[2].split()[0]
     assert first in ROLE_TYPES  # the species column: the role name (OVITO's particle type)
@@ -100,6 +102,15 @@ def test_output_rules(run, capsys):
         assert main(["export", str(run), "--format", "xyz", "-o", str(target), "--force"]) == 2
         assert "run file itself" in capsys.readouterr().err
     assert run.read_bytes() == before
+    checkpoint = run.with_name(run.stem + ".checkpoint.h5")
+    with h5py.File(checkpoint, "w") as f:  # where the run's checkpoint would be (any HDF5 file)
+        f["x"] = 1
+    h5 = checkpoint.read_bytes()
+    assert main(["export", str(run), "--format", "xyz", "-o", str(checkpoint), "--force"]) == 2
+    assert "an export never replaces one" in capsys.readouterr().err and checkpoint.read_bytes() == h5
+    checkpoint.unlink()
+    assert main(["export", str(run), "--format", "gsd", "-o", str(run.parent / "x.xyz")]) == 2
+    assert "names a .xyz file, but the format is gsd" in capsys.readouterr().err
     assert main(["export", str(run), "--format", "gsd", "--force", "--frames", "0"]) == 0
     assert out.read_bytes() != b"keep"
     assert main(["export", str(run), "--format", "xyz", "--frames", "99"]) == 2
