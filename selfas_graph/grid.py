@@ -27,6 +27,7 @@ from pathlib import Path
 from .ensemble import Ensemble, EnsembleError, run_seed, run_tasks, summarise
 from .ensemble.folder import FolderLock, make_folder
 from .ensemble.plan import check_jobs, scenario_source, summary_times
+from .ensemble.tables import CSV_EXTRA, summary_rows
 from .io.scenario import ScenarioError, load_scenario
 from .parallel import task_pool
 
@@ -62,10 +63,29 @@ def parse_grid(items) -> dict:
         parts = [p.strip() for p in parts]
         if not any(parts) or any(not p for p in parts):
             raise EnsembleError(f"--grid {key}: an empty value in {values!r}; give V1,V2,... with no empty entry")
-        if len(set(parts)) != len(parts):
-            raise EnsembleError(f"--grid {key}: a value repeats in {values!r}")
+        same = _repeated(parts)
+        if same:
+            raise EnsembleError(f"--grid {key}: {same[0]} and {same[1]} are the same value in {values!r}")
         out[key] = parts
     return out
+
+
+def _repeated(parts):
+    """Two entries of a grid key that give the same value (``1`` and ``1.0``, as the override reads
+    them: a TOML value, else the text), or None."""
+    import tomllib
+
+    seen = {}
+    for p in parts:
+        try:
+            value = tomllib.loads(f"v = {p}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = p
+        marker = repr(value) if not isinstance(value, (int, float)) or isinstance(value, bool) else float(value)
+        if marker in seen:
+            return seen[marker], p
+        seen[marker] = p
+    return None
 
 
 def _folder_name(point) -> str:
@@ -151,25 +171,15 @@ class Grid:
             paths = [p for p in (ens.folder / f"seed_{s:04d}.h5" for s in ens.seeds) if p.exists()]
             s = summarise(paths, times, t_end=self.t_end, flux_radius=flux_radius)
             points.append({"point": dict(point), "folder": ens.folder.name, "summary": s})
-            for name, m in s["measures"].items():
-                for k, t in enumerate(times):
-                    rows.append(
-                        {
-                            **dict(point),
-                            "measure": name,
-                            "unit": m["unit"],
-                            "time": t,
-                            "mean": m["mean"][k],
-                            "sem": m["sem"][k],
-                            "n": m["n"][k],
-                        }
-                    )
+            # each point's summary.csv rows: the short circuit's, and the current measures' seeds
+            # carrying current (k) of the seeds with a value (n_seeds), whose mean, sem and n are the k's
+            rows += [{**dict(point), **r} for r in summary_rows(s)]
         return {"keys": self.keys, "times": times, "t_end": self.t_end, "points": points, "rows": rows}
 
 
 def grid_csv(table) -> str:
     buf = io.StringIO()
-    fields = [*table["keys"], "measure", "unit", "time", "mean", "sem", "n"]
+    fields = [*table["keys"], "measure", "unit", "time", "mean", "sem", "n", *CSV_EXTRA]
     w = csv.DictWriter(buf, fieldnames=fields, lineterminator="\n")
     w.writeheader()
     for r in table["rows"]:
@@ -186,7 +196,7 @@ def plot_grid(table, out, title) -> Path:
 
     key, others = table["keys"][0], table["keys"][1:]
     t = table["times"][-1]
-    rows = [r for r in table["rows"] if abs(r["time"] - t) < 1e-9]
+    rows = [r for r in table["rows"] if r["time"] is not None and abs(r["time"] - t) < 1e-9]
     names = list(dict.fromkeys(r["measure"] for r in rows))
     ncols = 2
     nrows = math.ceil(len(names) / ncols)
@@ -204,21 +214,36 @@ def plot_grid(table, out, title) -> Path:
         groups = {}
         for r in mine:
             groups.setdefault(tuple(r[o] for o in others), []).append(r)
+        grouped = any(r.get("k") is not None for r in mine)
         for label, rs in groups.items():
             xs = [num(r[key]) for r in rs]
             ys = [math.nan if r["mean"] is None else r["mean"] for r in rs]
-            es = [0.0 if r["sem"] is None else r["sem"] for r in rs]
+            es = [math.nan if r["sem"] is None else r["sem"] for r in rs]
             lab = ", ".join(f"{o} = {v}" for o, v in zip(others, label)) or None
-            ax.errorbar(xs, ys, yerr=es, marker="o", ms=3, capsize=3, lw=1, label=lab)
+            line = ax.errorbar(xs, ys, yerr=es, marker="o", ms=3, capsize=3, lw=1, label=lab)
+            # a mean of one seed has no standard error: an open marker, not a bar of zero
+            lone = [(x, y) for x, y, e in zip(xs, ys, es) if math.isnan(e) and not math.isnan(y)]
+            if lone:
+                colour = line[0].get_color()
+                ax.plot(*zip(*lone), ls="none", marker="o", ms=6, mfc="white", mec=colour, zorder=3)
+            if grouped:  # the seeds carrying current of the seeds with a value, at each point
+                for x, r in zip(xs, rs):
+                    y = r["mean"] if r["mean"] is not None else 0.0
+                    ax.annotate(f"{r['k'] or 0}/{r['n_seeds'] or 0}", (x, y), fontsize="xx-small",
+                                textcoords="offset points", xytext=(3, 3))  # fmt: skip
         unit = mine[0]["unit"] if mine else ""
-        ax.set_title(name.replace("_", " ") + (f" ({unit})" if unit not in ("", "1") else ""), fontsize="small")
+        head = name.replace("_", " ") + (f" ({unit})" if unit not in ("", "1") else "")
+        ax.set_title(head + (": seeds carrying current, k/n" if grouped else ""), fontsize="small")
         ax.set_xlabel(key, fontsize="small")
         ax.tick_params(labelsize="small")
         if others:
             ax.legend(fontsize="x-small", frameon=False)
     for ax in axes[len(names) :]:
         ax.set_visible(False)
-    fig.suptitle(f"{title}: mean and one standard error over seeds at t = {t:g}", fontsize="medium")
+    fig.suptitle(
+        f"{title}: mean and one standard error over seeds at t = {t:g} (open marker: one seed, no error)",
+        fontsize="medium",
+    )
     out = Path(out)
     tmp = out.with_name(out.name + ".tmp.png")
     fig.savefig(tmp, dpi=150)

@@ -82,6 +82,27 @@ def format_table(summary) -> str:
 CSV_EXTRA = ("sem_between", "fit_err_rms", "k", "n_seeds", "median", "min", "max")
 
 
+def summary_rows(summary) -> list[dict]:
+    """The rows of ``summary.csv``: the short circuit's (time None), then one per measure and time,
+    each with ``measure, unit, time, mean, sem, n`` and the :data:`CSV_EXTRA` columns (None where a
+    measure has none)."""
+    rows = []
+    blank = dict.fromkeys(CSV_EXTRA)
+    sc = summary.get("short_circuit")
+    if sc:
+        for name, unit, mean, sem, n in (
+            ("short_circuit_time_observed", "t0", sc["mean_observed"], sc["sem_observed"], sc["n_observed"]),
+            ("short_circuit_time_km_median", "t0", sc["median"], None, sc["n"]),
+            ("seeds_without_short_circuit", "seeds", sc["n_censored"], None, sc["n"]),
+        ):
+            rows.append({"measure": name, "unit": unit, "time": None, "mean": mean, "sem": sem, "n": n, **blank})
+    for name, m in summary["measures"].items():
+        for i, (t, a, b, n) in enumerate(zip(summary["times"], m["mean"], m["sem"], m["n"])):
+            extra = {c: (m[c][i] if c in m else None) for c in CSV_EXTRA}
+            rows.append({"measure": name, "unit": m["unit"], "time": t, "mean": a, "sem": b, "n": n, **extra})
+    return rows
+
+
 def write_summary(summary, folder) -> tuple[Path, Path]:
     """Write ``summary.json`` (everything) and ``summary.csv`` (one row per measure and time) into ``folder``."""
     folder = make_folder(folder)
@@ -89,25 +110,10 @@ def write_summary(summary, folder) -> tuple[Path, Path]:
     js.write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["measure", "unit", "time", "mean", "sem", "n", *CSV_EXTRA])
-    sc = summary.get("short_circuit")
-    if sc:
-        w.writerow(
-            [
-                "short_circuit_time_observed",
-                "t0",
-                "",
-                _csv(sc["mean_observed"]),
-                _csv(sc["sem_observed"]),
-                sc["n_observed"],
-                *[""] * len(CSV_EXTRA),
-            ]
-        )
-        w.writerow(["short_circuit_time_km_median", "t0", "", _csv(sc["median"]), "", sc["n"], *[""] * len(CSV_EXTRA)])
-        w.writerow(["seeds_without_short_circuit", "seeds", "", sc["n_censored"], "", sc["n"], *[""] * len(CSV_EXTRA)])
-    for name, m in summary["measures"].items():
-        for i, (t, a, b, n) in enumerate(zip(summary["times"], m["mean"], m["sem"], m["n"])):
-            w.writerow([name, m["unit"], t, _csv(a), _csv(b), n, *(_csv(m[c][i]) if c in m else "" for c in CSV_EXTRA)])
+    fields = ["measure", "unit", "time", "mean", "sem", "n", *CSV_EXTRA]
+    w.writerow(fields)
+    for r in summary_rows(summary):
+        w.writerow([_csv(r[f]) for f in fields])
     cs.write_text(buf.getvalue())
     return js, cs
 

@@ -21,7 +21,8 @@ def test_parse_grid_keeps_vectors_whole_and_refuses_bad_items():
         (["circuit.delta_J0"], "expected KEY=V1,V2"),
         (["circuit.delta_J0="], "empty value"),
         (["circuit.delta_J0=1,,2"], "empty value"),
-        (["circuit.delta_J0=1,1"], "repeats"),
+        (["circuit.delta_J0=1,1"], "1 and 1 are the same value"),
+        (["circuit.delta_J0=1, 1.0"], "1 and 1.0 are the same value"),  # one point, run twice otherwise
         (["a=1", "a=2"], "given twice"),
         (["scenario.seed=1,2"], "--seeds"),
     ]:
@@ -49,7 +50,7 @@ def test_grid_runs_every_point_once_and_writes_the_combined_summary(tmp_path, ca
     from selfas_graph.cli.main import main
 
     argv = ["ensemble", str(QUICK), "--seeds", "2", "--grid", "circuit.delta_J0=1,2", "--jobs", "1"]
-    argv += ["--set", "rods.count=40", "--t-end", "0.2", "-o", str(tmp_path / "g"), "--times", "0.1,0.2"]
+    argv += ["--set", "rods.count=40", "--t-end", "0.2", "-o", str(tmp_path / "g"), "--times", "0.1,0.2", "--plot"]
     assert main(argv) == 0
     out = capsys.readouterr().out
     folders = sorted(p.name for p in (tmp_path / "g").iterdir() if p.is_dir())
@@ -57,7 +58,13 @@ def test_grid_runs_every_point_once_and_writes_the_combined_summary(tmp_path, ca
     for f in folders:
         assert sorted(p.name for p in (tmp_path / "g" / f).glob("seed_*[0-9].h5")) == ["seed_0001.h5", "seed_0002.h5"]
     rows = list(csv.DictReader((tmp_path / "g" / "grid_summary.csv").open()))
-    assert rows[0].keys() >= {"circuit.delta_J0", "measure", "time", "mean", "sem", "n"}
+    assert rows[0].keys() >= {"circuit.delta_J0", "measure", "time", "mean", "sem", "n", "k", "n_seeds"}
+    # as each point's summary.csv: the short circuit's rows, and the seeds carrying current (k) of the
+    # seeds with a value (n_seeds) beside the current measures, whose mean is that of the k
+    point = [{k: v for k, v in r.items() if k != "circuit.delta_J0"} for r in rows if r["circuit.delta_J0"] == "1"]
+    own = list(csv.DictReader((tmp_path / "g" / "circuit.delta_J0=1" / "summary.csv").open()))
+    assert point == own and any(r["k"] != "" for r in own)
+    assert (tmp_path / "g" / "grid_summary.png").exists()
     assert {r["circuit.delta_J0"] for r in rows} == {"1", "2"} and {r["n"] for r in rows} <= {"0", "2"}
     table = json.loads((tmp_path / "g" / "grid_summary.json").read_text())
     assert table["keys"] == ["circuit.delta_J0"] and len(table["points"]) == 2
