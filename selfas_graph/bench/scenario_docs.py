@@ -381,13 +381,20 @@ def render() -> str:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description="Write docs/scenarios.md from selfas_graph.model.params.")
+    parser = argparse.ArgumentParser(
+        description=f"Write docs/scenarios.md of the source checkout the package runs from ({OUTPUT}) from "
+        "selfas_graph.model.params."
+    )
     parser.add_argument(
         "--check",
         action="store_true",
         help="do not write; exit 1 if docs/scenarios.md differs from what would be written",
     )
     args = parser.parse_args(argv)
+    if not (ROOT / "pyproject.toml").exists():  # an installed package: its folder is no checkout
+        print(f"selfas_graph runs from {ROOT.parent}, not from a source checkout: no docs/scenarios.md to write",
+              file=sys.stderr)  # fmt: skip
+        return 2
     text = render()
     rel = OUTPUT.relative_to(ROOT)
     if args.check:

@@ -331,7 +331,12 @@ def _run_grid(args, pool, held):
             flush=True,
         )
     tasks = [] if args.no_run else grid.tasks(plans)
-    print(f"grid of {len(grid.points)} points x {len(grid.ensembles[0].seeds)} seeds: {len(tasks)} to run", flush=True)
+    resumed = sum(t["action"] == "resume" for t in tasks)
+    print(
+        f"grid of {len(grid.points)} points x {len(grid.ensembles[0].seeds)} seeds: {len(tasks) - resumed} to run"
+        + (f", {resumed} to resume" if resumed else ""),
+        flush=True,
+    )
     results = []
     if tasks:
         _make(folder)
@@ -352,6 +357,9 @@ def _run_grid(args, pool, held):
                 hard_exit=bool(ABANDONED),
             )
     table = grid.summarise(times=args.times, flux_radius=args.flux_radius)
+    if not tasks and not any(point["summary"]["n_seeds"] for point in table["points"]):
+        print("no seed file to summarise")  # as for one ensemble: nothing written
+        return 0
     try:
         for point in table["points"]:
             if point["summary"]["n_seeds"]:

@@ -8,6 +8,8 @@ only with --force (docs/output.md).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from ..io.export import FORMATS, ExportError, export_run
 from ..io.h5md import RunFileError
 from .main import CliError
@@ -36,7 +38,8 @@ def run(args):
         path, n = export_run(args.run, args.format, out=args.output, frames=args.frames, force=args.force)
     except (RunFileError, ExportError) as exc:
         raise CliError(str(exc)) from None
-    except OSError as exc:
-        raise CliError(f"cannot write the export: {exc}") from None
+    except OSError as exc:  # named by the file asked for, not the temporary file it is written to first
+        target = args.output or Path(args.run).with_suffix("." + args.format)
+        raise CliError(f"cannot write the export {target}: {exc.strerror or exc}") from None
     print(f"wrote {path} ({n} frames, {args.format})")
     return 0

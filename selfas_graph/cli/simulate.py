@@ -61,7 +61,12 @@ def add_arguments(p):
         help="continue an interrupted run from RUN.h5 (its RUN.checkpoint.h5) or a checkpoint file; "
         "only --t-end may change",
     )
-    p.add_argument("-o", "--output", help="output HDF5 file (default: output.file, or SCENARIO name with .h5)")
+    p.add_argument(
+        "-o",
+        "--output",
+        help="output HDF5 file (default: output.file, or SCENARIO name with .h5); with --resume, the run file "
+        "the checkpoint continues (default: the one beside it)",
+    )
     p.add_argument(
         "--set",
         dest="overrides",
@@ -170,11 +175,22 @@ def _resume_paths(args):
     return checkpoint_path(src), src
 
 
+def _finished_at(path):
+    """The end time of the finished run in ``path``, or None (no file, not a run file, not finished)."""
+    try:
+        with RunFile(path) as run:
+            return float(run.time[-1]) if run.status == "finished" and run.n_frames else None
+    except (OSError, RunFileError, KeyError, ValueError):
+        return None
+
+
 def _load_resume(args):
     """(scenario, snapshot, run file, checkpoint file read, run identity) of a run to continue."""
     if args.scenario or args.overrides:
         raise CliError("--resume continues a run exactly: give no SCENARIO and no --set (only --t-end may change)")
     ckpt, out = _resume_paths(args)
+    if out is not None and not out.exists() and not ckpt.exists():
+        raise CliError(f"cannot resume {out}: neither the run file nor its checkpoint {ckpt} exists")
     try:
         snap, meta = read_checkpoint(ckpt)
     except CheckpointError as exc:
@@ -338,6 +354,12 @@ def _prepare(args):
         check_target(out, "output file", force=True, inputs=[args.scenario])
         check_target(ckpt, "checkpoint file", force=True, inputs=[args.scenario])
         if not args.dry_run and ckpt.exists() and not args.force:
+            ended = _finished_at(out)
+            if ended is not None:  # nothing left to continue: only a later end time extends it
+                raise CliError(
+                    f"{out} exists and finished at t = {ended:.6g} (its checkpoint {ckpt} beside it); pass --force "
+                    f"to run it again, -o to choose another name, or --resume {out} --t-end LATER to extend it"
+                )
             raise CliError(
                 f"checkpoint file {ckpt} exists (from an earlier run?); pass --force to overwrite it, "
                 f"or --resume {out} to continue that run"

@@ -30,7 +30,6 @@ import numpy as np
 from ..model.graph import ROLE_NAMES
 from . import layout
 from .h5md import RunFile, RunFileError
-from .h5md_format import in_use, in_use_message
 
 FORMATS = ("gsd", "xyz")
 #: particle and bond type names, indexed by role code
@@ -111,8 +110,6 @@ def output_path(run_path, out, fmt, force=False) -> Path:
         raise ExportError(f"{path} is an HDF5 file (a run file or checkpoint?); an export never replaces one")
     if path.exists() and not force:
         raise ExportError(f"{path} exists; pass --force (force=True) to overwrite it or -o (out=) to choose another")
-    if path.exists() and in_use(path):
-        raise ExportError(in_use_message(path, "output file", "--force (force=True)"))
     if not path.parent.exists():
         raise ExportError(f"the folder of the output file {path} does not exist")
     return path

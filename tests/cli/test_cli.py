@@ -96,12 +96,19 @@ def test_a_file_another_process_is_writing_is_not_replaced_even_with_force(scena
     with h5py.File(out, "w") as f:
         f["x"] = np.arange(3)
         f.flush()
-        for argv in (
-            ["simulate", str(scenario), "-o", str(out), "--force", "--progress", "none"],
-            ["export", str(finished_run(tmp_path, scenario)), "--format", "xyz", "-o", str(out), "--force"],
+        for argv, words in (
+            (
+                ["simulate", str(scenario), "-o", str(out), "--force", "--progress", "none"],
+                "is open in another process",
+            ),
+            # an export never replaces an HDF5 file, open or not
+            (
+                ["export", str(finished_run(tmp_path, scenario)), "--format", "xyz", "-o", str(out), "--force"],
+                "an export never replaces one",
+            ),
         ):
             assert main(argv) == 2
-            assert "is open in another process" in capsys.readouterr().err
+            assert words in capsys.readouterr().err
         np.testing.assert_array_equal(f["x"][()], np.arange(3))
     with h5py.File(out, "r") as f:
         np.testing.assert_array_equal(f["x"][()], np.arange(3))
@@ -125,6 +132,19 @@ def test_bad_scenario_exits_2_and_writes_nothing(scenario, tmp_path, capsys):
     assert main(["simulate", str(tmp_path / "missing.toml")]) == 2
     assert main(["simulate", str(scenario), "-o", str(tmp_path / "no" / "dir" / "x.h5")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_a_finished_run_is_named_so_when_simulated_again(scenario, tmp_path, capsys):
+    """Run again into a finished run (its checkpoint beside it), simulate names the run as finished
+    and how to extend it, not only the checkpoint: --resume alone would have nothing to continue."""
+    out = tmp_path / "run.h5"
+    assert main(["simulate", str(scenario), "-o", str(out), "--progress", "none"]) == 0
+    capsys.readouterr()
+    before = out.read_bytes()
+    assert main(["simulate", str(scenario), "-o", str(out), "--progress", "none"]) == 2
+    err = capsys.readouterr().err
+    assert f"{out} exists and finished at t = " in err and f"--resume {out} --t-end LATER" in err
+    assert out.read_bytes() == before
 
 
 def test_dry_run_writes_nothing(scenario, tmp_path, capsys, monkeypatch):

@@ -72,6 +72,10 @@ def test_grid_runs_every_point_once_and_writes_the_combined_summary(tmp_path, ca
     # run again: nothing new runs
     assert main(argv) == 0
     assert "grid of 2 points x 2 seeds: 0 to run" in capsys.readouterr().out
+    # summarising a grid that has no seed files yet: said so, nothing written, as for one ensemble
+    empty = [a if a != str(tmp_path / "g") else str(tmp_path / "none") for a in argv] + ["--no-run"]
+    assert main(empty) == 0
+    assert "no seed file to summarise" in capsys.readouterr().out and not (tmp_path / "none").exists()
 
 
 def test_grid_from_python_locks_its_folders_and_summarises_at_frame_times(tmp_path):

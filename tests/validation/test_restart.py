@@ -184,7 +184,7 @@ def test_bad_checkpoint_files(tmp_path):
 
 def test_cli_resume_errors(tmp_path, capsys):
     assert main(["simulate", "--resume", str(tmp_path / "missing.h5")]) == 2
-    assert "cannot resume" in capsys.readouterr().err
+    assert "neither the run file nor its checkpoint" in capsys.readouterr().err  # both named missing
     assert main(["simulate", "x.toml", "--resume", str(tmp_path / "missing.h5")]) == 2
     assert "give no SCENARIO" in capsys.readouterr().err
 
