@@ -392,7 +392,7 @@ def main(argv=None) -> int:
     )
     args = parser.parse_args(argv)
     if not (ROOT / "pyproject.toml").exists():  # an installed package: its folder is no checkout
-        print(f"selfas_graph runs from {ROOT.parent}, not from a source checkout: no docs/scenarios.md to write",
+        print(f"selfas_graph runs from {ROOT / 'selfas_graph'}, not from a source checkout: no docs/scenarios.md to write",
               file=sys.stderr)  # fmt: skip
         return 2
     text = render()
