@@ -392,8 +392,11 @@ def main(argv=None) -> int:
     )
     args = parser.parse_args(argv)
     if not (ROOT / "pyproject.toml").exists():  # an installed package: its folder is no checkout
-        print(f"selfas_graph runs from {ROOT / 'selfas_graph'}, not from a source checkout: no docs/scenarios.md to write",
-              file=sys.stderr)  # fmt: skip
+        where = ROOT / "selfas_graph"
+        print(
+            f"selfas_graph runs from {where}, not from a source checkout: no docs/scenarios.md to write",
+            file=sys.stderr,
+        )
         return 2
     text = render()
     rel = OUTPUT.relative_to(ROOT)
