@@ -53,6 +53,9 @@ def test_check_flag_reports_a_stale_file(tool, tmp_path, monkeypatch, capsys):
     out = tmp_path / "docs" / "scenarios.md"
     monkeypatch.setattr(tool, "ROOT", tmp_path)
     monkeypatch.setattr(tool, "OUTPUT", out)
+    assert tool.main([]) == 2 and not out.exists()  # no checkout there (an installed package): nothing written
+    assert "not from a source checkout" in capsys.readouterr().err
+    (tmp_path / "pyproject.toml").write_text("")
     assert tool.main(["--check"]) == 1  # missing
     assert tool.main([]) == 0 and out.read_text(encoding="utf-8") == tool.render()
     assert tool.main(["--check"]) == 0
