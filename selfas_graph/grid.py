@@ -165,7 +165,8 @@ class Grid:
     def summarise(self, times=None, flux_radius=None) -> dict:
         """Each point's :func:`~selfas_graph.ensemble.summarise`, and the rows of the combined table:
         one per point, measure and time, with the grid keys as columns."""
-        times = summary_times(times, self.t_end, self.ensembles[0].base.params.output.interval)
+        p = self.ensembles[0].base.params
+        times = summary_times(times, self.t_end, p.output.interval, p.integrator.dt)
         points, rows = [], []
         for point, ens in zip(self.points, self.ensembles):
             paths = [p for p in (ens.folder / f"seed_{s:04d}.h5" for s in ens.seeds) if p.exists()]

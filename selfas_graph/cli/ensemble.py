@@ -25,6 +25,7 @@ from pathlib import Path
 
 from .._version import __version__
 from ..ensemble import Ensemble, EnsembleError, format_table, write_summary
+from ..ensemble.plan import summary_times
 from ..parallel import task_pool
 from .main import EXIT_NUMERICAL, CliError, CliIOError
 
@@ -226,6 +227,11 @@ def _run_locked(args, pool, held):
     times = args.times
     if times is not None and max(times) > ens.t_end:
         raise CliError(f"--times {max(times):g} is after the end time {ens.t_end:g}; give times up to it")
+    if times is not None:  # frame times only, checked before anything runs
+        try:
+            summary_times(times, ens.t_end, ens.base.params.output.interval, ens.base.params.integrator.dt)
+        except EnsembleError as exc:
+            raise CliError(f"--{exc}") from None
     count = {a: sum(p.action == a for p in plans) for a in ("run", "resume", "done", "failed", "partial")}
     where = pool_text(pool)
     p = ens.base.params
@@ -318,6 +324,9 @@ def _run_grid(args, pool, held):
         )
         if args.times is not None and max(args.times) > grid.t_end:
             raise EnsembleError(f"--times {max(args.times):g} is after the end time {grid.t_end:g}")
+        if args.times is not None:  # frame times only, checked before anything runs
+            p0 = grid.ensembles[0].base.params
+            summary_times(args.times, grid.t_end, p0.output.interval, p0.integrator.dt)
         if not args.no_run and folder.is_dir():
             _lock(folder, held)
         plans = grid.plans(summary_only=args.no_run)

@@ -44,9 +44,11 @@ def scenario_source(scenario, overrides=(), t_end=None):
     return Path(scenario), list(overrides), t_end
 
 
-def check_times(times, t_end) -> list[float]:
+def check_times(times, t_end, frame_interval=None) -> list[float]:
     """``times`` of a summary as a list of floats in ``[0, t_end]`` (a single time is taken as a list
-    of one); EnsembleError naming the first that is not."""
+    of one), each a frame's time where ``frame_interval`` is given (a multiple of it, or ``t_end``, the
+    last frame); EnsembleError naming the first that is not. A time between two frames would take one
+    of them and be labelled with its own value."""
     times = [times] if np.ndim(times) == 0 else list(times)
     for t in times:
         try:
@@ -55,12 +57,25 @@ def check_times(times, t_end) -> list[float]:
             ok = False
         if not ok:
             raise EnsembleError(f"times: {t!r} is not a simulated time between 0 and the end time {t_end:g}")
+        if frame_interval:
+            k = math.floor(float(t) / frame_interval + 0.5)
+            tol = 1e-9 * max(1.0, abs(float(t)))
+            if abs(k * frame_interval - float(t)) > tol and abs(float(t) - t_end) > tol:
+                lo = math.floor(float(t) / frame_interval) * frame_interval
+                raise EnsembleError(
+                    f"times: no frame at t = {float(t):g}; the frames are every {frame_interval:g} t0 and at the "
+                    f"end time {t_end:g}: give frame times (the nearest: {lo:g} and {min(lo + frame_interval, t_end):g})"
+                )
     return [float(t) for t in times]
 
 
-def summary_times(times, t_end, interval) -> list[float]:
-    """The times of a summary: ``times`` checked (:func:`check_times`), or :func:`default_times` when None."""
-    return default_times(t_end, interval) if times is None else check_times(times, t_end)
+def summary_times(times, t_end, interval, dt=None) -> list[float]:
+    """The times of a summary: ``times`` checked (:func:`check_times`; frame times where the time step
+    ``dt`` is given, the frames ``interval`` rounded to whole steps), or :func:`default_times` when None."""
+    if times is None:
+        return default_times(t_end, interval)
+    frame_interval = max(1, round(interval / dt)) * dt if dt else None
+    return check_times(times, t_end, frame_interval)
 
 
 def check_jobs(jobs) -> None:
@@ -316,9 +331,11 @@ class Ensemble:
             return run_tasks(run_seed, tasks, pool, report)
 
     def summarise(self, times=None, measures=None, flux_radius=None) -> dict:
-        """:func:`summarise` over the seed files present (default times: :func:`default_times`, at frames)."""
+        """:func:`summarise` over the seed files present (default times: :func:`default_times`, at frames;
+        given ``times`` must be frame times, :func:`check_times`)."""
         paths = [seed_path(self.folder, s) for s in self.seeds]
-        times = summary_times(times, self.t_end, self.base.params.output.interval)
+        p = self.base.params
+        times = summary_times(times, self.t_end, p.output.interval, p.integrator.dt)
         out = summarise(
             [p for p in paths if p.exists()], times, t_end=self.t_end, measures=measures, flux_radius=flux_radius
         )

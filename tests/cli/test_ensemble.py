@@ -226,6 +226,8 @@ def test_seed_files_of_a_version_before_the_trajectories_are_not_reused(quick):
         (["--seeds", "2", "--set", "rods.cont=5"], "rods.cont"),
         (["--seeds", "2", "--times", "1,x"], "give simulated times separated by commas"),
         (["--seeds", "2", "--t-end", "0.5", "--times", "0.6"], "after the end time 0.5"),
+        # between two frames (every 0.5 t0): it would take one of them and be labelled 0.25
+        (["--seeds", "2", "--t-end", "1", "--times", "0.25"], "no frame at t = 0.25"),
         (["--seeds", "2", "--first-seed", "-3"], "seeds must be distinct integers >= 0"),
         (["--seeds", "2", "--first-seed", str(2**70)], "seed 1180591620717411303424: "),
         (["--seeds", "2", "--flux-radius", "nan"], "--flux-radius must be a positive length"),
@@ -289,6 +291,9 @@ def test_summary_times_are_checked(scene, tmp_path):
     without a word (the command line refuses it)."""
     ens = Ensemble(scene, [3], tmp_path / "e")
     assert ens.summarise(times=0.3)["times"] == [0.3]
+    # frames every 0.05: a time between two would take one of them under its own label
+    with pytest.raises(EnsembleError, match="no frame at t = 0.325; the frames are every 0.05"):
+        ens.summarise(times=[0.3, 0.325])
     for bad in ([5.0], [-1.0], ["x"], [float("nan")]):
         with pytest.raises(EnsembleError, match="is not a simulated time between 0 and the end time 0.6"):
             ens.summarise(times=bad)

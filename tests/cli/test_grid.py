@@ -50,7 +50,8 @@ def test_grid_runs_every_point_once_and_writes_the_combined_summary(tmp_path, ca
     from selfas_graph.cli.main import main
 
     argv = ["ensemble", str(QUICK), "--seeds", "2", "--grid", "circuit.delta_J0=1,2", "--jobs", "1"]
-    argv += ["--set", "rods.count=40", "--t-end", "0.2", "-o", str(tmp_path / "g"), "--times", "0.1,0.2", "--plot"]
+    argv += ["--set", "rods.count=40", "--set", "output.interval=0.1", "--t-end", "0.2", "-o", str(tmp_path / "g")]
+    argv += ["--times", "0.1,0.2", "--plot"]
     assert main(argv) == 0
     out = capsys.readouterr().out
     folders = sorted(p.name for p in (tmp_path / "g").iterdir() if p.is_dir())
