@@ -318,6 +318,11 @@ Besides each key's own range, `selfas_graph.io.scenario.check_consistency` requi
 - `[circuit]` needs a conductor to apply its bias: {conductors}; and `contacts.enabled`;
 - `[forces.current_field]` and `[forces.current_lorentz]` need `[circuit]` (rod currents come
   from the circuit solve);
+- with `[circuit]`, the resistances of the rods (`rods.resistance`, times the lengths where per unit
+  length) and of the contacts (`contacts.resistance`, unless 0) span at most a factor 1e6: beyond
+  it the Kirchhoff solve's round-off makes the currents wrong;
+- a `two_level` `rods.length` gives exactly `round(high_fraction * count)` rods the high value: the
+  mean of that draw is within 1 % of 1;
 - `run.t_end` is at most 1e12 steps of `integrator.dt`;
 - `output.interval >= integrator.dt`; an interval that is no whole number of steps is rounded to
   the nearest one, and `simulate` prints the interval it uses (a frame is also written at the end).

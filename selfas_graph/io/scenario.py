@@ -249,6 +249,32 @@ def _describe(value):
     return f"{text} ({type(value).__name__})"
 
 
+#: the largest ratio of the circuit's largest resistance to its smallest: the currents of the
+#: quick scene's first short circuit (12 rods in series) came out right to 1e-8 with contacts of
+#: 1e-12 to 1e8 R0, 0.5 % off at 1e12 and wrong by orders of magnitude at 1e16 and 1e-16 (direct
+#: and CG solves alike); at 1e8 the count of rods in series (a 1e-9 relative test) already failed
+MAX_RESISTANCE_SPREAD = 1e6
+
+
+def _resistance_spread(p):
+    """(smallest, largest) resistance the circuit of ``p`` can hold: its rods' (``rods.resistance``,
+    times the lengths where per unit length) and its contacts' (when not ideal)."""
+    d = p.rods.resistance
+    if d is None:
+        lo = hi = 1.0
+    elif d.distribution == "constant":
+        lo = hi = d.value
+    else:
+        lo, hi = min(d.low, d.high), max(d.low, d.high)
+    if d is not None and d.per_length and p.rods.length is not None:
+        shortest, longest = p.rods.length.bounds()
+        lo, hi = lo * shortest, hi * longest
+    r = p.contacts.resistance
+    if r > 0.0:
+        lo, hi = min(lo, r), max(hi, r)
+    return lo, hi
+
+
 def _check_number(path, value, tp, meta, problems):
     if tp is bool:
         if not isinstance(value, bool):
@@ -426,6 +452,16 @@ def check_consistency(p: P.Parameters):
                 f"length L (docs/model.md 'Reduced units'), so choose values with mean 1 (e.g. uniform in "
                 f"(0.5, 1.5))"
             )
+        if rods.length.distribution == "two_level":
+            # exactly round(high_fraction * count) rods are long (model/state.py): the mean of that draw
+            m = int(round(rods.length.high_fraction * rods.count))
+            drawn = ((rods.count - m) * rods.length.low + m * rods.length.high) / rods.count
+            if abs(drawn - 1.0) > 0.01:
+                out.append(
+                    f"rods.length: {m} of {rods.count} rods get the high value (round(high_fraction * count)), so "
+                    f"their mean is {drawn:.6g}, not 1 (more than 1 % off); choose a high_fraction and count whose "
+                    f"product is near a whole number of rods"
+                )
         shortest = rods.length.bounds()[0]
         if shortest < rods.diameter:
             out.append(
@@ -452,6 +488,15 @@ def check_consistency(p: P.Parameters):
             "circuit: the circuit needs a conductor to apply its bias: add [forces.electrodes] (case (i)) "
             "or [forces.external_filament] (case (ii))"
         )
+    if p.circuit is not None:
+        spread = _resistance_spread(p)
+        if spread[1] > MAX_RESISTANCE_SPREAD * spread[0]:
+            out.append(
+                f"contacts.resistance, rods.resistance: the circuit's resistances span {spread[0]:.3g} to "
+                f"{spread[1]:.3g} R0, a factor above {MAX_RESISTANCE_SPREAD:.0e}: the Kirchhoff solve's round-off "
+                f"grows with it and its currents would be wrong without a sign; keep them within that factor (or "
+                f"contacts.resistance = 0, ideal contacts)"
+            )
     if p.circuit is not None and not p.contacts.enabled:
         out.append(
             "circuit: the circuit is built from contacts; with contacts.enabled = false it can never close "

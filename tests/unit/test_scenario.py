@@ -148,3 +148,30 @@ def test_every_shipped_scenario_loads_and_runs_a_few_steps(path):
     sim = Simulation.from_scenario(sc)
     sim.step(5)
     assert sim.state.step == 5 and sim.max_bond_error < 1e-12
+
+
+def test_a_circuit_whose_resistances_span_more_than_1e6_is_refused():
+    """The Kirchhoff solve's round-off grows with the spread of the resistances: contacts of 1e16 R0
+    against rods of 1 gave currents 40 times too large, with no sign, so such a circuit is refused,
+    naming both keys; ideal contacts (0) and a spread of 1e6 pass."""
+    circuit = GOOD + "[circuit]\ndelta_J0 = 1.0\n"
+    for r in ("1e7", "1e-7"):
+        msg = problems(circuit, [f"contacts.resistance={r}"])
+        assert "contacts.resistance, rods.resistance: the circuit's resistances span" in msg and "1e+06" in msg
+    for r in ("0", "1e6", "1e-6"):
+        scenario_from_text(circuit, overrides=[f"contacts.resistance={r}"])
+    # per unit length: the rods' own spread counts, times their lengths
+    lengths = "rods.length={distribution='uniform',low=0.5,high=1.5}"
+    per_length = "rods.resistance={distribution='constant',value=1.0,per_length=true}"
+    scenario_from_text(circuit, overrides=[lengths, per_length, "contacts.resistance=4e5"])
+    assert "span 0.5 to 1e+06" in problems(circuit, [lengths, per_length, "contacts.resistance=1e6"])
+    scenario_from_text(GOOD, overrides=["contacts.resistance=1e30"])  # no circuit: nothing is solved
+
+
+def test_two_level_lengths_whose_drawn_mean_is_off_1_are_refused():
+    """Exactly round(high_fraction * count) rods are long: 4 rods with a fraction 0.1 of long ones get
+    none, and every rod would be 0.5 long, not the unit of length; 10 rods get one, a mean of 1."""
+    law = "rods.length={distribution='two_level',low=0.5,high=5.5,high_fraction=0.1}"
+    msg = problems(GOOD, [law, "rods.count=4"])
+    assert "rods.length: 0 of 4 rods get the high value" in msg and "their mean is 0.5, not 1" in msg
+    scenario_from_text(GOOD, overrides=[law, "rods.count=10"])
