@@ -125,8 +125,19 @@ def scenario_from_text(text, path=None, overrides=(), t_end=None) -> Scenario:
 
 def check_parameters(params: P.Parameters) -> None:
     """Validate parameters made in Python (``Parameters(...)``, ``dataclasses.replace``) as a
-    scenario file is validated; raises :class:`ScenarioError` with the same messages."""
-    parameters_from_dict(params.to_raw())
+    scenario file is validated; raises :class:`ScenarioError` with the same messages. A section
+    given as a dict (``Parameters(rods={"count": 5})``) is named: it must be the section's own
+    parameters, as :meth:`~selfas_graph.Parameters.replace` makes them from a dict."""
+    built = parameters_from_dict(params.to_raw())
+    wrong = [
+        f"{f.name}: a {type(getattr(params, f.name)).__name__} where the section's parameters "
+        f"({type(getattr(built, f.name)).__name__}) belong; give the changes to Parameters().replace("
+        f"{f.name}={{...}}) or Parameters.from_dict({{'{f.name}': {{...}}}})"
+        for f in dataclasses.fields(params)
+        if getattr(built, f.name) is not None and not isinstance(getattr(params, f.name), type(getattr(built, f.name)))
+    ]
+    if wrong:
+        raise ScenarioError(wrong)
 
 
 def parameters_from_dict(raw: dict, source=None) -> P.Parameters:
@@ -277,10 +288,10 @@ def _resistance_spread(p):
 
 def _check_number(path, value, tp, meta, problems):
     if tp is bool:
-        if not isinstance(value, bool):
+        if not isinstance(value, (bool, np.bool_)):
             problems.append(f"{path}: expected true or false, got {_describe(value)}")
             return _INVALID
-        return value
+        return bool(value)  # numpy's booleans from Python callers become plain ones
     if tp is int:
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
             problems.append(f"{path}: expected an integer, got {_describe(value)}")
@@ -291,7 +302,9 @@ def _check_number(path, value, tp, meta, problems):
             problems.append(f"{path}: expected a number, got {_describe(value)}")
             return _INVALID
         try:
-            value = float(value)
+            # a float32 (or narrower) number stands for the decimal it prints as, not its binary
+            # value widened: np.float32(1e-3) is dt = 0.001, not 0.0010000000474974513
+            value = float(str(value)) if isinstance(value, np.floating) and value.itemsize < 8 else float(value)
         except OverflowError:
             value = math.inf
         if not math.isfinite(value):

@@ -295,8 +295,8 @@ class Simulation:
         if abs(x - n) > 1e-6 + 4 * np.finfo(float).eps * abs(x):
             lo = t + math.floor(x) * dt
             raise ValueError(
-                f"t_end = {t_end:.10g} is not a whole number of steps dt = {dt:g} from t = {t:.10g} "
-                f"({x:.6g} steps); the nearest reachable times are {lo:.10g} and {lo + dt:.10g}"
+                f"t_end = {t_end!r} is not a whole number of steps dt = {dt!r} from t = {t!r} "
+                f"({x:.12g} steps); the nearest reachable times are {lo!r} and {lo + dt!r}"
             )
         return n
 

@@ -298,3 +298,22 @@ def test_resume_by_another_version_is_noted_and_recorded(tmp_path, capsys):
     capsys.readouterr()
     assert sg_main(["simulate", "--resume", str(out), "--t-end", "0.03", "--progress", "none"]) == 0
     assert "was written by version" not in capsys.readouterr().err  # its own checkpoint now
+
+
+def test_sections_given_as_dicts_and_numpy_scalars():
+    """A section given as a dict to ``Parameters(...)`` or ``dataclasses.replace`` is named (it failed
+    deep in the simulation); numpy scalars from a notebook are taken as the numbers they print as: a
+    float32 dt of 1e-3 is 0.001 (not 0.0010000000474974513, which no t_end of whole steps matched)."""
+    import dataclasses
+
+    for make in (
+        lambda: sg.Parameters(rods={"count": 5}),
+        lambda: dataclasses.replace(sg.Parameters(), rods={"count": 5}),
+    ):
+        with pytest.raises(sg.ScenarioError, match=r"rods: a dict where the section's parameters \(RodParams\)"):
+            make()
+    p = _params().replace(integrator={"dt": np.float32(1e-3)}, contacts={"enabled": np.True_})
+    assert p.integrator.dt == 0.001 and p.contacts.enabled is True
+    sim = sg.Simulation(p, state=_rods())
+    sim.run(0.01)
+    assert sim.state.step == 10
