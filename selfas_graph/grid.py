@@ -22,7 +22,10 @@ import csv
 import io
 import itertools
 import math
+import numbers
 from pathlib import Path
+
+import numpy as np
 
 from .ensemble import Ensemble, EnsembleError, run_seed, run_tasks, summarise
 from .ensemble.folder import FolderLock, make_folder
@@ -88,6 +91,23 @@ def _repeated(parts):
     return None
 
 
+def _value_text(value) -> str:
+    """A grid value as the text of an override: a string as it is (the command line's), a Python
+    number, boolean or list as its TOML literal, integral floats as integers."""
+    if isinstance(value, str):
+        return value.strip()
+    if isinstance(value, (bool, np.bool_)):
+        return "true" if value else "false"
+    if isinstance(value, numbers.Integral):
+        return str(int(value))
+    if isinstance(value, numbers.Real):
+        x = float(value)
+        return str(int(x)) if x.is_integer() and abs(x) < 1e15 else repr(x)
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return "[" + ",".join(_value_text(v) for v in value) + "]"
+    raise EnsembleError(f"grid value {value!r}: give a number, a boolean, a list of numbers or the text of a value")
+
+
 def _folder_name(point) -> str:
     name = "+".join(f"{k}={v}" for k, v in point)
     return name.replace("/", "_").replace(" ", "")
@@ -114,7 +134,15 @@ class Grid:
         for key in self.keys:
             if key in base:
                 raise EnsembleError(f"--grid {key}: also given by --set; give it in one place")
-        self.points = [tuple(zip(self.keys, values)) for values in itertools.product(*(grid[k] for k in self.keys))]
+        # Python values as the text of an override (False -> false, 2.0 -> 2, [0, 0, 1.5] -> [0,0,1.5]), so
+        # that a point has one folder however its value was written
+        texts = {k: [_value_text(v) for v in grid[k]] for k in self.keys}
+        for key in self.keys:
+            same = _repeated(texts[key])
+            if same:
+                what = f"{same[0]!r} and {same[1]!r} are the same value" if same[0] != same[1] else f"{same[0]} twice"
+                raise EnsembleError(f"grid key {key}: {what} in {list(grid[key])!r}")
+        self.points = [tuple(zip(self.keys, values)) for values in itertools.product(*(texts[k] for k in self.keys))]
         self.ensembles = []
         for point in self.points:
             extra = [f"{k}={v}" for k, v in point]

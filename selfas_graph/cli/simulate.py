@@ -555,7 +555,8 @@ def _print_summary(s, out, sim):
     lines = [
         f"done: {s.steps} steps, t = {s.t_start:.4g} -> {s.t_end:.4g} in {_fmt_time(s.wall_seconds)} ({speed})",
         f"  max bond-length error after constraint: {s.max_bond_error:.3g}",
-        f"  energy balance E - E0 - W: {s.energy_balance:.3g} ({rel:.2g} of kinetic energy + |work|)",
+        f"  energy balance E - E0 - W: {s.energy_balance:.3g} "
+        + (f"({rel:.2g} of kinetic energy + |work|)" if math.isfinite(rel) else "(no energy turned over)"),
         f"  contacts (tip pairs closer than r*): {sim.contact_count()}",
     ]
     st = sim.status()

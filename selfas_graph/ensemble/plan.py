@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import operator
+import os
 import shlex
 from pathlib import Path
 
@@ -41,6 +42,12 @@ def scenario_source(scenario, overrides=(), t_end=None):
             )
         t_end = scenario.params.run.t_end if t_end is None else t_end
         return Path(scenario.path), [*scenario.overrides, *overrides], t_end
+    if not isinstance(scenario, (str, os.PathLike)):
+        raise EnsembleError(
+            f"scenario: a scenario file's path, or a Scenario from load_scenario(path, overrides), got "
+            f"{type(scenario).__name__}; each seed runs from the file, with the changes as overrides "
+            f"(e.g. Ensemble('scene.toml', seeds, folder, overrides=['rods.count=50']))"
+        )
     return Path(scenario), list(overrides), t_end
 
 

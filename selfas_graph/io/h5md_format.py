@@ -231,7 +231,8 @@ def in_use_message(path, what, force) -> str:
     """Why ``path``, which :func:`in_use` found open in another process, is not replaced; ``what`` names
     the file, ``force`` the option that replaces an existing one (``--force``, ``overwrite=True``)."""
     return (
-        f"{what} {path} is open in another process (a simulation still writing it?); it is not replaced, "
+        f"{what} {path} is open in another process (a simulation still writing it?), or in this one (a "
+        f"RunFile or RunWriter not yet closed: close it, or use it in a with block); it is not replaced, "
         f"even with {force}: wait for that process to end, or give another name"
     )
 

@@ -4,6 +4,7 @@ simulation objects."""
 from __future__ import annotations
 
 import json
+import numbers
 import operator
 import re
 from pathlib import Path
@@ -23,8 +24,10 @@ def _pick_frame(path, n, frame, t, times) -> int:
     """Index of one of ``n`` frames: number ``frame`` (negative counts from the end; default the last)
     or the one nearest time ``t`` (``times()`` gives the frames' times); RunFileError otherwise."""
     if t is not None:
-        if not np.isfinite(t):
-            raise RunFileError(f"time {t} names no frame; give a finite simulated time")
+        if frame is not None:
+            raise RunFileError(f"frame {frame!r} and time {t!r} both given; name the frame by one of them")
+        if isinstance(t, (bool, np.bool_)) or not isinstance(t, numbers.Real) or not np.isfinite(t):
+            raise RunFileError(f"time {t!r} names no frame; give a finite simulated time")
         ts = np.asarray(times(), dtype=float)
         # the nearest frame, within the run's frames or at most one frame spacing beyond them: a time
         # further out names no frame of this run (a typo, or another run's time), not its first or last
@@ -37,6 +40,8 @@ def _pick_frame(path, n, frame, t, times) -> int:
             )
         return int(np.argmin(np.abs(ts - t)))
     try:
+        if isinstance(frame, (bool, np.bool_)):
+            raise TypeError  # True is not frame 1
         k = -1 if frame is None else operator.index(frame)
     except TypeError:
         raise RunFileError(f"frame {frame!r}: give a frame number (an integer; negative counts from the end)") from None

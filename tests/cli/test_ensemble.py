@@ -286,6 +286,16 @@ def test_jobs_below_one_are_refused_before_anything_is_made(scene, tmp_path):
     assert not (tmp_path / "e").exists() and not (tmp_path / "g").exists()
 
 
+def test_an_ensemble_of_parameters_names_what_it_takes(tmp_path):
+    """``Ensemble(Parameters(...))`` failed in pathlib: the message names the scenario file or a
+    loaded Scenario, and the overrides for the changes."""
+    import selfas_graph as sg
+
+    with pytest.raises(EnsembleError, match=r"scenario: a scenario file's path, or a Scenario .* got Parameters"):
+        Ensemble(sg.Parameters(), 2, tmp_path / "e")
+    assert not (tmp_path / "e").exists()
+
+
 def test_summary_times_are_checked(scene, tmp_path):
     """``summarise(times=0.3)`` failed with a TypeError, and a time after the end gave columns of n/a
     without a word (the command line refuses it)."""

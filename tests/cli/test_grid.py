@@ -46,6 +46,20 @@ def test_a_bad_grid_is_refused_naming_the_key_before_anything_is_written(tmp_pat
     assert not (tmp_path / "g").exists()
 
 
+def test_python_values_name_one_point_however_written(tmp_path):
+    """From Python a grid takes numbers, booleans and lists as well as the command line's text: False
+    switches a term off (it was refused, 'expected a table, got False'), and 2.0 and "2" are one point
+    with one folder (a cell run again with floats ran everything again); 1 and 1.0 are one value."""
+    g = Grid(QUICK, {"forces.yukawa": [False], "circuit.delta_J0": [2.0]}, seeds=1, folder=tmp_path / "a")
+    assert [e.folder.name for e in g.ensembles] == ["forces.yukawa=false+circuit.delta_J0=2"]
+    assert g.ensembles[0].base.params.forces.yukawa is None
+    h = Grid(QUICK, {"forces.yukawa": ["false"], "circuit.delta_J0": ["2"]}, seeds=1, folder=tmp_path / "a")
+    assert h.ensembles[0].folder == g.ensembles[0].folder
+    with pytest.raises(EnsembleError, match="1 twice"):
+        Grid(QUICK, {"circuit.delta_J0": [1, 1.0]}, seeds=1, folder=tmp_path / "b")
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
 def test_grid_runs_every_point_once_and_writes_the_combined_summary(tmp_path, capsys):
     from selfas_graph.cli.main import main
 

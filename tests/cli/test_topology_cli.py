@@ -16,7 +16,7 @@ import pytest
 from conftest import simulation
 from selfas_graph._version import __version__
 from selfas_graph.cli.main import main
-from selfas_graph.io.h5md import RunFile, RunWriter
+from selfas_graph.io.h5md import RunFile, RunFileError, RunWriter
 from selfas_graph.model import events as ev
 from selfas_graph.model.state import State
 
@@ -317,3 +317,17 @@ def test_snapshot_legend_counts_every_dead_end_topology_counts(chain_run):
     assert any(
         t.startswith("other rods (") and t.endswith("3 of them dead ends off the filament networks)") for t in labels
     )
+
+
+def test_a_frame_named_twice_or_by_a_boolean_is_refused(chain_run):
+    """``run.frame(1, t=0.05)`` took the time and dropped the number without a word; ``frame(True)`` was
+    frame 1: both are refused, naming what was given."""
+    path, _ = chain_run
+    with RunFile(path) as run:
+        with pytest.raises(RunFileError, match="frame 1 and time 0.05 both given"):
+            run.frame(1, t=0.05)
+        with pytest.raises(RunFileError, match="frame True"):
+            run.frame(True)
+        with pytest.raises(RunFileError, match="time True names no frame"):
+            run.graph(t=True)
+        assert run.frame(t=0.05).index == run.frame(5).index
