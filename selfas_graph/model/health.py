@@ -21,6 +21,12 @@ BOND_BREAK = 0.05
 #: far beyond stability: the tip core (width r* ~ 0.06) is crossed in one step
 MAX_STEP_DISPLACEMENT = 0.25
 #: a force component beyond this (units F_M0) is out of scale rather than a time-step problem:
+#: |lambda dt| below which Adams-Bashforth 4 follows a decay at rate lambda (docs/model.md '4.6 The
+#: stiff brakes'): a brake of rate lambda per unit mass needs dt < AB4_DECAY_LIMIT / lambda
+AB4_DECAY_LIMIT = 0.3
+#: the relative round-off of the energies and works the balance adds up, times a margin: a balance
+#: below this fraction of their sum is round-off, not an error of the step
+ROUND_OFF_ENERGY = 1e-12
 #: the stiffest force of a sane scene, the tip core's kappa / r*^2 at kappa = 1, r* = 0.06, is
 #: 278, and the paper's scenes stay below 1e4; a failure with a force above this blames the term
 FORCE_OUT_OF_SCALE = 1e8
@@ -132,22 +138,32 @@ class HealthChecks:
         raise NumericalFailure(msg, st.step, rods)
 
     def _stiff_brakes(self) -> str:
-        """A diagnosis naming the explicit brakes too stiff for dt (coefficient * dt > 2), or ""."""
+        """A diagnosis naming a brake too stiff for dt, or "". Tips have unit mass; AB4 follows a decay
+        at rate lambda only for lambda dt below about 0.3 (docs/model.md '4.6 The stiff brakes'). The
+        ambient brake (rate M_br) is always in the step; the tip brake (rate 2 k_br for a pair, m k_br
+        at a junction of m tips) only with integrator.brake = "explicit"."""
         f, ip = self.params.forces, self.params.integrator
-        if ip.brake != "explicit":
-            return ""
-        over = [
-            (name, b.coefficient)
-            for name, b in (("tip_brake", f.tip_brake), ("ambient_brake", f.ambient_brake))
-            if b is not None and b.coefficient * self.dt > 2.0
-        ]
-        if not over:
-            return ""
-        name, k = max(over, key=lambda x: x[1])
-        return (
-            f"the '{name}' term is too stiff for the step: forces.{name}.coefficient * dt = {k * self.dt:.3g} "
-            f'(an explicit brake is stable only below 2; integrator.brake = "split" is stable for any)'
-        )
+        over = []
+        if f.ambient_brake is not None and f.ambient_brake.coefficient * self.dt > AB4_DECAY_LIMIT:
+            k = f.ambient_brake.coefficient
+            over.append(
+                f"the 'ambient_brake' term is too stiff for the step: forces.ambient_brake.coefficient * dt = "
+                f"{k * self.dt:.3g}, and Adams-Bashforth 4 follows a brake only below about {AB4_DECAY_LIMIT:g} "
+                f"(the ambient brake is in the step whatever integrator.brake says): a dt below "
+                f"{AB4_DECAY_LIMIT / k:.3g}, or a smaller coefficient"
+            )
+        if (
+            ip.brake == "explicit"
+            and f.tip_brake is not None
+            and 2 * f.tip_brake.coefficient * self.dt > AB4_DECAY_LIMIT
+        ):
+            k = f.tip_brake.coefficient
+            over.append(
+                f"the 'tip_brake' term is too stiff for the step: 2 * forces.tip_brake.coefficient * dt = "
+                f"{2 * k * self.dt:.3g} for a pair of tips (more at junctions), and Adams-Bashforth 4 follows a "
+                f'brake only below about {AB4_DECAY_LIMIT:g}: integrator.brake = "split" takes it out of the step'
+            )
+        return "; ".join(over)
 
     def _out_of_scale_term(self):
         """(channel, force) of a channel whose force at the last sane state (the last frame, or the
@@ -172,7 +188,7 @@ class HealthChecks:
             return ""
         return (
             f"; or the slow forces, evaluated every integrator.slow_every = {k} steps, change too much "
-            f"in between: try a smaller slow_every (8 or 16 in the shipped scenes)"
+            f"in between: try a smaller slow_every ({max(1, k // 2)})"
             + (
                 f" with integrator.current_every = {m} a multiple of it, or 0"
                 if (m := self.params.integrator.current_every)
@@ -211,16 +227,34 @@ class HealthChecks:
         tol = self.params.integrator.energy_tolerance
         scale = energy_scale(obs)
         err = abs(obs["energy_balance"])
-        if scale > 0 and not err <= tol * scale:
+        # the balance cannot be known better than the round-off of the energies it adds up (a potential
+        # energy far from the origin is large beside the energy turned over): no failure below that
+        floor = ROUND_OFF_ENERGY * sum(abs(float(v)) for k, v in obs.items() if k.startswith(("energy", "work/")))
+        if scale > 0 and not err <= max(tol * scale, floor):
             st = self.state
             works = sorted(((abs(v), k[5:]) for k, v in obs.items() if k.startswith("work/")), reverse=True)
-            top = works[0][1] if works else "none"
+            top = (
+                f"the largest work is done by the '{works[0][1]}' term"
+                if works and works[0][0] > 0
+                else "no term does work"
+            )
+            stiff = self._stiff_brakes()
+            cause = (
+                f"{stiff}{self._slow_hint()}"
+                if stiff
+                else f"The time step integrator.dt = {self.dt:g} is likely past the stability limit of the stiff "
+                f"terms (the tip brake and tip core, or a strong field): try half of it{self._slow_hint()}"
+            )
+            tight = (
+                f" (or integrator.energy_tolerance = {tol:g} asks for more than the integrator's own error; "
+                f"the default is 0.1)"
+                if tol < 1e-3
+                else ""
+            )
             raise NumericalFailure(
                 f"numerical failure at step {st.step} (t = {st.time:.6g}): the energy balance is off by {err:.3g}, "
                 f"{err / scale:.0%} of the energy turned over ({scale:.3g}; integrator.energy_tolerance = {tol:g}); "
-                f"the largest work is done by the '{top}' term. The time step integrator.dt = {self.dt:g} is likely "
-                f"past the stability limit of the stiff contact terms (tip brake k_br, tip core): try half of it"
-                f"{self._slow_hint()}.",
+                f"{top}. {cause}{tight}.",
                 st.step,
             )
 

@@ -84,6 +84,20 @@ def test_huge_brake_coefficient(rng, brake, runs):
             sim.run(t_end=0.1)
 
 
+def test_a_stiff_ambient_brake_is_named_in_either_brake_mode(rng):
+    """The ambient brake is in the Adams-Bashforth step whatever integrator.brake says: at M_br dt = 10
+    (far past AB4's 0.3) the run stops naming it and the dt it needs, not a term it happened to push."""
+    state = random_rods(20, rng, box=1.2)
+    for brake in ("split", "explicit"):
+        sim = simulation(
+            state.copy(),
+            forces={"tip_magnetic": {}, "ambient_brake": {"coefficient": 1e4}},
+            integrator={"dt": 1e-3, "brake": brake},
+        )
+        with pytest.raises(NumericalFailure, match=r"'ambient_brake' term is too stiff .* a dt below 3e-05"):
+            sim.run(t_end=0.1)
+
+
 def _chain(n, gap_margin=0.02):
     """n rods stacked tip to tip along z, touching, spanning electrodes just outside the chain ends."""
     z = np.arange(n) * 1.0 - (n - 1) / 2
