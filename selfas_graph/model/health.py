@@ -21,8 +21,8 @@ BOND_BREAK = 0.05
 #: far beyond stability: the tip core (width r* ~ 0.06) is crossed in one step
 MAX_STEP_DISPLACEMENT = 0.25
 #: a force component beyond this (units F_M0) is out of scale rather than a time-step problem:
-#: |lambda dt| below which Adams-Bashforth 4 follows a decay at rate lambda (docs/model.md '4.6 The
-#: stiff brakes'): a brake of rate lambda per unit mass needs dt < AB4_DECAY_LIMIT / lambda
+#: |lambda dt| below which Adams-Bashforth 4 follows a decay at rate lambda: a brake of rate lambda
+#: per unit mass needs dt < AB4_DECAY_LIMIT / lambda (docs/model.md 'The stiff brakes')
 AB4_DECAY_LIMIT = 0.3
 #: the relative round-off of the energies and works the balance adds up, times a margin: a balance
 #: below this fraction of their sum is round-off, not an error of the step
@@ -139,7 +139,7 @@ class HealthChecks:
 
     def _stiff_brakes(self) -> str:
         """A diagnosis naming a brake too stiff for dt, or "". Tips have unit mass; AB4 follows a decay
-        at rate lambda only for lambda dt below about 0.3 (docs/model.md '4.6 The stiff brakes'). The
+        at rate lambda only for lambda dt below about 0.3 (docs/model.md 'The stiff brakes'). The
         ambient brake (rate M_br) is always in the step; the tip brake (rate 2 k_br for a pair, m k_br
         at a junction of m tips) only with integrator.brake = "explicit"."""
         f, ip = self.params.forces, self.params.integrator
