@@ -34,10 +34,11 @@ import time
 import numba
 import numpy as np
 
-from selfas_graph.kernels._jit import inline_sum, njit_parallel_sum, prange, set_parallel_chunksize
+from selfas_graph.kernels._jit import inline, inline_sum, njit_parallel_sum, prange, set_parallel_chunksize
 from selfas_graph.kernels.laws import tip_force_over_r, tip_force_over_r_f32
 from selfas_graph.kernels.tree import build_tip_tree, evaluate_tip_tree
 from selfas_graph.kernels.treewalk import (
+    FAR_CHUNK,
     _far32_on_target_3,
     _far32_on_target_4,
     _near_copies,
@@ -52,6 +53,25 @@ from .tree import KAPPA, RSTAR, chains, fig2, uniform
 LISTS, NEAR, FAR = 0, 1, 2
 
 
+@inline
+def _group_walk(gi, x, y, z, index, rank, start, end, nxt, box, centre, radius, moment, group, order, theta2, rstar):
+    """Stages 1 and 2 of ``evaluate_groups`` for group ``gi`` (all its tips as targets, mixed precision):
+    ``(gs, gcx, gcy, gcz, (sel, n_w, tx, ty, tz, partner), walk)``, ``walk`` the tuple :func:`_walk`
+    returns (empty lists when the group has no target)."""
+    g = group[gi]
+    gs = start[g]
+    xl, yl, zl, xh, yh, zh = box[g, 0], box[g, 1], box[g, 2], box[g, 3], box[g, 4], box[g, 5]
+    gcx = 0.5 * (xl + xh)
+    gcy = 0.5 * (yl + yh)
+    gcz = 0.5 * (zl + zh)
+    targets = _targets(x, y, z, index, rank, gs, end[g], 0, x.shape[0], gcx, gcy, gcz)
+    tx, ty, tz = targets[2], targets[3], targets[4]
+    walk = _walk(
+        start, end, nxt, centre, radius, moment, order, True, theta2, rstar, xl, yl, zl, xh, yh, zh, tx, ty, tz
+    )
+    return gs, gcx, gcy, gcz, targets, walk
+
+
 @njit_parallel_sum
 def walk_parts(
     x, y, z, charge, rod, index, rank, start, end, nxt, box, centre, radius, moment, group, order,
@@ -63,31 +83,19 @@ def walk_parts(
     theta2 = theta * theta
     rstar32 = np.float32(rstar)
     kappa32 = np.float32(kappa)
-    n_tips = x.shape[0]
     for gi in prange(group.shape[0]):
-        g = group[gi]
-        gs = start[g]
-        ge = end[g]
-        xl = box[g, 0]
-        yl = box[g, 1]
-        zl = box[g, 2]
-        xh = box[g, 3]
-        yh = box[g, 4]
-        zh = box[g, 5]
-        gcx = 0.5 * (xl + xh)
-        gcy = 0.5 * (yl + yh)
-        gcz = 0.5 * (zl + zh)
-        sel, n_w, tx, ty, tz, partner = _targets(x, y, z, index, rank, gs, ge, 0, n_tips, gcx, gcy, gcz)
+        gs, gcx, gcy, gcz, targets, walk = _group_walk(
+            gi, x, y, z, index, rank, start, end, nxt, box, centre, radius, moment, group, order, theta2, rstar
+        )
+        sel, n_w, tx, ty, tz, partner = targets
         if n_w == 0:
             continue
-        ex, ey, ez, far32, n_chunks, near_start, near_end, n_near, n_near_tips = _walk(
-            start, end, nxt, centre, radius, moment, order, True, theta2, rstar, xl, yl, zl, xh, yh, zh, tx, ty, tz
-        )
+        ex, ey, ez, far32, n_chunks, near_start, near_end, n_near, n_near_tips = walk
         partner_near, fx, fy, fz, lx, ly, lz, fq, frod, nx, ny, nz, nq, nrod = _near_copies(
             near_start, near_end, n_near, n_near_tips, partner, True, x, y, z, charge, rod, near32, charge32, rod32
         )
         counts[gi, 0] = n_w * n_near_tips
-        counts[gi, 1] = n_w * n_chunks * 64
+        counts[gi, 1] = n_w * n_chunks * FAR_CHUNK
         for w in range(n_w):
             i = sel[w]
             qk = charge[i]
@@ -182,22 +190,15 @@ def near_once(
     theta2 = theta * theta
     rstar32 = np.float32(rstar)
     kappa32 = np.float32(kappa)
-    n_tips = x.shape[0]
     for gi in prange(group.shape[0]):
         t = numba.get_thread_id()
-        g = group[gi]
-        gs = start[g]
-        ge = end[g]
-        xl, yl, zl, xh, yh, zh = box[g, 0], box[g, 1], box[g, 2], box[g, 3], box[g, 4], box[g, 5]
-        gcx = 0.5 * (xl + xh)
-        gcy = 0.5 * (yl + yh)
-        gcz = 0.5 * (zl + zh)
-        sel, n_w, tx, ty, tz, partner = _targets(x, y, z, index, rank, gs, ge, 0, n_tips, gcx, gcy, gcz)
+        gs, _, _, _, targets, walk = _group_walk(
+            gi, x, y, z, index, rank, start, end, nxt, box, centre, radius, moment, group, order, theta2, rstar
+        )
+        sel, n_w = targets[0], targets[1]
         if n_w == 0:
             continue
-        _, _, _, _, _, near_start, near_end, n_near, _ = _walk(
-            start, end, nxt, centre, radius, moment, order, True, theta2, rstar, xl, yl, zl, xh, yh, zh, tx, ty, tz
-        )
+        near_start, near_end, n_near = walk[5], walk[6], walk[7]
         m = 0
         n_after = 0
         for a in range(n_near):  # the runs from the group's first tip on
