@@ -169,8 +169,8 @@ class HealthChecks:
         """With integrator.brake = "split": a diagnosis naming the tip brake when its splitting from the
         step is coarse (coefficient * dt above :data:`AB4_DECAY_LIMIT`), or "". The split brake is stable
         at any step, but the step moves the tips with velocities the brake then takes away: the splitting
-        error grows with k_br dt and does not vanish until k_br dt is well below 1 (the quick scene: 0.6 %
-        of the energy turned over at k_br dt = 0.1, 16 % at 1, 35 % at 10)."""
+        error grows with k_br dt and does not vanish until k_br dt is well below 1 (docs/model.md 'The
+        stiff brakes': the quick scene 0.6 % off at k_br dt = 0.1, 16 % and 35 % at 1 and 10)."""
         f = self.params.forces
         if self.params.integrator.brake != "split" or f.tip_brake is None:
             return ""
