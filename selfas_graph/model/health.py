@@ -179,7 +179,8 @@ class HealthChecks:
             return ""
         return (
             f"the split tip brake is stable at any step but accurate only for forces.tip_brake.coefficient * dt "
-            f"well below 1 (here {k * self.dt:.3g}): a dt below {AB4_DECAY_LIMIT / k:.3g}, or a smaller coefficient"
+            f"well below 1 (here {k * self.dt:.3g}, at integrator.dt = {self.dt:g}): a dt below "
+            f"{AB4_DECAY_LIMIT / k:.3g}, or a smaller coefficient"
         )
 
     def _out_of_scale_term(self):
