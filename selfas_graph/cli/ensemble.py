@@ -195,30 +195,26 @@ def _run_locked(args, pool, held):
     try:
         name_source = Path(args.scenario).stem
         folder = Path(args.output) if args.output else Path(f"{name_source}_ensemble")
-        ens = Ensemble(
-            args.scenario,
-            args.seeds,
-            folder,
-            overrides=args.overrides,
-            t_end=args.t_end,
-            first_seed=args.first_seed,
-            force=args.force,
-        )
+
+        def ensemble(t_end):
+            return Ensemble(
+                args.scenario,
+                args.seeds,
+                folder,
+                overrides=args.overrides,
+                t_end=t_end,
+                first_seed=args.first_seed,
+                force=args.force,
+            )
+
+        ens = ensemble(args.t_end)
         if not args.no_run and folder.is_dir():  # before its files are read: they may be another ensemble's
             _lock(folder, held)
         if args.no_run and args.t_end is None:  # the files present, to where they were run (not the scene's end)
             ran_to = ens.files_end_time()
             if ran_to is not None and not math.isclose(ran_to, ens.t_end, rel_tol=1e-12):
                 print(f"summarising to t = {ran_to:g}, the end time of the seed files (--t-end chooses another)")
-                ens = Ensemble(
-                    args.scenario,
-                    args.seeds,
-                    folder,
-                    overrides=args.overrides,
-                    t_end=ran_to,
-                    first_seed=args.first_seed,
-                    force=args.force,
-                )
+                ens = ensemble(ran_to)
         plans = ens.plan(summary_only=args.no_run)
     except EnsembleError as exc:
         raise CliError(str(exc)) from None

@@ -20,6 +20,7 @@ from ..io.checkpoint import (
 )
 from ..io.h5md import RunFile, RunFileError
 from ..io.scenario import Scenario, ScenarioError, load_scenario, scenario_from_text
+from ..model.operations import frame_steps
 from ..parallel import task_pool
 from ..provenance import older_version, version_key
 from .folder import EnsembleError, FolderLock, make_folder, seed_path
@@ -81,7 +82,7 @@ def summary_times(times, t_end, interval, dt=None) -> list[float]:
     ``dt`` is given, the frames ``interval`` rounded to whole steps), or :func:`default_times` when None."""
     if times is None:
         return default_times(t_end, interval)
-    frame_interval = max(1, round(interval / dt)) * dt if dt else None
+    frame_interval = frame_steps(interval, dt) * dt if dt else None
     return check_times(times, t_end, frame_interval)
 
 

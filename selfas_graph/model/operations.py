@@ -148,6 +148,11 @@ class _Hooks(Operation):
         getattr(self.inner, "finish", lambda *a: None)(sim)
 
 
+def frame_steps(interval: float, dt: float) -> int:
+    """Steps between saved frames: the output ``interval`` rounded to whole steps of ``dt``, at least one."""
+    return max(1, int(round(interval / dt)))
+
+
 def as_operation(obj, where: str) -> Operation:
     """``obj`` as an :class:`Operation`: itself if it is one, else with the methods it lacks doing
     nothing; TypeError naming ``where`` if it has no callable ``trigger`` and ``act``."""

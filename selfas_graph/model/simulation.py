@@ -270,7 +270,7 @@ class Simulation:
     @property
     def frame_steps(self) -> int:
         """Steps between saved frames: ``output.interval`` rounded to whole steps, at least one."""
-        return max(1, int(round(self.params.output.interval / self.dt)))
+        return op.frame_steps(self.params.output.interval, self.dt)
 
     @property
     def frame_interval(self) -> float:
