@@ -98,7 +98,12 @@ def _radii(r, name) -> np.ndarray:
 
 
 def _positive_int(n, name) -> int:
-    n = operator.index(n)
+    if isinstance(n, (bool, np.bool_)):
+        raise TypeError(f"{name} must be a whole number >= 1, got {n!r}")
+    try:
+        n = operator.index(n)
+    except TypeError:
+        raise TypeError(f"{name} must be a whole number >= 1, got {n!r}") from None
     if n < 1:
         raise ValueError(f"{name} must be >= 1, got {n}")
     return n
@@ -117,6 +122,10 @@ def _sources(position, active_rod, current, wire_radius):
         raise ValueError(f"current must have shape (n_rods,) = ({n_rods},), got {current.shape}")
     if active_rod is None:
         active_rod = np.flatnonzero(current != 0.0)
+    elif np.asarray(active_rod).dtype == bool:
+        raise TypeError("active_rod holds rod indices, not a mask: pass np.flatnonzero(mask)")
+    elif np.asarray(active_rod).size and not np.issubdtype(np.asarray(active_rod).dtype, np.integer):
+        raise TypeError(f"active_rod must hold integer rod indices, got dtype {np.asarray(active_rod).dtype}")
     active_rod = np.ascontiguousarray(active_rod, dtype=np.int64)
     if active_rod.ndim != 1:
         raise ValueError(f"active_rod must be one-dimensional, got shape {active_rod.shape}")

@@ -19,7 +19,7 @@ import numpy as np
 from ..io import layout
 from ..io.h5md import RunFile, RunFileError
 from .main import CliError, CliIOError
-from .paths import check_target
+from .paths import check_folder, check_target
 
 #: frames per second of the movie
 FPS = 10
@@ -60,8 +60,7 @@ def render_movie(args, Figure) -> int:
     dpi = MOVIE_DPI if args.dpi == 150 else args.dpi
     run_path = Path(args.run)
     check_target(out, "movie", force=args.force, inputs=[run_path])
-    if not out.parent.exists():
-        raise CliError(f"the folder {out.parent} of the movie does not exist")
+    check_folder(out, "movie")
     out = out.resolve()  # through a symbolic link: the file it names is replaced, not the link
     tmp = out.with_name(f".{out.name}.part{out.suffix}")
     images, proc = [], None

@@ -42,7 +42,7 @@ import numpy as np
 
 from ..io.h5md import RunFile, RunFileError
 from .main import CliError, add_run_and_frame
-from .paths import check_target
+from .paths import check_folder, check_target
 from .plots.frame import LARGE_RUN as LARGE_RUN
 from .plots.frame import _density, _field_or_flux, _figsize, _snapshot
 from .plots.series import _fractal, _moment, _skeleton, _timeline
@@ -121,8 +121,7 @@ def _output_path(args, run_path: Path, frame: int) -> Path:
     else:
         out = run_path.with_name(f"{run_path.stem}_{args.kind}_frame{frame}.png")
     check_target(out, "output file", force=args.force, inputs=[run_path])
-    if not out.parent.exists():
-        raise CliError(f"the folder {out.parent} of the output file does not exist")
+    check_folder(out, "output file")
     return out
 
 

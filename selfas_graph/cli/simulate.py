@@ -50,7 +50,7 @@ from ..model.terms.currents import tree_note
 from ..parallel import fit_threads_to_cores, world
 from ..provenance import version_key
 from .main import EXIT_NUMERICAL, CliError, CliIOError
-from .paths import check_target
+from .paths import check_folder, check_target, same_file
 
 
 def add_arguments(p):
@@ -267,13 +267,6 @@ def _load_resume(args):
     return scenario, snap, out, ckpt, str(run_id)
 
 
-def _same_file(a, b) -> bool:
-    try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return False
-
-
 def _started_brake(run_file):
     """The integrator.brake a run was started with, from its resolved parameters (None if unreadable)."""
     try:
@@ -330,7 +323,7 @@ def _prepare(args):
         ckpt = checkpoint_path(out)  # new checkpoints go beside the run file continued
         check_target(out, "run file", force=True)
         check_target(ckpt, "checkpoint file", force=True)
-        if ckpt.exists() and not _same_file(ckpt, read_from):
+        if ckpt.exists() and not same_file(ckpt, read_from):
             try:
                 other = read_checkpoint(ckpt)[1].get("run_id")
             except CheckpointError:
@@ -369,11 +362,7 @@ def _prepare(args):
             raise CliError(f"output file {out} exists; pass --force to overwrite it or -o to choose another name")
         if out.exists() and out.is_dir():
             raise CliError(f"output path {out} is a directory")
-        parent = out.parent if str(out.parent) else Path(".")
-        if not parent.is_dir():
-            raise CliError(f"the folder {parent} of the output file does not exist")
-        if not os.access(parent, os.W_OK):
-            raise CliError(f"the folder {parent} of the output file is not writable")
+        check_folder(out, "output file")
         stale = failure_path(out)  # an earlier run's failed state: beside this run it would be taken for its own
         if stale.exists() and not args.force:
             raise CliError(

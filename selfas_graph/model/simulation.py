@@ -44,9 +44,9 @@ class Simulation:
     (:mod:`.operations`: frames, progress, stop check, checkpoints, and those in :attr:`operations`).
     The fast steps between two that need Python run in one compiled call (:attr:`compiled`,
     :mod:`.compiled`), bit for bit. Contacts present in the initial state are events of step 0.
-    Components: :attr:`network`, :attr:`force_field`, :attr:`integrator`, :attr:`health`
-    (:class:`~.health.HealthChecks`) and :attr:`observe` (:class:`~.observables.Observables`);
-    the methods of the last two are also the simulation's.
+    Components: :attr:`network` (None with ``contacts.enabled = false``), :attr:`force_field`,
+    :attr:`integrator`, :attr:`health` (:class:`~.health.HealthChecks`) and :attr:`observe`
+    (:class:`~.observables.Observables`); the methods of the last two are also the simulation's.
 
     Parameters
     ----------
@@ -284,9 +284,7 @@ class Simulation:
     def steps_to(self, t_end: float) -> int:
         """Steps from the current time to ``t_end``, a whole number of steps ahead (to round-off), not in the
         past; ValueError otherwise, naming the times that can be reached."""
-        t_end, t, dt = float(t_end), self.state.time, self.dt
-        if not math.isfinite(t_end):
-            raise ValueError(f"t_end = {t_end} is not a finite time")
+        t_end, t, dt = op.time_value(t_end, "t_end"), self.state.time, self.dt
         x = (t_end - t) / dt
         n = int(round(x))
         if n < 0 or x < -0.5:

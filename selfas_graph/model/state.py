@@ -190,11 +190,11 @@ class State:
         Parameters
         ----------
         centre, axis : (n_rods, 3) float64
-        magnetic_charge, electric_charge : (n_rods,) float64
+        magnetic_charge, electric_charge : (n_rods,) float64, or one value for every rod
         velocity : (n_tips, 3) float64, optional (default zero)
-        length : (n_rods,) float64, optional
+        length : (n_rods,) float64 or one value, optional
             Rod lengths (default: every rod has length 1, ``rod_length`` None).
-        resistance : (n_rods,) float64, optional
+        resistance : (n_rods,) float64 or one value, optional
             Rod resistances (default: R0 = 1, ``rod_resistance`` None).
         """
         centre = np.asarray(centre, dtype=np.float64).reshape(-1, 3)
@@ -205,17 +205,17 @@ class State:
         if length is None:
             half = 0.5 * axis
         else:
-            length = np.array(length, dtype=np.float64).reshape(n)
+            length = _per_rod(length, n, "length")
             if not (np.isfinite(length).all() and (length > 0).all()):
                 raise ValueError("rod lengths must be finite and > 0")
             half = (0.5 * length)[:, None] * axis
         position[0::2] = centre - half
         position[1::2] = centre + half
         if resistance is not None:
-            resistance = np.array(resistance, dtype=np.float64).reshape(n)
+            resistance = _per_rod(resistance, n, "resistance")
             if not (np.isfinite(resistance).all() and (resistance > 0).all()):
                 raise ValueError("rod resistances must be finite and > 0")
-        q = np.asarray(magnetic_charge, dtype=np.float64).reshape(n)
+        q = _per_rod(magnetic_charge, n, "magnetic_charge")
         tip_charge = np.empty(2 * n)
         tip_charge[0::2] = q
         tip_charge[1::2] = -q
@@ -224,10 +224,20 @@ class State:
             position,
             v,
             tip_charge,
-            np.asarray(electric_charge, dtype=np.float64).reshape(n).copy(),
+            _per_rod(electric_charge, n, "electric_charge"),
             rod_length=length,
             rod_resistance=resistance,
         )
+
+
+def _per_rod(value, n: int, name: str) -> np.ndarray:
+    """A fresh (n,) float64 array of one value per rod; a single value is given to every rod."""
+    value = np.asarray(value, dtype=np.float64)
+    if value.ndim == 0:
+        return np.full(n, float(value))
+    if value.size != n:
+        raise ValueError(f"{name} must hold one value per rod ({n}) or one for all, got shape {value.shape}")
+    return value.reshape(n).copy()
 
 
 #: the rigid-bond kernels' sign for "every rod has length 1"

@@ -212,3 +212,17 @@ def test_movie_refuses_other_formats_and_kinds(run_file, tmp_path, capsys):
     assert ".gif or .mp4" in capsys.readouterr().err
     assert main(["plot", str(run_file), "--movie", str(tmp_path / "m.gif"), "--kind", "density"]) == 2
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("movie", [False, True])
+def test_a_folder_that_is_missing_or_not_writable_is_a_usage_error(run_file, tmp_path, monkeypatch, movie, capsys):
+    """Refused before drawing, exit 2 as in simulate: found only when saving, it was an I/O error (exit 4).
+    The folder's permissions are stood in for by os.access, which a root user's tests cannot see denied."""
+    name = "out.gif" if movie else "out.png"
+    option = "--movie" if movie else "-o"
+    assert main(["plot", str(run_file), option, str(tmp_path / "none" / name)]) == 2
+    assert "does not exist" in capsys.readouterr().err
+    monkeypatch.setattr("selfas_graph.cli.paths.os.access", lambda path, mode: False)
+    assert main(["plot", str(run_file), option, str(tmp_path / name)]) == 2
+    assert f"the folder {tmp_path} of the" in capsys.readouterr().err
+    assert not (tmp_path / name).exists()

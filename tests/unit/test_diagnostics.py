@@ -307,6 +307,14 @@ def test_field_inputs_are_validated():
         bz_profile([-1.0], 0.0, pos, None, current, W)
     with pytest.raises(ValueError, match="z_range"):
         radial_density(np.zeros((3, 3)), 1.0, 4, (1.0, 1.0))
+    # a mask or float indices would be cast to rod numbers 0 and 1 without a word
+    with pytest.raises(TypeError, match="not a mask"):
+        bz_profile([1.0], 0.0, pos, current > 0, current, W)
+    with pytest.raises(TypeError, match="integer rod indices"):
+        bz_profile([1.0], 0.0, pos, [0.0, 1.5], current, W)
+    for n_bins in (3.5, True):
+        with pytest.raises(TypeError, match="n_bins must be a whole number"):
+            radial_density(np.zeros((3, 3)), 1.0, n_bins, (0.0, 1.0))
     # rods without current: no field, and no kernel call
     assert np.all(bz_profile([0.0, 1.0], 0.0, pos, None, np.zeros(6), W) == 0.0)
 

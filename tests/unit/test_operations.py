@@ -97,3 +97,16 @@ def test_progress_counts_steps_of_the_run_and_stop_raises_after_a_checkpoint():
         sim.run(t_end=sim.state.time + 10 * sim.dt, checkpointer=ck, stop=lambda: sim.state.step >= 15)
     assert exc.value.step == 15 and ck.written == [15]
     assert np.isfinite(sim.state.position).all()
+
+
+@pytest.mark.parametrize("t_end", [[0.2], "0.2", True, np.True_])
+def test_run_refuses_a_time_that_is_not_a_number(t_end):
+    """A list, a string or a boolean is not a time: float() took '0.2' and True (= 1.0) without a word."""
+    with pytest.raises(TypeError, match="t_end must be a time"):
+        _sim().run(t_end)
+
+
+def test_a_float32_time_is_the_decimal_it_prints_as():
+    """np.float32(0.02) is the time 0.02, as in a scene file, not a time between two steps."""
+    sim = _sim()
+    assert sim.steps_to(np.float32(0.02)) == sim.steps_to(0.02)

@@ -275,3 +275,18 @@ def test_run_file_keeps_lengths_and_resistances(tmp_path):
     with RunFile(plain) as run:
         assert "particles/rods/length" not in run.f
         np.testing.assert_array_equal(run.rod_length, np.ones(300))
+
+
+def test_from_rods_gives_a_single_value_to_every_rod_and_names_a_wrong_count():
+    """Charges, lengths and resistances take one value per rod or one for all; a wrong count is
+    refused with the argument's name (numpy's reshape said only 'cannot reshape')."""
+    centre, axis = [[0.0, 0.0, 0.0], [0.0, 0.0, 3.0]], [[0.0, 0.0, 1.0]] * 2
+    state = State.from_rods(centre, axis, 2.0, 1, length=1.5, resistance=3)
+    np.testing.assert_array_equal(state.tip_charge, [2.0, -2.0, 2.0, -2.0])
+    np.testing.assert_array_equal(state.rod_charge, [1.0, 1.0])
+    np.testing.assert_array_equal(state.rod_length, [1.5, 1.5])
+    np.testing.assert_array_equal(state.rod_resistance, [3.0, 3.0])
+    for key in ("magnetic_charge", "electric_charge"):
+        values = {"magnetic_charge": 1.0, "electric_charge": 0.0} | {key: [1.0, 2.0, 3.0]}
+        with pytest.raises(ValueError, match=f"{key} must hold one value per rod \\(2\\)"):
+            State.from_rods(centre, axis, **values)
