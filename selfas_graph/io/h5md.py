@@ -15,8 +15,9 @@ between conductors) has 1 in ``graph/floating`` and 0 in ``graph/potential``; :m
 gives NaN there (files before 0.4 hold NaN in potential instead).
 
 Every dimensionful dataset carries a ``unit`` attribute in the reduced units (the symbols below, docs/output.md), except
-the positions, velocities and their times: MDAnalysis' H5MD reader refuses any unit string
-outside its table of SI units, even with ``convert_units=False`` (docs/output.md). The
+the positions, velocities and their times (MDAnalysis' H5MD reader refuses any unit string
+outside its table of SI units, even with ``convert_units=False``; docs/output.md) and the fields
+of the compound ``events`` (its ``time`` is in t0). The
 ``particles`` group tracks creation order, so readers that take its first subgroup
 (MDAnalysis) take ``tips``. Files written before the units, ``connectivity``, the rods' box and
 ``observables/dt`` existed lack them; :class:`RunFile` reads both.

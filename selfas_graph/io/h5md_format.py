@@ -37,9 +37,11 @@ def observable_unit(name):
 
 
 def _fixed(text):
-    """A fixed-length string (H5MD asks for them in attributes); UTF-8 bytes of at least one byte."""
+    """A fixed-length string (H5MD asks for them in attributes) of at least one byte: ASCII, or
+    tagged UTF-8 where the text is not ASCII (an author's name), so that readers decode it."""
     data = str(text).encode("utf-8")
-    return np.array(data, dtype=f"S{max(1, len(data))}")
+    size = max(1, len(data))
+    return np.array(data, dtype=f"S{size}" if data.isascii() else h5py.string_dtype("utf-8", size))
 
 
 #: the events' dtype in the file: ``kind`` an HDF5 enumeration of the names in KIND_NAMES

@@ -122,8 +122,9 @@ class RunWriter(_PendingRows):
         Per-rod lengths and resistances (``particles/rods/length``, ``particles/rods/resistance``),
         written only when the scene sets them (absent: every rod has length 1 and resistance R0).
     frame_interval : float, optional
-        Simulated time between saved frames, written with every frame as ``observables/dt``
-        (MDAnalysis reads it as its time step between frames).
+        Simulated time between saved frames. Each frame states in ``observables/dt`` its time since
+        the frame before (MDAnalysis' ``Timestep.dt``): this interval, the first frame's too, but
+        for a frame at a run's end time off the interval's grid (or a chunk's end in ``sim.run``).
     """
 
     def __init__(
@@ -172,8 +173,9 @@ class RunWriter(_PendingRows):
         rods = particles.create_group(layout.RODS)
         _box(rods)
         _set_unit(rods.create_dataset("charge", data=np.asarray(rod_charge, dtype=np.float64)), CHARGE)
+        # H5MD ignores a tuple holding the fill value: HDF5's default, 0, would drop rod 0's bond
         bonds = f.create_group(layout.CONNECTIVITY).create_dataset(
-            layout.RODS, data=np.arange(n_tips, dtype=np.int64).reshape(-1, 2)
+            layout.RODS, data=np.arange(n_tips, dtype=np.int64).reshape(-1, 2), fillvalue=-1
         )
         bonds.attrs["particles_group"] = tips.ref
         for name, values, unit in (("length", rod_length, LENGTH), ("resistance", rod_resistance, "R_0")):
@@ -190,6 +192,7 @@ class RunWriter(_PendingRows):
             )
         self._obs = {}
         self.frame_interval = frame_interval
+        self._last_time = None
         self.observables = f.create_group(layout.OBSERVABLES)
         g = self.observables.create_group(layout.BOND_ERROR_PER_STEP)
         self._per_step = (_growable(g, "step", (), "<i8"), _growable(g, "value", (), "<f8"))
@@ -240,6 +243,7 @@ class RunWriter(_PendingRows):
             name: (f[p]["step"], f[p]["time"], f[p]["value"]) for name, p in layout.TIP_ELEMENTS.items() if p in f
         }
         self.n_frames = f[layout.TIP_POSITION_STEP].shape[0]
+        self._last_time = float(f[layout.TIP_POSITION_TIME][-1]) if self.n_frames else None
         self.observables = f[layout.OBSERVABLES]
         self._obs = {}
 
@@ -347,7 +351,10 @@ class RunWriter(_PendingRows):
                     f"{self._elements[name][2].shape[1:]}: this writer was made for another simulation"
                 )
         if self.frame_interval is not None:
-            observables = {**observables, layout.FRAME_INTERVAL: self.frame_interval}
+            # the time since the frame before (MDAnalysis' Timestep.dt): the interval but at a run's end
+            # time off the frame grid, or a chunk's end in sim.run; the first frame states the interval
+            spacing = self.frame_interval if self._last_time is None else t - self._last_time
+            observables = {**observables, layout.FRAME_INTERVAL: spacing}
         for name, arr in (("position", position), ("velocity", velocity)):
             if name in self._elements:
                 s, tt, v = self._elements[name]
@@ -370,6 +377,7 @@ class RunWriter(_PendingRows):
             _append(tt, t)
             _append(v, value)
         self.n_frames += 1
+        self._last_time = float(t)
 
     def write_per_step(self, steps, values):
         """Append a per-step series (the bond error of every step since the last call)."""

@@ -56,6 +56,7 @@ def test_layout_follows_h5md_1_1(run_file):
         bonds = f["connectivity/rods"]
         assert f[bonds.attrs["particles_group"]].name == "/particles/tips"
         np.testing.assert_array_equal(bonds[:], np.arange(120).reshape(60, 2))
+        assert bonds.fillvalue == -1  # H5MD ignores tuples holding the fill value: HDF5's default 0 is tip 0
         # step and time: time = step dt; observables/dt is the time between frames
         pos = f["particles/tips/position"]
         dt = 5e-4
@@ -75,6 +76,36 @@ def test_layout_follows_h5md_1_1(run_file):
         assert units["particles/tips/charge"] == units["particles/rods/charge"] == "Z_M0e"
         assert units["graph/current"] == "J_0" and units["graph/potential"] == "R_0 J_0"
         assert not any(name.startswith(("particles/tips/position", "particles/tips/velocity")) for name in units)
+
+
+def test_frame_spacing_off_the_grid_after_a_resume_and_a_non_ascii_author(tmp_path, monkeypatch):
+    """A run whose end time is off the frame grid (0.012 with frames every 0.005) ends with a closer
+    frame, which a resume to 0.02 keeps inside the trajectory: observables/dt states each frame's
+    time since the frame before (the first frame the interval), so MDAnalysis' Timestep.dt is right
+    at every frame (exact differences of the stored times, to their round-off: 1e-12 of a step).
+    An author's name that is not ASCII is a fixed-length string tagged UTF-8."""
+    scene = tmp_path / "small.toml"
+    scene.write_text(
+        SMALL_CIRCUIT_SCENE.replace("t_end = 0.6", "t_end = 0.012").replace("interval = 0.05", "interval = 0.005")
+    )
+    out = tmp_path / "small.h5"
+    monkeypatch.setenv("USER", "Jürgen Müller")
+    assert main(["simulate", str(scene), "-o", str(out), "--progress", "none"]) == 0
+    assert main(["simulate", "--resume", str(out), "--t-end", "0.02", "--progress", "none"]) == 0
+    with h5py.File(out, "r") as f:
+        time = f["particles/tips/position/time"][:]
+        spacing = f["observables/dt/value"][:]
+        author = f["h5md/author"].attrs.get_id("name").get_type()
+        assert f["h5md/author"].attrs["name"].decode("utf-8") == "Jürgen Müller"
+    assert not author.is_variable_str() and author.get_cset() == h5py.h5t.CSET_UTF8
+    np.testing.assert_allclose(time, [0, 0.005, 0.01, 0.012, 0.015, 0.02], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(spacing, np.diff(time, prepend=-0.005), rtol=0, atol=1e-12)
+    pytest.importorskip("MDAnalysis")
+    from MDAnalysis.coordinates.H5MD import H5MDReader
+
+    reader = H5MDReader(str(out), convert_units=False)
+    np.testing.assert_allclose([ts.dt for ts in reader], spacing, rtol=0, atol=1e-12)
+    reader.close()
 
 
 def test_mdanalysis_reads_the_run(run_file):
