@@ -141,8 +141,13 @@ def _spinning_rod(bond_force, project, correct, steps):
 
 
 def test_bond_length_exact_force_with_projection():
-    """Exact bond force + projection keeps | |r12| - 1 | below 1e-10 over 10^4 steps of a spinning rod."""
-    assert _spinning_rod("exact", True, True, 10_000) < 1e-10
+    """Exact bond force + projection keeps | |r12| - 1 | below 1e-14 over 10^4 steps of a spinning rod.
+
+    The projection resets the length every step to the round-off of a norm: measured 2.2e-16 (one ulp
+    of 1) as the worst of the 10^4 steps, the same for 8 other orientations and centres; 1e-14 leaves
+    45x. Without the projection the exact force drifts to 1.2e-14 (test below).
+    """
+    assert _spinning_rod("exact", True, True, 10_000) < 1e-14
 
 
 def test_bond_length_paper_force_drifts_more():

@@ -58,12 +58,17 @@ def test_switch_is_continuous_with_a_continuous_slope():
     s = kt.fast_switch.py_func
     assert s(0.0, r_in, r_out) == 1.0 and s(r_in**2, r_in, r_out) == 1.0 and s(r_out**2, r_in, r_out) == 0.0
     # one-sided slopes at both ends vanish: (S(r +- h) - S(r)) / h = 3 h / (r_out - r_in)^2 at most,
-    # 8e-4 for h = 1e-6, against the largest slope 1.5 / (r_out - r_in) = 25 in the middle
+    # 8e-4 for h = 1e-6, against the largest slope 1.5 / (r_out - r_in) = 25 in the middle. Measured
+    # 8.33e-4 inside the range (the exact 3 h / d^2 - 2 h^2 / d^3, d = r_out - r_in, to 2.3e-12), 0 outside;
+    # the round-off of S adds at most 1e-16 / h = 1e-10, so 1e-3 is the formula's value with a 1.2x margin,
+    # and a kink at the ends fails it
     h = 1e-6
     for r in (r_in, r_out):
         for side in (-1.0, 1.0):
             assert abs(s((r + side * h) ** 2, r_in, r_out) - s(r * r, r_in, r_out)) / h < 1e-3
     mid = 0.5 * (r_in + r_out)
+    # s = 1/2 up to the rounding of r_in + r_out and of the square root, about 1 ulp of 0.15 over
+    # r_out - r_in = 0.06, times |dS/ds| = 1.5: below 1e-15. Measured: exactly 0.5
     assert s(mid * mid, r_in, r_out) == pytest.approx(0.5, abs=1e-15)
 
 

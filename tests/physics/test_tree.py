@@ -544,7 +544,10 @@ def test_cells_filled_in_runs_give_the_same_tree(chains):
     bounds = cell_bounds(t, 3)
     assert bounds[0] == 0 and bounds[-1] == len(t.start) and np.all(np.diff(bounds) > 0)
     work = np.add.reduceat(t.end - t.start, bounds[:-1])
-    assert work.max() < 1.5 * work.sum() / 3
+    # a cut falls between cells, so a run exceeds a third of the work by less than its first cell's work
+    # (run 0 by nothing): at most the largest cell below the root, 842 tips against a third of 4100 here, a
+    # bound of 1.21; measured 1.03 (integer counts on a fixed tree: the same on any CPU)
+    assert work.max() < 1.25 * work.sum() / 3
     for r in range(3):
         fill_cells(t, bounds[r], bounds[r + 1])
     t = finish_tip_tree(t)

@@ -120,10 +120,33 @@ def test_ring_current_moment_is_current_times_area():
     assert unpaired_charge(q, tc, label).tolist() == [0.0]
 
 
-def test_straight_chain_on_the_axis_has_no_current_moment():
-    pos, q, tc = chain(9, direction=(0.0, 0.0, 1.0))
-    label, _ = structures(9, tc)
-    np.testing.assert_allclose(current_moment(pos - [0, 0, 4.5], np.full(9, -2.0), label), 0.0, atol=ROUND_OFF)
+def test_open_chains_off_the_axis_current_moment_by_hand():
+    """m_J = (1/2) sum_i J_i (x_a,i x x_b,i) about the scene axis (docs/model.md "Measures of the paper's
+    claims"), per structure, on two open chains off the z axis whose cross products are worked out by hand.
+
+    Chain A: three unit rods (1,0,0) -> (1,1,0) -> (1,1,1) -> (0,1,1) with currents 2, -0.5, 3 (different
+    from rod to rod, as where a chain's junctions also touch a conductor, which joins no structure):
+    x_a x x_b = (0,0,1), (1,-1,0), (0,-1,1), so m_J = (1/2)((0,0,2) + (-0.5,0.5,0) + (0,-3,3))
+    = (-0.25, -1.25, 2.5). Chain B: (0,-2,0) -> (0,-2,1) -> (-1,-2,1) with currents 1, 1:
+    (-2,0,0) and (0,-1,-2), m_J = (-1, -0.5, -1). A wrong sign, factor, tip order or current of a rod
+    changes these numbers. An open chain's moment depends on the point o of the axis: m_J(o) = m_J(0)
+    - (1/2) sum_i J_i o x (x_b,i - x_a,i), which for o along z leaves m_J,z alone; with o = (0,0,5):
+    o x (x_b - x_a) = (-5,0,0), 0, (0,-5,0) on chain A, 0, (0,-5,0) on chain B.
+    Every coordinate, current and product here is a small multiple of 1/4, exact in float64: the
+    moments are compared exactly.
+    """
+    a = [[1, 0, 0], [1, 1, 0], [1, 1, 1], [0, -2, 0], [0, -2, 1]]
+    b = [[1, 1, 0], [1, 1, 1], [0, 1, 1], [0, -2, 1], [-1, -2, 1]]
+    pos, _, tc = build(a, b)
+    label, size = structures(5, tc)
+    assert sorted(size.tolist()) == [2, 3] and label[0] == label[1] == label[2] != label[3] == label[4]
+    current = np.array([2.0, -0.5, 3.0, 1.0, 1.0])
+    m = current_moment(pos, current, label)
+    np.testing.assert_array_equal(m[label[0]], [-0.25, -1.25, 2.5])
+    np.testing.assert_array_equal(m[label[3]], [-1.0, -0.5, -1.0])
+    shifted = current_moment(pos, current, label, origin=(0.0, 0.0, 5.0))
+    np.testing.assert_array_equal(shifted[label[0]], [-0.25 + 5.0, -1.25 + 7.5, 2.5])
+    np.testing.assert_array_equal(shifted[label[3]], [-1.0, -0.5 + 2.5, -1.0])
 
 
 # ----------------------------------------------------------------------------- skeleton

@@ -116,6 +116,39 @@ def test_compiled_steps_are_the_python_steps_through_a_short_circuit(brake, team
     assert fast.short_circuit_time is not None and np.count_nonzero(fast.force_field.current)
 
 
+#: the small circuit scene with term 5 (its axis off the z axis, its radius inside the placement box, so
+#: that tips lie inside and outside the channel) and term 7 on
+PLASMA_AND_E_SCENE = (
+    SMALL_CIRCUIT_SCENE
+    + """
+[forces.plasma_filament]
+radius = 1.5
+current = -3.0
+axis = [0.3, -0.2]
+[forces.electric_field]
+E = [0.1, -0.2, 0.3]
+"""
+)
+
+
+def test_compiled_steps_are_the_python_steps_with_plasma_filament_and_electric_field(team):
+    """The small circuit scene with the plasma filament (docs/model.md 'Term 5') and the uniform electric
+    field ('Term 7') on, both fast terms of the compiled steps (``FAST_TERMS``): the plasma force on tips
+    evaluated at every compiled step, the electric field's constant channel kept, bit for bit with the
+    Python step through the contacts and the short circuit. The other scenes of this file switch neither
+    term on."""
+    params = scenario_from_text(PLASMA_AND_E_SCENE).params
+    assert params.forces.plasma_filament is not None and params.forces.electric_field is not None
+    slow, fast = pair(params, slow_every=8)
+    assert step_for_step(slow, fast, 1200) > 50
+    assert fast.short_circuit_time is not None  # the plasma field then acts on rod currents too (term 10)
+    out = fast.force_field.out
+    assert np.abs(out["plasma_filament"]).max() > 0 and np.abs(out["electric_field"]).max() > 0
+    x = fast.state.position
+    rho = np.hypot(x[:, 0] - 0.3, x[:, 1] + 0.2)
+    assert rho.min() < 1.5 < rho.max()  # both branches of the field, inside and outside the channel
+
+
 @pytest.mark.parametrize("line_slow", [False, True])
 def test_compiled_steps_are_the_python_steps_in_case_ii(line_slow, team):
     """Case (ii), the quick Fig. 8 scene with fewer rods: external filament, the dipole's monopoles with

@@ -127,7 +127,9 @@ def test_all_rods_in_one_chain_with_zero_and_huge_bias(delta):
     """50 rods in one chain between the electrodes: every rod is FILAMENT and carries delta gap / 50.
 
     delta_J0 = 0: a short circuit (topology) with zero current everywhere, so no current kernel
-    runs. delta_J0 = 1e4: currents of 2e2 J0; the run goes on or stops with a diagnosis, never NaN.
+    runs. delta_J0 = 1e4: currents of 2e2 J0; the run goes on or stops with a diagnosis, never NaN:
+    either way every position and velocity left in the state is finite (measured: the run stops at
+    step 13 on a runaway step, a tip moved 0.73 rod lengths, the largest force from the Lorentz term).
     """
     state, gap = _chain(50)
     forces = {
@@ -152,14 +154,13 @@ def test_all_rods_in_one_chain_with_zero_and_huge_bias(delta):
         np.testing.assert_allclose(sim.solution.current, -delta * gap / 50, rtol=1e-10)
         try:
             sim.run(t_end=0.02)
-            assert _finite(sim)
         except NumericalFailure as exc:
-            assert "integrator.dt" in str(exc)
-            assert np.isfinite(sim.state.position).any()
+            assert "integrator.dt" in str(exc)  # the diagnosis names the knob to turn
+    assert _finite(sim)  # whether the run went on or stopped: not a single NaN or inf
 
 
 def test_one_rod_runs():
-    """A single rod with every one-body term on: nothing to pair with, energy balance at round-off."""
+    """A single rod with every one-body term on: nothing to pair with, energy balance at the AB4 error."""
     state = State.from_rods([[0.3, -0.2, 0.1]], [[1.0, 0.5, 0.2]], [1.2], [0.7])
     state.velocity[:] = [[0.1, 0.0, 0.0], [0.0, 0.2, 0.0]]
     forces = dict(
@@ -172,7 +173,9 @@ def test_one_rod_runs():
     sim = simulation(state, forces=forces, integrator={"dt": 1e-3})
     sim.run(t_end=1.0)
     obs = sim.observables()
-    assert _finite(sim) and abs(obs["energy_balance"]) < 1e-9 * max(1.0, sim.energy_scale(obs))
+    # the AB4 error of the brake's and the plasma field's work (docs/model.md 'Work bookkeeping and the
+    # energy balance'), not round-off: measured -7.4e-12 at dt = 1e-3, 16x less per halving of dt; 1e-10 leaves 13x
+    assert _finite(sim) and abs(obs["energy_balance"]) < 1e-10 * max(1.0, sim.energy_scale(obs))
 
 
 def test_dead_end_rods_get_exactly_zero_current():
