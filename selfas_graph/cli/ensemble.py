@@ -121,12 +121,17 @@ def add_arguments(p):
 def pool_text(pool) -> str:
     """Where the seeds run, as the commands print it."""
     if pool.mpi:
-        return f"{pool.workers} MPI worker ranks"
+        return _count(pool.workers, "MPI worker rank")
     if pool.serial:
         import numba
 
-        return f"this process ({numba.get_num_threads()} numba threads)"
-    return f"{pool.workers} processes x {pool.threads} numba threads"
+        return f"this process ({_count(numba.get_num_threads(), 'numba thread')})"
+    return f"{_count(pool.workers, 'process', 'processes')} x {_count(pool.threads, 'numba thread')}"
+
+
+def _count(n, one, many=None) -> str:
+    """``n`` things, in the singular for one."""
+    return f"{n} {one if n == 1 else many or one + 's'}"
 
 
 class SeedReport:

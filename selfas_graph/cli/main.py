@@ -74,7 +74,7 @@ def add_run_and_frame(p):
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(prog="selfas-graph", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="selfas-graph", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"selfas-graph {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
@@ -99,12 +99,46 @@ def parse_args(parser, argv=None):
     return args
 
 
+def _launcher_rank() -> int:
+    """This process's rank as an MPI launcher states it (0 outside ``mpiexec``), read before MPI starts."""
+    import os
+
+    for var in ("PMI_RANK", "OMPI_COMM_WORLD_RANK", "PMIX_RANK"):
+        if os.environ.get(var, "").isdigit():
+            return int(os.environ[var])
+    return 0
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser, whose usage errors are printed by rank 0 alone under ``mpiexec`` (every rank
+    parses the same command line and exits with 2 alike)."""
+
+    def error(self, message):
+        if _launcher_rank() != 0:
+            sys.exit(2)
+        super().error(message)
+
+
+def _interrupted(who) -> int:
+    """Ctrl-C or SIGTERM that reached the command line outside a run's own handling (while a command
+    starts, or a command without any): one line, exit 130. Under ``mpiexec`` the other ranks may wait
+    in a collective call for this one, where no signal reaches Python: the job is ended (MPI_Abort),
+    never left hanging."""
+    world = getattr(sys.modules.get("selfas_graph.parallel"), "world", None)
+    size = getattr(world, "size", 1)
+    if size == 1 or world.rank == 0:
+        print(f"{who}: interrupted", file=sys.stderr)
+    if size > 1:
+        sys.stderr.flush()
+        world.Abort(130)
+    return 130
+
+
 def main(argv=None) -> int:
     try:
         return _main(argv)
     except KeyboardInterrupt:  # Ctrl-C while the command starts (MPI, the parser): no traceback
-        print("selfas-graph: interrupted", file=sys.stderr)
-        return 130
+        return _interrupted("selfas-graph")
 
 
 def _main(argv) -> int:
@@ -125,8 +159,7 @@ def _main(argv) -> int:
             os._exit(exc.code)
         return exc.code
     except KeyboardInterrupt:
-        print(f"selfas-graph {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return _interrupted(f"selfas-graph {args.command}")
     except BrokenPipeError:
         # the reader went away (e.g. `| head`): stop quietly, as command-line tools do
         import os

@@ -172,6 +172,13 @@ def _resume_paths(args):
         )
     if src.name.endswith(".checkpoint.h5"):
         return src, None
+    if src.name.endswith(".failure.h5"):
+        run = src.with_name(src.name.removesuffix(".failure.h5") + ".h5")
+        raise CliError(
+            f"--resume {args.resume}: this is the failed state of the run {run}, which is not resumed (its "
+            f"steps would fail again at the same step); start the run again with other settings (e.g. a smaller "
+            f"integrator.dt) and --force. read_checkpoint reads the file in Python"
+        )
     return checkpoint_path(src), src
 
 
@@ -228,6 +235,7 @@ def _load_resume(args):
             steps = run_file.step
             brake = _started_brake(run_file)
             run_id = run_file.meta.get("run_id")
+            source = str(run_file.meta.get("scenario_path") or "")
             problems = appendable_problems(run_file.f)
             status = run_file.status
     except RunFileError as exc:
@@ -264,7 +272,21 @@ def _load_resume(args):
             f"continuation (resumed_with)",
             file=sys.stderr,
         )
+    if source and _changed_since(source, meta["scenario_text"]):
+        print(
+            f"note: the scenario file {source} differs from the scenario this run started with; --resume continues "
+            f"the run as it started (its files hold that scenario): start a new run to use the file as it is now",
+            file=sys.stderr,
+        )
     return scenario, snap, out, ckpt, str(run_id)
+
+
+def _changed_since(path, text) -> bool:
+    """True if the scenario file at ``path`` (as the run recorded it) now reads other than ``text``."""
+    try:
+        return Path(path).read_text(encoding="utf-8") != text
+    except (OSError, UnicodeDecodeError):
+        return False
 
 
 def _started_brake(run_file):
@@ -408,7 +430,8 @@ def run(args):
         print(
             f"selfas-graph {__version__}: {p.scenario.name}: {p.rods.count} rods, terms "
             f"{', '.join(plan['terms']) or 'none'}; dt = {p.integrator.dt:g}, t_end = {p.run.t_end:g} "
-            f"({n_steps} steps); {plan['threads']} threads x {world.size} ranks",
+            f"({n_steps} steps); {plan['threads']} thread{'s' * (plan['threads'] != 1)} x {world.size} "
+            f"rank{'s' * (world.size != 1)}",
             flush=True,
         )
         if not math.isclose(sim.frame_interval, p.output.interval, rel_tol=1e-9):
@@ -434,7 +457,11 @@ def run(args):
         if snap is not None:
             try:
                 writer = RunWriter.reopen(
-                    out, int(snap["step"]), t_end=scenario.params.run.t_end, frame_interval=sim.frame_interval
+                    out,
+                    int(snap["step"]),
+                    t_end=scenario.params.run.t_end,
+                    frame_interval=sim.frame_interval,
+                    mpi_ranks=world.size,
                 )
             except RunFileError as exc:
                 raise CliError(f"cannot resume: {exc}") from None

@@ -208,13 +208,14 @@ class RunWriter(_PendingRows):
         f.flush()
 
     @classmethod
-    def reopen(cls, path, step, t_end=None, frame_interval=None):
+    def reopen(cls, path, step, t_end=None, frame_interval=None, mpi_ranks=1):
         """Open an existing run file to continue it after ``step``: every row written for a
         later step (frames, observables, events, circuit log, graph, per-step series) is removed first.
         ``t_end``: the continuation's end time, where it differs from the one the file states (a resume
         that extends the run): stored in ``parameters_json``, the earlier ones in ``t_end_before``.
         ``frame_interval``: the one a new file would state, for a file that has no frame yet (a run
-        stopped before its first step).
+        stopped before its first step). ``mpi_ranks``: the continuation's, recorded in ``resumed_with``
+        with its version, commit, CPU and threads where any of them differs from the file's.
 
         The rows are removed in a copy of the file that then replaces it (``os.replace``): HDF5 shrinks
         a file in place before it rewrites the superblock that states its new end, and a kill between
@@ -264,16 +265,16 @@ class RunWriter(_PendingRows):
             f[layout.CIRCUIT_LOG][layout.CIRCUIT_LOG_COLUMNS[0]].shape[0] if layout.CIRCUIT_LOG in f else 0
         )
         f[layout.PROVENANCE].attrs["status"] = "running"
-        self._resumed_with()
+        self._resumed_with(mpi_ranks)
         if t_end is not None:
             self._new_end_time(float(t_end))
         self._start_clock(float(f[layout.PROVENANCE].attrs.get("wall_seconds_total", 0.0)))
         f.flush()
         return self
 
-    def _resumed_with(self):
-        """Record the version, commit, CPU and thread count of a continuation when they differ from the
-        ones the file holds (``resumed_with``: a JSON list of them, oldest first)."""
+    def _resumed_with(self, mpi_ranks=1):
+        """Record the version, commit, CPU, thread and MPI rank counts of a continuation when they differ
+        from the ones the file holds (``resumed_with``: a JSON list of them, oldest first)."""
         import numba
 
         from .._version import __version__
@@ -285,6 +286,7 @@ class RunWriter(_PendingRows):
             "commit": source_commit(),
             "cpu_model": cpu_model(),
             "numba_threads": numba.get_num_threads(),
+            "mpi_ranks": int(mpi_ranks),
         }
         if all(str(attrs.get(k, "")) == str(v) for k, v in now.items()):
             return

@@ -200,6 +200,10 @@ def test_numerical_failure_exits_3_with_diagnosis_and_no_nan_in_file(scenario, t
     assert main(["simulate", "--resume", str(out), "--progress", "none"]) == 2
     err = capsys.readouterr().err
     assert "ended in a numerical failure" in err and "run.failure.h5" in err and "--force" in err
+    # --resume of the failure file itself: named as the failed state of its run, not as a run missing a checkpoint
+    assert main(["simulate", "--resume", str(tmp_path / "run.failure.h5"), "--progress", "none"]) == 2
+    err = capsys.readouterr().err
+    assert f"the failed state of the run {out}" in err and "failure.checkpoint" not in err
     # a new run under the same name: the old failed state is not left beside it unless asked to be removed
     argv = ["simulate", str(scenario), "-o", str(out), "--progress", "none"]
     assert main(argv) == 2 and "exists" in capsys.readouterr().err
@@ -232,3 +236,62 @@ def test_python_m_runs_the_command():
         timeout=120,
     )
     assert res.returncode == 2 and "no_such_scene.toml" in res.stderr
+
+
+def test_usage_errors_are_printed_by_rank_zero_alone(monkeypatch, capsys):
+    """Under mpiexec every rank parses the same command line: a usage error is printed once (rank 0),
+    and every rank exits with 2. The launcher's rank variable stands for mpiexec here."""
+    for rank, printed in (("1", False), ("0", True)):
+        monkeypatch.setenv("PMI_RANK", rank)
+        with pytest.raises(SystemExit) as exc:
+            main(["simulate", "--no-such-option"])
+        assert exc.value.code == 2
+        assert ("unrecognized arguments" in capsys.readouterr().err) is printed
+
+
+class _TwoRanks:
+    """A stand-in for the MPI world of two ranks: records MPI_Abort instead of ending the process."""
+
+    size = 2
+
+    def __init__(self, rank):
+        self.rank, self.aborted = rank, None
+
+    def Abort(self, code):  # noqa: N802 - mpi4py's name
+        self.aborted = code
+
+
+@pytest.mark.parametrize("rank", [0, 1])
+def test_an_interrupt_outside_a_run_ends_every_rank(monkeypatch, capsys, rank):
+    """A Ctrl-C that reaches the command line outside a run's own signal handling (while the command
+    starts) leaves the other ranks waiting in a collective call, where no signal reaches Python: the
+    job is ended with MPI_Abort(130), and the one line is printed by rank 0 alone."""
+    import selfas_graph.cli.analyze as analyze
+
+    world = _TwoRanks(rank)
+    monkeypatch.setattr("selfas_graph.parallel.world", world)
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(analyze, "run", interrupted)
+    assert main(["analyze", "any.h5"]) == 130
+    assert world.aborted == 130
+    assert ("selfas-graph analyze: interrupted" in capsys.readouterr().err) is (rank == 0)
+
+
+def test_resume_notes_a_scenario_file_changed_since_the_run_started(tmp_path, capsys):
+    """--resume continues a run as it started, from the scenario its files hold: a scenario file edited
+    since is named in a note (the edit is not taken), and an unchanged one gives no note."""
+    from conftest import SMALL_CIRCUIT_SCENE
+
+    scene, out = tmp_path / "small.toml", tmp_path / "small.h5"
+    scene.write_text(SMALL_CIRCUIT_SCENE)
+    assert main(["simulate", str(scene), "-o", str(out), "--t-end", "0.005", "--progress", "none"]) == 0
+    assert main(["simulate", "--resume", str(out), "--t-end", "0.01", "--progress", "none"]) == 0
+    assert "differs from the scenario" not in capsys.readouterr().err
+    scene.write_text(SMALL_CIRCUIT_SCENE.replace("dt = 5e-4", "dt = 1e-3"))
+    assert main(["simulate", "--resume", str(out), "--t-end", "0.015", "--progress", "none"]) == 0
+    assert f"the scenario file {scene} differs from the scenario this run started with" in capsys.readouterr().err
+    with RunFile(out) as run:
+        assert run.parameters["integrator"]["dt"] == 5e-4

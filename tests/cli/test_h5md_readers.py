@@ -1,6 +1,7 @@
 """Run files follow H5MD 1.1 and open with the readers users have (MDAnalysis, pyh5md), and
 RunFile still reads files written in the layout before the H5MD additions (tests/data)."""
 
+import json
 import warnings
 from pathlib import Path
 
@@ -10,7 +11,7 @@ import pytest
 
 from conftest import SMALL_CIRCUIT_SCENE
 from selfas_graph.cli.main import main
-from selfas_graph.io.h5md import RunFile
+from selfas_graph.io.h5md import RunFile, RunWriter
 
 DATA = Path(__file__).parent.parent / "data"
 #: written by selfas-graph at commit 58b30f8 (before units, connectivity and observables/dt), see tests/data/README.md
@@ -100,6 +101,12 @@ def test_frame_spacing_off_the_grid_after_a_resume_and_a_non_ascii_author(tmp_pa
     assert not author.is_variable_str() and author.get_cset() == h5py.h5t.CSET_UTF8
     np.testing.assert_allclose(time, [0, 0.005, 0.01, 0.012, 0.015, 0.02], rtol=0, atol=1e-12)
     np.testing.assert_allclose(spacing, np.diff(time, prepend=-0.005), rtol=0, atol=1e-12)
+    # a continuation on another number of MPI ranks is recorded with its version, commit, CPU and threads
+    with RunFile(out) as run:
+        assert json.loads(run.meta.get("resumed_with", "[]")) == []
+    RunWriter.reopen(out, 40, mpi_ranks=3).close()
+    with RunFile(out) as run:
+        assert [r["mpi_ranks"] for r in json.loads(run.meta["resumed_with"])] == [3]
     pytest.importorskip("MDAnalysis")
     from MDAnalysis.coordinates.H5MD import H5MDReader
 

@@ -69,7 +69,7 @@ def test_ranks_give_the_serial_run_bit_for_bit(scene, ranks):
     out = f"ranks{ranks}.h5"
     res = _launch(ranks, ["scene.toml", "-o", out], scene)
     assert res.returncode == 0, res.stderr
-    assert res.stdout.count("done: 1200 steps") == 1 and f"1 threads x {ranks} ranks" in res.stdout
+    assert res.stdout.count("done: 1200 steps") == 1 and f"1 thread x {ranks} ranks" in res.stdout
     assert res.stderr == ""
     _assert_same_run(scene / out, scene / "serial.h5")
 
