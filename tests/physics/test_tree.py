@@ -7,6 +7,8 @@ the value measured with the fixed seeds here (noted beside it), so that the
 tests catch a lost order of accuracy but not a change of round-off.
 """
 
+import math
+
 import numpy as np
 import pytest
 
@@ -182,6 +184,24 @@ def test_single_tip_leaves(chains):
     assert np.median(err) < 2e-8  # measured 5.5e-9
 
 
+def test_zero_theta_is_the_reference_sum():
+    """At theta = 0 the tree opens every cell and sums every pair of tips of different rods as the
+    slow reference of docs/model.md 'Term 1' does (tests/reference.py ``tip_tip_force``, a loop over
+    all pairs): 96 tips in chains whose joined tips sit at r*/2 (the core), with the default leaves
+    of 64 and with single-tip leaves and groups (every pair reached through the walk). Tolerance:
+    ``close``, 1e-12 relative with a floor of 1e-12 of the largest component, the round-off of sums
+    of about 100 terms of both signs added in another order (measured at most 9e-16 of the largest)."""
+    import reference as ref
+
+    tips = chain_rods(4, 12, np.random.default_rng(9))
+    position = np.column_stack(tips[:3])
+    expected = ref.tip_tip_force(position, tips[3], RSTAR, KAPPA)
+    gap = np.linalg.norm(position[1:-1:2] - position[2::2], axis=1)
+    assert (gap < RSTAR).sum() >= 40  # the chains' joints: the core branch is summed
+    for knobs in ({}, {"leaf_size": 1, "group_size": 1}):
+        close(tree(*tips, 0.0, **knobs), expected)
+
+
 def touching_pair_beside_300_rods():
     """Tips of two rods touching at r*/2 (tip b of rod 0 on tip a of rod 1), far from 300 rods."""
     far = uniform_rods(300, np.random.default_rng(3))
@@ -258,6 +278,46 @@ def test_morton_keys_of_both_builds_agree():
         getattr(morton_keys, build)(x, y, z, keys[build])
     # 1000 spread points at 21 bits a coordinate: distinct keys but for rare coincidences (not all zero)
     assert np.array_equal(keys["serial"], keys["parallel"]) and len(np.unique(keys["serial"])) > 990
+
+
+def morton_key_by_hand(x, y, z):
+    """The Morton keys of ``treebuild.morton_keys`` by plain Python: each coordinate quantised to
+    ``floor((c - min) 2**21 / extent)``, clamped to [0, 2**21 - 1] (extent: the largest of the three
+    ranges; all 0 when it is 0), and bit b of the x, y and z integers put at bits 3 b + 2, 3 b + 1 and
+    3 b of the key, one bit at a time."""
+    bits = 21
+    lo = [min(c) for c in (x, y, z)]
+    extent = max(max(c) - m for c, m in zip((x, y, z), lo))
+    scale = 2.0**bits / extent if extent > 0 else 0.0
+    keys = []
+    for point in zip(x, y, z):
+        ints = [min(max(math.floor((float(c) - m) * scale), 0), 2**bits - 1) for c, m in zip(point, lo)]
+        key = 0
+        for b in range(bits):
+            for shift, i in zip((2, 1, 0), ints):
+                key |= ((i >> b) & 1) << (3 * b + shift)
+        keys.append(key)
+    return keys
+
+
+@pytest.mark.jit_off_ok
+def test_morton_keys_are_the_bit_interleave_of_the_quantised_coordinates():
+    """``morton_keys`` equals a plain-Python interleave of the quantised coordinates (x in the highest
+    bit of each triple, then y, then z), integer for integer: on spread points, a flat scene (z all
+    equal), all points equal (every key 0), and hand-computed keys of the unit cube's corners: (1, 1, 1)
+    is clamped to 2**21 - 1 on each axis (every bit set), (0.5, 0, 0) sets bit 20 of x alone (bit 62),
+    (0, 0.5, 0) bit 61, (0, 0, 0.5) bit 60, (0, 0, 2**-21) bit 0."""
+    from selfas_graph.kernels.treebuild import morton_keys
+
+    rng = np.random.default_rng(14)
+    flat = [rng.uniform(-3, 5, 200), rng.uniform(0, 1, 200), np.full(200, 0.25)]
+    corners = np.array([[0, 0, 0], [1, 1, 1], [0.5, 0, 0], [0, 0.5, 0], [0, 0, 0.5], [0, 0, 2.0**-21]]).T
+    cases = [[rng.normal(size=500) for _ in range(3)], flat, [np.full(7, 1.5)] * 3, list(corners)]
+    for x, y, z in cases:
+        got = np.empty(len(x), np.int64)
+        morton_keys(*(np.ascontiguousarray(c, dtype=np.float64) for c in (x, y, z)), got)
+        assert got.tolist() == morton_key_by_hand(x, y, z)
+    assert got.tolist() == [0, 2**63 - 1, 2**62, 2**61, 2**60, 1]
 
 
 def test_one_rod():

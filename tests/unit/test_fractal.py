@@ -285,14 +285,22 @@ def _over(pieces):
 
 def test_rg_dimension_of_chains_sheets_and_dla(dla):
     """Chains 1 and sheets 2 within err + 0.05; DLA clusters of 3-1600 rods (every prefix of a DLA
-    cluster is one) 2.5 within two of the fit's own errors. One realisation's prefixes scatter about
-    the power law (fit error about 0.4), and the walk that grows the cluster is chaotic: the last bits
-    of numpy's sums differ between CPUs, so each CPU grows another cluster (2.3 on an Intel Xeon,
-    2.06 +- 0.42 on an AMD EPYC Zen 5); the rod-scale crossover pulls both below 2.5."""
+    cluster is one) between 1.8 and 2.75, and 2.5 within two of the fit's own errors, below 0.6. The
+    walk that grows the cluster is chaotic: the last bits of numpy's sums differ between CPUs, so each
+    CPU grows another cluster, and the bounds are set by the scatter between clusters. Measured on an
+    Intel Xeon: 2.19 +- 0.41 for this cluster (seed 1), 2.13-2.47 over seeds 1-8 (mean 2.28, standard
+    deviation 0.12, fit errors 0.11-0.91); 2.06 +- 0.42 on an AMD EPYC Zen 5. The rod-scale crossover
+    pulls every one below the 2.5 of large DLA. The bounds lie four standard deviations from that mean,
+    0.26 below the lowest value seen and 0.28 above the highest (2, the sheet's, would be 0.06 from the
+    AMD value). The error-relative check alone accepts a compact object (3) whose fit is clean: the
+    clusters of seeds 6 and 8 with R_g rescaled to give D = 2.94 +- 0.53 and 2.96 +- 0.27 pass it, and
+    fail the upper bound. Chains (1) and compact blobs (3; the Eden blobs here give 3.6) lie outside
+    the bounds; a sheet (2) inside: at these sizes the R_g dimension does not tell DLA from a sheet."""
     exact(rg_dimension(*_over([chain(n) for n in SIZES])), 1)
     exact(rg_dimension(*_over([sheet(s) for s in (4, 6, 8, 11, 16, 23, 30)])), 2)
     fit = rg_dimension(*_over([dla[: 2 * n] for n in SIZES]))
-    assert abs(fit.value - 2.5) <= 2 * fit.err and fit.err < 0.6 and fit.fit_range[0] >= 3, fit
+    assert 1.8 <= fit.value <= 2.75 and abs(fit.value - 2.5) <= 2 * fit.err and fit.err < 0.6, fit
+    assert fit.fit_range[0] >= 3, fit
 
 
 def test_rg_dimension_refuses_a_range_under_the_minimum(eden):

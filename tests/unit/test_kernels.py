@@ -77,12 +77,34 @@ def test_tip_brake(state):
     close(out, expected)
 
 
+@pytest.mark.parametrize("bounds", [(0, 80), (0, 37, 80), (0, 5, 6, 40, 41, 79, 80)])
+def test_tip_brake_rows_in_blocks(state, bounds):
+    """``brakes.tip_brake_rows`` over blocks of rows (one block; a split at tip 37, which cuts rod 18
+    and the list in the middle; blocks of one row, two of them tips 5 and 40 in contact, and one at
+    the end) equals the slow reference of
+    docs/model.md 'Term 2' (tests/reference.py ``tip_brake``, all pairs by distance) row by row, and
+    a block writes its own rows only. Tolerance: ``close`` (each row a sum of a few terms of size
+    k_br |v|: round-off)."""
+    nl = NeighbourList(RSTAR, 0.2, exclude_same_rod=True)
+    nl.build(state.position)
+    expected = ref.tip_brake(state.position, state.velocity, RSTAR, 100.0)
+    assert np.count_nonzero(np.abs(expected).sum(axis=1)) >= 6  # the fixture's tips in contact
+    out = np.full_like(state.position, np.nan)
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        brakes.tip_brake_rows(state.position, state.velocity, nl.start, nl.index, RSTAR, 100.0, lo, hi, out)
+        assert np.isnan(out[hi:]).all() and not np.isnan(out[:hi]).any()
+    close(out, expected)
+
+
 @pytest.mark.parametrize("cutoff", [0.7, 2.0, 100.0])
 @pytest.mark.parametrize("core", [0.0, 0.3])
 def test_yukawa(state, cutoff, core):
     """Term 6 neighbour kernel against the all-pairs reference, with and without the core
     (core 0.3 is large enough that several pairs of the fixture fall inside it)."""
     c = state.centre()
+    if core > 0:  # the core branch is met: rod pairs closer than the core radius (3 with this fixture)
+        d = np.linalg.norm(c[:, None] - c[None], axis=-1)
+        assert np.triu(d < core, 1).sum() > 0
     nl = NeighbourList(cutoff, 0.3)
     nl.build(c)
     out = np.empty_like(c)
@@ -95,8 +117,12 @@ def test_yukawa(state, cutoff, core):
 
 
 def test_plasma(state):
+    """Term 5's field and force on tips against the reference, with tips inside the channel (rho <= R,
+    the linear branch) and outside it (the 1/rho branch): 33 and 47 tips with this fixture."""
     out = np.empty_like(state.position)
     args = (0.3, -0.2, 1.1, 7.5)
+    rho = np.hypot(state.position[:, 0] - args[0], state.position[:, 1] - args[1])
+    assert (rho <= args[2]).sum() > 0 and (rho > args[2]).sum() > 0
     kf.plasma_field(state.position, *args, out)
     close(out, ref.plasma_field(state.position, *args))
     kf.plasma_force_on_tips(state.position, state.tip_charge, *args, out)
@@ -194,6 +220,38 @@ def test_close_pair_count(state):
     rod = np.arange(len(d)) // 2
     brute = np.triu((d < RSTAR) & (rod[:, None] != rod[None, :]), 1).sum()
     assert n == brute >= 3
+
+
+@pytest.mark.parametrize("radius", [RSTAR, 0.5])
+@pytest.mark.parametrize("exclude_same_rod", [True, False])
+def test_close_pairs_are_the_brute_force_pairs(rng, radius, exclude_same_rod):
+    """``contacts.close_pairs`` lists exactly the pairs k < l closer than the radius that a search over
+    all distances finds (tests/reference.py ``neighbour_pairs``), each once, row k after row k and each
+    row in the order of the neighbour list (the order the exact brake meets them in; not sorted by l
+    within a row): 200 random tips, with pairs placed 1e-9 of the radius inside and outside it in random
+    directions (the rounding of the coordinates, below 1e-14 of the radius here, cannot move them
+    across), one pair on top of each other, and the two tips of one rod closer than the radius (listed only when the list keeps
+    same-rod pairs)."""
+    s = random_rods(100, rng, box=4.0)
+    x = s.position
+    direction = rng.normal(size=(40, 3))
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    for j, (k, l) in enumerate(zip(range(0, 80, 2), range(121, 200, 2))):  # tips of different rods
+        x[k] = x[l] + radius * (1 - 1e-9 if j % 2 else 1 + 1e-9) * direction[j]
+    x[81] = x[150]
+    x[83] = x[82] + 0.5 * radius * direction[0]
+    nl = NeighbourList(radius, 0.3, exclude_same_rod=exclude_same_rod)
+    nl.build(x)
+    got = contacts.close_pairs(x, nl.start, nl.index, radius)
+    expected = ref.neighbour_pairs(x, radius, exclude_same_rod)
+    in_list_order = [
+        (k, l) for k in range(len(x)) for l in nl.index[nl.start[k] : nl.start[k + 1]] if (k, l) in expected
+    ]
+    assert got.dtype == np.int64 and got.shape == (len(expected), 2)
+    assert [tuple(p) for p in got.tolist()] == in_list_order and set(in_list_order) == expected
+    assert {(k, k + 121) for k in range(2, 80, 4)} <= set(expected)  # the pairs just inside
+    assert not {(k, k + 121) for k in range(0, 80, 4)} & set(expected)  # and none just outside
+    assert (81, 150) in expected and ((82, 83) in expected) != exclude_same_rod
 
 
 # ----------------------------------------------------------------------------- row ranges

@@ -11,6 +11,7 @@ from selfas_graph.kernels.laws import (
     wall_potential,
     wall_push,
     yukawa_force_over_r,
+    yukawa_force_over_r_f32,
     yukawa_potential,
 )
 
@@ -151,3 +152,31 @@ def test_float32_law_is_the_float64_law(r, p):
     assert abs(got - want) <= 1e-6 * scale
     if not numba.config.DISABLE_JIT:  # the compiled law returns float32 (Python sees a float)
         assert [sig.return_type for sig in tip_force_over_r_f32.nopython_signatures] == [numba.float32]
+
+
+@pytest.mark.parametrize("r", [0.0, 0.01, 0.1, 0.2999, 0.3001, 1.0, 4.0, 12.0])
+@pytest.mark.parametrize("core", [0.0, 0.3])
+@pytest.mark.parametrize("screening", [0.5, 2.0])
+@pytest.mark.parametrize("zz", [-2.0, 4.0])
+def test_float32_yukawa_law_is_the_float64_law(r, core, screening, zz):
+    """yukawa_force_over_r_f32 is the Yukawa law of docs/model.md 'Term 6' in float32 (the mixed Yukawa
+    sum): on the same float32 arguments, equal to the float64 law within 1e-6 of f (1 + r / R_D), inside
+    the core (r < a, the clamp to a), just outside it and far out (r / R_D up to 24), and 0 at r = 0
+    without a core. The bound is the float32 one of tests/physics/test_yukawa_mixed.py: about ten
+    roundings of 6e-8, the exponential within 2 float32 ulp, and the rounding of ``-r / R_D``, which
+    the exponential multiplies by r / R_D (measured at most 3.2e-7 of f (1 + r / R_D) over a finer
+    grid of r, a margin of 3). Compiled, it returns a float32 (no promotion)."""
+    import numba
+    import numpy as np
+
+    f32 = np.float32
+    args = (f32(r * r), f32(zz), f32(1.0 / screening), f32(core * core))
+    got = yukawa_force_over_r_f32(*args)
+    want = yukawa_force_over_r(*(float(a) for a in args))
+    if r == 0.0 and core == 0.0:
+        assert got == want == 0.0
+    else:
+        radius = math.sqrt(max(float(args[0]), float(args[3])))  # the law clamps r to the core radius
+        assert want != 0.0 and abs(got - want) <= 1e-6 * abs(want) * (1 + radius / screening)
+    if not numba.config.DISABLE_JIT:  # the compiled law returns float32 (Python sees a float)
+        assert [sig.return_type for sig in yukawa_force_over_r_f32.nopython_signatures] == [numba.float32]
