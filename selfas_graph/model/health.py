@@ -17,8 +17,8 @@ from .observables import energy_scale
 #: a bond whose length is off by more than this after a step is broken: no
 #: corrector recovers it meaningfully (typical per-step errors are < 1e-6)
 BOND_BREAK = 0.05
-#: a tip moving more than this (in rod lengths) in one step means the step is
-#: far beyond stability: the tip core (width r* ~ 0.06) is crossed in one step
+#: a tip moving more than this (in rod lengths, along one coordinate: |v_k,d| dt) in one step means
+#: the step is far beyond stability: the tip core (width r* ~ 0.06) is crossed in one step
 MAX_STEP_DISPLACEMENT = 0.25
 #: a force component beyond this (units F_M0) is out of scale rather than a time-step problem:
 #: |lambda dt| below which Adams-Bashforth 4 follows a decay at rate lambda: a brake of rate lambda
@@ -105,10 +105,13 @@ class HealthChecks:
             tips = np.flatnonzero(bad_tip)
         elif not err < BOND_BREAK:
             what = f"a broken rigid bond (length error {err:.3g} > {BOND_BREAK})"
-            r = np.linalg.norm(x[0::2] - x[1::2], axis=1)
-            tips = 2 * np.argsort(-np.abs(r - (1.0 if st.rod_length is None else st.rod_length)))[:5]
+            # the step's projection has given every bond its length again, so the bond errors now are
+            # round-off and tell no rod: the tips that moved most since the last state that passed
+            good = self._last_good
+            moved = speed if good is None or good[0].shape != x.shape else np.linalg.norm(x - good[0], axis=1)
+            tips = np.argsort(-moved)[:5]
         else:
-            what = f"a runaway step (a tip moved {vmax * self.dt:.3g} rod lengths in one step)"
+            what = f"a runaway step (a tip moved {vmax * self.dt:.3g} rod lengths along one axis in one step)"
             tips = np.argsort(-speed)[:5]
         rods = sorted(set(int(k) // 2 for k in tips[:10]))
         term, force = self._out_of_scale_term()
