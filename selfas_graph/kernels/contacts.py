@@ -208,7 +208,7 @@ def close_pair_count(position, start, index, radius):
 
 
 def close_pairs(position, start, index, radius):
-    """All listed pairs ``(k, l)``, ``k < l``, closer than ``radius``, sorted by (k, l).
+    """All listed pairs ``(k, l)``, ``k < l``, closer than ``radius``: by k, and for each k in the order of its list.
 
     Two passes (count, then fill at prefix-sum offsets) keep the parallel loop a
     gather with no shared counter and no fixed capacity to overflow.

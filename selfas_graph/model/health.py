@@ -127,7 +127,7 @@ class HealthChecks:
         cause = (
             f"largest force on them from the '{dominant}' term"
             if dominant != "none"
-            else "no force term is on, so the integrator alone is at fault"
+            else "no force acts on them (no term is on, or every force on them is zero), so the step alone is at fault"
         )
         stiff = self._stiff_brakes()
         if stiff:

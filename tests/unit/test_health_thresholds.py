@@ -141,5 +141,7 @@ def test_a_step_just_above_the_move_limit_stops_with_a_runaway_diagnosis(path):
     assert info.value.step == 6 and "at step 6 " in msg
     assert f"a runaway step (a tip moved {MOVE_LIMIT} rod lengths along one axis in one step)" in msg
     assert "broken" not in msg and f"integrator.dt = {DT:g}" in msg and ROD in info.value.rods
+    # no force acts (no term, or the tip term on zero charges): no term is named as the largest
+    assert "no force acts on them" in msg and "'tip_magnetic'" not in msg
     if path == "compiled":
         assert calls == [(1, NEEDS_HEALTH)]

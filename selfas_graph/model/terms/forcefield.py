@@ -331,13 +331,13 @@ class ForceField:
 
     def dominant_force(self, rows) -> tuple[str, float]:
         """(channel, largest force component) of the channel with the largest force on the given
-        tips; NaN counts as inf. ("none", 0.0) without channels."""
-        best, name = -1.0, "none"
+        tips; NaN counts as inf. ("none", 0.0) without channels or where every force on them is zero."""
+        best, name = 0.0, "none"
         for ch, _ in self.channels:
             m = float(np.nan_to_num(np.abs(self.out[ch][rows]), nan=np.inf).max(initial=0.0))
             if m > best:
                 best, name = m, ch
-        return name, max(best, 0.0)
+        return name, best
 
     def describe(self) -> dict:
         """Resolved settings derived from the parameters (e.g. the Yukawa cut-off radius)."""
