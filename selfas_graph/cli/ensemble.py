@@ -276,8 +276,16 @@ def _run_locked(args, pool, held):
                 hard_exit=bool(ABANDONED),
             )
     summary = ens.summarise(times=times, flux_radius=args.flux_radius)
+    statuses = [r.get("status") for r in results if r is not None]
+    stopped = statuses.count("interrupted")
+    never = sum(r is None for r in results)
     if summary["n_seeds"]:
         print()
+        if stopped or never:
+            print(
+                f"partial: {stopped} seed{'s' * (stopped != 1)} stopped before t = {ens.t_end:g} and {never} never "
+                f"started; each seed counts at the times it reached"
+            )
         print(format_table(summary))
         try:
             js, cs = write_summary(summary, folder)
@@ -290,8 +298,7 @@ def _run_locked(args, pool, held):
             print(f"wrote {plot_summary(summary, folder / 'summary.png', title=f'{p.scenario.name} ensemble')}")
     else:
         print("no seed file to summarise")
-    statuses = [r.get("status") for r in results if r is not None]
-    if "interrupted" in statuses or any(r is None for r in results):
+    if stopped or never:
         print(
             "selfas-graph ensemble: interrupted; rerun the same command to continue "
             "(finished seeds are kept, interrupted ones resume from their checkpoints)",

@@ -454,6 +454,7 @@ def test_a_signal_stops_the_seeds_with_checkpoints_and_a_rerun_continues(scene, 
     finally:
         _kill_group(proc)
     assert "rerun the same command to continue" in err and out.count("interrupted at t = ") == 2
+    assert "partial: 2 seeds stopped before t = 20 and 1 never started" in out  # the table is of part runs
     assert not seed_path(folder, 5).exists()
     for p in first:
         assert checkpoint_path(p).exists()
