@@ -18,6 +18,7 @@ summaries give). The paths of a studies file, and the defaults, are read from th
 from __future__ import annotations
 
 import functools
+import sys
 from pathlib import Path
 
 from ..provenance import older_version
@@ -237,6 +238,7 @@ def _run(args):
     if args.action == "summarise":
         from ..studies import summarise_study, write_json_atomic
 
+        skipped = []
         for s in _pick(studies, args.names):
             if s.kind == "percolation":
                 from ..studies.summary import percolation_summary
@@ -244,6 +246,7 @@ def _run(args):
                 src = Path(args.runs) / s.name / PERCOLATION_JSON
                 if not src.exists():
                     print(f"study {s.name}: no {src}; skipped")
+                    skipped.append(s.name)
                     continue
                 summary = percolation_summary(s, src)
                 out = write_json_atomic(summary, Path(args.summaries) / f"{s.name}.json")
@@ -251,10 +254,12 @@ def _run(args):
                 continue
             if not (Path(args.runs) / s.name).is_dir():
                 print(f"study {s.name}: no run files in {Path(args.runs) / s.name}; skipped")
+                skipped.append(s.name)
                 continue
             summary = summarise_study(s, args.runs, studies)
             if not summary["n_seeds"]:
                 print(f"study {s.name}: no readable seed file; skipped")
+                skipped.append(s.name)
                 continue
             try:
                 out = write_json_atomic(summary, Path(args.summaries) / f"{s.name}.json")
@@ -280,6 +285,9 @@ def _run(args):
                         every = max(1, -(-run.n_frames // MOVIE_FRAMES))
                     movie = Path(args.figures) / f"{s.name}_movie.{'mp4' if _ffmpeg() else 'gif'}"
                     main(["plot", str(first), "--movie", str(movie), "--every", str(every), "--force"])
+        if skipped and args.names:  # studies asked for by name, not summarised: not a success
+            print(f"selfas-graph study summarise: nothing to summarise for {', '.join(skipped)}", file=sys.stderr)
+            return 1
         return 0
     # page
     from ..studies.page import page_blocks, replace_blocks

@@ -47,7 +47,12 @@ def load_summary(folder, name):
     path = Path(folder) / f"{name}.json"
     if not path.exists():
         return None
-    return json.loads(path.read_text(encoding="utf-8"))
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise StudiesError(
+            f"{path}: not a readable study summary ({exc}); make it again with study summarise"
+        ) from None
 
 
 def has_electrodes(summary) -> bool:
@@ -193,6 +198,31 @@ def _older_text(summary, since) -> str:
     )
 
 
+def definition_changes(study, summary) -> list[str]:
+    """The parts of ``study``'s definition (docs/studies.toml now) that differ from those its summary was
+    made with (scenario, overrides, seeds, end time, table times): the summary then is of another study."""
+    made = summary.get("study", {})
+    now = {"scenario": study.scenario, "overrides": list(study.overrides)}
+    if summary.get("kind") != "percolation":
+        now |= {
+            "seeds": list(range(study.first_seed, study.first_seed + study.seeds)),
+            "t_end": study.t_end,
+            "table_times": list(study.table_times),
+        }
+    return [key for key, value in now.items() if key in made and made[key] != value]
+
+
+def _changed_text(study, summary) -> str:
+    changed = definition_changes(study, summary)
+    if not changed:
+        return ""
+    return (
+        f" **Summarised from another definition of this study than docs/studies.toml gives now (its "
+        f"{', '.join(changed)} differ): run and summarise it again (`selfas-graph study run {study.name} --jobs 2 "
+        f"--force`, then `study summarise {study.name}`).**"
+    )
+
+
 def page_blocks(studies, folder) -> dict:
     """Every generated block of the results page, keyed by its marker name: ``claims``, and for
     each study ``table NAME``, ``runs NAME`` and ``figures NAME`` (a study without a summary
@@ -222,11 +252,12 @@ def page_blocks(studies, folder) -> dict:
                 f"{(s['commit'] or 'unknown')[:10]}; {s['cpu_model'] or 'unknown CPU'}, kernels for {s['numba_cpu']}, "
                 f"{s['workers']} worker(s) of one numba thread; {fmt((s['wall_seconds'] or 0) / 60, 2)} min in all."
                 + _older_text(s, studies.since(name))
+                + _changed_text(study, s)
             )
             blocks[f"figures {name}"] = ""
             continue
         blocks[f"table {name}"] = study_table(s)
-        blocks[f"runs {name}"] = provenance_text(s, studies.since(name))
+        blocks[f"runs {name}"] = provenance_text(s, studies.since(name)) + _changed_text(study, s)
         blocks[f"figures {name}"] = (
             f"| {study.title}: every measure over time | short-circuit episodes | seed {s['seeds'][0]['seed']} at "
             f"t = {fmt(s['seeds'][0]['t_end'])} |\n|---|---|---|\n"

@@ -205,7 +205,10 @@ every = 0.25
 table_times = [0.5]
 """
     )
-    (tmp_path / "page.md").write_text("# R\n<!-- begin generated: table q -->\n<!-- end generated: table q -->\n")
+    (tmp_path / "page.md").write_text(
+        "# R\n<!-- begin generated: table q -->\n<!-- end generated: table q -->\n"
+        "<!-- begin generated: runs q -->\n<!-- end generated: runs q -->\n"
+    )
 
     cli = _study_cli(tmp_path)
     started = time.monotonic()
@@ -228,6 +231,26 @@ table_times = [0.5]
     page = (tmp_path / "page.md").read_text()
     assert "| fraction of rods within R_plas |" in page
     assert "is up to date" in cli("page", "--summaries", "res", "--page", "page.md", "--check")
+
+    def failing(*args):
+        cmd = [sys.executable, "-m", "selfas_graph.cli.main", "study", *args, "--studies", "studies.toml"]
+        res = subprocess.run(cmd, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+        return res.returncode, res.stdout + res.stderr
+
+    # the studies file now defines the study otherwise than its summary was made: --check fails, the page says so
+    studies = (tmp_path / "studies.toml").read_text()
+    (tmp_path / "studies.toml").write_text(studies.replace("rods.count=60", "rods.count=80").replace("= 2\n", "= 3\n"))
+    code, out = failing("page", "--summaries", "res", "--page", "page.md", "--check", "--no-figures")
+    assert code == 1, out
+    cli("page", "--summaries", "res", "--page", "page.md", "--no-figures")
+    assert "Summarised from another definition of this study" in (tmp_path / "page.md").read_text()
+    assert "(its overrides, seeds differ)" in (tmp_path / "page.md").read_text()
+    # a study named but with nothing to summarise is not a success; a damaged summary is named in one line
+    code, out = failing("summarise", "q", "--runs", "nowhere", "--summaries", "res2")
+    assert code == 1 and "nothing to summarise for q" in out
+    (tmp_path / "res" / "q.json").write_text('{"version": ')
+    code, out = failing("page", "--summaries", "res", "--page", "page.md", "--check", "--no-figures")
+    assert code == 2 and "q.json: not a readable study summary" in out and "Traceback" not in out
 
 
 def test_a_percolation_study_runs_summarises_and_tabulates(tmp_path):
