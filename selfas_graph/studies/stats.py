@@ -144,7 +144,14 @@ def measure_text(summary, measure, t) -> str:
     if measure in FIT_ERRORS:
         # a fit over less than a factor 4 in scale is refused (NaN) by the estimator
         # (analysis/fractal.py, MIN_RANGE): where every seed's is, the dimension is not testable
-        s = plain_stat(v, values_at(summary, FIT_ERRORS[measure], t))
+        err = values_at(summary, FIT_ERRORS[measure], t)
+        # only seeds that reached t: a seed stopped before it (an unfinished study) has no frame there
+        reached = np.array([seed["t_end"] >= t - 1e-9 * max(1.0, abs(t)) for seed in summary["seeds"]], dtype=bool)
+        if reached.shape == v.shape:
+            v, err = v[reached], err[reached]
+        if not v.size:
+            return "n/a"
+        s = plain_stat(v, err)
         if s["n"] == 0:
             return "not testable at this size (no fit over a factor 4 in scale)"
         k = len(v) - s["n"]

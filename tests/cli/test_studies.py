@@ -14,7 +14,7 @@ import pytest
 from selfas_graph.provenance import older_version, version_key
 from selfas_graph.studies import StudiesError, later_version, load_studies
 from selfas_graph.studies.page import replace_blocks
-from selfas_graph.studies.stats import grouped_stat, plain_stat
+from selfas_graph.studies.stats import grouped_stat, measure_text, plain_stat
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -154,6 +154,21 @@ def test_plain_stat_by_hand():
     assert plain_stat([1.0, 2.0, 3.0], errors=[0.3, 0.4, np.nan])["n"] == 2  # no uncertainty: left out
     assert plain_stat([np.nan])["n"] == 0
     assert math.isnan(plain_stat([5.0])["sem"])  # one seed: no spread
+
+
+def test_a_dimension_at_a_time_no_seed_reached_is_no_data_not_untestable():
+    """An unfinished study (seeds stopped at t = 4 and 16.5, the table asks t = 30): the dimension there is
+    n/a, as every other measure; 'not testable at this size' is for seeds that reached t with no fit."""
+    values = {"values": [[2.0, None, None], [2.2, None, None]]}
+    errors = {"values": [[0.1, None, None], [0.1, None, None]]}
+    summary = {
+        "times": [4.0, 16.0, 30.0],
+        "seeds": [{"t_end": 4.0}, {"t_end": 16.5}],
+        "measures": {"rg_dimension": values, "rg_dimension_err": errors},
+    }
+    assert measure_text(summary, "rg_dimension", 30.0) == "n/a"
+    assert measure_text(summary, "rg_dimension", 16.0).startswith("not testable at this size")  # seed 2 reached it
+    assert measure_text(summary, "rg_dimension", 4.0).startswith("2.1 ± ")
 
 
 def test_grouped_stat_reports_the_group_it_describes():
