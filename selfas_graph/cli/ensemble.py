@@ -261,7 +261,7 @@ def _run_locked(args, pool, held):
 
         results = run_tasks(run_seed, tasks, pool, report)
         print(
-            f"ran {sum(r is not None for r in results)} of {len(tasks)} seeds in {time.perf_counter() - t0:.1f} s",
+            f"ran {sum(r is not None for r in results)} of {_count(len(tasks), 'seed')} in {time.perf_counter() - t0:.1f} s",
             flush=True,
         )
         io = [r for r in results if r is not None and r.get("status") == "io_error"]

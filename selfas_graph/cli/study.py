@@ -22,7 +22,7 @@ import sys
 from pathlib import Path
 
 from ..provenance import older_version
-from .ensemble import _positive_int
+from .ensemble import _count, _positive_int
 from .main import CliError
 
 DEFAULT_STUDIES = "docs/studies.toml"
@@ -139,7 +139,7 @@ def _run_together(picked, args, older_than=""):
             )
         except EnsembleError as exc:
             raise CliError(str(exc)) from None
-    print(f"ran {report.done} seeds in {time.perf_counter() - started:.1f} s", flush=True)
+    print(f"ran {_count(report.done, 'seed')} in {time.perf_counter() - started:.1f} s", flush=True)
     statuses = [r.get("status") if r is not None else None for _, results in ran for r in results]
     if "io_error" in statuses:  # no summary: there is no room for it either
         from ..lifecycle import ABANDONED
