@@ -82,6 +82,20 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
     return out
 
 
+def seed_provenance(meta) -> dict:
+    """What made a seed file (its run's provenance attributes): version, commit, CPU, the CPU numba compiled
+    for, threads a seed and the wall time of all its segments (None where the file does not say)."""
+    wall = float(meta.get("wall_seconds_total", math.nan))
+    return {
+        "version": str(meta.get("version", "")),
+        "commit": str(meta.get("commit", "")),
+        "cpu_model": str(meta.get("cpu_model", "")),
+        "numba_cpu": str(meta.get("numba_cpu", "")),
+        "numba_threads": int(meta.get("numba_threads", 0)),
+        "wall_seconds": wall if math.isfinite(wall) else None,
+    }
+
+
 def _read_seed(run, path, times, t_end, measures, flux_radius, grouped):
     """One seed's entry of ``seeds`` and its row: (values, fit errors) per measure and time, whether
     it carries a current per time, its short-circuit time or censoring time, and whether it was seen."""
@@ -98,6 +112,7 @@ def _read_seed(run, path, times, t_end, measures, flux_radius, grouped):
         "status": str(run.meta.get("status", "")),
         "t_end": end,
         "short_circuit_time": t_sc if seen else None,
+        **seed_provenance(run.meta),
     }
     values = np.full((len(measures), len(times)), np.nan)
     errs = np.full_like(values, np.nan)

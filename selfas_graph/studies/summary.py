@@ -25,6 +25,7 @@ from ..analysis.episodes import circuit_episodes
 from ..analysis.moments import monopole_moment
 from ..analysis.skeleton import structures
 from ..ensemble import FRAME_MEASURES, Measure, seed_path, summarise
+from ..ensemble.summary import seed_provenance
 from ..io.h5md import RunFile, RunFileError
 from ..provenance import cpu_model, source_commit
 
@@ -162,12 +163,7 @@ def _seed_record(path):
             "seed": int(run.parameters["scenario"]["seed"]),
             "status": str(meta.get("status", "")),
             "t_end": float(run.time[-1]) if run.n_frames else 0.0,
-            "version": str(meta.get("version", "")),
-            "commit": str(meta.get("commit", "")),
-            "cpu_model": str(meta.get("cpu_model", "")),
-            "numba_cpu": str(meta.get("numba_cpu", "")),
-            "numba_threads": int(meta.get("numba_threads", 0)),
-            "wall_seconds": float(meta.get("wall_seconds_total", math.nan)),
+            **seed_provenance(meta),
             "resumed_with": json.loads(meta.get("resumed_with", "[]")),
             "episodes": {
                 "start": [float(x) for x in ep.start],

@@ -771,3 +771,15 @@ def test_a_null_model_without_the_plasma_filament_measures_the_same_channel(tmp_
         centres = rod_centres(run.position(-1))
     expected = float(np.mean(np.hypot(centres[:, 0], centres[:, 1]) < 6.0))
     assert s["measures"]["inside_R_plas"]["mean"] == [expected] and 0.0 < expected < 1.0
+
+
+def test_the_summary_names_what_made_each_seed(quick):
+    """summary.json holds each seed's provenance, as its run file states it: version, commit, CPU, numba's
+    target and threads, and wall time (the grid summary and the results page take it from there)."""
+    folder, _ = quick
+    summary = json.loads((folder / "summary.json").read_text())
+    for seed in summary["seeds"]:
+        with RunFile(folder / Path(seed["path"]).name) as run:
+            assert seed["commit"] == run.meta["commit"] and seed["version"] == run.meta["version"]
+            assert seed["cpu_model"] == run.meta["cpu_model"] and seed["numba_threads"] >= 1
+            assert seed["wall_seconds"] == float(run.meta["wall_seconds_total"]) > 0
