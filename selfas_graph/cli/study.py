@@ -261,6 +261,13 @@ def _run(args):
                 print(f"study {s.name}: no readable seed file; skipped")
                 skipped.append(s.name)
                 continue
+            # the movie the page links (None: none made with this summary, and an older one is not linked)
+            movie = None
+            if s.section in ("paper", "contrast") and not (args.no_figures or args.no_movie):
+                from .movie import _ffmpeg
+
+                movie = f"{s.name}_movie.{'mp4' if _ffmpeg() else 'gif'}"  # MP4 where ffmpeg is there
+            summary["movie"] = movie
             try:
                 out = write_json_atomic(summary, Path(args.summaries) / f"{s.name}.json")
             except OSError as exc:
@@ -276,15 +283,16 @@ def _run(args):
                 first = Path(args.runs) / s.name / summary["seeds"][0]["path"]
                 snap = Path(args.figures) / f"{s.name}_snapshot.png"
                 main(["plot", str(first), "--kind", "snapshot", "-o", str(snap), "--force"])
-                if s.section in ("paper", "contrast") and not args.no_movie:
-                    # the first seed's movie, at most MOVIE_FRAMES frames (MP4 where ffmpeg is there)
+                if movie is not None:
+                    # the first seed's movie, at most MOVIE_FRAMES frames
                     from ..io.h5md import RunFile
-                    from .movie import _ffmpeg
 
                     with RunFile(first) as run:
                         every = max(1, -(-run.n_frames // MOVIE_FRAMES))
-                    movie = Path(args.figures) / f"{s.name}_movie.{'mp4' if _ffmpeg() else 'gif'}"
-                    main(["plot", str(first), "--movie", str(movie), "--every", str(every), "--force"])
+                    argv = ["plot", str(first), "--movie", str(Path(args.figures) / movie), "--every", str(every)]
+                    if main(argv + ["--force"]) != 0:  # not made: the page must not link an older one
+                        summary["movie"] = None
+                        write_json_atomic(summary, out)
         if skipped and args.names:  # studies asked for by name, not summarised: not a success
             print(f"selfas-graph study summarise: nothing to summarise for {', '.join(skipped)}", file=sys.stderr)
             return 1

@@ -263,9 +263,11 @@ def page_blocks(studies, folder) -> dict:
             f"t = {fmt(s['seeds'][0]['t_end'])} |\n|---|---|---|\n"
             f"| ![](figures/{name}_series.png) | ![](figures/{name}_episodes.png) | ![](figures/{name}_snapshot.png) |"
         )
-        if study.section in ("paper", "contrast"):
+        # the movie made with this summary (summaries before the key: the MP4 of the same name)
+        movie = s.get("movie", f"{name}_movie.mp4")
+        if study.section in ("paper", "contrast") and movie:
             blocks[f"figures {name}"] += (
-                f"\n\nA movie of seed {s['seeds'][0]['seed']}: [`figures/{name}_movie.mp4`](figures/{name}_movie.mp4) "
+                f"\n\nA movie of seed {s['seeds'][0]['seed']}: [`figures/{movie}`](figures/{movie}) "
                 f"(`selfas-graph plot RUN.h5 --movie OUT.mp4`)."
             )
     return blocks

@@ -45,3 +45,22 @@ def test_every_committed_summary_names_its_commits_and_is_complete():
         if not summary.get("missing"):
             assert summary["n_seeds"] == study.seeds
             assert min(s["t_end"] for s in summary["seeds"]) >= study.t_end - 1e-9, f"{path.name}: a seed ended early"
+
+
+def test_the_page_links_the_movie_its_summary_was_made_with(tmp_path, monkeypatch):
+    """A paper study's figures block links the movie its summary names (a GIF where no ffmpeg made an MP4),
+    and none where the summary was made without one (--no-movie, or a movie that failed): an older movie
+    left in the figures folder is not linked. Summaries from before the key link the MP4 of the name."""
+    import shutil
+
+    monkeypatch.chdir(ROOT)  # the studies file's scenario paths are relative to the repository's root
+    studies = load_studies(DOCS / "studies.toml")
+    folder = tmp_path / "results"
+    shutil.copytree(DOCS / "results", folder)
+    summary = json.loads((folder / "fig2.json").read_text(encoding="utf-8"))
+    for movie, link in ((None, None), ("fig2_movie.gif", "figures/fig2_movie.gif")):
+        (folder / "fig2.json").write_text(json.dumps(summary | {"movie": movie}), encoding="utf-8")
+        block = page_blocks(studies, folder)["figures fig2"]
+        assert ("A movie of seed" in block) is (link is not None)
+        assert link is None or f"]({link})" in block
+    assert "](figures/fig2_movie.mp4)" in page_blocks(studies, DOCS / "results")["figures fig2"]
