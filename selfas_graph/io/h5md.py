@@ -7,7 +7,7 @@ parameters_json, version, command_line, seed, mpi_ranks, numba_threads, created,
 and its widest vectors), wall_seconds_total (wall time of the run's segments, a killed one's up to its last frame or
 checkpoint; wall_seconds and steps_done: the run loop's time and steps, last segment),
 resumed_with (JSON: version, commit, CPU, threads, MPI ranks of continuations that differ), t_end_before (JSON:
-the end times the run was started or continued with before a resume extended it; parameters_json
+the end times the run was started or continued with before a resume moved it; parameters_json
 states the last). ``/graph`` attributes:
 conductor_ids, conductor_potentials (0 where conductor_per_contact is 1: a potential set per
 contact, the case (ii) filament), conductor_per_contact, role_names. A floating tip (on no path

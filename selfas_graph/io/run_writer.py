@@ -212,7 +212,8 @@ class RunWriter(_PendingRows):
         """Open an existing run file to continue it after ``step``: every row written for a
         later step (frames, observables, events, circuit log, graph, per-step series) is removed first.
         ``t_end``: the continuation's end time, where it differs from the one the file states (a resume
-        that extends the run): stored in ``parameters_json``, the earlier ones in ``t_end_before``.
+        with another ``--t-end``, later or earlier): stored in ``parameters_json``, the earlier ones in
+        ``t_end_before``.
         ``frame_interval``: the one a new file would state, for a file that has no frame yet (a run
         stopped before its first step). ``mpi_ranks``: the continuation's, recorded in ``resumed_with``
         with its version, commit, CPU and threads where any of them differs from the file's.

@@ -198,9 +198,12 @@ class State:
             Rod resistances (default: R0 = 1, ``rod_resistance`` None).
         """
         centre = np.asarray(centre, dtype=np.float64).reshape(-1, 3)
-        axis = np.asarray(axis, dtype=np.float64).reshape(-1, 3)
-        axis = axis / np.linalg.norm(axis, axis=1)[:, None]
         n = centre.shape[0]
+        axis = np.asarray(axis, dtype=np.float64)
+        if axis.size != 3 * n:
+            raise ValueError(f"axis must hold one 3-vector per rod ({n}), got shape {axis.shape}")
+        axis = axis.reshape(n, 3)
+        axis = axis / np.linalg.norm(axis, axis=1)[:, None]
         position = np.empty((2 * n, 3))
         if length is None:
             half = 0.5 * axis
@@ -219,7 +222,10 @@ class State:
         tip_charge = np.empty(2 * n)
         tip_charge[0::2] = q
         tip_charge[1::2] = -q
-        v = np.zeros_like(position) if velocity is None else np.array(velocity, dtype=np.float64).reshape(2 * n, 3)
+        v = np.zeros_like(position) if velocity is None else np.array(velocity, dtype=np.float64)
+        if v.size != 6 * n:
+            raise ValueError(f"velocity must hold one 3-vector per tip ({2 * n}), got shape {v.shape}")
+        v = v.reshape(2 * n, 3)
         return cls(
             position,
             v,

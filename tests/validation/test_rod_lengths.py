@@ -290,3 +290,7 @@ def test_from_rods_gives_a_single_value_to_every_rod_and_names_a_wrong_count():
         values = {"magnetic_charge": 1.0, "electric_charge": 0.0} | {key: [1.0, 2.0, 3.0]}
         with pytest.raises(ValueError, match=f"{key} must hold one value per rod \\(2\\)"):
             State.from_rods(centre, axis, **values)
+    with pytest.raises(ValueError, match=r"axis must hold one 3-vector per rod \(2\)"):
+        State.from_rods(centre, [[0.0, 0.0, 1.0]] * 3, 1.0, 0.0)
+    with pytest.raises(ValueError, match=r"velocity must hold one 3-vector per tip \(4\)"):
+        State.from_rods(centre, axis, 1.0, 0.0, velocity=np.zeros((3, 3)))
