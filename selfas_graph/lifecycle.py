@@ -60,7 +60,8 @@ class StopOnSignal:
     signals : tuple of signal numbers
     interrupt : bool
         Raise ``KeyboardInterrupt`` on a signal instead (in a pool's launching process: SIGTERM
-        then winds the pool down as Ctrl-C does).
+        then winds the pool down as Ctrl-C does); the signals are then ignored to the end of the block,
+        so that a repeat (a launcher signals the process and its group) cannot cut the wind-down.
 
     Outside the main thread no handler can be set: the launcher's own handling applies.
     """
@@ -89,6 +90,8 @@ class StopOnSignal:
 
     def _handle(self, signum, frame):
         if self.interrupt:
+            for sig in self.old:
+                signal.signal(sig, signal.SIG_IGN)
             raise KeyboardInterrupt
         self.signum = signum
 

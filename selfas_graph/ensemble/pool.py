@@ -43,7 +43,8 @@ def run_tasks(
                 _terminate_workers()  # the other running seeds stop with a checkpoint while there is room
             stopping |= results[i].get("status") in stop_statuses
 
-    with StopOnSignal(signals=(signal.SIGTERM,), interrupt=True):  # Ctrl-C and SIGTERM wind the pool down alike
+    # Ctrl-C and SIGTERM wind the pool down alike, and a repeat of either is ignored from the first on
+    with StopOnSignal(signals=(signal.SIGTERM, signal.SIGINT), interrupt=True):
         try:
             while waiting or running:
                 while waiting and not stopping and len(running) < pool.workers:
@@ -55,7 +56,7 @@ def run_tasks(
                 collect(done)
         except KeyboardInterrupt:
             stopping = True
-            with _signals_ignored():  # a second Ctrl-C or SIGTERM (a launcher signals the whole group) waits too
+            with _signals_ignored():  # as StopOnSignal left them, also where its handlers could not be set
                 if not pool.mpi:
                     _terminate_workers()
                 collect(list(running))
