@@ -113,7 +113,7 @@ class _Lines:
 
     def __init__(self, stream, period=10.0):
         self.stream, self.period = stream, period
-        self.t0 = time.perf_counter()
+        self.first = None  # (wall time, steps done) at the first line: the rate is timed from there on
         self.last = -1e9
 
     def __call__(self, sim, done, total):
@@ -121,11 +121,17 @@ class _Lines:
         if now - self.last < self.period and done < total:
             return
         self.last = now
-        rate = done / max(now - self.t0, 1e-9)
-        eta = (total - done) / rate if rate > 0 else 0
+        if self.first is None or done <= self.first[1]:
+            # the steps before the first line include compiling the kernels (a minute on a fresh
+            # installation): a rate from them would promise hours
+            self.first = self.first or (now, done)
+            speed = "-- steps/s  ETA --"
+        else:
+            rate = (done - self.first[1]) / max(now - self.first[0], 1e-9)
+            speed = f"{rate:.0f} steps/s  ETA {_fmt_time((total - done) / rate)}"
         print(
             f"t = {sim.state.time:.4g} / {sim.params.run.t_end:.4g}  step {sim.state.step}  "
-            f"{100 * done / max(total, 1):5.1f}%  {rate:.0f} steps/s  ETA {_fmt_time(eta)}  {_status_text(sim)}",
+            f"{100 * done / max(total, 1):5.1f}%  {speed}  {_status_text(sim)}",
             file=self.stream,
             flush=True,
         )

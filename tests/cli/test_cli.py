@@ -295,3 +295,25 @@ def test_resume_notes_a_scenario_file_changed_since_the_run_started(tmp_path, ca
     assert f"the scenario file {scene} differs from the scenario this run started with" in capsys.readouterr().err
     with RunFile(out) as run:
         assert run.parameters["integrator"]["dt"] == 5e-4
+
+
+def test_progress_lines_time_the_rate_from_the_first_line(monkeypatch):
+    """The steps before the first progress line include compiling the kernels: the first line gives no
+    rate (it promised hours on a fresh installation), later lines the rate since the first."""
+    import io
+
+    from conftest import SMALL_CIRCUIT_SCENE
+    from selfas_graph.cli import simulate as cli_simulate
+    from selfas_graph.io.scenario import scenario_from_text
+    from selfas_graph.model.simulation import Simulation
+
+    sim = Simulation.from_scenario(scenario_from_text(SMALL_CIRCUIT_SCENE))
+    clock = iter([160.0, 170.0])  # the first line after a minute of compiling, the second 10 s and 1000 steps later
+    monkeypatch.setattr(cli_simulate.time, "perf_counter", lambda: next(clock))
+    out = io.StringIO()
+    lines = cli_simulate._Lines(out, period=0.0)
+    lines(sim, 10, 2010)
+    lines(sim, 1010, 2010)
+    first, second = out.getvalue().splitlines()
+    assert "-- steps/s  ETA --" in first
+    assert "100 steps/s  ETA 0m10s" in second
