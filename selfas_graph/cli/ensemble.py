@@ -27,7 +27,7 @@ from .._version import __version__
 from ..ensemble import Ensemble, EnsembleError, format_table, write_summary
 from ..ensemble.plan import summary_times
 from ..parallel import task_pool
-from .main import EXIT_NUMERICAL, CliError, CliIOError
+from .main import EXIT_NUMERICAL, CliError, CliIOError, counted
 
 
 def _times(text):
@@ -121,17 +121,12 @@ def add_arguments(p):
 def pool_text(pool) -> str:
     """Where the seeds run, as the commands print it."""
     if pool.mpi:
-        return _count(pool.workers, "MPI worker rank")
+        return counted(pool.workers, "MPI worker rank")
     if pool.serial:
         import numba
 
-        return f"this process ({_count(numba.get_num_threads(), 'numba thread')})"
-    return f"{_count(pool.workers, 'process', 'processes')} x {_count(pool.threads, 'numba thread')}"
-
-
-def _count(n, one, many=None) -> str:
-    """``n`` things, in the singular for one."""
-    return f"{n} {one if n == 1 else many or one + 's'}"
+        return f"this process ({counted(numba.get_num_threads(), 'numba thread')})"
+    return f"{counted(pool.workers, 'process', 'processes')} x {counted(pool.threads, 'numba thread')}"
 
 
 class SeedReport:
@@ -261,7 +256,7 @@ def _run_locked(args, pool, held):
 
         results = run_tasks(run_seed, tasks, pool, report)
         print(
-            f"ran {sum(r is not None for r in results)} of {_count(len(tasks), 'seed')} in {time.perf_counter() - t0:.1f} s",
+            f"ran {sum(r is not None for r in results)} of {counted(len(tasks), 'seed')} in {time.perf_counter() - t0:.1f} s",
             flush=True,
         )
         io = [r for r in results if r is not None and r.get("status") == "io_error"]
@@ -283,7 +278,7 @@ def _run_locked(args, pool, held):
         print()
         if stopped or never:
             print(
-                f"partial: {stopped} seed{'s' * (stopped != 1)} stopped before t = {ens.t_end:g} and {never} never "
+                f"partial: {counted(stopped, 'seed')} stopped before t = {ens.t_end:g} and {never} never "
                 f"started; each seed counts at the times it reached"
             )
         print(format_table(summary))

@@ -99,6 +99,11 @@ def parse_args(parser, argv=None):
     return args
 
 
+def counted(n, one, many=None) -> str:
+    """``n`` things as the commands print them, in the singular for one: ``counted(2, "seed")``."""
+    return f"{n} {one if n == 1 else many or one + 's'}"
+
+
 def _launcher_rank() -> int:
     """This process's rank as an MPI launcher states it (0 outside ``mpiexec``), read before MPI starts."""
     import os

@@ -90,7 +90,7 @@ def check_target(path, what="output file", force=False, inputs=()) -> Path:
 def check_folder(path, what="output file") -> None:
     """Refuse a target whose folder does not exist or cannot be written to (CliError, exit 2), before
     any work: found only when the file is saved, the refusal would come as an I/O error (exit 4)."""
-    parent = Path(path).parent if str(Path(path).parent) else Path(".")
+    parent = Path(path).parent
     if not parent.is_dir():
         raise CliError(f"the folder {parent} of the {what} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):

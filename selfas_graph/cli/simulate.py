@@ -49,7 +49,7 @@ from ..model.state import PlacementError
 from ..model.terms.currents import tree_note
 from ..parallel import fit_threads_to_cores, world
 from ..provenance import version_key
-from .main import EXIT_NUMERICAL, CliError, CliIOError
+from .main import EXIT_NUMERICAL, CliError, CliIOError, counted
 from .paths import check_folder, check_target, same_file
 
 
@@ -436,8 +436,7 @@ def run(args):
         print(
             f"selfas-graph {__version__}: {p.scenario.name}: {p.rods.count} rods, terms "
             f"{', '.join(plan['terms']) or 'none'}; dt = {p.integrator.dt:g}, t_end = {p.run.t_end:g} "
-            f"({n_steps} steps); {plan['threads']} thread{'s' * (plan['threads'] != 1)} x {world.size} "
-            f"rank{'s' * (world.size != 1)}",
+            f"({n_steps} steps); {counted(plan['threads'], 'thread')} x {counted(world.size, 'rank')}",
             flush=True,
         )
         if not math.isclose(sim.frame_interval, p.output.interval, rel_tol=1e-9):

@@ -22,8 +22,8 @@ import sys
 from pathlib import Path
 
 from ..provenance import older_version
-from .ensemble import _count, _positive_int
-from .main import CliError
+from .ensemble import _positive_int
+from .main import CliError, counted
 
 DEFAULT_STUDIES = "docs/studies.toml"
 DEFAULT_SUMMARIES = "docs/results"
@@ -139,7 +139,7 @@ def _run_together(picked, args, older_than=""):
             )
         except EnsembleError as exc:
             raise CliError(str(exc)) from None
-    print(f"ran {_count(report.done, 'seed')} in {time.perf_counter() - started:.1f} s", flush=True)
+    print(f"ran {counted(report.done, 'seed')} in {time.perf_counter() - started:.1f} s", flush=True)
     statuses = [r.get("status") if r is not None else None for _, results in ran for r in results]
     if "io_error" in statuses:  # no summary: there is no room for it either
         from ..lifecycle import ABANDONED

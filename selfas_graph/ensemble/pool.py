@@ -56,28 +56,10 @@ def run_tasks(
                 collect(done)
         except KeyboardInterrupt:
             stopping = True
-            with _signals_ignored():  # as StopOnSignal left them, also where its handlers could not be set
-                if not pool.mpi:
-                    _terminate_workers()
-                collect(list(running))
+            if not pool.mpi:
+                _terminate_workers()
+            collect(list(running))
     return results
-
-
-class _signals_ignored:
-    """SIGINT and SIGTERM ignored inside a ``with`` block (in the main thread), restored after it."""
-
-    def __enter__(self):
-        self.old = {}
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            try:
-                self.old[sig] = signal.signal(sig, signal.SIG_IGN)
-            except ValueError:  # not the main thread
-                pass
-        return self
-
-    def __exit__(self, *exc):
-        for sig, handler in self.old.items():
-            signal.signal(sig, handler)
 
 
 def _terminate_workers():

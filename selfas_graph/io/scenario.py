@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..model import params as P
+from ..model.validate import as_decimal
 
 #: every float of a scenario is 0 or within these magnitudes: products of up to ten of them (q^2 B / r*^3 ...)
 #: stay finite in double precision (1e30^10 = 1e300), and reciprocals of tiny ones (1 / R_D^2 ...) too
@@ -298,15 +299,11 @@ def _check_number(path, value, tp, meta, problems):
             return _INVALID
         value = int(value)  # numpy integers from Python callers become plain ones
     elif tp is float:
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        try:
+            value = as_decimal(value)  # a float32 is the decimal it prints as: np.float32(1e-3) is dt = 0.001
+        except TypeError:
             problems.append(f"{path}: expected a number, got {_describe(value)}")
             return _INVALID
-        try:
-            # a float32 (or narrower) number stands for the decimal it prints as, not its binary
-            # value widened: np.float32(1e-3) is dt = 0.001, not 0.0010000000474974513
-            value = float(str(value)) if isinstance(value, np.floating) and value.itemsize < 8 else float(value)
-        except OverflowError:
-            value = math.inf
         if not math.isfinite(value):
             problems.append(f"{path}: expected a finite number, got {value}")
             return _INVALID

@@ -21,8 +21,9 @@ time, instead of acting on a trigger (:class:`PerStepRows`).
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass
+
+from .validate import as_decimal
 
 __all__ = [
     "RunSummary",
@@ -159,10 +160,10 @@ def time_value(value, name: str) -> float:
     """``value`` as a finite float time; TypeError naming ``name`` for anything but a real number (a
     bool, a string, a list), ValueError for NaN or infinity. A float32 stands for the decimal it prints
     as, as in a scene file (np.float32(0.2) is 0.2, not 0.20000000298)."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):  # numpy's numbers are Real, its bool not
-        raise TypeError(f"{name} must be a time (a real number), got {value!r}")
-    narrow = getattr(value, "dtype", None) is not None and value.dtype.kind == "f" and value.dtype.itemsize < 8
-    value = float(str(value)) if narrow else float(value)
+    try:
+        value = as_decimal(value)
+    except TypeError:
+        raise TypeError(f"{name} must be a time (a real number), got {value!r}") from None
     if not math.isfinite(value):
         raise ValueError(f"{name} = {value} is not a finite time")
     return value

@@ -3,9 +3,23 @@ resistances, with errors that name the argument and what it should hold."""
 
 from __future__ import annotations
 
+import math
+import numbers
 import operator
 
 import numpy as np
+
+
+def as_decimal(value) -> float:
+    """A real number as a float: a float32 (or narrower) number stands for the decimal it prints as, not
+    its binary value widened (np.float32(1e-3) is 0.001, not 0.0010000000474974513), and an integer too
+    large for a float is inf. TypeError for anything but a real number (a bool, a string, a list)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):  # numpy's bool is not Real
+        raise TypeError(f"expected a number, got {value!r}")
+    try:
+        return float(str(value)) if isinstance(value, np.floating) and value.itemsize < 8 else float(value)
+    except OverflowError:
+        return math.inf
 
 
 def _as_count(value, name: str) -> int:

@@ -25,7 +25,6 @@ from ..analysis.episodes import circuit_episodes
 from ..analysis.moments import monopole_moment
 from ..analysis.skeleton import structures
 from ..ensemble import FRAME_MEASURES, Measure, seed_path, summarise
-from ..ensemble.summary import seed_provenance
 from ..io.h5md import RunFile, RunFileError
 from ..provenance import cpu_model, source_commit
 
@@ -150,7 +149,8 @@ STUDY_MEASURES += [
 
 
 def _seed_record(path):
-    """Provenance and short-circuit episodes of one seed file (None if it cannot be read)."""
+    """The continuations (``resumed_with``) and short-circuit episodes of one seed file (None if it cannot be
+    read); its provenance is in the ensemble's seed entry (:func:`~selfas_graph.ensemble.summary.seed_provenance`)."""
     try:
         run = RunFile(path)
     except RunFileError:
@@ -163,7 +163,6 @@ def _seed_record(path):
             "seed": int(run.parameters["scenario"]["seed"]),
             "status": str(meta.get("status", "")),
             "t_end": float(run.time[-1]) if run.n_frames else 0.0,
-            **seed_provenance(meta),
             "resumed_with": json.loads(meta.get("resumed_with", "[]")),
             "episodes": {
                 "start": [float(x) for x in ep.start],
@@ -236,7 +235,7 @@ def summarise_study(study, runs, studies=None) -> dict:
     records = [r for r in (_seed_record(p) for p in present) if r is not None]
     out["seeds"] = [
         s | r for s, r in zip(out["seeds"], records)
-    ]  # ensemble's seed entries (short-circuit time) with provenance
+    ]  # the ensemble's seed entries (short-circuit time, provenance) with the continuations and episodes
     for s in out["seeds"]:
         s["path"] = Path(s["path"]).name
     out["unreadable"] = [{"path": Path(u["path"]).name, "reason": u["reason"]} for u in out["unreadable"]]
