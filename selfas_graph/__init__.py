@@ -23,48 +23,47 @@ Layers: :mod:`selfas_graph.kernels` (numba, arrays only), :mod:`selfas_graph.mod
 :mod:`selfas_graph.parallel` (MPI).
 """
 
-from ._version import __version__
-from .io.export import ExportError, export_run
-from .io.h5md import RunFile, RunFileError, RunWriter
-from .io.scenario import Scenario, ScenarioError, load_scenario, parameters_from_dict, scenario_from_text
-from .model.circuit import CircuitSolution, solve_circuit
-from .model.events import Event, EventKind, named_events
-from .model.graph import ROLE_NAMES, ConnectivityGraph, classify_rods
-from .model.network import Network
-from .model.operations import Operation, Periodic
-from .model.params import Parameters
-from .model.simulation import NumericalFailure, RunSummary, Simulation
-from .model.state import PlacementError, State, StateError, random_state
+import importlib
 
-__all__ = [
-    "__version__",
-    "load_scenario",
-    "scenario_from_text",
-    "parameters_from_dict",
-    "Scenario",
-    "ScenarioError",
-    "Parameters",
-    "Simulation",
-    "RunSummary",
-    "NumericalFailure",
-    "State",
-    "StateError",
-    "random_state",
-    "PlacementError",
-    "RunFile",
-    "RunFileError",
-    "RunWriter",
-    "export_run",
-    "ExportError",
-    "solve_circuit",
-    "CircuitSolution",
-    "ConnectivityGraph",
-    "classify_rods",
-    "ROLE_NAMES",
-    "Event",
-    "EventKind",
-    "named_events",
-    "Network",
-    "Operation",
-    "Periodic",
-]
+from ._version import __version__
+
+#: where each name of the API lives; imported on first use (PEP 562), so that ``selfas-graph --help``
+#: and a Ctrl-C while a command starts need not wait for numba, scipy, h5py and networkx
+_API = {
+    ".io.export": ("ExportError", "export_run"),
+    ".io.h5md": ("RunFile", "RunFileError", "RunWriter"),
+    ".io.scenario": ("Scenario", "ScenarioError", "load_scenario", "parameters_from_dict", "scenario_from_text"),
+    ".model.circuit": ("CircuitSolution", "solve_circuit"),
+    ".model.events": ("Event", "EventKind", "named_events"),
+    ".model.graph": ("ROLE_NAMES", "ConnectivityGraph", "classify_rods"),
+    ".model.network": ("Network",),
+    ".model.operations": ("Operation", "Periodic"),
+    ".model.params": ("Parameters",),
+    ".model.simulation": ("NumericalFailure", "RunSummary", "Simulation"),
+    ".model.state": ("PlacementError", "State", "StateError", "random_state"),
+}
+#: the subpackages and modules, reachable as attributes once the API is imported (as they were when it
+#: was imported with the package)
+_PACKAGES = ("analysis", "bench", "cli", "ensemble", "grid", "io", "kernels", "lifecycle", "model", "parallel")
+_PACKAGES += ("provenance", "studies")
+_HOME = {name: module for module, names in _API.items() for name in names}
+
+
+def __getattr__(name):
+    module = _HOME.get(name)
+    if module is None and name in _PACKAGES:  # e.g. selfas_graph.model.state.State
+        for module in _API:
+            importlib.import_module(module, __name__)
+        return importlib.import_module(f".{name}", __name__)
+    if module is None:
+        raise AttributeError(f"module 'selfas_graph' has no attribute {name!r}")
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_HOME))
+
+
+__all__ = ["__version__", *_HOME]

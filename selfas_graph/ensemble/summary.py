@@ -109,7 +109,7 @@ def _read_seed(run, path, times, t_end, measures, flux_radius, grouped):
     seed = {
         "path": str(path),
         "seed": int(params["scenario"]["seed"]),
-        "status": str(run.meta.get("status", "")),
+        "status": run.status,
         "t_end": end,
         "short_circuit_time": t_sc if seen else None,
         **seed_provenance(run.meta),

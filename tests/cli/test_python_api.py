@@ -233,6 +233,25 @@ def test_top_level_names():
         "Parameters",
     ):
         assert name in sg.__all__ and hasattr(sg, name)
+    assert set(sg.__all__) <= set(dir(sg))
+    assert sg.model.state.State is sg.State and sg.io.h5md.RunFile is sg.RunFile
+    with pytest.raises(AttributeError, match="no attribute 'Simulaton'"):
+        sg.Simulaton
+
+
+def test_the_package_and_the_command_line_import_the_heavy_libraries_on_first_use():
+    """`selfas-graph --help` and a Ctrl-C while a command starts need not wait for numba and the rest:
+    the API's names are imported when first used (``selfas_graph.__getattr__``)."""
+    import subprocess
+
+    code = (
+        "import sys, selfas_graph as sg, selfas_graph.cli.main\n"
+        "print([m for m in ('numba', 'h5py', 'scipy', 'networkx', 'mpi4py') if m in sys.modules])\n"
+        "sg.Simulation\n"
+        "print('numba' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["[]", "True"]
 
 
 def test_worked_example_runs(tmp_path, monkeypatch, capsys):
