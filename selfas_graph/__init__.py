@@ -27,8 +27,8 @@ import importlib
 
 from ._version import __version__
 
-#: where each name of the API lives; imported on first use (PEP 562), so that ``selfas-graph --help``
-#: and a Ctrl-C while a command starts need not wait for numba, scipy, h5py and networkx
+#: where each name of the API lives; imported on first use (PEP 562), so that the command line
+#: imports numba, scipy, h5py and networkx inside its own handling of a Ctrl-C (cli/main.py::main)
 _API = {
     ".io.export": ("ExportError", "export_run"),
     ".io.h5md": ("RunFile", "RunFileError", "RunWriter"),

@@ -240,7 +240,7 @@ def test_top_level_names():
 
 
 def test_the_package_and_the_command_line_import_the_heavy_libraries_on_first_use():
-    """`selfas-graph --help` and a Ctrl-C while a command starts need not wait for numba and the rest:
+    """The command line imports numba and the rest inside its handling of a Ctrl-C (cli/main.py::main):
     the API's names are imported when first used (``selfas_graph.__getattr__``)."""
     import subprocess
 
