@@ -130,8 +130,8 @@ class RunFile:
 
     @property
     def status(self) -> str:
-        """How the run stands: "finished", "interrupted at step N", "failed: ...", or "running" (still
-        running, or killed before it could say otherwise)."""
+        """How the run stands: "finished", "interrupted at step N", "interrupted (Ctrl-C)" (a run driven from
+        Python), "failed: ...", or "running" (still running, or killed before it could say otherwise)."""
         return str(self.meta.get("status", "unknown"))
 
     @property

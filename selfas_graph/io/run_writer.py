@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import numbers
 import os
 import time
 from pathlib import Path
@@ -13,6 +14,7 @@ import numpy as np
 
 from ..model.circuitlog import CIRCUIT_LOG_DTYPE, circuit_log_array
 from ..model.events import CONDUCTOR_NAMES, KIND_NAMES, OPEN_CIRCUIT, SHORT_CIRCUIT, event_array
+from ..model.operations import RunInterrupted
 from ..model.topology import ROLE_NAMES
 from . import layout
 from .h5md_format import (
@@ -193,6 +195,7 @@ class RunWriter(_PendingRows):
         self._obs = {}
         self.frame_interval = frame_interval
         self._last_time = None
+        self._continues_from = None
         self.observables = f.create_group(layout.OBSERVABLES)
         g = self.observables.create_group(layout.BOND_ERROR_PER_STEP)
         self._per_step = (_growable(g, "step", (), "<i8"), _growable(g, "value", (), "<f8"))
@@ -226,6 +229,9 @@ class RunWriter(_PendingRows):
         and writes it again (a kill while it was written could have torn it unseen).
         """
         path = Path(path)
+        if isinstance(step, (bool, np.bool_)) or not isinstance(step, numbers.Integral) or step < 0:
+            raise TypeError(f"RunWriter.reopen(step=...): the step to continue after, an integer >= 0, got {step!r}")
+        step = int(step)
         try:
             with h5py.File(path, "r") as f:
                 plan = trim_plan(f, step if step > 0 else -1, path)
@@ -266,6 +272,7 @@ class RunWriter(_PendingRows):
             f[layout.CIRCUIT_LOG][layout.CIRCUIT_LOG_COLUMNS[0]].shape[0] if layout.CIRCUIT_LOG in f else 0
         )
         f[layout.PROVENANCE].attrs["status"] = "running"
+        self._continues_from = step
         self._resumed_with(mpi_ranks)
         if t_end is not None:
             self._new_end_time(float(t_end))
@@ -335,6 +342,31 @@ class RunWriter(_PendingRows):
                 f"{self.path}: this writer is closed; to write more frames keep it open (one with block "
                 f"around every sim.run), or continue the file with RunWriter.reopen"
             )
+
+    def check_continues(self, step, position_shape) -> None:
+        """Refuse, before a run takes its first step, a simulation whose frames this file cannot take: the
+        writer closed, the file's tips of another count, its last frame after ``step`` (another simulation,
+        or one started again), or a file reopened (:meth:`reopen`) to continue after another step."""
+        self._check_open()
+        shape = self._elements["position"][2].shape[1:]
+        if tuple(position_shape) != shape:
+            raise ValueError(
+                f"{self.path}: the simulation has {position_shape[0]} tips, the file's frames {shape[0]}: this "
+                f"writer was made for another simulation"
+            )
+        if self._continues_from is not None and step != self._continues_from:
+            raise ValueError(
+                f"{self.path}: reopened to continue after step {self._continues_from}, but the simulation is at "
+                f"step {step}: reopen it at the simulation's step, RunWriter.reopen(path, sim.state.step)"
+            )
+        steps = self._elements["position"][0]
+        if steps.shape[0] and int(steps[-1]) > step:
+            raise ValueError(
+                f"{self.path}: the file's last frame is at step {int(steps[-1])}, after this simulation's step "
+                f"{step}: a writer takes the frames of the simulation it was made for (RunWriter.for_simulation "
+                f"for another)"
+            )
+        self._continues_from = None
 
     def check_space(self):
         """Raise :class:`DiskFullError` (nothing written) when the next frame may not fit
@@ -508,7 +540,15 @@ class RunWriter(_PendingRows):
         return self
 
     def __exit__(self, exc_type, exc, tb):
-        self.close(status="finished" if exc_type is None else f"failed: {exc}")
+        if exc_type is None:
+            status = "finished"
+        elif issubclass(exc_type, KeyboardInterrupt):
+            status = "interrupted (Ctrl-C)"
+        elif issubclass(exc_type, RunInterrupted):  # a run's stop(): "interrupted at step N"
+            status = str(exc)
+        else:
+            status = f"failed: {exc or exc_type.__name__}"
+        self.close(status=status)
 
     def set_attrs(self, **attrs):
         for k, v in attrs.items():

@@ -184,6 +184,7 @@ def as_operation(obj, where: str) -> Operation:
 def run_operations(sim, writer, every, n_steps, progress, progress_every, checkpointer, stop, check_every) -> list:
     """The operations of one :meth:`Simulation.run <.simulation.Simulation.run>` call, in their order
     (module docstring): those its arguments make around the attached ``sim.operations``."""
+    _check_arguments(sim, writer, progress, checkpointer, stop)
     ops = [PerStepRows(writer, every), FrameWriter(writer, every)] if writer is not None else [EnergyCheck(every)]
     ops += [as_operation(o, f"sim.operations[{k}]") for k, o in enumerate(sim.operations)]
     if progress is not None:
@@ -194,6 +195,20 @@ def run_operations(sim, writer, every, n_steps, progress, progress_every, checkp
     if checkpoint is not None:
         ops.append(checkpoint)
     return ops
+
+
+def _check_arguments(sim, writer, progress, checkpointer, stop) -> None:
+    """Refuse before any step what would fail only after one: a closed writer, one whose file another
+    simulation (or another step) continues, callbacks that cannot be called."""
+    for name, fn in (("progress", progress), ("stop", stop)):
+        if fn is not None and not callable(fn):
+            raise TypeError(f"run({name}=...): a callable, got {fn!r}")
+    if checkpointer is not None and not (
+        callable(getattr(checkpointer, "due", None)) and hasattr(checkpointer, "write")
+    ):
+        raise TypeError(f"run(checkpointer=...): an object with due() and write(sim), got {checkpointer!r}")
+    if writer is not None and hasattr(writer, "check_continues"):
+        writer.check_continues(sim.state.step, sim.state.position.shape)
 
 
 class PerStepRows(Operation):
@@ -288,8 +303,8 @@ class Checkpoint(Operation):
 
 
 class StopCheck(Operation):
-    """Stops the run when ``stop()`` is true (asked every ``every`` steps): writes a checkpoint (with ``checkpoint``, a
-    :class:`Checkpoint`) and raises :class:`RunInterrupted`."""
+    """Stops the run when ``stop()`` is true (asked every ``every`` steps): hands every operation's buffered data
+    on, writes a checkpoint (with ``checkpoint``, a :class:`Checkpoint`) and raises :class:`RunInterrupted`."""
 
     def __init__(self, stop, checkpoint: Checkpoint | None = None, every: int = 1):
         self.trigger = When(stop, every)
@@ -298,6 +313,8 @@ class StopCheck(Operation):
     def act(self, sim, i, n_steps):
         if self.checkpoint is not None:
             self.checkpoint.act(sim, i, n_steps)
+        else:
+            sim.flush_operations()
         raise RunInterrupted(sim.state.step)
 
 

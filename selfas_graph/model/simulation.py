@@ -319,7 +319,8 @@ class Simulation:
             When due, the writer's pending rows and events are flushed and a checkpoint is written;
             one is also written at the end.
         stop : callable() -> bool, optional
-            When true, pending data are flushed, a checkpoint is written and :class:`RunInterrupted` raised.
+            When true, pending data are flushed, a checkpoint is written and :class:`RunInterrupted` raised
+            (on a Ctrl-C, KeyboardInterrupt, the pending data are flushed too).
         check_every : int
             ``checkpointer`` and ``stop`` are asked after the steps that are multiples of this (default
             every step; ``integrator.slow_every`` lets the fast steps between run in one call).
@@ -351,16 +352,17 @@ class Simulation:
                 summary.steps = i
             for operation in ops:
                 operation.finish(self)
+        except KeyboardInterrupt:  # Ctrl-C in a notebook: what the steps before it buffered reaches the writer
+            self.flush_operations()
+            raise
         finally:
             summary.wall_seconds = time.perf_counter() - t0
             self._ops = ()
-        summary.t_end = self.state.time
-        summary.max_bond_error = self.health.max_bond_error
+        summary.t_end, summary.max_bond_error = self.state.time, self.health.max_bond_error
         frames = next((o for o in ops if isinstance(o, op.FrameWriter)), None)
         obs = frames.last_observables if frames is not None and n_steps else None
         obs = obs if obs is not None else self.observables()
-        summary.energy_balance = float(obs["energy_balance"])
-        summary.energy_scale = energy_scale(obs)
+        summary.energy_balance, summary.energy_scale = float(obs["energy_balance"]), energy_scale(obs)
         summary.frames = writer.n_frames if writer is not None else 0
         return summary
 

@@ -1,0 +1,109 @@
+"""A run file driven from Python keeps what its simulation did and nothing else: a writer refuses a
+simulation it cannot continue before any step, a stop or a Ctrl-C hands the buffered rows on, and
+arguments that could only fail after a step are refused before it.
+
+The system: three rods in a column across a gap of 3.06 (their tips touch at step 0, so the circuit
+closes at once and the run has events to lose)."""
+
+import numpy as np
+import pytest
+
+import selfas_graph as sg
+from selfas_graph.model.operations import RunInterrupted
+
+PARAMS = sg.Parameters.from_dict(
+    {
+        "rods": {"count": 3},
+        "placement": {"box": [[-3, 3], [-3, 3], [-1.5, 1.5]]},
+        "forces": {"tip_magnetic": {}, "tip_brake": {}, "ambient_brake": {}, "electrodes": {"gap": 3.06}},
+        "circuit": {"delta_J0": 2.0},
+        "output": {"interval": 0.05},
+    }
+)
+CENTRES = [[0, 0, -1.02], [0, 0, 0], [0, 0, 1.02]]
+
+
+def column(**kw):
+    return sg.Simulation(PARAMS, state=sg.State.from_rods(CENTRES, [[0, 0, 1]] * 3, 1.0, 1.0, **kw))
+
+
+def test_reopen_takes_a_step_not_a_time(tmp_path):
+    sim = column()
+    with sg.RunWriter.for_simulation(sim, tmp_path / "r.h5") as w:
+        sim.run(0.1, writer=w)
+    for bad in (0.1, True, -1, "100"):
+        with pytest.raises(TypeError, match="an integer >= 0"):
+            sg.RunWriter.reopen(tmp_path / "r.h5", step=bad)
+    with sg.RunFile(tmp_path / "r.h5") as run:
+        assert run.step.tolist() == [0, 50, 100]  # nothing trimmed
+
+
+def test_a_writer_refuses_another_simulation_before_any_step(tmp_path):
+    a, b = column(), column()
+    with sg.RunWriter.for_simulation(a, tmp_path / "r.h5") as w:
+        a.run(0.1, writer=w)
+        with pytest.raises(ValueError, match="last frame is at step 100, after this simulation's step 0"):
+            b.run(0.1, writer=w)
+        assert b.state.step == 0
+    with sg.RunFile(tmp_path / "r.h5") as run:
+        assert run.time.tolist() == [0.0, 0.05, 0.1]
+    four = sg.Simulation(PARAMS.replace(rods={"count": 4}))
+    with sg.RunWriter.for_simulation(four, tmp_path / "four.h5") as w:
+        with pytest.raises(ValueError, match="the simulation has 6 tips, the file's frames 8"):
+            column().run(0.1, writer=w)
+    with sg.RunFile(tmp_path / "four.h5") as run:
+        assert run.n_frames == 0 and len(run.events()) == 0  # the column's events stayed out of it
+
+
+def test_a_reopened_file_continues_the_step_it_was_reopened_at(tmp_path):
+    sim = column()
+    with sg.RunWriter.for_simulation(sim, tmp_path / "r.h5") as w:
+        sim.run(0.1, writer=w)
+    sim.run(0.2)
+    with sg.RunWriter.reopen(tmp_path / "r.h5", step=100) as w:
+        with pytest.raises(ValueError, match="reopened to continue after step 100, but the simulation is at step 200"):
+            sim.run(0.3, writer=w)
+
+
+def test_a_stop_hands_the_buffered_rows_and_events_to_the_file(tmp_path):
+    sim = column()
+    with pytest.raises(RunInterrupted):
+        with sg.RunWriter.for_simulation(sim, tmp_path / "r.h5") as w:
+            sim.run(0.3, writer=w, stop=lambda: sim.state.step >= 45)
+    with sg.RunFile(tmp_path / "r.h5") as run:
+        assert len(run.events()) == len(sim.events) > 0
+        steps, _ = run.observable("bond_error_per_step")
+        assert steps.tolist() == list(range(1, 46))
+        assert run.status == "interrupted at step 45"
+
+
+def test_a_ctrl_c_hands_the_buffered_rows_on_and_says_so(tmp_path):
+    sim = column()
+
+    def ctrl_c(sim_, done, total):
+        if sim_.state.step >= 30:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        with sg.RunWriter.for_simulation(sim, tmp_path / "r.h5") as w:
+            sim.run(0.3, writer=w, progress=ctrl_c, progress_every=10)
+    with sg.RunFile(tmp_path / "r.h5") as run:
+        assert len(run.events()) == len(sim.events) > 0
+        assert run.observable("bond_error_per_step")[0].tolist() == list(range(1, 31))
+        assert run.status == "interrupted (Ctrl-C)"
+
+
+def test_arguments_that_would_fail_after_a_step_are_refused_before_it(tmp_path):
+    sim = column()
+    with sg.RunWriter.for_simulation(sim, tmp_path / "r.h5") as w:
+        sim.run(0.1, writer=w)
+    with pytest.raises(sg.RunFileError, match="this writer is closed"):
+        sim.run(0.2, writer=w)
+    with pytest.raises(TypeError, match=r"run\(progress=...\): a callable"):
+        sim.run(0.2, progress=True)
+    with pytest.raises(TypeError, match=r"run\(stop=...\): a callable"):
+        sim.run(0.2, stop=True)
+    with pytest.raises(TypeError, match=r"run\(checkpointer=...\)"):
+        sim.run(0.2, checkpointer="ckpt.h5")
+    assert sim.state.step == 100
+    assert np.isfinite(sim.state.position).all()
