@@ -164,6 +164,8 @@ def frame_claims(run, frame=-1, loops=True) -> dict[str, float]:
     dict with the keys of :data:`CLAIM_KEYS`. A frame without contact data (a run with
     contacts off) has only time, step and NaN for every other key.
     """
+    if not hasattr(run, "frame_index"):
+        raise TypeError(f"frame_claims(run, ...): an open RunFile (with RunFile(path) as run: ...), got {run!r}")
     k = run.frame_index(frame)
     out = {"time": float(run.time[k]), "step": float(run.step[k])}
     g = _graph_of_frame(run, k)

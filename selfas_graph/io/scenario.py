@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..model import params as P
-from ..model.validate import as_decimal
+from ..model.validate import MAX_RESISTANCE_SPREAD, as_decimal
 
 #: every float of a scenario is 0 or within these magnitudes: products of up to ten of them (q^2 B / r*^3 ...)
 #: stay finite in double precision (1e30^10 = 1e300), and reciprocals of tiny ones (1 / R_D^2 ...) too
@@ -259,13 +259,6 @@ def _describe(value):
     if len(text) > 60:
         text = text[:57] + "..."
     return f"{text} ({type(value).__name__})"
-
-
-#: the largest ratio of the circuit's largest resistance to its smallest: the currents of the
-#: quick scene's first short circuit (12 rods in series) came out right to 1e-8 with contacts of
-#: 1e-12 to 1e8 R0, 0.5 % off at 1e12 and wrong by orders of magnitude at 1e16 and 1e-16 (direct
-#: and CG solves alike); at 1e8 the count of rods in series (a 1e-9 relative test) already failed
-MAX_RESISTANCE_SPREAD = 1e6
 
 
 def _resistance_spread(p):

@@ -27,7 +27,8 @@ from .network import Network
 from .observables import Observables, energy_scale
 from .operations import RunInterrupted, RunSummary
 from .params import Parameters
-from .state import State, StateError, random_state
+from .state import State, random_state
+from .state_checks import check_against
 from .terms import ForceField
 
 __all__ = ["Simulation", "RunSummary", "RunInterrupted", "NumericalFailure"]
@@ -75,13 +76,11 @@ class Simulation:
                 f"Simulation(params): a Parameters (Parameters.from_dict(d) for a dict), got {type(params).__name__}"
             )
         self.params = params
-        if state is not None and check_state:
-            state = state.checked()
-        if state is not None and state.n_rods != params.rods.count:
-            raise StateError(
-                f"the state has {state.n_rods} rods but rods.count = {params.rods.count}; make them "
-                f"agree, e.g. params.replace(rods={{'count': {state.n_rods}}})"
-            )
+        if state is not None:
+            if not isinstance(state, State):
+                raise TypeError(f"Simulation(state=...): a State (State.from_rods(...)), got {type(state).__name__}")
+            state = state.checked() if check_state else state
+            check_against(params, state, values=check_state)
         self.state = random_state(params) if state is None else state
         #: contacts, graph, conductor potentials, circuit and the rod currents (None when contacts.enabled is false)
         self.network = Network.from_params(params, self.state) if params.contacts.enabled else None
@@ -119,7 +118,7 @@ class Simulation:
     @classmethod
     def from_scenario(cls, scenario, **kw):
         if not isinstance(getattr(scenario, "params", None), Parameters):
-            raise TypeError(f"Simulation.from_scenario: a Scenario (load_scenario(path)), got {scenario!r}")
+            raise TypeError(f"Simulation.from_scenario: a Scenario (load_scenario), got {type(scenario).__name__}")
         sim = cls(scenario.params, **kw)
         sim.scenario = scenario  # its text goes into run files written from Python
         return sim

@@ -174,7 +174,7 @@ class State:
             i = int(off[np.argmax(np.abs(length[off] - target[off]))])
             raise StateError(
                 f"State.position: rod {i} has length {length[i]:.6g}, not its "
-                f"{'rod_length' if 'rod_length' in extra else 'length 1'} {target[i]:.6g} (to "
+                f"{'rod_length ' if 'rod_length' in extra else 'length '}{target[i]:.6g} (to "
                 f"{BOND_TOLERANCE:g} relative), {len(off)} rods are off; build the state with "
                 f"State.from_rods (centres and axes)"
             )
@@ -203,7 +203,12 @@ class State:
         if axis.size != 3 * n:
             raise ValueError(f"axis must hold one 3-vector per rod ({n}), got shape {axis.shape}")
         axis = axis.reshape(n, 3)
-        axis = axis / np.linalg.norm(axis, axis=1)[:, None]
+        norm = np.linalg.norm(axis, axis=1)
+        if not (np.isfinite(norm).all() and (norm > 0).all()):
+            raise ValueError(
+                f"axis of rod {int(np.flatnonzero(~(norm > 0) | ~np.isfinite(norm))[0])}: zero or not finite"
+            )
+        axis = axis / norm[:, None]
         position = np.empty((2 * n, 3))
         if length is None:
             half = 0.5 * axis
@@ -226,6 +231,13 @@ class State:
         if v.size != 6 * n:
             raise ValueError(f"velocity must hold one 3-vector per tip ({2 * n}), got shape {v.shape}")
         v = v.reshape(2 * n, 3)
+        apart = np.einsum("ij,ij->i", v[1::2] - v[0::2], axis)
+        if (np.abs(apart) > 1e-9 * max(1.0, float(np.abs(v).max(initial=0.0)))).any():
+            i = int(np.argmax(np.abs(apart)))
+            raise ValueError(
+                f"velocity: the tips of rod {i} move apart along its axis at {apart[i]:.3g}; a rigid rod's may not "
+                f"(give both tips v, or v -+ w x s/2 for a spin w): the first step would take it away unaccounted"
+            )
         return cls(
             position,
             v,

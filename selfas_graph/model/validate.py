@@ -9,6 +9,12 @@ import operator
 
 import numpy as np
 
+#: the largest ratio of the circuit's largest resistance to its smallest: the currents of the
+#: quick scene's first short circuit (12 rods in series) came out right to 1e-8 with contacts of
+#: 1e-12 to 1e8 R0, 0.5 % off at 1e12 and wrong by orders of magnitude at 1e16 and 1e-16 (direct
+#: and CG solves alike); at 1e8 the count of rods in series (a 1e-9 relative test) already failed
+MAX_RESISTANCE_SPREAD = 1e6
+
 
 def as_decimal(value) -> float:
     """A real number as a float: a float32 (or narrower) number stands for the decimal it prints as, not

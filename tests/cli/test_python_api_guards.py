@@ -107,3 +107,55 @@ def test_arguments_that_would_fail_after_a_step_are_refused_before_it(tmp_path):
         sim.run(0.2, checkpointer="ckpt.h5")
     assert sim.state.step == 100
     assert np.isfinite(sim.state.position).all()
+
+
+@pytest.mark.parametrize(
+    "state, message",
+    [
+        # the nodal solve's currents were 9 % off at this spread, with a Kirchhoff residual of 5e-16
+        (dict(resistance=[1, 1e15, 1]), "span 1 to 1e[+]15 R0, a factor above 1e[+]06"),
+        (dict(length=0.01), "mean length is 0.01 and the shortest 0.01"),
+        (dict(length=2.0), "mean length is 2 and the shortest 2"),
+    ],
+)
+def test_a_state_by_hand_obeys_what_a_scene_file_must(state, message):
+    with pytest.raises(sg.StateError, match=message):
+        column(**state)
+    column(resistance=[1, 1e5, 1])  # within the spread
+
+
+def test_a_state_by_hand_fits_its_parameters():
+    beyond = sg.State.from_rods([[0, 0, -1.02], [0, 0, 0], [0, 0, 10.0]], [[0, 0, 1]] * 3, 1.0, 1.0)
+    with pytest.raises(sg.StateError, match=r"tip 4 \(rod 2\) is at z = 9.5, beyond the electrodes at z = \+-1.53"):
+        sg.Simulation(PARAMS, state=beyond)
+    with pytest.raises(sg.StateError, match="rods.resistance is set in the parameters, but the state has none"):
+        sg.Simulation(PARAMS.replace({"rods.resistance": 2.0}), state=column().state)
+    with pytest.raises(sg.StateError, match="the state has 3 rods but rods.count = 4"):
+        sg.Simulation(PARAMS.replace(rods={"count": 4}), state=column().state)
+
+
+def test_from_rods_refuses_tips_that_move_apart_and_a_zero_axis():
+    axes = [[0, 0, 1]] * 3
+    apart = [[0, 0, -1], [0, 0, 1]] * 3  # the first step took the kinetic energy from 3.0 to 0.0005, uncounted
+    with pytest.raises(ValueError, match="the tips of rod 0 move apart along its axis at 2"):
+        sg.State.from_rods(CENTRES, axes, 1.0, 1.0, velocity=apart)
+    spin = np.array([[-0.5, 0, 0], [0.5, 0, 0]] * 3) + [0.1, 0.2, 0.3]  # a drift and a spin: taken
+    sim = sg.Simulation(PARAMS, state=sg.State.from_rods(CENTRES, axes, 1.0, 1.0, velocity=spin))
+    assert np.array_equal(sim.state.velocity, spin)
+    with pytest.raises(ValueError, match="axis of rod 1: zero or not finite"):
+        sg.State.from_rods(CENTRES, [[0, 0, 1], [0, 0, 0], [0, 0, 1]], 1.0, 1.0)
+
+
+def test_the_wrong_kind_of_argument_is_named(tmp_path):
+    with pytest.raises(TypeError, match=r"Simulation\(state=...\): a State .*, got dict"):
+        sg.Simulation(PARAMS, state={"position": []})
+    with pytest.raises(TypeError, match="a Scenario .*, got Parameters"):
+        sg.Simulation.from_scenario(PARAMS)
+    from selfas_graph.analysis.claims import frame_claims
+
+    with pytest.raises(TypeError, match=r"frame_claims\(run, ...\): an open RunFile"):
+        frame_claims(str(tmp_path / "r.h5"))
+    stretched = column().state
+    stretched.position[1, 2] += 0.1
+    with pytest.raises(sg.StateError, match=r"rod 0 has length 1.1, not its length 1 \(to"):
+        sg.Simulation(PARAMS, state=stretched)
