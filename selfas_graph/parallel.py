@@ -36,9 +36,6 @@ class _SerialWorld:
     def bcast(self, obj, root=0):
         return obj
 
-    def allreduce(self, value, op=None):
-        return value
-
     def allgather(self, value):
         return [value]
 
@@ -75,14 +72,6 @@ def fit_threads_to_cores(world=world):
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
         numba.set_num_threads(max(1, min(numba.config.NUMBA_NUM_THREADS, cores // world.size)))
     return numba.get_num_threads()
-
-
-def any_rank(flag: bool, comm=None) -> bool:
-    """True on every rank if ``flag`` is true on any rank (a collective call: every rank must make it)."""
-    comm = world if comm is None else comm
-    if comm.size == 1:
-        return bool(flag)
-    return comm.allreduce(int(bool(flag))) > 0
 
 
 class RowBlocks:

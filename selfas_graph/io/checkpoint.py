@@ -62,14 +62,6 @@ def _digest(snapshot: dict, meta: dict) -> str:
     return h.hexdigest()
 
 
-def _stored(value):
-    """A value as it reads back from HDF5 (attribute scalars as Python / numpy scalars)."""
-    arr = np.asarray(value)
-    if arr.ndim == 0 and arr.dtype.fields is None:
-        return arr.item()
-    return arr
-
-
 def write_checkpoint(path, snapshot: dict, meta: dict, failed: dict | None = None) -> None:
     """Write ``snapshot`` and ``meta`` to ``path`` atomically (write aside, fsync, rename).
 

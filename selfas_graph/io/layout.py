@@ -105,7 +105,6 @@ GRAPH = "graph"
 #: datasets of GRAPH with one row per saved frame (``floating`` only in files from 0.4 on)
 GRAPH_PER_FRAME = ("step", "time", "tip_contacts_count", "conductor_contacts_count", "role", "current", "potential")
 GRAPH_FLOATING = "floating"
-GRAPH_TIP_CONTACTS = "tip_contacts"
 #: datasets of GRAPH with one row per tip-conductor contact
 GRAPH_CONDUCTOR_CONTACTS = ("conductor_tip", "conductor_id", "conductor_potential")
 #: the datasets a readable GRAPH holds

@@ -296,5 +296,6 @@ class ForceParams:
     )
 
     def active(self):
-        """Names of the terms that are on, in docs/model.md order ('Force terms')."""
+        """Names of the terms that are on, in the order they are computed and summed: 1-8, 11, 9, 10 (this
+        class's fields; docs/model.md 'Force terms')."""
         return [f.name for f in dataclasses.fields(self) if getattr(self, f.name) is not None]

@@ -68,8 +68,8 @@ class FieldSource:
     """A term whose source also makes a magnetic field that other terms feel.
 
     The Lorentz force on rod currents (docs/model.md 'Term 10') sums, at its quadrature points,
-    the field of the rod currents and of every field source that is on, in the order of the
-    terms (docs/model.md 'Force terms').
+    the field of the rod currents and of every field source that is on, in the order the terms
+    are summed (1-8, 11, 9, 10; docs/model.md 'Force terms').
     """
 
     def field_at(self, points, out):  # pragma: no cover - interface

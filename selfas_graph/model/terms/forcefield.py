@@ -66,7 +66,7 @@ class ForceField:
 
     Attributes
     ----------
-    terms : list of the active term objects, docs/model.md order ('Force terms')
+    terms : list of the active term objects, in the order they are summed (1-8, 11, 9, 10; docs/model.md 'Force terms')
     channels : list of (name, conservative)
     field_sources : the terms that are also sources of a magnetic field (FieldSource), in term order
     context : EvalContext, what the terms read and write in an evaluation (bound to its arrays)
@@ -98,7 +98,7 @@ class ForceField:
         self.field_sources = [t for t in self.terms if isinstance(t, FieldSource)]
         for t in self.terms:
             if isinstance(t, CurrentLorentzForce):
-                # its field sources are terms too, some built after it (docs/model.md 'Force terms' order)
+                # its field sources, every term that makes a magnetic field, in the order of the terms
                 t.field_sources = tuple(self.field_sources)
         self.nonconservative = [name for name, cons in self.channels if not cons]
         self.conservative = [name for name, cons in self.channels if cons]
