@@ -26,11 +26,11 @@ Only one process writes. Every frame is followed by a flush, so a run that is
 killed keeps everything up to its last saved frame. ``status`` is "running"
 until the run ends, then "finished" or "failed: <reason>".
 
-The format lives in four modules, all re-exported here (import the names from this module):
+The format lives in five modules, all re-exported here (import the names from this module):
 :mod:`~selfas_graph.io.h5md_format` (units, the events' dtype, growable datasets, errors, free
 space, :func:`appendable_problems`), :mod:`~selfas_graph.io.run_provenance` (:func:`run_provenance`),
-:mod:`~selfas_graph.io.run_writer` (:class:`RunWriter`, :class:`NullWriter`) and
-:mod:`~selfas_graph.io.run_reader` (:class:`RunFile`).
+:mod:`~selfas_graph.io.run_writer` (:class:`RunWriter`), :mod:`~selfas_graph.io.pending_rows`
+(:class:`NullWriter`) and :mod:`~selfas_graph.io.run_reader` (:class:`RunFile`).
 """
 
 from .h5md_format import CHARGE as CHARGE
@@ -50,7 +50,7 @@ from .h5md_format import appendable_problems as appendable_problems
 from .h5md_format import free_bytes as free_bytes
 from .h5md_format import is_io_error as is_io_error
 from .h5md_format import observable_unit as observable_unit
+from .pending_rows import NullWriter as NullWriter
 from .run_provenance import run_provenance as run_provenance
 from .run_reader import RunFile as RunFile
-from .run_writer import NullWriter as NullWriter
 from .run_writer import RunWriter as RunWriter
