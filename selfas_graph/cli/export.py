@@ -12,7 +12,7 @@ from pathlib import Path
 
 from ..io.export import FORMATS, ExportError, export_run
 from ..io.h5md import RunFileError
-from .main import CliError
+from .main import CliError, raised_in_hdf5
 
 
 def add_arguments(p):
@@ -39,6 +39,8 @@ def run(args):
     except (RunFileError, ExportError) as exc:
         raise CliError(str(exc)) from None
     except OSError as exc:  # named by the file asked for, not the temporary file it is written to first
+        if raised_in_hdf5(exc):  # reading the run file
+            raise
         target = args.output or Path(args.run).with_suffix("." + args.format)
         raise CliError(f"cannot write the export {target}: {exc.strerror or exc}") from None
     print(f"wrote {path} ({n} frames, {args.format})")

@@ -37,6 +37,9 @@ COMMANDS = {
     ),
 }
 
+#: the commands that only read run files: an HDF5 error while they run is a damaged input
+READERS = ("topology", "analyze", "plot", "export", "compare")
+
 EXIT_USAGE = 2
 EXIT_NUMERICAL = 3
 EXIT_IO = 4
@@ -124,6 +127,16 @@ class _Parser(argparse.ArgumentParser):
         super().error(message)
 
 
+def raised_in_hdf5(exc) -> bool:
+    """Whether ``exc`` was raised in h5py (HDF5 read errors are OSError, RuntimeError or KeyError there)."""
+    tb = exc.__traceback__
+    while tb is not None:
+        if "h5py" in tb.tb_frame.f_code.co_filename:
+            return True
+        tb = tb.tb_next
+    return False
+
+
 def _interrupted(who) -> int:
     """Ctrl-C or SIGTERM that reached the command line outside a run's own handling (while a command
     starts, or a command without any): one line, exit 130. Under ``mpiexec`` the other ranks may wait
@@ -171,6 +184,13 @@ def _main(argv) -> int:
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except (OSError, RuntimeError) as exc:
+        if args.command not in READERS or not raised_in_hdf5(exc):
+            raise
+        # a damaged run file (bytes overwritten in its metadata): HDF5 says so only when the part is read
+        files = " or ".join(str(getattr(args, a)) for a in ("run", "a", "b") if getattr(args, a, None))
+        print(f"selfas-graph {args.command}: error: cannot read {files}: {exc} (a damaged file?)", file=sys.stderr)
+        return EXIT_USAGE
     except Exception:
         if world.size == 1:
             raise

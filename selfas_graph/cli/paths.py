@@ -25,7 +25,7 @@ def same_file(a, b) -> bool:
         return False
 
 
-def check_target(path, what="output file", force=False, inputs=()) -> Path:
+def check_target(path, what="output file", force=False, inputs=(), keep_hdf5=False) -> Path:
     """Refuse a path that cannot or must not be written; returns it as a Path.
 
     Parameters
@@ -37,6 +37,9 @@ def check_target(path, what="output file", force=False, inputs=()) -> Path:
         An existing regular file may be replaced.
     inputs : iterable of path-like
         Files the command reads: never a target, not even with ``force``.
+    keep_hdf5 : bool
+        An existing HDF5 file (a run file, a checkpoint, a failure file) is never replaced, not even with
+        ``force``: for the commands that write something else (plots, movies).
     """
     path = Path(path)
     if "\x00" in str(path):
@@ -75,6 +78,11 @@ def check_target(path, what="output file", force=False, inputs=()) -> Path:
                     f"the {what} {path} is the input {source} of this command; "
                     f"give another name (it would be destroyed, even with --force)"
                 )
+        if keep_hdf5 and _is_hdf5(path):
+            raise CliError(
+                f"the {what} {path} is an HDF5 file (a run file, checkpoint or failure file?); this command never "
+                f"replaces one, even with --force: give another name"
+            )
         if not force:
             raise CliError(f"{what} {path} exists; pass --force to overwrite it or -o to choose another name")
         if in_use(path):
@@ -95,6 +103,15 @@ def check_folder(path, what="output file") -> None:
         raise CliError(f"the folder {parent} of the {what} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise CliError(f"the folder {parent} of the {what} is not writable")
+
+
+def _is_hdf5(path) -> bool:
+    import h5py
+
+    try:
+        return bool(h5py.is_hdf5(path))
+    except OSError:
+        return False
 
 
 def _name_max(folder) -> int:

@@ -46,7 +46,7 @@ from .paths import check_folder, check_target
 from .plots.frame import LARGE_RUN as LARGE_RUN
 from .plots.frame import _density, _field_or_flux, _figsize, _snapshot
 from .plots.series import _fractal, _moment, _skeleton, _timeline
-from .plots.style import _matplotlib, _save_png
+from .plots.style import _matplotlib, _save_png, plot_format
 from .plots.summary import plot_summary as plot_summary
 
 KINDS = ("snapshot", "density", "field", "flux", "timeline", "moment", "fractal", "skeleton")
@@ -71,7 +71,7 @@ def add_arguments(p):
     p.add_argument(
         "-o",
         "--output",
-        help="PNG file to write (default next to the run file: RUN_KIND_frameK.png, or RUN_KIND.png for the "
+        help="PNG, PDF or SVG file to write, by its suffix (default next to the run file: RUN_KIND_frameK.png, or RUN_KIND.png for the "
         "kinds over time: timeline, moment, fractal, skeleton)",
     )
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
@@ -120,7 +120,8 @@ def _output_path(args, run_path: Path, frame: int) -> Path:
         out = run_path.with_name(f"{run_path.stem}_{args.kind}.png")
     else:
         out = run_path.with_name(f"{run_path.stem}_{args.kind}_frame{frame}.png")
-    check_target(out, "output file", force=args.force, inputs=[run_path])
+    plot_format(out)
+    check_target(out, "output file", force=args.force, inputs=[run_path], keep_hdf5=True)
     check_folder(out, "output file")
     return out
 

@@ -384,3 +384,59 @@ def test_bug_bench_tools_leave_a_dangling_link_as_it_is(tmp_path, capsys, option
     code = main(["bench", "percolation", str(quick), "--counts", "10", "--seeds", "1"] + args)
     assert code == 2 and "symbolic link" in capsys.readouterr().err
     assert os.readlink(link) == str(tmp_path / "missing" / "x.json") and sorted(os.listdir(tmp_path)) == ["dang.json"]
+
+
+@pytest.mark.parametrize("command", ["topology", "analyze", "plot", "export", "compare"])
+def test_bug_a_run_file_damaged_inside_gives_a_traceback(command, workdir, capsys, real_run):
+    """Each B-tree node of the run file in turn made unreadable (its signature overwritten, as bytes
+    written over the file's metadata do): HDF5 says so only when the part is read, from inside h5py."""
+    data = real_run["run_bytes"]
+    nodes = [k for k in range(len(data) - 4) if data[k : k + 4] == b"TREE"]
+    assert len(nodes) > 5
+    args = {
+        "topology": (),
+        "analyze": ("--series",),
+        "plot": ("--kind", "timeline", "-o", workdir / "t.png", "--force"),
+        "export": ("--format", "xyz", "-o", workdir / "t.xyz", "--force"),
+        "compare": (),
+    }[command]
+    damaged = 0
+    for k in nodes:
+        path = workdir / "damaged.h5"
+        path.write_bytes(data[:k] + b"XXXX" + data[k + 4 :])
+        res = cli(capsys, command, *((real_run["run"], path) if command == "compare" else (path,)), *args)
+        check_contract(res, allowed=(0, 1, 2))
+        if res.code == 2:
+            damaged += 1
+            assert "damaged" in res.err or "cannot" in res.err, res.err
+    assert damaged > 0
+
+
+@pytest.mark.parametrize("victim", ["run", "checkpoint"])
+@pytest.mark.parametrize("name", ["victim.checkpoint.h5", "victim.png", "victim.gif"])
+def test_bug_plot_force_writes_over_an_hdf5_file(victim, name, workdir, capsys, real_run):
+    """`plot -o RUN.checkpoint.h5 --force` wrote a PNG over the checkpoint; an HDF5 file is never replaced,
+    whatever its name says (the .h5 name is refused for its suffix first)."""
+    target = workdir / name
+    target.write_bytes(real_run["run_bytes"] if victim == "run" else real_run["checkpoint_bytes"])
+    before = target.read_bytes()
+    more = ("--movie", target) if name.endswith(".gif") else ("--kind", "timeline", "-o", target)
+    res = cli(capsys, "plot", real_run["run"], *more, "--force")
+    _expect_usage_error(res, ".png, .pdf or .svg" if name.endswith(".h5") else "is an HDF5 file")
+    assert target.read_bytes() == before
+
+
+@pytest.mark.parametrize(
+    "suffix, magic", [(".pdf", b"%PDF"), (".svg", b"<?xml"), (".png", b"\x89PNG"), ("", b"\x89PNG")]
+)
+def test_bug_plot_writes_png_bytes_under_any_name(suffix, magic, workdir, capsys, real_run):
+    out = workdir / f"t{suffix}"
+    check_contract(cli(capsys, "plot", real_run["run"], "--kind", "timeline", "-o", out), allowed=(0,))
+    assert out.read_bytes().startswith(magic)
+
+
+def test_bug_plot_to_a_suffix_it_cannot_write(workdir, capsys, real_run):
+    _expect_usage_error(
+        cli(capsys, "plot", real_run["run"], "--kind", "timeline", "-o", workdir / "t.txt"), ".png, .pdf or .svg"
+    )
+    assert not (workdir / "t.txt").exists()

@@ -61,11 +61,24 @@ def _series_style(n):
     return dict(lw=1.0) if n > MARKERS_UP_TO else dict(lw=1.2, marker="o", ms=2.5)
 
 
+#: the formats a plot is written in, by the output's suffix (PNG without one)
+PLOT_FORMATS = ("png", "pdf", "svg")
+
+
+def plot_format(out: Path) -> str:
+    """The format of a plot written to ``out``: its suffix's, PNG without one; CliError for another suffix."""
+    suffix = out.suffix.lower().lstrip(".")
+    if suffix and suffix not in PLOT_FORMATS:
+        raise CliError(f"{out}: a plot is written as PNG, PDF or SVG; give a name ending in .png, .pdf or .svg")
+    return suffix or "png"
+
+
 def _save_png(fig, out: Path, dpi):
-    """Draw aside and rename into place: a failed write (full disk) leaves no partial PNG."""
+    """Draw aside in the format of :func:`plot_format` and rename into place: a failed write (full disk)
+    leaves no partial file."""
     tmp = out.with_name(out.name + ".tmp")
     try:
-        fig.savefig(tmp, dpi=dpi, format="png")
+        fig.savefig(tmp, dpi=dpi, format=plot_format(out))
         os.replace(tmp, out)
     except OSError as exc:
         try:
