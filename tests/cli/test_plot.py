@@ -226,3 +226,30 @@ def test_a_folder_that_is_missing_or_not_writable_is_a_usage_error(run_file, tmp
     assert main(["plot", str(run_file), option, str(tmp_path / name)]) == 2
     assert f"the folder {tmp_path} of the" in capsys.readouterr().err
     assert not (tmp_path / name).exists()
+
+
+@pytest.mark.parametrize("r_max", [None, 3.0])
+def test_density_counts_every_rod_it_says_it_counts(run_file, tmp_path, monkeypatch, r_max):
+    """The default outer radius is the farthest rod's distance from the axis, and the shells are
+    half-open: that rod was left out, while the legend said every rod was counted."""
+    import numpy as np
+
+    import selfas_graph.cli.plot as plot_cli
+    from selfas_graph.analysis import rod_centres
+    from selfas_graph.io.h5md import RunFile
+
+    figures = []
+    monkeypatch.setattr(plot_cli, "_save_png", lambda fig, out, dpi: figures.append(fig))
+    more = [] if r_max is None else ["--r-max", str(r_max)]
+    assert main(["plot", str(run_file), "--kind", "density", "-o", str(tmp_path / "d.png"), *more]) == 0
+    with RunFile(run_file) as run:
+        centre, gap = rod_centres(run.position(-1)), float(run.parameters["forces"]["electrodes"]["gap"])
+    rho = np.hypot(centre[:, 0], centre[:, 1])
+    within = len(rho) if r_max is None else int((rho < r_max).sum())
+    total = figures[0].axes[0].lines[0]
+    r = total.get_xdata()
+    width = r[1] - r[0]
+    shells = np.pi * ((r + width / 2) ** 2 - (r - width / 2) ** 2) * gap
+    assert np.rint(np.sum(total.get_ydata() * shells)) == within
+    label = f"total ({len(rho)} rods)" if within == len(rho) else f"total ({within} of {len(rho)} rods within r_max)"
+    assert total.get_label() == label

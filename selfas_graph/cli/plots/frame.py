@@ -158,6 +158,8 @@ def _density(fig, run, frame, args):
     if args.bins < 1:
         raise CliError(f"--bins must be >= 1, got {args.bins}")
     r_max = _r_max(args, centre)
+    if args.r_max is None:  # the shells are half-open: the farthest rod, at r_max, falls in the last one
+        r_max = float(np.nextafter(r_max, np.inf))
     curves = [("total", None, TOTAL_COLOUR)]
     if frame.role is not None:
         curves += [
@@ -167,7 +169,9 @@ def _density(fig, run, frame, args):
     for label, mask, colour in curves:
         edges, dens = radial_density(centre, r_max, args.bins, z_range, mask=mask)
         n = len(centre) if mask is None else int(mask.sum())
-        ax.plot(0.5 * (edges[1:] + edges[:-1]), dens, "-o", ms=2.5, lw=1.2, color=colour, label=f"{label} ({n} rods)")
+        counted = int(np.rint(np.sum(dens * np.pi * np.diff(edges**2) * (z_range[1] - z_range[0]))))
+        rods = f"{n} rods" if counted == n else f"{counted} of {n} rods within r_max"
+        ax.plot(0.5 * (edges[1:] + edges[:-1]), dens, "-o", ms=2.5, lw=1.2, color=colour, label=f"{label} ({rods})")
     ax.set_xlim(0, r_max)
     ax.set_ylim(bottom=0)
     ax.set_xlabel("distance from the z axis r (L)")
