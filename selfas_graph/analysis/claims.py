@@ -42,10 +42,10 @@ CLAIM_KEYS = {
     "fractal_r_min": "fit range of the mass-radius dimension: smallest r (L)",
     "fractal_r_max": "largest r (L)",
     "rg_dimension": "D from R_g ~ N^(1/D) over the structures of the frame with R_g >= 1 L "
-    "(NaN, not testable, while their R_g spans less than a factor 4)",
+    "(NaN, not testable, with fewer than 3 distinct sizes or while their R_g spans less than a factor 4)",
     "rg_dimension_err": "its uncertainty",
     "rg_dimension_se": "standard error of the fitted slope, carried to D",
-    "rg_n_min": "fit range of the R_g dimension: smallest structure (rods)",
+    "rg_n_min": "fit range of the R_g dimension, in rods: smallest structure",
     "rg_n_max": "largest structure (rods)",
     "cycle_rank": "independent loops E - V + C of the contact graph",
     "cycle_rank_largest": "independent loops of the largest structure",

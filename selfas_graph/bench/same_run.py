@@ -45,7 +45,8 @@ VOLATILE = (
     "run_id",
     "commit",
     "resumed_with",
-)  # a random identifier drawn for every run
+    "steps_done",  # the run loop's steps in the last segment: a resumed run and its uninterrupted twin differ
+)  # run_id: a random identifier drawn for every run
 
 
 def _volatile(name: str) -> bool:

@@ -138,7 +138,8 @@ def run(args):
             if k + "_err" in r:
                 lo, hi = _RANGES[k]
                 value += (
-                    f" +- {_fmt(r[k + '_err'])} (slope s.e. {_fmt(r[k + '_se'])}, fit over {_fmt(r[lo])}..{_fmt(r[hi])})"
+                    f" +- {_fmt(r[k + '_err'])} (slope s.e. {_fmt(r[k + '_se'])}, fit over {_fmt(r[lo])}..{_fmt(r[hi])}"
+                    f" {_RANGE_UNITS[k]})"
                     if np.isfinite(r[k])
                     else " (not testable at this size)"
                 )
@@ -151,3 +152,4 @@ _RANGES = {
     "rg_dimension": ("rg_n_min", "rg_n_max"),
 }
 _RANGE_KEYS = {k for pair in _RANGES.values() for k in pair}
+_RANGE_UNITS = {"fractal_dimension": "L", "rg_dimension": "rods"}

@@ -15,6 +15,7 @@ ROOT = Path(__file__).resolve().parents[2]
 def _write(path, value, extra=False):
     with h5py.File(path, "w") as f:
         f.attrs["created"] = str(path)  # wall-clock-like: ignored
+        f.attrs["steps_done"] = ord(Path(path).name[0])  # the last segment's steps: a resumed run counts its own
         g = f.create_group("observables/current")
         g.create_dataset("value", data=value)
         g.attrs["unit"] = "J0"
