@@ -179,7 +179,7 @@ def test_objects_of_the_wrong_kind_are_refused_by_name():
     AttributeErrors from inside; each names what to give instead."""
     with pytest.raises(TypeError, match=r"Simulation\(params\): a Parameters .*got dict"):
         sg.Simulation({"rods": {"count": 3}})
-    with pytest.raises(TypeError, match=r"from_scenario: a Scenario \(load_scenario\(path\)\)"):
+    with pytest.raises(TypeError, match=r"from_scenario: a Scenario \(load_scenario\), got"):
         sg.Simulation.from_scenario("scenarios/quick.toml")
     with pytest.raises(TypeError, match="changes by dotted key in a dict"):
         sg.Parameters().replace("integrator.dt=5e-4")

@@ -33,8 +33,9 @@ CASE_I_PLASMA = sorted(
 def spanning_chain(params):
     """State of a straight chain of rods along the z axis from the cathode to the anode.
 
-    n rods of length 1 with neighbouring tips |s| < r*/2 apart (s < 0: they overlap along the
-    axis) and the end tips h = r*/2 from the electrode planes, so that every contact closes.
+    n rods of length 1 and resistance R0 with neighbouring tips |s| < r*/2 apart (s < 0: they overlap
+    along the axis) and the end tips h = r*/2 from the electrode planes, so that every contact closes.
+    Their lengths and resistances are given where the scene draws them (a scene with a length law).
     """
     gap, rstar = params.forces.electrodes.gap, params.rods.rstar
     h = 0.5 * rstar
@@ -45,7 +46,8 @@ def spanning_chain(params):
     centre = np.zeros((n, 3))
     centre[:, 2] = z0 + np.arange(n) * (1.0 + s)
     axis = np.tile([0.0, 0.0, 1.0], (n, 1))
-    return State.from_rods(centre, axis, np.ones(n), np.zeros(n))
+    given = {key: 1.0 for key in ("length", "resistance") if getattr(params.rods, key) is not None}
+    return State.from_rods(centre, axis, np.ones(n), np.zeros(n), **given)
 
 
 def azimuthal(point, field):
