@@ -72,7 +72,11 @@ def add_run_and_frame(p):
     p.add_argument("run", help="run file written by selfas-graph simulate")
     which = p.add_mutually_exclusive_group()
     which.add_argument("--frame", type=int, help="frame number (negative counts from the end; default: last)")
-    which.add_argument("--time", type=float, help="the frame nearest to this simulated time (within the run's frames)")
+    which.add_argument(
+        "--time",
+        type=float,
+        help="the frame nearest to this simulated time (at most one frame spacing outside the run's)",
+    )
     return which
 
 

@@ -21,6 +21,7 @@ time, instead of acting on a trigger (:class:`PerStepRows`).
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 
 from .validate import as_decimal
@@ -184,7 +185,7 @@ def as_operation(obj, where: str) -> Operation:
 def run_operations(sim, writer, every, n_steps, progress, progress_every, checkpointer, stop, check_every) -> list:
     """The operations of one :meth:`Simulation.run <.simulation.Simulation.run>` call, in their order
     (module docstring): those its arguments make around the attached ``sim.operations``."""
-    _check_arguments(sim, writer, progress, checkpointer, stop)
+    _check_arguments(sim, writer, progress, checkpointer, stop, check_every)
     ops = [PerStepRows(writer, every), FrameWriter(writer, every)] if writer is not None else [EnergyCheck(every)]
     ops += [as_operation(o, f"sim.operations[{k}]") for k, o in enumerate(sim.operations)]
     if progress is not None:
@@ -197,7 +198,7 @@ def run_operations(sim, writer, every, n_steps, progress, progress_every, checkp
     return ops
 
 
-def _check_arguments(sim, writer, progress, checkpointer, stop) -> None:
+def _check_arguments(sim, writer, progress, checkpointer, stop, check_every) -> None:
     """Refuse before any step what would fail only after one: a closed writer, one whose file another
     simulation (or another step) continues, callbacks that cannot be called."""
     for name, fn in (("progress", progress), ("stop", stop)):
@@ -207,6 +208,8 @@ def _check_arguments(sim, writer, progress, checkpointer, stop) -> None:
         callable(getattr(checkpointer, "due", None)) and hasattr(checkpointer, "write")
     ):
         raise TypeError(f"run(checkpointer=...): an object with due() and write(sim), got {checkpointer!r}")
+    if isinstance(check_every, bool) or not isinstance(check_every, numbers.Integral) or check_every < 1:
+        raise TypeError(f"run(check_every=...): a whole number of steps >= 1, got {check_every!r}")
     if writer is not None and hasattr(writer, "check_continues"):
         writer.check_continues(sim.state.step, sim.state.position.shape)
 

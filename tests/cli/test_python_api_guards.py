@@ -159,3 +159,11 @@ def test_the_wrong_kind_of_argument_is_named(tmp_path):
     stretched.position[1, 2] += 0.1
     with pytest.raises(sg.StateError, match=r"rod 0 has length 1.1, not its length 1 \(to"):
         sg.Simulation(PARAMS, state=stretched)
+
+
+@pytest.mark.parametrize("check_every", [0, -3, 2.5, True])
+def test_check_every_is_a_whole_number_of_steps(check_every):
+    sim = column()
+    with pytest.raises(TypeError, match=r"run\(check_every=...\): a whole number of steps >= 1"):
+        sim.run(0.1, stop=lambda: False, check_every=check_every)
+    assert sim.state.step == 0
