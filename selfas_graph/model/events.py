@@ -28,37 +28,33 @@ from typing import NamedTuple
 
 import numpy as np
 
-TIP_CONTACT = 1
-TIP_RELEASE = 2
-CONDUCTOR_CONTACT = 3
-CONDUCTOR_RELEASE = 4
-SHORT_CIRCUIT = 5
-OPEN_CIRCUIT = 6
-
-KIND_NAMES = {
-    TIP_CONTACT: "tip_contact",
-    TIP_RELEASE: "tip_release",
-    CONDUCTOR_CONTACT: "conductor_contact",
-    CONDUCTOR_RELEASE: "conductor_release",
-    SHORT_CIRCUIT: "short_circuit",
-    OPEN_CIRCUIT: "open_circuit",
-}
-
 
 class EventKind(enum.IntEnum):
     """Event kinds by name; each equals its integer code (``EventKind.SHORT_CIRCUIT == 5``), and
-    ``EventKind(row.kind).label`` is the name stored in run files (``kind_names``)."""
+    ``EventKind(row.kind).label`` is the name stored in run files (``kind_names``): the one table of the
+    kinds, from which the module's constants and :data:`KIND_NAMES` are made."""
 
-    TIP_CONTACT = TIP_CONTACT
-    TIP_RELEASE = TIP_RELEASE
-    CONDUCTOR_CONTACT = CONDUCTOR_CONTACT
-    CONDUCTOR_RELEASE = CONDUCTOR_RELEASE
-    SHORT_CIRCUIT = SHORT_CIRCUIT
-    OPEN_CIRCUIT = OPEN_CIRCUIT
+    TIP_CONTACT = 1
+    TIP_RELEASE = 2
+    CONDUCTOR_CONTACT = 3
+    CONDUCTOR_RELEASE = 4
+    SHORT_CIRCUIT = 5
+    OPEN_CIRCUIT = 6
 
     @property
     def label(self) -> str:
-        return KIND_NAMES[int(self)]
+        return self.name.lower()
+
+
+#: the kinds as plain integers, for the arrays and the compiled kernels
+TIP_CONTACT = int(EventKind.TIP_CONTACT)
+TIP_RELEASE = int(EventKind.TIP_RELEASE)
+CONDUCTOR_CONTACT = int(EventKind.CONDUCTOR_CONTACT)
+CONDUCTOR_RELEASE = int(EventKind.CONDUCTOR_RELEASE)
+SHORT_CIRCUIT = int(EventKind.SHORT_CIRCUIT)
+OPEN_CIRCUIT = int(EventKind.OPEN_CIRCUIT)
+#: code -> the name stored in run files
+KIND_NAMES = {int(k): k.label for k in EventKind}
 
 
 class Event(NamedTuple):
