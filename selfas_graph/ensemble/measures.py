@@ -119,8 +119,7 @@ def _midplane_flux(f):
     current = np.asarray(f.graph["current"], dtype=np.float64)
     if not np.any(current):
         return 0.0
-    w = 0.5 * f.params["rods"]["diameter"]
-    return flux_through_rim(f.flux_radius, 0.0, f.position, None, current, w)
+    return flux_through_rim(f.flux_radius, 0.0, f.position, None, current, f.wire_radius)
 
 
 #: the per-frame measures of a summary, in table order; a new one is one more line
