@@ -63,6 +63,33 @@ def _same_value(a, b) -> bool:
     return np.ascontiguousarray(a).tobytes() == np.ascontiguousarray(b).tobytes()
 
 
+def _json_differences(a, b):
+    """The entries in which two JSON texts of objects differ, as ``key.sub: A != B`` lines (None when either
+    is not such a text)."""
+    import json
+
+    try:
+        a, b = (json.loads(v.decode() if isinstance(v, bytes) else v) for v in (a, b))
+    except (TypeError, ValueError, AttributeError, UnicodeDecodeError):
+        return None
+    if not (isinstance(a, dict) and isinstance(b, dict)):
+        return None
+
+    def flat(d, prefix=""):
+        out = {}
+        for k, v in d.items():
+            out.update(flat(v, f"{prefix}{k}.") if isinstance(v, dict) and v else {f"{prefix}{k}": v})
+        return out
+
+    fa, fb = flat(a), flat(b)
+    missing = "(absent)"
+    return [
+        f"{k}: {fa.get(k, missing)!r} != {fb.get(k, missing)!r}"
+        for k in sorted(set(fa) | set(fb))
+        if fa.get(k, missing) != fb.get(k, missing)
+    ]
+
+
 def compare(path_a, path_b, attrs: bool = True, counts: dict | None = None) -> list[str]:
     """Differences between two HDF5 files, as readable lines (empty if they agree).
 
@@ -108,7 +135,11 @@ def compare(path_a, path_b, attrs: bool = True, counts: dict | None = None) -> l
                         if ra != rb:
                             out.append(f"{name or '/'}@{key}: references {ra} != {rb}")
                     elif not _same_value(oa.attrs[key], ob.attrs[key]):
-                        out.append(f"{name or '/'}@{key}: {oa.attrs[key]!r} != {ob.attrs[key]!r}")
+                        keys = _json_differences(oa.attrs[key], ob.attrs[key])
+                        if keys is not None:  # a JSON text (the parameters): the entries that differ
+                            out += [f"{name or '/'}@{key}: {k}" for k in keys]
+                        else:
+                            out.append(f"{name or '/'}@{key}: {oa.attrs[key]!r} != {ob.attrs[key]!r}")
     return out
 
 

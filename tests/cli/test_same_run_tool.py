@@ -142,3 +142,17 @@ def test_same_as_commit_passes_over_a_parameter_added_at_its_default(tmp_path):
         other = json.loads(json.dumps(new))
         other[key][value[0]] = value[1]
         assert _parameters_added_at_default(commit, write("other.h5", other)) == []
+
+
+def test_compare_names_the_entries_of_the_parameters_that_differ(tmp_path):
+    import json
+
+    for name, seed in (("a.h5", 1), ("b.h5", 2)):
+        with h5py.File(tmp_path / name, "w") as f:
+            params = {"scenario": {"seed": seed, "name": "quick"}, "rods": {"count": 300}}
+            f.attrs["parameters_json"] = json.dumps(params)
+            f.attrs["note"] = "plain text"
+    r = _run(tmp_path / "a.h5", tmp_path / "b.h5")
+    assert r.returncode == 1
+    assert "/@parameters_json: scenario.seed: 1 != 2" in r.stdout.splitlines(), r.stdout
+    assert "count" not in r.stdout  # the entries that agree are not printed
