@@ -3,7 +3,8 @@
 numba passes a named tuple to a compiled function as it passes a tuple (each field typed on its own), and a
 compiled function reads its fields by name (``args.x``): the caller (``model/compiled.py``) builds
 :class:`FastStepArgs` by keyword, and the call's control flow (``steps.py``) and the task loop
-(``step_tasks.py::run_tasks``) read what they need by name; no list of the ~60 arrays by position is left.
+(``step_tasks.py::run_tasks``) read what they need by name; the two arrays of numbers, ``scalars`` and
+``limits``, are read by the named positions below.
 
 The work of a task (``step_tasks.py::forces``, ``split_brakes``) takes its arrays one by one: a compiled
 function that takes the named tuple counts a reference to each of its arrays on entry and on return, and
@@ -12,6 +13,40 @@ against 115-117 us on one thread, Zen 5).
 """
 
 from collections import namedtuple
+
+#: the positions of ``FastStepArgs.scalars`` (``model/compiled.py::CompiledSteps`` fills them by these names;
+#: numba takes the names as constants): the ambient brake's coefficient, r*, the tip stiffness kappa, the tip
+#: brake's coefficient when explicit (NaN: split or off) and when split (0: explicit or off), the cathode's and
+#: the anode's z, the electrode walls' explicit and split brake coefficients, the external filament's current and
+#: wire radius, the dipole monopoles' explicit and split brake coefficients, the fast range of the tip-tip
+#: force (inner, outer), half the tip list's skin squared, and the contacts' release radius
+(
+    SC_AMBIENT_K,
+    SC_RSTAR,
+    SC_KAPPA,
+    SC_TIP_BRAKE_K,
+    SC_TIP_BRAKE_SPLIT,
+    SC_CATHODE_Z,
+    SC_ANODE_Z,
+    SC_WALL_K,
+    SC_WALL_SPLIT,
+    SC_FILAMENT_CURRENT,
+    SC_FILAMENT_W,
+    SC_POLE_K,
+    SC_POLE_SPLIT,
+    SC_FAST_INNER,
+    SC_FAST_OUTER,
+    SC_HALF_SKIN2,
+    SC_RELEASE,
+) = range(17)
+N_SCALARS = 17
+#: the positions of ``FastStepArgs.limits``: the network on (1.0) or off, the contact test's electrode planes
+#: and filament surface radius (NaN: none), the height tolerance, the health limits BOND_BREAK and
+#: MAX_STEP_DISPLACEMENT, the largest bond error so far
+LIM_NETWORK, LIM_CATHODE_Z, LIM_ANODE_Z, LIM_FILAMENT_R, LIM_HEIGHT_TOL, LIM_BOND_BREAK, LIM_MAX_MOVE, LIM_MAX_BOND = (
+    range(8)
+)
+N_LIMITS = 8
 
 FastStepArgs = namedtuple(
     "FastStepArgs",

@@ -18,6 +18,28 @@ from .external import filament_force_on_tips, line_yukawa_on_centres, monopoles_
 from .fields import electrode_brake_exact, electrode_walls, plasma_force_on_tips
 from .integrate import ab4_rods, dot_as_numpy, power_group, sum_rows_range
 from .rigid import bond_acceleration, constrain_bonds_checked
+from .step_args import (
+    LIM_ANODE_Z,
+    LIM_CATHODE_Z,
+    LIM_FILAMENT_R,
+    LIM_NETWORK,
+    SC_AMBIENT_K,
+    SC_ANODE_Z,
+    SC_CATHODE_Z,
+    SC_FAST_INNER,
+    SC_FAST_OUTER,
+    SC_FILAMENT_CURRENT,
+    SC_FILAMENT_W,
+    SC_KAPPA,
+    SC_POLE_K,
+    SC_POLE_SPLIT,
+    SC_RELEASE,
+    SC_RSTAR,
+    SC_TIP_BRAKE_K,
+    SC_TIP_BRAKE_SPLIT,
+    SC_WALL_K,
+    SC_WALL_SPLIT,
+)
 from .tips import tip_tip_fast_rows
 
 _bond_acceleration = bond_acceleration.serial
@@ -212,20 +234,20 @@ def run_tasks(p, args, s):
             partial[j, P_BOND] = ab4_rods(
                 x, v, args.hist_v, args.hist_a, args.slot_table[h], args.dt, args.length, r0, r1
             )
-            if scalars[4] != 0.0:
+            if scalars[SC_TIP_BRAKE_SPLIT] != 0.0:
                 partial[j, P_DUE_SPLIT] = max_displacement2(x[t0:t1], reference[t0:t1])
         elif kind == UNDO:
             _copy_rows(x, args.save_x, t0, t1)
             _copy_rows(v, args.save_v, t0, t1)
         elif kind == PAIRS:
-            counts[j, 0] = close_pairs_rows(x, start, index, scalars[1], t0, t1, s.pair_k, s.pair_l, start[t0])
+            counts[j, 0] = close_pairs_rows(x, start, index, scalars[SC_RSTAR], t0, t1, s.pair_k, s.pair_l, start[t0])
         elif kind == CONSTRAIN:
             length = args.length
             ell = length if length.shape[0] == 0 else length[r0:r1]
             err, speed = _constrain_bonds_checked(x[t0:t1], v[t0:t1], args.project, args.correct_velocity, ell)
             partial[j, P_BOND_AFTER] = err
             partial[j, P_SPEED] = speed
-            if args.lists[2] and limits[0] == 1.0:
+            if args.lists[2] and limits[LIM_NETWORK] == 1.0:
                 partial[j, P_DUE_AFTER] = max_displacement2(x[t0:t1], reference[t0:t1])
         elif kind == CONTACTS:
             m = args.pairs.shape[0]
@@ -238,13 +260,13 @@ def run_tasks(p, args, s):
                 (j + 1) * m // chunks,
                 t0,
                 t1,
-                scalars[1],
-                scalars[16],
-                limits[1],
-                limits[2],
+                scalars[SC_RSTAR],
+                scalars[SC_RELEASE],
+                limits[LIM_CATHODE_Z],
+                limits[LIM_ANODE_Z],
                 args.on_cathode,
                 args.on_anode,
-                limits[3],
+                limits[LIM_FILAMENT_R],
                 args.on_filament,
             )
             counts[j, 1] = 1 if ok else 0
@@ -299,10 +321,10 @@ def forces(
     channel, their sum and the accelerations into ``hist_ah``, the velocities into ``hist_vh``
     (``ForceField.evaluate`` with ``full=False``, ``MultipleTimeStepping.complete``, then
     ``AdamsBashforth4.step`` up to the update)."""
-    amb_k, rstar, kappa, tb_k = scalars[0], scalars[1], scalars[2], scalars[3]
-    z_c, z_a, wall_k = scalars[5], scalars[6], scalars[7]
-    fil_current, fil_w, pole_k = scalars[9], scalars[10], scalars[11]
-    r_in, r_out = scalars[13], scalars[14]
+    amb_k, rstar, kappa, tb_k = scalars[SC_AMBIENT_K], scalars[SC_RSTAR], scalars[SC_KAPPA], scalars[SC_TIP_BRAKE_K]
+    z_c, z_a, wall_k = scalars[SC_CATHODE_Z], scalars[SC_ANODE_Z], scalars[SC_WALL_K]
+    fil_current, fil_w, pole_k = scalars[SC_FILAMENT_CURRENT], scalars[SC_FILAMENT_W], scalars[SC_POLE_K]
+    r_in, r_out = scalars[SC_FAST_INNER], scalars[SC_FAST_OUTER]
     c_tip, c_tb, c_amb, c_pl, c_wall, c_wb, c_fil, c_pole, c_pb, c_line = (
         channel[0],
         channel[1],
@@ -404,8 +426,9 @@ def split_brakes(
 ):
     """The split brakes of step ``done`` of the call, one after another, each over all tips (the pairs of
     the tip brake as the blocks of ``brakes.py::close_pairs_rows`` found them, in order)."""
-    rstar, tb_split, z_c, z_a = scalars[1], scalars[4], scalars[5], scalars[6]
-    wall_split, pole_split = scalars[8], scalars[12]
+    rstar, tb_split = scalars[SC_RSTAR], scalars[SC_TIP_BRAKE_SPLIT]
+    z_c, z_a = scalars[SC_CATHODE_Z], scalars[SC_ANODE_Z]
+    wall_split, pole_split = scalars[SC_WALL_SPLIT], scalars[SC_POLE_SPLIT]
     n = x.shape[0]
     if tb_split != 0.0:
         w = 0.0

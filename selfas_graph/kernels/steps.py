@@ -45,7 +45,18 @@ import numpy as np
 
 from . import team
 from ._jit import njit, njit_parallel, prange
-from .step_args import Scratch
+from .step_args import (
+    LIM_BOND_BREAK,
+    LIM_HEIGHT_TOL,
+    LIM_MAX_BOND,
+    LIM_MAX_MOVE,
+    LIM_NETWORK,
+    SC_HALF_SKIN2,
+    SC_POLE_SPLIT,
+    SC_TIP_BRAKE_SPLIT,
+    SC_WALL_SPLIT,
+    Scratch,
+)
 from .step_tasks import (
     BRAKES,
     CONSTRAIN,
@@ -132,7 +143,7 @@ def _prepare(args, chunks):
     n_max, slow_every = args.n_max, args.slow_every
     ctl = np.zeros(team.control_size(PHASES_PER_STEP * max(1, min(n_max, slow_every)) + 1), dtype=np.int64)
     chunks = max(1, min(chunks, args.x.shape[0] // 2))
-    n_pairs = args.index.shape[0] if args.scalars[4] != 0.0 else 0
+    n_pairs = args.index.shape[0] if args.scalars[SC_TIP_BRAKE_SPLIT] != 0.0 else 0
     s = Scratch(
         ctl=ctl,
         partial=np.zeros((chunks, 6)),
@@ -212,10 +223,10 @@ def _lead(args, s):
         args.hist_p,
     )
     partial, counts, zero, chunks = s.partial, s.counts, s.zero, s.chunks
-    tb_split, half_skin2 = scalars[4], scalars[15]
-    network = limits[0] == 1.0
-    height_tol = limits[4]
-    bond_break, max_move, max_bond = limits[5], limits[6], limits[7]
+    tb_split, half_skin2 = scalars[SC_TIP_BRAKE_SPLIT], scalars[SC_HALF_SKIN2]
+    network = limits[LIM_NETWORK] == 1.0
+    height_tol = limits[LIM_HEIGHT_TOL]
+    bond_break, max_move, max_bond = limits[LIM_BOND_BREAK], limits[LIM_MAX_MOVE], limits[LIM_MAX_BOND]
     groups = (args.powered.shape[0] + 2) // 3
     err_after = 0.0
     speed = 0.0
@@ -255,7 +266,7 @@ def _lead(args, s):
                 return done, NEEDS_STEP, head, max_bond, err_after, speed
             p += 1
             _phase(p, PAIRS, chunks, h, step, done, args, s)
-        if tb_split != 0.0 or scalars[8] != 0.0 or scalars[12] != 0.0:
+        if tb_split != 0.0 or scalars[SC_WALL_SPLIT] != 0.0 or scalars[SC_POLE_SPLIT] != 0.0:
             p += 1
             _phase(p, BRAKES, 1, h, step, done, args, s)
         p += 1

@@ -20,6 +20,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from ..kernels import step_args as sa
 from ..kernels._jit import PARALLEL_ROWS
 from ..kernels.step_args import FastStepArgs
 from ..kernels.steps import (
@@ -101,27 +102,26 @@ class CompiledSteps:
         nan = np.nan
         amb = terms.get("ambient_brake")
         split = p.integrator.brake == "split"
-        self.scalars = np.array(
-            [
-                amb.k if amb is not None else 0.0,
-                p.rods.rstar,
-                p.rods.tip_stiffness,
-                tb.k if tb is not None and not split else nan,
-                tb.k if tb is not None and split else 0.0,
-                el.z[0] if el is not None else nan,
-                el.z[1] if el is not None else nan,
-                (0.0 if el.split_mode else el.k) if el is not None else 0.0,
-                el.k if el is not None and el.split_mode else 0.0,
-                fil.current if fil is not None else 0.0,
-                fil.w if fil is not None else 0.0,
-                (0.0 if dip.split_mode else dip.k) if dip is not None else 0.0,
-                dip.k if dip is not None and dip.split_mode else 0.0,
-                mts.fast_range[0] if tip is not None else 0.0,
-                mts.fast_range[1] if tip is not None else 0.0,
-                (0.5 * p.neighbours.skin) ** 2,
-                sim.network.tracker.release if sim.network is not None else 0.0,
-            ]
-        )
+        scalars = {
+            sa.SC_AMBIENT_K: amb.k if amb is not None else 0.0,
+            sa.SC_RSTAR: p.rods.rstar,
+            sa.SC_KAPPA: p.rods.tip_stiffness,
+            sa.SC_TIP_BRAKE_K: tb.k if tb is not None and not split else nan,
+            sa.SC_TIP_BRAKE_SPLIT: tb.k if tb is not None and split else 0.0,
+            sa.SC_CATHODE_Z: el.z[0] if el is not None else nan,
+            sa.SC_ANODE_Z: el.z[1] if el is not None else nan,
+            sa.SC_WALL_K: (0.0 if el.split_mode else el.k) if el is not None else 0.0,
+            sa.SC_WALL_SPLIT: el.k if el is not None and el.split_mode else 0.0,
+            sa.SC_FILAMENT_CURRENT: fil.current if fil is not None else 0.0,
+            sa.SC_FILAMENT_W: fil.w if fil is not None else 0.0,
+            sa.SC_POLE_K: (0.0 if dip.split_mode else dip.k) if dip is not None else 0.0,
+            sa.SC_POLE_SPLIT: dip.k if dip is not None and dip.split_mode else 0.0,
+            sa.SC_FAST_INNER: mts.fast_range[0] if tip is not None else 0.0,
+            sa.SC_FAST_OUTER: mts.fast_range[1] if tip is not None else 0.0,
+            sa.SC_HALF_SKIN2: (0.5 * p.neighbours.skin) ** 2,
+            sa.SC_RELEASE: sim.network.tracker.release if sim.network is not None else 0.0,
+        }
+        self.scalars = np.array([scalars[k] for k in range(sa.N_SCALARS)])
         pl = terms.get("plasma_filament")
         self.plasma = np.array(pl.args, dtype=np.float64) if pl is not None else _EMPTY
         self.el = el
@@ -196,7 +196,9 @@ class CompiledSteps:
         nl = ff.lists.tip
         n_max = min(int(n_max), CHUNK)
         (pairs, on_c, on_a, on_f, fil_tip, fil_z), limits = self._contact_args(net, st.n_tips)
+        # the positions sa.LIM_NETWORK ... sa.LIM_HEIGHT_TOL, then LIM_BOND_BREAK, LIM_MAX_MOVE, LIM_MAX_BOND
         limits = np.array(limits + (BOND_BREAK, MAX_STEP_DISPLACEMENT, health.max_bond_error))
+        assert limits.shape == (sa.N_LIMITS,)
         base_step = (
             np.array([-1 if b is None else b for b in mts.base_step.values()], dtype=np.int64)
             if (mts.extrapolate)
