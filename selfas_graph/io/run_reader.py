@@ -168,13 +168,16 @@ class RunFile:
 
         return SavedFrame(self, self.frame_index(index, t))
 
-    def position(self, frame=-1) -> np.ndarray:
-        return self.f[layout.TIP_POSITION_VALUE][self.frame_index(frame)]
+    def position(self, frame=None, t=None) -> np.ndarray:
+        """The tips' positions (n_tips, 3) of a frame: by number (negative counts from the end; default the
+        last) or nearest time ``t``, as :meth:`frame_index`."""
+        return self.f[layout.TIP_POSITION_VALUE][self.frame_index(frame, t)]
 
-    def velocity(self, frame=-1) -> np.ndarray:
+    def velocity(self, frame=None, t=None) -> np.ndarray:
+        """The tips' velocities of a frame, chosen as by :meth:`position`."""
         if layout.TIP_VELOCITY not in self.f:
             raise RunFileError(f"{self.path}: velocities were not saved (output.velocities = false)")
-        return self.f[layout.TIP_VELOCITY_VALUE][self.frame_index(frame)]
+        return self.f[layout.TIP_VELOCITY_VALUE][self.frame_index(frame, t)]
 
     @property
     def tip_charge(self) -> np.ndarray:
@@ -228,6 +231,8 @@ class RunFile:
         """Event records (structured array, fields step, time, kind, a, b), optionally up to a step."""
         if layout.EVENTS not in self.f:
             return np.zeros(0, dtype=EVENT_DTYPE)
+        if until_step is not None and (isinstance(until_step, bool) or not isinstance(until_step, numbers.Integral)):
+            raise RunFileError(f"events(until_step=...): a step number (an integer), got {until_step!r}")
         e = self.f[layout.EVENTS][:].astype(EVENT_DTYPE)  # the kind an enumeration in newer files, integers before
         return e if until_step is None else e[e["step"] <= until_step]
 

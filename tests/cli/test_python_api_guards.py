@@ -167,3 +167,15 @@ def test_check_every_is_a_whole_number_of_steps(check_every):
     with pytest.raises(TypeError, match=r"run\(check_every=...\): a whole number of steps >= 1"):
         sim.run(0.1, stop=lambda: False, check_every=check_every)
     assert sim.state.step == 0
+
+
+def test_a_run_file_picks_a_frame_by_number_or_time_alike_for_every_array(tmp_path):
+    sim = column()
+    with sg.RunWriter.for_simulation(sim, tmp_path / "r.h5") as w:
+        sim.run(0.1, writer=w)
+    with sg.RunFile(tmp_path / "r.h5") as run:
+        assert np.array_equal(run.position(t=0.05), run.position(1))
+        assert np.array_equal(run.velocity(t=0.1), run.velocity())
+        assert run.graph(t=0.05)["step"] == run.step[1]
+        with pytest.raises(sg.RunFileError, match=r"events\(until_step=...\): a step number"):
+            run.events(until_step="10")
