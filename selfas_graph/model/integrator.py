@@ -104,6 +104,10 @@ class AdamsBashforth4:
         self.head, self.count = int(d["head"]), int(d["count"])
         self.work[:] = d["work"]
         self.time_origin = (int(d["time_origin_step"]), float(d["time_origin_time"]))
+        if "step" in d and self.time_origin[1] + (int(d["step"]) - self.time_origin[0]) * self.dt != float(d["time"]):
+            # a snapshot continued at another time step than it was made with (a branch of `bench
+            # tradeoff`): the time counts on from the snapshot's, not from the run's origin at the new dt
+            self.time_origin = (int(d["step"]), float(d["time"]))
         self.bond_error_before = float(d["bond_error_before"])
         self.bond_error_after = float(d["bond_error_after"])
 

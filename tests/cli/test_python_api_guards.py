@@ -179,3 +179,17 @@ def test_a_run_file_picks_a_frame_by_number_or_time_alike_for_every_array(tmp_pa
         assert run.graph(t=0.05)["step"] == run.step[1]
         with pytest.raises(sg.RunFileError, match=r"events\(until_step=...\): a step number"):
             run.events(until_step="10")
+
+
+def test_a_snapshot_continued_at_another_time_step_counts_time_on_from_its_own():
+    """`bench tradeoff` branches a checkpoint at other time steps: a branch at dt = 2e-3 from step 100 of a
+    run at 1e-3 (t = 0.1) stated t = 0.202 after one step (0 + 101 x 2e-3), not 0.102."""
+    sim = column()
+    sim.run(0.1)
+    snap = sim.snapshot()
+    same = sg.Simulation.from_snapshot(PARAMS, snap)
+    same.step(1)
+    assert same.state.time == 0.0 + 101 * 1e-3  # the run's own origin, bit for bit as an uninterrupted run
+    other = sg.Simulation.from_snapshot(PARAMS.replace(integrator={"dt": 2e-3}), snap)
+    other.step(1)
+    assert other.state.step == 101 and other.state.time == 0.1 + 2e-3
