@@ -99,6 +99,9 @@ KNOBS = {
     # the rod-current terms every M steps (0: with the other slow sums), each against no splitting: the
     # row at 0 is the other slow terms' own error
     "integrator.current_every": ([0, 32, 48, 64], NO_SPLITTING),
+    # case (ii): how far a filament contact may move along z before the circuit is solved again, against
+    # a solve at nearly every move
+    "circuit.height_tolerance": ([0.001, 0.003, 0.01, 0.03, 0.1], {"circuit.height_tolerance": 1e-5}),
 }
 
 
