@@ -152,7 +152,8 @@ ACCURACY_RULES = (
     ),
     AccuracyRule(
         "circuit.height_tolerance",
-        "<= 0.01 L",
+        "<= 0.01 L (the median tip 20 times under the time step's error late in Fig. 8 quick; "
+        'docs/performance.md "The case (ii) filament contacts: when to solve the circuit again")',
         lambda p: p.forces.external_filament is not None,
         lambda p: p.circuit.height_tolerance <= 0.01,
     ),
