@@ -102,6 +102,9 @@ KNOBS = {
     # case (ii): how far a filament contact may move along z before the circuit is solved again, against
     # a solve at nearly every move
     "circuit.height_tolerance": ([0.001, 0.003, 0.01, 0.03, 0.1], {"circuit.height_tolerance": 1e-5}),
+    # a speed knob alone: the lists hold every pair within the cut-off at any skin, so the rows differ from
+    # the default's by the order of the sums only
+    "neighbours.skin": ([0.15, 0.3, 0.6, 1.0], {"neighbours.skin": 0.3}),
 }
 
 
