@@ -29,8 +29,11 @@ def _solve_direct(A: sp.csc_matrix, b: np.ndarray) -> np.ndarray:
 
 
 #: "auto" uses the direct solver below this many unknowns and "cg" above. Measured with
-#: selfas_graph/bench/circuit.py at 10^5 rods: direct 0.87 s / cg 0.16 s on a diluted cubic
-#: lattice, 0.07 s / 0.17 s on cross-linked chains; at 10^4 both are under 15 ms.
+#: selfas_graph/bench/circuit.py (docs/performance.md 'Contacts, events, topology and circuit'): a
+#: diluted cubic lattice favours CG from 10^4 rods (1.03 s direct / 0.21 s CG at 10^5, Intel Xeon),
+#: cross-linked chains the direct solver at every size (0.08 s / 0.27 s at 10^5); no one size suits both,
+#: and at 10^5 rods this one takes the slower solver for both (the lattice has 37 000 unknowns, the chains
+#: 72 000). Below 10^4 unknowns, the scenes' sizes, both take milliseconds.
 AUTO_CG_UNKNOWNS = 50_000
 
 
