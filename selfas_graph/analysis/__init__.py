@@ -1,10 +1,11 @@
 """Analysis of saved frames: the diagnostics behind the paper's figures (docs/model.md 'Figure diagnostics')
 and the measures of its claims (section 7a: :mod:`.moments`, :mod:`.fractal`, :mod:`.skeleton`,
-and :func:`.claims.frame_claims`, which reads them from a run file).
+and :func:`.claims.frame_claims`, which reads them from a run file), and the topology of a saved frame
+(:func:`.frame_topology.frame_topology`, what ``selfas-graph topology`` prints).
 
 Arrays in, arrays out: these functions see one frame's numpy arrays (or a run's
-observable arrays) and never open a file; reading run files is the job of
-:mod:`selfas_graph.io` and of the ``plot`` command.
+observable arrays) and never open a file (the two readers of a frame take a run file opened by
+:mod:`selfas_graph.io`); reading run files is the job of :mod:`selfas_graph.io` and of the ``plot`` command.
 """
 
 from .diagnostics import (

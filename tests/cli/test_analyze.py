@@ -19,9 +19,9 @@ import pytest
 
 from selfas_graph.analysis.claims import CLAIM_KEYS, claims_of_arrays, claims_series, frame_claims
 from selfas_graph.analysis.fractal import MIN_RANGE, radius_of_gyration
+from selfas_graph.analysis.frame_topology import frame_topology
 from selfas_graph.analysis.skeleton import structures
 from selfas_graph.cli.main import main
-from selfas_graph.cli.topology import analyse
 from selfas_graph.io.h5md import RunFile
 
 REPO = Path(__file__).resolve().parents[2]
@@ -68,7 +68,7 @@ def test_frame_claims_keys_and_values(run_file):
             assert math.isfinite(c[k]) == math.isfinite(c[k.replace("_err", "")]), k
         assert frame_claims(run, run.n_frames - 1) == c  # negative frames count from the end
         # the same largest structure as the topology command, the same numbers as the array API
-        assert c["largest_structure_rods"] == analyse(run)["largest_structure"]
+        assert c["largest_structure_rods"] == frame_topology(run)["largest_structure"]
         g = run.graph(frame=-1)
         direct = claims_of_arrays(run.position(-1), run.tip_charge, g["tip_contacts"], g["current"])
         assert {k: v for k, v in c.items() if k not in ("time", "step")} == pytest.approx(direct, nan_ok=True)
