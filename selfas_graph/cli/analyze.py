@@ -63,7 +63,10 @@ def add_arguments(p):
 
 
 def _frames(run, args):
-    if args.series or (args.csv and args.frame is None and args.time is None):
+    series = args.series or (args.csv and args.frame is None and args.time is None)
+    if args.every != 1 and not series:
+        raise CliError(f"--every {args.every} takes every K-th frame of a series: give it with --series (or --csv)")
+    if series:
         if args.every < 1:
             raise CliError(f"--every must be >= 1, got {args.every}")
         return list(range(0, run.n_frames, args.every)), True

@@ -70,6 +70,8 @@ def _resistance_line(data) -> str:
 
 
 def run(args):
+    if args.events < 0:
+        raise CliError(f"--events {args.events}: the number of events to show, >= 0")
     if args.time is not None and not np.isfinite(args.time):
         raise CliError(f"--time {args.time} names no frame; give a finite simulated time")
     try:

@@ -440,3 +440,15 @@ def test_bug_plot_to_a_suffix_it_cannot_write(workdir, capsys, real_run):
         cli(capsys, "plot", real_run["run"], "--kind", "timeline", "-o", workdir / "t.txt"), ".png, .pdf or .svg"
     )
     assert not (workdir / "t.txt").exists()
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (("analyze", "RUN", "--every", "5"), ("--every 5", "--series")),
+        (("topology", "RUN", "--events", "-1"), ("--events -1", ">= 0")),
+    ],
+)
+def test_bug_an_option_that_does_nothing_is_taken_without_a_word(argv, words, workdir, capsys, real_run):
+    res = cli(capsys, *(real_run["run"] if a == "RUN" else a for a in argv))
+    _expect_usage_error(res, *words)

@@ -119,6 +119,9 @@ def _skeleton(fig, run, frame, args):
     ax.plot(s["time"], s["cycle_rank"], **style, color="black", label="contact graph")
     ax.plot(s["time"], s["cycle_rank_largest"], **style, color=LARGEST_COLOUR, label="largest structure")
     ax.set_ylim(bottom=0)
+    from matplotlib.ticker import MaxNLocator
+
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))  # a count of loops: no half-integer ticks
     ax.set_xlabel("time t ($t_0$)")
     ax.set_ylabel("cycle rank E - V + C (independent loops)")
     _outside_legend(fig, ncols=2)
