@@ -13,7 +13,7 @@ import os
 import stat
 from pathlib import Path
 
-from ..io.h5md_format import in_use, in_use_message
+from ..io.h5md_format import in_use, in_use_message, is_hdf5
 from .main import CliError
 
 
@@ -78,7 +78,7 @@ def check_target(path, what="output file", force=False, inputs=(), keep_hdf5=Fal
                     f"the {what} {path} is the input {source} of this command; "
                     f"give another name (it would be destroyed, even with --force)"
                 )
-        if keep_hdf5 and _is_hdf5(path):
+        if keep_hdf5 and is_hdf5(path):
             raise CliError(
                 f"the {what} {path} is an HDF5 file (a run file, checkpoint or failure file?); this command never "
                 f"replaces one, even with --force: give another name"
@@ -103,15 +103,6 @@ def check_folder(path, what="output file") -> None:
         raise CliError(f"the folder {parent} of the {what} does not exist")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise CliError(f"the folder {parent} of the {what} is not writable")
-
-
-def _is_hdf5(path) -> bool:
-    import h5py
-
-    try:
-        return bool(h5py.is_hdf5(path))
-    except OSError:
-        return False
 
 
 def _name_max(folder) -> int:

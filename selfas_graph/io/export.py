@@ -24,12 +24,12 @@ import os
 import tempfile
 from pathlib import Path
 
-import h5py
 import numpy as np
 
 from ..model.graph import ROLE_NAMES
 from . import layout
 from .h5md import RunFile, RunFileError
+from .h5md_format import is_hdf5
 
 FORMATS = ("gsd", "xyz")
 #: particle and bond type names, indexed by role code
@@ -79,13 +79,6 @@ def parse_frames(spec, n_frames) -> np.ndarray:
     return np.asarray(picked, dtype=np.int64)
 
 
-def _is_hdf5(path) -> bool:
-    try:
-        return bool(h5py.is_hdf5(path))
-    except OSError:
-        return False
-
-
 def output_path(run_path, out, fmt, force=False) -> Path:
     """The export's path (default: the run's name with the format's suffix), checked: never the
     input file or any other HDF5 file (its checkpoint), never a name with the other format's suffix,
@@ -105,7 +98,7 @@ def output_path(run_path, out, fmt, force=False) -> Path:
     other = path.suffix.lower().lstrip(".")
     if other in FORMATS and other != fmt:
         raise ExportError(f"{path} names a .{other} file, but the format is {fmt}; give a name ending in .{fmt}")
-    if path.is_file() and _is_hdf5(path):
+    if path.is_file() and is_hdf5(path):
         # never replaced, force or not: a run file or its checkpoint (an export is GSD or XYZ)
         raise ExportError(f"{path} is an HDF5 file (a run file or checkpoint?); an export never replaces one")
     if path.exists() and not force:

@@ -239,6 +239,15 @@ def in_use_message(path, what, force) -> str:
     )
 
 
+def is_hdf5(path) -> bool:
+    """Whether ``path`` is an HDF5 file (a run file, a checkpoint, a failure file): one a command that writes
+    something else never replaces."""
+    try:
+        return bool(h5py.is_hdf5(path))
+    except OSError:
+        return False
+
+
 def in_use(path) -> bool:
     """True if another process holds a lock on the file ``path``: HDF5 locks a file it has open
     (``flock``, exclusive for a writer, shared for a reader) until it closes it, so a running

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..model.circuitlog import CIRCUIT_LOG_DTYPE
 from ..model.events import EVENT_DTYPE, named_events
+from ..model.validate import is_whole_number
 from . import layout
 from .h5md_format import (
     RunFileError,
@@ -231,7 +232,7 @@ class RunFile:
         """Event records (structured array, fields step, time, kind, a, b), optionally up to a step."""
         if layout.EVENTS not in self.f:
             return np.zeros(0, dtype=EVENT_DTYPE)
-        if until_step is not None and (isinstance(until_step, bool) or not isinstance(until_step, numbers.Integral)):
+        if until_step is not None and not is_whole_number(until_step):
             raise RunFileError(f"events(until_step=...): a step number (an integer), got {until_step!r}")
         e = self.f[layout.EVENTS][:].astype(EVENT_DTYPE)  # the kind an enumeration in newer files, integers before
         return e if until_step is None else e[e["step"] <= until_step]

@@ -4,7 +4,6 @@ a writer holds between frames, and :class:`NullWriter` (nothing written), are in
 from __future__ import annotations
 
 import json
-import numbers
 import os
 import time
 from pathlib import Path
@@ -16,6 +15,7 @@ from ..model.circuitlog import CIRCUIT_LOG_DTYPE, circuit_log_array
 from ..model.events import CONDUCTOR_NAMES, KIND_NAMES, OPEN_CIRCUIT, SHORT_CIRCUIT, event_array
 from ..model.operations import RunInterrupted
 from ..model.topology import ROLE_NAMES
+from ..model.validate import is_whole_number
 from . import layout
 from .h5md_format import (
     CHARGE,
@@ -168,7 +168,7 @@ class RunWriter(PendingRows):
         and writes it again (a kill while it was written could have torn it unseen).
         """
         path = Path(path)
-        if isinstance(step, (bool, np.bool_)) or not isinstance(step, numbers.Integral) or step < 0:
+        if not is_whole_number(step) or step < 0:
             raise TypeError(f"RunWriter.reopen(step=...): the step to continue after, an integer >= 0, got {step!r}")
         step = int(step)
         try:

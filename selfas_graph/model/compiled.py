@@ -198,7 +198,6 @@ class CompiledSteps:
         (pairs, on_c, on_a, on_f, fil_tip, fil_z), limits = self._contact_args(net, st.n_tips)
         # the positions sa.LIM_NETWORK ... sa.LIM_HEIGHT_TOL, then LIM_BOND_BREAK, LIM_MAX_MOVE, LIM_MAX_BOND
         limits = np.array(limits + (BOND_BREAK, MAX_STEP_DISPLACEMENT, health.max_bond_error))
-        assert limits.shape == (sa.N_LIMITS,)
         base_step = (
             np.array([-1 if b is None else b for b in mts.base_step.values()], dtype=np.int64)
             if (mts.extrapolate)

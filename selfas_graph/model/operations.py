@@ -21,10 +21,9 @@ time, instead of acting on a trigger (:class:`PerStepRows`).
 from __future__ import annotations
 
 import math
-import numbers
 from dataclasses import dataclass
 
-from .validate import as_decimal
+from .validate import as_decimal, is_whole_number
 
 __all__ = [
     "RunSummary",
@@ -208,7 +207,7 @@ def _check_arguments(sim, writer, progress, checkpointer, stop, check_every) -> 
         callable(getattr(checkpointer, "due", None)) and hasattr(checkpointer, "write")
     ):
         raise TypeError(f"run(checkpointer=...): an object with due() and write(sim), got {checkpointer!r}")
-    if isinstance(check_every, bool) or not isinstance(check_every, numbers.Integral) or check_every < 1:
+    if not is_whole_number(check_every) or check_every < 1:
         raise TypeError(f"run(check_every=...): a whole number of steps >= 1, got {check_every!r}")
     if writer is not None and hasattr(writer, "check_continues"):
         writer.check_continues(sim.state.step, sim.state.position.shape)

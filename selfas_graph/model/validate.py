@@ -16,6 +16,11 @@ import numpy as np
 MAX_RESISTANCE_SPREAD = 1e6
 
 
+def is_whole_number(value) -> bool:
+    """Whether ``value`` is an integer (Python's or numpy's), a boolean not counting as one."""
+    return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+
+
 def as_decimal(value) -> float:
     """A real number as a float: a float32 (or narrower) number stands for the decimal it prints as, not
     its binary value widened (np.float32(1e-3) is 0.001, not 0.0010000000474974513), and an integer too
