@@ -25,13 +25,14 @@ the bare law: what the core changes), forces.current_lorentz.quadrature_points,
 integrator.bond_force (exact/paper), integrator.position_projection, integrator.slow_every
 (multiple time stepping, against evaluating every force every step), integrator.fast_range and
 integrator.current_every (with ``--set integrator.slow_every=K``; also against no splitting), the tree's
-forces.tip_magnetic.opening_angle, forces.tip_magnetic.group_size and forces.tip_magnetic.order (against
+forces.tip_magnetic.opening_angle, group_size, order and leaf_size (against
 the direct sum; only
 where the scene takes the tree, e.g. ``--set forces.tip_magnetic.method=tree``) and the
 ``precision`` of forces.tip_magnetic, forces.yukawa, forces.current_field and
 forces.current_lorentz (mixed against float64), the ``method`` of forces.current_field and
 forces.current_lorentz (the tree of the rod currents against the direct sum) and their
-``opening_angle`` (against the direct sum; only where the scene takes the tree). Prints a markdown table and writes JSON and a
+``opening_angle``, ``leaf_size``, ``group_size`` and ``order`` (against the direct sum; only where the scene
+takes the tree). Prints a markdown table and writes JSON and a
 plot of error against cost, one curve per knob.
 """
 
@@ -75,6 +76,7 @@ KNOBS = {
     "forces.tip_magnetic.opening_angle": ([0.3, 0.4, 0.475, 0.55, 0.65], {"forces.tip_magnetic.method": "direct"}),
     "forces.tip_magnetic.group_size": ([128, 512, 1024, 4096], {"forces.tip_magnetic.method": "direct"}),
     "forces.tip_magnetic.order": ([2, 3, 4], {"forces.tip_magnetic.method": "direct"}),
+    "forces.tip_magnetic.leaf_size": ([16, 32, 64, 128, 256], {"forces.tip_magnetic.method": "direct"}),
     # float32 arithmetic against float64, with everything else as the scene has it
     "forces.tip_magnetic.precision": (["float64", "mixed"], {"forces.tip_magnetic.precision": "float64"}),
     "forces.yukawa.precision": (["float64", "mixed"], {"forces.yukawa.precision": "float64"}),
@@ -86,6 +88,12 @@ KNOBS = {
     "forces.current_lorentz.method": (["direct", "tree"], {"forces.current_lorentz.method": "direct"}),
     "forces.current_field.opening_angle": ([0.3, 0.4, 0.5, 0.6, 0.7], {"forces.current_field.method": "direct"}),
     "forces.current_lorentz.opening_angle": ([0.3, 0.4, 0.5, 0.6, 0.7], {"forces.current_lorentz.method": "direct"}),
+    "forces.current_field.leaf_size": ([16, 32, 64, 128, 256], {"forces.current_field.method": "direct"}),
+    "forces.current_field.group_size": ([32, 64, 128, 256, 512], {"forces.current_field.method": "direct"}),
+    "forces.current_field.order": ([2, 3], {"forces.current_field.method": "direct"}),
+    "forces.current_lorentz.leaf_size": ([16, 32, 64, 128, 256], {"forces.current_lorentz.method": "direct"}),
+    "forces.current_lorentz.group_size": ([32, 64, 128, 256, 512], {"forces.current_lorentz.method": "direct"}),
+    "forces.current_lorentz.order": ([2, 3], {"forces.current_lorentz.method": "direct"}),
     "integrator.slow_extrapolation": ([False, True], NO_SPLITTING),
     # only with slow_every > 1 in the base (--set integrator.slow_every=8): each range against no splitting
     "integrator.fast_range": ([2.0, 3.0, 4.0, 6.0, 8.0, 12.0], NO_SPLITTING),
@@ -121,7 +129,9 @@ def _overrides(values):
 
 
 #: knobs of the tip-tip tree: they change nothing where the scene sums the tip pairs directly
-TREE_KNOBS = ("forces.tip_magnetic.opening_angle", "forces.tip_magnetic.group_size", "forces.tip_magnetic.order")
+TREE_KNOBS = tuple(f"forces.tip_magnetic.{k}" for k in ("opening_angle", "group_size", "order", "leaf_size"))
+#: knobs of the rod currents' tree (of either current term): they change nothing where the term sums directly
+CURRENT_TREE_KNOBS = ("opening_angle", "leaf_size", "group_size", "order")
 
 
 def _applicable(scenario, knob):
@@ -132,7 +142,7 @@ def _applicable(scenario, knob):
     f = scenario.params.forces
     if knob == "integrator.current_every" and f.current_field is None and f.current_lorentz is None:
         return False
-    if knob.startswith("forces.current_") and knob.endswith(".opening_angle"):
+    if knob.startswith("forces.current_") and knob.rsplit(".", 1)[1] in CURRENT_TREE_KNOBS:
         term = getattr(f, knob.split(".")[1])
         if term is None or term.method != "tree":
             return False

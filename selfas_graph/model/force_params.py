@@ -43,6 +43,14 @@ class TipMagnetic:
         "error as small or smaller but for a uniform gas of 10^5 rods (7.9e-4 against 7.4e-4), docs/performance.md 'Tip-tip force by a multipole tree')",
         ge=1,
     )
+    leaf_size: int = spec(
+        64,
+        "tree: a cell is split until it holds at most this many tips; a speed knob (a leaf's tips are taken "
+        "as near pairs when it is opened, so larger leaves err slightly less at more cost; docs/performance.md "
+        "'Leaves of the two trees')",
+        ge=1,
+        le=100000,
+    )
     order: int = spec(
         4,
         "tree: the highest multipole moment of a cell, 2 (quadrupole), 3 (octupole) or 4 (hexadecapole); an "
@@ -192,6 +200,19 @@ _CURRENT_METHOD_HELP = (
     "precision at a median error of 1.4e-4 of the field, 16 to 21 times with 5 x 10^4, no faster with 1000; "
     "docs/performance.md 'A tree of the rod currents'); a speed knob for large networks"
 )
+_CURRENT_LEAF_HELP = (
+    "tree: a cell of rods is split until it holds at most this many; a speed knob (a leaf's rods are summed "
+    "by the segment law when it is opened; docs/performance.md 'Leaves of the two trees'). With both "
+    "current terms on the tree, one tree serves both where their leaf_size and order agree"
+)
+_CURRENT_GROUP_HELP = (
+    "tree: field points walk the tree in runs of this many in Morton order, a cell accepted for the run by "
+    "its distance from the run's box; an accuracy and speed knob (docs/performance.md 'A tree of the rod currents')"
+)
+_CURRENT_ORDER_HELP = (
+    "tree: the highest moment of a cell's vector potential, 2 (quadrupole) or 3 (octupole); an accuracy knob "
+    "(docs/model.md 'The rod currents by a tree')"
+)
 _CURRENT_THETA_HELP = (
     "tree: a cell of rods acts through its moments when its radius is below this times its distance from the "
     "group of points; an accuracy and speed knob (in [0, 1): the own rod of a point is then always summed "
@@ -206,6 +227,9 @@ class CurrentField:
     precision: str = spec("float64", _CURRENT_PRECISION_HELP.format(where="on the tips"), choices=("float64", "mixed"))
     method: str = spec("direct", _CURRENT_METHOD_HELP.format(where="on the tips"), choices=("direct", "tree"))
     opening_angle: float = spec(0.5, _CURRENT_THETA_HELP, ge=0.0, lt=1.0)
+    leaf_size: int = spec(64, _CURRENT_LEAF_HELP, ge=1, le=100000)
+    group_size: int = spec(128, _CURRENT_GROUP_HELP, ge=1, le=1000000)
+    order: int = spec(3, _CURRENT_ORDER_HELP, ge=2, le=3)
 
 
 @dataclass(frozen=True)
@@ -236,6 +260,9 @@ class CurrentLorentz:
         "direct", _CURRENT_METHOD_HELP.format(where="at the quadrature points"), choices=("direct", "tree")
     )
     opening_angle: float = spec(0.5, _CURRENT_THETA_HELP, ge=0.0, lt=1.0)
+    leaf_size: int = spec(64, _CURRENT_LEAF_HELP, ge=1, le=100000)
+    group_size: int = spec(128, _CURRENT_GROUP_HELP, ge=1, le=1000000)
+    order: int = spec(3, _CURRENT_ORDER_HELP, ge=2, le=3)
 
 
 @dataclass(frozen=True)

@@ -86,9 +86,15 @@ def test_current_tree_tool_reads_a_checkpoint_and_refuses_bad_input(quick_run, c
     checkpoint = str(quick_run).replace(".h5", ".checkpoint.h5")
     assert tool(["--checkpoint", checkpoint, "--theta", "0", "--precision", "float64", "--reps", "1"]) == 0
     out = capsys.readouterr().out
-    assert "rods carrying current" in out and "| tree | float64 | 0 |" in out
+    assert "rods carrying current" in out and "| tree | float64 | 0 | 64 / 128 / 3 |" in out
+    # the tree's shapes: at opening angle 0 every rod is summed by the segment law whatever the leaves
+    assert tool(["--checkpoint", checkpoint, "--theta", "0", "--precision", "float64", "--reps", "1",
+                 "--leaf", "8", "64", "--group", "16", "--order", "2"]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    assert "| tree | float64 | 0 | 8 / 16 / 2 |" in out and "| tree | float64 | 0 | 64 / 16 / 2 |" in out
     for argv, named in (
         (["--theta", "1.0", "--rods", "10"], "--theta"),
+        (["--rods", "10", "--leaf", "0"], "--leaf"),
         ([], "--checkpoint"),
         (["--rods", "10", "--carrying", "0"], "--carrying"),
     ):

@@ -226,7 +226,9 @@ def test_bench_current_tree_times_the_walks_the_ranks_share(tmp_path):
     args = ["bench", "current_tree", "--rods", "400", "--theta", "0.5", "--precision", "mixed"]
     res = launch(["-m", "selfas_graph.cli.main", *args, "--reps", "1", "--json", "ct.json"], tmp_path, 2)
     assert res.returncode == 0, res.stderr
-    assert res.stdout.count("2 ranks sharing the tree, mixed, opening angle 0.5:") == 1
+    assert (
+        res.stdout.count("2 ranks sharing the tree, mixed, opening angle 0.5, leaf / group / order 64 / 128 / 3:") == 1
+    )
     assert "x 2 MPI ranks" in res.stdout
     rows = {r["method"]: r for r in json.loads((tmp_path / "ct.json").read_text())["scenes"][0]["rows"]}
     shared, whole = rows["tree, shared by the ranks"], rows["tree"]

@@ -213,7 +213,7 @@ def test_the_terms_by_the_tree_match_the_direct_terms():
     direct, ff = forces("direct", 0.5)
     assert ff.describe()["current_field_sum"] == "direct"
     exact, ff = forces("tree", 0.0)
-    assert ff.describe()["current_lorentz_sum"].startswith("tree (opening angle 0,")
+    assert ff.describe()["current_lorentz_sum"].startswith("tree (order 3, opening angle 0,")
     for name in direct:
         scale = np.abs(direct[name]).max()
         assert scale > 1e-3
@@ -320,7 +320,7 @@ def test_ranks_share_the_walks_and_give_one_rank_bit_for_bit(ranks, carrying):
 
     def rank_work(comm):
         blocks = RowBlocks(state.n_rods, comm)
-        ranked = dataclasses.replace(ctx, blocks=blocks, _buffers={}, _current_tree=None)
+        ranked = dataclasses.replace(ctx, blocks=blocks, _buffers={}, _current_trees={}, _trees_current=None)
         ranked.bind(state.position, state.velocity)
         out = {}
         for term in ff.terms:
@@ -379,6 +379,47 @@ def test_context_builds_the_tree_once_and_skips_it_for_nan():
     assert ff.context.current_tree() is None
     total = ff.evaluate(bad, state.velocity)
     assert np.isnan(total).any()
+
+
+def test_each_term_takes_its_own_tree_settings():
+    """leaf_size, order and group_size of forces.current_field and forces.current_lorentz reach the
+    tree: with the defaults both terms share one tree; with other leaves and order for term 10 it
+    takes a tree of its own, and its field at the quadrature points is the kernel's with those
+    settings bit for bit (so term 9, on the shared default tree, is unchanged)."""
+    rng = np.random.default_rng(6)
+    state = random_rods(60, rng, box=4.0)
+    current = np.linspace(0.5, 1.5, state.n_rods)
+    points = state.position[:7] + 0.3
+    exclude = np.full(7, -1, dtype=np.int64)
+
+    def field(lorentz):
+        forces = {
+            "electrodes": {"gap": 8.0},
+            "current_field": {"method": "tree"},
+            "current_lorentz": {"method": "tree", **lorentz},
+        }
+        ff = simulation(state.copy(), forces=forces, circuit={"delta_J0": 1.0}).force_field
+        ff.set_currents(current)
+        ff.evaluate(state.position, state.velocity)
+        lorentz_term = next(t for t in ff.terms if t.name == "current_lorentz")
+        out = np.empty((7, 3))
+        lorentz_term.current_field(ff.context, points, out, exclude)
+        return ff, out
+
+    ff, _ = field({})
+    shared = ff.context.current_tree()
+    assert ff.context.current_tree(ct.LEAF_SIZE, ct.ORDER) is shared
+    before = ff.out["current_field"].copy()
+    ff, out = field({"leaf_size": 4, "order": 2, "group_size": 3})
+    own = ff.context.current_tree(4, 2)
+    assert own is not ff.context.current_tree() and own.order == 2
+    assert np.array_equal(ff.out["current_field"], before)
+    active = np.arange(state.n_rods, dtype=np.int64)
+    tree = ct.build_current_tree(state.position, active, current, leaf_size=4, order=2)
+    expected = np.empty((7, 3))
+    ct.current_tree_field(tree, points, exclude, 0.5, W, expected, group_size=3)
+    assert np.array_equal(out, expected)
+    assert "leaves of up to 4 rods, groups of 3 points" in ff.describe()["current_lorentz_sum"]
 
 
 def test_build_rejects_an_order_it_does_not_have():

@@ -629,15 +629,41 @@ def test_force_field_precision():
     ff_32, _ = _field(400, "tree", precision="mixed", group_size=128)
     assert (
         ff_32.describe()["tip_magnetic_sum"]
-        == "tree (order 4, opening angle 0.55, groups of up to 128 tips, mixed near field)"
+        == "tree (order 4, opening angle 0.55, leaves of up to 64 tips, groups of up to 128 tips, mixed near field)"
     )
     assert (
         _field(40, "tree")[0]
         .describe()["tip_magnetic_sum"]
-        .startswith("tree (order 4, opening angle 0.55, groups of up to 1024")
+        .startswith("tree (order 4, opening angle 0.55, leaves of up to 64 tips, groups of up to 1024")
     )
     f = [ff.evaluate(state.position, state.velocity).copy() for ff in (ff_64, ff_32)]
     close_mixed(f[1], f[0])
+
+
+def test_leaf_size_reaches_the_tree():
+    """forces.tip_magnetic.leaf_size is the tree's leaf: the force field's channel is the kernel's
+    evaluation of a tree with those leaves bit for bit, and leaves of 8 tips give other cells (so
+    other sums) than the default's 64, both within the tree's error of the direct sum (groups of 128,
+    so that far cells act in these 800 tips)."""
+    from selfas_graph.kernels.tree import LEAF_SIZE
+
+    forces = {}
+    for leaf in (8, LEAF_SIZE):
+        ff, state = _field(400, "tree", group_size=128, leaf_size=leaf)
+        ff.evaluate(state.position, state.velocity)
+        forces[leaf] = ff.out["tip_magnetic"].copy()
+        x, y, z = (np.ascontiguousarray(state.position[:, d]) for d in range(3))
+        t = build_tip_tree(x, y, z, state.tip_charge, leaf_size=leaf, group_size=128)
+        f = np.empty((state.n_tips, 3))
+        evaluate_tip_tree(t, RSTAR, KAPPA, 0.55, f)
+        assert np.array_equal(forces[leaf], f)
+        assert f"leaves of up to {leaf} tips" in ff.describe()["tip_magnetic_sum"]
+    assert not np.array_equal(forces[8], forces[LEAF_SIZE])
+    exact, _ = _field(400, "direct")
+    exact.evaluate(state.position, state.velocity)
+    for leaf in forces:
+        # the tree's truncation error, as test_force_field_tree_matches_direct_within_its_error
+        assert 1e-6 < np.median(relative_error(forces[leaf], exact.out["tip_magnetic"])) < 1e-3
 
 
 # ------------------------------------------------------------------ mixed far field

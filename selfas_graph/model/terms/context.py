@@ -24,14 +24,14 @@ from ..network import RodCurrents
 from .base import fill_cells_shared
 
 
-def shared_current_tree(blocks, position, active_rod, current):
+def shared_current_tree(blocks, position, active_rod, current, leaf_size=kct.LEAF_SIZE, order=kct.ORDER):
     """:func:`~selfas_graph.kernels.currenttree.build_current_tree` on every rank of ``blocks``
     (:class:`~selfas_graph.parallel.RowBlocks`), the ranks sharing the moments of its cells: each
     plans the tree, computes the moments of one run of cells and the runs are gathered
     (:func:`~selfas_graph.model.terms.base.fill_cells_shared`): the same tree bit for bit."""
     if blocks.serial:
-        return kct.build_current_tree(position, active_rod, current)
-    tree = kct.plan_current_tree(position, active_rod, current)
+        return kct.build_current_tree(position, active_rod, current, leaf_size, order)
+    tree = kct.plan_current_tree(position, active_rod, current, leaf_size, order)
     fill_cells_shared(blocks, tree, kct.fill_current_cells, (tree.centre, tree.radius, tree.moment))
     return tree
 
@@ -132,7 +132,9 @@ class EvalContext:
     _soa: tuple | None = None
     _centre: np.ndarray | None = None
     _buffers: dict = field(default_factory=dict)
-    _current_tree: tuple | None = None
+    #: the trees of the rod currents of this binding, by (leaf size, order), and the currents they hold
+    _current_trees: dict = field(default_factory=dict)
+    _trees_current: np.ndarray | None = None
 
     @property
     def n_tips(self) -> int:
@@ -148,7 +150,7 @@ class EvalContext:
         self.velocity = velocity
         self._soa = None
         self._centre = None
-        self._current_tree = None
+        self._current_trees.clear()
 
     def soa(self) -> tuple:
         """The positions as three contiguous (n_tips,) arrays x, y, z (computed once per binding)."""
@@ -162,21 +164,24 @@ class EvalContext:
             self._centre = 0.5 * (self.position[0::2] + self.position[1::2])
         return self._centre
 
-    def current_tree(self):
-        """The multipole tree of the rod currents at :attr:`position` (:func:`~selfas_graph.kernels.currenttree.build_current_tree`),
-        built once per binding and set of currents and shared by terms 9 and 10 (under MPI the
-        ranks share the moments of its cells); None while no rod
+    def current_tree(self, leaf_size=kct.LEAF_SIZE, order=kct.ORDER):
+        """The multipole tree of the rod currents at :attr:`position` with ``leaf_size`` rods a leaf and
+        moments up to ``order`` (:func:`~selfas_graph.kernels.currenttree.build_current_tree`), built
+        once per binding, set of currents and settings, and shared by terms 9 and 10 where their
+        settings agree (under MPI the ranks share the moments of its cells); None while no rod
         carries current or a position is not finite (the direct sums then carry the NaN to the run's
         health check)."""
         rc = self.currents
-        cached = self._current_tree
-        if cached is not None and cached[0] is rc.current:
-            return cached[1]
-        tree = None
-        if len(rc.active_rod) and np.isfinite(self.position).all():
-            tree = shared_current_tree(self.blocks, self.position, rc.active_rod, rc.current)
-        self._current_tree = (rc.current, tree)
-        return tree
+        if self._trees_current is not rc.current:
+            self._current_trees.clear()
+            self._trees_current = rc.current
+        key = (int(leaf_size), int(order))
+        if key not in self._current_trees:
+            tree = None
+            if len(rc.active_rod) and np.isfinite(self.position).all():
+                tree = shared_current_tree(self.blocks, self.position, rc.active_rod, rc.current, *key)
+            self._current_trees[key] = tree
+        return self._current_trees[key]
 
     def buffer(self, name: str, rows: int) -> np.ndarray:
         """A work buffer (rows, 3) float64 kept under ``name`` between evaluations; contents undefined."""

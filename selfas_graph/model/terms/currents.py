@@ -54,7 +54,7 @@ def wire_radius(p) -> float:
     return 0.5 * p.rods.diameter
 
 
-def tree_field(blocks, tree, points, exclude_rod, opening_angle, wire_radius, out, mixed):
+def tree_field(blocks, tree, points, exclude_rod, opening_angle, wire_radius, out, mixed, group_size=kt.GROUP_SIZE):
     """Overwrite ``out`` (m, 3), C-contiguous, with the field of the rod currents by ``tree`` at every
     one of ``points`` (m, 3) on every rank, each point leaving out the rod ``exclude_rod[p]``
     (:func:`~selfas_graph.kernels.currenttree.current_tree_field`).
@@ -67,7 +67,7 @@ def tree_field(blocks, tree, points, exclude_rod, opening_angle, wire_radius, ou
     and sum them otherwise."""
     if points.shape[0] == 0:
         return
-    targets = kt.sort_targets(points, exclude_rod)
+    targets = kt.sort_targets(points, exclude_rod, group_size)
     bounds, rows = kt.target_runs(targets, blocks.size)
     r = blocks.rank
     kt.evaluate_current_tree(tree, targets, opening_angle, wire_radius, out, mixed, groups=bounds[r : r + 2])
@@ -92,6 +92,9 @@ class CurrentFieldForce(Term):
         self.wire_radius = wire_radius(p)
         self.use_tree = p.forces.current_field.method == "tree"
         self.opening_angle = p.forces.current_field.opening_angle
+        tp = p.forces.current_field
+        #: the tree's settings (one tree serves terms 9 and 10 where leaf_size and order agree)
+        self.leaf_size, self.order, self.group_size = tp.leaf_size, tp.order, tp.group_size
         self._gathered = False
 
     def compute(self, ctx, out):
@@ -100,14 +103,24 @@ class CurrentFieldForce(Term):
         rc = ctx.currents
         if len(rc.active_rod):
             lo, hi = ctx.blocks.tips
-            tree = ctx.current_tree() if self.use_tree else None
+            tree = ctx.current_tree(self.leaf_size, self.order) if self.use_tree else None
             self._gathered = tree is not None
             if tree is None:
                 self.kernel(ctx.position, ctx.tip_charge, rc.active_rod, rc.current, self.wire_radius, lo, hi, f)
             else:
                 own_rod = np.arange(ctx.n_tips, dtype=np.int64) // 2
                 mixed = self.precision == "mixed"
-                tree_field(ctx.blocks, tree, ctx.position, own_rod, self.opening_angle, self.wire_radius, f, mixed)
+                tree_field(
+                    ctx.blocks,
+                    tree,
+                    ctx.position,
+                    own_rod,
+                    self.opening_angle,
+                    self.wire_radius,
+                    f,
+                    mixed,
+                    self.group_size,
+                )
                 f *= ctx.tip_charge[:, None]
             ctx.calls[self.name] += 1
 
@@ -142,6 +155,9 @@ class CurrentLorentzForce(Term):
         self.wire_radius = wire_radius(p)
         self.use_tree = p.forces.current_lorentz.method == "tree"
         self.opening_angle = p.forces.current_lorentz.opening_angle
+        tp = p.forces.current_lorentz
+        #: the tree's settings (one tree serves terms 9 and 10 where leaf_size and order agree)
+        self.leaf_size, self.order, self.group_size = tp.leaf_size, tp.order, tp.group_size
         #: the terms that are sources of a magnetic field (FieldSource), in term order: handed in by the
         #: force field that holds this term, once every term is built
         self.field_sources = ()
@@ -215,10 +231,20 @@ class CurrentLorentzForce(Term):
         :func:`~selfas_graph.kernels.currents.rod_current_field_mixed`) and by its method (the tree:
         :func:`~selfas_graph.kernels.currenttree.current_tree_field`)."""
         rc = ctx.currents
-        tree = ctx.current_tree() if self.use_tree else None
+        tree = ctx.current_tree(self.leaf_size, self.order) if self.use_tree else None
         if tree is not None:
             mixed = self.precision == "mixed"
-            tree_field(ctx.blocks, tree, points, exclude_rod, self.opening_angle, self.wire_radius, out, mixed)
+            tree_field(
+                ctx.blocks,
+                tree,
+                points,
+                exclude_rod,
+                self.opening_angle,
+                self.wire_radius,
+                out,
+                mixed,
+                self.group_size,
+            )
             return
         _FIELD_KERNEL[self.precision](
             points, exclude_rod, ctx.position, rc.active_rod, rc.current, self.wire_radius, out

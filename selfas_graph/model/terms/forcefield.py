@@ -345,7 +345,8 @@ class ForceField:
         for t in self.terms:
             if isinstance(t, TipMagneticForce):
                 d["tip_magnetic_sum"] = (
-                    f"tree (order {t.order}, opening angle {t.theta:g}, groups of up to {t.group_size} tips, "
+                    f"tree (order {t.order}, opening angle {t.theta:g}, leaves of up to {t.leaf_size} tips, "
+                    f"groups of up to {t.group_size} tips, "
                     f"{t.precision} near field)"
                     if t.use_tree
                     else "direct"
@@ -354,7 +355,8 @@ class ForceField:
                 d["yukawa_cutoff"] = t.cutoff
             if t.name in ("current_field", "current_lorentz"):
                 d[f"{t.name}_sum"] = (
-                    f"tree (opening angle {t.opening_angle:g}, octupoles, {t.precision} near rods)"
+                    f"tree (order {t.order}, opening angle {t.opening_angle:g}, leaves of up to {t.leaf_size} rods, "
+                    f"groups of {t.group_size} points, {t.precision} near rods)"
                     if t.use_tree
                     else "direct"
                 )

@@ -59,6 +59,7 @@ class TipMagneticForce(Term):
         self.theta = tm.opening_angle
         self.order = tm.order
         self.group_size = tm.group_size
+        self.leaf_size = tm.leaf_size
         self.precision = tm.precision
         #: the energy of a frame by the tree (docs/model.md 'Term 1'), else by the direct sum
         self.tree_energy = state.n_rods >= tm.energy_tree_above
@@ -104,8 +105,8 @@ class TipMagneticForce(Term):
         """The tip tree; under MPI each rank computes the moments of a run of cells and the ranks
         exchange them (the work two threads would share), the same tree bit for bit."""
         if ctx.blocks.serial:
-            return ktree.build_tip_tree(x, y, z, ctx.tip_charge, group_size=self.group_size, order=self.order)
-        tree = ktree.plan_tip_tree(x, y, z, ctx.tip_charge, group_size=self.group_size, order=self.order)
+            return ktree.build_tip_tree(x, y, z, ctx.tip_charge, self.leaf_size, self.group_size, self.order)
+        tree = ktree.plan_tip_tree(x, y, z, ctx.tip_charge, self.leaf_size, self.group_size, self.order)
         fill_cells_shared(ctx.blocks, tree, ktree.fill_cells, (tree.box, tree.centre, tree.radius, tree.moment))
         return ktree.finish_tip_tree(tree)
 
