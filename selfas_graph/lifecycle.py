@@ -1,7 +1,8 @@
 """The lifecycle of one run into its run file, shared by ``selfas-graph simulate`` and the ensemble's seeds.
 
 A run is: a run file, new (:func:`new_run_file`: provenance and the file) or reopened
-(``RunWriter.reopen``); a checkpointer; the run loop under :class:`StopOnSignal`
+(``RunWriter.reopen``, once :func:`continuation` has found the file and its checkpoint fit to
+continue); a checkpointer; the run loop under :class:`StopOnSignal`
 (SIGTERM and SIGINT stop it after the current step with a checkpoint); and one of four ends
 (:func:`run_to_file`, which returns an :class:`Outcome`):
 
@@ -21,19 +22,28 @@ and ``ensemble.run_seed``.
 from __future__ import annotations
 
 import dataclasses
+import json
 import signal
 from pathlib import Path
 
-from .io.checkpoint import failure_meta, write_failure
-from .io.h5md import DiskFullError, RunWriter, is_io_error, run_provenance
+import numpy as np
+
+from ._version import __version__
+from .io.checkpoint import CheckpointError, failure_meta, read_checkpoint, write_failure
+from .io.h5md import DiskFullError, RunFile, RunFileError, RunWriter, appendable_problems, is_io_error, run_provenance
+from .io.scenario import ScenarioError, scenario_from_text
 from .model.simulation import NumericalFailure, RunInterrupted
 from .parallel import parent_gone
+from .provenance import version_key
 
 __all__ = [
     "ABANDONED",
+    "Continuation",
+    "ContinuationError",
     "Outcome",
     "StopOnSignal",
     "close_after_io_error",
+    "continuation",
     "failure_path",
     "new_run_file",
     "run_to_file",
@@ -239,3 +249,140 @@ def close_after_io_error(writer, exc, status) -> bool:
     if not clean:
         ABANDONED.append(writer)
     return clean
+
+
+class ContinuationError(Exception):
+    """A run file and checkpoint that cannot be continued together; the message says why."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Continuation:
+    """A run to continue from its checkpoint (:func:`continuation`).
+
+    Attributes
+    ----------
+    scenario : Scenario
+        The scenario the run started with (its text and ``--set`` overrides, as the checkpoint holds
+        them), ending at the end time asked for.
+    snapshot, meta : dict
+        The checkpoint's state and metadata (:func:`~selfas_graph.io.checkpoint.read_checkpoint`).
+    run_id : str
+        The run's identity, the same in the run file and the checkpoint.
+    notes : tuple of str
+        What the user should know and nothing stops: another version continues the run, or the
+        scenario file has changed since the run started.
+    """
+
+    scenario: object
+    snapshot: dict
+    meta: dict
+    run_id: str
+    notes: tuple = ()
+
+
+def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
+    """Check that the run file ``run_path`` continues from the checkpoint file ``checkpoint`` and
+    return what a resume needs; nothing is written. The one rule of ``simulate --resume``, an
+    ensemble's plan and its seeds.
+
+    Refused (:class:`ContinuationError`): a checkpoint that cannot be read or whose scenario no longer
+    validates; a run file that cannot be read, cannot be appended to (a torn row is dropped on
+    reopening; other damage is not), ended in a numerical failure (the same steps would fail again),
+    is another run's (run identity, scenario or rod count) or has no frame at or before the
+    checkpoint's step. A run started when ``integrator.brake``'s default was ``explicit`` continues
+    with it.
+
+    Parameters
+    ----------
+    checkpoint, run_path : path
+    t_end : float, optional
+        The end time; None: the run's own (the checkpoint's ``t_end``, else the scenario's).
+    read : (snapshot, meta), optional
+        The checkpoint as already read, so that it is not read twice.
+    """
+    checkpoint, run_path = Path(checkpoint), Path(run_path)
+    if read is None:
+        try:
+            read = read_checkpoint(checkpoint)
+        except CheckpointError as exc:
+            raise ContinuationError(f"cannot resume: {exc}") from None
+    snap, meta = read
+    if t_end is None and "t_end" in meta:
+        t_end = float(meta["t_end"])
+    overrides = json.loads(meta["overrides"])
+    try:
+        scenario = scenario_from_text(meta["scenario_text"], overrides=overrides, t_end=t_end)
+    except (ScenarioError, ValueError, TypeError) as exc:
+        raise ContinuationError(f"cannot resume: the checkpoint's scenario no longer validates: {exc}") from None
+    # the run file must be this run's, checked read-only before anything in it is changed
+    try:
+        with RunFile(run_path) as run_file:
+            same = (
+                run_file.n_tips == np.asarray(snap["position"]).shape[0]
+                and run_file.scenario_text == meta["scenario_text"]
+            )
+            steps = run_file.step
+            brake = _started_brake(run_file)
+            run_id = run_file.meta.get("run_id")
+            source = str(run_file.meta.get("scenario_path") or "")
+            problems = appendable_problems(run_file.f)
+            status = run_file.status
+    except RunFileError as exc:
+        raise ContinuationError(f"cannot resume into {run_path}: {exc}") from None
+    if status.startswith("failed: numerical failure"):  # not a full disk, which a resume with room overcomes
+        raise ContinuationError(
+            f"cannot resume: the run of {run_path} ended in a {status.removeprefix('failed: ')} (its "
+            f"state is in {failure_path(run_path)}); a resume would take the same steps from the checkpoint and "
+            f"fail again. Start the run again with other settings (e.g. a smaller integrator.dt) and --force"
+        )
+    if problems:
+        raise ContinuationError(f"cannot resume into {run_path}: it cannot be continued: {'; '.join(problems)}")
+    if not run_id or run_id != meta.get("run_id"):
+        raise ContinuationError(
+            f"cannot resume: the checkpoint {checkpoint} belongs to another run than the run file {run_path} "
+            f"(run identity {meta.get('run_id') or 'none'} in the checkpoint, {run_id or 'none'} in the "
+            f"run file); give the run file's own checkpoint"
+        )
+    if not same:
+        raise ContinuationError(
+            f"cannot resume: {run_path} is not the run of checkpoint {checkpoint} (different scenario or rod count)"
+        )
+    step = int(snap["step"])
+    if (len(steps) and steps[0] > step) or (not len(steps) and step != 0):
+        raise ContinuationError(f"cannot resume: {run_path} has no frame at or before the checkpoint's step {step}")
+    if brake is not None and brake != scenario.params.integrator.brake:
+        # a scene without integrator.brake, started when the default was explicit: continue as it ran
+        scenario = scenario_from_text(
+            meta["scenario_text"], t_end=t_end, overrides=overrides + [f"integrator.brake={brake}"]
+        )
+    notes = []
+    made_by = str(meta.get("version") or "unknown")
+    if version_key(made_by) != version_key(__version__):
+        notes.append(
+            f"{checkpoint} was written by version {made_by} and version {__version__} continues it: where the model "
+            f"changed between them (CHANGELOG), the rest of the run follows {__version__}; the run file records the "
+            f"continuation (resumed_with)"
+        )
+    if source and _changed_since(source, meta["scenario_text"]):
+        notes.append(
+            f"the scenario file {source} differs from the scenario this run started with; a resume continues "
+            f"the run as it started (its files hold that scenario): start a new run to use the file as it is now"
+        )
+    return Continuation(scenario, snap, meta, str(run_id), tuple(notes))
+
+
+def _changed_since(path, text) -> bool:
+    """True if the scenario file at ``path`` (as the run recorded it) now reads other than ``text``."""
+    try:
+        return Path(path).read_text(encoding="utf-8") != text
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
+def _started_brake(run_file):
+    """The integrator.brake a run was started with, from its resolved parameters (None if unreadable)."""
+    try:
+        brake = json.loads(run_file.meta["parameters_json"])["integrator"]["brake"]
+    except (ValueError, TypeError, KeyError, IndexError):
+        return None
+    return brake if brake in ("explicit", "split") else None

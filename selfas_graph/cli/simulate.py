@@ -22,8 +22,6 @@ import time
 import uuid
 from pathlib import Path
 
-import numpy as np
-
 from .._version import __version__
 from ..io.checkpoint import (
     Checkpointer,
@@ -37,18 +35,24 @@ from ..io.h5md import (
     RunFile,
     RunFileError,
     RunWriter,
-    appendable_problems,
     is_io_error,
 )
-from ..io.scenario import ScenarioError, load_scenario, scenario_from_text
-from ..lifecycle import StopOnSignal, close_after_io_error, failure_path, new_run_file, run_to_file
+from ..io.scenario import ScenarioError, load_scenario
+from ..lifecycle import (
+    ContinuationError,
+    StopOnSignal,
+    close_after_io_error,
+    continuation,
+    failure_path,
+    new_run_file,
+    run_to_file,
+)
 from ..model.accuracy import null_model_notes, short_of_accuracy
 from ..model.params import plasma_current_text
 from ..model.simulation import Simulation
 from ..model.state import PlacementError
 from ..model.terms.currents import tree_note
 from ..parallel import fit_threads_to_cores, world
-from ..provenance import version_key
 from .main import EXIT_NUMERICAL, CliError, CliIOError, counted
 from .paths import check_folder, check_target, same_file
 
@@ -198,7 +202,8 @@ def _finished_at(path):
 
 
 def _load_resume(args):
-    """(scenario, snapshot, run file, checkpoint file read, run identity) of a run to continue."""
+    """(scenario, snapshot, run file, checkpoint file read, run identity) of a run to continue
+    (the checks: :func:`~selfas_graph.lifecycle.continuation`)."""
     if args.scenario or args.overrides:
         raise CliError("--resume continues a run exactly: give no SCENARIO and no --set (only --t-end may change)")
     ckpt, out = _resume_paths(args)
@@ -216,14 +221,6 @@ def _load_resume(args):
     if args.output:
         out = Path(args.output)
     _check_output_name(out)
-    # the effective end time of the run (a --t-end given when it started) unless a new one is given
-    t_end = args.t_end
-    if t_end is None and "t_end" in meta:
-        t_end = float(meta["t_end"])
-    try:
-        scenario = scenario_from_text(meta["scenario_text"], overrides=json.loads(meta["overrides"]), t_end=t_end)
-    except (ScenarioError, ValueError, TypeError) as exc:
-        raise CliError(f"cannot resume: the checkpoint's scenario no longer validates: {exc}") from None
     if args.t_end is not None and args.t_end < float(snap["time"]):
         raise CliError(
             f"--t-end (run.t_end) {args.t_end:g} is before the checkpoint's time {float(snap['time']):.6g}; "
@@ -233,75 +230,13 @@ def _load_resume(args):
         raise CliError(
             f"cannot resume: the run file {out} of checkpoint {ckpt} does not exist (give the run file with -o)"
         )
-    # the run file must be this run's, checked read-only before anything in it is changed
     try:
-        with RunFile(out) as run_file:
-            n_tips = run_file.n_tips
-            same = n_tips == np.asarray(snap["position"]).shape[0] and run_file.scenario_text == meta["scenario_text"]
-            steps = run_file.step
-            brake = _started_brake(run_file)
-            run_id = run_file.meta.get("run_id")
-            source = str(run_file.meta.get("scenario_path") or "")
-            problems = appendable_problems(run_file.f)
-            status = run_file.status
-    except RunFileError as exc:
-        raise CliError(f"cannot resume into {out}: {exc}") from None
-    if status.startswith("failed: numerical failure"):  # not a full disk, which a resume with room overcomes
-        # the steps from the checkpoint are the same bit for bit: they would fail again at the same step
-        raise CliError(
-            f"cannot resume: the run of {out} ended in a {status.removeprefix('failed: ')} (its "
-            f"state is in {failure_path(out)}); a resume would take the same steps from the checkpoint and "
-            f"fail again. Start the run again with other settings (e.g. a smaller integrator.dt) and --force"
-        )
-    if problems:
-        raise CliError(f"cannot resume into {out}: it cannot be continued: {'; '.join(problems)}")
-    if not run_id or run_id != meta.get("run_id"):
-        raise CliError(
-            f"cannot resume: the checkpoint {ckpt} belongs to another run than the run file {out} "
-            f"(run identity {meta.get('run_id') or 'none'} in the checkpoint, {run_id or 'none'} in the "
-            f"run file); give the run file's own checkpoint"
-        )
-    if same and brake is not None and brake != scenario.params.integrator.brake:
-        # a scene without integrator.brake, started when the default was explicit: continue as it ran
-        scenario = scenario_from_text(
-            meta["scenario_text"], t_end=t_end, overrides=json.loads(meta["overrides"]) + [f"integrator.brake={brake}"]
-        )
-    if not same:
-        raise CliError(f"cannot resume: {out} is not the run of checkpoint {ckpt} (different scenario or rod count)")
-    if (len(steps) and steps[0] > int(snap["step"])) or (not len(steps) and int(snap["step"]) != 0):
-        raise CliError(f"cannot resume: {out} has no frame at or before the checkpoint's step {int(snap['step'])}")
-    made_by = str(meta.get("version") or "unknown")
-    if version_key(made_by) != version_key(__version__):
-        print(
-            f"note: {ckpt} was written by version {made_by} and version {__version__} continues it: where the model "
-            f"changed between them (CHANGELOG), the rest of the run follows {__version__}; the run file records the "
-            f"continuation (resumed_with)",
-            file=sys.stderr,
-        )
-    if source and _changed_since(source, meta["scenario_text"]):
-        print(
-            f"note: the scenario file {source} differs from the scenario this run started with; --resume continues "
-            f"the run as it started (its files hold that scenario): start a new run to use the file as it is now",
-            file=sys.stderr,
-        )
-    return scenario, snap, out, ckpt, str(run_id)
-
-
-def _changed_since(path, text) -> bool:
-    """True if the scenario file at ``path`` (as the run recorded it) now reads other than ``text``."""
-    try:
-        return Path(path).read_text(encoding="utf-8") != text
-    except (OSError, UnicodeDecodeError):
-        return False
-
-
-def _started_brake(run_file):
-    """The integrator.brake a run was started with, from its resolved parameters (None if unreadable)."""
-    try:
-        brake = json.loads(run_file.meta["parameters_json"])["integrator"]["brake"]
-    except (ValueError, TypeError, KeyError, IndexError):
-        return None
-    return brake if brake in ("explicit", "split") else None
+        cont = continuation(ckpt, out, t_end=args.t_end, read=(snap, meta))
+    except ContinuationError as exc:
+        raise CliError(str(exc)) from None
+    for note in cont.notes:
+        print(f"note: {note}", file=sys.stderr)
+    return cont.scenario, snap, out, ckpt, cont.run_id
 
 
 def _check_output_name(out: Path):

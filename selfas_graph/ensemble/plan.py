@@ -20,6 +20,7 @@ from ..io.checkpoint import (
 )
 from ..io.h5md import RunFile, RunFileError
 from ..io.scenario import Scenario, ScenarioError, load_scenario, scenario_from_text
+from ..lifecycle import ContinuationError, continuation
 from ..model.operations import frame_steps
 from ..parallel import task_pool
 from ..provenance import older_version, version_key
@@ -256,7 +257,6 @@ class Ensemble:
                 stored, status = run.parameters, str(run.meta.get("status", ""))
                 made_by = str(run.meta.get("version") or "unknown")
                 t_last = float(run.time[-1]) if run.n_frames else -math.inf
-                scenario_text = run.scenario_text
         except RunFileError as exc:
             if replace:
                 return SeedPlan(seed, path, "run", f"replacing: {exc}")
@@ -283,12 +283,16 @@ class Ensemble:
             if replace:
                 return SeedPlan(seed, path, "run", "replacing a failed run")
             return SeedPlan(seed, path, "failed", status)
+        # the checks of simulate --resume (lifecycle.continuation), and a checkpoint not past the end
+        why = None
         try:
             snap, meta = read_checkpoint(ckpt)
-            usable = meta.get("scenario_text") == scenario_text and float(snap["time"]) <= self.t_end + half_step
-        except CheckpointError:
-            usable = False
-        if usable:
+            continuation(ckpt, path, t_end=self.t_end, read=(snap, meta))
+            if float(snap["time"]) > self.t_end + half_step:
+                why = f"checkpoint at t = {float(snap['time']):.6g}, after the end time"
+        except (CheckpointError, ContinuationError) as exc:
+            why = str(exc)
+        if why is None:
             return SeedPlan(
                 seed, path, "resume", f"{status} at t = {t_last:.6g}; checkpoint at t = {float(snap['time']):.6g}"
             )
@@ -298,7 +302,7 @@ class Ensemble:
             return SeedPlan(seed, path, "run", f"replacing: {status} at t = {t_last:.6g}, no usable checkpoint")
         raise EnsembleError(
             f"{path} is {status} at t = {t_last:.6g} (end time {self.t_end:g}) and has no usable "
-            f"checkpoint {ckpt.name} to continue from"
+            f"checkpoint {ckpt.name} to continue from ({why})"
         )
 
     # ------------------------------------------------------------------ running

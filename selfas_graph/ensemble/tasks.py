@@ -3,7 +3,6 @@ file to its first short circuit (:func:`run_to_short_circuit`, the percolation b
 
 from __future__ import annotations
 
-import json
 import time
 import uuid
 from pathlib import Path
@@ -13,15 +12,13 @@ from ..io.checkpoint import (
     Checkpointer,
     checkpoint_meta,
     checkpoint_path,
-    read_checkpoint,
 )
-from ..io.h5md import RunFile, RunWriter, is_io_error
+from ..io.h5md import RunWriter, is_io_error
 from ..io.scenario import scenario_from_text
-from ..lifecycle import StopOnSignal, close_after_io_error, new_run_file, run_to_file
+from ..lifecycle import StopOnSignal, close_after_io_error, continuation, new_run_file, run_to_file
 from ..model.simulation import NumericalFailure, RunInterrupted, Simulation
 from ..model.state import PlacementError
 from ..parallel import is_pool_worker
-from .folder import EnsembleError
 
 
 def run_seed(task: dict) -> dict:
@@ -55,18 +52,8 @@ def run_seed(task: dict) -> dict:
     with StopOnSignal() as stop:
         try:
             if task["action"] == "resume":
-                snap, meta = read_checkpoint(ckpt)
-                with RunFile(path) as run:
-                    run_id = run.meta.get("run_id")
-                if not run_id or run_id != meta.get("run_id"):
-                    raise EnsembleError(
-                        f"the checkpoint {ckpt} belongs to another run than {path} (run identity "
-                        f"{meta.get('run_id') or 'none'} against {run_id or 'none'})"
-                    )
-                meta = {**meta, "t_end": t_end}
-                scenario = scenario_from_text(
-                    meta["scenario_text"], overrides=json.loads(meta["overrides"]), t_end=t_end
-                )
+                cont = continuation(ckpt, path, t_end=t_end)  # the checks of simulate --resume
+                scenario, snap, meta = cont.scenario, cont.snapshot, {**cont.meta, "t_end": t_end}
                 sim = Simulation.from_snapshot(scenario.params, snap)
                 writer = RunWriter.reopen(
                     path, int(snap["step"]), t_end=scenario.params.run.t_end, frame_interval=sim.frame_interval

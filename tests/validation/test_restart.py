@@ -189,6 +189,33 @@ def test_cli_resume_errors(tmp_path, capsys):
     assert "give no SCENARIO" in capsys.readouterr().err
 
 
+def test_continuation_is_the_one_rule_of_a_resume(tmp_path):
+    """``lifecycle.continuation`` (what ``simulate --resume`` and an ensemble's plan and seeds check):
+    a run's own checkpoint gives its scenario at the end time asked for and its identity, with no
+    note; another run's checkpoint, or a run file that is not one, is refused by name, and nothing
+    is written to either file."""
+    from selfas_graph.lifecycle import ContinuationError, continuation
+
+    (tmp_path / "s.toml").write_text(SCENE)
+    for name in ("a", "b"):
+        out = tmp_path / f"{name}.h5"
+        assert main(["simulate", str(tmp_path / "s.toml"), "-o", str(out), "--t-end", "0.2", "--progress", "none"]) == 0
+    a, b = tmp_path / "a.h5", tmp_path / "b.h5"
+    before = {f: f.read_bytes() for f in (a, b, checkpoint_path(a), checkpoint_path(b))}
+    cont = continuation(checkpoint_path(a), a, t_end=0.5)
+    assert cont.scenario.params.run.t_end == 0.5 and cont.notes == ()
+    with RunFile(a) as run:
+        assert cont.run_id == run.meta["run_id"] == cont.meta["run_id"]
+    assert continuation(checkpoint_path(a), a).scenario.params.run.t_end == pytest.approx(0.2)  # the run's own end
+    with pytest.raises(ContinuationError, match="belongs to another run than the run file"):
+        continuation(checkpoint_path(b), a)
+    with pytest.raises(ContinuationError, match="cannot resume into"):
+        continuation(checkpoint_path(a), tmp_path / "s.toml")
+    with pytest.raises(ContinuationError, match="no such checkpoint"):
+        continuation(tmp_path / "none.checkpoint.h5", a)
+    assert {f: f.read_bytes() for f in before} == before
+
+
 def test_sigterm_checkpoints_and_resume_completes(tmp_path):
     """A real process stopped by SIGTERM writes a checkpoint, exits 143, and --resume finishes the run
     with the same data as an uninterrupted process."""
