@@ -117,18 +117,7 @@ def new_run_file(sim, scenario, path, run_id, command_line, scenario_path, overw
     beside it (``RUN.failure.h5``) goes with the run this one replaces: beside it, it would be taken for
     this run's (``simulate`` asks for --force first)."""
     provenance = run_provenance(sim, scenario, command_line, run_id, scenario_path=scenario_path, mpi_ranks=mpi_ranks)
-    writer = RunWriter(
-        path,
-        sim.state.n_tips,
-        sim.state.tip_charge,
-        sim.state.rod_charge,
-        provenance,
-        overwrite=overwrite,
-        velocities=sim.params.output.velocities,
-        frame_interval=sim.frame_interval,
-        rod_length=sim.state.rod_length,
-        rod_resistance=sim.state.rod_resistance,
-    )
+    writer = RunWriter.for_simulation(sim, path, overwrite=overwrite, provenance=provenance)
     stale = failure_path(path)  # once the new file is made: a refused one leaves the old run whole
     if stale.is_file() and not stale.is_symlink():
         stale.unlink()

@@ -446,20 +446,24 @@ class RunWriter(PendingRows):
             _append(g["floating"], floating.astype(np.int8))
 
     @classmethod
-    def for_simulation(cls, sim, path, overwrite=False, velocities=None, author=None):
+    def for_simulation(cls, sim, path, overwrite=False, velocities=None, author=None, provenance=None):
         """A writer for a run driven from Python: ``sim.run(t_end, writer=w)`` (in as many
         chunks as wanted), then ``w.close()``; or ``with RunWriter.for_simulation(sim, path) as w``.
 
         The file is the one ``selfas-graph simulate`` writes (the provenance holds the resolved
         parameters, and the scenario text when the simulation came from a scenario), and
-        :class:`RunFile`, ``topology``, ``plot`` and ``export`` read it.
+        :class:`RunFile`, ``topology``, ``plot`` and ``export`` read it. ``provenance``: the
+        provenance record to store (:func:`run_provenance`; the command line's and ensemble's own),
+        else one made here with a new run identity. The one place a writer is made from a
+        simulation: a per-rod constant added to the file is added here.
         """
-        import shlex
-        import sys
-        import uuid
-
         p = sim.params
-        provenance = run_provenance(sim, getattr(sim, "scenario", None), shlex.join(sys.argv), uuid.uuid4().hex)
+        if provenance is None:
+            import shlex
+            import sys
+            import uuid
+
+            provenance = run_provenance(sim, getattr(sim, "scenario", None), shlex.join(sys.argv), uuid.uuid4().hex)
         if author is not None:
             provenance["author"] = author
         return cls(

@@ -403,7 +403,19 @@ def _unknown_key(path, key, valid):
 
 
 def check_consistency(p: P.Parameters):
-    """Problems that involve several keys at once. Returns a list of messages."""
+    """Problems that involve several keys at once. Returns a list of messages, in the order of the
+    rules below; a box that cannot hold the rods stops the checks there (the rest would measure
+    against it)."""
+    out = _box_rules(p)
+    if out:
+        return out
+    for rules in (_packing_rules, _rod_law_rules, _integrator_rules, _conductor_rules, _run_length_rules):
+        out += rules(p)
+    return out
+
+
+def _box_rules(p) -> list:
+    """The placement box: not empty, within +-1e6, large enough for the longest rod."""
     out = []
     rods, box = p.rods, p.placement.box
     for d, name in enumerate("xyz"):
@@ -423,7 +435,14 @@ def check_consistency(p: P.Parameters):
             f"placement.box: a rod of length {longest:g} cannot fit in a box of size "
             f"{ext[0]:g} x {ext[1]:g} x {ext[2]:g}; make the box larger"
         )
-        return out
+    return out
+
+
+def _packing_rules(p) -> list:
+    """Room in the box for the rods at their least tip distance."""
+    out = []
+    rods, box = p.rods, p.placement.box
+    ext = [box[d][1] - box[d][0] for d in range(3)]
     dmin = p.min_tip_distance
     volume = ext[0] * ext[1] * ext[2]
     # random sequential packing of spheres jams near a volume fraction of 0.38;
@@ -435,6 +454,13 @@ def check_consistency(p: P.Parameters):
             f"(exclusion volume fraction {fraction:.2f} > 0.3); use fewer rods, a larger box "
             f"or a smaller min_tip_distance"
         )
+    return out
+
+
+def _rod_law_rules(p) -> list:
+    """The laws of the rods' charges, lengths and resistances."""
+    out = []
+    rods = p.rods
     for name, dist in (("magnetic_charge", rods.magnetic_charge), ("electric_charge", rods.electric_charge)):
         if dist.distribution == "magnetic" and name == "magnetic_charge":
             out.append(
@@ -471,6 +497,12 @@ def check_consistency(p: P.Parameters):
                 f"rods.length: the shortest rod ({shortest:g}) is shorter than its diameter "
                 f"rods.diameter = {rods.diameter:g}"
             )
+    return out
+
+
+def _integrator_rules(p) -> list:
+    """The integrator's step counts against each other."""
+    out = []
     ip = p.integrator
     # with slow_every = 1 every force is evaluated at every step and current_every has no effect
     if ip.current_every and ip.current_every % ip.slow_every:
@@ -478,6 +510,13 @@ def check_consistency(p: P.Parameters):
             f"integrator.current_every: {ip.current_every} must be 0 (with the other slow forces) or a multiple of "
             f"integrator.slow_every = {ip.slow_every} (e.g. {2 * ip.slow_every})"
         )
+    return out
+
+
+def _conductor_rules(p) -> list:
+    """The electrodes against the box, and what the circuit and the current terms need."""
+    out = []
+    box = p.placement.box
     el = p.forces.electrodes
     if el is not None:
         zlo, zhi = box[2]
@@ -511,6 +550,12 @@ def check_consistency(p: P.Parameters):
                 f"forces.{term}: rod currents come from the circuit solve; add a [circuit] table "
                 f"(with delta_J0) or remove this term"
             )
+    return out
+
+
+def _run_length_rules(p) -> list:
+    """The run's and the frames' lengths against the time step."""
+    out = []
     # a run of more than 1e12 steps cannot finish; its step count would also overflow
     for name, length in (("run.t_end", p.run.t_end), ("output.interval", p.output.interval)):
         if length / p.integrator.dt > 1e12:
