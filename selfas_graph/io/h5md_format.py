@@ -60,6 +60,17 @@ def _set_unit(obj, unit):
         obj.attrs["unit"] = _fixed(unit)
 
 
+def _charges(group, values, quantity):
+    """The H5MD 1.1 element ``charge`` of a particles group: its values in units Z_M0 e, ``type`` =
+    ``effective`` (H5MD 1.1: a charge whose meaning the model gives, here the magnetic charge of a tip or
+    the screened electric charge of a rod, docs/model.md) and ``quantity``, which of the two it is."""
+    ds = group.create_dataset("charge", data=np.asarray(values, dtype=np.float64))
+    _set_unit(ds, CHARGE)
+    ds.attrs["type"] = _fixed("effective")
+    ds.attrs["quantity"] = _fixed(quantity)
+    return ds
+
+
 def _box(group):
     box = group.create_group(layout.BOX)
     box.attrs["dimension"] = np.int32(3)

@@ -18,7 +18,6 @@ from ..model.topology import ROLE_NAMES
 from ..model.validate import is_whole_number
 from . import layout
 from .h5md_format import (
-    CHARGE,
     CURRENT,
     EVENT_FILE_DTYPE,
     H5MD_VERSION,
@@ -31,6 +30,7 @@ from .h5md_format import (
     RunFileError,
     _append,
     _box,
+    _charges,
     _fixed,
     _growable,
     _set_unit,
@@ -109,11 +109,11 @@ class RunWriter(PendingRows):
         particles = f.create_group(layout.PARTICLES, track_order=True)
         tips = particles.create_group(layout.TIPS)
         _box(tips)
-        _set_unit(tips.create_dataset("charge", data=np.asarray(tip_charge, dtype=np.float64)), CHARGE)
+        _charges(tips, tip_charge, "the magnetic charge of each tip, +q_i at tip a and -q_i at tip b of rod i")
         tips.create_dataset(layout.TIP_ROD, data=np.arange(n_tips, dtype=np.int64) // 2)
         rods = particles.create_group(layout.RODS)
         _box(rods)
-        _set_unit(rods.create_dataset("charge", data=np.asarray(rod_charge, dtype=np.float64)), CHARGE)
+        _charges(rods, rod_charge, "the screened electric charge Z_i of each rod")
         # H5MD ignores a tuple holding the fill value: HDF5's default, 0, would drop rod 0's bond
         bonds = f.create_group(layout.CONNECTIVITY).create_dataset(
             layout.RODS, data=np.arange(n_tips, dtype=np.int64).reshape(-1, 2), fillvalue=-1

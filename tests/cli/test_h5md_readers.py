@@ -75,6 +75,11 @@ def test_layout_follows_h5md_1_1(run_file):
         assert units["observables/energy/kinetic/time"] == "t_0"
         assert units["observables/dt/value"] == "t_0"
         assert units["particles/tips/charge"] == units["particles/rods/charge"] == "Z_M0e"
+        # H5MD 1.1 charge: type "effective" (a charge whose meaning the model gives), and which charge it is
+        for name, quantity in (("tips", "magnetic charge"), ("rods", "electric charge")):
+            charge = f[f"particles/{name}/charge"]
+            assert charge.attrs["type"].decode() == "effective" and _fixed_ascii(charge.attrs.get_id("type"))
+            assert quantity in charge.attrs["quantity"].decode()
         assert units["graph/current"] == "J_0" and units["graph/potential"] == "R_0 J_0"
         assert not any(name.startswith(("particles/tips/position", "particles/tips/velocity")) for name in units)
 
