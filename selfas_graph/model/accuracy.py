@@ -123,6 +123,16 @@ ACCURACY_RULES = (
         lambda p: p.forces.current_lorentz is not None and p.forces.current_lorentz.method == "tree",
         lambda p: p.forces.current_lorentz.opening_angle <= 0.5,
     ),
+    *(
+        AccuracyRule(
+            f"forces.{term}.order",
+            "3 with the tree (quadrupoles err 3-4 times more in the median at 2-6 % less cost; "
+            "docs/performance.md 'Leaves of the two trees')",
+            lambda p, term=term: getattr(p.forces, term) is not None and getattr(p.forces, term).method == "tree",
+            lambda p, term=term: getattr(p.forces, term).order >= 3,
+        )
+        for term in ("current_field", "current_lorentz")
+    ),
     AccuracyRule(
         "forces.current_lorentz.near_range",
         "near_range >= 1.5 with quadrature_points >= 2 (2.8e-3 of the term's rms force at the 99th "

@@ -63,6 +63,19 @@ def test_the_tree_is_short_of_its_accuracy_by_its_angle_or_its_groups(angle, gro
     assert [r.key for r in short_of_accuracy(p) if r.key.startswith("forces.tip_magnetic")] == short
 
 
+@pytest.mark.parametrize("term", ["current_field", "current_lorentz"])
+def test_quadrupoles_in_the_current_tree_are_named_faster_than_accurate(term):
+    """order = 2 of a current term's tree is below its stated accuracy; on the direct sum it changes nothing."""
+    base = {"rods": {"count": 10}, "forces": {"electrodes": {}}, "circuit": {"delta_J0": 1.0}}
+
+    def short(**knobs):
+        p = Parameters.from_dict({**base, "forces": {"electrodes": {}, term: knobs}})
+        return [r.key for r in short_of_accuracy(p) if r.key.startswith(f"forces.{term}.order")]
+
+    assert short(method="tree", order=2) == [f"forces.{term}.order"]
+    assert short(method="tree", order=3) == short(method="direct", order=2) == []
+
+
 def test_every_rule_names_a_real_key():
     p = Parameters()
     for rule in ACCURACY_RULES:
