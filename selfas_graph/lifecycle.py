@@ -354,7 +354,7 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
         )
     if source and _changed_since(source, meta["scenario_text"]):
         notes.append(
-            f"the scenario file {source} differs from the scenario this run started with; a resume continues "
+            f"the scenario file {source} differs from the scenario this run started with; --resume continues "
             f"the run as it started (its files hold that scenario): start a new run to use the file as it is now"
         )
     return Continuation(scenario, snap, meta, str(run_id), tuple(notes))

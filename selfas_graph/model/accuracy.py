@@ -126,7 +126,7 @@ ACCURACY_RULES = (
     *(
         AccuracyRule(
             f"forces.{term}.order",
-            "3 with the tree (quadrupoles err 3-4 times more in the median at 2-6 % less cost; "
+            "3 with the tree (quadrupoles err 3-4 times more in the median at 2-7 % less cost; "
             "docs/performance.md 'Leaves of the two trees')",
             lambda p, term=term: getattr(p.forces, term) is not None and getattr(p.forces, term).method == "tree",
             lambda p, term=term: getattr(p.forces, term).order >= 3,

@@ -320,7 +320,7 @@ def test_ranks_share_the_walks_and_give_one_rank_bit_for_bit(ranks, carrying):
 
     def rank_work(comm):
         blocks = RowBlocks(state.n_rods, comm)
-        ranked = dataclasses.replace(ctx, blocks=blocks, _buffers={}, _current_trees={}, _trees_current=None)
+        ranked = dataclasses.replace(ctx, blocks=blocks, _buffers={})  # bind() gives the copy its own tree cache
         ranked.bind(state.position, state.velocity)
         out = {}
         for term in ff.terms:

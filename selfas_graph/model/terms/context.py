@@ -150,7 +150,7 @@ class EvalContext:
         self.velocity = velocity
         self._soa = None
         self._centre = None
-        self._current_trees.clear()
+        self._current_trees = {}  # a new dict: a copy of this context (dataclasses.replace) keeps its own
 
     def soa(self) -> tuple:
         """The positions as three contiguous (n_tips,) arrays x, y, z (computed once per binding)."""
@@ -173,7 +173,7 @@ class EvalContext:
         health check)."""
         rc = self.currents
         if self._trees_current is not rc.current:
-            self._current_trees.clear()
+            self._current_trees = {}
             self._trees_current = rc.current
         key = (int(leaf_size), int(order))
         if key not in self._current_trees:
