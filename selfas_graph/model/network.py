@@ -62,14 +62,15 @@ class RodCurrents:
     def set(self, current) -> bool:
         """Take the currents ``(n_rods,)``; rods whose current is exactly zero are left out of the kernels.
 
-        Returns False (and keeps the arrays in use) when the currents are those in use, bit for bit.
+        Returns False (and keeps the arrays in use) when the currents are those in use, bit for bit. The
+        currents are copied: an array the caller changes in place and sets again is taken again.
         """
         current = np.ascontiguousarray(current, dtype=np.float64)
         if current.shape != (self.n_rods,):
             raise ValueError(f"currents must have shape ({self.n_rods},), got {current.shape}")
         if np.array_equal(current, self.current):
             return False
-        self.current = current
+        self.current = current.copy()
         self.active_rod = np.flatnonzero(current != 0.0).astype(np.int64)
         return True
 

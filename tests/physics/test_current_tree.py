@@ -462,3 +462,28 @@ def test_cells_filled_by_runs_are_the_built_tree():
         ct.fill_current_cells(planned, bounds[r], bounds[r + 1])
     for name in ("seg", "rod", "start", "end", "nxt", "centre", "radius", "moment"):
         np.testing.assert_array_equal(getattr(planned, name), getattr(built, name))
+
+
+def test_currents_changed_in_place_and_set_again_are_taken():
+    """``set_currents`` kept the caller's array: a notebook that changed it in place and set it again
+    was ignored (the same object compared equal), with the old rods carrying current and the old tree.
+    The currents are now copied; the result equals a fresh field's, on the direct sum and the tree."""
+    rng = np.random.default_rng(11)
+    state = random_rods(60, rng, box=4.0)
+    for method in ("direct", "tree"):
+        forces = {"electrodes": {"gap": 8.0}, "current_field": {"method": method}}
+
+        def field():
+            return simulation(state.copy(), forces=forces, circuit={"delta_J0": 1.0}).force_field
+
+        ff = field()
+        current = np.zeros(state.n_rods)
+        current[:10] = 1.0
+        ff.set_currents(current)
+        current[10:] = 1.0  # in place, then set again
+        ff.set_currents(current)
+        ff.evaluate(state.position, state.velocity)
+        fresh = field()
+        fresh.set_currents(np.ones(state.n_rods))
+        fresh.evaluate(state.position, state.velocity)
+        assert np.array_equal(ff.out["current_field"], fresh.out["current_field"]), method
