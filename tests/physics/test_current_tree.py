@@ -420,6 +420,15 @@ def test_each_term_takes_its_own_tree_settings():
     ct.current_tree_field(tree, points, exclude, 0.5, W, expected, group_size=3)
     assert np.array_equal(out, expected)
     assert "leaves of up to 4 rods, groups of 3 points" in ff.describe()["current_lorentz_sum"]
+    # the mirror: term 9 with its own settings is the kernel's field with them, times the tip charges
+    forces = {"electrodes": {"gap": 8.0}, "current_field": {"method": "tree", "leaf_size": 4, "order": 2,
+                                                            "group_size": 3}}  # fmt: skip
+    ff = simulation(state.copy(), forces=forces, circuit={"delta_J0": 1.0}).force_field
+    ff.set_currents(current)
+    ff.evaluate(state.position, state.velocity)
+    tips = np.empty_like(state.position)
+    ct.current_tree_field(tree, state.position, np.arange(state.n_tips) // 2, 0.5, W, tips, group_size=3)
+    assert np.array_equal(ff.out["current_field"], tips * state.tip_charge[:, None])
 
 
 def test_build_rejects_an_order_it_does_not_have():
