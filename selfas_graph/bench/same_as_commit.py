@@ -156,8 +156,9 @@ def main(argv=None) -> int:
             added = _parameters_added_at_default(before, after)
             if added:
                 diffs = [line for line in diffs if not line.startswith(PARAMETERS)]
-            described = [line.split(":")[0] for line in diffs if _descriptive_only(line, before, after)]
-            diffs = [line for line in diffs if not _descriptive_only(line, before, after)]
+            descriptive = {line for line in diffs if _descriptive_only(line, before, after)}
+            described = [line.split(":")[0] for line in diffs if line in descriptive]
+            diffs = [line for line in diffs if line not in descriptive]
             for line in diffs:
                 print(f"  {line}")
             print(

@@ -65,12 +65,12 @@ class RodCurrents:
         Returns False (and keeps the arrays in use) when the currents are those in use, bit for bit. The
         currents are copied: an array the caller changes in place and sets again is taken again.
         """
-        current = np.ascontiguousarray(current, dtype=np.float64)
+        current = np.array(current, dtype=np.float64)  # a copy: the caller may change its array later
         if current.shape != (self.n_rods,):
             raise ValueError(f"currents must have shape ({self.n_rods},), got {current.shape}")
         if np.array_equal(current, self.current):
             return False
-        self.current = current.copy()
+        self.current = current
         self.active_rod = np.flatnonzero(current != 0.0).astype(np.int64)
         return True
 

@@ -132,9 +132,9 @@ class EvalContext:
     _soa: tuple | None = None
     _centre: np.ndarray | None = None
     _buffers: dict = field(default_factory=dict)
-    #: the trees of the rod currents of this binding, by (leaf size, order), and the currents they hold
-    _current_trees: dict = field(default_factory=dict)
-    _trees_current: np.ndarray | None = None
+    #: the trees of the rod currents of this binding: (currents, leaf size, order, tree) entries, a tuple
+    #: replaced (never changed in place), so that a copy of this context keeps its own
+    _current_trees: tuple = ()
 
     @property
     def n_tips(self) -> int:
@@ -150,7 +150,7 @@ class EvalContext:
         self.velocity = velocity
         self._soa = None
         self._centre = None
-        self._current_trees = {}  # a new dict: a copy of this context (dataclasses.replace) keeps its own
+        self._current_trees = ()
 
     def soa(self) -> tuple:
         """The positions as three contiguous (n_tips,) arrays x, y, z (computed once per binding)."""
@@ -172,16 +172,16 @@ class EvalContext:
         carries current or a position is not finite (the direct sums then carry the NaN to the run's
         health check)."""
         rc = self.currents
-        if self._trees_current is not rc.current:
-            self._current_trees = {}
-            self._trees_current = rc.current
-        key = (int(leaf_size), int(order))
-        if key not in self._current_trees:
-            tree = None
-            if len(rc.active_rod) and np.isfinite(self.position).all():
-                tree = shared_current_tree(self.blocks, self.position, rc.active_rod, rc.current, *key)
-            self._current_trees[key] = tree
-        return self._current_trees[key]
+        for current, leaf, moments, tree in self._current_trees:
+            if current is rc.current and (leaf, moments) == (leaf_size, order):
+                return tree
+        tree = None
+        if len(rc.active_rod) and np.isfinite(self.position).all():
+            tree = shared_current_tree(self.blocks, self.position, rc.active_rod, rc.current, leaf_size, order)
+        # entries of earlier currents are dropped: a set of currents replaces the one before
+        kept = tuple(e for e in self._current_trees if e[0] is rc.current)
+        self._current_trees = kept + ((rc.current, leaf_size, order, tree),)
+        return tree
 
     def buffer(self, name: str, rows: int) -> np.ndarray:
         """A work buffer (rows, 3) float64 kept under ``name`` between evaluations; contents undefined."""

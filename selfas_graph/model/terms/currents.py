@@ -74,7 +74,29 @@ def tree_field(blocks, tree, points, exclude_rod, opening_angle, wire_radius, ou
     blocks.gather_runs(out, targets.index, rows)
 
 
-class CurrentFieldForce(Term):
+class _CurrentTreeTerm(Term):
+    """What terms 9 and 10 share when they sum the rod currents by the tree: its settings, taken from the
+    term's parameters ``tp`` (``forces.current_field`` or ``forces.current_lorentz``), the context's tree of
+    those settings (one tree serves both terms where leaf_size and order agree), and the walk."""
+
+    def _take_tree_settings(self, tp):
+        self.use_tree = tp.method == "tree"
+        self.opening_angle = tp.opening_angle
+        self.leaf_size, self.order, self.group_size = tp.leaf_size, tp.order, tp.group_size
+
+    def _tree(self, ctx):
+        """The context's tree of this term's settings, or None (the direct sum)."""
+        return ctx.current_tree(self.leaf_size, self.order) if self.use_tree else None
+
+    def _tree_field(self, ctx, tree, points, exclude_rod, out):
+        """:func:`tree_field` of ``tree`` at ``points`` with this term's settings and precision."""
+        mixed = self.precision == "mixed"
+        tree_field(
+            ctx.blocks, tree, points, exclude_rod, self.opening_angle, self.wire_radius, out, mixed, self.group_size
+        )
+
+
+class CurrentFieldForce(_CurrentTreeTerm):
     """Term 9: q_k times the field of all other rods' currents (``ctx.currents``, wire radius D/2).
     No kernel call while no rod carries current. ``forces.current_field.precision`` picks the
     float64 or the mixed-precision kernel, ``forces.current_field.method`` the direct sum or the tree
@@ -90,11 +112,7 @@ class CurrentFieldForce(Term):
         self.precision = p.forces.current_field.precision
         self.kernel = _TIP_KERNEL[self.precision]
         self.wire_radius = wire_radius(p)
-        self.use_tree = p.forces.current_field.method == "tree"
-        self.opening_angle = p.forces.current_field.opening_angle
-        tp = p.forces.current_field
-        #: the tree's settings (one tree serves terms 9 and 10 where leaf_size and order agree)
-        self.leaf_size, self.order, self.group_size = tp.leaf_size, tp.order, tp.group_size
+        self._take_tree_settings(p.forces.current_field)
         self._gathered = False
 
     def compute(self, ctx, out):
@@ -103,24 +121,13 @@ class CurrentFieldForce(Term):
         rc = ctx.currents
         if len(rc.active_rod):
             lo, hi = ctx.blocks.tips
-            tree = ctx.current_tree(self.leaf_size, self.order) if self.use_tree else None
+            tree = self._tree(ctx)
             self._gathered = tree is not None
             if tree is None:
                 self.kernel(ctx.position, ctx.tip_charge, rc.active_rod, rc.current, self.wire_radius, lo, hi, f)
             else:
                 own_rod = np.arange(ctx.n_tips, dtype=np.int64) // 2
-                mixed = self.precision == "mixed"
-                tree_field(
-                    ctx.blocks,
-                    tree,
-                    ctx.position,
-                    own_rod,
-                    self.opening_angle,
-                    self.wire_radius,
-                    f,
-                    mixed,
-                    self.group_size,
-                )
+                self._tree_field(ctx, tree, ctx.position, own_rod, f)
                 f *= ctx.tip_charge[:, None]
             ctx.calls[self.name] += 1
 
@@ -129,7 +136,7 @@ class CurrentFieldForce(Term):
         return ("current_field",) if len(ctx.currents.active_rod) and not self._gathered else ()
 
 
-class CurrentLorentzForce(Term):
+class CurrentLorentzForce(_CurrentTreeTerm):
     """Term 10: J_i s_i x B_tot on current-carrying rods, by Gauss-Legendre quadrature along each rod.
 
     B_tot = the currents of all other rods (``ctx.currents``, :meth:`current_field`) + every field source that is
@@ -153,11 +160,7 @@ class CurrentLorentzForce(Term):
         self.near_range = p.forces.current_lorentz.near_range
         self.panel_t, self.panel_w = kl.gauss_legendre_01(kl.NEAR_PANEL_POINTS)
         self.wire_radius = wire_radius(p)
-        self.use_tree = p.forces.current_lorentz.method == "tree"
-        self.opening_angle = p.forces.current_lorentz.opening_angle
-        tp = p.forces.current_lorentz
-        #: the tree's settings (one tree serves terms 9 and 10 where leaf_size and order agree)
-        self.leaf_size, self.order, self.group_size = tp.leaf_size, tp.order, tp.group_size
+        self._take_tree_settings(p.forces.current_lorentz)
         #: the terms that are sources of a magnetic field (FieldSource), in term order: handed in by the
         #: force field that holds this term, once every term is built
         self.field_sources = ()
@@ -231,20 +234,9 @@ class CurrentLorentzForce(Term):
         :func:`~selfas_graph.kernels.currents.rod_current_field_mixed`) and by its method (the tree:
         :func:`~selfas_graph.kernels.currenttree.current_tree_field`)."""
         rc = ctx.currents
-        tree = ctx.current_tree(self.leaf_size, self.order) if self.use_tree else None
+        tree = self._tree(ctx)
         if tree is not None:
-            mixed = self.precision == "mixed"
-            tree_field(
-                ctx.blocks,
-                tree,
-                points,
-                exclude_rod,
-                self.opening_angle,
-                self.wire_radius,
-                out,
-                mixed,
-                self.group_size,
-            )
+            self._tree_field(ctx, tree, points, exclude_rod, out)
             return
         _FIELD_KERNEL[self.precision](
             points, exclude_rod, ctx.position, rc.active_rod, rc.current, self.wire_radius, out
