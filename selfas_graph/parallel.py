@@ -20,7 +20,9 @@ on every rank over all rows, so they do not depend on the number of ranks either
 from __future__ import annotations
 
 import os
+import sys
 import threading
+import time
 
 import numpy as np
 
@@ -59,6 +61,32 @@ def _make_world():
 
 
 world = _make_world()
+
+
+# How long a rank that ends the job waits after its last words: MPICH's launcher forwards a rank's
+# stdout and stderr through pipes it reads in its own loop, and MPI_Abort ends the job at once, so a
+# line printed just before the abort was lost now and then (an empty stderr, exit code right)
+_ABORT_GRACE = 1.0
+
+
+def abort_job(code: int, world=world) -> None:
+    """End every rank of the job with exit ``code``, after this rank's printed lines have left it.
+
+    Flushes stdout and stderr, gives the launcher :data:`_ABORT_GRACE` seconds to forward them, then
+    calls MPI_Abort; MPICH's MPI_Abort may return to its caller while the launcher ends the job, so the
+    process then ends itself (``os._exit``) rather than go on and print a second time. With one rank
+    it raises ``SystemExit(code)``.
+    """
+    if world.size == 1:
+        raise SystemExit(code)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed or broken stream has nothing left to forward
+            pass
+    time.sleep(_ABORT_GRACE)
+    world.Abort(code)
+    os._exit(code)  # pragma: no cover - MPI_Abort normally does not return
 
 
 def fit_threads_to_cores(world=world):
@@ -280,7 +308,6 @@ def watch_parent(parent_pid=None) -> None:
     at once (``prctl(PR_SET_PDEATHSIG)``, the fast path). Then :func:`parent_gone` is true, a running
     task stops and the process exits."""
     import signal
-    import sys
 
     parent_pid = os.getppid() if parent_pid is None else int(parent_pid)
     _watched[0] = parent_pid

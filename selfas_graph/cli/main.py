@@ -151,8 +151,9 @@ def _interrupted(who) -> int:
     if size == 1 or world.rank == 0:
         print(f"{who}: interrupted", file=sys.stderr)
     if size > 1:
-        sys.stderr.flush()
-        world.Abort(130)
+        from ..parallel import abort_job
+
+        abort_job(130, world)
     return 130
 
 
@@ -200,9 +201,10 @@ def _main(argv) -> int:
             raise
         import traceback
 
+        from ..parallel import abort_job
+
         traceback.print_exc()
-        sys.stderr.flush()
-        world.Abort(1)
+        abort_job(1, world)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -52,7 +52,7 @@ from ..model.params import plasma_current_text
 from ..model.simulation import Simulation
 from ..model.state import PlacementError
 from ..model.terms.currents import tree_note
-from ..parallel import fit_threads_to_cores, world
+from ..parallel import abort_job, fit_threads_to_cores, world
 from .main import EXIT_NUMERICAL, CliError, CliIOError, counted
 from .paths import check_folder, check_target, same_file
 
@@ -498,8 +498,7 @@ def _io_failure(exc, writer, out, ckpt, sim):
     )
     if world.size > 1:
         print(f"selfas-graph simulate: error: {msg}", file=sys.stderr, flush=True)
-        world.Abort(4)  # every rank ends (the others wait in a collective call)
-        os._exit(4)  # MPICH's MPI_Abort may return to its caller while the launcher ends the job: print once
+        abort_job(4, world)  # every rank ends (the others wait in a collective call)
     raise CliIOError(msg, hard_exit=not clean) from None
 
 

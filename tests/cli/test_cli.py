@@ -250,7 +250,8 @@ def test_usage_errors_are_printed_by_rank_zero_alone(monkeypatch, capsys):
 
 
 class _TwoRanks:
-    """A stand-in for the MPI world of two ranks: records MPI_Abort instead of ending the process."""
+    """A stand-in for the MPI world of two ranks: MPI_Abort records its code and ends with SystemExit
+    (as the one-rank stub does) instead of ending the process."""
 
     size = 2
 
@@ -259,6 +260,7 @@ class _TwoRanks:
 
     def Abort(self, code):  # noqa: N802 - mpi4py's name
         self.aborted = code
+        raise SystemExit(code)
 
 
 @pytest.mark.parametrize("rank", [0, 1])
@@ -270,14 +272,54 @@ def test_an_interrupt_outside_a_run_ends_every_rank(monkeypatch, capsys, rank):
 
     world = _TwoRanks(rank)
     monkeypatch.setattr("selfas_graph.parallel.world", world)
+    monkeypatch.setattr("selfas_graph.parallel._ABORT_GRACE", 0.0)
 
     def interrupted(args):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(analyze, "run", interrupted)
-    assert main(["analyze", "any.h5"]) == 130
-    assert world.aborted == 130
+    with pytest.raises(SystemExit) as exc:
+        main(["analyze", "any.h5"])
+    assert exc.value.code == world.aborted == 130
     assert ("selfas-graph analyze: interrupted" in capsys.readouterr().err) is (rank == 0)
+
+
+def test_abort_job_lets_the_last_words_out_then_ends_every_rank(monkeypatch):
+    """Under MPI a rank that ends the job flushes its streams and waits the grace time before MPI_Abort,
+    so the launcher forwards the line printed just before (it was lost now and then); if MPICH's
+    MPI_Abort returns, the process ends itself rather than go on and print a second time."""
+    import selfas_graph.parallel as parallel
+
+    calls = []
+
+    class Streams:
+        def __init__(self, name):
+            self.name = name
+
+        def flush(self):
+            calls.append(("flush", self.name))
+
+    class ReturningAbort:
+        size, rank = 2, 0
+
+        def Abort(self, code):  # noqa: N802 - mpi4py's name
+            calls.append(("abort", code))
+
+    def exit_now(code):
+        calls.append(("exit", code))
+        raise SystemExit(code)
+
+    monkeypatch.setattr("sys.stdout", Streams("out"))
+    monkeypatch.setattr("sys.stderr", Streams("err"))
+    monkeypatch.setattr(parallel.time, "sleep", lambda s: calls.append(("sleep", s)))
+    monkeypatch.setattr(parallel.os, "_exit", exit_now)
+    with pytest.raises(SystemExit):
+        parallel.abort_job(4, ReturningAbort())
+    assert calls == [("flush", "out"), ("flush", "err"), ("sleep", parallel._ABORT_GRACE), ("abort", 4), ("exit", 4)]
+    assert parallel._ABORT_GRACE > 0
+    with pytest.raises(SystemExit) as exc:  # one rank: no MPI, the stub's SystemExit
+        parallel.abort_job(3, parallel.SERIAL)
+    assert exc.value.code == 3
 
 
 def test_resume_notes_a_scenario_file_changed_since_the_run_started(tmp_path, capsys):

@@ -183,7 +183,9 @@ def test_an_io_error_under_mpi_aborts_every_rank_with_exit_4(scene):
     collective call) and gives mpiexec's exit code 4; the run file keeps its flushed frame, readable and
     finite. 9 MB: above the first frame's reservation for this scene (5.3 MiB), below two of them; a
     limit that lets a checkpoint be written first takes 30 s and more on 2 loaded cores. (MPICH's
-    MPI_Abort returned to its caller, which then printed the message a second time.)"""
+    MPI_Abort returned to its caller, which then printed the message a second time; and without the
+    grace time before the abort, the launcher now and then ended the job before it had forwarded the
+    message: an empty stderr with exit code 4.)"""
     import os
     import resource
     import subprocess
