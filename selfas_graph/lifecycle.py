@@ -11,7 +11,8 @@ continue); a checkpointer; the run loop under :class:`StopOnSignal`
 - ``failed`` (a numerical failure): the events and per-step rows up to the failure written, the
   file closed "failed: <reason>", the last good state and the failed one saved to
   ``RUN.failure.h5`` (:func:`failure_path`);
-- ``io_error`` (a write failed: full disk, quota, a vanished folder): the caller ends the file
+- ``io_error`` (a write failed: full disk, quota, a vanished folder, or HDF5 failed on the file's
+  damaged metadata): the caller ends the file
   with :func:`close_after_io_error` and its own message.
 
 A ``KeyboardInterrupt`` closes the file "interrupted" and is raised again. What each caller says
@@ -30,7 +31,17 @@ import numpy as np
 
 from ._version import __version__
 from .io.checkpoint import CheckpointError, failure_meta, read_checkpoint, write_failure
-from .io.h5md import DiskFullError, RunFile, RunFileError, RunWriter, appendable_problems, is_io_error, run_provenance
+from .io.h5md import (
+    HDF5_READ_ERRORS,
+    DiskFullError,
+    RunFile,
+    RunFileError,
+    RunWriter,
+    appendable_problems,
+    is_io_error,
+    raised_in_hdf5,
+    run_provenance,
+)
 from .io.scenario import ScenarioError, scenario_from_text
 from .model.simulation import NumericalFailure, RunInterrupted
 from .parallel import parent_gone
@@ -203,7 +214,8 @@ def run_to_file(sim, writer, checkpointer, stop, path, progress=None, keeps_file
             writer.close(status="interrupted")
         raise
     except (OSError, RuntimeError) as exc:
-        if not is_io_error(exc):
+        # a failed write of the system, or any failed HDF5 operation on the run's files (damaged metadata)
+        if not (is_io_error(exc) or raised_in_hdf5(exc)):
             raise
         if progress:
             progress.close()
@@ -215,7 +227,7 @@ def run_to_file(sim, writer, checkpointer, stop, path, progress=None, keeps_file
             writer.set_attrs(wall_seconds=summary.wall_seconds, steps_done=summary.steps)
             writer.close(status="finished")
         except (OSError, RuntimeError) as exc:
-            if not is_io_error(exc):
+            if not (is_io_error(exc) or raised_in_hdf5(exc)):
                 raise
             return Outcome("io_error", summary=summary, error=exc)
     return Outcome("finished", summary=summary)
@@ -275,8 +287,9 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
     ensemble's plan and its seeds.
 
     Refused (:class:`ContinuationError`): a checkpoint that cannot be read or whose scenario no longer
-    validates; a run file that cannot be read (a position row torn by a kill is among these), cannot be
-    appended to (a torn row of the times or observables is dropped on reopening; other damage is not), ended in a numerical failure (the same steps would fail again),
+    validates; a run file that cannot be read (a position row torn by a kill and damaged metadata are among
+    these), cannot be appended to (a torn row of the times or observables is dropped on reopening; other
+    damage is not), ended in a numerical failure (the same steps would fail again),
     is another run's (run identity, scenario or rod count) or has no frame at or before the
     checkpoint's step. A run started when ``integrator.brake``'s default was ``explicit`` continues
     with it.
@@ -318,6 +331,10 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
             status = run_file.status
     except RunFileError as exc:
         raise ContinuationError(f"cannot resume into {run_path}: {exc}") from None
+    except HDF5_READ_ERRORS as exc:
+        if not raised_in_hdf5(exc):
+            raise
+        raise ContinuationError(f"cannot resume into {run_path}: cannot read it: {exc} (a damaged file?)") from None
     if status.startswith("failed: numerical failure"):  # not a full disk, which a resume with room overcomes
         raise ContinuationError(
             f"cannot resume: the run of {run_path} ended in a {status.removeprefix('failed: ')} (its "

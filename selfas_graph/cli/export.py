@@ -11,8 +11,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..io.export import FORMATS, ExportError, export_run
-from ..io.h5md import RunFileError
-from .main import CliError, raised_in_hdf5
+from ..io.h5md import RunFileError, raised_in_hdf5
+from .main import CliError
 
 
 def add_arguments(p):

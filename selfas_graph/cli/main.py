@@ -131,16 +131,6 @@ class _Parser(argparse.ArgumentParser):
         super().error(message)
 
 
-def raised_in_hdf5(exc) -> bool:
-    """Whether ``exc`` was raised in h5py (HDF5 read errors are OSError, RuntimeError or KeyError there)."""
-    tb = exc.__traceback__
-    while tb is not None:
-        if "h5py" in tb.tb_frame.f_code.co_filename:
-            return True
-        tb = tb.tb_next
-    return False
-
-
 def _interrupted(who) -> int:
     """Ctrl-C or SIGTERM that reached the command line outside a run's own handling (while a command
     starts, or a command without any): one line, exit 130. Under ``mpiexec`` the other ranks may wait
@@ -190,6 +180,8 @@ def _main(argv) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except (OSError, RuntimeError) as exc:
+        from ..io.h5md import raised_in_hdf5
+
         if args.command not in READERS or not raised_in_hdf5(exc):
             raise
         # a damaged run file (bytes overwritten in its metadata): HDF5 says so only when the part is read

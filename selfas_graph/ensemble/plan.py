@@ -18,7 +18,7 @@ from ..io.checkpoint import (
     checkpoint_path,
     read_checkpoint,
 )
-from ..io.h5md import RunFile, RunFileError
+from ..io.h5md import HDF5_READ_ERRORS, RunFile, RunFileError, raised_in_hdf5
 from ..io.scenario import Scenario, ScenarioError, load_scenario, scenario_from_text
 from ..lifecycle import ContinuationError, continuation
 from ..model.operations import frame_steps
@@ -257,10 +257,13 @@ class Ensemble:
                 stored, status = run.parameters, str(run.meta.get("status", ""))
                 made_by = str(run.meta.get("version") or "unknown")
                 t_last = float(run.time[-1]) if run.n_frames else -math.inf
-        except RunFileError as exc:
+        except (RunFileError, *HDF5_READ_ERRORS) as exc:
+            if not isinstance(exc, RunFileError) and not raised_in_hdf5(exc):
+                raise
+            why = str(exc) if isinstance(exc, RunFileError) else f"{path}: cannot read it: {exc} (a damaged file?)"
             if replace:
-                return SeedPlan(seed, path, "run", f"replacing: {exc}")
-            raise EnsembleError(str(exc)) from None
+                return SeedPlan(seed, path, "run", f"replacing: {why}")
+            raise EnsembleError(why) from None
         if older_version(made_by, self.older_than):
             why = f"made by version {made_by}, before the trajectories of version {self.older_than}"
             if replace:

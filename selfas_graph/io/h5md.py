@@ -38,6 +38,7 @@ from .h5md_format import CURRENT as CURRENT
 from .h5md_format import ENERGY as ENERGY
 from .h5md_format import EVENT_FILE_DTYPE as EVENT_FILE_DTYPE
 from .h5md_format import H5MD_VERSION as H5MD_VERSION
+from .h5md_format import HDF5_READ_ERRORS as HDF5_READ_ERRORS
 from .h5md_format import LENGTH as LENGTH
 from .h5md_format import POTENTIAL as POTENTIAL
 from .h5md_format import SPACE_MARGIN as SPACE_MARGIN
@@ -50,6 +51,7 @@ from .h5md_format import appendable_problems as appendable_problems
 from .h5md_format import free_bytes as free_bytes
 from .h5md_format import is_io_error as is_io_error
 from .h5md_format import observable_unit as observable_unit
+from .h5md_format import raised_in_hdf5 as raised_in_hdf5
 from .pending_rows import NullWriter as NullWriter
 from .run_provenance import run_provenance as run_provenance
 from .run_reader import RunFile as RunFile

@@ -85,6 +85,20 @@ class RunFileError(ValueError):
     """A file that is not a readable selfas-graph run."""
 
 
+#: what h5py raises when a damaged file's metadata is read (the error comes only when the part is read)
+HDF5_READ_ERRORS = (OSError, RuntimeError, KeyError)
+
+
+def raised_in_hdf5(exc) -> bool:
+    """Whether ``exc`` was raised in h5py (HDF5 read errors are :data:`HDF5_READ_ERRORS` there)."""
+    tb = exc.__traceback__
+    while tb is not None:
+        if "h5py" in tb.tb_frame.f_code.co_filename:
+            return True
+        tb = tb.tb_next
+    return False
+
+
 class DiskFullError(OSError):
     """Too little free space for the next write; raised before anything of it is written."""
 
@@ -187,11 +201,38 @@ def _rows_up_to(steps, step, strict=True) -> int:
     return int(bad[0]) if len(bad) else len(s)
 
 
+def unreadable_part(f) -> str | None:
+    """Why HDF5 cannot read all of the open file ``f`` that a continuation touches, or None.
+
+    Damaged metadata (bytes written over a B-tree node or an object header) shows only when the part is
+    read, from inside h5py, possibly in the middle of a run: every object, its attributes and the last
+    row of every dataset (the path in its chunk index where rows are appended) are read here, up front.
+    """
+
+    def touch(name, obj):
+        dict(obj.attrs)
+        if isinstance(obj, h5py.Dataset) and obj.shape and obj.shape[0]:
+            obj[-1]
+
+    try:
+        dict(f.attrs)
+        f.visititems(touch)
+    except HDF5_READ_ERRORS as exc:
+        if not raised_in_hdf5(exc):
+            raise
+        return f"cannot read it: {exc} (a damaged file?)"
+    return None
+
+
 def appendable_problems(f) -> list:
-    """What keeps an open run file from being continued: datasets that cannot grow, wrong dtypes.
+    """What keeps an open run file from being continued: a part HDF5 cannot read
+    (:func:`unreadable_part`), datasets that cannot grow, wrong dtypes.
 
     Checked read-only before :meth:`RunWriter.reopen` changes anything (an empty list: none).
     """
+    damage = unreadable_part(f)
+    if damage:
+        return [damage]
     problems = []
 
     def check(name, kind=None, dtype=None):

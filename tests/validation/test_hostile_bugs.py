@@ -26,6 +26,7 @@ from hostile import (
     tree,
 )
 from selfas_graph.io.checkpoint import FORMAT as CHECKPOINT_FORMAT
+from selfas_graph.io.checkpoint import checkpoint_path
 
 
 def _expect_usage_error(res: Result, *words):
@@ -410,6 +411,63 @@ def test_bug_a_run_file_damaged_inside_gives_a_traceback(command, workdir, capsy
             damaged += 1
             assert "damaged" in res.err or "cannot" in res.err, res.err
     assert damaged > 0
+
+
+@pytest.mark.parametrize("command", ["resume", "ensemble"])
+def test_bug_a_damaged_run_file_to_continue_gives_a_traceback(command, workdir, capsys, real_run):
+    """`simulate --resume` and an ensemble's plan and summary (`ensemble --no-run`, which plans every seed
+    and summarises the files) read a run file whose B-tree node was made unreadable: exit 2 naming the
+    damage (resume) or the seed left out of the summary and named, never HDF5's traceback."""
+    import shutil
+
+    data = real_run["run_bytes"]
+    nodes = [k for k in range(len(data) - 4) if data[k : k + 4] == b"TREE"]
+    assert len(nodes) > 5
+    refused = 0
+    for k in nodes:
+        folder = workdir / f"node{k}"
+        folder.mkdir()
+        run = folder / ("run.h5" if command == "resume" else "seed_0007.h5")
+        run.write_bytes(data[:k] + b"XXXX" + data[k + 4 :])
+        shutil.copy(real_run["checkpoint"], checkpoint_path(run))
+        if command == "resume":
+            res = cli(capsys, "simulate", "--resume", run, "--t-end", "0.003", "--progress", "none")
+            check_contract(res, allowed=(0, 2))
+        else:
+            res = cli(capsys, "ensemble", real_run["scenario"], "--seeds", "1", "-o", folder, "--no-run")
+            check_contract(res, allowed=(0, 2))
+        if "a damaged file?" in res.err or "a damaged file?" in res.out:
+            refused += 1
+    assert refused > 0
+
+
+def test_bug_hdf5_failing_on_damaged_metadata_in_a_run_gives_a_traceback(workdir, capsys, real_run, monkeypatch):
+    """HDF5 failing in the middle of a run on a file's damaged metadata (a RuntimeError raised in h5py, no
+    errno) ends the run as a failed write does: exit 4 with the I/O error message, the file kept readable."""
+    from selfas_graph.io.run_writer import RunWriter
+
+    data = real_run["run_bytes"]
+    k = [k for k in range(len(data) - 4) if data[k : k + 4] == b"TREE"][0]
+    damaged = workdir / "damaged.h5"
+    damaged.write_bytes(data[:k] + b"XXXX" + data[k + 4 :])
+    calls = []
+    original = RunWriter.reserve
+
+    def reserve(self):
+        calls.append(1)
+        if len(calls) > 1:  # the second frame: HDF5 fails on the damaged node, from inside h5py
+            with h5py.File(damaged, "r") as f:
+                f.visititems(lambda name, obj: dict(obj.attrs))
+        return original(self)
+
+    monkeypatch.setattr(RunWriter, "reserve", reserve)
+    res = cli(capsys, "simulate", real_run["scenario"], "-o", workdir / "out.h5", "--progress", "none")
+    assert res.code == 4 and "Traceback" not in res.err, res.err
+    assert "I/O error at step" in res.err and "--resume" in res.err
+    from selfas_graph.io.h5md import RunFile
+
+    with RunFile(workdir / "out.h5") as run:
+        assert run.n_frames >= 1 and np.isfinite(run.position(-1)).all()
 
 
 @pytest.mark.parametrize("victim", ["run", "checkpoint"])
