@@ -11,7 +11,7 @@ folder, runs ``selfas-graph simulate`` once with that code and once with the wor
 ``--threads``, default 1), and compares the two run files with ``selfas_graph/bench/same_run.py``. The
 ``--set`` overrides apply to every scenario. A scenario may carry its own overrides after a
 ``+``: ``scenarios/fig8_quick.toml+run.t_end=6+forces.external_filament.diameter=0.6``.
-Exits 1 if any pair differs. Attributes that only describe (``DESCRIPTIVE_ADDED``, the words of
+Exits 1 if any pair differs. Attributes that only describe (``same_run.DESCRIBING``, the words of
 ``derived_json``'s ``*_sum`` entries) are named but not counted. Parameters added since ``REV`` that the working tree's file stores at their
 defaults are not a difference (as for an ensemble's seed files, ``ensemble/parameters.py``): the verdict
 names them.
@@ -34,7 +34,7 @@ import tempfile
 from pathlib import Path
 
 from ..io.layout import PROVENANCE
-from .same_run import compare
+from .same_run import compare, described
 
 #: the folder that holds the working tree's package (and its git checkout)
 ROOT = Path(__file__).resolve().parents[2]
@@ -104,30 +104,6 @@ def _parameters_added_at_default(before: Path, after: Path) -> list[str]:
     return added if all(_newer_key_at_default(k, old, new) for k in added) else []
 
 
-#: attributes that say what a dataset holds, added since earlier commits without changing a value: a file of
-#: the commit that lacks them is the same run (H5MD 1.1's ``type`` of the charges and their ``quantity``)
-DESCRIPTIVE_ADDED = tuple(f"particles/{g}/charge@{a}" for g in ("tips", "rods") for a in ("type", "quantity"))
-#: the attribute of the settings derived from the parameters, whose ``*_sum`` entries describe the sums in words
-DERIVED = f"{PROVENANCE}@derived_json"
-
-
-def _descriptive_only(line: str, before: Path, after: Path) -> bool:
-    """True for a difference that changes no value: a :data:`DESCRIPTIVE_ADDED` attribute only in the working
-    tree's file, or ``derived_json`` entries that differ only in the words describing a sum (``*_sum``)."""
-    import json
-
-    import h5py
-
-    if any(line.startswith(f"{name}: only in one file") for name in DESCRIPTIVE_ADDED):
-        return True
-    if not line.startswith(DERIVED):
-        return False
-    with h5py.File(before, "r") as a, h5py.File(after, "r") as b:
-        old, new = (json.loads(f[PROVENANCE].attrs["derived_json"]) for f in (a, b))
-    keep = [{k: v for k, v in d.items() if not k.endswith("_sum")} for d in (old, new)]
-    return keep[0] == keep[1]
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenarios", nargs="+", help="scenario files, each optionally followed by +KEY=VALUE overrides")
@@ -152,13 +128,11 @@ def main(argv=None) -> int:
             _simulate(base, scenario, sets, before, args.threads, tmp)
             _simulate(ROOT, scenario, sets, after, args.threads, tmp)
             counts: dict = {}
-            diffs = compare(before, after, counts=counts)
+            notes: list = []
+            diffs = compare(before, after, counts=counts, notes=notes)
             added = _parameters_added_at_default(before, after)
             if added:
                 diffs = [line for line in diffs if not line.startswith(PARAMETERS)]
-            descriptive = {line for line in diffs if _descriptive_only(line, before, after)}
-            described = [line.split(":")[0] for line in diffs if line in descriptive]
-            diffs = [line for line in diffs if line not in descriptive]
             for line in diffs:
                 print(f"  {line}")
             print(
@@ -170,7 +144,7 @@ def main(argv=None) -> int:
                     if added
                     else ""
                 )
-                + (f" (descriptions only: {', '.join(described)})" if described else "")
+                + (f" (descriptions only: {', '.join(described(notes))})" if notes else "")
             )
             failed += bool(diffs)
     return 1 if failed else 0

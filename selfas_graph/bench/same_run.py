@@ -8,7 +8,9 @@ Walks both HDF5 files and compares every dataset (shape, dtype and bytes; NaN eq
 at the same place, since the bytes are compared) and, unless ``--ignore-attrs``, every
 attribute except those that record the wall clock or the software (``created``,
 ``version``, timings: see ``VOLATILE``). Prints the differences and exits 1 if there are
-any, 0 if the files agree.
+any, 0 if the files agree. Attributes that only describe what a dataset holds, which a later
+version added (``DESCRIBING``; the words of ``derived_json``'s ``*_sum`` entries), are named
+but not counted: a file of an earlier version compares equal to its twin of this one.
 
 Use it to show that a change to the code keeps a run's results: run the same scenario
 before and after the change (same thread count), then compare, e.g.::
@@ -49,6 +51,13 @@ VOLATILE = (
 )  # run_id: a random identifier drawn for every run
 
 
+#: attributes that only say what a dataset holds, added by a later version without changing a value (H5MD
+#: 1.1's ``type`` and ``quantity`` of the charges, since 0.4.3): one file without them is an earlier version's
+DESCRIBING = tuple(f"particles/{g}/charge@{a}" for g in ("tips", "rods") for a in ("type", "quantity"))
+#: entries of a JSON attribute that describe a setting in words (``derived_json``'s ``*_sum``: how a sum is done)
+DESCRIBING_SUFFIX = "_sum"
+
+
 def _volatile(name: str) -> bool:
     low = name.lower()
     return any(v in low for v in VOLATILE)
@@ -84,18 +93,21 @@ def _json_differences(a, b):
     fa, fb = flat(a), flat(b)
     missing = "(absent)"
     return [
-        f"{k}: {fa.get(k, missing)!r} != {fb.get(k, missing)!r}"
+        (k, f"{k}: {fa.get(k, missing)!r} != {fb.get(k, missing)!r}")
         for k in sorted(set(fa) | set(fb))
         if fa.get(k, missing) != fb.get(k, missing)
     ]
 
 
-def compare(path_a, path_b, attrs: bool = True, counts: dict | None = None) -> list[str]:
+def compare(path_a, path_b, attrs: bool = True, counts: dict | None = None, notes: list | None = None) -> list[str]:
     """Differences between two HDF5 files, as readable lines (empty if they agree).
 
-    ``counts``, if given, receives the number of datasets and attributes compared.
+    ``counts``, if given, receives the number of datasets and attributes compared. ``notes``, if given,
+    receives the differences that change no value, instead of the returned list: an attribute of
+    :data:`DESCRIBING` in one file only, a JSON entry ending in :data:`DESCRIBING_SUFFIX` that differs.
     """
     out: list[str] = []
+    described = out if notes is None else notes
     counts = {} if counts is None else counts
     counts.update(datasets=0, attributes=0)
     with h5py.File(path_a, "r") as fa, h5py.File(path_b, "r") as fb:
@@ -128,7 +140,8 @@ def compare(path_a, path_b, attrs: bool = True, counts: dict | None = None) -> l
                         continue
                     counts["attributes"] += 1
                     if key not in oa.attrs or key not in ob.attrs:
-                        out.append(f"{name or '/'}@{key}: only in one file")
+                        where = f"{name or '/'}@{key}"
+                        (described if where in DESCRIBING else out).append(f"{where}: only in one file")
                     elif isinstance(oa.attrs[key], h5py.Reference):
                         # object references point into their own file: compare the paths they name
                         ra, rb = fa[oa.attrs[key]].name, fb[ob.attrs[key]].name
@@ -137,7 +150,9 @@ def compare(path_a, path_b, attrs: bool = True, counts: dict | None = None) -> l
                     elif not _same_value(oa.attrs[key], ob.attrs[key]):
                         keys = _json_differences(oa.attrs[key], ob.attrs[key])
                         if keys is not None:  # a JSON text (the parameters): the entries that differ
-                            out += [f"{name or '/'}@{key}: {k}" for k in keys]
+                            for k, line in keys:
+                                to = described if k.endswith(DESCRIBING_SUFFIX) else out
+                                to.append(f"{name or '/'}@{key}: {line}")
                         else:
                             out.append(f"{name or '/'}@{key}: {oa.attrs[key]!r} != {ob.attrs[key]!r}")
     return out
@@ -153,14 +168,25 @@ def add_arguments(ap):
 def run(args) -> int:
     """Compare ``args.a`` with ``args.b``, print the differences and the verdict; 1 if they differ."""
     counts: dict = {}
-    diffs = compare(args.a, args.b, attrs=not args.ignore_attrs, counts=counts)
+    notes: list = []
+    diffs = compare(args.a, args.b, attrs=not args.ignore_attrs, counts=counts, notes=notes)
     for line in diffs:
         print(line)
     print(
         f"{args.a} and {args.b}: {counts['datasets']} datasets and {counts['attributes']} attributes compared, "
         + ("the same, bit for bit" if not diffs else f"{len(diffs)} differences")
+        + (f" (descriptions only, not counted: {', '.join(described(notes))})" if notes else "")
     )
     return 1 if diffs else 0
+
+
+def described(notes) -> list:
+    """The attributes (and JSON entries) that :func:`compare`'s ``notes`` name, each once."""
+    names = []
+    for line in notes:
+        parts = line.split(": ", 2)  # ATTRIBUTE: only in one file, or ATTRIBUTE: KEY: A != B
+        names.append(parts[0] if len(parts) < 3 else f"{parts[0]} ({parts[1]})")
+    return list(dict.fromkeys(names))
 
 
 def main(argv=None) -> int:

@@ -3,6 +3,7 @@
 Compares every dataset (shape, dtype and bytes; NaN equals NaN at the same place) and, unless
 ``--ignore-attrs``, every attribute except those that record the wall clock, the software or the
 random run identity. Prints the differences; exit code 1 if there are any, 0 if the files agree.
+Attributes that only describe what a dataset holds, added by a later version, are named but not counted.
 The same as ``python -m selfas_graph.bench.same_run`` (``selfas_graph/bench/same_run.py``).
 """
 

@@ -156,3 +156,36 @@ def test_compare_names_the_entries_of_the_parameters_that_differ(tmp_path):
     assert r.returncode == 1
     assert "/@parameters_json: scenario.seed: 1 != 2" in r.stdout.splitlines(), r.stdout
     assert "count" not in r.stdout  # the entries that agree are not printed
+
+
+def test_compare_names_descriptions_an_earlier_version_lacks_but_does_not_count_them(tmp_path, capsys):
+    """A run file of an earlier version lacks the charges' H5MD ``type`` and ``quantity`` (added in 0.4.3)
+    and may word the ``*_sum`` entries of ``derived_json`` otherwise: ``compare`` names those, exits 0;
+    any other attribute in one file only, or any other entry that differs, still counts."""
+    import json
+
+    from selfas_graph.cli.main import main
+
+    def write(name, new=True, words="direct", theta=0.5):
+        with h5py.File(tmp_path / name, "w") as f:
+            for g in ("tips", "rods"):
+                ds = f.create_dataset(f"particles/{g}/charge", data=[1.0, -1.0])
+                if new:
+                    ds.attrs["type"], ds.attrs["quantity"] = "effective", "charge"
+            derived = {"tip_magnetic_sum": words, "tip_magnetic_theta": theta}
+            f.create_group("parameters").attrs["derived_json"] = json.dumps(derived)
+
+    write("old.h5", new=False, words="tree of leaves")
+    write("new.h5")
+    write("other.h5", theta=0.6)
+    old, new, other = (str(tmp_path / n) for n in ("old.h5", "new.h5", "other.h5"))
+    assert main(["compare", old, new]) == 0
+    out = capsys.readouterr().out
+    assert "the same, bit for bit (descriptions only, not counted: parameters@derived_json (tip_magnetic_sum), " in out
+    assert all(f"particles/{g}/charge@{a}" in out for g in ("tips", "rods") for a in ("type", "quantity")), out
+    assert main(["compare", new, other]) == 1
+    assert "parameters@derived_json: tip_magnetic_theta: 0.5 != 0.6" in capsys.readouterr().out
+    with h5py.File(tmp_path / "other.h5", "a") as f:
+        f["particles/tips/charge"].attrs["unit"] = "q0"
+    assert main(["compare", new, other]) == 1
+    assert "particles/tips/charge@unit: only in one file" in capsys.readouterr().out
