@@ -253,7 +253,15 @@ def close_after_io_error(writer, exc, status) -> bool:
 
 
 class ContinuationError(Exception):
-    """A run file and checkpoint that cannot be continued together; the message says why."""
+    """A run file and checkpoint that cannot be continued together; the message says why.
+
+    ``reason`` is the why alone and ``advice`` what a user of ``simulate --resume`` does about it (or
+    ""); the message is both. An ensemble's plan, which advises otherwise, quotes the reason.
+    """
+
+    def __init__(self, reason: str, advice: str = ""):
+        super().__init__(f"{reason}; {advice}" if advice else reason)
+        self.reason, self.advice = reason, advice
 
 
 @dataclasses.dataclass(frozen=True)
@@ -339,7 +347,8 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
         raise ContinuationError(
             f"cannot resume: the run of {run_path} ended in a {status.removeprefix('failed: ')} (its "
             f"state is in {failure_path(run_path)}); a resume would take the same steps from the checkpoint and "
-            f"fail again. Start the run again with other settings (e.g. a smaller integrator.dt) and --force"
+            f"fail again",
+            "start the run again with other settings (e.g. a smaller integrator.dt) and --force",
         )
     if problems:
         raise ContinuationError(f"cannot resume into {run_path}: it cannot be continued: {'; '.join(problems)}")
@@ -347,7 +356,8 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
         raise ContinuationError(
             f"cannot resume: the checkpoint {checkpoint} belongs to another run than the run file {run_path} "
             f"(run identity {meta.get('run_id') or 'none'} in the checkpoint, {run_id or 'none'} in the "
-            f"run file); give the run file's own checkpoint"
+            f"run file)",
+            "give the run file's own checkpoint",
         )
     if not same:
         raise ContinuationError(

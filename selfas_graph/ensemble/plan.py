@@ -278,6 +278,7 @@ class Ensemble:
                 f"{path} belongs to other parameters: {shown}" + (f" and {len(diff) - 4} more" if len(diff) > 4 else "")
             )
         half_step = 0.5 * wanted.integrator.dt
+        where = f"at t = {t_last:.6g}" if math.isfinite(t_last) else "with no frame"
         if status == "finished" and t_last >= self.t_end - half_step:
             other = made_by if version_key(made_by) != version_key(__version__) else None
             note = f"finished at t = {t_last:.6g}" + (f" by version {other}" if other else "")
@@ -293,18 +294,18 @@ class Ensemble:
             continuation(ckpt, path, t_end=self.t_end, read=(snap, meta))
             if float(snap["time"]) > self.t_end + half_step:
                 why = f"checkpoint at t = {float(snap['time']):.6g}, after the end time"
-        except (CheckpointError, ContinuationError) as exc:
+        except CheckpointError as exc:
             why = str(exc)
+        except ContinuationError as exc:  # the reason; the advice is simulate's (here: --force)
+            why = exc.reason
         if why is None:
-            return SeedPlan(
-                seed, path, "resume", f"{status} at t = {t_last:.6g}; checkpoint at t = {float(snap['time']):.6g}"
-            )
+            return SeedPlan(seed, path, "resume", f"{status} {where}; checkpoint at t = {float(snap['time']):.6g}")
         if summary_only:
-            return SeedPlan(seed, path, "partial", f"{status} at t = {t_last:.6g}")
+            return SeedPlan(seed, path, "partial", f"{status} {where}")
         if replace:
-            return SeedPlan(seed, path, "run", f"replacing: {status} at t = {t_last:.6g}, no usable checkpoint")
+            return SeedPlan(seed, path, "run", f"replacing: {status} {where}, no usable checkpoint")
         raise EnsembleError(
-            f"{path} is {status} at t = {t_last:.6g} (end time {self.t_end:g}) and has no usable "
+            f"{path} is {status} {where} (end time {self.t_end:g}) and has no usable "
             f"checkpoint {ckpt.name} to continue from ({why})"
         )
 

@@ -353,7 +353,8 @@ def test_killed_seed_resumes_and_one_without_checkpoint_is_refused(scene, tmp_pa
 def test_a_seed_with_another_runs_checkpoint_is_refused_when_planned(scene, tmp_path):
     """The plan takes the checks of ``simulate --resume`` (lifecycle.continuation): a seed file beside
     another run's checkpoint (here seed 3's copied over seed 4's) was planned "resume" and failed only
-    in its task; it is now refused when planned, naming the run identities, and replaced with force."""
+    in its task; it is now refused when planned, naming the run identities, and replaced with force.
+    The refusal gives the ensemble's advice (--force), not simulate's (give the run file's own checkpoint)."""
     ens = Ensemble(scene, [3, 4], tmp_path, t_end=0.2)
     ens.run()
     for s in (3, 4):  # as after kill -9 at t = 0.2: status still "running"
@@ -361,9 +362,10 @@ def test_a_seed_with_another_runs_checkpoint_is_refused_when_planned(scene, tmp_
             f["parameters/selfas_graph"].attrs["status"] = "running"
     shutil.copyfile(checkpoint_path(seed_path(tmp_path, 3)), checkpoint_path(seed_path(tmp_path, 4)))
     with pytest.raises(
-        EnsembleError, match=r"seed_0004.h5 is running .* no usable checkpoint .*belongs to another run"
-    ):
+        EnsembleError, match=r"seed_0004.h5 is running at t = 0.2 .* no usable checkpoint .*belongs to another run"
+    ) as refused:
         Ensemble(scene, [3, 4], tmp_path, t_end=0.3).plan()
+    assert "own checkpoint" not in str(refused.value)
     forced = Ensemble(scene, [3, 4], tmp_path, t_end=0.3, force=True)
     assert [(p.seed, p.action) for p in forced.plan()] == [(3, "resume"), (4, "run")]
 

@@ -207,8 +207,10 @@ def test_continuation_is_the_one_rule_of_a_resume(tmp_path):
     with RunFile(a) as run:
         assert cont.run_id == run.meta["run_id"] == cont.meta["run_id"]
     assert continuation(checkpoint_path(a), a).scenario.params.run.t_end == pytest.approx(0.2)  # the run's own end
-    with pytest.raises(ContinuationError, match="belongs to another run than the run file"):
+    with pytest.raises(ContinuationError, match="belongs to another run than the run file") as other:
         continuation(checkpoint_path(b), a)
+    assert other.value.advice == "give the run file's own checkpoint"
+    assert str(other.value) == f"{other.value.reason}; {other.value.advice}"  # simulate --resume prints both
     with pytest.raises(ContinuationError, match="cannot resume into"):
         continuation(checkpoint_path(a), tmp_path / "s.toml")
     with pytest.raises(ContinuationError, match="no such checkpoint"):
