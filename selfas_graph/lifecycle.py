@@ -110,11 +110,11 @@ class StopOnSignal:
         return self
 
     def _handle(self, signum, frame):
-        if self.interrupt:
+        self.signum = signum
+        if self.interrupt:  # the pool hands the signal on to its workers
             for sig in self.old:
                 signal.signal(sig, signal.SIG_IGN)
             raise KeyboardInterrupt
-        self.signum = signum
 
     def __exit__(self, *exc):
         for sig, handler in self.old.items():

@@ -27,7 +27,7 @@ from .._version import __version__
 from ..ensemble import Ensemble, EnsembleError, format_table, write_summary
 from ..ensemble.plan import summary_times
 from ..parallel import task_pool
-from .main import EXIT_NUMERICAL, CliError, CliIOError, counted
+from .main import EXIT_NUMERICAL, CliError, CliIOError, counted, interrupted_code
 
 
 def _times(text):
@@ -299,7 +299,7 @@ def _run_locked(args, pool, held):
             "(finished seeds are kept, interrupted ones resume from their checkpoints)",
             file=sys.stderr,
         )
-        return 130
+        return interrupted_code(results)
     if "error" in statuses:
         print("selfas-graph ensemble: some seeds stopped with an error (above)", file=sys.stderr)
         return 1
@@ -385,7 +385,7 @@ def _run_grid(args, pool, held):
     statuses = [r.get("status") for r in results if r is not None]
     if "interrupted" in statuses or any(r is None for r in results):
         print("selfas-graph ensemble: interrupted; rerun the same command to continue", file=sys.stderr)
-        return 130
+        return interrupted_code(results)
     if "error" in statuses:
         return 1
     if "failed" in statuses:

@@ -2,7 +2,8 @@
 
 Exit codes: 0 success, 2 bad input (scenario, arguments, files), 3 numerical
 failure of a run, 4 an I/O error while writing (full disk, quota, a vanished
-folder), 130 interrupted. Under ``mpiexec`` every rank exits with the
+folder), 128 + the signal's number when a signal stopped a run (130 Ctrl-C, 143 SIGTERM; 130 where the
+signal is not known). Under ``mpiexec`` every rank exits with the
 same code and only rank 0 prints the error; an unexpected error on one rank
 aborts them all (no rank is left waiting for the others).
 """
@@ -43,6 +44,8 @@ READERS = ("topology", "analyze", "plot", "export", "compare")
 EXIT_USAGE = 2
 EXIT_NUMERICAL = 3
 EXIT_IO = 4
+#: the exit code of an interruption whose signal is not known (that of Ctrl-C, 128 + SIGINT)
+EXIT_INTERRUPTED = 130
 
 
 class CliError(Exception):
@@ -106,6 +109,17 @@ def parse_args(parser, argv=None):
     return args
 
 
+def interrupted_code(results) -> int:
+    """The exit code of a command whose seeds a signal stopped: 128 + the signal's number, as ``simulate``
+    and a shell give it (130 for Ctrl-C, 143 for SIGTERM), from the first seed result (a dict or None) that
+    names it (``signum``); :data:`EXIT_INTERRUPTED` where none does (under ``mpiexec`` the signal stays
+    with rank 0)."""
+    for r in results:
+        if r is not None and r.get("signum"):
+            return 128 + int(r["signum"])
+    return EXIT_INTERRUPTED
+
+
 def counted(n, one, many=None) -> str:
     """``n`` things as the commands print them, in the singular for one: ``counted(2, "seed")``."""
     return f"{n} {one if n == 1 else many or one + 's'}"
@@ -143,8 +157,8 @@ def _interrupted(who) -> int:
     if size > 1:
         from ..parallel import abort_job
 
-        abort_job(130, world)
-    return 130
+        abort_job(EXIT_INTERRUPTED, world)
+    return EXIT_INTERRUPTED
 
 
 def main(argv=None) -> int:

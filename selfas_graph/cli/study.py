@@ -23,7 +23,7 @@ from pathlib import Path
 
 from ..provenance import older_version
 from .ensemble import _positive_int
-from .main import CliError, counted
+from .main import CliError, counted, interrupted_code
 
 DEFAULT_STUDIES = "docs/studies.toml"
 DEFAULT_SUMMARIES = "docs/results"
@@ -159,7 +159,7 @@ def _run_together(picked, args, older_than=""):
             print(f"study {ens.folder.name}: wrote {js} (selfas-graph study summarise {ens.folder.name}: the page's)")
     if "interrupted" in statuses or None in statuses:
         print("selfas-graph study run: interrupted; run the same command again to continue", file=sys.stderr)
-        return 130
+        return interrupted_code(r for _, results in ran for r in results)
     if "error" in statuses:
         print("selfas-graph study run: some seeds stopped with an error (above)", file=sys.stderr)
         return 1
@@ -219,7 +219,7 @@ def _run(args):
             code = _run_together(ensembles, args, since)
             if code is None:
                 return 0  # an MPI worker rank: rank 0 runs the rest
-            if code in (2, 4, 130):
+            if code in (2, 4) or code > 128:  # bad input, an I/O error, a signal
                 return code
         for s in picked:
             if s.kind != "percolation":

@@ -19,8 +19,9 @@ def run_tasks(
     ``report(result)`` is called as each ends. In a serial pool they run here, one after
     the other. Once a result's ``status`` is in ``stop_statuses`` (a seed stopped by a
     signal), or on Ctrl-C or SIGTERM here, no further task starts; the local workers get
-    SIGTERM (a running seed then stops after its step with a checkpoint) and the running
-    tasks' results are collected. Tasks never started are None in the returned list.
+    the signal received here (SIGTERM when a seed stopped them; a running seed then stops after its step
+    with a checkpoint and names the signal in its result's ``signum``) and the running tasks' results are
+    collected. Tasks never started are None in the returned list.
     """
     results = [None] * len(tasks)
     report = report or (lambda r: None)
@@ -44,7 +45,7 @@ def run_tasks(
             stopping |= results[i].get("status") in stop_statuses
 
     # Ctrl-C and SIGTERM wind the pool down alike, and a repeat of either is ignored from the first on
-    with StopOnSignal(signals=(signal.SIGTERM, signal.SIGINT), interrupt=True):
+    with StopOnSignal(signals=(signal.SIGTERM, signal.SIGINT), interrupt=True) as received:
         try:
             while waiting or running:
                 while waiting and not stopping and len(running) < pool.workers:
@@ -57,16 +58,21 @@ def run_tasks(
         except KeyboardInterrupt:
             stopping = True
             if not pool.mpi:
-                _terminate_workers()
+                _terminate_workers(received.signum or signal.SIGINT)
             collect(list(running))
     return results
 
 
-def _terminate_workers():
+def _terminate_workers(signum=signal.SIGTERM):
+    """Send ``signum`` to the local workers: a running seed stops after its step with a checkpoint."""
     import multiprocessing
+    import os
 
     for child in multiprocessing.active_children():
-        child.terminate()  # SIGTERM: a running seed stops after its step with a checkpoint
+        try:
+            os.kill(child.pid, signum)
+        except (ProcessLookupError, TypeError):  # ended meanwhile (a pid of None: never started)
+            pass
 
 
 def _result(fut):

@@ -30,7 +30,8 @@ def run_seed(task: dict) -> dict:
     for a failing run: returns a dict with ``status`` "finished", "interrupted",
     "failed" (numerical failure; the last good and the failed state go to ``SEED.failure.h5``), "io_error"
     (a write failed: full disk, quota; the file stays resumable, :func:`_stop_on_io_error`) or "error"
-    (with ``message``), and ``t`` (simulated time reached), ``steps``, ``wall_seconds``, ``threads``.
+    (with ``message``), and ``t`` (simulated time reached), ``steps``, ``wall_seconds``, ``threads``,
+    ``signum`` (the signal that stopped an interrupted seed, else None).
     """
     import numba
 
@@ -45,6 +46,7 @@ def run_seed(task: dict) -> dict:
         "wall_seconds": 0.0,
         "threads": numba.get_num_threads(),
         "message": None,
+        "signum": None,
     }
     t0 = time.perf_counter()
     sim = writer = end = None
@@ -75,6 +77,7 @@ def run_seed(task: dict) -> dict:
             out["status"] = end.status
             if end.status == "interrupted":
                 out["message"] = f"stopped at step {end.error.step}; checkpoint {ckpt}"
+                out["signum"] = stop.signum  # None when the launching process ended
             elif end.status == "failed":
                 out["message"] = f"{end.error} (failed state in {end.failure})"
             elif end.status == "io_error":

@@ -359,3 +359,16 @@ def test_progress_lines_time_the_rate_from_the_first_line(monkeypatch):
     first, second = out.getvalue().splitlines()
     assert "-- steps/s  ETA --" in first
     assert "100 steps/s  ETA 0m10s" in second
+
+
+def test_an_ensemble_stopped_by_a_signal_exits_as_simulate_does():
+    """128 + the number of the signal the first interrupted seed names (None: a seed never started);
+    130 where no seed names one (under mpiexec the signal stays with rank 0)."""
+    import signal
+
+    from selfas_graph.cli.main import interrupted_code
+
+    done = {"status": "finished", "signum": None}
+    assert interrupted_code([done, None, {"status": "interrupted", "signum": signal.SIGTERM}]) == 143
+    assert interrupted_code([{"status": "interrupted", "signum": signal.SIGINT}]) == 130
+    assert interrupted_code([done, None]) == interrupted_code([]) == 130
