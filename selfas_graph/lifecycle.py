@@ -295,9 +295,9 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
     ensemble's plan and its seeds.
 
     Refused (:class:`ContinuationError`): a checkpoint that cannot be read or whose scenario no longer
-    validates; a run file that cannot be read (a position row torn by a kill and damaged metadata are among
-    these), cannot be appended to (a torn row of the times or observables is dropped on reopening; other
-    damage is not), ended in a numerical failure (the same steps would fail again),
+    validates; a run file that cannot be read (damaged metadata among these), cannot be appended to (a row
+    of the frames or observables torn by a kill is dropped on reopening; other damage is not), ended in a
+    numerical failure (the same steps would fail again),
     is another run's (run identity, scenario or rod count) or has no frame at or before the
     checkpoint's step. A run started when ``integrator.brake``'s default was ``explicit`` continues
     with it.

@@ -54,6 +54,9 @@ def _pick_frame(path, n, frame, t, times) -> int:
 class RunFile:
     """Read-only access to a run file, without any simulation objects.
 
+    The frames are the rows whose step, time and positions were all written: ``torn_frame`` is true
+    when a kill while a frame was appended left one of the three a row longer (a resume drops that row).
+
     Parameters
     ----------
     path : path-like
@@ -99,9 +102,15 @@ class RunFile:
             )
         self.meta = dict(self.f[layout.PROVENANCE].attrs)
         n = self.f[layout.TIP_POSITION_VALUE].shape
-        if len(n) != 3 or n[2] != 3 or self.f[layout.TIP_POSITION_STEP].shape[0] != n[0]:
+        rows = [
+            self.f[name].shape[0] if self.f[name].ndim else -1
+            for name in (layout.TIP_POSITION_STEP, layout.TIP_POSITION_TIME)
+        ]
+        if len(n) != 3 or n[2] != 3 or min(rows) < 0 or max(rows + [n[0]]) - min(rows + [n[0]]) > 1:
             self.f.close()
             raise RunFileError(f"{self.path}: the positions are not laid out as (frames, tips, 3)")
+        self._frames = min(rows + [n[0]])
+        self.torn_frame = max(rows + [n[0]]) > self._frames
         kinds = {name: self.f[f"{layout.TIP_POSITION}/{name}"].dtype.kind for name in ("step", "time", "value")}
         if kinds["step"] not in "iu" or kinds["time"] != "f" or kinds["value"] != "f":
             self.f.close()
@@ -145,15 +154,15 @@ class RunFile:
 
     @property
     def n_frames(self) -> int:
-        return self.f[layout.TIP_POSITION_VALUE].shape[0]
+        return self._frames
 
     @property
     def time(self) -> np.ndarray:
-        return self.f[layout.TIP_POSITION_TIME][:]
+        return self.f[layout.TIP_POSITION_TIME][: self._frames]
 
     @property
     def step(self) -> np.ndarray:
-        return self.f[layout.TIP_POSITION_STEP][:]
+        return self.f[layout.TIP_POSITION_STEP][: self._frames]
 
     def frame_index(self, frame=None, t=None) -> int:
         """Index of a frame given by number (negative counts from the end) or nearest time."""

@@ -371,3 +371,36 @@ def test_a_resume_from_step_0_writes_frame_0_again(reference, tmp_path):
         assert writer.n_frames == 0 and writer.events_written == 0 and writer.circuit_rows_written == 0
     finally:
         writer.close("interrupted")
+
+
+@pytest.mark.parametrize("torn", ["step", "time", "value"])
+def test_a_frame_row_torn_by_a_kill_is_no_frame_and_a_resume_continues(tmp_path, torn):
+    """A kill while a frame is appended can leave its step, time or positions a row longer than the other
+    two (the size flushed, the data not). That row is no frame for RunFile (``torn_frame``), the file is
+    continued from its checkpoint (a resume drops the row), and the run then holds what the resume of
+    the same file without the torn row holds, bit for bit."""
+    import shutil
+
+    (tmp_path / "s.toml").write_text(SMALL_CIRCUIT_SCENE)
+    run, clean = tmp_path / "run.h5", tmp_path / "clean.h5"
+    quiet = ["--progress", "none"]
+    assert main(["simulate", str(tmp_path / "s.toml"), "-o", str(run), "--t-end", "0.01", *quiet]) == 0
+    for path in (run, clean):
+        if path == clean:
+            shutil.copy(run, clean)
+            shutil.copy(checkpoint_path(run), checkpoint_path(clean))
+        with h5py.File(path, "r+") as f:
+            f["parameters/selfas_graph"].attrs["status"] = "running"  # as a kill leaves it
+    with RunFile(run) as f:
+        frames, times = f.n_frames, f.time
+    with h5py.File(run, "r+") as f:
+        ds = f[f"particles/tips/position/{torn}"]
+        ds.resize(ds.shape[0] + 1, axis=0)
+    with RunFile(run) as f:
+        assert f.torn_frame and f.n_frames == frames and np.array_equal(f.time, times) and len(f.step) == frames
+    for path in (run, clean):
+        assert main(["simulate", "--resume", str(path), "--t-end", "0.02", *quiet]) == 0
+    with RunFile(run) as got, RunFile(clean) as ref:
+        assert not got.torn_frame and got.n_frames == ref.n_frames > frames
+        assert np.array_equal(got.step, ref.step) and np.array_equal(got.time, ref.time)
+        assert all(np.array_equal(got.position(k), ref.position(k)) for k in range(ref.n_frames))
