@@ -132,6 +132,25 @@ def _overrides(values):
 TREE_KNOBS = tuple(f"forces.tip_magnetic.{k}" for k in ("opening_angle", "group_size", "order", "leaf_size"))
 #: knobs of the rod currents' tree (of either current term): they change nothing where the term sums directly
 CURRENT_TREE_KNOBS = ("opening_angle", "leaf_size", "group_size", "order")
+#: knobs of the tree itself: where both current terms take the tree, one tree serves both only while these
+#: agree, so they are swept for both terms at once (term 9's row; term 10's would repeat it)
+SHARED_TREE_KNOBS = ("leaf_size", "order")
+
+
+def _both_current_trees(scenario) -> bool:
+    f = scenario.params.forces
+    return all(t is not None and t.method == "tree" for t in (f.current_field, f.current_lorentz))
+
+
+def _setting(scenario, knob, value) -> list[str]:
+    """The overrides of one row: ``knob=value``, and the same for term 10 where the knob is one of the
+    :data:`SHARED_TREE_KNOBS` of term 9 and both terms take the tree (a value for one term alone would cost
+    a second tree, :func:`~selfas_graph.model.terms.currents.two_trees_note`)."""
+    out = [f"{knob}={_toml(value)}"]
+    name = knob.rsplit(".", 1)[1]
+    if knob.startswith("forces.current_field.") and name in SHARED_TREE_KNOBS and _both_current_trees(scenario):
+        out.append(f"forces.current_lorentz.{name}={_toml(value)}")
+    return out
 
 
 def _applicable(scenario, knob):
@@ -146,6 +165,8 @@ def _applicable(scenario, knob):
         term = getattr(f, knob.split(".")[1])
         if term is None or term.method != "tree":
             return False
+        if knob.startswith("forces.current_lorentz.") and knob.rsplit(".", 1)[1] in SHARED_TREE_KNOBS:
+            return not _both_current_trees(scenario)  # swept with term 9's, for both terms
     if knob in TREE_KNOBS:
         tm = scenario.params.forces.tip_magnetic
         if tm is None or not (
@@ -206,7 +227,13 @@ def main(argv=None):
         "instead of a fresh start; --from then runs on from its time",
     )
     ap.add_argument("--t", type=float, default=0.5, help="simulated time of each run (default 0.5)")
-    ap.add_argument("--knob", nargs="+", choices=sorted(KNOBS), help="only these knobs (default: all that apply)")
+    ap.add_argument(
+        "--knob",
+        nargs="+",
+        choices=sorted(KNOBS),
+        metavar="KNOB",
+        help=f"only these knobs (default: all that apply), of: {', '.join(sorted(KNOBS))}",
+    )
     ap.add_argument(
         "--set",
         dest="base_set",
@@ -265,10 +292,15 @@ def main(argv=None):
             sys.exit(f"the reference run of {knob} failed: {ref['failed']}")
         default = eval(f"base.params.{knob}")  # noqa: S307 - a dotted attribute path of our own
         for value in KNOBS[knob][0]:
-            setting = args.base_set + [f"{knob}={_toml(value)}"]
+            setting = args.base_set + _setting(base, knob, value)
             run_once(args.scenario, setting, min(args.t, 0.01), snap)  # compile a setting's own kernels untimed
             res = run_once(args.scenario, setting, args.t, snap)
-            row = {"knob": knob, "value": value, "default": value == default}
+            paired = len(_setting(base, knob, value)) > 1
+            row = {
+                "knob": knob + (" (both current terms)" if paired else ""),
+                "value": value,
+                "default": value == default,
+            }
             if "failed" in res:
                 row["failed"] = res["failed"]
             else:

@@ -51,7 +51,7 @@ from ..model.accuracy import null_model_notes, short_of_accuracy
 from ..model.params import plasma_current_text
 from ..model.simulation import Simulation
 from ..model.state import PlacementError
-from ..model.terms.currents import tree_note
+from ..model.terms.currents import tree_note, two_trees_note
 from ..parallel import abort_job, fit_threads_to_cores, world
 from .main import EXIT_NUMERICAL, CliError, CliIOError, counted
 from .paths import check_folder, check_target, same_file
@@ -386,8 +386,9 @@ def run(args):
             print("dry run: placement succeeded, nothing written")
             if plasma_current_text(p):
                 print(plasma_current_text(p))
-            for text in null_model_notes(p):
-                print(f"note: {text}")
+            for text in [*null_model_notes(p), two_trees_note(p)]:
+                if text:
+                    print(f"note: {text}")
             for rule in short_of_accuracy(p):
                 print(f"faster than accurate: {rule.key} (stated accuracy: {rule.stated})")
             print(json.dumps(plan, indent=2))

@@ -56,6 +56,26 @@ def test_tree_knobs_only_where_the_scene_takes_the_tree():
     assert tool._applicable(quick, "forces.tip_magnetic.precision")
 
 
+def test_the_current_trees_leaves_and_order_are_swept_for_both_terms_where_both_take_the_tree():
+    """A value of leaf_size or order for one current term alone costs a second tree where both terms take
+    the tree: term 9's row then sets both (term 10's row would repeat it and is left out); the group size,
+    the walk's, stays each term's own, and a term alone on the tree keeps its own rows."""
+    tool = _tool()
+    quick = ROOT / "scenarios" / "quick.toml"
+    both = load_scenario(quick, overrides=[f"forces.{t}.method=tree" for t in ("current_field", "current_lorentz")])
+    one = load_scenario(quick, overrides=["forces.current_lorentz.method=tree"])
+    assert tool._setting(both, "forces.current_field.leaf_size", 128) == [
+        "forces.current_field.leaf_size=128",
+        "forces.current_lorentz.leaf_size=128",
+    ]
+    assert tool._setting(both, "forces.current_field.order", 2)[1] == "forces.current_lorentz.order=2"
+    assert tool._setting(both, "forces.current_field.group_size", 64) == ["forces.current_field.group_size=64"]
+    assert not tool._applicable(both, "forces.current_lorentz.leaf_size")
+    assert tool._applicable(both, "forces.current_lorentz.group_size")
+    assert tool._applicable(one, "forces.current_lorentz.leaf_size")
+    assert tool._setting(one, "forces.current_lorentz.order", 2) == ["forces.current_lorentz.order=2"]
+
+
 def test_current_every_applies_with_current_terms_and_a_refused_setting_is_a_failed_run(tmp_path):
     """integrator.current_every applies to a scene with multiple time stepping and current terms only;
     a setting the scene refuses (here 12 with slow_every = 8) comes back from ``run_once`` as a failed

@@ -431,6 +431,33 @@ def test_each_term_takes_its_own_tree_settings():
     assert np.array_equal(ff.out["current_field"], tips * state.tip_charge[:, None])
 
 
+@pytest.mark.parametrize("lorentz, builds", [({}, 1), ({"order": 2}, 2), ({"leaf_size": 4}, 2), ({"group_size": 3}, 1)])
+def test_the_two_current_terms_build_one_tree_where_their_leaves_and_order_agree(monkeypatch, lorentz, builds):
+    """One evaluation builds one tree of the rod currents for both terms where their leaf_size and order
+    agree (the group size is the walk's, not the tree's), two where they differ; and the dry run's note
+    says so for the second case only."""
+    from selfas_graph.model.terms import context
+    from selfas_graph.model.terms.currents import two_trees_note
+
+    rng = np.random.default_rng(7)
+    state = random_rods(60, rng, box=4.0)
+    calls = []
+    real = context.shared_current_tree
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(context, "shared_current_tree", counted)
+    forces = {"electrodes": {"gap": 8.0}, "current_field": {"method": "tree"},
+              "current_lorentz": {"method": "tree", **lorentz}}  # fmt: skip
+    sim = simulation(state.copy(), forces=forces, circuit={"delta_J0": 1.0})
+    sim.force_field.set_currents(np.linspace(0.5, 1.5, state.n_rods))
+    sim.force_field.evaluate(state.position, state.velocity)
+    assert len(calls) == builds
+    assert (two_trees_note(sim.params) is not None) == (builds == 2)
+
+
 def test_build_rejects_an_order_it_does_not_have():
     position, current, active, _, _ = scene(6, n_rods=10)
     with pytest.raises(ValueError, match="order must be 2 or 3"):

@@ -48,6 +48,22 @@ def tree_note(p, carrying: int) -> str | None:
     )
 
 
+def two_trees_note(p) -> str | None:
+    """A note for parameters ``p`` whose two current terms both take the tree but with other leaves or order:
+    each evaluation then builds two trees of the rod currents where one would serve both; else None."""
+    terms = [getattr(p.forces, name, None) for name in ("current_field", "current_lorentz")]
+    if any(t is None or t.method != "tree" for t in terms):
+        return None
+    (a, b) = terms
+    if (a.leaf_size, a.order) == (b.leaf_size, b.order):
+        return None
+    return (
+        f"forces.current_field and forces.current_lorentz take trees of other leaves or order (leaf_size "
+        f"{a.leaf_size} and {b.leaf_size}, order {a.order} and {b.order}): each evaluation builds both trees, "
+        f"where one serves both terms when the two settings agree"
+    )
+
+
 def wire_radius(p) -> float:
     """The wire radius w = D/2 that regularises the field of the rod currents, D = ``rods.diameter``
     of the parameters ``p`` (docs/model.md 'Term 9', choice A5)."""
