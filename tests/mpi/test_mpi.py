@@ -85,17 +85,20 @@ def test_tree_on_two_ranks_gives_the_serial_tree_run_bit_for_bit(scene):
     _assert_same_run(scene / "tree2.h5", scene / "tree1.h5")
 
 
-def test_tree_force_and_energy_split_over_two_ranks_give_the_serial_run(tmp_path):
+@pytest.mark.parametrize("leaf", [64, 16])
+def test_tree_force_and_energy_split_over_two_ranks_give_the_serial_run(tmp_path, leaf):
     """The quick scene (300 rods: 600 tips in 32 target groups of at most 128 tips, 15 and 17 a rank, cells accepted
     as multipoles; the default groups of 1024 would hold all 600 tips in one), tip-tip
     force and energy of every frame by the tree: the two ranks each walk their own groups and gather
     the rows, and the run equals the serial one bit for bit (the 60-rod scene above has one group,
-    which one rank walks alone)."""
+    which one rank walks alone). So with leaves of 16 tips (the ranks share the moments of the cells
+    of the tree with the scene's leaf_size)."""
     from pathlib import Path
 
     (tmp_path / "quick.toml").write_text((Path(__file__).parents[2] / "scenarios" / "quick.toml").read_text())
     tree = ["--set", "forces.tip_magnetic.method=tree", "--set", "forces.tip_magnetic.energy_tree_above=1"]
     tree += ["--set", "forces.tip_magnetic.group_size=128", "--t-end", "0.1", "--set", "output.interval=0.05"]
+    tree += ["--set", f"forces.tip_magnetic.leaf_size={leaf}"]
     serial = _launch(0, ["quick.toml", "-o", "q1.h5", *tree], tmp_path)
     assert serial.returncode == 0, serial.stderr
     res = _launch(2, ["quick.toml", "-o", "q2.h5", *tree], tmp_path)

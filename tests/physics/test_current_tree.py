@@ -287,20 +287,27 @@ class _ThreadRanks:
         return results
 
 
-@pytest.mark.parametrize("ranks, carrying", [(2, "every rod"), (3, "every rod"), (3, "the first block")])
-def test_ranks_share_the_walks_and_give_one_rank_bit_for_bit(ranks, carrying):
+OTHER_TREE = {"leaf_size": 8, "order": 2, "group_size": 16}  # none the default
+
+
+@pytest.mark.parametrize(
+    "ranks, carrying, settings",
+    [(2, "every rod", {}), (3, "every rod", {}), (3, "the first block", {}), (3, "every rod", OTHER_TREE)],
+)
+def test_ranks_share_the_walks_and_give_one_rank_bit_for_bit(ranks, carrying, settings):
     """Under MPI the ranks sort the points into groups as one rank does, each walks a run of groups
     (``target_runs``) and the runs are gathered: every rank ends with the serial field at every tip
     (term 9) and the serial rows of its block (term 10), bit for bit; each walked its own groups only
     (the points of a block alone would form other groups and sum otherwise). A rank whose block
-    holds no rod carrying current takes its share of term 10's walks all the same."""
+    holds no rod carrying current takes its share of term 10's walks all the same. So with leaves,
+    order and groups other than the defaults."""
     import dataclasses
 
     from selfas_graph.parallel import RowBlocks
 
     rng = np.random.default_rng(9)
     state = random_rods(400, rng, box=12.0, q=(0.5, 1.5))
-    terms = {"method": "tree", "opening_angle": 0.9}
+    terms = {"method": "tree", "opening_angle": 0.9, **settings}
     forces = {"electrodes": {"gap": 20.0}, "current_field": terms, "current_lorentz": {**terms, "near_range": 1.5}}
     sim = simulation(state, forces=forces, circuit={"delta_J0": 1.0})
     ff = sim.force_field
@@ -349,7 +356,8 @@ def test_ranks_share_the_walks_and_give_one_rank_bit_for_bit(ranks, carrying):
         cut = [(n_group * r // ranks, n_group * (r + 1) // ranks) for r in range(ranks)]
         assert n_group >= ranks and runs == sorted(cut * (len(runs) // ranks))
     # the test means something: a block's tips alone form other groups, and sum otherwise
-    tree = ctx.current_tree()
+    tree = ctx.current_tree(settings.get("leaf_size", ct.LEAF_SIZE), settings.get("order", ct.ORDER))
+    assert tree.order == settings.get("order", ct.ORDER)
     lo, hi = results[-1][0].tips
     block = np.empty((hi - lo, 3))
     ct.current_tree_field(tree, state.position[lo:hi], np.arange(lo, hi) // 2, 0.9, W, block)
