@@ -55,7 +55,10 @@ def run_seed(task: dict) -> dict:
         try:
             if task["action"] == "resume":
                 cont = continuation(ckpt, path, t_end=t_end)  # the checks of simulate --resume
-                scenario, snap, meta = cont.scenario, cont.snapshot, {**cont.meta, "t_end": t_end}
+                scenario, snap = cont.scenario, cont.snapshot
+                # the checkpoints from here on, as simulate --resume writes them: this version, the scenario
+                # continued (an old run's brake among its overrides)
+                meta = checkpoint_meta(scenario, cont.run_id, path.name, t_end, __version__)
                 sim = Simulation.from_snapshot(scenario.params, snap)
                 writer = RunWriter.reopen(
                     path, int(snap["step"]), t_end=scenario.params.run.t_end, frame_interval=sim.frame_interval

@@ -293,6 +293,32 @@ def test_resume_keeps_the_brake_a_run_started_with(tmp_path):
     assert json.loads(meta["overrides"]) == ["integrator.brake=explicit"]
 
 
+def test_an_ensemble_seed_resumes_as_simulate_does(tmp_path):
+    """An ensemble's seed continues through the checks of simulate --resume (lifecycle.continuation): a
+    run started when the brake's default was explicit resumes explicit, and the checkpoints from then on
+    say so and name this version, as simulate's do (the seed kept the old checkpoint's record)."""
+    import json
+
+    from selfas_graph import __version__
+    from selfas_graph.ensemble import run_seed
+    from selfas_graph.io.checkpoint import checkpoint_path, read_checkpoint, write_checkpoint
+
+    out = _two_rod_run(tmp_path)
+    ckpt = checkpoint_path(out)
+    snap, meta = read_checkpoint(ckpt)
+    write_checkpoint(ckpt, snap, {**meta, "version": "0.0.1"})
+    with h5py.File(out, "r+") as f:  # as a run file of that time says
+        attrs = f["parameters/selfas_graph"].attrs
+        resolved = json.loads(attrs["parameters_json"])
+        resolved["integrator"]["brake"] = "explicit"
+        attrs["parameters_json"] = json.dumps(resolved)
+    res = run_seed({"seed": 1, "path": str(out), "action": "resume", "t_end": 0.02})
+    assert res["status"] == "finished", res
+    _, meta = read_checkpoint(ckpt)
+    assert json.loads(meta["overrides"]) == ["integrator.brake=explicit"] and meta["version"] == __version__
+    assert meta["t_end"] == 0.02
+
+
 def test_resume_by_another_version_is_noted_and_recorded(tmp_path, capsys):
     """A checkpoint written by another version is continued with a note that names both versions, and
     the run file records the continuation's version in ``resumed_with``."""
