@@ -48,6 +48,7 @@ from ..lifecycle import (
     run_to_file,
 )
 from ..model.accuracy import null_model_notes, short_of_accuracy
+from ..model.compiled import python_steps_reason
 from ..model.params import plasma_current_text
 from ..model.simulation import Simulation
 from ..model.state import PlacementError
@@ -365,6 +366,7 @@ def run(args):
         "output": str(out),
         "threads": numba.get_num_threads(),
         "mpi_ranks": world.size,
+        "fast_steps": "compiled" if sim.compiled is not None else f"in Python: {python_steps_reason(sim)}",
         **{k: v for k, v in sim.force_field.describe().items() if k != "terms"},
     }
     if world.rank == 0:

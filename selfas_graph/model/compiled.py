@@ -37,7 +37,7 @@ from ..kernels.steps import (
 from .health import BOND_BREAK, MAX_STEP_DISPLACEMENT
 from .integrator import AB4_WEIGHTS
 
-__all__ = ["CompiledSteps", "FAST_TERMS", "DONE", "NEEDS_STEP", "NEEDS_CONTACTS", "NEEDS_HEALTH"]
+__all__ = ["CompiledSteps", "FAST_TERMS", "DONE", "NEEDS_STEP", "NEEDS_CONTACTS", "NEEDS_HEALTH", "python_steps_reason"]
 
 #: the terms evaluated at every step that the compiled steps know (the slow terms are held)
 FAST_TERMS = (
@@ -63,16 +63,28 @@ _EMPTY = np.zeros(0)
 _EMPTY3 = np.zeros((0, 3))
 
 
-def compiled_steps_for(sim) -> "CompiledSteps | None":
-    """The compiled steps of ``sim``, or None when its steps must all run in Python."""
+def python_steps_reason(sim) -> str | None:
+    """Why every step of ``sim`` runs in Python (``simulate --dry-run`` names it), or None when its fast
+    steps run in compiled calls."""
     ff = sim.force_field
-    if ff.mts is None or not ff.blocks.serial:
-        return None
-    if ff.clock.on or ff.n_tips >= PARALLEL_ROWS:
-        return None
-    if any(not t.slow and t.name not in FAST_TERMS for t in ff.terms):
-        return None
-    return CompiledSteps(sim)
+    if ff.mts is None:
+        return "no multiple time stepping (integrator.slow_every = 1)"
+    if not ff.blocks.serial:
+        return "MPI ranks (each step gathers the ranks' rows)"
+    if ff.clock.on:
+        return "per-term timing is on"
+    if ff.n_tips >= PARALLEL_ROWS:
+        return f"{ff.n_tips} tips, at least {PARALLEL_ROWS}: each term runs on all threads in its own kernel"
+    unknown = [t.name for t in ff.terms if not t.slow and t.name not in FAST_TERMS]
+    if unknown:
+        return f"fast terms the compiled steps do not know: {', '.join(unknown)}"
+    return None
+
+
+def compiled_steps_for(sim) -> "CompiledSteps | None":
+    """The compiled steps of ``sim``, or None when its steps must all run in Python
+    (:func:`python_steps_reason` says why)."""
+    return None if python_steps_reason(sim) else CompiledSteps(sim)
 
 
 class CompiledSteps:

@@ -301,3 +301,32 @@ def test_all_plus_zero_tells_plus_zero_from_minus_zero_and_nan():
         a = np.zeros((5, 3))
         a[4, 2] = bad
         assert not _all_plus_zero(a)
+
+
+def test_the_reason_a_run_takes_every_step_in_python_is_named(tmp_path, capsys):
+    """python_steps_reason names why no step is compiled (no multiple time stepping, timing, a fast term the
+    compiled steps do not know) and is None exactly when the simulation has compiled steps; the dry run's
+    plan says which (``fast_steps``)."""
+    import json
+
+    from selfas_graph.cli.main import main
+
+    base = scenario_from_text(SMALL_CIRCUIT_SCENE).params
+    mts = base.replace(integrator={"slow_every": 4})
+    sim = Simulation(mts)
+    assert sim.compiled is not None and compiled.python_steps_reason(sim) is None
+    assert "slow_every = 1" in compiled.python_steps_reason(Simulation(base))
+    timed = Simulation(mts)
+    timed.force_field.clock.on = True
+    assert compiled.python_steps_reason(timed) == "per-term timing is on"
+    unknown = Simulation(mts)
+    term = next(t for t in unknown.force_field.terms if t.name == "tip_brake")
+    term.name = "a_new_term"
+    assert compiled.python_steps_reason(unknown) == "fast terms the compiled steps do not know: a_new_term"
+    scene = tmp_path / "s.toml"
+    scene.write_text(SMALL_CIRCUIT_SCENE)
+    for every, says in ((4, "compiled"), (1, "in Python: no multiple time stepping")):
+        capsys.readouterr()
+        assert main(["simulate", str(scene), "--dry-run", "--set", f"integrator.slow_every={every}"]) == 0
+        out = capsys.readouterr().out
+        assert json.loads(out[out.index("{") :])["fast_steps"].startswith(says)
