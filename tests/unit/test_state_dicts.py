@@ -73,3 +73,22 @@ def test_writer_state_round_trip():
     assert v.circuit_rows_written == 0
     np.testing.assert_array_equal(v.state_dict()["pending_step"], [9])
     np.testing.assert_array_equal(v.state_dict()["pending_value"], [3e-16])
+
+
+def test_the_components_give_disjoint_entries_of_the_snapshot():
+    """The snapshot is one flat namespace: a key two components both gave would silently lose one state
+    (Simulation.snapshot merges them with dict.update). Checked on a scene with every component that
+    saves state: the network of case (ii) with currents flowing, multiple time stepping (held slow
+    forces) and both current terms on the tree."""
+    snap, meta = read_checkpoint(DATA / "checkpoint_0.2_case2.h5")
+    overrides = json.loads(meta["overrides"]) + ["integrator.slow_every=4"]
+    overrides += [f"forces.{t}.method=tree" for t in ("current_field", "current_lorentz")]
+    scenario = scenario_from_text(meta["scenario_text"], overrides=overrides)
+    sim = Simulation.from_snapshot(scenario.params, snap)
+    sim.step(5)
+    parts = [sim.state.state_dict(), sim.integrator.state_dict(), sim.network.state_dict()]
+    parts.append(sim.force_field.state_dict())
+    own = {"max_bond_error", "energy0", "events", "circuit_log", "short_circuit_time"}
+    keys = [set(p) for p in parts] + [own]
+    assert all(len(a & b) == 0 for i, a in enumerate(keys) for b in keys[i + 1 :]), keys
+    assert set().union(*keys) == set(sim.snapshot())
