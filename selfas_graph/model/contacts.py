@@ -128,10 +128,9 @@ class ContactTracker:
 
     @staticmethod
     def _sorted(rows):
-        """Releases first, then contacts, each sorted by ids (a deterministic order)."""
+        """Releases first, then contacts, each sorted by ids (a deterministic order, ``events.SEARCH_ORDER``)."""
         if rows:
-            order = {ev.TIP_RELEASE: 0, ev.CONDUCTOR_RELEASE: 1, ev.TIP_CONTACT: 2, ev.CONDUCTOR_CONTACT: 3}
-            rows.sort(key=lambda r: (order[r[2]], r[3], r[4]))
+            rows.sort(key=lambda r: (ev.SEARCH_ORDER[r[2]], r[3], r[4]))
         return rows
 
     def search_numpy(self, contacts, position, neighbours, step, time):

@@ -55,6 +55,11 @@ SHORT_CIRCUIT = int(EventKind.SHORT_CIRCUIT)
 OPEN_CIRCUIT = int(EventKind.OPEN_CIRCUIT)
 #: code -> the name stored in run files
 KIND_NAMES = {int(k): k.label for k in EventKind}
+#: the order of the contact search's events within a step (releases first, then contacts; the rows of
+#: one kind by their ids): a kind the search emits must be here, as one a replay meets must be handled
+#: by ``model/contactset.py::ContactSet.apply`` (or be one of its ``DERIVED_KINDS``); a kind triggered
+#: by geometry must also make the compiled steps' quiet-step test unsure (``kernels/contacts.py``)
+SEARCH_ORDER = {TIP_RELEASE: 0, CONDUCTOR_RELEASE: 1, TIP_CONTACT: 2, CONDUCTOR_CONTACT: 3}
 
 
 class Event(NamedTuple):

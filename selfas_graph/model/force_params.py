@@ -185,6 +185,11 @@ class ElectricField:
 class Electrodes:
     gap: float = spec(17.9, "distance dZ between the cathode plane z = -dZ/2 and the anode plane z = +dZ/2", gt=0.0)
 
+    @property
+    def planes(self) -> tuple:
+        """``(z_cathode, z_anode) = (-gap/2, +gap/2)``, the planes of term 7 and of the contact search."""
+        return (-0.5 * self.gap, 0.5 * self.gap)
+
 
 _CURRENT_PRECISION_HELP = (
     "arithmetic of the rod currents' field {where}: float64, or mixed (the segment law in float32 "

@@ -180,7 +180,7 @@ class Network(ContactQueries):
             state.n_rods,
             rstar,
             cp.release_factor * rstar,
-            electrodes=(-0.5 * el.gap, 0.5 * el.gap) if el is not None else None,
+            electrodes=el.planes if el is not None else None,
             filament_radius=0.5 * fil.diameter if fil is not None else None,
             bias=circ.delta_J0 if circ is not None else 0.0,
             circuit=circ is not None,

@@ -85,8 +85,7 @@ class ElectrodesForce(Term):
     channels = [("electrodes", True), ("electrode_brake", False)]
 
     def __init__(self, p, state):
-        gap = p.forces.electrodes.gap
-        self.z = (-0.5 * gap, 0.5 * gap)
+        self.z = p.forces.electrodes.planes
         self.rstar = p.rods.rstar
         self.kappa = p.rods.tip_stiffness
         self.k = p.forces.tip_brake.coefficient if p.forces.tip_brake is not None else 0.0
