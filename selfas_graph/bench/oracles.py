@@ -10,8 +10,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from selfas_graph.model.graph import CLUSTER, DEAD_END, FILAMENT, FREE, Topology, _frozen
-from selfas_graph.model.validate import _as_count, _as_index_array
+from selfas_graph.model.graph import CLUSTER, DEAD_END, FILAMENT, FREE, Topology
+from selfas_graph.model.validate import _as_count, _as_index_array, _frozen
 
 
 def component_labels_scipy(n, a, b):

@@ -1,6 +1,6 @@
 """Nodal analysis of the rod network: potentials and rod currents (docs/model.md 'Circuit').
 
-Arrays in, arrays out: ``contactset.solve_contacts`` hands over the contacts as arrays (for
+Arrays in, arrays out: ``contact_queries.solve_contacts`` hands over the contacts as arrays (for
 ``network.Network.solve`` in a run and ``graph.ConnectivityGraph.solve`` for a saved graph).
 The reduced system is assembled and solved in :mod:`.linear`.
 :func:`solve_network` solves any resistor network; :func:`solve_circuit` turns

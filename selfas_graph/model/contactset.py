@@ -22,10 +22,11 @@ from types import MappingProxyType
 import numpy as np
 
 from . import events as ev
-from .circuit import CircuitSolution, SolveMemo, solve_circuit
+from .contact_queries import ContactQueries, solve_contacts
 from .topology import Topology, classify_rods, conductor_node_key
 from .validate import _as_count, _as_index_array, _frozen, conductor_id, finite_potential, tip_index, tip_pair
 
+#: ContactQueries and solve_contacts live in .contact_queries, and are imported from here too
 __all__ = ["ContactSet", "ContactQueries", "solve_contacts", "DERIVED_KINDS"]
 
 #: event kinds derived from a batch (not contacts): skipped by :meth:`ContactSet.apply`
@@ -322,68 +323,3 @@ def _sorted_conductor_contacts(contacts: dict) -> tuple[np.ndarray, np.ndarray, 
         _frozen(np.ascontiguousarray(kc[order, 1])),
         _frozen(np.ascontiguousarray(pot[order])),
     )
-
-
-def solve_contacts(
-    contacts: ContactSet,
-    solver: str = "auto",
-    rod_resistance=None,
-    contact_resistance: float = 0.0,
-    memo: SolveMemo | None = None,
-) -> CircuitSolution:
-    """Potentials and rod currents of ``contacts`` (:func:`.circuit.solve_circuit`).
-
-    The tips are merged once, by the set's topology (:attr:`Topology.node_of_tip`). ``memo``: a
-    :class:`~.circuit.SolveMemo` that remembers the last reduced system. Raises ValueError if a
-    per-contact potential is unset.
-    """
-    pot = contacts.conductor_potential
-    if np.isnan(pot).any():
-        i = np.flatnonzero(np.isnan(pot))
-        pairs = list(zip(contacts.conductor_tip[i].tolist(), contacts.conductor_id[i].tolist()))
-        raise ValueError(f"unset contact potential for (tip, conductor) {pairs[:10]}")
-    topo = contacts.topology
-    return solve_circuit(
-        contacts.n_tips,
-        contacts.tip_contacts,
-        contacts.conductor_tip,
-        pot,
-        solver=solver,
-        rod_resistance=rod_resistance,
-        contact_resistance=contact_resistance,
-        memo=memo,
-        merged=(topo.n_nodes, topo.node_of_tip),
-    )
-
-
-class ContactQueries:
-    """What an object that holds its contacts asks of them: the queries and the solve that
-    :class:`~.graph.ConnectivityGraph` and :class:`~.network.Network` share.
-
-    The object keeps the present contacts as ``contacts`` (a :class:`ContactSet`, replaced by each
-    batch of events) and the circuit's ``solver``, ``rod_resistance`` and ``contact_resistance``, and
-    a ``changed`` flag that :meth:`solve` clears.
-    """
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """The contacts as arrays (:meth:`ContactSet.arrays`): ``tip_contacts`` (m, 2) int64 rows
-        ``(k, l)`` with ``k < l``, sorted; ``conductor_tip``, ``conductor_id`` (k,) int64 and
-        ``conductor_potential`` (k,) float64 (NaN where a per-contact potential is unset), sorted by
-        (tip, conductor)."""
-        return self.contacts.arrays()
-
-    def topology(self) -> Topology:
-        """Roles and structures of the rods (computed once per set of contacts)."""
-        return self.contacts.topology
-
-    @property
-    def has_short_circuit(self) -> bool:
-        """Whether a filament joins two different conductor attachments now."""
-        return self.contacts.topology.has_short_circuit
-
-    def solve(self, memo: SolveMemo | None = None) -> CircuitSolution:
-        """Potentials and rod currents of the present contacts (:func:`solve_contacts`, through
-        ``memo`` when given); clears ``changed``. Raises ValueError if a per-contact potential is unset."""
-        sol = solve_contacts(self.contacts, self.solver, self.rod_resistance, self.contact_resistance, memo)
-        self.changed = False
-        return sol

@@ -18,7 +18,8 @@ from collections.abc import Callable, Iterable, Mapping
 import numpy as np
 
 from selfas_graph.model import events as ev
-from selfas_graph.model.contactset import ContactQueries, ContactSet
+from selfas_graph.model.contact_queries import ContactQueries
+from selfas_graph.model.contactset import ContactSet
 from selfas_graph.model.topology import (
     CLUSTER,
     DEAD_END,
@@ -29,7 +30,7 @@ from selfas_graph.model.topology import (
     circuit_event,
     classify_rods,
 )
-from selfas_graph.model.validate import _as_resistance, _frozen, tip_index
+from selfas_graph.model.validate import tip_index
 
 __all__ = ["FREE", "CLUSTER", "DEAD_END", "FILAMENT", "ROLE_NAMES", "Topology", "classify_rods", "ConnectivityGraph"]
 
@@ -74,20 +75,9 @@ class ConnectivityGraph(ContactQueries):
         contact_resistance: float = 0.0,
     ):
         self.contacts = ContactSet.empty(n_rods, conductor_potential)
-        #: linear solver of :meth:`solve` ("auto", "direct" or "cg"; see circuit.solve_circuit)
-        self.solver = solver
         self.n_rods = self.contacts.n_rods
         self.n_tips = self.contacts.n_tips
-        #: resistance of each rod (units R0), or None for R0 = 1 everywhere (circuit.solve_circuit)
-        self.rod_resistance = (
-            None
-            if rod_resistance is None
-            else _frozen(_as_resistance(rod_resistance, "rod_resistance", self.n_rods, allow_zero=False).copy())
-        )
-        #: resistance of every contact (units R0); 0 = ideal contacts (circuit.solve_circuit)
-        self.contact_resistance = float(contact_resistance)
-        if not (np.isfinite(self.contact_resistance) and self.contact_resistance >= 0.0):
-            raise ValueError(f"contact_resistance must be finite and >= 0, got {contact_resistance!r}")
+        self._set_circuit(self.n_rods, solver, rod_resistance, contact_resistance)
         self.changed = True  # nothing solved yet
 
     # ------------------------------------------------------------------ mutations

@@ -10,7 +10,7 @@ events', 'Connectivity graph and topology', 'Circuit'):
 * the conductor potentials (electrodes of case (i), ``-delta_J0 z`` along the filament of
   case (ii)) and the filament contact heights at the last solve;
 * the topology (``ContactSet.topology``, once per set of contacts), the circuit solve
-  (:func:`.contactset.solve_contacts`) and the memo of its last linear system
+  (:func:`.contact_queries.solve_contacts`) and the memo of its last linear system
   (:class:`.circuit.SolveMemo`);
 * the rod currents (:class:`RodCurrents`): the one store of them in a run. The force field
   is built with this object and its current terms read it (``ForceField.currents``); nothing
@@ -31,10 +31,10 @@ import numpy as np
 from . import events as ev
 from .circuit import CircuitSolution, SolveMemo
 from .circuitlog import circuit_rows
+from .contact_queries import ContactQueries
 from .contacts import ContactTracker
-from .contactset import ContactQueries, ContactSet
+from .contactset import ContactSet
 from .topology import FILAMENT, circuit_event
-from .validate import _frozen
 
 __all__ = ["Network", "NetworkUpdate", "RodCurrents"]
 
@@ -145,11 +145,8 @@ class Network(ContactQueries):
         self.tracker = ContactTracker(self.n_tips, rstar, release_radius, electrodes, filament_radius)
         self.bias = float(bias)
         self.circuit = bool(circuit)
-        #: linear solver of :meth:`solve` ("auto", "direct" or "cg"; see circuit.solve_circuit)
-        self.solver = solver
         self.height_tolerance = float(height_tolerance)
-        self.rod_resistance = None if rod_resistance is None else _frozen(np.array(rod_resistance, dtype=np.float64))
-        self.contact_resistance = float(contact_resistance)
+        self._set_circuit(self.n_rods, solver, rod_resistance, contact_resistance)
         conductors = {}
         if electrodes is not None:
             # the planes are -+gap/2, so their distance is the gap exactly; + 0.0: no negative zero without a bias

@@ -291,6 +291,34 @@ def test_solve_circuit_invalid_resistances(kwargs, message):
         solve_circuit(4, [[1, 2]], [0, 3], [1.0, -1.0], **kwargs)
 
 
+@pytest.mark.parametrize("holder", ["graph", "network"])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(rod_resistance=[1.0, 0.0]), "rod_resistance must be finite and > 0; entry 1"),
+        (dict(rod_resistance=[1.0, 1.0, 1.0]), r"rod_resistance must be a number or have shape \(2,\)"),
+        (dict(contact_resistance=-0.1), "contact_resistance must be finite and >= 0"),
+        (dict(contact_resistance=float("nan")), "contact_resistance must be finite and >= 0"),
+        (dict(solver="lu"), "solver must be one of"),
+    ],
+)
+def test_the_holders_of_contacts_check_the_circuit_settings_alike(holder, kwargs, message):
+    """ConnectivityGraph and Network take the circuit's settings through one check (ContactQueries), when
+    they are made: the network took any rod or contact resistance and solver and failed at its first solve,
+    or solved with a negative contact resistance."""
+    from selfas_graph.model.graph import ConnectivityGraph
+    from selfas_graph.model.network import Network
+
+    with pytest.raises(ValueError, match=message):
+        if holder == "graph":
+            ConnectivityGraph(2, {0: -1.0, 1: 1.0}, **kwargs)
+        else:
+            Network(2, 1.0, 1.2, electrodes=(-2.0, 2.0), bias=1.0, circuit=True, **kwargs)
+    ok = ConnectivityGraph(2, {0: -1.0, 1: 1.0}, rod_resistance=[1.0, 2.0]) if holder == "graph" else None
+    ok = ok or Network(2, 1.0, 1.2, rod_resistance=[1.0, 2.0], contact_resistance=0.5)
+    assert not ok.rod_resistance.flags.writeable and ok.rod_resistance.tolist() == [1.0, 2.0]
+
+
 # ------------------------------------------------------------------------------ contact resistance
 @pytest.mark.parametrize("n", [1, 2, 5, 17])
 @pytest.mark.parametrize("r", [0.0, 0.1, 3.0])
