@@ -133,18 +133,9 @@ def claims_of_arrays(position, tip_charge, tip_contacts, current=None, loops=Tru
 
 
 def _graph_of_frame(run, k):
-    """The graph record saved with position frame ``k`` (same step), or None."""
-    if not run.has_graph:
-        return None
-    step = int(run.step[k])
-    try:
-        g = run.graph(frame=k)
-        if g["step"] == step:
-            return g
-    except Exception:  # noqa: BLE001 - fewer graph frames than position frames: look up by time
-        pass
-    g = run.graph(t=float(run.time[k]))
-    return g if g["step"] == step else None
+    """The graph record saved with position frame ``k`` (the same step), or None: the rule of a saved
+    frame (:attr:`selfas_graph.io.frame.SavedFrame.graph`)."""
+    return run.frame(k).graph
 
 
 def frame_claims(run, frame=-1, loops=True) -> dict[str, float]:
