@@ -27,7 +27,8 @@ FPS = 10
 MOVIE_DPI = 80
 
 
-def _ffmpeg():
+def ffmpeg_path():
+    """The ffmpeg program to write MP4 with (imageio-ffmpeg's, else one on PATH), or None."""
     try:
         import imageio_ffmpeg
 
@@ -54,7 +55,7 @@ def render_movie(args, Figure) -> int:
         raise CliError(f"--movie {out}: the movie must end in .gif or .mp4")
     if args.kind != "snapshot":
         raise CliError("--movie renders snapshots; leave out --kind or give --kind snapshot")
-    ffmpeg = _ffmpeg() if kind == ".mp4" else None
+    ffmpeg = ffmpeg_path() if kind == ".mp4" else None
     if kind == ".mp4" and ffmpeg is None:
         raise CliError('an MP4 needs ffmpeg: pip install "selfas-graph[movie]" (or write a .gif)')
     dpi = MOVIE_DPI if args.dpi == 150 else args.dpi

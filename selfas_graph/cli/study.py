@@ -179,125 +179,139 @@ def _run(args):
     studies = _studies(args)
     if args.figures is None:  # beside the page whose figures they are
         args.figures = str(Path(args.page).parent / FIGURES_BESIDE_PAGE)
-    if args.action == "list":
-        for s in studies.studies.values():
-            extra = f" {' '.join('--set ' + o for o in s.overrides)}" if s.overrides else ""
-            print(f"{s.name}: {s.title}: {s.scenario}{extra}, {s.seeds} seeds to t = {s.t_end:g}")
-        return 0
-    if args.action == "run":
-        if not args.names:
-            raise CliError("study run needs the names of the studies to run (selfas-graph study list shows them)")
-        from .._version import __version__
-        from .main import main
+    actions = {"list": _list, "run": _run_studies, "summarise": _summarise, "page": _page}
+    return actions[args.action](args, studies)
 
-        code = 0
-        picked = _pick(studies, args.names)
-        since = studies.trajectories_since
-        from ..studies import later_version
 
-        newest = functools.reduce(later_version, (studies.since(s.name) for s in picked), since)
-        if older_version(__version__, newest):
-            raise CliError(
-                f"this installation reports version {__version__}, older than trajectories_since = {newest} in "
-                f"{args.studies}: its runs would be taken for older ones; install the package again (pip install -e .)"
-            )
-        old = [
-            f"{out} was made by version {made_by}, before the trajectories of version {studies.since(s.name)}"
-            for s in picked
-            if s.kind == "percolation" and not args.force
-            for out in [Path(args.runs) / s.name / PERCOLATION_JSON]
-            if out.exists() and older_version(made_by := _percolation_version(out), studies.since(s.name))
-        ]
-        if old:  # refused before anything runs, as a seed file of an older version is
-            raise CliError(
-                "result files that cannot be used (docs/studies.toml trajectories_since):\n  "
-                + "\n  ".join(old)
-                + "\npass --force to run them again"
-            )
-        ensembles = [s for s in picked if s.kind != "percolation"]
-        if ensembles:  # their seeds in one pool: no worker waits for the end of a study
-            code = _run_together(ensembles, args, since)
-            if code is None:
-                return 0  # an MPI worker rank: rank 0 runs the rest
-            if code in (2, 4) or code > 128:  # bad input, an I/O error, a signal
-                return code
-        for s in picked:
-            if s.kind != "percolation":
-                continue
-            out = Path(args.runs) / s.name / PERCOLATION_JSON
-            if out.exists() and not args.force:
-                print(f"study {s.name}: {out} exists (--force runs it again)")
-                continue
-            out.parent.mkdir(parents=True, exist_ok=True)
-            argv = ["bench", "percolation", s.scenario, "--counts", *map(str, s.counts), "--seeds", str(s.seeds)]
-            argv += ["--first-seed", str(s.first_seed), "--t-max", repr(s.t_end), "--fields", s.fields]
-            argv += ["--workers", str(args.jobs), "-o", str(out)] + [f"--set={o}" for o in s.overrides]
-            print(f"study {s.name}: selfas-graph {' '.join(argv)}", flush=True)
-            code = main(argv) or code
-        return code
-    if args.action == "summarise":
-        from ..studies import summarise_study, write_json_atomic
+def _list(args, studies):
+    """``study list``: each study, its scene and its seeds."""
+    for s in studies.studies.values():
+        extra = f" {' '.join('--set ' + o for o in s.overrides)}" if s.overrides else ""
+        print(f"{s.name}: {s.title}: {s.scenario}{extra}, {s.seeds} seeds to t = {s.t_end:g}")
+    return 0
 
-        skipped = []
-        for s in _pick(studies, args.names):
-            if s.kind == "percolation":
-                from ..studies.summary import percolation_summary
 
-                src = Path(args.runs) / s.name / PERCOLATION_JSON
-                if not src.exists():
-                    print(f"study {s.name}: no {src}; skipped")
-                    skipped.append(s.name)
-                    continue
-                summary = percolation_summary(s, src)
-                out = write_json_atomic(summary, Path(args.summaries) / f"{s.name}.json")
-                print(f"study {s.name}: {len(summary['densities'])} densities summarised into {out}")
-                continue
-            if not (Path(args.runs) / s.name).is_dir():
-                print(f"study {s.name}: no run files in {Path(args.runs) / s.name}; skipped")
+def _run_studies(args, studies):
+    """``study run NAME...``: the seeds of the ensembles in one pool, then the percolation studies."""
+    if not args.names:
+        raise CliError("study run needs the names of the studies to run (selfas-graph study list shows them)")
+    from .._version import __version__
+    from .main import main
+
+    code = 0
+    picked = _pick(studies, args.names)
+    since = studies.trajectories_since
+    from ..studies import later_version
+
+    newest = functools.reduce(later_version, (studies.since(s.name) for s in picked), since)
+    if older_version(__version__, newest):
+        raise CliError(
+            f"this installation reports version {__version__}, older than trajectories_since = {newest} in "
+            f"{args.studies}: its runs would be taken for older ones; install the package again (pip install -e .)"
+        )
+    old = [
+        f"{out} was made by version {made_by}, before the trajectories of version {studies.since(s.name)}"
+        for s in picked
+        if s.kind == "percolation" and not args.force
+        for out in [Path(args.runs) / s.name / PERCOLATION_JSON]
+        if out.exists() and older_version(made_by := _percolation_version(out), studies.since(s.name))
+    ]
+    if old:  # refused before anything runs, as a seed file of an older version is
+        raise CliError(
+            "result files that cannot be used (docs/studies.toml trajectories_since):\n  "
+            + "\n  ".join(old)
+            + "\npass --force to run them again"
+        )
+    ensembles = [s for s in picked if s.kind != "percolation"]
+    if ensembles:  # their seeds in one pool: no worker waits for the end of a study
+        code = _run_together(ensembles, args, since)
+        if code is None:
+            return 0  # an MPI worker rank: rank 0 runs the rest
+        if code in (2, 4) or code > 128:  # bad input, an I/O error, a signal
+            return code
+    for s in picked:
+        if s.kind != "percolation":
+            continue
+        out = Path(args.runs) / s.name / PERCOLATION_JSON
+        if out.exists() and not args.force:
+            print(f"study {s.name}: {out} exists (--force runs it again)")
+            continue
+        out.parent.mkdir(parents=True, exist_ok=True)
+        argv = ["bench", "percolation", s.scenario, "--counts", *map(str, s.counts), "--seeds", str(s.seeds)]
+        argv += ["--first-seed", str(s.first_seed), "--t-max", repr(s.t_end), "--fields", s.fields]
+        argv += ["--workers", str(args.jobs), "-o", str(out)] + [f"--set={o}" for o in s.overrides]
+        print(f"study {s.name}: selfas-graph {' '.join(argv)}", flush=True)
+        code = main(argv) or code
+    return code
+
+
+def _summarise(args, studies):
+    """``study summarise [NAME...]``: each study's summary from its run files, and its figures."""
+    from ..studies import summarise_study, write_json_atomic
+
+    skipped = []
+    for s in _pick(studies, args.names):
+        if s.kind == "percolation":
+            from ..studies.summary import percolation_summary
+
+            src = Path(args.runs) / s.name / PERCOLATION_JSON
+            if not src.exists():
+                print(f"study {s.name}: no {src}; skipped")
                 skipped.append(s.name)
                 continue
-            summary = summarise_study(s, args.runs, studies)
-            if not summary["n_seeds"]:
-                print(f"study {s.name}: no readable seed file; skipped")
-                skipped.append(s.name)
-                continue
-            # the movie the page links (None: none made with this summary, and an older one is not linked)
-            movie = None
-            if s.section in ("paper", "contrast") and not (args.no_figures or args.no_movie):
-                from .movie import _ffmpeg
+            summary = percolation_summary(s, src)
+            out = write_json_atomic(summary, Path(args.summaries) / f"{s.name}.json")
+            print(f"study {s.name}: {len(summary['densities'])} densities summarised into {out}")
+            continue
+        if not (Path(args.runs) / s.name).is_dir():
+            print(f"study {s.name}: no run files in {Path(args.runs) / s.name}; skipped")
+            skipped.append(s.name)
+            continue
+        summary = summarise_study(s, args.runs, studies)
+        if not summary["n_seeds"]:
+            print(f"study {s.name}: no readable seed file; skipped")
+            skipped.append(s.name)
+            continue
+        # the movie the page links (None: none made with this summary, and an older one is not linked)
+        movie = None
+        if s.section in ("paper", "contrast") and not (args.no_figures or args.no_movie):
+            from .movie import ffmpeg_path
 
-                movie = f"{s.name}_movie.{'mp4' if _ffmpeg() else 'gif'}"  # MP4 where ffmpeg is there
-            summary["movie"] = movie
-            try:
-                out = write_json_atomic(summary, Path(args.summaries) / f"{s.name}.json")
-            except OSError as exc:
-                raise CliError(f"cannot write the summary of {s.name}: {exc.strerror or exc}") from None
-            print(f"study {s.name}: {summary['n_seeds']} seeds summarised into {out}")
-            if not args.no_figures:
-                from ..studies.figures import study_figures
+            movie = f"{s.name}_movie.{'mp4' if ffmpeg_path() else 'gif'}"  # MP4 where ffmpeg is there
+        summary["movie"] = movie
+        try:
+            out = write_json_atomic(summary, Path(args.summaries) / f"{s.name}.json")
+        except OSError as exc:
+            raise CliError(f"cannot write the summary of {s.name}: {exc.strerror or exc}") from None
+        print(f"study {s.name}: {summary['n_seeds']} seeds summarised into {out}")
+        if not args.no_figures:
+            from ..studies.figures import study_figures
 
-                for path in study_figures(s, summary, args.figures):
-                    print(f"  wrote {path}")
-                from .main import main
+            for path in study_figures(s, summary, args.figures):
+                print(f"  wrote {path}")
+            from .main import main
 
-                first = Path(args.runs) / s.name / summary["seeds"][0]["path"]
-                snap = Path(args.figures) / f"{s.name}_snapshot.png"
-                main(["plot", str(first), "--kind", "snapshot", "-o", str(snap), "--force"])
-                if movie is not None:
-                    # the first seed's movie, at most MOVIE_FRAMES frames
-                    from ..io.h5md import RunFile
+            first = Path(args.runs) / s.name / summary["seeds"][0]["path"]
+            snap = Path(args.figures) / f"{s.name}_snapshot.png"
+            main(["plot", str(first), "--kind", "snapshot", "-o", str(snap), "--force"])
+            if movie is not None:
+                # the first seed's movie, at most MOVIE_FRAMES frames
+                from ..io.h5md import RunFile
 
-                    with RunFile(first) as run:
-                        every = max(1, -(-run.n_frames // MOVIE_FRAMES))
-                    argv = ["plot", str(first), "--movie", str(Path(args.figures) / movie), "--every", str(every)]
-                    if main(argv + ["--force"]) != 0:  # not made: the page must not link an older one
-                        summary["movie"] = None
-                        write_json_atomic(summary, out)
-        if skipped and args.names:  # studies asked for by name, not summarised: not a success
-            print(f"selfas-graph study summarise: nothing to summarise for {', '.join(skipped)}", file=sys.stderr)
-            return 1
-        return 0
-    # page
+                with RunFile(first) as run:
+                    every = max(1, -(-run.n_frames // MOVIE_FRAMES))
+                argv = ["plot", str(first), "--movie", str(Path(args.figures) / movie), "--every", str(every)]
+                if main(argv + ["--force"]) != 0:  # not made: the page must not link an older one
+                    summary["movie"] = None
+                    write_json_atomic(summary, out)
+    if skipped and args.names:  # studies asked for by name, not summarised: not a success
+        print(f"selfas-graph study summarise: nothing to summarise for {', '.join(skipped)}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _page(args, studies):
+    """``study page [--check]``: the results page's generated blocks and figures from the summaries."""
     from ..studies.page import page_blocks, replace_blocks
 
     page = Path(args.page)
