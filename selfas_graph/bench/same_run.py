@@ -54,7 +54,7 @@ VOLATILE = (
 #: attributes that only say what a dataset holds, added by a later version without changing a value (H5MD
 #: 1.1's ``type`` and ``quantity`` of the charges, since 0.4.3): one file without them is an earlier version's
 DESCRIBING = tuple(f"particles/{g}/charge@{a}" for g in ("tips", "rods") for a in ("type", "quantity"))
-#: entries of a JSON attribute that describe a setting in words (``derived_json``'s ``*_sum``: how a sum is done)
+#: entries of the ``derived_json`` attribute that describe a setting in words (``*_sum``: how a sum is done)
 DESCRIBING_SUFFIX = "_sum"
 
 
@@ -151,7 +151,8 @@ def compare(path_a, path_b, attrs: bool = True, counts: dict | None = None, note
                         keys = _json_differences(oa.attrs[key], ob.attrs[key])
                         if keys is not None:  # a JSON text (the parameters): the entries that differ
                             for k, line in keys:
-                                to = described if k.endswith(DESCRIBING_SUFFIX) else out
+                                words = key == "derived_json" and k.endswith(DESCRIBING_SUFFIX)
+                                to = described if words else out
                                 to.append(f"{name or '/'}@{key}: {line}")
                         else:
                             out.append(f"{name or '/'}@{key}: {oa.attrs[key]!r} != {ob.attrs[key]!r}")

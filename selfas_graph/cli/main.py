@@ -109,6 +109,15 @@ def parse_args(parser, argv=None):
     return args
 
 
+def __getattr__(name):
+    # raised_in_hdf5 lives in io/h5md_format.py; imported from here as before, without loading h5py at start
+    if name == "raised_in_hdf5":
+        from ..io.h5md_format import raised_in_hdf5
+
+        return raised_in_hdf5
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 def interrupted_code(results) -> int:
     """The exit code of a command whose seeds a signal stopped: 128 + the signal's number, as ``simulate``
     and a shell give it (130 for Ctrl-C, 143 for SIGTERM), from the first seed result (a dict or None) that

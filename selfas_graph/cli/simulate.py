@@ -494,10 +494,15 @@ def _io_failure(exc, writer, out, ckpt, sim):
         except CheckpointError:
             last = str(ckpt)
     reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else " ".join(str(exc).split())[:300]
+    advice = (
+        "Free some space (or fix the folder) and continue with"
+        if is_io_error(exc)
+        else "HDF5 failed on the file (a damaged file?); check it, then try"
+    )
     msg = (
         f"I/O error at step {sim.state.step} (t = {sim.state.time:.6g}) while writing: {reason}. "
-        f"The frames flushed before it are in {out}; last good checkpoint: {last}. Free some space "
-        f"(or fix the folder) and continue with: selfas-graph simulate --resume {out}"
+        f"The frames flushed before it are in {out}; last good checkpoint: {last}. {advice}: "
+        f"selfas-graph simulate --resume {out}"
     )
     if world.size > 1:
         print(f"selfas-graph simulate: error: {msg}", file=sys.stderr, flush=True)

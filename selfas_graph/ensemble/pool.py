@@ -19,9 +19,9 @@ def run_tasks(
     ``report(result)`` is called as each ends. In a serial pool they run here, one after
     the other. Once a result's ``status`` is in ``stop_statuses`` (a seed stopped by a
     signal), or on Ctrl-C or SIGTERM here, no further task starts; the local workers get
-    the signal received here (SIGTERM when a seed stopped them; a running seed then stops after its step
-    with a checkpoint and names the signal in its result's ``signum``) and the running tasks' results are
-    collected. Tasks never started are None in the returned list.
+    the signal received here (SIGTERM after a seed's I/O error, so that the others stop while there is
+    room; a running seed then stops after its step with a checkpoint and names the signal in its result's
+    ``signum``) and the running tasks' results are collected. Tasks never started are None in the returned list.
     """
     results = [None] * len(tasks)
     report = report or (lambda r: None)

@@ -93,7 +93,8 @@ def raised_in_hdf5(exc) -> bool:
     """Whether ``exc`` was raised in h5py (HDF5 read errors are :data:`HDF5_READ_ERRORS` there)."""
     tb = exc.__traceback__
     while tb is not None:
-        if "h5py" in tb.tb_frame.f_code.co_filename:
+        name = tb.tb_frame.f_code.co_filename  # h5py's modules, or its compiled ones ("h5py/h5o.pyx")
+        if f"{os.sep}h5py{os.sep}" in name or name.startswith(f"h5py{os.sep}"):
             return True
         tb = tb.tb_next
     return False

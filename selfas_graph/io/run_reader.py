@@ -229,13 +229,26 @@ class RunFile:
         return (
             isinstance(g, h5py.Group)
             and all(isinstance(g.get(n), h5py.Dataset) for n in layout.GRAPH_DATASETS)
-            and g["step"].shape[0] > 0
+            and self._graph_records() > 0
         )
+
+    def _graph_records(self) -> int:
+        """The graph records all of whose rows were written: a kill while a record was appended can leave
+        its step and time without the rest (a resume drops that record, as a torn frame row)."""
+        g = self.f[layout.GRAPH]
+        names = layout.GRAPH_PER_FRAME + ((layout.GRAPH_FLOATING,) if layout.GRAPH_FLOATING in g else ())
+        n = min(g[name].shape[0] for name in names)
+        tips = np.cumsum(g["tip_contacts_count"][:n])
+        conductors = np.cumsum(g["conductor_contacts_count"][:n])
+        held = min(g[name].shape[0] for name in layout.GRAPH_CONDUCTOR_CONTACTS)
+        while n and (tips[n - 1] > g["tip_contacts"].shape[0] or conductors[n - 1] > held):
+            n -= 1
+        return n
 
     @property
     def graph_steps(self) -> np.ndarray:
         """The steps of the frames saved with graph data (empty without any)."""
-        return self.f[layout.GRAPH_STEP][:] if self.has_graph else np.zeros(0, dtype=np.int64)
+        return self.f[layout.GRAPH_STEP][: self._graph_records()] if self.has_graph else np.zeros(0, dtype=np.int64)
 
     def events(self, until_step=None) -> np.ndarray:
         """Event records (structured array, fields step, time, kind, a, b), optionally up to a step."""
@@ -271,8 +284,8 @@ class RunFile:
                 f"{self.path}: the file has no graph data (the run had contacts.enabled = false, "
                 f"or was written before any frame)"
             )
-        n = self.f[layout.GRAPH_STEP].shape[0]
-        return _pick_frame(self.path, n, frame, t, lambda: self.f[layout.GRAPH_TIME][:])
+        n = self._graph_records()
+        return _pick_frame(self.path, n, frame, t, lambda: self.f[layout.GRAPH_TIME][:n])
 
     def graph(self, frame=None, t=None) -> dict:
         """The graph state of one frame: contact arrays, roles, currents, potentials, step and time."""

@@ -74,6 +74,12 @@ def test_the_current_trees_leaves_and_order_are_swept_for_both_terms_where_both_
     assert tool._applicable(both, "forces.current_lorentz.group_size")
     assert tool._applicable(one, "forces.current_lorentz.leaf_size")
     assert tool._setting(one, "forces.current_lorentz.order", 2) == ["forces.current_lorentz.order=2"]
+    # the reference of a row that sets both trees takes both terms to the direct sum
+    assert tool._reference(both, "forces.current_field.order") == {
+        "forces.current_field.method": "direct",
+        "forces.current_lorentz.method": "direct",
+    }
+    assert tool._reference(both, "forces.current_field.group_size") == {"forces.current_field.method": "direct"}
 
 
 def test_current_every_applies_with_current_terms_and_a_refused_setting_is_a_failed_run(tmp_path):

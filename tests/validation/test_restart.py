@@ -404,3 +404,35 @@ def test_a_frame_row_torn_by_a_kill_is_no_frame_and_a_resume_continues(tmp_path,
         assert not got.torn_frame and got.n_frames == ref.n_frames > frames
         assert np.array_equal(got.step, ref.step) and np.array_equal(got.time, ref.time)
         assert all(np.array_equal(got.position(k), ref.position(k)) for k in range(ref.n_frames))
+
+
+def test_a_graph_record_torn_by_a_kill_is_no_record_and_the_readers_go_on(tmp_path):
+    """A kill while a frame's graph record was appended can leave its step and time without the rest
+    (roles, currents, potentials, counts): that record is no record for RunFile (the frame has no graph
+    data), the readers of the frame go on without it, and a resume from the checkpoint of that frame's
+    step drops the torn rows and continues (that frame stays without graph data; the next have theirs)."""
+    from selfas_graph.analysis.claims import claims_series
+    from selfas_graph.io import layout
+
+    (tmp_path / "s.toml").write_text(SMALL_CIRCUIT_SCENE)
+    run = tmp_path / "run.h5"
+    quiet = ["--progress", "none"]
+    assert main(["simulate", str(tmp_path / "s.toml"), "-o", str(run), "--t-end", "0.01", *quiet]) == 0
+    with RunFile(run) as f:
+        steps = f.graph_steps
+    with h5py.File(run, "r+") as f:
+        g = f[layout.GRAPH]
+        n = g["step"].shape[0] - 1
+        for name in (*layout.GRAPH_PER_FRAME, layout.GRAPH_FLOATING):
+            if name not in ("step", "time"):
+                g[name].resize(n, axis=0)
+        f["parameters/selfas_graph"].attrs["status"] = "running"  # as a kill leaves it
+    with RunFile(run) as f:
+        assert np.array_equal(f.graph_steps, steps[:-1]) and f.frame(-1).graph is None
+        assert f.graph(frame=-1)["step"] == steps[-2]
+        assert len(claims_series(f)["time"]) == f.n_frames
+    assert main(["simulate", "--resume", str(run), "--t-end", "0.02", *quiet]) == 0
+    with RunFile(run) as f:
+        assert f.frame(-1).graph is not None and f.frame(1).graph is None
+        assert np.array_equal(f.graph_steps, np.delete(f.step, 1))
+        assert len(claims_series(f)["time"]) == f.n_frames
