@@ -38,6 +38,7 @@ from .io.h5md import (
     RunFileError,
     RunWriter,
     appendable_problems,
+    hdf5_damage,
     is_io_error,
     raised_in_hdf5,
     run_provenance,
@@ -340,9 +341,10 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
     except RunFileError as exc:
         raise ContinuationError(f"cannot resume into {run_path}: {exc}") from None
     except HDF5_READ_ERRORS as exc:
-        if not raised_in_hdf5(exc):
+        why = hdf5_damage(exc)
+        if why is None:
             raise
-        raise ContinuationError(f"cannot resume into {run_path}: cannot read it: {exc} (a damaged file?)") from None
+        raise ContinuationError(f"cannot resume into {run_path}: {why}") from None
     if status.startswith("failed: numerical failure"):  # not a full disk, which a resume with room overcomes
         raise ContinuationError(
             f"cannot resume: the run of {run_path} ended in a {status.removeprefix('failed: ')} (its "

@@ -142,23 +142,25 @@ def _both_current_trees(scenario) -> bool:
     return all(t is not None and t.method == "tree" for t in (f.current_field, f.current_lorentz))
 
 
+def _paired(scenario, knob) -> bool:
+    """Whether ``knob``'s rows set both current terms: one of term 9's :data:`SHARED_TREE_KNOBS` where both
+    terms take the tree (a value for one term alone would cost a second tree,
+    :func:`~selfas_graph.model.terms.currents.two_trees_note`)."""
+    name = knob.rsplit(".", 1)[1]
+    return knob.startswith("forces.current_field.") and name in SHARED_TREE_KNOBS and _both_current_trees(scenario)
+
+
 def _reference(scenario, knob) -> dict:
-    """The reference of ``knob``'s rows: :data:`KNOBS`'s, and term 10 on the direct sum too where the row
-    sets both current terms (:func:`_setting`), so that the rows measure both trees against exact sums."""
-    ref = dict(KNOBS[knob][1])
-    if len(_setting(scenario, knob, KNOBS[knob][0][0])) > 1:
-        ref["forces.current_lorentz.method"] = "direct"
-    return ref
+    """The reference of ``knob``'s rows: :data:`KNOBS`'s, and term 10 on the direct sum too where the rows
+    set both current terms (:func:`_paired`), so that they measure both trees against exact sums."""
+    return {**KNOBS[knob][1], **({"forces.current_lorentz.method": "direct"} if _paired(scenario, knob) else {})}
 
 
 def _setting(scenario, knob, value) -> list[str]:
-    """The overrides of one row: ``knob=value``, and the same for term 10 where the knob is one of the
-    :data:`SHARED_TREE_KNOBS` of term 9 and both terms take the tree (a value for one term alone would cost
-    a second tree, :func:`~selfas_graph.model.terms.currents.two_trees_note`)."""
+    """The overrides of one row: ``knob=value``, and the same for term 10 where :func:`_paired`."""
     out = [f"{knob}={_toml(value)}"]
-    name = knob.rsplit(".", 1)[1]
-    if knob.startswith("forces.current_field.") and name in SHARED_TREE_KNOBS and _both_current_trees(scenario):
-        out.append(f"forces.current_lorentz.{name}={_toml(value)}")
+    if _paired(scenario, knob):
+        out.append(f"forces.current_lorentz.{knob.rsplit('.', 1)[1]}={_toml(value)}")
     return out
 
 
@@ -305,9 +307,8 @@ def main(argv=None):
             setting = args.base_set + _setting(base, knob, value)
             run_once(args.scenario, setting, min(args.t, 0.01), snap)  # compile a setting's own kernels untimed
             res = run_once(args.scenario, setting, args.t, snap)
-            paired = len(_setting(base, knob, value)) > 1
             row = {
-                "knob": knob + (" (both current terms)" if paired else ""),
+                "knob": knob + (" (both current terms)" if _paired(base, knob) else ""),
                 "value": value,
                 "default": value == default,
             }

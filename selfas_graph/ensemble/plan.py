@@ -18,7 +18,7 @@ from ..io.checkpoint import (
     checkpoint_path,
     read_checkpoint,
 )
-from ..io.h5md import HDF5_READ_ERRORS, RunFile, RunFileError, raised_in_hdf5
+from ..io.h5md import HDF5_READ_ERRORS, RunFile, RunFileError, hdf5_damage
 from ..io.scenario import Scenario, ScenarioError, load_scenario, scenario_from_text
 from ..lifecycle import ContinuationError, continuation
 from ..model.operations import frame_steps
@@ -258,9 +258,9 @@ class Ensemble:
                 made_by = str(run.meta.get("version") or "unknown")
                 t_last = float(run.time[-1]) if run.n_frames else -math.inf
         except (RunFileError, *HDF5_READ_ERRORS) as exc:
-            if not isinstance(exc, RunFileError) and not raised_in_hdf5(exc):
+            if not isinstance(exc, RunFileError) and hdf5_damage(exc) is None:
                 raise
-            why = str(exc) if isinstance(exc, RunFileError) else f"{path}: cannot read it: {exc} (a damaged file?)"
+            why = str(exc) if isinstance(exc, RunFileError) else f"{path}: {hdf5_damage(exc)}"
             if replace:
                 return SeedPlan(seed, path, "run", f"replacing: {why}")
             raise EnsembleError(why) from None

@@ -10,7 +10,7 @@ import numpy as np
 from .._version import __version__
 from ..analysis.diagnostics import timeline
 from ..analysis.ensemble_stats import censored_times, grouped_summary, mean_sem, mean_sem_fits
-from ..io.h5md import HDF5_READ_ERRORS, RunFile, RunFileError, raised_in_hdf5
+from ..io.h5md import HDF5_READ_ERRORS, RunFile, RunFileError, hdf5_damage
 from .measures import FRAME_MEASURES, Frame, carries_current
 
 
@@ -59,9 +59,9 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
             with run:
                 seed, row = _read_seed(run, path, times, t_end, measures, flux_radius, grouped)
         except HDF5_READ_ERRORS as exc:  # damaged metadata: HDF5 says so only when the part is read
-            if not raised_in_hdf5(exc):
+            if hdf5_damage(exc) is None:
                 raise
-            unreadable.append({"path": str(path), "reason": f"{path}: cannot read it: {exc} (a damaged file?)"})
+            unreadable.append({"path": str(path), "reason": f"{path}: {hdf5_damage(exc)}"})
             continue
         seeds.append(seed)
         rows.append(row)

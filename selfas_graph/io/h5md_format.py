@@ -202,6 +202,12 @@ def _rows_up_to(steps, step, strict=True) -> int:
     return int(bad[0]) if len(bad) else len(s)
 
 
+def hdf5_damage(exc) -> str | None:
+    """What to say of a read error ``exc`` that h5py raised (damaged metadata: ``cannot read it: ... (a damaged
+    file?)``), or None for an error raised elsewhere, which the caller raises again."""
+    return f"cannot read it: {exc} (a damaged file?)" if raised_in_hdf5(exc) else None
+
+
 def unreadable_part(f) -> str | None:
     """Why HDF5 cannot read all of the open file ``f`` that a continuation touches, or None.
 
@@ -219,9 +225,10 @@ def unreadable_part(f) -> str | None:
         dict(f.attrs)
         f.visititems(touch)
     except HDF5_READ_ERRORS as exc:
-        if not raised_in_hdf5(exc):
+        why = hdf5_damage(exc)
+        if why is None:
             raise
-        return f"cannot read it: {exc} (a damaged file?)"
+        return why
     return None
 
 

@@ -3,6 +3,7 @@ simulation objects."""
 
 from __future__ import annotations
 
+import functools
 import json
 import numbers
 import operator
@@ -225,17 +226,16 @@ class RunFile:
 
     @property
     def has_graph(self) -> bool:
-        g = self.f.get(layout.GRAPH)
-        return (
-            isinstance(g, h5py.Group)
-            and all(isinstance(g.get(n), h5py.Dataset) for n in layout.GRAPH_DATASETS)
-            and self._graph_records() > 0
-        )
+        return self._graph_records > 0
 
+    @functools.cached_property
     def _graph_records(self) -> int:
-        """The graph records all of whose rows were written: a kill while a record was appended can leave
-        its step and time without the rest (a resume drops that record, as a torn frame row)."""
-        g = self.f[layout.GRAPH]
+        """The graph records all of whose rows were written (0 without graph data), counted once: a kill
+        while a record was appended can leave its step and time without the rest (a resume drops that
+        record, as a torn frame row)."""
+        g = self.f.get(layout.GRAPH)
+        if not (isinstance(g, h5py.Group) and all(isinstance(g.get(n), h5py.Dataset) for n in layout.GRAPH_DATASETS)):
+            return 0
         names = layout.GRAPH_PER_FRAME + ((layout.GRAPH_FLOATING,) if layout.GRAPH_FLOATING in g else ())
         n = min(g[name].shape[0] for name in names)
         tips = np.cumsum(g["tip_contacts_count"][:n])
@@ -248,7 +248,7 @@ class RunFile:
     @property
     def graph_steps(self) -> np.ndarray:
         """The steps of the frames saved with graph data (empty without any)."""
-        return self.f[layout.GRAPH_STEP][: self._graph_records()] if self.has_graph else np.zeros(0, dtype=np.int64)
+        return self.f[layout.GRAPH_STEP][: self._graph_records] if self.has_graph else np.zeros(0, dtype=np.int64)
 
     def events(self, until_step=None) -> np.ndarray:
         """Event records (structured array, fields step, time, kind, a, b), optionally up to a step."""
@@ -284,7 +284,7 @@ class RunFile:
                 f"{self.path}: the file has no graph data (the run had contacts.enabled = false, "
                 f"or was written before any frame)"
             )
-        n = self._graph_records()
+        n = self._graph_records
         return _pick_frame(self.path, n, frame, t, lambda: self.f[layout.GRAPH_TIME][:n])
 
     def graph(self, frame=None, t=None) -> dict:

@@ -37,13 +37,13 @@ merged node are dropped: they carry 0).
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 
 from selfas_graph.kernels.graph import component_labels
 from selfas_graph.model.linear import SolveMemo, _potentials
 from selfas_graph.model.validate import (  # noqa: F401
+    _as_contact_resistance,
     _as_count,
     _as_index_array,
     _as_potentials,
@@ -353,9 +353,7 @@ def solve_circuit(
     n_rods = n_tips // 2
     unit = rod_resistance is None
     r_rod = np.ones(n_rods) if unit else _as_resistance(rod_resistance, "rod_resistance", n_rods, allow_zero=False)
-    r_contact = float(contact_resistance)
-    if not (math.isfinite(r_contact) and r_contact >= 0.0):
-        raise ValueError(f"contact_resistance must be finite and >= 0, got {contact_resistance!r}")
+    r_contact = _as_contact_resistance(contact_resistance)
     k = conductor_tip.shape[0]
     m = tip_contacts.shape[0]
     # nodes: the tips, then one node per conductor contact held at its potential;

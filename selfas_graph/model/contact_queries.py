@@ -11,7 +11,7 @@ import numpy as np
 
 from .circuit import SOLVERS, CircuitSolution, SolveMemo, solve_circuit
 from .topology import Topology
-from .validate import _as_resistance, _frozen
+from .validate import _as_contact_resistance, _as_resistance, _frozen
 
 if TYPE_CHECKING:
     from .contactset import ContactSet
@@ -76,9 +76,7 @@ class ContactQueries:
             else _frozen(_as_resistance(rod_resistance, "rod_resistance", n_rods, allow_zero=False).copy())
         )
         #: resistance of every contact (units R0); 0 = ideal contacts
-        self.contact_resistance = float(contact_resistance)
-        if not (np.isfinite(self.contact_resistance) and self.contact_resistance >= 0.0):
-            raise ValueError(f"contact_resistance must be finite and >= 0, got {contact_resistance!r}")
+        self.contact_resistance = _as_contact_resistance(contact_resistance)
 
     def arrays(self) -> dict[str, np.ndarray]:
         """The contacts as arrays (:meth:`ContactSet.arrays`): ``tip_contacts`` (m, 2) int64 rows

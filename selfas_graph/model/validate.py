@@ -112,6 +112,14 @@ def _as_resistance(value, name: str, m: int, allow_zero: bool) -> np.ndarray:
     return np.ascontiguousarray(arr)
 
 
+def _as_contact_resistance(value) -> float:
+    """The one resistance of every contact: a finite number >= 0 (0: ideal contacts)."""
+    r = float(value)
+    if not (math.isfinite(r) and r >= 0.0):
+        raise ValueError(f"contact_resistance must be finite and >= 0, got {value!r}")
+    return r
+
+
 def _frozen(arr: np.ndarray) -> np.ndarray:
     arr.setflags(write=False)
     return arr
