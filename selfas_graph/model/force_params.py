@@ -283,6 +283,11 @@ class ExternalFilament:
         gt=0.0,
     )
 
+    @property
+    def radius(self) -> float:
+        """D_ext/2, the filament's radius: in its field (term 11) and in the contact search."""
+        return 0.5 * self.diameter
+
 
 @dataclass(frozen=True)
 class ExternalDipole:

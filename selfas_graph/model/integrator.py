@@ -46,6 +46,12 @@ class AdamsBashforth4:
         Exact bond force (True) or the paper's Eq. (9) (False).
     project, correct_velocity : bool
         Apply the position projection / the velocity correction after each step.
+    split_brakes : bool
+        Leave the stiff brakes out of the update and apply them exactly to the velocities after it
+        (docs/model.md 'The stiff brakes').
+    slow_every : int
+        K: evaluate the slow forces every K steps and extrapolate them in between (1: every step;
+        docs/model.md 'Multiple time stepping (`integrator.slow_every`)').
     """
 
     def __init__(

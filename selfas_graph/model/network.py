@@ -178,7 +178,7 @@ class Network(ContactQueries):
             rstar,
             cp.release_factor * rstar,
             electrodes=el.planes if el is not None else None,
-            filament_radius=0.5 * fil.diameter if fil is not None else None,
+            filament_radius=fil.radius if fil is not None else None,
             bias=circ.delta_J0 if circ is not None else 0.0,
             circuit=circ is not None,
             solver=circ.solver if circ is not None else "auto",
@@ -196,7 +196,7 @@ class Network(ContactQueries):
         if rows:
             # a new filament contact is at -delta_J0 z of its tip (docs/model.md 'Circuit')
             self.contacts = before.apply(rows, contact_potential=lambda k, c: -self.bias * float(position[k, 2]))
-        moved = self._heights_moved(position)
+        moved = self._update_moved_heights(position)
         if not rows and not moved:
             return NetworkUpdate([])
         self.changed = True
@@ -226,7 +226,7 @@ class Network(ContactQueries):
         total = self.solution.total_current if self.solution is not None else 0.0
         return NetworkUpdate(rows, currents_changed, True, circuit_rows(rows, total, self.current))
 
-    def _heights_moved(self, position) -> bool:
+    def _update_moved_heights(self, position) -> bool:
         """Case (ii): give the filament contacts that moved along z by more than the height
         tolerance since the last solve their new potential; True if any did."""
         if not len(self.filament_tip) or not self.circuit:

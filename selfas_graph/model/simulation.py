@@ -111,7 +111,7 @@ class Simulation:
         self.operations = []
         self._ops = ()
         if self.network is not None:
-            self.force_field.extend_tip_range(params.contacts.release_factor * params.rods.rstar)
+            self.force_field.extend_tip_range(self.network.tracker.release)  # the contact search's pairs
             self._update_contacts()
         self.compiled = compiled_steps_for(self)  # the fast steps in one call (.compiled); None: in Python
 
@@ -151,7 +151,8 @@ class Simulation:
         :meth:`from_snapshot` rebuilds a simulation whose next steps are bitwise those of this one (same
         thread count): the union of the components' states (:meth:`State.state_dict`,
         :meth:`AdamsBashforth4.state_dict`, the force field's, :meth:`Network.state_dict`), the largest
-        bond error, the energy reference, and the run's events.
+        bond error, the energy reference, the run's events, its circuit log and the time of its first
+        short circuit (NaN: none yet).
         """
         snap = self.state.state_dict()
         snap.update(self.integrator.state_dict())

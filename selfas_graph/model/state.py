@@ -263,6 +263,11 @@ _UNIT_LENGTH = np.zeros(0)
 _UNIT_LENGTH.setflags(write=False)
 
 
+def high_count(dist, n: int) -> int:
+    """How many of ``n`` rods a ``two_level`` law gives the high value: ``round(high_fraction * n)``."""
+    return int(round(dist.high_fraction * n))
+
+
 def draw_charges(dist: ChargeDistribution, n: int, rng, magnetic=None) -> np.ndarray:
     """Per-rod values (charges, lengths, resistances) from a distribution (docs/model.md 'Rods').
 
@@ -275,7 +280,7 @@ def draw_charges(dist: ChargeDistribution, n: int, rng, magnetic=None) -> np.nda
         return rng.uniform(dist.low, dist.high, n)
     if dist.distribution == "two_level":
         out = np.full(n, dist.low)
-        out[rng.permutation(n)[: int(round(dist.high_fraction * n))]] = dist.high
+        out[rng.permutation(n)[: high_count(dist, n)]] = dist.high
         return out
     if dist.distribution == "magnetic":
         return np.array(magnetic, dtype=np.float64)

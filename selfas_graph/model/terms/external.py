@@ -26,7 +26,7 @@ class ExternalFilamentForce(Term, FieldSource):
 
     def __init__(self, p, state):
         f = p.forces.external_filament
-        self.current, self.w = f.current, 0.5 * f.diameter
+        self.current, self.w = f.current, f.radius
 
     def compute(self, ctx, out):
         kx.filament_force_on_tips(ctx.position, ctx.tip_charge, self.current, self.w, out["external_filament"])
