@@ -289,7 +289,7 @@ def run_all(tasks, workers, report):
             if r is not None
             else {
                 **{k: tasks[i][k] for k in ("count", "seed")},
-                "status": "error",
+                "status": "interrupted",  # a signal stopped the pool before this run started
                 "time": None,
                 "t_end": 0.0,
                 "steps": 0,
@@ -297,10 +297,9 @@ def run_all(tasks, workers, report):
                 "filament_rods": 0,
                 "wall_seconds": 0.0,
                 "message": "not run",
+                "signum": None,
             }
         )
-        if r is None:
-            results[i]["status"] = "interrupted"
     return results
 
 
@@ -498,6 +497,7 @@ def main(argv=None):
     if not points:
         ap.error("no density left to run (every one was skipped, see above)")
     from selfas_graph import __version__
+    from selfas_graph.cli.main import interrupted_code
     from selfas_graph.provenance import cpu_model, numba_target, source_commit
 
     seeds = [meta["first_seed"] + k for k in range(args.seeds)]
@@ -571,7 +571,7 @@ def main(argv=None):
         plot(result, args.plot)
         print(f"wrote {args.plot}")
     if any(r["status"] == "interrupted" for r in runs):
-        return 130
+        return interrupted_code(runs)  # 128 + the signal's number, as simulate and ensemble exit
     return 1 if any(r["status"] == "error" for r in runs) else 0
 
 

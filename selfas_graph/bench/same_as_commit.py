@@ -104,14 +104,37 @@ def _parameters_added_at_default(before: Path, after: Path) -> list[str]:
     return added if all(_newer_key_at_default(k, old, new) for k in added) else []
 
 
+def scenario_specs(words) -> list:
+    """The command line's scenario words as one ``FILE+KEY=VALUE...`` spec per scenario: an override given as
+    a word of its own (``+KEY=VALUE``) joins the scenario before it."""
+    specs = []
+    for word in words:
+        if word.startswith("+"):
+            if not specs:
+                raise ValueError(f"the override {word} comes before any scenario file; put it after its scenario")
+            specs[-1] += word
+        else:
+            specs.append(word)
+    return specs
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("scenarios", nargs="+", help="scenario files, each optionally followed by +KEY=VALUE overrides")
+    ap.add_argument(
+        "scenarios",
+        nargs="+",
+        help="scenario files, each optionally followed by +KEY=VALUE overrides of its own (joined to its name or "
+        "as the next arguments: fig2.toml+run.t_end=5 or fig2.toml +run.t_end=5)",
+    )
     ap.add_argument("--commit", default="HEAD", help="the reference commit (default HEAD)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", help="override for every scenario")
     ap.add_argument("--threads", type=int, default=1, help="numba threads of both runs (default 1)")
     ap.add_argument("--keep", type=Path, help="keep the run files in this folder")
     args = ap.parse_args(argv)
+    try:
+        specs = scenario_specs(args.scenarios)
+    except ValueError as exc:
+        ap.error(str(exc))
     with tempfile.TemporaryDirectory(prefix="same_as_commit_") as tmp:
         tmp = Path(tmp)
         base = tmp / "code"
@@ -120,7 +143,7 @@ def main(argv=None) -> int:
         out_dir = (args.keep or tmp).resolve()
         out_dir.mkdir(parents=True, exist_ok=True)
         failed = 0
-        for i, spec in enumerate(args.scenarios):
+        for i, spec in enumerate(specs):
             scenario, *own = spec.split("+")
             sets = args.set + own
             name = f"{i}_{Path(scenario).stem}"

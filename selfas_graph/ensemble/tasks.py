@@ -147,7 +147,7 @@ def run_to_short_circuit(task: dict) -> dict:
     the seed's), ``seed``, ``t_max`` and ``chunk`` (simulated time per
     :meth:`Simulation.run` call: the granularity of the stop check; results do not depend
     on it); the task keys named in ``echo`` are copied into the result. Returns ``status`` "short_circuit" (``time``), "censored" (none by ``t_max``),
-    "failed" (numerical failure at ``t_end``), "interrupted" (a signal, ``message``),
+    "failed" (numerical failure at ``t_end``), "interrupted" (a signal, ``message``; its number in ``signum``),
     "unplaceable" or "error" (``message``),
     with ``t_end``, ``steps``, ``events``, ``filament_rods``, ``wall_seconds``.
     """
@@ -163,6 +163,7 @@ def run_to_short_circuit(task: dict) -> dict:
         "filament_rods": 0,
         "wall_seconds": 0.0,
         "message": None,
+        "signum": None,
     }
     t0 = time.perf_counter()
     sim = None
@@ -186,6 +187,7 @@ def run_to_short_circuit(task: dict) -> dict:
             out["status"], out["time"] = "short_circuit", float(sim.short_circuit_time)
         elif signalled():
             out["status"], out["message"] = "interrupted", f"signal {signalled.signum} at step {sim.state.step}"
+            out["signum"] = signalled.signum
         else:
             out["status"] = "censored"
     except PlacementError as exc:

@@ -18,7 +18,19 @@ ROOT = Path(__file__).resolve().parents[2]
 QUICK = str(ROOT / "scenarios" / "quick.toml")
 T_MAX = 2.2  # quick.toml short-circuits at t = 2.01 with its seed (1) at 300 rods
 DENSITIES = ["0.4", "0.6"]  # rods per unit volume: 200 and 300 rods in the 10 x 10 x 5 box
-RUN_KEYS = {"count", "seed", "status", "time", "t_end", "steps", "events", "filament_rods", "wall_seconds", "message"}
+RUN_KEYS = {
+    "count",
+    "seed",
+    "status",
+    "time",
+    "t_end",
+    "steps",
+    "events",
+    "filament_rods",
+    "wall_seconds",
+    "message",
+    "signum",
+}
 DENSITY_KEYS = {
     "requested",
     "count",
@@ -147,6 +159,32 @@ def test_censored_and_skipped(tool, tmp_path, capsys):
     assert d["short_circuited"] == 0 and d["censored"] == 1 and d["fraction"] == 0.0
     assert d["median"] is None and d["km"] == []
     assert "| 300 | 0.6 |" in out and ">0.01" in out
+
+
+def test_a_signal_stops_the_runs_and_the_tool_exits_as_simulate_does(tool, tmp_path, monkeypatch, capsys):
+    """SIGTERM in a run: it stops after its step, "interrupted" with the signal's number, no further run
+    starts, the statistics are still written, and the tool exits 143 (128 + the signal's number, as
+    simulate and ensemble do; it exited 130 whatever the signal)."""
+    import os
+    import signal
+
+    from selfas_graph.model.simulation import Simulation
+
+    run = Simulation.run
+
+    def run_then_signal(sim, *a, **kw):
+        if sim.state.step >= 5:
+            os.kill(os.getpid(), signal.SIGTERM)  # caught by the run's handler: the run stops after its step
+        return run(sim, *a, **kw)
+
+    monkeypatch.setattr(Simulation, "run", run_then_signal)
+    js = tmp_path / "s.json"
+    argv = [QUICK, "--counts", "40", "--seeds", "2", "--t-max", "5", "--chunk", "0.01", "-o", str(js)]
+    assert tool.main(argv) == 128 + signal.SIGTERM
+    first, second = json.loads(js.read_text())["runs"]
+    assert first["status"] == "interrupted" and first["signum"] == signal.SIGTERM
+    assert "signal 15 at step" in first["message"] and first["t_end"] < 5
+    assert second["status"] == "interrupted" and second["message"] == "not run" and second["signum"] is None
 
 
 @pytest.mark.parametrize(

@@ -69,6 +69,20 @@ def test_same_as_commit_tool_finds_the_working_tree_equal_to_head(tmp_path):
     assert r.returncode == 0 and "the same, bit for bit" in r.stdout, r.stdout + r.stderr
 
 
+def test_same_as_commit_takes_an_override_as_a_word_of_its_own(capsys):
+    """``fig8_quick.toml +run.t_end=6`` is ``fig8_quick.toml+run.t_end=6`` (the override was taken for a
+    scenario file of its own, and the run failed on a directory); an override before any scenario is a usage
+    error that says so."""
+    from selfas_graph.bench.same_as_commit import main, scenario_specs
+
+    words = ["a.toml", "+run.t_end=6", "+rods.count=20", "b.toml+run.t_end=1", "c.toml"]
+    assert scenario_specs(words) == ["a.toml+run.t_end=6+rods.count=20", "b.toml+run.t_end=1", "c.toml"]
+    with pytest.raises(SystemExit) as exc:
+        main(["+run.t_end=6", "a.toml"])
+    assert exc.value.code == 2
+    assert "+run.t_end=6 comes before any scenario file" in capsys.readouterr().err
+
+
 def test_compare_command_is_the_tool(tmp_path, capsys):
     """``selfas-graph compare A B`` is same_run on the command line (exit 0 equal, 1 different), as is
     ``selfas-graph bench same_run A B``; a missing file is a usage error (exit 2) naming it."""
