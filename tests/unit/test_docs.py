@@ -194,6 +194,25 @@ def test_every_cited_function_exists(page):
     assert not bad, f"docs/{page.name} names code that does not exist: {sorted(set(bad))}"
 
 
+#: ARCHITECTURE.md names code by its path in the package: `model/network.py::Network.update`
+ARCH_REF = re.compile(r"`((?:[a-z_]+/)*[a-z_]+\.py)::([\w.]+)`")
+
+
+def test_every_function_architecture_md_names_exists():
+    """Every ``path.py::name`` of ARCHITECTURE.md (a path inside the package) names an existing
+    definition, so that the guides to changing the code do not send a maintainer to code that moved."""
+    refs = ARCH_REF.findall((ROOT / "ARCHITECTURE.md").read_text(encoding="utf-8"))
+    assert len(refs) > 20  # not vacuous
+    bad = []
+    for file, name in refs:
+        path = ROOT / "selfas_graph" / file
+        if not path.is_file():
+            bad.append(f"{file}::{name} (no such file)")
+        elif name not in _defined_names(path):
+            bad.append(f"{file}::{name}")
+    assert not bad, f"ARCHITECTURE.md names code that does not exist: {sorted(set(bad))}"
+
+
 # ----------------------------------------------------------------------------- citations of docs/model.md
 
 #: the form the code cites docs/model.md in: the page's path, a space and a heading of the page in
