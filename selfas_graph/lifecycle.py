@@ -290,6 +290,19 @@ class Continuation:
     notes: tuple = ()
 
 
+def _scenario_refusal(meta, overrides, stored, t_end, exc) -> str:
+    """Why the checkpoint's scenario does not validate: the end time asked for (when the scenario validates
+    with the run's own), or the checkpoint's scenario itself."""
+    if t_end is not None:
+        try:
+            scenario_from_text(meta["scenario_text"], overrides=overrides, t_end=stored)
+        except (ScenarioError, ValueError, TypeError):
+            pass
+        else:
+            return f"cannot resume to the end time {t_end!r} asked for (--t-end, run.t_end): {exc}"
+    return f"cannot resume: the checkpoint's scenario no longer validates: {exc}"
+
+
 def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
     """Check that the run file ``run_path`` continues from the checkpoint file ``checkpoint`` and
     return what a resume needs; nothing is written. The one rule of ``simulate --resume``, an
@@ -318,13 +331,13 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
         except CheckpointError as exc:
             raise ContinuationError(f"cannot resume: {exc}") from None
     snap, meta = read
-    if t_end is None and "t_end" in meta:
-        t_end = float(meta["t_end"])
+    stored, asked = (float(meta["t_end"]) if "t_end" in meta else None), t_end
+    t_end = stored if t_end is None else t_end
     overrides = json.loads(meta["overrides"])
     try:
         scenario = scenario_from_text(meta["scenario_text"], overrides=overrides, t_end=t_end)
     except (ScenarioError, ValueError, TypeError) as exc:
-        raise ContinuationError(f"cannot resume: the checkpoint's scenario no longer validates: {exc}") from None
+        raise ContinuationError(_scenario_refusal(meta, overrides, stored, asked, exc)) from None
     # the run file must be this run's, checked read-only before anything in it is changed
     try:
         with RunFile(run_path) as run_file:

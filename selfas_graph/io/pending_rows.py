@@ -13,6 +13,9 @@ class PendingRows:
     and how many of the run's events and circuit-log rows are written. Shared by :class:`~.run_writer.RunWriter` and :class:`NullWriter`."""
 
     n_frames = 0
+    #: why the last run written stopped early ("failed: ...", "interrupted (Ctrl-C)"), None if it did not:
+    #: set by the run (``model/operations.py::FrameWriter.stopped``), the status a plain ``close()`` records
+    stopped_by = None
     events_written = 0
     circuit_rows_written = 0
     _pending = (np.empty(0, dtype=np.int64), np.empty(0))
@@ -104,5 +107,5 @@ class NullWriter(PendingRows):
     def flush(self):
         pass
 
-    def close(self, status="finished"):
+    def close(self, status=None):
         pass

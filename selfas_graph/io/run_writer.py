@@ -484,7 +484,7 @@ class RunWriter(PendingRows):
 
     def __exit__(self, exc_type, exc, tb):
         if exc_type is None:
-            status = "finished"
+            status = None  # "finished", unless a run written stopped early (its exception caught inside)
         elif issubclass(exc_type, KeyboardInterrupt):
             status = "interrupted (Ctrl-C)"
         elif issubclass(exc_type, RunInterrupted):  # a run's stop(): "interrupted at step N"
@@ -511,7 +511,11 @@ class RunWriter(PendingRows):
         self.set_attrs(wall_seconds_total=self._wall_total())
         self.f.flush()
 
-    def close(self, status="finished"):
+    def close(self, status=None):
+        """Record ``status`` and close the file. Without one: "finished", or why the last run written
+        stopped early (:attr:`stopped_by`, e.g. "failed: ..." after a numerical failure caught in a notebook)."""
+        if status is None:
+            status = self.stopped_by or "finished"
         if self.f:
             self.set_attrs(status=status, wall_seconds_total=self._wall_total())
             self.f.close()

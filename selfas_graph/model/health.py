@@ -132,12 +132,18 @@ class HealthChecks:
         stiff = self._stiff_brakes()
         if stiff:
             cause = stiff
-        msg = (
-            f"numerical failure at step {st.step} (t = {st.time:.6g}): {what}; rods involved: "
-            f"{rods[:10]}; {cause}. "
+        advice = (
             f"The time step integrator.dt = {self.dt:g} is the likely cause: try a smaller one "
             f"(the stiff parts are the tip core and the brakes inside r*){self._slow_hint()}."
         )
+        if err >= BOND_BREAK and not (self.integrator.project or self.integrator.correct_velocity):
+            # measured: the quick scene fails at t = 0.042 with dt = 1e-3, 1e-4 and 1e-5 alike
+            advice = (
+                "integrator.position_projection and integrator.velocity_correction are both off, so nothing "
+                "takes out the drift of the bond lengths (the split brakes add velocity along the rods at every "
+                "step, whatever its length, and a smaller step does not help): turn either back on."
+            )
+        msg = f"numerical failure at step {st.step} (t = {st.time:.6g}): {what}; rods involved: {rods[:10]}; {cause}. {advice}"
         raise NumericalFailure(msg, st.step, rods)
 
     def _stiff_brakes(self) -> str:

@@ -125,6 +125,10 @@ class Operation:
     def flush(self, sim) -> None:
         pass
 
+    def stopped(self, sim, exc) -> None:
+        """The run stops on ``exc`` (Ctrl-C, a numerical failure): hand on what is buffered (:meth:`flush`)."""
+        self.flush(sim)
+
     def finish(self, sim) -> None:
         pass
 
@@ -251,6 +255,7 @@ class FrameWriter(Operation):
 
     def start(self, sim, n_steps):
         self.last_observables = None
+        self.writer.stopped_by = None
         if self.writer.n_frames == 0:
             sim.write_frame(self.writer)
 
@@ -262,6 +267,12 @@ class FrameWriter(Operation):
     def flush(self, sim):
         sim.flush_output(self.writer)
         self.writer.flush()
+
+    def stopped(self, sim, exc):
+        """Write what the steps before ``exc`` buffered (the events and per-step rows up to a failure), and
+        tell the writer why the run stopped: its ``close()`` then records that status, not "finished"."""
+        self.flush(sim)
+        self.writer.stopped_by = "interrupted (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else f"failed: {exc}"
 
 
 class EnergyCheck(Operation):
@@ -332,6 +343,12 @@ def steps_to_next_act(ops, step: int, remaining: int) -> int:
         t = operation.trigger
         h = min(h, (t.phase - step - 1) % t.period + 1 if isinstance(t, (Periodic, When)) else 1)
     return max(h, 1)
+
+
+def stopped(ops, sim, exc) -> None:
+    """Every operation of a run that ``exc`` (Ctrl-C, a numerical failure) stops hands on what it buffered."""
+    for operation in ops:
+        operation.stopped(sim, exc)
 
 
 def per_step_rows(ops):

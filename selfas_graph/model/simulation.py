@@ -352,8 +352,8 @@ class Simulation:
                 summary.steps = i
             for operation in ops:
                 operation.finish(self)
-        except KeyboardInterrupt:  # Ctrl-C in a notebook: what the steps before it buffered reaches the writer
-            self.flush_operations()
+        except (KeyboardInterrupt, NumericalFailure) as exc:  # what the steps before it buffered is written
+            op.stopped(ops, self, exc)
             raise
         finally:
             summary.wall_seconds = time.perf_counter() - t0

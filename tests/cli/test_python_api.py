@@ -362,3 +362,62 @@ def test_sections_given_as_dicts_and_numpy_scalars():
     sim = sg.Simulation(p, state=_rods())
     sim.run(0.01)
     assert sim.state.step == 10
+
+
+def _failing_quick():
+    """The quick scene with an ambient brake too stiff for its step: a numerical failure at step 18."""
+    scene = sg.load_scenario(ROOT / "scenarios" / "quick.toml", overrides=["forces.ambient_brake.coefficient=1e3"])
+    return sg.Simulation.from_scenario(scene)
+
+
+def test_a_failure_inside_a_writer_block_keeps_the_rows_up_to_it_and_the_file_says_failed(tmp_path):
+    """A numerical failure in ``sim.run`` inside ``with RunWriter...``: the per-step rows and events up to
+    the failing step reach the file, as through the command line (the rows since the last frame were
+    lost), and the file says "failed"; a failure caught inside the block, and a plain ``close()`` after
+    it, no longer mark the run "finished"."""
+    sim = _failing_quick()
+    out = tmp_path / "a.h5"
+    with pytest.raises(sg.NumericalFailure) as failure:
+        with sg.RunWriter.for_simulation(sim, out) as w:
+            sim.run(1.0, writer=w)
+    step = failure.value.step
+    with sg.RunFile(out) as run:
+        assert run.meta["status"].startswith(f"failed: numerical failure at step {step} ")
+    with h5py.File(out, "r") as f:
+        rows = f["observables/bond_error_per_step/step"][:]
+        assert rows[-1] == step - 1 and len(rows) == step - 1  # every step before the failing one
+        assert len(f["events"]) == len(sim.events)
+    for caught in ("in the block", "then close()"):
+        sim = _failing_quick()
+        w = sg.RunWriter.for_simulation(sim, tmp_path / f"{caught}.h5")
+        with pytest.raises(sg.NumericalFailure):
+            sim.run(1.0, writer=w)
+        if caught == "then close()":
+            w.close()
+        else:
+            w.__exit__(None, None, None)
+        with sg.RunFile(tmp_path / f"{caught}.h5") as run:
+            assert run.meta["status"].startswith("failed: numerical failure at step"), caught
+
+
+def test_a_later_run_that_ends_well_closes_finished(tmp_path):
+    """The reason a run stopped early is that run's: a next ``sim.run`` on the writer that ends well
+    leaves a plain ``close()`` saying "finished"."""
+    sim = sg.Simulation(_params(), state=_rods())
+    with sg.RunWriter.for_simulation(sim, tmp_path / "b.h5") as w:
+        w.stopped_by = "failed: an earlier run"
+        sim.run(0.02, writer=w)
+    with sg.RunFile(tmp_path / "b.h5") as run:
+        assert run.meta["status"] == "finished"
+
+
+@pytest.mark.parametrize("t_end", ["inf", "nan", "1e300"])
+def test_resume_to_an_impossible_end_time_blames_the_end_time(tmp_path, capsys, t_end):
+    """``--resume --t-end inf`` said the checkpoint's scenario no longer validates; the checkpoint is fine,
+    the end time asked for is not."""
+    out = _two_rod_run(tmp_path)
+    capsys.readouterr()
+    assert sg_main(["simulate", "--resume", str(out), "--t-end", t_end, "--progress", "none"]) == 2
+    err = capsys.readouterr().err
+    assert f"cannot resume to the end time {float(t_end)!r} asked for (--t-end, run.t_end)" in err
+    assert "no longer validates" not in err and "run.t_end" in err
