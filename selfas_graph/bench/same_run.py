@@ -6,7 +6,7 @@ Usage::
 
 Walks both HDF5 files and compares every dataset (shape, dtype and bytes; NaN equals NaN
 at the same place, since the bytes are compared) and, unless ``--ignore-attrs``, every
-attribute except those that record the wall clock or the software (``created``,
+attribute except those that record the wall clock, the software or how the run was launched (``created``,
 ``version``, timings: see ``VOLATILE``). Prints the differences and exits 1 if there are
 any, 0 if the files agree. Attributes that only describe what a dataset holds, which a later
 version added (``DESCRIBING``; the words of ``derived_json``'s ``*_sum`` entries), are named
@@ -48,6 +48,11 @@ VOLATILE = (
     "commit",
     "resumed_with",
     "steps_done",  # the run loop's steps in the last segment: a resumed run and its uninterrupted twin differ
+    # how a run was launched, which its data do not depend on: MPI ranks and numba threads give the same run bit
+    # for bit (docs/performance.md 'Several MPI ranks'), and the scene file may be read from another folder
+    "mpi_ranks",
+    "numba_threads",
+    "scenario_path",
 )  # run_id: a random identifier drawn for every run
 
 

@@ -60,7 +60,7 @@ def render_movie(args, Figure) -> int:
         raise CliError('an MP4 needs ffmpeg: pip install "selfas-graph[movie]" (or write a .gif)')
     dpi = MOVIE_DPI if args.dpi == 150 else args.dpi
     run_path = Path(args.run)
-    check_target(out, "movie", force=args.force, inputs=[run_path], keep_hdf5=True)
+    check_target(out, "movie", force=args.force, inputs=[run_path], keep_hdf5=True, name_option="--movie")
     check_folder(out, "movie")
     out = out.resolve()  # through a symbolic link: the file it names is replaced, not the link
     tmp = out.with_name(f".{out.name}.part{out.suffix}")

@@ -25,7 +25,7 @@ def same_file(a, b) -> bool:
         return False
 
 
-def check_target(path, what="output file", force=False, inputs=(), keep_hdf5=False) -> Path:
+def check_target(path, what="output file", force=False, inputs=(), keep_hdf5=False, name_option="-o") -> Path:
     """Refuse a path that cannot or must not be written; returns it as a Path.
 
     Parameters
@@ -40,6 +40,8 @@ def check_target(path, what="output file", force=False, inputs=(), keep_hdf5=Fal
     keep_hdf5 : bool
         An existing HDF5 file (a run file, a checkpoint, a failure file) is never replaced, not even with
         ``force``: for the commands that write something else (plots, movies).
+    name_option : str
+        The option that names the file, for the advice when it exists (``--movie`` for a movie).
     """
     path = Path(path)
     if "\x00" in str(path):
@@ -84,7 +86,9 @@ def check_target(path, what="output file", force=False, inputs=(), keep_hdf5=Fal
                 f"replaces one, even with --force: give another name"
             )
         if not force:
-            raise CliError(f"{what} {path} exists; pass --force to overwrite it or -o to choose another name")
+            raise CliError(
+                f"{what} {path} exists; pass --force to overwrite it or {name_option} to choose another name"
+            )
         if in_use(path):
             raise CliError(in_use_message(path, what, "--force"))
     elif len(path.name.encode("utf-8", "surrogateescape")) > _name_max(path.parent):

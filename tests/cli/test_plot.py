@@ -204,7 +204,9 @@ def test_movie_renders_every_frame(run_file, tmp_path, suffix, capsys):
         from PIL import Image
 
         assert Image.open(out).n_frames == 6
+    capsys.readouterr()
     assert main(["plot", str(run_file), "--movie", str(out)]) == 2
+    assert "pass --force to overwrite it or --movie to choose another name" in capsys.readouterr().err  # not -o
 
 
 def test_movie_refuses_other_formats_and_kinds(run_file, tmp_path, capsys):

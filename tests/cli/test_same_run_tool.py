@@ -203,3 +203,37 @@ def test_compare_names_descriptions_an_earlier_version_lacks_but_does_not_count_
         f["particles/tips/charge"].attrs["unit"] = "q0"
     assert main(["compare", new, other]) == 1
     assert "particles/tips/charge@unit: only in one file" in capsys.readouterr().out
+
+
+def test_compare_passes_over_how_a_run_was_launched(tmp_path, capsys):
+    """An MPI run and its serial twin hold the same data bit for bit (docs/performance.md 'Several MPI ranks'),
+    but compare counted ``mpi_ranks`` (and the threads, and the folder the scene was read from) as a
+    difference; these record the launch, not the run."""
+    from selfas_graph.cli.main import main
+
+    for name, ranks in (("a.h5", 2), ("b.h5", 1)):
+        _write(tmp_path / name, np.array([1.0, 2.0]))
+        with h5py.File(tmp_path / name, "a") as f:
+            g = f.require_group("parameters/selfas_graph")
+            g.attrs["mpi_ranks"], g.attrs["numba_threads"] = ranks, 3 - ranks
+            g.attrs["scenario_path"] = str(tmp_path / name / "scene.toml")
+    assert main(["compare", str(tmp_path / "a.h5"), str(tmp_path / "b.h5")]) == 0
+    assert "the same, bit for bit" in capsys.readouterr().out
+
+
+def test_compare_into_a_closed_pipe_is_no_read_error(tmp_path, monkeypatch):
+    """``compare A B | head -1``: the reader leaving (BrokenPipeError, an OSError) was reported as 'cannot read
+    the run files' (exit 2); it reaches the command line's handler, which ends quietly."""
+    from selfas_graph.bench import same_run
+    from selfas_graph.cli import compare
+
+    _write(tmp_path / "a.h5", np.arange(3.0))
+    _write(tmp_path / "b.h5", np.arange(3.0) + 1)
+
+    def closed(args):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(same_run, "run", closed)
+    args = type("Args", (), {"a": tmp_path / "a.h5", "b": tmp_path / "b.h5"})()
+    with pytest.raises(BrokenPipeError):
+        compare.run(args)

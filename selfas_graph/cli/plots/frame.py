@@ -243,7 +243,7 @@ def _field_or_flux(fig, run, frame, args):
     else:
         closed = len(circuit_episodes(run.events(until_step=frame.step)))
         note = (
-            "no rod carries current (the electrodes have not been short-circuited yet)"
+            "no rod carries current (no filament has joined two conductors yet)"
             if closed == 0
             else f"no rod carries current at this frame (the gap closed {closed} time{'s' if closed > 1 else ''} before)"
         )
