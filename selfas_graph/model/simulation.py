@@ -320,7 +320,7 @@ class Simulation:
             one is also written at the end.
         stop : callable() -> bool, optional
             When true, pending data are flushed, a checkpoint is written and :class:`RunInterrupted` raised
-            (on a Ctrl-C, KeyboardInterrupt, the pending data are flushed too).
+            (on Ctrl-C and on a NumericalFailure the pending data are flushed too, and the writer told why).
         check_every : int
             ``checkpointer`` and ``stop`` are asked after the steps that are multiples of this (default
             every step; ``integrator.slow_every`` lets the fast steps between run in one call).
