@@ -136,7 +136,7 @@ class _Lines:
             speed = f"{rate:.0f} steps/s  ETA {_fmt_time((total - done) / rate)}"
         print(
             f"t = {sim.state.time:.4g} / {sim.params.run.t_end:.4g}  step {sim.state.step}  "
-            f"{100 * done / max(total, 1):5.1f}%  {speed}  {_status_text(sim)}",
+            f"{_percent(sim.state.step, sim.state.step - done + total):5.1f}%  {speed}  {_status_text(sim)}",
             file=self.stream,
             flush=True,
         )
@@ -145,12 +145,27 @@ class _Lines:
         pass
 
 
+def _percent(step, last_step):
+    """How far a run is, in % of all its steps (a resumed run counts those before the checkpoint)."""
+    return 100 * step / max(last_step, 1)
+
+
+def _new_frames(start, n_steps, every, first):
+    """Frames written by ``n_steps`` steps from step ``start``: one at each multiple of ``every``,
+    one at the end if that is not one, and (``first``) the initial frame."""
+    end = start + n_steps
+    return end // every - start // every + int(n_steps > 0 and end % every != 0) + int(first)
+
+
 class _Bar:
-    def __init__(self, total, t_end):
+    """A tqdm bar over all the run's steps (a resumed run's bar starts at its checkpoint's step)."""
+
+    def __init__(self, total, t_end, start=0):
         from tqdm import tqdm
 
         self.bar = tqdm(
-            total=total,
+            initial=start,
+            total=start + total,
             unit="step",
             dynamic_ncols=True,
             file=sys.stderr,
@@ -310,7 +325,7 @@ def _prepare(args):
         ckpt = checkpoint_path(out)
         check_target(out, "output file", force=True, inputs=[args.scenario])
         check_target(ckpt, "checkpoint file", force=True, inputs=[args.scenario])
-        if not args.dry_run and ckpt.exists() and not args.force:
+        if ckpt.exists() and not args.force:
             ended = _finished_at(out)
             if ended is not None:  # nothing left to continue: only a later end time extends it
                 raise CliError(
@@ -321,7 +336,7 @@ def _prepare(args):
                 f"checkpoint file {ckpt} exists (from an earlier run?); pass --force to overwrite it, "
                 f"or --resume {out} to continue that run"
             )
-    if snap is None and not args.dry_run:
+    if snap is None:  # a dry run checks these too: it says whether the run would start
         if out.exists() and not args.force:
             raise CliError(f"output file {out} exists; pass --force to overwrite it or -o to choose another name")
         if out.exists() and out.is_dir():
@@ -355,14 +370,16 @@ def run(args):
         n_steps = sim.steps_to(p.run.t_end)
     except ValueError as exc:
         raise CliError(f"run.t_end: {exc}") from None
+    start = sim.state.step
     plan = {
-        "scenario": str(args.scenario),
+        "scenario": None if args.scenario is None else str(args.scenario),
+        **({"resume": str(ckpt), "from_step": start, "from_t": sim.state.time} if snap is not None else {}),
         "rods": p.rods.count,
         "terms": p.forces.active(),
         "dt": p.integrator.dt,
         "t_end": p.run.t_end,
         "steps": n_steps,
-        "frames": -(-n_steps // sim.frame_steps) + 1,  # every frame_steps steps from the first, and the last
+        "frames": _new_frames(start, n_steps, sim.frame_steps, first=snap is None),
         "output": str(out),
         "threads": numba.get_num_threads(),
         "mpi_ranks": world.size,
@@ -385,14 +402,20 @@ def run(args):
             )
     if args.dry_run:
         if world.rank == 0:
-            print("dry run: placement succeeded, nothing written")
+            if snap is None:
+                print("dry run: placement succeeded, nothing written")
+            else:
+                print(
+                    f"dry run: checkpoint {ckpt} read and verified against {out} (step {start}, "
+                    f"t = {sim.state.time:.6g}); {counted(n_steps, 'step')} to take, nothing written"
+                )
             if plasma_current_text(p):
                 print(plasma_current_text(p))
             for text in [*null_model_notes(p), two_trees_note(p)]:
                 if text:
                     print(f"note: {text}")
             for rule in short_of_accuracy(p):
-                print(f"faster than accurate: {rule.key} (stated accuracy: {rule.stated})")
+                print(f"faster than accurate: {rule.key} = {rule.value(p)}; the stated accuracy needs {rule.stated}")
             print(json.dumps(plan, indent=2))
         return 0
 
@@ -445,7 +468,7 @@ def run(args):
         mode = "bar" if sys.stderr.isatty() else "lines"
     reporter = None
     if world.rank == 0 and mode != "none":
-        reporter = _Bar(n_steps, p.run.t_end) if mode == "bar" else _Lines(sys.stderr)
+        reporter = _Bar(n_steps, p.run.t_end, start) if mode == "bar" else _Lines(sys.stderr)
     with StopOnSignal(comm=world) as stop:
         end = run_to_file(sim, writer, checkpointer, stop, out, progress=reporter, keeps_files=world.rank == 0)
     exc = end.error

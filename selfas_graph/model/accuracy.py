@@ -29,6 +29,13 @@ class AccuracyRule:
     applies: Callable
     meets: Callable
 
+    def value(self, params):
+        """The scene's setting of :attr:`key` (``params.integrator.slow_every`` for "integrator.slow_every")."""
+        obj = params
+        for part in self.key.split("."):
+            obj = getattr(obj, part)
+        return obj
+
 
 def _term(name):
     return lambda p: getattr(p.forces, name) is not None
@@ -60,8 +67,8 @@ ACCURACY_RULES = (
     ),
     AccuracyRule(
         "integrator.slow_every",
-        "1: every force every step (multiple time stepping errs of the order of the time step's own "
-        "error at 8-16, and at 24 in the Fig. 6 scene; docs/performance.md 'Multiple time stepping: the slow "
+        "1: every force every step (every K steps, the slow sums add an error as large as the time step's own "
+        "at K = 8-16, and at 24 in the Fig. 6 scene; docs/performance.md 'Multiple time stepping: the slow "
         "sums every K steps')",
         _always,
         lambda p: p.integrator.slow_every == 1,

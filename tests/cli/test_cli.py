@@ -155,6 +155,77 @@ def test_dry_run_writes_nothing(scenario, tmp_path, capsys, monkeypatch):
     assert not list(tmp_path.glob("*.h5"))
 
 
+def test_dry_run_refuses_what_the_run_would_refuse(scenario, tmp_path, capsys):
+    """A dry run is a pre-flight check: an existing output file, a missing folder or an earlier
+    run's checkpoint stop it (exit 2) as they stop the run, and nothing is touched."""
+    out = tmp_path / "run.h5"
+    out.write_bytes(b"keep")
+    assert main(["simulate", str(scenario), "-o", str(out), "--dry-run"]) == 2
+    assert f"output file {out} exists; pass --force" in capsys.readouterr().err
+    assert main(["simulate", str(scenario), "-o", str(out), "--dry-run", "--force"]) == 0
+    assert out.read_bytes() == b"keep"
+    capsys.readouterr()
+    assert main(["simulate", str(scenario), "-o", str(tmp_path / "none" / "x.h5"), "--dry-run"]) == 2
+    assert "the folder" in capsys.readouterr().err and not (tmp_path / "none").exists()
+    out.unlink()
+    (tmp_path / "run.checkpoint.h5").write_bytes(b"keep")
+    assert main(["simulate", str(scenario), "-o", str(out), "--dry-run"]) == 2
+    assert "checkpoint file" in capsys.readouterr().err and not out.exists()
+
+
+def test_a_resumed_dry_run_says_what_it_read_and_what_is_left(scenario, tmp_path, capsys):
+    """``--resume --dry-run`` places nothing: it names the checkpoint and its step, counts the steps
+    and frames still to come, and writes the scenario as JSON null (a resume has no scene file)."""
+    import json
+
+    out = tmp_path / "run.h5"
+    assert main(["simulate", str(scenario), "-o", str(out), "--progress", "none"]) == 0
+    before = out.read_bytes()
+    capsys.readouterr()
+    assert main(["simulate", "--resume", str(out), "--t-end", "0.085", "--dry-run"]) == 0
+    text = capsys.readouterr().out
+    assert "placement" not in text
+    assert f"checkpoint {tmp_path / 'run.checkpoint.h5'} read and verified against {out} (step 50, t = 0.05)" in text
+    plan = json.loads(text[text.index("{") :])
+    assert plan["scenario"] is None and plan["from_step"] == 50 and plan["steps"] == 35
+    assert plan["frames"] == 4  # steps 60, 70, 80 and the last, 85
+    assert out.read_bytes() == before
+
+
+@pytest.mark.parametrize(
+    "start, n, every, first, frames",
+    [
+        (0, 100, 10, True, 11),
+        (0, 95, 10, True, 11),
+        (0, 0, 10, True, 1),
+        (50, 35, 10, False, 4),
+        (55, 5, 10, False, 1),
+        (55, 4, 10, False, 1),
+        (50, 0, 10, False, 0),
+    ],
+)
+def test_the_plan_counts_the_frames_the_writer_writes(start, n, every, first, frames):
+    """A frame at each multiple of the interval, one at the end if it is not one, and the first."""
+    from selfas_graph.cli.simulate import _new_frames
+
+    assert _new_frames(start, n, every, first) == frames
+
+
+def test_the_progress_of_a_resumed_run_counts_the_whole_run(scenario, tmp_path):
+    """The progress line's percentage goes with its absolute t and step: a run resumed half-way starts at 50 %."""
+    import io
+
+    from selfas_graph.cli.simulate import _Lines
+    from selfas_graph.io.scenario import load_scenario
+    from selfas_graph.model.simulation import Simulation
+
+    sim = Simulation.from_scenario(load_scenario(scenario))
+    sim.run(0.025)
+    stream = io.StringIO()
+    _Lines(stream)(sim, 0, 25)
+    assert "step 25   50.0%" in stream.getvalue()
+
+
 def test_an_output_interval_of_no_whole_number_of_steps_is_named_with_the_one_used(scenario, tmp_path, capsys):
     """Frames come every whole number of steps: an interval between two is rounded, and simulate
     says to what, as the plan's frame count does."""

@@ -43,6 +43,34 @@ def test_the_defaults_meet_every_stated_accuracy():
     assert short_of_accuracy(p) == []
 
 
+def test_every_rule_reads_its_own_setting():
+    """``rule.value`` reads the key it names (the dry run prints it beside the stated accuracy), in a
+    case (i) scene with every tree on and a case (ii) scene: between them every rule applies."""
+    trees = {"method": "tree"}
+    case_i = Parameters.from_dict(
+        {
+            "rods": {"count": 10},
+            "forces": {"tip_magnetic": trees, "yukawa": {}, "current_field": trees, "current_lorentz": trees}
+            | {"electrodes": {}},
+            "circuit": {},
+            "integrator": {"slow_every": 4},
+        }
+    )
+    case_ii = load_scenario(SCENARIOS[0].with_name("fig8_quick.toml")).params
+    seen = set()
+    for p in (case_i, case_ii):
+        for rule in ACCURACY_RULES:
+            if rule.applies(p):
+                section, *rest = rule.key.split(".")
+                expected = getattr(p, section)
+                for part in rest:
+                    expected = getattr(expected, part)
+                assert rule.value(p) == expected and rule.value(p) is not None
+                seen.add(rule.key)
+    assert seen == {r.key for r in ACCURACY_RULES}
+    assert case_i.integrator.slow_every == ACCURACY_RULES[1].value(case_i) == 4
+
+
 @pytest.mark.parametrize(
     "angle, groups, short",
     [
