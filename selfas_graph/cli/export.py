@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..io.export import FORMATS, ExportError, export_run
+from ..io.export import FORMATS, ExportError, ExportExistsError, export_run
 from ..io.h5md import RunFileError, raised_in_hdf5
 from .main import CliError
 
@@ -29,13 +29,19 @@ def add_arguments(p):
         help="all (default), K, A:B[:S] (a Python slice) or K1,K2,... "
         "(negative numbers count from the end; write --frames=-1)",
     )
-    p.add_argument("-o", "--output", help="output file (default: RUN with .gsd or .xyz)")
+    p.add_argument(
+        "-o", "--output", help="output file, ending in .gsd or .xyz (.extxyz) (default: RUN with .gsd or .xyz)"
+    )
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")
 
 
 def run(args):
     try:
         path, n = export_run(args.run, args.format, out=args.output, frames=args.frames, force=args.force)
+    except ExportExistsError as exc:
+        raise CliError(
+            f"output file {exc.path} exists; pass --force to overwrite it or -o to choose another name"
+        ) from None
     except (RunFileError, ExportError) as exc:
         raise CliError(str(exc)) from None
     except OSError as exc:  # named by the file asked for, not the temporary file it is written to first

@@ -32,12 +32,22 @@ from .h5md import RunFile, RunFileError
 from .h5md_format import is_hdf5
 
 FORMATS = ("gsd", "xyz")
+#: the suffixes an export's name may end in, by format (what the readers take the format from)
+SUFFIXES = {"gsd": (".gsd",), "xyz": (".xyz", ".extxyz")}
 #: particle and bond type names, indexed by role code
 ROLE_TYPES = [ROLE_NAMES[k] for k in sorted(ROLE_NAMES)]
 
 
 class ExportError(ValueError):
     """A bad frame selection or output path (the run file is not touched)."""
+
+
+class ExportExistsError(ExportError):
+    """The export's output file exists and ``force`` was not given; ``path`` is the file."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+        super().__init__(f"{path} exists; pass force=True to overwrite it, or another out= path")
 
 
 def parse_frames(spec, n_frames) -> np.ndarray:
@@ -95,17 +105,23 @@ def output_path(run_path, out, fmt, force=False) -> Path:
         raise ExportError(f"{path} is the run file itself; choose another output with -o")
     if path.is_dir():
         raise ExportError(f"{path} is a directory; give a file name with -o")
-    other = path.suffix.lower().lstrip(".")
-    if other in FORMATS and other != fmt:
-        raise ExportError(f"{path} names a .{other} file, but the format is {fmt}; give a name ending in .{fmt}")
     if path.is_file() and is_hdf5(path):
         # never replaced, force or not: a run file or its checkpoint (an export is GSD or XYZ)
         raise ExportError(f"{path} is an HDF5 file (a run file or checkpoint?); an export never replaces one")
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES[fmt]:
+        other = next((f for f, ends in SUFFIXES.items() if suffix in ends), None)
+        said = f"names a {suffix} file, but the format is {fmt}" if other else f"does not end in {_or(SUFFIXES[fmt])}"
+        raise ExportError(f"{path} {said}; give a name ending in {_or(SUFFIXES[fmt])}")
     if path.exists() and not force:
-        raise ExportError(f"{path} exists; pass --force (force=True) to overwrite it or -o (out=) to choose another")
+        raise ExportExistsError(path)
     if not path.parent.exists():
         raise ExportError(f"the folder of the output file {path} does not exist")
     return path
+
+
+def _or(words) -> str:
+    return " or ".join(words)
 
 
 class _Frames:
@@ -284,6 +300,8 @@ __all__ = [
     "write_gsd",
     "write_xyz",
     "ExportError",
+    "ExportExistsError",
+    "SUFFIXES",
     "FORMATS",
     "ROLE_TYPES",
     "RunFileError",

@@ -84,10 +84,10 @@ class RunWriter(PendingRows):
         self.path = Path(path)
         if self.path.exists() and not overwrite:
             raise OutputExistsError(
-                f"output file {self.path} exists; pass --force (overwrite=True) to overwrite it or -o to choose another"
+                f"output file {self.path} exists; pass overwrite=True to overwrite it, or another path"
             )
         if self.path.exists() and in_use(self.path):
-            raise OutputExistsError(in_use_message(self.path, "output file", "--force (overwrite=True)"))
+            raise OutputExistsError(in_use_message(self.path, "output file", "overwrite=True"))
         if not self.path.parent.exists():
             raise FileNotFoundError(f"the folder of the output file {self.path} does not exist")
         # default (earliest) format on purpose: the "latest" superblock carries a writer flag that a

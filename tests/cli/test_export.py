@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from selfas_graph.cli.main import main
-from selfas_graph.io.export import ROLE_TYPES, ExportError, parse_frames
+from selfas_graph.io.export import ROLE_TYPES, ExportError, ExportExistsError, export_run, parse_frames
 from selfas_graph.io.h5md import RunFile
 
 #: a short circuit at frame 6: filament and dead-end rods, currents (tests/data/README.md)
@@ -117,6 +117,28 @@ def test_output_rules(run, capsys):
     assert "out of range" in capsys.readouterr().err
     assert main(["export", str(run.parent / "missing.h5"), "--format", "xyz"]) == 2
     assert list(p.name for p in run.parent.iterdir() if p.suffix == ".part") == []
+
+
+def test_an_export_replaces_only_a_file_of_its_format(run, capsys):
+    """``-o`` must end in the format's suffix: a scene file (or any other) is not replaced, even with
+    --force; the command line's advice names its options, Python's its arguments."""
+    scene = run.parent / "scene.toml"
+    scene.write_text("[rods]\ncount = 3\n")
+    for name in ("scene.toml", "traj", "plot.png"):
+        target = run.parent / name
+        assert main(["export", str(run), "--format", "xyz", "-o", str(target), "--force"]) == 2
+        assert "give a name ending in .xyz or .extxyz" in capsys.readouterr().err
+        assert not target.exists() or target == scene
+    assert scene.read_text() == "[rods]\ncount = 3\n"
+    for name, fmt in (("a.extxyz", "xyz"), ("a.XYZ", "xyz"), ("a.gsd", "gsd")):
+        assert main(["export", str(run), "--format", fmt, "--frames", "0", "-o", str(run.parent / name)]) == 0
+    capsys.readouterr()
+    assert main(["export", str(run), "--format", "gsd", "--frames", "0", "-o", str(run.parent / "a.gsd")]) == 2
+    err = capsys.readouterr().err
+    assert "pass --force to overwrite it or -o to choose another name" in err and "force=True" not in err
+    with pytest.raises(ExportExistsError, match="pass force=True to overwrite it, or another out= path") as info:
+        export_run(run, "gsd", out=run.parent / "a.gsd", frames=0)
+    assert info.value.path == run.parent / "a.gsd" and "--force" not in str(info.value)
 
 
 def test_exports_get_the_permissions_of_a_new_file(run):

@@ -130,8 +130,9 @@ def test_run_file_from_python_with_event_names(tmp_path):
     with sg.RunWriter.for_simulation(sim, out) as w:
         sim.run(0.05, writer=w)
         sim.run(0.1, writer=w)
-    with pytest.raises(FileExistsError):
+    with pytest.raises(FileExistsError, match="pass overwrite=True to overwrite it, or another path") as info:
         sg.RunWriter.for_simulation(sim, out)
+    assert "--force" not in str(info.value)  # Python's advice names Python's argument
     with sg.RunFile(out) as run:
         assert run.meta["status"] == "finished"
         assert run.step[-1] == 100 and run.parameters["rods"]["count"] == 2
