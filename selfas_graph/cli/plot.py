@@ -61,6 +61,21 @@ MAX_PLANES = 50
 #: profiles reach at most this radius (L): the shipped scenes span tens of L, and the default
 #: azimuthal sampling at this radius is MAX_N_PHI samples for the wires of D = 0.06
 MAX_R_MAX = 500.0
+#: kinds drawn from one frame (--frame / --time pick it)
+FRAME_KINDS = ("snapshot", "density", "field", "flux")
+#: the options that shape some figures only, and those figures ("movie": ``--movie``); any other is refused
+KIND_OPTIONS = {
+    "frame": FRAME_KINDS,
+    "time": FRAME_KINDS,
+    "every": ("moment", "fractal", "skeleton", "movie"),
+    "bins": ("density",),
+    "r_max": ("density", "field", "flux"),
+    "planes": ("field", "flux"),
+    "n_phi": ("field", "flux"),
+    "z_mext": ("flux",),
+}
+#: the density profile's radial shells when --bins is not given
+DEFAULT_BINS = 30
 #: kinds that need the graph data (contacts, roles, currents) of the run
 NEEDS_GRAPH = ("field", "flux", "timeline", "moment", "fractal", "skeleton")
 
@@ -87,7 +102,7 @@ def add_arguments(p):
     p.add_argument(
         "--r-max", type=float, help="largest radius of the profiles (default: the farthest rod from the axis)"
     )
-    p.add_argument("--bins", type=int, default=30, help="radial shells of the density profile (default 30)")
+    p.add_argument("--bins", type=int, help=f"radial shells of the density profile (default {DEFAULT_BINS})")
     p.add_argument(
         "--n-phi",
         type=int,
@@ -138,11 +153,31 @@ DRAW = {
 }
 
 
+def _option_name(dest: str) -> str:
+    return "--" + dest.replace("_", "-")
+
+
+def _check_applies(args):
+    """Refuse an option the figure asked for does not use (it would be ignored without a word)."""
+    figure = "movie" if args.movie else args.kind
+    if args.movie and args.output:
+        raise CliError(f"-o names a figure's file; a movie is written to its --movie name ({args.movie}): leave -o out")
+    for dest, kinds in KIND_OPTIONS.items():
+        if getattr(args, dest) is None or figure in kinds:
+            continue
+        named = [k for k in kinds if k != "movie"]
+        uses = f"--kind {', '.join(named[:-1])}{' or ' if len(named) > 1 else ''}{named[-1]}"
+        uses += " and by --movie" if "movie" in kinds else ""
+        asked = "--movie" if args.movie else f"--kind {args.kind}"
+        hint = " (a figure over time draws every frame)" if dest in ("frame", "time") and not args.movie else ""
+        raise CliError(f"{_option_name(dest)} is used by {uses}, not by {asked}{hint}; leave it out")
+
+
 def _check_options(args):
     if not 10 <= args.dpi <= 1200:
         raise CliError(f"--dpi must be between 10 and 1200, got {args.dpi}")
     # size-like options are bounded: a figure is drawn in seconds, not minutes
-    if not 1 <= args.bins <= MAX_BINS:
+    if args.bins is not None and not 1 <= args.bins <= MAX_BINS:
         raise CliError(f"--bins must be between 1 and {MAX_BINS}, got {args.bins}")
     if args.n_phi is not None and not 1 <= args.n_phi <= MAX_N_PHI:
         raise CliError(f"--n-phi must be between 1 and {MAX_N_PHI}, got {args.n_phi}")
@@ -156,6 +191,9 @@ def _check_options(args):
         raise CliError(f"--every must be >= 1, got {args.every}")
     if args.time is not None and not np.isfinite(args.time):
         raise CliError(f"--time {args.time} names no frame; give a finite simulated time")
+    _check_applies(args)
+    if args.bins is None:
+        args.bins = DEFAULT_BINS
 
 
 def run(args):

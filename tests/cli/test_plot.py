@@ -209,6 +209,38 @@ def test_movie_renders_every_frame(run_file, tmp_path, suffix, capsys):
     assert "pass --force to overwrite it or --movie to choose another name" in capsys.readouterr().err  # not -o
 
 
+@pytest.mark.parametrize(
+    "figure, option, used_by",
+    [
+        (["--kind", "density"], ["--every", "3"], "--kind moment, fractal or skeleton and by --movie"),
+        (["--kind", "timeline"], ["--frame", "3"], "--kind snapshot, density, field or flux"),
+        (["--kind", "moment"], ["--time", "1"], "--kind snapshot, density, field or flux"),
+        (["--kind", "snapshot"], ["--bins", "10"], "--kind density,"),
+        (["--kind", "timeline"], ["--r-max", "3"], "--kind density, field or flux"),
+        (["--kind", "density"], ["--planes", "0"], "--kind field or flux"),
+        (["--kind", "density"], ["--n-phi", "64"], "--kind field or flux"),
+        (["--kind", "field"], ["--z-mext", "2"], "--kind flux,"),
+        (["--movie", "m.gif"], ["--frame", "1"], "--kind snapshot, density, field or flux"),
+    ],
+)
+def test_an_option_the_figure_does_not_use_is_refused(run_file, tmp_path, capsys, figure, option, used_by):
+    """An option that shapes other figures only is refused by name (it was ignored without a word),
+    as ``analyze --every`` without a series is; nothing is drawn."""
+    figure = [str(tmp_path / w) if w.endswith(".gif") else w for w in figure]
+    out = [] if "--movie" in figure else ["-o", str(tmp_path / "x.png")]
+    assert main(["plot", str(run_file), *figure, *option, *out]) == 2
+    err = capsys.readouterr().err
+    assert f"error: {option[0]} is used by {used_by}" in err and "leave it out" in err
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_movie_refuses_o(run_file, tmp_path, capsys):
+    """A movie is written to its --movie name: -o beside it was ignored."""
+    assert main(["plot", str(run_file), "--movie", str(tmp_path / "m.gif"), "-o", str(tmp_path / "o.gif")]) == 2
+    assert "a movie is written to its --movie name" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
+
+
 def test_movie_refuses_other_formats_and_kinds(run_file, tmp_path, capsys):
     assert main(["plot", str(run_file), "--movie", str(tmp_path / "m.avi")]) == 2
     assert ".gif or .mp4" in capsys.readouterr().err
