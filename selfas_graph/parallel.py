@@ -89,12 +89,26 @@ def abort_job(code: int, world=world) -> None:
     os._exit(code)  # pragma: no cover - MPI_Abort normally does not return
 
 
+def _numba():
+    """numba, with ``OMP_WAIT_POLICY=PASSIVE`` in the environment unless the user set it.
+
+    The OpenMP runtime reads the policy once, when numba starts its threads, and
+    ``numba.set_num_threads`` starts them: here that may come before any kernel module, which sets
+    the same default (``kernels/_jit.py`` says why: spinning idle workers take a core), is imported,
+    as in an ``mpi4py.futures`` worker rank.
+    """
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+    import numba
+
+    return numba
+
+
 def fit_threads_to_cores(world=world):
     """Give each rank ``cores // ranks`` numba threads (at least 1) unless NUMBA_NUM_THREADS is set.
 
     Ranks times threads then fit the machine instead of oversubscribing it. Returns the count.
     """
-    import numba
+    numba = _numba()
 
     if world.size > 1 and "NUMBA_NUM_THREADS" not in os.environ:
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
@@ -244,7 +258,7 @@ def set_job_threads(threads=None) -> int:
     ``threads=None`` (an MPI worker rank) a user's ``NUMBA_NUM_THREADS`` wins, otherwise
     the node's cores are shared among the launcher's ranks on that node.
     """
-    import numba
+    numba = _numba()
 
     if threads is None:
         if "NUMBA_NUM_THREADS" in os.environ:

@@ -7,7 +7,7 @@ Usage::
 Walks both HDF5 files and compares every dataset (shape, dtype and bytes; NaN equals NaN
 at the same place, since the bytes are compared) and, unless ``--ignore-attrs``, every
 attribute except those that record the wall clock, the software or how the run was launched (``created``,
-``version``, timings: see ``VOLATILE``). Prints the differences and exits 1 if there are
+``version``, timings: see ``VOLATILE``); the ``--set`` overrides compare in any order (``ORDERLESS``). Prints the differences and exits 1 if there are
 any, 0 if the files agree. Attributes that only describe what a dataset holds, which a later
 version added (``DESCRIBING``; the words of ``derived_json``'s ``*_sum`` entries), are named
 but not counted: a file of an earlier version compares equal to its twin of this one.
@@ -61,6 +61,25 @@ VOLATILE = (
 DESCRIBING = tuple(f"particles/{g}/charge@{a}" for g in ("tips", "rods") for a in ("type", "quantity"))
 #: entries of the ``derived_json`` attribute that describe a setting in words (``*_sum``: how a sum is done)
 DESCRIBING_SUFFIX = "_sum"
+
+
+#: attributes holding a JSON list whose order is not part of the run: the ``--set`` overrides (an ensemble
+#: seed and its ``simulate --set ...`` twin list them in another order; should the order matter, because a
+#: key is set twice, the resolved parameters in ``parameters_json`` differ and are reported)
+ORDERLESS = ("overrides",)
+
+
+def _same_items(a, b) -> bool:
+    """Whether two JSON texts of lists hold the same items, in any order."""
+    import json
+
+    try:
+        a, b = (json.loads(v.decode() if isinstance(v, bytes) else v) for v in (a, b))
+    except (TypeError, ValueError, AttributeError, UnicodeDecodeError):
+        return False
+    if not (isinstance(a, list) and isinstance(b, list)):
+        return False
+    return sorted(map(json.dumps, a)) == sorted(map(json.dumps, b))
 
 
 def _volatile(name: str) -> bool:
@@ -152,6 +171,8 @@ def compare(path_a, path_b, attrs: bool = True, counts: dict | None = None, note
                         ra, rb = fa[oa.attrs[key]].name, fb[ob.attrs[key]].name
                         if ra != rb:
                             out.append(f"{name or '/'}@{key}: references {ra} != {rb}")
+                    elif key in ORDERLESS and _same_items(oa.attrs[key], ob.attrs[key]):
+                        continue
                     elif not _same_value(oa.attrs[key], ob.attrs[key]):
                         keys = _json_differences(oa.attrs[key], ob.attrs[key])
                         if keys is not None:  # a JSON text (the parameters): the entries that differ

@@ -1,6 +1,7 @@
 """Smoke test of selfas_graph/bench/same_run.py (``selfas-graph compare``): equal files agree, a one-ulp
 change or a missing dataset is found."""
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -219,6 +220,27 @@ def test_compare_passes_over_how_a_run_was_launched(tmp_path, capsys):
             g.attrs["scenario_path"] = str(tmp_path / name / "scene.toml")
     assert main(["compare", str(tmp_path / "a.h5"), str(tmp_path / "b.h5")]) == 0
     assert "the same, bit for bit" in capsys.readouterr().out
+
+
+def test_compare_takes_the_overrides_in_any_order(tmp_path, capsys):
+    """An ensemble seed lists its ``--set`` overrides in another order than its ``simulate --set ...``
+    twin: the same overrides in another order agree; another override or value does not."""
+    from selfas_graph.cli.main import main
+
+    def write(name, overrides):
+        _write(tmp_path / name, np.array([1.0, 2.0]))
+        with h5py.File(tmp_path / name, "a") as f:
+            f.require_group("parameters/selfas_graph").attrs["overrides"] = json.dumps(overrides)
+
+    write("a.h5", ["scenario.seed=2", "run.t_end=1"])
+    write("b.h5", ["run.t_end=1", "scenario.seed=2"])
+    write("c.h5", ["run.t_end=1", "scenario.seed=3"])
+    write("d.h5", ["run.t_end=1"])
+    assert main(["compare", str(tmp_path / "a.h5"), str(tmp_path / "b.h5")]) == 0
+    assert "the same, bit for bit" in capsys.readouterr().out
+    for other in ("c.h5", "d.h5"):
+        assert main(["compare", str(tmp_path / "a.h5"), str(tmp_path / other)]) == 1
+        assert "parameters/selfas_graph@overrides" in capsys.readouterr().out
 
 
 def test_compare_into_a_closed_pipe_is_no_read_error(tmp_path, monkeypatch):
