@@ -30,6 +30,17 @@ from ..parallel import task_pool
 from .main import EXIT_NUMERICAL, CliError, CliIOError, counted, interrupted_code
 
 
+def _default_times_note(times, t_end, interval) -> str | None:
+    """Why the default times gave fewer than four columns (frames too far apart), or None."""
+    if len(times) >= 4:
+        return None
+    return (
+        f"the default times (a quarter, half, three quarters and all of t = {t_end:g}) fall on "
+        f"{len(times)} frame{'s' if len(times) != 1 else ''} of the output every {interval:g}: give --times, "
+        f"or a shorter output.interval, for more columns"
+    )
+
+
 def _times(text):
     import argparse
 
@@ -282,6 +293,10 @@ def _run_locked(args, pool, held):
                 f"started; each seed counts at the times it reached"
             )
         print(format_table(summary))
+        if times is None:
+            note = _default_times_note(summary["times"], ens.t_end, ens.base.params.output.interval)
+            if note:
+                print(f"note: {note}")
         try:
             js, cs = write_summary(summary, folder)
         except (EnsembleError, OSError) as exc:

@@ -184,9 +184,16 @@ def _run(args):
 
 
 def _list(args, studies):
-    """``study list``: each study, its scene and its seeds."""
+    """``study list``: each study, its scene and its seeds (a percolation study also its rod counts and fields)."""
     for s in studies.studies.values():
         extra = f" {' '.join('--set ' + o for o in s.overrides)}" if s.overrides else ""
+        if s.kind == "percolation":  # its rod counts and fields: what its runs are (bench percolation)
+            counts = ", ".join(str(c) for c in s.counts)
+            extra += f", percolation over {counts} rods, fields {s.fields},"
+            print(
+                f"{s.name}: {s.title}: {s.scenario}{extra} {s.seeds} seeds each to the short circuit or t = {s.t_end:g}"
+            )
+            continue
         print(f"{s.name}: {s.title}: {s.scenario}{extra}, {s.seeds} seeds to t = {s.t_end:g}")
     return 0
 

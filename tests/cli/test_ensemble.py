@@ -112,6 +112,16 @@ def test_default_times_are_frame_times():
     assert default_times(1.0) == [0.25, 0.5, 0.75, 1.0]
 
 
+def test_default_times_that_collapse_are_explained():
+    """Frames too far apart for four default columns get a note that says why and what to give."""
+    from selfas_graph.cli.ensemble import _default_times_note
+
+    note = _default_times_note(default_times(1.0, 0.5), 1.0, 0.5)
+    assert note.startswith("the default times (a quarter, half, three quarters and all of t = 1) fall on 2 frames")
+    assert "give --times" in note
+    assert _default_times_note(default_times(600.0, 10.0), 600.0, 10.0) is None
+
+
 def test_rerun_runs_nothing_new(quick, capsys):
     folder, _ = quick
     before = {p.name: p.read_bytes() for p in folder.glob("seed_*.h5")}

@@ -2,6 +2,7 @@
 change or a missing dataset is found."""
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -114,6 +115,15 @@ def test_bench_lists_every_tool(capsys):
     assert {line.split()[0] for line in lines} == {p.stem for p in BENCH.glob("*.py")} - HELPERS
     assert all(len(line.split(maxsplit=1)) == 2 for line in lines)  # each with its one line
     assert main(["bench", "nope"]) == 2 and "same_run" in capsys.readouterr().err
+
+
+def test_the_readme_tables_every_tool():
+    """Each tool ``selfas-graph bench`` lists has its row in the README's table (``bench walk_parts`` had none)."""
+    readme = (ROOT / "README.md").read_text()
+    rows = set(re.findall(r"^\| `selfas-graph bench (\w+)", readme, flags=re.M))
+    rows |= set(re.findall(r"^\| `selfas-graph bench \w+`, `selfas-graph bench (\w+)", readme, flags=re.M))
+    missing = {p.stem for p in BENCH.glob("*.py")} - HELPERS - rows - {"same_run"}  # same_run: `compare`
+    assert not missing, f"tools without a row in README.md's table: {sorted(missing)}"
 
 
 @pytest.mark.parametrize("name", sorted({p.stem for p in BENCH.glob("*.py")} - HELPERS))

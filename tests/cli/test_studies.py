@@ -599,3 +599,22 @@ def test_the_first_closing_is_left_out_where_no_seed_carries_current():
     assert "closings of the gap in all" in blocks["table fig2_no_circuit"]
     assert "first closing carries" not in blocks["table fig2_no_circuit"]
     assert "first closing carries" in blocks["table fig2"]
+
+
+def test_study_list_names_what_a_percolation_study_runs(tmp_path, capsys):
+    """`study list` gives a percolation study's rod counts and fields beside its seeds (it gave the
+    scene and seeds alone, as if it were an ensemble of the scene's own rods)."""
+    from selfas_graph.cli.main import main
+
+    (tmp_path / "s.toml").write_text(
+        "[study.p]\ntitle = 'P'\nkind = 'percolation'\nfields = 'off'\nscenario = 'scenarios/quick.toml'\n"
+        "counts = [300, 1000]\nseeds = 8\nt_end = 20.0\n"
+        "[study.e]\ntitle = 'E'\nscenario = 'scenarios/quick.toml'\nseeds = 2\nt_end = 6.0\n"
+    )
+    assert main(["study", "list", "--studies", str(tmp_path / "s.toml")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out == [
+        "p: P: scenarios/quick.toml, percolation over 300, 1000 rods, fields off, 8 seeds each to the short "
+        "circuit or t = 20",
+        "e: E: scenarios/quick.toml, 2 seeds to t = 6",
+    ]
