@@ -69,17 +69,23 @@ DESCRIBING_SUFFIX = "_sum"
 ORDERLESS = ("overrides",)
 
 
-def _same_items(a, b) -> bool:
-    """Whether two JSON texts of lists hold the same items, in any order."""
+def _json_pair(a, b, kind):
+    """Two attribute values read as JSON texts of ``kind`` (list or dict), or None when either is not one."""
     import json
 
     try:
         a, b = (json.loads(v.decode() if isinstance(v, bytes) else v) for v in (a, b))
     except (TypeError, ValueError, AttributeError, UnicodeDecodeError):
-        return False
-    if not (isinstance(a, list) and isinstance(b, list)):
-        return False
-    return sorted(map(json.dumps, a)) == sorted(map(json.dumps, b))
+        return None
+    return (a, b) if isinstance(a, kind) and isinstance(b, kind) else None
+
+
+def _same_items(a, b) -> bool:
+    """Whether two JSON texts of lists hold the same items, in any order."""
+    import json
+
+    pair = _json_pair(a, b, list)
+    return pair is not None and sorted(map(json.dumps, pair[0])) == sorted(map(json.dumps, pair[1]))
 
 
 def _volatile(name: str) -> bool:
@@ -99,14 +105,10 @@ def _same_value(a, b) -> bool:
 def _json_differences(a, b):
     """The entries in which two JSON texts of objects differ, as ``key.sub: A != B`` lines (None when either
     is not such a text)."""
-    import json
-
-    try:
-        a, b = (json.loads(v.decode() if isinstance(v, bytes) else v) for v in (a, b))
-    except (TypeError, ValueError, AttributeError, UnicodeDecodeError):
+    pair = _json_pair(a, b, dict)
+    if pair is None:
         return None
-    if not (isinstance(a, dict) and isinstance(b, dict)):
-        return None
+    a, b = pair
 
     def flat(d, prefix=""):
         out = {}

@@ -165,8 +165,6 @@ class Network(ContactQueries):
         self.solution: CircuitSolution | None = None
         #: the rod currents (zero off the filament rods): their one store, read by the force field
         self.currents = RodCurrents(self.n_rods)
-        #: the contacts or potentials changed since the last solve
-        self.changed = True
 
     @classmethod
     def from_params(cls, params, state) -> "Network":
@@ -199,7 +197,6 @@ class Network(ContactQueries):
         moved = self._update_moved_heights(position)
         if not rows and not moved:
             return NetworkUpdate([])
-        self.changed = True
         if rows:
             rows += circuit_event(
                 before.topology.has_short_circuit, self.topology(), int(rows[-1][0]), float(rows[-1][1])
@@ -216,7 +213,6 @@ class Network(ContactQueries):
                 # no rod lies between two conductor attachments: every current is zero, so the
                 # linear solve (about 1 ms at 1200 rods) is skipped until a path exists
                 self.solution = None
-                self.changed = False
                 if np.count_nonzero(self.current):
                     current = np.zeros(self.n_rods)
             currents_changed = current is not None and self.currents.set(current)
@@ -307,7 +303,6 @@ class Network(ContactQueries):
         self.contacts = ContactSet.from_arrays(self.n_rods, self.conductor_potential, arrays)
         self.filament_tip = np.array(d["filament_tip"], dtype=np.int64)
         self.filament_z = np.array(d["filament_z"], dtype=np.float64)
-        self.changed = True
         self.solution = None
         if bool(d["has_solution"]) and self.circuit:
             self.solution = self.solve()
@@ -317,5 +312,5 @@ class Network(ContactQueries):
     def __repr__(self) -> str:
         return (
             f"Network(n_rods={self.n_rods}, contacts={self.n_contacts}, "
-            f"conductors={sorted(self.conductor_potential)}, changed={self.changed})"
+            f"conductors={sorted(self.conductor_potential)}, solved={self.solution is not None})"
         )
