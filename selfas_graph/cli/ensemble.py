@@ -387,6 +387,10 @@ def _run_grid(args, pool, held):
     if not tasks and not any(point["summary"]["n_seeds"] for point in table["points"]):
         print("no seed file to summarise")  # as for one ensemble: nothing written
         return 0
+    if args.times is None:
+        note = _default_times_note(table["times"], grid.t_end, grid.ensembles[0].base.params.output.interval)
+        if note:
+            print(f"note: {note}")
     try:
         for point in table["points"]:
             if point["summary"]["n_seeds"]:
