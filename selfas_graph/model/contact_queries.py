@@ -57,7 +57,7 @@ class ContactQueries:
 
     The object keeps the present contacts as ``contacts`` (a :class:`ContactSet`, replaced by each
     batch of events) and the circuit's ``solver``, ``rod_resistance`` and ``contact_resistance`` (set and
-    checked once, by :meth:`_set_circuit`), and a ``changed`` flag that :meth:`solve` clears.
+    checked once, by :meth:`_set_circuit`).
     """
 
     def _set_circuit(self, n_rods, solver, rod_resistance, contact_resistance) -> None:
@@ -96,7 +96,5 @@ class ContactQueries:
 
     def solve(self, memo: SolveMemo | None = None) -> CircuitSolution:
         """Potentials and rod currents of the present contacts (:func:`solve_contacts`, through
-        ``memo`` when given); clears ``changed``. Raises ValueError if a per-contact potential is unset."""
-        sol = solve_contacts(self.contacts, self.solver, self.rod_resistance, self.contact_resistance, memo)
-        self.changed = False
-        return sol
+        ``memo`` when given). Raises ValueError if a per-contact potential is unset."""
+        return solve_contacts(self.contacts, self.solver, self.rod_resistance, self.contact_resistance, memo)

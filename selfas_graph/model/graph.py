@@ -18,6 +18,7 @@ from collections.abc import Callable, Iterable, Mapping
 import numpy as np
 
 from selfas_graph.model import events as ev
+from selfas_graph.model.circuit import CircuitSolution, SolveMemo
 from selfas_graph.model.contact_queries import ContactQueries
 from selfas_graph.model.contactset import ContactSet
 from selfas_graph.model.topology import (
@@ -79,6 +80,13 @@ class ConnectivityGraph(ContactQueries):
         self.n_tips = self.contacts.n_tips
         self._set_circuit(self.n_rods, solver, rod_resistance, contact_resistance)
         self.changed = True  # nothing solved yet
+
+    def solve(self, memo: SolveMemo | None = None) -> CircuitSolution:
+        """Potentials and rod currents of the present contacts (:meth:`ContactQueries.solve
+        <.contact_queries.ContactQueries.solve>`); clears :attr:`changed`."""
+        sol = super().solve(memo)
+        self.changed = False
+        return sol
 
     # ------------------------------------------------------------------ mutations
     def _replace(self, contacts: ContactSet) -> None:
