@@ -120,7 +120,7 @@ class HealthChecks:
                 f"numerical failure at step {st.step} (t = {st.time:.6g}): {what}; rods involved: "
                 f"{rods[:10]}; the '{term}' term's force was already {force:.3g} F_M0 at the last saved state, "
                 f"out of scale (above {FORCE_OUT_OF_SCALE:g}): no time step follows it. Check the parameters "
-                f"of that term and the charges it acts on ({_term_keys(term)})."
+                f"of that term and the charges it acts on ({self.force_field.channel_keys(term)})."
             )
             raise NumericalFailure(msg, st.step, rods)
         dominant = self.force_field.dominant_channel(np.asarray(tips[:10]))
@@ -242,7 +242,7 @@ class HealthChecks:
             term = terms[0] if terms else None
             where = (
                 f"the '{term}' term is out of scale: check its parameters and the charges it acts on "
-                f"({_term_keys(term)})"
+                f"({self.force_field.channel_keys(term)})"
                 if term
                 else "the state itself is out of scale (velocities or positions beyond double precision)"
             )
@@ -284,31 +284,3 @@ class HealthChecks:
                 f"{top}. {cause[:1].upper()}{cause[1:]}{tight}.",
                 st.step,
             )
-
-
-#: the scenario keys behind each force channel (for failure messages that name a term)
-_CHANNEL_KEYS = {
-    "tip_magnetic": "rods.magnetic_charge, rods.tip_stiffness, rods.transition_radius",
-    "tip_brake": "forces.tip_brake.coefficient",
-    "ambient_brake": "forces.ambient_brake.coefficient",
-    "uniform_field": "forces.uniform_field.B, rods.magnetic_charge",
-    "plasma_filament": "forces.plasma_filament.current, forces.plasma_filament.radius, rods.magnetic_charge",
-    "yukawa": "rods.electric_charge, forces.yukawa.screening_length, forces.yukawa.core_radius",
-    "electric_field": "forces.electric_field.E, rods.electric_charge",
-    "electrodes": "forces.electrodes.gap, rods.tip_stiffness",
-    "electrode_brake": "forces.electrodes, forces.tip_brake.coefficient",
-    "current_field": "circuit.delta_J0, rods.magnetic_charge",
-    "current_lorentz": "circuit.delta_J0 and the fields the currents sit in",
-    "external_filament": "forces.external_filament.current, forces.external_filament.diameter",
-    "external_dipole": "forces.external_dipole.*, rods.magnetic_charge, rods.electric_charge",
-    "external_monopole": "forces.external_dipole.magnetic_charge, forces.external_dipole.length, rods.magnetic_charge",
-    "external_line_charge": "forces.external_dipole.line_charge, forces.external_dipole.screening_length, "
-    "forces.external_dipole.radius, rods.electric_charge",
-}
-
-
-def _term_keys(channel) -> str:
-    for name, keys in _CHANNEL_KEYS.items():
-        if channel and channel.startswith(name):
-            return keys
-    return f"forces.{channel}" if channel else "the force terms"

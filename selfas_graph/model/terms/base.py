@@ -33,6 +33,10 @@ class Term:
     counts_own_calls : bool
         The term counts its kernel calls in ``ctx.calls`` itself (only when it calls a kernel);
         for the others the field counts every ``compute``.
+    keys : dict of str to tuple of str
+        For each channel, the scenario keys its force depends on, which a failure's diagnosis
+        names when that channel is out of scale (``tests/unit/test_terms.py`` checks every one
+        names a parameter).
     """
 
     name = ""
@@ -40,6 +44,7 @@ class Term:
     slow = False
     uses_currents = False
     counts_own_calls = False
+    keys: dict = {}
 
     def compute(self, ctx, out):  # pragma: no cover - interface
         """Write the term's force on every tip into ``out[channel]`` (n_tips, 3) for each of its

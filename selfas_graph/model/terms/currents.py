@@ -120,6 +120,7 @@ class CurrentFieldForce(_CurrentTreeTerm):
 
     name = "current_field"
     channels = [("current_field", False)]
+    keys = {"current_field": ("circuit.delta_J0", "rods.resistance", "rods.magnetic_charge")}
     slow = True
     uses_currents = True
     counts_own_calls = True
@@ -165,6 +166,17 @@ class CurrentLorentzForce(_CurrentTreeTerm):
 
     name = "current_lorentz"
     channels = [("current_lorentz", False)]
+    # the currents, and the fields they sit in (those of the scene's terms that are on)
+    keys = {
+        "current_lorentz": (
+            "circuit.delta_J0",
+            "rods.resistance",
+            "forces.uniform_field.B",
+            "forces.plasma_filament.current",
+            "forces.external_filament.current",
+            "forces.external_dipole.magnetic_charge",
+        )
+    }
     slow = True
     uses_currents = True
     counts_own_calls = True

@@ -23,6 +23,7 @@ class ExternalFilamentForce(Term, FieldSource):
 
     name = "external_filament"
     channels = [("external_filament", False)]
+    keys = {"external_filament": ("forces.external_filament.current", "forces.external_filament.diameter")}
 
     def __init__(self, p, state):
         f = p.forces.external_filament
@@ -42,6 +43,15 @@ class ExternalDipoleForce(Term, FieldSource):
 
     name = "external_dipole"
     channels = [("external_monopoles", True), ("external_monopole_brake", False)]
+    keys = {
+        "external_monopoles": (
+            "forces.external_dipole.magnetic_charge",
+            "forces.external_dipole.length",
+            "rods.magnetic_charge",
+            "rods.tip_stiffness",
+        ),
+        "external_monopole_brake": ("forces.tip_brake.coefficient", "forces.external_dipole.length"),
+    }
 
     def __init__(self, p, state):
         d = p.forces.external_dipole
@@ -93,6 +103,14 @@ class ExternalLineChargeForce(Term):
 
     name = "external_line_charge"
     channels = [("external_line_charge", True)]
+    keys = {
+        "external_line_charge": (
+            "forces.external_dipole.line_charge",
+            "forces.external_dipole.screening_length",
+            "forces.external_dipole.radius",
+            "rods.electric_charge",
+        )
+    }
 
     def __init__(self, p, state):
         d = p.forces.external_dipole

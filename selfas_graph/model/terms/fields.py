@@ -18,6 +18,7 @@ class AmbientBrakeForce(Term):
 
     name = "ambient_brake"
     channels = [("ambient_brake", False)]
+    keys = {"ambient_brake": ("forces.ambient_brake.coefficient",)}
 
     def __init__(self, p, state):
         self.k = p.forces.ambient_brake.coefficient
@@ -31,6 +32,7 @@ class UniformFieldForce(Term, FieldSource):
 
     name = "uniform_field"
     channels = [("uniform_field", True)]
+    keys = {"uniform_field": ("forces.uniform_field.B", "rods.magnetic_charge")}
 
     def __init__(self, p, state):
         self.B = np.array(p.forces.uniform_field.B, dtype=np.float64)
@@ -50,6 +52,9 @@ class PlasmaFilamentForce(Term, FieldSource):
 
     name = "plasma_filament"
     channels = [("plasma_filament", False)]
+    keys = {
+        "plasma_filament": ("forces.plasma_filament.current", "forces.plasma_filament.radius", "rods.magnetic_charge")
+    }
 
     def __init__(self, p, state):
         pf = p.forces.plasma_filament
@@ -67,6 +72,7 @@ class ElectricFieldForce(Term):
 
     name = "electric_field"
     channels = [("electric_field", True)]
+    keys = {"electric_field": ("forces.electric_field.E", "rods.electric_charge")}
 
     def __init__(self, p, state):
         self.E = np.array(p.forces.electric_field.E, dtype=np.float64)
@@ -83,6 +89,10 @@ class ElectrodesForce(Term):
 
     name = "electrodes"
     channels = [("electrodes", True), ("electrode_brake", False)]
+    keys = {
+        "electrodes": ("forces.electrodes.gap", "rods.tip_stiffness"),
+        "electrode_brake": ("forces.electrodes.gap", "forces.tip_brake.coefficient"),
+    }
 
     def __init__(self, p, state):
         self.z = p.forces.electrodes.planes

@@ -324,6 +324,18 @@ class ForceField:
                 energy.update(e)
         return energy
 
+    def channel_keys(self, channel) -> str:
+        """The scenario keys that channel ``channel``'s force depends on (its term's ``keys``), those of
+        tables the scene leaves out dropped, for a failure's diagnosis; ``forces.CHANNEL`` for a channel
+        no term names keys for, "the force terms" for none."""
+        if not channel:
+            return "the force terms"
+        for term in self.terms:
+            if channel in term.keys:
+                present = [k for k in term.keys[channel] if _present(self.params, k)]
+                return ", ".join(present)
+        return f"forces.{channel}"
+
     def dominant_channel(self, rows) -> str:
         """Name of the channel with the largest force on the given tips (for failure diagnoses);
         a non-finite force (NaN or inf) counts as the largest."""
@@ -361,3 +373,14 @@ class ForceField:
                     else "direct"
                 )
         return d
+
+
+def _present(params, key) -> bool:
+    """Whether the dotted ``key`` names a setting of ``params``, not one of a table the scene leaves out
+    (a setting may itself be None: a derived default, as ``rods.transition_radius``)."""
+    obj = params
+    for part in key.split(".")[:-1]:
+        obj = getattr(obj, part, None)
+        if obj is None:
+            return False
+    return True

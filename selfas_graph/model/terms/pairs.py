@@ -49,6 +49,7 @@ class TipMagneticForce(Term):
 
     name = "tip_magnetic"
     channels = [("tip_magnetic", True)]
+    keys = {"tip_magnetic": ("rods.magnetic_charge", "rods.tip_stiffness", "rods.transition_radius")}
     slow = True
 
     def __init__(self, p, state):
@@ -135,6 +136,7 @@ class TipMagneticForce(Term):
 class TipBrakeForce(Term):
     name = "tip_brake"
     channels = [("tip_brake", False)]
+    keys = {"tip_brake": ("forces.tip_brake.coefficient",)}
 
     def __init__(self, p, state):
         self.rstar = p.rods.rstar
@@ -157,6 +159,7 @@ class TipBrakeForce(Term):
 class YukawaForce(Term):
     name = "yukawa"
     channels = [("yukawa", True)]
+    keys = {"yukawa": ("rods.electric_charge", "forces.yukawa.screening_length", "forces.yukawa.core_radius")}
     slow = True
 
     def __init__(self, p, state):

@@ -1,0 +1,56 @@
+"""The force terms' own statements about themselves: the scenario keys behind each channel
+(``Term.keys``), which a failure's diagnosis names, name parameters that exist."""
+
+import dataclasses
+import typing
+
+import pytest
+
+from selfas_graph.model.params import Parameters
+from selfas_graph.model.terms.registry import FOLLOWING_TERMS, TERM_CLASSES
+
+TERMS = [*TERM_CLASSES.values(), *(t for following in FOLLOWING_TERMS.values() for t in following)]
+
+
+def _field_type(cls, name):
+    """The type of dataclass ``cls``'s field ``name`` (Optional[X] read as X), or None if it has none."""
+    if not dataclasses.is_dataclass(cls) or name not in {f.name for f in dataclasses.fields(cls)}:
+        return None
+    hint = typing.get_type_hints(cls)[name]
+    args = [a for a in typing.get_args(hint) if a is not type(None)]
+    return args[0] if typing.get_origin(hint) is typing.Union and args else hint
+
+
+@pytest.mark.parametrize("term", TERMS, ids=lambda t: t.__name__)
+def test_every_channel_names_the_parameters_its_force_depends_on(term):
+    """Each channel of each term has its keys, and each key is a parameter (a field of the
+    parameter dataclasses down the dotted path), so that no diagnosis names a setting that is not."""
+    assert set(term.keys) == {name for name, _ in term.channels}, term.__name__
+    for channel, keys in term.keys.items():
+        assert keys and isinstance(keys, tuple)
+        for key in keys:
+            cls = Parameters
+            for part in key.split("."):
+                cls = _field_type(cls, part)
+                assert cls is not None, f"{term.__name__}.keys[{channel!r}]: {key} is no parameter"
+
+
+def test_a_diagnosis_names_the_keys_of_the_tables_the_scene_has():
+    """``ForceField.channel_keys`` gives a channel's keys without those of tables the scene leaves
+    out (the Lorentz term of a scene without an external filament does not name one)."""
+    from pathlib import Path
+
+    from selfas_graph.io.scenario import load_scenario
+    from selfas_graph.model.simulation import Simulation
+
+    scene = Path(__file__).resolve().parents[2] / "scenarios" / "quick.toml"
+    sim = Simulation.from_scenario(load_scenario(scene, overrides=["rods.count=20"]))
+    keys = sim.force_field.channel_keys("current_lorentz")
+    assert keys.startswith("circuit.delta_J0, ") and "forces.uniform_field.B" in keys
+    assert "external" not in keys and "rods.resistance" in keys  # absent, it means R0 = 1: still a setting
+    assert (
+        sim.force_field.channel_keys("tip_magnetic")
+        == "rods.magnetic_charge, rods.tip_stiffness, rods.transition_radius"
+    )
+    assert sim.force_field.channel_keys("nonesuch") == "forces.nonesuch"
+    assert sim.force_field.channel_keys(None) == "the force terms"
