@@ -1,5 +1,7 @@
 """Case (ii) external objects (docs/model.md 'Term 11', 'Circuit'): filament, dipole monopoles, line charge."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -338,9 +340,13 @@ def test_case2_scene_is_symmetric_under_rotation_about_x_with_tips_swapped():
 
 def test_a_failure_in_the_dipoles_channels_names_their_scenario_keys():
     """A run stopped by a non-finite or out-of-scale force names the keys behind the channel that
-    failed; the dipole's channels are named after its parts, not after its table."""
-    from selfas_graph.model.health import _term_keys
+    failed; the dipole's channels are named after its parts, not after its table, and its brake
+    after the brake's coefficient (it was given the monopoles' keys)."""
+    from selfas_graph.io.scenario import load_scenario
+    from selfas_graph.model.simulation import Simulation
 
-    assert "forces.external_dipole.line_charge" in _term_keys("external_line_charge")
-    assert "forces.external_dipole.magnetic_charge" in _term_keys("external_monopoles")
-    assert "forces.external_dipole.magnetic_charge" in _term_keys("external_monopole_brake")
+    scene = Path(__file__).resolve().parents[2] / "scenarios" / "fig8_quick.toml"
+    ff = Simulation.from_scenario(load_scenario(scene, overrides=["rods.count=20"])).force_field
+    assert "forces.external_dipole.line_charge" in ff.channel_keys("external_line_charge")
+    assert "forces.external_dipole.magnetic_charge" in ff.channel_keys("external_monopoles")
+    assert ff.channel_keys("external_monopole_brake") == "forces.tip_brake.coefficient, forces.external_dipole.length"
