@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .health import NumericalFailure
 from .validate import as_decimal, is_whole_number
 
 __all__ = [
@@ -126,7 +127,8 @@ class Operation:
         pass
 
     def stopped(self, sim, exc) -> None:
-        """The run stops on ``exc`` (Ctrl-C, a numerical failure): hand on what is buffered (:meth:`flush`)."""
+        """The run stops on ``exc`` (Ctrl-C, a numerical failure, an error in an operation or a callback): hand on
+        what is buffered (:meth:`flush`)."""
         self.flush(sim)
 
     def finish(self, sim) -> None:
@@ -272,7 +274,12 @@ class FrameWriter(Operation):
         """Write what the steps before ``exc`` buffered (the events and per-step rows up to a failure), and
         tell the writer why the run stopped: its ``close()`` then records that status, not "finished"."""
         self.flush(sim)
-        self.writer.stopped_by = "interrupted (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else f"failed: {exc}"
+        if isinstance(exc, KeyboardInterrupt):
+            self.writer.stopped_by = "interrupted (Ctrl-C)"
+        elif isinstance(exc, (NumericalFailure, RunInterrupted)):
+            self.writer.stopped_by = f"{'' if isinstance(exc, RunInterrupted) else 'failed: '}{exc}"
+        else:  # an error of an operation or a callback: named by its type
+            self.writer.stopped_by = f"failed: {type(exc).__name__}: {exc}"
 
 
 class EnergyCheck(Operation):
@@ -346,7 +353,8 @@ def steps_to_next_act(ops, step: int, remaining: int) -> int:
 
 
 def stopped(ops, sim, exc) -> None:
-    """Every operation of a run that ``exc`` (Ctrl-C, a numerical failure) stops hands on what it buffered."""
+    """Every operation of a run that ``exc`` (Ctrl-C, a numerical failure, an error in an operation or a
+    callback) stops hands on what it buffered."""
     for operation in ops:
         operation.stopped(sim, exc)
 

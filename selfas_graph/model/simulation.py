@@ -352,8 +352,9 @@ class Simulation:
                 summary.steps = i
             for operation in ops:
                 operation.finish(self)
-        except (KeyboardInterrupt, NumericalFailure) as exc:  # what the steps before it buffered is written
-            op.stopped(ops, self, exc)
+        except BaseException as exc:  # what the steps before it buffered is written (Ctrl-C, a failure, a bug)
+            if not isinstance(exc, OSError):  # a failed write: writing again would fail again
+                op.stopped(ops, self, exc)
             raise
         finally:
             summary.wall_seconds = time.perf_counter() - t0

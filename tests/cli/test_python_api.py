@@ -401,6 +401,34 @@ def test_a_failure_inside_a_writer_block_keeps_the_rows_up_to_it_and_the_file_sa
             assert run.meta["status"].startswith("failed: numerical failure at step"), caught
 
 
+@pytest.mark.parametrize("where", ["progress", "operation"])
+def test_an_error_in_the_users_own_code_keeps_the_rows_up_to_it(tmp_path, where):
+    """A bug in a progress callback or an attached operation stops ``sim.run``: the events and per-step
+    rows of the steps taken reach the file (only Ctrl-C and a numerical failure flushed them: 0 of 250
+    rows were kept), and a plain ``close()`` records the error, named by its type."""
+    sim = sg.Simulation.from_scenario(sg.load_scenario(ROOT / "scenarios" / "quick.toml"))
+
+    def bug(sim, *args):
+        if sim.state.step >= 250:
+            raise ValueError("bug in my code")
+
+    class Buggy(sg.Operation):
+        trigger = sg.Periodic(50)
+        act = staticmethod(bug)
+
+    if where == "operation":
+        sim.operations.append(Buggy())
+    w = sg.RunWriter.for_simulation(sim, tmp_path / "a.h5")
+    with pytest.raises(ValueError, match="bug in my code"):
+        sim.run(1.0, writer=w, **({"progress": bug, "progress_every": 50} if where == "progress" else {}))
+    w.close()
+    with sg.RunFile(tmp_path / "a.h5") as run:
+        assert run.meta["status"] == "failed: ValueError: bug in my code"
+    with h5py.File(tmp_path / "a.h5", "r") as f:
+        assert len(f["observables/bond_error_per_step/step"]) == 250 == sim.state.step
+        assert len(f["events"]) == len(sim.events)
+
+
 def test_a_later_run_that_ends_well_closes_finished(tmp_path):
     """The reason a run stopped early is that run's: a next ``sim.run`` on the writer that ends well
     leaves a plain ``close()`` saying "finished"."""
