@@ -428,6 +428,7 @@ def run(args):
                     t_end=scenario.params.run.t_end,
                     frame_interval=sim.frame_interval,
                     mpi_ranks=world.size,
+                    drop_later=True,  # what came after the checkpoint is computed again
                 )
             except RunFileError as exc:
                 raise CliError(f"cannot resume: {exc}") from None

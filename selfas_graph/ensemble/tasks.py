@@ -61,7 +61,11 @@ def run_seed(task: dict) -> dict:
                 meta = checkpoint_meta(scenario, cont.run_id, path.name, t_end, __version__)
                 sim = Simulation.from_snapshot(scenario.params, snap)
                 writer = RunWriter.reopen(
-                    path, int(snap["step"]), t_end=scenario.params.run.t_end, frame_interval=sim.frame_interval
+                    path,
+                    int(snap["step"]),
+                    t_end=scenario.params.run.t_end,
+                    frame_interval=sim.frame_interval,
+                    drop_later=True,  # what came after the checkpoint is computed again
                 )
             else:
                 scenario = scenario_from_text(

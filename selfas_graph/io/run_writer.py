@@ -44,6 +44,20 @@ from .run_provenance import run_provenance
 from .trim import apply_plan, trim_plan, trim_safely
 
 
+def _later_rows_message(f, path, step) -> str:
+    """Why a run file that holds rows after ``step`` is not reopened there without ``drop_later``."""
+    frames = f[layout.TIP_POSITION_STEP][:]
+    later = frames[frames > step]
+    if len(later) > 1:
+        what = f"{len(later)} frames (steps {int(later[0])} to {int(later[-1])})"
+    else:
+        what = f"a frame (step {int(later[0])})" if len(later) else "rows of later steps"
+    return (
+        f"{path} holds {what} after step {step}, which reopening there would remove: give the step the "
+        f"simulation is at, RunWriter.reopen(path, sim.state.step), or drop_later=True to remove them"
+    )
+
+
 class RunWriter(PendingRows):
     """Writes frames and observables of one run.
 
@@ -150,9 +164,14 @@ class RunWriter(PendingRows):
         f.flush()
 
     @classmethod
-    def reopen(cls, path, step, t_end=None, frame_interval=None, mpi_ranks=1):
-        """Open an existing run file to continue it after ``step``: every row written for a
-        later step (frames, observables, events, circuit log, graph, per-step series) is removed first.
+    def reopen(cls, path, step, t_end=None, frame_interval=None, mpi_ranks=1, drop_later=False):
+        """Open an existing run file to continue it after ``step`` (from Python: ``sim.state.step``).
+
+        ``drop_later``: remove first every row written for a later step (frames, observables, events,
+        circuit log, graph, per-step series), as a resume from a checkpoint does (a resume from step 0
+        drops frame 0 too and writes it again: a kill while it was written could have torn it unseen).
+        Without it a file that holds rows after ``step`` is refused (RunFileError), as a file open in
+        another writer is always: a step given by mistake would have removed them.
         ``t_end``: the continuation's end time, where it differs from the one the file states (a resume
         with another ``--t-end``, later or earlier): stored in ``parameters_json``, the earlier ones in
         ``t_end_before``.
@@ -164,16 +183,22 @@ class RunWriter(PendingRows):
         a file in place before it rewrites the superblock that states its new end, and a kill between
         the two leaves a file it no longer opens. The copy replaces the file a symbolic link points to;
         the rows are removed in place where the file has other names (hard links) or the copy cannot be
-        made (no room, a quota, a folder that is not writable). A resume from step 0 drops frame 0 too
-        and writes it again (a kill while it was written could have torn it unseen).
+        made (no room, a quota, a folder that is not writable).
         """
         path = Path(path)
         if not is_whole_number(step) or step < 0:
             raise TypeError(f"RunWriter.reopen(step=...): the step to continue after, an integer >= 0, got {step!r}")
         step = int(step)
+        if path.exists() and in_use(path):
+            raise RunFileError(
+                f"{path} is open in another writer or process (a RunWriter not yet closed, a simulation still "
+                f"writing it): close it before reopening the file"
+            )
         try:
             with h5py.File(path, "r") as f:
-                plan = trim_plan(f, step if step > 0 else -1, path)
+                plan = trim_plan(f, step if step > 0 or not drop_later else -1, path)
+                if plan and not drop_later:
+                    raise RunFileError(_later_rows_message(f, path, step))
         except OSError as exc:
             raise RunFileError(f"{path}: cannot reopen the run file to continue it ({exc})") from None
         if plan:

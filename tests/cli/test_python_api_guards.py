@@ -65,6 +65,28 @@ def test_a_reopened_file_continues_the_step_it_was_reopened_at(tmp_path):
             sim.run(0.3, writer=w)
 
 
+def test_a_reopen_at_a_wrong_step_removes_nothing(tmp_path):
+    """``reopen`` at a step before the file's last frame removed the later frames at once, before the
+    run that then refused the step: now it is refused first, naming the frames, unless asked for
+    (``drop_later=True``, as a resume from a checkpoint); a file open in another writer is refused."""
+    sim = column()
+    path = tmp_path / "r.h5"
+    with sg.RunWriter.for_simulation(sim, path) as w:
+        sim.run(0.1, writer=w)
+    before = path.read_bytes()
+    with pytest.raises(sg.RunFileError, match=r"holds 2 frames \(steps 50 to 100\) after step 12, which reopening"):
+        sg.RunWriter.reopen(path, 12)
+    assert path.read_bytes() == before
+    with sg.RunWriter.reopen(path, 100) as w:
+        with pytest.raises(sg.RunFileError, match="open in another writer"):
+            sg.RunWriter.reopen(path, 100)
+        sim.run(0.2, writer=w)
+    with sg.RunWriter.reopen(path, 100, drop_later=True) as w:
+        assert w.n_frames == 3
+    with sg.RunFile(path) as run:
+        assert list(run.step) == [0, 50, 100]
+
+
 def test_a_stop_hands_the_buffered_rows_and_events_to_the_file(tmp_path):
     sim = column()
     with pytest.raises(RunInterrupted):

@@ -46,7 +46,7 @@ def _run(path, stop_at=None, resume_from=None):
     else:
         snap, meta = read_checkpoint(resume_from)
         sim = Simulation.from_snapshot(sc.params, snap)
-        writer = RunWriter.reopen(path, int(snap["step"]))
+        writer = RunWriter.reopen(path, int(snap["step"]), drop_later=True)
     cp = Checkpointer(ckpt, 0, meta)
     try:
         sim.run(writer=writer, checkpointer=cp, stop=(lambda: sim.state.step >= stop_at) if stop_at else None)
@@ -157,7 +157,7 @@ def test_resume_truncates_frames_written_after_the_checkpoint(reference, tmp_pat
     ckpt.write_bytes(saved)  # as if killed before the step-900 checkpoint replaced the step-300 one
     os.chmod(real, 0o640)
     before = os.stat(real)
-    writer = RunWriter.reopen(path, 300)
+    writer = RunWriter.reopen(path, 300, drop_later=True)
     after = os.stat(real)
     writer.close("interrupted")
     assert (after.st_ino != before.st_ino) == (how in ("copy", "through a link")) and after.st_mode == before.st_mode
@@ -326,7 +326,7 @@ def test_wall_time_of_a_killed_segment_counts_up_to_its_last_flush(tmp_path):
         assert attrs["status"] == "running"
         first = float(attrs["wall_seconds_total"])
     assert first >= 0.2
-    writer = RunWriter.reopen(path, 0)
+    writer = RunWriter.reopen(path, 0, drop_later=True)
     time.sleep(0.1)
     writer.close()
     with h5py.File(path, "r") as f:
@@ -366,7 +366,7 @@ def test_a_resume_from_step_0_writes_frame_0_again(reference, tmp_path):
 
     path = tmp_path / "run.h5"
     shutil.copy(reference[0], path)
-    writer = RunWriter.reopen(path, 0)
+    writer = RunWriter.reopen(path, 0, drop_later=True)
     try:
         assert writer.n_frames == 0 and writer.events_written == 0 and writer.circuit_rows_written == 0
     finally:
