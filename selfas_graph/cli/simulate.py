@@ -36,6 +36,7 @@ from ..io.h5md import (
     RunFileError,
     RunWriter,
     is_io_error,
+    not_replaced,
 )
 from ..io.scenario import ScenarioError, load_scenario
 from ..lifecycle import (
@@ -325,6 +326,9 @@ def _prepare(args):
         ckpt = checkpoint_path(out)
         check_target(out, "output file", force=True, inputs=[args.scenario])
         check_target(ckpt, "checkpoint file", force=True, inputs=[args.scenario])
+        refused = not_replaced(out)  # a scene, a checkpoint or an export is not replaced, even with --force
+        if refused:
+            raise CliError(refused)
         if ckpt.exists() and not args.force:
             ended = _finished_at(out)
             if ended is not None:  # nothing left to continue: only a later end time extends it

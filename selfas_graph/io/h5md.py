@@ -51,6 +51,7 @@ from .h5md_format import appendable_problems as appendable_problems
 from .h5md_format import free_bytes as free_bytes
 from .h5md_format import hdf5_damage as hdf5_damage
 from .h5md_format import is_io_error as is_io_error
+from .h5md_format import not_replaced as not_replaced
 from .h5md_format import observable_unit as observable_unit
 from .h5md_format import raised_in_hdf5 as raised_in_hdf5
 from .pending_rows import NullWriter as NullWriter

@@ -299,6 +299,40 @@ def in_use_message(path, what, force) -> str:
     )
 
 
+#: the names beside a run file that belong to it: a run file never takes one (``RUN.checkpoint.h5``, ``RUN.failure.h5``)
+COMPANION_SUFFIXES = (".checkpoint.h5", ".failure.h5")
+
+
+#: the suffixes of a run file: another file that is not HDF5 (a scene, an export, a figure) is never replaced
+RUN_SUFFIXES = (".h5", ".hdf5", ".h5md")
+
+
+def not_replaced(path) -> str | None:
+    """Why a run file is not written to ``path`` even where replacing is asked for (``overwrite=True``,
+    ``--force``), or None: a name of a run's checkpoint or failed state, a folder, a checkpoint, or a file
+    that is not HDF5 and not named as a run file (a scene, an export, a figure). What ``--force`` is for,
+    an earlier or a damaged run file (or any HDF5 or ``.h5`` file), is replaced."""
+    path = Path(path)
+    if path.name.endswith(COMPANION_SUFFIXES):
+        return f"{path} is the name of a run's checkpoint or failed state; give the run file another name"
+    if path.is_dir():
+        return f"{path} is a folder; give a file name such as run.h5"
+    if not path.is_file() or path.stat().st_size == 0:
+        return None
+    if not is_hdf5(path):
+        if path.suffix.lower() in RUN_SUFFIXES:
+            return None
+        return f"{path} exists and is not a run file (a scenario, an export?); it is not replaced: give another name"
+    try:
+        with h5py.File(path, "r") as f:
+            kind = str(f.attrs.get("format", ""))
+    except OSError:  # HDF5 that does not open: a run file torn by a kill is replaced
+        return None
+    if kind.startswith("selfas-graph checkpoint"):
+        return f"{path} is a run's checkpoint (what it resumes from); it is not replaced: give another name"
+    return None
+
+
 def is_hdf5(path) -> bool:
     """Whether ``path`` is an HDF5 file (a run file, a checkpoint, a failure file): one a command that writes
     something else never replaces."""

@@ -37,6 +37,7 @@ from .h5md_format import (
     check_room,
     in_use,
     in_use_message,
+    not_replaced,
     observable_unit,
 )
 from .pending_rows import PendingRows
@@ -96,6 +97,14 @@ class RunWriter(PendingRows):
         rod_resistance=None,
     ):
         self.path = Path(path)
+        refused = not_replaced(self.path)
+        if refused:
+            raise (IsADirectoryError if self.path.is_dir() else OutputExistsError)(refused)
+        if self.path.is_symlink() and not self.path.exists():
+            raise FileNotFoundError(
+                f"the output path {self.path} is a symbolic link to {os.readlink(self.path)}, which does not exist; "
+                f"give the file the link should point to, or another name"
+            )
         if self.path.exists() and not overwrite:
             raise OutputExistsError(
                 f"output file {self.path} exists; pass overwrite=True to overwrite it, or another path"

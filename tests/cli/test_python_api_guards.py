@@ -215,3 +215,41 @@ def test_a_snapshot_continued_at_another_time_step_counts_time_on_from_its_own()
     other = sg.Simulation.from_snapshot(PARAMS.replace(integrator={"dt": 2e-3}), snap)
     other.step(1)
     assert other.state.step == 101 and other.state.time == 0.1 + 2e-3
+
+
+@pytest.mark.parametrize("name", ["scene.toml", "traj.gsd", "r.checkpoint.h5", "r.failure.h5", "saved.h5"])
+def test_overwrite_replaces_a_run_file_only(tmp_path, capsys, name):
+    """``overwrite=True`` (``--force``) replaced any file: a scene, an export, another run's checkpoint
+    (after which that run could not be resumed, here one copied to another name). It now replaces none
+    of them, and no run file takes the name of a run's checkpoint or failed state."""
+    import h5py
+
+    from selfas_graph.cli.main import main
+
+    target = tmp_path / name
+    if name == "saved.h5":
+        with h5py.File(target, "w") as f:  # a checkpoint saved under another name
+            f.attrs["format"] = "selfas-graph checkpoint 1"
+    elif not name.endswith(".failure.h5"):
+        target.write_bytes(b"keep: not a run file")
+    before = target.read_bytes() if target.exists() else None
+    with pytest.raises(FileExistsError, match="not a run file|the name of a run's checkpoint|a run's checkpoint"):
+        sg.RunWriter.for_simulation(column(), target, overwrite=True)
+    scene = tmp_path / "s.toml"
+    scene.write_text("[rods]\ncount = 2\n[run]\nt_end = 0.01\n")
+    assert main(["simulate", str(scene), "-o", str(target), "--force", "--progress", "none"]) == 2
+    assert "it is not replaced" in capsys.readouterr().err or name.endswith((".checkpoint.h5", ".failure.h5"))
+    assert (target.read_bytes() if target.exists() else None) == before
+
+
+def test_overwrite_replaces_a_run_file_and_what_is_named_as_one(tmp_path):
+    """What ``--force`` is for: an earlier run file, an empty file, a damaged one named ``.h5``."""
+    for name in ("run.h5", "empty.h5", "junk.h5"):
+        target = tmp_path / name
+        if name == "run.h5":
+            sg.RunWriter.for_simulation(column(), target).close()
+        else:
+            target.write_bytes(b"" if name == "empty.h5" else b"not HDF5")
+        sg.RunWriter.for_simulation(column(), target, overwrite=True).close()
+        with sg.RunFile(target) as run:
+            assert run.n_frames == 0
