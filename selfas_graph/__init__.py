@@ -37,7 +37,7 @@ _API = {
     ".model.events": ("Event", "EventKind", "named_events"),
     ".model.graph": ("ROLE_NAMES", "ConnectivityGraph", "classify_rods"),
     ".model.network": ("Network",),
-    ".model.operations": ("Operation", "Periodic"),
+    ".model.operations": ("Operation", "Periodic", "Always", "When", "RunInterrupted"),
     ".model.params": ("Parameters",),
     ".model.simulation": ("NumericalFailure", "RunSummary", "Simulation"),
     ".model.state": ("PlacementError", "State", "StateError", "random_state"),

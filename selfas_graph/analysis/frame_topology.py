@@ -21,6 +21,8 @@ def frame_topology(run, frame=None, t=None) -> dict:
     role, whether the conductors are short-circuited, the filament rods' currents, the total current and
     effective resistance, and the events up to the frame (each short circuit with its circuit-log row).
     ``run``: an open :class:`~selfas_graph.io.h5md.RunFile`."""
+    if not hasattr(run, "graph"):
+        raise TypeError(f"frame_topology(run, ...): an open RunFile (with RunFile(path) as run: ...), got {run!r}")
     g = run.graph(frame=frame, t=t)
     n_rods = g["role"].shape[0]
     graph = ConnectivityGraph.from_arrays(n_rods, g["conductors"], g)

@@ -21,7 +21,7 @@ from ..io.checkpoint import (
 from ..io.h5md import HDF5_READ_ERRORS, RunFile, RunFileError, hdf5_damage
 from ..io.scenario import Scenario, ScenarioError, load_scenario, scenario_from_text
 from ..lifecycle import ContinuationError, continuation
-from ..model.operations import frame_steps
+from ..model.operations import frame_steps, steps_between
 from ..parallel import task_pool
 from ..provenance import older_version, version_key
 from .folder import EnsembleError, FolderLock, make_folder, seed_path
@@ -43,14 +43,22 @@ def scenario_source(scenario, overrides=(), t_end=None):
                 "give the scenario file's path, or a Scenario from load_scenario(path)"
             )
         t_end = scenario.params.run.t_end if t_end is None else t_end
-        return Path(scenario.path), [*scenario.overrides, *overrides], t_end
+        return Path(scenario.path), [*scenario.overrides, *_override_list(overrides)], t_end
     if not isinstance(scenario, (str, os.PathLike)):
         raise EnsembleError(
             f"scenario: a scenario file's path, or a Scenario from load_scenario(path, overrides), got "
             f"{type(scenario).__name__}; each seed runs from the file, with the changes as overrides "
             f"(e.g. Ensemble('scene.toml', seeds, folder, overrides=['rods.count=50']))"
         )
-    return Path(scenario), list(overrides), t_end
+    return Path(scenario), _override_list(overrides), t_end
+
+
+def _override_list(overrides) -> list:
+    """``overrides`` as a list of "key=value" strings; EnsembleError for one string (it was read one
+    character at a time) or anything but a sequence of strings."""
+    if isinstance(overrides, (str, bytes)) or not all(isinstance(o, str) for o in overrides or ()):
+        raise EnsembleError(f"overrides: give a list of 'key=value' strings, e.g. ['rods.count=50'], got {overrides!r}")
+    return list(overrides or ())
 
 
 def check_times(times, t_end, frame_interval=None) -> list[float]:
@@ -147,6 +155,8 @@ class Ensemble:
 
     def __init__(self, scenario, seeds, folder, overrides=(), t_end=None, first_seed=None, force=False, older_than=""):
         self.scenario_path, self.overrides, t_end = scenario_source(scenario, overrides, t_end)
+        if not isinstance(folder, (str, os.PathLike)):
+            raise EnsembleError(f"folder: the path of the folder for the seed files and the summary, got {folder!r}")
         self.folder = Path(folder)
         self.force = bool(force)
         self.older_than = str(older_than or "")
@@ -162,6 +172,10 @@ class Ensemble:
         except ScenarioError as exc:
             raise EnsembleError(str(exc)) from None
         self.t_end = float(self.base.params.run.t_end)
+        try:  # as simulate refuses it before any step: each seed would fail at its start
+            steps_between(0.0, self.t_end, self.base.params.integrator.dt)
+        except ValueError as exc:
+            raise EnsembleError(f"t_end (--t-end): {exc}") from None
         if isinstance(seeds, (int, np.integer)) and not isinstance(seeds, bool):
             if seeds < 1:
                 raise EnsembleError(f"seeds (--seeds) must be >= 1, got {seeds}")

@@ -166,6 +166,8 @@ class RunWriter(PendingRows):
         for key, value in provenance.items():
             p.attrs[key] = value
         p.attrs["status"] = "running"
+        #: what close() records if no run is written to this writer (a run that starts clears it)
+        self.stopped_by = "no run written"
         p.attrs["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
         p.attrs["wall_seconds_total"] = 0.0
         self._start_clock(0.0)
@@ -244,6 +246,8 @@ class RunWriter(PendingRows):
         self.circuit_rows_written = (
             f[layout.CIRCUIT_LOG][layout.CIRCUIT_LOG_COLUMNS[0]].shape[0] if layout.CIRCUIT_LOG in f else 0
         )
+        # closed before a run continues it (or after a refused one), the file says what it said
+        self.stopped_by = str(f[layout.PROVENANCE].attrs.get("status", "interrupted"))
         f[layout.PROVENANCE].attrs["status"] = "running"
         self._continues_from = step
         self._resumed_with(mpi_ranks)
@@ -547,7 +551,8 @@ class RunWriter(PendingRows):
 
     def close(self, status=None):
         """Record ``status`` and close the file. Without one: "finished", or why the last run written
-        stopped early (:attr:`stopped_by`, e.g. "failed: ..." after a numerical failure caught in a notebook)."""
+        stopped early (:attr:`stopped_by`, e.g. "failed: ..." after a numerical failure caught in a notebook);
+        "no run written" for a new file no run wrote to, a reopened file's status before for one no run continued."""
         if status is None:
             status = self.stopped_by or "finished"
         if self.f:

@@ -14,6 +14,7 @@ import dataclasses
 import difflib
 import math
 import numbers
+import os
 import tomllib
 import typing
 from dataclasses import dataclass
@@ -76,6 +77,8 @@ def load_scenario(source, overrides=(), t_end=None) -> Scenario:
     ScenarioError
         Naming every invalid key and what would be valid.
     """
+    if not isinstance(source, (str, os.PathLike)):
+        raise TypeError(f"load_scenario(source): the path of a scenario file (TOML), got {source!r}")
     path = Path(source)
     try:
         raw_bytes = path.read_bytes()

@@ -41,6 +41,18 @@ class NumericalFailure(RuntimeError):
         self.rods = list(rods)
 
 
+def refuse_after(failure) -> None:
+    """Refuse to step a simulation that ``failure`` (a NumericalFailure, or None) stopped: its state is the
+    failed one, steps from it would integrate that (NaN within a few steps), and a writer would record a
+    later failure in place of the first."""
+    if failure is not None:
+        raise RuntimeError(
+            f"this simulation stopped at step {failure.step} ({failure}); its state is the failed one. Continue "
+            f"from the last state that passed the checks, with other settings if need be: "
+            f"Simulation.from_snapshot(params, sim.last_good_snapshot)"
+        )
+
+
 class HealthChecks:
     """The checks a simulation runs after every step (:meth:`after_step`) and on every frame
     (:meth:`check_energy`); each failure raises :class:`NumericalFailure` with a diagnosis.

@@ -76,11 +76,21 @@ class Trigger:
         raise NotImplementedError
 
 
+def _period(period, who) -> int:
+    """``period`` as a whole number of steps >= 1; TypeError naming ``who`` otherwise (it became 1, or
+    was rounded down, without a word)."""
+    if not is_whole_number(period) or period < 1:
+        raise TypeError(f"{who}(period=...): a whole number of steps >= 1, got {period!r}")
+    return int(period)
+
+
 class Periodic(Trigger):
     """True when ``timestep % period == phase``."""
 
     def __init__(self, period: int, phase: int = 0):
-        self.period = max(1, int(period))
+        self.period = _period(period, "Periodic")
+        if not is_whole_number(phase):
+            raise TypeError(f"Periodic(phase=...): a whole number of steps, got {phase!r}")
         self.phase = int(phase) % self.period
 
     def __call__(self, timestep: int) -> bool:
@@ -102,8 +112,10 @@ class When(Trigger):
     every step); a period lets the steps between run without Python (:mod:`.compiled`)."""
 
     def __init__(self, predicate, period: int = 1):
+        if not callable(predicate):
+            raise TypeError(f"When(predicate, ...): a callable that returns true or false, got {predicate!r}")
         self.predicate = predicate
-        self.period = max(1, int(period))
+        self.period = _period(period, "When")
         self.phase = 0
 
     def __call__(self, timestep: int) -> bool:
@@ -155,6 +167,25 @@ class _Hooks(Operation):
 
     def finish(self, sim):
         getattr(self.inner, "finish", lambda *a: None)(sim)
+
+
+def steps_between(t: float, t_end, dt: float) -> int:
+    """Steps of ``dt`` from ``t`` to ``t_end``, a whole number of steps ahead (to round-off), not in the past;
+    ValueError otherwise, naming the times that can be reached (:meth:`Simulation.steps_to
+    <.simulation.Simulation.steps_to>`, and an ensemble's check of its end time before any seed runs)."""
+    t_end = time_value(t_end, "t_end")
+    x = (t_end - t) / dt
+    n = int(round(x))
+    if n < 0 or x < -0.5:
+        raise ValueError(f"t_end = {t_end:.10g} lies before the current time t = {t:.10g}; a run goes forward only")
+    # round-off of t_end - t: a few ulps of the step count, and no more than 1e-6 of a step below 1e10 steps
+    if abs(x - n) > 1e-6 + 4 * math.ulp(1.0) * abs(x):  # math.ulp(1.0): the machine epsilon
+        lo = t + math.floor(x) * dt
+        raise ValueError(
+            f"t_end = {t_end!r} is not a whole number of steps dt = {dt!r} from t = {t!r} "
+            f"({x:.12g} steps); the nearest reachable times are {lo!r} and {lo + dt!r}"
+        )
+    return n
 
 
 def frame_steps(interval: float, dt: float) -> int:
@@ -215,6 +246,11 @@ def _check_arguments(sim, writer, progress, checkpointer, stop, check_every) -> 
         raise TypeError(f"run(checkpointer=...): an object with due() and write(sim), got {checkpointer!r}")
     if not is_whole_number(check_every) or check_every < 1:
         raise TypeError(f"run(check_every=...): a whole number of steps >= 1, got {check_every!r}")
+    if writer is not None and not callable(getattr(writer, "write_frame", None)):
+        raise TypeError(
+            f"run(writer=...): a writer, RunWriter.for_simulation(sim, path), not a path or other object; "
+            f"got {writer!r}"
+        )
     if writer is not None and hasattr(writer, "check_continues"):
         writer.check_continues(sim.state.step, sim.state.position.shape)
 

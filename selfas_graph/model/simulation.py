@@ -21,7 +21,7 @@ from . import events as ev
 from . import operations as op
 from .circuitlog import circuit_log_array
 from .compiled import advance, compiled_steps_for
-from .health import BOND_BREAK, FORCE_OUT_OF_SCALE, MAX_STEP_DISPLACEMENT, HealthChecks, NumericalFailure
+from .health import BOND_BREAK, FORCE_OUT_OF_SCALE, MAX_STEP_DISPLACEMENT, HealthChecks, NumericalFailure, refuse_after
 from .integrator import AdamsBashforth4
 from .network import Network
 from .observables import Observables, energy_scale
@@ -110,6 +110,8 @@ class Simulation:
         #: operations attached for every :meth:`run` (:mod:`.operations`), acted after the frame writer
         self.operations = []
         self._ops = ()
+        #: the NumericalFailure that stopped this simulation (its state is then the failed one), or None
+        self.failure = None
         if self.network is not None:
             self.force_field.extend_tip_range(self.network.tracker.release)  # the contact search's pairs
             self._update_contacts()
@@ -237,11 +239,16 @@ class Simulation:
             raise TypeError(f"Simulation.step(n): n is a whole number of steps, got {n!r}") from None
         if n < 0:
             raise ValueError(f"Simulation.step(n): n is a number of steps >= 0, got {n}")
+        refuse_after(self.failure)
         if self.observe.energy0 is None:
             self.observe.record_initial_energy()
         done = 0
-        while done < n:
-            done += advance(self, n - done)
+        try:
+            while done < n:
+                done += advance(self, n - done)
+        except NumericalFailure as exc:
+            self.failure = exc
+            raise
 
     def python_step(self) -> None:
         """One step in Python (:mod:`.compiled` makes fast steps in one call, the same numbers)."""
@@ -284,19 +291,7 @@ class Simulation:
     def steps_to(self, t_end: float) -> int:
         """Steps from the current time to ``t_end``, a whole number of steps ahead (to round-off), not in the
         past; ValueError otherwise, naming the times that can be reached."""
-        t_end, t, dt = op.time_value(t_end, "t_end"), self.state.time, self.dt
-        x = (t_end - t) / dt
-        n = int(round(x))
-        if n < 0 or x < -0.5:
-            raise ValueError(f"t_end = {t_end:.10g} lies before the current time t = {t:.10g}; a run goes forward only")
-        # round-off of t_end - t: a few ulps of the step count, and no more than 1e-6 of a step below 1e10 steps
-        if abs(x - n) > 1e-6 + 4 * np.finfo(float).eps * abs(x):
-            lo = t + math.floor(x) * dt
-            raise ValueError(
-                f"t_end = {t_end!r} is not a whole number of steps dt = {dt!r} from t = {t!r} "
-                f"({x:.12g} steps); the nearest reachable times are {lo!r} and {lo + dt!r}"
-            )
-        return n
+        return op.steps_between(self.state.time, t_end, self.dt)
 
     def run(
         self, t_end=None, writer=None, progress=None, progress_every=None, checkpointer=None, stop=None, check_every=1
@@ -327,6 +322,7 @@ class Simulation:
 
         Returns a :class:`RunSummary`.
         """
+        refuse_after(self.failure)
         t_end = self.params.run.t_end if t_end is None else t_end
         n_steps = self.steps_to(t_end)
         every = self.frame_steps
@@ -353,6 +349,7 @@ class Simulation:
             for operation in ops:
                 operation.finish(self)
         except BaseException as exc:  # what the steps before it buffered is written (Ctrl-C, a failure, a bug)
+            self.failure = exc if isinstance(exc, NumericalFailure) else None
             if not isinstance(exc, OSError):  # a failed write: writing again would fail again
                 op.stopped(ops, self, exc)
             raise

@@ -232,6 +232,11 @@ def test_top_level_names():
         "named_events",
         "ROLE_NAMES",
         "Parameters",
+        "Operation",
+        "Periodic",
+        "Always",
+        "When",
+        "RunInterrupted",
     ):
         assert name in sg.__all__ and hasattr(sg, name)
     assert set(sg.__all__) <= set(dir(sg))
@@ -427,6 +432,39 @@ def test_an_error_in_the_users_own_code_keeps_the_rows_up_to_it(tmp_path, where)
     with h5py.File(tmp_path / "a.h5", "r") as f:
         assert len(f["observables/bond_error_per_step/step"]) == 250 == sim.state.step
         assert len(f["events"]) == len(sim.events)
+
+
+def test_a_failed_simulation_refuses_more_steps_and_its_file_keeps_the_first_failure(tmp_path):
+    """After a NumericalFailure the simulation held the failed state and stepped on from it (NaN by
+    the third retry), each retry recording a later failure in the file in place of the first: run and
+    step now refuse, naming the failure and the way on (from the last good snapshot)."""
+    sim = _failing_quick()
+    w = sg.RunWriter.for_simulation(sim, tmp_path / "a.h5")
+    with pytest.raises(sg.NumericalFailure) as first:
+        sim.run(1.0, writer=w)
+    for again in (lambda: sim.run(1.0, writer=w), lambda: sim.step(1)):
+        with pytest.raises(RuntimeError, match=rf"stopped at step {first.value.step} .*last_good_snapshot"):
+            again()
+    w.close()
+    with sg.RunFile(tmp_path / "a.h5") as run:
+        assert run.meta["status"].startswith(f"failed: numerical failure at step {first.value.step} ")
+    good = sg.Simulation.from_snapshot(sim.params, sim.last_good_snapshot)
+    assert good.failure is None and good.state.step < first.value.step
+
+
+def test_a_writer_no_run_wrote_to_says_so(tmp_path):
+    """A writer closed before any run (or after a refused one) said "finished"; a new file now says
+    "no run written", a reopened one keeps the status it had."""
+    sim = sg.Simulation(_params(), state=_rods())
+    with sg.RunWriter.for_simulation(sim, tmp_path / "a.h5"):
+        pass
+    with sg.RunFile(tmp_path / "a.h5") as run:
+        assert run.meta["status"] == "no run written"
+    with sg.RunWriter.for_simulation(sim, tmp_path / "b.h5") as w:
+        sim.run(0.05, writer=w)
+    sg.RunWriter.reopen(tmp_path / "b.h5", 50).close()
+    with sg.RunFile(tmp_path / "b.h5") as run:
+        assert run.meta["status"] == "finished"
 
 
 def test_a_later_run_that_ends_well_closes_finished(tmp_path):

@@ -5,11 +5,15 @@ arguments that could only fail after a step are refused before it.
 The system: three rods in a column across a gap of 3.06 (their tips touch at step 0, so the circuit
 closes at once and the run has events to lose)."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 import selfas_graph as sg
-from selfas_graph.model.operations import RunInterrupted
+from selfas_graph.model.operations import RunInterrupted, When
+
+ROOT = Path(__file__).resolve().parents[2]
 
 PARAMS = sg.Parameters.from_dict(
     {
@@ -253,3 +257,33 @@ def test_overwrite_replaces_a_run_file_and_what_is_named_as_one(tmp_path):
         sg.RunWriter.for_simulation(column(), target, overwrite=True).close()
         with sg.RunFile(target) as run:
             assert run.n_frames == 0
+
+
+def test_python_mistakes_are_named_by_argument(tmp_path):
+    """A path for the writer, a path for frame_topology, a period that is no whole number of steps >= 1,
+    a folder or scenario that is no path, one string of overrides: each is refused by its argument (a
+    bare AttributeError came through, and Periodic(0) or Periodic(2.7) became another period)."""
+    from selfas_graph.analysis.frame_topology import frame_topology
+    from selfas_graph.ensemble import Ensemble, EnsembleError
+
+    sim = column()
+    with pytest.raises(TypeError, match=r"run\(writer=...\): a writer, RunWriter.for_simulation"):
+        sim.run(0.01, writer=str(tmp_path / "x.h5"))
+    assert sim.state.step == 0
+    with pytest.raises(TypeError, match="frame_topology.*an open RunFile"):
+        frame_topology("run.h5")
+    for bad in (0, -3, 2.7, "x", True):
+        with pytest.raises(TypeError, match=r"Periodic\(period=...\): a whole number of steps >= 1"):
+            sg.Periodic(bad)
+    with pytest.raises(TypeError, match=r"When\(predicate"):
+        When(5)
+    with pytest.raises(TypeError, match=r"load_scenario\(source\): the path of a scenario file"):
+        sg.load_scenario(5)
+    scene = ROOT / "scenarios" / "quick.toml"
+    with pytest.raises(EnsembleError, match="folder: the path of the folder"):
+        Ensemble(scene, 2, None)
+    with pytest.raises(EnsembleError, match="overrides: give a list of 'key=value' strings"):
+        Ensemble(scene, 2, tmp_path / "e", overrides="rods.count=40")
+    with pytest.raises(EnsembleError, match=r"t_end \(--t-end\): t_end = 0.0105 is not a whole number of steps"):
+        Ensemble(scene, 1, tmp_path / "e", t_end=0.0105)
+    assert not (tmp_path / "e").exists()
