@@ -134,6 +134,11 @@ class Grid:
         for key in self.keys:
             if key in base:
                 raise EnsembleError(f"--grid {key}: also given by --set; give it in one place")
+            if key == "run.t_end":  # every point was summarised at the first point's end
+                raise EnsembleError(
+                    "--grid run.t_end: the end time is the grid's (t_end, --t-end); run to the latest end and read "
+                    "the earlier ones with --times"
+                )
         # Python values as the text of an override (False -> false, 2.0 -> 2, [0, 0, 1.5] -> [0,0,1.5]), so
         # that a point has one folder however its value was written
         texts = {k: [_value_text(v) for v in grid[k]] for k in self.keys}
@@ -192,18 +197,22 @@ class Grid:
 
     def summarise(self, times=None, flux_radius=None) -> dict:
         """Each point's :func:`~selfas_graph.ensemble.summarise`, and the rows of the combined table:
-        one per point, measure and time, with the grid keys as columns."""
-        p = self.ensembles[0].base.params
-        times = summary_times(times, self.t_end, p.output.interval, p.integrator.dt)
+        one per point, measure and time, with the grid keys as columns. Each point's times fall on its own
+        frames (a grid over ``output.interval`` or ``integrator.dt`` has frames of its own at each point);
+        ``times`` of the table are the first point's."""
+        asked, all_times = times, []
         points, rows = [], []
         for point, ens in zip(self.points, self.ensembles):
+            p = ens.base.params
+            times = summary_times(asked, ens.t_end, p.output.interval, p.integrator.dt)
+            all_times.append(times)
             paths = [p for p in (ens.folder / f"seed_{s:04d}.h5" for s in ens.seeds) if p.exists()]
-            s = summarise(paths, times, t_end=self.t_end, flux_radius=flux_radius)
+            s = summarise(paths, times, t_end=ens.t_end, flux_radius=flux_radius)
             points.append({"point": dict(point), "folder": ens.folder.name, "summary": s})
             # each point's summary.csv rows: the short circuit's, and the current measures' seeds
             # carrying current (k) of the seeds with a value (n_seeds), whose mean, sem and n are the k's
             rows += [{**dict(point), **r} for r in summary_rows(s)]
-        return {"keys": self.keys, "times": times, "t_end": self.t_end, "points": points, "rows": rows}
+        return {"keys": self.keys, "times": all_times[0], "t_end": self.t_end, "points": points, "rows": rows}
 
 
 def grid_csv(table) -> str:

@@ -38,10 +38,12 @@ def test_parse_grid_keeps_vectors_whole_and_refuses_bad_items():
         ({"rods.count": ["10", "many"]}, "rods.count"),
         ({"circuit.delta_J0": []}, "circuit.delta_J0"),  # an empty list (it was an IndexError)
         ({"circuit.delta_J0": "12"}, "circuit.delta_J0"),  # a string, not a list of values
+        # every point was summarised at the first point's end time
+        ({"run.t_end": ["0.1", "0.2"]}, "run.t_end: the end time is the grid's"),
     ],
 )
 def test_a_bad_grid_is_refused_naming_the_key_before_anything_is_written(tmp_path, grid, words):
-    with pytest.raises(EnsembleError, match=words.replace(".", r"\.")):
+    with pytest.raises(EnsembleError, match=words.replace(".", r"\.").replace("'", ".")):
         Grid(QUICK, grid, seeds=2, folder=tmp_path / "g")
     assert not (tmp_path / "g").exists()
 
@@ -117,3 +119,20 @@ def test_grid_from_python_locks_its_folders_and_summarises_at_frame_times(tmp_pa
     grid.run(jobs=1)
     assert grid.summarise()["times"] == [0.04, 0.08, 0.1]  # frames at 0, 0.04, 0.08 and the end
     assert not list(tmp_path.rglob(".ensemble.lock"))  # every lock released
+
+
+def test_each_point_is_summarised_at_its_own_frames(tmp_path):
+    """A grid over the output interval summarises each point at its own frames (each took the first
+    point's, which the other point's frames need not hold)."""
+    grid = Grid(
+        QUICK,
+        {"output.interval": ["0.04", "0.05"]},
+        seeds=1,
+        folder=tmp_path / "g",
+        overrides=["rods.count=20"],
+        t_end=0.1,
+    )
+    grid.run(jobs=1)
+    table = grid.summarise()
+    assert [p["summary"]["times"] for p in table["points"]] == [[0.04, 0.08, 0.1], [0.05, 0.1]]
+    assert table["times"] == [0.04, 0.08, 0.1]
