@@ -8,6 +8,7 @@ import math
 import operator
 import os
 import shlex
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -96,13 +97,23 @@ def summary_times(times, t_end, interval, dt=None) -> list[float]:
 
 
 def check_jobs(jobs) -> None:
-    """EnsembleError unless ``jobs`` (worker processes) is an integer >= 1."""
+    """EnsembleError unless ``jobs`` (worker processes) is an integer >= 1, and for more than one unless
+    this is the process that started the script (a worker that imports it would start its own pool)."""
     try:
         ok = operator.index(jobs) >= 1
     except TypeError:
         ok = False
     if not ok:
         raise EnsembleError(f"jobs: the number of worker processes, an integer >= 1, got {jobs!r}")
+    mp_main = sys.modules.get("__mp_main__")
+    if jobs > 1 and mp_main is not None and mp_main is not sys.modules.get("__main__"):
+        # multiprocessing's spawn runs the user's script as __mp_main__ (a module of its own, where the process
+        # that started it holds __main__ under that name too) in each worker it starts: a call not under the
+        # guard runs again there (it said the folder was locked by another ensemble: the script's own)
+        raise EnsembleError(
+            "run(jobs > 1) was called in a worker process while it imported your script: each worker starts by "
+            "importing it, so put the call under `if __name__ == \"__main__\":`"
+        )
 
 
 @dataclasses.dataclass

@@ -813,3 +813,21 @@ def test_the_summary_names_what_made_each_seed(quick):
             assert seed["commit"] == run.meta["commit"] and seed["version"] == run.meta["version"]
             assert seed["cpu_model"] == run.meta["cpu_model"] and seed["numba_threads"] >= 1
             assert seed["wall_seconds"] == float(run.meta["wall_seconds_total"]) > 0
+
+
+def test_a_pool_started_from_a_script_without_the_main_guard_says_so(tmp_path):
+    """``Ensemble.run(jobs=2)`` at a script's top level runs again in every worker that imports the script:
+    the workers said the folder was locked by another ensemble (the script's own) and to use -o; they now
+    say where the call must go."""
+    import subprocess
+    import sys
+
+    script = tmp_path / "noguard.py"
+    script.write_text(
+        "from selfas_graph.ensemble import Ensemble\n"
+        f"e = Ensemble({str(QUICK)!r}, seeds=2, folder='e', overrides=['rods.count=20'], t_end=0.01)\n"
+        "print([r['status'] for r in e.run(jobs=2)])\n"
+    )
+    res = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert 'put the call under `if __name__ == "__main__":`' in res.stderr
+    assert "in use by another ensemble" not in res.stderr
