@@ -56,6 +56,8 @@ def parse_frames(spec, n_frames) -> np.ndarray:
     if n_frames == 0:
         raise ExportError("the run has no saved frames")
     if not isinstance(spec, (str, type(None))) and np.ndim(spec) in (0, 1):
+        if any(isinstance(k, (bool, np.bool_)) for k in np.atleast_1d(spec).tolist()):
+            raise ExportError(f"frames={spec!r}: True or False is not a frame number (True was frame 1)")
         try:  # from Python: a frame number or a sequence of them, written as the command line's list
             spec = ",".join(str(operator.index(k)) for k in np.atleast_1d(spec).tolist())
         except TypeError:

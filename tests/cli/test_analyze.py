@@ -67,6 +67,7 @@ def test_frame_claims_keys_and_values(run_file):
         for k in DIMENSION_KEYS:
             assert math.isfinite(c[k]) == math.isfinite(c[k.replace("_err", "")]), k
         assert frame_claims(run, run.n_frames - 1) == c  # negative frames count from the end
+        assert frame_claims(run, t=float(run.time[-1]) - 1e-9) == c  # by time, as analyze --time
         # the same largest structure as the topology command, the same numbers as the array API
         assert c["largest_structure_rods"] == frame_topology(run)["largest_structure"]
         g = run.graph(frame=-1)

@@ -136,6 +136,8 @@ def test_an_export_replaces_only_a_file_of_its_format(run, capsys):
     assert main(["export", str(run), "--format", "gsd", "--frames", "0", "-o", str(run.parent / "a.gsd")]) == 2
     err = capsys.readouterr().err
     assert "pass --force to overwrite it or -o to choose another name" in err and "force=True" not in err
+    with pytest.raises(ExportError, match="True or False is not a frame number"):
+        export_run(run, "xyz", out=run.parent / "b.xyz", frames=True)  # it exported frame 1
     with pytest.raises(ExportExistsError, match="pass force=True to overwrite it, or another out= path") as info:
         export_run(run, "gsd", out=run.parent / "a.gsd", frames=0)
     assert info.value.path == run.parent / "a.gsd" and "--force" not in str(info.value)
