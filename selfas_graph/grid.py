@@ -122,7 +122,7 @@ class Grid:
 
     def __init__(self, scenario, grid: dict, seeds, folder, overrides=(), t_end=None, first_seed=None, force=False):
         if not grid:
-            raise EnsembleError("a grid needs at least one --grid KEY=V1,V2,...")
+            raise EnsembleError("a grid needs at least one key and its values ({KEY: [V1, V2]}, --grid KEY=V1,V2,...)")
         scenario, overrides, t_end = scenario_source(scenario, overrides, t_end)
         self.keys = list(grid)
         for key in self.keys:
@@ -133,7 +133,7 @@ class Grid:
         base = [o.split("=", 1)[0].strip() for o in overrides]
         for key in self.keys:
             if key in base:
-                raise EnsembleError(f"--grid {key}: also given by --set; give it in one place")
+                raise EnsembleError(f"grid key (--grid) {key}: also given in overrides (--set); give it in one place")
             if key == "run.t_end":  # every point was summarised at the first point's end
                 raise EnsembleError(
                     "--grid run.t_end: the end time is the grid's (t_end, --t-end); run to the latest end and read "

@@ -112,7 +112,7 @@ def check_jobs(jobs) -> None:
         # guard runs again there (it said the folder was locked by another ensemble: the script's own)
         raise EnsembleError(
             "run(jobs > 1) was called in a worker process while it imported your script: each worker starts by "
-            "importing it, so put the call under `if __name__ == \"__main__\":`"
+            'importing it, so put the call under `if __name__ == "__main__":`'
         )
 
 
@@ -176,7 +176,8 @@ class Ensemble:
         bad = [o for o in self.overrides if o.split("=", 1)[0].strip() == "scenario.seed"]
         if bad:
             raise EnsembleError(
-                f"--set {bad[0]}: the ensemble sets scenario.seed for each run; choose the seeds with --first-seed"
+                f"overrides (--set) {bad[0]}: the ensemble sets scenario.seed for each run; choose the seeds with "
+                f"first_seed (--first-seed) or a list of seeds"
             )
         try:
             self.base = load_scenario(self.scenario_path, overrides=self.overrides, t_end=t_end)
@@ -262,7 +263,7 @@ class Ensemble:
             except EnsembleError as exc:
                 problems.append(str(exc))
         if problems:
-            hint = "; pass --force to replace them" if not (self.force or summary_only) else ""
+            hint = "; pass force=True (--force) to replace them" if not (self.force or summary_only) else ""
             raise EnsembleError("seed files that cannot be used:\n  " + "\n  ".join(problems) + hint)
         return plans
 

@@ -83,11 +83,11 @@ def parse_frames(spec, n_frames) -> np.ndarray:
         bad = picked[(picked < -n_frames) | (picked >= n_frames)]
         if len(bad):
             raise ExportError(
-                f"--frames {text}: frame {int(bad[0])} out of range; the file has frames 0..{n_frames - 1}"
+                f"frames (--frames) {text}: frame {int(bad[0])} out of range; the file has frames 0..{n_frames - 1}"
             )
         picked = picked % n_frames
     if not len(picked):
-        raise ExportError(f"--frames {text}: selects no frame of the {n_frames} in the file")
+        raise ExportError(f"frames (--frames) {text}: selects no frame of the {n_frames} in the file")
     return np.asarray(picked, dtype=np.int64)
 
 
