@@ -77,8 +77,7 @@ class Trigger:
 
 
 def _period(period, who) -> int:
-    """``period`` as a whole number of steps >= 1; TypeError naming ``who`` otherwise (it became 1, or
-    was rounded down, without a word)."""
+    """``period`` as a whole number of steps >= 1; TypeError naming ``who`` otherwise (it was changed silently)."""
     if not is_whole_number(period) or period < 1:
         raise TypeError(f"{who}(period=...): a whole number of steps >= 1, got {period!r}")
     return int(period)
@@ -170,9 +169,8 @@ class _Hooks(Operation):
 
 
 def steps_between(t: float, t_end, dt: float) -> int:
-    """Steps of ``dt`` from ``t`` to ``t_end``, a whole number of steps ahead (to round-off), not in the past;
-    ValueError otherwise, naming the times that can be reached (:meth:`Simulation.steps_to
-    <.simulation.Simulation.steps_to>`, and an ensemble's check of its end time before any seed runs)."""
+    """Steps of ``dt`` from ``t`` to ``t_end``, a whole number ahead (to round-off); ValueError otherwise, naming
+    the times that can be reached (``Simulation.steps_to``, and an ensemble's check before any seed runs)."""
     t_end = time_value(t_end, "t_end")
     x = (t_end - t) / dt
     n = int(round(x))
@@ -310,12 +308,10 @@ class FrameWriter(Operation):
         """Write what the steps before ``exc`` buffered (the events and per-step rows up to a failure), and
         tell the writer why the run stopped: its ``close()`` then records that status, not "finished"."""
         self.flush(sim)
-        if isinstance(exc, KeyboardInterrupt):
-            self.writer.stopped_by = "interrupted (Ctrl-C)"
-        elif isinstance(exc, (NumericalFailure, RunInterrupted)):
-            self.writer.stopped_by = f"{'' if isinstance(exc, RunInterrupted) else 'failed: '}{exc}"
-        else:  # an error of an operation or a callback: named by its type
-            self.writer.stopped_by = f"failed: {type(exc).__name__}: {exc}"
+        named = isinstance(exc, (NumericalFailure, RunInterrupted))  # others: an operation's or a callback's error
+        why = f"failed: {exc}" if named else f"failed: {type(exc).__name__}: {exc}"
+        why = str(exc) if isinstance(exc, RunInterrupted) else why
+        self.writer.stopped_by = "interrupted (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else why
 
 
 class EnergyCheck(Operation):
