@@ -43,6 +43,16 @@ def scenario_source(scenario, overrides=(), t_end=None):
                 "the scenario was built from text and has no file each seed can run from: "
                 "give the scenario file's path, or a Scenario from load_scenario(path)"
             )
+        try:  # each seed runs from the file and the overrides: params changed after loading would be dropped
+            again = scenario_from_text(scenario.text, scenario.path, scenario.overrides, scenario.params.run.t_end)
+            same = again.params == scenario.params
+        except ScenarioError:
+            same = False
+        if not same:
+            raise EnsembleError(
+                "the scenario's params differ from what its file and overrides give (changed after "
+                "load_scenario?); each seed runs from the file: give the change as overrides"
+            )
         t_end = scenario.params.run.t_end if t_end is None else t_end
         return Path(scenario.path), [*scenario.overrides, *_override_list(overrides)], t_end
     if not isinstance(scenario, (str, os.PathLike)):

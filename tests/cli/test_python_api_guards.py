@@ -5,6 +5,7 @@ arguments that could only fail after a step are refused before it.
 The system: three rods in a column across a gap of 3.06 (their tips touch at step 0, so the circuit
 closes at once and the run has events to lose)."""
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -287,3 +288,8 @@ def test_python_mistakes_are_named_by_argument(tmp_path):
     with pytest.raises(EnsembleError, match=r"t_end \(--t-end\): t_end = 0.0105 is not a whole number of steps"):
         Ensemble(scene, 1, tmp_path / "e", t_end=0.0105)
     assert not (tmp_path / "e").exists()
+    loaded = sg.load_scenario(scene, overrides=["rods.count=40"], t_end=0.5)
+    Ensemble(loaded, 1, tmp_path / "e")  # a loaded scenario, its end time given at loading
+    changed = dataclasses.replace(loaded, params=loaded.params.replace(rods={"count": 30}))
+    with pytest.raises(EnsembleError, match="params differ from what its file and overrides give"):
+        Ensemble(changed, 1, tmp_path / "e")  # it ran the file's 40 rods without a word
