@@ -24,6 +24,7 @@ import math
 from dataclasses import dataclass
 
 from .health import NumericalFailure
+from .triggers import Always, Periodic, Trigger, When
 from .validate import as_decimal, is_whole_number
 
 __all__ = [
@@ -45,7 +46,13 @@ __all__ = [
 
 @dataclass
 class RunSummary:
-    """What :meth:`Simulation.run <.simulation.Simulation.run>` returns about the run it made."""
+    """What :meth:`Simulation.run <.simulation.Simulation.run>` returns about the run it made.
+
+    ``steps`` and ``wall_seconds`` are the call's; ``t_start`` and ``t_end`` its simulated times;
+    ``max_bond_error`` the largest bond-length error after the constraint so far; ``energy_balance``
+    (E - E0 - W) and ``energy_scale`` (kinetic energy + |work|) at its end; ``frames`` the frames
+    the writer holds in all (the file's, not this call's alone; 0 without a writer).
+    """
 
     steps: int = 0
     wall_seconds: float = 0.0
@@ -67,58 +74,6 @@ class RunInterrupted(Exception):
     def __init__(self, step):
         super().__init__(f"interrupted at step {step}")
         self.step = step
-
-
-class Trigger:
-    """Decides whether an operation acts at a time step."""
-
-    def __call__(self, timestep: int) -> bool:
-        raise NotImplementedError
-
-
-def _period(period, who) -> int:
-    """``period`` as a whole number of steps >= 1; TypeError naming ``who`` otherwise (it was changed silently)."""
-    if not is_whole_number(period) or period < 1:
-        raise TypeError(f"{who}(period=...): a whole number of steps >= 1, got {period!r}")
-    return int(period)
-
-
-class Periodic(Trigger):
-    """True when ``timestep % period == phase``."""
-
-    def __init__(self, period: int, phase: int = 0):
-        self.period = _period(period, "Periodic")
-        if not is_whole_number(phase):
-            raise TypeError(f"Periodic(phase=...): a whole number of steps, got {phase!r}")
-        self.phase = int(phase) % self.period
-
-    def __call__(self, timestep: int) -> bool:
-        return timestep % self.period == self.phase
-
-    def __repr__(self) -> str:
-        return f"Periodic(period={self.period}, phase={self.phase})"
-
-
-class Always(Trigger):
-    """True at every time step."""
-
-    def __call__(self, timestep: int) -> bool:
-        return True
-
-
-class When(Trigger):
-    """True when ``predicate()`` is, asked on the time steps that are multiples of ``period`` (default:
-    every step); a period lets the steps between run without Python (:mod:`.compiled`)."""
-
-    def __init__(self, predicate, period: int = 1):
-        if not callable(predicate):
-            raise TypeError(f"When(predicate, ...): a callable that returns true or false, got {predicate!r}")
-        self.predicate = predicate
-        self.period = _period(period, "When")
-        self.phase = 0
-
-    def __call__(self, timestep: int) -> bool:
-        return timestep % self.period == 0 and bool(self.predicate())
 
 
 class Operation:
@@ -219,7 +174,7 @@ def as_operation(obj, where: str) -> Operation:
 def run_operations(sim, writer, every, n_steps, progress, progress_every, checkpointer, stop, check_every) -> list:
     """The operations of one :meth:`Simulation.run <.simulation.Simulation.run>` call, in their order
     (module docstring): those its arguments make around the attached ``sim.operations``."""
-    _check_arguments(sim, writer, progress, checkpointer, stop, check_every)
+    _check_arguments(sim, writer, progress, checkpointer, stop, check_every, progress_every)
     ops = [PerStepRows(writer, every), FrameWriter(writer, every)] if writer is not None else [EnergyCheck(every)]
     ops += [as_operation(o, f"sim.operations[{k}]") for k, o in enumerate(sim.operations)]
     if progress is not None:
@@ -232,7 +187,7 @@ def run_operations(sim, writer, every, n_steps, progress, progress_every, checkp
     return ops
 
 
-def _check_arguments(sim, writer, progress, checkpointer, stop, check_every) -> None:
+def _check_arguments(sim, writer, progress, checkpointer, stop, check_every, progress_every=None) -> None:
     """Refuse before any step what would fail only after one: a closed writer, one whose file another
     simulation (or another step) continues, callbacks that cannot be called."""
     for name, fn in (("progress", progress), ("stop", stop)):
@@ -242,8 +197,9 @@ def _check_arguments(sim, writer, progress, checkpointer, stop, check_every) -> 
         callable(getattr(checkpointer, "due", None)) and hasattr(checkpointer, "write")
     ):
         raise TypeError(f"run(checkpointer=...): an object with due() and write(sim), got {checkpointer!r}")
-    if not is_whole_number(check_every) or check_every < 1:
-        raise TypeError(f"run(check_every=...): a whole number of steps >= 1, got {check_every!r}")
+    for name, every in (("check_every", check_every), ("progress_every", progress_every or 1)):
+        if not is_whole_number(every) or every < 1:
+            raise TypeError(f"run({name}=...): a whole number of steps >= 1, got {every!r}")
     if writer is not None and not callable(getattr(writer, "write_frame", None)):
         raise TypeError(
             f"run(writer=...): a writer, RunWriter.for_simulation(sim, path), not a path or other object; "

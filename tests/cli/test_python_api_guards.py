@@ -271,6 +271,8 @@ def test_python_mistakes_are_named_by_argument(tmp_path):
     with pytest.raises(TypeError, match=r"run\(writer=...\): a writer, RunWriter.for_simulation"):
         sim.run(0.01, writer=str(tmp_path / "x.h5"))
     assert sim.state.step == 0
+    with pytest.raises(TypeError, match=r"run\(progress_every=...\): a whole number of steps >= 1"):
+        sim.run(0.01, progress=lambda *a: None, progress_every=-2)
     with pytest.raises(TypeError, match="frame_topology.*an open RunFile"):
         frame_topology("run.h5")
     for bad in (0, -3, 2.7, "x", True):
