@@ -360,7 +360,7 @@ class Simulation:
         frames = next((o for o in ops if isinstance(o, op.FrameWriter)), None)
         obs = frames.last_observables if frames is not None and n_steps else None
         obs = obs if obs is not None else self.observables()
-        summary.energy_balance, summary.energy_scale = float(obs["energy_balance"]), energy_scale(obs)
+        summary.energy_balance, summary.energy_scale = float(obs["energy_balance"]), float(energy_scale(obs))
         summary.frames = writer.n_frames if writer is not None else 0
         return summary
 
