@@ -200,19 +200,18 @@ class Grid:
         one per point, measure and time, with the grid keys as columns. Each point's times fall on its own
         frames (a grid over ``output.interval`` or ``integrator.dt`` has frames of its own at each point);
         ``times`` of the table are the first point's."""
-        asked, all_times = times, []
-        points, rows = [], []
+        points, rows, point_times = [], [], []
         for point, ens in zip(self.points, self.ensembles):
-            p = ens.base.params
-            times = summary_times(asked, ens.t_end, p.output.interval, p.integrator.dt)
-            all_times.append(times)
+            params = ens.base.params
+            at = summary_times(times, ens.t_end, params.output.interval, params.integrator.dt)
+            point_times.append(at)
             paths = [p for p in (ens.folder / f"seed_{s:04d}.h5" for s in ens.seeds) if p.exists()]
-            s = summarise(paths, times, t_end=ens.t_end, flux_radius=flux_radius)
+            s = summarise(paths, at, t_end=ens.t_end, flux_radius=flux_radius)
             points.append({"point": dict(point), "folder": ens.folder.name, "summary": s})
             # each point's summary.csv rows: the short circuit's, and the current measures' seeds
             # carrying current (k) of the seeds with a value (n_seeds), whose mean, sem and n are the k's
             rows += [{**dict(point), **r} for r in summary_rows(s)]
-        return {"keys": self.keys, "times": all_times[0], "t_end": self.t_end, "points": points, "rows": rows}
+        return {"keys": self.keys, "times": point_times[0], "t_end": self.t_end, "points": points, "rows": rows}
 
 
 def grid_csv(table) -> str:

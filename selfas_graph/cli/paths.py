@@ -13,7 +13,7 @@ import os
 import stat
 from pathlib import Path
 
-from ..io.h5md_format import in_use, in_use_message, is_hdf5
+from ..io.h5md_format import dangling_link, in_use, in_use_message, is_hdf5
 from .main import CliError
 
 
@@ -53,12 +53,7 @@ def check_target(path, what="output file", force=False, inputs=(), keep_hdf5=Fal
     except (FileNotFoundError, NotADirectoryError):
         st = None
         if os.path.islink(path):
-            # written through, the link would make a file where it points (or fail there and be
-            # removed); replaced, the link itself would change: neither is what was named
-            raise CliError(
-                f"the {what} path {path} is a symbolic link to {os.readlink(path)}, which does not exist; "
-                f"give the file the link should point to, or another name"
-            ) from None
+            raise CliError(dangling_link(path, what)) from None
     except OSError as exc:
         if exc.errno == errno.ENAMETOOLONG:
             raise CliError(

@@ -29,7 +29,7 @@ import numpy as np
 from ..model.graph import ROLE_NAMES
 from . import layout
 from .h5md import RunFile, RunFileError
-from .h5md_format import is_hdf5
+from .h5md_format import dangling_link, is_hdf5
 
 FORMATS = ("gsd", "xyz")
 #: the suffixes an export's name may end in, by format (what the readers take the format from)
@@ -93,16 +93,13 @@ def parse_frames(spec, n_frames) -> np.ndarray:
 
 def output_path(run_path, out, fmt, force=False) -> Path:
     """The export's path (default: the run's name with the format's suffix), checked: never the
-    input file or any other HDF5 file (its checkpoint), never a name with the other format's suffix,
-    never an existing file without ``force``, never a symbolic link to nothing (it would be
-    replaced), in an existing folder."""
+    input file or any other HDF5 file (its checkpoint), never a name without the format's suffix
+    (:data:`SUFFIXES`), never an existing file without ``force`` (:class:`ExportExistsError`), never a
+    symbolic link to nothing (:func:`~.h5md_format.dangling_link`), in an existing folder."""
     run_path = Path(run_path)
     path = Path(out) if out is not None else run_path.with_suffix("." + fmt)
-    if path.is_symlink() and not path.exists():
-        raise ExportError(
-            f"the output path {path} is a symbolic link to {os.readlink(path)}, which does not exist; "
-            f"give the file the link should point to, or another name"
-        )
+    if dangling_link(path):
+        raise ExportError(dangling_link(path))
     if path.exists() and (path.resolve() == run_path.resolve() or os.path.samefile(path, run_path)):
         raise ExportError(f"{path} is the run file itself; choose another output with -o")
     if path.is_dir():

@@ -299,6 +299,18 @@ def in_use_message(path, what, force) -> str:
     )
 
 
+def dangling_link(path, what="output") -> str | None:
+    """Why ``path``, a symbolic link to nothing, is not written (through it a file would be made where it
+    points, or the link itself replaced: neither is what was named), or None when it is no such link."""
+    path = Path(path)
+    if not (path.is_symlink() and not path.exists()):
+        return None
+    return (
+        f"the {what} path {path} is a symbolic link to {os.readlink(path)}, which does not exist; "
+        f"give the file the link should point to, or another name"
+    )
+
+
 #: the names beside a run file that belong to it: a run file never takes one (``RUN.checkpoint.h5``, ``RUN.failure.h5``)
 COMPANION_SUFFIXES = (".checkpoint.h5", ".failure.h5")
 

@@ -35,6 +35,7 @@ from .h5md_format import (
     _growable,
     _set_unit,
     check_room,
+    dangling_link,
     in_use,
     in_use_message,
     not_replaced,
@@ -100,11 +101,8 @@ class RunWriter(PendingRows):
         refused = not_replaced(self.path)
         if refused:
             raise (IsADirectoryError if self.path.is_dir() else OutputExistsError)(refused)
-        if self.path.is_symlink() and not self.path.exists():
-            raise FileNotFoundError(
-                f"the output path {self.path} is a symbolic link to {os.readlink(self.path)}, which does not exist; "
-                f"give the file the link should point to, or another name"
-            )
+        if dangling_link(self.path):
+            raise FileNotFoundError(dangling_link(self.path))
         if self.path.exists() and not overwrite:
             raise OutputExistsError(
                 f"output file {self.path} exists; pass overwrite=True to overwrite it, or another path"

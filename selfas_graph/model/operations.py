@@ -264,10 +264,14 @@ class FrameWriter(Operation):
         """Write what the steps before ``exc`` buffered (the events and per-step rows up to a failure), and
         tell the writer why the run stopped: its ``close()`` then records that status, not "finished"."""
         self.flush(sim)
-        named = isinstance(exc, (NumericalFailure, RunInterrupted))  # others: an operation's or a callback's error
-        why = f"failed: {exc}" if named else f"failed: {type(exc).__name__}: {exc}"
-        why = str(exc) if isinstance(exc, RunInterrupted) else why
-        self.writer.stopped_by = "interrupted (Ctrl-C)" if isinstance(exc, KeyboardInterrupt) else why
+        if isinstance(exc, KeyboardInterrupt):
+            self.writer.stopped_by = "interrupted (Ctrl-C)"
+        elif isinstance(exc, RunInterrupted):  # "interrupted at step N"
+            self.writer.stopped_by = str(exc)
+        elif isinstance(exc, NumericalFailure):  # its message names itself
+            self.writer.stopped_by = f"failed: {exc}"
+        else:  # an error of an operation or a callback: named by its type
+            self.writer.stopped_by = f"failed: {type(exc).__name__}: {exc}"
 
 
 class EnergyCheck(Operation):

@@ -349,7 +349,8 @@ class Simulation:
             for operation in ops:
                 operation.finish(self)
         except BaseException as exc:  # what the steps before it buffered is written (Ctrl-C, a failure, a bug)
-            self.failure = exc if isinstance(exc, NumericalFailure) else None
+            if isinstance(exc, NumericalFailure):
+                self.failure = exc
             if not isinstance(exc, OSError):  # a failed write: writing again would fail again
                 op.stopped(ops, self, exc)
             raise
