@@ -123,7 +123,8 @@ class State:
         ------
         StateError
             Wrong shapes, non-finite values, a rod whose tips do not carry +q and -q
-            (docs/model.md 'Rods'), or a rod length off 1 by more than ``BOND_TOLERANCE``.
+            (docs/model.md 'Rods'), a rod length off 1 by more than ``BOND_TOLERANCE``, or a rod
+            given twice (its tips on another's).
         """
 
         def arr(name, value, shape):
@@ -178,6 +179,7 @@ class State:
                 f"{BOND_TOLERANCE:g} relative), {len(off)} rods are off; build the state with "
                 f"State.from_rods (centres and axes)"
             )
+        _refuse_twice_given(position)
         step, t = int(self.step), float(self.time)
         if step < 0 or not np.isfinite(t):
             raise StateError(f"State: step {step} and time {t} must be a step >= 0 and a finite time")
@@ -245,6 +247,27 @@ class State:
             _per_rod(electric_charge, n, "electric_charge"),
             rod_length=length,
             rod_resistance=resistance,
+        )
+
+
+def _refuse_twice_given(position: np.ndarray) -> None:
+    """Refuse a rod given twice (its two tips on another rod's two tips, either way round): the
+    regularised laws give a pair at zero distance no force (docs/model.md 'Term 1', 'Term 6'), and
+    every other force on the two is the same, so they would move as one for the whole run. Tips of
+    two rods at one point, or rods crossing, are taken: the rods' other forces part them."""
+    a, b = position[0::2], position[1::2]
+    a_first = (a[:, 0] < b[:, 0]) | (
+        (a[:, 0] == b[:, 0]) & ((a[:, 1] < b[:, 1]) | ((a[:, 1] == b[:, 1]) & (a[:, 2] <= b[:, 2])))
+    )
+    ends = np.where(a_first[:, None], np.hstack([a, b]), np.hstack([b, a]))
+    _, first, count = np.unique(ends, axis=0, return_index=True, return_counts=True)
+    if (count > 1).any():
+        k = int(first[np.flatnonzero(count > 1)[0]])
+        same = np.flatnonzero((ends == ends[k]).all(axis=1))
+        raise StateError(
+            f"State.position: rods {int(same[0])} and {int(same[1])} have their tips at the same two points "
+            f"{a[k].tolist()} and {b[k].tolist()}; at zero distance the forces between them have no direction, "
+            f"so the two would move as one: a rod given twice?"
         )
 
 
