@@ -22,6 +22,7 @@ from __future__ import annotations
 import operator
 import os
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -269,22 +270,31 @@ def write_xyz(run: RunFile, path, frames):
     _atomic_write(Path(path), write)
 
 
-def export_run(run_path, fmt, out=None, frames=None, force=False) -> tuple[Path, int]:
+def export_run(run_path, format=None, out=None, frames=None, force=False, *, fmt=None) -> tuple[Path, int]:
     """Export a run file; returns the output path and the number of frames written.
 
-    ``fmt`` is "gsd" or "xyz"; ``frames`` "all" (default), a frame number, "A:B[:S]", "K1,K2", or a
-    list of frame numbers; ``out`` the output path (default: the run's name with the format's
-    suffix), which must not exist unless ``force``.
+    ``format`` is "gsd" or "xyz" (the command's ``--format``; ``fmt=``, its name before 0.4.3, is
+    still taken, with a DeprecationWarning); ``frames`` "all" (default), a frame number, "A:B[:S]",
+    "K1,K2", or a list of frame numbers; ``out`` the output path (default: the run's name with the
+    format's suffix), which must not exist unless ``force``.
 
     Raises
     ------
     RunFileError
         The input is not a readable run file.
     ExportError
-        Bad ``fmt``, ``frames`` or output path; nothing is written then.
+        Bad ``format``, ``frames`` or output path; nothing is written then.
     """
-    if fmt not in FORMATS:
-        raise ExportError(f"format {fmt!r} is not known; valid: {', '.join(FORMATS)}")
+    if fmt is not None:
+        if format is not None:
+            raise TypeError("export_run: give format= alone (fmt= is its old name)")
+        warnings.warn("export_run(fmt=...) is now export_run(format=...)", DeprecationWarning, stacklevel=2)
+        format = fmt
+    if format is None:
+        raise TypeError(f"export_run(run_path, format): the format is missing; valid: {', '.join(FORMATS)}")
+    if format not in FORMATS:
+        raise ExportError(f"format {format!r} is not known; valid: {', '.join(FORMATS)}")
+    fmt = format
     with RunFile(run_path) as run:
         picked = parse_frames(frames, run.n_frames)
         path = output_path(run_path, out, fmt, force=force)

@@ -143,6 +143,19 @@ def test_an_export_replaces_only_a_file_of_its_format(run, capsys):
     assert info.value.path == run.parent / "a.gsd" and "--force" not in str(info.value)
 
 
+def test_the_format_keyword_is_the_commands_name(run):
+    """``export_run(format=...)`` as the command's ``--format``; ``fmt=``, the name of 0.4.2, still works."""
+    path, n = export_run(run, format="xyz", out=run.parent / "k.xyz", frames=0)
+    assert (path, n) == (run.parent / "k.xyz", 1)
+    with pytest.warns(DeprecationWarning, match=r"now export_run\(format=...\)"):
+        assert export_run(run, fmt="xyz", out=run.parent / "old.xyz", frames=0)[1] == 1
+    assert (run.parent / "old.xyz").read_bytes() == path.read_bytes()
+    with pytest.raises(TypeError, match="give format= alone"):
+        export_run(run, format="xyz", fmt="gsd")
+    with pytest.raises(TypeError, match=r"export_run\(run_path, format\): the format is missing; valid: gsd, xyz"):
+        export_run(run)
+
+
 def test_exports_get_the_permissions_of_a_new_file(run):
     """An export is written through a private temporary file (``mkstemp``: 0o600) and renamed: it
     used to keep those permissions, unreadable by the group where the run file beside it is not."""
