@@ -203,6 +203,11 @@ class Ensemble:
                 raise EnsembleError(f"seeds (--seeds) must be >= 1, got {seeds}")
             first = self.base.params.scenario.seed if first_seed is None else int(first_seed)
             seeds = range(first, first + int(seeds))
+        elif first_seed is not None:
+            raise EnsembleError(
+                f"first_seed (--first-seed) {first_seed!r} goes with a count of seeds; the seeds {seeds!r} are given "
+                f"themselves"
+            )
         try:
             if isinstance(seeds, (str, bytes)):
                 raise TypeError

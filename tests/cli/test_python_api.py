@@ -204,6 +204,9 @@ def test_step_count_and_overrides_are_checked():
     for seeds in ("12", 2.0, [1.5]):
         with pytest.raises(EnsembleError, match="seeds: give a count N or a list of integer seeds"):
             Ensemble(quick, seeds, "never_made")
+    with pytest.raises(EnsembleError, match=r"first_seed \(--first-seed\) 100 goes with a count of seeds"):
+        Ensemble(quick, [5], "never_made", first_seed=100)  # it ran seed 5 alone
+    assert Ensemble(quick, 2, "never_made", first_seed=100).seeds == [100, 101]
     assert not Path("never_made").exists()
 
 
