@@ -13,7 +13,7 @@ import numpy as np
 
 from ..model.circuitlog import CIRCUIT_LOG_DTYPE, circuit_log_array
 from ..model.events import CONDUCTOR_NAMES, KIND_NAMES, OPEN_CIRCUIT, SHORT_CIRCUIT, event_array
-from ..model.operations import RunInterrupted
+from ..model.operations import stop_status
 from ..model.topology import ROLE_NAMES
 from ..model.validate import is_whole_number
 from . import layout
@@ -519,15 +519,8 @@ class RunWriter(PendingRows):
         return self
 
     def __exit__(self, exc_type, exc, tb):
-        if exc_type is None:
-            status = None  # "finished", unless a run written stopped early (its exception caught inside)
-        elif issubclass(exc_type, KeyboardInterrupt):
-            status = "interrupted (Ctrl-C)"
-        elif issubclass(exc_type, RunInterrupted):  # a run's stop(): "interrupted at step N"
-            status = str(exc)
-        else:
-            status = f"failed: {exc or exc_type.__name__}"
-        self.close(status=status)
+        # None: "finished", unless a run written stopped early (its exception caught inside)
+        self.close(status=None if exc_type is None else stop_status(exc))
 
     def set_attrs(self, **attrs):
         for k, v in attrs.items():

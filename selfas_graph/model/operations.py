@@ -76,6 +76,18 @@ class RunInterrupted(Exception):
         self.step = step
 
 
+def stop_status(exc: BaseException) -> str:
+    """The status a run file records for a run stopped by ``exc``: "interrupted (Ctrl-C)", "interrupted at
+    step N", "failed: numerical failure ..." (the failure names itself), else "failed: Type: message"."""
+    if isinstance(exc, KeyboardInterrupt):
+        return "interrupted (Ctrl-C)"
+    if isinstance(exc, RunInterrupted):
+        return str(exc)
+    if isinstance(exc, NumericalFailure):
+        return f"failed: {exc}"
+    return f"failed: {type(exc).__name__}: {exc}" if str(exc) else f"failed: {type(exc).__name__}"
+
+
 class Operation:
     """Base of the operations: a ``trigger`` and what to do when it fires."""
 
@@ -264,14 +276,7 @@ class FrameWriter(Operation):
         """Write what the steps before ``exc`` buffered (the events and per-step rows up to a failure), and
         tell the writer why the run stopped: its ``close()`` then records that status, not "finished"."""
         self.flush(sim)
-        if isinstance(exc, KeyboardInterrupt):
-            self.writer.stopped_by = "interrupted (Ctrl-C)"
-        elif isinstance(exc, RunInterrupted):  # "interrupted at step N"
-            self.writer.stopped_by = str(exc)
-        elif isinstance(exc, NumericalFailure):  # its message names itself
-            self.writer.stopped_by = f"failed: {exc}"
-        else:  # an error of an operation or a callback: named by its type
-            self.writer.stopped_by = f"failed: {type(exc).__name__}: {exc}"
+        self.writer.stopped_by = stop_status(exc)
 
 
 class EnergyCheck(Operation):

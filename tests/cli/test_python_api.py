@@ -435,6 +435,14 @@ def test_an_error_in_the_users_own_code_keeps_the_rows_up_to_it(tmp_path, where)
     with h5py.File(tmp_path / "a.h5", "r") as f:
         assert len(f["observables/bond_error_per_step/step"]) == 250 == sim.state.step
         assert len(f["events"]) == len(sim.events)
+    # the writer as a context manager records the same status (it recorded "failed: bug in my code")
+    again = sg.Simulation.from_scenario(sg.load_scenario(ROOT / "scenarios" / "quick.toml"))
+    if where == "operation":
+        again.operations.append(Buggy())
+    with pytest.raises(ValueError), sg.RunWriter.for_simulation(again, tmp_path / "b.h5") as w:
+        again.run(1.0, writer=w, **({"progress": bug, "progress_every": 50} if where == "progress" else {}))
+    with sg.RunFile(tmp_path / "b.h5") as run:
+        assert run.meta["status"] == "failed: ValueError: bug in my code"
 
 
 def test_a_failed_simulation_refuses_more_steps_and_its_file_keeps_the_first_failure(tmp_path):
