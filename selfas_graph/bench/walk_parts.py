@@ -22,6 +22,13 @@ other tip (its forces are not the tree's: it is there for its time). With both s
 kernel must give the shipped kernel's forces bit for bit; the tool says whether it does, so that
 the parts are those of the code a run executes.
 
+``--separation`` times nothing: it asks what a local expansion about each group's centre could take
+over from the far cells. For every cell the walk accepts (the shipped test, :func:`far_separation`) it
+gives the ratio ``(b + r_g) / D`` of the cell's radius b plus the group's (half its box's diagonal)
+to the distance D of their centres, the ratio an expansion about the group's centre converges by (its
+error of order p about ``ratio^(p + 1)``), and prints the share of the far work (cells times targets)
+below each ratio.
+
 Each figure is the shortest of ``--reps`` runs (wall time, all numba threads), the five calls
 timed in turns. The header names the
 CPU and the instruction set numba compiled for; run it again with ``NUMBA_CPU_NAME=haswell
@@ -29,12 +36,13 @@ NUMBA_CPU_FEATURES=`` for the AVX2 build.
 """
 
 import argparse
+import math
 import time
 
 import numba
 import numpy as np
 
-from selfas_graph.kernels._jit import inline, inline_sum, njit_parallel_sum, prange, set_parallel_chunksize
+from selfas_graph.kernels._jit import inline, inline_sum, njit, njit_parallel_sum, prange, set_parallel_chunksize
 from selfas_graph.kernels.laws import tip_force_over_r, tip_force_over_r_f32
 from selfas_graph.kernels.tree import build_tip_tree, evaluate_tip_tree
 from selfas_graph.kernels.treewalk import (
@@ -45,6 +53,7 @@ from selfas_graph.kernels.treewalk import (
     _near_on_target_f32,
     _targets,
     _walk,
+    accepts,
 )
 
 from .tree import KAPPA, RSTAR, chains, fig2, uniform
@@ -263,6 +272,60 @@ def run_parts(tree, theta, parts, out, counts):
         set_parallel_chunksize(chunk)
 
 
+@njit
+def far_separation(start, end, nxt, box, centre, radius, group, theta, rstar):
+    """For every (group, accepted cell) pair of the walk (the acceptance test of
+    ``kernels/treewalk.py::accepts``): the ratio ``(b + r_g) / D`` (module docstring) and the group's
+    number of tips, the work the cell costs there."""
+    theta2 = theta * theta
+    ratio = np.empty(1024)
+    work = np.empty(1024, np.int64)
+    n = 0
+    for gi in range(group.shape[0]):
+        g = group[gi]
+        xl, yl, zl, xh, yh, zh = box[g, 0], box[g, 1], box[g, 2], box[g, 3], box[g, 4], box[g, 5]
+        gx, gy, gz = 0.5 * (xl + xh), 0.5 * (yl + yh), 0.5 * (zl + zh)
+        rg = 0.5 * math.sqrt((xh - xl) ** 2 + (yh - yl) ** 2 + (zh - zl) ** 2)
+        c = 0
+        while c < start.shape[0]:
+            take, _ = accepts(centre, radius, c, xl, yl, zl, xh, yh, zh, theta2, rstar)
+            if take:
+                if n == ratio.shape[0]:
+                    ratio = np.concatenate((ratio, np.empty(n)))
+                    work = np.concatenate((work, np.empty(n, np.int64)))
+                d = math.sqrt((centre[c, 0] - gx) ** 2 + (centre[c, 1] - gy) ** 2 + (centre[c, 2] - gz) ** 2)
+                ratio[n] = (radius[c] + rg) / d
+                work[n] = end[g] - start[g]
+                n += 1
+                c = nxt[c]
+            else:
+                c += 1
+    return ratio[:n], work[:n]
+
+
+#: the ratios ``(b + r_g) / D`` of ``--separation``'s table
+SEPARATIONS = (0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 1.0)
+
+
+def separation_table(args):
+    """``--separation``: the share of the far work an expansion about each group's centre could take."""
+    print(f"opening angle {args.theta:g}; share of the far work (cells x targets) with (b + r_g) / D below:")
+    print("| config | rods | groups | far cells a target | " + " | ".join(f"< {r:g}" for r in SEPARATIONS) + " |")
+    print("|---|---|---|---|" + "---|" * len(SEPARATIONS))
+    make = {"uniform": uniform, "chains": chains, "fig2": fig2}
+    for config in args.config:
+        for n_rods in args.rods:
+            t = build_tip_tree(*make[config](n_rods, np.random.default_rng(args.seed)))
+            ratio, work = far_separation(t.start, t.end, t.next, t.box, t.centre, t.radius, t.group, args.theta, RSTAR)
+            share = [work[ratio < r].sum() / work.sum() for r in SEPARATIONS]
+            print(
+                f"| {config} | {n_rods} | {t.group.shape[0]} | {work.sum() / t.x.shape[0]:.0f} | "
+                + " | ".join(f"{s:.3f}" for s in share)
+                + " |"
+            )
+    return 0
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rods", type=int, nargs="+", default=[6000, 24000])
@@ -270,10 +333,15 @@ def main(argv=None):
     ap.add_argument("--theta", type=float, default=0.55, help="opening angle (default 0.55, the tree's)")
     ap.add_argument("--reps", type=int, default=5)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument(
+        "--separation", action="store_true", help="no timing: how far the accepted cells are from their groups"
+    )
     args = ap.parse_args(argv)
     from .peer import machine_line
 
     print(machine_line())
+    if args.separation:
+        return separation_table(args)
     print(f"numba threads: {numba.get_num_threads()}; mixed precision, opening angle {args.theta:g}")
     print(
         "| config | rods | groups | whole ms | lists | near | far | rest | near pairs / far cells a target "

@@ -2,8 +2,10 @@
 end and prints its table (a tool that stopped running would otherwise be found only by its next
 user). The figures are measurements, not checked."""
 
+import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -40,6 +42,7 @@ def _main(name):
         ("step", ["--scenario", QUICK, "--rods", "300", "--steps", "10", "--repeat", "1"], "| 300 |"),
         ("current_tree", ["--rods", "300", "--theta", "0.5", "--reps", "1"], "| tree | mixed | 0.5 |"),
         ("walk_parts", ["--rods", "3000", "--config", "uniform", "--reps", "1"], "| uniform | 3000 |"),
+        ("walk_parts", ["--separation", "--rods", "1500", "--config", "uniform"], "(b + r_g) / D below"),
     ],
 )
 def test_a_tool_runs_to_its_table(name, argv, printed, capsys):
@@ -112,3 +115,37 @@ def test_radial_forces_refuses_bad_input(tmp_path, capsys):
     with pytest.raises(SystemExit) as info:
         tool([str(tmp_path / "none.h5")])
     assert "none.h5" in str(info.value.code) and "no such file" in str(info.value.code)
+
+
+def test_far_separation_takes_the_walks_cells():
+    """``walk_parts --separation``: the cells it finds for each group are those the shipped walk accepts
+    (as many per group as the walk records, padded to its chunks), each with the ratio (b + r_g) / D
+    computed here in plain Python. To 1e-14: the same float64 numbers, the squares perhaps summed in
+    another order."""
+    from selfas_graph.bench.tree import RSTAR, uniform
+    from selfas_graph.bench.walk_parts import NEAR, far_separation, run_parts
+    from selfas_graph.kernels.tree import build_tip_tree
+    from selfas_graph.kernels.treewalk import FAR_CHUNK
+
+    t = build_tip_tree(*uniform(1500, np.random.default_rng(3)), 32, 128, 4)
+    ratio, work = far_separation(t.start, t.end, t.next, t.box, t.centre, t.radius, t.group, 0.55, RSTAR)
+    counts = np.zeros((t.group.shape[0], 2), np.int64)
+    run_parts(t, 0.55, NEAR, np.empty((t.x.shape[0], 3)), counts)
+    expect, expect_work = [], 0
+    for gi, g in enumerate(t.group):
+        lo, hi = t.box[g, :3], t.box[g, 3:]
+        mid, rg = 0.5 * (lo + hi), 0.5 * math.sqrt(((hi - lo) ** 2).sum())
+        c, taken = 0, 0
+        while c < len(t.start):
+            d2 = (np.maximum(np.maximum(lo - t.centre[c], 0.0), t.centre[c] - hi) ** 2).sum()
+            b = t.radius[c]
+            if d2 * 0.55**2 > b * b and d2 > (b + RSTAR) ** 2:
+                expect.append((b + rg) / math.sqrt(((t.centre[c] - mid) ** 2).sum()))
+                c, taken = t.next[c], taken + 1
+            else:
+                c += 1
+        n_tips = t.end[g] - t.start[g]
+        assert counts[gi, 1] == n_tips * -(-taken // FAR_CHUNK) * FAR_CHUNK
+        expect_work += n_tips * taken
+    assert work.sum() == expect_work > 0
+    np.testing.assert_allclose(ratio, expect, rtol=1e-14)
