@@ -1,4 +1,4 @@
-"""One-body terms: fields of fixed sources acting on tips (docs/model.md 'Term 5', 'Term 8')."""
+"""One-body terms: fields of fixed sources acting on tips (docs/model.md 'Term 4', 'Term 5', 'Term 8')."""
 
 import numpy as np
 

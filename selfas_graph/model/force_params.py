@@ -340,3 +340,9 @@ class ForceParams:
         """Names of the terms that are on, in the order they are computed and summed: 1-8, 11, 9, 10 (this
         class's fields; docs/model.md 'Force terms')."""
         return [f.name for f in dataclasses.fields(self) if getattr(self, f.name) is not None]
+
+
+#: every table, :class:`ForceParams` and :func:`plasma_current_text`: what :mod:`.params` re-exports (a new
+#: table is in it without a line more)
+__all__ = [n for n, v in list(globals().items()) if dataclasses.is_dataclass(v) and v.__module__ == __name__]
+__all__ += ["plasma_current_text"]

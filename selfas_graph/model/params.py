@@ -17,22 +17,8 @@ import threading
 from dataclasses import dataclass
 from typing import Optional
 
-from .force_params import (  # noqa: F401 - the force tables are part of this schema
-    AmbientBrake,
-    CurrentField,
-    CurrentLorentz,
-    ElectricField,
-    Electrodes,
-    ExternalDipole,
-    ExternalFilament,
-    ForceParams,
-    PlasmaFilament,
-    TipBrake,
-    TipMagnetic,
-    UniformField,
-    Yukawa,
-    plasma_current_text,
-)
+from .force_params import *  # noqa: F403 - the force tables (force_params.__all__) are part of this schema
+from .force_params import ForceParams
 from .schema import spec
 
 #: set while the scenario loader builds a Parameters it validates itself (no second check)

@@ -57,7 +57,7 @@ def test_conservative_channels_are_minus_energy_gradients(scene):
             down = sum(ff.potential_energy(x)[c] for c in channels)
             numeric[k, d] = -(up - down) / (2 * h)
     # central differences: O(h^2 U''') truncation and O(U eps / h) round-off, ~1e-10 to 1e-8 of the
-    # largest force here (measured at most 3.7e-10 over the six scenes)
+    # largest force here (measured at most 3.7e-10 over the scenes of CONSERVATIVE_SCENES)
     np.testing.assert_allclose(force, numeric, rtol=0, atol=1e-8 * np.abs(force).max())
 
 

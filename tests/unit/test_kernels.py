@@ -294,12 +294,18 @@ def test_row_ranges_do_not_change_a_row(state, bounds):
 def _rows_kernel_cases(rng):
     """(kernel, arguments) for every O(n) kernel built by ``njit_rows``, on 3000 random tips."""
     from selfas_graph.kernels import external as kx
+    from selfas_graph.kernels.cells import neighbour_rows
+    from selfas_graph.kernels.treebuild import morton_keys
 
     n = 3000
     x = rng.normal(size=(n, 3))
     v = rng.normal(size=(n, 3))
     q = rng.normal(size=n)
     src = rng.normal(size=(4, 3))
+    start, index = neighbour_rows(x, 0.4)  # about 30 neighbours a tip
+    counts = np.zeros(n, np.int64)
+    contacts._close_counts(x, start, index, 0.3, counts)
+    offset = np.concatenate(([0], np.cumsum(counts)))
     return [
         (ki.ab4_update, lambda: (x, v, 2 * v, 3 * v, 4 * v, 1e-3, np.zeros((n, 3)))),
         (ki.axpy, lambda: (x, v, 0.1, np.zeros((n, 3)))),
@@ -352,6 +358,10 @@ def _rows_kernel_cases(rng):
         ),
         (kx.monopole_field, lambda: (x, src, np.array([1.0, -1.0, 2.0, -2.0]), RSTAR, np.zeros((n, 3)))),
         (kx.line_yukawa_on_centres, lambda: (x, q, -1.0, 1.0, 0.5, 1.0, 0.05, *kc_nodes(8), np.zeros((n, 3)))),
+        (kt.tip_tip_fast, lambda: (x, q, start, index, RSTAR, KAPPA, 0.2, 0.4, np.zeros((n, 3)))),
+        (contacts._close_counts, lambda: (x, start, index, 0.3, np.zeros(n, np.int64))),
+        (contacts._close_fill, lambda: (x, start, index, 0.3, offset, np.zeros((offset[-1], 2), np.int64))),
+        (morton_keys, lambda: (*(np.ascontiguousarray(x[:, d]) for d in range(3)), np.zeros(n, np.int64))),
     ]
 
 
@@ -373,6 +383,23 @@ def test_rows_kernels_serial_and_parallel_builds_agree_bit_for_bit(rng):
             for p, q in zip(*((u, w) if isinstance(u, tuple) else ((u,), (w,)))):
                 if isinstance(p, np.ndarray):
                     np.testing.assert_array_equal(p, q, err_msg=kernel.__name__)
+
+
+def test_every_rows_kernel_has_its_case(rng):
+    """The bit-for-bit test above covers every ``njit_rows`` kernel of the package (a new one was left
+    out without a word)."""
+    import importlib
+    import pkgutil
+
+    import selfas_graph.kernels as package
+    from selfas_graph.kernels._jit import _RowsKernel
+
+    found = set()
+    for info in pkgutil.iter_modules(package.__path__):
+        module = importlib.import_module(f"selfas_graph.kernels.{info.name}")
+        found |= {f"{k.py_func.__module__}.{k.__name__}" for k in vars(module).values() if isinstance(k, _RowsKernel)}
+    cased = {f"{k.py_func.__module__}.{k.__name__}" for k, _ in _rows_kernel_cases(rng)}
+    assert found - cased == set(), "add these to _rows_kernel_cases"
 
 
 def test_kernel_sources_digest_sees_every_kernel_module(tmp_path):
