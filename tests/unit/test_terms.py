@@ -54,3 +54,24 @@ def test_a_diagnosis_names_the_keys_of_the_tables_the_scene_has():
     )
     assert sim.force_field.channel_keys("nonesuch") == "forces.nonesuch"
     assert sim.force_field.channel_keys(None) == "the force terms"
+
+
+def test_every_term_is_exported_and_in_the_models_term_table():
+    """The places that list the terms by hand (ARCHITECTURE.md 'How to add a force term', step 4): each
+    term class is in ``model/terms/__init__.py``'s ``__all__``, each scenario table has its row in the
+    table of docs/model.md 'Force terms', with each of the term's channels."""
+    from pathlib import Path
+
+    import selfas_graph.model.terms as terms
+    from selfas_graph.model.force_params import ForceParams
+
+    assert {t.__name__ for t in TERMS} <= set(terms.__all__)
+    assert set(TERM_CLASSES) == {f.name for f in dataclasses.fields(ForceParams)}
+    text = (Path(__file__).resolve().parents[2] / "docs" / "model.md").read_text()
+    table = text[text.index("## 3. Force terms") : text.index("\n## 4.")]
+    for name in TERM_CLASSES:
+        rows = [r for r in table.splitlines() if r.startswith("|") and f"`forces.{name}`" in r]
+        assert rows, f"docs/model.md 'Force terms': no row for forces.{name}"
+        for cls in (TERM_CLASSES[name], *FOLLOWING_TERMS.get(name, ())):
+            for channel, _ in cls.channels:
+                assert any(channel in r.split("|")[3] for r in rows), (name, channel)
