@@ -180,10 +180,11 @@ def mean_sem_fits(values, fit_err, axis=0):
     each seed's own fit uncertainty. Each seed has the same weight (no inverse-variance
     weighting: a seed whose structure fits a straight line better is not a likelier sample of
     the ensemble). The between-seed variance already holds the random part of the fit errors,
-    so the sum counts that part twice: it is an upper bound for it, chosen because most of a
-    fit's uncertainty on these structures is systematic (how the slope depends on the range),
-    shared between seeds and not reduced by their spread. A bias common to every seed is not
-    reduced by averaging at all; the anchors of ``tests/unit/test_fractal.py`` bound it.
+    so the sum counts that part twice: an upper bound on the random error. Most of a fit's
+    uncertainty on these structures is the bend of the curve over the fitted range, alike from
+    seed to seed; such a part is not reduced by averaging at all, so the results page also
+    states its verdicts by ``sem_between`` alone (``studies/verdicts.py``). A bias common to
+    every seed is bounded by the anchors of ``tests/unit/test_fractal.py``.
 
     Parameters
     ----------

@@ -99,7 +99,7 @@ def study_table(summary) -> str:
     n_obs, n = sc.get("n_observed", 0), summary["n_seeds"]
     text = f"{n_obs} of {n} seeds"
     if n_obs:
-        text += f", median time (Kaplan-Meier) {fmt(sc.get('median'))} t0"
+        text += f", median time (Kaplan-Meier: where its estimate reaches 1/2) {fmt(sc.get('median'))} t0"
         starts = [s["episodes"]["start"] for s in summary["seeds"]]
         text += f"; {sum(len(x) for x in starts)} closings of the {'gap' if electrodes else 'circuit'} in all"
         first = [s["episodes"].get("total_current", [None])[:1] for s in summary["seeds"]]
@@ -122,7 +122,8 @@ def percolation_table(summary) -> str:
     Wilson interval of the fraction) and the Kaplan-Meier median [quartiles] of the short-circuit time."""
     t_max = summary["study"]["t_max"]
     rows = [
-        f"| rods | short-circuited by t = {t_max:g} (95 % interval) | median short-circuit time [q25 to q75] |",
+        f"| rods | short-circuited by t = {t_max:g} (Wilson 95 % interval) | median short-circuit time [q25 to q75] "
+        "(Kaplan-Meier) |",
         "|---|---|---|",
     ]
     for d in summary["densities"]:

@@ -177,6 +177,17 @@ def window_values(summary, measure, lo, hi):
     return np.where(n > 0, np.nansum(v, axis=1) / np.maximum(n, 1), np.nan)
 
 
+def window_times(summary, measure, lo, hi) -> int:
+    """How many summarised times in [lo, hi] hold ``measure`` for some seed: the times a window's mean
+    is over (the costly flux is summarised at fewer times than the counts)."""
+    times = np.asarray(summary["times"], dtype=float)
+    pick = (times >= lo - 1e-9) & (times <= hi + 1e-9)
+    if measure not in summary["measures"] or not pick.any():
+        return 0
+    rows = summary["measures"][measure]["values"]
+    return sum(any(row[k] is not None for row in rows) for k in np.flatnonzero(pick))
+
+
 def older_runs(summary, since) -> list:
     """The versions of a summary's runs older than ``since`` (docs/studies.toml ``trajectories_since``,
     the first version whose trajectories the code follows now), an unreadable version counted as older;

@@ -12,7 +12,18 @@ from __future__ import annotations
 import math
 
 from ..provenance import version_key
-from .stats import FIT_ERRORS, measure_label, measure_text, older_runs, plain_stat, pm, values_at, window_values
+from .stats import (
+    FIT_ERRORS,
+    fmt,
+    measure_label,
+    measure_text,
+    older_runs,
+    plain_stat,
+    pm,
+    values_at,
+    window_times,
+    window_values,
+)
 
 __all__ = ["CLAIM_MEASURES", "claim_rows", "convergence_rows", "sweep_points", "sweep_rows"]
 
@@ -42,6 +53,20 @@ def _verdict(d, expect):
     return f"not distinguished from the null model ({d:+.1f} SE)".replace("-", "−")
 
 
+def _fit_verdict(d, d_seeds, expect):
+    """The verdict on a fitted measure, whose standard error carries each seed's fit uncertainty (``d``)
+    or the spread between seeds alone (``d_seeds``): the two are stated, and where they lead to
+    different verdicts the page says that the verdict depends on counting the fits' own errors
+    (docs/model.md "Measures of the paper's claims")."""
+    with_fits, seeds_alone = _verdict(d, expect), _verdict(d_seeds, expect)
+    if with_fits.split(" (")[0] == seeds_alone.split(" (")[0]:
+        return f"{with_fits[:-1]}; {d_seeds:+.1f} SE by the spread between seeds alone)".replace("-", "−")
+    return (
+        f"depends on the fits' own errors: {with_fits} with each seed's fit error, {seeds_alone} by the "
+        f"spread between seeds alone"
+    )
+
+
 def _older_note(summaries, names, studies) -> str:
     """ "; made before the trajectory change of 0.4.0 (NAME: 0.3.0): to be run again" for the studies
     among ``names`` made of runs older than their ``trajectories_since`` (``studies.since``), or ""."""
@@ -67,7 +92,7 @@ def claim_rows(studies, summaries) -> str:
             continue
         if c.window:
             lo, hi = c.window
-            where = f"mean over t = {lo:g}-{hi:g}"
+            where = f"mean over t = {lo:g}-{hi:g} ({window_times(s, c.measure, lo, hi)} summarised times)"
             value = pm(plain_stat(window_values(s, c.measure, lo, hi)))
             value += f"; at t = {c.time:g}: {measure_text(s, c.measure, c.time)}"
         else:
@@ -97,6 +122,11 @@ def claim_rows(studies, summaries) -> str:
             null_text = studies.study(c.null).title
             null_value += "" if nm == c.measure else f" ({measure_label(nm)})"
             verdict = _verdict(d, c.expect)
+            if not c.window and (ea is not None or eb is not None):
+                seeds_alone = _claim_difference(
+                    plain_stat(values_at(s, c.measure, c.time)), plain_stat(values_at(null, nm, c.time))
+                )
+                verdict = _fit_verdict(d, seeds_alone, c.expect)
         verdict += _older_note(summaries, (c.study, c.null), studies)
         rows.append(
             f"| {c.claim} | {c.paper} | {measure_label(c.measure)}, {where} | {value} | {null_text} | "
@@ -122,13 +152,21 @@ def _difference(a, b):
     return (a["mean"] - b["mean"]) / den if den > 0 else math.nan
 
 
+def _detectable(a, b) -> str:
+    """The smallest difference the comparison of ``a`` with the default ``b`` would find: 2 combined
+    standard errors, in % of the default's mean ("n/a" without a spread or a mean)."""
+    if not (a["n"] and b["n"]) or not (math.isfinite(a["sem"]) and math.isfinite(b["sem"])) or not b["mean"]:
+        return "n/a"
+    return f"±{fmt(200 * math.sqrt(a['sem'] ** 2 + b['sem'] ** 2) / abs(b['mean']), 2)} %"
+
+
 def convergence_rows(studies, summaries) -> str:
     """For each variant of a numerical knob, each claim measure at the variant's end time against the
     study it varies (same time): both means with their standard errors, the difference in combined
     standard errors, and what follows for a user."""
     rows = [
-        "| setting | measure | default | this setting | difference (combined SE) | conclusion |",
-        "|---|---|---|---|---|---|",
+        "| setting | measure | default | this setting | difference (combined SE) | detectable | conclusion |",
+        "|---|---|---|---|---|---|---|",
     ]
     for st in studies.studies.values():
         if st.section != "convergence":
@@ -136,7 +174,7 @@ def convergence_rows(studies, summaries) -> str:
         s, base = summaries.get(st.name), summaries.get(st.null_of)
         if s is None or base is None:
             missing = st.name if s is None else st.null_of
-            rows.append(f"| {st.title} | | | | | not run yet (`selfas-graph study run {missing}`) |")
+            rows.append(f"| {st.title} | | | | | | not run yet (`selfas-graph study run {missing}`) |")
             continue
         t = st.t_end
         ds = []
@@ -152,17 +190,20 @@ def convergence_rows(studies, summaries) -> str:
         if not finite:
             verdict = "not decided (too few seeds)"
         elif max(finite) > 3:
-            verdict = "moves these statistics: not safe for them"
+            verdict = "moves these statistics"
         elif max(finite) > 2:
             verdict = "marginal (a difference of 2-3 SE)"
         else:
-            verdict = "safe for these statistics (every difference within 2 SE)"
+            verdict = "no difference detected at this size (every difference within 2 SE)"
+        if finite and len(finite) < len(ds):
+            verdict += f"; {len(ds) - len(finite)} of {len(ds)} measures not compared (n/a)"
         verdict += _older_note(summaries, (st.name, st.null_of), studies)
         for k, (m, b, a, d) in enumerate(cells):
             name = st.title if k == 0 else ""
             text = "n/a" if not math.isfinite(d) else f"{d:+.1f}".replace("-", "−")
             rows.append(
-                f"| {name} | {measure_label(m)}, t = {t:g} | {pm(b)} | {pm(a)} | {text} | {verdict if k == 0 else ''} |"
+                f"| {name} | {measure_label(m)}, t = {t:g} | {pm(b)} | {pm(a)} | {text} | {_detectable(a, b)} | "
+                f"{verdict if k == 0 else ''} |"
             )
     return "\n".join(rows)
 

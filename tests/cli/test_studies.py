@@ -342,6 +342,57 @@ null_measure = "all_alignment"
     assert words in table, table
 
 
+@pytest.mark.parametrize(
+    "claim_err, words",
+    [
+        # fit errors of 1 a seed: SE sqrt((0.01 + 1) / 3) = 0.58 a side, d = +0.5 / 0.82 = +0.6; by the
+        # spread alone (0.1 / sqrt 3 = 0.058 a side) d = +6.1: the verdicts differ, and the page says so
+        (1.0, "depends on the fits' own errors: not distinguished from the null model (+0.6 SE) with each seed's "
+         "fit error, opposite to the claim (+6.1 SE from the null model) by the spread between seeds alone"),
+        # fit errors of 0.01: both ways opposite, the one with the fits first
+        (0.01, "opposite to the claim (+6.1 SE from the null model; +6.1 SE by the spread between seeds alone)"),
+    ],
+)  # fmt: skip
+def test_a_fitted_measures_verdict_is_given_with_and_without_the_fits_errors(tmp_path, claim_err, words):
+    """A fitted dimension's standard error carries each seed's fit error; most of that error is the bend
+    of the mass-radius curve, alike from seed to seed, so the verdict by the spread between seeds alone
+    is given beside it, and a disagreement is named rather than resolved."""
+    from selfas_graph.studies.verdicts import claim_rows
+
+    (tmp_path / "s.toml").write_text(
+        """
+[study.a]
+scenario = "x"
+seeds = 3
+t_end = 600
+[study.b]
+title = "plain"
+scenario = "x"
+seeds = 3
+t_end = 600
+[[claim]]
+id = "c"
+claim = "a fractal skeleton"
+paper = "words"
+study = "a"
+measure = "fractal_dimension"
+time = 600
+null = "b"
+expect = "less"
+"""
+    )
+
+    def fitted(values, err):
+        s = _fake_summary(values, measure="fractal_dimension")
+        s["measures"]["fractal_dimension_err"] = {"values": [[err] for _ in values]}
+        s["seeds"] = [{"seed": k + 1, "t_end": 600.0} for k in range(len(values))]
+        return s
+
+    studies = load_studies(tmp_path / "s.toml")
+    table = claim_rows(studies, {"a": fitted([2.4, 2.5, 2.6], claim_err), "b": fitted([1.9, 2.0, 2.1], claim_err)})
+    assert words in table, table
+
+
 def test_study_commands_away_from_their_files_say_which_file_and_what_to_do(tmp_path):
     """Run outside the repository's root, `study list` names --studies; `study page` of a study whose
     scenario file cannot be read from here stops, naming the file, and writes nothing (it would
