@@ -273,12 +273,26 @@ def write_json_atomic(data, path) -> Path:
 
 def percolation_summary(study, path) -> dict:
     """The summary of a percolation study from ``selfas-graph bench percolation``'s result file: the
-    statistics per rod count (runs, short-circuited, the 95 % interval of the fraction, Kaplan-Meier
-    quartiles of the short-circuit time) and the provenance of the runs; the runs themselves and the
-    Kaplan-Meier curves stay in the result file."""
+    statistics per rod count (runs, short-circuited, the Wilson 95 % interval of the fraction,
+    Kaplan-Meier quartiles of the short-circuit time), what they are made of (the Kaplan-Meier curve
+    ``km`` and each run's ``run_times``: seed, status, and the short-circuit time or the time it was
+    censored at), and the provenance of the runs."""
     raw = json.loads(Path(path).read_text(encoding="utf-8"))
     keep = ("count", "density", "fraction_volume", "phi", "runs", "short_circuited", "censored", "failed")
-    keep += ("fraction", "fraction_ci95", "q25", "median", "q75")
+    keep += ("fraction", "fraction_ci95", "q25", "median", "q75", "km")
+    runs = raw.get("runs", [])
+
+    def run_times(count):
+        return [
+            {
+                "seed": r["seed"],
+                "status": r["status"],
+                "time": r["time"] if r["status"] == "short_circuit" else r["t_end"],
+            }
+            for r in runs
+            if r["count"] == count
+        ]
+
     return {
         "kind": "percolation",
         "study": {
@@ -289,7 +303,9 @@ def percolation_summary(study, path) -> dict:
             "t_max": raw["t_max"],
             "fields": raw["fields"],
         },
-        "densities": [{k: d[k] for k in keep if k in d} for d in raw["densities"]],
+        "densities": [
+            {**{k: d[k] for k in keep if k in d}, "run_times": run_times(d["count"])} for d in raw["densities"]
+        ],
         "seeds": raw["seeds"],
         "version": raw.get("version", ""),
         "commit": raw.get("commit", ""),
