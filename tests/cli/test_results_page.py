@@ -3,6 +3,7 @@ regenerated from docs/studies.toml and docs/results/*.json and compared (no numb
 typed by hand), and every committed summary names a commit and covers its study's seeds."""
 
 import json
+import math
 from pathlib import Path
 
 from selfas_graph.studies import load_studies
@@ -35,6 +36,8 @@ def test_every_committed_summary_names_its_commits_and_is_complete():
         if summary.get("kind") == "percolation":
             assert len(summary["commit"].removesuffix("+dirty")) == 40 and summary["cpu_model"], path
             assert [d["count"] for d in summary["densities"]] == list(study.counts), path
+            for d in summary["densities"]:  # its statistics follow from the runs' times it keeps
+                _percolation_statistics_follow_from_the_runs(d, summary["study"]["t_max"], path)
             continue
         assert summary["seeds"], path
         for seed in summary["seeds"]:
@@ -43,6 +46,23 @@ def test_every_committed_summary_names_its_commits_and_is_complete():
         if not summary.get("missing"):
             assert summary["n_seeds"] == study.seeds
             assert min(s["t_end"] for s in summary["seeds"]) >= study.t_end - 1e-9, f"{path.name}: a seed ended early"
+
+
+def _percolation_statistics_follow_from_the_runs(d, t_max, path):
+    """A percolation summary's count, Wilson interval and Kaplan-Meier quartiles from its runs' times
+    (a summary from before the runs' times were kept has none to check)."""
+    from selfas_graph.analysis.ensemble_stats import kaplan_meier, km_quantile, wilson_interval
+
+    if "run_times" not in d:
+        return
+    used = [r for r in d["run_times"] if r["status"] in ("short_circuit", "censored", "failed")]
+    observed = [r["status"] == "short_circuit" for r in used]
+    assert (len(used), sum(observed)) == (d["runs"], d["short_circuited"]), (path.name, d["count"])
+    assert list(wilson_interval(sum(observed), len(used))) == d["fraction_ci95"]
+    t, F = kaplan_meier([r["time"] for r in used], observed)
+    for q, key in ((0.25, "q25"), (0.5, "median"), (0.75, "q75")):
+        want = km_quantile(t, F, q)
+        assert (d[key] is None and not math.isfinite(want)) or d[key] == want, (path.name, d["count"], key)
 
 
 def test_the_page_links_the_movie_its_summary_was_made_with(tmp_path, monkeypatch):
