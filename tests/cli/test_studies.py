@@ -304,6 +304,16 @@ def _fake_summary(values, t=600.0, measure="largest_alignment"):
     }
 
 
+def _claim_against_null(tmp_path, lines):
+    """A studies file of two 3-seed studies to t = 600, ``a`` and its null model ``b``, and one claim
+    on ``a`` at t = 600 with the TOML ``lines`` (its measure, and what else it sets)."""
+    (tmp_path / "s.toml").write_text(
+        "[study.a]\nscenario = 'x'\nseeds = 3\nt_end = 600\n[study.b]\ntitle = 'null'\nscenario = 'x'\nseeds = 3\n"
+        f"t_end = 600\n[[claim]]\nid = 'c'\nclaim = 'a claim'\npaper = 'words'\nstudy = 'a'\ntime = 600\nnull = 'b'\n{lines}\n"
+    )
+    return load_studies(tmp_path / "s.toml")
+
+
 @pytest.mark.parametrize(
     "claim, null, words",
     [
@@ -315,29 +325,7 @@ def _fake_summary(values, t=600.0, measure="largest_alignment"):
 def test_a_verdict_needs_three_combined_standard_errors_in_the_claimed_direction(tmp_path, claim, null, words):
     from selfas_graph.studies.verdicts import claim_rows
 
-    (tmp_path / "s.toml").write_text(
-        """
-[study.a]
-scenario = "x"
-seeds = 3
-t_end = 600
-[study.b]
-title = "free rods"
-scenario = "x"
-seeds = 3
-t_end = 600
-[[claim]]
-id = "c"
-claim = "a bigger dipole"
-paper = "words"
-study = "a"
-measure = "largest_alignment"
-time = 600
-null = "b"
-null_measure = "all_alignment"
-"""
-    )
-    studies = load_studies(tmp_path / "s.toml")
+    studies = _claim_against_null(tmp_path, 'measure = "largest_alignment"\nnull_measure = "all_alignment"')
     table = claim_rows(studies, {"a": _fake_summary(claim), "b": _fake_summary(null)})
     assert words in table, table
 
@@ -359,28 +347,7 @@ def test_a_fitted_measures_verdict_is_given_with_and_without_the_fits_errors(tmp
     is given beside it, and a disagreement is named rather than resolved."""
     from selfas_graph.studies.verdicts import claim_rows
 
-    (tmp_path / "s.toml").write_text(
-        """
-[study.a]
-scenario = "x"
-seeds = 3
-t_end = 600
-[study.b]
-title = "plain"
-scenario = "x"
-seeds = 3
-t_end = 600
-[[claim]]
-id = "c"
-claim = "a fractal skeleton"
-paper = "words"
-study = "a"
-measure = "fractal_dimension"
-time = 600
-null = "b"
-expect = "less"
-"""
-    )
+    studies = _claim_against_null(tmp_path, 'measure = "fractal_dimension"\nexpect = "less"')
 
     def fitted(values, err):
         s = _fake_summary(values, measure="fractal_dimension")
@@ -388,7 +355,6 @@ expect = "less"
         s["seeds"] = [{"seed": k + 1, "t_end": 600.0} for k in range(len(values))]
         return s
 
-    studies = load_studies(tmp_path / "s.toml")
     table = claim_rows(studies, {"a": fitted([2.4, 2.5, 2.6], claim_err), "b": fitted([1.9, 2.0, 2.1], claim_err)})
     assert words in table, table
 
