@@ -50,6 +50,7 @@ from ..lifecycle import (
 )
 from ..model.accuracy import null_model_notes, short_of_accuracy
 from ..model.compiled import python_steps_reason
+from ..model.health import stiff_brakes
 from ..model.params import plasma_current_text
 from ..model.simulation import Simulation
 from ..model.state import PlacementError
@@ -421,6 +422,10 @@ def run(args):
             for rule in short_of_accuracy(p):
                 print(f"faster than accurate: {rule.key} = {rule.value(p)}; the stated accuracy needs {rule.stated}")
             print(json.dumps(plan, indent=2))
+        if stiff := stiff_brakes(p, p.integrator.dt):  # the run would stop at its first contacts, or at once
+            if world.rank == 0:
+                print(f"selfas-graph simulate: the run would stop with a numerical failure: {stiff}", file=sys.stderr)
+            return EXIT_NUMERICAL
         return 0
 
     def open_writer():
@@ -538,6 +543,16 @@ def _io_failure(exc, writer, out, ckpt, sim):
     raise CliIOError(msg, hard_exit=not clean) from None
 
 
+def _balance_note(rel, sim) -> str:
+    """The balance over the energy turned over; a finished run above its energy_tolerance passed the
+    check by the round-off floor of the energies (model/health.py), so its ratio says nothing."""
+    if not math.isfinite(rel):
+        return "(no energy turned over)"
+    if abs(rel) > sim.params.integrator.energy_tolerance:
+        return "(round-off of the energies: almost no energy turned over)"
+    return f"({rel:.2g} of kinetic energy + |work|)"
+
+
 def _print_summary(s, out, sim):
     rel = s.energy_balance / s.energy_scale if s.energy_scale > 0 else float("nan")
     speed = (
@@ -546,8 +561,7 @@ def _print_summary(s, out, sim):
     lines = [
         f"done: {s.steps} steps, t = {s.t_start:.4g} -> {s.t_end:.4g} in {_fmt_time(s.wall_seconds)} ({speed})",
         f"  max bond-length error after constraint: {s.max_bond_error:.3g}",
-        f"  energy balance E - E0 - W: {s.energy_balance:.3g} "
-        + (f"({rel:.2g} of kinetic energy + |work|)" if math.isfinite(rel) else "(no energy turned over)"),
+        f"  energy balance E - E0 - W: {s.energy_balance:.3g} " + _balance_note(rel, sim),
         f"  contacts (tip pairs closer than r*): {sim.contact_count()}",
     ]
     st = sim.status()

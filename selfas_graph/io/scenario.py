@@ -452,7 +452,7 @@ def _packing_rules(p) -> list:
     # random sequential packing of spheres jams near a volume fraction of 0.38;
     # beyond ~0.3 the rejection sampler stalls, so refuse that early and clearly
     fraction = 2 * rods.count * (math.pi / 6.0) * dmin**3 / volume
-    if fraction > 0.3:
+    if fraction > 0.3 and rods.count > 1:  # the distance is between tips of different rods: one rod always fits
         out.append(
             f"rods.count: {rods.count} rods cannot fit the box with placement.min_tip_distance = {dmin:g} "
             f"(exclusion volume fraction {fraction:.2f} > 0.3); use fewer rods, a larger box "

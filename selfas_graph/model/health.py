@@ -20,16 +20,44 @@ BOND_BREAK = 0.05
 #: a tip moving more than this (in rod lengths, along one coordinate: |v_k,d| dt) in one step means
 #: the step is far beyond stability: the tip core (width r* ~ 0.06) is crossed in one step
 MAX_STEP_DISPLACEMENT = 0.25
-#: a force component beyond this (units F_M0) is out of scale rather than a time-step problem:
 #: |lambda dt| below which Adams-Bashforth 4 follows a decay at rate lambda: a brake of rate lambda
 #: per unit mass needs dt < AB4_DECAY_LIMIT / lambda (docs/model.md 'The stiff brakes')
 AB4_DECAY_LIMIT = 0.3
+#: slow forces held longer than this (integrator.slow_every * dt, t0) are the first suspect of a failure
+SLOW_HELD_LONG = 0.1
 #: the relative round-off of the energies and works the balance adds up, times a margin: a balance
 #: below this fraction of their sum is round-off, not an error of the step
 ROUND_OFF_ENERGY = 1e-12
 #: the stiffest force of a sane scene, the tip core's kappa / r*^2 at kappa = 1, r* = 0.06, is
 #: 278, and the paper's scenes stay below 1e4; a failure with a force above this blames the term
+#: (out of scale rather than a time-step problem)
 FORCE_OUT_OF_SCALE = 1e8
+
+
+def stiff_brakes(params, dt) -> str:
+    """A diagnosis naming a brake too stiff for dt, or "". Tips have unit mass; AB4 follows a decay
+    at rate lambda only for lambda dt below about 0.3 (docs/model.md 'The stiff brakes'). The
+    ambient brake (rate M_br) is always in the step; the tip brake (rate 2 k_br for a pair, m k_br
+    at a junction of m tips) only with integrator.brake = "explicit". ``simulate --dry-run`` names it
+    before any step."""
+    f, ip = params.forces, params.integrator
+    over = []
+    if f.ambient_brake is not None and f.ambient_brake.coefficient * dt > AB4_DECAY_LIMIT:
+        k = f.ambient_brake.coefficient
+        over.append(
+            f"the 'ambient_brake' term is too stiff for the step: forces.ambient_brake.coefficient * dt = "
+            f"{k * dt:.3g}, and Adams-Bashforth 4 follows a brake only below about {AB4_DECAY_LIMIT:g} "
+            f"(the ambient brake is in the step whatever integrator.brake says): a dt below "
+            f"{AB4_DECAY_LIMIT / k:.3g}, or a smaller coefficient"
+        )
+    if ip.brake == "explicit" and f.tip_brake is not None and 2 * f.tip_brake.coefficient * dt > AB4_DECAY_LIMIT:
+        k = f.tip_brake.coefficient
+        over.append(
+            f"the 'tip_brake' term is too stiff for the step: 2 * forces.tip_brake.coefficient * dt = "
+            f"{2 * k * dt:.3g} for a pair of tips (more at junctions), and Adams-Bashforth 4 follows a "
+            f'brake only below about {AB4_DECAY_LIMIT:g}: integrator.brake = "split" takes it out of the step'
+        )
+    return "; ".join(over)
 
 
 class NumericalFailure(RuntimeError):
@@ -148,6 +176,10 @@ class HealthChecks:
             f"The time step integrator.dt = {self.dt:g} is the likely cause: try a smaller one "
             f"(the stiff parts are the tip core and the brakes inside r*){self._slow_hint()}."
         )
+        if dominant == "tip_magnetic" and not stiff:
+            advice += self._core_hint()
+        if slow := self._slow_first():
+            advice = f"{slow[:1].upper()}{slow[1:]}."
         if err >= BOND_BREAK and not (self.integrator.project or self.integrator.correct_velocity):
             # measured: the quick scene fails at t = 0.042 with dt = 1e-3, 1e-4 and 1e-5 alike
             advice = (
@@ -158,33 +190,28 @@ class HealthChecks:
         msg = f"numerical failure at step {st.step} (t = {st.time:.6g}): {what}; rods involved: {rods[:10]}; {cause}. {advice}"
         raise NumericalFailure(msg, st.step, rods)
 
+    def _core_hint(self) -> str:
+        """Where the tip-tip force failed the step: how long two tips falling together take to cross the
+        core r* (docs/model.md 'Term 1'), against dt. From rest far away, a pair of charges q falls to
+        r* with the energy q^2 / r*, a speed of about q sqrt(2 / r*) for unit masses, and crosses the
+        core in r* / v: a step that is not a small part of that cannot follow the fall, and a tiny r*
+        asks for a tiny step."""
+        rstar = self.params.rods.rstar
+        q = float(np.max(np.abs(self.state.tip_charge), initial=0.0))
+        if not (q > 0 and rstar > 0):
+            return ""
+        crossing = rstar / (q * math.sqrt(2.0 / rstar))
+        if self.dt < 0.5 * crossing:  # the quick scene runs at 0.19 of it (r* = 0.06, q up to 2, dt = 1e-3)
+            return ""
+        return (
+            f" Two tips falling together reach about {q * math.sqrt(2.0 / rstar):.3g} at the core r* = {rstar:g} "
+            f"(rods.transition_radius, or rods.diameter) and cross it in about {crossing:.3g}: a step must be a "
+            f"small part of that (dt below about {0.2 * crossing:.2g}), or r* larger."
+        )
+
     def _stiff_brakes(self) -> str:
-        """A diagnosis naming a brake too stiff for dt, or "". Tips have unit mass; AB4 follows a decay
-        at rate lambda only for lambda dt below about 0.3 (docs/model.md 'The stiff brakes'). The
-        ambient brake (rate M_br) is always in the step; the tip brake (rate 2 k_br for a pair, m k_br
-        at a junction of m tips) only with integrator.brake = "explicit"."""
-        f, ip = self.params.forces, self.params.integrator
-        over = []
-        if f.ambient_brake is not None and f.ambient_brake.coefficient * self.dt > AB4_DECAY_LIMIT:
-            k = f.ambient_brake.coefficient
-            over.append(
-                f"the 'ambient_brake' term is too stiff for the step: forces.ambient_brake.coefficient * dt = "
-                f"{k * self.dt:.3g}, and Adams-Bashforth 4 follows a brake only below about {AB4_DECAY_LIMIT:g} "
-                f"(the ambient brake is in the step whatever integrator.brake says): a dt below "
-                f"{AB4_DECAY_LIMIT / k:.3g}, or a smaller coefficient"
-            )
-        if (
-            ip.brake == "explicit"
-            and f.tip_brake is not None
-            and 2 * f.tip_brake.coefficient * self.dt > AB4_DECAY_LIMIT
-        ):
-            k = f.tip_brake.coefficient
-            over.append(
-                f"the 'tip_brake' term is too stiff for the step: 2 * forces.tip_brake.coefficient * dt = "
-                f"{2 * k * self.dt:.3g} for a pair of tips (more at junctions), and Adams-Bashforth 4 follows a "
-                f'brake only below about {AB4_DECAY_LIMIT:g}: integrator.brake = "split" takes it out of the step'
-            )
-        return "; ".join(over)
+        """:func:`stiff_brakes` of this run's parameters and step."""
+        return stiff_brakes(self.params, self.dt)
 
     def _coarse_split(self) -> str:
         """With integrator.brake = "split": a diagnosis naming the tip brake when its splitting from the
@@ -219,6 +246,20 @@ class HealthChecks:
             ff.evaluate(good[0].copy(), good[1].copy(), full=True)
             name, force = ff.dominant_force(np.arange(self.state.n_tips))
         return (name, force) if name != "none" and not force <= FORCE_OUT_OF_SCALE else (None, 0.0)
+
+    def _slow_first(self) -> str:
+        """The diagnosis when the slow forces are held far longer than any shipped scene holds them
+        (integrator.slow_every * dt of 0.008-0.024 t0 there): past :data:`SLOW_HELD_LONG` t0 they, not
+        dt, are the first suspect (a smaller dt leaves them as stale: the quick scene at slow_every =
+        1000 is 53 % off at dt = 1e-3 and at 5e-4 alike), else ""."""
+        k = self.params.integrator.slow_every
+        if k * self.dt < SLOW_HELD_LONG:
+            return ""
+        return (
+            f"the slow forces are evaluated every integrator.slow_every = {k} steps ({k * self.dt:.3g} t0) and "
+            f"change too much in between: try slow_every = {max(1, min(16, k // 2))} or less (the shipped scenes "
+            f"hold them for 0.008-0.024 t0), and integrator.current_every a multiple of it, or 0"
+        )
 
     def _slow_hint(self) -> str:
         """With multiple time stepping, the other suspect of a failure (appended to its message)."""
@@ -279,10 +320,13 @@ class HealthChecks:
             )
             stiff = self._stiff_brakes() or self._coarse_split()
             cause = (
-                f"{stiff}{self._slow_hint()}"
+                self._slow_first()
+                if self._slow_first()
+                else f"{stiff}{self._slow_hint()}"
                 if stiff
                 else f"The time step integrator.dt = {self.dt:g} is likely past the stability limit of the stiff "
-                f"terms (the tip brake and tip core, or a strong field): try half of it{self._slow_hint()}"
+                f"terms (the tip brake and tip core, or a strong field): try half of it{self._slow_hint()}."
+                f"{self._core_hint()}".rstrip(".")
             )
             tight = (
                 f" (or integrator.energy_tolerance = {tol:g} asks for more than the integrator's own error; "

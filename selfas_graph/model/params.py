@@ -160,8 +160,10 @@ class IntegratorParams:
         0.1,
         "stop the run when the energy balance |E - E0 - W| exceeds this fraction of the energy turned over "
         "(kinetic energy + |work| of every non-conservative term), checked every output interval; the usual "
-        "sign of a time step past the stability limit of the brakes",
+        "sign of a time step past the stability limit of the brakes (at most 1: a balance off by the whole "
+        "energy turned over is no result)",
         gt=0.0,
+        le=1.0,
     )
     restart_on_events: bool = spec(
         False,

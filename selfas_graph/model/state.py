@@ -379,6 +379,13 @@ def random_state(params: Parameters, rng=None) -> State:
                         grid.setdefault(key, []).append(k)
                     placed = True
                     break
+        if not placed and i == 0:  # no other rod in the way: the box leaves no room for a random orientation
+            raise PlacementError(
+                f"placed no rod in {params.placement.max_attempts} draws (placement.max_attempts): both tips of a "
+                f"rod of length {1.0 if ell is None else ell[0]:g} in a random orientation seldom fall in the box "
+                f"{params.placement.box}; "
+                f"make placement.box larger"
+            )
         if not placed:
             raise PlacementError(
                 f"placed only {i} of {n} rods: no free spot found in {params.placement.max_attempts} draws "

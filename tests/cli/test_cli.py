@@ -173,6 +173,20 @@ def test_dry_run_refuses_what_the_run_would_refuse(scenario, tmp_path, capsys):
     assert "checkpoint file" in capsys.readouterr().err and not out.exists()
 
 
+def test_dry_run_names_a_brake_too_stiff_for_the_step(scenario, tmp_path, capsys):
+    """A brake past Adams-Bashforth 4's limit (rate * dt above 0.3) stops the run, at once or at the first
+    contacts: the dry run names it and exits 3 as the run would (it exited 0, and the run stopped at
+    step 1); the explicit tip brake counts only in its own mode."""
+    argv = ["simulate", str(scenario), "-o", str(tmp_path / "r.h5"), "--dry-run"]
+    assert main([*argv, "--set", "forces.ambient_brake.coefficient=1e30"]) == 3
+    assert "would stop with a numerical failure: the 'ambient_brake' term is too stiff" in capsys.readouterr().err
+    tip = ["--set", "forces.tip_brake={coefficient=1000}"]
+    assert main([*argv, *tip, "--set", "integrator.brake=explicit"]) == 3
+    assert "the 'tip_brake' term is too stiff for the step" in capsys.readouterr().err
+    assert main([*argv, *tip, "--set", "integrator.brake=split"]) == 0
+    assert not list(tmp_path.glob("*.h5"))
+
+
 def test_a_resumed_dry_run_says_what_it_read_and_what_is_left(scenario, tmp_path, capsys):
     """``--resume --dry-run`` places nothing: it names the checkpoint and its step, counts the steps
     and frames still to come, and writes the scenario as JSON null (a resume has no scene file)."""

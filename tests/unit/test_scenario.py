@@ -59,6 +59,8 @@ def test_wrong_type_names_key_and_expected_type():
         ("[run]\nt_end = 0", "run.t_end", "> 0"),
         ("[rods.magnetic_charge]\nhigh_fraction = 1.5", "rods.magnetic_charge.high_fraction", "<= 1"),
         ("[forces.yukawa]\ntolerance = 0", "forces.yukawa.tolerance", "> 0"),
+        # above 1 the energy check never stopped a run: 99 % off still "finished"
+        ("[integrator]\nenergy_tolerance = 1e30", "integrator.energy_tolerance", "> 0 and <= 1"),
     ],
 )
 def test_out_of_range(line, key, valid):

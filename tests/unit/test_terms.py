@@ -52,6 +52,10 @@ def test_a_diagnosis_names_the_keys_of_the_tables_the_scene_has():
         sim.force_field.channel_keys("tip_magnetic")
         == "rods.magnetic_charge, rods.tip_stiffness, rods.transition_radius"
     )
+    # the quick scene's electric charges follow the magnetic ones: the key a user changes is named
+    assert sim.force_field.channel_keys("yukawa").startswith(
+        "rods.magnetic_charge (rods.electric_charge follows it), forces.yukawa.screening_length"
+    )
     assert sim.force_field.channel_keys("nonesuch") == "forces.nonesuch"
     assert sim.force_field.channel_keys(None) == "the force terms"
 

@@ -8,7 +8,7 @@ import pytest
 from conftest import random_rods, simulation
 from selfas_graph.model import events as ev
 from selfas_graph.model.graph import FILAMENT
-from selfas_graph.model.simulation import NumericalFailure
+from selfas_graph.model.simulation import NumericalFailure, Simulation
 from selfas_graph.model.state import State
 
 ALL_PAIR_TERMS = {"tip_magnetic": {}, "tip_brake": {}, "ambient_brake": {}, "yukawa": {}}
@@ -114,6 +114,44 @@ def test_a_coarse_split_tip_brake_is_named_when_the_energy_check_stops(tmp_path,
     assert "a dt below 3e-05" in err
 
 
+def test_a_tip_core_too_small_for_the_step_is_named(tmp_path, capsys):
+    """At r* = 0.01 two tips falling together cross the core in about 3.5e-4 (charges up to 2): the
+    quick scene at dt = 1e-3 goes 62 % off by t = 0.05, and the failure gives the crossing time and a
+    dt that follows it (measured: 7e-5 and below run, 2 % off at 1e-4); at r* = 1e-30 no dt would."""
+    from selfas_graph.cli.main import main
+
+    quick = Path(__file__).resolve().parents[2] / "scenarios" / "quick.toml"
+    argv = ["simulate", str(quick), "-o", str(tmp_path / "r.h5"), "--t-end", "0.5", "--progress", "none"]
+    assert main([*argv, "--set", "rods.transition_radius=0.01", "--set", "output.interval=0.05"]) == 3
+    err = capsys.readouterr().err
+    assert "at the core r* = 0.01 (rods.transition_radius, or rods.diameter) and cross it in about 0.000354" in err
+    assert "dt below about 7.1e-05" in err
+
+
+def test_slow_forces_held_far_too_long_are_named_before_the_step(tmp_path, capsys):
+    """slow_every = 1000 at dt = 1e-3 holds the slow forces for 1 t0 (the shipped scenes: 0.008-0.024):
+    the quick scene goes 53 % off at dt = 1e-3 and 5e-4 alike, so the failure names slow_every, not dt."""
+    from selfas_graph.cli.main import main
+
+    quick = Path(__file__).resolve().parents[2] / "scenarios" / "quick.toml"
+    argv = ["simulate", str(quick), "-o", str(tmp_path / "r.h5"), "--t-end", "1", "--progress", "none"]
+    assert main([*argv, "--set", "rods.count=150", "--set", "integrator.slow_every=1000"]) == 3
+    err = capsys.readouterr().err
+    assert "The slow forces are evaluated every integrator.slow_every = 1000 steps (1 t0)" in err
+    assert "try slow_every = 16 or less" in err and "try half of it" not in err
+
+
+def test_a_balance_at_round_off_is_not_given_as_a_ratio(tmp_path, capsys):
+    """At dt = 1e-30 no energy is turned over: the balance is the energies' round-off, and its ratio to
+    the energy turned over read -1.4e+38 in the summary."""
+    from selfas_graph.cli.main import main
+
+    quick = Path(__file__).resolve().parents[2] / "scenarios" / "quick.toml"
+    argv = ["simulate", str(quick), "-o", str(tmp_path / "r.h5"), "--t-end", "1e-28", "--progress", "none"]
+    assert main([*argv, "--set", "integrator.dt=1e-30", "--set", "output.interval=2e-29"]) == 0
+    assert "(round-off of the energies: almost no energy turned over)" in capsys.readouterr().out
+
+
 def _chain(n, gap_margin=0.02):
     """n rods stacked tip to tip along z, touching, spanning electrodes just outside the chain ends."""
     z = np.arange(n) * 1.0 - (n - 1) / 2
@@ -176,6 +214,24 @@ def test_one_rod_runs():
     # the AB4 error of the brake's and the plasma field's work (docs/model.md 'Work bookkeeping and the
     # energy balance'), not round-off: measured -7.4e-12 at dt = 1e-3, 16x less per halving of dt; 1e-10 leaves 13x
     assert _finite(sim) and abs(obs["energy_balance"]) < 1e-10 * max(1.0, sim.energy_scale(obs))
+
+
+def test_one_rod_in_a_tight_box_is_placed_or_named_by_the_box():
+    """The least tip distance is between tips of different rods, so one rod fits any box it is shorter
+    than (the packing rule said "use fewer rods" to one rod); a box that leaves a random orientation
+    almost no room is named as the box, not the rod count."""
+    from selfas_graph.io.scenario import load_scenario
+    from selfas_graph.model.state import PlacementError
+
+    quick = Path(__file__).resolve().parents[2] / "scenarios" / "quick.toml"
+    one = ["rods.count=1", "forces.electrodes.gap=1.2", "placement.min_tip_distance=0.9"]  # an exclusion fraction of 0.64
+    sim = Simulation.from_scenario(
+        load_scenario(quick, overrides=[*one, "placement.box=[[-0.5,0.5],[-0.5,0.5],[-0.6,0.6]]"])
+    )
+    assert sim.state.n_rods == 1
+    tight = load_scenario(quick, overrides=[*one, "placement.box=[[-0.1,0.1],[-0.1,0.1],[-0.5,0.5]]"])
+    with pytest.raises(PlacementError, match=r"placed no rod in 2000 draws .* make placement.box larger"):
+        Simulation.from_scenario(tight)
 
 
 def test_dead_end_rods_get_exactly_zero_current():

@@ -333,6 +333,10 @@ class ForceField:
         for term in self.terms:
             if channel in term.keys:
                 present = [k for k in term.keys[channel] if _present(self.params, k)]
+                if "rods.electric_charge" in present and self.params.rods.electric_charge.distribution == "magnetic":
+                    # the scene draws each rod's electric charge as its magnetic one (docs/model.md 'Rods')
+                    i = present.index("rods.electric_charge")
+                    present[i] = "rods.magnetic_charge (rods.electric_charge follows it)"
                 return ", ".join(present)
         return f"forces.{channel}"
 
