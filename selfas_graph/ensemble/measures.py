@@ -122,7 +122,8 @@ def _midplane_flux(f):
     return flux_through_rim(f.flux_radius, 0.0, f.position, None, current, f.wire_radius)
 
 
-#: the per-frame measures of a summary, in table order; a new one is one more line
+#: the per-frame measures of a summary, in table order (a new one: ARCHITECTURE.md 'How to add a measure of a
+#: saved frame', which names the other lists it goes in)
 FRAME_MEASURES = [
     Measure("filament_rods", "rods", "rods in current-carrying filaments", _filament_rods, grouped=True),
     Measure(

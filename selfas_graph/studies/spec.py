@@ -213,6 +213,19 @@ def _check(where, table, keys, required):
             raise StudiesError(f"{where}: missing key {k!r}")
 
 
+def _check_measures(where, claim):
+    """A claim's ``measure``, ``null_measure`` and ``also`` name measures a study's summary has (a
+    misspelled one gave a row of "n/a" and no verdict, without a word)."""
+    from .summary import STUDY_MEASURES
+
+    known = {m.name for m in STUDY_MEASURES}
+    for key in ("measure", "null_measure", "also"):
+        names = claim.get(key) or []
+        for name in [names] if isinstance(names, str) else names:
+            if name not in known:
+                raise StudiesError(f"{where}.{key}: no measure named {name!r}; valid: {', '.join(sorted(known))}")
+
+
 def load_studies(path) -> Studies:
     """Read and check a studies file (StudiesError naming the file and key when it is wrong)."""
     path = Path(path)
@@ -295,6 +308,7 @@ def load_studies(path) -> Studies:
         for key in ("study", "null"):
             if c.get(key) and c[key] not in studies:
                 raise StudiesError(f"{where}.{key}: no study named {c[key]!r}")
+        _check_measures(where, c)
         w = c.get("window", [])
         if w and (len(w) != 2 or not all(isinstance(x, (int, float)) for x in w) or not w[0] < w[1]):
             raise StudiesError(f"{where}.window: [t1, t2] with t1 < t2, got {w!r}")

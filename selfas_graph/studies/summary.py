@@ -104,13 +104,13 @@ FRAME_BY_NAME = {m.name: m for m in FRAME_MEASURES}
 
 #: the measures of a study's summary: the ensemble's, the fits' uncertainties and the alignment measures
 STUDY_MEASURES = [dataclasses.replace(m, fn=_flux) if m.name == "midplane_flux" else m for m in FRAME_MEASURES] + [
-    Measure(k, u, d, lambda f, k=k: float(f.claims[k]))
-    for k, u, d in (
-        ("fractal_dimension_err", "1", "uncertainty of that mass-radius fit"),
-        ("rg_dimension_err", "1", "uncertainty of the R_g fit"),
-        ("largest_moment_J_z", "J0 L^2", "m_J,z of the largest structure's rod currents"),
-        ("cycle_rank_largest", "loops", "independent loops of the largest structure"),
-        ("structures", "1", "structures (rods joined by tip contacts)"),
+    Measure(k, u, d, lambda f, k=k: float(f.claims[k]), grouped=grouped)
+    for k, u, d, grouped in (
+        ("fractal_dimension_err", "1", "uncertainty of that mass-radius fit", False),
+        ("rg_dimension_err", "1", "uncertainty of the R_g fit", False),
+        ("largest_moment_J_z", "J0 L^2", "m_J,z of the largest structure's rod currents", True),
+        ("cycle_rank_largest", "loops", "independent loops of the largest structure", False),
+        ("structures", "1", "structures (rods joined by tip contacts)", False),
     )
 ]
 STUDY_MEASURES += [
@@ -138,12 +138,14 @@ STUDY_MEASURES += [
         "1",
         "rod currents' flux through the mid-plane disc over B_ext's flux through it",
         _flux_over_external,
+        grouped=True,
     ),
     Measure(
         "flux_over_dipole",
         "1",
         "case (ii): rod currents' flux through the mid-plane disc over the external dipole's flux 4 pi |Z_Mext|",
         _flux_over_dipole,
+        grouped=True,
     ),
 ]
 

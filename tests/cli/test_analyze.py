@@ -25,18 +25,22 @@ from selfas_graph.cli.main import main
 from selfas_graph.io.h5md import RunFile
 
 REPO = Path(__file__).resolve().parents[2]
-#: the keys the ensemble summary reads
+#: the keys of a frame's measures that the ensemble and study summaries read (ensemble/measures.py,
+#: studies/summary.py), and the monopole moment's two others
 ENSEMBLE_KEYS = (
     "largest_structure_rods",
     "largest_moment_q",
     "largest_moment_ratio",
     "largest_moment_J_z",
+    "moment_J_z",
     "unpaired_charge_largest",
     "fractal_dimension",
     "fractal_dimension_err",
     "rg_dimension",
     "rg_dimension_err",
     "cycle_rank",
+    "cycle_rank_largest",
+    "structures",
 )
 DIMENSION_KEYS = ("fractal_dimension", "fractal_dimension_err", "rg_dimension", "rg_dimension_err")
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from selfas_graph.studies import load_studies
 from selfas_graph.studies.page import page_blocks, page_blocks_in
+from selfas_graph.studies.stats import GROUPED
 
 ROOT = Path(__file__).resolve().parents[2]
 DOCS = ROOT / "docs"
@@ -40,6 +41,8 @@ def test_every_committed_summary_names_its_commits_and_is_complete():
                 _percolation_statistics_follow_from_the_runs(d, summary["study"]["t_max"], path)
             continue
         assert summary["seeds"], path
+        for m in GROUPED:  # over the seeds that carry current alone, as the page shows them
+            assert m not in summary["measures"] or "group" in summary["measures"][m], (path.name, m)
         for seed in summary["seeds"]:
             assert len(seed["commit"].removesuffix("+dirty")) == 40, f"{path.name}: seed {seed['seed']} names no commit"
             assert seed["cpu_model"] and seed["wall_seconds"] > 0

@@ -36,6 +36,12 @@ def test_the_shipped_studies_file_loads_and_every_claim_names_its_study():
         ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\ntable_times = [2.0]\n", "table_times"),
         ("[[claim]]\nid='c'\nclaim='c'\npaper='p'\nstudy='nope'\nmeasure='m'\ntime=1\n", "no study named 'nope'"),
         ("[stduy.a]\n", "unknown key(s) ['stduy']"),
+        # a misspelled measure gave a row of n/a and no verdict
+        (
+            "[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\n[[claim]]\nid='c'\nclaim='c'\npaper='p'\nstudy='a'\n"
+            "measure='filament_rods'\nalso=['largest_fracton']\ntime=1\n",
+            "claim[0].also: no measure named 'largest_fracton'; valid: ",
+        ),
         ("trajectories_since = 'new'\n", "trajectories_since"),
         ("trajectories_since = 4\n", "trajectories_since"),
         (

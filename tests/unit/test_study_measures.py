@@ -163,3 +163,41 @@ def test_flux_over_external_scales_as_flux_over_bz_r_squared():
     assert ratio(frame([[0, 0, 0]], [[0, 0, 1]], 1.0, [], double, flux=0.7, flux_radius=1.5)) == base / 2
     for forces in ({}, {"uniform_field": {"B": [1.0, 0.0, 0.0]}}):
         assert math.isnan(ratio(frame([[0, 0, 0]], [[0, 0, 1]], 1.0, [], forces, flux=0.7)))
+
+
+def test_every_list_of_measures_names_measures_that_exist():
+    """The measures are listed by hand in several places (analyze's columns and counts, the study
+    table's rows, the series panels, the claim measures, the grouped and fitted measures, the words on
+    the page): each must name a measure that exists, or a row or panel is left out without a word
+    (studies/page.py skips a row its summary lacks: a misspelled row passed every test). A measure of
+    a summary is a row of the study table or named here as not one, so that a new one is placed on
+    purpose (ARCHITECTURE.md 'How to add a measure of a saved frame')."""
+    from selfas_graph.analysis.claims import CLAIM_KEYS
+    from selfas_graph.cli.analyze import _COUNTS, SERIES_COLUMNS
+    from selfas_graph.studies.figures import SERIES_MEASURES
+    from selfas_graph.studies.page import TABLE_MEASURES
+    from selfas_graph.studies.stats import FIT_ERRORS, GROUPED, LABELS
+    from selfas_graph.studies.verdicts import CLAIM_MEASURES
+
+    assert set(SERIES_COLUMNS) - {"frame", "time"} <= set(CLAIM_KEYS) and set(_COUNTS) <= set(CLAIM_KEYS)
+    names = set(MEASURE)
+    for listed in (TABLE_MEASURES, SERIES_MEASURES, CLAIM_MEASURES, GROUPED, LABELS, FIT_ERRORS, FIT_ERRORS.values()):
+        assert set(listed) <= names, sorted(set(listed) - names)
+    errors = set(FIT_ERRORS.values())
+    assert names - errors <= set(LABELS), f"measures without words on the page: {sorted(names - errors - set(LABELS))}"
+    not_tabled = errors | {"cycle_rank_largest", "structures", "free_rods", "all_alignment", "flux_over_external"}
+    not_tabled |= {"largest_moment_J_z"}
+    assert names - not_tabled == set(TABLE_MEASURES), sorted(
+        names.symmetric_difference(not_tabled | set(TABLE_MEASURES))
+    )
+
+
+def test_the_page_groups_and_fits_the_measures_the_summary_does():
+    """A measure of the seeds that carry current is summarised over them alone (docs/model.md "Measures
+    of the paper's claims": never a mean over both groups), in the summary and on the page alike: the
+    flux over B_ext's, over the dipole's and the largest structure's m_J,z were grouped on the page and
+    averaged over every seed in summary.json."""
+    from selfas_graph.studies.stats import FIT_ERRORS, GROUPED
+
+    assert set(GROUPED) == {m.name for m in STUDY_MEASURES if m.grouped}
+    assert set(FIT_ERRORS) == {m.name for m in STUDY_MEASURES if m.err is not None}
