@@ -224,7 +224,11 @@ def test_one_rod_in_a_tight_box_is_placed_or_named_by_the_box():
     from selfas_graph.model.state import PlacementError
 
     quick = Path(__file__).resolve().parents[2] / "scenarios" / "quick.toml"
-    one = ["rods.count=1", "forces.electrodes.gap=1.2", "placement.min_tip_distance=0.9"]  # an exclusion fraction of 0.64
+    one = [
+        "rods.count=1",
+        "forces.electrodes.gap=1.2",
+        "placement.min_tip_distance=0.9",
+    ]  # an exclusion fraction of 0.64
     sim = Simulation.from_scenario(
         load_scenario(quick, overrides=[*one, "placement.box=[[-0.5,0.5],[-0.5,0.5],[-0.6,0.6]]"])
     )
