@@ -294,11 +294,10 @@ def export_run(run_path, format=None, out=None, frames=None, force=False, *, fmt
         raise TypeError(f"export_run(run_path, format): the format is missing; valid: {', '.join(FORMATS)}")
     if format not in FORMATS:
         raise ExportError(f"format {format!r} is not known; valid: {', '.join(FORMATS)}")
-    fmt = format
     with RunFile(run_path) as run:
         picked = parse_frames(frames, run.n_frames)
-        path = output_path(run_path, out, fmt, force=force)
-        (write_gsd if fmt == "gsd" else write_xyz)(run, path, picked)
+        path = output_path(run_path, out, format, force=force)
+        (write_gsd if format == "gsd" else write_xyz)(run, path, picked)
     return path, len(picked)
 
 

@@ -169,7 +169,7 @@ class HealthChecks:
             if dominant != "none"
             else "no force acts on them (no term is on, or every force on them is zero), so the step alone is at fault"
         )
-        stiff = self._stiff_brakes()
+        stiff = stiff_brakes(self.params, self.dt)
         if stiff:
             cause = stiff
         advice = (
@@ -200,18 +200,15 @@ class HealthChecks:
         q = float(np.max(np.abs(self.state.tip_charge), initial=0.0))
         if not (q > 0 and rstar > 0):
             return ""
-        crossing = rstar / (q * math.sqrt(2.0 / rstar))
+        speed = q * math.sqrt(2.0 / rstar)
+        crossing = rstar / speed
         if self.dt < 0.5 * crossing:  # the quick scene runs at 0.19 of it (r* = 0.06, q up to 2, dt = 1e-3)
             return ""
         return (
-            f" Two tips falling together reach about {q * math.sqrt(2.0 / rstar):.3g} at the core r* = {rstar:g} "
+            f" Two tips falling together reach about {speed:.3g} at the core r* = {rstar:g} "
             f"(rods.transition_radius, or rods.diameter) and cross it in about {crossing:.3g}: a step must be a "
             f"small part of that (dt below about {0.2 * crossing:.2g}), or r* larger."
         )
-
-    def _stiff_brakes(self) -> str:
-        """:func:`stiff_brakes` of this run's parameters and step."""
-        return stiff_brakes(self.params, self.dt)
 
     def _coarse_split(self) -> str:
         """With integrator.brake = "split": a diagnosis naming the tip brake when its splitting from the
@@ -318,16 +315,18 @@ class HealthChecks:
                 if works and works[0][0] > 0
                 else "no term does work"
             )
-            stiff = self._stiff_brakes() or self._coarse_split()
-            cause = (
-                self._slow_first()
-                if self._slow_first()
-                else f"{stiff}{self._slow_hint()}"
-                if stiff
-                else f"The time step integrator.dt = {self.dt:g} is likely past the stability limit of the stiff "
-                f"terms (the tip brake and tip core, or a strong field): try half of it{self._slow_hint()}."
-                f"{self._core_hint()}".rstrip(".")
-            )
+            stiff = stiff_brakes(self.params, self.dt) or self._coarse_split()
+            if slow := self._slow_first():
+                cause = slow
+            elif stiff:
+                cause = f"{stiff}{self._slow_hint()}"
+            else:
+                core = self._core_hint().rstrip(".")  # the message ends with its own full stop
+                cause = (
+                    f"The time step integrator.dt = {self.dt:g} is likely past the stability limit of the stiff "
+                    f"terms (the tip brake and tip core, or a strong field): try half of it{self._slow_hint()}"
+                    + (f".{core}" if core else "")
+                )
             tight = (
                 f" (or integrator.energy_tolerance = {tol:g} asks for more than the integrator's own error; "
                 f"the default is 0.1)"

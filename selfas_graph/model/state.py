@@ -256,10 +256,8 @@ def _refuse_twice_given(position: np.ndarray) -> None:
     every other force on the two is the same, so they would move as one for the whole run. Tips of
     two rods at one point, or rods crossing, are taken: the rods' other forces part them."""
     a, b = position[0::2], position[1::2]
-    a_first = (a[:, 0] < b[:, 0]) | (
-        (a[:, 0] == b[:, 0]) & ((a[:, 1] < b[:, 1]) | ((a[:, 1] == b[:, 1]) & (a[:, 2] <= b[:, 2])))
-    )
-    ends = np.where(a_first[:, None], np.hstack([a, b]), np.hstack([b, a]))
+    _, point = np.unique(position, axis=0, return_inverse=True)  # one number per distinct point
+    ends = np.sort(point.reshape(-1, 2), axis=1)  # a rod's two points, either way round
     _, first, count = np.unique(ends, axis=0, return_index=True, return_counts=True)
     if (count > 1).any():
         k = int(first[np.flatnonzero(count > 1)[0]])

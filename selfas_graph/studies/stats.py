@@ -165,10 +165,15 @@ def measure_label(measure):
     return f"{words} ({unit})" if unit else words
 
 
+def _in_window(summary, lo, hi):
+    """Which summarised times lie in [lo, hi] (to 1e-9: the times are sums of the summary's step)."""
+    times = np.asarray(summary["times"], dtype=float)
+    return (times >= lo - 1e-9) & (times <= hi + 1e-9)
+
+
 def window_values(summary, measure, lo, hi):
     """Each seed's mean of ``measure`` over the summarised times in [lo, hi] (NaN: none there)."""
-    times = np.asarray(summary["times"], dtype=float)
-    pick = (times >= lo - 1e-9) & (times <= hi + 1e-9)
+    pick = _in_window(summary, lo, hi)
     if measure not in summary["measures"] or not pick.any():
         return np.full(len(summary["seeds"]), np.nan)
     v = np.array([[np.nan if x is None else x for x in row] for row in summary["measures"][measure]["values"]])
@@ -180,8 +185,7 @@ def window_values(summary, measure, lo, hi):
 def window_times(summary, measure, lo, hi) -> int:
     """How many summarised times in [lo, hi] hold ``measure`` for some seed: the times a window's mean
     is over (the costly flux is summarised at fewer times than the counts)."""
-    times = np.asarray(summary["times"], dtype=float)
-    pick = (times >= lo - 1e-9) & (times <= hi + 1e-9)
+    pick = _in_window(summary, lo, hi)
     if measure not in summary["measures"] or not pick.any():
         return 0
     rows = summary["measures"][measure]["values"]

@@ -28,13 +28,18 @@ from .stats import (
 __all__ = ["CLAIM_MEASURES", "claim_rows", "convergence_rows", "sweep_points", "sweep_rows"]
 
 
+def _combined_sem(a, b):
+    """sqrt(SE_a^2 + SE_b^2) of two plain statistics; NaN where either has no value or no spread."""
+    return math.sqrt(a["sem"] ** 2 + b["sem"] ** 2) if a["n"] and b["n"] else math.nan
+
+
 def _claim_difference(a, b):
     """(x - x_null) / sqrt(SE^2 + SE_null^2); infinite where both spreads are zero and the means differ
     (every seed of both the same, e.g. no filament in any seed of the null model and the same count in
     every seed of the scene), NaN without a spread estimate (one seed)."""
-    if not (a["n"] and b["n"]) or not (math.isfinite(a["sem"]) and math.isfinite(b["sem"])):
+    den = _combined_sem(a, b)
+    if not math.isfinite(den):
         return math.nan
-    den = math.sqrt(a["sem"] ** 2 + b["sem"] ** 2)
     if den == 0.0:
         return 0.0 if a["mean"] == b["mean"] else math.copysign(math.inf, a["mean"] - b["mean"])
     return (a["mean"] - b["mean"]) / den
@@ -148,16 +153,17 @@ CLAIM_MEASURES = (
 
 def _difference(a, b):
     """(x_a - x_b) / sqrt(SE_a^2 + SE_b^2) of two plain statistics (NaN without a spread)."""
-    den = math.sqrt(a["sem"] ** 2 + b["sem"] ** 2) if a["n"] and b["n"] else math.nan
+    den = _combined_sem(a, b)
     return (a["mean"] - b["mean"]) / den if den > 0 else math.nan
 
 
 def _detectable(a, b) -> str:
     """The smallest difference the comparison of ``a`` with the default ``b`` would find: 2 combined
     standard errors, in % of the default's mean ("n/a" without a spread or a mean)."""
-    if not (a["n"] and b["n"]) or not (math.isfinite(a["sem"]) and math.isfinite(b["sem"])) or not b["mean"]:
+    den = _combined_sem(a, b)
+    if not math.isfinite(den) or not b["mean"]:
         return "n/a"
-    return f"±{fmt(200 * math.sqrt(a['sem'] ** 2 + b['sem'] ** 2) / abs(b['mean']), 2)} %"
+    return f"±{fmt(200 * den / abs(b['mean']), 2)} %"
 
 
 def convergence_rows(studies, summaries) -> str:
