@@ -43,13 +43,21 @@ def _main(name):
         ("current_tree", ["--rods", "300", "--theta", "0.5", "--reps", "1"], "| tree | mixed | 0.5 |"),
         ("walk_parts", ["--rods", "3000", "--config", "uniform", "--reps", "1"], "| uniform | 3000 |"),
         ("walk_parts", ["--separation", "--rods", "1500", "--config", "uniform"], "(b + r_g) / D below"),
+        ("fmm", ["--rods", "1500", "--config", "uniform", "--order", "4", "--theta", "0.5", "--reps", "1"], "| FMM,"),
     ],
 )
 def test_a_tool_runs_to_its_table(name, argv, printed, capsys):
     _main(name)(argv)
     out = capsys.readouterr().out
     assert printed in out
-    if name in ("step", "rods", "checks", "current_tree", "walk_parts"):  # the timing tools name the CPU they ran on
+    if name in (
+        "step",
+        "rods",
+        "checks",
+        "current_tree",
+        "walk_parts",
+        "fmm",
+    ):  # the timing tools name the CPU they ran on
         assert "CPU" in out
     if name == "walk_parts":  # its parts are the shipped kernel's: with both sums, the same forces bit for bit
         assert "differs from the shipped one" not in out
