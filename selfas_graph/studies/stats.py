@@ -25,6 +25,7 @@ __all__ = [
     "FIT_ERRORS",
     "GROUPED",
     "LABELS",
+    "UNSHOWN_UNITS",
     "fmt",
     "grouped_stat",
     "measure_label",
@@ -55,7 +56,12 @@ FIT_ERRORS = {
 }
 
 
-#: words and units of the measures, as the tables and figures show them
+#: units of a measure (``Measure.unit``) that the page does not show: counts and pure numbers
+UNSHOWN_UNITS = ("1", "rods", "loops", "fraction")
+
+#: words and units of the measures, as the tables and figures show them: each unit is the measure's
+#: own (``Measure.unit``, selfas_graph/ensemble/measures.py and studies/summary.py), or "" for one of
+#: :data:`UNSHOWN_UNITS` (a test holds the two together)
 LABELS = {
     "filament_rods": ("rods in current-carrying filaments", ""),
     "total_current": ("current through the gap", "J0"),

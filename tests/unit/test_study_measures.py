@@ -21,6 +21,7 @@ from selfas_graph.studies.summary import STUDY_MEASURES
 
 ROUND_OFF = 1e-12
 MEASURE = {m.name: m.fn for m in STUDY_MEASURES}
+UNIT = {m.name: m.unit for m in STUDY_MEASURES}
 
 
 def frame(tip_a, tip_b, q, contacts, forces=None, flux=None, flux_radius=1.0):
@@ -190,6 +191,17 @@ def test_every_list_of_measures_names_measures_that_exist():
     assert names - not_tabled == set(TABLE_MEASURES), sorted(
         names.symmetric_difference(not_tabled | set(TABLE_MEASURES))
     )
+
+
+def test_the_page_shows_each_measures_own_unit():
+    """A unit is the measure's (``Measure.unit``); the page's words (``LABELS``) show it, or nothing
+    for a count or a pure number (``UNSHOWN_UNITS``), so a unit changed in one place and not the
+    other fails here."""
+    from selfas_graph.studies.stats import LABELS, UNSHOWN_UNITS
+
+    for name, (_, shown) in LABELS.items():
+        unit = UNIT[name]
+        assert shown == ("" if unit in UNSHOWN_UNITS else unit), (name, unit, shown)
 
 
 def test_the_page_groups_and_fits_the_measures_the_summary_does():
