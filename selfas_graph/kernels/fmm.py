@@ -1,6 +1,6 @@
 """Tip-tip force (docs/model.md 'Term 1') by a fast multipole method: cell-cell expansions on the
-tip tree, float64. Measured by ``selfas-graph bench walk_parts --fmm``; the model does not use it
-(its walk is :mod:`.treewalk`).
+tip tree, float64. Measured by ``selfas-graph bench fmm`` (docs/performance.md "A fast multipole
+method, measured"); the model does not use it (its walk is :mod:`.treewalk`).
 
 The walk of :mod:`.treewalk` applies every accepted cell's multipoles to every target of a group.
 Here the targets are cells too, at every level (Dehnen's scheme, J. Comput. Phys. 179, 27, 2002):
@@ -17,8 +17,10 @@ Here the targets are cells too, at every level (Dehnen's scheme, J. Comput. Phys
 3. **M2L.** With ``R = c_A - c_B`` and ``D_n = d^n (1/|R|)`` (the derivatives of ``1/r``, by the
    McMurchie-Davidson recursion ``R^m_{t+1,u,v} = t R^{m+1}_{t-1,u,v} + X R^{m+1}_{t,u,v}`` from
    ``R^m_000 = (-1)^m (2m - 1)!! / |R|^(2m + 1)``), the potential of B about ``c_A`` is
-   ``phi(c_A + h) = sum_b L_b h^b`` with ``L_b = (1 / b!) sum_{|a| <= p - |b|} (-1)^|a| M_a(B) D_{a+b}``;
-   B's from A uses the same ``D`` (``D_n(-R) = (-1)^|n| D_n(R)``).
+   ``phi(c_A + h) = sum_b L_b h^b`` with ``L_b = (1 / b!) sum_{|a| <= p - |b|} (-1)^|a| M_a(B) D_{a+b}``.
+   Each cell takes the expansions of all its far cells (both cells of every far pair), its sources
+   in batches of :data:`LANES` across which the derivatives and the rows of the sum run, so that
+   every inner loop is vectorised (:func:`m2l_lanes`).
 4. **L2L, L2P.** Local expansions are shifted down the tree,
    ``L_g(child) += sum_{b >= g} L_b binom(b, g) d^(b - g)``, and each leaf's gives the field
    ``E = -grad phi`` at its tips; the force is ``q E``.
@@ -28,8 +30,8 @@ Here the targets are cells too, at every level (Dehnen's scheme, J. Comput. Phys
    same law (when the partner was far, the expansion held it: the difference is of the
    expansion's error, as in :mod:`.treewalk`).
 
-The expansion of order p errs by about ``theta^(p + 1)`` of a cell pair's field at the worst and much
-less typically; ``theta = 0`` takes every pair as near (the direct sum). Cells are the tip tree's
+The error falls by a factor of about the pair's ``(r_A + r_B) / |c_A - c_B|`` with each order
+(tests/physics/test_fmm.py); ``theta = 0`` takes every pair as near (the direct sum). Cells are the tip tree's
 (:func:`.tree.build_tip_tree`); the tree's leaf size sets the near work.
 """
 
