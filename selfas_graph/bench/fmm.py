@@ -29,7 +29,7 @@ import numpy as np
 from selfas_graph.kernels import fmm
 from selfas_graph.kernels.tree import build_tip_tree, evaluate_tip_tree
 
-from .tree import KAPPA, RSTAR, Reference, best_of, chains, fig2, uniform
+from .tree import CONFIGS, KAPPA, RSTAR, Reference, best_of
 from .walk_parts import FAR, LISTS, NEAR, run_parts
 
 
@@ -106,7 +106,7 @@ def main(argv=None):
         "| M2L | ns an M2L (one way) | near | L2L + L2P |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
-    make = {"uniform": uniform, "chains": chains, "fig2": fig2}
+    make = CONFIGS
     for config in args.config:
         for n_rods in args.rods:
             rng = np.random.default_rng(args.seed)

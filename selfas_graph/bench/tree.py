@@ -97,6 +97,10 @@ def fig2(n_rods, rng):
     return (*(np.ascontiguousarray(p[:, d]) for d in range(3)), sim.force_field.tip_charge.copy())
 
 
+#: the configurations of tips the tree tools build, by name (``--config``)
+CONFIGS = {"uniform": uniform, "chains": chains, "fig2": fig2}
+
+
 def best_of(reps, fn, min_seconds=0.05, max_reps=200):
     """Shortest of at least ``reps`` runs, more for fast calls (until ``min_seconds`` in all):
     on the shared machine one run of 0.2 ms can take ten times longer."""
@@ -236,7 +240,7 @@ def main(argv=None):
 
     print(machine_line())
     print(f"numba threads: {numba.get_num_threads()}; r* = {RSTAR}, kappa = {KAPPA}, density {DENSITY}")
-    make = {"uniform": uniform, "chains": chains, "fig2": fig2}
+    make = CONFIGS
     old = None
     if args.before:
         from .kernels import kernels_at

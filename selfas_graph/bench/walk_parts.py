@@ -56,7 +56,7 @@ from selfas_graph.kernels.treewalk import (
     accepts,
 )
 
-from .tree import KAPPA, RSTAR, chains, fig2, uniform
+from .tree import CONFIGS, KAPPA, RSTAR
 
 #: the parts' kernel: which sums it takes
 LISTS, NEAR, FAR = 0, 1, 2
@@ -312,7 +312,7 @@ def separation_table(args):
     print(f"opening angle {args.theta:g}; share of the far work (cells x targets) with (b + r_g) / D below:")
     print("| config | rods | groups | far cells a target | " + " | ".join(f"< {r:g}" for r in SEPARATIONS) + " |")
     print("|---|---|---|---|" + "---|" * len(SEPARATIONS))
-    make = {"uniform": uniform, "chains": chains, "fig2": fig2}
+    make = CONFIGS
     for config in args.config:
         for n_rods in args.rods:
             t = build_tip_tree(*make[config](n_rods, np.random.default_rng(args.seed)))
@@ -348,7 +348,7 @@ def main(argv=None):
         "| near, each pair once (prototype) | the whole with it: at best / prototype |"
     )
     print("|---|---|---|---|---|---|---|---|---|---|---|")
-    make = {"uniform": uniform, "chains": chains, "fig2": fig2}
+    make = CONFIGS
     for config in args.config:
         for n_rods in args.rods:
             tips = make[config](n_rods, np.random.default_rng(args.seed))

@@ -142,6 +142,14 @@ def monomials(vx, vy, vz, axis, lower1, out):
 
 
 @njit
+def _offset_monomials(centre, c, ch, axis, lower1, out):
+    """:func:`monomials` of the offset ``d = c_child - c_parent`` of child ``ch`` from cell ``c``."""
+    monomials(
+        centre[ch, 0] - centre[c, 0], centre[ch, 1] - centre[c, 1], centre[ch, 2] - centre[c, 2], axis, lower1, out
+    )
+
+
+@njit
 def children(nxt, c):
     """The children of cell ``c`` (empty for a leaf)."""
     out = []
@@ -225,10 +233,7 @@ def upward(nxt, centre, shift, w_m2m, axis, lower1, moment):
             continue
         moment[c, :] = 0.0
         for ch in children(nxt, c):
-            monomials(
-                centre[ch, 0] - centre[c, 0], centre[ch, 1] - centre[c, 1], centre[ch, 2] - centre[c, 2],
-                axis, lower1, mono,
-            )  # fmt: skip
+            _offset_monomials(centre, c, ch, axis, lower1, mono)
             for r in range(shift.shape[0]):
                 moment[c, shift[r, 0]] += moment[ch, shift[r, 1]] * mono[shift[r, 2]] * w_m2m[r]
 
@@ -242,10 +247,7 @@ def downward(nxt, centre, shift, w_l2l, axis, lower1, local):
         if nxt[c] == c + 1:
             continue
         for ch in children(nxt, c):
-            monomials(
-                centre[ch, 0] - centre[c, 0], centre[ch, 1] - centre[c, 1], centre[ch, 2] - centre[c, 2],
-                axis, lower1, mono,
-            )  # fmt: skip
+            _offset_monomials(centre, c, ch, axis, lower1, mono)
             # L_g(child) += sum_{b >= g} L_b binom(b, g) d^(b - g): the shift rows are (b, g, b - g)
             for r in range(shift.shape[0]):
                 local[ch, shift[r, 1]] += local[c, shift[r, 0]] * w_l2l[r] * mono[shift[r, 2]]
