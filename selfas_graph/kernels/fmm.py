@@ -30,8 +30,8 @@ Here the targets are cells too, at every level (Dehnen's scheme, J. Comput. Phys
    same law (when the partner was far, the expansion held it: the difference is of the
    expansion's error, as in :mod:`.treewalk`).
 
-The error falls by a factor of about the pair's ``(r_A + r_B) / |c_A - c_B|`` with each order
-(tests/physics/test_fmm.py); ``theta = 0`` takes every pair as near (the direct sum). Cells are the tip tree's
+Each order multiplies the error by about a pair's ``(r_A + r_B) / |c_A - c_B|``, at most ``theta``
+(tests/physics/test_fmm.py); ``theta`` must be in [0, 1); ``theta = 0`` takes every pair as near (the direct sum). Cells are the tip tree's
 (:func:`.tree.build_tip_tree`); the tree's leaf size sets the near work.
 """
 
@@ -349,7 +349,9 @@ class Lists(NamedTuple):
 
 def interaction_lists(tree, theta, rstar):
     """The :class:`Lists` of the tip tree ``tree`` (:func:`.tree.build_tip_tree`) at opening angle
-    ``theta``."""
+    ``theta`` (in [0, 1): at 1 and above the expansions need not converge; ValueError)."""
+    if not 0.0 <= theta < 1.0:
+        raise ValueError(f"the opening angle theta must be in [0, 1), got {theta}")
     far, near = dual_walk(tree.next, tree.centre, tree.radius, float(theta), float(rstar))
     n_cells = tree.start.shape[0]
     return Lists(far, near, *pair_rows(far, n_cells), *pair_rows(near, n_cells))
