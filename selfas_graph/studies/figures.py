@@ -160,7 +160,8 @@ def study_figures(study, summary, folder) -> list:
 
 def plot_sweep(studies, summaries, name, out) -> Path:
     """The claim measures at the sweep's time against its parameter: mean and one standard error over
-    the seeds of each point (all seeds counted, those without current as 0)."""
+    the seeds of each point, as the sweep's table gives them (:func:`.verdicts.sweep_points`: for a
+    measure of the current, the seeds that carry it, "k/n" beside each point)."""
     sw = studies.sweeps[name]
     ncols = 2
     nrows = math.ceil(len(CLAIM_MEASURES) / ncols)
@@ -173,6 +174,10 @@ def plot_sweep(studies, summaries, name, out) -> Path:
             y = [st["mean"] for _, st in pts]
             e = [0.0 if not math.isfinite(st["sem"]) else st["sem"] for _, st in pts]
             ax.errorbar(x, y, yerr=e, marker="o", ms=3.5, capsize=3, lw=1.0, color=SEED_COLOUR)
+            for xv, yv, (_, st) in zip(x, y, pts):
+                if "of" in st:  # grouped: how many seeds the point describes
+                    ax.annotate(f"{st['n']}/{st['of']}", (xv, yv), textcoords="offset points", xytext=(4, 4),
+                                fontsize="x-small", color="0.35")  # fmt: skip
         ax.axvline(sw.base_value, color="0.6", lw=0.8, ls=":")
         words, unit = _words_unit(m)
         ax.set_title(words, fontsize="small", loc="left")

@@ -26,6 +26,7 @@ __all__ = [
     "GROUPED",
     "LABELS",
     "UNSHOWN_UNITS",
+    "current_group",
     "fmt",
     "grouped_stat",
     "measure_label",
@@ -86,13 +87,32 @@ LABELS = {
 }
 
 
-def values_at(summary, measure, t):
-    """Per-seed values of ``measure`` at time ``t`` (NaN where a seed has none)."""
+def _rows_at(summary, rows, t):
+    """Column ``t`` of per-seed rows over the summary's times (NaN where a seed has none, or where
+    ``rows`` is None or ``t`` is not a summarised time)."""
     times = summary["times"]
     k = int(np.argmin([abs(x - t) for x in times]))
-    if abs(times[k] - t) > 1e-9 * max(1.0, abs(t)) or measure not in summary["measures"]:
+    if abs(times[k] - t) > 1e-9 * max(1.0, abs(t)) or rows is None:
         return np.full(len(summary["seeds"]), np.nan)
-    return np.array([np.nan if v[k] is None else v[k] for v in summary["measures"][measure]["values"]], dtype=float)
+    return np.array([np.nan if v[k] is None else v[k] for v in rows], dtype=float)
+
+
+def values_at(summary, measure, t):
+    """Per-seed values of ``measure`` at time ``t`` (NaN where a seed has none)."""
+    m = summary["measures"].get(measure)
+    return _rows_at(summary, None if m is None else m["values"], t)
+
+
+def current_group(summary, t):
+    """``(active, circuit)`` at time ``t``: which seeds the grouped measures describe, those with rods
+    in gap-spanning filaments or a nonzero current through the gap (the summary's ``current``,
+    docs/model.md "Measures of the paper's claims"; a summary without it: a nonzero total current),
+    and whether the study has a circuit at all (some seed's total current is a number). Without a
+    circuit the filaments span the gap but carry no current."""
+    cur = values_at(summary, "total_current", t)
+    circuit = bool(np.isfinite(cur).any())
+    flag = _rows_at(summary, summary.get("current"), t) if "current" in summary else np.abs(cur)
+    return np.nan_to_num(flag) > 0, circuit
 
 
 def plain_stat(values, errors=None) -> dict:
@@ -137,14 +157,15 @@ def measure_text(summary, measure, t) -> str:
     """A measure of a summary at a time as the page prints it (module docstring)."""
     v = values_at(summary, measure, t)
     if measure in GROUPED:
-        cur = values_at(summary, "total_current", t)
-        g = grouped_stat(v, np.abs(cur) > 0)
+        active, circuit = current_group(summary, t)
+        g = grouped_stat(v, active)
+        what = "carry current" if circuit else "span the gap (no circuit)"
         if g["n"] == 0:
             return "n/a"
         if g["k"] == 0:
-            return f"0 of {g['n']} seeds carry current"
+            return f"0 of {g['n']} seeds {what}"
         return (
-            f"{g['k']} of {g['n']} seeds carry current: median {fmt(g['median'])} "
+            f"{g['k']} of {g['n']} seeds {what}: median {fmt(g['median'])} "
             f"[{fmt(g['min'])} to {fmt(g['max'])}], mean {pm(g | {'n': g['k']})}"
         )
     if measure in FIT_ERRORS:

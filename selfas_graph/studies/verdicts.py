@@ -14,7 +14,10 @@ import math
 from ..provenance import version_key
 from .stats import (
     FIT_ERRORS,
+    GROUPED,
+    current_group,
     fmt,
+    grouped_stat,
     measure_label,
     measure_text,
     older_runs,
@@ -237,12 +240,21 @@ def sweep_rows(studies, summaries, name) -> str:
 
 
 def sweep_points(studies, summaries, name, measure):
-    """(value, plain statistic) of a measure over a sweep's points that have a summary."""
+    """(value, statistic) of a measure over a sweep's points that have a summary, as the sweep's table
+    gives it: for a grouped measure the mean and standard error of the seeds that carry current, with
+    their number ``k`` (``n``: those of them with a value; never a mean over both groups), else the
+    plain statistic of every seed."""
     sw = studies.sweeps[name]
     out = []
     for value, study in studies.sweep_points(name):
         s = summaries.get(study)
-        if s is not None:
-            errs = values_at(s, FIT_ERRORS[measure], sw.time) if measure in FIT_ERRORS else None
-            out.append((value, plain_stat(values_at(s, measure, sw.time), errs)))
+        if s is None:
+            continue
+        v = values_at(s, measure, sw.time)
+        if measure in GROUPED:
+            g = grouped_stat(v, current_group(s, sw.time)[0])
+            out.append((value, {"n": g["k"], "mean": g["mean"], "sem": g["sem"], "of": g["n"]}))
+            continue
+        errs = values_at(s, FIT_ERRORS[measure], sw.time) if measure in FIT_ERRORS else None
+        out.append((value, plain_stat(v, errs)))
     return out

@@ -186,6 +186,51 @@ def test_grouped_stat_reports_the_group_it_describes():
     assert (g["k"], g["n"]) == (0, 2) and math.isnan(g["mean"])
 
 
+def test_grouped_measures_follow_the_summarys_current_flag_and_say_when_there_is_no_circuit():
+    """The seeds a grouped measure describes are those the summary flags as carrying current (rods in
+    gap-spanning filaments, or a nonzero current): without a circuit the total current is None in
+    every seed, yet the rods span the gap, and the page says so instead of "0 of n carry current"."""
+    rods = {"values": [[700.0], [0.0], [650.0]]}
+    no_circuit = {
+        "times": [600.0],
+        "seeds": [{"seed": k} for k in (1, 2, 3)],
+        "current": [[1.0], [0.0], [1.0]],
+        "measures": {"filament_rods": rods, "total_current": {"values": [[None], [None], [None]]}},
+    }
+    text = measure_text(no_circuit, "filament_rods", 600.0)
+    assert text.startswith("2 of 3 seeds span the gap (no circuit): median 675 [650 to 700]"), text
+    with_circuit = no_circuit | {
+        "measures": {"filament_rods": rods, "total_current": {"values": [[4.0], [0.0], [3.0]]}}
+    }
+    assert measure_text(with_circuit, "filament_rods", 600.0).startswith("2 of 3 seeds carry current: median 675")
+    older = {k: v for k, v in with_circuit.items() if k != "current"}  # no flag: a nonzero current decides
+    assert measure_text(older, "filament_rods", 600.0).startswith("2 of 3 seeds carry current")
+
+
+def test_a_sweep_point_of_a_grouped_measure_is_the_mean_of_the_seeds_that_carry_current():
+    """The sweep's figure plots what its table prints: for a grouped measure the mean of the k seeds
+    with current (and k of n), never a mean with the others as 0."""
+    from types import SimpleNamespace
+
+    from selfas_graph.studies.verdicts import sweep_points
+
+    summary = {
+        "times": [300.0],
+        "seeds": [{"seed": k} for k in (1, 2, 3)],
+        "current": [[1.0], [0.0], [1.0]],
+        "measures": {
+            "filament_rods": {"values": [[680.0], [0.0], [700.0]]},
+            "total_current": {"values": [[4.0], [0.0], [3.0]]},
+            "inside_R_plas": {"values": [[0.5], [0.2], [0.3]]},
+        },
+    }
+    studies = SimpleNamespace(sweeps={"s": SimpleNamespace(time=300.0)}, sweep_points=lambda name: [(0.0, "p0")])
+    ((_, rods),) = sweep_points(studies, {"p0": summary}, "s", "filament_rods")
+    assert (rods["n"], rods["of"], rods["mean"]) == (2, 3, 690.0)
+    ((_, frac),) = sweep_points(studies, {"p0": summary}, "s", "inside_R_plas")
+    assert frac["n"] == 3 and frac["mean"] == pytest.approx(1.0 / 3.0)
+
+
 def test_replace_blocks_changes_only_the_generated_blocks():
     text = "a\n<!-- begin generated: x -->\nold\n<!-- end generated: x -->\nb\n<!-- begin generated: y -->\n<!-- end generated: y -->\n"
     new, missing = replace_blocks(text, {"x": "new\nlines"})
