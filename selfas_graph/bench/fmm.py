@@ -29,6 +29,7 @@ import numpy as np
 from selfas_graph.kernels import fmm
 from selfas_graph.kernels.tree import build_tip_tree, evaluate_tip_tree
 
+from .args import below_one, positive
 from .tree import CONFIGS, KAPPA, RSTAR, Reference, best_of
 from .walk_parts import FAR, LISTS, NEAR, run_parts
 
@@ -88,13 +89,19 @@ def fmm_row(config, n_rods, tips, ref, reps, leaf, order, theta):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--rods", type=int, nargs="+", default=[6000, 24000])
+    ap.add_argument("--rods", type=positive(int), nargs="+", default=[6000, 24000])
     ap.add_argument("--config", nargs="+", default=["fig2"], choices=["uniform", "chains", "fig2"])
-    ap.add_argument("--order", type=int, nargs="+", default=[5, 6], help="FMM expansion orders p (default 5 6)")
-    ap.add_argument("--theta", type=float, nargs="+", default=[0.5, 0.6], help="FMM opening angles (default 0.5 0.6)")
-    ap.add_argument("--leaf", type=int, nargs="+", default=[64], help="FMM leaf sizes (default 64, the walk's)")
-    ap.add_argument("--reps", type=int, default=3)
-    ap.add_argument("--sample", type=int, default=3000, help="tips the error is measured on (default 3000)")
+    ap.add_argument(
+        "--order", type=positive(int), nargs="+", default=[5, 6], help="FMM expansion orders p (default 5 6)"
+    )
+    ap.add_argument(
+        "--theta", type=below_one, nargs="+", default=[0.5, 0.6], help="FMM opening angles (default 0.5 0.6)"
+    )
+    ap.add_argument(
+        "--leaf", type=positive(int), nargs="+", default=[64], help="FMM leaf sizes (default 64, the walk's)"
+    )
+    ap.add_argument("--reps", type=positive(int), default=3)
+    ap.add_argument("--sample", type=positive(int), default=3000, help="tips the error is measured on (default 3000)")
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args(argv)
     from .peer import machine_line

@@ -48,6 +48,8 @@ import math
 import sys
 import time
 
+from .args import positive
+
 #: densest packing of equal spheres: tips at least d apart are spheres of diameter d that do not overlap
 _MAX_PACKING = math.pi / (3.0 * math.sqrt(2.0))
 #: the terms ``--fields off`` removes: every magnetic field and every force on or from a current
@@ -92,19 +94,6 @@ def summarise(point, runs):
 # ----------------------------------------------------------------------------- planning
 
 
-def _positive(kind):
-    def parse(text):
-        try:
-            v = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if kind is int else 'a number'}") from None
-        if not (v > 0 and math.isfinite(v)):
-            raise argparse.ArgumentTypeError(f"{text} must be positive")
-        return v
-
-    return parse
-
-
 def build_parser():
     ap = argparse.ArgumentParser(
         description=__doc__.splitlines()[0],
@@ -114,20 +103,20 @@ def build_parser():
     grp = ap.add_mutually_exclusive_group()
     grp.add_argument(
         "--densities",
-        type=_positive(float),
+        type=positive(float),
         nargs="+",
         metavar="RHO",
         help="number densities, rods per unit box volume (L^-3)",
     )
     grp.add_argument(
         "--fractions",
-        type=_positive(float),
+        type=positive(float),
         nargs="+",
         metavar="PHI",
         help="rod volume fractions rods * pi (D/2)^2 L / V",
     )
-    grp.add_argument("--counts", type=_positive(int), nargs="+", metavar="N", help="rod counts")
-    ap.add_argument("--seeds", type=_positive(int), metavar="K", help="runs per density")
+    grp.add_argument("--counts", type=positive(int), nargs="+", metavar="N", help="rod counts")
+    ap.add_argument("--seeds", type=positive(int), metavar="K", help="runs per density")
     ap.add_argument(
         "--first-seed",
         type=int,
@@ -143,14 +132,14 @@ def build_parser():
     )
     ap.add_argument(
         "--t-max",
-        type=_positive(float),
+        type=positive(float),
         metavar="T",
         help="simulated time after which a run without short circuit is censored",
     )
-    ap.add_argument("--workers", type=_positive(int), default=1, metavar="W", help="worker processes (default 1)")
+    ap.add_argument("--workers", type=positive(int), default=1, metavar="W", help="worker processes (default 1)")
     ap.add_argument(
         "--chunk",
-        type=_positive(float),
+        type=positive(float),
         default=0.25,
         metavar="DT",
         help="simulated time per run() call (progress granularity; results do not depend on it)",

@@ -157,3 +157,20 @@ def test_far_separation_takes_the_walks_cells():
         expect_work += n_tips * taken
     assert work.sum() == expect_work > 0
     np.testing.assert_allclose(ratio, expect, rtol=1e-14)
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["--order", "0"], "--order: 0 must be positive"),
+        (["--theta", "1.2"], "--theta: 1.2 must be in [0, 1)"),
+        (["--leaf", "0"], "--leaf: 0 must be positive"),
+        (["--rods", "-5"], "--rods: -5 must be positive"),
+        (["--reps", "x"], "--reps: 'x' is not an integer"),
+    ],
+)
+def test_bench_fmm_refuses_values_out_of_range_naming_the_option(argv, words, capsys):
+    with pytest.raises(SystemExit) as exc:
+        _main("fmm")(argv)
+    assert exc.value.code == 2
+    assert words in capsys.readouterr().err
