@@ -18,7 +18,6 @@ import os
 import shlex
 import signal
 import sys
-import time
 import uuid
 from pathlib import Path
 
@@ -58,6 +57,7 @@ from ..model.terms.currents import tree_note, two_trees_note
 from ..parallel import abort_job, fit_threads_to_cores, world
 from .main import EXIT_NUMERICAL, CliError, CliIOError, counted
 from .paths import check_folder, check_target, same_file
+from .progress import Bar, Lines, fmt_time
 
 
 def add_arguments(p):
@@ -93,96 +93,11 @@ def add_arguments(p):
     )
 
 
-def _fmt_time(seconds):
-    seconds = max(0, int(seconds))
-    h, rem = divmod(seconds, 3600)
-    m, s = divmod(rem, 60)
-    return f"{h}h{m:02d}m{s:02d}s" if h else f"{m}m{s:02d}s"
-
-
-def _status_text(sim) -> str:
-    """Contacts, conductor contacts, the short circuit and the current, for the progress display."""
-    st = sim.status()
-    parts = [f"contacts {st['contacts']}"]
-    if sim.params.forces.electrodes is not None:
-        parts.append(f"on electrodes {st['electrode_contacts']}")
-    if sim.params.forces.external_filament is not None:
-        parts.append(f"on filament {st['filament_contacts']}")
-    if sim.params.circuit is not None:
-        sc = st["short_circuit_time"]
-        parts.append(f"short circuit at t = {sc:.4g}" if sc is not None else "no short circuit")
-        parts.append(f"I = {st['total_current']:.4g} J0")
-    return ", ".join(parts)
-
-
-class _Lines:
-    """Plain progress lines, at most one every ``period`` wall seconds (and at the end)."""
-
-    def __init__(self, stream, period=10.0):
-        self.stream, self.period = stream, period
-        self.first = None  # (wall time, steps done) at the first line: the rate is timed from there on
-        self.last = -1e9
-
-    def __call__(self, sim, done, total):
-        now = time.perf_counter()
-        if now - self.last < self.period and done < total:
-            return
-        self.last = now
-        if self.first is None or done <= self.first[1]:
-            # the steps before the first line include compiling the kernels (a minute on a fresh
-            # installation): a rate from them would promise hours
-            self.first = self.first or (now, done)
-            speed = "-- steps/s  ETA --"
-        else:
-            rate = (done - self.first[1]) / max(now - self.first[0], 1e-9)
-            speed = f"{rate:.0f} steps/s  ETA {_fmt_time((total - done) / rate)}"
-        print(
-            f"t = {sim.state.time:.4g} / {sim.params.run.t_end:.4g}  step {sim.state.step}  "
-            f"{_percent(sim.state.step, sim.state.step - done + total):5.1f}%  {speed}  {_status_text(sim)}",
-            file=self.stream,
-            flush=True,
-        )
-
-    def close(self):
-        pass
-
-
-def _percent(step, last_step):
-    """How far a run is, in % of all its steps (a resumed run counts those before the checkpoint)."""
-    return 100 * step / max(last_step, 1)
-
-
 def _new_frames(start, n_steps, every, first):
     """Frames written by ``n_steps`` steps from step ``start``: one at each multiple of ``every``,
     one at the end if that is not one, and (``first``) the initial frame."""
     end = start + n_steps
     return end // every - start // every + int(n_steps > 0 and end % every != 0) + int(first)
-
-
-class _Bar:
-    """A tqdm bar over all the run's steps (a resumed run's bar starts at its checkpoint's step)."""
-
-    def __init__(self, total, t_end, start=0):
-        from tqdm import tqdm
-
-        self.bar = tqdm(
-            initial=start,
-            total=start + total,
-            unit="step",
-            dynamic_ncols=True,
-            file=sys.stderr,
-            bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}, {rate_fmt}] {postfix}",
-        )
-        self.t_end = t_end
-        self.n = 0
-
-    def __call__(self, sim, done, total):
-        self.bar.update(done - self.n)
-        self.n = done
-        self.bar.set_postfix_str(f"t={sim.state.time:.4g}/{self.t_end:.4g}, {_status_text(sim)}", refresh=False)
-
-    def close(self):
-        self.bar.close()
 
 
 def _resume_paths(args):
@@ -367,102 +282,18 @@ def run(args):
         )
     except PlacementError as exc:
         raise CliError(str(exc)) from None
-
-    import numba
-
     fit_threads_to_cores()
     try:
         n_steps = sim.steps_to(p.run.t_end)
     except ValueError as exc:
         raise CliError(f"run.t_end: {exc}") from None
-    start = sim.state.step
-    plan = {
-        "scenario": None if args.scenario is None else str(args.scenario),
-        **({"resume": str(ckpt), "from_step": start, "from_t": sim.state.time} if snap is not None else {}),
-        "rods": p.rods.count,
-        "terms": p.forces.active(),
-        "dt": p.integrator.dt,
-        "t_end": p.run.t_end,
-        "steps": n_steps,
-        "frames": _new_frames(start, n_steps, sim.frame_steps, first=snap is None),
-        "output": str(out),
-        "threads": numba.get_num_threads(),
-        "mpi_ranks": world.size,
-        "fast_steps": "compiled" if sim.compiled is not None else f"in Python: {python_steps_reason(sim)}",
-        **{k: v for k, v in sim.force_field.describe().items() if k != "terms"},
-    }
+    plan = _plan(args, sim, snap, ckpt, out, n_steps)
     if world.rank == 0:
-        print(
-            f"selfas-graph {__version__}: {p.scenario.name}: {p.rods.count} rods, terms "
-            f"{', '.join(plan['terms']) or 'none'}; dt = {p.integrator.dt:g}, t_end = {p.run.t_end:g} "
-            f"({n_steps} steps); {counted(plan['threads'], 'thread')} x {counted(world.size, 'rank')}",
-            flush=True,
-        )
-        if not math.isclose(sim.frame_interval, p.output.interval, rel_tol=1e-9):
-            print(
-                f"note: output.interval = {p.output.interval:g} is {p.output.interval / p.integrator.dt:.6g} steps of "
-                f"integrator.dt = {p.integrator.dt:g}: a frame every {sim.frame_steps} steps "
-                f"(t = {sim.frame_interval:.6g}), and one at the end",
-                flush=True,
-            )
+        _announce(sim, plan)
     if args.dry_run:
-        if world.rank == 0:
-            if snap is None:
-                print("dry run: placement succeeded, nothing written")
-            else:
-                print(
-                    f"dry run: checkpoint {ckpt} read and verified against {out} (step {start}, "
-                    f"t = {sim.state.time:.6g}); {counted(n_steps, 'step')} to take, nothing written"
-                )
-            if plasma_current_text(p):
-                print(plasma_current_text(p))
-            for text in [*null_model_notes(p), two_trees_note(p)]:
-                if text:
-                    print(f"note: {text}")
-            for rule in short_of_accuracy(p):
-                print(f"faster than accurate: {rule.key} = {rule.value(p)}; the stated accuracy needs {rule.stated}")
-            print(json.dumps(plan, indent=2))
-        if stiff := stiff_brakes(p, p.integrator.dt):  # the run would stop at its first contacts, or at once
-            if world.rank == 0:
-                print(f"selfas-graph simulate: the run would stop with a numerical failure: {stiff}", file=sys.stderr)
-            return EXIT_NUMERICAL
-        return 0
+        return _dry_run(sim, snap, ckpt, out, plan)
 
-    def open_writer():
-        if snap is not None:
-            try:
-                writer = RunWriter.reopen(
-                    out,
-                    int(snap["step"]),
-                    t_end=scenario.params.run.t_end,
-                    frame_interval=sim.frame_interval,
-                    mpi_ranks=world.size,
-                    drop_later=True,  # what came after the checkpoint is computed again
-                )
-            except RunFileError as exc:
-                raise CliError(f"cannot resume: {exc}") from None
-            print(
-                f"resuming at step {int(snap['step'])} (t = {float(snap['time']):.6g}) from {ckpt}; "
-                f"{writer.n_frames} frames kept in {out}",
-                flush=True,
-            )
-            return writer
-        existed = os.path.lexists(out)
-        try:
-            return new_run_file(
-                sim, scenario, out, run_id, shlex.join(sys.argv), args.scenario, args.force, mpi_ranks=world.size
-            )
-        except OSError as exc:
-            if not existed:  # a failed run leaves no output file behind
-                try:
-                    out.unlink()
-                except OSError:
-                    pass
-            if is_io_error(exc) and not isinstance(exc, (FileNotFoundError, PermissionError, IsADirectoryError)):
-                raise CliIOError(f"cannot write the output file {out}: {' '.join(str(exc).split())}") from None
-            raise CliError(f"cannot write the output file {out}: {exc}") from None
-
-    writer = _on_root(open_writer, share=False)
+    writer = _on_root(lambda: _open_writer(args, sim, scenario, snap, out, ckpt, run_id), share=False)
     checkpointer = None
     if world.size > 1:
         # the other ranks take the frames' calls too (their energies are sums over all ranks)
@@ -478,9 +309,120 @@ def run(args):
         mode = "bar" if sys.stderr.isatty() else "lines"
     reporter = None
     if world.rank == 0 and mode != "none":
-        reporter = _Bar(n_steps, p.run.t_end, start) if mode == "bar" else _Lines(sys.stderr)
+        reporter = Bar(n_steps, p.run.t_end, sim.state.step) if mode == "bar" else Lines(sys.stderr)
     with StopOnSignal(comm=world) as stop:
         end = run_to_file(sim, writer, checkpointer, stop, out, progress=reporter, keeps_files=world.rank == 0)
+    return _ended(end, stop, sim, writer, out, ckpt)
+
+
+def _plan(args, sim, snap, ckpt, out, n_steps) -> dict:
+    """What the run will do, as printed by ``--dry-run``: scene, size, terms, steps, frames, output, threads."""
+    import numba
+
+    p = sim.params
+    start = sim.state.step
+    return {
+        "scenario": None if args.scenario is None else str(args.scenario),
+        **({"resume": str(ckpt), "from_step": start, "from_t": sim.state.time} if snap is not None else {}),
+        "rods": p.rods.count,
+        "terms": p.forces.active(),
+        "dt": p.integrator.dt,
+        "t_end": p.run.t_end,
+        "steps": n_steps,
+        "frames": _new_frames(start, n_steps, sim.frame_steps, first=snap is None),
+        "output": str(out),
+        "threads": numba.get_num_threads(),
+        "mpi_ranks": world.size,
+        "fast_steps": "compiled" if sim.compiled is not None else f"in Python: {python_steps_reason(sim)}",
+        **{k: v for k, v in sim.force_field.describe().items() if k != "terms"},
+    }
+
+
+def _announce(sim, plan):
+    """The run's first line (scene, rods, terms, steps, threads and ranks), and a note when the output
+    interval is not a whole number of steps."""
+    p = sim.params
+    print(
+        f"selfas-graph {__version__}: {p.scenario.name}: {p.rods.count} rods, terms "
+        f"{', '.join(plan['terms']) or 'none'}; dt = {p.integrator.dt:g}, t_end = {p.run.t_end:g} "
+        f"({plan['steps']} steps); {counted(plan['threads'], 'thread')} x {counted(world.size, 'rank')}",
+        flush=True,
+    )
+    if not math.isclose(sim.frame_interval, p.output.interval, rel_tol=1e-9):
+        print(
+            f"note: output.interval = {p.output.interval:g} is {p.output.interval / p.integrator.dt:.6g} steps of "
+            f"integrator.dt = {p.integrator.dt:g}: a frame every {sim.frame_steps} steps "
+            f"(t = {sim.frame_interval:.6g}), and one at the end",
+            flush=True,
+        )
+
+
+def _dry_run(sim, snap, ckpt, out, plan) -> int:
+    """``--dry-run``: the placement or checkpoint checked, the notes and the plan printed, nothing
+    written; the numerical-failure exit code when the brakes are too stiff for the time step."""
+    p = sim.params
+    if world.rank == 0:
+        if snap is None:
+            print("dry run: placement succeeded, nothing written")
+        else:
+            print(
+                f"dry run: checkpoint {ckpt} read and verified against {out} (step {sim.state.step}, "
+                f"t = {sim.state.time:.6g}); {counted(plan['steps'], 'step')} to take, nothing written"
+            )
+        if plasma_current_text(p):
+            print(plasma_current_text(p))
+        for text in [*null_model_notes(p), two_trees_note(p)]:
+            if text:
+                print(f"note: {text}")
+        for rule in short_of_accuracy(p):
+            print(f"faster than accurate: {rule.key} = {rule.value(p)}; the stated accuracy needs {rule.stated}")
+        print(json.dumps(plan, indent=2))
+    if stiff := stiff_brakes(p, p.integrator.dt):  # the run would stop at its first contacts, or at once
+        if world.rank == 0:
+            print(f"selfas-graph simulate: the run would stop with a numerical failure: {stiff}", file=sys.stderr)
+        return EXIT_NUMERICAL
+    return 0
+
+
+def _open_writer(args, sim, scenario, snap, out, ckpt, run_id):
+    """The run file: reopened after its checkpoint on ``--resume`` (what came after is dropped), or
+    new; a new file that cannot be written is removed and reported as a CliError or CliIOError."""
+    if snap is not None:
+        try:
+            writer = RunWriter.reopen(
+                out,
+                int(snap["step"]),
+                t_end=scenario.params.run.t_end,
+                frame_interval=sim.frame_interval,
+                mpi_ranks=world.size,
+                drop_later=True,  # what came after the checkpoint is computed again
+            )
+        except RunFileError as exc:
+            raise CliError(f"cannot resume: {exc}") from None
+        print(
+            f"resuming at step {int(snap['step'])} (t = {float(snap['time']):.6g}) from {ckpt}; "
+            f"{writer.n_frames} frames kept in {out}",
+            flush=True,
+        )
+        return writer
+    existed = os.path.lexists(out)
+    try:
+        return new_run_file(
+            sim, scenario, out, run_id, shlex.join(sys.argv), args.scenario, args.force, mpi_ranks=world.size
+        )
+    except OSError as exc:
+        if not existed:  # a failed run leaves no output file behind
+            try:
+                out.unlink()
+            except OSError:
+                pass
+        if is_io_error(exc) and not isinstance(exc, (FileNotFoundError, PermissionError, IsADirectoryError)):
+            raise CliIOError(f"cannot write the output file {out}: {' '.join(str(exc).split())}") from None
+        raise CliError(f"cannot write the output file {out}: {exc}") from None
+
+
+def _ended(end, stop, sim, writer, out, ckpt) -> int:
+    """The exit code of a run that ended (``run_to_file``'s end), with its message or summary."""
     exc = end.error
     if end.status == "interrupted":
         if world.rank == 0:
@@ -506,9 +448,8 @@ def run(args):
         return EXIT_NUMERICAL
     if end.status == "io_error":
         _io_failure(exc, writer, out, ckpt, sim)
-    summary = end.summary
     if world.rank == 0:
-        _print_summary(summary, out, sim)
+        _print_summary(end.summary, out, sim)
     return 0
 
 
@@ -559,7 +500,7 @@ def _print_summary(s, out, sim):
         f"{s.steps_per_second:.0f} steps/s, {1e3 / s.steps_per_second:.2f} ms/step" if s.steps else "no step to take"
     )
     lines = [
-        f"done: {s.steps} steps, t = {s.t_start:.4g} -> {s.t_end:.4g} in {_fmt_time(s.wall_seconds)} ({speed})",
+        f"done: {s.steps} steps, t = {s.t_start:.4g} -> {s.t_end:.4g} in {fmt_time(s.wall_seconds)} ({speed})",
         f"  max bond-length error after constraint: {s.max_bond_error:.3g}",
         f"  energy balance E - E0 - W: {s.energy_balance:.3g} " + _balance_note(rel, sim),
         f"  contacts (tip pairs closer than r*): {sim.contact_count()}",

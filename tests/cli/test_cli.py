@@ -229,14 +229,14 @@ def test_the_progress_of_a_resumed_run_counts_the_whole_run(scenario, tmp_path):
     """The progress line's percentage goes with its absolute t and step: a run resumed half-way starts at 50 %."""
     import io
 
-    from selfas_graph.cli.simulate import _Lines
+    from selfas_graph.cli.progress import Lines
     from selfas_graph.io.scenario import load_scenario
     from selfas_graph.model.simulation import Simulation
 
     sim = Simulation.from_scenario(load_scenario(scenario))
     sim.run(0.025)
     stream = io.StringIO()
-    _Lines(stream)(sim, 0, 25)
+    Lines(stream)(sim, 0, 25)
     assert "step 25   50.0%" in stream.getvalue()
 
 
@@ -430,15 +430,15 @@ def test_progress_lines_time_the_rate_from_the_first_line(monkeypatch):
     import io
 
     from conftest import SMALL_CIRCUIT_SCENE
-    from selfas_graph.cli import simulate as cli_simulate
+    from selfas_graph.cli import progress
     from selfas_graph.io.scenario import scenario_from_text
     from selfas_graph.model.simulation import Simulation
 
     sim = Simulation.from_scenario(scenario_from_text(SMALL_CIRCUIT_SCENE))
     clock = iter([160.0, 170.0])  # the first line after a minute of compiling, the second 10 s and 1000 steps later
-    monkeypatch.setattr(cli_simulate.time, "perf_counter", lambda: next(clock))
+    monkeypatch.setattr(progress.time, "perf_counter", lambda: next(clock))
     out = io.StringIO()
-    lines = cli_simulate._Lines(out, period=0.0)
+    lines = progress.Lines(out, period=0.0)
     lines(sim, 10, 2010)
     lines(sim, 1010, 2010)
     first, second = out.getvalue().splitlines()

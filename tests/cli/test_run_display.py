@@ -7,7 +7,8 @@ import re
 import numpy as np
 
 import selfas_graph as sg
-from selfas_graph.cli.simulate import _Lines, _print_summary
+from selfas_graph.cli.progress import Lines
+from selfas_graph.cli.simulate import _print_summary
 
 
 def _column(short):
@@ -31,7 +32,7 @@ def test_progress_line_and_summary_after_a_short_circuit(tmp_path, capsys):
     sim = _column(short=True)
     summary = sim.run(0.01)
     stream = io.StringIO()
-    _Lines(stream)(sim, 10, 10)
+    Lines(stream)(sim, 10, 10)
     line = stream.getvalue()
     assert re.search(r"contacts 2, on electrodes 2, short circuit at t = 0, I = 2\.04 J0", line), line
     _print_summary(summary, tmp_path / "x.h5", sim)
@@ -47,7 +48,7 @@ def test_progress_line_before_a_short_circuit(tmp_path, capsys):
     sim = _column(short=False)
     summary = sim.run(0.01)
     stream = io.StringIO()
-    _Lines(stream)(sim, 10, 10)
+    Lines(stream)(sim, 10, 10)
     assert "no short circuit, I = 0 J0" in stream.getvalue()
     _print_summary(summary, tmp_path / "x.h5", sim)
     assert "short circuit: never; at the end 0 rods carry current" in capsys.readouterr().out
