@@ -450,3 +450,16 @@ def test_tip_force_skips_own_rod():
         assert np.linalg.norm(expected) > 0.1
         # same law, different rounding order: round-off of an O(1) value
         np.testing.assert_allclose(out[k], expected, rtol=1e-12, atol=1e-15)
+
+
+def test_packed_segments_are_the_active_rods_ends_and_currents(rng):
+    """Rows A (tip a), B (tip b) and J of each active rod, in the order of ``active_rod``."""
+    from selfas_graph.kernels.currents import packed_segments
+
+    position = rng.normal(size=(20, 3))
+    current = rng.normal(size=10)
+    active = np.array([7, 0, 3], dtype=np.int64)
+    seg = packed_segments(position, active, current)
+    np.testing.assert_array_equal(seg[0:3], position[2 * active].T)
+    np.testing.assert_array_equal(seg[3:6], position[2 * active + 1].T)
+    np.testing.assert_array_equal(seg[6], current[active])

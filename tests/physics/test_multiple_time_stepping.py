@@ -99,6 +99,11 @@ def test_fast_kernel_equals_the_literal_switched_sum(rng):
     assert np.abs(want).max() > 1.0  # the core pairs are in
     # round-off of sums of a few terms of size up to ~1e4 (core pairs): 1e-12 relative to the largest
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
+    # the compiled steps' kernel by blocks of tips (kernels/tips.py tip_tip_fast_rows), the same sum
+    parts = np.full_like(s.position, np.nan)
+    for t0, t1 in ((0, 40), (40, 41), (41, 41), (41, n)):
+        kt.tip_tip_fast_rows(s.position, s.tip_charge, nl.start, nl.index, RSTAR, KAPPA, r_in, r_out, t0, t1, parts)
+    np.testing.assert_allclose(parts, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
 
 
 def _sim(slow_every, **extra):

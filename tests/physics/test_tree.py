@@ -734,3 +734,34 @@ def test_mixed_huge_spread(offset):
     b = uniform_rods(300, rng)
     tips = [np.concatenate([u, v + (offset if d < 3 else 0.0)]) for d, (u, v) in enumerate(zip(a, b))]
     close_mixed(mixed(*tips, 0.5), tree(*tips, 0.5))
+
+
+@pytest.mark.jit_off_ok
+def test_acceptance_is_the_rule_on_the_box(rng):
+    """kernels/treewalk.py accepts: a cell of radius b acts through its moments on a group's box
+    exactly when the distance d of its centre from the box (0 inside it, numpy's clip) has
+    b < theta d and b + r* < d, so that no tip of the cell comes within r* of any point of the
+    box; hand-placed cells on both sides of each bound, and random ones against numpy."""
+    from selfas_graph.kernels.treewalk import accepts
+
+    box = (0.0, 0.0, 0.0, 1.0, 2.0, 1.0)
+    theta = 0.5
+
+    def rule(centre, radius):
+        return [accepts(centre, radius, c, *box, theta * theta, RSTAR)[0] for c in range(len(radius))]
+
+    # d = 2 beyond the x face: b = 0.99 (< theta d = 1) accepted, b = 1.01 not; a cell inside the box never
+    centre = np.array([[3.0, 1.0, 0.5], [3.0, 1.0, 0.5], [0.5, 1.0, 0.5], [0.5, 1.0, 0.5]])
+    assert rule(centre, np.array([0.99, 1.01, 0.0, 1e-9])) == [True, False, False, False]
+    # a small cell close to the box (d = 0.1): theta d = 0.05 passes b = 0.03 and 0.045, and r* decides:
+    # b + r* = 0.09 < d, 0.105 > d
+    assert rule(np.array([[1.1, 1.0, 0.5]] * 2), np.array([0.03, 0.045])) == [True, False]
+    centre = rng.uniform(-4, 5, (2000, 3))
+    radius = rng.uniform(0, 2, 2000)
+    lo, hi = np.array(box[:3]), np.array(box[3:])
+    d2 = ((centre - np.clip(centre, lo, hi)) ** 2).sum(1)
+    want = (d2 * theta**2 > radius**2) & (d2 > (radius + RSTAR) ** 2)
+    got = [accepts(centre, radius, c, *box, theta * theta, RSTAR) for c in range(2000)]
+    np.testing.assert_array_equal([g[0] for g in got], want)
+    np.testing.assert_allclose([g[1] for g in got], d2, rtol=1e-15, atol=0)
+    assert 200 < want.sum() < 1800

@@ -52,7 +52,7 @@ def test_inner_branch_bounded_at_zero():
         # at these r, a handful of roundings: measured at most 2.0e-16 (compiled) and 4.1e-16 (the kernels
         # as Python, NUMBA_DISABLE_JIT=1), 1e-14 leaves 20x
         assert f == pytest.approx((p * r + kappa * (RSTAR - r)) / RSTAR**3, rel=1e-14)
-        assert abs(f) <= kappa / RSTAR**2 * (1 + 1e-12)
+        assert abs(f) <= kappa / RSTAR**2 * (1 + 1e-12)  # the bound, with room for the rounding of f (above)
     assert tip_force_over_r(0.0, p, RSTAR, kappa) == 0.0
     assert math.isfinite(tip_potential(0.0, p, RSTAR, kappa))
 
@@ -104,7 +104,7 @@ def test_yukawa_core_is_bounded_continuous_and_minus_gradient(r):
     f = yukawa_force_over_r(r * r, zz, 1.0 / screening, core * core) * r
     expected = f_core * r / core if r < core else zz * math.exp(-r / screening) * (1 / r**2 + 1 / (screening * r))
     assert f == pytest.approx(expected, rel=1e-14, abs=1e-300)  # the same formulas in another order: round-off
-    assert abs(f) <= f_core * (1 + 1e-14)
+    assert abs(f) <= f_core * (1 + 1e-14)  # at r = a the two branches meet: f_core up to the rounding of f
     if r > 0.0:
         h = 1e-6 * r
         numeric = _central_difference(lambda s: yukawa_potential(s * s, zz, screening, core), r, h)

@@ -109,7 +109,7 @@ def test_fused_split_brake_is_the_reference(crowded):
     v_ref, w_ref, m_ref = ref.brake_close_pairs(s.position, s.velocity, RADIUS, 100.0, 1e-3)
     assert m == m_ref > 20
     np.testing.assert_allclose(v, v_ref, rtol=1e-12, atol=1e-14)  # the same arithmetic; numpy floats vs Python
-    assert work == pytest.approx(w_ref, rel=1e-12)
+    assert work == pytest.approx(w_ref, rel=1e-12)  # a sum of m_ref terms of one sign, in the same order: round-off
 
 
 def test_both_paths_of_the_split_brake_agree_bit_for_bit(crowded, monkeypatch):
@@ -342,7 +342,10 @@ def test_constrain_bonds_checked_is_the_constraint_and_both_checks(rng, project,
     same_bits(err, err_old)
     same_bits(vmax, vmax_old)
     x_ref, v_ref = ref.constrain_bonds(x0, v0, project, correct, None if unit else length)
-    np.testing.assert_allclose(x, x_ref, rtol=0, atol=1e-14)  # the projection about the centre, computed otherwise
+    # the projection about the centre, computed otherwise: a few ulp of coordinates of order 1 (x), and of
+    # velocities of order 1 (normal draws, up to about 4) less their parts along the bond (v); the bond error is a
+    # difference of such positions' lengths, and the largest |v| one of those velocities
+    np.testing.assert_allclose(x, x_ref, rtol=0, atol=1e-14)
     np.testing.assert_allclose(v, v_ref, rtol=0, atol=1e-13)
     assert err == pytest.approx(ref.bond_length_error(x_ref, None if unit else length), abs=1e-14)
     assert vmax == pytest.approx(float(np.abs(v_ref).max()), rel=1e-13)
@@ -492,3 +495,80 @@ def test_channel_sums_by_blocks_and_powers_by_group_are_channel_sum_power(rng):
         for j in range(0, len(powered), 3):
             ki.power_group(rows, v.reshape(-1), powered, p, j)
         same_bits(p, p1)
+
+
+# -- the same block kernels against the slow references (tests/reference.py) directly
+
+
+def test_block_kernels_are_the_slow_references(crowded, rng):
+    """Over one split into blocks: the pairs found, the brake, the AB4 update, the channel sums and the
+    powers, each against its reference, not only against the one-pass kernel above."""
+    s, nl = crowded
+    # rows sorted, so that the pairs come in the reference's (k, l) order
+    index = np.concatenate([np.sort(nl.index[a:b]) for a, b in zip(nl.start[:-1], nl.start[1:])])
+    edges = splits(s.n_rods, rng)[1]
+    pair_k = np.full(index.shape[0], -1)
+    pair_l = np.full(index.shape[0], -1)
+    v, work, found = s.velocity.copy(), 0.0, []
+    for r0, r1 in zip(edges[:-1], edges[1:]):
+        t0 = 2 * r0
+        m = brakes.close_pairs_rows(s.position, nl.start, index, RADIUS, t0, 2 * r1, pair_k, pair_l, nl.start[t0])
+        block = list(zip(pair_k[nl.start[t0] : nl.start[t0] + m], pair_l[nl.start[t0] : nl.start[t0] + m]))
+        want = sorted(p for p in ref.neighbour_pairs(s.position, RADIUS, True) if t0 <= p[0] < 2 * r1)
+        assert block == want
+        found.append((nl.start[t0], m))
+    for offset, m in found:
+        work = brakes.brake_found_pairs(v, pair_k, pair_l, offset, m, 100.0, 1e-3, work)
+    v_ref, w_ref, m_ref = ref.brake_close_pairs(s.position, s.velocity, RADIUS, 100.0, 1e-3)
+    assert sum(m for _, m in found) == m_ref > 20
+    np.testing.assert_allclose(v, v_ref, rtol=1e-12, atol=1e-14)  # the same arithmetic; numpy floats vs Python
+    assert work == pytest.approx(w_ref, rel=1e-12)  # a sum of m_ref such terms, in the same order
+
+    length = rng.uniform(0.5, 2.0, size=s.n_rods)
+    hist_v, hist_a = rng.normal(size=(4, s.n_tips, 3)), rng.normal(size=(4, s.n_tips, 3)) * 10.0
+    slots = np.array([3, 2, 1, 0], dtype=np.int64)
+    x, v = s.position.copy(), s.velocity.copy()
+    worst = max(ki.ab4_rods(x, v, hist_v, hist_a, slots, 1e-3, length, r0, r1) for r0, r1 in zip(edges[:-1], edges[1:]))
+    x_ref, v_ref, err_ref = ref.ab4_step(s.position, s.velocity, hist_v, hist_a, slots, 1e-3, length)
+    same_bits(x, x_ref)  # the same five products and four sums per element, in the same order
+    same_bits(v, v_ref)
+    assert worst == pytest.approx(err_ref, rel=1e-12, abs=1e-15)  # a square root of a sum in another order
+
+    c = channels(rng, n_ch=9, n=s.n_tips)
+    out = np.full((s.n_tips, 3), np.nan)
+    rows = c.reshape(9, -1)
+    for r0, r1 in zip(edges[:-1], edges[1:]):
+        ki.sum_rows_range(out.reshape(-1), rows, 6 * r0, 6 * r1)
+    same_bits(out, ref.channel_sum(c))  # element by element from 0.0, in channel order
+    powered = np.array([0, 2, 3, 5, 8], dtype=np.int64)
+    p = np.full(len(powered), np.nan)
+    for j in range(0, len(powered), 3):
+        ki.power_group(rows, s.velocity.reshape(-1), powered, p, j)
+    for j, ch in enumerate(powered):
+        # the kernel's pairwise sum against the correctly rounded one: within 1e-13 of the sum of |products|
+        bound = 1e-13 * ref.dot(np.abs(c[ch]), np.abs(s.velocity))
+        assert p[j] == pytest.approx(ref.dot(c[ch], s.velocity), abs=bound)
+
+
+def test_contact_test_by_blocks_counts_the_reference_pairs(rng):
+    """On a quiet state, each block's counts are the listed contacts and the pairs k < l of its tips
+    closer than r*, counted by all distances."""
+    s = random_rods(150, rng, box=1.2)
+    nl = NeighbourList(RADIUS, 0.05, exclude_same_rod=True)
+    nl.build(s.position)
+    close = sorted(ref.neighbour_pairs(s.position, RSTAR, True))
+    pairs = np.array(close, dtype=np.int64).reshape(-1, 2)
+    assert len(pairs) > 5
+    no = np.zeros(s.n_tips, dtype=bool)
+    args = (RSTAR, 1.5 * RSTAR, np.nan, np.nan, no, no, np.nan, no)
+    edges = splits(s.n_rods, rng)[2]
+    blocks = len(edges) - 1
+    m = len(pairs)
+    for j, (r0, r1) in enumerate(zip(edges[:-1], edges[1:])):
+        p_lo, p_hi = j * m // blocks, (j + 1) * m // blocks
+        ok, known, near = contacts.contacts_part(
+            s.position, nl.start, nl.index, pairs, p_lo, p_hi, 2 * r0, 2 * r1, *args
+        )
+        assert ok
+        assert known == p_hi - p_lo
+        assert near == sum(1 for k, _ in close if 2 * r0 <= k < 2 * r1)

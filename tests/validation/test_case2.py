@@ -30,6 +30,18 @@ def test_filament_field_formula(rng):
     np.testing.assert_allclose(out, (2 * 10.0 * rho / (rho**2 + 0.09**2))[:, None] * phi_hat, rtol=1e-13)
 
 
+def test_filament_force_on_tips_is_q_times_the_closed_form(rng):
+    """F_k = q_k B(x_k) with B = 2 J rho / (rho^2 + w^2) phi_hat, tip by tip."""
+    pts = rng.uniform(-3, 3, (50, 3))
+    q = rng.uniform(-2, 2, 50)
+    out = np.full_like(pts, np.nan)
+    kx.filament_force_on_tips(pts, q, 10.0, 0.09, out)
+    rho = np.hypot(pts[:, 0], pts[:, 1])
+    phi_hat = np.stack([-pts[:, 1] / rho, pts[:, 0] / rho, 0 * rho], axis=1)
+    # the closed form with its factors multiplied in another order: a few ulp
+    np.testing.assert_allclose(out, (q * 2 * 10.0 * rho / (rho**2 + 0.09**2))[:, None] * phi_hat, rtol=1e-13)
+
+
 def test_monopoles_on_tips_match_tip_law(rng):
     """The dipole's end monopoles act on tips with the term-1 law and the term-2 brake (v of the source = 0)."""
     pos = rng.uniform(-1, 1, (30, 3))
