@@ -118,7 +118,7 @@ def _pairings(items, k):
                 yield ((a, items[j]),) + more
 
 
-#: the stored components of each order, in the layout of kernels/tree.py's TipTree (docs/model.md 'Term 1')
+#: the stored components of each order, in the layout of kernels/tree.py's TipTree
 STORED = {
     0: [()],
     1: [(0,), (1,), (2,)],
