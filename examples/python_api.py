@@ -9,7 +9,8 @@ are short-circuited from the first step; six free rods float beside them. The sc
 4. reads the file back with ``RunFile``.
 
 Run it with ``python examples/python_api.py [OUT.h5]`` (a few seconds after the kernels are
-compiled); the tests run it too (tests/cli/test_python_api.py).
+compiled; an existing OUT.h5 is refused, as ``simulate`` refuses it without ``--force``); the tests
+run it too (tests/cli/test_python_api.py).
 """
 
 import sys
@@ -51,7 +52,7 @@ print(f"t = 0: short circuit at t = {sim.short_circuit_time}")
 
 # 3. run in chunks, writing a run file
 out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(tempfile.mkdtemp()) / "column.h5"
-with sg.RunWriter.for_simulation(sim, out, overwrite=True) as writer:
+with sg.RunWriter.for_simulation(sim, out) as writer:  # OutputExistsError if out exists
     for t_end in (0.1, 0.2, 0.3):
         sim.run(t_end, writer=writer)
         role = sim.network.topology().role

@@ -271,7 +271,8 @@ def write_xyz(run: RunFile, path, frames):
 
 
 def export_run(run_path, format=None, out=None, frames=None, force=False, *, fmt=None) -> tuple[Path, int]:
-    """Export a run file; returns the output path and the number of frames written.
+    """Export a run file (its path, or an open :class:`~.run_reader.RunFile`); returns the output
+    path and the number of frames written.
 
     ``format`` is "gsd" or "xyz" (the command's ``--format``; ``fmt=``, its name before 0.4.3, is
     still taken, with a DeprecationWarning); ``frames`` "all" (default), a frame number, "A:B[:S]",
@@ -294,6 +295,8 @@ def export_run(run_path, format=None, out=None, frames=None, force=False, *, fmt
         raise TypeError(f"export_run(run_path, format): the format is missing; valid: {', '.join(FORMATS)}")
     if format not in FORMATS:
         raise ExportError(f"format {format!r} is not known; valid: {', '.join(FORMATS)}")
+    if isinstance(run_path, RunFile):
+        run_path = run_path.path
     with RunFile(run_path) as run:
         picked = parse_frames(frames, run.n_frames)
         path = output_path(run_path, out, format, force=force)

@@ -83,7 +83,8 @@ def load_scenario(source, overrides=(), t_end=None) -> Scenario:
     try:
         raw_bytes = path.read_bytes()
     except FileNotFoundError:
-        raise ScenarioError([f"file not found: {path}"], source=path) from None
+        where = "" if path.is_absolute() else f" (a relative path, read from the working directory {Path.cwd()})"
+        raise ScenarioError([f"file not found: {path}{where}"], source=path) from None
     except IsADirectoryError:
         raise ScenarioError([f"{path} is a directory, not a scenario file"], source=path) from None
     except OSError as exc:
@@ -105,7 +106,7 @@ def scenario_from_text(text, path=None, overrides=(), t_end=None) -> Scenario:
         raise ScenarioError([f"not a usable scenario: {exc}"], source=path) from None
     except RecursionError:
         raise ScenarioError(["not valid TOML: arrays or tables nested too deeply"], source=path) from None
-    if isinstance(overrides, (str, bytes)) or overrides is None:
+    if isinstance(overrides, (str, bytes, dict)) or overrides is None:
         raise ScenarioError(
             [f"overrides: give a list of 'key=value' strings, e.g. ['integrator.dt=5e-4'], got {overrides!r}"],
             source=path,
@@ -230,6 +231,10 @@ def _build(cls, raw, prefix, problems):
                 value = {}
             if "distribution" in fields_of(tp) and isinstance(value, (int, float)) and not isinstance(value, bool):
                 value = {"distribution": "constant", "value": value}  # a bare number: the same for every rod
+            if optional and not isinstance(value, dict):
+                # a section that may be off: say how (TOML's booleans are lower case; Python's False is a string)
+                problems.append(f"{path}: expected a table, or true / false to switch it on / off, got {_describe(value)}")
+                continue
             sub = _build(tp, value, path + ".", problems)
             if sub is not None:
                 kwargs[name] = sub

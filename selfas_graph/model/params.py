@@ -344,6 +344,7 @@ class Parameters:
             p.replace({"integrator.dt": 5e-4, "forces.yukawa": False})   # False: the term off
             p.replace(integrator={"dt": 5e-4}, rods={"count": 50})      # merged into the section
             p.replace({"forces.electrodes": True}, circuit={"delta_J0": 2.0})   # True or {} switches a table on
+            p.replace(integrator=dataclasses.replace(p.integrator, dt=5e-4))    # a section object: the whole section
 
         Raises :class:`selfas_graph.ScenarioError` with the messages of a scenario file.
         """
@@ -358,6 +359,9 @@ class Parameters:
                 if not isinstance(node.get(name), dict):
                     node[name] = {}
                 node = node[name]
+            if dataclasses.is_dataclass(value) and not isinstance(value, type):
+                node[parts[-1]] = _raw(dataclasses.asdict(value))  # replaces the section, unset values too
+                continue
             old = node.get(parts[-1])
             node[parts[-1]] = _merge(old, value) if isinstance(old, dict) and isinstance(value, dict) else value
         return self.from_dict(raw)

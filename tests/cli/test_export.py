@@ -154,6 +154,9 @@ def test_the_format_keyword_is_the_commands_name(run):
         export_run(run, format="xyz", fmt="gsd")
     with pytest.raises(TypeError, match=r"export_run\(run_path, format\): the format is missing; valid: gsd, xyz"):
         export_run(run)
+    with RunFile(run) as open_run:  # an open run file is taken for its path
+        assert export_run(open_run, format="xyz", out=run.parent / "open.xyz", frames=0)[1] == 1
+    assert (run.parent / "open.xyz").read_bytes() == path.read_bytes()
 
 
 def test_exports_get_the_permissions_of_a_new_file(run):

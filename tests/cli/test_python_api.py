@@ -26,6 +26,9 @@ def test_parameters_replace_and_from_dict_validate_as_scenario_files_do():
     )
     assert p.replace({"forces.yukawa": True}).replace({"forces.yukawa": False}).forces.yukawa is None
     assert sg.Parameters.from_dict(p.to_raw()) == p
+    # a section object replaces the whole section, its unset values too
+    assert p.replace(integrator=dataclasses.replace(p.integrator, dt=2e-3)).integrator.dt == 2e-3
+    assert p.replace({"forces.yukawa": True}).replace(forces=p.forces).forces == p.forces
     toml = "[integrator]\ndt = -1.0\n"
     with pytest.raises(sg.ScenarioError) as from_toml:
         scenario_from_text(toml)

@@ -1,5 +1,6 @@
 """Scenario validation: every rule gives a message naming the key and what is valid."""
 
+import re
 from pathlib import Path
 
 import pytest
@@ -120,10 +121,14 @@ def test_all_problems_reported_together():
     assert "rods.count" in msg and "integrator.dt" in msg
 
 
-def test_not_toml_and_missing_file(tmp_path):
+def test_not_toml_and_missing_file(tmp_path, monkeypatch):
     assert "not valid TOML" in problems("[rods\ncount = ")
-    with pytest.raises(ScenarioError, match="file not found"):
+    with pytest.raises(ScenarioError, match="file not found") as absolute:
         load_scenario(tmp_path / "nope.toml")
+    assert "working directory" not in str(absolute.value)
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ScenarioError, match=re.escape(f"a relative path, read from the working directory {tmp_path}")):
+        load_scenario("scenarios/nope.toml")  # a studies file's or a script's path, run from elsewhere
     junk = tmp_path / "junk.toml"
     junk.write_bytes(b"\xff\xfe\x00binary")
     with pytest.raises(ScenarioError, match="not a UTF-8 text file"):
