@@ -273,3 +273,23 @@ def test_every_pair_of_leaves_is_taken_once(gas):
         if a != b:
             cover[tree.start[b] : tree.end[b]] += size[a]
     assert np.all(cover == tree.x.shape[0])
+
+
+@pytest.mark.parametrize("p", [1, 3, 6])
+def test_moments_shifted_up_are_the_moments_of_all_the_tips(p):
+    """P2M at the leaves and M2M up the tree (exact shifts of a polynomial) give every cell the moments
+    sum_i q_i (x_i - c)^a / a! of all its tips about its own centre, summed here in numpy.
+    Tolerance: sums of up to 600 terms of size up to max|q| (2 r)^p / a!, cancelling, in another order."""
+    rng = np.random.default_rng(8)
+    x, y, z, q = uniform_rods(300, rng)
+    tree = build_tip_tree(x, y, z, q, leaf_size=8, group_size=8, order=4)
+    tab = fmm.tables(p)
+    moment = fmm.moments(tree, tab)
+    idx = np.array(fmm.multi_indices(p))
+    pos = np.stack([tree.x, tree.y, tree.z], 1)
+    for c in range(len(tree.start)):
+        s = pos[tree.start[c] : tree.end[c]] - tree.centre[c]
+        qc = tree.charge[tree.start[c] : tree.end[c]]
+        want = (qc[:, None] * np.prod(s[:, None, :] ** idx[None], axis=2)).sum(0) / tab.fact
+        scale = np.abs(qc).max() * max(1.0, 2 * tree.radius[c]) ** p * len(qc)
+        np.testing.assert_allclose(moment[c], want, rtol=0, atol=1e-12 * scale)
