@@ -233,7 +233,9 @@ def _build(cls, raw, prefix, problems):
                 value = {"distribution": "constant", "value": value}  # a bare number: the same for every rod
             if optional and not isinstance(value, dict):
                 # a section that may be off: say how (TOML's booleans are lower case; Python's False is a string)
-                problems.append(f"{path}: expected a table, or true / false to switch it on / off, got {_describe(value)}")
+                problems.append(
+                    f"{path}: expected a table, or true / false to switch it on / off, got {_describe(value)}"
+                )
                 continue
             sub = _build(tp, value, path + ".", problems)
             if sub is not None:
