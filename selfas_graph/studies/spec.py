@@ -213,6 +213,16 @@ def _check(where, table, keys, required):
             raise StudiesError(f"{where}: missing key {k!r}")
 
 
+def _numbers(where, key, values, kind=float):
+    """The list ``values`` of table key ``key`` as a tuple of ``kind`` (StudiesError naming the key when an
+    entry is not a number: a bare ValueError left ``study`` with a traceback)."""
+    if any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in values):
+        raise StudiesError(f"{where}.{key}: a list of numbers, got {values!r}")
+    if kind is int and any(x != int(x) for x in values):
+        raise StudiesError(f"{where}.{key}: a list of whole numbers, got {values!r}")
+    return tuple(kind(x) for x in values)
+
+
 def _check_measures(where, claim):
     """A claim's ``measure``, ``null_measure`` and ``also`` name measures a study's summary has (a
     misspelled one gave a row of "n/a" and no verdict, without a word)."""
@@ -253,7 +263,7 @@ def load_studies(path) -> Studies:
         every = float(t.get("every", t_end / 4))
         if not (t_end > 0 and every > 0 and t["seeds"] >= 1):
             raise StudiesError(f"{where}: t_end, every and seeds must be positive")
-        table_times = tuple(float(x) for x in t.get("table_times", [t_end]))
+        table_times = _numbers(where, "table_times", t.get("table_times", [t_end]))
         own = t.get("trajectories_since", "")
         if own and (version_key(own) is None or (since and version_key(own) < version_key(since))):
             raise StudiesError(
@@ -278,7 +288,7 @@ def load_studies(path) -> Studies:
             sweep=t.get("sweep", ""),
             sweep_value=float(t.get("sweep_value", math.nan)),
             kind=t.get("kind", "ensemble"),
-            counts=tuple(int(c) for c in t.get("counts", [])),
+            counts=_numbers(where, "counts", t.get("counts", []), int),
             fields=t.get("fields", "on"),
             trajectories_since=own,
         )
@@ -297,6 +307,8 @@ def load_studies(path) -> Studies:
             raise StudiesError(f"{where}.base: no study named {t['base']!r}")
         sweeps[name] = Sweep(name, t["title"], t["parameter"], t["base"], float(t["base_value"]), float(t["time"]))
     for st in studies.values():
+        if st.null_of and st.null_of not in studies:
+            raise StudiesError(f"{path}: study.{st.name}.null_of: no study named {st.null_of!r}")
         if st.sweep and st.sweep not in sweeps:
             raise StudiesError(f"{path}: study.{st.name}.sweep: no sweep named {st.sweep!r}")
         if st.sweep and not math.isfinite(st.sweep_value):
@@ -309,9 +321,16 @@ def load_studies(path) -> Studies:
             if c.get(key) and c[key] not in studies:
                 raise StudiesError(f"{where}.{key}: no study named {c[key]!r}")
         _check_measures(where, c)
-        w = c.get("window", [])
-        if w and (len(w) != 2 or not all(isinstance(x, (int, float)) for x in w) or not w[0] < w[1]):
-            raise StudiesError(f"{where}.window: [t1, t2] with t1 < t2, got {w!r}")
+        w = _numbers(where, "window", c.get("window", []))
+        if w and (len(w) != 2 or not w[0] < w[1]):
+            raise StudiesError(f"{where}.window: [t1, t2] with t1 < t2, got {list(w)!r}")
+        for key in ("study", "null"):
+            st = studies.get(c.get(key, ""))
+            if st is not None and any(not 0 <= x <= st.t_end for x in (c["time"], *w)):
+                raise StudiesError(
+                    f"{where}: time {c['time']:g} and window {list(w)} must lie in [0, t_end = {st.t_end:g}] of "
+                    f"study {st.name!r} ({key})"
+                )
         if c.get("expect", "greater") not in ("greater", "less"):
             raise StudiesError(f"{where}.expect: 'greater' or 'less', got {c['expect']!r}")
         claims.append(
@@ -319,7 +338,7 @@ def load_studies(path) -> Studies:
                 **{k: v for k, v in c.items() if k not in ("time", "also", "window")},
                 time=float(c["time"]),
                 also=tuple(c.get("also", [])),
-                window=tuple(float(x) for x in c.get("window", [])),
+                window=w,
             )
         )
     return Studies(path=path, studies=studies, claims=tuple(claims), sweeps=sweeps, trajectories_since=since)

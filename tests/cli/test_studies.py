@@ -50,6 +50,25 @@ def test_the_shipped_studies_file_loads_and_every_claim_names_its_study():
         ),
         ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\ntrajectories_since = 'soon'\n", "got 'soon'"),
         ("[study.a\n", "not a valid TOML file"),
+        # entries that are no numbers, and names and times that point nowhere, were taken without a word
+        # or ended `study` with a bare ValueError
+        ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\ntable_times = ['x']\n", "a.table_times: a list of numbers"),
+        (
+            "[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\nkind = 'percolation'\ncounts = [10, 'a']\n",
+            "a.counts: a list of numbers",
+        ),
+        ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\ncounts = [10.5]\n", "a.counts: a list of whole numbers"),
+        ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\nnull_of = 'nosuch'\n", "a.null_of: no study named 'nosuch'"),
+        (
+            "[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 10\n[[claim]]\nid='c'\nclaim='c'\npaper='p'\nstudy='a'\n"
+            "measure='filament_rods'\ntime=99\n",
+            "claim[0]: time 99 and window [] must lie in [0, t_end = 10] of study 'a'",
+        ),
+        (
+            "[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 10\n[[claim]]\nid='c'\nclaim='c'\npaper='p'\nstudy='a'\n"
+            "measure='filament_rods'\ntime=9\nwindow=[true, 5]\n",
+            "claim[0].window: a list of numbers",
+        ),
     ],
 )
 def test_a_bad_studies_file_is_refused_naming_the_key(tmp_path, text, words):
