@@ -179,30 +179,91 @@ def _make(folder):
         raise CliError(str(exc)) from None
 
 
-def _lock(folder, held):
-    """Lock the ensemble's folder for this process (once): a second ensemble there is refused (exit 2)."""
-    from ..ensemble import FolderLock
+class _Locks:
+    """The folder locks this process holds: one per folder, taken once, all released at the end."""
 
-    if held:
-        return
-    try:
-        held.append(FolderLock(folder).acquire())
-    except EnsembleError as exc:
-        raise CliError(str(exc)) from None
+    def __init__(self):
+        self._held = {}
+
+    def hold(self, folder):
+        """Lock ``folder`` for this process (again: nothing); another ensemble there is refused (exit 2)."""
+        from ..ensemble import FolderLock
+
+        key = Path(folder).resolve()
+        if key in self._held:
+            return
+        try:
+            self._held[key] = FolderLock(folder).acquire()
+        except EnsembleError as exc:
+            raise CliError(str(exc)) from None
+
+    def release_all(self):
+        for lock in self._held.values():
+            lock.release()
+        self._held.clear()
 
 
 def _run(args, pool):
-    held = []
+    locks = _Locks()
     try:
-        return _run_locked(args, pool, held)
+        if args.grid:
+            return _run_grid(args, pool, locks)
+        return _run_ensemble(args, pool, locks)
     finally:
-        for lock in held:
-            lock.release()
+        locks.release_all()
 
 
-def _run_locked(args, pool, held):
-    if args.grid:
-        return _run_grid(args, pool, held)
+def _check_summary_args(args, t_end, params):
+    """``--flux-radius`` and ``--times`` against the scene, before anything runs (a bad one ended a
+    grid with a traceback after all its seeds had run)."""
+    if args.flux_radius is not None and not (math.isfinite(args.flux_radius) and args.flux_radius > 0):
+        raise CliError(f"--flux-radius must be a positive length, got {args.flux_radius}")
+    times = args.times
+    if times is None:
+        return
+    if max(times) > t_end:
+        raise CliError(f"--times {max(times):g} is after the end time {t_end:g}; give times up to it")
+    try:  # frame times only
+        summary_times(times, t_end, params.output.interval, params.integrator.dt)
+    except EnsembleError as exc:
+        raise CliError(f"--{exc}") from None
+
+
+def _exit_code(results, kept_failed) -> int:
+    """The exit code of an ensemble or a grid from its seeds' results (None: never started) and the
+    count of failed seeds the plan kept from an earlier run."""
+    statuses = [r.get("status") for r in results if r is not None]
+    if "interrupted" in statuses or any(r is None for r in results):
+        print(
+            "selfas-graph ensemble: interrupted; rerun the same command to continue "
+            "(finished seeds are kept, interrupted ones resume from their checkpoints)",
+            file=sys.stderr,
+        )
+        return interrupted_code(results)
+    if "error" in statuses:
+        print("selfas-graph ensemble: some seeds stopped with an error (above)", file=sys.stderr)
+        return 1
+    if "failed" in statuses or kept_failed:
+        return EXIT_NUMERICAL
+    return 0
+
+
+#: what the plan of a seed can say (ensemble.plan.SeedPlan.action)
+_ACTIONS = ("run", "resume", "done", "failed", "partial")
+
+
+def _counts(plans) -> dict:
+    return {a: sum(p.action == a for p in plans) for a in _ACTIONS}
+
+
+def _count_text(count) -> str:
+    return f"{count['run']} to run, {count['resume']} to resume, {count['done']} done, {count['failed']} failed" + (
+        f", {count['partial']} partial (summarised to their last frame)" if count["partial"] else ""
+    )
+
+
+def _run_ensemble(args, pool, locks):
+    """One ensemble: plan its seeds, run those left, summarise the files."""
     try:
         name_source = Path(args.scenario).stem
         folder = Path(args.output) if args.output else Path(f"{name_source}_ensemble")
@@ -220,7 +281,7 @@ def _run_locked(args, pool, held):
 
         ens = ensemble(args.t_end)
         if not args.no_run and folder.is_dir():  # before its files are read: they may be another ensemble's
-            _lock(folder, held)
+            locks.hold(folder)
         if args.no_run and args.t_end is None:  # the files present, to where they were run (not the scene's end)
             ran_to = ens.files_end_time()
             if ran_to is not None and not math.isclose(ran_to, ens.t_end, rel_tol=1e-12):
@@ -229,24 +290,14 @@ def _run_locked(args, pool, held):
         plans = ens.plan(summary_only=args.no_run)
     except EnsembleError as exc:
         raise CliError(str(exc)) from None
-    if args.flux_radius is not None and not (math.isfinite(args.flux_radius) and args.flux_radius > 0):
-        raise CliError(f"--flux-radius must be a positive length, got {args.flux_radius}")
+    _check_summary_args(args, ens.t_end, ens.base.params)
     times = args.times
-    if times is not None and max(times) > ens.t_end:
-        raise CliError(f"--times {max(times):g} is after the end time {ens.t_end:g}; give times up to it")
-    if times is not None:  # frame times only, checked before anything runs
-        try:
-            summary_times(times, ens.t_end, ens.base.params.output.interval, ens.base.params.integrator.dt)
-        except EnsembleError as exc:
-            raise CliError(f"--{exc}") from None
-    count = {a: sum(p.action == a for p in plans) for a in ("run", "resume", "done", "failed", "partial")}
-    where = pool_text(pool)
+    count = _counts(plans)
     p = ens.base.params
     print(
         f"{p.scenario.name}: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {ens.t_end:g} in {folder}/: "
-        f"{count['run']} to run, {count['resume']} to resume, {count['done']} done, {count['failed']} failed"
-        + (f", {count['partial']} partial (summarised to their last frame)" if count["partial"] else "")
-        + ("" if args.no_run else f"; on {where}"),
+        + _count_text(count)
+        + ("" if args.no_run else f"; on {pool_text(pool)}"),
         flush=True,
     )
     for plan in plans:
@@ -259,7 +310,7 @@ def _run_locked(args, pool, held):
     results = []
     if not args.no_run and count["run"] + count["resume"]:
         _make(folder)
-        _lock(folder, held)
+        locks.hold(folder)
         tasks = ens.tasks(plans)
         report = SeedReport(len(tasks))
         t0 = time.perf_counter()
@@ -282,8 +333,7 @@ def _run_locked(args, pool, held):
                 hard_exit=bool(ABANDONED),
             )
     summary = ens.summarise(times=times, flux_radius=args.flux_radius)
-    statuses = [r.get("status") for r in results if r is not None]
-    stopped = statuses.count("interrupted")
+    stopped = sum(r is not None and r.get("status") == "interrupted" for r in results)
     never = sum(r is None for r in results)
     if summary["n_seeds"]:
         print()
@@ -308,24 +358,12 @@ def _run_locked(args, pool, held):
             print(f"wrote {plot_summary(summary, folder / 'summary.png', title=f'{p.scenario.name} ensemble')}")
     else:
         print("no seed file to summarise")
-    if stopped or never:
-        print(
-            "selfas-graph ensemble: interrupted; rerun the same command to continue "
-            "(finished seeds are kept, interrupted ones resume from their checkpoints)",
-            file=sys.stderr,
-        )
-        return interrupted_code(results)
-    if "error" in statuses:
-        print("selfas-graph ensemble: some seeds stopped with an error (above)", file=sys.stderr)
-        return 1
-    if "failed" in statuses or count["failed"]:
-        return EXIT_NUMERICAL
-    return 0
+    return _exit_code(results, count["failed"])
 
 
-def _run_grid(args, pool, held):
+def _run_grid(args, pool, locks):
     """``--grid``: an ensemble at every grid point, all seeds in one pool, the combined summary."""
-    from ..ensemble import FolderLock, run_seed, run_tasks, write_summary
+    from ..ensemble import run_seed, run_tasks, write_summary
     from ..grid import GRID_PNG, Grid, parse_grid, plot_grid, write_grid_summary
 
     folder = Path(args.output) if args.output else Path(f"{Path(args.scenario).stem}_grid")
@@ -340,21 +378,21 @@ def _run_grid(args, pool, held):
             first_seed=args.first_seed,
             force=args.force,
         )
-        if args.times is not None and max(args.times) > grid.t_end:
-            raise EnsembleError(f"--times {max(args.times):g} is after the end time {grid.t_end:g}")
-        if args.times is not None:  # frame times only, checked before anything runs
-            p0 = grid.ensembles[0].base.params
-            summary_times(args.times, grid.t_end, p0.output.interval, p0.integrator.dt)
+    except EnsembleError as exc:
+        raise CliError(str(exc)) from None
+    _check_summary_args(args, grid.t_end, grid.ensembles[0].base.params)
+    try:
         if not args.no_run and folder.is_dir():
-            _lock(folder, held)
+            locks.hold(folder)
         plans = grid.plans(summary_only=args.no_run)
     except EnsembleError as exc:
         raise CliError(str(exc)) from None
-    for point, ens, plan in zip(grid.points, grid.ensembles, plans):
-        count = {a: sum(p.action == a for p in plan) for a in ("run", "resume", "done", "failed")}
+    kept_failed = 0
+    for ens, plan in zip(grid.ensembles, plans):
+        count = _counts(plan)
+        kept_failed += count["failed"]
         print(
-            f"{ens.folder}/: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {grid.t_end:g}: {count['run']} to run, "
-            f"{count['resume']} to resume, {count['done']} done, {count['failed']} failed",
+            f"{ens.folder}/: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {grid.t_end:g}: {_count_text(count)}",
             flush=True,
         )
     tasks = [] if args.no_run else grid.tasks(plans)
@@ -367,13 +405,10 @@ def _run_grid(args, pool, held):
     results = []
     if tasks:
         _make(folder)
-        _lock(folder, held)
+        locks.hold(folder)
         for ens in grid.ensembles:
             _make(ens.folder)
-            try:  # each point's folder too: an ensemble run there alone takes its lock
-                held.append(FolderLock(ens.folder).acquire())
-            except EnsembleError as exc:
-                raise CliError(str(exc)) from None
+            locks.hold(ens.folder)  # each point's folder too: an ensemble run there alone takes its lock
         results = run_tasks(run_seed, tasks, pool, SeedReport(len(tasks), folders=True))
         io = [r for r in results if r is not None and r.get("status") == "io_error"]
         if io:
@@ -401,12 +436,4 @@ def _run_grid(args, pool, held):
     print(f"wrote {js} and {cs}")
     if args.plot:
         print(f"wrote {plot_grid(table, folder / GRID_PNG, title=f'{Path(args.scenario).stem} grid')}")
-    statuses = [r.get("status") for r in results if r is not None]
-    if "interrupted" in statuses or any(r is None for r in results):
-        print("selfas-graph ensemble: interrupted; rerun the same command to continue", file=sys.stderr)
-        return interrupted_code(results)
-    if "error" in statuses:
-        return 1
-    if "failed" in statuses:
-        return EXIT_NUMERICAL
-    return 0
+    return _exit_code(results, kept_failed)

@@ -136,3 +136,36 @@ def test_each_point_is_summarised_at_its_own_frames(tmp_path):
     table = grid.summarise()
     assert [p["summary"]["times"] for p in table["points"]] == [[0.04, 0.08, 0.1], [0.05, 0.1]]
     assert table["times"] == [0.04, 0.08, 0.1]
+
+
+def test_a_grid_refuses_a_bad_flux_radius_before_anything_runs(tmp_path, capsys):
+    """``--grid`` took ``--flux-radius -1`` and ran every seed, to end with a traceback at the first
+    frame carrying current; it is refused first, as for one ensemble (exit 2, nothing written)."""
+    from selfas_graph.cli.main import main
+
+    argv = ["ensemble", str(QUICK), "--seeds", "1", "--grid", "circuit.delta_J0=1,2", "--t-end", "0.1"]
+    for bad, words in [
+        (["--flux-radius", "-1"], "--flux-radius must be a positive length"),
+        (["--times", "5"], "--times 5 is after the end time 0.1; give times up to it"),
+    ]:
+        assert main(argv + bad + ["-o", str(tmp_path / "g")]) == 2
+        assert words in capsys.readouterr().err
+        assert not (tmp_path / "g").exists()
+
+
+def test_a_grid_with_a_kept_failed_seed_exits_3_as_one_ensemble_does(tmp_path, capsys):
+    """A grid whose folder keeps a failed seed from an earlier run exited 0 (it read only the seeds it ran
+    now), where one ensemble exits 3 for the same folder."""
+    import h5py
+
+    from selfas_graph.cli.main import main
+    from selfas_graph.ensemble import seed_path
+
+    argv = ["ensemble", str(QUICK), "--seeds", "1", "--grid", "circuit.delta_J0=1,2", "--jobs", "1"]
+    argv += ["--set", "rods.count=20", "--t-end", "0.02", "-o", str(tmp_path / "g")]
+    assert main(argv) == 0
+    with h5py.File(seed_path(tmp_path / "g" / "circuit.delta_J0=2", 1), "r+") as f:
+        f["parameters/selfas_graph"].attrs["status"] = "failed: a test"
+    capsys.readouterr()
+    assert main(argv) == 3
+    assert "0 done, 1 failed" in capsys.readouterr().out
