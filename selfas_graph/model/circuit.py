@@ -1,10 +1,9 @@
 """Nodal analysis of the rod network: potentials and rod currents (docs/model.md 'Circuit').
 
 Arrays in, arrays out: ``contact_queries.solve_contacts`` hands over the contacts as arrays (for
-``network.Network.solve`` in a run and ``graph.ConnectivityGraph.solve`` for a saved graph).
-The reduced system is assembled and solved in :mod:`.linear`.
-:func:`solve_network` solves any resistor network; :func:`solve_circuit` turns
-rods and contacts into one.
+``network.Network.solve`` in a run, ``graph.ConnectivityGraph.solve`` for a saved graph).
+:func:`solve_network` solves any resistor network (the reduced system in :mod:`.linear`);
+:func:`solve_circuit` turns rods and contacts into one.
 
 Model
 -----
@@ -42,7 +41,7 @@ import numpy as np
 
 from selfas_graph.kernels.graph import component_labels
 from selfas_graph.model.linear import SolveMemo, _potentials
-from selfas_graph.model.validate import (  # noqa: F401
+from selfas_graph.model.validate import (
     _as_contact_resistance,
     _as_count,
     _as_index_array,
@@ -104,21 +103,18 @@ class CircuitSolution:
         Merged electrical node of each tip (with resistive contacts: the tip itself;
         the nodes ``n_tips + j`` are then the conductor contacts j).
     injected_current : (n_nodes,) float64
-        Net current flowing from the network's rods out of each merged node,
-        i.e. the current a conductor injects there; zero (to round-off) at
-        nodes without a conductor contact.
+        Net current from the rods out of each merged node: the current a conductor
+        injects there; zero (to round-off) at nodes without a conductor contact.
     total_current : float
-        Sum of the current leaving the conductors into the network
-        (= the current into the lower-potential conductors).
+        The current from the conductors into the network (= into the lower-potential ones).
     supplied_power : float
         sum over conductor nodes of psi * injected current.
     dissipated_power : float
         sum_i J_i^2 R_i, plus J^2 r over the contacts when they are resistive.
     effective_resistance : float
-        (psi_max - psi_min over conductor nodes in current-carrying components)
-        / total_current, units R0; ``inf`` when no current flows. In case (i)
-        this is the resistance between the electrodes; in case (ii) it is only a
-        summary number (the filament is not two terminals).
+        (psi_max - psi_min over conductor nodes in current-carrying components) / total_current,
+        units R0; ``inf`` when no current flows. Case (i): the resistance between the
+        electrodes; case (ii): a summary number only (the filament is not two terminals).
     kirchhoff_residual : float
         max |net current| at merged nodes without a conductor contact.
     """
@@ -288,6 +284,27 @@ def solve_network(
     return _solve(n_nodes, edges, resistance, fixed_node, fixed_potential, solver, memo=memo)
 
 
+def _netlist(n_tips, tip_contacts, conductor_tip, r_rod, r_contact) -> tuple[np.ndarray, np.ndarray]:
+    """``(edges, resistance)``: the rods (tips 2i, 2i+1), the tip contacts, then the conductor contacts,
+    contact j joining its tip to node ``n_tips + j``, which is held at its potential."""
+    n_rods, m, k = n_tips // 2, tip_contacts.shape[0], conductor_tip.shape[0]
+    edges = np.empty((n_rods + m + k, 2), dtype=np.int64)
+    edges[:n_rods] = np.arange(n_tips).reshape(n_rods, 2)
+    edges[n_rods : n_rods + m] = tip_contacts
+    edges[n_rods + m :, 0] = conductor_tip
+    edges[n_rods + m :, 1] = n_tips + np.arange(k)
+    return edges, np.concatenate([r_rod, np.full(m + k, r_contact)])
+
+
+def _merge_with_conductors(merged, conductor_tip):
+    """The caller's merge of the tips (:func:`merge_tips`, or None) with ideal contacts, extended to
+    :func:`_netlist`'s conductor nodes: each takes its tip's merged node."""
+    if merged is None:
+        return None
+    n_merged, node_of_tip = merged
+    return int(n_merged), np.concatenate([node_of_tip, node_of_tip[conductor_tip]])
+
+
 def solve_circuit(
     n_tips,
     tip_contacts,
@@ -317,12 +334,13 @@ def solve_circuit(
         Linear solver of the reduced system (symmetric positive definite).
         ``"direct"`` (default): sparse LU (SuperLU) with a symmetric minimum-degree
         ordering, exact to round-off; fast for the branched, quasi-one-dimensional
-        networks filaments form (70 ms for 10^5 rods of cross-linked chains) but
-        0.8 s for a 10^5-rod diluted cubic lattice (``selfas-graph bench circuit``).
+        networks filaments form, slow on a diluted cubic lattice.
         ``"cg"``: Jacobi-preconditioned conjugate gradients to a relative residual
-        ``CG_RTOL`` (round-off level): 0.14 s on that lattice, slower than
-        "direct" on chains; it falls back to the direct solver if it has not
-        converged after ``min(2 n, 2000)`` iterations. ``"auto"``: "direct" below ``AUTO_CG_UNKNOWNS``.
+        :data:`.linear.CG_RTOL` (round-off level): faster on the lattice, slower than "direct" on
+        chains; it falls back to the direct solver if it has not converged after
+        ``min(2 n, 2000) + 10`` iterations (n unknowns). ``"auto"``: "direct" up to
+        :data:`.linear.AUTO_CG_UNKNOWNS` unknowns, "cg" above; the timings behind that
+        choice are in its comment (``selfas-graph bench circuit``).
     rod_resistance : float or (n_rods,) float64, optional
         Resistance R_i of each rod (units R0, > 0); default 1 for every rod.
     contact_resistance : float
@@ -355,23 +373,8 @@ def solve_circuit(
     r_rod = np.ones(n_rods) if unit else _as_resistance(rod_resistance, "rod_resistance", n_rods, allow_zero=False)
     r_contact = _as_contact_resistance(contact_resistance)
     k = conductor_tip.shape[0]
-    m = tip_contacts.shape[0]
-    # nodes: the tips, then one node per conductor contact held at its potential;
-    # edges: the rods (tips 2i, 2i+1), the tip contacts, the conductor contacts
-    edges = np.empty((n_rods + m + k, 2), dtype=np.int64)
-    edges[:n_rods, 0] = np.arange(0, n_tips, 2)
-    edges[:n_rods, 1] = np.arange(1, n_tips, 2)
-    edges[n_rods : n_rods + m] = tip_contacts
-    edges[n_rods + m :, 0] = conductor_tip
-    edges[n_rods + m :, 1] = n_tips + np.arange(k)
-    resistance = np.concatenate([r_rod, np.full(m + k, r_contact)])
-    if merged is not None and r_contact == 0.0:
-        # conductor contact j is node n_tips + j, joined to its tip by an ideal edge: it takes the
-        # tip's merged node, and the numbering (by smallest member, always a tip) is merge_tips'
-        n_merged, node_of_tip = merged
-        merged = (int(n_merged), np.concatenate([node_of_tip, node_of_tip[conductor_tip]]))
-    else:
-        merged = None
+    edges, resistance = _netlist(n_tips, tip_contacts, conductor_tip, r_rod, r_contact)
+    merged = _merge_with_conductors(merged, conductor_tip) if r_contact == 0.0 else None
     net = _solve(
         n_tips + k,
         edges,
@@ -384,7 +387,6 @@ def solve_circuit(
         merged=merged,
     )
     current = net.current[:n_rods]
-    assert current.shape == (n_rods,)
     return CircuitSolution(
         potential=_frozen(net.potential[:n_tips].copy()),
         current=_frozen(current.copy()),
