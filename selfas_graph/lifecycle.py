@@ -338,19 +338,46 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
         scenario = scenario_from_text(meta["scenario_text"], overrides=overrides, t_end=t_end)
     except (ScenarioError, ValueError, TypeError) as exc:
         raise ContinuationError(_scenario_refusal(meta, overrides, stored, asked, exc)) from None
-    # the run file must be this run's, checked read-only before anything in it is changed
+    facts = _run_file_facts(run_path)  # read-only, before anything in it is changed
+    _refuse(facts, snap, meta, checkpoint, run_path)
+    if facts.brake is not None and facts.brake != scenario.params.integrator.brake:
+        # a scene without integrator.brake, started when the default was explicit: continue as it ran
+        try:
+            scenario = scenario_from_text(
+                meta["scenario_text"], t_end=t_end, overrides=overrides + [f"integrator.brake={facts.brake}"]
+            )
+        except (ScenarioError, ValueError, TypeError) as exc:
+            raise ContinuationError(_scenario_refusal(meta, overrides, stored, asked, exc)) from None
+    return Continuation(scenario, snap, meta, str(facts.run_id), _notes(meta, facts.source, checkpoint))
+
+
+@dataclasses.dataclass(frozen=True)
+class _RunFacts:
+    """What :func:`continuation` reads of a run file (read-only)."""
+
+    n_tips: int
+    scenario_text: str
+    steps: np.ndarray  # the frames' steps
+    brake: str | None  # integrator.brake the run started with (None: unreadable)
+    run_id: str | None
+    source: str  # the scenario file's path as the run recorded it ("" if none)
+    problems: list  # why it cannot be appended to (none: it can)
+    status: str
+
+
+def _run_file_facts(run_path) -> _RunFacts:
     try:
         with RunFile(run_path) as run_file:
-            same = (
-                run_file.n_tips == np.asarray(snap["position"]).shape[0]
-                and run_file.scenario_text == meta["scenario_text"]
+            return _RunFacts(
+                n_tips=run_file.n_tips,
+                scenario_text=run_file.scenario_text,
+                steps=run_file.step,
+                brake=_started_brake(run_file),
+                run_id=run_file.meta.get("run_id"),
+                source=str(run_file.meta.get("scenario_path") or ""),
+                problems=appendable_problems(run_file.f),
+                status=run_file.status,
             )
-            steps = run_file.step
-            brake = _started_brake(run_file)
-            run_id = run_file.meta.get("run_id")
-            source = str(run_file.meta.get("scenario_path") or "")
-            problems = appendable_problems(run_file.f)
-            status = run_file.status
     except RunFileError as exc:
         raise ContinuationError(f"cannot resume into {run_path}: {exc}") from None
     except HDF5_READ_ERRORS as exc:
@@ -358,6 +385,12 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
         if why is None:
             raise
         raise ContinuationError(f"cannot resume into {run_path}: {why}") from None
+
+
+def _refuse(facts, snap, meta, checkpoint, run_path) -> None:
+    """Raise ContinuationError if the run file ``run_path`` (``facts``) cannot continue from the checkpoint
+    (``snap``, ``meta``): the rules of :func:`continuation`, in the order they are told."""
+    status = facts.status
     if status.startswith("failed: numerical failure"):  # not a full disk, which a resume with room overcomes
         raise ContinuationError(
             f"cannot resume: the run of {run_path} ended in a {status.removeprefix('failed: ')} (its "
@@ -365,8 +398,9 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
             f"fail again",
             "start the run again with other settings (e.g. a smaller integrator.dt) and --force",
         )
-    if problems:
-        raise ContinuationError(f"cannot resume into {run_path}: it cannot be continued: {'; '.join(problems)}")
+    if facts.problems:
+        raise ContinuationError(f"cannot resume into {run_path}: it cannot be continued: {'; '.join(facts.problems)}")
+    run_id = facts.run_id
     if not run_id or run_id != meta.get("run_id"):
         raise ContinuationError(
             f"cannot resume: the checkpoint {checkpoint} belongs to another run than the run file {run_path} "
@@ -374,18 +408,17 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
             f"run file)",
             "give the run file's own checkpoint",
         )
-    if not same:
+    if facts.n_tips != np.asarray(snap["position"]).shape[0] or facts.scenario_text != meta["scenario_text"]:
         raise ContinuationError(
             f"cannot resume: {run_path} is not the run of checkpoint {checkpoint} (different scenario or rod count)"
         )
-    step = int(snap["step"])
+    step, steps = int(snap["step"]), facts.steps
     if (len(steps) and steps[0] > step) or (not len(steps) and step != 0):
         raise ContinuationError(f"cannot resume: {run_path} has no frame at or before the checkpoint's step {step}")
-    if brake is not None and brake != scenario.params.integrator.brake:
-        # a scene without integrator.brake, started when the default was explicit: continue as it ran
-        scenario = scenario_from_text(
-            meta["scenario_text"], t_end=t_end, overrides=overrides + [f"integrator.brake={brake}"]
-        )
+
+
+def _notes(meta, source, checkpoint) -> tuple:
+    """What the user should know of a continuation and nothing stops (:attr:`Continuation.notes`)."""
     notes = []
     made_by = str(meta.get("version") or "unknown")
     if version_key(made_by) != version_key(__version__):
@@ -399,7 +432,7 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
             f"the scenario file {source} differs from the scenario this run started with; --resume continues "
             f"the run as it started (its files hold that scenario): start a new run to use the file as it is now"
         )
-    return Continuation(scenario, snap, meta, str(run_id), tuple(notes))
+    return tuple(notes)
 
 
 def _changed_since(path, text) -> bool:
