@@ -119,9 +119,9 @@ def _interleaved(sims, steps, warmup=5):
 
 
 def _record_contact_updates(sim):
-    """Wrap ``sim._update_contacts`` to record (seconds, events produced) of every call."""
+    """Wrap ``sim.update_network`` to record (seconds, events produced) of every call."""
     record = []
-    inner = sim._update_contacts
+    inner = sim.update_network
 
     def timed():
         n = len(sim.events)
@@ -129,7 +129,7 @@ def _record_contact_updates(sim):
         inner()
         record.append((time.perf_counter() - t0, len(sim.events) - n))
 
-    sim._update_contacts = timed
+    sim.update_network = timed
     return record
 
 

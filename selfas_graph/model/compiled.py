@@ -87,6 +87,39 @@ def compiled_steps_for(sim) -> "CompiledSteps | None":
     return None if python_steps_reason(sim) else CompiledSteps(sim)
 
 
+def _scalars(p, terms, mts, network) -> np.ndarray:
+    """(N_SCALARS,) float64: the scalars of the fast terms and tests, at the places
+    ``kernels/step_args.py`` names (NaN or 0 for a term the scene does not have)."""
+    tb = terms.get("tip_brake")
+    el = terms.get("electrodes")
+    fil = terms.get("external_filament")
+    dip = terms.get("external_dipole")
+    amb = terms.get("ambient_brake")
+    split = p.integrator.brake == "split"
+    tip = mts.tip_term
+    nan = np.nan
+    scalars = {
+        sa.SC_AMBIENT_K: amb.k if amb is not None else 0.0,
+        sa.SC_RSTAR: p.rods.rstar,
+        sa.SC_KAPPA: p.rods.tip_stiffness,
+        sa.SC_TIP_BRAKE_K: tb.k if tb is not None and not split else nan,
+        sa.SC_TIP_BRAKE_SPLIT: tb.k if tb is not None and split else 0.0,
+        sa.SC_CATHODE_Z: el.z[0] if el is not None else nan,
+        sa.SC_ANODE_Z: el.z[1] if el is not None else nan,
+        sa.SC_WALL_K: (0.0 if el.split_mode else el.k) if el is not None else 0.0,
+        sa.SC_WALL_SPLIT: el.k if el is not None and el.split_mode else 0.0,
+        sa.SC_FILAMENT_CURRENT: fil.current if fil is not None else 0.0,
+        sa.SC_FILAMENT_W: fil.w if fil is not None else 0.0,
+        sa.SC_POLE_K: (0.0 if dip.split_mode else dip.k) if dip is not None else 0.0,
+        sa.SC_POLE_SPLIT: dip.k if dip is not None and dip.split_mode else 0.0,
+        sa.SC_FAST_INNER: mts.fast_range[0] if tip is not None else 0.0,
+        sa.SC_FAST_OUTER: mts.fast_range[1] if tip is not None else 0.0,
+        sa.SC_HALF_SKIN2: (0.5 * p.neighbours.skin) ** 2,
+        sa.SC_RELEASE: network.tracker.release if network is not None else 0.0,
+    }
+    return np.array([scalars[k] for k in range(sa.N_SCALARS)])
+
+
 class CompiledSteps:
     """The arguments of ``fast_steps`` for one simulation, and the bookkeeping after a call.
 
@@ -105,35 +138,13 @@ class CompiledSteps:
         mts = ff.mts
         tip = mts.tip_term
         if tip is None:
-            self.channel[0] = -1
+            self.channel[CHANNELS.index("tip_magnetic")] = -1
         tb = terms.get("tip_brake")
         el = terms.get("electrodes")
-        fil = terms.get("external_filament")
         dip = terms.get("external_dipole")
         line = terms.get("external_line_charge")
-        nan = np.nan
-        amb = terms.get("ambient_brake")
         split = p.integrator.brake == "split"
-        scalars = {
-            sa.SC_AMBIENT_K: amb.k if amb is not None else 0.0,
-            sa.SC_RSTAR: p.rods.rstar,
-            sa.SC_KAPPA: p.rods.tip_stiffness,
-            sa.SC_TIP_BRAKE_K: tb.k if tb is not None and not split else nan,
-            sa.SC_TIP_BRAKE_SPLIT: tb.k if tb is not None and split else 0.0,
-            sa.SC_CATHODE_Z: el.z[0] if el is not None else nan,
-            sa.SC_ANODE_Z: el.z[1] if el is not None else nan,
-            sa.SC_WALL_K: (0.0 if el.split_mode else el.k) if el is not None else 0.0,
-            sa.SC_WALL_SPLIT: el.k if el is not None and el.split_mode else 0.0,
-            sa.SC_FILAMENT_CURRENT: fil.current if fil is not None else 0.0,
-            sa.SC_FILAMENT_W: fil.w if fil is not None else 0.0,
-            sa.SC_POLE_K: (0.0 if dip.split_mode else dip.k) if dip is not None else 0.0,
-            sa.SC_POLE_SPLIT: dip.k if dip is not None and dip.split_mode else 0.0,
-            sa.SC_FAST_INNER: mts.fast_range[0] if tip is not None else 0.0,
-            sa.SC_FAST_OUTER: mts.fast_range[1] if tip is not None else 0.0,
-            sa.SC_HALF_SKIN2: (0.5 * p.neighbours.skin) ** 2,
-            sa.SC_RELEASE: sim.network.tracker.release if sim.network is not None else 0.0,
-        }
-        self.scalars = np.array([scalars[k] for k in range(sa.N_SCALARS)])
+        self.scalars = _scalars(p, terms, mts, sim.network)
         pl = terms.get("plasma_filament")
         self.plasma = np.array(pl.args, dtype=np.float64) if pl is not None else _EMPTY
         self.el = el
@@ -205,22 +216,17 @@ class CompiledSteps:
         sim = self.sim
         st, integ, ff, net = sim.state, sim.integrator, sim.force_field, sim.network
         mts, health = ff.mts, sim.health
+        el = self.el
+        if el is not None and el.split_mode and el.k != 0.0 and el.decay_dt != integ.dt:
+            return 0, NEEDS_STEP  # the electrode brake's decay is made by its first split step
+        if self.phase_time.shape not in ((0,), (9,)):
+            raise ValueError(f"phase_time must be empty or (9,) float64, not of shape {self.phase_time.shape}")
+        decay_walls = el.decay if el is not None and el.decay is not None else np.zeros(3)
         nl = ff.lists.tip
         n_max = min(int(n_max), CHUNK)
         (pairs, on_c, on_a, on_f, fil_tip, fil_z), limits = self._contact_args(net, st.n_tips)
         # the positions sa.LIM_NETWORK ... sa.LIM_HEIGHT_TOL, then LIM_BOND_BREAK, LIM_MAX_MOVE, LIM_MAX_BOND
         limits = np.array(limits + (BOND_BREAK, MAX_STEP_DISPLACEMENT, health.max_bond_error))
-        base_step = (
-            np.array([-1 if b is None else b for b in mts.base_step.values()], dtype=np.int64)
-            if (mts.extrapolate)
-            else np.full(len(self.held), -1, dtype=np.int64)
-        )
-        el = self.el
-        decay_walls = el.decay if el is not None and el.decay is not None else np.zeros(3)
-        if el is not None and el.split_mode and el.k != 0.0 and el.decay_dt != integ.dt:
-            return 0, NEEDS_STEP  # the electrode brake's decay is made by its first split step
-        if self.phase_time.shape not in ((0,), (9,)):
-            raise ValueError(f"phase_time must be empty or (9,) float64, not of shape {self.phase_time.shape}")
         hist_p0 = integ.hist_p.copy()
         head0 = integ.head
         args = FastStepArgs(
@@ -259,7 +265,7 @@ class CompiledSteps:
             tip_fast=self.tip_fast,
             rate=self.rate,
             base=self.base,
-            base_step=base_step,
+            base_step=mts.base_step_array(),
             extrapolate=bool(mts.extrapolate),
             lists=self.lists,
             start=nl.start,
@@ -292,12 +298,8 @@ class CompiledSteps:
         done, reason, head, max_bond, err_after, speed = result
         if done:
             self._account(done, head0, hist_p0)
-            integ.head = head
-            integ.bond_error_before = float(self.bond_before[done - 1])
-            integ.bond_error_after, integ.speed_max = float(err_after), float(speed)
+            integ.finish_compiled(st, done, head, float(self.bond_before[done - 1]), float(err_after), float(speed))
             health.max_bond_error = float(max_bond)
-            st.step += done
-            st.time = integ.time_origin[1] + (st.step - integ.time_origin[0]) * integ.dt
             ff.context.bind(st.position, st.velocity)
         return done, reason
 
@@ -360,7 +362,7 @@ def advance(sim, n_max: int, rows=None) -> int:
         if reason == NEEDS_HEALTH:
             sim.health.after_step()  # raises the diagnosis of the failed step
         elif reason == NEEDS_CONTACTS and sim.network is not None:
-            sim._update_contacts()
+            sim.update_network()
         if reason != NEEDS_STEP:
             return done
     sim.python_step()

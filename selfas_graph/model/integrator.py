@@ -110,7 +110,7 @@ class AdamsBashforth4:
         self.head, self.count = int(d["head"]), int(d["count"])
         self.work[:] = d["work"]
         self.time_origin = (int(d["time_origin_step"]), float(d["time_origin_time"]))
-        if "step" in d and self.time_origin[1] + (int(d["step"]) - self.time_origin[0]) * self.dt != float(d["time"]):
+        if "step" in d and self.time_at(int(d["step"])) != float(d["time"]):
             # a snapshot continued at another time step than it was made with (a branch of `bench
             # tradeoff`): the time counts on from the snapshot's, not from the run's origin at the new dt
             self.time_origin = (int(d["step"]), float(d["time"]))
@@ -153,7 +153,19 @@ class AdamsBashforth4:
         # without the projection the positions keep their error: the same value as before
         self.bond_error_after, self.speed_max = constrain_bonds_checked(x, v, self.project, self.correct_velocity, ell)
         state.step += 1
-        state.time = self.time_origin[1] + (state.step - self.time_origin[0]) * self.dt
+        state.time = self.time_at(state.step)
+
+    def time_at(self, step) -> float:
+        """The time of step ``step``: counted from the time origin, so that it does not drift as a sum."""
+        return self.time_origin[1] + (step - self.time_origin[0]) * self.dt
+
+    def finish_compiled(self, state, n, head, bond_before, bond_after, speed) -> None:
+        """Take over the ``n`` steps a compiled call made (:mod:`.compiled`): the ring buffer's head, the
+        last step's bond errors and largest speed, and the state's step and time."""
+        self.head = head
+        self.bond_error_before, self.bond_error_after, self.speed_max = bond_before, bond_after, speed
+        state.step += n
+        state.time = self.time_at(state.step)
 
     def _rk4(self, x, v, v1, a1, p1):
         dt = self.dt

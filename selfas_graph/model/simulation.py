@@ -114,7 +114,7 @@ class Simulation:
         self.failure = None
         if self.network is not None:
             self.force_field.extend_tip_range(self.network.tracker.release)  # the contact search's pairs
-            self._update_contacts()
+            self.update_network()
         self.compiled = compiled_steps_for(self)  # the fast steps in one call (.compiled); None: in Python
 
     @classmethod
@@ -255,11 +255,11 @@ class Simulation:
         self.integrator.step(self.state)
         self.health.after_step()
         if self.network is not None:
-            self._update_contacts()
+            self.update_network()
 
-    def _update_contacts(self):
-        """The network's step: events into the log; new currents (written by the network into the
-        store the force field reads) make the held current forces stale."""
+    def update_network(self):
+        """The network's part of a step (after :meth:`python_step`'s, or compiled ones): events into the
+        log; new currents (in the store the force field reads) make the held current forces stale."""
         st = self.state
         news = self.network.update(st.position, self.force_field.tip_neighbours(st.position), st.step, st.time)
         if not news.changed:

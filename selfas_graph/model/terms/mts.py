@@ -166,6 +166,13 @@ class MultipleTimeStepping:
         the tip-tip force less its fast part); views, not copies."""
         return dict(self._held)
 
+    def base_step_array(self) -> np.ndarray:
+        """(n_held,) int64: the step of each held force's base, in the order of :meth:`held_forces`
+        (the bases' rows are in that order), -1 where there is none yet or no extrapolation."""
+        if not self.extrapolate:
+            return np.full(len(self._held), -1, dtype=np.int64)
+        return np.array([-1 if b is None else b for b in self.base_step.values()], dtype=np.int64)
+
     def state_dict(self) -> dict:
         """What the next evaluations depend on besides the state, as copies: held forces, the stale
         terms and, with extrapolation, bases, rates and their steps (flat, checkpoint keys ``mts_*``)."""
@@ -174,7 +181,7 @@ class MultipleTimeStepping:
         if self.extrapolate:
             snap.update({f"mts_base_{k}": v.copy() for k, v in self._base.items()})
             snap.update({f"mts_rate_{k}": v.copy() for k, v in self._rate.items()})
-            snap["mts_base_step"] = np.array([-1 if b is None else b for b in self.base_step.values()], dtype=np.int64)
+            snap["mts_base_step"] = self.base_step_array()
             snap["mts_rated"] = np.array(list(self._rated.values()), dtype=bool)
         return snap
 
