@@ -86,7 +86,9 @@ class ContactQueries:
         return self.contacts.arrays()
 
     def topology(self) -> Topology:
-        """Roles and structures of the rods (computed once per set of contacts)."""
+        """Roles and structures of the rods (computed once per set of contacts). A call here, where
+        :attr:`ContactSet.topology` is a property: the contacts this reads are replaced at every batch of
+        events, so it always answers for the present ones."""
         return self.contacts.topology
 
     @property

@@ -194,7 +194,7 @@ class Network(ContactQueries):
         if rows:
             # a new filament contact is at -delta_J0 z of its tip (docs/model.md 'Circuit')
             self.contacts = before.apply(rows, contact_potential=lambda k, c: -self.bias * float(position[k, 2]))
-        moved = self._update_moved_heights(position)
+        moved = self._repotential_moved_contacts(position)
         if not rows and not moved:
             return NetworkUpdate([])
         if rows:
@@ -222,9 +222,10 @@ class Network(ContactQueries):
         total = self.solution.total_current if self.solution is not None else 0.0
         return NetworkUpdate(rows, currents_changed, True, circuit_rows(rows, total, self.current))
 
-    def _update_moved_heights(self, position) -> bool:
-        """Case (ii): give the filament contacts that moved along z by more than the height
-        tolerance since the last solve their new potential; True if any did."""
+    def _repotential_moved_contacts(self, position) -> bool:
+        """Case (ii): replace ``self.contacts`` by contacts whose filament contacts that moved along z by
+        more than the height tolerance since the last solve hold their new potential; True if any did.
+        The heights of the last solve, ``filament_z``, are :meth:`update`'s to refresh when it solves."""
         if not len(self.filament_tip) or not self.circuit:
             return False
         z = position[self.filament_tip, 2]
