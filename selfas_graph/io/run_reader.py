@@ -55,8 +55,9 @@ def _pick_frame(path, n, frame, t, times) -> int:
 class RunFile:
     """Read-only access to a run file, without any simulation objects.
 
-    The frames are the rows whose step, time and positions were all written: ``torn_frame`` is true
-    when a kill while a frame was appended left one of the three a row longer (a resume drops that row).
+    The frames are the rows whose step, time and positions (and velocities, where saved) were all
+    written: ``torn_frame`` is true when a kill while a frame was appended left some of them a row
+    longer than the others (a resume drops that row).
 
     Parameters
     ----------
@@ -110,8 +111,15 @@ class RunFile:
         if len(n) != 3 or n[2] != 3 or min(rows) < 0 or max(rows + [n[0]]) - min(rows + [n[0]]) > 1:
             self.f.close()
             raise RunFileError(f"{self.path}: the positions are not laid out as (frames, tips, 3)")
-        self._frames = min(rows + [n[0]])
-        self.torn_frame = max(rows + [n[0]]) > self._frames
+        lengths = rows + [n[0]]
+        if layout.TIP_VELOCITY in self.f:  # written after the positions: a kill between leaves it shorter
+            g = self.f[layout.TIP_VELOCITY]
+            lengths += [
+                g[k].shape[0] if isinstance(g.get(k), h5py.Dataset) and g[k].ndim else 0
+                for k in (layout.STEP, layout.TIME, layout.VALUE)
+            ]
+        self._frames = min(lengths)
+        self.torn_frame = max(lengths) > self._frames
         kinds = {name: self.f[f"{layout.TIP_POSITION}/{name}"].dtype.kind for name in ("step", "time", "value")}
         if kinds["step"] not in "iu" or kinds["time"] != "f" or kinds["value"] != "f":
             self.f.close()

@@ -33,10 +33,12 @@ def trim_plan(f, step, path) -> list:
     def cut(datasets, n):
         plan.extend((ds.name, n) for ds in datasets if ds.shape[0] > n)
 
-    for p in layout.TIP_ELEMENTS.values():
-        if p in f:
-            g = f[p]
-            cut((g["step"], g["time"], g["value"]), keep(g["step"], g["time"], g["value"]))
+    # the frames' elements (positions, then velocities, written one after the other) keep the same rows:
+    # a kill between the two left the velocities a row short, and they would stay a frame behind
+    elements = [(f[p]["step"], f[p]["time"], f[p]["value"]) for p in layout.TIP_ELEMENTS.values() if p in f]
+    frames = min(keep(*columns) for columns in elements)
+    for columns in elements:
+        cut(columns, frames)
 
     def visit(name, obj):
         if isinstance(obj, h5py.Group) and "value" in obj and name != layout.BOND_ERROR_PER_STEP:

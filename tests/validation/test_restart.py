@@ -406,6 +406,42 @@ def test_a_frame_row_torn_by_a_kill_is_no_frame_and_a_resume_continues(tmp_path,
         assert all(np.array_equal(got.position(k), ref.position(k)) for k in range(ref.n_frames))
 
 
+def test_a_frame_whose_velocities_a_kill_left_unwritten_is_no_frame_and_a_resume_keeps_them_in_step(tmp_path):
+    """A frame's velocities are appended after its positions: a kill between the two left the velocities
+    a row short. RunFile counted the frame (its velocity then raised IndexError, as did ``export``), and
+    a resume trimmed the two apart, leaving every later velocity a frame behind its positions. The frame
+    is no frame now, and after a resume each frame's velocities are those of the same step in a run
+    that was never killed."""
+    import shutil
+
+    (tmp_path / "s.toml").write_text(SMALL_CIRCUIT_SCENE)
+    run, clean = tmp_path / "run.h5", tmp_path / "clean.h5"
+    quiet = ["--progress", "none"]
+    assert main(["simulate", str(tmp_path / "s.toml"), "-o", str(run), "--t-end", "0.01", *quiet]) == 0
+    shutil.copy(run, clean)
+    shutil.copy(checkpoint_path(run), checkpoint_path(clean))
+    with RunFile(run) as f:
+        frames = f.n_frames
+    with h5py.File(run, "r+") as f:
+        f["parameters/selfas_graph"].attrs["status"] = "running"  # as a kill leaves it
+        for name in ("step", "time", "value"):
+            ds = f[f"particles/tips/velocity/{name}"]
+            ds.resize(ds.shape[0] - 1, axis=0)
+    with RunFile(run) as f:
+        assert f.torn_frame and f.n_frames == frames - 1
+        assert np.array_equal(f.velocity(-1), RunFile(clean).velocity(frames - 2))
+    assert main(["export", str(run), "--format", "xyz", "-o", str(tmp_path / "run.xyz")]) == 0
+    assert main(["simulate", "--resume", str(run), "--t-end", "0.02", *quiet]) == 0
+    assert main(["simulate", "--resume", str(clean), "--t-end", "0.02", *quiet]) == 0
+    with RunFile(run) as got, RunFile(clean) as ref, h5py.File(run, "r") as raw:
+        assert not got.torn_frame and got.n_frames > frames - 1
+        assert np.array_equal(raw["particles/tips/velocity/step"][:], raw["particles/tips/position/step"][:])
+        at = {int(s): k for k, s in enumerate(ref.step)}
+        for k, s in enumerate(got.step):
+            assert np.array_equal(got.velocity(k), ref.velocity(at[int(s)]))
+            assert np.array_equal(got.position(k), ref.position(at[int(s)]))
+
+
 def test_a_graph_record_torn_by_a_kill_is_no_record_and_the_readers_go_on(tmp_path):
     """A kill while a frame's graph record was appended can leave its step and time without the rest
     (roles, currents, potentials, counts): that record is no record for RunFile (the frame has no graph
