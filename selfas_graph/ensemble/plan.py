@@ -100,9 +100,9 @@ def check_times(times, t_end, frame_interval=None) -> list[float]:
 def summary_times(times, t_end, interval, dt=None) -> list[float]:
     """The times of a summary: ``times`` checked (:func:`check_times`; frame times where the time step
     ``dt`` is given, the frames ``interval`` rounded to whole steps), or :func:`default_times` when None."""
-    if times is None:
-        return default_times(t_end, interval)
     frame_interval = frame_steps(interval, dt) * dt if dt else None
+    if times is None:  # at the frames, whose interval is whole steps (an interval of 0.0125 at dt = 0.002: 0.012)
+        return default_times(t_end, frame_interval or interval)
     return check_times(times, t_end, frame_interval)
 
 

@@ -112,6 +112,18 @@ def test_default_times_are_frame_times():
     assert default_times(1.0) == [0.25, 0.5, 0.75, 1.0]
 
 
+def test_default_summary_times_fall_on_frames_whose_interval_is_rounded_to_whole_steps():
+    """Frames every output.interval = 0.0125 at dt = 0.002 are every 6 steps, 0.012: the default times
+    were the quarters rounded to 0.0125 (the 0.025 column held the frame at 0.024, and giving 0.025 back
+    was refused, no frame there). They are frame times now, each of which check_times takes back."""
+    from selfas_graph.ensemble.plan import check_times, summary_times
+
+    times = summary_times(None, 0.1, 0.0125, 0.002)
+    assert times == summary_times(times, 0.1, 0.0125, 0.002)
+    assert all(abs(t / 0.012 - round(t / 0.012)) < 1e-9 or t == 0.1 for t in times)
+    assert check_times(times, 0.1, 0.012) == times
+
+
 def test_default_times_that_collapse_are_explained():
     """Frames too far apart for four default columns get a note that says why and what to give."""
     from selfas_graph.cli.ensemble import _default_times_note
