@@ -148,6 +148,15 @@ class Grid:
                 what = f"{same[0]!r} and {same[1]!r} are the same value" if same[0] != same[1] else f"{same[0]} twice"
                 raise EnsembleError(f"grid key {key}: {what} in {list(grid[key])!r}")
         self.points = [tuple(zip(self.keys, values)) for values in itertools.product(*(texts[k] for k in self.keys))]
+        seen = {}
+        for point in self.points:  # a folder name drops spaces and turns "/" into "_": two values could share one
+            other = seen.setdefault(_folder_name(point).casefold(), point)
+            if other is not point:
+                raise EnsembleError(
+                    f"grid points {', '.join(f'{k}={v}' for k, v in other)} and {', '.join(f'{k}={v}' for k, v in point)} "
+                    f"would share the folder {_folder_name(point)!r}: give values that differ in more than spaces, "
+                    f"'/' and '_' (or case)"
+                )
         self.ensembles = []
         for point in self.points:
             extra = [f"{k}={v}" for k, v in point]

@@ -40,6 +40,9 @@ def test_parse_grid_keeps_vectors_whole_and_refuses_bad_items():
         ({"circuit.delta_J0": "12"}, "circuit.delta_J0"),  # a string, not a list of values
         # every point was summarised at the first point's end time
         ({"run.t_end": ["0.1", "0.2"]}, "run.t_end: the end time is the grid's"),
+        # two points in one folder: the second ensemble found the folder locked by its own process
+        ({"scenario.name": ["a/b", "a_b"]}, "would share the folder 'scenario.name=a_b'"),
+        ({"scenario.name": ['"a b"', '"ab"']}, "would share the folder"),
     ],
 )
 def test_a_bad_grid_is_refused_naming_the_key_before_anything_is_written(tmp_path, grid, words):
