@@ -31,6 +31,7 @@ from .ensemble import Ensemble, EnsembleError, run_seed, run_tasks, summarise
 from .ensemble.folder import FolderLock, make_folder
 from .ensemble.plan import check_jobs, scenario_source, summary_times
 from .ensemble.tables import CSV_EXTRA, summary_rows
+from .io.atomic import atomic_write, write_text_atomic
 from .io.scenario import ScenarioError, load_scenario
 from .parallel import task_pool
 
@@ -290,24 +291,15 @@ def plot_grid(table, out, title) -> Path:
         f"{title}: mean and one standard error over seeds at t = {t:g} (open marker: one seed, no error)",
         fontsize="medium",
     )
-    out = Path(out)
-    tmp = out.with_name(out.name + ".tmp.png")
-    fig.savefig(tmp, dpi=150)
-    tmp.replace(out)
-    return out
+    return atomic_write(out, lambda tmp: fig.savefig(tmp, dpi=150, format="png"))
 
 
 def write_grid_summary(table, folder) -> tuple[Path, Path]:
     """``grid_summary.json`` and ``grid_summary.csv`` in ``folder``, each written aside and renamed."""
     import json
-    import os
 
     folder = Path(folder)
-    out = []
-    for name, text in ((GRID_JSON, json.dumps(table, indent=1, allow_nan=False) + "\n"), (GRID_CSV, grid_csv(table))):
-        path = folder / name
-        tmp = path.with_name(path.name + ".tmp")
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-        out.append(path)
-    return tuple(out)
+    js, cs = folder / GRID_JSON, folder / GRID_CSV
+    write_text_atomic(js, json.dumps(table, indent=1, allow_nan=False) + "\n")
+    write_text_atomic(cs, grid_csv(table))
+    return js, cs

@@ -8,6 +8,7 @@ import io
 import json
 from pathlib import Path
 
+from ..io.atomic import write_text_atomic
 from .folder import make_folder
 
 #: summary files written into the ensemble's folder (rewritten from the run files on every call)
@@ -104,17 +105,19 @@ def summary_rows(summary) -> list[dict]:
 
 
 def write_summary(summary, folder) -> tuple[Path, Path]:
-    """Write ``summary.json`` (everything) and ``summary.csv`` (one row per measure and time) into ``folder``."""
+    """Write ``summary.json`` (everything) and ``summary.csv`` (one row per measure and time) into ``folder``,
+    each whole or not at all (:func:`~selfas_graph.io.atomic.atomic_write`: a kill or a full disk leaves
+    the summary there was)."""
     folder = make_folder(folder)
     js, cs = folder / SUMMARY_JSON, folder / SUMMARY_CSV
-    js.write_text(json.dumps(summary, indent=1, allow_nan=False) + "\n")
+    write_text_atomic(js, json.dumps(summary, indent=1, allow_nan=False) + "\n")
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     fields = ["measure", "unit", "time", "mean", "sem", "n", *CSV_EXTRA]
     w.writerow(fields)
     for r in summary_rows(summary):
         w.writerow([_csv(r[f]) for f in fields])
-    cs.write_text(buf.getvalue())
+    write_text_atomic(cs, buf.getvalue())
     return js, cs
 
 

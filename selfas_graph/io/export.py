@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import operator
 import os
-import tempfile
 import warnings
 from pathlib import Path
 
@@ -29,6 +28,7 @@ import numpy as np
 
 from ..model.graph import ROLE_NAMES
 from . import layout
+from .atomic import atomic_write
 from .h5md import RunFile, RunFileError
 from .h5md_format import dangling_link, is_hdf5
 
@@ -169,27 +169,6 @@ class _Frames:
         return 2.0 * reach + 2.0
 
 
-def _default_mode() -> int:
-    """The permissions a new file gets from ``open``: 0o666 less the process's umask."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-def _atomic_write(path: Path, write):
-    """Write through a temporary file in the same folder, renamed over ``path`` when complete, with
-    the permissions of a file the user creates (``mkstemp`` makes its file private, 0o600)."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent)
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        os.chmod(tmp, _default_mode())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_gsd(run: RunFile, path, frames):
     import gsd.hoomd
 
@@ -225,7 +204,7 @@ def write_gsd(run: RunFile, path, frames):
                 }
                 out.append(f)
 
-    _atomic_write(Path(path), write)
+    atomic_write(path, write)
 
 
 def write_xyz(run: RunFile, path, frames):
@@ -267,7 +246,7 @@ def write_xyz(run: RunFile, path, frames):
                 table = np.rec.fromarrays(columns)
                 np.savetxt(out, table, fmt=fmt)
 
-    _atomic_write(Path(path), write)
+    atomic_write(path, write)
 
 
 def export_run(run_path, format=None, out=None, frames=None, force=False, *, fmt=None) -> tuple[Path, int]:

@@ -114,10 +114,9 @@ class RunFile:
         lengths = rows + [n[0]]
         if layout.TIP_VELOCITY in self.f:  # written after the positions: a kill between leaves it shorter
             g = self.f[layout.TIP_VELOCITY]
-            lengths += [
-                g[k].shape[0] if isinstance(g.get(k), h5py.Dataset) and g[k].ndim else 0
-                for k in (layout.STEP, layout.TIME, layout.VALUE)
-            ]
+            cols = [g.get(k) for k in (layout.STEP, layout.TIME, layout.VALUE)]
+            if all(isinstance(c, h5py.Dataset) and c.ndim for c in cols):  # else damaged: read, they say so
+                lengths += [c.shape[0] for c in cols]
         self._frames = min(lengths)
         self.torn_frame = max(lengths) > self._frames
         kinds = {name: self.f[f"{layout.TIP_POSITION}/{name}"].dtype.kind for name in ("step", "time", "value")}

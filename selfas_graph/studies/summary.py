@@ -14,7 +14,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 import time
 from pathlib import Path
 
@@ -25,6 +24,7 @@ from ..analysis.episodes import circuit_episodes
 from ..analysis.moments import monopole_moment
 from ..analysis.skeleton import structures
 from ..ensemble import FRAME_MEASURES, Measure, seed_path, summarise
+from ..io.atomic import write_text_atomic
 from ..io.h5md import RunFile, RunFileError
 from ..provenance import cpu_model, source_commit
 
@@ -264,13 +264,7 @@ def write_json_atomic(data, path) -> Path:
     """Write ``data`` as JSON to ``path`` through a temporary file renamed into place."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path = path.resolve()  # through a symbolic link: the file it names is replaced, not the link
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", encoding="utf-8") as fh:
-        json.dump(data, fh, indent=1, allow_nan=False)
-        fh.write("\n")
-    os.replace(tmp, path)
-    return path
+    return write_text_atomic(path, json.dumps(data, indent=1, allow_nan=False) + "\n")
 
 
 def percolation_summary(study, path) -> dict:

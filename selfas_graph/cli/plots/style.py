@@ -3,9 +3,9 @@ style of time series, matplotlib imported lazily (headless) and PNGs written ato
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
+from ...io.atomic import atomic_write
 from ...io.frame import SavedFrame
 from ...io.h5md import RunFile
 from ..main import CliError, CliIOError
@@ -76,13 +76,8 @@ def plot_format(out: Path) -> str:
 def _save_png(fig, out: Path, dpi):
     """Draw aside in the format of :func:`plot_format` and rename into place: a failed write (full disk)
     leaves no partial file."""
-    tmp = out.with_name(out.name + ".tmp")
-    try:
-        fig.savefig(tmp, dpi=dpi, format=plot_format(out))
-        os.replace(tmp, out)
+    fmt = plot_format(out)
+    try:  # through a symbolic link the file it names is replaced, as for every file written (io/atomic.py)
+        atomic_write(out, lambda tmp: fig.savefig(tmp, dpi=dpi, format=fmt))
     except OSError as exc:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
         raise CliIOError(f"cannot write {out}: {exc.strerror or exc}") from None
