@@ -65,7 +65,11 @@ def add_arguments(p):
 def _frames(run, args):
     series = args.series or (args.csv and args.frame is None and args.time is None)
     if args.every != 1 and not series:
-        raise CliError(f"--every {args.every} takes every K-th frame of a series: give it with --series (or --csv)")
+        picked = ", and --frame and --time pick one frame" if args.frame is not None or args.time is not None else ""
+        raise CliError(
+            f"--every {args.every} takes every K-th frame of a series{picked}: give --every with --series, or with "
+            f"--csv and no --frame or --time"
+        )
     if series:
         if args.every < 1:
             raise CliError(f"--every must be >= 1, got {args.every}")

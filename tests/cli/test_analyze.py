@@ -121,3 +121,12 @@ def test_analyze_errors_are_one_line(run_file, tmp_path, capsys):
     assert "out of range" in capsys.readouterr().err
     assert main(["analyze", str(run_file), "--series", "--every", "0"]) == 2
     assert "--every" in capsys.readouterr().err
+
+
+def test_every_with_one_frame_says_what_picks_the_frame(real_run, capsys):
+    """``--csv --every 0 --frame 0`` was told to give --every with --csv, which it had."""
+    from selfas_graph.cli.main import main
+
+    assert main(["analyze", str(real_run["run"]), "--csv", "--every", "2", "--frame", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "--frame and --time pick one frame" in err and "with --csv and no --frame or --time" in err
