@@ -194,16 +194,21 @@ class CompiledSteps:
         self.brake_work = np.zeros((CHUNK, 3))
         self.brake_hit = np.zeros((CHUNK, 3), dtype=bool)
         self._no_tips = np.zeros(0, dtype=np.int64)
+        #: whether a Python step has filled the channels the compiled steps leave as they are (the uniform
+        #: and electric fields, the split tip brake's zeros): not yet in a simulation rebuilt from a snapshot,
+        #: whose channels start at zero (:func:`advance` makes its first step in Python)
+        self.primed = False
         #: (9,) float64 to time the phases of the calls (``kernels/step_args.py::FastStepArgs.phase_time``,
         #: ``bench profile --team --phases``; the CPU's cycle counter, x86-64 only); empty: no timing
         self.phase_time = _EMPTY
 
     def ready(self) -> bool:
-        """Whether the next step can be a compiled one as far as Python's state goes: the AB4 history is
-        full, no slow term is stale, the tip list is built (the step count is the kernel's to check)."""
+        """Whether the next step can be a compiled one as far as Python's state goes: a Python step has
+        filled the constant channels (:attr:`primed`), the AB4 history is full, no slow term is stale, the
+        tip list is built (the step count is the kernel's to check)."""
         sim = self.sim
         ff = sim.force_field
-        if sim.integrator.count < 4 or ff.mts.stale or ff.lists.tip is None:
+        if not self.primed or sim.integrator.count < 4 or ff.mts.stale or ff.lists.tip is None:
             return False
         return ff.lists.tip.reference is not None and ff.lists.tip.reference.shape == sim.state.position.shape
 
@@ -366,6 +371,8 @@ def advance(sim, n_max: int, rows=None) -> int:
         if reason != NEEDS_STEP:
             return done
     sim.python_step()
+    if cs is not None:
+        cs.primed = True
     if rows is not None:
         rows(sim.state.step, (sim.integrator.bond_error_before,))
     return done + 1
