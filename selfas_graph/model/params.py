@@ -345,6 +345,7 @@ class Parameters:
             p.replace(integrator={"dt": 5e-4}, rods={"count": 50})      # merged into the section
             p.replace({"forces.electrodes": True}, circuit={"delta_J0": 2.0})   # True or {} switches a table on
             p.replace(integrator=dataclasses.replace(p.integrator, dt=5e-4))    # a section object: the whole section
+            p.replace({"rods.transition_radius": None})                 # None: the key unset, to its default
 
         Raises :class:`selfas_graph.ScenarioError` with the messages of a scenario file.
         """
@@ -363,7 +364,10 @@ class Parameters:
                 node[parts[-1]] = _raw(dataclasses.asdict(value))  # replaces the section, unset values too
                 continue
             old = node.get(parts[-1])
-            node[parts[-1]] = _merge(old, value) if isinstance(old, dict) and isinstance(value, dict) else value
+            if value is None:
+                node.pop(parts[-1], None)
+            else:
+                node[parts[-1]] = _merge(old, value) if isinstance(old, dict) and isinstance(value, dict) else value
         return self.from_dict(raw)
 
 
@@ -378,7 +382,10 @@ def _raw(obj):
 def _merge(old: dict, new: dict) -> dict:
     out = dict(old)
     for k, v in new.items():
-        out[k] = _merge(out[k], v) if isinstance(out.get(k), dict) and isinstance(v, dict) else v
+        if v is None:  # unset: the default
+            out.pop(k, None)
+        else:
+            out[k] = _merge(out[k], v) if isinstance(out.get(k), dict) and isinstance(v, dict) else v
     return out
 
 

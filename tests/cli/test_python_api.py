@@ -29,6 +29,10 @@ def test_parameters_replace_and_from_dict_validate_as_scenario_files_do():
     # a section object replaces the whole section, its unset values too
     assert p.replace(integrator=dataclasses.replace(p.integrator, dt=2e-3)).integrator.dt == 2e-3
     assert p.replace({"forces.yukawa": True}).replace(forces=p.forces).forces == p.forces
+    # None sets an optional value back to its default (it was refused: "expected a number, got None")
+    q = p.replace({"rods.transition_radius": 0.1, "neighbours.centre_skin": 0.2})
+    assert q.rods.transition_radius == 0.1 and q.neighbours.centre_skin == 0.2
+    assert q.replace({"rods.transition_radius": None}, neighbours={"centre_skin": None}) == p
     toml = "[integrator]\ndt = -1.0\n"
     with pytest.raises(sg.ScenarioError) as from_toml:
         scenario_from_text(toml)
