@@ -52,10 +52,19 @@ class Observables:
         self.energy0 = None
 
     def energies(self) -> dict:
-        """Kinetic and potential energy of each conservative term (unit tip masses)."""
+        """Kinetic and potential energy of each conservative term (unit tip masses).
+
+        Taken at a step of the frame grid (a multiple of ``output.interval`` in whole steps) the energy
+        updates the neighbour lists as a step would, as the runs always have (their trajectories depend
+        on the frame interval; docs/output.md); taken elsewhere (the end of a run or of a chunk off the
+        grid, a call from Python) it reads them without moving their rebuilds, so that where a run stops
+        does not change its trajectory."""
+        from .operations import frame_steps  # operations -> health -> this module
+
         st = self.state
+        on_grid = st.step % frame_steps(self.params.output.interval, self.integrator.dt) == 0
         e = {"kinetic": 0.5 * float(np.einsum("ij,ij->", st.velocity, st.velocity))}
-        e.update(self.force_field.potential_energy(st.position))
+        e.update(self.force_field.potential_energy(st.position, keep_lists=not on_grid))
         return e
 
     def record_initial_energy(self):

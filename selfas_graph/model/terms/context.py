@@ -127,6 +127,8 @@ class EvalContext:
     currents: RodCurrents
     lists: PairLists
     calls: Counter = field(default_factory=Counter)
+    #: an energy taken off the frame grid: it reads the lists without moving their rebuilds (ForceField.potential_energy)
+    keep_lists: bool = False
     position: np.ndarray | None = None
     velocity: np.ndarray | None = None
     _soa: tuple | None = None
@@ -195,5 +197,8 @@ class EvalContext:
         return self.lists.tips(self.position)
 
     def centre_neighbours(self):
-        """Rod centres within the centre range (plus skin), up to date for :attr:`position`."""
+        """Rod centres within the centre range (plus skin), up to date for :attr:`position`; with
+        :attr:`keep_lists` set, without rebuilding the list the forces read (:meth:`NeighbourList.for_reading`)."""
+        if self.keep_lists:
+            return self.lists.centre.for_reading(self.centre())
         return self.lists.centres(self.centre())

@@ -313,15 +313,20 @@ class ForceField:
             for channel, w in t.split(ctx, dt).items():
                 work[self.work_index[channel]] += w
 
-    def potential_energy(self, position) -> dict:
-        """Potential energy of each conservative channel at ``position``."""
+    def potential_energy(self, position, keep_lists=False) -> dict:
+        """Potential energy of each conservative channel at ``position``; ``keep_lists``: without moving
+        where the neighbour lists are rebuilt (the same values)."""
         ctx = self.context
         ctx.bind(position, np.zeros_like(position) if ctx.velocity is None else ctx.velocity)
         energy = {}
-        for t in self.terms:
-            e = t.energy(ctx)
-            if e:
-                energy.update(e)
+        ctx.keep_lists = keep_lists
+        try:
+            for t in self.terms:
+                e = t.energy(ctx)
+                if e:
+                    energy.update(e)
+        finally:
+            ctx.keep_lists = False
         return energy
 
     def channel_keys(self, channel) -> str:
