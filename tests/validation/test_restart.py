@@ -373,6 +373,25 @@ def test_a_resume_from_step_0_writes_frame_0_again(reference, tmp_path):
         writer.close("interrupted")
 
 
+def test_a_resume_with_a_later_end_from_an_end_off_the_grids_is_the_run_made_at_once(tmp_path):
+    """A run ended off the frame grid and off the slow pattern, then resumed to a later end, against the
+    same run made at once: the positions of the last frame the same bit for bit. Both broke it: the
+    last frame's energies rebuilt the rod-centre list there, and, in a scene without electrodes, the
+    rebuilt simulation's compiled steps ran without the uniform field until a step ran in Python."""
+    (tmp_path / "s.toml").write_text(SMALL_CIRCUIT_SCENE)
+    scene = [str(tmp_path / "s.toml"), "--progress", "none", "--set", "integrator.slow_every=8"]
+    scene += ["--set", "neighbours.centre_skin=1e-4", "--set", "output.interval=0.01"]
+    for key in ("forces.electrodes", "circuit", "forces.current_field", "forces.current_lorentz"):
+        scene += ["--set", f"{key}=false"]
+    at_once, resumed = tmp_path / "at_once.h5", tmp_path / "resumed.h5"
+    assert main(["simulate", *scene, "-o", str(at_once), "--t-end", "0.05"]) == 0
+    assert main(["simulate", *scene, "-o", str(resumed), "--t-end", "0.0215"]) == 0  # 43 steps
+    assert main(["simulate", "--resume", str(resumed), "--t-end", "0.05", "--progress", "none"]) == 0
+    with RunFile(at_once) as a, RunFile(resumed) as b:
+        assert a.step[-1] == b.step[-1] == 100
+        assert np.array_equal(a.position(-1), b.position(-1)) and np.array_equal(a.velocity(-1), b.velocity(-1))
+
+
 @pytest.mark.parametrize("torn", ["step", "time", "value"])
 def test_a_frame_row_torn_by_a_kill_is_no_frame_and_a_resume_continues(tmp_path, torn):
     """A kill while a frame is appended can leave its step, time or positions a row longer than the other
