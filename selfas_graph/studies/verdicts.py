@@ -48,27 +48,55 @@ def _claim_difference(a, b):
     return (a["mean"] - b["mean"]) / den
 
 
-def _verdict(d, expect):
+def welch_p(a, b) -> float:
+    """The two-sided p-value of Welch's t-test of two plain statistics (mean, standard error, count): the
+    chance of a difference at least this large in combined standard errors between two sets of seeds of
+    one distribution, for the few seeds a study has (a normal reading of the difference overstates the
+    confidence: 3 SE is p = 0.0027 for a normal variable, p = 0.02 with 7 degrees of freedom). NaN
+    without two seeds a side or without a spread."""
+    if a["n"] < 2 or b["n"] < 2:
+        return math.nan
+    va, vb = a["sem"] ** 2, b["sem"] ** 2
+    if not va + vb > 0:
+        return math.nan
+    from scipy.stats import t as student
+
+    df = (va + vb) ** 2 / (va**2 / (a["n"] - 1) + vb**2 / (b["n"] - 1))
+    return float(2.0 * student.sf(abs(a["mean"] - b["mean"]) / math.sqrt(va + vb), df))
+
+
+def _p_text(p) -> str:
+    """``"; Welch p = 0.002"`` (two significant digits, ``< 1e-6`` below), or "" for NaN."""
+    if not math.isfinite(p):
+        return ""
+    return "; Welch p < 1e-6" if p < 1e-6 else f"; Welch p = {p:.2g}".replace("e-0", "e-")
+
+
+def _verdict(d, expect, p=math.nan):
+    """The verdict on a difference of ``d`` combined standard errors from the null model (3 of them in the
+    claimed direction), with the Welch p-value ``p`` beside it where given."""
     if math.isnan(d):
         return "not decided (too few seeds)"
     if math.isinf(d):  # no spread in either: every seed of each gives the same value
         same = (d > 0) == (expect == "greater")
         return f"{'reproduced' if same else 'opposite to the claim'} (every seed differs from every seed of the null model)"
     if (d > 3 and expect == "greater") or (d < -3 and expect == "less"):
-        return f"reproduced ({'+' if d > 0 else '−'}{abs(d):.1f} SE from the null model)"
+        return f"reproduced ({'+' if d > 0 else '−'}{abs(d):.1f} SE from the null model{_p_text(p)})"
     if abs(d) > 3:
-        return f"opposite to the claim ({'+' if d > 0 else '−'}{abs(d):.1f} SE from the null model)"
-    return f"not distinguished from the null model ({d:+.1f} SE)".replace("-", "−")
+        return f"opposite to the claim ({'+' if d > 0 else '−'}{abs(d):.1f} SE from the null model{_p_text(p)})"
+    return f"not distinguished from the null model ({d:+.1f} SE{_p_text(p)})".replace("-", "−")
 
 
-def _fit_verdict(d, d_seeds, expect):
+def _fit_verdict(d, d_seeds, expect, p_seeds=math.nan):
     """The verdict on a fitted measure, whose standard error carries each seed's fit uncertainty (``d``)
-    or the spread between seeds alone (``d_seeds``): the two are stated, and where they lead to
-    different verdicts the page says that the verdict depends on counting the fits' own errors
-    (docs/model.md "Measures of the paper's claims")."""
-    with_fits, seeds_alone = _verdict(d, expect), _verdict(d_seeds, expect)
+    or the spread between seeds alone (``d_seeds``, Welch p ``p_seeds``): the two are stated, and where
+    they lead to different verdicts the page says that the verdict depends on counting the fits' own
+    errors (docs/model.md "Measures of the paper's claims")."""
+    with_fits, seeds_alone = _verdict(d, expect), _verdict(d_seeds, expect, p_seeds)
     if with_fits.split(" (")[0] == seeds_alone.split(" (")[0]:
-        return f"{with_fits[:-1]}; {d_seeds:+.1f} SE by the spread between seeds alone)".replace("-", "−")
+        return f"{with_fits[:-1]}; {d_seeds:+.1f} SE by the spread between seeds alone{_p_text(p_seeds)})".replace(
+            "-", "−"
+        )
     return (
         f"depends on the fits' own errors: {with_fits} with each seed's fit error, {seeds_alone} by the "
         f"spread between seeds alone"
@@ -129,12 +157,10 @@ def claim_rows(studies, summaries) -> str:
             d = _claim_difference(a, b)
             null_text = studies.study(c.null).title
             null_value += "" if nm == c.measure else f" ({measure_label(nm)})"
-            verdict = _verdict(d, c.expect)
+            verdict = _verdict(d, c.expect, welch_p(a, b))
             if not c.window and (ea is not None or eb is not None):
-                seeds_alone = _claim_difference(
-                    plain_stat(values_at(s, c.measure, c.time)), plain_stat(values_at(null, nm, c.time))
-                )
-                verdict = _fit_verdict(d, seeds_alone, c.expect)
+                sa, sb = plain_stat(values_at(s, c.measure, c.time)), plain_stat(values_at(null, nm, c.time))
+                verdict = _fit_verdict(d, _claim_difference(sa, sb), c.expect, welch_p(sa, sb))
         verdict += _older_note(summaries, (c.study, c.null), studies)
         rows.append(
             f"| {c.claim} | {c.paper} | {measure_label(c.measure)}, {where} | {value} | {null_text} | "
@@ -154,19 +180,25 @@ CLAIM_MEASURES = (
 )
 
 
+#: combined standard errors of a difference found 4 times in 5 by the convergence table's 2-SE test:
+#: 2 + the normal quantile of 0.8 (the difference is beyond 2 SE with probability 0.8)
+DETECTABLE_SE = 2.0 + 0.8416212335729143
+
+
 def _difference(a, b):
-    """(x_a - x_b) / sqrt(SE_a^2 + SE_b^2) of two plain statistics (NaN without a spread)."""
-    den = _combined_sem(a, b)
-    return (a["mean"] - b["mean"]) / den if den > 0 else math.nan
+    """(x_a - x_b) / sqrt(SE_a^2 + SE_b^2) of two plain statistics, as for the claims (infinite where
+    neither has a spread and the means differ, NaN without a spread estimate)."""
+    return _claim_difference(a, b)
 
 
 def _detectable(a, b) -> str:
-    """The smallest difference the comparison of ``a`` with the default ``b`` would find: 2 combined
-    standard errors, in % of the default's mean ("n/a" without a spread or a mean)."""
+    """The difference the comparison of ``a`` with the default ``b`` finds 4 times in 5:
+    :data:`DETECTABLE_SE` combined standard errors, in % of the default's mean ("n/a" without a spread
+    or a mean). A difference of 2 combined standard errors, the test's own bound, it finds half the time."""
     den = _combined_sem(a, b)
     if not math.isfinite(den) or not b["mean"]:
         return "n/a"
-    return f"±{fmt(200 * den / abs(b['mean']), 2)} %"
+    return f"±{fmt(100 * DETECTABLE_SE * den / abs(b['mean']), 2)} %"
 
 
 def convergence_rows(studies, summaries) -> str:
@@ -195,7 +227,7 @@ def convergence_rows(studies, summaries) -> str:
             d = _difference(a, b)
             ds.append(d)
             cells.append((m, b, a, d))
-        finite = [abs(d) for d in ds if math.isfinite(d)]
+        finite = [abs(d) for d in ds if not math.isnan(d)]  # inf: no spread in either, the means differ
         if not finite:
             verdict = "not decided (too few seeds)"
         elif max(finite) > 3:
@@ -209,7 +241,12 @@ def convergence_rows(studies, summaries) -> str:
         verdict += _older_note(summaries, (st.name, st.null_of), studies)
         for k, (m, b, a, d) in enumerate(cells):
             name = st.title if k == 0 else ""
-            text = "n/a" if not math.isfinite(d) else f"{d:+.1f}".replace("-", "−")
+            if math.isnan(d):
+                text = "n/a"
+            elif math.isinf(d):
+                text = "every seed differs"
+            else:
+                text = f"{d:+.1f}".replace("-", "−")
             rows.append(
                 f"| {name} | {measure_label(m)}, t = {t:g} | {pm(b)} | {pm(a)} | {text} | {_detectable(a, b)} | "
                 f"{verdict if k == 0 else ''} |"

@@ -387,9 +387,11 @@ def _claim_against_null(tmp_path, lines):
 @pytest.mark.parametrize(
     "claim, null, words",
     [
-        ([0.5, 0.6, 0.7], [0.1, 0.2, 0.3], "reproduced (+4.9 SE"),  # d = 0.4 / sqrt(2 * (0.1/sqrt3)^2) = 4.9
-        ([0.1, 0.2, 0.3], [0.5, 0.6, 0.7], "opposite to the claim (−4.9 SE"),
-        ([0.2, 0.3, 0.4], [0.1, 0.2, 0.3], "not distinguished from the null model (+1.2 SE)"),
+        # d = 0.4 / sqrt(2 * (0.1/sqrt3)^2) = 4.9, and beside it Welch's t-test with 4 degrees of freedom
+        # (scipy.stats.t.sf by hand: 2 sf(4.90, 4) = 0.0080), which counts the few seeds
+        ([0.5, 0.6, 0.7], [0.1, 0.2, 0.3], "reproduced (+4.9 SE from the null model; Welch p = 0.008)"),
+        ([0.1, 0.2, 0.3], [0.5, 0.6, 0.7], "opposite to the claim (−4.9 SE from the null model; Welch p = 0.008)"),
+        ([0.2, 0.3, 0.4], [0.1, 0.2, 0.3], "not distinguished from the null model (+1.2 SE; Welch p = 0.29)"),
     ],
 )
 def test_a_verdict_needs_three_combined_standard_errors_in_the_claimed_direction(tmp_path, claim, null, words):
@@ -406,9 +408,11 @@ def test_a_verdict_needs_three_combined_standard_errors_in_the_claimed_direction
         # fit errors of 1 a seed: SE sqrt((0.01 + 1) / 3) = 0.58 a side, d = +0.5 / 0.82 = +0.6; by the
         # spread alone (0.1 / sqrt 3 = 0.058 a side) d = +6.1: the verdicts differ, and the page says so
         (1.0, "depends on the fits' own errors: not distinguished from the null model (+0.6 SE) with each seed's "
-         "fit error, opposite to the claim (+6.1 SE from the null model) by the spread between seeds alone"),
+         "fit error, opposite to the claim (+6.1 SE from the null model; Welch p = 0.0036) by the spread between "
+         "seeds alone"),
         # fit errors of 0.01: both ways opposite, the one with the fits first
-        (0.01, "opposite to the claim (+6.1 SE from the null model; +6.1 SE by the spread between seeds alone)"),
+        (0.01, "opposite to the claim (+6.1 SE from the null model; +6.1 SE by the spread between seeds alone; "
+         "Welch p = 0.0036)"),
     ],
 )  # fmt: skip
 def test_a_fitted_measures_verdict_is_given_with_and_without_the_fits_errors(tmp_path, claim_err, words):
