@@ -112,6 +112,8 @@ def study_table(summary) -> str:
                 f"[{fmt(min(first))} to {fmt(max(first))}] through median {fmt(float(np.median(series)))} "
                 f"{'rod' if float(np.median(series)) == 1.0 else 'rods'} in series"
             )
+            if len(first) < n_obs:  # seeds whose runs kept no circuit log: said, not silently left out
+                text += f" ({len(first)} of the {n_obs} seeds that closed it have a circuit log)"
     label = "short circuit of the electrodes" if electrodes else "circuit closed through the external filament"
     rows.append(f"| {label} | {text} |" + " |" * (len(times) - 1))
     return "\n".join(rows)
