@@ -23,6 +23,8 @@ before and after the change (same thread count), then compare, e.g.::
 from __future__ import annotations
 
 import argparse
+import math
+import struct
 import sys
 
 import h5py
@@ -118,11 +120,28 @@ def _json_differences(a, b):
 
     fa, fb = flat(a), flat(b)
     missing = "(absent)"
-    return [
+    lines = [
         (k, f"{k}: {fa.get(k, missing)!r} != {fb.get(k, missing)!r}")
         for k in sorted(set(fa) | set(fb))
-        if fa.get(k, missing) != fb.get(k, missing)
+        if not _same_leaf(fa.get(k, missing), fb.get(k, missing))
     ]
+    if not lines:  # the texts differ (else this is not called) in nothing an entry shows: their order, spacing
+        lines = [("", "the same entries, written differently (order or spacing of the JSON text)")]
+    return lines
+
+
+def _same_leaf(x, y) -> bool:
+    """Two JSON values the same to the bit: of one type (1 is not 1.0, nor true), -0.0 not 0.0, NaN the
+    same as NaN; lists entry by entry."""
+    if type(x) is not type(y):
+        return False
+    if isinstance(x, list):
+        return len(x) == len(y) and all(_same_leaf(u, v) for u, v in zip(x, y))
+    if isinstance(x, dict):
+        return x.keys() == y.keys() and all(_same_leaf(x[k], y[k]) for k in x)
+    if isinstance(x, float):
+        return struct.pack("<d", x) == struct.pack("<d", y) or (math.isnan(x) and math.isnan(y))
+    return x == y
 
 
 def compare(path_a, path_b, attrs: bool = True, counts: dict | None = None, notes: list | None = None) -> list[str]:

@@ -269,3 +269,35 @@ def test_compare_into_a_closed_pipe_is_no_read_error(tmp_path, monkeypatch):
     args = type("Args", (), {"a": tmp_path / "a.h5", "b": tmp_path / "b.h5"})()
     with pytest.raises(BrokenPipeError):
         compare.run(args)
+
+
+@pytest.mark.parametrize(
+    "a, b, words",
+    [
+        ({"x": 0.0}, {"x": -0.0}, "x: 0.0 != -0.0"),
+        ({"x": 1}, {"x": 1.0}, "x: 1 != 1.0"),
+        ({"x": True}, {"x": 1}, "x: True != 1"),
+        ({"x": [0.0, 1]}, {"x": [-0.0, 1]}, "x: [0.0, 1] != [-0.0, 1]"),
+        ({"x": 1, "y": 2}, {"y": 2, "x": 1}, "the same entries, written differently"),
+    ],
+)
+def test_json_attributes_that_differ_in_their_bytes_are_a_difference(tmp_path, a, b, words):
+    """A JSON attribute whose text differs was compared by its parsed values with Python's ==, which
+    takes 0.0 for -0.0, 1 for 1.0 and true for 1: files that differ were called the same, bit for bit.
+    NaN entries are the same as each other."""
+    from selfas_graph.bench.same_run import compare
+
+    for path, params in ((tmp_path / "a.h5", a), (tmp_path / "b.h5", b)):
+        with h5py.File(path, "w") as f:
+            f.create_group("parameters/selfas_graph").attrs["parameters_json"] = json.dumps(params)
+    out = compare(tmp_path / "a.h5", tmp_path / "b.h5")
+    assert len(out) == 1 and words in out[0], out
+    for path, params in (
+        (tmp_path / "a.h5", {"x": float("nan"), "y": 1}),
+        (tmp_path / "b.h5", {"x": float("nan"), "y": 2}),
+    ):
+        with h5py.File(path, "w") as f:
+            f.create_group("parameters/selfas_graph").attrs["parameters_json"] = json.dumps(params)
+    assert [line.split("@")[1] for line in compare(tmp_path / "a.h5", tmp_path / "b.h5")] == [
+        "parameters_json: y: 1 != 2"
+    ]
