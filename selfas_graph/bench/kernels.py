@@ -67,6 +67,7 @@ target and vector features it compiled for.
 import argparse
 import importlib
 import importlib.util
+import inspect
 import json
 import subprocess
 import sys
@@ -251,10 +252,14 @@ def run(args):
         # the scene's tree settings for both revisions, whatever their defaults were
         tm = p.forces.tip_magnetic
         groups, theta = (tm.group_size, tm.opening_angle) if tm is not None else (1024, 0.55)
+        # the leaves and order too, where the revision's build takes them (older ones fixed them)
+        shape = {"leaf_size": tm.leaf_size, "order": tm.order} if tm is not None else {}
 
         def tree_of(K):
             if id(K) not in trees:
-                trees[id(K)] = K.tree.build_tip_tree(x, y, z, q, group_size=groups)
+                known = inspect.signature(K.tree.build_tip_tree).parameters
+                extra = {k: v for k, v in shape.items() if k in known}
+                trees[id(K)] = K.tree.build_tip_tree(x, y, z, q, group_size=groups, **extra)
             return trees[id(K)]
 
         direct = n <= args.direct_max
@@ -476,7 +481,8 @@ def main(argv=None):
     rounds = {t: [] for t in args.targets}
     from .peer import target_env, tool_command, tool_env
 
-    for target in (t for r in range(args.rounds) for t in (args.targets if r % 2 == 0 else args.targets[::-1])):
+    turns = [(r, t) for r in range(args.rounds) for t in (args.targets if r % 2 == 0 else args.targets[::-1])]
+    for r, target in turns:
         env = tool_env(target_env(target))
         cmd = [
             *tool_command("kernels"),
@@ -499,7 +505,7 @@ def main(argv=None):
         if got.returncode:
             print(f"{target}: failed, left out of the table:\n{got.stderr}", file=sys.stderr, flush=True)
             continue
-        rounds[target].append(json.loads(got.stdout.strip().splitlines()[-1]))
+        rounds[target].append({**json.loads(got.stdout.strip().splitlines()[-1]), "round": r})
         print(f"{target}: {rounds[target][-1]['line']}", flush=True)
         results = merge_rounds(rounds)
         if args.json:  # after every target, so that a failure later keeps the figures
@@ -524,7 +530,9 @@ def main(argv=None):
         v = np.array(row[key])
         text = f"{np.median(v):.3g} [{v.min():.3g}-{v.max():.3g}]"
         if k in ("direct", "direct mixed", "plain"):
-            text += f" ({(2 * n) ** 2 / (np.median(v) * 1e-3) / args.threads / 1e9:.2f}e9)"
+            # per thread of wall time; CPU time already sums the threads
+            per = 1 if args.cpu_time else args.threads
+            text += f" ({(2 * n) ** 2 / (np.median(v) * 1e-3) / per / 1e9:.2f}e9)"
         if k == "yukawa":
             text += f" ({np.median(v) * 1e6 / row['yukawa_pairs']:.1f} ns/pair)"
         if k.startswith("current"):
@@ -588,7 +596,12 @@ def target_ratios(rounds, first, other, i, kernel):
     """Per round, the median time of ``kernel`` in row ``i`` of target ``other`` over that of
     ``first`` (rounds where both timed it); an array, empty if none."""
     out = []
-    for a, b in zip(rounds.get(first, []), rounds.get(other, [])):
+    # paired by the round they were timed in: a failed process leaves a round out of one target's list
+    by_round = {r["round"]: r for r in rounds.get(other, [])}
+    for a in rounds.get(first, []):
+        b = by_round.get(a["round"])
+        if b is None:
+            continue
         ta, tb = a["rows"][i].get(kernel), b["rows"][i].get(kernel)
         if ta and tb:
             out.append(np.median(tb) / np.median(ta))

@@ -70,6 +70,7 @@ def tree_error(sim, rng):
         kappa,
         tm.opening_angle,
         tree,
+        leaf_size=tm.leaf_size,
         group_size=tm.group_size,
         order=tm.order,
         precision=tm.precision,

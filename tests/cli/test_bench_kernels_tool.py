@@ -38,16 +38,23 @@ def test_rounds_merge_and_give_one_ratio_per_round():
     is taken round by round from the rounds' medians (hand-made timings, no process started)."""
     tool = _tool()
 
-    def result(ms):
-        return {"line": "x", "rows": [{"rods": 60, "tree eval": ms, "yukawa_pairs": 5}]}
+    def result(ms, r):
+        return {"line": "x", "rows": [{"rods": 60, "tree eval": ms, "yukawa_pairs": 5}], "round": r}
 
-    rounds = {"host": [result([1.0, 3.0]), result([2.0, 2.0])], "haswell": [result([4.0, 4.0]), result([3.0, 5.0])]}
+    rounds = {
+        "host": [result([1.0, 3.0], 0), result([2.0, 2.0], 1)],
+        "haswell": [result([4.0, 4.0], 0), result([3.0, 5.0], 1)],
+    }
     merged = tool.merge_rounds({**rounds, "znver3": []})
     assert set(merged) == {"host", "haswell"}
     assert merged["host"]["rows"][0]["tree eval"] == [1.0, 3.0, 2.0, 2.0] and merged["host"]["rounds"] == 2
     assert merged["haswell"]["rows"][0]["yukawa_pairs"] == 5
     assert list(tool.target_ratios(rounds, "host", "haswell", 0, "tree eval")) == [2.0, 2.0]
     assert len(tool.target_ratios(rounds, "host", "haswell", 0, "yukawa")) == 0
+    # a target whose process failed in round 0: its round 1 is set against round 1, not round 0
+    assert list(
+        tool.target_ratios({**rounds, "haswell": [result([6.0, 6.0], 1)]}, "host", "haswell", 0, "tree eval")
+    ) == [3.0]
 
 
 def test_a_named_target_compiles_with_its_own_features_only():
