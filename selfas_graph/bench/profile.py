@@ -328,8 +328,9 @@ def compare(args):
         f"{head['after']['origin']}; {args.threads} numba thread(s); {args.rounds} rounds of {args.steps} steps each, "
         f"interleaved; load average {os.getloadavg()[0]:.1f}"
     )
-    print(f"before ({args.before}): {1e3 * np.median(b):.3f} ms/step CPU [{1e3 * b.min():.3f}-{1e3 * b.max():.3f}]")
-    print(f"after (working tree): {1e3 * np.median(a):.3f} ms/step CPU [{1e3 * a.min():.3f}-{1e3 * a.max():.3f}]")
+    what = "CPU of the thread" if args.threads == 1 else "CPU of the process, all threads"
+    print(f"before ({args.before}): {1e3 * np.median(b):.3f} ms/step {what} [{1e3 * b.min():.3f}-{1e3 * b.max():.3f}]")
+    print(f"after (working tree): {1e3 * np.median(a):.3f} ms/step {what} [{1e3 * a.min():.3f}-{1e3 * a.max():.3f}]")
     r = b / a
     print(f"speed-up before/after: {np.median(r):.3f} [{r.min():.3f}-{r.max():.3f}]")
     wb, wa = np.array(walls["before"]), np.array(walls["after"])
@@ -467,8 +468,9 @@ def main(argv=None):
         f"thread(s); load average {os.getloadavg()[0]:.1f}"
     )
     print(
-        f"CPU time per step: {1e3 * plain:.3f} ms without the profiler, {1e3 * total / args.steps:.3f} ms "
-        f"with it ({args.steps} steps each)\n"
+        f"CPU time per step of the main thread (time.thread_time; the workers' time is not in it): "
+        f"{1e3 * plain:.3f} ms without the profiler, {1e3 * total / args.steps:.3f} ms with it "
+        f"({args.steps} steps each)\n"
     )
     print("| part | ms/step | share |")
     print("|---|---|---|")
