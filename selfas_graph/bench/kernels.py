@@ -15,7 +15,8 @@ On the tips of the Fig. 2 scene scaled to each size (as selfas_graph/bench/step.
   division per pair (up to 6000 rods);
 - ``tree build`` and ``tree eval``: the tip tree (kernels/tree.py) at its defaults; ``tree eval
   mixed`` the same evaluation in mixed precision, as the Fig. 2 and Fig. 6 scenes run it;
-- ``yukawa``: the screened rod-centre sum over the scene's rod-centre list, as each revision builds it;
+- ``yukawa``: the screened rod-centre sum over the scene's rod-centre list, as each revision's term
+  calls it (over copies in cell order and in the scene's precision where the revision has that kernel);
 - ``ab4 step``, ``constraint`` and ``channel sums``: the O(n) kernels of every step (the AB4 update
   with its bond check, the rigid-bond constraint with its checks, the sum of the scene's force
   channels with the powers of its non-conservative ones), each as the run calls it (serial below
@@ -232,6 +233,23 @@ def run(args):
                 own_lists[id(K)] = K.cells.neighbour_rows(c, nl.cutoff + nl.skin)
             return own_lists[id(K)]
 
+        def yukawa_job(K):
+            """The Yukawa sum as revision K's term calls it: over copies in cell order, in the scene's
+            precision, where the revision has that kernel (a list over the rows as built, before)."""
+            if not hasattr(K.yukawa, "yukawa_centres_sorted"):
+                return lambda: K.yukawa.yukawa_centres(
+                    c, st.rod_charge, *centre_list(K), yk.screening, yk.core, yk.cutoff, 0, n, fy
+                )
+            key = ("sorted", id(K))
+            if key not in own_lists:
+                own_lists[key] = K.cells.neighbour_rows(c, nl.cutoff + nl.skin, cell_order=True)[2]
+            order, start, index = own_lists[key]
+            mixed = yk.precision == "mixed" and hasattr(K.yukawa, "yukawa_centres_sorted_mixed")
+            kernel = K.yukawa.yukawa_centres_sorted_mixed if mixed else K.yukawa.yukawa_centres_sorted
+            return lambda: kernel(
+                c[order], st.rod_charge[order], order, start, index, yk.screening, yk.core, yk.cutoff, 0, n, fy
+            )
+
         fy = np.empty((n, 3))
         rng = np.random.default_rng(7)
         n_active = getattr(args, "active_rods", None)
@@ -294,16 +312,7 @@ def run(args):
                 args.repeat,
                 lambda K: lambda: K.tree.evaluate_tip_tree(tree_of(K), rstar, kappa, theta, f, precision="mixed"),
             ),
-            (
-                "yukawa",
-                True,
-                args.repeat,
-                lambda K: (
-                    lambda: K.yukawa.yukawa_centres(
-                        c, st.rod_charge, *centre_list(K), yk.screening, yk.core, yk.cutoff, 0, n, fy
-                    )
-                ),
-            ),
+            ("yukawa", True, args.repeat, yukawa_job),
             (
                 "ab4 step",
                 True,
@@ -384,51 +393,6 @@ def run(args):
     }
 
 
-def mixed_error(checkpoint):
-    """Rows (quantity, median, p99, max, max diff / max force) of the mixed current kernels
-    against the float64 ones on the state of ``checkpoint`` (see the module docstring)."""
-    from selfas_graph.kernels import currents as kc
-    from selfas_graph.kernels import lorentz as kl
-
-    from .profile import load_state
-
-    sim, origin = load_state(types.SimpleNamespace(checkpoint=checkpoint, extra=[], scenario=None, settle=0))
-    ff = sim.force_field
-    st = sim.state
-    ff.bind(st.position, st.velocity)
-    act, cur, w, pos = ff.active_rod, ff.current, ff.wire_radius, st.position
-    if not len(act):
-        raise SystemExit(f"{checkpoint}: no rod carries current in this state")
-
-    def row(name, a, b):
-        na = np.linalg.norm(a, axis=1)
-        e = np.linalg.norm(a - b, axis=1)[na > 0] / na[na > 0]
-        return (name, np.median(e), np.percentile(e, 99), e.max(), np.linalg.norm(a - b, axis=1).max() / na.max())
-
-    rows = []
-    f64, f32 = np.zeros_like(pos), np.zeros_like(pos)
-    kc.current_force_on_tips(pos, st.tip_charge, act, cur, w, 0, len(pos), f64)
-    kc.current_force_on_tips_mixed(pos, st.tip_charge, act, cur, w, 0, len(pos), f32)
-    rows.append(row("term 9 force on the tips", f64, f32))
-    t, wt = kl.gauss_legendre_01(sim.params.forces.current_lorentz.quadrature_points)
-    pts = np.empty((len(act) * len(t), 3))
-    kl.quadrature_points(pos, act, t, pts)
-    excl = np.repeat(act, len(t))
-    b64, b32 = np.empty_like(pts), np.empty_like(pts)
-    kc.rod_current_field(pts, excl, pos, act, cur, w, b64)
-    kc.rod_current_field_mixed(pts, excl, pos, act, cur, w, b32)
-    rows.append(row("rod currents' field at the quadrature points", b64, b32))
-    other, extra = np.zeros_like(pts), np.empty_like(pts)
-    for source in ff.field_sources:
-        source.field_at(pts, extra)
-        other += extra
-    l64, l32 = np.zeros_like(pos), np.zeros_like(pos)
-    kl.lorentz_force_on_rods(pos, act, cur, b64 + other, t, wt, l64)
-    kl.lorentz_force_on_rods(pos, act, cur, b32 + other, t, wt, l32)
-    rows.append(row("term 10 force (all fields)", l64, l32))
-    return origin, len(act), st.n_rods, rows
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rods", type=int, nargs="+", default=[1200, 6000, 24000])
@@ -465,6 +429,7 @@ def main(argv=None):
     if unknown:
         ap.error(f"--kernels: unknown {', '.join(map(repr, unknown))}; the kernels are {', '.join(map(repr, KERNELS))}")
     if args.mixed_error:
+        from .mixed_error import mixed_error
         from .peer import machine_line
 
         origin, n_active, n_rods, rows = mixed_error(args.mixed_error)
