@@ -245,9 +245,9 @@ def profile(sim, steps):
 def export(ref):
     """The tree of git revision ``ref`` in a temporary folder (kept, keyed by its commit): its path.
 
-    Today's ``selfas_graph/bench/profile.py`` is put beside that revision's package (as
-    ``selfas_graph/bench``), so that the child of ``--before`` serves steps the same way with the
-    old code."""
+    Today's ``selfas_graph/bench/profile.py`` and the module it imports, ``profile_parts.py``, are put
+    beside that revision's package (as ``selfas_graph/bench``), so that the child of ``--before`` serves
+    steps the same way with the old code (a revision without ``profile_parts.py``, or with another, failed)."""
     sha = subprocess.run(["git", "rev-parse", ref], cwd=ROOT, capture_output=True, text=True, check=True).stdout.strip()
     dest = Path(tempfile.gettempdir()) / "selfas_bench_profile" / sha[:12]
     if not (dest / "selfas_graph").exists():
@@ -256,7 +256,7 @@ def export(ref):
         subprocess.run(["tar", "-x", "-C", str(dest)], input=archive, check=True)
     bench = dest / "selfas_graph" / "bench"
     bench.mkdir(exist_ok=True)
-    for f in ("__init__.py", "profile.py"):
+    for f in ("__init__.py", "profile.py", "profile_parts.py"):
         shutil.copyfile(Path(__file__).with_name(f), bench / f)
     return dest
 
