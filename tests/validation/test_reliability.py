@@ -304,8 +304,8 @@ def test_frame_0_is_checked_before_it_is_written(scen, tmp_path, capsys, monkeyp
 
     real = ForceField.potential_energy
 
-    def nan_energy(self, position):
-        e = real(self, position)
+    def nan_energy(self, position, **kwargs):
+        e = real(self, position, **kwargs)
         e["yukawa"] = np.nan
         return e
 
