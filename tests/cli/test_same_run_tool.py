@@ -103,7 +103,7 @@ def test_compare_command_is_the_tool(tmp_path, capsys):
 
 BENCH = ROOT / "selfas_graph" / "bench"
 #: modules of selfas_graph/bench that other tools import and that are no tool themselves
-HELPERS = {"__init__", "peer", "oracles", "team_steps", "profile_parts", "args"}
+HELPERS = {"__init__", "peer", "oracles", "team_steps", "profile_parts", "args", "mixed_error"}
 
 
 def test_bench_lists_every_tool(capsys):
