@@ -9,7 +9,6 @@ temporary file and renamed into place, so a failed or interrupted render leaves 
 
 from __future__ import annotations
 
-import os
 import shutil
 import subprocess
 from pathlib import Path
@@ -17,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io import layout
+from ..io.atomic import atomic_write
 from ..io.h5md import RunFile, RunFileError
 from .main import CliError, CliIOError
 from .paths import check_folder, check_target
@@ -63,9 +63,10 @@ def render_movie(args, Figure) -> int:
     check_target(out, "movie", force=args.force, inputs=[run_path], keep_hdf5=True, name_option="--movie")
     check_folder(out, "movie")
     out = out.resolve()  # through a symbolic link: the file it names is replaced, not the link
-    tmp = out.with_name(f".{out.name}.part{out.suffix}")
-    images, proc = [], None
-    try:
+    images, proc, frames = [], None, []
+
+    def write(tmp):
+        nonlocal proc, frames
         with RunFile(run_path) as run:
             frames = _frames(run, args.every)
             pos = run.f[layout.TIP_POSITION_VALUE]
@@ -111,7 +112,9 @@ def render_movie(args, Figure) -> int:
             if proc.wait() != 0:
                 raise CliError(f"ffmpeg could not write {out}")
             proc = None
-        os.replace(tmp, out)
+
+    try:
+        atomic_write(out, write)
     except RunFileError as exc:
         raise CliError(str(exc)) from None
     except OSError as exc:
@@ -120,7 +123,5 @@ def render_movie(args, Figure) -> int:
         if proc is not None:
             proc.kill()
             proc.wait()
-        if tmp.exists():
-            tmp.unlink()
     print(f"wrote {out} ({len(frames)} frames, {FPS} per second)")
     return 0

@@ -354,13 +354,11 @@ def _page(args, studies):
         from .paths import check_target
 
         check_target(page, "results page", force=True)  # a regular file: not a device, folder or dangling link
-        target = page.resolve()  # through a symbolic link: the file it names changes, not the link
-        tmp = target.with_name(target.name + ".tmp")
-        try:
-            tmp.write_text(new, encoding="utf-8")
-            tmp.replace(target)
+        from ..io.atomic import write_text_atomic
+
+        try:  # through a symbolic link: the file it names changes, not the link
+            write_text_atomic(page, new)
         except OSError as exc:
-            tmp.unlink(missing_ok=True)
             raise CliError(f"cannot write the results page {page}: {exc.strerror or exc}") from None
         print(f"wrote {page}")
     else:
