@@ -185,12 +185,6 @@ CLAIM_MEASURES = (
 DETECTABLE_SE = 2.0 + 0.8416212335729143
 
 
-def _difference(a, b):
-    """(x_a - x_b) / sqrt(SE_a^2 + SE_b^2) of two plain statistics, as for the claims (infinite where
-    neither has a spread and the means differ, NaN without a spread estimate)."""
-    return _claim_difference(a, b)
-
-
 def _detectable(a, b) -> str:
     """The difference the comparison of ``a`` with the default ``b`` finds 4 times in 5:
     :data:`DETECTABLE_SE` combined standard errors, in % of the default's mean ("n/a" without a spread
@@ -224,7 +218,7 @@ def convergence_rows(studies, summaries) -> str:
             errs = values_at(s, FIT_ERRORS[m], t) if m in FIT_ERRORS else None
             berrs = values_at(base, FIT_ERRORS[m], t) if m in FIT_ERRORS else None
             a, b = plain_stat(values_at(s, m, t), errs), plain_stat(values_at(base, m, t), berrs)
-            d = _difference(a, b)
+            d = _claim_difference(a, b)  # as for the claims: inf without spreads, NaN without n
             ds.append(d)
             cells.append((m, b, a, d))
         finite = [abs(d) for d in ds if not math.isnan(d)]  # inf: no spread in either, the means differ
