@@ -26,7 +26,8 @@ seed), ``rods.count`` and ``run.t_end = T``, writes no file, and stops at the fi
 circuit (the step of the SHORT_CIRCUIT event: ``Simulation.run``'s ``stop`` hook) or at T.
 A run without a short circuit by T is censored at T; a run that ends in a numerical
 failure is censored at the time of the failure and counted apart. Per density the table
-gives the fraction short-circuited by T (with a 95 % Wilson interval) and the quartiles
+gives the fraction short-circuited by T over the runs that decide it, failed runs left out
+(with a 95 % Wilson interval), and the quartiles
 of the short-circuit time from the Kaplan-Meier estimate of its distribution (with
 censoring only at T these are plain order statistics of all K runs, censored runs
 counting as later than T); a quartile not reached by T is printed as ">T" (null in JSON).
@@ -73,16 +74,22 @@ def summarise(point, runs):
     observed = [r["status"] == "short_circuit" for r in used]
     t, F = kaplan_meier(times, observed)
     n, m = len(used), sum(observed)
-    lo, hi = wilson_interval(m, n)
+    censored = sum(r["status"] == "censored" for r in used)
+    # a failed run stopped before t_max without a short circuit: whether it would have short-circuited
+    # by t_max is unknown, so the fraction is over the runs that decide it (the Kaplan-Meier curve
+    # keeps the failed runs, censored at their failure time)
+    decided = m + censored
+    lo, hi = wilson_interval(m, decided)
     return {
         **point,
         "runs": n,
         "short_circuited": m,
-        "censored": sum(r["status"] == "censored" for r in used),
-        "failed": sum(r["status"] == "failed" for r in used),
+        "censored": censored,
+        "failed": n - decided,
+        "decided": decided,
         "excluded": len(runs) - n,
-        "fraction": m / n if n else None,
-        "fraction_ci95": [lo, hi] if n else None,
+        "fraction": m / decided if decided else None,
+        "fraction_ci95": [lo, hi] if decided else None,
         "km_fraction": float(F[-1]) if F.size else 0.0,
         "q25": _none(km_quantile(t, F, 0.25)),
         "median": _none(km_quantile(t, F, 0.5)),
@@ -321,7 +328,7 @@ def print_table(result):
         )
         print(
             f"| {d['count']} | {d['number_density']:.4g} | {d['volume_fraction']:.3g} | {d['runs']} "
-            f"| {d['short_circuited']}/{d['runs']} | {frac} | {_fmt_t(d['q25'], t_max)} "
+            f"| {d['short_circuited']}/{d.get('decided', d['runs'])} | {frac} | {_fmt_t(d['q25'], t_max)} "
             f"| {_fmt_t(d['median'], t_max)} | {_fmt_t(d['q75'], t_max)} | {d['censored']} | {d['failed']} |"
         )
     for s in result["skipped"]:
@@ -540,8 +547,8 @@ def main(argv=None):
         "threads_per_run": 1,
         **meta,
         "censoring": "status 'censored': no short circuit by t_max (censored at t_end = t_max); 'failed': a numerical "
-        "failure at t_end (censored there); 'unplaceable' and 'error' runs are left out of the "
-        "statistics. q25/median/q75 are Kaplan-Meier quantiles, null when not reached by t_max; "
+        "failure at t_end (censored there, and left out of fraction and fraction_ci95, which are over the "
+        "'decided' runs); 'unplaceable' and 'error' runs are left out of the statistics. q25/median/q75 are Kaplan-Meier quantiles, null when not reached by t_max; "
         "km lists (t, F(t)) at every short-circuit time",
         "densities": [summarise(pt, [r for r in runs if r["count"] == pt["count"]]) for pt in points],
         "skipped": skipped,

@@ -131,8 +131,12 @@ def percolation_table(summary) -> str:
     for d in summary["densities"]:
         lo, hi = d.get("fraction_ci95") or (math.nan, math.nan)
         q = [">" + f"{t_max:g}" if d.get(k) is None else fmt(d[k]) for k in ("median", "q25", "q75")]
+        # failed runs stopped before t_max: out of the fraction, in the Kaplan-Meier curve (censored)
+        failed = d.get("failed", 0)
+        decided = d.get("decided", d["runs"] - failed)
+        also = f"; {failed} failed before t = {t_max:g}" if failed else ""
         rows.append(
-            f"| {d['count']} | {d['short_circuited']} of {d['runs']} ({fmt(lo, 2)} to {fmt(hi, 2)}) | "
+            f"| {d['count']} | {d['short_circuited']} of {decided} ({fmt(lo, 2)} to {fmt(hi, 2)}){also} | "
             f"{q[0]} [{q[1]} to {q[2]}] |"
         )
     return "\n".join(rows)

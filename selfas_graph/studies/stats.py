@@ -28,6 +28,7 @@ __all__ = [
     "UNSHOWN_UNITS",
     "current_group",
     "fmt",
+    "grouped_at",
     "grouped_stat",
     "measure_label",
     "measure_text",
@@ -115,6 +116,19 @@ def current_group(summary, t):
     return np.nan_to_num(flag) > 0, circuit
 
 
+def grouped_at(summary, measure, t) -> dict:
+    """A grouped measure at time ``t``: :func:`grouped_stat` of the seeds :func:`current_group` says
+    carry current, with ``circuit``. A seed whose flag is unknown at ``t`` (no flag where it has a
+    value) counts in neither group rather than as one without current."""
+    v = values_at(summary, measure, t)
+    active, circuit = current_group(summary, t)
+    if "current" in summary:
+        known = np.isfinite(_rows_at(summary, summary.get("current"), t))
+    else:  # an older summary: the total current is the flag
+        known = np.isfinite(values_at(summary, "total_current", t)) | ~circuit
+    return grouped_stat(np.where(known, v, np.nan), active) | {"circuit": circuit}
+
+
 def plain_stat(values, errors=None) -> dict:
     """Mean, standard error and count over the finite values
     (:func:`~selfas_graph.analysis.ensemble_stats.mean_sem`); with ``errors``, each value's own
@@ -157,9 +171,8 @@ def measure_text(summary, measure, t) -> str:
     """A measure of a summary at a time as the page prints it (module docstring)."""
     v = values_at(summary, measure, t)
     if measure in GROUPED:
-        active, circuit = current_group(summary, t)
-        g = grouped_stat(v, active)
-        what = "carry current" if circuit else "span the gap (no circuit)"
+        g = grouped_at(summary, measure, t)
+        what = "carry current" if g["circuit"] else "span the gap (no circuit)"
         if g["n"] == 0:
             return "n/a"
         if g["k"] == 0:

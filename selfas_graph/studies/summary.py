@@ -274,7 +274,7 @@ def percolation_summary(study, path) -> dict:
     ``km`` and each run's ``run_times``: seed, status, and the short-circuit time or the time it was
     censored at), and the provenance of the runs."""
     raw = json.loads(Path(path).read_text(encoding="utf-8"))
-    keep = ("count", "density", "fraction_volume", "phi", "runs", "short_circuited", "censored", "failed")
+    keep = ("count", "density", "fraction_volume", "phi", "runs", "short_circuited", "censored", "failed", "decided")
     keep += ("fraction", "fraction_ci95", "q25", "median", "q75", "km")
     runs = raw.get("runs", [])
 

@@ -15,9 +15,8 @@ from ..provenance import version_key
 from .stats import (
     FIT_ERRORS,
     GROUPED,
-    current_group,
     fmt,
-    grouped_stat,
+    grouped_at,
     measure_label,
     measure_text,
     older_runs,
@@ -195,6 +194,18 @@ def _detectable(a, b) -> str:
     return f"±{fmt(100 * DETECTABLE_SE * den / abs(b['mean']), 2)} %"
 
 
+def _cell(stat) -> str:
+    """A statistic of :func:`_stat_at` as a convergence cell: "mean ± SE (n)", for a grouped measure
+    "mean ± SE (k of n carry current)" ("0 of n carry current" where no seed does)."""
+    if "of" not in stat:
+        return pm(stat)
+    group = f"{stat['n']} of {stat['of']} carry current"
+    if stat["n"] == 0:
+        return group
+    spread = f" ± {fmt(stat['sem'], 2)}" if math.isfinite(stat["sem"]) else ""
+    return f"{fmt(stat['mean'])}{spread} ({group})"
+
+
 def convergence_rows(studies, summaries) -> str:
     """For each variant of a numerical knob, each claim measure at the variant's end time against the
     study it varies (same time): both means with their standard errors, the difference in combined
@@ -215,9 +226,8 @@ def convergence_rows(studies, summaries) -> str:
         ds = []
         cells = []
         for m in CLAIM_MEASURES:
-            errs = values_at(s, FIT_ERRORS[m], t) if m in FIT_ERRORS else None
-            berrs = values_at(base, FIT_ERRORS[m], t) if m in FIT_ERRORS else None
-            a, b = plain_stat(values_at(s, m, t), errs), plain_stat(values_at(base, m, t), berrs)
+            # a grouped measure compares the seeds that carry current on each side: NaN where one has none
+            a, b = _stat_at(s, m, t), _stat_at(base, m, t)
             d = _claim_difference(a, b)  # as for the claims: inf without spreads, NaN without n
             ds.append(d)
             cells.append((m, b, a, d))
@@ -242,7 +252,7 @@ def convergence_rows(studies, summaries) -> str:
             else:
                 text = f"{d:+.1f}".replace("-", "−")
             rows.append(
-                f"| {name} | {measure_label(m)}, t = {t:g} | {pm(b)} | {pm(a)} | {text} | {_detectable(a, b)} | "
+                f"| {name} | {measure_label(m)}, t = {t:g} | {_cell(b)} | {_cell(a)} | {text} | {_detectable(a, b)} | "
                 f"{verdict if k == 0 else ''} |"
             )
     return "\n".join(rows)
@@ -281,11 +291,17 @@ def sweep_points(studies, summaries, name, measure):
         s = summaries.get(study)
         if s is None:
             continue
-        v = values_at(s, measure, sw.time)
-        if measure in GROUPED:
-            g = grouped_stat(v, current_group(s, sw.time)[0])
-            out.append((value, {"n": g["k"], "mean": g["mean"], "sem": g["sem"], "of": g["n"]}))
-            continue
-        errs = values_at(s, FIT_ERRORS[measure], sw.time) if measure in FIT_ERRORS else None
-        out.append((value, plain_stat(v, errs)))
+        out.append((value, _stat_at(s, measure, sw.time)))
     return out
+
+
+def _stat_at(summary, measure, t) -> dict:
+    """A measure's statistic at ``t`` as the tables give it: for a grouped measure the mean and
+    standard error of the ``n`` seeds that carry current, of ``of`` with a value (never a mean over
+    both groups); for a fitted one with each seed's fit error in the standard error; else over every
+    seed."""
+    if measure in GROUPED:
+        g = grouped_at(summary, measure, t)
+        return {"n": g["k"], "mean": g["mean"], "sem": g["sem"], "of": g["n"]}
+    errs = values_at(summary, FIT_ERRORS[measure], t) if measure in FIT_ERRORS else None
+    return plain_stat(values_at(summary, measure, t), errs)

@@ -40,6 +40,7 @@ DENSITY_KEYS = {
     "short_circuited",
     "censored",
     "failed",
+    "decided",
     "excluded",
     "fraction",
     "fraction_ci95",
@@ -251,3 +252,25 @@ def test_compare_draws_results_and_refuses_other_files(tool, ensemble, tmp_path,
             tool.main(argv)
         assert exc.value.code == 2 and message in capsys.readouterr().err
     assert tool.fields_of(json.loads(off.read_text())) == "off"  # the input refused as a target is intact
+
+
+def test_a_failed_run_is_censored_in_the_curve_and_left_out_of_the_fraction():
+    """A run that failed at t = 1 without a short circuit might have short-circuited by t_max: it is
+    censored there in the Kaplan-Meier curve and left out of the fraction, whose Wilson interval is
+    over the 3 runs that decide it (2 short circuits, 1 censored at t_max), not over 4."""
+    from selfas_graph.analysis.ensemble_stats import wilson_interval
+
+    runs = [
+        {"status": "short_circuit", "time": 0.5, "t_end": 0.5},
+        {"status": "short_circuit", "time": 1.5, "t_end": 1.5},
+        {"status": "censored", "time": None, "t_end": 2.0},
+        {"status": "failed", "time": None, "t_end": 1.0},
+        {"status": "error", "time": None, "t_end": 0.0},
+    ]
+    d = _tool().summarise({"count": 10}, runs)
+    assert (d["runs"], d["short_circuited"], d["censored"], d["failed"], d["decided"]) == (4, 2, 1, 1, 3)
+    assert d["excluded"] == 1 and d["fraction"] == pytest.approx(2 / 3)
+    assert d["fraction_ci95"] == pytest.approx(list(wilson_interval(2, 3)))
+    # the curve: 1/4 at t = 0.5 (4 at risk); the failure at t = 1 leaves 2 at risk at t = 1.5, where the
+    # survival falls by half: 1 - 3/4 * 1/2 = 5/8, not the 1 - 3/4 * 2/3 of the run counted as still at risk
+    assert [x for row in d["km"] for x in row] == pytest.approx([0.5, 0.25, 1.5, 0.625])

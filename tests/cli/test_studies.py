@@ -709,3 +709,57 @@ def test_study_list_names_what_a_percolation_study_runs(tmp_path, capsys):
         "circuit or t = 20",
         "e: E: scenarios/quick.toml, 2 seeds to t = 6",
     ]
+
+
+def _current_summary(rods, flags, t=150.0):
+    """A summary at one time with a circuit: ``rods`` in current-carrying filaments per seed, its
+    ``current`` flags (None: unknown), and the other claim measures absent."""
+    return {
+        "times": [t],
+        "seeds": [{"seed": k + 1, "t_end": t} for k in range(len(rods))],
+        "n_seeds": len(rods),
+        "current": [[f] for f in flags],
+        "measures": {
+            "filament_rods": {"values": [[v] for v in rods]},
+            "total_current": {"values": [[1.0 if f else 0.0] for f in flags]},
+        },
+    }
+
+
+def test_a_seed_whose_current_flag_is_unknown_counts_in_neither_group():
+    """A seed with a value but no flag at that time is not taken for one without current: 2 of 3, not
+    2 of 4."""
+    s = _current_summary([700.0, 0.0, 650.0, 600.0], [1.0, 0.0, 1.0, None])
+    assert measure_text(s, "filament_rods", 150.0).startswith("2 of 3 seeds carry current: median 675")
+
+
+def test_the_convergence_table_compares_a_grouped_measure_over_the_seeds_that_carry_current():
+    """The grouped rule holds in the convergence table too: the default's mean of 4 seeds carrying
+    current is 700 (not 525 with a fifth counted as 0), the setting's 690; where no seed of either
+    carries current the measure is not compared, and the conclusion says so."""
+    from types import SimpleNamespace
+
+    from selfas_graph.studies.verdicts import convergence_rows
+
+    st = SimpleNamespace(section="convergence", name="v", null_of="base", title="a knob", t_end=150.0)
+    studies = SimpleNamespace(studies={"v": st}, since=lambda name: "")
+    base = _current_summary([680.0, 700.0, 720.0, 700.0, 0.0], [1.0, 1.0, 1.0, 1.0, 0.0])
+    setting = _current_summary([670.0, 690.0, 710.0], [1.0, 1.0, 1.0])
+    rows = convergence_rows(studies, {"base": base, "v": setting}).splitlines()
+    rods = next(r for r in rows if "rods in current-carrying filaments" in r)
+    # d = -10 / sqrt(8.165^2 + 11.547^2) = -0.7
+    assert "| 700 ± 8.2 (4 of 5 carry current) | 690 ± 12 (3 of 3 carry current) | −0.7 |" in rods, rods
+    off = _current_summary([0.0, 0.0], [0.0, 0.0])
+    rows = convergence_rows(studies, {"base": off, "v": off}).splitlines()
+    rods = next(r for r in rows if "rods in current-carrying filaments" in r)
+    assert "| 0 of 2 carry current | 0 of 2 carry current | n/a |" in rods, rods
+    assert "not decided (too few seeds)" in rods  # no measure of this summary can be compared
+
+
+def test_a_percolation_table_leaves_failed_runs_out_of_the_fraction_and_names_them():
+    from selfas_graph.studies.page import percolation_table
+
+    d = {"count": 40, "runs": 4, "short_circuited": 2, "censored": 1, "failed": 1, "decided": 3}
+    d |= {"fraction_ci95": [0.2, 0.94], "median": 1.5, "q25": 0.5, "q75": None}
+    table = percolation_table({"study": {"t_max": 2.0}, "densities": [d]})
+    assert "| 40 | 2 of 3 (0.2 to 0.94); 1 failed before t = 2 | 1.5 [0.5 to >2] |" in table, table
