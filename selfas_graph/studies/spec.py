@@ -236,9 +236,8 @@ def _check_measures(where, claim):
                 raise StudiesError(f"{where}.{key}: no measure named {name!r}; valid: {', '.join(sorted(known))}")
 
 
-def load_studies(path) -> Studies:
-    """Read and check a studies file (StudiesError naming the file and key when it is wrong)."""
-    path = Path(path)
+def _read_toml(path):
+    """The tables of a studies file (StudiesError naming the file when it cannot be read or parsed)."""
     try:
         raw = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as exc:
@@ -250,62 +249,66 @@ def load_studies(path) -> Studies:
         raise StudiesError(
             f"{path}: unknown key(s) {sorted(extra)}; valid: trajectories_since, [study.NAME], [sweep.NAME], [[claim]]"
         )
-    since = raw.get("trajectories_since", "")
-    if not isinstance(since, str) or (since and version_key(since) is None):
-        raise StudiesError(f'{path}: trajectories_since: a version such as "0.4.0", got {since!r}')
-    studies = {}
-    for name, t in (raw.get("study") or {}).items():
-        where = f"{path}: study.{name}"
-        if not isinstance(t, dict):
-            raise StudiesError(f"{where}: must be a table")
-        _check(where, t, _STUDY_KEYS, ("scenario", "seeds", "t_end"))
-        t_end = float(t["t_end"])
-        every = float(t.get("every", t_end / 4))
-        if not (t_end > 0 and every > 0 and t["seeds"] >= 1):
-            raise StudiesError(f"{where}: t_end, every and seeds must be positive")
-        table_times = _numbers(where, "table_times", t.get("table_times", [t_end]))
-        own = t.get("trajectories_since", "")
-        if own and (version_key(own) is None or (since and version_key(own) < version_key(since))):
-            raise StudiesError(
-                f'{where}.trajectories_since: a version such as "0.4.1", not earlier than the file\'s '
-                f"trajectories_since ({since or 'none'}), got {own!r}"
-            )
-        if any(not 0 <= x <= t_end for x in table_times):
-            raise StudiesError(f"{where}.table_times: every time must lie in [0, t_end = {t_end:g}]")
-        studies[name] = Study(
-            name=name,
-            title=t.get("title", name),
-            scenario=t["scenario"],
-            overrides=tuple(str(o) for o in t.get("overrides", [])),
-            seeds=int(t["seeds"]),
-            first_seed=int(t.get("first_seed", 1)),
-            t_end=t_end,
-            every=every,
-            table_times=table_times,
-            section=t.get("section", ""),
-            null_of=t.get("null_of", ""),
-            doc=t.get("doc", ""),
-            sweep=t.get("sweep", ""),
-            sweep_value=float(t.get("sweep_value", math.nan)),
-            kind=t.get("kind", "ensemble"),
-            counts=_numbers(where, "counts", t.get("counts", []), int),
-            fields=t.get("fields", "on"),
-            trajectories_since=own,
+    return raw
+
+
+def _study(where, name, t, since) -> Study:
+    """One ``[study.NAME]`` table, checked on its own (its links to other entries: :func:`_check_links`)."""
+    if not isinstance(t, dict):
+        raise StudiesError(f"{where}: must be a table")
+    _check(where, t, _STUDY_KEYS, ("scenario", "seeds", "t_end"))
+    t_end = float(t["t_end"])
+    every = float(t.get("every", t_end / 4))
+    if not (t_end > 0 and every > 0 and t["seeds"] >= 1):
+        raise StudiesError(f"{where}: t_end, every and seeds must be positive")
+    table_times = _numbers(where, "table_times", t.get("table_times", [t_end]))
+    own = t.get("trajectories_since", "")
+    if own and (version_key(own) is None or (since and version_key(own) < version_key(since))):
+        raise StudiesError(
+            f'{where}.trajectories_since: a version such as "0.4.1", not earlier than the file\'s '
+            f"trajectories_since ({since or 'none'}), got {own!r}"
         )
-        st = studies[name]
-        if st.kind not in ("ensemble", "percolation"):
-            raise StudiesError(f"{where}.kind: 'ensemble' or 'percolation', got {st.kind!r}")
-        if st.kind == "percolation" and (not st.counts or min(st.counts) < 1 or st.fields not in ("on", "off")):
-            raise StudiesError(f"{where}: a percolation study needs counts (rods, >= 1) and fields 'on' or 'off'")
-    sweeps = {}
-    for name, t in (raw.get("sweep") or {}).items():
-        where = f"{path}: sweep.{name}"
-        if not isinstance(t, dict):
-            raise StudiesError(f"{where}: must be a table")
-        _check(where, t, _SWEEP_KEYS, tuple(_SWEEP_KEYS))
-        if t["base"] not in studies:
-            raise StudiesError(f"{where}.base: no study named {t['base']!r}")
-        sweeps[name] = Sweep(name, t["title"], t["parameter"], t["base"], float(t["base_value"]), float(t["time"]))
+    if any(not 0 <= x <= t_end for x in table_times):
+        raise StudiesError(f"{where}.table_times: every time must lie in [0, t_end = {t_end:g}]")
+    st = Study(
+        name=name,
+        title=t.get("title", name),
+        scenario=t["scenario"],
+        overrides=tuple(str(o) for o in t.get("overrides", [])),
+        seeds=int(t["seeds"]),
+        first_seed=int(t.get("first_seed", 1)),
+        t_end=t_end,
+        every=every,
+        table_times=table_times,
+        section=t.get("section", ""),
+        null_of=t.get("null_of", ""),
+        doc=t.get("doc", ""),
+        sweep=t.get("sweep", ""),
+        sweep_value=float(t.get("sweep_value", math.nan)),
+        kind=t.get("kind", "ensemble"),
+        counts=_numbers(where, "counts", t.get("counts", []), int),
+        fields=t.get("fields", "on"),
+        trajectories_since=own,
+    )
+    if st.kind not in ("ensemble", "percolation"):
+        raise StudiesError(f"{where}.kind: 'ensemble' or 'percolation', got {st.kind!r}")
+    if st.kind == "percolation" and (not st.counts or min(st.counts) < 1 or st.fields not in ("on", "off")):
+        raise StudiesError(f"{where}: a percolation study needs counts (rods, >= 1) and fields 'on' or 'off'")
+    return st
+
+
+def _sweep(where, name, t, studies) -> Sweep:
+    """One ``[sweep.NAME]`` table, whose base must name a study."""
+    if not isinstance(t, dict):
+        raise StudiesError(f"{where}: must be a table")
+    _check(where, t, _SWEEP_KEYS, tuple(_SWEEP_KEYS))
+    if t["base"] not in studies:
+        raise StudiesError(f"{where}.base: no study named {t['base']!r}")
+    return Sweep(name, t["title"], t["parameter"], t["base"], float(t["base_value"]), float(t["time"]))
+
+
+def _check_links(path, studies, sweeps):
+    """Each study's ``null_of`` and ``sweep`` name an entry of the file; a sweep's study has its value."""
     for st in studies.values():
         if st.null_of and st.null_of not in studies:
             raise StudiesError(f"{path}: study.{st.name}.null_of: no study named {st.null_of!r}")
@@ -313,32 +316,45 @@ def load_studies(path) -> Studies:
             raise StudiesError(f"{path}: study.{st.name}.sweep: no sweep named {st.sweep!r}")
         if st.sweep and not math.isfinite(st.sweep_value):
             raise StudiesError(f"{path}: study.{st.name}: a study of a sweep needs its sweep_value")
-    claims = []
-    for k, c in enumerate(raw.get("claim") or []):
-        where = f"{path}: claim[{k}]"
-        _check(where, c, _CLAIM_KEYS, ("id", "claim", "paper", "study", "measure", "time"))
-        for key in ("study", "null"):
-            if c.get(key) and c[key] not in studies:
-                raise StudiesError(f"{where}.{key}: no study named {c[key]!r}")
-        _check_measures(where, c)
-        w = _numbers(where, "window", c.get("window", []))
-        if w and (len(w) != 2 or not w[0] < w[1]):
-            raise StudiesError(f"{where}.window: [t1, t2] with t1 < t2, got {list(w)!r}")
-        for key in ("study", "null"):
-            st = studies.get(c.get(key, ""))
-            if st is not None and any(not 0 <= x <= st.t_end for x in (c["time"], *w)):
-                raise StudiesError(
-                    f"{where}: time {c['time']:g} and window {list(w)} must lie in [0, t_end = {st.t_end:g}] of "
-                    f"study {st.name!r} ({key})"
-                )
-        if c.get("expect", "greater") not in ("greater", "less"):
-            raise StudiesError(f"{where}.expect: 'greater' or 'less', got {c['expect']!r}")
-        claims.append(
-            Claim(
-                **{k: v for k, v in c.items() if k not in ("time", "also", "window")},
-                time=float(c["time"]),
-                also=tuple(c.get("also", [])),
-                window=w,
+
+
+def _claim(where, c, studies) -> Claim:
+    """One ``[[claim]]``: its studies exist, its measures are summarised, its time and window lie
+    within both studies' runs."""
+    _check(where, c, _CLAIM_KEYS, ("id", "claim", "paper", "study", "measure", "time"))
+    for key in ("study", "null"):
+        if c.get(key) and c[key] not in studies:
+            raise StudiesError(f"{where}.{key}: no study named {c[key]!r}")
+    _check_measures(where, c)
+    w = _numbers(where, "window", c.get("window", []))
+    if w and (len(w) != 2 or not w[0] < w[1]):
+        raise StudiesError(f"{where}.window: [t1, t2] with t1 < t2, got {list(w)!r}")
+    for key in ("study", "null"):
+        st = studies.get(c.get(key, ""))
+        if st is not None and any(not 0 <= x <= st.t_end for x in (c["time"], *w)):
+            raise StudiesError(
+                f"{where}: time {c['time']:g} and window {list(w)} must lie in [0, t_end = {st.t_end:g}] of "
+                f"study {st.name!r} ({key})"
             )
-        )
-    return Studies(path=path, studies=studies, claims=tuple(claims), sweeps=sweeps, trajectories_since=since)
+    if c.get("expect", "greater") not in ("greater", "less"):
+        raise StudiesError(f"{where}.expect: 'greater' or 'less', got {c['expect']!r}")
+    return Claim(
+        **{k: v for k, v in c.items() if k not in ("time", "also", "window")},
+        time=float(c["time"]),
+        also=tuple(c.get("also", [])),
+        window=w,
+    )
+
+
+def load_studies(path) -> Studies:
+    """Read and check a studies file (StudiesError naming the file and key when it is wrong)."""
+    path = Path(path)
+    raw = _read_toml(path)
+    since = raw.get("trajectories_since", "")
+    if not isinstance(since, str) or (since and version_key(since) is None):
+        raise StudiesError(f'{path}: trajectories_since: a version such as "0.4.0", got {since!r}')
+    studies = {name: _study(f"{path}: study.{name}", name, t, since) for name, t in (raw.get("study") or {}).items()}
+    sweeps = {name: _sweep(f"{path}: sweep.{name}", name, t, studies) for name, t in (raw.get("sweep") or {}).items()}
+    _check_links(path, studies, sweeps)
+    claims = tuple(_claim(f"{path}: claim[{k}]", c, studies) for k, c in enumerate(raw.get("claim") or []))
+    return Studies(path=path, studies=studies, claims=claims, sweeps=sweeps, trajectories_since=since)
