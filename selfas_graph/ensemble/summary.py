@@ -165,7 +165,8 @@ def _measure_summary(measure, values, errs, current) -> dict:
 
 
 def _plain(v):
-    """JSON-ready: arrays to lists, NaN to None."""
+    """JSON-ready: arrays to lists, NaN and +-inf to None (standard JSON has neither; a measure that is
+    not finite, such as a flux over the flux of a zero B_ext, has no value)."""
     if isinstance(v, np.ndarray):
         return [_plain(x) for x in v.tolist()]
     if isinstance(v, (list, tuple)):
