@@ -17,9 +17,10 @@ from pathlib import Path
 import numpy as np
 
 from ..provenance import version_key
+from .convergence import convergence_rows
 from .spec import StudiesError
 from .stats import fmt, measure_label, measure_text, older_runs
-from .verdicts import claim_rows, convergence_rows, sweep_rows
+from .verdicts import claim_rows, sweep_rows
 
 __all__ = ["has_electrodes", "load_summary", "page_blocks", "page_blocks_in", "replace_blocks", "study_table"]
 

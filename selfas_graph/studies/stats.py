@@ -22,10 +22,12 @@ from ..analysis.ensemble_stats import grouped_summary, mean_sem, mean_sem_fits
 from ..provenance import older_version
 
 __all__ = [
+    "CLAIM_MEASURES",
     "FIT_ERRORS",
     "GROUPED",
     "LABELS",
     "UNSHOWN_UNITS",
+    "current_flags",
     "current_group",
     "fmt",
     "grouped_at",
@@ -48,6 +50,17 @@ GROUPED = (
     "flux_over_dipole",
     "moment_J_z",
     "largest_moment_J_z",
+)
+
+
+#: the measures of the convergence and sensitivity tables: one per claim
+CLAIM_MEASURES = (
+    "filament_rods",
+    "inside_R_plas",
+    "midplane_flux",
+    "largest_alignment",
+    "fractal_dimension",
+    "cycle_rank",
 )
 
 
@@ -110,22 +123,29 @@ def current_group(summary, t):
     docs/model.md "Measures of the paper's claims"; a summary without it: a nonzero total current),
     and whether the study has a circuit at all (some seed's total current is a number). Without a
     circuit the filaments span the gap but carry no current."""
+    active, _, circuit = current_flags(summary, t)
+    return active, circuit
+
+
+def current_flags(summary, t):
+    """``(active, known, circuit)`` at time ``t``: :func:`current_group`'s two, and which seeds have a
+    flag at all (a seed with a value but no flag counts in neither group, not as one without current)."""
     cur = values_at(summary, "total_current", t)
     circuit = bool(np.isfinite(cur).any())
-    flag = _rows_at(summary, summary.get("current"), t) if "current" in summary else np.abs(cur)
-    return np.nan_to_num(flag) > 0, circuit
+    if "current" in summary:
+        flag = _rows_at(summary, summary.get("current"), t)
+        known = np.isfinite(flag)
+    else:  # an older summary: the total current is the flag
+        flag = np.abs(cur)
+        known = np.isfinite(cur) | ~circuit
+    return np.nan_to_num(flag) > 0, known, circuit
 
 
 def grouped_at(summary, measure, t) -> dict:
     """A grouped measure at time ``t``: :func:`grouped_stat` of the seeds :func:`current_group` says
-    carry current, with ``circuit``. A seed whose flag is unknown at ``t`` (no flag where it has a
-    value) counts in neither group rather than as one without current."""
+    carry current, with ``circuit``; a seed whose flag is unknown counts in neither group."""
+    active, known, circuit = current_flags(summary, t)
     v = values_at(summary, measure, t)
-    active, circuit = current_group(summary, t)
-    if "current" in summary:
-        known = np.isfinite(_rows_at(summary, summary.get("current"), t))
-    else:  # an older summary: the total current is the flag
-        known = np.isfinite(values_at(summary, "total_current", t)) | ~circuit
     return grouped_stat(np.where(known, v, np.nan), active) | {"circuit": circuit}
 
 

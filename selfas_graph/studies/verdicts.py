@@ -13,9 +13,9 @@ import math
 
 from ..provenance import version_key
 from .stats import (
+    CLAIM_MEASURES,
     FIT_ERRORS,
     GROUPED,
-    fmt,
     grouped_at,
     measure_label,
     measure_text,
@@ -27,7 +27,7 @@ from .stats import (
     window_values,
 )
 
-__all__ = ["CLAIM_MEASURES", "claim_rows", "convergence_rows", "sweep_points", "sweep_rows"]
+__all__ = ["CLAIM_MEASURES", "claim_rows", "sweep_points", "sweep_rows"]
 
 
 def _combined_sem(a, b):
@@ -165,96 +165,6 @@ def claim_rows(studies, summaries) -> str:
             f"| {c.claim} | {c.paper} | {measure_label(c.measure)}, {where} | {value} | {null_text} | "
             f"{null_value} | {verdict} |"
         )
-    return "\n".join(rows)
-
-
-#: the measures of the convergence and sensitivity tables: one per claim
-CLAIM_MEASURES = (
-    "filament_rods",
-    "inside_R_plas",
-    "midplane_flux",
-    "largest_alignment",
-    "fractal_dimension",
-    "cycle_rank",
-)
-
-
-#: combined standard errors of a difference found 4 times in 5 by the convergence table's 2-SE test:
-#: 2 + the normal quantile of 0.8 (the difference is beyond 2 SE with probability 0.8)
-DETECTABLE_SE = 2.0 + 0.8416212335729143
-
-
-def _detectable(a, b) -> str:
-    """The difference the comparison of ``a`` with the default ``b`` finds 4 times in 5:
-    :data:`DETECTABLE_SE` combined standard errors, in % of the default's mean ("n/a" without a spread
-    or a mean). A difference of 2 combined standard errors, the test's own bound, it finds half the time."""
-    den = _combined_sem(a, b)
-    if not math.isfinite(den) or not b["mean"]:
-        return "n/a"
-    return f"±{fmt(100 * DETECTABLE_SE * den / abs(b['mean']), 2)} %"
-
-
-def _cell(stat) -> str:
-    """A statistic of :func:`_stat_at` as a convergence cell: "mean ± SE (n)", for a grouped measure
-    "mean ± SE (k of n carry current)" ("0 of n carry current" where no seed does)."""
-    if "of" not in stat:
-        return pm(stat)
-    group = f"{stat['n']} of {stat['of']} carry current"
-    if stat["n"] == 0:
-        return group
-    spread = f" ± {fmt(stat['sem'], 2)}" if math.isfinite(stat["sem"]) else ""
-    return f"{fmt(stat['mean'])}{spread} ({group})"
-
-
-def convergence_rows(studies, summaries) -> str:
-    """For each variant of a numerical knob, each claim measure at the variant's end time against the
-    study it varies (same time): both means with their standard errors, the difference in combined
-    standard errors, and what follows for a user."""
-    rows = [
-        "| setting | measure | default | this setting | difference (combined SE) | detectable | conclusion |",
-        "|---|---|---|---|---|---|---|",
-    ]
-    for st in studies.studies.values():
-        if st.section != "convergence":
-            continue
-        s, base = summaries.get(st.name), summaries.get(st.null_of)
-        if s is None or base is None:
-            missing = st.name if s is None else st.null_of
-            rows.append(f"| {st.title} | | | | | | not run yet (`selfas-graph study run {missing}`) |")
-            continue
-        t = st.t_end
-        ds = []
-        cells = []
-        for m in CLAIM_MEASURES:
-            # a grouped measure compares the seeds that carry current on each side: NaN where one has none
-            a, b = _stat_at(s, m, t), _stat_at(base, m, t)
-            d = _claim_difference(a, b)  # as for the claims: inf without spreads, NaN without n
-            ds.append(d)
-            cells.append((m, b, a, d))
-        finite = [abs(d) for d in ds if not math.isnan(d)]  # inf: no spread in either, the means differ
-        if not finite:
-            verdict = "not decided (too few seeds)"
-        elif max(finite) > 3:
-            verdict = "moves these statistics"
-        elif max(finite) > 2:
-            verdict = "marginal (a difference of 2-3 SE)"
-        else:
-            verdict = "no difference detected at this size (every difference within 2 SE)"
-        if finite and len(finite) < len(ds):
-            verdict += f"; {len(ds) - len(finite)} of {len(ds)} measures not compared (n/a)"
-        verdict += _older_note(summaries, (st.name, st.null_of), studies)
-        for k, (m, b, a, d) in enumerate(cells):
-            name = st.title if k == 0 else ""
-            if math.isnan(d):
-                text = "n/a"
-            elif math.isinf(d):
-                text = "every seed differs"
-            else:
-                text = f"{d:+.1f}".replace("-", "−")
-            rows.append(
-                f"| {name} | {measure_label(m)}, t = {t:g} | {_cell(b)} | {_cell(a)} | {text} | {_detectable(a, b)} | "
-                f"{verdict if k == 0 else ''} |"
-            )
     return "\n".join(rows)
 
 

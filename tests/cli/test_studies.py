@@ -733,27 +733,58 @@ def test_a_seed_whose_current_flag_is_unknown_counts_in_neither_group():
     assert measure_text(s, "filament_rods", 150.0).startswith("2 of 3 seeds carry current: median 675")
 
 
-def test_the_convergence_table_compares_a_grouped_measure_over_the_seeds_that_carry_current():
-    """The grouped rule holds in the convergence table too: the default's mean of 4 seeds carrying
-    current is 700 (not 525 with a fifth counted as 0), the setting's 690; where no seed of either
-    carries current the measure is not compared, and the conclusion says so."""
+def test_the_convergence_table_pairs_the_seeds_and_a_grouped_measure_the_seeds_with_current_in_both():
+    """The setting runs seeds 1-3 of the default's 1-5, from the same rods: the table pairs them. The
+    rods in current-carrying filaments differ by -10, -10 and +20 (seed 3 carries current in the
+    setting but not in the default, so it is left out): mean -10 over 2 pairs with no spread; the
+    loops differ by 2, 4, 6: mean 4 ± 2 / sqrt(3) = 1.155, d = +3.5, p = 2 t_2.sf(3.46) = 0.074; where
+    no seed of either carries current the measure is not compared."""
     from types import SimpleNamespace
 
-    from selfas_graph.studies.verdicts import convergence_rows
+    from selfas_graph.studies.convergence import convergence_rows, paired_difference
+
+    base = _current_summary([680.0, 700.0, 0.0, 720.0, 700.0], [1.0, 1.0, 0.0, 1.0, 1.0])
+    base["measures"]["cycle_rank"] = {"values": [[100.0], [110.0], [90.0], [500.0], [500.0]]}
+    setting = _current_summary([670.0, 690.0, 20.0], [1.0, 1.0, 1.0])
+    setting["measures"]["cycle_rank"] = {"values": [[102.0], [114.0], [96.0]]}
+    p = paired_difference(setting, base, "filament_rods", 150.0)
+    assert (p["n"], p["k_a"], p["k_b"], p["of"], p["diff"], p["d"]) == (2, 3, 2, 3, -10.0, -math.inf)
+    assert p["b"]["mean"] == 690.0  # the default over the same seeds, not over its five
+    p = paired_difference(setting, base, "cycle_rank", 150.0)
+    assert (p["n"], p["diff"]) == (3, 4.0) and p["sem"] == pytest.approx(2.0 / math.sqrt(3.0))
+    assert p["d"] == pytest.approx(2.0 * math.sqrt(3.0)) and p["p"] == pytest.approx(0.0742, abs=1e-4)
 
     st = SimpleNamespace(section="convergence", name="v", null_of="base", title="a knob", t_end=150.0)
     studies = SimpleNamespace(studies={"v": st}, since=lambda name: "")
-    base = _current_summary([680.0, 700.0, 720.0, 700.0, 0.0], [1.0, 1.0, 1.0, 1.0, 0.0])
-    setting = _current_summary([670.0, 690.0, 710.0], [1.0, 1.0, 1.0])
     rows = convergence_rows(studies, {"base": base, "v": setting}).splitlines()
+    loops = next(r for r in rows if "independent loops" in r)
+    assert "| 100 ± 5.8 (3) | 104 ± 5.3 (3) | 4 ± 1.2 (+3.5 SE; p = 0.074) |" in loops, loops
     rods = next(r for r in rows if "rods in current-carrying filaments" in r)
-    # d = -10 / sqrt(8.165^2 + 11.547^2) = -0.7
-    assert "| 700 ± 8.2 (4 of 5 carry current) | 690 ± 12 (3 of 3 carry current) | −0.7 |" in rods, rods
+    assert "| 2 of 3 carry current: 690 ± 10 (2) | 3 of 3 carry current: 680 ± 10 (2) | −10 in every pair |" in rods
+    # two measures compared: the loops' p = 0.074 is the smaller (the rods' -inf counts as p = 0), so
+    # Holm multiplies the larger by 1: the rods decide, and move the statistics
+    assert "moves these statistics (rods in current-carrying filaments: p = 0, 0 after Holm over 2)" in rods
     off = _current_summary([0.0, 0.0], [0.0, 0.0])
     rows = convergence_rows(studies, {"base": off, "v": off}).splitlines()
     rods = next(r for r in rows if "rods in current-carrying filaments" in r)
     assert "| 0 of 2 carry current | 0 of 2 carry current | n/a |" in rods, rods
     assert "not decided (too few seeds)" in rods  # no measure of this summary can be compared
+
+
+def test_holm_and_the_detectable_difference_by_hand():
+    """Holm's adjustment of (0.01, 0.04, NaN, 0.03): sorted 0.01, 0.03, 0.04 times 3, 2, 1 and kept
+    rising: 0.03, 0.06, 0.06. The detectable difference tends to 2 + z_0.8 = 2.84 SE at a 2-SE screen
+    (level 4.55 %) with many degrees of freedom, and grows with fewer seeds and more measures."""
+    from scipy.stats import norm
+
+    from selfas_graph.studies.convergence import detectable_se, holm
+
+    out = holm([0.01, 0.04, math.nan, 0.03])
+    assert out[:2] == pytest.approx([0.03, 0.06]) and math.isnan(out[2]) and out[3] == pytest.approx(0.06)
+    level = 2.0 * norm.sf(2.0)
+    assert detectable_se(10**6, level=level) == pytest.approx(2.0 + norm.isf(0.2), abs=1e-3)
+    assert detectable_se(4) > detectable_se(30) > detectable_se(10**6)
+    assert detectable_se(4, 6) > detectable_se(4, 1)
 
 
 def test_a_percolation_table_leaves_failed_runs_out_of_the_fraction_and_names_them():
