@@ -187,18 +187,25 @@ def radius_of_gyration(position, structure=None, n_structures=None):
 
 
 def rod_points(position, rods=None, per_rod=8):
-    """Points spread evenly along the rods: the midpoints of ``per_rod`` equal pieces of each rod.
+    """Points spread evenly along the rods, ``per_rod`` per mean rod length L: a rod of length l_i is
+    cut into ``max(1, round(per_rod * l_i))`` equal pieces (``per_rod`` for the rods of length 1 of
+    the paper's scenes), and each piece gives its midpoint.
 
-    Each point stands for 1 / ``per_rod`` of its rod's length (one rod length is the unit of
-    mass), so counts of points are rod lengths without the steps of counting whole rods.
+    Each point stands for L / ``per_rod`` of rod length (the mean rod length is the unit of mass), so
+    counts of points are rod lengths without the steps of counting whole rods, also where the rods'
+    lengths differ (``rods.length``).
 
     Returns
     -------
-    (N * per_rod, 3) float64
+    (sum of the pieces, 3) float64, rod by rod
     """
     a, b = _rods(position, rods)
-    t = (np.arange(per_rod) + 0.5) / per_rod
-    return (a[:, None, :] + t[None, :, None] * (b - a)[:, None, :]).reshape(-1, 3)
+    axis = b - a
+    pieces = np.maximum(1, np.rint(per_rod * np.sqrt((axis * axis).sum(axis=1)))).astype(np.int64)
+    rod = np.repeat(np.arange(a.shape[0]), pieces)
+    k = np.arange(rod.shape[0]) - np.repeat(np.cumsum(pieces) - pieces, pieces)
+    t = (k + 0.5) / pieces[rod]
+    return a[rod] + t[:, None] * axis[rod]
 
 
 def mass_radius_dimension(

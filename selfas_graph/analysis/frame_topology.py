@@ -15,6 +15,22 @@ from ..model.graph import DEAD_END, FILAMENT, ROLE_NAMES, ConnectivityGraph
 __all__ = ["frame_topology"]
 
 
+def _graph_of_frame(run, frame, t) -> dict:
+    """The graph record of the run's frame ``frame`` (or the frame nearest ``t``), found by its step, with
+    ``frame`` set to the frame's number: a frame whose record a kill tore has none, and the records
+    after it are not numbered as the frames."""
+    from ..io.h5md import RunFileError
+
+    k = run.frame_index(frame=frame, t=t)
+    if not run.has_graph:
+        run.graph_frame_index(k)  # raises the reader's explanation
+    step = int(run.step[k])
+    match = np.flatnonzero(run.graph_steps == step)
+    if not match.size:
+        raise RunFileError(f"{run.path}: no graph data saved at frame {k} (step {step})")
+    return run.graph(frame=int(match[0])) | {"frame": k}
+
+
 def frame_topology(run, frame=None, t=None) -> dict:
     """The topology of one saved frame as plain Python data (what ``selfas-graph topology --json`` prints):
     the structures by size with their filament and dead-end rods and the conductors they touch, the rods by
@@ -23,7 +39,7 @@ def frame_topology(run, frame=None, t=None) -> dict:
     ``run``: an open :class:`~selfas_graph.io.h5md.RunFile`."""
     if not hasattr(run, "graph"):
         raise TypeError(f"frame_topology(run, ...): an open RunFile (with RunFile(path) as run: ...), got {run!r}")
-    g = run.graph(frame=frame, t=t)
+    g = _graph_of_frame(run, frame, t)
     n_rods = g["role"].shape[0]
     graph = ConnectivityGraph.from_arrays(n_rods, g["conductors"], g)
     topo = graph.topology()
@@ -60,9 +76,11 @@ def frame_topology(run, frame=None, t=None) -> dict:
     obs = {}
     for name in ("total_current", "effective_conductance", "effective_resistance"):
         if name in run.observable_names():
-            _, values = run.observable(name)
-            k = min(g["frame"], len(values) - 1)
-            obs[name] = float(values[k])
+            times, values = run.observable(name)
+            # the row of this frame's time: none where the frame's row was not written (not another frame's)
+            k = np.flatnonzero(times == g["time"])
+            if k.size:
+                obs[name] = float(values[k[-1]])
     if "effective_conductance" in obs:  # since 0.4: 0 for an open circuit, which has no finite resistance
         g_eff = obs["effective_conductance"]
         obs["effective_resistance"] = 1.0 / g_eff if g_eff > 0 else None
@@ -72,7 +90,7 @@ def frame_topology(run, frame=None, t=None) -> dict:
         "file": str(run.path),
         "run_status": run.status,
         "frame": g["frame"],
-        "frames": int(len(run.graph_steps)),
+        "frames": int(run.n_frames),
         "step": g["step"],
         "time": g["time"],
         "conductors": {ev.CONDUCTOR_NAMES.get(c, str(c)): p for c, p in g["conductors"].items()},

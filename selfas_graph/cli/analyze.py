@@ -73,6 +73,8 @@ def _frames(run, args):
     if series:
         if args.every < 1:
             raise CliError(f"--every must be >= 1, got {args.every}")
+        if run.n_frames == 0:
+            raise RunFileError(f"{run.path}: the run has no saved frames")
         return list(range(0, run.n_frames, args.every)), True
     if args.time is not None:
         if not math.isfinite(args.time):

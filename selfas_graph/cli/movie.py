@@ -58,7 +58,7 @@ def render_movie(args, Figure) -> int:
     ffmpeg = ffmpeg_path() if kind == ".mp4" else None
     if kind == ".mp4" and ffmpeg is None:
         raise CliError('an MP4 needs ffmpeg: pip install "selfas-graph[movie]" (or write a .gif)')
-    dpi = MOVIE_DPI if args.dpi == 150 else args.dpi
+    dpi = MOVIE_DPI if args.dpi is None else args.dpi
     run_path = Path(args.run)
     check_target(out, "movie", force=args.force, inputs=[run_path], keep_hdf5=True, name_option="--movie")
     check_folder(out, "movie")
@@ -66,45 +66,15 @@ def render_movie(args, Figure) -> int:
     images, proc, frames = [], None, []
 
     def write(tmp):
-        nonlocal proc, frames
+        nonlocal proc
         with RunFile(run_path) as run:
-            frames = _frames(run, args.every)
-            pos = run.f[layout.TIP_POSITION_VALUE]
-            lo = np.min([pos[k].min(axis=0) for k in frames], axis=0)
-            hi = np.max([pos[k].max(axis=0) for k in frames], axis=0)
-            args.bounds = (lo, hi)
-            size = None
-            for k in tqdm(frames, desc=f"movie {out.name}", unit="frame", disable=None):
-                frame = run.frame(k)
-                if frame.gap is not None:
-                    args.bounds = (
-                        np.array([lo[0], lo[1], min(lo[2], -frame.gap / 2)]),
-                        np.array([hi[0], hi[1], max(hi[2], frame.gap / 2)]),
-                    )
-                if size is None:
-                    size = _figsize("snapshot", frame)
-                fig = Figure(figsize=size, layout="constrained")
-                _snapshot(fig, run, frame, args)
-                canvas = FigureCanvasAgg(fig)
-                fig.set_dpi(dpi)
-                canvas.draw()
-                rgb = np.asarray(canvas.buffer_rgba())[..., :3]
-                h, w = rgb.shape[:2]
-                if kind == ".gif":
-                    from PIL import Image
-
-                    images.append(Image.fromarray(np.ascontiguousarray(rgb)).quantize(colors=128))
-                else:
-                    if proc is None:
-                        w2, h2 = w - w % 2, h - h % 2  # H.264 takes even sizes
-                        proc = subprocess.Popen(
-                            [ffmpeg, "-loglevel", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24"]
-                            + ["-s", f"{w2}x{h2}", "-r", str(FPS), "-i", "-", "-vcodec", "libx264"]
-                            + ["-pix_fmt", "yuv420p", str(tmp)],
-                            stdin=subprocess.PIPE,
-                        )
-                        shape = (h2, w2)
-                    proc.stdin.write(np.ascontiguousarray(rgb[: shape[0], : shape[1]]).tobytes())
+            try:
+                draw(run, tmp)
+            except RunFileError:
+                raise  # the reader's own explanation
+            except (KeyError, IndexError, TypeError, AttributeError, ValueError) as exc:
+                # the run layout with inconsistent contents, as plot's PNG says (cli/plot.py)
+                raise RunFileError(f"{run.path}: inconsistent run data ({type(exc).__name__}: {exc})") from None
         if kind == ".gif":
             images[0].save(tmp, save_all=True, append_images=images[1:], duration=1000 // FPS, loop=0)
         else:
@@ -112,6 +82,48 @@ def render_movie(args, Figure) -> int:
             if proc.wait() != 0:
                 raise CliError(f"ffmpeg could not write {out}")
             proc = None
+
+    def draw(run, tmp):
+        nonlocal proc, frames
+        if run.n_frames == 0:
+            raise RunFileError(f"{run.path}: the run has no saved frames")
+        frames = _frames(run, args.every)
+        pos = run.f[layout.TIP_POSITION_VALUE]
+        lo = np.min([pos[k].min(axis=0) for k in frames], axis=0)
+        hi = np.max([pos[k].max(axis=0) for k in frames], axis=0)
+        args.bounds = (lo, hi)
+        size = None
+        for k in tqdm(frames, desc=f"movie {out.name}", unit="frame", disable=None):
+            frame = run.frame(k)
+            if frame.gap is not None:
+                args.bounds = (
+                    np.array([lo[0], lo[1], min(lo[2], -frame.gap / 2)]),
+                    np.array([hi[0], hi[1], max(hi[2], frame.gap / 2)]),
+                )
+            if size is None:
+                size = _figsize("snapshot", frame)
+            fig = Figure(figsize=size, layout="constrained")
+            _snapshot(fig, run, frame, args)
+            canvas = FigureCanvasAgg(fig)
+            fig.set_dpi(dpi)
+            canvas.draw()
+            rgb = np.asarray(canvas.buffer_rgba())[..., :3]
+            h, w = rgb.shape[:2]
+            if kind == ".gif":
+                from PIL import Image
+
+                images.append(Image.fromarray(np.ascontiguousarray(rgb)).quantize(colors=128))
+            else:
+                if proc is None:
+                    w2, h2 = w - w % 2, h - h % 2  # H.264 takes even sizes
+                    proc = subprocess.Popen(
+                        [ffmpeg, "-loglevel", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24"]
+                        + ["-s", f"{w2}x{h2}", "-r", str(FPS), "-i", "-", "-vcodec", "libx264"]
+                        + ["-pix_fmt", "yuv420p", str(tmp)],
+                        stdin=subprocess.PIPE,
+                    )
+                    shape = (h2, w2)
+                proc.stdin.write(np.ascontiguousarray(rgb[: shape[0], : shape[1]]).tobytes())
 
     try:
         atomic_write(out, write)

@@ -22,7 +22,7 @@ Kinds, after the paper's figures (docs/model.md 'Figure diagnostics'):
 * ``skeleton`` -- the cycle rank of the contact graph (and of the largest structure) vs time.
 
 The last three read :func:`selfas_graph.analysis.claims.claims_series` (``--every K``: every
-K-th frame; default at most 200 frames).
+K-th frame and the last; default at most 201 frames).
 
 The output goes next to the run file as ``RUN_KIND_frameK.png`` (``RUN_KIND.png`` for the
 kinds over time: timeline, moment, fractal, skeleton) unless ``-o`` says otherwise; an existing file is kept unless
@@ -78,6 +78,12 @@ KIND_OPTIONS = {
 DEFAULT_BINS = 30
 #: kinds that need the graph data (contacts, roles, currents) of the run
 NEEDS_GRAPH = ("field", "flux", "timeline", "moment", "fractal", "skeleton")
+#: the kinds drawn over the run's frames rather than of one frame
+OVER_TIME = ("timeline", "moment", "fractal", "skeleton")
+
+
+#: the resolution of a PNG when --dpi is not given (a movie has its own, cli/movie.py MOVIE_DPI)
+PNG_DPI = 150
 
 
 def add_arguments(p):
@@ -112,7 +118,7 @@ def add_arguments(p):
     p.add_argument(
         "--z-mext", type=float, help="flux in units of an external dipole's flux 4 pi Z_Mext instead of Phi_0 = 4 pi"
     )
-    p.add_argument("--dpi", type=int, default=150, help="resolution of the PNG (default 150; a movie's 80)")
+    p.add_argument("--dpi", type=int, default=None, help=f"resolution of the PNG (default {PNG_DPI}; a movie's 80)")
     p.add_argument(
         "--movie",
         metavar="OUT.gif|OUT.mp4",
@@ -123,8 +129,8 @@ def add_arguments(p):
         "--every",
         type=int,
         metavar="K",
-        help="moment, fractal, skeleton: every K-th frame (default: at most 200 frames); --movie: every K-th frame "
-        "(default: every frame)",
+        help="moment, fractal, skeleton: every K-th frame and the last (default: at most 201 frames); --movie: every "
+        "K-th frame and the last (default: every frame)",
     )
 
 
@@ -174,7 +180,7 @@ def _check_applies(args):
 
 
 def _check_options(args):
-    if not 10 <= args.dpi <= 1200:
+    if args.dpi is not None and not 10 <= args.dpi <= 1200:
         raise CliError(f"--dpi must be between 10 and 1200, got {args.dpi}")
     # size-like options are bounded: a figure is drawn in seconds, not minutes
     if args.bins is not None and not 1 <= args.bins <= MAX_BINS:
@@ -207,7 +213,10 @@ def run(args):
         with RunFile(args.run) as f:
             try:
                 frame = f.frame(args.frame, t=args.time)
-                if args.kind in NEEDS_GRAPH:
+                if args.kind in OVER_TIME:  # any frame's graph data: a frame without (a torn record) is a gap
+                    if not f.has_graph:
+                        f.graph_frame_index(frame.index)  # raises the reader's explanation
+                elif args.kind in NEEDS_GRAPH:
                     frame.require_graph(args.kind)
                 out = _output_path(args, f.path, frame.index)
                 fig = Figure(figsize=_figsize(args.kind, frame), layout="constrained")
@@ -220,6 +229,6 @@ def run(args):
                 raise RunFileError(f"{f.path}: inconsistent run data ({type(exc).__name__}: {exc})") from None
     except RunFileError as exc:
         raise CliError(str(exc)) from None
-    _save_png(fig, out, args.dpi)
+    _save_png(fig, out, PNG_DPI if args.dpi is None else args.dpi)
     print(f"wrote {out}")
     return 0

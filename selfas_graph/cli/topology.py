@@ -23,7 +23,13 @@ from .paths import status_note
 def add_arguments(p):
     add_run_and_frame(p)
     p.add_argument("--json", action="store_true", help="print JSON for scripts instead of tables")
-    p.add_argument("--events", type=int, default=10, metavar="N", help="show the last N events (default 10)")
+    p.add_argument(
+        "--events",
+        type=int,
+        default=10,
+        metavar="N",
+        help="show the last N events (default 10); --json lists every event up to the frame",
+    )
 
 
 def _finite_or_null(obj):

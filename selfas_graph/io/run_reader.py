@@ -336,5 +336,13 @@ class RunFile:
         if name not in self.observable_names():  # a group of observables (energy) is not one
             raise RunFileError(f"{self.path}: no observable {name!r}; present: {', '.join(self.observable_names())}")
         g = self.f[layout.OBSERVABLES][name]
-        x = g["time"][:] if "time" in g else g["step"][:]
-        return x, g["value"][:]
+        if "time" not in g:
+            return g["step"][:], g["value"][:]
+        # a per-frame series: its rows up to the last frame (a kill can leave a row of a frame it tore)
+        rows = min(g["time"].shape[0], g["value"].shape[0])
+        if not self._frames:
+            rows = 0
+        elif "step" in g:
+            last = self.f[layout.TIP_POSITION_STEP][self._frames - 1]
+            rows = min(rows, int(np.searchsorted(g["step"][:rows], last, side="right")))
+        return g["time"][:rows], g["value"][:rows]

@@ -287,3 +287,97 @@ def test_density_counts_every_rod_it_says_it_counts(run_file, tmp_path, monkeypa
     assert np.rint(np.sum(total.get_ydata() * shells)) == within
     label = f"total ({len(rho)} rods)" if within == len(rho) else f"total ({within} of {len(rho)} rods within r_max)"
     assert total.get_label() == label
+
+
+def _copy_torn(run_file, tmp_path, group_rows):
+    """A copy of the run whose datasets under each group of ``group_rows`` (name: rows kept) a kill cut
+    short: the last frame's graph record or observables rows missing."""
+    import shutil
+
+    import h5py
+
+    out = tmp_path / "torn.h5"
+    shutil.copy(run_file, out)
+    with h5py.File(out, "r+") as f:
+        for group, keep in group_rows.items():
+            f[group].visititems(
+                lambda name, o: o.resize(keep, axis=0) if isinstance(o, h5py.Dataset) and o.shape[0] == 6 else None
+            )
+    return out
+
+
+def test_a_frame_whose_graph_record_a_kill_tore_leaves_the_plots_over_time_drawing(run_file, tmp_path, capsys):
+    """The last of the 6 frames without its graph record: the plots over the frames draw (that frame
+    has no graph, a gap), a plot of that frame alone says it has none, and ``topology`` numbers the
+    frames as every other command does (frame 4 of 0..5), not by graph records."""
+    import json
+
+    torn = _copy_torn(run_file, tmp_path, {"graph": 5})
+    for kind in ("timeline", "moment"):
+        assert main(["plot", str(torn), "--kind", kind, "-o", str(tmp_path / f"{kind}.png")]) == 0
+    assert main(["plot", str(torn), "--kind", "field", "-o", str(tmp_path / "f.png")]) == 2
+    assert "no graph data saved at frame 5" in capsys.readouterr().err
+    assert main(["topology", str(torn), "--frame", "4"]) == 0
+    assert "frame 4 of 0..5" in capsys.readouterr().out
+    assert main(["topology", str(torn)]) == 2
+    assert "no graph data saved at frame 5" in capsys.readouterr().err
+    assert main(["topology", str(run_file), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["total_current"] is not None
+
+
+def test_topology_gives_no_current_of_another_frame_where_the_frames_row_is_missing(run_file, tmp_path, capsys):
+    """The last frame's observables a row short: its total current is unknown (null), not the frame
+    before's."""
+    import json
+
+    torn = _copy_torn(run_file, tmp_path, {"observables": 5})
+    assert main(["topology", str(torn), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["frame"] == 5 and data["total_current"] is None and data["effective_resistance"] is None
+
+
+def test_a_movie_of_a_file_without_frames_or_with_damaged_contents_is_a_clear_error(run_file, tmp_path, capsys):
+    """As the PNG path says it (exit 2, one line), not with a traceback."""
+    import shutil
+
+    import h5py
+
+    empty, bad = tmp_path / "empty.h5", tmp_path / "bad.h5"
+    shutil.copy(run_file, empty)
+    shutil.copy(run_file, bad)
+    with h5py.File(empty, "r+") as f:
+        for name in ("step", "time", "value"):
+            f[f"particles/tips/position/{name}"].resize(0, axis=0)
+    with h5py.File(bad, "r+") as f:
+        f["parameters/selfas_graph"].attrs["parameters_json"] = "{"
+    assert main(["plot", str(empty), "--movie", str(tmp_path / "e.gif")]) == 2
+    assert "the run has no saved frames" in capsys.readouterr().err
+    assert main(["plot", str(bad), "--movie", str(tmp_path / "b.gif")]) == 2
+    assert "inconsistent run data" in capsys.readouterr().err
+    assert not list(tmp_path.glob("*.gif"))
+
+
+def test_a_movies_dpi_given_as_150_is_used(run_file, tmp_path):
+    """--dpi 150 was taken for "not given" (a movie's default 80)."""
+    from PIL import Image
+
+    sizes = {}
+    for dpi in ([], ["--dpi", "150"]):
+        out = tmp_path / f"m{len(dpi)}.gif"
+        assert main(["plot", str(run_file), "--movie", str(out), "--every", "5", *dpi]) == 0
+        sizes[len(dpi)] = Image.open(out).size
+    assert sizes[2][0] == pytest.approx(sizes[0][0] * 150 / 80, rel=0.02)
+
+
+def test_the_plots_over_time_take_the_last_frame_with_every(monkeypatch):
+    """--every 4 over 6 frames: frames 0, 4 and the last, 5."""
+    from types import SimpleNamespace
+
+    from selfas_graph.analysis import claims
+    from selfas_graph.cli.plots import series
+
+    seen = []
+    monkeypatch.setattr(claims, "claims_series", lambda run, frames, loops: seen.append(list(frames)))
+    series._series(SimpleNamespace(n_frames=6), SimpleNamespace(every=4))
+    series._series(SimpleNamespace(n_frames=5), SimpleNamespace(every=4))
+    assert seen == [[0, 4, 5], [0, 4]]

@@ -322,3 +322,25 @@ def test_box_counting_is_biased_low_at_these_sizes(dla):
     sheet_fit = box_dimension(turned(sheet(30)))
     assert sheet_fit.value < 1.85 and sheet_fit.value + sheet_fit.err < 2.0, sheet_fit
     assert box_dimension(turned(dla)).value < 2.1
+
+
+def test_rod_points_are_spread_by_length_so_their_count_is_rod_length():
+    """Rods of length 1, 2 and 0.5 L get 8, 16 and 4 points (per_rod = 8 per L), evenly at the middles of
+    their pieces: counts of points over 8 are rod lengths also where the rods' lengths differ. For rods
+    of length 1 the points are those of per_rod equal pieces, bit for bit."""
+    from selfas_graph.analysis.fractal import rod_points
+
+    tips = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 3, 0], [0, 0, 5], [0, 0, 5.5]], dtype=np.float64)
+    x = rod_points(tips)
+    assert x.shape == (28, 3)
+    assert np.allclose(x[:8, 0], (np.arange(8) + 0.5) / 8) and np.allclose(x[8:24, 1], 1 + (np.arange(16) + 0.5) / 8)
+    assert np.allclose(x[24:, 2], 5 + (np.arange(4) + 0.5) / 8)
+    rng = np.random.default_rng(3)
+    u = rng.normal(size=(50, 3))
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    c = rng.uniform(-3, 3, (50, 3))
+    unit = np.empty((100, 3))
+    unit[0::2], unit[1::2] = c - 0.5 * u, c + 0.5 * u
+    t = (np.arange(8) + 0.5) / 8
+    pieces = (unit[0::2][:, None, :] + t[None, :, None] * (unit[1::2] - unit[0::2])[:, None, :]).reshape(-1, 3)
+    assert np.array_equal(rod_points(unit), pieces)

@@ -66,7 +66,10 @@ def _series(run, args):
     every = args.every if args.every is not None else max(1, -(-run.n_frames // 200))
     if every < 1:
         raise CliError(f"--every must be >= 1, got {every}")
-    return claims_series(run, range(0, run.n_frames, every), loops=False)
+    frames = list(range(0, run.n_frames, every))
+    if frames and frames[-1] != run.n_frames - 1:  # the run's last frame too, as a movie shows it
+        frames.append(run.n_frames - 1)
+    return claims_series(run, frames, loops=False)
 
 
 def _moment(fig, run, frame, args):

@@ -18,7 +18,7 @@ from .style import (
 def plot_summary(summary: dict, out, title: str, dpi=150, measures=None) -> Path:
     """The measures of an ensemble summary (:func:`selfas_graph.ensemble.summarise`) against
     time: mean over seeds with a band of one standard error, one panel per measure, the
-    number of seeds behind each time in the lowest panel's labels."""
+    number of seeds behind each time in the first (top) panel."""
     Figure = _matplotlib()
     names = [m for m in (measures or summary["measures"]) if m in summary["measures"]]
     if not names:
