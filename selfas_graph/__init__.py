@@ -40,7 +40,8 @@ _API = {
     ".model.operations": ("Operation", "Periodic", "Always", "When", "RunInterrupted"),
     ".model.params": ("Parameters",),
     ".model.simulation": ("NumericalFailure", "RunSummary", "Simulation"),
-    ".model.state": ("PlacementError", "State", "StateError", "random_state"),
+    ".model.placement": ("PlacementError", "random_state"),
+    ".model.state": ("State", "StateError"),
 }
 #: the subpackages and modules, reachable as attributes once the API is imported (as they were when it
 #: was imported with the package)

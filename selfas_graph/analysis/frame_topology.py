@@ -15,22 +15,6 @@ from ..model.graph import DEAD_END, FILAMENT, ROLE_NAMES, ConnectivityGraph
 __all__ = ["frame_topology"]
 
 
-def _graph_of_frame(run, frame, t) -> dict:
-    """The graph record of the run's frame ``frame`` (or the frame nearest ``t``), found by its step, with
-    ``frame`` set to the frame's number: a frame whose record a kill tore has none, and the records
-    after it are not numbered as the frames."""
-    from ..io.h5md import RunFileError
-
-    k = run.frame_index(frame=frame, t=t)
-    if not run.has_graph:
-        run.graph_frame_index(k)  # raises the reader's explanation
-    step = int(run.step[k])
-    match = np.flatnonzero(run.graph_steps == step)
-    if not match.size:
-        raise RunFileError(f"{run.path}: no graph data saved at frame {k} (step {step})")
-    return run.graph(frame=int(match[0])) | {"frame": k}
-
-
 def frame_topology(run, frame=None, t=None) -> dict:
     """The topology of one saved frame as plain Python data (what ``selfas-graph topology --json`` prints):
     the structures by size with their filament and dead-end rods and the conductors they touch, the rods by
@@ -39,7 +23,7 @@ def frame_topology(run, frame=None, t=None) -> dict:
     ``run``: an open :class:`~selfas_graph.io.h5md.RunFile`."""
     if not hasattr(run, "graph"):
         raise TypeError(f"frame_topology(run, ...): an open RunFile (with RunFile(path) as run: ...), got {run!r}")
-    g = _graph_of_frame(run, frame, t)
+    g = run.graph_of_frame(run.frame_index(frame=frame, t=t))
     n_rods = g["role"].shape[0]
     graph = ConnectivityGraph.from_arrays(n_rods, g["conductors"], g)
     topo = graph.topology()

@@ -20,7 +20,7 @@ from selfas_graph.io.h5md import RunFile
 from selfas_graph.io.scenario import scenario_from_text
 from selfas_graph.kernels.fields import plasma_field
 from selfas_graph.model.graph import FILAMENT
-from selfas_graph.model.state import random_state
+from selfas_graph.model.placement import random_state
 from selfas_graph.model.terms import ForceField
 
 

@@ -51,8 +51,8 @@ from ..model.accuracy import null_model_notes, short_of_accuracy
 from ..model.compiled import python_steps_reason
 from ..model.health import stiff_brakes
 from ..model.params import plasma_current_text
+from ..model.placement import PlacementError
 from ..model.simulation import Simulation
-from ..model.state import PlacementError
 from ..model.terms.currents import tree_note, two_trees_note
 from ..parallel import abort_job, fit_threads_to_cores, world
 from .main import EXIT_NUMERICAL, CliError, CliIOError, counted

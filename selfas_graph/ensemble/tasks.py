@@ -16,8 +16,8 @@ from ..io.checkpoint import (
 from ..io.h5md import RunWriter, is_io_error
 from ..io.scenario import scenario_from_text
 from ..lifecycle import StopOnSignal, close_after_io_error, continuation, new_run_file, run_to_file
+from ..model.placement import PlacementError
 from ..model.simulation import NumericalFailure, RunInterrupted, Simulation
-from ..model.state import PlacementError
 from ..parallel import is_pool_worker
 
 

@@ -294,8 +294,23 @@ class RunFile:
         n = self._graph_records
         return _pick_frame(self.path, n, frame, t, lambda: self.f[layout.GRAPH_TIME][:n])
 
+    def graph_of_frame(self, index) -> dict:
+        """The graph record of the run's frame ``index`` (as :meth:`frame_index` numbers the frames),
+        found by its step, with ``frame`` set to ``index``: after a frame whose record a kill tore, the
+        records are not numbered as the frames. RunFileError where the frame has none."""
+        k = self.frame_index(frame=index)
+        if not self.has_graph:
+            self.graph_frame_index(k)  # raises the reader's explanation
+        step = int(self.f[layout.TIP_POSITION_STEP][k])
+        match = np.flatnonzero(self.graph_steps == step)
+        if not match.size:
+            raise RunFileError(f"{self.path}: no graph data saved at frame {k} (step {step})")
+        return self.graph(frame=int(match[0])) | {"frame": k}
+
     def graph(self, frame=None, t=None) -> dict:
-        """The graph state of one frame: contact arrays, roles, currents, potentials, step and time."""
+        """The graph state of graph record ``frame`` (or the record nearest ``t``): contact arrays, roles,
+        currents, potentials, step and time. The records are the frames' but where a kill tore one (a
+        frame's own record: :meth:`graph_of_frame`)."""
         k = self.graph_frame_index(frame, t)
         g = self.f[layout.GRAPH]
         tc_count = g["tip_contacts_count"][:]

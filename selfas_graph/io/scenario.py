@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..model import params as P
-from ..model.state import high_count
+from ..model.placement import high_count
 from ..model.validate import MAX_RESISTANCE_SPREAD, as_decimal
 
 #: every float of a scenario is 0 or within these magnitudes: products of up to ten of them (q^2 B / r*^3 ...)
@@ -493,7 +493,7 @@ def _rod_law_rules(p) -> list:
                 f"(0.5, 1.5))"
             )
         if rods.length.distribution == "two_level":
-            # exactly high_count rods are long (the draw of model/state.py): the mean of that draw
+            # exactly high_count rods are long (the draw of model/placement.py): the mean of that draw
             m = high_count(rods.length, rods.count)
             drawn = ((rods.count - m) * rods.length.low + m * rods.length.high) / rods.count
             if abs(drawn - 1.0) > 0.01:

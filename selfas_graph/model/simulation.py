@@ -27,7 +27,8 @@ from .network import Network
 from .observables import Observables, energy_scale
 from .operations import RunInterrupted, RunSummary
 from .params import Parameters
-from .state import State, random_state
+from .placement import random_state
+from .state import State
 from .state_checks import check_against
 from .terms import ForceField
 

@@ -1,4 +1,4 @@
-"""The state of the rods (struct of arrays) and its random initial placement."""
+"""The state of the rods (struct of arrays); its random initial placement is :mod:`.placement`."""
 
 from __future__ import annotations
 
@@ -6,12 +6,6 @@ from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
-
-from .params import ChargeDistribution, Parameters
-
-
-class PlacementError(ValueError):
-    """The initial placement could not be made (too dense, or the box too small)."""
 
 
 class StateError(ValueError):
@@ -282,112 +276,3 @@ def _per_rod(value, n: int, name: str) -> np.ndarray:
 #: the rigid-bond kernels' sign for "every rod has length 1"
 _UNIT_LENGTH = np.zeros(0)
 _UNIT_LENGTH.setflags(write=False)
-
-
-def high_count(dist, n: int) -> int:
-    """How many of ``n`` rods a ``two_level`` law gives the high value: ``round(high_fraction * n)``."""
-    return int(round(dist.high_fraction * n))
-
-
-def draw_charges(dist: ChargeDistribution, n: int, rng, magnetic=None) -> np.ndarray:
-    """Per-rod values (charges, lengths, resistances) from a distribution (docs/model.md 'Rods').
-
-    ``two_level`` gives exactly ``round(high_fraction * n)`` rods the high value,
-    at random positions in the rod list.
-    """
-    if dist.distribution == "constant":
-        return np.full(n, dist.value)
-    if dist.distribution == "uniform":
-        return rng.uniform(dist.low, dist.high, n)
-    if dist.distribution == "two_level":
-        out = np.full(n, dist.low)
-        out[rng.permutation(n)[: high_count(dist, n)]] = dist.high
-        return out
-    if dist.distribution == "magnetic":
-        return np.array(magnetic, dtype=np.float64)
-    raise ValueError(f"unknown charge distribution {dist.distribution!r}")
-
-
-def random_state(params: Parameters, rng=None) -> State:
-    """Random initial state of docs/model.md 'Assumptions and project choices', all from ``params.scenario.seed``.
-
-    Charges are drawn first, then the rods one by one: centre uniform in the box,
-    axis uniform on the sphere, accepted when both tips lie in the box and no tip
-    is closer than ``min_tip_distance`` to a tip of an accepted rod. Velocities zero.
-
-    Raises
-    ------
-    PlacementError
-        If a rod cannot be placed in ``placement.max_attempts`` draws.
-    """
-    rng = np.random.default_rng(params.scenario.seed) if rng is None else rng
-    n = params.rods.count
-    q = draw_charges(params.rods.magnetic_charge, n, rng)
-    z = draw_charges(params.rods.electric_charge, n, rng, magnetic=q)
-    # lengths and resistances are drawn only when the scene sets them (a constant draws
-    # nothing), so scenes without them draw, and place, exactly as before
-    ell = None if params.rods.length is None else draw_charges(params.rods.length, n, rng)
-    res = None
-    if params.rods.resistance is not None:
-        res = draw_charges(params.rods.resistance, n, rng)
-        if params.rods.resistance.per_length and ell is not None:
-            res = res * ell
-    box = np.array(params.placement.box, dtype=np.float64)
-    lo, hi = box[:, 0], box[:, 1]
-    dmin = params.min_tip_distance
-    cell = max(dmin, 1e-9)
-    grid: dict[tuple, list] = {}
-    centre = np.empty((n, 3))
-    axis = np.empty((n, 3))
-    accepted_tips = np.empty((2 * n, 3))
-
-    def clear(p):
-        if dmin <= 0.0:
-            return True
-        c = np.floor(p / cell).astype(np.int64)
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                for dz in (-1, 0, 1):
-                    for t in grid.get((c[0] + dx, c[1] + dy, c[2] + dz), ()):
-                        d = accepted_tips[t] - p
-                        if d @ d < dmin * dmin:
-                            return False
-        return True
-
-    batch = 64
-    for i in range(n):
-        placed = False
-        tries = 0
-        while not placed and tries < params.placement.max_attempts:
-            m = min(batch, params.placement.max_attempts - tries)
-            cs = rng.uniform(lo, hi, (m, 3))
-            ax = rng.normal(size=(m, 3))
-            ax /= np.linalg.norm(ax, axis=1)[:, None]
-            for j in range(m):
-                tries += 1
-                half = 0.5 * ax[j] if ell is None else (0.5 * ell[i]) * ax[j]
-                ta, tb = cs[j] - half, cs[j] + half
-                if (ta < lo).any() or (ta > hi).any() or (tb < lo).any() or (tb > hi).any():
-                    continue
-                if clear(ta) and clear(tb):
-                    centre[i], axis[i] = cs[j], ax[j]
-                    for k, p in ((2 * i, ta), (2 * i + 1, tb)):
-                        accepted_tips[k] = p
-                        key = tuple(np.floor(p / cell).astype(np.int64))
-                        grid.setdefault(key, []).append(k)
-                    placed = True
-                    break
-        if not placed and i == 0:  # no other rod in the way: the box leaves no room for a random orientation
-            raise PlacementError(
-                f"placed no rod in {params.placement.max_attempts} draws (placement.max_attempts): both tips of a "
-                f"rod of length {1.0 if ell is None else ell[0]:g} in a random orientation seldom fall in the box "
-                f"{params.placement.box}; "
-                f"make placement.box larger"
-            )
-        if not placed:
-            raise PlacementError(
-                f"placed only {i} of {n} rods: no free spot found in {params.placement.max_attempts} draws "
-                f"(placement.max_attempts); use fewer rods (rods.count), a larger box (placement.box) or a smaller "
-                f"placement.min_tip_distance (now {dmin:g})"
-            )
-    return State.from_rods(centre, axis, q, z, length=ell, resistance=res)

@@ -6,7 +6,7 @@ from conftest import random_rods, simulation
 from selfas_graph.model import events as ev
 from selfas_graph.model.graph import classify_rods
 from selfas_graph.model.params import ChargeDistribution, ExternalDipole
-from selfas_graph.model.state import draw_charges
+from selfas_graph.model.placement import draw_charges
 from selfas_graph.model.terms import external_monopoles
 
 
@@ -121,7 +121,7 @@ def test_placement_keeps_tips_in_the_box_and_apart():
     """A7: every tip of the initial state lies in the placement box, no two tips of different rods are
     closer than placement.min_tip_distance, and the velocities are zero."""
     from selfas_graph import load_scenario
-    from selfas_graph.model.state import random_state
+    from selfas_graph.model.placement import random_state
 
     params = load_scenario("scenarios/quick.toml").params
     state = random_state(params)

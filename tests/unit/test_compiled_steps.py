@@ -168,7 +168,7 @@ def test_compiled_steps_are_the_python_steps_with_tips_in_the_poles_cores(team):
     """Case (ii) with a tip of rod 0 inside the core of the dipole's upper pole and one of rod 1 inside the
     lower one from the start: the monopoles' split brake acts at every step, in the compiled steps as in
     Python, bit for bit (the scene of the test above never brings a tip within r* of a pole)."""
-    from selfas_graph.model.state import random_state
+    from selfas_graph.model.placement import random_state
 
     params = load_scenario("scenarios/fig8_quick.toml").params.replace(rods={"count": 60})
     state = random_state(params)

@@ -221,7 +221,7 @@ def test_one_rod_in_a_tight_box_is_placed_or_named_by_the_box():
     than (the packing rule said "use fewer rods" to one rod); a box that leaves a random orientation
     almost no room is named as the box, not the rod count."""
     from selfas_graph.io.scenario import load_scenario
-    from selfas_graph.model.state import PlacementError
+    from selfas_graph.model.placement import PlacementError
 
     quick = Path(__file__).resolve().parents[2] / "scenarios" / "quick.toml"
     one = [

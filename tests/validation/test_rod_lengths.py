@@ -11,7 +11,8 @@ from scipy.integrate import solve_ivp
 from conftest import simulation
 from selfas_graph import Simulation
 from selfas_graph.io.scenario import ScenarioError, load_scenario, scenario_from_text
-from selfas_graph.model.state import State, random_state
+from selfas_graph.model.placement import random_state
+from selfas_graph.model.state import State
 
 #: placement box of the hand-built scenes (only checked for consistency: the states are given)
 BOX = {"box": [[-3.0, 3.0]] * 3, "min_tip_distance": 0.0}
