@@ -169,7 +169,8 @@ def claim_rows(studies, summaries) -> str:
 
 
 def sweep_rows(studies, summaries, name) -> str:
-    """A sweep's table: a row per value of its parameter, the claim measures at the sweep's time."""
+    """A sweep's table: a row per value of its parameter, the claim measures at the sweep's time, and
+    the Welch p-value of each step from one value to the next."""
     sw = studies.sweeps[name]
     head = f"| {sw.parameter} | seeds | " + " | ".join(measure_label(m) for m in CLAIM_MEASURES) + " |"
     rows = [head, "|---|---|" + "---|" * len(CLAIM_MEASURES)]
@@ -185,9 +186,24 @@ def sweep_rows(studies, summaries, name) -> str:
         old = older_runs(s, studies.since(study))
         seeds = f"{s['n_seeds']}" + (f" (runs of {', '.join(old)}: to be run again)" if old else "")
         rows.append(f"| {value:g}{mark} | {seeds} | " + " | ".join(cells) + " |")
-    if sum(summaries.get(study) is not None for _, study in studies.sweep_points(name)) >= 2:
+    done = [(v, summaries[st]) for v, st in studies.sweep_points(name) if summaries.get(st) is not None]
+    if len(done) >= 2:
+        steps = [_step_p(done, m, sw.time) for m in CLAIM_MEASURES]
+        rows.append("| Welch p from each value to the next | | " + " | ".join(steps) + " |")
         rows.append(f"\n![{sw.title}: the claim measures at t = {sw.time:g}](figures/sweep_{name}.png)")
     return "\n".join(rows)
+
+
+def _step_p(points, measure, t) -> str:
+    """The two-sided Welch p-value of each step of a sweep, from one value to the next, of the statistic
+    the table gives (a grouped measure's over the seeds that carry current): "0.04; 0.5; < 0.001", "n/a"
+    for a step without two seeds a side."""
+    stats = [_stat_at(s, measure, t) for _, s in points]
+    out = []
+    for a, b in zip(stats, stats[1:]):
+        p = welch_p(b, a)
+        out.append("n/a" if not math.isfinite(p) else ("< 0.001" if p < 0.001 else f"{p:.2g}"))
+    return "; ".join(out)
 
 
 def sweep_points(studies, summaries, name, measure):
