@@ -12,19 +12,26 @@ from pathlib import Path
 __all__ = ["cpu_model", "machine", "numba_target", "older_version", "source_commit", "version_key"]
 
 
+#: the order of PEP 440's pre-release stages, a release itself after all of them
+_STAGES = {"dev": 0, "a": 1, "alpha": 1, "b": 2, "beta": 2, "c": 3, "rc": 3, "pre": 3, "preview": 3}
+
+
 def version_key(version):
-    """A version string as a key that orders versions: its release numbers without trailing zeros,
-    then 0 for a pre-release (``a``, ``b``, ``rc``, ``.dev``) and 1 for the release itself
-    ("0.4.0+source" -> ((0, 4), 1), "0.4.0.dev1" -> ((0, 4), 0)); None when the string does not start
-    with a release number ("", "unknown")."""
+    """A version string as a key that orders versions as PEP 440 does for this project's versions: its
+    release numbers without trailing zeros, then its stage (``.dev`` before ``a``, ``b``, ``rc``, the
+    release itself last) and the stage's number ("0.4.0+source" -> ((0, 4), 4, 0), "0.4.3.dev1" ->
+    ((0, 4, 3), 0, 1), after "0.4.3.dev0"); None when the string does not start with a release number
+    ("", "unknown")."""
     m = re.match(r"(\d+(?:\.\d+)*)(.*)", str(version or "").strip())
     if not m:
         return None
     release = [int(x) for x in m.group(1).split(".")]
     while len(release) > 1 and release[-1] == 0:
         release.pop()
-    pre = re.match(r"[.-]?(a|b|rc|alpha|beta|c|pre|preview|dev)\d*", m.group(2).lower())
-    return tuple(release), 0 if pre else 1
+    pre = re.match(r"[.-]?(alpha|beta|preview|pre|dev|rc|a|b|c)(\d*)", m.group(2).lower())
+    if not pre:
+        return tuple(release), len(set(_STAGES.values())), 0
+    return tuple(release), _STAGES[pre.group(1)], int(pre.group(2) or 0)
 
 
 def older_version(version, since) -> bool:

@@ -86,7 +86,7 @@ def check_target(path, what="output file", force=False, inputs=(), keep_hdf5=Fal
             )
         if in_use(path):
             raise CliError(in_use_message(path, what, "--force"))
-    elif len(path.name.encode("utf-8", "surrogateescape")) > _name_max(path.parent):
+    elif len(path.name.encode("utf-8", "surrogateescape")) > name_max(path.parent):
         raise CliError(
             f"the {what} name {path.name[:40]}... is too long for the file system "
             f"({len(path.name)} characters); give a shorter one"
@@ -104,7 +104,8 @@ def check_folder(path, what="output file") -> None:
         raise CliError(f"the folder {parent} of the {what} is not writable")
 
 
-def _name_max(folder) -> int:
+def name_max(folder) -> int:
+    """The longest file name (in bytes) the file system of ``folder`` takes (255 where it does not say)."""
     try:
         return os.pathconf(folder if str(folder) else ".", "PC_NAME_MAX")
     except (OSError, ValueError):

@@ -37,6 +37,7 @@ from ..io.h5md import (
     is_io_error,
     not_replaced,
 )
+from ..io.h5md_format import RUN_SUFFIXES, is_hdf5
 from ..io.scenario import ScenarioError, load_scenario
 from ..lifecycle import (
     ContinuationError,
@@ -56,7 +57,7 @@ from ..model.simulation import Simulation
 from ..model.terms.currents import tree_note, two_trees_note
 from ..parallel import abort_job, fit_threads_to_cores, world
 from .main import EXIT_NUMERICAL, CliError, CliIOError, counted
-from .paths import check_folder, check_target, same_file
+from .paths import check_folder, check_target, name_max, same_file
 from .progress import Bar, Lines, fmt_time
 
 
@@ -181,6 +182,28 @@ def _check_output_name(out: Path):
         raise CliError(f"the output path {out} names a folder, not a file; give a file name such as run.h5")
 
 
+def _check_files_beside(out: Path, ckpt: Path):
+    """Refuse a run whose checkpoint another run file beside it shares (the same name before another run
+    suffix: ``c.h5`` and ``c.hdf5`` both checkpoint to ``c.checkpoint.h5``), or whose checkpoint's
+    temporary file would have a longer name than the folder takes (found at the first checkpoint, it
+    would end the run as an I/O error)."""
+    for suffix in ("", *RUN_SUFFIXES):
+        other = out.with_name(out.stem + suffix)
+        if other.name != out.name and other.is_file() and is_hdf5(other):
+            raise CliError(
+                f"{other} beside {out.name} has the same name before its suffix: the two would share the "
+                f"checkpoint {ckpt.name} and the failure file; choose another name with -o"
+            )
+    tmp = ckpt.name + ".tmp"  # io/checkpoint.py writes aside, then renames
+    room = name_max(out.parent)
+    if len(tmp.encode("utf-8", "surrogateescape")) > room:
+        raise CliError(
+            f"the output name {out.name[:40]}... is too long: its checkpoint's temporary file would have "
+            f"{len(tmp)} characters, more than the file system's {room}; give a name of at most "
+            f"{room - (len(tmp) - len(out.stem))} characters before the suffix"
+        )
+
+
 class _PeerFailed(SystemExit):
     """Rank 0 failed with an unexpected error (it prints the traceback): the other ranks exit quietly."""
 
@@ -240,6 +263,7 @@ def _prepare(args):
         out = Path(args.output) if args.output else scenario.output_path
         _check_output_name(out)
         ckpt = checkpoint_path(out)
+        _check_files_beside(out, ckpt)
         check_target(out, "output file", force=True, inputs=[args.scenario])
         check_target(ckpt, "checkpoint file", force=True, inputs=[args.scenario])
         refused = not_replaced(out)  # a scene, a checkpoint or an export is not replaced, even with --force

@@ -25,7 +25,8 @@ def atomic_write(path, write) -> Path:
     format from it), then rename it over ``path``; returns the path written (a link's target). The file
     gets the permissions of one the user creates (``mkstemp`` makes it private, 0o600)."""
     path = Path(path).resolve()  # through a symbolic link: the file it names is replaced, not the link
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".part{path.suffix}", dir=path.parent)
+    suffix = f".part{path.suffix}"
+    fd, tmp = tempfile.mkstemp(prefix=_prefix(path, suffix), suffix=suffix, dir=path.parent)
     os.close(fd)
     try:
         write(Path(tmp))
@@ -35,6 +36,22 @@ def atomic_write(path, write) -> Path:
         Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def _prefix(path, suffix) -> str:
+    """``.NAME.`` before mkstemp's 8 random characters and ``suffix``, the name cut short where the
+    temporary name would be longer than the folder takes (a name the user may give, one the temporary
+    file may not lengthen)."""
+    try:
+        name_max = os.pathconf(path.parent, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        name_max = 255
+    prefix = f".{path.name}."
+    room = name_max - 8 - len(suffix.encode("utf-8", "surrogateescape"))
+    raw = prefix.encode("utf-8", "surrogateescape")
+    if len(raw) <= room:
+        return prefix
+    return raw[: max(room - 1, 1)].decode("utf-8", "ignore") + "."
 
 
 def write_text_atomic(path, text: str) -> Path:

@@ -185,7 +185,7 @@ def _apply_override(raw, item):
     node = raw
     for i, name in enumerate(parts[:-1]):
         nxt = node.get(name)
-        if nxt is None or nxt is True:
+        if nxt is None or isinstance(nxt, bool):  # a term on (true) or off (false): a key of it sets it on
             nxt = node[name] = {}
         if not isinstance(nxt, dict):
             return [f"--set {item!r}: {'.'.join(parts[: i + 1])} is a value, not a table"]

@@ -158,7 +158,7 @@ class Network(ContactQueries):
         self.conductor_potential = conductors
         #: the contacts (an immutable value, replaced by each batch of events)
         self.contacts = ContactSet.empty(self.n_rods, conductors)
-        #: filament contacts at the last solve and their heights then
+        #: filament contacts at the last solve, and the heights their potentials -delta_J0 z stand for
         self.filament_tip = np.zeros(0, dtype=np.int64)
         self.filament_z = np.zeros(0)
         self.memo = SolveMemo()
@@ -217,15 +217,22 @@ class Network(ContactQueries):
                     current = np.zeros(self.n_rods)
             currents_changed = current is not None and self.currents.set(current)
             cs = self.contacts
-            self.filament_tip = cs.conductor_tip[cs.conductor_id == ev.CONDUCTOR_FILAMENT]
-            self.filament_z = position[self.filament_tip, 2].copy()
+            fil = cs.conductor_id == ev.CONDUCTOR_FILAMENT
+            self.filament_tip = cs.conductor_tip[fil]
+            # the height each contact's potential -delta_J0 z stands for, not its height now: a contact that
+            # crept by less than the tolerance since its potential was set keeps its drift, and is caught
+            # once the drift adds up (heights of the last solve let it creep on at the old potential)
+            self.filament_z = (
+                -cs.conductor_potential[fil] / self.bias if self.bias else position[self.filament_tip, 2].copy()
+            )
         total = self.solution.total_current if self.solution is not None else 0.0
         return NetworkUpdate(rows, currents_changed, True, circuit_rows(rows, total, self.current))
 
     def _repotential_moved_contacts(self, position) -> bool:
         """Case (ii): replace ``self.contacts`` by contacts whose filament contacts that moved along z by
-        more than the height tolerance since the last solve hold their new potential; True if any did.
-        The heights of the last solve, ``filament_z``, are :meth:`update`'s to refresh when it solves."""
+        more than the height tolerance since their potential was set hold their new potential; True if
+        any did. The heights the potentials stand for, ``filament_z``, are :meth:`update`'s to refresh
+        when it solves."""
         if not len(self.filament_tip) or not self.circuit:
             return False
         z = position[self.filament_tip, 2]

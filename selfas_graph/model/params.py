@@ -232,8 +232,8 @@ class CircuitParams:
     )
     height_tolerance: float = spec(
         0.01,
-        "case (ii): re-solve the circuit when a tip touching the filament has moved this far along z since the "
-        "last solve (its potential is -delta_J0 z); an accuracy knob",
+        "case (ii): re-solve the circuit when a tip touching the filament has moved this far along z since its "
+        "potential -delta_J0 z was set; an accuracy knob",
         gt=0.0,
     )
 

@@ -457,3 +457,40 @@ def test_an_ensemble_stopped_by_a_signal_exits_as_simulate_does():
     assert interrupted_code([done, None, {"status": "interrupted", "signum": signal.SIGTERM}]) == 143
     assert interrupted_code([{"status": "interrupted", "signum": signal.SIGINT}]) == 130
     assert interrupted_code([done, None]) == interrupted_code([]) == 130
+
+
+def test_a_run_file_beside_one_of_the_same_name_before_its_suffix_is_refused(scenario, tmp_path, capsys):
+    """c.h5 and c.hdf5 both checkpoint to c.checkpoint.h5: a second run would take, and with --force
+    destroy, the first one's checkpoint; it is refused before anything is written."""
+    import h5py
+
+    with h5py.File(tmp_path / "c.h5", "w"):
+        pass
+    for force in ([], ["--force"]):
+        assert main(["simulate", str(scenario), "-o", str(tmp_path / "c.hdf5"), "--dry-run", *force]) == 2
+        assert "the same name before its suffix: the two would share the checkpoint c.checkpoint.h5" in (
+            capsys.readouterr().err
+        )
+    assert main(["simulate", str(scenario), "-o", str(tmp_path / "d.hdf5"), "--dry-run"]) == 0
+
+
+def test_an_output_name_whose_checkpoints_temporary_name_is_too_long_is_refused_before_the_run(
+    scenario, tmp_path, capsys
+):
+    """240 characters before .h5 is a legal name, but its checkpoint is written aside as
+    NAME.checkpoint.h5.tmp (258 characters): refused with a one-line error (exit 2), not found at the first
+    checkpoint as an I/O error that left a run file behind."""
+    out = tmp_path / ("a" * 240 + ".h5")
+    assert main(["simulate", str(scenario), "-o", str(out), "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert "is too long: its checkpoint's temporary file would have 258 characters" in err
+    assert "at most 237 characters before the suffix" in err and not list(tmp_path.glob("a*"))
+
+
+def test_an_atomic_write_of_a_name_the_folder_takes_needs_no_longer_temporary_name(tmp_path):
+    """A 250-character name is legal; the temporary file beside it is named within the folder's limit."""
+    from selfas_graph.io.atomic import write_text_atomic
+
+    out = tmp_path / ("b" * 246 + ".xyz")
+    write_text_atomic(out, "x\n")
+    assert out.read_text() == "x\n" and [p.name for p in tmp_path.iterdir()] == [out.name]

@@ -146,6 +146,13 @@ def test_overrides_go_through_the_same_checks():
     assert "expected key=value" in problems(GOOD, ["integrator.dt"])
     # a term is switched off by an override
     assert scenario_from_text(GOOD, overrides=["forces.electrodes=false"]).params.forces.electrodes is None
+    # and a key of a term that is off switches it on again, whether the term was off in the file or by
+    # an earlier override (docs/scenarios.md): "forces.yukawa is a value, not a table" before
+    off_in_file = GOOD.replace("[forces.tip_magnetic]", "[forces]\nyukawa = false\n[forces.tip_magnetic]", 1)
+    assert scenario_from_text(off_in_file).params.forces.yukawa is None
+    for text, first in ((off_in_file, []), (GOOD, ["forces.yukawa=false"])):
+        sc = scenario_from_text(text, overrides=[*first, "forces.yukawa.tolerance=1e-6"])
+        assert sc.params.forces.yukawa.tolerance == 1e-6
 
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.name)

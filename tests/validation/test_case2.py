@@ -362,3 +362,28 @@ def test_a_failure_in_the_dipoles_channels_names_their_scenario_keys():
     assert "forces.external_dipole.line_charge" in ff.channel_keys("external_line_charge")
     assert "forces.external_dipole.magnetic_charge" in ff.channel_keys("external_monopoles")
     assert ff.channel_keys("external_monopole_brake") == "forces.tip_brake.coefficient, forces.external_dipole.length"
+
+
+def test_a_filament_contact_creeping_below_the_tolerance_between_solves_is_caught_once_its_drift_adds_up():
+    """Rod 0 lies along the filament, both tips on it; tip 0 creeps up 0.005 a step (half the tolerance),
+    while rod 1's tip jiggles by 0.02 a step and has the circuit solved at every step. The heights of the
+    last solve were the yardstick, so tip 0 never moved more than the tolerance "since the last solve" and
+    kept the potential of its first height (0 instead of -0.5 after 100 steps, rod 0's current 1 instead of
+    0.5). Measured against the height its potential stands for, its potential lags by at most the
+    tolerance times delta_J0 (here 0.005), as circuit.height_tolerance promises."""
+    from selfas_graph.model import events as ev
+    from selfas_graph.model.network import Network
+
+    bias, tol = 1.0, 0.01
+    net = Network(2, 0.06, 0.09, filament_radius=0.1, bias=bias, circuit=True, height_tolerance=tol)
+    pos = np.array([[0.1, 0, 0.0], [0.1, 0, 1.0], [-0.1, 0, 0.0], [-0.1, 0, 1.0]])
+    first = [(0, 0.0, ev.CONDUCTOR_CONTACT, k, ev.CONDUCTOR_FILAMENT) for k in range(4)]
+    net.tracker.search = lambda *a, **k: [first.pop() for _ in range(len(first))][::-1]  # step 0's contacts only
+    net.update(pos, None, 0, 0.0)
+    for step in range(1, 101):
+        pos[0, 2] += 0.005
+        pos[2, 2] += 0.02 * (-1) ** step
+        net.update(pos, None, step, step * 1e-3)
+    potential = net.contacts.conductor_potential[net.contacts.conductor_tip == 0][0]
+    assert abs(potential + bias * pos[0, 2]) <= bias * tol + 1e-12
+    assert net.current[0] == pytest.approx(bias * (pos[1, 2] - pos[0, 2]), abs=bias * tol + 1e-12)
