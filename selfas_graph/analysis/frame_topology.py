@@ -25,7 +25,7 @@ def frame_topology(run, frame=None, t=None) -> dict:
         raise TypeError(f"frame_topology(run, ...): an open RunFile (with RunFile(path) as run: ...), got {run!r}")
     g = run.graph_of_frame(run.frame_index(frame=frame, t=t))
     n_rods = g["role"].shape[0]
-    graph = ConnectivityGraph.from_arrays(n_rods, g["conductors"], g)
+    graph = ConnectivityGraph.from_arrays(n_rods, g["conductors"], g, contact_resistance=run.contact_resistance)
     topo = graph.topology()
     # roles by the current topology rule from the saved contacts (the stored roles are what
     # the run used; they differ only for files written before a change of the rule)

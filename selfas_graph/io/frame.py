@@ -90,7 +90,9 @@ class SavedFrame:
     def topology(self):
         if self.graph is None:
             return None
-        return ConnectivityGraph.from_arrays(self.n_rods, self.graph["conductors"], self.graph).topology()
+        r = self.run.contact_resistance  # resistive contacts merge no tips (docs/model.md 'Circuit')
+        graph = ConnectivityGraph.from_arrays(self.n_rods, self.graph["conductors"], self.graph, contact_resistance=r)
+        return graph.topology()
 
     @property
     def role(self):

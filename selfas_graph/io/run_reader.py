@@ -156,6 +156,14 @@ class RunFile:
     def parameters(self) -> dict:
         return json.loads(self.meta["parameters_json"])
 
+    @functools.cached_property
+    def contact_resistance(self) -> float:
+        """The run's ``contacts.resistance`` (0: ideal contacts, and in files without the key)."""
+        try:
+            return float((self.parameters.get("contacts") or {}).get("resistance") or 0.0)
+        except (TypeError, ValueError, AttributeError):
+            return 0.0
+
     @property
     def scenario_text(self) -> str:
         return self.meta["scenario_text"]

@@ -23,7 +23,7 @@ import numpy as np
 
 from . import events as ev
 from .contact_queries import ContactQueries, solve_contacts
-from .topology import Topology, classify_rods, conductor_node_key
+from .topology import Topology, classify_resistive, classify_rods, conductor_node_key
 from .validate import _as_count, _as_index_array, _frozen, conductor_id, finite_potential, tip_index, tip_pair
 
 #: ContactQueries and solve_contacts live in .contact_queries, and are imported from here too
@@ -57,6 +57,9 @@ class ContactSet:
         The conductor contacts, sorted by (tip, conductor).
     conductor_potential : (k,) float64
         Potential of each conductor contact (NaN where a per-contact potential is unset).
+    resistive : bool
+        The contacts are resistors (``contacts.resistance`` > 0): the topology merges no tips
+        (:func:`.topology.classify_resistive`).
     """
 
     n_rods: int
@@ -66,12 +69,14 @@ class ContactSet:
     conductor_tip: np.ndarray
     conductor_id: np.ndarray
     conductor_potential: np.ndarray
+    resistive: bool = False
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def empty(cls, n_rods, conductor_potential: Mapping[int, float | None]) -> "ContactSet":
+    def empty(cls, n_rods, conductor_potential: Mapping[int, float | None], resistive=False) -> "ContactSet":
         """No contacts. ``conductor_potential``: conductor id (``events.CONDUCTOR_*``) -> fixed
-        potential, or None when the potential is given per contact; other conductors are unknown."""
+        potential, or None when the potential is given per contact; other conductors are unknown.
+        ``resistive``: contacts of resistance > 0 (the class's attribute)."""
         n_rods = _as_count(n_rods, "n_rods")
         fixed, per = {}, set()
         for c, pot in dict(conductor_potential).items():
@@ -91,11 +96,16 @@ class ContactSet:
             _frozen(_NONE.copy()),
             _frozen(_NONE.copy()),
             _frozen(np.zeros(0)),
+            bool(resistive),
         )
 
     @classmethod
     def from_arrays(
-        cls, n_rods, conductor_potential: Mapping[int, float | None], arrays: Mapping[str, np.ndarray]
+        cls,
+        n_rods,
+        conductor_potential: Mapping[int, float | None],
+        arrays: Mapping[str, np.ndarray],
+        resistive=False,
     ) -> "ContactSet":
         """The set of :meth:`arrays` output (e.g. read back from HDF5), validated as events are.
 
@@ -103,7 +113,7 @@ class ContactSet:
         fixed-potential conductors the ``conductor_potential`` mapping given here wins over the
         stored value.
         """
-        s = cls.empty(n_rods, conductor_potential)
+        s = cls.empty(n_rods, conductor_potential, resistive)
         tc = _as_index_array(arrays["tip_contacts"], "tip_contacts", 2, s.n_tips)
         ct = _as_index_array(arrays["conductor_tip"], "conductor_tip", 1, s.n_tips)
         cid = _as_index_array(arrays["conductor_id"], "conductor_id", 1, None)
@@ -168,8 +178,10 @@ class ContactSet:
 
     @functools.cached_property
     def topology(self) -> Topology:
-        """Roles and structures of the rods (:func:`.topology.classify_rods`), computed once per set."""
-        return classify_rods(self.n_rods, self.tip_contacts, self.conductor_tip, self.node_key())
+        """Roles and structures of the rods (:func:`.topology.classify_rods`, or
+        :func:`.topology.classify_resistive` for resistive contacts), computed once per set."""
+        classify = classify_resistive if self.resistive else classify_rods
+        return classify(self.n_rods, self.tip_contacts, self.conductor_tip, self.node_key())
 
     # ------------------------------------------------------------------ events
     def known_conductor(self, c) -> int:

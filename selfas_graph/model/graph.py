@@ -31,7 +31,7 @@ from selfas_graph.model.topology import (
     circuit_event,
     classify_rods,
 )
-from selfas_graph.model.validate import tip_index
+from selfas_graph.model.validate import _as_count, tip_index
 
 __all__ = ["FREE", "CLUSTER", "DEAD_END", "FILAMENT", "ROLE_NAMES", "Topology", "classify_rods", "ConnectivityGraph"]
 
@@ -75,10 +75,10 @@ class ConnectivityGraph(ContactQueries):
         rod_resistance=None,
         contact_resistance: float = 0.0,
     ):
-        self.contacts = ContactSet.empty(n_rods, conductor_potential)
+        self._set_circuit(_as_count(n_rods, "n_rods"), solver, rod_resistance, contact_resistance)
+        self.contacts = ContactSet.empty(n_rods, conductor_potential, resistive=self.contact_resistance > 0.0)
         self.n_rods = self.contacts.n_rods
         self.n_tips = self.contacts.n_tips
-        self._set_circuit(self.n_rods, solver, rod_resistance, contact_resistance)
         self.changed = True  # nothing solved yet
 
     def solve(self, memo: SolveMemo | None = None) -> CircuitSolution:
@@ -235,7 +235,7 @@ class ConnectivityGraph(ContactQueries):
         ``rod_resistance``, ``contact_resistance``) go to the constructor.
         """
         g = cls(n_rods, conductor_potential, **kwargs)
-        g.contacts = ContactSet.from_arrays(n_rods, conductor_potential, arrays)
+        g.contacts = ContactSet.from_arrays(n_rods, conductor_potential, arrays, resistive=g.contact_resistance > 0.0)
         return g
 
     def __repr__(self) -> str:

@@ -157,7 +157,7 @@ class Network(ContactQueries):
         #: conductor id -> fixed potential (units R0 J0), None where given per contact (docs/model.md 'Circuit')
         self.conductor_potential = conductors
         #: the contacts (an immutable value, replaced by each batch of events)
-        self.contacts = ContactSet.empty(self.n_rods, conductors)
+        self.contacts = ContactSet.empty(self.n_rods, conductors, resistive=self.contact_resistance > 0.0)
         #: filament contacts at the last solve, and the heights their potentials -delta_J0 z stand for
         self.filament_tip = np.zeros(0, dtype=np.int64)
         self.filament_z = np.zeros(0)
@@ -308,7 +308,9 @@ class Network(ContactQueries):
             "conductor_id": np.concatenate(ids + [np.zeros(0, dtype=np.int64)]),
             "conductor_potential": np.concatenate(pots + [np.zeros(0)]),
         }
-        self.contacts = ContactSet.from_arrays(self.n_rods, self.conductor_potential, arrays)
+        self.contacts = ContactSet.from_arrays(
+            self.n_rods, self.conductor_potential, arrays, resistive=self.contact_resistance > 0.0
+        )
         self.filament_tip = np.array(d["filament_tip"], dtype=np.int64)
         self.filament_z = np.array(d["filament_z"], dtype=np.float64)
         self.solution = None

@@ -53,6 +53,7 @@ __all__ = [
     "FILAMENT",
     "ROLE_NAMES",
     "Topology",
+    "classify_resistive",
     "classify_rods",
     "conductor_node_key",
     "circuit_event",
@@ -84,7 +85,8 @@ class Topology:
     n_filament, n_dead_end, n_cluster, n_free : int
         Number of rods with each role.
     has_short_circuit : bool
-        ``n_filament > 0``: a conducting path joins two different conductor attachments.
+        A conducting path joins two different conductor attachments: ``n_filament > 0``, or with
+        resistive contacts also a tip touching both electrodes (:func:`classify_resistive`).
     n_nodes, node_of_tip : int, (n_tips,) int64
         The merged electrical nodes (:func:`~.circuit.merge_tips`), handed on to the circuit
         solve so that the tips are merged once.
@@ -189,6 +191,48 @@ def classify_rods(n_rods, tip_contacts, conductor_tip, conductor_node_key) -> To
         has_short_circuit=bool(counts[FILAMENT] > 0),
         n_nodes=int(n_nodes),
         node_of_tip=_frozen(node_of_tip),
+    )
+
+
+def classify_resistive(n_rods, tip_contacts, conductor_tip, conductor_node_key) -> Topology:
+    """:func:`classify_rods` for resistive contacts (``contacts.resistance`` > 0, choice B29): no tips are
+    merged, and each contact is a resistor of its own, so a rod is FILAMENT iff it lies on a simple path
+    between two different attachments through rods *and* contacts (a loop pinned at one electrode by two
+    tips that a contact joins, or a rod whose tips touch both sides of a contact, then carries current).
+
+    Each contact becomes a virtual rod between ideal merges: tip-tip contact ``(i, j)`` a rod whose
+    tips merge with ``i`` and ``j``; conductor contact ``d`` on tip ``t`` a rod whose one tip merges with
+    ``t`` and whose other touches the conductor. The rule of :func:`classify_rods` on that system gives
+    the real rods' roles and structures (virtual rods left out of the counts and sizes);
+    ``has_short_circuit`` holds when any rod, virtual ones included, is FILAMENT (a tip touching both
+    electrodes conducts through its two contacts)."""
+    n_rods = _as_count(n_rods, "n_rods")
+    tip_contacts = _as_index_array(tip_contacts, "tip_contacts", 2, 2 * n_rods)
+    conductor_tip = _as_index_array(conductor_tip, "conductor_tip", 1, 2 * n_rods)
+    m, k = tip_contacts.shape[0], conductor_tip.shape[0]
+    first = 2 * n_rods + 2 * np.arange(m + k, dtype=np.int64)  # the first tip of each virtual rod
+    merges = np.concatenate(
+        [
+            np.column_stack([tip_contacts[:, 0], first[:m]]),
+            np.column_stack([first[:m] + 1, tip_contacts[:, 1]]),
+            np.column_stack([conductor_tip, first[m:]]),
+        ]
+    )
+    aug = classify_rods(n_rods + m + k, merges, first[m:] + 1, conductor_node_key)
+    role, structure = aug.role[:n_rods].copy(), aug.structure[:n_rods].copy()
+    # every structure holds a real rod (a virtual rod hangs on a real tip): the ids stay 0..S-1
+    size = np.bincount(structure[structure >= 0], minlength=aug.structure_size.shape[0]).astype(np.int64)
+    counts = np.bincount(role, minlength=4)
+    return Topology(
+        role=_frozen(role),
+        structure=_frozen(structure),
+        structure_size=_frozen(size),
+        largest_structure=int(np.argmax(size)) if size.size else -1,
+        n_filament=int(counts[FILAMENT]),
+        n_dead_end=int(counts[DEAD_END]),
+        n_cluster=int(counts[CLUSTER]),
+        n_free=int(counts[FREE]),
+        has_short_circuit=aug.has_short_circuit,
     )
 
 

@@ -418,3 +418,82 @@ def test_graph_roles_do_not_depend_on_resistances():
     sol = weighted.solve()
     direct = solve_circuit(2 * n_rods, tc, ct, electrode_potential(cid, 4.0), rod_resistance=R, contact_resistance=0.3)
     np.testing.assert_array_equal(sol.current, direct.current)
+
+
+# ------------------------------------------------------------------------------ resistive topology
+def _resistive_network(rows):
+    from selfas_graph.model import events as ev
+    from selfas_graph.model.network import Network
+
+    net = Network(3, 0.06, 0.09, electrodes=(-2.0, 2.0), bias=1.0, circuit=True, contact_resistance=1.0)
+    net.tracker.search = lambda *a, **k: [rows.pop(0) for _ in range(len(rows))]  # the search is not under test
+    net.update(np.zeros((6, 3)), None, 1, 0.1)
+    return net, ev
+
+
+def test_with_resistive_contacts_a_loop_pinned_at_the_anode_carries_its_current():
+    """Anode - rod 0 - contact - rod 1 - tip 3, which touches the anode and, through a contact, rod 2 to the
+    cathode (r = R = 1, gap 4, delta 1: anode +2, cathode -2). With ideal contacts rods 0 and 1 would be a
+    loop pinned at the anode (dead ends, no current); with resistors each tip is a node of its own, and the
+    nodal equations of its 8 nodes (the 6 tips and the two electrodes, as a dense solve checks) give rods 0
+    and 1 4/19 and rod 2 20/19.
+    The run zeroed the first two as dead ends: Kirchhoff's law failed at tip 3 in the currents the forces
+    use."""
+    from selfas_graph.model import events as ev
+    from selfas_graph.model.topology import FILAMENT
+
+    rows = [(1, 0.1, ev.TIP_CONTACT, 1, 2), (1, 0.1, ev.TIP_CONTACT, 3, 4)]
+    rows += [(1, 0.1, ev.CONDUCTOR_CONTACT, k, c) for k, c in ((0, 1), (3, 1), (5, 0))]
+    net, _ = _resistive_network(rows)
+    assert list(net.topology().role) == [FILAMENT] * 3
+    np.testing.assert_allclose(net.current, [4 / 19, 4 / 19, 20 / 19], rtol=0, atol=TOL)
+
+
+def test_with_resistive_contacts_a_rod_across_a_contact_between_the_electrodes_is_a_short_circuit():
+    """Rod 0's tips touch tip 2 (on the anode) and tip 4 (on the cathode), and tips 2 and 4 touch each other.
+    Ideal, that is one node touching both electrodes: no short circuit (choice B5). Resistive (B29), the
+    tips are nodes of their own and rod 0 carries 4/11 (hand solve: tips 2, 4 at +-6/11, rod 0's at
+    +-2/11): the run saw no short circuit, solved nothing and gave every rod 0."""
+    from selfas_graph.model import events as ev
+
+    rows = [(1, 0.1, ev.TIP_CONTACT, 0, 2), (1, 0.1, ev.TIP_CONTACT, 1, 4), (1, 0.1, ev.TIP_CONTACT, 2, 4)]
+    rows += [(1, 0.1, ev.CONDUCTOR_CONTACT, 2, ev.CONDUCTOR_ANODE), (1, 0.1, ev.CONDUCTOR_CONTACT, 4, 0)]
+    net, _ = _resistive_network(rows)
+    assert net.has_short_circuit and net.solution is not None
+    np.testing.assert_allclose(net.current, [4 / 11, 0.0, 0.0], rtol=0, atol=TOL)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_resistive_topology_against_networkx_and_the_solve(seed):
+    """On random networks of rods, tip contacts and contacts with the two electrodes: a rod is FILAMENT
+    iff networkx puts its edge in a biconnected component with a node X joined to the electrodes, in
+    the graph whose nodes are the tips (none merged) and whose edges are the rods and every contact; a
+    rod off every such path carries no current in the resistive solve (to round-off)."""
+    from selfas_graph.model import events as ev
+    from selfas_graph.model.topology import FILAMENT, classify_resistive
+
+    rng = np.random.default_rng(seed)
+    n_rods = 12
+    pairs = {tuple(sorted(rng.choice(2 * n_rods, 2, replace=False))) for _ in range(14)}
+    tc = np.array([p for p in pairs if p[0] // 2 != p[1] // 2], dtype=np.int64).reshape(-1, 2)
+    tips = rng.choice(2 * n_rods, 6, replace=False)
+    cid = rng.integers(0, 2, 6)
+    order = np.lexsort((cid, tips))
+    ct, cid = tips[order], cid[order]
+    topo = classify_resistive(n_rods, tc, ct, cid)
+    g = nx.Graph()
+    g.add_edges_from((2 * i, 2 * i + 1) for i in range(n_rods))
+    g.add_edges_from(map(tuple, tc.tolist()))
+    g.add_edges_from((int(t), ("C", int(c))) for t, c in zip(ct, cid))
+    g.add_edges_from(("X", ("C", int(c))) for c in set(cid.tolist()))
+    in_x = set()
+    for block in nx.biconnected_component_edges(g):
+        block = list(block)
+        if any("X" in e for e in block):
+            in_x |= {frozenset(e) for e in block}
+    want = [frozenset((2 * i, 2 * i + 1)) in in_x for i in range(n_rods)]
+    assert [r == FILAMENT for r in topo.role] == want
+    pot = np.where(cid == ev.CONDUCTOR_ANODE, 2.0, -2.0)
+    sol = solve_circuit(2 * n_rods, tc, ct, pot, contact_resistance=1.0)
+    off = np.flatnonzero(~np.array(want, dtype=bool))
+    assert np.abs(sol.current[off]).max(initial=0.0) < TOL
