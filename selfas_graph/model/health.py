@@ -144,7 +144,7 @@ class HealthChecks:
             what = "a non-finite position or velocity (NaN or inf)"
             tips = np.flatnonzero(bad_tip)
         elif not err < BOND_BREAK:
-            what = f"a broken rigid bond (length error {err:.3g} > {BOND_BREAK})"
+            what = f"a broken rigid bond (length error {err:.3g} >= {BOND_BREAK})"
             # the step's projection has given every bond its length again, so the bond errors now are
             # round-off and tell no rod: the tips that moved most since the last state that passed
             good = self._last_good

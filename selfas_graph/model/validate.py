@@ -97,8 +97,14 @@ def _validate(n_tips, tip_contacts, conductor_tip, conductor_potential):
     return n_tips, tip_contacts, conductor_tip, conductor_potential
 
 
+#: the range of a nonzero resistance (units R0): its conductance, and J^2 R at currents of order one,
+#: stay finite in float64 (1e-310 gave an infinite conductance and NaN potentials without a word)
+RESISTANCE_RANGE = (1e-100, 1e100)
+
+
 def _as_resistance(value, name: str, m: int, allow_zero: bool) -> np.ndarray:
-    """Coerce per-edge resistances: a scalar or an ``(m,)`` array of finite values >= 0 (or > 0)."""
+    """Coerce per-edge resistances: a scalar or an ``(m,)`` array of finite values >= 0 (or > 0), each
+    nonzero one in :data:`RESISTANCE_RANGE`."""
     arr = np.asarray(value, dtype=np.float64)
     if arr.ndim == 0:
         arr = np.full(m, float(arr))
@@ -109,14 +115,23 @@ def _as_resistance(value, name: str, m: int, allow_zero: bool) -> np.ndarray:
         i = int(np.flatnonzero(bad)[0])
         want = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"{name} must be finite and {want}; entry {i} is {arr[i]}")
+    lo, hi = RESISTANCE_RANGE
+    off = (arr != 0.0) & ((arr < lo) | (arr > hi))
+    if np.any(off):
+        i = int(np.flatnonzero(off)[0])
+        raise ValueError(f"{name} must lie within [{lo:g}, {hi:g}] (units R0); entry {i} is {arr[i]}")
     return np.ascontiguousarray(arr)
 
 
 def _as_contact_resistance(value) -> float:
-    """The one resistance of every contact: a finite number >= 0 (0: ideal contacts)."""
+    """The one resistance of every contact: 0 (ideal contacts) or a finite number in
+    :data:`RESISTANCE_RANGE`."""
     r = float(value)
     if not (math.isfinite(r) and r >= 0.0):
         raise ValueError(f"contact_resistance must be finite and >= 0, got {value!r}")
+    lo, hi = RESISTANCE_RANGE
+    if r != 0.0 and not lo <= r <= hi:
+        raise ValueError(f"contact_resistance must be 0 or lie within [{lo:g}, {hi:g}] (units R0), got {value!r}")
     return r
 
 

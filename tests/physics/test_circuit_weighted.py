@@ -284,6 +284,10 @@ def test_solve_network_invalid_input(kwargs, message):
         (dict(rod_resistance=[1.0, 0.0]), "rod_resistance must be finite and > 0; entry 1"),
         (dict(rod_resistance=[1.0, 1.0, 1.0]), r"rod_resistance must be a number or have shape \(2,\)"),
         (dict(contact_resistance=-0.1), "contact_resistance must be finite and >= 0"),
+        # a conductance 1/R or a power J^2 R that float64 does not hold: inf and NaN potentials before
+        (dict(rod_resistance=[1.0, 1e-310]), r"rod_resistance must lie within \[1e-100, 1e\+100\]"),
+        (dict(rod_resistance=1e308), r"rod_resistance must lie within"),
+        (dict(contact_resistance=1e-310), r"contact_resistance must be 0 or lie within"),
     ],
 )
 def test_solve_circuit_invalid_resistances(kwargs, message):
