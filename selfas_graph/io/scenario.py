@@ -422,7 +422,16 @@ def check_consistency(p: P.Parameters):
         return out
     for rules in (_packing_rules, _rod_law_rules, _integrator_rules, _conductor_rules, _run_length_rules):
         out += rules(p)
-    return out
+    return out + _output_rules(p)
+
+
+def _output_rules(p) -> list:
+    """``output.file`` names a file: a trailing slash (a folder) was dropped by the path, and the run went
+    to a file named after the folder."""
+    f = p.output.file
+    if f and (f.endswith(("/", os.sep)) or Path(f).name in ("", ".", "..")):
+        return [f"output.file: {f!r} names a folder, not a file; give a file name such as {f.rstrip('/')}/run.h5"]
+    return []
 
 
 def _box_rules(p) -> list:

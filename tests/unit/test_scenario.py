@@ -191,3 +191,10 @@ def test_two_level_lengths_whose_drawn_mean_is_off_1_are_refused():
     msg = problems(GOOD, [law, "rods.count=4"])
     assert "rods.length: 0 of 4 rods get the high value" in msg and "their mean is 0.5, not 1" in msg
     scenario_from_text(GOOD, overrides=[law, "rods.count=10"])
+
+
+def test_an_output_file_that_names_a_folder_is_refused():
+    """--set output.file=sub/ passed, and the run went to a file named "sub"."""
+    for name in ("sub/", "runs/..", "."):
+        assert "names a folder, not a file" in problems(GOOD, [f"output.file='{name}'"])
+    scenario_from_text(GOOD, overrides=["output.file='sub/run.h5'"])
