@@ -106,7 +106,7 @@ def test_a_bond_just_above_the_limit_stops_with_a_broken_bond_diagnosis(path):
         steps_with_errors(sim, 3)
     msg = str(info.value)
     assert info.value.step == 6 and "at step 6 " in msg
-    assert f"a broken rigid bond (length error 0.05 > {BOND_LIMIT})" in msg
+    assert f"a broken rigid bond (length error 0.05 >= {BOND_LIMIT})" in msg
     assert "runaway" not in msg and "non-finite" not in msg and f"integrator.dt = {DT:g}" in msg
     # the projection has given the bond its length again: the rods named are those whose tips moved most
     # since the last state that passed (the stretched rod, the others at rest)
