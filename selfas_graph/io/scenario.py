@@ -182,11 +182,14 @@ def _apply_override(raw, item):
         return [f"--set {key}: the value is nested too deeply"]
     except ValueError:  # e.g. an integer of more digits than Python converts
         return [f"--set {key}: the value {value_text.strip()[:40]!r}... is not a usable number"]
-    node = raw
+    node, tp = raw, P.Parameters
     for i, name in enumerate(parts[:-1]):
+        tp = _field_type(tp, name)
         nxt = node.get(name)
         if nxt is None or isinstance(nxt, bool):  # a term on (true) or off (false): a key of it sets it on
             nxt = node[name] = {}
+        elif _is_law(tp) and isinstance(nxt, (int, float)):  # a law given as a bare number: its table
+            nxt = node[name] = {"distribution": "constant", "value": nxt}
         if not isinstance(nxt, dict):
             return [f"--set {item!r}: {'.'.join(parts[: i + 1])} is a value, not a table"]
         node = nxt
@@ -195,6 +198,17 @@ def _apply_override(raw, item):
 
 
 # ----------------------------------------------------------------------------- schema walk
+
+
+def _field_type(tp, name):
+    """The type of field ``name`` of dataclass ``tp`` (Optional unwrapped), or None."""
+    hint = typing.get_type_hints(tp).get(name) if dataclasses.is_dataclass(tp) else None
+    return unwrap_optional(hint)[0] if hint is not None else None
+
+
+def _is_law(tp) -> bool:
+    """A per-rod law (charge, length, resistance): a bare number stands for the constant law."""
+    return dataclasses.is_dataclass(tp) and "distribution" in fields_of(tp)
 
 
 def unwrap_optional(tp):
@@ -229,7 +243,7 @@ def _build(cls, raw, prefix, problems):
                 continue
             if optional and value is True:
                 value = {}
-            if "distribution" in fields_of(tp) and isinstance(value, (int, float)) and not isinstance(value, bool):
+            if _is_law(tp) and isinstance(value, (int, float)) and not isinstance(value, bool):
                 value = {"distribution": "constant", "value": value}  # a bare number: the same for every rod
             if optional and not isinstance(value, dict):
                 # a section that may be off: say how (TOML's booleans are lower case; Python's False is a string)
@@ -414,9 +428,8 @@ def _unknown_key(path, key, valid):
 
 
 def check_consistency(p: P.Parameters):
-    """Problems that involve several keys at once. Returns a list of messages, in the order of the
-    rules below; a box that cannot hold the rods stops the checks there (the rest would measure
-    against it)."""
+    """Problems that involve several keys at once, in the order of the rules below; a box that cannot
+    hold the rods stops the checks there (the rest would measure against it)."""
     out = _box_rules(p)
     if out:
         return out
@@ -426,8 +439,7 @@ def check_consistency(p: P.Parameters):
 
 
 def _output_rules(p) -> list:
-    """``output.file`` names a file: a trailing slash (a folder) was dropped by the path, and the run went
-    to a file named after the folder."""
+    """``output.file`` names a file (a trailing slash, dropped by the path, sent the run to a file)."""
     f = p.output.file
     if f and (f.endswith(("/", os.sep)) or Path(f).name in ("", ".", "..")):
         return [f"output.file: {f!r} names a folder, not a file; give a file name such as {f.rstrip('/')}/run.h5"]

@@ -198,3 +198,11 @@ def test_an_output_file_that_names_a_folder_is_refused():
     for name in ("sub/", "runs/..", "."):
         assert "names a folder, not a file" in problems(GOOD, [f"output.file='{name}'"])
     scenario_from_text(GOOD, overrides=["output.file='sub/run.h5'"])
+
+
+def test_a_key_of_a_law_given_as_a_bare_number_sets_that_key_of_its_table():
+    """rods.length = 1 is the constant law of value 1; --set rods.length.value=1.2 on top of it was refused
+    as "rods.length is a value, not a table"."""
+    sc = scenario_from_text(GOOD, overrides=["rods.length=1", "rods.length.value=1"])
+    assert sc.params.rods.length.distribution == "constant" and sc.params.rods.length.value == 1.0
+    assert "integrator.dt is a value, not a table" in problems(GOOD, ["integrator.dt=1e-3", "integrator.dt.x=1"])
