@@ -372,9 +372,10 @@ def plot(result, path):
         curve = d["km"]
         ts = [0.0] + [t for t, _ in curve] + [t_max]
         fs = [0.0] + [f for _, f in curve] + [curve[-1][1] if curve else 0.0]
-        n_cens = d["runs"] - d["short_circuited"]
+        n_cens = d["censored"]  # at t_max; a failed run is censored at its failure, inside the curve
         label = f"{d['count']} rods\nrods/V = {d['number_density']:.3g}, phi = {d['volume_fraction']:.2g}\n"
-        label += f"{d['short_circuited']} of {d['runs']} runs short-circuited"
+        label += f"{d['short_circuited']} of {d.get('decided', d['runs'])} runs short-circuited"
+        label += f", {d['failed']} failed" if d.get("failed") else ""
         (line,) = ax2.step(ts, fs, where="post", label=label)
         if n_cens:
             ax2.plot([t_max], [fs[-1]], marker=">", color=line.get_color(), clip_on=False)

@@ -26,6 +26,8 @@ def atomic_write(path, write) -> Path:
     gets the permissions of one the user creates (``mkstemp`` makes it private, 0o600)."""
     path = Path(path).resolve()  # through a symbolic link: the file it names is replaced, not the link
     suffix = f".part{path.suffix}"
+    if len(suffix.encode("utf-8", "surrogateescape")) > 64:  # a long "extension": the writers read short ones
+        suffix = ".part"
     fd, tmp = tempfile.mkstemp(prefix=_prefix(path, suffix), suffix=suffix, dir=path.parent)
     os.close(fd)
     try:

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..analysis.ensemble_stats import wilson_interval
 from ..provenance import version_key
 from .convergence import convergence_rows
 from .spec import StudiesError
@@ -130,11 +131,12 @@ def percolation_table(summary) -> str:
         "|---|---|---|",
     ]
     for d in summary["densities"]:
-        lo, hi = d.get("fraction_ci95") or (math.nan, math.nan)
         q = [">" + f"{t_max:g}" if d.get(k) is None else fmt(d[k]) for k in ("median", "q25", "q75")]
-        # failed runs stopped before t_max: out of the fraction, in the Kaplan-Meier curve (censored)
+        # failed runs stopped before t_max: out of the fraction, in the Kaplan-Meier curve (censored); the
+        # interval is taken here, as a summary made before `decided` holds one over every run
         failed = d.get("failed", 0)
         decided = d.get("decided", d["runs"] - failed)
+        lo, hi = wilson_interval(d["short_circuited"], decided) if decided else (math.nan, math.nan)
         also = f"; {failed} failed before t = {t_max:g}" if failed else ""
         rows.append(
             f"| {d['count']} | {d['short_circuited']} of {decided} ({fmt(lo, 2)} to {fmt(hi, 2)}){also} | "

@@ -790,7 +790,19 @@ def test_holm_and_the_detectable_difference_by_hand():
 def test_a_percolation_table_leaves_failed_runs_out_of_the_fraction_and_names_them():
     from selfas_graph.studies.page import percolation_table
 
-    d = {"count": 40, "runs": 4, "short_circuited": 2, "censored": 1, "failed": 1, "decided": 3}
-    d |= {"fraction_ci95": [0.2, 0.94], "median": 1.5, "q25": 0.5, "q75": None}
+    # the interval is the page's own over the 3 runs that decide (Wilson, 2 of 3: 0.21 to 0.94), also for a
+    # summary made before `decided`, whose stored interval was over all 4
+    d = {"count": 40, "runs": 4, "short_circuited": 2, "censored": 1, "failed": 1}
+    d |= {"fraction_ci95": [0.15, 0.85], "median": 1.5, "q25": 0.5, "q75": None}
     table = percolation_table({"study": {"t_max": 2.0}, "densities": [d]})
-    assert "| 40 | 2 of 3 (0.2 to 0.94); 1 failed before t = 2 | 1.5 [0.5 to >2] |" in table, table
+    assert "| 40 | 2 of 3 (0.21 to 0.94); 1 failed before t = 2 | 1.5 [0.5 to >2] |" in table, table
+
+
+def test_the_convergence_conclusion_names_the_measure_of_the_smallest_p_where_holm_ties():
+    """Holm gives 0.012 * 6 and 0.011 * 5 the same 0.066: the conclusion names the raw smallest, the
+    fraction within R_plas (p = 0.011), not the first measure."""
+    from selfas_graph.studies.convergence import _conclusion
+
+    pairs = [{"d": 1.0, "p": p} for p in (0.012, 0.011, 0.5, 0.6, 0.7, 0.8)]
+    text = _conclusion(pairs)
+    assert "smallest: fraction of rods within R_plas: p = 0.011, 0.066 after Holm over 6" in text, text
