@@ -28,7 +28,6 @@ __all__ = [
     "LABELS",
     "UNSHOWN_UNITS",
     "current_flags",
-    "current_group",
     "fmt",
     "grouped_at",
     "grouped_stat",
@@ -117,19 +116,13 @@ def values_at(summary, measure, t):
     return _rows_at(summary, None if m is None else m["values"], t)
 
 
-def current_group(summary, t):
-    """``(active, circuit)`` at time ``t``: which seeds the grouped measures describe, those with rods
-    in gap-spanning filaments or a nonzero current through the gap (the summary's ``current``,
-    docs/model.md "Measures of the paper's claims"; a summary without it: a nonzero total current),
-    and whether the study has a circuit at all (some seed's total current is a number). Without a
-    circuit the filaments span the gap but carry no current."""
-    active, _, circuit = current_flags(summary, t)
-    return active, circuit
-
-
 def current_flags(summary, t):
-    """``(active, known, circuit)`` at time ``t``: :func:`current_group`'s two, and which seeds have a
-    flag at all (a seed with a value but no flag counts in neither group, not as one without current)."""
+    """``(active, known, circuit)`` at time ``t``: which seeds the grouped measures describe, those with
+    rods in gap-spanning filaments or a nonzero current through the gap (the summary's ``current``,
+    docs/model.md "Measures of the paper's claims"; a summary without it: a nonzero total current);
+    which seeds have a flag at all (a seed with a value but no flag counts in neither group, not as one
+    without current); and whether the study has a circuit at all (some seed's total current is a
+    number). Without a circuit the filaments span the gap but carry no current."""
     cur = values_at(summary, "total_current", t)
     circuit = bool(np.isfinite(cur).any())
     if "current" in summary:
@@ -142,7 +135,7 @@ def current_flags(summary, t):
 
 
 def grouped_at(summary, measure, t) -> dict:
-    """A grouped measure at time ``t``: :func:`grouped_stat` of the seeds :func:`current_group` says
+    """A grouped measure at time ``t``: :func:`grouped_stat` of the seeds the summary flags as
     carry current, with ``circuit``; a seed whose flag is unknown counts in neither group."""
     active, known, circuit = current_flags(summary, t)
     v = values_at(summary, measure, t)
