@@ -67,11 +67,8 @@ class SavedFrame:
 
     @functools.cached_property
     def graph(self):
-        run = self.run
-        if not run.has_graph:
-            return None
-        match = np.flatnonzero(run.graph_steps == self.step)
-        return run.graph(frame=int(match[0])) if match.size else None
+        record = self.run.graph_record_of_step(self.step)
+        return None if record is None else self.run.graph(frame=record)
 
     def require_graph(self, kind: str) -> dict:
         """The frame's graph data, or a :class:`RunFileError` naming what the ``kind`` of output needs."""

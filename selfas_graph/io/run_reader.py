@@ -310,10 +310,15 @@ class RunFile:
         if not self.has_graph:
             self.graph_frame_index(k)  # raises the reader's explanation
         step = int(self.f[layout.TIP_POSITION_STEP][k])
-        match = np.flatnonzero(self.graph_steps == step)
-        if not match.size:
+        record = self.graph_record_of_step(step)
+        if record is None:
             raise RunFileError(f"{self.path}: no graph data saved at frame {k} (step {step})")
-        return self.graph(frame=int(match[0])) | {"frame": k}
+        return self.graph(frame=record) | {"frame": k}
+
+    def graph_record_of_step(self, step) -> int | None:
+        """The graph record saved at ``step``, or None (no graph data, or none at that step)."""
+        match = np.flatnonzero(self.graph_steps == step) if self.has_graph else ()
+        return int(match[0]) if len(match) else None
 
     def graph(self, frame=None, t=None) -> dict:
         """The graph state of graph record ``frame`` (or the record nearest ``t``): contact arrays, roles,
