@@ -11,7 +11,9 @@ claims"):
 * the difference of a measure is the mean over the seeds both runs have of ``x_i - x_default,i``,
   its standard error ``s_d / sqrt(n)`` (``s_d`` the spread of the per-seed differences), and for a
   fitted dimension ``sqrt(s_d^2 / n + mean(err_i^2 + err_default,i^2) / n)`` as for the claims; its
-  two-sided p-value is that of the paired t-test, ``n - 1`` degrees of freedom;
+  two-sided p-value is that of the paired t-test, ``n - 1`` degrees of freedom; where every pair
+  differs by the same nonzero amount (a count can) the t-test is undefined, and the p-value is the
+  exact two-sided sign test's, ``2 / 2^n``: 5 pairs alike give 0.0625, not 0;
 * a grouped measure (zero while a seed's circuit is open) pairs the seeds that carry current in both
   runs, and is not compared where one side has none;
 * a setting "moves these statistics" when one of its measures differs at a family-wise level of 5 %
@@ -79,8 +81,10 @@ def paired_difference(setting, default, measure, t) -> dict:
     Returns a dict: ``n`` pairs compared; ``a`` and ``b``, the plain statistics (mean, sem, n) of the
     setting and the default over those pairs; ``diff`` and ``sem`` of the per-seed differences; ``d``,
     ``diff / sem`` (infinite where every pair differs by the same nonzero amount, 0 where none differs,
-    NaN for fewer than 2 pairs) and ``p``, its two-sided p-value with ``n - 1`` degrees of freedom; for a grouped measure also ``k_a``, ``k_b``, the seeds of each side
-    that carry current, of ``of`` pairs with a value and a flag on both sides.
+    NaN for fewer than 2 pairs) and ``p``, its two-sided p-value with ``n - 1`` degrees of freedom
+    (the sign test's ``2 / 2^n`` where ``d`` is infinite); for a grouped measure also ``k_a``,
+    ``k_b``, the seeds of each side that carry current, of ``of`` pairs with a value and a flag on
+    both sides.
     """
     rows_a, rows_b = _seed_rows(setting), _seed_rows(default)
     seeds = [k for k in rows_a if k in rows_b]
@@ -114,7 +118,10 @@ def paired_difference(setting, default, measure, t) -> dict:
 
         sem = math.sqrt(float((a - b).var(ddof=1)) / n + float((ea * ea + eb * eb).mean()) / n)
         d = diff / sem if sem > 0 else (0.0 if diff == 0 else math.copysign(math.inf, diff))
-        p = 1.0 if d == 0 else float(2.0 * student.sf(abs(d), n - 1))
+        if math.isinf(d):  # no spread to scale by: the exact sign test of n pairs of one sign
+            p = min(1.0, 2.0 * 0.5**n)
+        else:
+            p = 1.0 if d == 0 else float(2.0 * student.sf(abs(d), n - 1))
     return out | {"n": n, "a": stat(a, ea), "b": stat(b, eb), "diff": diff, "sem": sem, "d": d, "p": p}
 
 
@@ -133,7 +140,7 @@ def _difference(p) -> str:
     if math.isnan(p["d"]):
         return "n/a"
     if math.isinf(p["d"]):
-        return f"{fmt(p['diff'])} in every pair".replace("-", "−")
+        return f"{fmt(p['diff'])} in every pair (sign test p = {fmt(p['p'], 2)})".replace("-", "−")
     return f"{fmt(p['diff'])} ± {fmt(p['sem'], 2)} ({p['d']:+.1f} SE; p = {fmt(p['p'], 2)})".replace("-", "−")
 
 
@@ -147,7 +154,7 @@ def _detectable(p, measures) -> str:
 
 def _conclusion(pairs) -> str:
     """A setting's conclusion from the Holm-adjusted p-values of its measures (module docstring)."""
-    ps = [0.0 if math.isinf(x["d"]) else x["p"] for x in pairs]
+    ps = [x["p"] for x in pairs]
     adjusted = holm(ps)
     compared = [k for k, q in enumerate(adjusted) if not math.isnan(q)]
     if not compared:
