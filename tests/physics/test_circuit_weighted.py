@@ -20,8 +20,9 @@ import pytest
 from test_circuit import DELTA, check_laws, electrode_potential, netlist, random_network
 
 from selfas_graph.model.circuit import solve_circuit, solve_network
-from selfas_graph.model.events import CONDUCTOR_ANODE, CONDUCTOR_CATHODE
+from selfas_graph.model.events import CONDUCTOR_ANODE, CONDUCTOR_CATHODE, SHORT_CIRCUIT
 from selfas_graph.model.graph import ConnectivityGraph, classify_rods
+from selfas_graph.model.topology import circuit_event, classify_resistive
 
 #: round-off of a sparse solve of O(1) potentials, condition number < 1e3 (observed ~1e-15)
 TOL = 1e-12
@@ -384,6 +385,10 @@ def test_anode_and_cathode_joined_by_a_resistive_contact_pair_conduct():
     sol = solve_circuit(2, np.zeros((0, 2)), ct, pot, contact_resistance=r)
     assert sol.total_current == pytest.approx(V / (2 * r), rel=TOL)
     assert sol.current[0] == 0.0  # the rod itself hangs from that tip only
+    # the topology agrees: a short circuit (choice B29), whose event counts no filament rod
+    topo = classify_resistive(1, np.zeros((0, 2), dtype=np.int64), ct, np.array([CONDUCTOR_CATHODE, CONDUCTOR_ANODE]))
+    assert topo.has_short_circuit and topo.n_filament == 0
+    assert circuit_event(False, topo, 7, 0.5) == [(7, 0.5, SHORT_CIRCUIT, 0, -1)]
 
 
 def test_explicit_unit_resistance_and_ideal_contacts_are_bit_for_bit_the_default():
