@@ -8,9 +8,11 @@ only with --force (docs/output.md).
 
 from __future__ import annotations
 
+import sys
+import warnings
 from pathlib import Path
 
-from ..io.export import FORMATS, ExportError, ExportExistsError, export_run
+from ..io.export import FORMATS, ExportError, ExportExistsError, MissingGraphWarning, export_run
 from ..io.h5md import RunFileError, raised_in_hdf5
 from .main import CliError
 
@@ -37,7 +39,9 @@ def add_arguments(p):
 
 def run(args):
     try:
-        path, n = export_run(args.run, args.format, out=args.output, frames=args.frames, force=args.force)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", MissingGraphWarning)
+            path, n = export_run(args.run, args.format, out=args.output, frames=args.frames, force=args.force)
     except ExportExistsError as exc:
         raise CliError(
             f"output file {exc.path} exists; pass --force to overwrite it or -o to choose another name"
@@ -50,4 +54,9 @@ def run(args):
         target = args.output or Path(args.run).with_suffix("." + args.format)
         raise CliError(f"cannot write the export {target}: {exc.strerror or exc}") from None
     print(f"wrote {path} ({n} frames, {args.format})")
+    for w in caught:
+        if issubclass(w.category, MissingGraphWarning):
+            print(f"note: {w.message}", file=sys.stderr)
+        else:  # any other warning as Python would have shown it
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     return 0

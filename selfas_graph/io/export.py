@@ -280,7 +280,25 @@ def export_run(run_path, format=None, out=None, frames=None, force=False, *, fmt
         picked = parse_frames(frames, run.n_frames)
         path = output_path(run_path, out, format, force=force)
         (write_gsd if format == "gsd" else write_xyz)(run, path, picked)
+        bare = picked[~np.isin(run.step[picked], run.graph_steps)]
+    if bare.size:
+        warnings.warn(MissingGraphWarning(path, bare), stacklevel=2)
     return path, len(picked)
+
+
+class MissingGraphWarning(UserWarning):
+    """Exported frames had no graph record (a run written without graph data, or a frame whose record
+    a kill tore off): their rods are typed ``free`` with no current, which is not what they were.
+    ``frames`` holds their numbers."""
+
+    def __init__(self, path, frames):
+        self.path, self.frames = Path(path), np.asarray(frames, dtype=np.int64)
+        shown = ", ".join(str(int(k)) for k in self.frames[:5]) + (", ..." if self.frames.size > 5 else "")
+        n = self.frames.size
+        super().__init__(
+            f"{self.path}: {n} frame{'s' if n > 1 else ''} ({shown}) had no graph record in the run file; "
+            "their rods are written as free, with no current"
+        )
 
 
 __all__ = [
@@ -291,6 +309,7 @@ __all__ = [
     "write_xyz",
     "ExportError",
     "ExportExistsError",
+    "MissingGraphWarning",
     "SUFFIXES",
     "FORMATS",
     "ROLE_TYPES",

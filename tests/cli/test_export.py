@@ -11,7 +11,14 @@ import numpy as np
 import pytest
 
 from selfas_graph.cli.main import main
-from selfas_graph.io.export import ROLE_TYPES, ExportError, ExportExistsError, export_run, parse_frames
+from selfas_graph.io.export import (
+    ROLE_TYPES,
+    ExportError,
+    ExportExistsError,
+    MissingGraphWarning,
+    export_run,
+    parse_frames,
+)
 from selfas_graph.io.h5md import RunFile
 
 #: a short circuit at frame 6: filament and dead-end rods, currents (tests/data/README.md)
@@ -89,6 +96,25 @@ def test_xyz_export_opens_in_ase(run):
         assert not atoms.pbc.any()
     first = out.read_text().splitlines()[2].split()[0]
     assert first in ROLE_TYPES  # the species column: the role name (OVITO's particle type)
+
+
+def test_frames_without_a_graph_record_are_written_free_and_said_so(run, tmp_path, capsys):
+    """The last of the 7 frames with its graph record torn off by a kill: the export writes it (its
+    rods typed free, no current, which they were not), Python warns with the frame's number and the
+    command prints a note; an export of frames that all have their records says nothing."""
+    with h5py.File(run, "r+") as f:
+        for name in ("conductor_contacts_count", "current", "potential", "role", "step", "time", "tip_contacts_count"):
+            f["graph"][name].resize(6, axis=0)
+    with pytest.warns(MissingGraphWarning, match=r"1 frame \(6\) had no graph record") as caught:
+        path, n = export_run(run, "gsd", out=tmp_path / "a.gsd", frames="4:")
+    assert n == 3 and caught[0].message.frames.tolist() == [6]
+    with pytest.importorskip("gsd.hoomd").open(str(path)) as traj:
+        assert (traj[2].particles.typeid == 0).all() and (traj[0].particles.typeid > 0).any()
+    assert main(["export", str(run), "--format", "xyz", "-o", str(tmp_path / "b.xyz")]) == 0
+    err = capsys.readouterr().err
+    assert "note: " in err and "b.xyz: 1 frame (6) had no graph record" in err
+    assert main(["export", str(run), "--format", "xyz", "--frames", ":6", "-o", str(tmp_path / "c.xyz")]) == 0
+    assert capsys.readouterr().err == ""
 
 
 def test_output_rules(run, capsys):
