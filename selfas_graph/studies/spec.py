@@ -149,9 +149,10 @@ class Studies:
     def compared_times(self, name) -> list[float]:
         """The times at which other entries set a study against ``name``: the table times of the
         studies whose ``null_of`` names it (null models and convergence settings), the time of each
-        sweep it is the base of, and the times of the claims on it."""
+        sweep it is the base or a point of, and the times of the claims on it."""
         times = {t for s in self.studies.values() if s.null_of == name for t in s.table_times}
-        times |= {sw.time for sw in self.sweeps.values() if sw.base == name}
+        member = self.studies[name].sweep if name in self.studies else ""
+        times |= {sw.time for sw in self.sweeps.values() if sw.base == name or sw.name == member}
         times |= {c.time for c in self.claims if c.study == name or c.null == name}
         return sorted(times)
 

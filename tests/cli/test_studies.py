@@ -502,6 +502,8 @@ def test_the_flux_is_summarised_where_other_studies_are_set_against_a_study():
     assert 130.0 not in compared  # neither compared with, nor a table time, nor on the 20 t0 grid
     assert math.isnan(flux.fn(SimpleNamespace(time=130.0, _study_flux=1.25)))
     assert 150.0 not in {t for t in studies.compared_times("fig6")}
+    # a null model that is also a sweep's point (fig2_no_plasma, I_plas = 0) is compared at the sweep's time
+    assert studies.study("fig2_no_plasma").sweep == "fig2_I_plas" and 300.0 in studies.compared_times("fig2_no_plasma")
 
 
 def test_a_study_table_words_its_circuit_by_the_scene_and_leaves_out_measures_it_lacks():

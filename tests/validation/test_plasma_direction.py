@@ -107,3 +107,18 @@ def test_the_direction_is_said_in_words():
     reversed_ = load_scenario(SCENARIOS / "fig2.toml", overrides=["forces.plasma_filament.current=7.5"]).params
     assert "from the cathode (z = -8.95) to the anode (z = +8.95), antiparallel" in plasma_current_text(reversed_)
     assert plasma_current_text(load_scenario(SCENARIOS / "fig8.toml").params) is None
+
+
+def test_a_plasma_filament_of_no_current_is_no_filament_bit_for_bit():
+    """The plasma-current sweep takes the null model without the plasma filament as its point I_plas
+    = 0 (docs/studies.toml): the two runs must be the same bits. The quick scene, to t = 1."""
+    base = SCENARIOS / "quick.toml"
+    runs = []
+    for override in ("forces.plasma_filament.current=0", "forces.plasma_filament=false"):
+        sim = Simulation.from_scenario(load_scenario(base, overrides=[override]))
+        sim.run(1.0)
+        runs.append(sim)
+    a, b = runs
+    assert a.state.step == b.state.step > 0
+    np.testing.assert_array_equal(a.state.position, b.state.position)
+    np.testing.assert_array_equal(a.state.velocity, b.state.velocity)
