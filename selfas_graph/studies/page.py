@@ -20,7 +20,7 @@ from ..analysis.ensemble_stats import wilson_interval
 from ..provenance import version_key
 from .convergence import convergence_rows
 from .spec import StudiesError
-from .stats import fmt, measure_label, measure_text, older_runs
+from .stats import fmt, measure_label, measure_text, older_runs, with_minimum_counts
 from .verdicts import claim_rows, sweep_rows
 
 __all__ = ["has_electrodes", "load_summary", "page_blocks", "page_blocks_in", "replace_blocks", "study_table"]
@@ -50,11 +50,12 @@ def load_summary(folder, name):
     if not path.exists():
         return None
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        raw = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise StudiesError(
             f"{path}: not a readable study summary ({exc}); make it again with study summarise"
         ) from None
+    return with_minimum_counts(raw) if isinstance(raw, dict) else raw
 
 
 def has_electrodes(summary) -> bool:

@@ -26,6 +26,7 @@ __all__ = [
     "FIT_ERRORS",
     "GROUPED",
     "LABELS",
+    "MIN_FREE_RODS",
     "UNSHOWN_UNITS",
     "current_flags",
     "fmt",
@@ -38,6 +39,7 @@ __all__ = [
     "pm",
     "values_at",
     "window_values",
+    "with_minimum_counts",
 ]
 
 #: measures that are zero in a seed whose circuit is open: reported as "k of n seeds" (module docstring)
@@ -108,6 +110,27 @@ def _rows_at(summary, rows, t):
     if abs(times[k] - t) > 1e-9 * max(1.0, abs(t)) or rows is None:
         return np.full(len(summary["seeds"]), np.nan)
     return np.array([np.nan if v[k] is None else v[k] for v in rows], dtype=float)
+
+
+#: the fewest rods in no structure whose alignment the page gives: N rods at random align to about
+#: 1/sqrt(N) (0.18 at 30), and below that the measure follows the count of those rods, which falls
+#: as they join structures, more than their alignment (docs/model.md "Measures of the paper's claims")
+MIN_FREE_RODS = 30
+
+
+def with_minimum_counts(summary):
+    """``summary`` with the alignment of the rods in no structure removed (None) where fewer than
+    :data:`MIN_FREE_RODS` were in no structure: the rule of :mod:`.summary`'s measure, applied to
+    summaries made before it (their per-seed counts ``free_rods`` are kept). Changes ``summary`` in
+    place and returns it."""
+    m, counts = summary.get("measures", {}).get("free_alignment"), summary.get("measures", {}).get("free_rods")
+    if m is None or counts is None:
+        return summary
+    m["values"] = [
+        [None if c is None or v is None or c < MIN_FREE_RODS else v for v, c in zip(row, crow)]
+        for row, crow in zip(m["values"], counts["values"])
+    ]
+    return summary
 
 
 def values_at(summary, measure, t):

@@ -27,6 +27,7 @@ from ..ensemble import FRAME_MEASURES, Measure, seed_path, summarise
 from ..io.atomic import write_text_atomic
 from ..io.h5md import RunFile, RunFileError
 from ..provenance import cpu_model, source_commit
+from .stats import MIN_FREE_RODS
 
 __all__ = ["STUDY_MEASURES", "summarise_study", "write_json_atomic"]
 
@@ -37,8 +38,8 @@ def _contacts(f):
 
 def _alignment(f, which):
     """|m_q| over (rods x mean single-rod moment) of the largest structure, of the rods in no
-    structure or of all rods: 1 for rods all lined up head to tail along one direction, about
-    1/sqrt(N) at random. All rods need no contact data."""
+    structure (NaN for fewer than :data:`~.stats.MIN_FREE_RODS`) or of all rods: 1 for rods all lined
+    up head to tail along one direction, about 1/sqrt(N) at random. All rods need no contact data."""
     q = f.run.tip_charge
     n_rods = q.shape[0] // 2
     tc = _contacts(f)
@@ -56,7 +57,7 @@ def _alignment(f, which):
     else:
         rods = label < 0
     n = int(rods.sum())
-    if n == 0 or mean_rod <= 0:
+    if n == 0 or mean_rod <= 0 or (which == "free" and n < MIN_FREE_RODS):
         return math.nan
     lab = np.where(rods, 0, -1)
     m = monopole_moment(f.position, q, lab, 1)[0]

@@ -11,11 +11,14 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ..provenance import version_key
 from .stats import (
     CLAIM_MEASURES,
     FIT_ERRORS,
     GROUPED,
+    current_flags,
     grouped_at,
     measure_label,
     measure_text,
@@ -27,7 +30,7 @@ from .stats import (
     window_values,
 )
 
-__all__ = ["CLAIM_MEASURES", "claim_rows", "sweep_points", "sweep_rows"]
+__all__ = ["CLAIM_MEASURES", "claim_rows", "sweep_points", "sweep_rows", "sweep_trends"]
 
 
 def _combined_sem(a, b):
@@ -189,21 +192,80 @@ def sweep_rows(studies, summaries, name) -> str:
     done = [(v, summaries[st]) for v, st in studies.sweep_points(name) if summaries.get(st) is not None]
     if len(done) >= 2:
         steps = [_step_p(done, m, sw.time) for m in CLAIM_MEASURES]
-        rows.append("| Welch p from each value to the next | | " + " | ".join(steps) + " |")
+        rows.append("| Welch p from each value to the next (each step alone) | | " + " | ".join(steps) + " |")
+        trend = [_trend_text(x) for x in sweep_trends(done, sw.time)]
+        label = f"trend over the sweep (Kendall τ over every seed; Holm over the {len(CLAIM_MEASURES)} measures)"
+        rows.append(f"| {label} | | " + " | ".join(trend) + " |")
         rows.append(f"\n![{sw.title}: the claim measures at t = {sw.time:g}](figures/sweep_{name}.png)")
     return "\n".join(rows)
+
+
+def _p_cell(p) -> str:
+    return "n/a" if not math.isfinite(p) else ("< 0.001" if p < 0.001 else f"{p:.2g}")
 
 
 def _step_p(points, measure, t) -> str:
     """The two-sided Welch p-value of each step of a sweep, from one value to the next, of the statistic
     the table gives (a grouped measure's over the seeds that carry current): "0.04; 0.5; < 0.001", "n/a"
-    for a step without two seeds a side."""
+    for a step without two seeds a side. A fitted dimension's steps are given twice, with each seed's
+    fit error in the standard error and by the spread between seeds alone, as the claims give it."""
     stats = [_stat_at(s, measure, t) for _, s in points]
+    text = "; ".join(_p_cell(welch_p(b, a)) for a, b in zip(stats, stats[1:]))
+    if measure in FIT_ERRORS:
+        alone = [plain_stat(_table_values(s, measure, t)) for _, s in points]
+        text += " (seeds alone: " + "; ".join(_p_cell(welch_p(b, a)) for a, b in zip(alone, alone[1:])) + ")"
+    return text
+
+
+def _table_values(summary, measure, t) -> np.ndarray:
+    """The per-seed values a table's statistic of ``measure`` at ``t`` describes: the seeds that carry
+    current for a grouped measure (:func:`_stat_at`), every seed with a value otherwise."""
+    v = values_at(summary, measure, t)
+    if measure in GROUPED:
+        active, known, _ = current_flags(summary, t)
+        v = v[active & known]
+    return v[np.isfinite(v)]
+
+
+def sweep_trends(points, t) -> list[dict]:
+    """The trend of each claim measure over a sweep's points ``[(value, summary), ...]`` at ``t``:
+    Kendall's tau-b between the parameter and the per-seed values the table describes, every seed of
+    every point pooled, and its two-sided p-value (docs/model.md "Measures of the paper's claims"). One
+    test per measure, where the steps of the table are several each: the p-values are adjusted by Holm
+    over the measures (``holm``). A fitted dimension is ranked by its seeds' values alone (a rank test
+    cannot carry each fit's own error). Returns a dict per measure of :data:`CLAIM_MEASURES`:
+    ``tau``, ``p``, ``holm``, ``n`` (seeds ranked); NaN where fewer than two points have values or
+    the values do not vary."""
+    from scipy.stats import kendalltau
+
+    from .convergence import holm  # the convergence table's adjustment (convergence imports this module)
+
     out = []
-    for a, b in zip(stats, stats[1:]):
-        p = welch_p(b, a)
-        out.append("n/a" if not math.isfinite(p) else ("< 0.001" if p < 0.001 else f"{p:.2g}"))
-    return "; ".join(out)
+    for m in CLAIM_MEASURES:
+        x, y = [], []
+        for value, s in points:
+            v = _table_values(s, m, t)
+            x += [float(value)] * v.size
+            y += v.tolist()
+        tau = p = math.nan
+        if len(set(x)) >= 2 and len(y) >= 3 and np.ptp(y) > 0:
+            res = kendalltau(x, y)
+            tau, p = float(res.statistic), float(res.pvalue)
+        out.append({"measure": m, "tau": tau, "p": p, "n": len(y)})
+    for row, q in zip(out, holm([r["p"] for r in out])):
+        row["holm"] = q
+    return out
+
+
+def _trend_text(r) -> str:
+    """A trend cell: "rises: τ = +0.80, p < 0.001 (< 0.001 after Holm)", "falls: ...", or "none shown:
+    ..." where the adjusted p-value is not under the family-wise 5 %."""
+    if not math.isfinite(r["p"]):
+        return "n/a"
+    word = "none shown" if not r["holm"] < 0.05 else ("rises" if r["tau"] > 0 else "falls")
+    return f"{word}: τ = {r['tau']:+.2f}, p = {_p_cell(r['p'])} ({_p_cell(r['holm'])} after Holm)".replace(
+        "= <", "<"
+    ).replace("-", "−")
 
 
 def sweep_points(studies, summaries, name, measure):

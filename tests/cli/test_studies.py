@@ -250,6 +250,76 @@ def test_a_sweep_point_of_a_grouped_measure_is_the_mean_of_the_seeds_that_carry_
     assert frac["n"] == 3 and frac["mean"] == pytest.approx(1.0 / 3.0)
 
 
+def test_a_sweeps_trend_ranks_every_seed_and_adjusts_over_the_measures():
+    """Two points: the fraction within R_plas 0.1, 0.2, 0.3 at value 0 and 0.4, 0.5, 0.6 at value 1 is
+    concordant in all 9 pairs across the points: tau-b = 9 / sqrt(15 * 9) = 0.775 (ties in the value:
+    15 pairs of the 6 seeds less the 3 + 3 tied), scipy's p. The rods in current-carrying filaments
+    rank only the seeds that carry current (1 of 3 at value 0: 4 seeds). Holm over the measures with a
+    trend; a fitted dimension's steps are given with and without each seed's fit error."""
+    from scipy.stats import kendalltau
+
+    from selfas_graph.studies.verdicts import _step_p, _trend_text, sweep_trends
+
+    def point(frac, rods, flags, dims, errs):
+        return {
+            "times": [300.0],
+            "seeds": [{"seed": k + 1} for k in range(3)],
+            "current": [[f] for f in flags],
+            "measures": {
+                "inside_R_plas": {"values": [[v] for v in frac]},
+                "filament_rods": {"values": [[v] for v in rods]},
+                "total_current": {"values": [[float(f)] for f in flags]},
+                "fractal_dimension": {"values": [[v] for v in dims]},
+                "fractal_dimension_err": {"values": [[v] for v in errs]},
+            },
+        }
+
+    a = point([0.1, 0.2, 0.3], [0.0, 500.0, 0.0], [0, 1, 0], [2.0, 2.1, 2.2], [0.5] * 3)
+    b = point([0.4, 0.5, 0.6], [600.0, 700.0, 800.0], [1, 1, 1], [2.3, 2.4, 2.5], [0.5] * 3)
+    rows = {r["measure"]: r for r in sweep_trends([(0.0, a), (1.0, b)], 300.0)}
+    frac = rows["inside_R_plas"]
+    assert frac["n"] == 6 and frac["tau"] == pytest.approx(9.0 / math.sqrt(15.0 * 9.0))
+    assert frac["p"] == pytest.approx(kendalltau([0, 0, 0, 1, 1, 1], [0.1, 0.2, 0.3, 0.4, 0.5, 0.6]).pvalue)
+    assert rows["filament_rods"]["n"] == 4
+    assert rows["filament_rods"]["tau"] == pytest.approx(kendalltau([0, 1, 1, 1], [500, 600, 700, 800]).statistic)
+    assert math.isnan(rows["midplane_flux"]["p"]) and math.isnan(rows["midplane_flux"]["holm"])
+    tested = [r for r in rows.values() if math.isfinite(r["p"])]
+    smallest = min(tested, key=lambda r: r["p"])
+    assert smallest["holm"] == pytest.approx(min(1.0, len(tested) * smallest["p"]))
+    assert _trend_text(frac).startswith("rises: τ = +0.77, p = ") or _trend_text(frac).startswith("none shown")
+    assert _trend_text({"tau": -0.5, "p": 0.01, "holm": 0.02}) == "falls: τ = −0.50, p = 0.01 (0.02 after Holm)"
+    assert _trend_text({"tau": 0.1, "p": 0.5, "holm": 1.0}).startswith("none shown")
+    # fit errors of 0.5 swamp the steps of 0.3; the seeds alone resolve them
+    step = _step_p([(0.0, a), (1.0, b)], "fractal_dimension", 300.0)
+    assert step.startswith("0.") and "(seeds alone: 0.0" in step, step
+
+
+def test_the_alignment_of_the_rods_in_no_structure_needs_30_of_them():
+    """Committed summaries: the rule applies on loading, from the kept counts; a frame: NaN below 30
+    such rods, the value from 30 on."""
+    from types import SimpleNamespace
+
+    from selfas_graph.studies.stats import MIN_FREE_RODS, with_minimum_counts
+    from selfas_graph.studies.summary import _alignment
+
+    s = {"measures": {"free_alignment": {"values": [[0.9, 0.3]]}, "free_rods": {"values": [[2.0, 40.0]]}}}
+    assert with_minimum_counts(s)["measures"]["free_alignment"]["values"] == [[None, 0.3]]
+    assert MIN_FREE_RODS == 30
+
+    def frame(n_rods):  # rods along z, all free (no contacts), tips +q at the top
+        q = np.tile([1.0, -1.0], n_rods)
+        pos = np.zeros((2 * n_rods, 3))
+        pos[0::2, 2], pos[1::2, 2] = 0.5, -0.5
+        pos[:, 0] = np.repeat(3.0 * np.arange(n_rods), 2)
+        return SimpleNamespace(
+            run=SimpleNamespace(tip_charge=q), position=pos, graph={"tip_contacts": np.zeros((0, 2))}
+        )
+
+    assert math.isnan(_alignment(frame(29), "free"))
+    assert _alignment(frame(30), "free") == pytest.approx(1.0)
+    assert _alignment(frame(3), "all") == pytest.approx(1.0)  # the rule is the free rods' alone
+
+
 def test_replace_blocks_changes_only_the_generated_blocks():
     text = "a\n<!-- begin generated: x -->\nold\n<!-- end generated: x -->\nb\n<!-- begin generated: y -->\n<!-- end generated: y -->\n"
     new, missing = replace_blocks(text, {"x": "new\nlines"})
