@@ -3,7 +3,7 @@ the default it varies, and each sweep of a scene's parameter.
 
 A claim's verdict compares the study with its null model at the paper's end time, or in each seed's
 mean over the claim's window, in standard errors of the difference: "reproduced" only for |d| > 3 in
-the direction the claim predicts (docs/model.md "Measures of the paper's claims", "Verdicts"). One
+the direction the claim predicts (docs/model.md "Measures of the paper's claims", its Verdicts). One
 rule decides the test, as for the convergence table:
 
 * where the two studies start from the same rods (the summaries' values at t = 0 agree seed by seed,
@@ -99,7 +99,7 @@ def _p_text(p, paired=None) -> str:
     return f"; {text}" if text else ""
 
 
-#: a verdict's words where the null model's value is zero in every seed (docs/model.md "Verdicts")
+#: a verdict's words where the null model's value is zero in every seed (docs/model.md "Measures of the paper's claims", its Verdicts)
 ZERO_NULL = (
     "nonzero only with what the null model removes (the null model's value is zero in every seed, by construction)"
 )
