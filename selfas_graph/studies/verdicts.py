@@ -1,10 +1,26 @@
 """The verdicts of the results page: each claim against its null model, each numerical knob against
 the default it varies, and each sweep of a scene's parameter.
 
-A claim's verdict compares the study with its null model at the paper's end time in units of the
-combined standard error, d = (x - x_null) / sqrt(SE^2 + SE_null^2): "reproduced" only for |d| > 3 in
-the direction the claim predicts (docs/model.md "Measures of the paper's claims"). The statistics are
-those of :mod:`.stats`.
+A claim's verdict compares the study with its null model at the paper's end time, or in each seed's
+mean over the claim's window, in standard errors of the difference: "reproduced" only for |d| > 3 in
+the direction the claim predicts (docs/model.md "Measures of the paper's claims", its Verdicts). One
+rule decides the test, as for the convergence table:
+
+* where the two studies start from the same rods (the summaries' values at t = 0 agree seed by seed,
+  :func:`.pairing.same_start`; a null model that runs the scene's scenario with a force term changed
+  does), the seeds both have are paired: d is the mean of the per-seed differences over its standard
+  error s_d / sqrt(n) (a fitted measure's fit errors added), with the paired t-test's p-value,
+  n - 1 degrees of freedom, or the exact sign test's 2 / 2^n where every pair differs alike
+  (:func:`.pairing.paired_stat`); the verdict says "paired over N seeds";
+* otherwise the two sets of seeds are independent: d = (x - x_null) / sqrt(SE^2 + SE_null^2) over
+  all the seeds of each, beside Welch's p-value ("Welch p").
+
+A null model whose value is zero in every seed cannot have what the claim measures (its rods never
+touch, say): a difference in the claimed direction is then worded as nonzero where the null model
+is zero by construction, not as the claim reproduced. A windowed measure that is zero while a seed's
+circuit is open, set against a null model that has some, is split in its row into the share of the
+window's times at which the seeds carry current and its mean over those times alone (both sides); the
+verdict stays on the window's mean. The statistics are those of :mod:`.stats` and :mod:`.pairing`.
 """
 
 from __future__ import annotations
@@ -14,6 +30,7 @@ import math
 import numpy as np
 
 from ..provenance import version_key
+from .pairing import common_rows, paired_stat, same_start, window_split
 from .stats import (
     CLAIM_MEASURES,
     FIT_ERRORS,
@@ -30,7 +47,7 @@ from .stats import (
     window_values,
 )
 
-__all__ = ["CLAIM_MEASURES", "claim_rows", "sweep_points", "sweep_rows", "sweep_trends"]
+__all__ = ["CLAIM_MEASURES", "claim_rows", "claim_verdict", "sweep_points", "sweep_rows", "sweep_trends"]
 
 
 def _combined_sem(a, b):
@@ -67,41 +84,70 @@ def welch_p(a, b) -> float:
     return float(2.0 * student.sf(abs(a["mean"] - b["mean"]) / math.sqrt(va + vb), df))
 
 
-def _p_text(p) -> str:
-    """``"; Welch p = 0.002"`` (two significant digits, ``< 1e-6`` below), or "" for NaN."""
+def _test_text(p, paired=None) -> str:
+    """The test beside a verdict: "Welch p = 0.002" (two significant digits, "< 1e-6" below), "paired
+    over 5 seeds, p = 0.002" for a paired test of ``paired`` seeds (without its p where ``p`` is NaN);
+    "" for Welch without a p-value."""
     if not math.isfinite(p):
-        return ""
-    return "; Welch p < 1e-6" if p < 1e-6 else f"; Welch p = {p:.2g}".replace("e-0", "e-")
+        return f"paired over {paired} seeds" if paired else ""
+    value = "< 1e-6" if p < 1e-6 else f"= {p:.2g}".replace("e-0", "e-")
+    return f"paired over {paired} seeds, p {value}" if paired else f"Welch p {value}"
 
 
-def _verdict(d, expect, p=math.nan):
-    """The verdict on a difference of ``d`` combined standard errors from the null model (3 of them in the
-    claimed direction), with the Welch p-value ``p`` beside it where given."""
+def _p_text(p, paired=None) -> str:
+    """``"; "`` and :func:`_test_text`, or "" where that is empty."""
+    text = _test_text(p, paired)
+    return f"; {text}" if text else ""
+
+
+#: a verdict's words where the null model's value is zero in every seed (docs/model.md "Measures of the paper's claims", its Verdicts)
+ZERO_NULL = (
+    "nonzero only with what the null model removes (the null model's value is zero in every seed, by construction)"
+)
+
+
+def _verdict(d, expect, p=math.nan, paired=None, zero=False):
+    """The verdict on a difference of ``d`` standard errors from the null model (3 of them in the
+    claimed direction), with the test beside it: Welch's p-value ``p``, or the paired test over
+    ``paired`` seeds. Where the null model's value is zero in every seed (``zero``), a difference in
+    the claimed direction is not worded as the claim reproduced: the null model cannot have any."""
     if math.isnan(d):
         return "not decided (too few seeds)"
-    if math.isinf(d):  # no spread in either: every seed of each gives the same value
-        same = (d > 0) == (expect == "greater")
-        return f"{'reproduced' if same else 'opposite to the claim'} (every seed differs from every seed of the null model)"
-    if (d > 3 and expect == "greater") or (d < -3 and expect == "less"):
-        return f"reproduced ({'+' if d > 0 else '−'}{abs(d):.1f} SE from the null model{_p_text(p)})"
+    claimed = (d > 0) == (expect == "greater")
+    if math.isinf(d):  # no spread: every seed of each gives the same value, or every pair differs alike
+        if paired:
+            what = f"every seed differs from the same seed of the null model by the same amount; sign test over {paired} seeds, p = {p:.2g}"
+        else:
+            what = "every seed differs from every seed of the null model"
+        if zero and claimed:
+            return f"{ZERO_NULL}; {what}"
+        return f"{'reproduced' if claimed else 'opposite to the claim'} ({what})"
+    sign = f"{'+' if d > 0 else '−'}{abs(d):.1f}"
+    if abs(d) > 3 and claimed and zero:
+        test = _test_text(p, paired)
+        return f"{ZERO_NULL}; {sign} SE{', ' + test if test else ''}"
+    note = "; the null model's value is zero in every seed" if zero else ""
     if abs(d) > 3:
-        return f"opposite to the claim ({'+' if d > 0 else '−'}{abs(d):.1f} SE from the null model{_p_text(p)})"
-    return f"not distinguished from the null model ({d:+.1f} SE{_p_text(p)})".replace("-", "−")
+        return f"{'reproduced' if claimed else 'opposite to the claim'} ({sign} SE from the null model{_p_text(p, paired)}{note})"
+    return f"not distinguished from the null model ({d:+.1f} SE{_p_text(p, paired)}{note})".replace("-", "−")
 
 
-def _fit_verdict(d, d_seeds, expect, p_seeds=math.nan):
+def _fit_verdict(d, d_seeds, expect, p_seeds=math.nan, paired=None):
     """The verdict on a fitted measure, whose standard error carries each seed's fit uncertainty (``d``)
-    or the spread between seeds alone (``d_seeds``, Welch p ``p_seeds``): the two are stated, and where
-    they lead to different verdicts the page says that the verdict depends on counting the fits' own
-    errors (docs/model.md "Measures of the paper's claims")."""
-    with_fits, seeds_alone = _verdict(d, expect), _verdict(d_seeds, expect, p_seeds)
+    or the spread between seeds alone (``d_seeds``, p-value ``p_seeds``; both paired over ``paired``
+    seeds where given, else Welch's): the two are stated, and where they lead to different verdicts the
+    page says that the verdict depends on counting the fits' own errors (docs/model.md "Measures of the
+    paper's claims")."""
+    with_fits, seeds_alone = _verdict(d, expect), _verdict(d_seeds, expect, p_seeds, paired)
     if with_fits.split(" (")[0] == seeds_alone.split(" (")[0]:
-        return f"{with_fits[:-1]}; {d_seeds:+.1f} SE by the spread between seeds alone{_p_text(p_seeds)})".replace(
-            "-", "−"
+        return (
+            f"{with_fits[:-1]}; {d_seeds:+.1f} SE by the spread between seeds alone{_p_text(p_seeds, paired)})".replace(
+                "-", "−"
+            )
         )
     return (
-        f"depends on the fits' own errors: {with_fits} with each seed's fit error, {seeds_alone} by the "
-        f"spread between seeds alone"
+        f"depends on the fits' own errors: {_verdict(d, expect, math.nan, paired)} with each seed's fit error, "
+        f"{seeds_alone} by the spread between seeds alone"
     )
 
 
@@ -117,8 +163,66 @@ def _older_note(summaries, names, studies) -> str:
     return f"; made before the trajectory change of {' and '.join(since)} ({which}): to be run again"
 
 
+def _claim_values(summary, measure, c):
+    """A claim side's per-seed values, each seed's mean over the claim's window or its value at the
+    claim's time, and their fit errors (None but for a fitted measure at a time)."""
+    if c.window:
+        return window_values(summary, measure, *c.window), None
+    errs = values_at(summary, FIT_ERRORS[measure], c.time) if measure in FIT_ERRORS else None
+    return values_at(summary, measure, c.time), errs
+
+
+def _all_zero(values) -> bool:
+    """Whether every seed with a value has exactly 0 (a null model that cannot have any)."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    return bool(v.size) and bool((v == 0.0).all())
+
+
+def claim_verdict(c, s, null, nm) -> str:
+    """The verdict of claim ``c`` on study summary ``s`` against its null model's summary ``null``
+    (measure ``nm``): paired by seed over the seeds both have where the two start from the same rods
+    (:func:`.pairing.same_start`), else Welch's comparison of the two sets of seeds; a fitted measure's
+    also by the spread between seeds alone; a null model zero in every seed worded as such."""
+    x, ex = _claim_values(s, c.measure, c)
+    y, ey = _claim_values(null, nm, c)
+    fitted = ex is not None or ey is not None
+    zero = not fitted and _all_zero(y)
+    if same_start(s, null):
+        ia, ib = common_rows(s, null)
+        ex = None if ex is None else ex[ia]
+        ey = None if ey is None else ey[ib]
+        q = paired_stat(x[ia], y[ib], ex, ey)
+        if not fitted:
+            return _verdict(q["d"], c.expect, q["p"], q["n"], zero)
+        keep = np.isfinite(np.zeros(len(ia)) if ex is None else ex) & np.isfinite(
+            np.zeros(len(ib)) if ey is None else ey
+        )
+        alone = paired_stat(np.where(keep, x[ia], np.nan), y[ib])  # the same pairs, without the fits' errors
+        return _fit_verdict(q["d"], alone["d"], c.expect, alone["p"], q["n"])
+    a, b = plain_stat(x, ex), plain_stat(y, ey)
+    if not fitted:
+        return _verdict(_claim_difference(a, b), c.expect, welch_p(a, b), zero=zero)
+    sa, sb = plain_stat(x), plain_stat(y)
+    return _fit_verdict(_claim_difference(a, b), _claim_difference(sa, sb), c.expect, welch_p(sa, sb))
+
+
+def _split_text(summary, measure, window) -> str:
+    """A window's mean of a grouped measure split in two (:func:`.pairing.window_split`): the share of
+    the window's times at which the seeds carry current, and the measure over those times alone, each
+    mean ± SE over the seeds."""
+    sp = window_split(summary, measure, *window)
+    what = "carry current" if sp["circuit"] else "span the gap (no circuit)"
+    return (
+        f"split: share of the window's {sp['times']} times at which the seeds {what}: {pm(plain_stat(sp['fraction']))}; "
+        f"the measure over those times alone: {pm(plain_stat(sp['size']))}"
+    )
+
+
 def claim_rows(studies, summaries) -> str:
-    """The claims table: each claim's measure at the paper's end time, its null model and the verdict."""
+    """The claims table: each claim's measure at the paper's end time, its null model and the verdict
+    (:func:`claim_verdict`); a windowed grouped measure against a null model that has some gives both
+    sides' :func:`_split_text`."""
     rows = [
         "| claim | what the paper shows | measure at t | selfas-graph | null model | null model's value | verdict |",
         "|---|---|---|---|---|---|---|",
@@ -147,22 +251,20 @@ def claim_rows(studies, summaries) -> str:
         else:
             nm = c.null_measure or c.measure
             if c.window:
-                a = plain_stat(window_values(s, c.measure, *c.window))
-                b = plain_stat(window_values(null, nm, *c.window))
-                null_value = pm(b)
-            else:  # a fitted measure's standard error carries each seed's fit uncertainty, as the tables show
-                ea = values_at(s, FIT_ERRORS[c.measure], c.time) if c.measure in FIT_ERRORS else None
-                eb = values_at(null, FIT_ERRORS[nm], c.time) if nm in FIT_ERRORS else None
-                a = plain_stat(values_at(s, c.measure, c.time), ea)
-                b = plain_stat(values_at(null, nm, c.time), eb)
+                null_value = pm(plain_stat(window_values(null, nm, *c.window)))
+            else:
                 null_value = measure_text(null, nm, c.time)
-            d = _claim_difference(a, b)
             null_text = studies.study(c.null).title
             null_value += "" if nm == c.measure else f" ({measure_label(nm)})"
-            verdict = _verdict(d, c.expect, welch_p(a, b))
-            if not c.window and (ea is not None or eb is not None):
-                sa, sb = plain_stat(values_at(s, c.measure, c.time)), plain_stat(values_at(null, nm, c.time))
-                verdict = _fit_verdict(d, _claim_difference(sa, sb), c.expect, welch_p(sa, sb))
+            verdict = claim_verdict(c, s, null, nm)
+            if (
+                c.window
+                and c.measure in GROUPED
+                and nm in GROUPED
+                and not _all_zero(window_values(null, nm, *c.window))
+            ):
+                value += f"; {_split_text(s, c.measure, c.window)}"
+                null_value += f"; {_split_text(null, nm, c.window)}"
         verdict += _older_note(summaries, (c.study, c.null), studies)
         rows.append(
             f"| {c.claim} | {c.paper} | {measure_label(c.measure)}, {where} | {value} | {null_text} | "

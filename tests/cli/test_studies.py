@@ -887,3 +887,126 @@ def test_the_convergence_conclusion_names_the_measure_of_the_smallest_p_where_ho
     pairs = [{"d": 1.0, "p": p} for p in (0.012, 0.011, 0.5, 0.6, 0.7, 0.8)]
     text = _conclusion(pairs)
     assert "smallest: fraction of rods within R_plas: p = 0.011, 0.066 after Holm over 6" in text, text
+
+
+def _started(values, start, t=600.0, measure="inside_R_plas"):
+    """A summary of one seed a value, at t = 0 (``start``: where its rods begin) and at ``t``."""
+    return {
+        "times": [0.0, t],
+        "seeds": [{"seed": k + 1, "t_end": t} for k in range(len(values))],
+        "n_seeds": len(values),
+        "measures": {measure: {"values": [[s, v] for s, v in zip(start, values, strict=True)]}},
+    }
+
+
+def test_a_claim_is_paired_by_seed_where_the_summaries_start_from_the_same_rods(tmp_path):
+    """The same values at t = 0 seed by seed: the null model ran the same seeds from the same rods, and
+    the verdict pairs them. The differences 0.2, 0.3, 0.1: mean 0.2 ± 0.1 / sqrt 3 = 0.0577, d = +3.5,
+    p = 2 t_2.sf(3.46) = 0.074. Another start at t = 0 (seed 3's), no t = 0 in a summary, or only a
+    measure one side lacks there: Welch over the two sets, d = 0.2 / sqrt(2 * 0.0577^2) = +2.4 with
+    4 degrees of freedom, p = 0.07. A seed only the null model has is left out of the pairs."""
+    from selfas_graph.studies.pairing import common_rows, same_start
+    from selfas_graph.studies.verdicts import claim_rows
+
+    studies = _claim_against_null(tmp_path, 'measure = "inside_R_plas"')
+    scene = _started([0.5, 0.7, 0.6], [0.1, 0.2, 0.3])
+    null = _started([0.3, 0.4, 0.5, 0.9], [0.1, 0.2, 0.3, 0.4])  # seed 4: the null's alone
+    null["measures"]["total_current"] = {"values": [[None, None]] * 4}  # no circuit: not compared
+    scene["measures"]["total_current"] = {"values": [[0.0, 1.0]] * 3}
+    assert same_start(scene, null) and [list(r) for r in common_rows(scene, null)] == [[0, 1, 2], [0, 1, 2]]
+    paired = "reproduced (+3.5 SE from the null model; paired over 3 seeds, p = 0.074)"
+    assert paired in claim_rows(studies, {"a": scene, "b": null})
+    welch = "not distinguished from the null model (+2.4 SE; Welch p = 0.07)"
+    other = _started([0.3, 0.4, 0.5], [0.1, 0.2, 0.35])
+    assert not same_start(scene, other) and welch in claim_rows(studies, {"a": scene, "b": other})
+    late = _started([0.3, 0.4, 0.5], [0.1, 0.2, 0.3]) | {"times": [10.0, 600.0]}  # no t = 0
+    assert not same_start(scene, late) and welch in claim_rows(studies, {"a": scene, "b": late})
+    blank = _started([0.3, 0.4, 0.5], [None, None, None])  # nothing finite on both sides at t = 0
+    assert not same_start(scene, blank) and welch in claim_rows(studies, {"a": scene, "b": blank})
+
+
+def test_the_paired_difference_and_a_fitted_claims_paired_verdict_by_hand(tmp_path):
+    """:func:`paired_stat` is the convergence table's arithmetic; pairs alike get the sign test. A fitted
+    dimension, same start: differences 0.5, 0.4, 0.6 (mean 0.5, s_d 0.1); with fit errors of 1 a seed
+    SE = sqrt(0.01 / 3 + 2 / 3) = 0.82, d = +0.6; by the spread alone 0.5 / 0.0577 = +8.7, p =
+    2 t_2.sf(8.66) = 0.013."""
+    from selfas_graph.studies.convergence import paired_difference
+    from selfas_graph.studies.pairing import paired_stat
+    from selfas_graph.studies.verdicts import claim_rows
+
+    q = paired_stat([0.5, 0.7, 0.6, np.nan], [0.3, 0.4, 0.5, 0.1])
+    assert q["n"] == 3 and q["diff"] == pytest.approx(0.2) and q["sem"] == pytest.approx(0.1 / math.sqrt(3.0))
+    assert q["p"] == pytest.approx(0.0742, abs=1e-4) and q["b"]["mean"] == pytest.approx(0.4)
+    alike = paired_stat([5.0, 6.0, 7.0, 8.0, 9.0], [4.0, 5.0, 6.0, 7.0, 8.0])
+    assert (alike["d"], alike["p"]) == (math.inf, 0.0625)
+    base = _current_summary([680.0, 700.0, 690.0, 720.0], [1.0] * 4)
+    base["measures"]["cycle_rank"] = {"values": [[100.0], [110.0], [90.0], [500.0]]}
+    setting = _current_summary([670.0, 690.0, 20.0], [1.0] * 3)
+    setting["measures"]["cycle_rank"] = {"values": [[102.0], [114.0], [96.0]]}
+    want = paired_difference(setting, base, "cycle_rank", 150.0)
+    got = paired_stat([102.0, 114.0, 96.0], [100.0, 110.0, 90.0])
+    assert all(got[k] == pytest.approx(want[k]) for k in ("n", "diff", "sem", "d", "p"))
+
+    studies = _claim_against_null(tmp_path, 'measure = "fractal_dimension"\nexpect = "less"')
+
+    def fitted(values):
+        s = _started(values, [1.0, 2.0, 3.0], measure="fractal_dimension")
+        s["measures"]["fractal_dimension_err"] = {"values": [[None, 1.0]] * 3}
+        return s
+
+    table = claim_rows(studies, {"a": fitted([2.4, 2.5, 2.6]), "b": fitted([1.9, 2.1, 2.0])})
+    words = (
+        "depends on the fits' own errors: not distinguished from the null model (+0.6 SE; paired over 3 seeds) "
+        "with each seed's fit error, opposite to the claim (+8.7 SE from the null model; paired over 3 seeds, "
+        "p = 0.013) by the spread between seeds alone"
+    )
+    assert words in table, table
+
+
+def _window_summary(rods, flags, circuit=True):
+    """A summary at t = 0, 300, 450 and 600 from the same rods per seed (t = 0: no filament, the
+    fraction within R_plas 0.1 k for seed k): ``rods`` in current-carrying (or, without a circuit,
+    gap-spanning) filaments and the ``current`` flags per seed at t = 300, 450, 600."""
+    return {
+        "times": [0.0, 300.0, 450.0, 600.0],
+        "seeds": [{"seed": k + 1, "t_end": 600.0} for k in range(len(rods))],
+        "n_seeds": len(rods),
+        "current": [[0.0, *f] for f in flags],
+        "measures": {
+            "filament_rods": {"values": [[0.0, *r] for r in rods]},
+            "total_current": {"values": [[0.0, *(1.0 * x for x in f)] if circuit else [None] * 4 for f in flags]},
+            "inside_R_plas": {"values": [[0.1 * (k + 1), 0.5, 0.5, 0.5] for k in range(len(rods))]},
+        },
+    }
+
+
+def test_a_windowed_claim_against_a_null_with_none_and_the_split_of_the_currents_row(tmp_path):
+    """Seeds with 900 rods in current at 2 of 3 times, 800 at all, 1000 at 1: window means 600, 800 and
+    333.3. Against a null model with none in any seed (its rods never touch): paired over 3 seeds, mean
+    577.8 ± 234.1 / sqrt 3 = 135.2, d = +4.3, p = 2 t_2.sf(4.27) = 0.051, worded as nonzero where the null
+    model is zero by construction, not as the claim reproduced, and not split. Against a null without a
+    circuit whose filaments span the gap at every time (500, 600, 400): differences 100, 200, -66.7, d =
+    +1.0, p = 0.42; the row splits each side's window mean into the share of the times at which the
+    seeds carry current (2/3, 1, 1/3: 0.667 ± 0.19) and the count over those times alone (900, 800, 1000:
+    900 ± 58), and the null's (1 ± 0; 500 ± 58)."""
+    from selfas_graph.studies.verdicts import ZERO_NULL, claim_rows
+
+    studies = _claim_against_null(tmp_path, 'measure = "filament_rods"\nwindow = [300.0, 600.0]')
+    scene = _window_summary([[0.0, 900.0, 900.0], [800.0] * 3, [0.0, 0.0, 1000.0]], [[0, 1, 1], [1, 1, 1], [0, 0, 1]])
+    free = _window_summary([[0.0] * 3] * 3, [[0, 0, 0]] * 3)
+    row = claim_rows(studies, {"a": scene, "b": free}).splitlines()[-1]
+    assert f"| {ZERO_NULL}; +4.3 SE, paired over 3 seeds, p = 0.051 |" in row and "split" not in row, row
+    assert "reproduced" not in row
+    plain = _window_summary([[500.0] * 3, [600.0] * 3, [400.0] * 3], [[1, 1, 1]] * 3, circuit=False)
+    row = claim_rows(studies, {"a": scene, "b": plain}).splitlines()[-1]
+    cells = [c.strip() for c in row.split("|")]
+    assert cells[4] == (
+        "578 ± 135 (3); at t = 600: 3 of 3 seeds carry current: median 900 [800 to 1000], mean 900 ± 58 (3); "
+        "split: share of the window's 3 times at which the seeds carry current: 0.667 ± 0.19 (3); the measure "
+        "over those times alone: 900 ± 58 (3)"
+    ), cells[4]
+    assert cells[6] == (
+        "500 ± 58 (3); split: share of the window's 3 times at which the seeds span the gap (no circuit): "
+        "1 ± 0 (3); the measure over those times alone: 500 ± 58 (3)"
+    ), cells[6]
+    assert cells[7] == "not distinguished from the null model (+1.0 SE; paired over 3 seeds, p = 0.42)", cells[7]
