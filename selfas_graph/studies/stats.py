@@ -153,7 +153,7 @@ def current_flags(summary, t):
         known = np.isfinite(flag)
     else:  # an older summary: the total current is the flag
         flag = np.abs(cur)
-        known = np.isfinite(cur) | ~circuit
+        known = np.isfinite(cur) | (not circuit)  # a bool array (``~`` of a Python bool is an int)
     return np.nan_to_num(flag) > 0, known, circuit
 
 

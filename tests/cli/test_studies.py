@@ -852,6 +852,56 @@ def test_the_convergence_table_pairs_the_seeds_and_a_grouped_measure_the_seeds_w
     assert "not decided (too few seeds)" in rods  # no measure of this summary can be compared
 
 
+def test_a_fitted_dimension_in_the_convergence_table_is_read_with_and_without_its_fit_errors():
+    """Fit errors of 0.5 on every seed swamp a shift of 0.3 that every pair shows within 0.02: with
+    them, SE = sqrt(s_d^2 / 5 + 0.5 / 5) = 0.32 and no difference; by the seeds alone +0.306 over an SE
+    of 0.005, which moves the statistics, so the conclusion depends on the fits' own errors."""
+    from types import SimpleNamespace
+
+    from selfas_graph.studies.convergence import convergence_rows, paired_difference
+
+    def summary(dims):
+        return {
+            "times": [100.0],
+            "seeds": [{"seed": k + 1, "t_end": 100.0} for k in range(5)],
+            "n_seeds": 5,
+            "measures": {
+                "fractal_dimension": {"values": [[v] for v in dims]},
+                "fractal_dimension_err": {"values": [[0.5]] * 5},
+            },
+        }
+
+    base = summary([2.0, 2.1, 2.2, 2.3, 2.4])
+    setting = summary([2.31, 2.39, 2.52, 2.61, 2.70])
+    with_fits = paired_difference(setting, base, "fractal_dimension", 100.0)
+    alone = paired_difference(setting, base, "fractal_dimension", 100.0, fit_errors=False)
+    assert with_fits["diff"] == alone["diff"] == pytest.approx(0.306)
+    assert with_fits["sem"] == pytest.approx(math.sqrt(np.var([0.31, 0.29, 0.32, 0.31, 0.30], ddof=1) / 5 + 0.1))
+    assert with_fits["p"] > 0.3 and alone["p"] < 1e-5
+    assert alone["b"]["sem"] == pytest.approx(np.std([2.0, 2.1, 2.2, 2.3, 2.4], ddof=1) / math.sqrt(5))
+    st = SimpleNamespace(section="convergence", name="v", null_of="base", title="a knob", t_end=100.0)
+    studies = SimpleNamespace(studies={"v": st}, since=lambda name: "")
+    rows = convergence_rows(studies, {"base": base, "v": setting})
+    assert "; seeds alone: 0.306 ± " in rows and "(seeds alone: ±" in rows
+    assert "depends on the fits' own errors: no difference detected at this size" in rows
+    assert "moves these statistics (mass-radius dimension of the largest structure: p = " in rows
+
+
+def test_an_older_summarys_current_flags_are_known_only_where_its_total_current_is():
+    """A summary from before the ``current`` flags: the total current is the flag, known where it is a
+    number (a bool array: ``~`` of Python's bool is an int, which made every seed known)."""
+    from selfas_graph.studies.stats import current_flags
+
+    s = {"times": [1.0], "seeds": [{"seed": k} for k in (1, 2, 3)], "measures": {}}
+    s["measures"]["total_current"] = {"values": [[2.0], [None], [0.0]]}
+    active, known, circuit = current_flags(s, 1.0)
+    assert known.dtype == bool and known.tolist() == [True, False, True] and circuit
+    assert active.tolist() == [True, False, False]
+    s["measures"]["total_current"] = {"values": [[None]] * 3}  # no circuit: every seed known, none active
+    active, known, circuit = current_flags(s, 1.0)
+    assert known.dtype == bool and known.all() and not circuit and not active.any()
+
+
 def test_holm_and_the_detectable_difference_by_hand():
     """Holm's adjustment of (0.01, 0.04, NaN, 0.03): sorted 0.01, 0.03, 0.04 times 3, 2, 1 and kept
     rising: 0.03, 0.06, 0.06. The detectable difference tends to 2 + z_0.8 = 2.84 SE at a 2-SE screen
