@@ -10,7 +10,6 @@
 
 from __future__ import annotations
 
-import math
 import operator
 import time
 
@@ -19,7 +18,7 @@ import numpy as np
 from ..parallel import RowBlocks
 from . import events as ev
 from . import operations as op
-from .circuitlog import circuit_log_array
+from . import restart
 from .compiled import advance, compiled_steps_for
 from .health import BOND_BREAK, FORCE_OUT_OF_SCALE, MAX_STEP_DISPLACEMENT, HealthChecks, NumericalFailure, refuse_after
 from .integrator import AdamsBashforth4
@@ -157,39 +156,15 @@ class Simulation:
         bond error, the energy reference, the run's events, its circuit log and the time of its first
         short circuit (NaN: none yet).
         """
-        snap = self.state.state_dict()
-        snap.update(self.integrator.state_dict())
-        snap.update(
-            max_bond_error=self.health.max_bond_error,
-            energy0=np.nan if self.observe.energy0 is None else self.observe.energy0,
-            events=ev.event_array(self.events),
-            circuit_log=circuit_log_array(self.circuit_log),
-            short_circuit_time=np.nan if self.short_circuit_time is None else self.short_circuit_time,
-        )
-        if self.network is not None:
-            snap.update(self.network.state_dict())  # contacts, flags, filament heights, the rod currents
-        snap.update(self.force_field.state_dict())  # neighbour lists, held slow forces
-        return snap
+        return restart.snapshot(self)
 
     @classmethod
-    def from_snapshot(cls, params: Parameters, snap: dict, timing: bool = False, comm=None) -> "Simulation":
-        """Rebuild a simulation from :meth:`snapshot` (see there)."""
-        state = State.from_state_dict(snap)
-        sim = cls(params, state=state, timing=timing, comm=comm, check_state=False)
-        sim.integrator.load_state_dict(snap)
-        sim.health.max_bond_error = float(snap["max_bond_error"])
-        e0 = float(snap["energy0"])
-        sim.observe.energy0 = None if math.isnan(e0) else e0
-        sct = float(snap["short_circuit_time"])
-        sim.short_circuit_time = None if math.isnan(sct) else sct
-        sim.events = [tuple(r.item()) for r in np.asarray(snap["events"])]
-        sim.circuit_log = [tuple(r.item()) for r in snap.get("circuit_log", ())]  # older checkpoints: none
-        if sim.network is not None:
-            sim.network.load_state_dict(snap)
-        ff = sim.force_field
-        ff.bind(state.position, state.velocity)
-        ff.load_state_dict(snap)  # neighbour lists, held slow forces (missing ones: rebuilt)
-        return sim
+    def from_snapshot(
+        cls, params: Parameters, snap: dict, timing: bool = False, comm=None, new_dt: bool = False
+    ) -> "Simulation":
+        """Rebuild a simulation from :meth:`snapshot` (see there), at the snapshot's time step: another
+        ``integrator.dt`` is refused (ValueError) unless ``new_dt`` (the history then forgotten: RK4 again)."""
+        return restart.from_snapshot(cls, params, snap, timing=timing, comm=comm, new_dt=new_dt)
 
     @property
     def dt(self) -> float:

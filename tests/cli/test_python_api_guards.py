@@ -229,9 +229,23 @@ def test_a_snapshot_continued_at_another_time_step_counts_time_on_from_its_own()
     same = sg.Simulation.from_snapshot(PARAMS, snap)
     same.step(1)
     assert same.state.time == 0.0 + 101 * 1e-3  # the run's own origin, bit for bit as an uninterrupted run
-    other = sg.Simulation.from_snapshot(PARAMS.replace(integrator={"dt": 2e-3}), snap)
+    other = sg.Simulation.from_snapshot(PARAMS.replace(integrator={"dt": 2e-3}), snap, new_dt=True)
     other.step(1)
     assert other.state.step == 101 and other.state.time == 0.1 + 2e-3
+    assert other.integrator.count == 1  # the history at dt = 1e-3 forgotten: the branch starts with RK4
+
+
+def test_a_snapshot_is_not_continued_at_another_time_step_unasked():
+    """A snapshot holds the Adams-Bashforth history of derivatives one dt apart: continued at another dt it
+    was extrapolated as if they were the new dt apart, without a word. Refused now, naming both time steps;
+    ``new_dt=True`` (`bench tradeoff`'s branches) forgets the history, and a snapshot with none (step 0) is
+    taken as it is."""
+    sim = column()
+    sim.run(0.1)
+    with pytest.raises(ValueError, match=r"made with integrator.dt = 0.001, the parameters have 0.002.*new run"):
+        sg.Simulation.from_snapshot(PARAMS.replace(integrator={"dt": 2e-3}), sim.snapshot())
+    fresh = column().snapshot()
+    assert sg.Simulation.from_snapshot(PARAMS.replace(integrator={"dt": 2e-3}), fresh).dt == 2e-3
 
 
 @pytest.mark.parametrize("name", ["scene.toml", "traj.gsd", "r.checkpoint.h5", "r.failure.h5", "saved.h5"])
