@@ -22,6 +22,7 @@ from . import restart
 from .compiled import advance, compiled_steps_for
 from .health import BOND_BREAK, FORCE_OUT_OF_SCALE, MAX_STEP_DISPLACEMENT, HealthChecks, NumericalFailure, refuse_after
 from .integrator import AdamsBashforth4
+from .interrupt import DeferredCtrlC
 from .network import Network
 from .observables import Observables, energy_scale
 from .operations import RunInterrupted, RunSummary
@@ -220,8 +221,10 @@ class Simulation:
             self.observe.record_initial_energy()
         done = 0
         try:
-            while done < n:
-                done += advance(self, n - done)
+            with DeferredCtrlC() as ctrl_c:  # a Ctrl-C stops after the step it lands in (.interrupt)
+                while done < n:
+                    done += advance(self, n - done)
+                    ctrl_c.check()
         except NumericalFailure as exc:
             self.failure = exc
             raise
@@ -292,6 +295,9 @@ class Simulation:
         stop : callable() -> bool, optional
             When true, pending data are flushed, a checkpoint is written and :class:`RunInterrupted` raised
             (on Ctrl-C and on a NumericalFailure the pending data are flushed too, and the writer told why).
+            A Ctrl-C (SIGINT in the main thread, with Python's own handler in place) stops the run after the
+            step it lands in and the operations on that step (:mod:`.interrupt`), then raises
+            ``KeyboardInterrupt``: ``run`` again continues with the steps the run would have taken.
         check_every : int
             ``checkpointer`` and ``stop`` are asked after the steps that are multiples of this (default
             every step; ``integrator.slow_every`` lets the fast steps between run in one call).
@@ -309,36 +315,42 @@ class Simulation:
         self.health.keep_last_good(self.snapshot())
         self._ops = ops
         t0 = time.perf_counter()
-        try:
-            for operation in ops:
-                operation.start(self, n_steps)
-            (per_step, rows), i = op.per_step_rows(ops), 0
-            while i < n_steps:
-                # the steps up to the next one after which an operation acts, compiled where they can be
-                i += advance(self, op.steps_to_next_act(ops, self.state.step, n_steps - i), rows)
+        # a Ctrl-C (SIGINT under Python's own handler) is raised after the step it lands in and the operations
+        # on that step, frames among them (.interrupt): a run continued from there takes the same steps
+        with DeferredCtrlC() as ctrl_c:
+            try:
                 for operation in ops:
-                    if operation in per_step:
-                        continue
-                    if operation.trigger(self.state.step) or (operation.final and i == n_steps):
-                        operation.act(self, i, n_steps)
-                summary.steps = i
-            for operation in ops:
-                operation.finish(self)
-        except BaseException as exc:  # what the steps before it buffered is written (Ctrl-C, a failure, a bug)
-            if isinstance(exc, NumericalFailure):
-                self.failure = exc
-            if not isinstance(exc, OSError):  # a failed write: writing again would fail again
-                op.stopped(ops, self, exc)
-            raise
-        finally:
-            summary.wall_seconds = time.perf_counter() - t0
-            self._ops = ()
+                    operation.start(self, n_steps)
+                ctrl_c.check()
+                (per_step, rows), i = op.per_step_rows(ops), 0
+                while i < n_steps:
+                    # the steps up to the next one after which an operation acts, compiled where they can be
+                    i += advance(self, op.steps_to_next_act(ops, self.state.step, n_steps - i), rows)
+                    for operation in ops:
+                        if operation in per_step:
+                            continue
+                        if operation.trigger(self.state.step) or (operation.final and i == n_steps):
+                            operation.act(self, i, n_steps)
+                    summary.steps = i
+                    ctrl_c.check()
+                for operation in ops:
+                    operation.finish(self)
+            except BaseException as exc:  # what the steps before it buffered is written (Ctrl-C, a failure, a bug)
+                if isinstance(exc, NumericalFailure):
+                    self.failure = exc
+                if not isinstance(exc, OSError):  # a failed write: writing again would fail again
+                    op.stopped(ops, self, exc)
+                raise
+            finally:
+                summary.wall_seconds = time.perf_counter() - t0
+                self._ops = ()
         summary.t_end, summary.max_bond_error = self.state.time, self.health.max_bond_error
         frames = next((o for o in ops if isinstance(o, op.FrameWriter)), None)
         obs = frames.last_observables if frames is not None and n_steps else None
         obs = obs if obs is not None else self.observables()
         summary.energy_balance, summary.energy_scale = float(obs["energy_balance"]), float(energy_scale(obs))
         summary.frames = writer.n_frames if writer is not None else 0
+        ctrl_c.check()  # one that came after the last step: the run is whole, the caller still stops
         return summary
 
     def flush_operations(self) -> None:
