@@ -44,6 +44,7 @@ from .pending_rows import PendingRows
 from .run_provenance import run_provenance
 from .trim import apply_plan, trim_plan, trim_safely
 from .whole_writes import WholeWrites, all_or_nothing
+from .writer_binding import bind, check_simulation
 
 
 def _later_rows_message(f, path, step) -> str:
@@ -61,7 +62,7 @@ def _later_rows_message(f, path, step) -> str:
 
 
 class RunWriter(WholeWrites, PendingRows):
-    """Writes frames and observables of one run.
+    """Writes frames and observables of one run, of one simulation (:meth:`check_continues`).
 
     Parameters
     ----------
@@ -83,6 +84,9 @@ class RunWriter(WholeWrites, PendingRows):
         the frame before (MDAnalysis' ``Timestep.dt``): this interval, the first frame's too, but
         for a frame at a run's end time off the interval's grid (or a chunk's end in ``sim.run``).
     """
+
+    #: a weak reference to the simulation it takes frames from (:mod:`.writer_binding`), None before the first
+    _simulation = None
 
     def __init__(
         self,
@@ -318,11 +322,14 @@ class RunWriter(WholeWrites, PendingRows):
                 f"around every sim.run), or continue the file with RunWriter.reopen"
             )
 
-    def check_continues(self, step, position_shape) -> None:
-        """Refuse, before a run takes its first step, a simulation whose frames this file cannot take: the
-        writer closed, the file's tips of another count, its last frame after ``step`` (another simulation,
-        or one started again), or a file reopened (:meth:`reopen`) to continue after another step."""
+    def check_continues(self, sim) -> None:
+        """Refuse, before a run takes its first step, a simulation ``sim`` whose frames this file cannot take:
+        the writer closed, the file's tips of another count, its last frame after the simulation's step (one
+        started again), a file reopened (:meth:`reopen`) to continue after another step, or another simulation
+        than the one the writer was made for or last took frames from (:mod:`.writer_binding`: other
+        parameters than the file's apart from the end time, another step or other positions)."""
         self._check_open()
+        step, position_shape = sim.state.step, sim.state.position.shape
         shape = self._elements["position"][2].shape[1:]
         if tuple(position_shape) != shape:
             raise ValueError(
@@ -341,6 +348,7 @@ class RunWriter(WholeWrites, PendingRows):
                 f"{step}: a writer takes the frames of the simulation it was made for (RunWriter.for_simulation "
                 f"for another)"
             )
+        check_simulation(self, sim)
         self._continues_from = None
 
     def check_space(self):
@@ -509,7 +517,7 @@ class RunWriter(WholeWrites, PendingRows):
             provenance = run_provenance(sim, getattr(sim, "scenario", None), shlex.join(sys.argv), uuid.uuid4().hex)
         if author is not None:
             provenance["author"] = author
-        return cls(
+        writer = cls(
             path,
             sim.state.n_tips,
             sim.state.tip_charge,
@@ -521,6 +529,8 @@ class RunWriter(WholeWrites, PendingRows):
             rod_length=sim.state.rod_length,
             rod_resistance=sim.state.rod_resistance,
         )
+        bind(writer, sim)  # the simulation whose frames it takes (.writer_binding)
+        return writer
 
     def __enter__(self):
         return self

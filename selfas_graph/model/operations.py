@@ -218,7 +218,7 @@ def _check_arguments(sim, writer, progress, checkpointer, stop, check_every, pro
             f"got {writer!r}"
         )
     if writer is not None and hasattr(writer, "check_continues"):
-        writer.check_continues(sim.state.step, sim.state.position.shape)
+        writer.check_continues(sim)
 
 
 class PerStepRows(Operation):

@@ -321,3 +321,53 @@ def test_python_mistakes_are_named_by_argument(tmp_path):
     changed = dataclasses.replace(loaded, params=loaded.params.replace(rods={"count": 30}))
     with pytest.raises(EnsembleError, match="params differ from what its file and overrides give"):
         Ensemble(changed, 1, tmp_path / "e")  # it ran the file's 40 rods without a word
+
+
+def test_a_writer_refuses_the_frames_of_another_simulation(tmp_path):
+    """A writer made for b took a's frames (file: b's seed and charges, a's positions; status "finished"),
+    and a third simulation's after a jump. Refused now before any step, naming what differs."""
+    b = column()
+    a = sg.Simulation(PARAMS.replace(scenario={"seed": 2}), state=b.state)
+    with sg.RunWriter.for_simulation(b, tmp_path / "r.h5") as w:
+        with pytest.raises(ValueError, match="scenario.seed is 1 in the one it was made for and 2 in this one"):
+            a.run(0.1, writer=w)
+        assert a.state.step == 0 and w.n_frames == 0
+        b.run(0.1, writer=w)
+        c = column()
+        c.run(0.2)
+        with pytest.raises(ValueError, match="takes the frames of another simulation .the step is 100 there and 200"):
+            c.run(0.3, writer=w)
+        b.run(0.2, writer=w)  # its own frames, in another call
+    with sg.RunFile(tmp_path / "r.h5") as run:
+        assert run.step.tolist() == [0, 50, 100, 150, 200]
+        assert np.array_equal(run.position(), b.state.position)
+
+
+def test_a_writer_takes_the_continuation_of_its_simulation(tmp_path):
+    """What continues the file is taken: a copy restored from the simulation's snapshot, with the writer open
+    or reopened at its step, also once the simulation it was made for is gone; a reopened file refuses a
+    simulation of other parameters than it states (the end time aside) or whose time does not follow it."""
+    sim = column()
+    path = tmp_path / "r.h5"
+    with sg.RunWriter.for_simulation(sim, path) as w:
+        sim.run(0.1, writer=w)
+        copy = sg.Simulation.from_snapshot(PARAMS, sim.snapshot())
+        copy.run(0.15, writer=w)
+        with pytest.raises(ValueError, match="last frame is at step 150, after this simulation.s step 100"):
+            sim.run(0.2, writer=w)  # the writer now takes the copy's frames
+    snap = copy.snapshot()
+    del sim, copy
+    with sg.RunWriter.reopen(path, 150) as w:
+        other = sg.Simulation.from_snapshot(PARAMS.replace(circuit={"delta_J0": 3.0}), snap)
+        with pytest.raises(ValueError, match="circuit.delta_J0 is 2.0 in the file and 3.0 in the simulation"):
+            other.run(0.2, writer=w)
+        shifted = sg.Simulation(PARAMS, state=dataclasses.replace(other.state, time=0.5))
+        with pytest.raises(ValueError, match="its time 0.5 at step 150 does not follow the last frame's"):
+            shifted.run(0.55, writer=w)
+        moved = dataclasses.replace(other.state, position=other.state.position + 1e-3)
+        with pytest.raises(ValueError, match="its positions at step 150 are not those of the file's last frame"):
+            sg.Simulation(PARAMS, state=moved).run(0.2, writer=w)
+        again = sg.Simulation.from_snapshot(PARAMS.replace(run={"t_end": 0.2}), snap)
+        again.run(writer=w)
+    with sg.RunFile(path) as run:
+        assert run.step.tolist() == [0, 50, 100, 150, 200] and run.status == "finished"
