@@ -87,6 +87,8 @@ class RunWriter(WholeWrites, PendingRows):
 
     #: a weak reference to the simulation it takes frames from (:mod:`.writer_binding`), None before the first
     _simulation = None
+    #: whether the end time the file stated when opened needs no keeping (a new file's) or is kept already
+    _end_kept = True
 
     def __init__(
         self,
@@ -252,6 +254,7 @@ class RunWriter(WholeWrites, PendingRows):
         self.stopped_by = str(f[layout.PROVENANCE].attrs.get("status", "interrupted"))
         f[layout.PROVENANCE].attrs["status"] = "running"
         self._continues_from = step
+        self._end_kept = False  # the end time the file states, kept in t_end_before when a run changes it
         self._resumed_with(mpi_ranks)
         if t_end is not None:
             self._new_end_time(float(t_end))
@@ -283,7 +286,8 @@ class RunWriter(WholeWrites, PendingRows):
 
     def _new_end_time(self, t_end):
         """State the continuation's end time in ``parameters_json`` (the only parameter a resume may
-        change) and keep each earlier one, oldest first, in ``t_end_before`` (JSON)."""
+        change) and keep each earlier one, oldest first, in ``t_end_before`` (JSON): the one the file stated
+        when it was reopened, once (a run from Python in chunks replaces its own chunks' end times)."""
         attrs = self.f[layout.PROVENANCE].attrs
         params = json.loads(attrs["parameters_json"])
         before = float(params["run"]["t_end"])
@@ -291,7 +295,16 @@ class RunWriter(WholeWrites, PendingRows):
             return
         params["run"]["t_end"] = t_end
         attrs["parameters_json"] = json.dumps(params)
-        attrs["t_end_before"] = json.dumps(json.loads(attrs.get("t_end_before", "[]")) + [before])
+        if not self._end_kept:
+            attrs["t_end_before"] = json.dumps(json.loads(attrs.get("t_end_before", "[]")) + [before])
+            self._end_kept = True
+
+    def run_to(self, t_end) -> None:
+        """State ``t_end``, the end time of the run that writes to the file from now on, in ``parameters_json``,
+        as ``simulate`` states the one it runs to (docs/output.md): a file written by ``sim.run(2.5, writer=w)``
+        states 2.5, not the scenario's ``run.t_end``. Called by the run (``FrameWriter.start``)."""
+        self._check_open()
+        self._new_end_time(float(t_end))
 
     def reserve(self) -> int:
         """Bytes the next frame may need at most: one new chunk of every growable dataset, and a margin

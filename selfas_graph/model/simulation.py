@@ -309,7 +309,9 @@ class Simulation:
         n_steps = self.steps_to(t_end)
         every = self.frame_steps
         summary = RunSummary(t_start=self.state.time)
-        ops = op.run_operations(self, writer, every, n_steps, progress, progress_every, checkpointer, stop, check_every)
+        ops = op.run_operations(
+            self, writer, every, n_steps, progress, progress_every, checkpointer, stop, check_every, t_end
+        )
         if self.observe.energy0 is None:
             self.observe.record_initial_energy()
         self.health.keep_last_good(self.snapshot())

@@ -371,3 +371,24 @@ def test_a_writer_takes_the_continuation_of_its_simulation(tmp_path):
         again.run(writer=w)
     with sg.RunFile(path) as run:
         assert run.step.tolist() == [0, 50, 100, 150, 200] and run.status == "finished"
+
+
+def test_a_file_written_from_python_states_the_end_time_it_was_run_to(tmp_path):
+    """``parameters_json`` states the end time the run was last started or continued with (docs/output.md), as
+    ``simulate`` writes it; a file written by ``sim.run(0.1)`` kept the scenario's ``run.t_end``. Chunks
+    state the last; a reopened file keeps the end time it stated in ``t_end_before``."""
+    import json
+
+    sim = column()
+    assert sim.params.run.t_end != 0.15
+    path = tmp_path / "r.h5"
+    with sg.RunWriter.for_simulation(sim, path) as w:
+        sim.run(0.1, writer=w)
+        sim.run(np.float32(0.15), writer=w)
+    with sg.RunFile(path) as run:
+        assert run.parameters["run"]["t_end"] == 0.15 and "t_end_before" not in run.meta
+    with sg.RunWriter.reopen(path, sim.state.step) as w:
+        sim.run(0.2, writer=w)
+        sim.run(0.25, writer=w)
+    with sg.RunFile(path) as run:
+        assert run.parameters["run"]["t_end"] == 0.25 and json.loads(run.meta["t_end_before"]) == [0.15]
