@@ -138,15 +138,15 @@ def _graph_of_frame(run, k):
     return run.frame(k).graph
 
 
-def frame_claims(run, frame=-1, loops=True, t=None) -> dict[str, float]:
+def frame_claims(run, frame=None, loops=True, t=None) -> dict[str, float]:
     """The claim measures of one frame of a run file, as floats (NaN where undefined).
 
     Parameters
     ----------
     run : selfas_graph.io.h5md.RunFile
         An open run file.
-    frame : int
-        Frame index; negative counts from the end.
+    frame : int, optional
+        Frame index; negative counts from the end (default: the last frame).
     loops : bool
         Compute the loop lengths too.
     t : float, optional
@@ -159,7 +159,7 @@ def frame_claims(run, frame=-1, loops=True, t=None) -> dict[str, float]:
     """
     if not hasattr(run, "frame_index"):
         raise TypeError(f"frame_claims(run, ...): an open RunFile (with RunFile(path) as run: ...), got {run!r}")
-    k = run.frame_index(None, t=t) if t is not None else run.frame_index(frame)
+    k = run.frame_index(frame, t=t)  # frame and t both given: refused, as RunFile.position does
     out = {"time": float(run.time[k]), "step": float(run.step[k])}
     g = _graph_of_frame(run, k)
     if g is None:

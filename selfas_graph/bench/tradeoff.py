@@ -206,8 +206,8 @@ def run_once(path, overrides, duration, snap):
         sc = load_scenario(path, overrides=overrides)
     except ScenarioError as exc:
         return {"failed": "refused: " + str(exc).splitlines()[-1].strip()}
-    sim = Simulation.from_snapshot(sc.params, snap)
-    sim.integrator.reset_history()  # the history was taken with the base dt; start afresh with RK4
+    # the history was taken with the base dt; a branch at another one starts afresh with RK4
+    sim = Simulation.from_snapshot(sc.params, snap, new_dt=True)
     n_old = len(sim.events)
     t_start, step_start = sim.state.time, sim.state.step
     balance0 = sim.observables()["energy_balance"]

@@ -48,6 +48,9 @@ class PendingRows:
             self.write_circuit_log(circuit_log[self.circuit_rows_written :])
             self.circuit_rows_written = len(circuit_log)
 
+    def run_to(self, t_end) -> None:
+        """The end time of the run writing from now on (a :class:`~.run_writer.RunWriter` states it in the file)."""
+
     def state_dict(self) -> dict:
         """Frames, events and circuit-log rows written, and the per-step rows not written yet."""
         steps, values = self._pending

@@ -28,7 +28,6 @@ from .h5md_format import (
     UNIT_SYSTEM,
     OutputExistsError,
     RunFileError,
-    _append,
     _box,
     _charges,
     _fixed,
@@ -44,6 +43,8 @@ from .h5md_format import (
 from .pending_rows import PendingRows
 from .run_provenance import run_provenance
 from .trim import apply_plan, trim_plan, trim_safely
+from .whole_writes import WholeWrites, all_or_nothing
+from .writer_binding import bind, check_simulation
 
 
 def _later_rows_message(f, path, step) -> str:
@@ -60,8 +61,8 @@ def _later_rows_message(f, path, step) -> str:
     )
 
 
-class RunWriter(PendingRows):
-    """Writes frames and observables of one run.
+class RunWriter(WholeWrites, PendingRows):
+    """Writes frames and observables of one run, of one simulation (:meth:`check_continues`).
 
     Parameters
     ----------
@@ -83,6 +84,11 @@ class RunWriter(PendingRows):
         the frame before (MDAnalysis' ``Timestep.dt``): this interval, the first frame's too, but
         for a frame at a run's end time off the interval's grid (or a chunk's end in ``sim.run``).
     """
+
+    #: a weak reference to the simulation it takes frames from (:mod:`.writer_binding`), None before the first
+    _simulation = None
+    #: whether the end time the file stated when opened needs no keeping (a new file's) or is kept already
+    _end_kept = True
 
     def __init__(
         self,
@@ -248,6 +254,7 @@ class RunWriter(PendingRows):
         self.stopped_by = str(f[layout.PROVENANCE].attrs.get("status", "interrupted"))
         f[layout.PROVENANCE].attrs["status"] = "running"
         self._continues_from = step
+        self._end_kept = False  # the end time the file states, kept in t_end_before when a run changes it
         self._resumed_with(mpi_ranks)
         if t_end is not None:
             self._new_end_time(float(t_end))
@@ -279,7 +286,8 @@ class RunWriter(PendingRows):
 
     def _new_end_time(self, t_end):
         """State the continuation's end time in ``parameters_json`` (the only parameter a resume may
-        change) and keep each earlier one, oldest first, in ``t_end_before`` (JSON)."""
+        change) and keep each earlier one, oldest first, in ``t_end_before`` (JSON): the one the file stated
+        when it was reopened, once (a run from Python in chunks replaces its own chunks' end times)."""
         attrs = self.f[layout.PROVENANCE].attrs
         params = json.loads(attrs["parameters_json"])
         before = float(params["run"]["t_end"])
@@ -287,7 +295,16 @@ class RunWriter(PendingRows):
             return
         params["run"]["t_end"] = t_end
         attrs["parameters_json"] = json.dumps(params)
-        attrs["t_end_before"] = json.dumps(json.loads(attrs.get("t_end_before", "[]")) + [before])
+        if not self._end_kept:
+            attrs["t_end_before"] = json.dumps(json.loads(attrs.get("t_end_before", "[]")) + [before])
+            self._end_kept = True
+
+    def run_to(self, t_end) -> None:
+        """State ``t_end``, the end time of the run that writes to the file from now on, in ``parameters_json``,
+        as ``simulate`` states the one it runs to (docs/output.md): a file written by ``sim.run(2.5, writer=w)``
+        states 2.5, not the scenario's ``run.t_end``. Called by the run (``FrameWriter.start``)."""
+        self._check_open()
+        self._new_end_time(float(t_end))
 
     def reserve(self) -> int:
         """Bytes the next frame may need at most: one new chunk of every growable dataset, and a margin
@@ -318,11 +335,14 @@ class RunWriter(PendingRows):
                 f"around every sim.run), or continue the file with RunWriter.reopen"
             )
 
-    def check_continues(self, step, position_shape) -> None:
-        """Refuse, before a run takes its first step, a simulation whose frames this file cannot take: the
-        writer closed, the file's tips of another count, its last frame after ``step`` (another simulation,
-        or one started again), or a file reopened (:meth:`reopen`) to continue after another step."""
+    def check_continues(self, sim) -> None:
+        """Refuse, before a run takes its first step, a simulation ``sim`` whose frames this file cannot take:
+        the writer closed, the file's tips of another count, its last frame after the simulation's step (one
+        started again), a file reopened (:meth:`reopen`) to continue after another step, or another simulation
+        than the one the writer was made for or last took frames from (:mod:`.writer_binding`: other
+        parameters than the file's apart from the end time, another step or other positions)."""
         self._check_open()
+        step, position_shape = sim.state.step, sim.state.position.shape
         shape = self._elements["position"][2].shape[1:]
         if tuple(position_shape) != shape:
             raise ValueError(
@@ -341,6 +361,7 @@ class RunWriter(PendingRows):
                 f"{step}: a writer takes the frames of the simulation it was made for (RunWriter.for_simulation "
                 f"for another)"
             )
+        check_simulation(self, sim)
         self._continues_from = None
 
     def check_space(self):
@@ -349,6 +370,7 @@ class RunWriter(PendingRows):
         self._check_open()
         check_room(self.path, self.reserve())
 
+    @all_or_nothing
     def write_frame(self, step, t, position, velocity, observables: dict):
         """Append one frame (positions, velocities, observables) and flush to disk."""
         self.check_space()
@@ -368,13 +390,13 @@ class RunWriter(PendingRows):
         for name, arr in (("position", position), ("velocity", velocity)):
             if name in self._elements:
                 s, tt, v = self._elements[name]
-                _append(s, step)
-                _append(tt, t)
-                _append(v, arr)
+                self._add(s, step)
+                self._add(tt, t)
+                self._add(v, arr)
         for name, value in observables.items():
             value = np.asarray(value, dtype=np.float64)
             if name not in self._obs:
-                g = self.observables.create_group(name)
+                g = self._created(self.observables.create_group(name))
                 self._obs[name] = (
                     _growable(g, "step", (), "<i8"),
                     _growable(g, "time", (), "<f8"),
@@ -383,37 +405,42 @@ class RunWriter(PendingRows):
                 _set_unit(self._obs[name][1], TIME)
                 _set_unit(self._obs[name][2], observable_unit(name))
             s, tt, v = self._obs[name]
-            _append(s, step)
-            _append(tt, t)
-            _append(v, value)
+            self._add(s, step)
+            self._add(tt, t)
+            self._add(v, value)
         self.n_frames += 1
         self._last_time = float(t)
 
+    @all_or_nothing
     def write_per_step(self, steps, values):
         """Append a per-step series (the bond error of every step since the last call)."""
         self.check_space()
         if len(steps):
-            _append(self._per_step[0], np.asarray(steps, dtype=np.int64))
-            _append(self._per_step[1], np.asarray(values, dtype=np.float64))
+            self._add(self._per_step[0], np.asarray(steps, dtype=np.int64))
+            self._add(self._per_step[1], np.asarray(values, dtype=np.float64))
 
+    @all_or_nothing
     def write_events(self, rows):
         """Append event rows ``(step, time, kind, a, b)``."""
         self._check_open()
         if layout.EVENTS not in self.f:
-            ds = self.f.create_dataset(
-                layout.EVENTS, shape=(0,), maxshape=(None,), dtype=EVENT_FILE_DTYPE, chunks=(4096,)
+            ds = self._created(
+                self.f.create_dataset(
+                    layout.EVENTS, shape=(0,), maxshape=(None,), dtype=EVENT_FILE_DTYPE, chunks=(4096,)
+                )
             )
             ds.attrs["kind_names"] = json.dumps({int(k): v for k, v in KIND_NAMES.items()})
             ds.attrs["conductor_names"] = json.dumps({int(k): v for k, v in CONDUCTOR_NAMES.items()})
         if len(rows):
-            _append(self.f[layout.EVENTS], event_array(rows))
+            self._add(self.f[layout.EVENTS], event_array(rows))
 
+    @all_or_nothing
     def write_circuit_log(self, rows):
         """Append circuit-log rows ``(step, time, kind, total_current, rods_in_series, filament_rods)``
         (:mod:`selfas_graph.model.circuitlog`), one column dataset per field."""
         self._check_open()
         if layout.CIRCUIT_LOG not in self.f:
-            g = self.f.create_group(layout.CIRCUIT_LOG)
+            g = self._created(self.f.create_group(layout.CIRCUIT_LOG))
             for name in layout.CIRCUIT_LOG_COLUMNS:
                 _growable(g, name, (), CIRCUIT_LOG_DTYPE[name])
             _set_unit(g["time"], TIME)
@@ -424,8 +451,9 @@ class RunWriter(PendingRows):
             table = circuit_log_array(rows)
             g = self.f[layout.CIRCUIT_LOG]
             for name in layout.CIRCUIT_LOG_COLUMNS:
-                _append(g[name], table[name])
+                self._add(g[name], table[name])
 
+    @all_or_nothing
     def write_graph(self, step, t, arrays, role, current, potential, conductor_potential):
         """Append the graph state of one frame.
 
@@ -439,7 +467,7 @@ class RunWriter(PendingRows):
         """
         self._check_open()
         if layout.GRAPH not in self.f:
-            g = self.f.create_group(layout.GRAPH)
+            g = self._created(self.f.create_group(layout.GRAPH))
             g.attrs["conductor_ids"] = np.array(sorted(conductor_potential), dtype=np.int64)
             # no NaN in the file: a conductor whose potential is set per contact (the case (ii)
             # filament, -delta_J0 z) is flagged in conductor_per_contact, its entry here 0
@@ -462,24 +490,24 @@ class RunWriter(PendingRows):
             _growable(g, "floating", potential.shape, "i1")
             _set_unit(g["conductor_potential"], POTENTIAL)
         g = self.f[layout.GRAPH]
-        _append(g["step"], step)
-        _append(g["time"], t)
+        self._add(g["step"], step)
+        self._add(g["time"], t)
         tc = arrays["tip_contacts"]
         if len(tc):
-            _append(g["tip_contacts"], tc)
-        _append(g["tip_contacts_count"], len(tc))
+            self._add(g["tip_contacts"], tc)
+        self._add(g["tip_contacts_count"], len(tc))
         if len(arrays["conductor_tip"]):
             for name in layout.GRAPH_CONDUCTOR_CONTACTS:
-                _append(g[name], arrays[name])
-        _append(g["conductor_contacts_count"], len(arrays["conductor_tip"]))
-        _append(g["role"], role)
-        _append(g["current"], current)
+                self._add(g[name], arrays[name])
+        self._add(g["conductor_contacts_count"], len(arrays["conductor_tip"]))
+        self._add(g["role"], role)
+        self._add(g["current"], current)
         # a floating tip (on no path between conductors) has no potential: 1 in ``floating`` and 0
         # in ``potential``, so that the file holds no NaN; RunFile.graph gives NaN there again
         floating = ~np.isfinite(potential)
-        _append(g["potential"], np.where(floating, 0.0, potential))
+        self._add(g["potential"], np.where(floating, 0.0, potential))
         if "floating" in g:
-            _append(g["floating"], floating.astype(np.int8))
+            self._add(g["floating"], floating.astype(np.int8))
 
     @classmethod
     def for_simulation(cls, sim, path, overwrite=False, velocities=None, author=None, provenance=None):
@@ -502,7 +530,7 @@ class RunWriter(PendingRows):
             provenance = run_provenance(sim, getattr(sim, "scenario", None), shlex.join(sys.argv), uuid.uuid4().hex)
         if author is not None:
             provenance["author"] = author
-        return cls(
+        writer = cls(
             path,
             sim.state.n_tips,
             sim.state.tip_charge,
@@ -514,6 +542,8 @@ class RunWriter(PendingRows):
             rod_length=sim.state.rod_length,
             rod_resistance=sim.state.rod_resistance,
         )
+        bind(writer, sim)  # the simulation whose frames it takes (.writer_binding)
+        return writer
 
     def __enter__(self):
         return self

@@ -183,11 +183,14 @@ def as_operation(obj, where: str) -> Operation:
     return _Hooks(obj)
 
 
-def run_operations(sim, writer, every, n_steps, progress, progress_every, checkpointer, stop, check_every) -> list:
-    """The operations of one :meth:`Simulation.run <.simulation.Simulation.run>` call, in their order
-    (module docstring): those its arguments make around the attached ``sim.operations``."""
+def run_operations(
+    sim, writer, every, n_steps, progress, progress_every, checkpointer, stop, check_every, t_end=None
+) -> list:
+    """The operations of one :meth:`Simulation.run <.simulation.Simulation.run>` call (to ``t_end``), in their
+    order (module docstring): those its arguments make around the attached ``sim.operations``."""
     _check_arguments(sim, writer, progress, checkpointer, stop, check_every, progress_every)
-    ops = [PerStepRows(writer, every), FrameWriter(writer, every)] if writer is not None else [EnergyCheck(every)]
+    frames = FrameWriter(writer, every, t_end) if writer is not None else None
+    ops = [PerStepRows(writer, every), frames] if writer is not None else [EnergyCheck(every)]
     ops += [as_operation(o, f"sim.operations[{k}]") for k, o in enumerate(sim.operations)]
     if progress is not None:
         ops.append(Progress(progress, progress_every or max(1, n_steps // 200), first_step=sim.state.step))
@@ -218,7 +221,7 @@ def _check_arguments(sim, writer, progress, checkpointer, stop, check_every, pro
             f"got {writer!r}"
         )
     if writer is not None and hasattr(writer, "check_continues"):
-        writer.check_continues(sim.state.step, sim.state.position.shape)
+        writer.check_continues(sim)
 
 
 class PerStepRows(Operation):
@@ -251,15 +254,18 @@ class FrameWriter(Operation):
 
     final = True
 
-    def __init__(self, writer, every: int):
+    def __init__(self, writer, every: int, t_end=None):
         self.writer = writer
         self.trigger = Periodic(every)
+        self.t_end = t_end
         #: the observables of the last frame written in the steps of this run
         self.last_observables = None
 
     def start(self, sim, n_steps):
         self.last_observables = None
         self.writer.stopped_by = None
+        if self.t_end is not None and callable(getattr(self.writer, "run_to", None)):
+            self.writer.run_to(time_value(self.t_end, "t_end"))  # the end time the run goes to, as simulate states it
         if self.writer.n_frames == 0:
             sim.write_frame(self.writer)
 

@@ -10,7 +10,6 @@
 
 from __future__ import annotations
 
-import math
 import operator
 import time
 
@@ -19,10 +18,11 @@ import numpy as np
 from ..parallel import RowBlocks
 from . import events as ev
 from . import operations as op
-from .circuitlog import circuit_log_array
+from . import restart
 from .compiled import advance, compiled_steps_for
 from .health import BOND_BREAK, FORCE_OUT_OF_SCALE, MAX_STEP_DISPLACEMENT, HealthChecks, NumericalFailure, refuse_after
 from .integrator import AdamsBashforth4
+from .interrupt import DeferredCtrlC
 from .network import Network
 from .observables import Observables, energy_scale
 from .operations import RunInterrupted, RunSummary
@@ -157,39 +157,15 @@ class Simulation:
         bond error, the energy reference, the run's events, its circuit log and the time of its first
         short circuit (NaN: none yet).
         """
-        snap = self.state.state_dict()
-        snap.update(self.integrator.state_dict())
-        snap.update(
-            max_bond_error=self.health.max_bond_error,
-            energy0=np.nan if self.observe.energy0 is None else self.observe.energy0,
-            events=ev.event_array(self.events),
-            circuit_log=circuit_log_array(self.circuit_log),
-            short_circuit_time=np.nan if self.short_circuit_time is None else self.short_circuit_time,
-        )
-        if self.network is not None:
-            snap.update(self.network.state_dict())  # contacts, flags, filament heights, the rod currents
-        snap.update(self.force_field.state_dict())  # neighbour lists, held slow forces
-        return snap
+        return restart.snapshot(self)
 
     @classmethod
-    def from_snapshot(cls, params: Parameters, snap: dict, timing: bool = False, comm=None) -> "Simulation":
-        """Rebuild a simulation from :meth:`snapshot` (see there)."""
-        state = State.from_state_dict(snap)
-        sim = cls(params, state=state, timing=timing, comm=comm, check_state=False)
-        sim.integrator.load_state_dict(snap)
-        sim.health.max_bond_error = float(snap["max_bond_error"])
-        e0 = float(snap["energy0"])
-        sim.observe.energy0 = None if math.isnan(e0) else e0
-        sct = float(snap["short_circuit_time"])
-        sim.short_circuit_time = None if math.isnan(sct) else sct
-        sim.events = [tuple(r.item()) for r in np.asarray(snap["events"])]
-        sim.circuit_log = [tuple(r.item()) for r in snap.get("circuit_log", ())]  # older checkpoints: none
-        if sim.network is not None:
-            sim.network.load_state_dict(snap)
-        ff = sim.force_field
-        ff.bind(state.position, state.velocity)
-        ff.load_state_dict(snap)  # neighbour lists, held slow forces (missing ones: rebuilt)
-        return sim
+    def from_snapshot(
+        cls, params: Parameters, snap: dict, timing: bool = False, comm=None, new_dt: bool = False
+    ) -> "Simulation":
+        """Rebuild a simulation from :meth:`snapshot` (see there), at the snapshot's time step: another
+        ``integrator.dt`` is refused (ValueError) unless ``new_dt`` (the history then forgotten: RK4 again)."""
+        return restart.from_snapshot(cls, params, snap, timing=timing, comm=comm, new_dt=new_dt)
 
     @property
     def dt(self) -> float:
@@ -245,8 +221,10 @@ class Simulation:
             self.observe.record_initial_energy()
         done = 0
         try:
-            while done < n:
-                done += advance(self, n - done)
+            with DeferredCtrlC() as ctrl_c:  # a Ctrl-C stops after the step it lands in (.interrupt)
+                while done < n:
+                    done += advance(self, n - done)
+                    ctrl_c.check()
         except NumericalFailure as exc:
             self.failure = exc
             raise
@@ -317,6 +295,9 @@ class Simulation:
         stop : callable() -> bool, optional
             When true, pending data are flushed, a checkpoint is written and :class:`RunInterrupted` raised
             (on Ctrl-C and on a NumericalFailure the pending data are flushed too, and the writer told why).
+            A Ctrl-C (SIGINT in the main thread, with Python's own handler in place) stops the run after the
+            step it lands in and the operations on that step (:mod:`.interrupt`), then raises
+            ``KeyboardInterrupt``: ``run`` again continues with the steps the run would have taken.
         check_every : int
             ``checkpointer`` and ``stop`` are asked after the steps that are multiples of this (default
             every step; ``integrator.slow_every`` lets the fast steps between run in one call).
@@ -328,42 +309,50 @@ class Simulation:
         n_steps = self.steps_to(t_end)
         every = self.frame_steps
         summary = RunSummary(t_start=self.state.time)
-        ops = op.run_operations(self, writer, every, n_steps, progress, progress_every, checkpointer, stop, check_every)
+        ops = op.run_operations(
+            self, writer, every, n_steps, progress, progress_every, checkpointer, stop, check_every, t_end
+        )
         if self.observe.energy0 is None:
             self.observe.record_initial_energy()
         self.health.keep_last_good(self.snapshot())
         self._ops = ops
         t0 = time.perf_counter()
-        try:
-            for operation in ops:
-                operation.start(self, n_steps)
-            (per_step, rows), i = op.per_step_rows(ops), 0
-            while i < n_steps:
-                # the steps up to the next one after which an operation acts, compiled where they can be
-                i += advance(self, op.steps_to_next_act(ops, self.state.step, n_steps - i), rows)
+        # a Ctrl-C (SIGINT under Python's own handler) is raised after the step it lands in and the operations
+        # on that step, frames among them (.interrupt): a run continued from there takes the same steps
+        with DeferredCtrlC() as ctrl_c:
+            try:
                 for operation in ops:
-                    if operation in per_step:
-                        continue
-                    if operation.trigger(self.state.step) or (operation.final and i == n_steps):
-                        operation.act(self, i, n_steps)
-                summary.steps = i
-            for operation in ops:
-                operation.finish(self)
-        except BaseException as exc:  # what the steps before it buffered is written (Ctrl-C, a failure, a bug)
-            if isinstance(exc, NumericalFailure):
-                self.failure = exc
-            if not isinstance(exc, OSError):  # a failed write: writing again would fail again
-                op.stopped(ops, self, exc)
-            raise
-        finally:
-            summary.wall_seconds = time.perf_counter() - t0
-            self._ops = ()
+                    operation.start(self, n_steps)
+                ctrl_c.check()
+                (per_step, rows), i = op.per_step_rows(ops), 0
+                while i < n_steps:
+                    # the steps up to the next one after which an operation acts, compiled where they can be
+                    i += advance(self, op.steps_to_next_act(ops, self.state.step, n_steps - i), rows)
+                    for operation in ops:
+                        if operation in per_step:
+                            continue
+                        if operation.trigger(self.state.step) or (operation.final and i == n_steps):
+                            operation.act(self, i, n_steps)
+                    summary.steps = i
+                    ctrl_c.check()
+                for operation in ops:
+                    operation.finish(self)
+            except BaseException as exc:  # what the steps before it buffered is written (Ctrl-C, a failure, a bug)
+                if isinstance(exc, NumericalFailure):
+                    self.failure = exc
+                if not isinstance(exc, OSError):  # a failed write: writing again would fail again
+                    op.stopped(ops, self, exc)
+                raise
+            finally:
+                summary.wall_seconds = time.perf_counter() - t0
+                self._ops = ()
         summary.t_end, summary.max_bond_error = self.state.time, self.health.max_bond_error
         frames = next((o for o in ops if isinstance(o, op.FrameWriter)), None)
         obs = frames.last_observables if frames is not None and n_steps else None
         obs = obs if obs is not None else self.observables()
         summary.energy_balance, summary.energy_scale = float(obs["energy_balance"]), float(energy_scale(obs))
         summary.frames = writer.n_frames if writer is not None else 0
+        ctrl_c.check()  # one that came after the last step: the run is whole, the caller still stops
         return summary
 
     def flush_operations(self) -> None:

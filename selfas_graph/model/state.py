@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 from typing import Optional
 
@@ -174,7 +175,11 @@ class State:
                 f"State.from_rods (centres and axes)"
             )
         _refuse_twice_given(position)
-        step, t = int(self.step), float(self.time)
+        step = self.step
+        whole = isinstance(step, numbers.Integral) or (isinstance(step, numbers.Real) and float(step).is_integer())
+        if isinstance(step, (bool, np.bool_)) or not whole:
+            raise StateError(f"State.step: a whole number of steps >= 0, got {step!r}")
+        step, t = int(step), float(self.time)
         if step < 0 or not np.isfinite(t):
             raise StateError(f"State: step {step} and time {t} must be a step >= 0 and a finite time")
         return State(position, velocity, tip_charge, rod_charge, step, t, **extra)

@@ -22,7 +22,7 @@ from selfas_graph.analysis.fractal import MIN_RANGE, radius_of_gyration
 from selfas_graph.analysis.frame_topology import frame_topology
 from selfas_graph.analysis.skeleton import structures
 from selfas_graph.cli.main import main
-from selfas_graph.io.h5md import RunFile
+from selfas_graph.io.h5md import RunFile, RunFileError
 
 REPO = Path(__file__).resolve().parents[2]
 #: the keys of a frame's measures that the ensemble and study summaries read (ensemble/measures.py,
@@ -72,6 +72,9 @@ def test_frame_claims_keys_and_values(run_file):
             assert math.isfinite(c[k]) == math.isfinite(c[k.replace("_err", "")]), k
         assert frame_claims(run, run.n_frames - 1) == c  # negative frames count from the end
         assert frame_claims(run, t=float(run.time[-1]) - 1e-9) == c  # by time, as analyze --time
+        assert frame_claims(run) == c  # default: the last frame
+        with pytest.raises(RunFileError, match="frame 0 and time 1.0 both given"):
+            frame_claims(run, 0, t=1.0)  # t was taken and the frame dropped without a word
         # the same largest structure as the topology command, the same numbers as the array API
         assert c["largest_structure_rods"] == frame_topology(run)["largest_structure"]
         g = run.graph(frame=-1)

@@ -99,6 +99,10 @@ def test_state_is_validated_and_copied():
         sg.Simulation(_params(), state=nan)
     with pytest.raises(sg.StateError, match=r"the state has 2 rods but rods.count = 3"):
         sg.Simulation(_params(3), state=_rods(2))
+    for step in (1.5, True, "2"):  # 1.5 was cut to step 1 without a word
+        with pytest.raises(sg.StateError, match="State.step: a whole number of steps >= 0, got"):
+            sg.Simulation(_params(), state=dataclasses.replace(_rods(), step=step))
+    assert sg.Simulation(_params(), state=dataclasses.replace(_rods(), step=np.int64(7))).state.step == 7
 
 
 def test_run_lands_on_t_end_or_refuses():

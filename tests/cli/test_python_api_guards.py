@@ -229,9 +229,23 @@ def test_a_snapshot_continued_at_another_time_step_counts_time_on_from_its_own()
     same = sg.Simulation.from_snapshot(PARAMS, snap)
     same.step(1)
     assert same.state.time == 0.0 + 101 * 1e-3  # the run's own origin, bit for bit as an uninterrupted run
-    other = sg.Simulation.from_snapshot(PARAMS.replace(integrator={"dt": 2e-3}), snap)
+    other = sg.Simulation.from_snapshot(PARAMS.replace(integrator={"dt": 2e-3}), snap, new_dt=True)
     other.step(1)
     assert other.state.step == 101 and other.state.time == 0.1 + 2e-3
+    assert other.integrator.count == 1  # the history at dt = 1e-3 forgotten: the branch starts with RK4
+
+
+def test_a_snapshot_is_not_continued_at_another_time_step_unasked():
+    """A snapshot holds the Adams-Bashforth history of derivatives one dt apart: continued at another dt it
+    was extrapolated as if they were the new dt apart, without a word. Refused now, naming both time steps;
+    ``new_dt=True`` (`bench tradeoff`'s branches) forgets the history, and a snapshot with none (step 0) is
+    taken as it is."""
+    sim = column()
+    sim.run(0.1)
+    with pytest.raises(ValueError, match=r"made with integrator.dt = 0.001, the parameters have 0.002.*new run"):
+        sg.Simulation.from_snapshot(PARAMS.replace(integrator={"dt": 2e-3}), sim.snapshot())
+    fresh = column().snapshot()
+    assert sg.Simulation.from_snapshot(PARAMS.replace(integrator={"dt": 2e-3}), fresh).dt == 2e-3
 
 
 @pytest.mark.parametrize("name", ["scene.toml", "traj.gsd", "r.checkpoint.h5", "r.failure.h5", "saved.h5"])
@@ -307,3 +321,74 @@ def test_python_mistakes_are_named_by_argument(tmp_path):
     changed = dataclasses.replace(loaded, params=loaded.params.replace(rods={"count": 30}))
     with pytest.raises(EnsembleError, match="params differ from what its file and overrides give"):
         Ensemble(changed, 1, tmp_path / "e")  # it ran the file's 40 rods without a word
+
+
+def test_a_writer_refuses_the_frames_of_another_simulation(tmp_path):
+    """A writer made for b took a's frames (file: b's seed and charges, a's positions; status "finished"),
+    and a third simulation's after a jump. Refused now before any step, naming what differs."""
+    b = column()
+    a = sg.Simulation(PARAMS.replace(scenario={"seed": 2}), state=b.state)
+    with sg.RunWriter.for_simulation(b, tmp_path / "r.h5") as w:
+        with pytest.raises(ValueError, match="scenario.seed is 1 in the one it was made for and 2 in this one"):
+            a.run(0.1, writer=w)
+        assert a.state.step == 0 and w.n_frames == 0
+        b.run(0.1, writer=w)
+        c = column()
+        c.run(0.2)
+        with pytest.raises(ValueError, match="takes the frames of another simulation .the step is 100 there and 200"):
+            c.run(0.3, writer=w)
+        b.run(0.2, writer=w)  # its own frames, in another call
+    with sg.RunFile(tmp_path / "r.h5") as run:
+        assert run.step.tolist() == [0, 50, 100, 150, 200]
+        assert np.array_equal(run.position(), b.state.position)
+
+
+def test_a_writer_takes_the_continuation_of_its_simulation(tmp_path):
+    """What continues the file is taken: a copy restored from the simulation's snapshot, with the writer open
+    or reopened at its step, also once the simulation it was made for is gone; a reopened file refuses a
+    simulation of other parameters than it states (the end time aside) or whose time does not follow it."""
+    sim = column()
+    path = tmp_path / "r.h5"
+    with sg.RunWriter.for_simulation(sim, path) as w:
+        sim.run(0.1, writer=w)
+        copy = sg.Simulation.from_snapshot(PARAMS, sim.snapshot())
+        copy.run(0.15, writer=w)
+        with pytest.raises(ValueError, match="last frame is at step 150, after this simulation.s step 100"):
+            sim.run(0.2, writer=w)  # the writer now takes the copy's frames
+    snap = copy.snapshot()
+    del sim, copy
+    with sg.RunWriter.reopen(path, 150) as w:
+        other = sg.Simulation.from_snapshot(PARAMS.replace(circuit={"delta_J0": 3.0}), snap)
+        with pytest.raises(ValueError, match="circuit.delta_J0 is 2.0 in the file and 3.0 in the simulation"):
+            other.run(0.2, writer=w)
+        shifted = sg.Simulation(PARAMS, state=dataclasses.replace(other.state, time=0.5))
+        with pytest.raises(ValueError, match="its time 0.5 at step 150 does not follow the last frame's"):
+            shifted.run(0.55, writer=w)
+        moved = dataclasses.replace(other.state, position=other.state.position + 1e-3)
+        with pytest.raises(ValueError, match="its positions at step 150 are not those of the file's last frame"):
+            sg.Simulation(PARAMS, state=moved).run(0.2, writer=w)
+        again = sg.Simulation.from_snapshot(PARAMS.replace(run={"t_end": 0.2}), snap)
+        again.run(writer=w)
+    with sg.RunFile(path) as run:
+        assert run.step.tolist() == [0, 50, 100, 150, 200] and run.status == "finished"
+
+
+def test_a_file_written_from_python_states_the_end_time_it_was_run_to(tmp_path):
+    """``parameters_json`` states the end time the run was last started or continued with (docs/output.md), as
+    ``simulate`` writes it; a file written by ``sim.run(0.1)`` kept the scenario's ``run.t_end``. Chunks
+    state the last; a reopened file keeps the end time it stated in ``t_end_before``."""
+    import json
+
+    sim = column()
+    assert sim.params.run.t_end != 0.15
+    path = tmp_path / "r.h5"
+    with sg.RunWriter.for_simulation(sim, path) as w:
+        sim.run(0.1, writer=w)
+        sim.run(np.float32(0.15), writer=w)
+    with sg.RunFile(path) as run:
+        assert run.parameters["run"]["t_end"] == 0.15 and "t_end_before" not in run.meta
+    with sg.RunWriter.reopen(path, sim.state.step) as w:
+        sim.run(0.2, writer=w)
+        sim.run(0.25, writer=w)
+    with sg.RunFile(path) as run:
+        assert run.parameters["run"]["t_end"] == 0.25 and json.loads(run.meta["t_end_before"]) == [0.15]
