@@ -161,7 +161,8 @@ def study_figures(study, summary, folder) -> list:
 def plot_sweep(studies, summaries, name, out) -> Path:
     """The claim measures at the sweep's time against its parameter: mean and one standard error over
     the seeds of each point, as the sweep's table gives them (:func:`.verdicts.sweep_points`: for a
-    measure of the current, the seeds that carry it, "k/n" beside each point)."""
+    measure of the current, the seeds that carry it, "k/n" beside each point). A point of one seed,
+    without a spread, is drawn hollow."""
     sw = studies.sweeps[name]
     ncols = 2
     nrows = math.ceil(len(CLAIM_MEASURES) / ncols)
@@ -174,6 +175,9 @@ def plot_sweep(studies, summaries, name, out) -> Path:
             y = [st["mean"] for _, st in pts]
             e = [0.0 if not math.isfinite(st["sem"]) else st["sem"] for _, st in pts]
             ax.errorbar(x, y, yerr=e, marker="o", ms=3.5, capsize=3, lw=1.0, color=SEED_COLOUR)
+            alone = [(xv, yv) for xv, yv, (_, st) in zip(x, y, pts) if st["n"] < 2]
+            if alone:  # one seed: no spread to draw, which a bar of zero length would hide; a hollow mark
+                ax.plot(*zip(*alone), ls="none", marker="o", ms=7, mfc="white", mec=SEED_COLOUR, zorder=3)
             for xv, yv, (_, st) in zip(x, y, pts):
                 if "of" in st:  # grouped: how many seeds the point describes
                     ax.annotate(f"{st['n']}/{st['of']}", (xv, yv), textcoords="offset points", xytext=(4, 4),

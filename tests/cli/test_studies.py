@@ -320,6 +320,32 @@ def test_the_alignment_of_the_rods_in_no_structure_needs_30_of_them():
     assert _alignment(frame(3), "all") == pytest.approx(1.0)  # the rule is the free rods' alone
 
 
+def test_the_sweep_figure_draws_a_point_of_one_seed_hollow(tmp_path, monkeypatch):
+    """A point whose measure one seed gives has no spread: hollow, not a bar of zero length that reads
+    as a certain value; points of several seeds are filled."""
+    from types import SimpleNamespace
+
+    from selfas_graph.studies import figures
+
+    def point(rods, flags):
+        return {
+            "times": [300.0],
+            "seeds": [{"seed": k + 1} for k in range(len(rods))],
+            "current": [[f] for f in flags],
+            "measures": {"filament_rods": {"values": [[v] for v in rods]}},
+        }
+
+    summaries = {"a": point([500.0, 0.0, 0.0], [1, 0, 0]), "b": point([600.0, 650.0, 700.0], [1, 1, 1])}
+    sweep = SimpleNamespace(title="t", parameter="x", base="b", base_value=1.0, time=300.0)
+    studies = SimpleNamespace(sweeps={"s": sweep}, sweep_points=lambda name: [(0.0, "a"), (1.0, "b")])
+    drawn = {}
+    monkeypatch.setattr(figures, "_save", lambda fig, out: drawn.setdefault("fig", fig))
+    figures.plot_sweep(studies, summaries, "s", tmp_path / "s.png")
+    ax = drawn["fig"].axes[0]
+    hollow = [ln for ln in ax.get_lines() if ln.get_markerfacecolor() == "white"]
+    assert len(hollow) == 1 and hollow[0].get_xdata().tolist() == [0.0]
+
+
 def test_replace_blocks_changes_only_the_generated_blocks():
     text = "a\n<!-- begin generated: x -->\nold\n<!-- end generated: x -->\nb\n<!-- begin generated: y -->\n<!-- end generated: y -->\n"
     new, missing = replace_blocks(text, {"x": "new\nlines"})
