@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .page import has_electrodes
-from .stats import GROUPED, LABELS
+from .stats import FIT_ERRORS, GROUPED, LABELS
 from .verdicts import CLAIM_MEASURES, sweep_points
 
 __all__ = ["SERIES_MEASURES", "plot_episodes", "plot_series", "series_panels", "study_figures"]
@@ -68,7 +68,9 @@ def series_panels(summary) -> list:
 
 def plot_series(summary, out, title) -> Path:
     """Each measure against time: every seed as a thin line, the mean over seeds and one standard
-    error as a band where the measure is not split by the circuit (module :mod:`.page`)."""
+    error as a band where the measure is not split by the circuit (module :mod:`.page`); a fitted
+    dimension's band is the spread between seeds alone, which its panel's title says (the tables add
+    each seed's fit error)."""
     names = series_panels(summary)
     electrodes = has_electrodes(summary)
     t = np.asarray(summary["times"], dtype=float)
@@ -104,6 +106,8 @@ def plot_series(summary, out, title) -> Path:
         words, unit = _words_unit(name)
         if not electrodes:  # case (ii): the current enters and leaves through the external filament
             words = words.replace("through the gap", "through the network")
+        if name in FIT_ERRORS:  # the tables' standard error adds each seed's fit error; the band does not
+            words += "\n(band: the spread between seeds)"
         ax.set_title(words, fontsize="small", loc="left")
         if unit:
             ax.set_ylabel(unit, fontsize="small")
