@@ -44,6 +44,7 @@ from .io.h5md import (
     run_provenance,
 )
 from .io.scenario import ScenarioError, scenario_from_text
+from .model.parameter_match import described_differences
 from .model.simulation import NumericalFailure, RunInterrupted
 from .parallel import parent_gone
 from .provenance import version_key
@@ -312,8 +313,9 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
     validates; a run file that cannot be read (damaged metadata among these), cannot be appended to (a row
     of the frames or observables torn by a kill is dropped on reopening; other damage is not), ended in a
     numerical failure (the same steps would fail again),
-    is another run's (run identity, scenario or rod count) or has no frame at or before the
-    checkpoint's step. A run started when ``integrator.brake``'s default was ``explicit`` continues
+    is another run's (run identity, scenario or rod count), has no frame at or before the
+    checkpoint's step or states other parameters than the scenario continued (its ``parameters_json``,
+    the end time, output file and checkpoint interval aside: :mod:`.model.parameter_match`). A run started when ``integrator.brake``'s default was ``explicit`` continues
     with it.
 
     Parameters
@@ -348,6 +350,7 @@ def continuation(checkpoint, run_path, t_end=None, read=None) -> Continuation:
             )
         except (ScenarioError, ValueError, TypeError) as exc:
             raise ContinuationError(_scenario_refusal(meta, overrides, stored, asked, exc)) from None
+    _refuse_other_parameters(facts, scenario, run_path)
     return Continuation(scenario, snap, meta, str(facts.run_id), _notes(meta, facts.source, checkpoint))
 
 
@@ -363,6 +366,7 @@ class _RunFacts:
     source: str  # the scenario file's path as the run recorded it ("" if none)
     problems: list  # why it cannot be appended to (none: it can)
     status: str
+    parameters: dict | None  # parameters_json (None: unreadable)
 
 
 def _run_file_facts(run_path) -> _RunFacts:
@@ -377,6 +381,7 @@ def _run_file_facts(run_path) -> _RunFacts:
                 source=str(run_file.meta.get("scenario_path") or ""),
                 problems=appendable_problems(run_file.f),
                 status=run_file.status,
+                parameters=_stored_parameters(run_file),
             )
     except RunFileError as exc:
         raise ContinuationError(f"cannot resume into {run_path}: {exc}") from None
@@ -417,6 +422,20 @@ def _refuse(facts, snap, meta, checkpoint, run_path) -> None:
         raise ContinuationError(f"cannot resume: {run_path} has no frame at or before the checkpoint's step {step}")
 
 
+def _refuse_other_parameters(facts, scenario, run_path) -> None:
+    """ContinuationError when the run file states other parameters than ``scenario``, the one continued:
+    checked before the file is reopened, which changes it (and on every MPI rank alike)."""
+    if facts.parameters is None:
+        return
+    differs = described_differences(facts.parameters, scenario.params.to_dict(), "the run file", "its checkpoint")
+    if differs:
+        shown = "; ".join(differs[:4]) + (f" and {len(differs) - 4} more" if len(differs) > 4 else "")
+        raise ContinuationError(
+            f"cannot resume: {run_path} states other parameters than the run its checkpoint continues ({shown})",
+            "resume a run file with its own checkpoint, or start a new run",
+        )
+
+
 def _notes(meta, source, checkpoint) -> tuple:
     """What the user should know of a continuation and nothing stops (:attr:`Continuation.notes`)."""
     notes = []
@@ -441,6 +460,15 @@ def _changed_since(path, text) -> bool:
         return Path(path).read_text(encoding="utf-8") != text
     except (OSError, UnicodeDecodeError):
         return False
+
+
+def _stored_parameters(run_file) -> dict | None:
+    """The resolved parameters a run file states (``parameters_json``; None if absent or unreadable)."""
+    try:
+        params = json.loads(run_file.meta["parameters_json"])
+    except (ValueError, TypeError, KeyError):
+        return None
+    return params if isinstance(params, dict) else None
 
 
 def _started_brake(run_file):

@@ -100,7 +100,13 @@ def load_state(args):
                 meta = dict(f["meta"].attrs)
             note = " (no checksum: written by an older version, read without verification)"
         sc = scenario_from_text(meta["scenario_text"], overrides=json.loads(meta["overrides"]) + list(args.extra))
-        sim = Simulation.from_snapshot(sc.params, snap)
+        from selfas_graph.model.integrator import same_time_step
+
+        # --set integrator.dt=...: the snapshot continued at that time step, its history forgotten (RK4 again)
+        new_dt = not same_time_step(snap, sc.params.integrator.dt)
+        sim = Simulation.from_snapshot(sc.params, snap, new_dt=new_dt)
+        if new_dt:
+            note += f" (at integrator.dt = {sc.params.integrator.dt:g}, started again with RK4)"
         return sim, f"checkpoint {args.checkpoint} at t = {float(snap['time']):.3f}{note}"
     from selfas_graph.io.scenario import ScenarioError
 

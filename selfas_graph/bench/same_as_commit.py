@@ -13,7 +13,7 @@ folder, runs ``selfas-graph simulate`` once with that code and once with the wor
 ``+``: ``scenarios/fig8_quick.toml+run.t_end=6+forces.external_filament.diameter=0.6``.
 Exits 1 if any pair differs. Attributes that only describe (``same_run.DESCRIBING``, the words of
 ``derived_json``'s ``*_sum`` entries) are named but not counted. Parameters added since ``REV`` that the working tree's file stores at their
-defaults are not a difference (as for an ensemble's seed files, ``ensemble/parameters.py``): the verdict
+defaults are not a difference (as for an ensemble's seed files, ``model/parameter_match.py``): the verdict
 names them.
 
 Use it before committing a change that should keep a run's results: e.g. ::
@@ -88,13 +88,13 @@ PARAMETERS = f"{PROVENANCE}@parameters_json"
 def _parameters_added_at_default(before: Path, after: Path) -> list[str]:
     """The parameter keys the working tree's run file stores and the commit's lacks, when those are all
     that differ and each is at its default (a parameter added since the commit that leaves a run as it
-    was, as ``ensemble/parameters.py`` counts it); otherwise []. Every key of the commit's file must be in
+    was, as ``model/parameter_match.py`` counts it); otherwise []. Every key of the commit's file must be in
     the working tree's with the same value (no key is exempt, unlike an ensemble's ``run.t_end``)."""
     import json
 
     import h5py
 
-    from ..ensemble.parameters import _flat, _newer_key_at_default
+    from ..model.parameter_match import _flat, _newer_key_at_default
 
     with h5py.File(before, "r") as a, h5py.File(after, "r") as b:
         old, new = (_flat(json.loads(f[PROVENANCE].attrs["parameters_json"])) for f in (a, b))

@@ -50,6 +50,7 @@ from selfas_graph import NumericalFailure, Simulation, load_scenario
 from selfas_graph.io.checkpoint import CheckpointError, read_checkpoint
 from selfas_graph.io.scenario import ScenarioError
 from selfas_graph.model import events as ev
+from selfas_graph.model.integrator import same_time_step
 from selfas_graph.provenance import source_commit
 
 from .peer import machine, machine_line
@@ -285,7 +286,8 @@ def main(argv=None):
         ap.error(str(exc))
     knobs = [k for k in (args.knob or KNOBS) if _applicable(base, k)]
     if snap0 is not None:
-        sim0 = Simulation.from_snapshot(base.params, snap0)
+        # a base --set integrator.dt: the checkpoint continued at that time step, its history forgotten
+        sim0 = Simulation.from_snapshot(base.params, snap0, new_dt=not same_time_step(snap0, base.params.integrator.dt))
     else:
         sim0 = Simulation.from_scenario(base)
     if args.t0 > sim0.state.time:

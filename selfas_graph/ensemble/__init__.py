@@ -34,13 +34,13 @@ The parts, one concept a module: ``plan`` (:class:`Ensemble`, :class:`SeedPlan`)
 names from here; the names outside ``__all__`` are re-exported as ``name as name``.
 """
 
+from ..model.parameter_match import FREE_PARAMETERS as FREE_PARAMETERS
+from ..model.parameter_match import parameter_differences as parameter_differences
 from .folder import LOCK_FILE as LOCK_FILE
 from .folder import SEED_FILE as SEED_FILE
 from .folder import EnsembleError, FolderLock, seed_path
 from .folder import make_folder as make_folder
 from .measures import FRAME_MEASURES, Frame, Measure, carries_current
-from .parameters import FREE_PARAMETERS as FREE_PARAMETERS
-from .parameters import parameter_differences as parameter_differences
 from .plan import Ensemble, SeedPlan
 from .plan import default_times as default_times
 from .pool import run_tasks

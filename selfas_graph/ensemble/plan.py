@@ -23,10 +23,11 @@ from ..io.h5md import HDF5_READ_ERRORS, RunFile, RunFileError, hdf5_damage
 from ..io.scenario import Scenario, ScenarioError, load_scenario, scenario_from_text
 from ..lifecycle import ContinuationError, continuation
 from ..model.operations import frame_steps, steps_between
+from ..model.parameter_match import parameter_differences
+from ..model.parameter_match import value_at as _get
 from ..parallel import task_pool
 from ..provenance import older_version, version_key
 from .folder import EnsembleError, FolderLock, make_folder, seed_path
-from .parameters import _get, parameter_differences
 from .pool import run_tasks
 from .summary import summarise
 from .tasks import run_seed

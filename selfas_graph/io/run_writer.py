@@ -338,9 +338,9 @@ class RunWriter(WholeWrites, PendingRows):
     def check_continues(self, sim) -> None:
         """Refuse, before a run takes its first step, a simulation ``sim`` whose frames this file cannot take:
         the writer closed, the file's tips of another count, its last frame after the simulation's step (one
-        started again), a file reopened (:meth:`reopen`) to continue after another step, or another simulation
-        than the one the writer was made for or last took frames from (:mod:`.writer_binding`: other
-        parameters than the file's apart from the end time, another step or other positions)."""
+        started again), a file reopened (:meth:`reopen`) to continue after another step, or a simulation that
+        does not continue what the file holds (:mod:`.writer_binding`: other parameters than the file's apart
+        from the end time, a step before the last one written, fewer events, other positions)."""
         self._check_open()
         step, position_shape = sim.state.step, sim.state.position.shape
         shape = self._elements["position"][2].shape[1:]
@@ -353,13 +353,6 @@ class RunWriter(WholeWrites, PendingRows):
             raise ValueError(
                 f"{self.path}: reopened to continue after step {self._continues_from}, but the simulation is at "
                 f"step {step}: reopen it at the simulation's step, RunWriter.reopen(path, sim.state.step)"
-            )
-        steps = self._elements["position"][0]
-        if steps.shape[0] and int(steps[-1]) > step:
-            raise ValueError(
-                f"{self.path}: the file's last frame is at step {int(steps[-1])}, after this simulation's step "
-                f"{step}: a writer takes the frames of the simulation it was made for (RunWriter.for_simulation "
-                f"for another)"
             )
         check_simulation(self, sim)
         self._continues_from = None

@@ -1,12 +1,16 @@
 """Which simulation a run file's writer takes frames from: :func:`check_simulation`, the part of
 :meth:`RunWriter.check_continues <.run_writer.RunWriter.check_continues>` that tells one simulation from another.
 
-A writer is bound to the simulation it was made for (:meth:`RunWriter.for_simulation`), by a weak reference,
-and then to the last one it took frames from. Another simulation object is taken only as that one's exact
-continuation (the same parameters apart from the end time, step and positions): a copy restored from its
-snapshot. A writer with no simulation alive (:meth:`RunWriter.reopen`, or the one it was made for deleted)
-takes one whose parameters are those the file states (apart from the end time), whose time follows the
-file's last frame and, at that frame's step, whose positions are the frame's; then it is bound to it.
+The rule is read from what the writer has written, not from a simulation object: a simulation is taken when
+its parameters are those the file states (the end time, output file and checkpoint interval aside:
+:func:`~selfas_graph.model.parameter_match.parameter_differences`), its step is not before the last step
+written (the last frame's or per-step row's; a reopened file's, the step it was reopened at), it holds at
+least the events and circuit-log rows written, its time follows the last frame's and, at that frame's step,
+its positions are the frame's. A copy restored from the simulation's snapshot at the file's last frame is
+taken; one restored from an earlier state (``sim.last_good_snapshot`` after a Ctrl-C) is refused, whose
+rows the file holds already. The simulation last taken, held by a weak reference, is taken without a look.
+This guards runs from Python: ``simulate --resume`` and an ensemble's resume check the file's parameters
+before it is reopened (``lifecycle.continuation``), on every MPI rank.
 """
 
 from __future__ import annotations
@@ -17,10 +21,8 @@ import weakref
 
 import numpy as np
 
+from ..model.parameter_match import described_differences
 from . import layout
-
-#: the one parameter a continuation may change (``simulate --resume --t-end``, ``sim.run(t_end)``)
-_FREE = ("run", "t_end")
 
 
 def bind(writer, sim) -> None:
@@ -29,61 +31,55 @@ def bind(writer, sim) -> None:
 
 
 def check_simulation(writer, sim) -> None:
-    """ValueError, naming what differs, when ``sim`` is not the simulation ``writer`` takes frames from nor
-    a continuation of it (module docstring); otherwise ``sim`` becomes that simulation."""
+    """ValueError, naming what differs, when ``sim`` does not continue what ``writer`` has written (module
+    docstring); otherwise ``sim`` becomes the simulation it takes frames from."""
     bound = writer._simulation() if writer._simulation is not None else None
     if bound is sim:
         return
-    if bound is not None:
-        differs = parameter_differences(_plain(bound.params), _plain(sim.params), "the one it was made for", "this one")
-        if not differs and bound.state.step != sim.state.step:
-            differs = [f"the step is {bound.state.step} there and {sim.state.step} here"]
-        if not differs and not np.array_equal(bound.state.position, sim.state.position):
-            differs = [f"the positions at step {sim.state.step} differ"]
-        if differs:
-            raise ValueError(
-                f"{writer.path}: this writer takes the frames of another simulation ({'; '.join(differs)}); {_WAY_ON}"
-            )
-    else:
-        differs = parameter_differences(_file_parameters(writer), _plain(sim.params), "the file", "the simulation")
-        differs += _frame_differences(writer, sim)
-        if differs:
-            raise ValueError(
-                f"{writer.path}: the simulation does not continue this file ({'; '.join(differs)}); {_WAY_ON}"
-            )
+    differs = described_differences(_file_parameters(writer), sim.params.to_dict(), "the file", "the simulation")
+    differs += _written_differences(writer, sim) or _frame_differences(writer, sim)
+    if differs:
+        raise ValueError(f"{writer.path}: the simulation does not continue this file ({'; '.join(differs)}); {_WAY_ON}")
     bind(writer, sim)
 
 
 _WAY_ON = (
-    "a writer takes the frames of the simulation it was made for and its continuation: RunWriter.for_simulation"
-    "(sim, path) for a new file, RunWriter.reopen(path, sim.state.step) for a simulation restored from this run"
+    "a writer takes the frames of the simulation it was made for and of its continuation: RunWriter.for_simulation"
+    "(sim, path) for a new file; to continue the file from an earlier state, close the writer and "
+    "RunWriter.reopen(path, sim.state.step, drop_later=True)"
 )
-
-
-def parameter_differences(theirs: dict, ours: dict, where: str, here: str, path=()) -> list[str]:
-    """The parameters (dotted keys) whose values differ between ``theirs`` (those of ``where``) and ``ours``
-    (those of ``here``), the end time aside; a key one of them lacks (a file of an older version) is not
-    compared."""
-    out = []
-    for key in theirs.keys() & ours.keys():
-        a, b, name = theirs[key], ours[key], path + (key,)
-        if name == _FREE:
-            continue
-        if isinstance(a, dict) and isinstance(b, dict):
-            out += parameter_differences(a, b, where, here, name)
-        elif a != b:
-            out.append(f"{'.'.join(name)} is {a!r} in {where} and {b!r} in {here}")
-    return sorted(out)
-
-
-def _plain(params) -> dict:
-    """``params`` as the file stores them (JSON: tuples as lists)."""
-    return json.loads(json.dumps(params.to_dict()))
 
 
 def _file_parameters(writer) -> dict:
     text = writer.f[layout.PROVENANCE].attrs.get("parameters_json")
     return json.loads(text) if text else {}
+
+
+def last_step_written(writer) -> int | None:
+    """The step the file continues after: a reopened file's own (``RunWriter.reopen``) until a run continues
+    it, else the later of its last frame's step and its last per-step row's (None: nothing written)."""
+    if writer._continues_from is not None:
+        return writer._continues_from
+    steps = [int(ds[-1]) for ds in (writer._elements["position"][0], writer._per_step[0]) if ds.shape[0]]
+    if writer._n_pending:
+        steps.append(int(writer._pending[0][writer._n_pending - 1]))
+    return max(steps) if steps else None
+
+
+def _written_differences(writer, sim) -> list[str]:
+    """How ``sim`` falls short of what the file holds: a step before the last written, fewer events or
+    circuit-log rows than written (none: it does not)."""
+    st, last = sim.state, last_step_written(writer)
+    if last is not None and st.step < last:
+        return [f"its step {st.step} is before the last step the file holds, {last}"]
+    out = []
+    for what, have, written in (
+        ("events", len(sim.events), writer.events_written),
+        ("circuit-log rows", len(sim.circuit_log), writer.circuit_rows_written),
+    ):
+        if have < written:
+            out.append(f"it holds {have} {what}, the file {written}")
+    return out
 
 
 def _frame_differences(writer, sim) -> list[str]:

@@ -35,6 +35,16 @@ from ..kernels.rigid import bond_acceleration, bond_length_error, constrain_bond
 AB4_WEIGHTS = np.array([55.0, -59.0, 37.0, -9.0]) / 24.0
 
 
+def same_time_step(d: dict, dt: float) -> bool:
+    """Whether the state dict ``d`` (its step, time and time origin) was made at the time step ``dt``: its
+    step's time counted from its origin at ``dt`` (as :meth:`AdamsBashforth4.time_at`) is its time. True
+    for a dict without a step or time origin."""
+    if "step" not in d or "time_origin_step" not in d:
+        return True
+    steps = int(d["step"]) - int(d["time_origin_step"])
+    return float(d["time_origin_time"]) + steps * dt == float(d["time"])
+
+
 class AdamsBashforth4:
     """AB4 on positions and velocities of rigid two-tip rods.
 
@@ -110,9 +120,9 @@ class AdamsBashforth4:
         self.head, self.count = int(d["head"]), int(d["count"])
         self.work[:] = d["work"]
         self.time_origin = (int(d["time_origin_step"]), float(d["time_origin_time"]))
-        if "step" in d and self.time_at(int(d["step"])) != float(d["time"]):
-            # a snapshot continued at another time step than it was made with (a branch of `bench
-            # tradeoff`): the time counts on from the snapshot's, not from the run's origin at the new dt
+        if not same_time_step(d, self.dt):
+            # a snapshot continued at another time step than it was made with (from_snapshot's new_dt):
+            # the time counts on from the snapshot's, not from the run's origin at the new dt
             self.time_origin = (int(d["step"]), float(d["time"]))
         self.bond_error_before = float(d["bond_error_before"])
         self.bond_error_after = float(d["bond_error_after"])

@@ -5,7 +5,9 @@ terminal, "interrupt kernel" in a notebook): in the middle of a step, the integr
 positions and the event log would be left out of step with each other, and in the middle of a frame
 the run file's datasets of unequal length. :meth:`Simulation.run <.simulation.Simulation.run>` and
 :meth:`Simulation.step <.simulation.Simulation.step>` record the signal instead and raise
-``KeyboardInterrupt`` at the next step boundary (docs/output.md "Writing a run file from Python").
+``KeyboardInterrupt`` at the next step boundary: the end of the batch of compiled steps it lands in (at
+most 256) or of the next operation (docs/output.md "Writing a run file from Python"). A second Ctrl-C
+raises at once, to stop a step or a callback that hangs.
 """
 
 from __future__ import annotations
@@ -17,7 +19,8 @@ __all__ = ["DeferredCtrlC"]
 
 
 class DeferredCtrlC:
-    """SIGINT recorded, not raised, for the duration of a ``with`` block; :meth:`check` raises it.
+    """The first SIGINT recorded, not raised, for the duration of a ``with`` block; :meth:`check` raises it.
+    A second one raises ``KeyboardInterrupt`` where it lands: the first puts Python's handler back.
 
     The handler is set only in the main thread (no other can set one) and only where the handler in
     place is Python's own (``signal.default_int_handler``): a handler of the caller's (the command
@@ -41,6 +44,8 @@ class DeferredCtrlC:
 
     def _record(self, signum, frame):
         self.requested = True
+        if signal.getsignal(signal.SIGINT) == self._record:  # the next Ctrl-C stops a hung step or callback
+            signal.signal(signal.SIGINT, signal.default_int_handler)
 
     def check(self) -> None:
         """Raise ``KeyboardInterrupt`` if a SIGINT arrived since the block began (or the last check)."""

@@ -10,6 +10,7 @@ import numpy as np
 
 from . import events as ev
 from .circuitlog import circuit_log_array
+from .integrator import same_time_step
 from .state import State
 
 
@@ -65,11 +66,8 @@ def _check_time_step(integrator, snap, new_dt) -> None:
     """ValueError when ``snap`` was made at another time step than ``integrator``'s and ``new_dt`` is not
     given: the Adams-Bashforth history it holds is of derivatives at the old step's spacing, which the new
     step would extrapolate as if they were at its own."""
-    if new_dt or int(snap["count"]) == 0 or "time_origin_step" not in snap:
+    if new_dt or int(snap["count"]) == 0 or same_time_step(snap, integrator.dt):
         return
-    steps = int(snap["step"]) - int(snap["time_origin_step"])
-    if float(snap["time_origin_time"]) + steps * integrator.dt == float(snap["time"]):
-        return  # the time the integrator would give the snapshot's step: the same time step
     raise ValueError(
         f"Simulation.from_snapshot: the snapshot was made with integrator.dt = {snapshot_dt(snap)!r}, the "
         f"parameters have {integrator.dt!r}; its Adams-Bashforth history holds derivatives at the old time "

@@ -221,13 +221,14 @@ class Simulation:
             self.observe.record_initial_energy()
         done = 0
         try:
-            with DeferredCtrlC() as ctrl_c:  # a Ctrl-C stops after the step it lands in (.interrupt)
+            with DeferredCtrlC() as ctrl_c:  # a Ctrl-C stops after the batch of steps it lands in (.interrupt)
                 while done < n:
                     done += advance(self, n - done)
                     ctrl_c.check()
         except NumericalFailure as exc:
             self.failure = exc
             raise
+        ctrl_c.check()  # one that came after the last check, before the handler was put back
 
     def python_step(self) -> None:
         """One step in Python (:mod:`.compiled` makes fast steps in one call, the same numbers)."""
@@ -295,9 +296,10 @@ class Simulation:
         stop : callable() -> bool, optional
             When true, pending data are flushed, a checkpoint is written and :class:`RunInterrupted` raised
             (on Ctrl-C and on a NumericalFailure the pending data are flushed too, and the writer told why).
-            A Ctrl-C (SIGINT in the main thread, with Python's own handler in place) stops the run after the
-            step it lands in and the operations on that step (:mod:`.interrupt`), then raises
-            ``KeyboardInterrupt``: ``run`` again continues with the steps the run would have taken.
+            A Ctrl-C (SIGINT in the main thread, with Python's own handler in place) stops the run at the end
+            of the batch of compiled steps it lands in (at most 256) or of the next operation (:mod:`.interrupt`),
+            then raises ``KeyboardInterrupt``: ``run`` again continues with the steps the run would have taken.
+            A second Ctrl-C raises at once.
         check_every : int
             ``checkpointer`` and ``stop`` are asked after the steps that are multiples of this (default
             every step; ``integrator.slow_every`` lets the fast steps between run in one call).
@@ -317,8 +319,8 @@ class Simulation:
         self.health.keep_last_good(self.snapshot())
         self._ops = ops
         t0 = time.perf_counter()
-        # a Ctrl-C (SIGINT under Python's own handler) is raised after the step it lands in and the operations
-        # on that step, frames among them (.interrupt): a run continued from there takes the same steps
+        # a Ctrl-C (SIGINT under Python's own handler) is raised after the batch of steps it lands in and the
+        # operations after it, frames among them (.interrupt): a run continued from there takes the same steps
         with DeferredCtrlC() as ctrl_c:
             try:
                 for operation in ops:

@@ -180,3 +180,18 @@ def test_the_parts_a_function_is_counted_in():
     }
     for key, part in cases.items():
         assert part_of(key) == part, key
+
+
+def test_a_checkpoint_profiled_at_another_time_step(tmp_path, capsys):
+    """``--checkpoint X --set integrator.dt=...`` ended in from_snapshot's ValueError (a snapshot continued at
+    another time step): the tool now continues it at that step, its history forgotten, and says so."""
+    from selfas_graph.cli.main import main as cli
+
+    run = tmp_path / "run.h5"
+    scene = str(ROOT / "scenarios" / "quick.toml")
+    argv = ["simulate", scene, "-o", str(run), "--set", "rods.count=20", "--t-end", "0.02", "--progress", "none"]
+    assert cli(argv) in (0, None)
+    capsys.readouterr()
+    ckpt = str(tmp_path / "run.checkpoint.h5")
+    _tool().main(["--checkpoint", ckpt, "--set", "integrator.dt=5e-4", "--steps", "4"])
+    assert "at integrator.dt = 0.0005, started again with RK4" in capsys.readouterr().out

@@ -6,6 +6,9 @@ The system: three rods in a column across a gap of 3.06 (their tips touch at ste
 closes at once and the run has events to lose)."""
 
 import dataclasses
+import gc
+import os
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +50,7 @@ def test_a_writer_refuses_another_simulation_before_any_step(tmp_path):
     a, b = column(), column()
     with sg.RunWriter.for_simulation(a, tmp_path / "r.h5") as w:
         a.run(0.1, writer=w)
-        with pytest.raises(ValueError, match="last frame is at step 100, after this simulation's step 0"):
+        with pytest.raises(ValueError, match="its step 0 is before the last step the file holds, 100"):
             b.run(0.1, writer=w)
         assert b.state.step == 0
     with sg.RunFile(tmp_path / "r.h5") as run:
@@ -325,18 +328,21 @@ def test_python_mistakes_are_named_by_argument(tmp_path):
 
 def test_a_writer_refuses_the_frames_of_another_simulation(tmp_path):
     """A writer made for b took a's frames (file: b's seed and charges, a's positions; status "finished"),
-    and a third simulation's after a jump. Refused now before any step, naming what differs."""
+    and those of simulations behind the file or elsewhere. Refused now before any step, naming what differs."""
     b = column()
     a = sg.Simulation(PARAMS.replace(scenario={"seed": 2}), state=b.state)
     with sg.RunWriter.for_simulation(b, tmp_path / "r.h5") as w:
-        with pytest.raises(ValueError, match="scenario.seed is 1 in the one it was made for and 2 in this one"):
+        with pytest.raises(ValueError, match="scenario.seed is 1 in the file and 2 in the simulation"):
             a.run(0.1, writer=w)
         assert a.state.step == 0 and w.n_frames == 0
         b.run(0.1, writer=w)
-        c = column()
-        c.run(0.2)
-        with pytest.raises(ValueError, match="takes the frames of another simulation .the step is 100 there and 200"):
-            c.run(0.3, writer=w)
+        behind = column()
+        behind.run(0.05)
+        with pytest.raises(ValueError, match="its step 50 is before the last step the file holds, 100"):
+            behind.run(0.3, writer=w)
+        moved = dataclasses.replace(b.state, position=b.state.position + 1e-3)
+        with pytest.raises(ValueError, match="its positions at step 100 are not those of the file's last frame"):
+            sg.Simulation(PARAMS, state=moved).run(0.2, writer=w)
         b.run(0.2, writer=w)  # its own frames, in another call
     with sg.RunFile(tmp_path / "r.h5") as run:
         assert run.step.tolist() == [0, 50, 100, 150, 200]
@@ -345,16 +351,17 @@ def test_a_writer_refuses_the_frames_of_another_simulation(tmp_path):
 
 def test_a_writer_takes_the_continuation_of_its_simulation(tmp_path):
     """What continues the file is taken: a copy restored from the simulation's snapshot, with the writer open
-    or reopened at its step, also once the simulation it was made for is gone; a reopened file refuses a
-    simulation of other parameters than it states (the end time aside) or whose time does not follow it."""
+    or reopened at its step; a reopened file refuses a simulation of other parameters than it states (the end
+    time aside) or whose time or positions do not follow it. A writer whose simulation was collected:
+    ``test_a_writer_whose_simulation_is_gone_takes_its_continuation_and_nothing_else``."""
     sim = column()
     path = tmp_path / "r.h5"
     with sg.RunWriter.for_simulation(sim, path) as w:
         sim.run(0.1, writer=w)
         copy = sg.Simulation.from_snapshot(PARAMS, sim.snapshot())
         copy.run(0.15, writer=w)
-        with pytest.raises(ValueError, match="last frame is at step 150, after this simulation.s step 100"):
-            sim.run(0.2, writer=w)  # the writer now takes the copy's frames
+        with pytest.raises(ValueError, match="its step 100 is before the last step the file holds, 150"):
+            sim.run(0.2, writer=w)  # the file now holds the copy's frames
     snap = copy.snapshot()
     del sim, copy
     with sg.RunWriter.reopen(path, 150) as w:
@@ -392,3 +399,83 @@ def test_a_file_written_from_python_states_the_end_time_it_was_run_to(tmp_path):
         sim.run(0.25, writer=w)
     with sg.RunFile(path) as run:
         assert run.parameters["run"]["t_end"] == 0.25 and json.loads(run.meta["t_end_before"]) == [0.15]
+
+
+def test_a_writer_judges_a_simulation_by_the_file_not_by_which_objects_are_alive(tmp_path):
+    """Whether a simulation continued the file depended on whether the one the writer last took frames from
+    was still alive, which garbage collection decides (a simulation holds reference cycles). A copy restored
+    from the snapshot of the file's last frame, after a look ahead without the writer, was refused while the
+    old object lived; the writer now judges from what it has written, the old object alive or collected."""
+    for collect in (False, True):
+        sim = column()
+        path = tmp_path / f"r{collect}.h5"
+        with sg.RunWriter.for_simulation(sim, path) as w:
+            sim.run(0.1, writer=w)
+            snap = sim.snapshot()  # the state of the file's last frame
+            sim.run(0.2)  # a look ahead without the writer
+            if collect:
+                del sim
+                gc.collect()
+                assert w._simulation() is None
+            sg.Simulation.from_snapshot(PARAMS, snap).run(0.2, writer=w)
+        with sg.RunFile(path) as run:
+            assert run.step.tolist() == [0, 50, 100, 150, 200]
+            steps = run.observable("bond_error_per_step")[0]
+            assert steps.tolist() == list(range(1, 201))
+
+
+def test_a_writer_whose_simulation_is_gone_takes_its_continuation_and_nothing_else(tmp_path):
+    """A writer made by ``for_simulation`` whose simulation was dropped and collected took any simulation whose
+    time followed the last frame: one behind the file, or one without the events it holds."""
+    sim = column()
+    w = sg.RunWriter.for_simulation(sim, tmp_path / "r.h5")
+    sim.run(0.1, writer=w)
+    snap = sim.snapshot()
+    del sim
+    gc.collect()
+    assert w._simulation() is None
+    behind = column()
+    behind.run(0.05)
+    with pytest.raises(ValueError, match="its step 50 is before the last step the file holds, 100"):
+        behind.run(0.2, writer=w)
+    assert w.events_written > 0
+    bare = sg.Simulation(PARAMS, state=sg.State.from_state_dict(snap))  # the state, not the run's event log
+    bare.events = []
+    with pytest.raises(ValueError, match=f"it holds 0 events, the file {w.events_written}"):
+        bare.run(0.2, writer=w)
+    sg.Simulation.from_snapshot(PARAMS, snap).run(0.2, writer=w)
+    w.close()
+    with sg.RunFile(tmp_path / "r.h5") as run:
+        assert run.step.tolist() == [0, 50, 100, 150, 200] and run.status == "finished"
+
+
+def test_a_continuation_from_before_the_rows_a_ctrl_c_wrote_is_refused(tmp_path):
+    """A Ctrl-C at step 130 writes the per-step rows to 130, the last frame being at 100. A simulation restored
+    from ``last_good_snapshot`` (step 100) was taken once the old one was collected, and the file got the rows
+    of steps 101-130 twice. Refused now, alive or collected; a file reopened at 100 with ``drop_later`` takes it."""
+    sim = column()
+    path = tmp_path / "r.h5"
+    w = sg.RunWriter.for_simulation(sim, path)
+
+    def ctrl_c(s, done, total):
+        if done == 130:
+            os.kill(os.getpid(), signal.SIGINT)
+
+    with pytest.raises(KeyboardInterrupt):
+        sim.run(0.2, writer=w, progress=ctrl_c, progress_every=10)
+    assert sim.state.step == 130
+    good = sim.last_good_snapshot
+    assert int(good["step"]) == 100
+    for collect in (False, True):
+        if collect:
+            del sim
+            gc.collect()
+            assert w._simulation() is None
+        with pytest.raises(ValueError, match="its step 100 is before the last step the file holds, 130"):
+            sg.Simulation.from_snapshot(PARAMS, good).run(0.2, writer=w)
+    w.close()
+    with sg.RunWriter.reopen(path, 100, drop_later=True) as w:
+        sg.Simulation.from_snapshot(PARAMS, good).run(0.2, writer=w)
+    with sg.RunFile(path) as run:
+        assert run.step.tolist() == [0, 50, 100, 150, 200]
+        assert run.observable("bond_error_per_step")[0].tolist() == list(range(1, 201))

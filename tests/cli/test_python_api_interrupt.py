@@ -9,6 +9,7 @@ rods to t = 0.5 (about 140 of its steps evaluate forces in Python, the rest run 
 import os
 import signal
 import threading
+import time
 from pathlib import Path
 
 import h5py
@@ -17,6 +18,7 @@ import pytest
 
 import selfas_graph as sg
 import selfas_graph.io.run_writer as run_writer
+from selfas_graph.model.interrupt import DeferredCtrlC
 
 ROOT = Path(__file__).resolve().parents[2]
 T_END = 0.5
@@ -103,7 +105,7 @@ def test_a_ctrl_c_while_a_frame_is_written_finishes_the_frame(tmp_path, monkeypa
     _, ref_rows = reference
     sim = quick()
     with sg.RunWriter.for_simulation(sim, tmp_path / "r.h5") as w:
-        # the 7th dataset made after the file's: the 3rd observable's values
+        # the 7th dataset made after the file's: the 3rd observable's ``step`` dataset
         monkeypatch.setattr(run_writer, "_growable", ctrl_c_at_call(run_writer._growable, 7))
         with pytest.raises(KeyboardInterrupt):
             sim.run(T_END, writer=w)
@@ -161,3 +163,50 @@ def test_a_sigint_handler_of_the_callers_own_and_other_threads_are_left_alone():
     other.start()
     other.join()
     assert isinstance(errors[0], sg.RunSummary)
+
+
+def test_a_second_ctrl_c_stops_a_callback_that_hangs_at_once():
+    """The first Ctrl-C is held to the end of the step, which a hung step or callback never reaches, and every
+    later Ctrl-C was held too: nothing stopped the run. The first now puts Python's handler back, so the second
+    raises ``KeyboardInterrupt`` where it lands (a write it cuts is undone), here in the callback's sleep."""
+    seen = []
+
+    def hung(sim, done, total):
+        if done == 10:
+            os.kill(os.getpid(), signal.SIGINT)  # held
+            seen.append("held")
+            threading.Timer(0.2, os.kill, (os.getpid(), signal.SIGINT)).start()
+            time.sleep(10)
+            seen.append("slept")
+
+    sim = quick()
+    started = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        sim.run(T_END, progress=hung, progress_every=10)
+    assert seen == ["held"] and time.monotonic() - started < 5
+    assert sim.state.step == 10
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_ctrl_c_after_the_last_check_is_raised_and_the_handler_is_put_back(monkeypatch):
+    """A SIGINT after the last check of ``step`` but before its handler was put back was recorded and then
+    dropped: ``step`` returned as if none came. ``step`` checks once more after the block, as ``run`` does;
+    after both, Python's own handler is in place again."""
+    put_back = DeferredCtrlC.__exit__
+
+    def late(self, *exc):
+        os.kill(os.getpid(), signal.SIGINT)  # after the last check, the recording handler still in place
+        return put_back(self, *exc)
+
+    sim = quick()
+    sim.step(2)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    monkeypatch.setattr(DeferredCtrlC, "__exit__", late)
+    with pytest.raises(KeyboardInterrupt):
+        sim.step(3)
+    assert sim.state.step == 5
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    with pytest.raises(KeyboardInterrupt):
+        sim.run(sim.state.time + 10 * sim.dt)
+    assert sim.state.step == 15  # the run whole, then the Ctrl-C raised
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

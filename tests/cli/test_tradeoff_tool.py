@@ -122,3 +122,32 @@ def test_a_checkpoint_branches_with_its_own_run_overrides(tmp_path, capsys):
     )
     assert "made with --set circuit.delta_J0=3.0: every run takes them" in capsys.readouterr().out
     assert len(json.loads(js.read_text())["rows"]) == 2
+
+
+def test_a_checkpoint_branches_at_a_base_time_step_of_its_own(tmp_path, capsys):
+    """A base ``--set integrator.dt=...`` with ``--checkpoint`` ended in from_snapshot's ValueError: the base
+    simulation now continues the checkpoint at that time step, its history forgotten."""
+    from selfas_graph.cli.main import main as cli
+
+    tool = _tool()
+    run = tmp_path / "run.h5"
+    scene = str(ROOT / "scenarios" / "quick.toml")
+    argv = ["simulate", scene, "-o", str(run), "--set", "rods.count=20", "--t-end", "0.02", "--progress", "none"]
+    assert cli(argv) in (0, None)
+    js = tmp_path / "t.json"
+    ckpt = str(tmp_path / "run.checkpoint.h5")
+    tool.main(
+        [
+            scene,
+            "--checkpoint",
+            ckpt,
+            "--set",
+            "integrator.dt=5e-4",
+            "--t",
+            "0.002",
+            "--knob",
+            "forces.yukawa.precision",
+        ]
+        + ["--json", str(js)]
+    )
+    assert len(json.loads(js.read_text())["rows"]) == 2

@@ -120,6 +120,32 @@ def test_a_resume_that_extends_the_run_states_its_end_time(scen, tmp_path, capsy
         assert json.loads(fa["parameters/selfas_graph"].attrs["t_end_before"]) == [0.004]
 
 
+def test_a_resume_into_a_file_of_other_parameters_is_refused_before_the_file_is_changed(scen, tmp_path, capsys):
+    """A run file whose ``parameters_json`` states other parameters than its checkpoint's scenario was reopened
+    first (its status set to "running", its end time rewritten) and then refused inside the run, with a
+    traceback and advice for Python. Refused now before the file is opened to write, with one line (the end
+    time, output file and checkpoint interval may differ: ``lifecycle.continuation``)."""
+    a = tmp_path / "a.h5"
+    assert simulate(capsys, scen, "-o", a)[0] == 0
+    with h5py.File(a, "r+") as f:
+        attrs = f["parameters/selfas_graph"].attrs
+        params = json.loads(attrs["parameters_json"])
+        params["circuit"]["delta_J0"] = 3.0
+        params["output"]["checkpoint_interval"] = 5.0  # free: not named
+        attrs["parameters_json"] = json.dumps(params)
+    before = a.read_bytes()
+    code, _, err = simulate(capsys, "--resume", a, "--t-end", "0.008")
+    assert code == 2
+    assert "states other parameters than the run its checkpoint continues" in err
+    assert "circuit.delta_J0 is 3.0 in the run file and 2.0 in its checkpoint" in err
+    assert "checkpoint_interval" not in err
+    assert a.read_bytes() == before
+    with h5py.File(a, "r") as f:
+        attrs = f["parameters/selfas_graph"].attrs
+        assert attrs["status"] == "finished" and "t_end_before" not in attrs
+        assert json.loads(attrs["parameters_json"]) == params and len(f["particles/tips/position/step"]) == 3
+
+
 def test_resume_of_a_moved_folder(scen, tmp_path, capsys):
     a = tmp_path / "a"
     a.mkdir()

@@ -1,5 +1,7 @@
-"""Whether a seed file belongs to the ensemble: its stored parameters against the wanted ones, keys
-added by later versions counted at their defaults."""
+"""Whether a file's stored parameters are those of a simulation: :func:`parameter_differences`, the one rule
+of a seed file of an ensemble (``ensemble/plan.py``), of a run file a resume continues
+(``lifecycle.continuation``) and of a run file a simulation continues from Python (``io/writer_binding.py``).
+Keys added by later versions count at their defaults."""
 
 from __future__ import annotations
 
@@ -9,7 +11,7 @@ import json
 import types
 import typing
 
-#: parameters a seed file may differ in and still belong to the ensemble
+#: parameters a file may differ in and still be the simulation's (a seed of the ensemble, a run continued)
 FREE_PARAMETERS = ("run.t_end", "output.file", "output.checkpoint_interval")
 
 
@@ -25,13 +27,24 @@ def _flat(d, prefix=""):
 
 
 def parameter_differences(stored: dict, wanted: dict) -> list[str]:
-    """Dotted keys whose values differ between two parameter dicts, except :data:`FREE_PARAMETERS`."""
+    """Dotted keys whose values differ between ``stored`` (a file's parameters, JSON) and ``wanted`` (a
+    simulation's, ``Parameters.to_dict()``), except :data:`FREE_PARAMETERS` and a key ``stored`` lacks
+    whose wanted value is its default."""
     a, b = _flat(json.loads(json.dumps(stored))), _flat(json.loads(json.dumps(wanted)))
     return sorted(
         k
         for k in set(a) | set(b)
         if k not in FREE_PARAMETERS and a.get(k) != b.get(k) and not _newer_key_at_default(k, a, b)
     )
+
+
+def described_differences(stored: dict, wanted: dict, where: str, here: str) -> list[str]:
+    """:func:`parameter_differences` as sentences: "key is <stored value> in ``where`` and <wanted> in ``here``"."""
+    wanted = json.loads(json.dumps(wanted))
+    return [
+        f"{k} is {value_at(stored, k)!r} in {where} and {value_at(wanted, k)!r} in {here}"
+        for k in parameter_differences(stored, wanted)
+    ]
 
 
 def _newer_key_at_default(key, stored_flat, wanted_flat) -> bool:
@@ -55,7 +68,7 @@ def _DEFAULTS_FLAT():
     """Every key's default, dotted, including the keys of the optional tables (force terms,
     ``[circuit]`` ...) that are off by default: a key added to such a table later has a default
     too, and a file of an earlier version that has the table on used it."""
-    from ..model.params import Parameters
+    from .params import Parameters
 
     flat = _flat(json.loads(json.dumps(Parameters().to_dict())))
     flat.update(_optional_table_defaults(Parameters, ""))
@@ -84,7 +97,8 @@ def _optional_table_defaults(cls, prefix) -> dict:
     return out
 
 
-def _get(d, dotted):
+def value_at(d, dotted):
+    """The value of the dotted key ``dotted`` in the nested dict ``d`` (None where it has none)."""
     for k in dotted.split("."):
         if not isinstance(d, dict) or k not in d:
             return None
