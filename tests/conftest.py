@@ -1,5 +1,7 @@
 """Shared helpers: small hand-built systems with fixed seeds."""
 
+import signal
+
 import numpy as np
 import pytest
 
@@ -77,6 +79,17 @@ def random_rods(n, rng, box=4.0, q=(0.5, 2.0)):
     centre = rng.uniform(-box / 2, box / 2, (n, 3))
     axis = rng.normal(size=(n, 3))
     return State.from_rods(centre, axis, rng.uniform(*q, n), rng.uniform(*q, n))
+
+
+@pytest.fixture(autouse=True)
+def python_sigint_handler():
+    """Python's own SIGINT handler in every test, as in a notebook or a script at a terminal: a process
+    started with SIGINT ignored (a shell's background job, some CI runners) starts without it, and the
+    tests of a Ctrl-C (``Simulation.run`` defers it only under this handler) would see none arrive.
+    The handler found is put back."""
+    found = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, found)
 
 
 @pytest.fixture

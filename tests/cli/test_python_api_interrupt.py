@@ -49,16 +49,6 @@ def rows(path) -> dict:
     return {k: v for k, v in out.items() if not k.startswith("parameters")}
 
 
-@pytest.fixture(autouse=True)
-def python_sigint_handler():
-    """Python's own SIGINT handler, as in a notebook or a script at a terminal: a process started
-    with SIGINT ignored (a shell's background job, some CI runners) starts without it, and then
-    neither the run defers a Ctrl-C nor does one arrive. The handler found is put back."""
-    found = signal.signal(signal.SIGINT, signal.default_int_handler)
-    yield
-    signal.signal(signal.SIGINT, found)
-
-
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
     path = tmp_path_factory.mktemp("ref") / "ref.h5"
