@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 import scipy.integrate
 
+from selfas_graph.studies import summary
 from selfas_graph.studies.summary import STUDY_MEASURES
 
 ROUND_OFF = 1e-12
@@ -89,9 +90,11 @@ def test_a_head_to_head_pair_as_the_largest_structure_has_alignment_zero():
         ([[1, 0, 0], [0, 1, 0]], math.sqrt(2) / 2),  # at right angles: |m_q| = sqrt(2) q over 2 q
     ],
 )
-def test_free_rods_alignment_by_hand(axes, expected):
+def test_free_rods_alignment_by_hand(axes, expected, monkeypatch):
     """The rods in no structure (no tip contact) have alignment |sum q (x_a - x_b)| / (n q): worked out by
-    hand for rods lined up, antiparallel and at right angles; the chain and the pair are left out."""
+    hand for rods lined up, antiparallel and at right angles; the chain and the pair are left out. The
+    page's minimum count of such rods (MIN_FREE_RODS, tested in tests/cli/test_studies.py) set to 1."""
+    monkeypatch.setattr(summary, "MIN_FREE_RODS", 1)
     a, b, contacts = scene(axes)
     f = frame(a, b, 1.5, contacts)
     assert MEASURE["free_rods"](f) == len(axes)
@@ -111,10 +114,11 @@ def test_all_rods_alignment_is_the_explicit_sum():
     assert MEASURE["largest_alignment"](f) == pytest.approx(q[:6].sum() / (6 * q.mean()), abs=ROUND_OFF)
 
 
-def test_no_free_rods_or_no_contact_data_give_nan():
+def test_no_free_rods_or_no_contact_data_give_nan(monkeypatch):
     """With every rod in a structure the free rods' alignment is NaN (no rods to average over) and their
     count 0; a frame without contact data gives NaN for the structure measures and the free rods, while
-    the alignment of all rods needs no contacts."""
+    the alignment of all rods needs no contacts (the minimum count of free rods set to 1, as above)."""
+    monkeypatch.setattr(summary, "MIN_FREE_RODS", 1)
     a, b, contacts = chain(4, [0, 0, 0], [0, 0, 1])
     f = frame(a, b, 1.0, contacts)
     assert math.isnan(MEASURE["free_alignment"](f)) and MEASURE["free_rods"](f) == 0.0
