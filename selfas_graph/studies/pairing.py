@@ -13,7 +13,8 @@ table (:func:`.convergence.paired_difference`), from per-seed values already set
 mean of ``x_i - y_i`` over the pairs where both have a value, its standard error
 ``sqrt(s_d^2 / n + mean(ex_i^2 + ey_i^2) / n)`` (``s_d`` the spread of the differences, the fit errors
 only for a fitted measure), ``d = diff / sem`` and the two-sided p-value of the paired t-test with
-``n - 1`` degrees of freedom; where every pair differs by the same nonzero amount ``d`` is infinite and
+``n - 1`` degrees of freedom (the seeds' alone, also with the fit errors: a fit error has no sample
+size of its own, and one would only raise the degrees of freedom, so the p-value errs high); where every pair differs by the same nonzero amount ``d`` is infinite and
 the p-value is the exact sign test's, ``2 / 2^n``.
 """
 

@@ -71,8 +71,11 @@ def welch_p(a, b) -> float:
     """The two-sided p-value of Welch's t-test of two plain statistics (mean, standard error, count): the
     chance of a difference at least this large in combined standard errors between two sets of seeds of
     one distribution, for the few seeds a study has (a normal reading of the difference overstates the
-    confidence: 3 SE is p = 0.0027 for a normal variable, p = 0.02 with 7 degrees of freedom). NaN
-    without two seeds a side or without a spread."""
+    confidence: 3 SE is p = 0.0027 for a normal variable, p = 0.02 with 7 degrees of freedom). The
+    Welch-Satterthwaite degrees of freedom count each side's whole variance as that of its seeds, a
+    fitted dimension's fit-error term too: that term has no sample size of its own (docs/model.md
+    "Measures of the paper's claims"), and one would only raise the degrees of freedom, so the
+    p-value errs high. NaN without two seeds a side or without a spread."""
     if a["n"] < 2 or b["n"] < 2:
         return math.nan
     va, vb = a["sem"] ** 2, b["sem"] ** 2
