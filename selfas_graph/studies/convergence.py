@@ -50,7 +50,8 @@ def detectable_se(df, measures=1, level=LEVEL, power=0.8) -> float:
     finds with probability ``power`` at level ``level / measures`` (two-sided; Holm's first step over
     ``measures`` comparisons): the noncentrality of the noncentral t distribution where the chance
     beyond the critical value reaches ``power``. About 2.8 for many degrees of freedom and one
-    measure; 3.76 for 4 degrees of freedom and one measure, 6.17 with 6 measures."""
+    measure; 3.76 for 4 degrees of freedom and one measure, 6.17 with 6 measures; 65 for one degree
+    of freedom (two pairs) and 4 measures. Infinite past 10^6."""
     from scipy.optimize import brentq
     from scipy.stats import nct
     from scipy.stats import t as student
@@ -61,7 +62,12 @@ def detectable_se(df, measures=1, level=LEVEL, power=0.8) -> float:
         p = nct.sf(crit, df, delta) + nct.cdf(-crit, df, delta)
         return float(np.nan_to_num(p, nan=1.0 if delta > crit else 0.0)) - power
 
-    return float(brentq(missed, 0.0, 50.0))
+    hi = 50.0  # with few degrees of freedom and many measures the critical value itself passes 50
+    while missed(hi) < 0.0:
+        if hi > 1e6:
+            return math.inf
+        hi *= 4.0
+    return float(brentq(missed, 0.0, hi))
 
 
 def holm(pvalues) -> list:
@@ -134,6 +140,8 @@ def _detectable(p, measures) -> str:
     """:func:`detectable_se` standard errors of the paired difference in % of the default's mean over
     the pairs ("n/a" without a spread or a mean)."""
     if not (p["n"] > 1 and math.isfinite(p["sem"]) and p["sem"] > 0 and p["b"]["mean"]):
+        return "n/a"
+    if math.isinf(detectable_se(p["n"] - 1, measures)):
         return "n/a"
     return f"±{fmt(100 * detectable_se(p['n'] - 1, measures) * p['sem'] / abs(p['b']['mean']), 2)} %"
 

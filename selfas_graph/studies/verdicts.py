@@ -15,6 +15,9 @@ rule decides the test, as for the convergence table:
 * otherwise the two sets of seeds are independent: d = (x - x_null) / sqrt(SE^2 + SE_null^2) over
   all the seeds of each, beside Welch's p-value ("Welch p").
 
+A difference with no spread to scale by (infinite d: every pair alike, or every seed of each side the
+same) is decided by its exact test, the sign test or :func:`separation_p`, at :data:`EXACT_LEVEL`.
+
 A null model whose value is zero in every seed cannot have what the claim measures (its rods never
 touch, say): a difference in the claimed direction is then worded as nonzero where the null model
 is zero by construction, not as the claim reproduced. A windowed measure that is zero while a seed's
@@ -87,6 +90,21 @@ def welch_p(a, b) -> float:
     return float(2.0 * student.sf(abs(a["mean"] - b["mean"]) / math.sqrt(va + vb), df))
 
 
+#: the two-sided chance of 3 standard errors of a normal variable, 0.0027: where a difference has no
+#: spread to scale by (infinite d), the level its exact test must pass for a verdict (docs/model.md
+#: "Measures of the paper's claims", its Verdicts)
+EXACT_LEVEL = 2.6997960632601866e-3
+
+
+def separation_p(a, b) -> float:
+    """The two-sided p-value of the exact rank test of two sets of seeds that each give one value, the
+    two values different (no spread on either side, infinite d): every seed of one above every seed of
+    the other, a chance of ``2 / C(n_a + n_b, n_a)`` under exchangeable seeds; NaN without a seed a side."""
+    if a["n"] < 1 or b["n"] < 1:
+        return math.nan
+    return min(1.0, 2.0 / math.comb(a["n"] + b["n"], a["n"]))
+
+
 def _test_text(p, paired=None) -> str:
     """The test beside a verdict: "Welch p = 0.002" (two significant digits, "< 1e-6" below), "paired
     over 5 seeds, p = 0.002" for a paired test of ``paired`` seeds (without its p where ``p`` is NaN);
@@ -119,9 +137,15 @@ def _verdict(d, expect, p=math.nan, paired=None, zero=False):
     claimed = (d > 0) == (expect == "greater")
     if math.isinf(d):  # no spread: every seed of each gives the same value, or every pair differs alike
         if paired:
-            what = f"every seed differs from the same seed of the null model by the same amount; sign test over {paired} seeds, p = {p:.2g}"
+            what = f"every seed differs from the same seed of the null model by the same amount; sign test over {paired} seeds"
         else:
-            what = "every seed differs from every seed of the null model"
+            what = "every seed differs from every seed of the null model; exact rank test"
+        what += f", p = {p:.2g}" if math.isfinite(p) else " without a p-value"
+        if not p < EXACT_LEVEL:  # a few pairs alike are no evidence: 2 of 2 happen half the time
+            note = "; the null model's value is zero in every seed" if zero else ""
+            return (
+                f"not distinguished from the null model ({what}, not below {EXACT_LEVEL:.2g}, the chance of 3 SE{note})"
+            )
         if zero and claimed:
             return f"{ZERO_NULL}; {what}"
         return f"{'reproduced' if claimed else 'opposite to the claim'} ({what})"
@@ -142,12 +166,16 @@ def _fit_verdict(d, d_seeds, expect, p_seeds=math.nan, paired=None):
     page says that the verdict depends on counting the fits' own errors (docs/model.md "Measures of the
     paper's claims")."""
     with_fits, seeds_alone = _verdict(d, expect), _verdict(d_seeds, expect, p_seeds, paired)
-    if with_fits.split(" (")[0] == seeds_alone.split(" (")[0]:
+    if math.isnan(d) and math.isnan(d_seeds):
+        return with_fits  # "not decided (too few seeds)"
+    if with_fits.split(" (")[0] == seeds_alone.split(" (")[0] and math.isfinite(d_seeds):
         return (
             f"{with_fits[:-1]}; {d_seeds:+.1f} SE by the spread between seeds alone{_p_text(p_seeds, paired)})".replace(
                 "-", "−"
             )
         )
+    if with_fits.split(" (")[0] == seeds_alone.split(" (")[0]:  # no spread between the seeds
+        return f"{with_fits[:-1]}; by the spread between seeds alone: {seeds_alone})"
     return (
         f"depends on the fits' own errors: {_verdict(d, expect, math.nan, paired)} with each seed's fit error, "
         f"{seeds_alone} by the spread between seeds alone"
@@ -205,9 +233,15 @@ def claim_verdict(c, s, null, nm) -> str:
         return _fit_verdict(q["d"], alone["d"], c.expect, alone["p"], q["n"])
     a, b = plain_stat(x, ex), plain_stat(y, ey)
     if not fitted:
-        return _verdict(_claim_difference(a, b), c.expect, welch_p(a, b), zero=zero)
-    sa, sb = plain_stat(x), plain_stat(y)
-    return _fit_verdict(_claim_difference(a, b), _claim_difference(sa, sb), c.expect, welch_p(sa, sb))
+        d = _claim_difference(a, b)
+        return _verdict(d, c.expect, separation_p(a, b) if math.isinf(d) else welch_p(a, b), zero=zero)
+    keep = np.isfinite(ex) if ex is not None else np.ones(len(x), dtype=bool)
+    keep_null = np.isfinite(ey) if ey is not None else np.ones(len(y), dtype=bool)
+    sa, sb = plain_stat(np.where(keep, x, np.nan)), plain_stat(np.where(keep_null, y, np.nan))  # the seeds of a, b
+    d_seeds = _claim_difference(sa, sb)
+    return _fit_verdict(
+        _claim_difference(a, b), d_seeds, c.expect, separation_p(sa, sb) if math.isinf(d_seeds) else welch_p(sa, sb)
+    )
 
 
 def _split_text(summary, measure, window) -> str:
@@ -324,8 +358,11 @@ def _step_p(points, measure, t) -> str:
 
 def _table_values(summary, measure, t) -> np.ndarray:
     """The per-seed values a table's statistic of ``measure`` at ``t`` describes: the seeds that carry
-    current for a grouped measure (:func:`_stat_at`), every seed with a value otherwise."""
+    current for a grouped measure (:func:`_stat_at`), the seeds with a value and a fit error for a
+    fitted one, every seed with a value otherwise."""
     v = values_at(summary, measure, t)
+    if measure in FIT_ERRORS:
+        v = np.where(np.isfinite(values_at(summary, FIT_ERRORS[measure], t)), v, np.nan)
     if measure in GROUPED:
         active, known, _ = current_flags(summary, t)
         v = v[active & known]

@@ -569,15 +569,45 @@ def test_study_page_through_a_link_writes_the_file_it_names(tmp_path):
 
 def test_a_windowed_claim_and_a_null_without_spread():
     """A claim's `window` averages each seed over the summarised times in it; a null model whose seeds
-    all give the same value, against seeds that all give another, differs by infinitely many SE."""
-    from selfas_graph.studies.stats import plain_stat, window_values
-    from selfas_graph.studies.verdicts import _claim_difference, _verdict
+    all give the same value, against seeds that all give another, differs by infinitely many SE. Its
+    verdict rests on the exact rank test, 2 / C(n_a + n_b, n_a), against the 0.0027 of 3 SE: 2 against
+    3 seeds (p = 0.2) or 5 against 5 (0.0079) are no verdict, 6 against 6 (0.0022) is; as the sign
+    test of pairs alike: 5 pairs (0.0625) are none, 10 (0.00195) are."""
+    from scipy.stats import norm
 
+    from selfas_graph.studies.stats import plain_stat, window_values
+    from selfas_graph.studies.verdicts import EXACT_LEVEL, _claim_difference, _verdict, separation_p
+
+    assert EXACT_LEVEL == pytest.approx(2.0 * norm.sf(3.0), rel=1e-12)
     s = {"times": [0.0, 10.0, 20.0], "seeds": [{}, {}], "measures": {"m": {"values": [[9, 1, 3], [9, None, 5]]}}}
     assert list(window_values(s, "m", 5.0, 20.0)) == [2.0, 5.0]  # (1 + 3) / 2 and 5 alone
-    d = _claim_difference(plain_stat([4.0, 4.0]), plain_stat([0.0, 0.0, 0.0]))
-    assert d == math.inf and _verdict(d, "greater").startswith("reproduced (every seed")
+    a, b = plain_stat([4.0, 4.0]), plain_stat([0.0, 0.0, 0.0])
+    d = _claim_difference(a, b)
+    assert d == math.inf and separation_p(a, b) == pytest.approx(0.2)
+    assert _verdict(d, "greater", separation_p(a, b)).startswith("not distinguished from the null model (every seed")
+    assert _verdict(d, "greater").startswith("not distinguished")  # no p-value: no verdict
+    five, six = (plain_stat([4.0] * n) for n in (5, 6))
+    assert separation_p(five, plain_stat([0.0] * 5)) == pytest.approx(2.0 / 252.0)
+    assert _verdict(d, "greater", separation_p(five, plain_stat([0.0] * 5))).startswith("not distinguished")
+    assert _verdict(d, "greater", separation_p(six, plain_stat([0.0] * 6))).startswith("reproduced (every seed")
+    assert _verdict(d, "less", separation_p(six, plain_stat([0.0] * 6))).startswith("opposite to the claim")
+    assert _verdict(d, "greater", 0.0625, paired=5).startswith("not distinguished")
+    assert _verdict(d, "greater", 2.0 / 2**10, paired=10).startswith("reproduced (every seed differs from the same")
     assert math.isnan(_claim_difference(plain_stat([4.0]), plain_stat([0.0, 0.0])))  # one seed: no spread
+
+
+def test_a_fitted_verdict_without_seeds_or_spread_reads_plainly():
+    """One seed a side: "not decided (too few seeds)" alone, not with "+nan SE"; no spread between the
+    seeds alone: their verdict in words, not "+inf SE"."""
+    from selfas_graph.studies.verdicts import _fit_verdict
+
+    assert _fit_verdict(math.nan, math.nan, "less", math.nan, 1) == "not decided (too few seeds)"
+    text = _fit_verdict(-0.5, -math.inf, "less", 0.0625, 5)
+    assert "inf" not in text and "nan" not in text
+    assert (
+        text.startswith("not distinguished from the null model (−0.5 SE")
+        and "sign test over 5 seeds, p = 0.062" in text
+    )
 
 
 def test_the_flux_is_summarised_where_other_studies_are_set_against_a_study():
@@ -942,6 +972,24 @@ def test_holm_and_the_detectable_difference_by_hand():
     assert detectable_se(10**6, level=level) == pytest.approx(2.0 + norm.isf(0.2), abs=1e-3)
     assert detectable_se(4) > detectable_se(30) > detectable_se(10**6)
     assert detectable_se(4, 6) > detectable_se(4, 1)
+
+
+def test_the_detectable_difference_of_two_pairs_and_several_measures_is_found_past_50_se():
+    """With one degree of freedom (two pairs) and 4 measures the critical value of t alone is 50.9 SE:
+    the search widens its bracket instead of failing, and the difference found has the power asked
+    (the noncentral t's chance beyond the critical value is 0.8, to brentq's tolerance); a table row
+    of such a setting reads "n/a" only where the difference is past 10^6 SE."""
+    from scipy.stats import nct
+    from scipy.stats import t as student
+
+    from selfas_graph.studies.convergence import LEVEL, _detectable, detectable_se
+
+    delta = detectable_se(1, 4)
+    crit = student.isf(LEVEL / 8, 1)
+    assert crit > 50.0 and delta > crit
+    assert nct.sf(crit, 1, delta) + nct.cdf(-crit, 1, delta) == pytest.approx(0.8, abs=1e-6)
+    assert detectable_se(1, 6) > delta > detectable_se(1, 3)
+    assert _detectable({"n": 2, "sem": 1.0, "b": {"mean": 10.0}}, 5).endswith("%")
 
 
 def test_a_percolation_table_leaves_failed_runs_out_of_the_fraction_and_names_them():
