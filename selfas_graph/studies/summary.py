@@ -27,6 +27,7 @@ from ..ensemble import FRAME_MEASURES, Measure, seed_path, summarise
 from ..io.atomic import write_text_atomic
 from ..io.h5md import RunFile, RunFileError
 from ..provenance import cpu_model, source_commit
+from .spec import StudiesError
 from .stats import MIN_FREE_RODS
 
 __all__ = ["STUDY_MEASURES", "summarise_study", "write_json_atomic"]
@@ -235,10 +236,16 @@ def summarise_study(study, runs, studies=None) -> dict:
         t_end=study.t_end,
         measures=study_measures(study, studies.compared_times(study.name) if studies else ()),
     )
-    records = [r for r in (_seed_record(p) for p in present) if r is not None]
-    out["seeds"] = [
-        s | r for s, r in zip(out["seeds"], records)
-    ]  # the ensemble's seed entries (short-circuit time, provenance) with the continuations and episodes
+    # the ensemble's seed entries (short-circuit time, provenance) with the continuations and episodes,
+    # joined by file: a file the ensemble summary could not read is in neither
+    records = {r["path"]: r for r in (_seed_record(p) for p in present) if r is not None}
+    lost = [Path(s["path"]).name for s in out["seeds"] if Path(s["path"]).name not in records]
+    if lost:
+        raise StudiesError(
+            f"{', '.join(lost)} in {folder}: read for its frames but not for its events (is a run still "
+            "writing it?); summarise again once no run writes the study's files"
+        )
+    out["seeds"] = [s | records[Path(s["path"]).name] for s in out["seeds"]]
     for s in out["seeds"]:
         s["path"] = Path(s["path"]).name
     out["unreadable"] = [{"path": Path(u["path"]).name, "reason": u["reason"]} for u in out["unreadable"]]

@@ -371,9 +371,11 @@ def _study_cli(folder):
     return cli
 
 
-def test_a_study_is_run_summarised_and_written_into_a_page(tmp_path):
+def test_a_study_is_run_summarised_and_written_into_a_page(tmp_path, monkeypatch):
     """`study run`, `study summarise`, `study page`: the summary holds the per-seed values, the
-    episodes and the provenance; the page's block is what the summary gives; --check agrees."""
+    episodes and the provenance; the page's block is what the summary gives; --check agrees. A seed's
+    episodes join its values by file: where the frames of seed 1 cannot be read, seed 2's row is still
+    seed 2's; a file read for its frames but not its events stops the summary, naming it."""
     (tmp_path / "studies.toml").write_text(
         f"""
 [study.q]
@@ -407,6 +409,21 @@ table_times = [0.5]
     for key in ("total_current", "rods_in_series"):  # the circuit log's row at each closing
         assert len(seed["episodes"].get(key, seed["episodes"]["start"])) == len(seed["episodes"]["start"])
     assert (tmp_path / "figs" / "q_series.png").exists() and (tmp_path / "figs" / "q_snapshot.png").exists()
+
+    import selfas_graph.studies.summary as study_summary
+    from selfas_graph.studies import StudiesError, load_studies
+
+    spec = load_studies(tmp_path / "studies.toml")
+    real = study_summary.summarise
+    monkeypatch.setattr(study_summary, "summarise", lambda paths, *a, **k: real(paths[1:], *a, **k))
+    one = study_summary.summarise_study(spec.study("q"), tmp_path / "runs", spec)
+    assert [(x["seed"], x["path"]) for x in one["seeds"]] == [(2, "seed_0002.h5")]
+    assert one["seeds"][0]["episodes"] == summary["seeds"][1]["episodes"]
+    monkeypatch.setattr(study_summary, "summarise", real)
+    monkeypatch.setattr(study_summary, "_seed_record", lambda path: None)
+    with pytest.raises(StudiesError, match="seed_0001.h5, seed_0002.h5 in .*not for its events"):
+        study_summary.summarise_study(spec.study("q"), tmp_path / "runs", spec)
+    monkeypatch.undo()
     out = cli("page", "--summaries", "res", "--page", "page.md")  # the figures beside the page, each named
     assert f"wrote {Path('figures') / 'q_series.png'}" in out and (tmp_path / "figures" / "q_series.png").exists()
     page = (tmp_path / "page.md").read_text()
