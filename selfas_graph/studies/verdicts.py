@@ -210,6 +210,16 @@ def _all_zero(values) -> bool:
     return bool(v.size) and bool((v == 0.0).all())
 
 
+def _unpaired_note(s, null, ia) -> str:
+    """ "; 8 of the study's 20 seeds have no pair in the null model and are left out" where a paired
+    verdict leaves seeds out (the row's values are over all of each side's seeds), or ""."""
+    left = [(len(x["seeds"]) - len(ia), len(x["seeds"]), who) for x, who in ((s, "study's"), (null, "null model's"))]
+    words = [f"{k} of the {who} {n} seeds" for k, n, who in left if k]
+    if not words:
+        return ""
+    return f"; {' and '.join(words)} have no pair and are left out"
+
+
 def claim_verdict(c, s, null, nm) -> str:
     """The verdict of claim ``c`` on study summary ``s`` against its null model's summary ``null``
     (measure ``nm``): paired by seed over the seeds both have where the two start from the same rods
@@ -225,12 +235,12 @@ def claim_verdict(c, s, null, nm) -> str:
         ey = None if ey is None else ey[ib]
         q = paired_stat(x[ia], y[ib], ex, ey)
         if not fitted:
-            return _verdict(q["d"], c.expect, q["p"], q["n"], zero)
+            return _verdict(q["d"], c.expect, q["p"], q["n"], zero) + _unpaired_note(s, null, ia)
         keep = np.isfinite(np.zeros(len(ia)) if ex is None else ex) & np.isfinite(
             np.zeros(len(ib)) if ey is None else ey
         )
         alone = paired_stat(np.where(keep, x[ia], np.nan), y[ib])  # the same pairs, without the fits' errors
-        return _fit_verdict(q["d"], alone["d"], c.expect, alone["p"], q["n"])
+        return _fit_verdict(q["d"], alone["d"], c.expect, alone["p"], q["n"]) + _unpaired_note(s, null, ia)
     a, b = plain_stat(x, ex), plain_stat(y, ey)
     if not fitted:
         d = _claim_difference(a, b)
@@ -332,8 +342,10 @@ def sweep_rows(studies, summaries, name) -> str:
     if len(done) >= 2:
         steps = [_step_p(done, m, sw.time) for m in CLAIM_MEASURES]
         rows.append("| Welch p from each value to the next (each step alone) | | " + " | ".join(steps) + " |")
-        trend = [_trend_text(x) for x in sweep_trends(done, sw.time)]
-        label = f"trend over the sweep (Kendall τ over every seed; Holm over the {len(CLAIM_MEASURES)} measures)"
+        trends = sweep_trends(done, sw.time)
+        trend = [_trend_text(x) for x in trends]
+        tested = sum(math.isfinite(x["p"]) for x in trends)  # Holm counts the measures with a p-value
+        label = f"trend over the sweep (Kendall τ over every seed; Holm over the {tested} measures tested)"
         rows.append(f"| {label} | | " + " | ".join(trend) + " |")
         rows.append(f"\n![{sw.title}: the claim measures at t = {sw.time:g}](figures/sweep_{name}.png)")
     return "\n".join(rows)

@@ -627,6 +627,23 @@ def test_a_fitted_verdict_without_seeds_or_spread_reads_plainly():
     )
 
 
+def test_a_paired_verdict_says_which_seeds_it_leaves_out():
+    """Seeds 1-5 of the study against seeds 1-3 of its null model pair 3; the verdict says that 2 of the
+    study's 5 have no pair (the row's values are over all 5). Equal seed sets say nothing."""
+    from selfas_graph.studies.pairing import common_rows
+    from selfas_graph.studies.verdicts import _unpaired_note
+
+    five = {"seeds": [{"seed": k} for k in range(1, 6)]}
+    three = {"seeds": [{"seed": k} for k in (3, 1, 2)]}
+    ia, ib = common_rows(five, three)
+    assert list(ia) == [0, 1, 2] and list(ib) == [1, 2, 0]
+    assert _unpaired_note(five, three, ia) == "; 2 of the study's 5 seeds have no pair and are left out"
+    assert _unpaired_note(three, five, common_rows(three, five)[0]) == (
+        "; 2 of the null model's 5 seeds have no pair and are left out"
+    )
+    assert _unpaired_note(five, five, common_rows(five, five)[0]) == ""
+
+
 def test_the_flux_is_summarised_where_other_studies_are_set_against_a_study():
     """The rod currents' flux, costly, is summarised at a few times only; those include the times a
     convergence setting, a sweep or a claim compares with the study (t = 150 for the Fig. 2
