@@ -102,14 +102,24 @@ LABELS = {
 }
 
 
+def reached(summary, t) -> np.ndarray:
+    """Which seeds ran to time ``t`` (their ``t_end``, to 1e-9 relative; a seed entry without one
+    counts as having reached it). A seed that stopped before ``t`` has no value there, though the
+    ensemble summary may hold its last frame within half an output interval of ``t``: one rule for every
+    statistic of the page."""
+    tol = 1e-9 * max(1.0, abs(t))
+    return np.array([float(x.get("t_end", math.inf)) >= t - tol for x in summary["seeds"]], dtype=bool)
+
+
 def _rows_at(summary, rows, t):
-    """Column ``t`` of per-seed rows over the summary's times (NaN where a seed has none, or where
-    ``rows`` is None or ``t`` is not a summarised time)."""
+    """Column ``t`` of per-seed rows over the summary's times (NaN where a seed has none or did not
+    reach ``t``, :func:`reached`, or where ``rows`` is None or ``t`` is not a summarised time)."""
     times = summary["times"]
     k = int(np.argmin([abs(x - t) for x in times]))
     if abs(times[k] - t) > 1e-9 * max(1.0, abs(t)) or rows is None:
         return np.full(len(summary["seeds"]), np.nan)
-    return np.array([np.nan if v[k] is None else v[k] for v in rows], dtype=float)
+    out = np.array([np.nan if v[k] is None else v[k] for v in rows], dtype=float)
+    return np.where(reached(summary, t), out, np.nan) if len(out) == len(summary["seeds"]) else out
 
 
 #: the fewest rods in no structure whose alignment the page gives: N rods at random align to about
@@ -221,10 +231,10 @@ def measure_text(summary, measure, t) -> str:
         # a fit over less than a factor 4 in scale is refused (NaN) by the estimator
         # (analysis/fractal.py, MIN_RANGE): where every seed's is, the dimension is not testable
         err = values_at(summary, FIT_ERRORS[measure], t)
-        # only seeds that reached t: a seed stopped before it (an unfinished study) has no frame there
-        reached = np.array([seed["t_end"] >= t - 1e-9 * max(1.0, abs(t)) for seed in summary["seeds"]], dtype=bool)
-        if reached.shape == v.shape:
-            v, err = v[reached], err[reached]
+        # only seeds that reached t (values_at): a seed stopped before it has no frame there
+        there = reached(summary, t)
+        if there.shape == v.shape:
+            v, err = v[there], err[there]
         if not v.size:
             return "n/a"
         s = plain_stat(v, err)
@@ -248,14 +258,15 @@ def _in_window(summary, lo, hi):
 
 
 def window_values(summary, measure, lo, hi):
-    """Each seed's mean of ``measure`` over the summarised times in [lo, hi] (NaN: none there)."""
+    """Each seed's mean of ``measure`` over the summarised times in [lo, hi] (NaN: none there, or the
+    seed stopped before ``hi``: a mean over the window's early part alone is not the window's)."""
     pick = _in_window(summary, lo, hi)
     if measure not in summary["measures"] or not pick.any():
         return np.full(len(summary["seeds"]), np.nan)
     v = np.array([[np.nan if x is None else x for x in row] for row in summary["measures"][measure]["values"]])
     v = v[:, pick]
     n = np.isfinite(v).sum(axis=1)
-    return np.where(n > 0, np.nansum(v, axis=1) / np.maximum(n, 1), np.nan)
+    return np.where((n > 0) & reached(summary, hi), np.nansum(v, axis=1) / np.maximum(n, 1), np.nan)
 
 
 def window_times(summary, measure, lo, hi) -> int:

@@ -644,6 +644,28 @@ def test_a_paired_verdict_says_which_seeds_it_leaves_out():
     assert _unpaired_note(five, five, common_rows(five, five)[0]) == ""
 
 
+def test_a_seed_that_stopped_early_has_no_value_past_its_end_in_any_statistic():
+    """Seed 2 stopped at t = 18 (its last frame within half an interval of t = 20 is in the summary):
+    it has no value at t = 20, in a fitted cell as in a plain one, and no mean over a window that ends
+    after it stopped; before t = 18 it counts as the others."""
+    from selfas_graph.studies.stats import measure_text, reached, values_at, window_values
+
+    s = {
+        "times": [0.0, 10.0, 20.0],
+        "seeds": [{"seed": 1, "t_end": 20.0}, {"seed": 2, "t_end": 18.0}, {"seed": 3}],
+        "measures": {
+            "m": {"values": [[1.0, 2.0, 3.0], [1.0, 4.0, 9.0], [1.0, 6.0, 5.0]]},
+            "fractal_dimension": {"values": [[None, 2.0, 2.0], [None, 2.0, 9.0], [None, 2.0, 2.2]]},
+            "fractal_dimension_err": {"values": [[None, 0.1, 0.1], [None, 0.1, 0.1], [None, 0.1, 0.1]]},
+        },
+    }
+    assert list(reached(s, 20.0)) == [True, False, True] and reached(s, 10.0).all()
+    assert np.isnan(values_at(s, "m", 20.0)[1]) and list(values_at(s, "m", 10.0)) == [2.0, 4.0, 6.0]
+    assert list(window_values(s, "m", 10.0, 20.0))[::2] == [2.5, 5.5] and np.isnan(window_values(s, "m", 10.0, 20.0)[1])
+    assert window_values(s, "m", 0.0, 10.0)[1] == 2.5
+    assert measure_text(s, "fractal_dimension", 20.0).endswith("(2)")
+
+
 def test_the_flux_is_summarised_where_other_studies_are_set_against_a_study():
     """The rod currents' flux, costly, is summarised at a few times only; those include the times a
     convergence setting, a sweep or a claim compares with the study (t = 150 for the Fig. 2
