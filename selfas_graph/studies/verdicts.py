@@ -321,8 +321,8 @@ def claim_rows(studies, summaries) -> str:
 
 
 def sweep_rows(studies, summaries, name) -> str:
-    """A sweep's table: a row per value of its parameter, the claim measures at the sweep's time, and
-    the Welch p-value of each step from one value to the next."""
+    """A sweep's table: a row per value of its parameter, the claim measures at the sweep's time, the
+    p-value of each step from one value to the next (:func:`_step_p`) and the trend over the sweep."""
     sw = studies.sweeps[name]
     head = f"| {sw.parameter} | seeds | " + " | ".join(measure_label(m) for m in CLAIM_MEASURES) + " |"
     rows = [head, "|---|---|" + "---|" * len(CLAIM_MEASURES)]
@@ -341,7 +341,7 @@ def sweep_rows(studies, summaries, name) -> str:
     done = [(v, summaries[st]) for v, st in studies.sweep_points(name) if summaries.get(st) is not None]
     if len(done) >= 2:
         steps = [_step_p(done, m, sw.time) for m in CLAIM_MEASURES]
-        rows.append("| Welch p from each value to the next (each step alone) | | " + " | ".join(steps) + " |")
+        rows.append(f"| {_step_label(done)} | | " + " | ".join(steps) + " |")
         trends = sweep_trends(done, sw.time)
         trend = [_trend_text(x) for x in trends]
         tested = sum(math.isfinite(x["p"]) for x in trends)  # Holm counts the measures with a p-value
@@ -355,16 +355,39 @@ def _p_cell(p) -> str:
     return "n/a" if not math.isfinite(p) else ("< 0.001" if p < 0.001 else f"{p:.2g}")
 
 
+def _step_label(points) -> str:
+    """The step row's label: how its p-values are made, by the one rule of the claims (paired by seed
+    where the two points start from the same rods, :func:`.pairing.same_start`, else Welch's)."""
+    paired = [same_start(a, b) for (_, a), (_, b) in zip(points, points[1:])]
+    if all(paired):
+        how = "paired p, seed by seed,"
+    elif not any(paired):
+        how = "Welch p"
+    else:
+        how = "p (" + "; ".join("paired" if x else "Welch" for x in paired) + ")"
+    return f"{how} from each value to the next (each step alone)"
+
+
 def _step_p(points, measure, t) -> str:
-    """The two-sided Welch p-value of each step of a sweep, from one value to the next, of the statistic
-    the table gives (a grouped measure's over the seeds that carry current): "0.04; 0.5; < 0.001", "n/a"
-    for a step without two seeds a side. A fitted dimension's steps are given twice, with each seed's
-    fit error in the standard error and by the spread between seeds alone, as the claims give it."""
-    stats = [_stat_at(s, measure, t) for _, s in points]
-    text = "; ".join(_p_cell(welch_p(b, a)) for a, b in zip(stats, stats[1:]))
+    """The two-sided p-value of each step of a sweep, from one value to the next: paired by seed where
+    the two points start from the same rods (:func:`.convergence.paired_difference`, a grouped measure
+    over the seeds that carry current in both), else Welch's of the statistics the table gives (a
+    grouped measure's over the seeds that carry current): "0.04; 0.5; < 0.001", "n/a" for a step
+    without two seeds (pairs) a side. A fitted dimension's steps are given twice, with each seed's fit
+    error in the standard error and by the spread between seeds alone, as the claims give it."""
+    from .convergence import paired_difference  # (convergence imports this module)
+
+    def step(a, b, fit_errors):
+        if same_start(a, b):
+            return paired_difference(b, a, measure, t, fit_errors)["p"]
+        if fit_errors:
+            return welch_p(_stat_at(b, measure, t), _stat_at(a, measure, t))
+        return welch_p(plain_stat(_table_values(b, measure, t)), plain_stat(_table_values(a, measure, t)))
+
+    pairs = [(a, b) for (_, a), (_, b) in zip(points, points[1:])]
+    text = "; ".join(_p_cell(step(a, b, True)) for a, b in pairs)
     if measure in FIT_ERRORS:
-        alone = [plain_stat(_table_values(s, measure, t)) for _, s in points]
-        text += " (seeds alone: " + "; ".join(_p_cell(welch_p(b, a)) for a, b in zip(alone, alone[1:])) + ")"
+        text += " (seeds alone: " + "; ".join(_p_cell(step(a, b, False)) for a, b in pairs) + ")"
     return text
 
 

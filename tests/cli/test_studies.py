@@ -294,6 +294,31 @@ def test_a_sweeps_trend_ranks_every_seed_and_adjusts_over_the_measures():
     assert step.startswith("0.") and "(seeds alone: 0.0" in step, step
 
 
+def test_a_sweeps_steps_are_paired_where_its_points_start_from_the_same_rods():
+    """Three points: the first two agree at t = 0 seed by seed (a force's strength changed), the third
+    does not (other rods). The first step is the paired t-test over the seeds both have (differences
+    0.3, 0.2, 0.4: p = 2 t_2.sf(0.3 / (0.1 / sqrt 3))), the second Welch's; the label says which."""
+    from selfas_graph.studies.pairing import paired_stat
+    from selfas_graph.studies.verdicts import _step_label, _step_p, plain_stat, welch_p
+
+    def point(start, late):
+        return {
+            "times": [0.0, 300.0],
+            "seeds": [{"seed": k + 1} for k in range(3)],
+            "measures": {"inside_R_plas": {"values": [[x, y] for x, y in zip(start, late)]}},
+        }
+
+    a, b = point([0.1, 0.2, 0.3], [0.1, 0.2, 0.3]), point([0.1, 0.2, 0.3], [0.4, 0.4, 0.7])
+    c = point([0.5, 0.6, 0.7], [0.9, 0.8, 1.0])
+    paired = paired_stat([0.4, 0.4, 0.7], [0.1, 0.2, 0.3])["p"]
+    welch = welch_p(plain_stat([0.9, 0.8, 1.0]), plain_stat([0.4, 0.4, 0.7]))
+    assert paired != pytest.approx(welch_p(plain_stat([0.4, 0.4, 0.7]), plain_stat([0.1, 0.2, 0.3])))
+    assert _step_p([(0, a), (1, b), (2, c)], "inside_R_plas", 300.0) == f"{paired:.2g}; {welch:.2g}"
+    assert _step_label([(0, a), (1, b), (2, c)]).startswith("p (paired; Welch) from each value")
+    assert _step_label([(0, a), (1, b)]).startswith("paired p, seed by seed,")
+    assert _step_label([(1, b), (2, c)]).startswith("Welch p")
+
+
 def test_the_alignment_of_the_rods_in_no_structure_needs_30_of_them():
     """Committed summaries: the rule applies on loading, from the kept counts; a frame: NaN below 30
     such rods, the value from 30 on."""
