@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .ensemble import Ensemble, EnsembleError, run_seed, run_tasks, summarise
-from .ensemble.folder import FolderLock, make_folder
+from .ensemble.folder import FolderLock, make_folder, own_file
 from .ensemble.plan import check_jobs, scenario_source, summary_times
 from .ensemble.tables import CSV_EXTRA, summary_rows
 from .io.atomic import atomic_write, write_text_atomic
@@ -299,7 +299,7 @@ def write_grid_summary(table, folder) -> tuple[Path, Path]:
     import json
 
     folder = Path(folder)
-    js, cs = folder / GRID_JSON, folder / GRID_CSV
+    js, cs = own_file(folder / GRID_JSON), own_file(folder / GRID_CSV)
     write_text_atomic(js, json.dumps(table, indent=1, allow_nan=False) + "\n")
     write_text_atomic(cs, grid_csv(table))
     return js, cs

@@ -169,7 +169,11 @@ def frame_claims(run, frame=None, loops=True, t=None) -> dict[str, float]:
 
 
 def claims_series(run, frames=None, loops=True) -> dict[str, np.ndarray]:
-    """:func:`frame_claims` of several frames (default all) as arrays, one entry per frame."""
-    frames = range(run.n_frames) if frames is None else frames
+    """:func:`frame_claims` of several frames (default all; a sequence of frame indices, or a ``slice``
+    of the run's frames) as arrays, one entry per frame."""
+    if frames is None:
+        frames = range(run.n_frames)
+    elif isinstance(frames, slice):
+        frames = range(run.n_frames)[frames]
     rows = [frame_claims(run, k, loops=loops) for k in frames]
     return {key: np.array([r.get(key, NAN) for r in rows], dtype=np.float64) for key in CLAIM_KEYS}

@@ -25,6 +25,7 @@ from pathlib import Path
 
 from .._version import __version__
 from ..ensemble import Ensemble, EnsembleError, format_table, write_summary
+from ..ensemble.folder import own_file
 from ..ensemble.plan import summary_times
 from ..parallel import task_pool
 from .main import EXIT_NUMERICAL, CliError, CliIOError, counted, interrupted_code
@@ -229,6 +230,18 @@ def _check_summary_args(args, t_end, params):
         raise CliError(f"--{exc}") from None
 
 
+def _check_own_files(folder, extra=()):
+    """Refuse, before any seed runs, a summary file of ``folder`` that is a symbolic link or not a file
+    (:func:`~selfas_graph.ensemble.folder.own_file`): its run would end without a summary."""
+    from ..ensemble import SUMMARY_CSV, SUMMARY_JSON
+
+    try:
+        for name in (SUMMARY_JSON, SUMMARY_CSV, *extra):
+            own_file(Path(folder) / name)
+    except EnsembleError as exc:
+        raise CliError(str(exc)) from None
+
+
 def _exit_code(results, kept_failed) -> int:
     """The exit code of an ensemble or a grid from its seeds' results (None: never started) and the
     count of failed seeds the plan kept from an earlier run."""
@@ -291,6 +304,7 @@ def _run_ensemble(args, pool, locks):
     except EnsembleError as exc:
         raise CliError(str(exc)) from None
     _check_summary_args(args, ens.t_end, ens.base.params)
+    _check_own_files(folder, ("summary.png",) if args.plot else ())
     times = args.times
     count = _counts(plans)
     p = ens.base.params
@@ -355,7 +369,11 @@ def _run_ensemble(args, pool, locks):
         if args.plot:
             from .plot import plot_summary
 
-            print(f"wrote {plot_summary(summary, folder / 'summary.png', title=f'{p.scenario.name} ensemble')}")
+            try:
+                png = own_file(folder / "summary.png")
+            except EnsembleError as exc:
+                raise CliError(str(exc)) from None
+            print(f"wrote {plot_summary(summary, png, title=f'{p.scenario.name} ensemble')}")
     else:
         print("no seed file to summarise")
     return _exit_code(results, count["failed"])
@@ -364,7 +382,7 @@ def _run_ensemble(args, pool, locks):
 def _run_grid(args, pool, locks):
     """``--grid``: an ensemble at every grid point, all seeds in one pool, the combined summary."""
     from ..ensemble import run_seed, run_tasks, write_summary
-    from ..grid import GRID_PNG, Grid, parse_grid, plot_grid, write_grid_summary
+    from ..grid import GRID_CSV, GRID_JSON, GRID_PNG, Grid, parse_grid, plot_grid, write_grid_summary
 
     folder = Path(args.output) if args.output else Path(f"{Path(args.scenario).stem}_grid")
     try:
@@ -381,6 +399,9 @@ def _run_grid(args, pool, locks):
     except EnsembleError as exc:
         raise CliError(str(exc)) from None
     _check_summary_args(args, grid.t_end, grid.ensembles[0].base.params)
+    _check_own_files(folder, (GRID_JSON, GRID_CSV) + ((GRID_PNG,) if args.plot else ()))
+    for ens in grid.ensembles:
+        _check_own_files(ens.folder)
     try:
         if not args.no_run and folder.is_dir():
             locks.hold(folder)
@@ -435,5 +456,9 @@ def _run_grid(args, pool, locks):
         raise CliError(f"cannot write the grid summary into {folder}: {exc}") from None
     print(f"wrote {js} and {cs}")
     if args.plot:
-        print(f"wrote {plot_grid(table, folder / GRID_PNG, title=f'{Path(args.scenario).stem} grid')}")
+        try:
+            png = own_file(folder / GRID_PNG)
+        except EnsembleError as exc:
+            raise CliError(str(exc)) from None
+        print(f"wrote {plot_grid(table, png, title=f'{Path(args.scenario).stem} grid')}")
     return _exit_code(results, kept_failed)

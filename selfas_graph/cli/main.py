@@ -170,11 +170,52 @@ def _interrupted(who) -> int:
     return EXIT_INTERRUPTED
 
 
+class _ReaderMayGo:
+    """Standard output that outlives its reader: once a write or flush finds the pipe closed (``| head``),
+    the rest goes to /dev/null and the command carries on, so that the files it writes after its
+    printed lines (an ensemble's summary after its table) are written all the same."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def _gone(self):
+        import os
+
+        try:
+            os.dup2(os.open(os.devnull, os.O_WRONLY), self._stream.fileno())
+        except (OSError, ValueError, AttributeError):  # no descriptor (captured output): nothing to redirect
+            pass
+
+    def write(self, text):
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            self._gone()
+            return len(text)
+
+    def flush(self):
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._gone()
+            try:  # what the buffer held now goes to /dev/null
+                self._stream.flush()
+            except (BrokenPipeError, ValueError):
+                pass
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
 def main(argv=None) -> int:
+    stdout = sys.stdout
+    sys.stdout = _ReaderMayGo(stdout)
     try:
         return _main(argv)
     except KeyboardInterrupt:  # Ctrl-C while the command starts (MPI, the parser): no traceback
         return _interrupted("selfas-graph")
+    finally:
+        sys.stdout = stdout
 
 
 def _main(argv) -> int:

@@ -16,7 +16,7 @@ import numpy as np
 from ..analysis.frame_topology import frame_topology
 from ..io.h5md import RunFile, RunFileError
 from ..model import events as ev
-from .main import CliError, add_run_and_frame
+from .main import CliError, add_run_and_frame, counted
 from .paths import status_note
 
 
@@ -110,7 +110,7 @@ def run(args):
         f"rods: {r['total']} = {r['filament']} in current-carrying filaments + {r['dead_end']} dead ends + "
         f"{r['cluster']} in floating clusters + {r['free']} free",
         f"structures: {len(data['structures'])}, rods joined by tip contacts or touching a conductor alone "
-        f"(largest: {data['largest_structure']} rods)",
+        f"(largest: {counted(data['largest_structure'], 'rod')})",
         "short circuit: "
         + ("yes" if data["short_circuit"] else "no")
         + (

@@ -112,6 +112,22 @@ def _read_holder(fd) -> str:
     return text or "a process that has not written its name yet"
 
 
+def own_file(path) -> Path:
+    """``path``, a file an ensemble names itself in its folder (its summary, table, plot), checked before it
+    is written: never a symbolic link, which would make the ensemble write where no one named (a run
+    file elsewhere, or a new file anywhere), and never anything but a regular file. EnsembleError
+    otherwise, naming it and what to do."""
+    path = Path(path)
+    if path.is_symlink():
+        raise EnsembleError(
+            f"{path} is a symbolic link (to {os.readlink(path)}); an ensemble writes its own files in its folder, "
+            "never through a link: remove the link, or give another folder"
+        )
+    if path.exists() and not path.is_file():
+        raise EnsembleError(f"{path} is not a regular file; remove it, or give another folder")
+    return path
+
+
 def make_folder(folder) -> Path:
     """Create ``folder`` (and its parents) if missing; EnsembleError if that is impossible."""
     folder = Path(folder)

@@ -14,6 +14,25 @@ from ..io.h5md import HDF5_READ_ERRORS, RunFile, RunFileError, hdf5_damage
 from .measures import FRAME_MEASURES, Frame, carries_current
 
 
+def _each_file_once(paths):
+    """EnsembleError where two of ``paths`` name one file (also through a link): it would count as two
+    seeds, and shrink the standard errors."""
+    import os
+
+    from .folder import EnsembleError
+
+    seen = {}
+    for path in paths:
+        try:
+            st = os.stat(path)
+            key = (st.st_dev, st.st_ino)
+        except OSError:  # not there: named as unreadable below
+            continue
+        if key in seen:
+            raise EnsembleError(f"{path} and {seen[key]} are one file: give each seed file once")
+        seen[key] = path
+
+
 def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict:
     """Mean and standard error over seed files of the short-circuit time and of per-frame measures.
 
@@ -48,6 +67,7 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
     measures = FRAME_MEASURES if measures is None else measures
     times = [float(t) for t in times]
     grouped = any(m.grouped for m in measures)
+    _each_file_once(paths)
     seeds, unreadable, rows = [], [], []
     for path in paths:
         try:

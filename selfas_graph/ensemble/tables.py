@@ -9,7 +9,7 @@ import json
 from pathlib import Path
 
 from ..io.atomic import write_text_atomic
-from .folder import make_folder
+from .folder import make_folder, own_file
 
 #: summary files written into the ensemble's folder (rewritten from the run files on every call)
 SUMMARY_JSON, SUMMARY_CSV = "summary.json", "summary.csv"
@@ -109,7 +109,7 @@ def write_summary(summary, folder) -> tuple[Path, Path]:
     each whole or not at all (:func:`~selfas_graph.io.atomic.atomic_write`: a kill or a full disk leaves
     the summary there was)."""
     folder = make_folder(folder)
-    js, cs = folder / SUMMARY_JSON, folder / SUMMARY_CSV
+    js, cs = own_file(folder / SUMMARY_JSON), own_file(folder / SUMMARY_CSV)
     write_text_atomic(js, json.dumps(summary, indent=1, allow_nan=False) + "\n")
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")

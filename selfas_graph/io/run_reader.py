@@ -97,7 +97,14 @@ class RunFile:
         )
         missing = [name for name in required if not isinstance(self.f.get(name), (h5py.Dataset, h5py.Group))]
         if missing or "parameters_json" not in self.f[layout.PROVENANCE].attrs:
+            fmt = self.f.attrs.get("format")
             self.f.close()
+            if isinstance(fmt, (str, bytes)) and "checkpoint" in (fmt.decode() if isinstance(fmt, bytes) else fmt):
+                run = self.path.name.removesuffix(".checkpoint.h5") + ".h5"
+                raise RunFileError(
+                    f"{self.path}: a checkpoint (the state to resume a run from), not a run file; give the run "
+                    f"file it belongs to ({run}, beside it)"
+                )
             raise RunFileError(
                 f"{self.path}: an HDF5 file, but not a selfas-graph run "
                 f"(missing {', '.join(missing) or 'parameters_json'})"

@@ -843,3 +843,97 @@ def test_a_pool_started_from_a_script_without_the_main_guard_says_so(tmp_path):
     res = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert 'put the call under `if __name__ == "__main__":`' in res.stderr
     assert "in use by another ensemble" not in res.stderr
+
+
+def test_a_summary_file_that_is_a_link_is_refused_before_any_seed_runs(tmp_path, capsys):
+    """``summary.json`` in the folder a symbolic link to a run file elsewhere: the ensemble wrote the
+    summary through it, replacing that file. It is refused (exit 2) before a seed runs, naming the link,
+    and the file it points to is untouched; a link to nothing (which would create a file where no one
+    named one) is refused alike, for the grid's own summaries too."""
+    victim = tmp_path / "victim.h5"
+    victim.write_bytes(b"\x89HDF\r\n\x1a\n run file")
+    folder = tmp_path / "ens"
+    folder.mkdir()
+    (folder / "summary.json").symlink_to(victim)
+    argv = ["ensemble", QUICK, "--seeds", "1", "--t-end", str(T_END), "-o", str(folder)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "summary.json is a symbolic link" in err and "never through a link" in err
+    assert victim.read_bytes() == b"\x89HDF\r\n\x1a\n run file" and not list(folder.glob("seed_*"))
+    (folder / "summary.json").unlink()
+    (folder / "summary.csv").symlink_to(tmp_path / "nowhere.csv")
+    assert main(argv) == 2 and "summary.csv is a symbolic link" in capsys.readouterr().err
+    assert not (tmp_path / "nowhere.csv").exists()
+    grid = tmp_path / "grid"
+    grid.mkdir()
+    (grid / "grid_summary.json").symlink_to(tmp_path / "elsewhere.json")
+    argv = ["ensemble", QUICK, "--seeds", "1", "--t-end", str(T_END), "--grid", "rods.count=20,30", "-o", str(grid)]
+    assert main(argv) == 2 and "grid_summary.json is a symbolic link" in capsys.readouterr().err
+    assert not (tmp_path / "elsewhere.json").exists() and not list(grid.rglob("seed_*"))
+
+
+def test_a_reader_that_leaves_does_not_stop_the_summary(quick, tmp_path, monkeypatch):
+    """``ensemble ... | head -3``: the table's lines met a closed pipe, and the command ended quietly with
+    exit 0 before writing its summary (an older one stayed). The lines after the reader left go nowhere;
+    the summary is written and the exit code is the command's."""
+    import sys
+
+    folder = tmp_path / "ens"
+    folder.mkdir()
+    for f in quick[0].glob("seed_*.h5"):
+        shutil.copy(f, folder / f.name)
+
+    class Head:
+        """Standard output read by ``head -1``: the second write finds the pipe closed."""
+
+        def __init__(self):
+            self.lines = []
+
+        def write(self, text):
+            if self.lines:
+                raise BrokenPipeError(32, "Broken pipe")
+            self.lines.append(text)
+            return len(text)
+
+        def flush(self):
+            pass
+
+    head = Head()
+    monkeypatch.setattr(sys, "stdout", head)
+    assert main(["ensemble", QUICK, "--seeds", "4", "--t-end", str(T_END), "-o", str(folder), "--no-run"]) == 0
+    monkeypatch.undo()
+    assert len(head.lines) == 1 and sys.stdout is not head
+    s = json.loads((folder / "summary.json").read_text())
+    assert s["n_seeds"] == 4 and (folder / "summary.csv").exists()
+
+
+def test_one_file_given_twice_is_refused_not_counted_as_two_seeds(quick, tmp_path):
+    """``summarise([a, a])`` (or a link to ``a`` beside it) counted one run as two seeds, halving its
+    spread's weight; it is refused, naming both paths."""
+    a = seed_path(quick[0], 1)
+    (tmp_path / "link.h5").symlink_to(a)
+    for twice in ([a, a], [a, tmp_path / "link.h5"]):
+        with pytest.raises(EnsembleError, match="are one file: give each seed file once"):
+            summarise(twice, [0.0])
+
+
+def test_claims_of_a_slice_of_frames(quick):
+    """``claims_series(run, frames=slice(0, 2))`` takes the run's frames as a slice, as numpy would."""
+    from selfas_graph.analysis.claims import claims_series
+
+    with RunFile(seed_path(quick[0], 1)) as run:
+        whole = claims_series(run, loops=False)
+        part = claims_series(run, frames=slice(1, None), loops=False)
+    assert all(np.array_equal(part[k], whole[k][1:], equal_nan=True) for k in whole)
+
+
+def test_a_checkpoint_given_for_a_run_file_names_the_run_file(quick):
+    """A checkpoint where a run file is wanted: the error says what it is and which file to give, not the
+    seven groups a run file has and it lacks."""
+    from selfas_graph.io.h5md import RunFileError
+
+    ck = checkpoint_path(seed_path(quick[0], 2))
+    with pytest.raises(
+        RunFileError, match=r"a checkpoint .*, not a run file; give the run file it belongs to \(seed_0002.h5"
+    ):
+        RunFile(ck)
