@@ -260,9 +260,9 @@ class Ensemble:
     def plan(self, summary_only=False) -> list[SeedPlan]:
         """What :meth:`run` would do with each seed, from the files in the folder (nothing is written).
 
-        With ``summary_only`` (nothing will run) an incomplete seed file without a usable
-        checkpoint (one still being written, say) is planned as "partial": summarised up to
-        its last frame.
+        With ``summary_only`` (nothing will run) an incomplete seed file, with or without a usable
+        checkpoint (one still being written, say, or one run to an earlier end), is planned as
+        "partial": summarised up to its last frame.
 
         Raises
         ------
@@ -279,9 +279,25 @@ class Ensemble:
             except EnsembleError as exc:
                 problems.append(str(exc))
         if problems:
-            hint = "; pass force=True (--force) to replace them" if not (self.force or summary_only) else ""
-            raise EnsembleError("seed files that cannot be used:\n  " + "\n  ".join(problems) + hint)
+            raise EnsembleError(
+                "seed files that cannot be used:\n  " + "\n  ".join(problems) + self._advice(problems, summary_only)
+            )
         return plans
+
+    def _advice(self, problems, summary_only) -> str:
+        """What to do about ``problems`` (the messages of :meth:`_plan_seed`): ``--force`` replaces a seed
+        file and all it holds, so it is not offered for a file another process is writing, nor alone for
+        one run past this end time, which a later end time continues or ``--no-run`` summarises."""
+        if self.force or summary_only:
+            return ""
+        if all("locked by another process" in p for p in problems):
+            return "; wait for the processes writing them to end (--force cannot replace a file in use)"
+        if any("after the end time" in p for p in problems):
+            return (
+                "; a later end time (--t-end) continues a seed run past this one, and --no-run summarises the "
+                "files as they are; force=True (--force) would replace them, and all they hold, with new runs"
+            )
+        return "; pass force=True (--force) to replace them"
 
     def _plan_seed(self, seed, summary_only=False) -> SeedPlan:
         path = seed_path(self.folder, seed)
@@ -340,6 +356,8 @@ class Ensemble:
             why = str(exc)
         except ContinuationError as exc:  # the reason; the advice is simulate's (here: --force)
             why = exc.reason
+        if why is None and summary_only:  # nothing runs: it is summarised to where it ended
+            return SeedPlan(seed, path, "partial", f"{status} {where}")
         if why is None:
             return SeedPlan(seed, path, "resume", f"{status} {where}; checkpoint at t = {float(snap['time']):.6g}")
         if summary_only:

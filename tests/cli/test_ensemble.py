@@ -365,8 +365,9 @@ def test_killed_seed_resumes_and_one_without_checkpoint_is_refused(scene, tmp_pa
     ens = Ensemble(scene, [3, 4], tmp_path, t_end=0.3)
     with pytest.raises(EnsembleError, match=r"seed_0004.h5 is running at t = 0.2 .* no usable checkpoint"):
         ens.plan()
-    # summarising only, a file still being written (or killed) is read up to its last frame
-    assert [(p.seed, p.action) for p in ens.plan(summary_only=True)] == [(3, "resume"), (4, "partial")]
+    # summarising only, a file still being written (or killed) is read up to its last frame, with its
+    # checkpoint or without: nothing resumes it
+    assert [(p.seed, p.action) for p in ens.plan(summary_only=True)] == [(3, "partial"), (4, "partial")]
     forced = Ensemble(scene, [3, 4], tmp_path, t_end=0.3, force=True)
     assert [(p.seed, p.action) for p in forced.plan()] == [(3, "resume"), (4, "run")]
     assert [r["status"] for r in forced.run()] == ["finished", "finished"]
@@ -937,3 +938,46 @@ def test_a_checkpoint_given_for_a_run_file_names_the_run_file(quick):
         RunFileError, match=r"a checkpoint .*, not a run file; give the run file it belongs to \(seed_0002.h5"
     ):
         RunFile(ck)
+
+
+def test_the_advice_for_a_seed_run_past_the_end_is_not_force_alone(quick, tmp_path):
+    """A seed interrupted after the end asked for (its checkpoint at t = 0.5, the ensemble's end 0.25):
+    --force would throw away what it holds, so the message offers a later end time and --no-run first."""
+    from selfas_graph.io import layout
+
+    folder = tmp_path / "ens"
+    folder.mkdir()
+    for name in ("seed_0001.h5", "seed_0001.checkpoint.h5"):
+        shutil.copy(quick[0] / name, folder / name)
+    with h5py.File(folder / "seed_0001.h5", "r+") as f:
+        f[layout.PROVENANCE].attrs["status"] = "interrupted at step 100"
+    with pytest.raises(EnsembleError) as err:
+        Ensemble(QUICK, 1, folder, t_end=0.25).plan()
+    text = str(err.value)
+    assert "after the end time" in text and "a later end time (--t-end) continues" in text
+    assert "--no-run summarises the files as they are" in text and "all they hold" in text
+
+
+def test_the_advice_for_a_seed_file_in_use_is_to_wait(quick, tmp_path):
+    """A seed file another process holds open for writing: --force cannot replace it, and is not offered."""
+    import subprocess
+    import sys
+
+    folder = tmp_path / "ens"
+    folder.mkdir()
+    for name in ("seed_0001.h5", "seed_0001.checkpoint.h5"):
+        shutil.copy(quick[0] / name, folder / name)
+    hold = "import h5py, sys, time; f = h5py.File(sys.argv[1], 'r+'); print('open', flush=True); time.sleep(60)"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", hold, str(folder / "seed_0001.h5")], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        assert proc.stdout.readline().strip() == "open"
+        with pytest.raises(EnsembleError) as err:
+            Ensemble(QUICK, 1, folder, t_end=1.0).plan()
+    finally:
+        proc.kill()
+        proc.communicate(timeout=30)
+    text = str(err.value)
+    assert "locked by another process" in text and "wait for the processes writing them to end" in text
+    assert "pass force=True" not in text
