@@ -20,13 +20,34 @@ def add_arguments(p):
     same_run.add_arguments(p)
 
 
+def _check(path):
+    """A clear error naming ``path`` where it cannot be compared: missing, a folder, not HDF5, or a file
+    another process is writing."""
+    from ..io.h5md_format import is_hdf5
+
+    p = Path(path)
+    if p.is_dir():
+        raise CliError(f"{path} is a folder, not a run file")
+    if not p.is_file():
+        raise CliError(f"no such run file: {path}")
+    if not is_hdf5(p):
+        raise CliError(f"{path} is not an HDF5 file, as a selfas-graph run file is")
+
+
 def run(args):
     for path in (args.a, args.b):
-        if not Path(path).is_file():
-            raise CliError(f"no such run file: {path}")
+        _check(path)
     try:
         return same_run.run(args)
     except BrokenPipeError:
         raise  # the reader of the output went away (`| head`): the command line ends quietly
-    except OSError as exc:  # h5py: not an HDF5 file, or unreadable
-        raise CliError(f"cannot read the run files: {exc}") from None
+    except OSError as exc:  # h5py: unreadable, or locked by a writer
+        from ..io.h5md_format import in_use
+
+        busy = [str(p) for p in (args.a, args.b) if in_use(p)]
+        if busy:
+            raise CliError(
+                f"{' and '.join(busy)}: locked by another process, most likely a simulation still writing it; "
+                "wait for it to end, or set HDF5_USE_FILE_LOCKING=FALSE to read it anyway"
+            ) from None
+        raise CliError(f"cannot read {args.a} or {args.b}: {exc}") from None

@@ -2,6 +2,7 @@
 change or a missing dataset is found."""
 
 import json
+import os
 import re
 import subprocess
 import sys
@@ -301,3 +302,37 @@ def test_json_attributes_that_differ_in_their_bytes_are_a_difference(tmp_path, a
     assert [line.split("@")[1] for line in compare(tmp_path / "a.h5", tmp_path / "b.h5")] == [
         "parameters_json: y: 1 != 2"
     ]
+
+
+def test_compare_names_the_file_it_cannot_read(tmp_path, capsys):
+    """A folder, a missing file, a file that is not HDF5 and a file another process is writing: each a
+    one-line error naming it (exit 2), not "no such run file" for a folder or the raw errno of a lock."""
+    from selfas_graph.cli.main import main
+
+    _write(tmp_path / "a.h5", np.arange(3.0))
+    (tmp_path / "text.json").write_text("{}")
+    (tmp_path / "dir").mkdir()
+    for other, words in [
+        ("dir", "is a folder, not a run file"),
+        ("gone.h5", "no such run file"),
+        ("text.json", "text.json is not an HDF5 file"),
+    ]:
+        assert main(["compare", str(tmp_path / "a.h5"), str(tmp_path / other)]) == 2
+        assert words in capsys.readouterr().err
+    _write(tmp_path / "b.h5", np.arange(3.0))
+    env = {k: v for k, v in os.environ.items() if k != "HDF5_USE_FILE_LOCKING"}  # HDF5's locks, as a user has them
+    hold = "import h5py, sys, time; f = h5py.File(sys.argv[1], 'r+'); print('open', flush=True); time.sleep(60)"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", hold, str(tmp_path / "b.h5")], stdout=subprocess.PIPE, text=True, env=env
+    )
+    cmd = [sys.executable, "-m", "selfas_graph", "compare", str(tmp_path / "a.h5"), str(tmp_path / "b.h5")]
+    try:
+        assert proc.stdout.readline().strip() == "open"
+        res = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120)
+    finally:
+        proc.kill()
+        proc.communicate(timeout=30)
+    if res.returncode == 0:
+        pytest.skip("HDF5 file locking is off here (a file system without locks)")
+    assert res.returncode == 2, res.stdout + res.stderr
+    assert "b.h5: locked by another process" in res.stderr and "a.h5:" not in res.stderr
