@@ -78,9 +78,20 @@ def run(args):
     for path in _output_paths(args.tool_args):  # a link to nothing, a folder or a device: refused, untouched
         check_target(path, "output file", force=True)
     module = importlib.import_module(f"{bench.__name__}.{args.tool}")
-    for key, value in getattr(module, "COMMAND_ENV", {}).items():
+    # the tool's environment (HDF5 without file locks, to read a running seed's file) for its run alone:
+    # a caller in the same process (a notebook, the tests) keeps its own
+    env = getattr(module, "COMMAND_ENV", {})
+    before = {key: os.environ.get(key) for key in env}
+    for key, value in env.items():
         os.environ.setdefault(key, value)
-    with _program(f"selfas-graph bench {args.tool}", args.tool_args):
-        result = module.main(args.tool_args)
+    try:
+        with _program(f"selfas-graph bench {args.tool}", args.tool_args):
+            result = module.main(args.tool_args)
+    finally:
+        for key, value in before.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
     # a tool's exit code is what main returns, when that is a number (some return their figures)
     return result if isinstance(result, int) else 0

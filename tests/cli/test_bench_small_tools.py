@@ -174,3 +174,23 @@ def test_bench_fmm_refuses_values_out_of_range_naming_the_option(argv, words, ca
         _main("fmm")(argv)
     assert exc.value.code == 2
     assert words in capsys.readouterr().err
+
+
+def test_a_tools_environment_is_its_own(monkeypatch, capsys):
+    """`bench profile` reads a running seed's file with HDF5's file locks off (its COMMAND_ENV); called
+    in-process it set that for the caller for good, after which HDF5 no longer locked the caller's files
+    (a notebook's, or every later test's). It is set for the tool's run alone."""
+    import os
+
+    from selfas_graph.bench import profile
+    from selfas_graph.cli.main import main
+
+    assert profile.COMMAND_ENV == {"HDF5_USE_FILE_LOCKING": "FALSE"}
+    monkeypatch.delenv("HDF5_USE_FILE_LOCKING", raising=False)
+    seen = {}
+    monkeypatch.setattr(profile, "main", lambda argv: seen.update(env=os.environ.get("HDF5_USE_FILE_LOCKING")) or 0)
+    assert main(["bench", "profile"]) == 0
+    assert seen["env"] == "FALSE" and "HDF5_USE_FILE_LOCKING" not in os.environ
+    monkeypatch.setenv("HDF5_USE_FILE_LOCKING", "TRUE")  # the caller's own setting is kept, before and after
+    assert main(["bench", "profile"]) == 0
+    assert seen["env"] == "TRUE" and os.environ["HDF5_USE_FILE_LOCKING"] == "TRUE"
