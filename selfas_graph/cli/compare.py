@@ -43,11 +43,9 @@ def run(args):
         raise  # the reader of the output went away (`| head`): the command line ends quietly
     except OSError as exc:  # h5py: unreadable, or locked by a writer
         from ..io.h5md_format import in_use
+        from ..io.run_reader import locked_message
 
-        busy = [str(p) for p in (args.a, args.b) if in_use(p)]
+        busy = [p for p in (args.a, args.b) if in_use(p)]
         if busy:
-            raise CliError(
-                f"{' and '.join(busy)}: locked by another process, most likely a simulation still writing it; "
-                "wait for it to end, or set HDF5_USE_FILE_LOCKING=FALSE to read it anyway"
-            ) from None
+            raise CliError("; ".join(locked_message(p) for p in busy)) from None
         raise CliError(f"cannot read {args.a} or {args.b}: {exc}") from None

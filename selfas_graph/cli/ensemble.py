@@ -24,7 +24,7 @@ import time
 from pathlib import Path
 
 from .._version import __version__
-from ..ensemble import Ensemble, EnsembleError, format_table, write_summary
+from ..ensemble import SUMMARY_CSV, SUMMARY_JSON, Ensemble, EnsembleError, format_table, write_summary
 from ..ensemble.folder import own_file
 from ..ensemble.plan import summary_times
 from ..parallel import task_pool
@@ -230,14 +230,12 @@ def _check_summary_args(args, t_end, params):
         raise CliError(f"--{exc}") from None
 
 
-def _check_own_files(folder, extra=()):
-    """Refuse, before any seed runs, a summary file of ``folder`` that is a symbolic link or not a file
-    (:func:`~selfas_graph.ensemble.folder.own_file`): its run would end without a summary."""
-    from ..ensemble import SUMMARY_CSV, SUMMARY_JSON
-
+def _own_files(folder, *names) -> list[Path]:
+    """The files ``names`` of ``folder`` an ensemble writes, refused (CliError) where one is a symbolic
+    link or not a file (:func:`~selfas_graph.ensemble.folder.own_file`): checked before any seed runs,
+    or its run would end without a summary, and again before each is written."""
     try:
-        for name in (SUMMARY_JSON, SUMMARY_CSV, *extra):
-            own_file(Path(folder) / name)
+        return [own_file(Path(folder) / name) for name in names]
     except EnsembleError as exc:
         raise CliError(str(exc)) from None
 
@@ -304,7 +302,7 @@ def _run_ensemble(args, pool, locks):
     except EnsembleError as exc:
         raise CliError(str(exc)) from None
     _check_summary_args(args, ens.t_end, ens.base.params)
-    _check_own_files(folder, ("summary.png",) if args.plot else ())
+    _own_files(folder, SUMMARY_JSON, SUMMARY_CSV, *(("summary.png",) if args.plot else ()))
     times = args.times
     count = _counts(plans)
     p = ens.base.params
@@ -369,10 +367,7 @@ def _run_ensemble(args, pool, locks):
         if args.plot:
             from .plot import plot_summary
 
-            try:
-                png = own_file(folder / "summary.png")
-            except EnsembleError as exc:
-                raise CliError(str(exc)) from None
+            (png,) = _own_files(folder, "summary.png")
             print(f"wrote {plot_summary(summary, png, title=f'{p.scenario.name} ensemble')}")
     else:
         print("no seed file to summarise")
@@ -399,9 +394,9 @@ def _run_grid(args, pool, locks):
     except EnsembleError as exc:
         raise CliError(str(exc)) from None
     _check_summary_args(args, grid.t_end, grid.ensembles[0].base.params)
-    _check_own_files(folder, (GRID_JSON, GRID_CSV) + ((GRID_PNG,) if args.plot else ()))
+    _own_files(folder, GRID_JSON, GRID_CSV, *((GRID_PNG,) if args.plot else ()))
     for ens in grid.ensembles:
-        _check_own_files(ens.folder)
+        _own_files(ens.folder, SUMMARY_JSON, SUMMARY_CSV)
     try:
         if not args.no_run and folder.is_dir():
             locks.hold(folder)
@@ -456,9 +451,6 @@ def _run_grid(args, pool, locks):
         raise CliError(f"cannot write the grid summary into {folder}: {exc}") from None
     print(f"wrote {js} and {cs}")
     if args.plot:
-        try:
-            png = own_file(folder / GRID_PNG)
-        except EnsembleError as exc:
-            raise CliError(str(exc)) from None
+        (png,) = _own_files(folder, GRID_PNG)
         print(f"wrote {plot_grid(table, png, title=f'{Path(args.scenario).stem} grid')}")
     return _exit_code(results, kept_failed)

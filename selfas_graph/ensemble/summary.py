@@ -4,6 +4,7 @@ per-frame measures (:func:`summarise`)."""
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
@@ -11,16 +12,13 @@ from .._version import __version__
 from ..analysis.diagnostics import timeline
 from ..analysis.ensemble_stats import censored_times, grouped_summary, mean_sem, mean_sem_fits
 from ..io.h5md import HDF5_READ_ERRORS, RunFile, RunFileError, hdf5_damage
+from .folder import EnsembleError
 from .measures import FRAME_MEASURES, Frame, carries_current
 
 
 def _each_file_once(paths):
     """EnsembleError where two of ``paths`` name one file (also through a link): it would count as two
     seeds, and shrink the standard errors."""
-    import os
-
-    from .folder import EnsembleError
-
     seen = {}
     for path in paths:
         try:

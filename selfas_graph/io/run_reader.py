@@ -52,6 +52,15 @@ def _pick_frame(path, n, frame, t, times) -> int:
     return k % n
 
 
+def locked_message(path, reason=None) -> str:
+    """Why ``path``, locked by another process (HDF5's file lock: ``reason``), is not read, and what to do."""
+    why = f" (HDF5 file locking: {reason})" if reason else ""
+    return (
+        f"{path}: locked by another process, most likely a simulation still writing it{why}; wait for it to "
+        "end, or set HDF5_USE_FILE_LOCKING=FALSE to read it anyway"
+    )
+
+
 class RunFile:
     """Read-only access to a run file, without any simulation objects.
 
@@ -80,11 +89,7 @@ class RunFile:
         except OSError as exc:
             reason = " ".join(str(exc).split())  # h5py's messages can span lines
             if re.search(r"\block", reason.lower()) or "already open for write" in reason.lower():
-                raise RunFileError(
-                    f"{self.path}: locked by another process, most likely a simulation still "
-                    f"writing it (HDF5 file locking: {reason}); wait for it to end, or set "
-                    f"HDF5_USE_FILE_LOCKING=FALSE to read it anyway"
-                ) from None
+                raise RunFileError(locked_message(self.path, reason)) from None
             raise RunFileError(f"{self.path}: not a readable HDF5 file ({reason})") from None
         required = (
             layout.PROVENANCE,

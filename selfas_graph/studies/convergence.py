@@ -141,9 +141,8 @@ def _detectable(p, measures) -> str:
     the pairs ("n/a" without a spread or a mean)."""
     if not (p["n"] > 1 and math.isfinite(p["sem"]) and p["sem"] > 0 and p["b"]["mean"]):
         return "n/a"
-    if math.isinf(detectable_se(p["n"] - 1, measures)):
-        return "n/a"
-    return f"±{fmt(100 * detectable_se(p['n'] - 1, measures) * p['sem'] / abs(p['b']['mean']), 2)} %"
+    delta = detectable_se(p["n"] - 1, measures)
+    return "n/a" if math.isinf(delta) else f"±{fmt(100 * delta * p['sem'] / abs(p['b']['mean']), 2)} %"
 
 
 def _conclusion(pairs) -> str:

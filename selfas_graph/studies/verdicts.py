@@ -168,14 +168,14 @@ def _fit_verdict(d, d_seeds, expect, p_seeds=math.nan, paired=None):
     with_fits, seeds_alone = _verdict(d, expect), _verdict(d_seeds, expect, p_seeds, paired)
     if math.isnan(d) and math.isnan(d_seeds):
         return with_fits  # "not decided (too few seeds)"
-    if with_fits.split(" (")[0] == seeds_alone.split(" (")[0] and math.isfinite(d_seeds):
+    if with_fits.split(" (")[0] == seeds_alone.split(" (")[0]:
+        if math.isinf(d_seeds):  # no spread between the seeds: their verdict in words
+            return f"{with_fits[:-1]}; by the spread between seeds alone: {seeds_alone})"
         return (
             f"{with_fits[:-1]}; {d_seeds:+.1f} SE by the spread between seeds alone{_p_text(p_seeds, paired)})".replace(
                 "-", "−"
             )
         )
-    if with_fits.split(" (")[0] == seeds_alone.split(" (")[0]:  # no spread between the seeds
-        return f"{with_fits[:-1]}; by the spread between seeds alone: {seeds_alone})"
     return (
         f"depends on the fits' own errors: {_verdict(d, expect, math.nan, paired)} with each seed's fit error, "
         f"{seeds_alone} by the spread between seeds alone"
@@ -210,6 +210,12 @@ def _all_zero(values) -> bool:
     return bool(v.size) and bool((v == 0.0).all())
 
 
+def _fitted_only(values, errors):
+    """``values`` with NaN where a fit error is missing (none missing without ``errors``): the seeds a
+    statistic with fit errors counts, for the reading by the spread between seeds alone too."""
+    return values if errors is None else np.where(np.isfinite(errors), values, np.nan)
+
+
 def _unpaired_note(s, null, ia) -> str:
     """ "; 8 of the study's 20 seeds have no pair in the null model and are left out" where a paired
     verdict leaves seeds out (the row's values are over all of each side's seeds), or ""."""
@@ -236,18 +242,13 @@ def claim_verdict(c, s, null, nm) -> str:
         q = paired_stat(x[ia], y[ib], ex, ey)
         if not fitted:
             return _verdict(q["d"], c.expect, q["p"], q["n"], zero) + _unpaired_note(s, null, ia)
-        keep = np.isfinite(np.zeros(len(ia)) if ex is None else ex) & np.isfinite(
-            np.zeros(len(ib)) if ey is None else ey
-        )
-        alone = paired_stat(np.where(keep, x[ia], np.nan), y[ib])  # the same pairs, without the fits' errors
+        alone = paired_stat(_fitted_only(x[ia], ex), _fitted_only(y[ib], ey))  # the same pairs, no fit errors
         return _fit_verdict(q["d"], alone["d"], c.expect, alone["p"], q["n"]) + _unpaired_note(s, null, ia)
     a, b = plain_stat(x, ex), plain_stat(y, ey)
     if not fitted:
         d = _claim_difference(a, b)
         return _verdict(d, c.expect, separation_p(a, b) if math.isinf(d) else welch_p(a, b), zero=zero)
-    keep = np.isfinite(ex) if ex is not None else np.ones(len(x), dtype=bool)
-    keep_null = np.isfinite(ey) if ey is not None else np.ones(len(y), dtype=bool)
-    sa, sb = plain_stat(np.where(keep, x, np.nan)), plain_stat(np.where(keep_null, y, np.nan))  # the seeds of a, b
+    sa, sb = plain_stat(_fitted_only(x, ex)), plain_stat(_fitted_only(y, ey))  # the seeds of a, b
     d_seeds = _claim_difference(sa, sb)
     return _fit_verdict(
         _claim_difference(a, b), d_seeds, c.expect, separation_p(sa, sb) if math.isinf(d_seeds) else welch_p(sa, sb)
@@ -340,8 +341,9 @@ def sweep_rows(studies, summaries, name) -> str:
         rows.append(f"| {value:g}{mark} | {seeds} | " + " | ".join(cells) + " |")
     done = [(v, summaries[st]) for v, st in studies.sweep_points(name) if summaries.get(st) is not None]
     if len(done) >= 2:
-        steps = [_step_p(done, m, sw.time) for m in CLAIM_MEASURES]
-        rows.append(f"| {_step_label(done)} | | " + " | ".join(steps) + " |")
+        paired = _paired_steps(done)
+        steps = [_step_p(done, m, sw.time, paired) for m in CLAIM_MEASURES]
+        rows.append(f"| {_step_label(done, paired)} | | " + " | ".join(steps) + " |")
         trends = sweep_trends(done, sw.time)
         trend = [_trend_text(x) for x in trends]
         tested = sum(math.isfinite(x["p"]) for x in trends)  # Holm counts the measures with a p-value
@@ -355,10 +357,15 @@ def _p_cell(p) -> str:
     return "n/a" if not math.isfinite(p) else ("< 0.001" if p < 0.001 else f"{p:.2g}")
 
 
-def _step_label(points) -> str:
-    """The step row's label: how its p-values are made, by the one rule of the claims (paired by seed
-    where the two points start from the same rods, :func:`.pairing.same_start`, else Welch's)."""
-    paired = [same_start(a, b) for (_, a), (_, b) in zip(points, points[1:])]
+def _paired_steps(points) -> list:
+    """For each step of a sweep, whether its two points start from the same rods (:func:`.pairing.same_start`):
+    the one rule of the claims, paired by seed where they do, else Welch's."""
+    return [same_start(a, b) for (_, a), (_, b) in zip(points, points[1:])]
+
+
+def _step_label(points, paired=None) -> str:
+    """The step row's label: how its p-values are made (:func:`_paired_steps`, given or found)."""
+    paired = _paired_steps(points) if paired is None else paired
     if all(paired):
         how = "paired p, seed by seed,"
     elif not any(paired):
@@ -368,7 +375,7 @@ def _step_label(points) -> str:
     return f"{how} from each value to the next (each step alone)"
 
 
-def _step_p(points, measure, t) -> str:
+def _step_p(points, measure, t, paired=None) -> str:
     """The two-sided p-value of each step of a sweep, from one value to the next: paired by seed where
     the two points start from the same rods (:func:`.convergence.paired_difference`, a grouped measure
     over the seeds that carry current in both), else Welch's of the statistics the table gives (a
@@ -377,17 +384,18 @@ def _step_p(points, measure, t) -> str:
     error in the standard error and by the spread between seeds alone, as the claims give it."""
     from .convergence import paired_difference  # (convergence imports this module)
 
-    def step(a, b, fit_errors):
-        if same_start(a, b):
+    def step(a, b, same, fit_errors):
+        if same:
             return paired_difference(b, a, measure, t, fit_errors)["p"]
         if fit_errors:
             return welch_p(_stat_at(b, measure, t), _stat_at(a, measure, t))
         return welch_p(plain_stat(_table_values(b, measure, t)), plain_stat(_table_values(a, measure, t)))
 
-    pairs = [(a, b) for (_, a), (_, b) in zip(points, points[1:])]
-    text = "; ".join(_p_cell(step(a, b, True)) for a, b in pairs)
+    paired = _paired_steps(points) if paired is None else paired
+    steps = [(a, b, same) for ((_, a), (_, b)), same in zip(zip(points, points[1:]), paired)]
+    text = "; ".join(_p_cell(step(a, b, same, True)) for a, b, same in steps)
     if measure in FIT_ERRORS:
-        text += " (seeds alone: " + "; ".join(_p_cell(step(a, b, False)) for a, b in pairs) + ")"
+        text += " (seeds alone: " + "; ".join(_p_cell(step(a, b, same, False)) for a, b, same in steps) + ")"
     return text
 
 
@@ -397,7 +405,7 @@ def _table_values(summary, measure, t) -> np.ndarray:
     fitted one, every seed with a value otherwise."""
     v = values_at(summary, measure, t)
     if measure in FIT_ERRORS:
-        v = np.where(np.isfinite(values_at(summary, FIT_ERRORS[measure], t)), v, np.nan)
+        v = _fitted_only(v, values_at(summary, FIT_ERRORS[measure], t))
     if measure in GROUPED:
         active, known, _ = current_flags(summary, t)
         v = v[active & known]
