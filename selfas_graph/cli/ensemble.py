@@ -28,7 +28,7 @@ from ..ensemble import SUMMARY_CSV, SUMMARY_JSON, Ensemble, EnsembleError, forma
 from ..ensemble.folder import own_file
 from ..ensemble.plan import summary_times
 from ..parallel import task_pool
-from .main import EXIT_NUMERICAL, CliError, CliIOError, counted, interrupted_code
+from .main import EXIT_NUMERICAL, CliError, CliIOError, counted, interrupted_code, write_failed
 
 
 def _default_times_note(times, t_end, interval) -> str | None:
@@ -362,7 +362,7 @@ def _run_ensemble(args, pool, locks):
         try:
             js, cs = write_summary(summary, folder)
         except (EnsembleError, OSError) as exc:
-            raise CliError(f"cannot write the summary into {folder}: {exc}") from None
+            raise write_failed(f"cannot write the summary into {folder}", exc) from None
         print(f"\nwrote {js} and {cs}")
         if args.plot:
             from .plot import plot_summary
@@ -448,7 +448,7 @@ def _run_grid(args, pool, locks):
                 write_summary(point["summary"], folder / point["folder"])
         js, cs = write_grid_summary(table, folder)
     except (EnsembleError, OSError) as exc:
-        raise CliError(f"cannot write the grid summary into {folder}: {exc}") from None
+        raise write_failed(f"cannot write the grid summary into {folder}", exc) from None
     print(f"wrote {js} and {cs}")
     if args.plot:
         (png,) = _own_files(folder, GRID_PNG)

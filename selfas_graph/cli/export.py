@@ -14,7 +14,7 @@ from pathlib import Path
 
 from ..io.export import FORMATS, ExportError, ExportExistsError, MissingGraphWarning, export_run
 from ..io.h5md import RunFileError, raised_in_hdf5
-from .main import CliError
+from .main import CliError, write_failed
 
 
 def add_arguments(p):
@@ -52,7 +52,7 @@ def run(args):
         if raised_in_hdf5(exc):  # reading the run file
             raise
         target = args.output or Path(args.run).with_suffix("." + args.format)
-        raise CliError(f"cannot write the export {target}: {exc.strerror or exc}") from None
+        raise write_failed(f"cannot write the export {target}", exc) from None
     print(f"wrote {path} ({n} frames, {args.format})")
     for w in caught:
         if issubclass(w.category, MissingGraphWarning):

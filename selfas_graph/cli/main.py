@@ -69,6 +69,17 @@ class CliIOError(CliError):
         self.hard_exit = hard_exit
 
 
+def write_failed(message, exc) -> CliError:
+    """The error of a failed write, one rule for every command: exit 4 (:class:`CliIOError`) where the
+    system could not store the bytes (full disk, quota, an I/O error), 2 where the target is wrong (a
+    missing folder, no permission, a folder in the file's place). ``message`` names the file."""
+    from ..io.h5md_format import is_io_error
+
+    wrong_target = isinstance(exc, (FileNotFoundError, PermissionError, IsADirectoryError, NotADirectoryError))
+    why = " ".join(str(getattr(exc, "strerror", None) or exc).split())  # one line, also for HDF5's messages
+    return (CliIOError if is_io_error(exc) and not wrong_target else CliError)(f"{message}: {why}")
+
+
 def add_run_and_frame(p):
     """The run-file argument and the ``--frame K | --time T`` choice that the commands reading a
     saved frame share; returns the mutually exclusive group for more choices (e.g. ``--series``)."""

@@ -18,7 +18,7 @@ import numpy as np
 from ..io import layout
 from ..io.atomic import atomic_write
 from ..io.h5md import RunFile, RunFileError
-from .main import CliError, CliIOError
+from .main import CliError, write_failed
 from .paths import check_folder, check_target
 
 #: frames per second of the movie
@@ -162,7 +162,7 @@ def render_movie(args, Figure) -> int:
     except RunFileError as exc:
         raise CliError(str(exc)) from None
     except OSError as exc:
-        raise CliIOError(f"cannot write {out}: {exc.strerror or exc}") from None
+        raise write_failed(f"cannot write {out}", exc) from None
     finally:
         for sink in sinks:
             sink.abandon()

@@ -56,7 +56,7 @@ from ..model.placement import PlacementError
 from ..model.simulation import Simulation
 from ..model.terms.currents import tree_note, two_trees_note
 from ..parallel import abort_job, fit_threads_to_cores, world
-from .main import EXIT_NUMERICAL, CliError, CliIOError, counted
+from .main import EXIT_NUMERICAL, CliError, CliIOError, counted, write_failed
 from .paths import check_folder, check_target, name_max, same_file
 from .progress import Bar, Lines, fmt_time
 
@@ -440,9 +440,7 @@ def _open_writer(args, sim, scenario, snap, out, ckpt, run_id):
                 out.unlink()
             except OSError:
                 pass
-        if is_io_error(exc) and not isinstance(exc, (FileNotFoundError, PermissionError, IsADirectoryError)):
-            raise CliIOError(f"cannot write the output file {out}: {' '.join(str(exc).split())}") from None
-        raise CliError(f"cannot write the output file {out}: {exc}") from None
+        raise write_failed(f"cannot write the output file {out}", exc) from None
 
 
 def _ended(end, stop, sim, writer, out, ckpt) -> int:

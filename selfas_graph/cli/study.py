@@ -23,7 +23,7 @@ from pathlib import Path
 
 from ..provenance import older_version
 from .ensemble import _positive_int
-from .main import CliError, counted, interrupted_code
+from .main import CliError, counted, interrupted_code, write_failed
 
 DEFAULT_STUDIES = "docs/studies.toml"
 DEFAULT_SUMMARIES = "docs/results"
@@ -155,7 +155,7 @@ def _run_together(picked, args, older_than=""):
             try:
                 js, _ = write_summary(summary, ens.folder)
             except (EnsembleError, OSError) as exc:
-                raise CliError(f"cannot write the summary into {ens.folder}: {exc}") from None
+                raise write_failed(f"cannot write the summary into {ens.folder}", exc) from None
             print(f"study {ens.folder.name}: wrote {js} (selfas-graph study summarise {ens.folder.name}: the page's)")
     if "interrupted" in statuses or None in statuses:
         print("selfas-graph study run: interrupted; run the same command again to continue", file=sys.stderr)
@@ -289,7 +289,7 @@ def _summarise(args, studies):
         try:
             out = write_json_atomic(summary, Path(args.summaries) / f"{s.name}.json")
         except OSError as exc:
-            raise CliError(f"cannot write the summary of {s.name}: {exc.strerror or exc}") from None
+            raise write_failed(f"cannot write the summary of {s.name}", exc) from None
         print(f"study {s.name}: {summary['n_seeds']} seeds summarised into {out}")
         if not args.no_figures:
             from ..studies.figures import study_figures
@@ -359,7 +359,7 @@ def _page(args, studies):
         try:  # through a symbolic link: the file it names changes, not the link
             write_text_atomic(page, new)
         except OSError as exc:
-            raise CliError(f"cannot write the results page {page}: {exc.strerror or exc}") from None
+            raise write_failed(f"cannot write the results page {page}", exc) from None
         print(f"wrote {page}")
     else:
         print(f"{page} already up to date")

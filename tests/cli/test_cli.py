@@ -494,3 +494,26 @@ def test_an_atomic_write_of_a_name_the_folder_takes_needs_no_longer_temporary_na
     out = tmp_path / ("b" * 246 + ".xyz")
     write_text_atomic(out, "x\n")
     assert out.read_text() == "x\n" and [p.name for p in tmp_path.iterdir()] == [out.name]
+
+
+def test_write_failed_tells_a_full_disk_from_a_wrong_target():
+    """exit 4 where the system failed the write (an errno, or HDF5's wrapped one), 2 where the target is
+    wrong (missing folder, permission, a folder in its place) or the failure is not the system's."""
+    import errno
+
+    from selfas_graph.cli.main import EXIT_IO, EXIT_USAGE, write_failed
+
+    cases = [
+        (OSError(errno.ENOSPC, "No space left on device"), EXIT_IO),
+        (OSError(errno.EDQUOT, "Disk quota exceeded"), EXIT_IO),
+        (RuntimeError("Can't write data (file write failed: ..., errno = 28, error message = 'No space')"), EXIT_IO),
+        (FileNotFoundError(errno.ENOENT, "No such file or directory"), EXIT_USAGE),
+        (PermissionError(errno.EACCES, "Permission denied"), EXIT_USAGE),
+        (IsADirectoryError(errno.EISDIR, "Is a directory"), EXIT_USAGE),
+        (NotADirectoryError(errno.ENOTDIR, "Not a directory"), EXIT_USAGE),
+        (ValueError("a summary with no seeds"), EXIT_USAGE),
+    ]
+    for exc, code in cases:
+        err = write_failed("cannot write x.h5", exc)
+        assert err.code == code, exc
+        assert str(err).startswith("cannot write x.h5: ") and "\n" not in str(err)

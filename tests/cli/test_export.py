@@ -246,3 +246,21 @@ def test_ovito_reads_the_exports(run):
             assert p.bonds.count == 60
             np.testing.assert_array_equal(p.bonds.topology[...], np.arange(120).reshape(60, 2))
             assert data.attributes["time"] == pytest.approx(e["time"][6])
+
+
+@pytest.mark.parametrize(
+    "error, code",
+    [(OSError(28, "No space left on device"), 4), (PermissionError(13, "Permission denied"), 2)],
+)
+def test_a_failed_write_has_the_exit_code_of_every_command(run, capsys, monkeypatch, error, code):
+    """One rule with plot and simulate (cli.main.write_failed): a full disk is an I/O error, exit 4; a
+    target the user must change is a usage error, exit 2. Nothing is left at the output's name."""
+
+    def fail(path, write):
+        raise error
+
+    monkeypatch.setattr("selfas_graph.io.export.atomic_write", fail)
+    out = run.with_name("out.gsd")
+    assert main(["export", str(run), "--format", "gsd", "-o", str(out)]) == code
+    err = capsys.readouterr().err
+    assert f"cannot write the export {out}: {error.strerror}" in err and not out.exists()

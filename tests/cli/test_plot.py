@@ -381,3 +381,26 @@ def test_the_plots_over_time_take_the_last_frame_with_every(monkeypatch):
     series._series(SimpleNamespace(n_frames=6), SimpleNamespace(every=4))
     series._series(SimpleNamespace(n_frames=5), SimpleNamespace(every=4))
     assert seen == [[0, 4, 5], [0, 4]]
+
+
+@pytest.mark.parametrize("movie", [False, True])
+def test_a_full_disk_is_an_io_error_and_a_wrong_target_a_usage_error(run_file, tmp_path, monkeypatch, movie, capsys):
+    """The rule of every command that writes (cli.main.write_failed): exit 4 where the system could not
+    store the bytes, 2 where the user must name another target."""
+    import errno
+
+    name = "out.gif" if movie else "out.png"
+    option = "--movie" if movie else "-o"
+    where = "selfas_graph.cli.movie.atomic_write" if movie else "selfas_graph.cli.plots.style.atomic_write"
+    for error, code in [
+        (OSError(errno.ENOSPC, "No space left on device"), 4),
+        (IsADirectoryError(21, "Is a directory"), 2),
+    ]:
+
+        def fail(path, write, error=error):
+            raise error
+
+        monkeypatch.setattr(where, fail)
+        assert main(["plot", str(run_file), option, str(tmp_path / name)]) == code
+        assert f"cannot write {tmp_path / name}: {error.strerror}" in capsys.readouterr().err
+        assert not (tmp_path / name).exists()

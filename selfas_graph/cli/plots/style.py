@@ -8,7 +8,7 @@ from pathlib import Path
 from ...io.atomic import atomic_write
 from ...io.frame import SavedFrame
 from ...io.h5md import RunFile
-from ..main import CliError, CliIOError
+from ..main import CliError, write_failed
 
 # the paper's colours
 FILAMENT_COLOUR = "blue"
@@ -80,4 +80,4 @@ def _save_png(fig, out: Path, dpi):
     try:  # through a symbolic link the file it names is replaced, as for every file written (io/atomic.py)
         atomic_write(out, lambda tmp: fig.savefig(tmp, dpi=dpi, format=fmt))
     except OSError as exc:
-        raise CliIOError(f"cannot write {out}: {exc.strerror or exc}") from None
+        raise write_failed(f"cannot write {out}", exc) from None
