@@ -34,9 +34,28 @@ def _check(path):
         raise CliError(f"{path} is not an HDF5 file, as a selfas-graph run file is")
 
 
+def _kind(path):
+    """ "checkpoint" for a checkpoint file, "run file" for anything else that opens (None where it does not:
+    locked or damaged, named by the comparison itself)."""
+    import h5py
+
+    from ..io.h5md_format import HDF5_READ_ERRORS
+
+    try:
+        with h5py.File(path, "r") as f:
+            fmt = f.attrs.get("format", "")
+    except HDF5_READ_ERRORS:
+        return None
+    fmt = fmt.decode(errors="replace") if isinstance(fmt, bytes) else str(fmt)
+    return "checkpoint" if "checkpoint" in fmt else "run file"
+
+
 def run(args):
     for path in (args.a, args.b):
         _check(path)
+    kinds = [_kind(args.a), _kind(args.b)]
+    if None not in kinds and kinds[0] != kinds[1]:  # every dataset would differ: a list of no use
+        raise CliError(f"{args.a} is a {kinds[0]} and {args.b} a {kinds[1]}: compare two run files, or two checkpoints")
     try:
         return same_run.run(args)
     except BrokenPipeError:

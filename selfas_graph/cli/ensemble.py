@@ -305,6 +305,10 @@ def _run_ensemble(args, pool, locks):
     _own_files(folder, SUMMARY_JSON, SUMMARY_CSV, *(("summary.png",) if args.plot else ()))
     times = args.times
     count = _counts(plans)
+    runs = not args.no_run and count["run"] + count["resume"]
+    if runs:  # a folder that cannot be made is refused before the plan is printed
+        _make(folder)
+        locks.hold(folder)
     p = ens.base.params
     print(
         f"{p.scenario.name}: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {ens.t_end:g} in {folder}/: "
@@ -320,9 +324,7 @@ def _run_ensemble(args, pool, locks):
                 f"  seed {plan.seed}: {plan.note}, not this version {__version__} (kept; see the CHANGELOG)", flush=True
             )
     results = []
-    if not args.no_run and count["run"] + count["resume"]:
-        _make(folder)
-        locks.hold(folder)
+    if runs:
         tasks = ens.tasks(plans)
         report = SeedReport(len(tasks))
         t0 = time.perf_counter()
@@ -403,6 +405,13 @@ def _run_grid(args, pool, locks):
         plans = grid.plans(summary_only=args.no_run)
     except EnsembleError as exc:
         raise CliError(str(exc)) from None
+    tasks = [] if args.no_run else grid.tasks(plans)
+    if tasks:  # folders that cannot be made are refused before the plan is printed
+        _make(folder)
+        locks.hold(folder)
+        for ens in grid.ensembles:
+            _make(ens.folder)
+            locks.hold(ens.folder)  # each point's folder too: an ensemble run there alone takes its lock
     kept_failed = 0
     for ens, plan in zip(grid.ensembles, plans):
         count = _counts(plan)
@@ -411,7 +420,6 @@ def _run_grid(args, pool, locks):
             f"{ens.folder}/: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {grid.t_end:g}: {_count_text(count)}",
             flush=True,
         )
-    tasks = [] if args.no_run else grid.tasks(plans)
     resumed = sum(t["action"] == "resume" for t in tasks)
     print(
         f"grid of {len(grid.points)} points x {len(grid.ensembles[0].seeds)} seeds: {len(tasks) - resumed} to run"
@@ -420,11 +428,6 @@ def _run_grid(args, pool, locks):
     )
     results = []
     if tasks:
-        _make(folder)
-        locks.hold(folder)
-        for ens in grid.ensembles:
-            _make(ens.folder)
-            locks.hold(ens.folder)  # each point's folder too: an ensemble run there alone takes its lock
         results = run_tasks(run_seed, tasks, pool, SeedReport(len(tasks), folders=True))
         io = [r for r in results if r is not None and r.get("status") == "io_error"]
         if io:

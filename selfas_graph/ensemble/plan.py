@@ -76,8 +76,8 @@ def _override_list(overrides) -> list:
 def check_times(times, t_end, frame_interval=None) -> list[float]:
     """``times`` of a summary as a list of floats in ``[0, t_end]`` (a single time is taken as a list
     of one), each a frame's time where ``frame_interval`` is given (a multiple of it, or ``t_end``, the
-    last frame); EnsembleError naming the first that is not. A time between two frames would take one
-    of them and be labelled with its own value."""
+    last frame), each once; EnsembleError naming the first that is not. A time between two frames would
+    take one of them and be labelled with its own value."""
     times = [times] if np.ndim(times) == 0 else list(times)
     for t in times:
         try:
@@ -95,7 +95,12 @@ def check_times(times, t_end, frame_interval=None) -> list[float]:
                     f"times: no frame at t = {float(t):g}; the frames are every {frame_interval:g} t0 and at the "
                     f"end time {t_end:g}: give frame times (the nearest: {lo:g} and {min(lo + frame_interval, t_end):g})"
                 )
-    return [float(t) for t in times]
+    times = [float(t) for t in times]
+    for i, t in enumerate(times):  # a time twice would be a column twice, its seeds counted in both
+        same = [u for u in times[:i] if math.isclose(u, t, rel_tol=1e-9, abs_tol=1e-12)]
+        if same:
+            raise EnsembleError(f"times: {same[0]:g} and {t:g} are one time; give each time once")
+    return times
 
 
 def summary_times(times, t_end, interval, dt=None) -> list[float]:

@@ -12,6 +12,7 @@ from .._version import __version__
 from ..analysis.diagnostics import timeline
 from ..analysis.ensemble_stats import censored_times, grouped_summary, mean_sem, mean_sem_fits
 from ..io.h5md import HDF5_READ_ERRORS, RunFile, RunFileError, hdf5_damage
+from ..model.parameter_match import parameter_differences, value_at
 from .folder import EnsembleError
 from .measures import FRAME_MEASURES, Frame, carries_current
 
@@ -31,13 +32,37 @@ def _each_file_once(paths):
         seen[key] = path
 
 
+def _one_sample(first, path, params, seeds) -> tuple:
+    """The path and parameters every seed file is held to (``first``; the file's own for the first one
+    read), EnsembleError where ``params`` differ from them in more than the seed or repeat a seed of
+    ``seeds`` (those read before): a mean over other parameters, or one seed counted twice, would pass
+    for one ensemble's."""
+    seed = value_at(params, "scenario.seed")
+    twice = [s["path"] for s in seeds if s["seed"] == seed]
+    if twice:
+        raise EnsembleError(f"{path} and {twice[0]} are both seed {seed}: one sample, give it once")
+    if first is None:
+        return path, params
+    # both ways: a key a file of an earlier version lacks counts at its default, whichever file lacks it
+    diff = sorted(set(parameter_differences(first[1], params)) & set(parameter_differences(params, first[1])))
+    diff = [k for k in diff if k != "scenario.seed"]
+    if diff:
+        shown = "; ".join(f"{k} is {value_at(first[1], k)!r} there and {value_at(params, k)!r} here" for k in diff[:3])
+        more = f" (and {len(diff) - 3} more keys)" if len(diff) > 3 else ""
+        raise EnsembleError(
+            f"{path} is of other parameters than {first[0]}: {shown}{more}; summarise one parameter set at a time"
+        )
+    return first
+
+
 def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict:
     """Mean and standard error over seed files of the short-circuit time and of per-frame measures.
 
     Parameters
     ----------
     paths : sequence of path-like
-        Run files, one per seed.
+        Run files, one per seed, of one parameter set but for the seed and the end time
+        (EnsembleError naming the keys otherwise).
     times : sequence of float
         Simulated times; each seed's nearest saved frame within half an output interval
         is used, a seed that has no such frame (it ended earlier) is left out there.
@@ -67,6 +92,7 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
     grouped = any(m.grouped for m in measures)
     _each_file_once(paths)
     seeds, unreadable, rows = [], [], []
+    first = None  # the path and parameters of the first file read, which every other must share
     for path in paths:
         try:
             run = RunFile(path)
@@ -75,6 +101,7 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
             continue
         try:
             with run:
+                first = _one_sample(first, path, run.parameters, seeds)
                 seed, row = _read_seed(run, path, times, t_end, measures, flux_radius, grouped)
         except HDF5_READ_ERRORS as exc:  # damaged metadata: HDF5 says so only when the part is read
             if hdf5_damage(exc) is None:

@@ -87,6 +87,9 @@ def parse_frames(spec, n_frames) -> np.ndarray:
                 f"frames (--frames) {text}: frame {int(bad[0])} out of range; the file has frames 0..{n_frames - 1}"
             )
         picked = picked % n_frames
+        twice = [int(k) for i, k in enumerate(picked) if k in picked[:i]]
+        if twice:  # a frame twice would be a trajectory that steps back in time
+            raise ExportError(f"frames (--frames) {text}: frame {twice[0]} is named twice; give each frame once")
     if not len(picked):
         raise ExportError(f"frames (--frames) {text}: selects no frame of the {n_frames} in the file")
     return np.asarray(picked, dtype=np.int64)

@@ -271,7 +271,12 @@ def test_output_folder_that_is_a_file_is_refused(tmp_path, capsys):
     assert main(["ensemble", QUICK, "--seeds", "1", "-o", str(tmp_path / "e")]) == 2
     assert "the output folder" in capsys.readouterr().err and (tmp_path / "e").read_text() == "precious"
     assert main(["ensemble", QUICK, "--seeds", "1", "-o", str(tmp_path / "e" / "sub")]) == 2
-    assert "cannot" in capsys.readouterr().err
+    res = capsys.readouterr()
+    assert "cannot" in res.err and res.out == ""  # refused before the plan is printed
+    grid = ["--grid", "integrator.dt=0.002,0.004"]
+    assert main(["ensemble", QUICK, "--seeds", "1", *grid, "-o", str(tmp_path / "e" / "sub")]) == 2
+    res = capsys.readouterr()
+    assert "cannot" in res.err and res.out == "" and (tmp_path / "e").read_text() == "precious"
 
 
 # ----------------------------------------------------------------------------- the small circuit scene
@@ -329,6 +334,9 @@ def test_summary_times_are_checked(scene, tmp_path):
     for bad in ([5.0], [-1.0], ["x"], [float("nan")]):
         with pytest.raises(EnsembleError, match="is not a simulated time between 0 and the end time 0.6"):
             ens.summarise(times=bad)
+    # a time twice was a column twice
+    with pytest.raises(EnsembleError, match="times: 0.3 and 0.3 are one time; give each time once"):
+        ens.summarise(times=[0.3, 0.1, 0.3])
         with pytest.raises(EnsembleError, match="is not a simulated time"):
             Grid(scene, {"integrator.dt": ["2.5e-4"]}, seeds=[3], folder=tmp_path / "g").summarise(times=bad)
 
@@ -916,6 +924,37 @@ def test_one_file_given_twice_is_refused_not_counted_as_two_seeds(quick, tmp_pat
     for twice in ([a, a], [a, tmp_path / "link.h5"]):
         with pytest.raises(EnsembleError, match="are one file: give each seed file once"):
             summarise(twice, [0.0])
+
+
+def _with_parameters(src, dst, change):
+    """A copy of the run file ``src`` at ``dst`` whose stored parameters ``change`` edits (a dict in place)."""
+    shutil.copyfile(src, dst)
+    with h5py.File(dst, "r+") as f:
+        group = f["parameters/selfas_graph"]
+        params = json.loads(group.attrs["parameters_json"])
+        change(params)
+        group.attrs["parameters_json"] = json.dumps(params)
+    return dst
+
+
+def test_seed_files_of_other_parameters_or_one_seed_twice_are_refused(quick, tmp_path):
+    """``summarise`` of files that differ in more than the seed and the end time averaged them as one
+    ensemble without a word; the same seed in two files counted one sample twice. Both are refused,
+    naming the files and the keys."""
+    a, b = seed_path(quick[0], 1), seed_path(quick[0], 2)
+
+    def other_b_ext(p):
+        p["forces"]["uniform_field"] = {"B": [0.0, 0.0, 7.0]}
+
+    def longer(p):
+        p["run"]["t_end"] = 99.0
+
+    other = _with_parameters(b, tmp_path / "other.h5", other_b_ext)
+    with pytest.raises(EnsembleError, match=r"other.h5 is of other parameters than .*forces\.uniform_field"):
+        summarise([a, other], [0.0])
+    assert summarise([a, _with_parameters(b, tmp_path / "longer.h5", longer)], [0.0])["n_seeds"] == 2
+    with pytest.raises(EnsembleError, match="are both seed 1: one sample"):
+        summarise([a, shutil.copyfile(a, tmp_path / "copy.h5")], [0.0])
 
 
 def test_claims_of_a_slice_of_frames(quick):

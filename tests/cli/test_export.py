@@ -224,6 +224,13 @@ def test_parse_frames_refuses(spec):
         parse_frames(spec, 4)
 
 
+@pytest.mark.parametrize("spec", ["1,1", "3,-1", [0, 2, -4]])
+def test_a_frame_named_twice_is_refused(spec):
+    """It was written twice, a trajectory stepping back in time for every reader."""
+    with pytest.raises(ExportError, match=r"frame \d is named twice; give each frame once"):
+        parse_frames(spec, 4)
+
+
 def test_ovito_reads_the_exports(run):
     """OVITO's Python module (pip install ovito: 260 MB, so not in the test extra) reads both exports:
     the roles as particle types, the rods as bonds typed by role, the currents, time and total current."""

@@ -336,3 +336,18 @@ def test_compare_names_the_file_it_cannot_read(tmp_path, capsys):
         pytest.skip("HDF5 file locking is off here (a file system without locks)")
     assert res.returncode == 2, res.stdout + res.stderr
     assert "b.h5: locked by another process" in res.stderr and "a.h5:" not in res.stderr
+
+
+def test_compare_refuses_a_run_file_against_a_checkpoint(tmp_path, capsys):
+    """Every dataset of the two differs: the list was of no use. Two checkpoints compare as two run files do."""
+    import shutil
+
+    from selfas_graph.cli.main import main
+
+    data = Path(__file__).parent.parent / "data"
+    run, ckpt = data / "legacy_run_58b30f8.h5", data / "checkpoint_0.2_case2.h5"
+    assert main(["compare", str(run), str(ckpt)]) == 2
+    err = capsys.readouterr().err
+    assert f"{run} is a run file and {ckpt} a checkpoint: compare two run files, or two checkpoints" in err
+    shutil.copyfile(ckpt, tmp_path / "c.h5")
+    assert main(["compare", str(ckpt), str(tmp_path / "c.h5")]) == 0
