@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from .page import has_electrodes
-from .stats import FIT_ERRORS, GROUPED, LABELS
-from .verdicts import CLAIM_MEASURES, sweep_points
+from .stats import CLAIM_MEASURES, FIT_ERRORS, GROUPED, LABELS
+from .sweeps import sweep_points
 
 __all__ = ["SERIES_MEASURES", "plot_episodes", "plot_series", "series_panels", "study_figures"]
 
@@ -164,7 +164,7 @@ def study_figures(study, summary, folder) -> list:
 
 def plot_sweep(studies, summaries, name, out) -> Path:
     """The claim measures at the sweep's time against its parameter: mean and one standard error over
-    the seeds of each point, as the sweep's table gives them (:func:`.verdicts.sweep_points`: for a
+    the seeds of each point, as the sweep's table gives them (:func:`.sweeps.sweep_points`: for a
     measure of the current, the seeds that carry it, "k/n" beside each point). A point of one seed,
     without a spread, is drawn hollow."""
     sw = studies.sweeps[name]

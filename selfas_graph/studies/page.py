@@ -21,7 +21,8 @@ from ..provenance import version_key
 from .convergence import convergence_rows
 from .spec import StudiesError
 from .stats import fmt, measure_label, measure_text, older_runs, with_minimum_counts
-from .verdicts import claim_rows, sweep_rows
+from .sweeps import sweep_rows
+from .verdicts import claim_rows
 
 __all__ = ["has_electrodes", "load_summary", "page_blocks", "page_blocks_in", "replace_blocks", "study_table"]
 

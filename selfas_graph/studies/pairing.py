@@ -3,7 +3,9 @@ values, and how a window's mean of a grouped measure splits into how often and h
 
 Two studies start from the same rods where the summaries say so at t = 0: every measure both hold has
 the same value there, seed by seed, over the seeds both have (a measure one side lacks at t = 0, NaN as
-the current of a scene without a circuit, is not compared), and at least one finite value is compared.
+the current of a scene without a circuit, is not compared), and at least one finite value of a measure
+of the rods' placement is compared (the others are constants of the scene at t = 0: the rod count, no
+structure, no current; two scenes of as many rods would agree in them whatever their rods).
 A study without t = 0 among its summarised times, or with no seed in common, starts from other rods as
 far as the page can tell. Names, scenario files and overrides are not read: a null model that runs the
 same scenario with another force term has the same rods at t = 0, one that places them anew has not.
@@ -24,7 +26,7 @@ import math
 
 import numpy as np
 
-from .stats import _in_window, current_flags, plain_stat, values_at
+from .stats import _in_window, current_flags, plain_stat, reached, values_at
 
 __all__ = ["common_rows", "paired_stat", "same_start", "window_split"]
 
@@ -38,10 +40,17 @@ def common_rows(a, b):
     return ia, ib
 
 
+#: measures whose value at t = 0 depends on where each rod is placed and how it points (the others there
+#: are constants of the scene: the number of rods, no structure, no current); two summaries start from
+#: the same rods only where one of these is compared
+PLACED = ("inside_R_plas", "median_axis_distance", "all_alignment", "free_alignment")
+
+
 def same_start(a, b, t=0.0) -> bool:
     """Whether two summaries start from the same rods: at ``t`` (0) every measure both hold is equal,
-    seed by seed over the seeds both have, where both have a value, and at least one such value is
-    compared (module docstring). Equal to 1e-12 relative, as the same rods give the same numbers."""
+    seed by seed over the seeds both have, where both have a value, and at least one value of a measure
+    of the rods' placement (:data:`PLACED`) is compared (module docstring). Equal to 1e-12 relative, as
+    the same rods give the same numbers."""
     ia, ib = common_rows(a, b)
     if not ia.size:
         return False
@@ -51,7 +60,7 @@ def same_start(a, b, t=0.0) -> bool:
         both = np.isfinite(x) & np.isfinite(y)
         if not np.allclose(x[both], y[both], rtol=1e-12, atol=0.0):
             return False
-        compared += int(both.sum())
+        compared += int(both.sum()) if m in PLACED else 0
     return compared > 0
 
 
@@ -93,7 +102,8 @@ def window_split(summary, measure, lo, hi) -> dict:
     """How a seed's mean of a grouped measure over the summarised times in [lo, hi] (zero while its
     circuit is open) splits: ``fraction``, each seed's share of those times at which it carries current
     (of the times with a value and a current flag), and ``size``, its mean over those times alone (NaN
-    for a seed that never does), each a per-seed array; ``times``, how many of the window's times
+    for a seed that never does), each a per-seed array, NaN for a seed that stopped before ``hi`` (as in
+    :func:`.stats.window_values`); ``times``, how many of the window's times
     hold the measure for some seed; ``circuit``, whether the study has a circuit (without one the flag
     says that filaments span the gap)."""
     times = np.asarray(summary["times"], dtype=float)[_in_window(summary, lo, hi)]
@@ -111,7 +121,8 @@ def window_split(summary, measure, lo, hi) -> dict:
         circuit |= circ
     v, act, kn = np.array(values).T, np.array(active).T, np.array(known).T
     on = act & kn
+    whole = reached(summary, hi)  # a seed that stopped inside the window has no split, as it has no mean
     with np.errstate(invalid="ignore", divide="ignore"):
-        fraction = np.where(kn.sum(axis=1) > 0, on.sum(axis=1) / kn.sum(axis=1), np.nan)
-        size = np.where(on.sum(axis=1) > 0, np.where(on, v, 0.0).sum(axis=1) / on.sum(axis=1), np.nan)
+        fraction = np.where(whole & (kn.sum(axis=1) > 0), on.sum(axis=1) / kn.sum(axis=1), np.nan)
+        size = np.where(whole & (on.sum(axis=1) > 0), np.where(on, v, 0.0).sum(axis=1) / on.sum(axis=1), np.nan)
     return {"fraction": fraction, "size": size, "times": int(np.isfinite(v).any(axis=0).sum()), "circuit": circuit}

@@ -115,6 +115,10 @@ class Claim:
     #: (t1, t2): test each seed's mean of the measure over the summarised times in [t1, t2] instead of
     #: its value at ``time`` (for a measure that flickers, e.g. rods in filaments as the gap opens and closes)
     window: tuple[float, ...] = ()
+    #: the seed counts (study, null model) at which the verdict was read before, in order: the verdict
+    #: is tested at the level over all its readings, this one included (docs/model.md "Measures of the
+    #: paper's claims", its Verdicts)
+    looks: tuple[tuple[int, int], ...] = ()
 
 
 @dataclasses.dataclass(frozen=True)
@@ -200,6 +204,7 @@ _CLAIM_KEYS = {
     "expect": str,
     "also": list,
     "window": list,
+    "looks": list,
 }
 
 
@@ -339,11 +344,16 @@ def _claim(where, c, studies) -> Claim:
             )
     if c.get("expect", "greater") not in ("greater", "less"):
         raise StudiesError(f"{where}.expect: 'greater' or 'less', got {c['expect']!r}")
+    looks = c.get("looks", [])
+    counts = [n for x in looks if isinstance(x, list) and len(x) == 2 for n in x]
+    if len(counts) != 2 * len(looks) or any(type(n) is not int or n < 1 for n in counts):
+        raise StudiesError(f"{where}.looks: a list of [seeds of the study, seeds of the null model], got {looks!r}")
     return Claim(
-        **{k: v for k, v in c.items() if k not in ("time", "also", "window")},
+        **{k: v for k, v in c.items() if k not in ("time", "also", "window", "looks")},
         time=float(c["time"]),
         also=tuple(c.get("also", [])),
         window=w,
+        looks=tuple(tuple(int(n) for n in x) for x in looks),
     )
 
 

@@ -242,6 +242,12 @@ def measure_text(summary, measure, t) -> str:
             return "not testable at this size (no fit over a factor 4 in scale)"
         k = len(v) - s["n"]
         return pm(s) if not k else f"{pm(s)}; not testable in {k} seed{'' if k == 1 else 's'}"
+    if measure == "free_alignment":  # say which seeds the rule of MIN_FREE_RODS leaves out
+        few = int((values_at(summary, "free_rods", t) < MIN_FREE_RODS).sum())
+        if few:
+            if not np.isfinite(v).any():
+                return f"n/a (fewer than {MIN_FREE_RODS} such rods in {'every' if few == len(v) else few} seed{'s' if few > 1 and few < len(v) else ''})"
+            return f"{pm(plain_stat(v))}; {few} seed{'' if few == 1 else 's'} with fewer than {MIN_FREE_RODS} such rods left out"
     return pm(plain_stat(v))
 
 

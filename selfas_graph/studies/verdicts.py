@@ -2,9 +2,11 @@
 the default it varies, and each sweep of a scene's parameter.
 
 A claim's verdict compares the study with its null model at the paper's end time, or in each seed's
-mean over the claim's window, in standard errors of the difference: "reproduced" only for |d| > 3 in
-the direction the claim predicts (docs/model.md "Measures of the paper's claims", its Verdicts). One
-rule decides the test, as for the convergence table:
+mean over the claim's window, by d, the difference in standard errors of the difference, and its test's
+two-sided p-value: "reproduced" only where p is below :data:`VERDICT_LEVEL` (0.0027, the chance of 3
+SE of a normal variable; divided by the number of readings for a claim read before at other seed
+counts) and d lies in the direction the claim predicts (docs/model.md "Measures of the paper's
+claims", its Verdicts). One rule decides the test, as for the convergence table:
 
 * where the two studies start from the same rods (the summaries' values at t = 0 agree seed by seed,
   :func:`.pairing.same_start`; a null model that runs the scene's scenario with a force term changed
@@ -16,7 +18,7 @@ rule decides the test, as for the convergence table:
   all the seeds of each, beside Welch's p-value ("Welch p").
 
 A difference with no spread to scale by (infinite d: every pair alike, or every seed of each side the
-same) is decided by its exact test, the sign test or :func:`separation_p`, at :data:`EXACT_LEVEL`.
+same) is decided by its exact test, the sign test or :func:`separation_p`, at the same level.
 
 A null model whose value is zero in every seed cannot have what the claim measures (its rods never
 touch, say): a difference in the claimed direction is then worded as nonzero where the null model
@@ -38,8 +40,6 @@ from .stats import (
     CLAIM_MEASURES,
     FIT_ERRORS,
     GROUPED,
-    current_flags,
-    grouped_at,
     measure_label,
     measure_text,
     older_runs,
@@ -50,7 +50,7 @@ from .stats import (
     window_values,
 )
 
-__all__ = ["CLAIM_MEASURES", "claim_rows", "claim_verdict", "sweep_points", "sweep_rows", "sweep_trends"]
+__all__ = ["CLAIM_MEASURES", "claim_rows", "claim_verdict", "welch_p"]
 
 
 def _combined_sem(a, b):
@@ -90,10 +90,10 @@ def welch_p(a, b) -> float:
     return float(2.0 * student.sf(abs(a["mean"] - b["mean"]) / math.sqrt(va + vb), df))
 
 
-#: the two-sided chance of 3 standard errors of a normal variable, 0.0027: where a difference has no
-#: spread to scale by (infinite d), the level its exact test must pass for a verdict (docs/model.md
-#: "Measures of the paper's claims", its Verdicts)
-EXACT_LEVEL = 2.6997960632601866e-3
+#: the two-sided chance of 3 standard errors of a normal variable, 0.0027: the level a claim's test
+#: must pass for a verdict, a t-test's or, where a difference has no spread to scale by (infinite d), an
+#: exact test's (docs/model.md "Measures of the paper's claims", its Verdicts)
+VERDICT_LEVEL = 2.6997960632601866e-3
 
 
 def separation_p(a, b) -> float:
@@ -127,45 +127,55 @@ ZERO_NULL = (
 )
 
 
-def _verdict(d, expect, p=math.nan, paired=None, zero=False):
-    """The verdict on a difference of ``d`` standard errors from the null model (3 of them in the
-    claimed direction), with the test beside it: Welch's p-value ``p``, or the paired test over
-    ``paired`` seeds. Where the null model's value is zero in every seed (``zero``), a difference in
-    the claimed direction is not worded as the claim reproduced: the null model cannot have any."""
+def level_text(level=None) -> str:
+    """The level a verdict's p-value must pass, in words: "0.0027, the chance of 3 SE", or a claim's
+    lower level over its readings (:func:`_looks_note` says why) as a number alone."""
+    if level is None or level == VERDICT_LEVEL:
+        return f"{VERDICT_LEVEL:.2g}, the chance of 3 SE"
+    return f"{level:.2g}"
+
+
+def _verdict(d, expect, p=math.nan, paired=None, zero=False, level=None):
+    """The verdict on a difference of ``d`` standard errors from the null model, decided by its test's
+    two-sided p-value ``p`` (Welch's, or the paired test's over ``paired`` seeds; an exact test's where
+    ``d`` is infinite): "reproduced" where ``p`` is below ``level`` (:data:`VERDICT_LEVEL`, the chance
+    of 3 SE, unless given) and ``d`` lies in the claimed direction, "opposite to the claim" where it
+    lies the other way, "not distinguished from the null model" otherwise. One rule for every test, so
+    that a few seeds need a larger d (at 2 pairs, 3 SE is p = 0.2). Where the null model's value is
+    zero in every seed (``zero``), a difference in the claimed direction is not worded as the claim
+    reproduced: the null model cannot have any."""
     if math.isnan(d):
         return "not decided (too few seeds)"
+    level = VERDICT_LEVEL if level is None else level
     claimed = (d > 0) == (expect == "greater")
+    note = "; the null model's value is zero in every seed" if zero else ""
     if math.isinf(d):  # no spread: every seed of each gives the same value, or every pair differs alike
         if paired:
             what = f"every seed differs from the same seed of the null model by the same amount; sign test over {paired} seeds"
         else:
             what = "every seed differs from every seed of the null model; exact rank test"
         what += f", p = {p:.2g}" if math.isfinite(p) else " without a p-value"
-        if not p < EXACT_LEVEL:  # a few pairs alike are no evidence: 2 of 2 happen half the time
-            note = "; the null model's value is zero in every seed" if zero else ""
-            return (
-                f"not distinguished from the null model ({what}, not below {EXACT_LEVEL:.2g}, the chance of 3 SE{note})"
-            )
-        if zero and claimed:
-            return f"{ZERO_NULL}; {what}"
-        return f"{'reproduced' if claimed else 'opposite to the claim'} ({what})"
-    sign = f"{'+' if d > 0 else '−'}{abs(d):.1f}"
-    if abs(d) > 3 and claimed and zero:
+        found = what
+    else:
+        sign = f"{'+' if d > 0 else '−'}{abs(d):.1f}"
         test = _test_text(p, paired)
-        return f"{ZERO_NULL}; {sign} SE{', ' + test if test else ''}"
-    note = "; the null model's value is zero in every seed" if zero else ""
-    if abs(d) > 3:
-        return f"{'reproduced' if claimed else 'opposite to the claim'} ({sign} SE from the null model{_p_text(p, paired)}{note})"
-    return f"not distinguished from the null model ({d:+.1f} SE{_p_text(p, paired)}{note})".replace("-", "−")
+        what = f"{sign} SE{'; ' + test if test else ''}"
+        found = f"{sign} SE from the null model{'; ' + test if test else ''}"
+    if not p < level:  # a few pairs alike are no evidence: 2 of 2 happen half the time
+        return f"not distinguished from the null model ({what}, not below {level_text(level)}{note})"
+    if zero and claimed:
+        return f"{ZERO_NULL}; {what.replace('SE;', 'SE,')}"
+    return f"{'reproduced' if claimed else 'opposite to the claim'} ({found}{note})"
 
 
-def _fit_verdict(d, d_seeds, expect, p_seeds=math.nan, paired=None):
-    """The verdict on a fitted measure, whose standard error carries each seed's fit uncertainty (``d``)
-    or the spread between seeds alone (``d_seeds``, p-value ``p_seeds``; both paired over ``paired``
-    seeds where given, else Welch's): the two are stated, and where they lead to different verdicts the
-    page says that the verdict depends on counting the fits' own errors (docs/model.md "Measures of the
-    paper's claims")."""
-    with_fits, seeds_alone = _verdict(d, expect), _verdict(d_seeds, expect, p_seeds, paired)
+def _fit_verdict(d, d_seeds, expect, p=math.nan, p_seeds=math.nan, paired=None, level=None):
+    """The verdict on a fitted measure, whose standard error carries each seed's fit uncertainty (``d``,
+    p-value ``p``) or the spread between seeds alone (``d_seeds``, p-value ``p_seeds``; both paired over
+    ``paired`` seeds where given, else Welch's): the two are stated, and where they lead to different
+    verdicts the page says that the verdict depends on counting the fits' own errors (docs/model.md
+    "Measures of the paper's claims")."""
+    with_fits = _verdict(d, expect, p, paired, level=level)
+    seeds_alone = _verdict(d_seeds, expect, p_seeds, paired, level=level)
     if math.isnan(d) and math.isnan(d_seeds):
         return with_fits  # "not decided (too few seeds)"
     if with_fits.split(" (")[0] == seeds_alone.split(" (")[0]:
@@ -177,7 +187,7 @@ def _fit_verdict(d, d_seeds, expect, p_seeds=math.nan, paired=None):
             )
         )
     return (
-        f"depends on the fits' own errors: {_verdict(d, expect, math.nan, paired)} with each seed's fit error, "
+        f"depends on the fits' own errors: {with_fits} with each seed's fit error, "
         f"{seeds_alone} by the spread between seeds alone"
     )
 
@@ -216,23 +226,48 @@ def _fitted_only(values, errors):
     return values if errors is None else np.where(np.isfinite(errors), values, np.nan)
 
 
-def _unpaired_note(s, null, ia) -> str:
+def _unpaired_note(s, null, n_pairs) -> str:
     """ "; 8 of the study's 20 seeds have no pair in the null model and are left out" where a paired
-    verdict leaves seeds out (the row's values are over all of each side's seeds), or ""."""
-    left = [(len(x["seeds"]) - len(ia), len(x["seeds"]), who) for x, who in ((s, "study's"), (null, "null model's"))]
+    verdict over ``n_pairs`` pairs leaves seeds out (no seed of that number on the other side, or no
+    value on either; the row's values are over all of each side's seeds), or ""."""
+    left = [(len(x["seeds"]) - n_pairs, len(x["seeds"]), who) for x, who in ((s, "study's"), (null, "null model's"))]
     words = [f"{k} of the {who} {n} seeds" for k, n, who in left if k]
     if not words:
         return ""
     return f"; {' and '.join(words)} have no pair and are left out"
 
 
+def _earlier_looks(c, s, null) -> list:
+    """The seed counts (study, null model) at which claim ``c``'s verdict was read before (its ``looks``),
+    but for those of this reading (``s`` and ``null``'s), which count once."""
+    now = (len(s["seeds"]), len(null["seeds"]))
+    return [x for x in dict.fromkeys(c.looks) if tuple(x) != now]
+
+
+def _looks_note(looks) -> str:
+    """ "; read before at 8/5, 12/12 and 16/16 seeds (study/null model): tested at 0.0027 / 4" for a
+    claim whose verdict was read at other seed counts before (``looks``, :func:`_earlier_looks`), or "".
+    Adding seeds until a verdict turns raises its chance of a false one: the level is divided by the
+    number of readings (Bonferroni's bound holds whatever rule chose when to read)."""
+    if not looks:
+        return ""
+    at = [f"{n}/{m}" for n, m in looks]
+    at = at[0] if len(at) == 1 else f"{', '.join(at[:-1])} and {at[-1]}"
+    return f"; read before at {at} seeds (study/null model): tested at {VERDICT_LEVEL:.2g} / {1 + len(looks)}"
+
+
 def claim_verdict(c, s, null, nm) -> str:
     """The verdict of claim ``c`` on study summary ``s`` against its null model's summary ``null``
     (measure ``nm``): paired by seed over the seeds both have where the two start from the same rods
     (:func:`.pairing.same_start`), else Welch's comparison of the two sets of seeds; a fitted measure's
-    also by the spread between seeds alone; a null model zero in every seed worded as such."""
+    also by the spread between seeds alone; a null model zero in every seed worded as such. The level
+    is :data:`VERDICT_LEVEL` over the claim's readings (:func:`_looks_note`)."""
     x, ex = _claim_values(s, c.measure, c)
     y, ey = _claim_values(null, nm, c)
+    looks = _earlier_looks(c, s, null)
+    level = VERDICT_LEVEL / (1 + len(looks))
+    if not np.isfinite(y).any():
+        return "not decided (the null model has no value of the measure)"
     fitted = ex is not None or ey is not None
     zero = not fitted and _all_zero(y)
     if same_start(s, null):
@@ -241,18 +276,21 @@ def claim_verdict(c, s, null, nm) -> str:
         ey = None if ey is None else ey[ib]
         q = paired_stat(x[ia], y[ib], ex, ey)
         if not fitted:
-            return _verdict(q["d"], c.expect, q["p"], q["n"], zero) + _unpaired_note(s, null, ia)
-        alone = paired_stat(_fitted_only(x[ia], ex), _fitted_only(y[ib], ey))  # the same pairs, no fit errors
-        return _fit_verdict(q["d"], alone["d"], c.expect, alone["p"], q["n"]) + _unpaired_note(s, null, ia)
+            verdict = _verdict(q["d"], c.expect, q["p"], q["n"], zero, level)
+        else:
+            alone = paired_stat(_fitted_only(x[ia], ex), _fitted_only(y[ib], ey))  # the same pairs, no fit errors
+            verdict = _fit_verdict(q["d"], alone["d"], c.expect, q["p"], alone["p"], q["n"], level)
+        return verdict + _unpaired_note(s, null, q["n"]) + _looks_note(looks)
     a, b = plain_stat(x, ex), plain_stat(y, ey)
     if not fitted:
         d = _claim_difference(a, b)
-        return _verdict(d, c.expect, separation_p(a, b) if math.isinf(d) else welch_p(a, b), zero=zero)
+        p = separation_p(a, b) if math.isinf(d) else welch_p(a, b)
+        return _verdict(d, c.expect, p, zero=zero, level=level) + _looks_note(looks)
     sa, sb = plain_stat(_fitted_only(x, ex)), plain_stat(_fitted_only(y, ey))  # the seeds of a, b
     d_seeds = _claim_difference(sa, sb)
-    return _fit_verdict(
-        _claim_difference(a, b), d_seeds, c.expect, separation_p(sa, sb) if math.isinf(d_seeds) else welch_p(sa, sb)
-    )
+    p_seeds = separation_p(sa, sb) if math.isinf(d_seeds) else welch_p(sa, sb)
+    verdict = _fit_verdict(_claim_difference(a, b), d_seeds, c.expect, welch_p(a, b), p_seeds, level=level)
+    return verdict + _looks_note(looks)
 
 
 def _split_text(summary, measure, window) -> str:
@@ -319,162 +357,3 @@ def claim_rows(studies, summaries) -> str:
             f"{null_value} | {verdict} |"
         )
     return "\n".join(rows)
-
-
-def sweep_rows(studies, summaries, name) -> str:
-    """A sweep's table: a row per value of its parameter, the claim measures at the sweep's time, the
-    p-value of each step from one value to the next (:func:`_step_p`) and the trend over the sweep."""
-    sw = studies.sweeps[name]
-    head = f"| {sw.parameter} | seeds | " + " | ".join(measure_label(m) for m in CLAIM_MEASURES) + " |"
-    rows = [head, "|---|---|" + "---|" * len(CLAIM_MEASURES)]
-    for value, study in studies.sweep_points(name):
-        s = summaries.get(study)
-        mark = " (the paper's)" if study == sw.base else ""
-        if s is None:
-            rows.append(
-                f"| {value:g}{mark} | not run yet (`selfas-graph study run {study}`) |" + " |" * len(CLAIM_MEASURES)
-            )
-            continue
-        cells = [measure_text(s, m, sw.time) for m in CLAIM_MEASURES]
-        old = older_runs(s, studies.since(study))
-        seeds = f"{s['n_seeds']}" + (f" (runs of {', '.join(old)}: to be run again)" if old else "")
-        rows.append(f"| {value:g}{mark} | {seeds} | " + " | ".join(cells) + " |")
-    done = [(v, summaries[st]) for v, st in studies.sweep_points(name) if summaries.get(st) is not None]
-    if len(done) >= 2:
-        paired = _paired_steps(done)
-        steps = [_step_p(done, m, sw.time, paired) for m in CLAIM_MEASURES]
-        rows.append(f"| {_step_label(done, paired)} | | " + " | ".join(steps) + " |")
-        trends = sweep_trends(done, sw.time)
-        trend = [_trend_text(x) for x in trends]
-        tested = sum(math.isfinite(x["p"]) for x in trends)  # Holm counts the measures with a p-value
-        label = f"trend over the sweep (Kendall τ over every seed; Holm over the {tested} measures tested)"
-        rows.append(f"| {label} | | " + " | ".join(trend) + " |")
-        rows.append(f"\n![{sw.title}: the claim measures at t = {sw.time:g}](figures/sweep_{name}.png)")
-    return "\n".join(rows)
-
-
-def _p_cell(p) -> str:
-    return "n/a" if not math.isfinite(p) else ("< 0.001" if p < 0.001 else f"{p:.2g}")
-
-
-def _paired_steps(points) -> list:
-    """For each step of a sweep, whether its two points start from the same rods (:func:`.pairing.same_start`):
-    the one rule of the claims, paired by seed where they do, else Welch's."""
-    return [same_start(a, b) for (_, a), (_, b) in zip(points, points[1:])]
-
-
-def _step_label(points, paired=None) -> str:
-    """The step row's label: how its p-values are made (:func:`_paired_steps`, given or found)."""
-    paired = _paired_steps(points) if paired is None else paired
-    if all(paired):
-        how = "paired p, seed by seed,"
-    elif not any(paired):
-        how = "Welch p"
-    else:
-        how = "p (" + "; ".join("paired" if x else "Welch" for x in paired) + ")"
-    return f"{how} from each value to the next (each step alone)"
-
-
-def _step_p(points, measure, t, paired=None) -> str:
-    """The two-sided p-value of each step of a sweep, from one value to the next: paired by seed where
-    the two points start from the same rods (:func:`.convergence.paired_difference`, a grouped measure
-    over the seeds that carry current in both), else Welch's of the statistics the table gives (a
-    grouped measure's over the seeds that carry current): "0.04; 0.5; < 0.001", "n/a" for a step
-    without two seeds (pairs) a side. A fitted dimension's steps are given twice, with each seed's fit
-    error in the standard error and by the spread between seeds alone, as the claims give it."""
-    from .convergence import paired_difference  # (convergence imports this module)
-
-    def step(a, b, same, fit_errors):
-        if same:
-            return paired_difference(b, a, measure, t, fit_errors)["p"]
-        if fit_errors:
-            return welch_p(_stat_at(b, measure, t), _stat_at(a, measure, t))
-        return welch_p(plain_stat(_table_values(b, measure, t)), plain_stat(_table_values(a, measure, t)))
-
-    paired = _paired_steps(points) if paired is None else paired
-    steps = [(a, b, same) for ((_, a), (_, b)), same in zip(zip(points, points[1:]), paired)]
-    text = "; ".join(_p_cell(step(a, b, same, True)) for a, b, same in steps)
-    if measure in FIT_ERRORS:
-        text += " (seeds alone: " + "; ".join(_p_cell(step(a, b, same, False)) for a, b, same in steps) + ")"
-    return text
-
-
-def _table_values(summary, measure, t) -> np.ndarray:
-    """The per-seed values a table's statistic of ``measure`` at ``t`` describes: the seeds that carry
-    current for a grouped measure (:func:`_stat_at`), the seeds with a value and a fit error for a
-    fitted one, every seed with a value otherwise."""
-    v = values_at(summary, measure, t)
-    if measure in FIT_ERRORS:
-        v = _fitted_only(v, values_at(summary, FIT_ERRORS[measure], t))
-    if measure in GROUPED:
-        active, known, _ = current_flags(summary, t)
-        v = v[active & known]
-    return v[np.isfinite(v)]
-
-
-def sweep_trends(points, t) -> list[dict]:
-    """The trend of each claim measure over a sweep's points ``[(value, summary), ...]`` at ``t``:
-    Kendall's tau-b between the parameter and the per-seed values the table describes, every seed of
-    every point pooled, and its two-sided p-value (docs/model.md "Measures of the paper's claims"). One
-    test per measure, where the steps of the table are several each: the p-values are adjusted by Holm
-    over the measures (``holm``). A fitted dimension is ranked by its seeds' values alone (a rank test
-    cannot carry each fit's own error). Returns a dict per measure of :data:`CLAIM_MEASURES`:
-    ``tau``, ``p``, ``holm``, ``n`` (seeds ranked); NaN where fewer than two points have values or
-    the values do not vary."""
-    from scipy.stats import kendalltau
-
-    from .convergence import holm  # the convergence table's adjustment (convergence imports this module)
-
-    out = []
-    for m in CLAIM_MEASURES:
-        x, y = [], []
-        for value, s in points:
-            v = _table_values(s, m, t)
-            x += [float(value)] * v.size
-            y += v.tolist()
-        tau = p = math.nan
-        if len(set(x)) >= 2 and len(y) >= 3 and np.ptp(y) > 0:
-            res = kendalltau(x, y)
-            tau, p = float(res.statistic), float(res.pvalue)
-        out.append({"measure": m, "tau": tau, "p": p, "n": len(y)})
-    for row, q in zip(out, holm([r["p"] for r in out])):
-        row["holm"] = q
-    return out
-
-
-def _trend_text(r) -> str:
-    """A trend cell: "rises: τ = +0.80, p < 0.001 (< 0.001 after Holm)", "falls: ...", or "none shown:
-    ..." where the adjusted p-value is not under the family-wise 5 %."""
-    if not math.isfinite(r["p"]):
-        return "n/a"
-    word = "none shown" if not r["holm"] < 0.05 else ("rises" if r["tau"] > 0 else "falls")
-    return f"{word}: τ = {r['tau']:+.2f}, p = {_p_cell(r['p'])} ({_p_cell(r['holm'])} after Holm)".replace(
-        "= <", "<"
-    ).replace("-", "−")
-
-
-def sweep_points(studies, summaries, name, measure):
-    """(value, statistic) of a measure over a sweep's points that have a summary, as the sweep's table
-    gives it: for a grouped measure the mean and standard error of the seeds that carry current, with
-    their number ``k`` (``n``: those of them with a value; never a mean over both groups), else the
-    plain statistic of every seed."""
-    sw = studies.sweeps[name]
-    out = []
-    for value, study in studies.sweep_points(name):
-        s = summaries.get(study)
-        if s is None:
-            continue
-        out.append((value, _stat_at(s, measure, sw.time)))
-    return out
-
-
-def _stat_at(summary, measure, t) -> dict:
-    """A measure's statistic at ``t`` as the tables give it: for a grouped measure the mean and
-    standard error of the ``n`` seeds that carry current, of ``of`` with a value (never a mean over
-    both groups); for a fitted one with each seed's fit error in the standard error; else over every
-    seed."""
-    if measure in GROUPED:
-        g = grouped_at(summary, measure, t)
-        return {"n": g["k"], "mean": g["mean"], "sem": g["sem"], "of": g["n"]}
-    errs = values_at(summary, FIT_ERRORS[measure], t) if measure in FIT_ERRORS else None
-    return plain_stat(values_at(summary, measure, t), errs)

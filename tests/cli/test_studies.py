@@ -231,7 +231,7 @@ def test_a_sweep_point_of_a_grouped_measure_is_the_mean_of_the_seeds_that_carry_
     with current (and k of n), never a mean with the others as 0."""
     from types import SimpleNamespace
 
-    from selfas_graph.studies.verdicts import sweep_points
+    from selfas_graph.studies.sweeps import sweep_points
 
     summary = {
         "times": [300.0],
@@ -254,11 +254,12 @@ def test_a_sweeps_trend_ranks_every_seed_and_adjusts_over_the_measures():
     """Two points: the fraction within R_plas 0.1, 0.2, 0.3 at value 0 and 0.4, 0.5, 0.6 at value 1 is
     concordant in all 9 pairs across the points: tau-b = 9 / sqrt(15 * 9) = 0.775 (ties in the value:
     15 pairs of the 6 seeds less the 3 + 3 tied), scipy's p. The rods in current-carrying filaments
-    rank only the seeds that carry current (1 of 3 at value 0: 4 seeds). Holm over the measures with a
-    trend; a fitted dimension's steps are given with and without each seed's fit error."""
+    rank every seed, 0 where it carries none (1 of 3 carries current at value 0): ranking only those
+    that do picked the seeds by the outcome. Holm over the measures with a trend; a fitted dimension's
+    steps are given with and without each seed's fit error."""
     from scipy.stats import kendalltau
 
-    from selfas_graph.studies.verdicts import _step_p, _trend_text, sweep_trends
+    from selfas_graph.studies.sweeps import _step_p, _trend_text, sweep_trends
 
     def point(frac, rods, flags, dims, errs):
         return {
@@ -280,8 +281,13 @@ def test_a_sweeps_trend_ranks_every_seed_and_adjusts_over_the_measures():
     frac = rows["inside_R_plas"]
     assert frac["n"] == 6 and frac["tau"] == pytest.approx(9.0 / math.sqrt(15.0 * 9.0))
     assert frac["p"] == pytest.approx(kendalltau([0, 0, 0, 1, 1, 1], [0.1, 0.2, 0.3, 0.4, 0.5, 0.6]).pvalue)
-    assert rows["filament_rods"]["n"] == 4
-    assert rows["filament_rods"]["tau"] == pytest.approx(kendalltau([0, 1, 1, 1], [500, 600, 700, 800]).statistic)
+    assert rows["filament_rods"]["n"] == 6
+    from selfas_graph.studies.sweeps import _cell
+
+    assert _cell(a, "filament_rods", 300.0).endswith("; every seed, 0 without current: 167 ± 167 (3)")
+    assert "every seed" not in _cell(b, "filament_rods", 300.0)  # all carry current: the one mean
+    want = kendalltau([0, 0, 0, 1, 1, 1], [0, 500, 0, 600, 700, 800])
+    assert (rows["filament_rods"]["tau"], rows["filament_rods"]["p"]) == pytest.approx((want.statistic, want.pvalue))
     assert math.isnan(rows["midplane_flux"]["p"]) and math.isnan(rows["midplane_flux"]["holm"])
     tested = [r for r in rows.values() if math.isfinite(r["p"])]
     smallest = min(tested, key=lambda r: r["p"])
@@ -299,7 +305,9 @@ def test_a_sweeps_steps_are_paired_where_its_points_start_from_the_same_rods():
     does not (other rods). The first step is the paired t-test over the seeds both have (differences
     0.3, 0.2, 0.4: p = 2 t_2.sf(0.3 / (0.1 / sqrt 3))), the second Welch's; the label says which."""
     from selfas_graph.studies.pairing import paired_stat
-    from selfas_graph.studies.verdicts import _step_label, _step_p, plain_stat, welch_p
+    from selfas_graph.studies.stats import plain_stat
+    from selfas_graph.studies.sweeps import _step_label, _step_p
+    from selfas_graph.studies.verdicts import welch_p
 
     def point(start, late):
         return {
@@ -313,7 +321,7 @@ def test_a_sweeps_steps_are_paired_where_its_points_start_from_the_same_rods():
     paired = paired_stat([0.4, 0.4, 0.7], [0.1, 0.2, 0.3])["p"]
     welch = welch_p(plain_stat([0.9, 0.8, 1.0]), plain_stat([0.4, 0.4, 0.7]))
     assert paired != pytest.approx(welch_p(plain_stat([0.4, 0.4, 0.7]), plain_stat([0.1, 0.2, 0.3])))
-    assert _step_p([(0, a), (1, b), (2, c)], "inside_R_plas", 300.0) == f"{paired:.2g}; {welch:.2g}"
+    assert _step_p([(0, a), (1, b), (2, c)], "inside_R_plas", 300.0) == f"{paired:.2g} (3); {welch:.2g} (3, 3)"
     assert _step_label([(0, a), (1, b), (2, c)]).startswith("p (paired; Welch) from each value")
     assert _step_label([(0, a), (1, b)]).startswith("paired p, seed by seed,")
     assert _step_label([(1, b), (2, c)]).startswith("Welch p")
@@ -340,6 +348,15 @@ def test_the_alignment_of_the_rods_in_no_structure_needs_30_of_them():
             run=SimpleNamespace(tip_charge=q), position=pos, graph={"tip_contacts": np.zeros((0, 2))}
         )
 
+    from selfas_graph.studies.stats import measure_text
+
+    cell = {"times": [1.0], "seeds": [{}, {}, {}], "measures": {}}
+    cell["measures"]["free_rods"] = {"values": [[40.0], [10.0], [50.0]]}
+    cell["measures"]["free_alignment"] = {"values": [[0.3], [None], [0.5]]}
+    assert measure_text(cell, "free_alignment", 1.0) == "0.4 ± 0.1 (2); 1 seed with fewer than 30 such rods left out"
+    cell["measures"]["free_rods"] = {"values": [[4.0], [10.0], [5.0]]}
+    cell["measures"]["free_alignment"] = {"values": [[None], [None], [None]]}
+    assert measure_text(cell, "free_alignment", 1.0) == "n/a (fewer than 30 such rods in every seed)"
     assert math.isnan(_alignment(frame(29), "free"))
     assert _alignment(frame(30), "free") == pytest.approx(1.0)
     assert _alignment(frame(3), "all") == pytest.approx(1.0)  # the rule is the free rods' alone
@@ -525,14 +542,22 @@ def _claim_against_null(tmp_path, lines):
 @pytest.mark.parametrize(
     "claim, null, words",
     [
-        # d = 0.4 / sqrt(2 * (0.1/sqrt3)^2) = 4.9, and beside it Welch's t-test with 4 degrees of freedom
-        # (scipy.stats.t.sf by hand: 2 sf(4.90, 4) = 0.0080), which counts the few seeds
-        ([0.5, 0.6, 0.7], [0.1, 0.2, 0.3], "reproduced (+4.9 SE from the null model; Welch p = 0.008)"),
-        ([0.1, 0.2, 0.3], [0.5, 0.6, 0.7], "opposite to the claim (−4.9 SE from the null model; Welch p = 0.008)"),
-        ([0.2, 0.3, 0.4], [0.1, 0.2, 0.3], "not distinguished from the null model (+1.2 SE; Welch p = 0.29)"),
+        # d = 0.8 / sqrt(2 * (0.1/sqrt3)^2) = 9.8, and its Welch's t-test with 4 degrees of freedom
+        # (scipy.stats.t.sf by hand: 2 sf(9.80, 4) = 0.00061), below 0.0027
+        ([0.9, 1.0, 1.1], [0.1, 0.2, 0.3], "reproduced (+9.8 SE from the null model; Welch p = 0.00061)"),
+        ([0.1, 0.2, 0.3], [0.9, 1.0, 1.1], "opposite to the claim (−9.8 SE from the null model; Welch p = 0.00061)"),
+        # 4.9 SE is more than 3, but with 3 seeds a side p = 2 sf(4.90, 4) = 0.0080: no verdict
+        (
+            [0.5, 0.6, 0.7],
+            [0.1, 0.2, 0.3],
+            "not distinguished from the null model (+4.9 SE; Welch p = 0.008, not below 0.0027, the chance of 3 SE)",
+        ),
+        ([0.2, 0.3, 0.4], [0.1, 0.2, 0.3], "not distinguished from the null model (+1.2 SE; Welch p = 0.29, not below"),
     ],
 )
-def test_a_verdict_needs_three_combined_standard_errors_in_the_claimed_direction(tmp_path, claim, null, words):
+def test_a_verdict_needs_its_test_below_the_chance_of_three_se_in_the_claimed_direction(tmp_path, claim, null, words):
+    """One rule for every test: p below 0.0027, the chance of 3 SE of a normal variable, counted with
+    the seeds' degrees of freedom; d > 3 alone was "reproduced" at p = 0.2 with 2 pairs."""
     from selfas_graph.studies.verdicts import claim_rows
 
     studies = _claim_against_null(tmp_path, 'measure = "largest_alignment"\nnull_measure = "all_alignment"')
@@ -540,17 +565,44 @@ def test_a_verdict_needs_three_combined_standard_errors_in_the_claimed_direction
     assert words in table, table
 
 
+def test_a_claim_read_before_at_other_seed_counts_is_tested_over_all_its_readings(tmp_path):
+    """Seeds added until a verdict turns raise its chance of a false one: the level 0.0027 is divided by
+    the readings, those listed in ``looks`` and this one (the same counts as this one's count once).
+    Welch p = 0.00061 (3 seeds a side, d = 9.8) passes 0.0027 and 0.0027 / 3, not 0.0027 / 5."""
+    from selfas_graph.studies.verdicts import claim_rows
+
+    scene, null = _fake_summary([0.9, 1.0, 1.1]), _fake_summary([0.1, 0.2, 0.3])
+    for looks, words in [
+        ("[[2, 2], [3, 3]]", "reproduced (+9.8 SE from the null model; Welch p = 0.00061); read before at 2/2 seeds "
+         "(study/null model): tested at 0.0027 / 2 |"),
+        ("[[1, 1], [2, 2], [3, 2]]", "reproduced (+9.8 SE from the null model; Welch p = 0.00061); read before at "
+         "1/1, 2/2 and 3/2 seeds (study/null model): tested at 0.0027 / 4 |"),
+        ("[[1, 1], [2, 2], [2, 3], [3, 2], [3, 3]]", "not distinguished from the null model (+9.8 SE; Welch p = "
+         "0.00061, not below 0.00054); read before at 1/1, 2/2, 2/3 and 3/2 seeds (study/null model): tested at "
+         "0.0027 / 5 |"),
+    ]:  # fmt: skip
+        studies = _claim_against_null(
+            tmp_path, f'measure = "largest_alignment"\nnull_measure = "all_alignment"\nlooks = {looks}'
+        )
+        table = claim_rows(studies, {"a": scene, "b": null})
+        assert words in table, table
+    for bad in ("[[3]]", "[3, 3]", "[[0, 3]]", "[[2.5, 3]]", '[["a", 3]]'):
+        with pytest.raises(StudiesError, match=r"claim\[0\]\.looks: a list of \[seeds of the study, seeds of the null"):
+            _claim_against_null(tmp_path, f'measure = "largest_alignment"\nlooks = {bad}')
+
+
 @pytest.mark.parametrize(
     "claim_err, words",
     [
-        # fit errors of 1 a seed: SE sqrt((0.01 + 1) / 3) = 0.58 a side, d = +0.5 / 0.82 = +0.6; by the
-        # spread alone (0.1 / sqrt 3 = 0.058 a side) d = +6.1: the verdicts differ, and the page says so
-        (1.0, "depends on the fits' own errors: not distinguished from the null model (+0.6 SE) with each seed's "
-         "fit error, opposite to the claim (+6.1 SE from the null model; Welch p = 0.0036) by the spread between "
-         "seeds alone"),
-        # fit errors of 0.01: both ways opposite, the one with the fits first
-        (0.01, "opposite to the claim (+6.1 SE from the null model; +6.1 SE by the spread between seeds alone; "
-         "Welch p = 0.0036)"),
+        # fit errors of 1 a seed: SE sqrt((0.01 + 1) / 3) = 0.58 a side, d = +0.7 / 0.82 = +0.85, Welch p
+        # 2 sf(0.853, 4) = 0.44; by the spread alone (0.1 / sqrt 3 = 0.058 a side) d = +8.6, p = 0.0010:
+        # the verdicts differ, and the page says so
+        (1.0, "depends on the fits' own errors: not distinguished from the null model (+0.9 SE; Welch p = 0.44, "
+         "not below 0.0027, the chance of 3 SE) with each seed's fit error, opposite to the claim (+8.6 SE from "
+         "the null model; Welch p = 0.001) by the spread between seeds alone"),
+        # fit errors of 0.01: both ways opposite, the one with the fits first (d = 8.53, p = 0.0010)
+        (0.01, "opposite to the claim (+8.5 SE from the null model; Welch p = 0.001; +8.6 SE by the spread between "
+         "seeds alone; Welch p = 0.001)"),
     ],
 )  # fmt: skip
 def test_a_fitted_measures_verdict_is_given_with_and_without_the_fits_errors(tmp_path, claim_err, words):
@@ -567,7 +619,7 @@ def test_a_fitted_measures_verdict_is_given_with_and_without_the_fits_errors(tmp
         s["seeds"] = [{"seed": k + 1, "t_end": 600.0} for k in range(len(values))]
         return s
 
-    table = claim_rows(studies, {"a": fitted([2.4, 2.5, 2.6], claim_err), "b": fitted([1.9, 2.0, 2.1], claim_err)})
+    table = claim_rows(studies, {"a": fitted([2.6, 2.7, 2.8], claim_err), "b": fitted([1.9, 2.0, 2.1], claim_err)})
     assert words in table, table
 
 
@@ -618,9 +670,9 @@ def test_a_windowed_claim_and_a_null_without_spread():
     from scipy.stats import norm
 
     from selfas_graph.studies.stats import plain_stat, window_values
-    from selfas_graph.studies.verdicts import EXACT_LEVEL, _claim_difference, _verdict, separation_p
+    from selfas_graph.studies.verdicts import VERDICT_LEVEL, _claim_difference, _verdict, separation_p
 
-    assert EXACT_LEVEL == pytest.approx(2.0 * norm.sf(3.0), rel=1e-12)
+    assert VERDICT_LEVEL == pytest.approx(2.0 * norm.sf(3.0), rel=1e-12)
     s = {"times": [0.0, 10.0, 20.0], "seeds": [{}, {}], "measures": {"m": {"values": [[9, 1, 3], [9, None, 5]]}}}
     assert list(window_values(s, "m", 5.0, 20.0)) == [2.0, 5.0]  # (1 + 3) / 2 and 5 alone
     a, b = plain_stat([4.0, 4.0]), plain_stat([0.0, 0.0, 0.0])
@@ -644,7 +696,7 @@ def test_a_fitted_verdict_without_seeds_or_spread_reads_plainly():
     from selfas_graph.studies.verdicts import _fit_verdict
 
     assert _fit_verdict(math.nan, math.nan, "less", math.nan, 1) == "not decided (too few seeds)"
-    text = _fit_verdict(-0.5, -math.inf, "less", 0.0625, 5)
+    text = _fit_verdict(-0.5, -math.inf, "less", math.nan, 0.0625, 5)
     assert "inf" not in text and "nan" not in text
     assert (
         text.startswith("not distinguished from the null model (−0.5 SE")
@@ -662,11 +714,14 @@ def test_a_paired_verdict_says_which_seeds_it_leaves_out():
     three = {"seeds": [{"seed": k} for k in (3, 1, 2)]}
     ia, ib = common_rows(five, three)
     assert list(ia) == [0, 1, 2] and list(ib) == [1, 2, 0]
-    assert _unpaired_note(five, three, ia) == "; 2 of the study's 5 seeds have no pair and are left out"
-    assert _unpaired_note(three, five, common_rows(three, five)[0]) == (
-        "; 2 of the null model's 5 seeds have no pair and are left out"
+    assert _unpaired_note(five, three, len(ia)) == "; 2 of the study's 5 seeds have no pair and are left out"
+    assert _unpaired_note(three, five, 3) == "; 2 of the null model's 5 seeds have no pair and are left out"
+    assert _unpaired_note(five, five, 5) == ""
+    # a pair without a value on either side is left out too, and counted
+    assert (
+        _unpaired_note(five, five, 4)
+        == "; 1 of the study's 5 seeds and 1 of the null model's 5 seeds have no pair and are left out"
     )
-    assert _unpaired_note(five, five, common_rows(five, five)[0]) == ""
 
 
 def test_a_seed_that_stopped_early_has_no_value_past_its_end_in_any_statistic():
@@ -1105,9 +1160,9 @@ def _started(values, start, t=600.0, measure="inside_R_plas"):
 
 
 def test_a_claim_is_paired_by_seed_where_the_summaries_start_from_the_same_rods(tmp_path):
-    """The same values at t = 0 seed by seed: the null model ran the same seeds from the same rods, and
-    the verdict pairs them. The differences 0.2, 0.3, 0.1: mean 0.2 ± 0.1 / sqrt 3 = 0.0577, d = +3.5,
-    p = 2 t_2.sf(3.46) = 0.074. Another start at t = 0 (seed 3's), no t = 0 in a summary, or only a
+    """The same values at t = 0 seed by seed, one of them a measure of where the rods were placed: the
+    null model ran the same seeds from the same rods, and the verdict pairs them. The differences 0.2, 0.3, 0.1: mean 0.2 ± 0.1 / sqrt 3 = 0.0577, d = +3.5,
+    p = 2 t_2.sf(3.46) = 0.074 (no verdict with 3 pairs, though d > 3). Another start at t = 0 (seed 3's), no t = 0 in a summary, or only a
     measure one side lacks there: Welch over the two sets, d = 0.2 / sqrt(2 * 0.0577^2) = +2.4 with
     4 degrees of freedom, p = 0.07. A seed only the null model has is left out of the pairs."""
     from selfas_graph.studies.pairing import common_rows, same_start
@@ -1119,22 +1174,27 @@ def test_a_claim_is_paired_by_seed_where_the_summaries_start_from_the_same_rods(
     null["measures"]["total_current"] = {"values": [[None, None]] * 4}  # no circuit: not compared
     scene["measures"]["total_current"] = {"values": [[0.0, 1.0]] * 3}
     assert same_start(scene, null) and [list(r) for r in common_rows(scene, null)] == [[0, 1, 2], [0, 1, 2]]
-    paired = "reproduced (+3.5 SE from the null model; paired over 3 seeds, p = 0.074)"
+    paired = "not distinguished from the null model (+3.5 SE; paired over 3 seeds, p = 0.074, not below 0.0027"
     assert paired in claim_rows(studies, {"a": scene, "b": null})
-    welch = "not distinguished from the null model (+2.4 SE; Welch p = 0.07)"
+    welch = "not distinguished from the null model (+2.4 SE; Welch p = 0.07, not below 0.0027"
     other = _started([0.3, 0.4, 0.5], [0.1, 0.2, 0.35])
     assert not same_start(scene, other) and welch in claim_rows(studies, {"a": scene, "b": other})
     late = _started([0.3, 0.4, 0.5], [0.1, 0.2, 0.3]) | {"times": [10.0, 600.0]}  # no t = 0
     assert not same_start(scene, late) and welch in claim_rows(studies, {"a": scene, "b": late})
     blank = _started([0.3, 0.4, 0.5], [None, None, None])  # nothing finite on both sides at t = 0
     assert not same_start(scene, blank) and welch in claim_rows(studies, {"a": scene, "b": blank})
+    # constants of the scene at t = 0 (as many rods, no structure) agree whatever the rods: not enough
+    counts = {"times": [0.0], "seeds": [{"seed": 1}, {"seed": 2}]}
+    a = counts | {"measures": {"free_rods": {"values": [[1200], [1200]]}, "structures": {"values": [[0], [0]]}}}
+    b = counts | {"measures": {**a["measures"], "median_axis_distance": {"values": [[7.2], [7.4]]}}}
+    assert not same_start(a, b) and not same_start(a, a) and same_start(b, b)
 
 
 def test_the_paired_difference_and_a_fitted_claims_paired_verdict_by_hand(tmp_path):
     """:func:`paired_stat` is the convergence table's arithmetic; pairs alike get the sign test. A fitted
-    dimension, same start: differences 0.5, 0.4, 0.6 (mean 0.5, s_d 0.1); with fit errors of 1 a seed
-    SE = sqrt(0.01 / 3 + 2 / 3) = 0.82, d = +0.6; by the spread alone 0.5 / 0.0577 = +8.7, p =
-    2 t_2.sf(8.66) = 0.013."""
+    dimension, same start: differences 0.5, 0.48, 0.52 (mean 0.5, s_d 0.02); with fit errors of 1 a seed
+    SE = sqrt(0.0004 / 3 + 2 / 3) = 0.82, d = +0.6, p = 2 t_2.sf(0.612) = 0.60; by the spread alone
+    0.5 / 0.01155 = +43.3, p = 2 t_2.sf(43.3) = 0.00053."""
     from selfas_graph.studies.convergence import paired_difference
     from selfas_graph.studies.pairing import paired_stat
     from selfas_graph.studies.verdicts import claim_rows
@@ -1157,13 +1217,14 @@ def test_the_paired_difference_and_a_fitted_claims_paired_verdict_by_hand(tmp_pa
     def fitted(values):
         s = _started(values, [1.0, 2.0, 3.0], measure="fractal_dimension")
         s["measures"]["fractal_dimension_err"] = {"values": [[None, 1.0]] * 3}
+        s["measures"]["inside_R_plas"] = {"values": [[0.1 * k, 0.5] for k in (1, 2, 3)]}  # the same rods
         return s
 
-    table = claim_rows(studies, {"a": fitted([2.4, 2.5, 2.6]), "b": fitted([1.9, 2.1, 2.0])})
+    table = claim_rows(studies, {"a": fitted([2.4, 2.58, 2.52]), "b": fitted([1.9, 2.1, 2.0])})
     words = (
-        "depends on the fits' own errors: not distinguished from the null model (+0.6 SE; paired over 3 seeds) "
-        "with each seed's fit error, opposite to the claim (+8.7 SE from the null model; paired over 3 seeds, "
-        "p = 0.013) by the spread between seeds alone"
+        "depends on the fits' own errors: not distinguished from the null model (+0.6 SE; paired over 3 seeds, "
+        "p = 0.6, not below 0.0027, the chance of 3 SE) with each seed's fit error, opposite to the claim "
+        "(+43.3 SE from the null model; paired over 3 seeds, p = 0.00053) by the spread between seeds alone"
     )
     assert words in table, table
 
@@ -1188,8 +1249,9 @@ def _window_summary(rods, flags, circuit=True):
 def test_a_windowed_claim_against_a_null_with_none_and_the_split_of_the_currents_row(tmp_path):
     """Seeds with 900 rods in current at 2 of 3 times, 800 at all, 1000 at 1: window means 600, 800 and
     333.3. Against a null model with none in any seed (its rods never touch): paired over 3 seeds, mean
-    577.8 ± 234.1 / sqrt 3 = 135.2, d = +4.3, p = 2 t_2.sf(4.27) = 0.051, worded as nonzero where the null
-    model is zero by construction, not as the claim reproduced, and not split. Against a null without a
+    577.8 ± 234.1 / sqrt 3 = 135.2, d = +4.3, p = 2 t_2.sf(4.27) = 0.051: no verdict with 3 pairs, the
+    null model said to be zero in every seed, and not split; with p below 0.0027 it would be worded as
+    nonzero where the null model is zero by construction, not as the claim reproduced. Against a null without a
     circuit whose filaments span the gap at every time (500, 600, 400): differences 100, 200, -66.7, d =
     +1.0, p = 0.42; the row splits each side's window mean into the share of the times at which the
     seeds carry current (2/3, 1, 1/3: 0.667 ± 0.19) and the count over those times alone (900, 800, 1000:
@@ -1200,8 +1262,12 @@ def test_a_windowed_claim_against_a_null_with_none_and_the_split_of_the_currents
     scene = _window_summary([[0.0, 900.0, 900.0], [800.0] * 3, [0.0, 0.0, 1000.0]], [[0, 1, 1], [1, 1, 1], [0, 0, 1]])
     free = _window_summary([[0.0] * 3] * 3, [[0, 0, 0]] * 3)
     row = claim_rows(studies, {"a": scene, "b": free}).splitlines()[-1]
-    assert f"| {ZERO_NULL}; +4.3 SE, paired over 3 seeds, p = 0.051 |" in row and "split" not in row, row
-    assert "reproduced" not in row
+    words = "not distinguished from the null model (+4.3 SE; paired over 3 seeds, p = 0.051, not below 0.0027, "
+    assert f"| {words}the chance of 3 SE; the null model's value is zero in every seed) |" in row, row
+    assert "split" not in row and "reproduced" not in row
+    from selfas_graph.studies.verdicts import _verdict
+
+    assert _verdict(4.3, "greater", 0.001, 3, zero=True) == f"{ZERO_NULL}; +4.3 SE, paired over 3 seeds, p = 0.001"
     plain = _window_summary([[500.0] * 3, [600.0] * 3, [400.0] * 3], [[1, 1, 1]] * 3, circuit=False)
     row = claim_rows(studies, {"a": scene, "b": plain}).splitlines()[-1]
     cells = [c.strip() for c in row.split("|")]
@@ -1214,4 +1280,27 @@ def test_a_windowed_claim_against_a_null_with_none_and_the_split_of_the_currents
         "500 ± 58 (3); split: share of the window's 3 times at which the seeds span the gap (no circuit): "
         "1 ± 0 (3); the measure over those times alone: 500 ± 58 (3)"
     ), cells[6]
-    assert cells[7] == "not distinguished from the null model (+1.0 SE; paired over 3 seeds, p = 0.42)", cells[7]
+    assert cells[7] == (
+        "not distinguished from the null model (+1.0 SE; paired over 3 seeds, p = 0.42, not below 0.0027, the chance of 3 SE)"
+    ), cells[7]
+
+
+def test_the_split_of_a_window_leaves_out_a_seed_that_stopped_inside_it():
+    """As the window's mean and the verdict do: seed 3 stopped at t = 2, inside the window 1-4; its
+    share and size were counted from its early frames, describing other seeds than the verdict's."""
+    from selfas_graph.studies.pairing import window_split
+    from selfas_graph.studies.stats import plain_stat, window_values
+
+    s = {
+        "times": [0.0, 1.0, 2.0, 3.0, 4.0],
+        "seeds": [{"seed": 1, "t_end": 4.0}, {"seed": 2, "t_end": 4.0}, {"seed": 3, "t_end": 2.0}],
+        "measures": {
+            "filament_rods": {"values": [[0, 10, 10, 10, 10], [0, 0, 10, 0, 10], [0, 50, 50, None, None]]},
+            "total_current": {"values": [[0, 1, 1, 1, 1], [0, 0, 1, 0, 1], [0, 1, 1, None, None]]},
+        },
+        "current": [[0, 1, 1, 1, 1], [0, 0, 1, 0, 1], [0, 1, 1, None, None]],
+    }
+    assert plain_stat(window_values(s, "filament_rods", 1.0, 4.0))["n"] == 2
+    sp = window_split(s, "filament_rods", 1.0, 4.0)
+    assert sp["fraction"][:2].tolist() == [1.0, 0.5] and sp["size"][:2].tolist() == [10.0, 10.0]
+    assert np.isnan(sp["fraction"][2]) and np.isnan(sp["size"][2])
