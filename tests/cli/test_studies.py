@@ -1304,3 +1304,59 @@ def test_the_split_of_a_window_leaves_out_a_seed_that_stopped_inside_it():
     sp = window_split(s, "filament_rods", 1.0, 4.0)
     assert sp["fraction"][:2].tolist() == [1.0, 0.5] and sp["size"][:2].tolist() == [10.0, 10.0]
     assert np.isnan(sp["fraction"][2]) and np.isnan(sp["size"][2])
+
+
+def test_a_sweep_whose_points_start_from_the_same_rods_ranks_each_seed_on_its_own():
+    """Three points from the same rods: Page's L test over the seeds every point has (seed 4, at the
+    middle point alone, is not a block), two-sided as twice the smaller one-sided p, and the mean of
+    the seeds' Kendall tau-b as the trend's size. A seed's own level (0, 10, 20) would swamp a pooled
+    rank test; ranked on its own each seed rises."""
+    from scipy.stats import kendalltau, page_trend_test
+
+    from selfas_graph.studies.sweeps import _trend_text, sweep_trends
+
+    def point(late, seeds=(1, 2, 3)):
+        start = [0.1 * k for k in seeds]
+        return {
+            "times": [0.0, 300.0],
+            "seeds": [{"seed": k} for k in seeds],
+            "measures": {"inside_R_plas": {"values": [[a, b] for a, b in zip(start, late)]}},
+        }
+
+    pts = [
+        (0.0, point([0.0, 10.0, 20.0])),
+        (1.0, point([1.0, 11.0, 20.5, 99.0], (1, 2, 3, 4))),
+        (2.0, point([2.0, 10.5, 21.0])),
+    ]
+    (row,) = [r for r in sweep_trends(pts, 300.0) if r["measure"] == "inside_R_plas"]
+    blocks = np.array([[0.0, 1.0, 2.0], [10.0, 11.0, 10.5], [20.0, 20.5, 21.0]])
+    want = 2.0 * min(page_trend_test(blocks).pvalue, page_trend_test(blocks[:, ::-1]).pvalue)
+    taus = [kendalltau([0, 1, 2], b).statistic for b in blocks]
+    assert (row["test"], row["n"]) == ("Page", 3) and row["p"] == pytest.approx(want, rel=1e-12)
+    assert row["tau"] == pytest.approx(np.mean(taus), rel=1e-12)
+    assert _trend_text(row).endswith("after Holm; 3 seeds)")
+    pooled = kendalltau([0] * 3 + [1] * 3 + [2] * 3, [0, 10, 20, 1, 11, 20.5, 2, 10.5, 21]).pvalue
+    assert row["p"] < pooled  # the seeds' levels, not the parameter, set the pooled ranks
+
+
+def test_a_pooled_rank_test_of_seeds_that_share_their_rods_is_conservative():
+    """Why a sweep from the same rods is ranked seed by seed (docs/model.md "Measures of the paper's
+    claims"): with no trend, 5, 16 and 5 seeds whose own levels spread as much as their noise, pooled
+    as independent, reject at 5 % far less often than 5 % (each point holds the same seeds' levels),
+    so that test stays valid but loses power; Page's test over the 5 seeds every point has keeps its
+    level. 400 draws: the binomial spread at 5 % is 1.1 %."""
+    from scipy.stats import kendalltau, page_trend_test
+
+    rng = np.random.default_rng(7)
+    pooled = blocked = 0
+    for _ in range(400):
+        level = rng.normal(0.0, 1.0, 16)
+        x, y, block = [], [], np.zeros((5, 3))
+        for j, n in enumerate((5, 16, 5)):
+            v = level[:n] + rng.normal(0.0, 1.0, n)
+            x += [j] * n
+            y += v.tolist()
+            block[:, j] = v[:5]
+        pooled += kendalltau(x, y).pvalue < 0.05
+        blocked += 2.0 * min(page_trend_test(block).pvalue, page_trend_test(block[:, ::-1]).pvalue) < 0.05
+    assert pooled / 400 < 0.03 and 0.02 < blocked / 400 < 0.09
