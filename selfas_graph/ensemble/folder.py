@@ -11,7 +11,13 @@ SEED_FILE = "seed_{:04d}.h5"
 
 
 class EnsembleError(ValueError):
-    """Bad input or a seed file that cannot be used (the CLI reports it with exit code 2)."""
+    """Bad input or a seed file that cannot be used (the CLI reports it with exit code 2); ``kind`` says
+    what is wrong with a seed file where the advice depends on it: "in_use" (another process writes
+    it), "past_end" (run past this end time), "" otherwise."""
+
+    def __init__(self, message, kind=""):
+        super().__init__(message)
+        self.kind = kind
 
 
 def seed_path(folder, seed) -> Path:

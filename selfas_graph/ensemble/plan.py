@@ -20,6 +20,7 @@ from ..io.checkpoint import (
     read_checkpoint,
 )
 from ..io.h5md import HDF5_READ_ERRORS, RunFile, RunFileError, hdf5_damage
+from ..io.h5md_format import FileInUseError
 from ..io.scenario import Scenario, ScenarioError, load_scenario, scenario_from_text
 from ..lifecycle import ContinuationError, continuation
 from ..model.operations import frame_steps, steps_between
@@ -282,22 +283,25 @@ class Ensemble:
             try:
                 plans.append(self._plan_seed(s, summary_only))
             except EnsembleError as exc:
-                problems.append(str(exc))
+                problems.append(exc)
         if problems:
             raise EnsembleError(
-                "seed files that cannot be used:\n  " + "\n  ".join(problems) + self._advice(problems, summary_only)
+                "seed files that cannot be used:\n  "
+                + "\n  ".join(map(str, problems))
+                + self._advice({p.kind for p in problems}, summary_only)
             )
         return plans
 
-    def _advice(self, problems, summary_only) -> str:
-        """What to do about ``problems`` (the messages of :meth:`_plan_seed`): ``--force`` replaces a seed
-        file and all it holds, so it is not offered for a file another process is writing, nor alone for
-        one run past this end time, which a later end time continues or ``--no-run`` summarises."""
+    def _advice(self, kinds, summary_only) -> str:
+        """What to do about the problems of the ``kinds`` (:class:`EnsembleError` of :meth:`_plan_seed`):
+        ``--force`` replaces a seed file and all it holds, so it is not offered for a file another process
+        is writing, nor alone for one run past this end time, which a later end time continues or
+        ``--no-run`` summarises."""
         if self.force or summary_only:
             return ""
-        if all("locked by another process" in p for p in problems):
+        if kinds == {"in_use"}:
             return "; wait for the processes writing them to end (--force cannot replace a file in use)"
-        if any("after the end time" in p for p in problems):
+        if "past_end" in kinds:
             return (
                 "; a later end time (--t-end) continues a seed run past this one, and --no-run summarises the "
                 "files as they are; force=True (--force) would replace them, and all they hold, with new runs"
@@ -324,9 +328,9 @@ class Ensemble:
             if not isinstance(exc, RunFileError) and hdf5_damage(exc) is None:
                 raise
             why = str(exc) if isinstance(exc, RunFileError) else f"{path}: {hdf5_damage(exc)}"
-            if replace:
+            if replace and not isinstance(exc, FileInUseError):
                 return SeedPlan(seed, path, "run", f"replacing: {why}")
-            raise EnsembleError(why) from None
+            raise EnsembleError(why, "in_use" if isinstance(exc, FileInUseError) else "") from None
         if older_version(made_by, self.older_than):
             why = f"made by version {made_by}, before the trajectories of version {self.older_than}"
             if replace:
@@ -351,12 +355,12 @@ class Ensemble:
                 return SeedPlan(seed, path, "run", "replacing a failed run")
             return SeedPlan(seed, path, "failed", status)
         # the checks of simulate --resume (lifecycle.continuation), and a checkpoint not past the end
-        why = None
+        why, kind = None, ""
         try:
             snap, meta = read_checkpoint(ckpt)
             continuation(ckpt, path, t_end=self.t_end, read=(snap, meta))
             if float(snap["time"]) > self.t_end + half_step:
-                why = f"checkpoint at t = {float(snap['time']):.6g}, after the end time"
+                why, kind = f"checkpoint at t = {float(snap['time']):.6g}, after the end time", "past_end"
         except CheckpointError as exc:
             why = str(exc)
         except ContinuationError as exc:  # the reason; the advice is simulate's (here: --force)
@@ -371,7 +375,8 @@ class Ensemble:
             return SeedPlan(seed, path, "run", f"replacing: {status} {where}, no usable checkpoint")
         raise EnsembleError(
             f"{path} is {status} {where} (end time {self.t_end:g}) and has no usable "
-            f"checkpoint {ckpt.name} to continue from ({why})"
+            f"checkpoint {ckpt.name} to continue from ({why})",
+            kind,
         )
 
     # ------------------------------------------------------------------ running

@@ -85,6 +85,10 @@ class RunFileError(ValueError):
     """A file that is not a readable selfas-graph run."""
 
 
+class FileInUseError(RunFileError):
+    """A run file another process holds (HDF5's file lock): readable once that process ends."""
+
+
 #: what h5py raises when a damaged file's metadata is read (the error comes only when the part is read)
 HDF5_READ_ERRORS = (OSError, RuntimeError, KeyError)
 

@@ -17,9 +17,7 @@ from ..model.circuitlog import CIRCUIT_LOG_DTYPE
 from ..model.events import EVENT_DTYPE, named_events
 from ..model.validate import is_whole_number
 from . import layout
-from .h5md_format import (
-    RunFileError,
-)
+from .h5md_format import FileInUseError, RunFileError
 
 
 def _pick_frame(path, n, frame, t, times) -> int:
@@ -89,7 +87,7 @@ class RunFile:
         except OSError as exc:
             reason = " ".join(str(exc).split())  # h5py's messages can span lines
             if re.search(r"\block", reason.lower()) or "already open for write" in reason.lower():
-                raise RunFileError(locked_message(self.path, reason)) from None
+                raise FileInUseError(locked_message(self.path, reason)) from None
             raise RunFileError(f"{self.path}: not a readable HDF5 file ({reason})") from None
         required = (
             layout.PROVENANCE,

@@ -586,6 +586,9 @@ def test_a_claim_read_before_at_other_seed_counts_is_tested_over_all_its_reading
         )
         table = claim_rows(studies, {"a": scene, "b": null})
         assert words in table, table
+    none = _fake_summary([None, None, None])
+    table = claim_rows(_claim_against_null(tmp_path, 'measure = "largest_alignment"'), {"a": scene, "b": none})
+    assert "| not decided (the null model has no value of the measure) |" in table  # not "too few seeds"
     for bad in ("[[3]]", "[3, 3]", "[[0, 3]]", "[[2.5, 3]]", '[["a", 3]]'):
         with pytest.raises(StudiesError, match=r"claim\[0\]\.looks: a list of \[seeds of the study, seeds of the null"):
             _claim_against_null(tmp_path, f'measure = "largest_alignment"\nlooks = {bad}')
