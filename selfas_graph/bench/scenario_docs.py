@@ -294,7 +294,8 @@ when its table is present**, even empty (`[forces.tip_magnetic]`), and off when 
 term that is off is not computed at all.
 
 - `--set forces.yukawa=false` switches a term off (so does `yukawa = false` under `[forces]`).
-- `--set forces.yukawa=true` switches it on with its defaults.
+- `--set forces.yukawa=true` switches it on with its defaults where the scenario has it off; a term
+  already on keeps the scenario's values (true is then no change).
 - Setting a key of a term that is off, e.g. `--set forces.yukawa.tolerance=1e-6`, switches the
   term on, with the other keys at their defaults.
 - `--set circuit=false` removes the circuit; then no current flows, and terms 9 and 10 must be

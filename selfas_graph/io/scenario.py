@@ -149,9 +149,7 @@ def check_parameters(params: P.Parameters) -> None:
 def parameters_from_dict(raw: dict, source=None) -> P.Parameters:
     """Validate a nested dict (as from TOML) into :class:`Parameters`; raises :class:`ScenarioError`."""
     if not isinstance(raw, dict):
-        raise ScenarioError(
-            [f"parameters: expected a table (a dict of sections), got {type(raw).__name__}"], source=source
-        )
+        raise ScenarioError([f"parameters: expected a table (a dict of sections), got {type(raw).__name__}"], source)
     problems = []
     params = _build(P.Parameters, raw, "", problems)
     if not problems:
@@ -193,7 +191,8 @@ def _apply_override(raw, item):
         if not isinstance(nxt, dict):
             return [f"--set {item!r}: {'.'.join(parts[: i + 1])} is a value, not a table"]
         node = nxt
-    node[parts[-1]] = value
+    if not (value is True and isinstance(node.get(parts[-1]), dict)):  # true keeps a term already on as it is
+        node[parts[-1]] = value
     return []
 
 

@@ -29,7 +29,7 @@ import dataclasses
 import numpy as np
 
 from . import events as ev
-from .circuit import CircuitSolution, SolveMemo
+from .circuit import CircuitSolution, SolveMemo, solve_circuit
 from .circuitlog import circuit_rows
 from .contact_queries import ContactQueries
 from .contacts import ContactTracker
@@ -156,6 +156,11 @@ class Network(ContactQueries):
             conductors[ev.CONDUCTOR_FILAMENT] = None  # psi = -delta_J0 z per contact (docs/model.md 'Circuit')
         #: conductor id -> fixed potential (units R0 J0), None where given per contact (docs/model.md 'Circuit')
         self.conductor_potential = conductors
+        #: the electrodes' potentials at a unit bias: the probe of the resistance without a bias (:meth:`_solve_at`)
+        self._unit_potential = {}
+        if electrodes is not None:
+            half_gap = 0.5 * (electrodes[1] - electrodes[0])
+            self._unit_potential = {ev.CONDUCTOR_CATHODE: -half_gap, ev.CONDUCTOR_ANODE: half_gap}
         #: the contacts (an immutable value, replaced by each batch of events)
         self.contacts = ContactSet.empty(self.n_rods, conductors, resistive=self.contact_resistance > 0.0)
         #: filament contacts at the last solve, and the heights their potentials -delta_J0 z stand for
@@ -205,7 +210,8 @@ class Network(ContactQueries):
         currents_changed = False
         if self.circuit:  # something changed (else the update returned above)
             if self.has_short_circuit:
-                self.solution = self.solve()
+                fil = self.contacts.conductor_id == ev.CONDUCTOR_FILAMENT
+                self.solution = self._solve_at(position[self.contacts.conductor_tip[fil], 2])
                 # rods off every conductor-to-conductor path carry no current by topology; the
                 # solve leaves them round-off currents (measured up to 2e-14 in a Fig. 2 run)
                 current = np.where(self.topology().role == FILAMENT, self.solution.current, 0.0)
@@ -315,9 +321,27 @@ class Network(ContactQueries):
         self.filament_z = np.array(d["filament_z"], dtype=np.float64)
         self.solution = None
         if bool(d["has_solution"]) and self.circuit:
-            self.solution = self.solve()
+            self.solution = self._solve_at(self.filament_z)
         if "current" in d:
             self.currents.set(np.array(d["current"], dtype=np.float64))
+
+    def _solve_at(self, filament_z) -> CircuitSolution:
+        """:meth:`solve`; without a bias no current flows, so the effective resistance between the
+        conductors comes from a second solve at their unit-bias potentials (the electrodes' -+gap/2,
+        a filament contact's -z at its height ``filament_z``, in the order of the contacts): the network
+        is linear, and any bias gives the same resistance. Only the resistance is taken from it."""
+        sol = self.solve()
+        if self.bias:
+            return sol
+        cs = self.contacts
+        unit = np.array([self._unit_potential.get(int(c), 0.0) for c in cs.conductor_id], dtype=np.float64)
+        unit[cs.conductor_id == ev.CONDUCTOR_FILAMENT] = -np.asarray(filament_z, dtype=np.float64)
+        topo = cs.topology
+        probe = solve_circuit(
+            cs.n_tips, cs.tip_contacts, cs.conductor_tip, unit, solver=self.solver, rod_resistance=self.rod_resistance,
+            contact_resistance=self.contact_resistance, merged=(topo.n_nodes, topo.node_of_tip),
+        )  # fmt: skip
+        return dataclasses.replace(sol, effective_resistance=probe.effective_resistance)
 
     def __repr__(self) -> str:
         return (

@@ -366,7 +366,7 @@ class Parameters:
             old = node.get(parts[-1])
             if value is None:
                 node.pop(parts[-1], None)
-            else:
+            elif not (value is True and isinstance(old, dict)):  # True keeps a table already on as it is
                 node[parts[-1]] = _merge(old, value) if isinstance(old, dict) and isinstance(value, dict) else value
         return self.from_dict(raw)
 

@@ -116,8 +116,8 @@ class Claim:
     #: its value at ``time`` (for a measure that flickers, e.g. rods in filaments as the gap opens and closes)
     window: tuple[float, ...] = ()
     #: the seed counts (study, null model) at which the verdict was read before, in order: the verdict
-    #: is tested at the level over all its readings, this one included (docs/model.md "Measures of the
-    #: paper's claims", its Verdicts)
+    #: is tested at the level over all its readings, this one included
+    #: (docs/model.md "Measures of the paper's claims", its Verdicts)
     looks: tuple[tuple[int, int], ...] = ()
 
 

@@ -155,6 +155,22 @@ def test_overrides_go_through_the_same_checks():
         assert sc.params.forces.yukawa.tolerance == 1e-6
 
 
+def test_true_switches_an_absent_term_on_and_keeps_one_already_on():
+    """`--set forces.TERM=true` (and `--grid forces.TERM=true,false`) on a term the scenario has replaced
+    its table by the defaults without a word (Fig. 8's B_z 1.5 became 0.5); it is no change now. On a
+    term that is off it switches it on with its defaults, from the command line and from Python."""
+    fig8 = load_scenario(SCENARIOS[0].parent / "fig8_quick.toml")
+    assert fig8.params.forces.uniform_field.B == (0.0, 0.0, 1.5)
+    on = scenario_from_text(fig8.text, overrides=["forces.uniform_field=true"]).params
+    assert on.forces.uniform_field == fig8.params.forces.uniform_field
+    assert fig8.params.replace({"forces.uniform_field": True}) == fig8.params
+    off = fig8.params.replace({"forces.uniform_field": False})
+    assert off.forces.uniform_field is None
+    assert off.replace({"forces.uniform_field": True}).forces.uniform_field.B == (0.0, 0.0, 0.5)  # the default
+    sc = scenario_from_text(fig8.text, overrides=["forces.uniform_field=false", "forces.uniform_field=true"])
+    assert sc.params.forces.uniform_field.B == (0.0, 0.0, 0.5)
+
+
 @pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.name)
 def test_every_shipped_scenario_loads_and_runs_a_few_steps(path):
     """Each file in scenarios/ validates, places its rods and takes steps without failure."""

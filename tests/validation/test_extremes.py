@@ -165,7 +165,7 @@ def test_all_rods_in_one_chain_with_zero_and_huge_bias(delta):
     """50 rods in one chain between the electrodes: every rod is FILAMENT and carries delta gap / 50.
 
     delta_J0 = 0: a short circuit (topology) with zero current everywhere, so no current kernel
-    runs. delta_J0 = 1e4: currents of 2e2 J0; the run goes on or stops with a diagnosis, never NaN:
+    runs; the effective resistance is the chain's, 50 R0, at either bias. delta_J0 = 1e4: currents of 2e2 J0; the run goes on or stops with a diagnosis, never NaN:
     either way every position and velocity left in the state is finite (measured: the run stops at
     step 13 on a runaway step, a tip moved 0.73 rod lengths, the largest force from the Lorentz term).
     """
@@ -182,6 +182,9 @@ def test_all_rods_in_one_chain_with_zero_and_huge_bias(delta):
     kinds = [r[2] for r in sim.events]
     assert kinds.count(ev.SHORT_CIRCUIT) == 1
     assert (sim.graph.topology().role == FILAMENT).all()
+    # 50 unit rods in series, whatever the bias (without one, from the probe at a unit bias: it was
+    # reported open, infinite, with the electrodes joined)
+    assert sim.solution.effective_resistance == pytest.approx(50.0, rel=1e-12)
     if delta == 0.0:
         assert sim.solution is not None and np.array_equal(sim.solution.current, np.zeros(50))
         assert len(sim.force_field.active_rod) == 0
