@@ -50,6 +50,7 @@ VOLATILE = (
     "commit",
     "resumed_with",
     "steps_done",  # the run loop's steps in the last segment: a resumed run and its uninterrupted twin differ
+    "t_end_before",  # the end times a run was started with before a resume moved it: its history, not its data
     # how a run was launched, which its data do not depend on: MPI ranks and numba threads give the same run bit
     # for bit (docs/performance.md 'Several MPI ranks'), and the scene file may be read from another folder
     "mpi_ranks",

@@ -6,7 +6,7 @@ unpaired monopole charge at its free tips; its mass-radius dimension and
 the R_g ~ N^(1/D) dimension over all structures, each with its uncertainty and fit range;
 the cycle rank, loop lengths and junction degrees of the contact graph (docs/model.md
 "Measures of the paper's claims"). ``--series`` (or ``--csv`` without ``--frame``/``--time``) gives one row per
-frame (every K-th with ``--every K``). NaN (null in JSON, empty in CSV) where a measure is
+frame (every K-th and the last with ``--every K``). NaN (null in JSON, empty in CSV) where a measure is
 undefined. A thin layer over :func:`selfas_graph.analysis.claims.frame_claims`.
 """
 
@@ -55,7 +55,9 @@ _COUNTS = (
 def add_arguments(p):
     which = add_run_and_frame(p)
     which.add_argument("--series", action="store_true", help="every saved frame (a time series)")
-    p.add_argument("--every", type=int, default=1, metavar="K", help="with a series: every K-th frame (default 1)")
+    p.add_argument(
+        "--every", type=int, default=1, metavar="K", help="with a series: every K-th frame and the last (default 1)"
+    )
     form = p.add_mutually_exclusive_group()
     form.add_argument("--json", action="store_true", help="print JSON for scripts")
     form.add_argument("--csv", action="store_true", help="print CSV (all frames unless --frame or --time is given)")
@@ -75,7 +77,10 @@ def _frames(run, args):
             raise CliError(f"--every must be >= 1, got {args.every}")
         if run.n_frames == 0:
             raise RunFileError(f"{run.path}: the run has no saved frames")
-        return list(range(0, run.n_frames, args.every)), True
+        frames = list(range(0, run.n_frames, args.every))
+        if frames and frames[-1] != run.n_frames - 1:  # the run's last frame too, as plot --every takes it
+            frames.append(run.n_frames - 1)
+        return frames, True
     if args.time is not None:
         if not math.isfinite(args.time):
             raise CliError(f"--time {args.time} names no frame; give a finite simulated time")

@@ -101,7 +101,7 @@ def add_arguments(p):
         "--times",
         type=_times,
         metavar="T1,T2,...",
-        help="times of the summary, each seed's nearest frame within half an output interval (default: a quarter, half, three quarters and all of the end time, each at its nearest frame)",
+        help="times of the summary, each a frame time (a multiple of output.interval, or the end time) (default: a quarter, half, three quarters and all of the end time, each at its nearest frame)",
     )
     p.add_argument(
         "--flux-radius",

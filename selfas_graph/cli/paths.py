@@ -25,7 +25,9 @@ def same_file(a, b) -> bool:
         return False
 
 
-def check_target(path, what="output file", force=False, inputs=(), keep_hdf5=False, name_option="-o") -> Path:
+def check_target(
+    path, what="output file", force=False, inputs=(), keep_hdf5=False, name_option="-o", resuming=False
+) -> Path:
     """Refuse a path that cannot or must not be written; returns it as a Path.
 
     Parameters
@@ -42,6 +44,8 @@ def check_target(path, what="output file", force=False, inputs=(), keep_hdf5=Fal
         ``force``: for the commands that write something else (plots, movies).
     name_option : str
         The option that names the file, for the advice when it exists (``--movie`` for a movie).
+    resuming : bool
+        The file is a run continued in place (``--resume``): the advice when it is in use says so.
     """
     path = Path(path)
     if "\x00" in str(path):
@@ -85,7 +89,7 @@ def check_target(path, what="output file", force=False, inputs=(), keep_hdf5=Fal
                 f"{what} {path} exists; pass --force to overwrite it or {name_option} to choose another name"
             )
         if in_use(path):
-            raise CliError(in_use_message(path, what, "--force"))
+            raise CliError(in_use_message(path, what, None if resuming else "--force"))
     elif len(path.name.encode("utf-8", "surrogateescape")) > name_max(path.parent):
         raise CliError(
             f"the {what} name {path.name[:40]}... is too long for the file system "

@@ -154,7 +154,7 @@ def _load_resume(args):
         out = ckpt.with_name(name)
     if args.output:
         out = Path(args.output)
-    _check_output_name(out)
+    _check_output_name(out, resuming=True)
     if args.t_end is not None and args.t_end < float(snap["time"]):
         raise CliError(
             f"--t-end (run.t_end) {args.t_end:g} is before the checkpoint's time {float(snap['time']):.6g}; "
@@ -173,11 +173,11 @@ def _load_resume(args):
     return cont.scenario, snap, out, ckpt, cont.run_id
 
 
-def _check_output_name(out: Path):
+def _check_output_name(out: Path, resuming=False):
     if "\x00" in str(out):
         raise CliError(f"the output path {str(out)!r} contains a NUL character")
     if out.name not in ("", ".", ".."):
-        check_target(out, "output file", force=True)  # over-long names, devices
+        check_target(out, "run file" if resuming else "output file", force=True, resuming=resuming)  # devices, names
     if out.name in ("", ".", "..") or out.is_dir():
         raise CliError(f"the output path {out} names a folder, not a file; give a file name such as run.h5")
 
@@ -240,8 +240,8 @@ def _prepare(args):
     if args.resume:
         scenario, snap, out, read_from, run_id = _load_resume(args)
         ckpt = checkpoint_path(out)  # new checkpoints go beside the run file continued
-        check_target(out, "run file", force=True)
-        check_target(ckpt, "checkpoint file", force=True)
+        check_target(out, "run file", force=True, resuming=True)
+        check_target(ckpt, "checkpoint file", force=True, resuming=True)
         if ckpt.exists() and not same_file(ckpt, read_from):
             try:
                 other = read_checkpoint(ckpt)[1].get("run_id")

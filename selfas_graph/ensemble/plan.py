@@ -190,12 +190,14 @@ class Ensemble:
         self.older_than = str(older_than or "")
         if self.older_than and version_key(self.older_than) is None:
             raise EnsembleError(f"older_than: a version such as '0.4.0', got {self.older_than!r}")
-        bad = [o for o in self.overrides if o.split("=", 1)[0].strip() == "scenario.seed"]
+        own = {
+            "scenario.seed": "choose the seeds with first_seed (--first-seed) or a list of seeds",
+            "output.file": "each seed's file is FOLDER/seed_SSSS.h5; choose the folder with folder (-o)",
+        }
+        bad = [o for o in self.overrides if o.split("=", 1)[0].strip() in own]
         if bad:
-            raise EnsembleError(
-                f"overrides (--set) {bad[0]}: the ensemble sets scenario.seed for each run; choose the seeds with "
-                f"first_seed (--first-seed) or a list of seeds"
-            )
+            key = bad[0].split("=", 1)[0].strip()
+            raise EnsembleError(f"overrides (--set) {bad[0]}: the ensemble sets {key} for each run; {own[key]}")
         try:
             self.base = load_scenario(self.scenario_path, overrides=self.overrides, t_end=t_end)
         except ScenarioError as exc:

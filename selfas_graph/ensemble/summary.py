@@ -14,7 +14,7 @@ from ..analysis.ensemble_stats import censored_times, grouped_summary, mean_sem,
 from ..io.h5md import HDF5_READ_ERRORS, RunFile, RunFileError, hdf5_damage
 from ..model.parameter_match import parameter_differences, value_at
 from .folder import EnsembleError
-from .measures import FRAME_MEASURES, Frame, carries_current
+from .measures import FRAME_MEASURES, Frame, Measure, carries_current
 
 
 def _each_file_once(paths):
@@ -55,6 +55,24 @@ def _one_sample(first, path, params, seeds) -> tuple:
     return first
 
 
+def _measures(measures) -> list:
+    """``measures`` as :class:`Measure` objects (:data:`FRAME_MEASURES` for None; a name stands for the
+    measure of :data:`FRAME_MEASURES` it names); EnsembleError naming the valid names otherwise."""
+    if measures is None:
+        return FRAME_MEASURES
+    known = {m.name: m for m in FRAME_MEASURES}
+    out = []
+    for m in [measures] if isinstance(measures, (str, Measure)) else measures:
+        if isinstance(m, str) and m in known:
+            m = known[m]
+        if not isinstance(m, Measure):
+            raise EnsembleError(
+                f"measures: {m!r} is not a measure; give Measure objects or names of FRAME_MEASURES: {', '.join(known)}"
+            )
+        out.append(m)
+    return out
+
+
 def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict:
     """Mean and standard error over seed files of the short-circuit time and of per-frame measures.
 
@@ -68,8 +86,8 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
         is used, a seed that has no such frame (it ended earlier) is left out there.
     t_end : float, optional
         Short circuits later than this count as censored at ``t_end`` (default: none).
-    measures : list of :class:`Measure`, optional
-        Default :data:`FRAME_MEASURES`.
+    measures : list of :class:`Measure` or of their names, optional
+        Default :data:`FRAME_MEASURES`; a name stands for the measure of that list it names.
     flux_radius : float, optional
         Disc radius of the mid-plane flux (see :class:`Frame`).
 
@@ -87,7 +105,7 @@ def summarise(paths, times, t_end=None, measures=None, flux_radius=None) -> dict
     ``max`` per time, and its ``mean``, ``sem`` and ``n`` are the group's alone; ``current``
     per seed and time says which seeds carry a current.
     """
-    measures = FRAME_MEASURES if measures is None else measures
+    measures = _measures(measures)
     times = [float(t) for t in times]
     grouped = any(m.grouped for m in measures)
     _each_file_once(paths)

@@ -53,9 +53,14 @@ class ExportExistsError(ExportError):
 
 def parse_frames(spec, n_frames) -> np.ndarray:
     """Frame indices from ``all``, ``K``, ``A:B`` or ``A:B:S`` (Python slices) or ``K1,K2,...``
-    (also, from Python, an integer or a sequence of integers); negative numbers count from the end."""
+    (also, from Python, an integer, a sequence of integers or a ``slice``); negative numbers count from
+    the end."""
     if n_frames == 0:
         raise ExportError("the run has no saved frames")
+    if isinstance(spec, slice):  # from Python, as the command line's A:B:S
+        if spec.step == 0 or not all(x is None or isinstance(x, int) for x in (spec.start, spec.stop, spec.step)):
+            raise ExportError(f"frames={spec!r}: a slice of integers with a step other than 0")
+        spec = ":".join("" if x is None else str(x) for x in (spec.start, spec.stop, spec.step))
     if not isinstance(spec, (str, type(None))) and np.ndim(spec) in (0, 1):
         if any(isinstance(k, (bool, np.bool_)) for k in np.atleast_1d(spec).tolist()):
             raise ExportError(f"frames={spec!r}: True or False is not a frame number (True was frame 1)")

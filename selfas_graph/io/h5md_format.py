@@ -295,12 +295,15 @@ def appendable_problems(f) -> list:
 
 def in_use_message(path, what, force) -> str:
     """Why ``path``, which :func:`in_use` found open in another process, is not replaced; ``what`` names
-    the file, ``force`` the option that replaces an existing one (``--force``, ``overwrite=True``)."""
-    return (
+    the file, ``force`` the option that replaces an existing one (``--force``, ``overwrite=True``), or
+    None for a run continued in place (a resume), which neither replaces it nor takes another name."""
+    where = (
         f"{what} {path} is open in another process (a simulation still writing it?), or in this one (a "
-        f"RunFile or RunWriter not yet closed: close it, or use it in a with block); it is not replaced, "
-        f"even with {force}: wait for that process to end, or give another name"
+        f"RunFile or RunWriter not yet closed: close it, or use it in a with block)"
     )
+    if force is None:
+        return f"{where}; it is not continued while open: wait for that process to end or close it, then resume"
+    return f"{where}; it is not replaced, even with {force}: wait for that process to end, or give another name"
 
 
 def dangling_link(path, what="output") -> str | None:

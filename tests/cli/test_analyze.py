@@ -114,7 +114,9 @@ def test_analyze_table_json_csv_and_series(run_file, capsys):
     assert len(rows) == 1 and float(rows[0]["time"]) == 1.0
     assert main(["analyze", str(run_file), "--series", "--every", "2", "--no-loops"]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert len(lines) == 2 + len(range(0, n_frames, 2)) and "D_mass" in lines[1]
+    picked = sorted(set(range(0, n_frames, 2)) | {n_frames - 1})  # and the last, as plot --every takes it
+    assert len(lines) == 2 + len(picked) and "D_mass" in lines[1]
+    assert int(lines[-1].split()[0]) == n_frames - 1
 
 
 def test_analyze_errors_are_one_line(run_file, tmp_path, capsys):

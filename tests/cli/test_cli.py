@@ -115,6 +115,16 @@ def test_a_file_another_process_is_writing_is_not_replaced_even_with_force(scena
     assert main(["simulate", str(scenario), "-o", str(out), "--force", "--progress", "none"]) == 0
 
 
+def test_a_run_file_in_use_is_not_resumed_and_the_advice_is_to_close_it(scenario, tmp_path, capsys):
+    """The refusal of a resume while the run file is open elsewhere (a notebook's RunFile) spoke of
+    replacing it, --force and another name, none of which a resume has."""
+    run = finished_run(tmp_path, scenario)
+    with h5py.File(run, "r+"):
+        assert main(["simulate", "--resume", str(run), "--t-end", "2", "--progress", "none"]) == 2
+    err = capsys.readouterr().err
+    assert "is open in another process" in err and "it is not continued while open" in err and "--force" not in err
+
+
 def finished_run(tmp_path, scenario):
     """A finished run file of the test scene to export from (made once per test)."""
     path = tmp_path / "source.h5"

@@ -245,6 +245,8 @@ def test_seed_files_of_a_version_before_the_trajectories_are_not_reused(quick):
     [
         (["--seeds", "0"], "--seeds: 0 must be >= 1"),
         (["--seeds", "2", "--set", "scenario.seed=5"], "the ensemble sets scenario.seed"),
+        # it was taken, ignored and written into each seed file's parameters
+        (["--seeds", "2", "--set", "output.file=zz.h5"], "the ensemble sets output.file for each run; each seed's"),
         (["--seeds", "2", "--set", "rods.cont=5"], "rods.cont"),
         (["--seeds", "2", "--times", "1,x"], "give simulated times separated by commas"),
         (["--seeds", "2", "--t-end", "0.5", "--times", "0.6"], "after the end time 0.5"),
@@ -1026,3 +1028,17 @@ def test_the_advice_for_a_seed_file_in_use_is_to_wait(quick, tmp_path):
         proc.communicate(timeout=30)
     assert "locked by another process" in text and "wait for the processes writing them to end" in text
     assert "pass force=True" not in text
+
+
+def test_measures_by_name_and_a_misspelt_one(quick):
+    """``summarise(measures=["cycle_rank"])``, as a notebook names them, failed with an AttributeError; a
+    name stands for its measure of FRAME_MEASURES, and one that is not there is named with the valid ones."""
+    from selfas_graph.ensemble import FRAME_MEASURES
+
+    a = seed_path(quick[0], 1)
+    by_name = summarise([a], [0.0], measures=["cycle_rank"])
+    by_object = summarise([a], [0.0], measures=[m for m in FRAME_MEASURES if m.name == "cycle_rank"])
+    assert list(by_name["measures"]) == ["cycle_rank"] and by_name["measures"] == by_object["measures"]
+    assert list(summarise([a], [0.0], measures="cycle_rank")["measures"]) == ["cycle_rank"]
+    with pytest.raises(EnsembleError, match=r"measures: 'cycle_rnk' is not a measure; .*cycle_rank"):
+        summarise([a], [0.0], measures=["cycle_rnk"])

@@ -210,6 +210,8 @@ def test_exports_get_the_permissions_of_a_new_file(run):
         ([0, 2], [0, 2]),
         (np.array([1, -1]), [1, 3]),
         (2, [2]),
+        (slice(None, None, 2), [0, 2]),  # a slice object from Python, as "::2"
+        (slice(1, -1), [1, 2]),
     ],
 )
 def test_parse_frames(spec, frames):
@@ -217,7 +219,21 @@ def test_parse_frames(spec, frames):
 
 
 @pytest.mark.parametrize(
-    "spec", ["x", "1:2:0", "4", "5:9", "1:2:3:4", "", "99999999999999999999999", [0.5], [4], [[0, 1]]]
+    "spec",
+    [
+        "x",
+        "1:2:0",
+        "4",
+        "5:9",
+        "1:2:3:4",
+        "",
+        "99999999999999999999999",
+        [0.5],
+        [4],
+        [[0, 1]],
+        slice(0, 2, 0),
+        slice(0.5, 2),
+    ],
 )
 def test_parse_frames_refuses(spec):
     with pytest.raises(ExportError):
