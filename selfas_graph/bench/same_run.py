@@ -223,7 +223,7 @@ def run(args) -> int:
         print(line)
     print(
         f"{args.a} and {args.b}: {counts['datasets']} datasets and {counts['attributes']} attributes compared, "
-        + ("the same, bit for bit" if not diffs else f"{len(diffs)} differences")
+        + ("the same, bit for bit" if not diffs else f"{len(diffs)} difference{'' if len(diffs) == 1 else 's'}")
         + (f" (descriptions only, not counted: {', '.join(described(notes))})" if notes else "")
     )
     return 1 if diffs else 0

@@ -267,8 +267,10 @@ def _counts(plans) -> dict:
     return {a: sum(p.action == a for p in plans) for a in _ACTIONS}
 
 
-def _count_text(count) -> str:
-    return f"{count['run']} to run, {count['resume']} to resume, {count['done']} done, {count['failed']} failed" + (
+def _count_text(count, no_run=False) -> str:
+    """The plan's counts in words; with ``--no-run`` a seed without a file is missing, not to run."""
+    first = f"{count['run']} missing" if no_run else f"{count['run']} to run, {count['resume']} to resume"
+    return f"{first}, {count['done']} done, {count['failed']} failed" + (
         f", {count['partial']} partial (summarised to their last frame)" if count["partial"] else ""
     )
 
@@ -312,7 +314,7 @@ def _run_ensemble(args, pool, locks):
     p = ens.base.params
     print(
         f"{p.scenario.name}: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {ens.t_end:g} in {folder}/: "
-        + _count_text(count)
+        + _count_text(count, args.no_run)
         + ("" if args.no_run else f"; on {pool_text(pool)}"),
         flush=True,
     )
@@ -417,7 +419,7 @@ def _run_grid(args, pool, locks):
         count = _counts(plan)
         kept_failed += count["failed"]
         print(
-            f"{ens.folder}/: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {grid.t_end:g}: {_count_text(count)}",
+            f"{ens.folder}/: seeds {ens.seeds[0]}..{ens.seeds[-1]} to t = {grid.t_end:g}: {_count_text(count, args.no_run)}",
             flush=True,
         )
     resumed = sum(t["action"] == "resume" for t in tasks)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from ..io.export import FORMATS, ExportError, ExportExistsError, MissingGraphWarning, export_run
 from ..io.h5md import RunFileError, raised_in_hdf5
-from .main import CliError, write_failed
+from .main import CliError, counted, write_failed
 
 
 def add_arguments(p):
@@ -53,7 +53,7 @@ def run(args):
             raise
         target = args.output or Path(args.run).with_suffix("." + args.format)
         raise write_failed(f"cannot write the export {target}", exc) from None
-    print(f"wrote {path} ({n} frames, {args.format})")
+    print(f"wrote {path} ({counted(n, 'frame')}, {args.format})")
     for w in caught:
         if issubclass(w.category, MissingGraphWarning):
             print(f"note: {w.message}", file=sys.stderr)

@@ -64,7 +64,8 @@ class RunFile:
 
     The frames are the rows whose step, time and positions (and velocities, where saved) were all
     written: ``torn_frame`` is true when a kill while a frame was appended left some of them a row
-    longer than the others (a resume drops that row).
+    longer than the others (a resume drops that row). They are those the file held when it was opened:
+    of a run still being written, open it again to read later frames.
 
     Parameters
     ----------
@@ -194,8 +195,25 @@ class RunFile:
         """Index of a frame given by number (negative counts from the end) or nearest time."""
         n = self.n_frames
         if n == 0:
-            raise RunFileError(f"{self.path}: the run has no saved frames")
-        return _pick_frame(self.path, n, frame, t, lambda: self.time)
+            raise RunFileError(f"{self.path}: the run has no saved frames{self._later_frames()}")
+        try:
+            return _pick_frame(self.path, n, frame, t, lambda: self.time)
+        except RunFileError as exc:
+            raise RunFileError(f"{exc}{self._later_frames()}") from None
+
+    def _later_frames(self) -> str:
+        """ "; it holds N frames now: ..." where frames were written since this RunFile was opened (it reads
+        the frames it found then), or ""."""
+        try:
+            now = int(self.f[layout.TIP_POSITION_STEP].shape[0])
+        except (OSError, RuntimeError, KeyError):
+            return ""
+        if now <= self._frames:
+            return ""
+        return (
+            f" when this RunFile was opened; the file holds {now} frames now: open it again to read the frames "
+            "written since"
+        )
 
     def frame(self, index=None, t=None):
         """One saved frame as a :class:`~selfas_graph.io.frame.SavedFrame`: by index (negative counts

@@ -150,6 +150,24 @@ def test_run_file_from_python_with_event_names(tmp_path):
     assert sg.EventKind.SHORT_CIRCUIT == 5 and sg.EventKind(1).label == "tip_contact"
 
 
+def test_a_run_file_opened_mid_run_says_it_reads_the_frames_it_found(tmp_path):
+    """A notebook cell opens the run, the next continues it: the open RunFile keeps the frames it found,
+    and asking for a later one said the file had only those; it now says more were written since."""
+    sim = sg.Simulation(_params(), state=_rods())
+    out = tmp_path / "nb.h5"
+    with sg.RunWriter.for_simulation(sim, out) as w:
+        sim.run(0.05, writer=w)
+        run = sg.RunFile(out)
+        n = run.n_frames
+        sim.run(0.1, writer=w)
+        with pytest.raises(sg.RunFileError, match=f"frames 0..{n - 1} when this RunFile was opened; the file holds"):
+            run.position(n + 1)
+        assert run.n_frames == n  # the frames it found, as its docstring says
+        run.close()
+    with sg.RunFile(out) as again:
+        assert again.n_frames > n
+
+
 def test_a_writer_used_wrongly_is_refused_and_the_file_stays_readable(tmp_path):
     """A closed writer handed to ``sim.run`` gave a TypeError from deep inside; a writer made for
     another simulation wrote part of a frame and left the file unreadable. Both are refused by name
