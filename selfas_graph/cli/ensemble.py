@@ -214,7 +214,7 @@ def _run(args, pool):
         locks.release_all()
 
 
-def _check_summary_args(args, t_end, params):
+def _check_summary_args(args, t_end, params, also=()):
     """``--flux-radius`` and ``--times`` against the scene, before anything runs (a bad one ended a
     grid with a traceback after all its seeds had run)."""
     if args.flux_radius is not None and not (math.isfinite(args.flux_radius) and args.flux_radius > 0):
@@ -225,7 +225,7 @@ def _check_summary_args(args, t_end, params):
     if max(times) > t_end:
         raise CliError(f"--times {max(times):g} is after the end time {t_end:g}; give times up to it")
     try:  # frame times only
-        summary_times(times, t_end, params.output.interval, params.integrator.dt)
+        summary_times(times, t_end, params.output.interval, params.integrator.dt, also)
     except EnsembleError as exc:
         raise CliError(f"--{exc}") from None
 
@@ -303,7 +303,7 @@ def _run_ensemble(args, pool, locks):
         plans = ens.plan(summary_only=args.no_run)
     except EnsembleError as exc:
         raise CliError(str(exc)) from None
-    _check_summary_args(args, ens.t_end, ens.base.params)
+    _check_summary_args(args, ens.t_end, ens.base.params, ens.shared_frame_times() if args.times else ())
     _own_files(folder, SUMMARY_JSON, SUMMARY_CSV, *(("summary.png",) if args.plot else ()))
     times = args.times
     count = _counts(plans)

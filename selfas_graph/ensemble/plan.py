@@ -74,11 +74,12 @@ def _override_list(overrides) -> list:
     return list(overrides or ())
 
 
-def check_times(times, t_end, frame_interval=None) -> list[float]:
+def check_times(times, t_end, frame_interval=None, also=()) -> list[float]:
     """``times`` of a summary as a list of floats in ``[0, t_end]`` (a single time is taken as a list
-    of one), each a frame's time where ``frame_interval`` is given (a multiple of it, or ``t_end``, the
-    last frame), each once; EnsembleError naming the first that is not. A time between two frames would
-    take one of them and be labelled with its own value."""
+    of one), each a frame's time where ``frame_interval`` is given (a multiple of it, ``t_end``, the
+    last frame, or one of ``also``, frames every seed file holds off that grid), each once;
+    EnsembleError naming the first that is not. A time between two frames would take one of them and
+    be labelled with its own value."""
     times = [times] if np.ndim(times) == 0 else list(times)
     for t in times:
         try:
@@ -90,7 +91,7 @@ def check_times(times, t_end, frame_interval=None) -> list[float]:
         if frame_interval:
             k = math.floor(float(t) / frame_interval + 0.5)
             tol = 1e-9 * max(1.0, abs(float(t)))
-            if abs(k * frame_interval - float(t)) > tol and abs(float(t) - t_end) > tol:
+            if abs(k * frame_interval - float(t)) > tol and min(abs(float(t) - x) for x in (t_end, *also)) > tol:
                 lo = math.floor(float(t) / frame_interval) * frame_interval
                 raise EnsembleError(
                     f"times: no frame at t = {float(t):g}; the frames are every {frame_interval:g} t0 and at the "
@@ -104,13 +105,14 @@ def check_times(times, t_end, frame_interval=None) -> list[float]:
     return times
 
 
-def summary_times(times, t_end, interval, dt=None) -> list[float]:
+def summary_times(times, t_end, interval, dt=None, also=()) -> list[float]:
     """The times of a summary: ``times`` checked (:func:`check_times`; frame times where the time step
-    ``dt`` is given, the frames ``interval`` rounded to whole steps), or :func:`default_times` when None."""
+    ``dt`` is given, the frames ``interval`` rounded to whole steps, or ``also``), or :func:`default_times`
+    when None."""
     frame_interval = frame_steps(interval, dt) * dt if dt else None
     if times is None:  # at the frames, whose interval is whole steps (an interval of 0.0125 at dt = 0.002: 0.012)
         return default_times(t_end, frame_interval or interval)
-    return check_times(times, t_end, frame_interval)
+    return check_times(times, t_end, frame_interval, also)
 
 
 def check_jobs(jobs) -> None:
@@ -418,12 +420,33 @@ class Ensemble:
                     return run_tasks(run_seed, tasks, own, report)
             return run_tasks(run_seed, tasks, pool, report)
 
+    def shared_frame_times(self) -> list[float]:
+        """The frame times off the output grid that every seed file present holds: an earlier end time,
+        off the grid, that a later end time continued past (a summary may take them as it takes the
+        grid's; a seed run at once to the later end has no frame there, and then none is shared)."""
+        p = self.base.params
+        step = frame_steps(p.output.interval, p.integrator.dt) * p.integrator.dt
+        shared = None
+        for s in self.seeds:
+            path = seed_path(self.folder, s)
+            if not path.exists():
+                continue
+            try:
+                with RunFile(path) as run:
+                    t = np.asarray(run.time, dtype=float)
+            except (RunFileError, *HDF5_READ_ERRORS):
+                continue  # the plan and the summary name a file they cannot use
+            off = {float(x) for x in t if abs(x / step - round(x / step)) > 1e-9 * max(1.0, x / step)}
+            shared = off if shared is None else shared & off
+        return sorted(shared or ())
+
     def summarise(self, times=None, measures=None, flux_radius=None) -> dict:
         """:func:`summarise` over the seed files present (default times: :func:`default_times`, at frames;
-        given ``times`` must be frame times, :func:`check_times`)."""
+        given ``times`` must be frame times, :func:`check_times`, or :meth:`shared_frame_times`)."""
         paths = [seed_path(self.folder, s) for s in self.seeds]
         p = self.base.params
-        times = summary_times(times, self.t_end, p.output.interval, p.integrator.dt)
+        also = self.shared_frame_times() if times is not None else ()
+        times = summary_times(times, self.t_end, p.output.interval, p.integrator.dt, also)
         out = summarise(
             [p for p in paths if p.exists()], times, t_end=self.t_end, measures=measures, flux_radius=flux_radius
         )

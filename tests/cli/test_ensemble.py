@@ -305,6 +305,21 @@ def test_an_earlier_end_is_continued_from_the_checkpoint_bit_for_bit(scene, tmp_
     assert [p.action for p in full.plan()] == ["done"]
 
 
+def test_an_earlier_end_off_the_frame_grid_stays_a_summary_time(scene, tmp_path):
+    """Seeds run to t = 0.32 (frames every 0.05 and at 0.32), then continued to 0.6: every seed holds the
+    frame at 0.32, which the first summary gave; it was refused afterwards as "no frame at t = 0.32".
+    A seed run at once to 0.6 has none there, and then the time is refused again."""
+    Ensemble(scene, [3, 4], tmp_path / "e", t_end=0.32).run()
+    full = Ensemble(scene, [3, 4], tmp_path / "e")
+    full.run()
+    assert full.shared_frame_times() == [pytest.approx(0.32)]
+    s = full.summarise(times=[0.3, 0.32, 0.6])
+    assert s["times"] == [0.3, 0.32, 0.6] and s["measures"]["cycle_rank"]["n"] == [2, 2, 2]
+    Ensemble(scene, [5], tmp_path / "e").run()  # seed 5 at once: no frame at 0.32
+    with pytest.raises(EnsembleError, match="no frame at t = 0.32"):
+        Ensemble(scene, [3, 4, 5], tmp_path / "e").summarise(times=[0.32])
+
+
 def test_jobs_below_one_are_refused_before_anything_is_made(scene, tmp_path):
     """``run(jobs=0)`` or ``jobs=-1`` ran the seeds serially without a word."""
     for jobs in (0, -1, 1.5, "2"):
