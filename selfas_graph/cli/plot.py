@@ -92,7 +92,7 @@ def add_arguments(p):
     p.add_argument(
         "-o",
         "--output",
-        help="PNG, PDF or SVG file to write, by its suffix (default next to the run file: RUN_KIND_frameK.png, or RUN_KIND.png for the "
+        help="PNG, PDF or SVG file to write, by its suffix, PNG without one (default next to the run file: RUN_KIND_frameK.png, or RUN_KIND.png for the "
         "kinds over time: timeline, moment, fractal, skeleton)",
     )
     p.add_argument("--force", action="store_true", help="overwrite an existing output file")

@@ -594,6 +594,7 @@ def _run_length_rules(p) -> list:
                 f"{name} / integrator.dt = {length / p.integrator.dt:.3g} steps; at most 1e12 are possible "
                 f"(make integrator.dt larger or {name} smaller)"
             )
-    if p.output.interval < p.integrator.dt:
-        out.append(f"output.interval = {p.output.interval:g} is shorter than integrator.dt = {p.integrator.dt:g}")
+    for name, length in (("output.interval", p.output.interval), ("run.t_end", p.run.t_end)):
+        if length < p.integrator.dt:  # a run.t_end below dt/2 took no step at all, and t_end > 0 was its rule
+            out.append(f"{name} = {length:g} is shorter than integrator.dt = {p.integrator.dt:g}")
     return out

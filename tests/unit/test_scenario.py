@@ -142,6 +142,8 @@ def test_overrides_go_through_the_same_checks():
     assert sc.params.integrator.dt == 5e-4 and sc.params.forces.uniform_field.B == (0.0, 0.0, 1.0)
     assert sc.params.integrator.bond_force == "paper"
     assert "integrator.dt: -1.0 is out of range" in problems(GOOD, ["integrator.dt=-1"])
+    # t_end > 0 but below half a step took no step at all
+    assert "run.t_end = 1e-09 is shorter than integrator.dt" in problems(GOOD, ["run.t_end=1e-9"])
     assert "integrator.dtt: unknown key; did you mean 'dt'?" in problems(GOOD, ["integrator.dtt=1"])
     assert "expected key=value" in problems(GOOD, ["integrator.dt"])
     # a term is switched off by an override
