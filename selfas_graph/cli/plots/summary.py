@@ -37,7 +37,12 @@ def plot_summary(summary: dict, out, title: str, dpi=150, measures=None) -> Path
         ax.fill_between(times, mean - sem, mean + sem, color="0.6", alpha=0.5, lw=0)
         unit = m.get("unit") or ""
         words = (m.get("doc") or name.replace("_", " ")).split(" (")[0]
-        ax.set_title(words[0].upper() + words[1:], fontsize="small", loc="left")
+        if "_" not in words.split(" ")[0]:  # a word, not a symbol such as m_J,z
+            words = words[0].upper() + words[1:]
+        ax.set_title(words, fontsize="small", loc="left")
+        if not np.isfinite(mean).any():  # an empty panel says why
+            why = "no seed carries current at these times" if "k" in m else "no value at these times"
+            ax.text(0.5, 0.5, why, transform=ax.transAxes, ha="center", va="center", fontsize="small", color="0.4")
         if unit not in ("", "1"):
             ax.set_ylabel(unit.replace("Phi_0", r"$\Phi_0$").replace("J0", "$J_0$"), fontsize="small")
     for ax in axes[len(names) :]:
