@@ -252,19 +252,25 @@ class Ensemble:
         return shlex.join(args + ["--t-end", repr(self.t_end), "-o", str(seed_path(self.folder, seed))])
 
     # ------------------------------------------------------------------ planning
-    def files_end_time(self):
-        """The latest end time (``run.t_end``) the seed files in the folder were run to, or None
-        where there is no readable one: what a summary of the files present reaches."""
-        ends = []
+    def _from_files(self, read) -> list:
+        """``read(run)`` of each seed file present that can be read (the plan and the summary name those
+        that cannot)."""
+        out = []
         for s in self.seeds:
             path = seed_path(self.folder, s)
             if not path.exists():
                 continue
             try:
                 with RunFile(path) as run:
-                    ends.append(float(run.parameters["run"]["t_end"]))
-            except (RunFileError, KeyError, TypeError, ValueError):
-                continue  # the plan names a file it cannot use
+                    out.append(read(run))
+            except (RunFileError, *HDF5_READ_ERRORS, TypeError, ValueError):
+                continue
+        return out
+
+    def files_end_time(self):
+        """The latest end time (``run.t_end``) the seed files in the folder were run to, or None
+        where there is no readable one: what a summary of the files present reaches."""
+        ends = self._from_files(lambda run: float(run.parameters["run"]["t_end"]))
         return max(ends) if ends else None
 
     def plan(self, summary_only=False) -> list[SeedPlan]:
@@ -427,15 +433,7 @@ class Ensemble:
         p = self.base.params
         step = frame_steps(p.output.interval, p.integrator.dt) * p.integrator.dt
         shared = None
-        for s in self.seeds:
-            path = seed_path(self.folder, s)
-            if not path.exists():
-                continue
-            try:
-                with RunFile(path) as run:
-                    t = np.asarray(run.time, dtype=float)
-            except (RunFileError, *HDF5_READ_ERRORS):
-                continue  # the plan and the summary name a file they cannot use
+        for t in self._from_files(lambda run: np.asarray(run.time, dtype=float)):
             off = {float(x) for x in t if abs(x / step - round(x / step)) > 1e-9 * max(1.0, x / step)}
             shared = off if shared is None else shared & off
         return sorted(shared or ())
