@@ -127,7 +127,7 @@ ZERO_NULL = (
 )
 
 
-def level_text(level=None) -> str:
+def _level_text(level=None) -> str:
     """The level a verdict's p-value must pass, in words: "0.0027, the chance of 3 SE", or a claim's
     lower level over its readings (:func:`_looks_note` says why) as a number alone."""
     if level is None or level == VERDICT_LEVEL:
@@ -162,7 +162,7 @@ def _verdict(d, expect, p=math.nan, paired=None, zero=False, level=None):
         what = f"{sign} SE{'; ' + test if test else ''}"
         found = f"{sign} SE from the null model{'; ' + test if test else ''}"
     if not p < level:  # a few pairs alike are no evidence: 2 of 2 happen half the time
-        return f"not distinguished from the null model ({what}, not below {level_text(level)}{note})"
+        return f"not distinguished from the null model ({what}, not below {_level_text(level)}{note})"
     if zero and claimed:
         return f"{ZERO_NULL}; {what.replace('SE;', 'SE,')}"
     return f"{'reproduced' if claimed else 'opposite to the claim'} ({found}{note})"
