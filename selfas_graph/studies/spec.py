@@ -115,8 +115,8 @@ class Claim:
     #: (t1, t2): test each seed's mean of the measure over the summarised times in [t1, t2] instead of
     #: its value at ``time`` (for a measure that flickers, e.g. rods in filaments as the gap opens and closes)
     window: tuple[float, ...] = ()
-    #: the seed counts (study, null model) at which the verdict was read before, in order: the verdict
-    #: is tested at the level over all its readings, this one included
+    #: the seed counts (study, null model) of each reading of the verdict before this one, in order (a
+    #: count read twice is there twice): the k-th reading is tested at a lower level
     #: (docs/model.md "Measures of the paper's claims", its Verdicts)
     looks: tuple[tuple[int, int], ...] = ()
 

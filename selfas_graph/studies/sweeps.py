@@ -9,10 +9,8 @@ that carry current alone would pick its seeds by the outcome, and how many seeds
 much of what a sweep changes. Where some seeds of a point carry none, its cell also gives the mean
 the tests use. A step is paired by seed where its two points start from the same rods
 (:func:`.pairing.same_start`), over the seeds both have, else Welch's; its cell gives the pairs (or
-the seeds a side) in brackets. The trend is one test per measure, adjusted by Holm over the measures:
-Page's L test where every point starts from the same rods (each seed ranked across the points on
-its own, over the seeds every point has), else Kendall's tau-b between the parameter and every
-seed's value.
+the seeds a side) in brackets. The trend is one test per measure, Kendall's tau-b between the
+parameter and every seed's value, adjusted by Holm over the sweep's measures.
 """
 
 from __future__ import annotations
@@ -91,16 +89,12 @@ def sweep_rows(studies, summaries, name) -> str:
         paired = _paired_steps(done)
         steps = [_step_p(done, m, sw.time, paired) for m in CLAIM_MEASURES]
         rows.append(f"| {_step_label(done, paired)} | | " + " | ".join(steps) + " |")
-        trends = sweep_trends(done, sw.time, paired)
+        trends = sweep_trends(done, sw.time)
         trend = [_trend_text(x) for x in trends]
         tested = sum(math.isfinite(x["p"]) for x in trends)  # Holm counts the measures with a p-value
-        if trends[0]["test"] == "Page":
-            how = "Page's test over the seeds every point has, each seed ranked on its own; τ the seeds' mean"
-        else:
-            how = "Kendall τ over every seed"
         label = (
-            f"trend over the sweep ({how}; a current-related measure 0 without current; "
-            f"Holm over the {tested} measures tested)"
+            "trend over the sweep (Kendall τ over every seed, a current-related measure 0 without current; "
+            f"Holm over the sweep's {tested} measures tested)"
         )
         rows.append(f"| {label} | | " + " | ".join(trend) + " |")
         rows.append(f"\n![{sw.title}: the claim measures at t = {sw.time:g}](figures/sweep_{name}.png)")
@@ -165,35 +159,6 @@ def _step_p(points, measure, t, paired=None) -> str:
     return text
 
 
-def _blocks(points, measure, t) -> np.ndarray:
-    """The per-seed values of :func:`sweep_values` of the seeds every point has a value for, one row a
-    seed and one column a point (the spread between seeds alone for a fitted dimension)."""
-    rows = []
-    for value, s in points:
-        v = sweep_values(s, measure, t, fit_errors=False)[0]
-        rows.append({int(x["seed"]): float(y) for x, y in zip(s["seeds"], v) if "seed" in x and np.isfinite(y)})
-    seeds = sorted(set.intersection(*(set(r) for r in rows))) if rows else []
-    return np.array([[r[k] for r in rows] for k in seeds], dtype=float).reshape(len(seeds), len(rows))
-
-
-def _page(points, measure, t) -> dict:
-    """Page's L test of a trend over seeds that start from the same rods at every point, each seed a
-    block ranked on its own (two-sided: twice the smaller one-sided p-value), and the mean of each
-    seed's Kendall tau-b as the trend's size."""
-    from scipy.stats import kendalltau, page_trend_test
-
-    x = _blocks(points, measure, t)
-    tau = p = math.nan
-    varied = x[np.ptp(x, axis=1) > 0] if x.size else x
-    if len(x) >= 2 and len(varied):
-        up = page_trend_test(x, method="auto").pvalue
-        down = page_trend_test(x[:, ::-1], method="auto").pvalue
-        p = float(min(1.0, 2.0 * min(up, down)))
-        order = np.arange(x.shape[1])
-        tau = float(np.mean([kendalltau(order, row).statistic for row in varied]))
-    return {"tau": tau, "p": p, "n": len(x), "test": "Page"}
-
-
 def _kendall(points, measure, t) -> dict:
     """Kendall's tau-b between the parameter and every seed's value, the seeds of every point pooled."""
     from scipy.stats import kendalltau
@@ -208,25 +173,23 @@ def _kendall(points, measure, t) -> dict:
     if len(set(x)) >= 2 and len(y) >= 3 and np.ptp(y) > 0:
         res = kendalltau(x, y)
         tau, p = float(res.statistic), float(res.pvalue)
-    return {"tau": tau, "p": p, "n": len(y), "test": "Kendall"}
+    return {"tau": tau, "p": p, "n": len(y)}
 
 
-def sweep_trends(points, t, paired=None) -> list[dict]:
-    """The trend of each claim measure over a sweep's points ``[(value, summary), ...]`` at ``t``, on the
-    per-seed values of :func:`sweep_values` (a current-related measure 0 where a seed carries none; a
-    fitted dimension by its seeds' values alone, as a rank test cannot carry each fit's own error),
-    one two-sided test per measure (docs/model.md "Measures of the paper's claims"): where every step
-    starts from the same rods (``paired``, :func:`_paired_steps`) and there are three points or more,
-    Page's L test over the seeds every point has, each seed ranked on its own (``tau``: the mean of
-    the seeds' Kendall tau-b); otherwise Kendall's tau-b between the parameter and every seed's value,
-    the points' seeds pooled as independent. The p-values are adjusted by Holm over the measures
-    (``holm``). Returns a dict per measure of :data:`CLAIM_MEASURES`: ``tau``, ``p``, ``holm``, ``n``
-    (seeds), ``test`` ("Page" or "Kendall"); NaN where the values cannot show a trend."""
+def sweep_trends(points, t) -> list[dict]:
+    """The trend of each claim measure over a sweep's points ``[(value, summary), ...]`` at ``t``:
+    Kendall's tau-b between the parameter and the per-seed values of :func:`sweep_values` (a
+    current-related measure 0 where a seed carries none; a fitted dimension by its seeds' values
+    alone, as a rank test cannot carry each fit's own error), every seed of every point pooled, and
+    its two-sided p-value (docs/model.md "Measures of the paper's claims"). Where the points start
+    from the same rods the seeds are not independent, which only makes the test conservative. One
+    test per measure, where the steps of the table are several each: the p-values are adjusted by
+    Holm over the measures of the sweep (``holm``). Returns a dict per measure of
+    :data:`CLAIM_MEASURES`: ``tau``, ``p``, ``holm``, ``n`` (seeds ranked); NaN where fewer than two
+    points have values or the values do not vary."""
     from .convergence import holm  # the convergence table's adjustment
 
-    paired = _paired_steps(points) if paired is None else paired
-    blocks = len(points) >= 3 and all(paired)
-    out = [{"measure": m} | (_page if blocks else _kendall)(points, m, t) for m in CLAIM_MEASURES]
+    out = [{"measure": m} | _kendall(points, m, t) for m in CLAIM_MEASURES]
     for row, q in zip(out, holm([r["p"] for r in out])):
         row["holm"] = q
     return out
@@ -238,8 +201,7 @@ def _trend_text(r) -> str:
     if not math.isfinite(r["p"]):
         return "n/a"
     word = "none shown" if not r["holm"] < 0.05 else ("rises" if r["tau"] > 0 else "falls")
-    seeds = f"; {r['n']} seeds" if r.get("test") == "Page" else ""
-    return f"{word}: τ = {r['tau']:+.2f}, p = {_p_cell(r['p'])} ({_p_cell(r['holm'])} after Holm{seeds})".replace(
+    return f"{word}: τ = {r['tau']:+.2f}, p = {_p_cell(r['p'])} ({_p_cell(r['holm'])} after Holm)".replace(
         "= <", "<"
     ).replace("-", "−")
 

@@ -4,8 +4,7 @@ the default it varies, and each sweep of a scene's parameter.
 A claim's verdict compares the study with its null model at the paper's end time, or in each seed's
 mean over the claim's window, by d, the difference in standard errors of the difference, and its test's
 two-sided p-value: "reproduced" only where p is below :data:`VERDICT_LEVEL` (0.0027, the chance of 3
-SE of a normal variable; divided by the number of readings for a claim read before at other seed
-counts) and d lies in the direction the claim predicts (docs/model.md "Measures of the paper's
+SE of a normal variable; lower for a claim read before, :func:`reading_level`) and d lies in the direction the claim predicts (docs/model.md "Measures of the paper's
 claims", its Verdicts). One rule decides the test, as for the convergence table:
 
 * where the two studies start from the same rods (the summaries' values at t = 0 agree seed by seed,
@@ -238,22 +237,39 @@ def _unpaired_note(s, null, n_pairs) -> str:
 
 
 def _earlier_looks(c, s, null) -> list:
-    """The seed counts (study, null model) at which claim ``c``'s verdict was read before (its ``looks``),
-    but for those of this reading (``s`` and ``null``'s), which count once."""
+    """The readings of claim ``c``'s verdict before this one (its ``looks``: the seed counts, study and
+    null model, of each, in order; a count read twice, on new runs or by another test, is there twice),
+    but for those at this reading's counts (``s`` and ``null``'s), which are this one."""
     now = (len(s["seeds"]), len(null["seeds"]))
-    return [x for x in dict.fromkeys(c.looks) if tuple(x) != now]
+    return [tuple(x) for x in c.looks if tuple(x) != now]
+
+
+def reading_level(k) -> float:
+    """The level of a claim's ``k``-th reading (k = 1, 2, ...): :data:`VERDICT_LEVEL` / (k (k + 1)). As
+    1 / (k (k + 1)) = 1 / k - 1 / (k + 1), the levels of all readings, however many, sum to less than
+    :data:`VERDICT_LEVEL`: reading the verdict again as seeds are added, and stopping when it turns,
+    cannot raise the chance of a false one above it (a level divided by the readings so far would:
+    its sum grows as the harmonic series)."""
+    return VERDICT_LEVEL / (k * (k + 1))
 
 
 def _looks_note(looks) -> str:
-    """ "; read before at 8/5, 12/12 and 16/16 seeds (study/null model): tested at 0.0027 / 4" for a
-    claim whose verdict was read at other seed counts before (``looks``, :func:`_earlier_looks`), or "".
-    Adding seeds until a verdict turns raises its chance of a false one: the level is divided by the
-    number of readings (Bonferroni's bound holds whatever rule chose when to read)."""
+    """ "; read before at 8/5 (3 times), 12/12 and 16/16 seeds (study/null model): the 6th reading,
+    tested at 0.0027 / 42" for a claim whose verdict was read before (``looks``, :func:`_earlier_looks`),
+    or "" (:func:`reading_level`)."""
     if not looks:
         return ""
-    at = [f"{n}/{m}" for n, m in looks]
+    counts = {}
+    for x in looks:  # in order of first reading
+        counts[x] = counts.get(x, 0) + 1
+    at = [f"{n}/{m}" + ("" if k == 1 else " (twice)" if k == 2 else f" ({k} times)") for (n, m), k in counts.items()]
     at = at[0] if len(at) == 1 else f"{', '.join(at[:-1])} and {at[-1]}"
-    return f"; read before at {at} seeds (study/null model): tested at {VERDICT_LEVEL:.2g} / {1 + len(looks)}"
+    k = 1 + len(looks)
+    nth = {1: "st", 2: "nd", 3: "rd"}.get(k % 10 if k % 100 not in (11, 12, 13) else 0, "th")
+    return (
+        f"; read before at {at} seeds (study/null model): the {k}{nth} reading, tested at "
+        f"{VERDICT_LEVEL:.2g} / {k * (k + 1)}"
+    )
 
 
 def claim_verdict(c, s, null, nm) -> str:
@@ -261,11 +277,11 @@ def claim_verdict(c, s, null, nm) -> str:
     (measure ``nm``): paired by seed over the seeds both have where the two start from the same rods
     (:func:`.pairing.same_start`), else Welch's comparison of the two sets of seeds; a fitted measure's
     also by the spread between seeds alone; a null model zero in every seed worded as such. The level
-    is :data:`VERDICT_LEVEL` over the claim's readings (:func:`_looks_note`)."""
+    is that of the claim's reading (:func:`reading_level`, :func:`_looks_note`)."""
     x, ex = _claim_values(s, c.measure, c)
     y, ey = _claim_values(null, nm, c)
     looks = _earlier_looks(c, s, null)
-    level = VERDICT_LEVEL / (1 + len(looks))
+    level = reading_level(1 + len(looks))
     if not np.isfinite(y).any():
         return "not decided (the null model has no value of the measure)"
     fitted = ex is not None or ey is not None
