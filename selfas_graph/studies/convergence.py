@@ -14,8 +14,9 @@ claims"):
   two-sided p-value is that of the paired t-test, ``n - 1`` degrees of freedom; where every pair
   differs by the same nonzero amount (a count can) the t-test is undefined, and the p-value is the
   exact two-sided sign test's, ``2 / 2^n``: 5 pairs alike give 0.0625, not 0;
-* a grouped measure (zero while a seed's circuit is open) pairs the seeds that carry current in both
-  runs, and is not compared where one side has none;
+* a grouped measure (zero while a seed's circuit is open) pairs every seed with a current flag in both
+  runs, 0 where one carries none: pairing only the seeds that carry current in both picked them by the
+  outcome, and would not see a setting that changes whether current flows;
 * a setting "moves these statistics" when one of its measures differs at a family-wise level of 5 %
   over the measures compared (Holm's step-down adjustment of the p-values): with 6 measures and 5
   seeds, a single difference of 3-4 SE is what chance gives one setting in ten or more;
@@ -102,12 +103,14 @@ def paired_difference(setting, default, measure, t, fit_errors=True) -> dict:
         ea, eb = values_at(setting, FIT_ERRORS[measure], t)[ia], values_at(default, FIT_ERRORS[measure], t)[ib]
         ok &= np.isfinite(ea) & np.isfinite(eb)
     out = {}
-    if measure in GROUPED:
+    if measure in GROUPED:  # every pair with a flag on both sides, 0 where a seed carries none (not only
+        # the pairs that carry current in both: that picked the seeds by the outcome)
         act_a, known_a, _ = current_flags(setting, t)
         act_b, known_b, _ = current_flags(default, t)
         ok &= known_a[ia] & known_b[ib]
         out |= {"k_a": int((ok & act_a[ia]).sum()), "k_b": int((ok & act_b[ib]).sum()), "of": int(ok.sum())}
-        ok &= act_a[ia] & act_b[ib]
+        if not (out["k_a"] or out["k_b"]):  # no current on either side: nothing to compare, not a 0 = 0
+            ok &= False
     if ea is not None and not fit_errors:
         ea, eb = np.zeros_like(ea), np.zeros_like(eb)
     pick = np.where(ok, 0.0, np.nan)  # the pairs kept: NaN elsewhere, which paired_stat leaves out
@@ -119,12 +122,14 @@ def paired_difference(setting, default, measure, t, fit_errors=True) -> dict:
 
 def _side(p, key) -> str:
     """One side's cell: "mean ± SE (n)", for a grouped measure after how many of the paired seeds
-    carry current ("0 of 5 carry current" alone where none does)."""
+    carry current, the mean over every one of them where some carry none."""
     s = p["a" if key == "k_a" else "b"]
     if key not in p:
         return pm(s)
     group = f"{p[key]} of {p['of']} carry current"
-    return group if not p["n"] else f"{group}: {pm(s)}"
+    if not p["n"]:
+        return group
+    return f"{group}: {pm(s)}" if p[key] == p["of"] else f"{group}; every seed, 0 without current: {pm(s)}"
 
 
 def _difference(p) -> str:

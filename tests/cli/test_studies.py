@@ -1003,13 +1003,13 @@ def test_a_seed_whose_current_flag_is_unknown_counts_in_neither_group():
     assert measure_text(s, "filament_rods", 150.0).startswith("2 of 3 seeds carry current: median 675")
 
 
-def test_the_convergence_table_pairs_the_seeds_and_a_grouped_measure_the_seeds_with_current_in_both():
+def test_the_convergence_table_pairs_the_seeds_and_a_grouped_measure_every_seed_with_a_flag():
     """The setting runs seeds 1-3 of the default's 1-5, from the same rods: the table pairs them. The
-    rods in current-carrying filaments differ by -10, -10 and +20 (seed 3 carries current in the
-    setting but not in the default, so it is left out): mean -10 over 2 pairs with no spread, where
-    the t-test is undefined and the sign test gives p = 2 / 2^2 = 0.5; the loops differ by 2, 4, 6:
-    mean 4 ± 2 / sqrt(3) = 1.155, d = +3.5, p = 2 t_2.sf(3.46) = 0.074; where no seed of either
-    carries current the measure is not compared."""
+    rods in current-carrying filaments, 0 where a seed carries none, differ by -10, -10 and +20 (seed 3
+    carries current in the setting only: it was left out, a pick by the outcome): mean 0 ± 10, d = 0,
+    p = 1; each side's cell is over the 3 pairs, the default's saying that 2 of them carry current.
+    The loops differ by 2, 4, 6: mean 4 ± 2 / sqrt(3) = 1.155, d = +3.5, p = 2 t_2.sf(3.46) = 0.074;
+    where no seed of either carries current the measure is not compared."""
     from types import SimpleNamespace
 
     from selfas_graph.studies.convergence import convergence_rows, paired_difference
@@ -1019,8 +1019,8 @@ def test_the_convergence_table_pairs_the_seeds_and_a_grouped_measure_the_seeds_w
     setting = _current_summary([670.0, 690.0, 20.0], [1.0, 1.0, 1.0])
     setting["measures"]["cycle_rank"] = {"values": [[102.0], [114.0], [96.0]]}
     p = paired_difference(setting, base, "filament_rods", 150.0)
-    assert (p["n"], p["k_a"], p["k_b"], p["of"], p["diff"], p["d"], p["p"]) == (2, 3, 2, 3, -10.0, -math.inf, 0.5)
-    assert p["b"]["mean"] == 690.0  # the default over the same seeds, not over its five
+    assert (p["n"], p["k_a"], p["k_b"], p["of"], p["diff"], p["d"], p["p"]) == (3, 3, 2, 3, 0.0, 0.0, 1.0)
+    assert p["sem"] == pytest.approx(10.0) and p["b"]["mean"] == 460.0  # the default over the same seeds
     p = paired_difference(setting, base, "cycle_rank", 150.0)
     assert (p["n"], p["diff"]) == (3, 4.0) and p["sem"] == pytest.approx(2.0 / math.sqrt(3.0))
     assert p["d"] == pytest.approx(2.0 * math.sqrt(3.0)) and p["p"] == pytest.approx(0.0742, abs=1e-4)
@@ -1031,10 +1031,10 @@ def test_the_convergence_table_pairs_the_seeds_and_a_grouped_measure_the_seeds_w
     loops = next(r for r in rows if "| independent loops" in r)
     assert "| 100 ± 5.8 (3) | 104 ± 5.3 (3) | 4 ± 1.2 (+3.5 SE; p = 0.074) |" in loops, loops
     rods = next(r for r in rows if "| rods in current-carrying filaments" in r)
-    cell = "| 2 of 3 carry current: 690 ± 10 (2) | 3 of 3 carry current: 680 ± 10 (2) | −10 in every pair (sign test p = 0.5) |"
+    cell = "| 2 of 3 carry current; every seed, 0 without current: 460 ± 230 (3) | 3 of 3 carry current: 460 ± 220 (3) | 0 ± 10 (+0.0 SE; p = 1) |"
     assert cell in rods, rods
-    # two measures compared: Holm multiplies the smaller p, the loops' 0.074, by 2; two pairs of one
-    # sign are what chance gives half the time, so nothing moves the statistics
+    # two measures compared: Holm multiplies the smaller p, the loops' 0.074, by 2, so nothing moves
+    # the statistics
     assert (
         "no difference detected at this size (smallest: independent loops (cycle rank): p = 0.074, 0.15 after Holm over 2)"
         in rods
