@@ -185,6 +185,9 @@ def test_all_rods_in_one_chain_with_zero_and_huge_bias(delta):
     # 50 unit rods in series, whatever the bias (without one, from the probe at a unit bias: it was
     # reported open, infinite, with the electrodes joined)
     assert sim.solution.effective_resistance == pytest.approx(50.0, rel=1e-12)
+    # and after a restart from a snapshot (the contacts' heights kept for the probe)
+    again = Simulation.from_snapshot(sim.params, sim.snapshot())
+    assert again.solution.effective_resistance == pytest.approx(50.0, rel=1e-12)
     if delta == 0.0:
         assert sim.solution is not None and np.array_equal(sim.solution.current, np.zeros(50))
         assert len(sim.force_field.active_rod) == 0
