@@ -165,8 +165,9 @@ def study_figures(study, summary, folder) -> list:
 def plot_sweep(studies, summaries, name, out) -> Path:
     """The claim measures at the sweep's time against its parameter: mean and one standard error over
     the seeds of each point, as the sweep's table gives them (:func:`.sweeps.sweep_points`: for a
-    measure of the current, the seeds that carry it, "k/n" beside each point). A point of one seed,
-    without a spread, is drawn hollow."""
+    measure of the current, the seeds that carry it, "k/n" beside each point, and dashed grey the mean
+    over every seed, 0 where one carries none, which the step and trend rows test). A point of one
+    seed, without a spread, is drawn hollow."""
     sw = studies.sweeps[name]
     ncols = 2
     nrows = math.ceil(len(CLAIM_MEASURES) / ncols)
@@ -186,6 +187,15 @@ def plot_sweep(studies, summaries, name, out) -> Path:
                 if "of" in st:  # grouped: how many seeds the point describes
                     ax.annotate(f"{st['n']}/{st['of']}", (xv, yv), textcoords="offset points", xytext=(4, 4),
                                 fontsize="x-small", color="0.35")  # fmt: skip
+        if m in GROUPED:  # what the step and trend rows test: every seed, 0 where it carries no current
+            every = [(v, st) for v, st in sweep_points(studies, summaries, name, m, every_seed=True) if st["n"]]
+            if every:
+                ax.errorbar(
+                    [v for v, _ in every], [st["mean"] for _, st in every],
+                    yerr=[0.0 if not math.isfinite(st["sem"]) else st["sem"] for _, st in every],
+                    marker="s", ms=3, capsize=2, lw=0.8, ls="--", color="0.55", label="every seed, 0 without current",
+                )  # fmt: skip
+                ax.legend(fontsize="x-small", frameon=False, loc="best")
         ax.axvline(sw.base_value, color="0.6", lw=0.8, ls=":")
         words, unit = _words_unit(m)
         ax.set_title(words, fontsize="small", loc="left")

@@ -206,18 +206,22 @@ def _trend_text(r) -> str:
     ).replace("-", "−")
 
 
-def sweep_points(studies, summaries, name, measure):
+def sweep_points(studies, summaries, name, measure, every_seed=False):
     """(value, statistic) of a measure over a sweep's points that have a summary, as the sweep's table
     gives it: for a grouped measure the mean and standard error of the seeds that carry current, with
     their number ``k`` (``n``: those of them with a value; never a mean over both groups), else the
-    plain statistic of every seed."""
+    plain statistic of every seed. With ``every_seed``, the plain statistic of the values the tests
+    use (:func:`sweep_values`: a grouped measure's 0 where a seed carries none)."""
     sw = studies.sweeps[name]
     out = []
     for value, study in studies.sweep_points(name):
         s = summaries.get(study)
         if s is None:
             continue
-        out.append((value, _stat_at(s, measure, sw.time)))
+        if every_seed:
+            out.append((value, plain_stat(sweep_values(s, measure, sw.time, fit_errors=False)[0])))
+        else:
+            out.append((value, _stat_at(s, measure, sw.time)))
     return out
 
 
