@@ -228,7 +228,8 @@ def test_grouped_measures_follow_the_summarys_current_flag_and_say_when_there_is
 
 def test_a_sweep_point_of_a_grouped_measure_is_the_mean_of_the_seeds_that_carry_current():
     """The sweep's figure plots what its table prints: for a grouped measure the mean of the k seeds
-    with current (and k of n), never a mean with the others as 0."""
+    with current (and k of n), not a mean with the others as 0; beside it, apart, the mean over every
+    seed that the step and trend rows test."""
     from types import SimpleNamespace
 
     from selfas_graph.studies.sweeps import sweep_points
@@ -246,6 +247,8 @@ def test_a_sweep_point_of_a_grouped_measure_is_the_mean_of_the_seeds_that_carry_
     studies = SimpleNamespace(sweeps={"s": SimpleNamespace(time=300.0)}, sweep_points=lambda name: [(0.0, "p0")])
     ((_, rods),) = sweep_points(studies, {"p0": summary}, "s", "filament_rods")
     assert (rods["n"], rods["of"], rods["mean"]) == (2, 3, 690.0)
+    ((_, every),) = sweep_points(studies, {"p0": summary}, "s", "filament_rods", every_seed=True)
+    assert (every["n"], every["mean"]) == (3, 460.0)  # what the tests use, drawn beside it
     ((_, frac),) = sweep_points(studies, {"p0": summary}, "s", "inside_R_plas")
     assert frac["n"] == 3 and frac["mean"] == pytest.approx(1.0 / 3.0)
 
