@@ -322,11 +322,18 @@ def _page(args, studies):
     from ..studies.page import page_blocks, replace_blocks
 
     page = Path(args.page)
+    if not Path(args.summaries).is_dir():  # every block would say "not run yet" and the page lose its tables
+        raise CliError(
+            f"the summaries folder {args.summaries} does not exist; give the folder of NAME.json (--summaries)"
+        )
     try:
         text = page.read_text(encoding="utf-8")
     except OSError as exc:
         raise CliError(f"cannot read the results page {page}: {exc.strerror or exc}") from None
-    new, missing = replace_blocks(text, page_blocks(studies, args.summaries))
+    import os
+
+    links = Path(os.path.relpath(Path(args.figures).resolve(), page.resolve().parent)).as_posix()  # as the page links
+    new, missing = replace_blocks(text, page_blocks(studies, args.summaries, links))
     if not args.check:
         from ..studies.figures import plot_sweep
         from ..studies.page import load_summary

@@ -235,10 +235,12 @@ def _changed_text(study, summary) -> str:
     )
 
 
-def page_blocks(studies, folder) -> dict:
+def page_blocks(studies, folder, figures="figures") -> dict:
     """Every generated block of the results page, keyed by its marker name: ``claims``, and for
     each study ``table NAME``, ``runs NAME`` and ``figures NAME`` (a study without a summary
-    yet says how to make it)."""
+    yet says how to make it). ``figures``: the figures' folder as the page links it (relative to
+    the page)."""
+    fig = str(figures).rstrip("/") or "."
     summaries = {name: load_summary(folder, name) for name in studies.studies}
     summaries = {k: v for k, v in summaries.items() if v is not None}
     blocks = {
@@ -247,12 +249,14 @@ def page_blocks(studies, folder) -> dict:
         "status": status_text(studies, summaries),
     }
     for name in studies.sweeps:
-        blocks[f"sensitivity {name}"] = sweep_rows(studies, summaries, name)
+        blocks[f"sensitivity {name}"] = sweep_rows(studies, summaries, name, fig)
     for name, study in studies.studies.items():
         s = summaries.get(name)
         if s is None:
+            where = "" if Path(studies.path).as_posix().endswith("docs/studies.toml") else f" --studies {studies.path}"
             todo = (
-                f"Not run at this version yet: `selfas-graph study run {name} --jobs 2`, then `study summarise {name}`."
+                f"Not run at this version yet: `selfas-graph study run {name}{where} --jobs 2`, then "
+                f"`study summarise {name}{where}`."
             )
             blocks[f"table {name}"] = blocks[f"runs {name}"] = todo
             blocks[f"figures {name}"] = ""
@@ -273,13 +277,13 @@ def page_blocks(studies, folder) -> dict:
         blocks[f"figures {name}"] = (
             f"| {study.title}: every measure over time | short-circuit episodes | seed {s['seeds'][0]['seed']} at "
             f"t = {fmt(s['seeds'][0]['t_end'])} |\n|---|---|---|\n"
-            f"| ![](figures/{name}_series.png) | ![](figures/{name}_episodes.png) | ![](figures/{name}_snapshot.png) |"
+            f"| ![]({fig}/{name}_series.png) | ![]({fig}/{name}_episodes.png) | ![]({fig}/{name}_snapshot.png) |"
         )
         # the movie made with this summary (summaries before the key: the MP4 of the same name)
         movie = s.get("movie", f"{name}_movie.mp4")
         if study.section in ("paper", "contrast") and movie:
             blocks[f"figures {name}"] += (
-                f"\n\nA movie of seed {s['seeds'][0]['seed']}: [`figures/{movie}`](figures/{movie}) "
+                f"\n\nA movie of seed {s['seeds'][0]['seed']}: [`{fig}/{movie}`]({fig}/{movie}) "
                 f"(`selfas-graph plot RUN.h5 --movie OUT.mp4`)."
             )
     return blocks

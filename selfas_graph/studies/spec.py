@@ -265,8 +265,10 @@ def _study(where, name, t, since) -> Study:
     _check(where, t, _STUDY_KEYS, ("scenario", "seeds", "t_end"))
     t_end = float(t["t_end"])
     every = float(t.get("every", t_end / 4))
-    if not (t_end > 0 and every > 0 and t["seeds"] >= 1):
-        raise StudiesError(f"{where}: t_end, every and seeds must be positive")
+    if not (0 < t_end < math.inf and 0 < every < math.inf and t["seeds"] >= 1 and t.get("first_seed", 1) >= 0):
+        raise StudiesError(f"{where}: t_end and every must be finite and positive, seeds >= 1, first_seed >= 0")
+    if not all(isinstance(o, str) for o in t.get("overrides", [])):
+        raise StudiesError(f"{where}.overrides: a list of strings KEY=VALUE, got {t['overrides']!r}")
     table_times = _numbers(where, "table_times", t.get("table_times", [t_end]))
     own = t.get("trajectories_since", "")
     if own and (version_key(own) is None or (since and version_key(own) < version_key(since))):
@@ -322,11 +324,33 @@ def _check_links(path, studies, sweeps):
             raise StudiesError(f"{path}: study.{st.name}.sweep: no sweep named {st.sweep!r}")
         if st.sweep and not math.isfinite(st.sweep_value):
             raise StudiesError(f"{path}: study.{st.name}: a study of a sweep needs its sweep_value")
+        if math.isfinite(st.sweep_value) and not st.sweep:
+            raise StudiesError(f"{path}: study.{st.name}.sweep_value: given without the sweep it is a point of")
+    for sw in sweeps.values():
+        if studies[sw.base].sweep == sw.name:
+            raise StudiesError(
+                f"{path}: sweep.{sw.name}.base: {sw.base} is the sweep's base at base_value; it names the sweep "
+                "itself too (sweep, sweep_value): give it once"
+            )
+        points = [sw.base, *(s.name for s in studies.values() if s.sweep == sw.name)]
+        off = [st for st in points if not _summarised_at(studies[st], sw.time)]
+        if off:
+            raise StudiesError(
+                f"{path}: sweep.{sw.name}.time {sw.time:g} is no summarised time of study {off[0]} (its times: "
+                f"every {studies[off[0]].every:g} to t_end and table_times)"
+            )
+
+
+def _summarised_at(study, t) -> bool:
+    """Whether ``t`` is one of ``study``'s summarised times (:attr:`Study.times`)."""
+    return any(abs(t - x) <= 1e-9 * max(1.0, abs(t)) for x in study.times)
 
 
 def _claim(where, c, studies) -> Claim:
     """One ``[[claim]]``: its studies exist, its measures are summarised, its time and window lie
     within both studies' runs."""
+    if not isinstance(c, dict):
+        raise StudiesError(f"{where}: must be a table")
     _check(where, c, _CLAIM_KEYS, ("id", "claim", "paper", "study", "measure", "time"))
     for key in ("study", "null"):
         if c.get(key) and c[key] not in studies:
@@ -344,6 +368,19 @@ def _claim(where, c, studies) -> Claim:
             )
     if c.get("expect", "greater") not in ("greater", "less"):
         raise StudiesError(f"{where}.expect: 'greater' or 'less', got {c['expect']!r}")
+    if c.get("null") and c["null"] == c["study"]:
+        raise StudiesError(f"{where}.null: {c['null']!r} is the claim's own study; name its null model")
+    for key in ("study", "null"):
+        st = studies.get(c.get(key, ""))
+        if st is None:
+            continue
+        if not _summarised_at(st, c["time"]):
+            raise StudiesError(
+                f"{where}.time {c['time']:g} is no summarised time of study {st.name!r} ({key}): give one of its "
+                "times (every to t_end, and table_times)"
+            )
+        if w and not any(w[0] - 1e-9 <= x <= w[1] + 1e-9 for x in st.times):
+            raise StudiesError(f"{where}.window {list(w)} holds no summarised time of study {st.name!r} ({key})")
     looks = c.get("looks", [])
     counts = [n for x in looks if isinstance(x, list) and len(x) == 2 for n in x]
     if len(counts) != 2 * len(looks) or any(type(n) is not int or n < 1 for n in counts):
@@ -364,8 +401,22 @@ def load_studies(path) -> Studies:
     since = raw.get("trajectories_since", "")
     if not isinstance(since, str) or (since and version_key(since) is None):
         raise StudiesError(f'{path}: trajectories_since: a version such as "0.4.0", got {since!r}')
+    for key, kind in (("study", dict), ("sweep", dict), ("claim", list)):
+        if not isinstance(raw.get(key, kind()), kind):
+            what = (
+                "tables [study.NAME]"
+                if key == "study"
+                else "tables [sweep.NAME]"
+                if key == "sweep"
+                else "[[claim]] tables"
+            )
+            raise StudiesError(f"{path}: {key}: {what}, got {raw[key]!r}")
     studies = {name: _study(f"{path}: study.{name}", name, t, since) for name, t in (raw.get("study") or {}).items()}
     sweeps = {name: _sweep(f"{path}: sweep.{name}", name, t, studies) for name, t in (raw.get("sweep") or {}).items()}
     _check_links(path, studies, sweeps)
     claims = tuple(_claim(f"{path}: claim[{k}]", c, studies) for k, c in enumerate(raw.get("claim") or []))
+    ids = [c.id for c in claims]
+    twice = sorted({i for i in ids if ids.count(i) > 1})
+    if twice:
+        raise StudiesError(f"{path}: claim id {twice[0]!r} is given to more than one claim; each claim needs its own")
     return Studies(path=path, studies=studies, claims=claims, sweeps=sweeps, trajectories_since=since)

@@ -39,8 +39,10 @@ def _contacts(f):
 
 def _alignment(f, which):
     """|m_q| over (rods x mean single-rod moment) of the largest structure, of the rods in no
-    structure (NaN for fewer than :data:`~.stats.MIN_FREE_RODS`) or of all rods: 1 for rods all lined
-    up head to tail along one direction, about 1/sqrt(N) at random. All rods need no contact data."""
+    structure (NaN for fewer than :data:`~.stats.MIN_FREE_RODS`) or of all rods: 1 for rods of the
+    mean charge all lined up head to tail along one direction, about 1/sqrt(N) at random. The mean is
+    over all rods, one scale for every structure of a frame, so that strong rods lined up exceed 1.
+    All rods need no contact data."""
     q = f.run.tip_charge
     n_rods = q.shape[0] // 2
     tc = _contacts(f)
@@ -217,6 +219,29 @@ def study_measures(study, compared_times=()) -> list:
     return [_sparse(m, flux_times) if m.name in FLUX_MEASURES else m for m in STUDY_MEASURES]
 
 
+def _check_frames(study, paths, also=()):
+    """StudiesError where a summarised time of ``study`` (or one of ``also``, the times other entries set
+    it against) is no frame of its run files, up to each file's last: the summary would give the
+    nearest frame's values under that time's label (frames every 0.5 summarised at 0.3, say)."""
+    for path in paths:
+        try:
+            with RunFile(path) as run:
+                frames = np.asarray(run.time, dtype=float)
+        except (RunFileError, OSError, RuntimeError, KeyError):
+            continue  # the summary names a file it cannot read
+        if not frames.size:
+            continue
+        tol = 1e-9 * max(1.0, float(frames[-1]))
+        off = [t for t in (*study.times, *also) if t <= frames[-1] + tol and not (np.abs(frames - t) <= tol).any()]
+        if off:
+            raise StudiesError(
+                f"study {study.name}: t = {off[0]:g} is no frame of {Path(path).name} (frames at "
+                f"{', '.join(f'{x:g}' for x in frames[:4])}, ...): give every, table_times and the times of the "
+                "claims and sweeps on it as frame times (multiples of the scenario's output.interval, or t_end)"
+            )
+        return
+
+
 def summarise_study(study, runs, studies=None) -> dict:
     """The summary of ``study`` (a :class:`~.spec.Study`) from its run files in ``runs/study.name``;
     with ``studies`` (the :class:`~.spec.Studies` it belongs to), the flux measures also at the
@@ -230,12 +255,9 @@ def summarise_study(study, runs, studies=None) -> dict:
     paths = [seed_path(folder, s) for s in seeds]
     present = [p for p in paths if p.exists()]
     started = time.perf_counter()
-    out = summarise(
-        present,
-        study.times,
-        t_end=study.t_end,
-        measures=study_measures(study, studies.compared_times(study.name) if studies else ()),
-    )
+    compared = studies.compared_times(study.name) if studies else ()
+    _check_frames(study, present, compared)
+    out = summarise(present, study.times, t_end=study.t_end, measures=study_measures(study, compared))
     # the ensemble's seed entries (short-circuit time, provenance) with the continuations and episodes,
     # joined by file: a file the ensemble summary could not read is in neither
     records = {r["path"]: r for r in (_seed_record(p) for p in present) if r is not None}

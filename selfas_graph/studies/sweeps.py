@@ -66,9 +66,10 @@ def _cell(summary, measure, t) -> str:
     return text
 
 
-def sweep_rows(studies, summaries, name) -> str:
+def sweep_rows(studies, summaries, name, figures="figures") -> str:
     """A sweep's table: a row per value of its parameter, the claim measures at the sweep's time, the
-    p-value of each step from one value to the next (:func:`_step_p`) and the trend over the sweep."""
+    p-value of each step from one value to the next (:func:`_step_p`) and the trend over the sweep;
+    its figure linked in ``figures`` (the folder as the page links it)."""
     sw = studies.sweeps[name]
     head = f"| {sw.parameter} | seeds | " + " | ".join(measure_label(m) for m in CLAIM_MEASURES) + " |"
     rows = [head, "|---|---|" + "---|" * len(CLAIM_MEASURES)]
@@ -97,7 +98,7 @@ def sweep_rows(studies, summaries, name) -> str:
             f"Holm over the sweep's {tested} measures tested)"
         )
         rows.append(f"| {label} | | " + " | ".join(trend) + " |")
-        rows.append(f"\n![{sw.title}: the claim measures at t = {sw.time:g}](figures/sweep_{name}.png)")
+        rows.append(f"\n![{sw.title}: the claim measures at t = {sw.time:g}]({figures}/sweep_{name}.png)")
     return "\n".join(rows)
 
 

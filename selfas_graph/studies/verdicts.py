@@ -156,7 +156,7 @@ def _verdict(d, expect, p=math.nan, paired=None, zero=False, level=None):
         what += f", p = {p:.2g}" if math.isfinite(p) else " without a p-value"
         found = what
     else:
-        sign = f"{'+' if d > 0 else '−'}{abs(d):.1f}"
+        sign = f"{'−' if round(d, 1) < 0 else '+'}{abs(d):.1f}"  # no −0.0
         test = _test_text(p, paired)
         what = f"{sign} SE{'; ' + test if test else ''}"
         found = f"{sign} SE from the null model{'; ' + test if test else ''}"
@@ -236,14 +236,6 @@ def _unpaired_note(s, null, n_pairs) -> str:
     return f"; {' and '.join(words)} have no pair and are left out"
 
 
-def _earlier_looks(c, s, null) -> list:
-    """The readings of claim ``c``'s verdict before this one (its ``looks``: the seed counts, study and
-    null model, of each, in order; a count read twice, on new runs or by another test, is there twice),
-    but for those at this reading's counts (``s`` and ``null``'s), which are this one."""
-    now = (len(s["seeds"]), len(null["seeds"]))
-    return [tuple(x) for x in c.looks if tuple(x) != now]
-
-
 def reading_level(k) -> float:
     """The level of a claim's ``k``-th reading (k = 1, 2, ...): :data:`VERDICT_LEVEL` / (k (k + 1)). As
     1 / (k (k + 1)) = 1 / k - 1 / (k + 1), the levels of all readings, however many, sum to less than
@@ -255,8 +247,8 @@ def reading_level(k) -> float:
 
 def _looks_note(looks) -> str:
     """ "; read before at 8/5 (3 times), 12/12 and 16/16 seeds (study/null model): the 6th reading,
-    tested at 0.0027 / 42" for a claim whose verdict was read before (``looks``, :func:`_earlier_looks`),
-    or "" (:func:`reading_level`)."""
+    tested at 0.0027 / 42" for a claim whose verdict was read before (its ``looks``), or ""
+    (:func:`reading_level`)."""
     if not looks:
         return ""
     counts = {}
@@ -280,7 +272,7 @@ def claim_verdict(c, s, null, nm) -> str:
     is that of the claim's reading (:func:`reading_level`, :func:`_looks_note`)."""
     x, ex = _claim_values(s, c.measure, c)
     y, ey = _claim_values(null, nm, c)
-    looks = _earlier_looks(c, s, null)
+    looks = [tuple(x) for x in c.looks]  # the readings before this one, a count read twice there twice
     level = reading_level(1 + len(looks))
     if not np.isfinite(y).any():
         return "not decided (the null model has no value of the measure)"

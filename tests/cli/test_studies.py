@@ -1,6 +1,7 @@
 """The results pipeline: the studies file, the statistics of the page, its generated blocks, and a
 study run, summarised and written into a page end to end (on the quick scene)."""
 
+import dataclasses
 import json
 import math
 import subprocess
@@ -32,7 +33,7 @@ def test_the_shipped_studies_file_loads_and_every_claim_names_its_study():
     [
         ("[study.a]\nscenario = 'x'\nseeds = 2\n", "missing key 't_end'"),
         ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\nsedes = 3\n", "unknown key 'sedes'"),
-        ("[study.a]\nscenario = 'x'\nseeds = 0\nt_end = 1\n", "must be positive"),
+        ("[study.a]\nscenario = 'x'\nseeds = 0\nt_end = 1\n", "must be finite and positive, seeds >= 1"),
         ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\ntable_times = [2.0]\n", "table_times"),
         ("[[claim]]\nid='c'\nclaim='c'\npaper='p'\nstudy='nope'\nmeasure='m'\ntime=1\n", "no study named 'nope'"),
         ("[stduy.a]\n", "unknown key(s) ['stduy']"),
@@ -68,6 +69,46 @@ def test_the_shipped_studies_file_loads_and_every_claim_names_its_study():
             "[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 10\n[[claim]]\nid='c'\nclaim='c'\npaper='p'\nstudy='a'\n"
             "measure='filament_rods'\ntime=9\nwindow=[true, 5]\n",
             "claim[0].window: a list of numbers",
+        ),
+        # times that no summary holds gave n/a rows and "the null model has no value"
+        (
+            "[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 10\nevery = 5\n[[claim]]\nid='c'\nclaim='c'\npaper='p'\n"
+            "study='a'\nmeasure='filament_rods'\ntime=7\n",
+            "claim[0].time 7 is no summarised time of study 'a' (study)",
+        ),
+        (
+            "[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 10\nevery = 5\n[[claim]]\nid='c'\nclaim='c'\npaper='p'\n"
+            "study='a'\nmeasure='filament_rods'\ntime=10\nwindow=[6, 8]\n",
+            "claim[0].window [6.0, 8.0] holds no summarised time of study 'a'",
+        ),
+        (
+            "[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 10\n[sweep.s]\ntitle='t'\nparameter='p'\nbase='a'\n"
+            "base_value=1\ntime=50\n",
+            "sweep.s.time 50 is no summarised time of study a",
+        ),
+        (
+            "[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 10\n[[claim]]\nid='c'\nclaim='c'\npaper='p'\nstudy='a'\n"
+            "null='a'\nmeasure='filament_rods'\ntime=10\n",
+            "claim[0].null: 'a' is the claim's own study",
+        ),
+        (
+            "[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 10\n[[claim]]\nid='c'\nclaim='c'\npaper='p'\nstudy='a'\n"
+            "measure='filament_rods'\ntime=10\n[[claim]]\nid='c'\nclaim='d'\npaper='p'\nstudy='a'\n"
+            "measure='cycle_rank'\ntime=10\n",
+            "claim id 'c' is given to more than one claim",
+        ),
+        # tables that are not tables, an infinite end time: tracebacks before
+        ("claim = 'x'\n", "claim: [[claim]] tables, got 'x'"),
+        ("study = 5\n", "study: tables [study.NAME], got 5"),
+        ("claim = ['x']\n", "claim[0]: must be a table"),
+        ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = inf\n", "must be finite and positive"),
+        ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\nfirst_seed = -3\n", "first_seed >= 0"),
+        ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\noverrides = [60]\n", "a.overrides: a list of strings"),
+        ("[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\nsweep_value = 2\n", "given without the sweep"),
+        (
+            "[study.a]\nscenario = 'x'\nseeds = 2\nt_end = 1\nsweep = 's'\nsweep_value = 1\n[sweep.s]\ntitle='t'\n"
+            "parameter='p'\nbase='a'\nbase_value=1\ntime=1\n",
+            "sweep.s.base: a is the sweep's base at base_value; it names the sweep itself too",
         ),
     ],
 )
@@ -426,7 +467,7 @@ def test_a_study_is_run_summarised_and_written_into_a_page(tmp_path, monkeypatch
 [study.q]
 title = "Quick scene"
 scenario = "{(ROOT / "scenarios" / "quick.toml").as_posix()}"
-overrides = ["rods.count=60"]
+overrides = ["rods.count=60", "output.interval=0.25"]
 seeds = 2
 t_end = 0.5
 every = 0.25
@@ -573,19 +614,20 @@ def test_a_claim_read_before_at_other_seed_counts_is_tested_over_all_its_reading
     """Seeds added until a verdict turns raise its chance of a false one: the k-th reading is tested at
     0.0027 / (k (k + 1)), whose sum over any number of readings stays below 0.0027 (a level divided by
     the readings so far sums as the harmonic series). ``looks`` lists the readings before this one, a
-    count read twice twice; a look at this reading's counts is this one. Welch p = 0.00061 (3 seeds a
-    side, d = 9.8) passes 0.0027 at the first reading, not 0.0027 / 6 at the second."""
+    count read twice twice (it dropped every earlier reading at this one's counts). Welch p = 0.00061
+    (3 seeds a side, d = 9.8) passes 0.0027 / 2 at the first reading, not 0.0027 / 6 at the second."""
     from selfas_graph.studies.verdicts import VERDICT_LEVEL, claim_rows, reading_level
 
     assert sum(reading_level(k) for k in range(1, 10_000)) < VERDICT_LEVEL
     assert [reading_level(k) * k * (k + 1) for k in (1, 5)] == pytest.approx([VERDICT_LEVEL] * 2, rel=1e-15)
     scene, null = _fake_summary([0.9, 1.0, 1.1]), _fake_summary([0.1, 0.2, 0.3])
     for looks, words in [
-        ("[[3, 3]]", "| reproduced (+9.8 SE from the null model; Welch p = 0.00061) |"),
+        ("[]", "| reproduced (+9.8 SE from the null model; Welch p = 0.00061) |"),
         ("[[2, 2]]", "not distinguished from the null model (+9.8 SE; Welch p = 0.00061, not below 0.00045); read "
          "before at 2/2 seeds (study/null model): the 2nd reading, tested at 0.0027 / 6 |"),
-        ("[[1, 1], [2, 3], [1, 1], [3, 3]]", "read before at 1/1 (twice) and 2/3 seeds (study/null model): the "
-         "4th reading, tested at 0.0027 / 20 |"),
+        # a reading at this one's counts (runs made again) is an earlier one too
+        ("[[1, 1], [3, 3], [1, 1], [3, 3]]", "read before at 1/1 (twice) and 3/3 (twice) seeds (study/null model): "
+         "the 5th reading, tested at 0.0027 / 30 |"),
     ]:  # fmt: skip
         studies = _claim_against_null(
             tmp_path, f'measure = "largest_alignment"\nnull_measure = "all_alignment"\nlooks = {looks}'
@@ -666,8 +708,13 @@ def test_study_page_through_a_link_writes_the_file_it_names(tmp_path):
     real.write_text("<!-- begin generated: table a -->\nold\n<!-- end generated: table a -->\n")
     os.symlink(real, tmp_path / "link.md")
     args = ["study", "page", "--studies", str(tmp_path / "s.toml"), "--summaries", str(tmp_path / "none")]
+    # a summaries folder that is not there (a typo) is refused: every block would say "not run yet"
+    assert main([*args, "--page", str(tmp_path / "link.md")]) == 2
+    assert "old" in real.read_text()
+    (tmp_path / "none").mkdir()
     assert main([*args, "--page", str(tmp_path / "link.md")]) == 0
     assert os.path.islink(tmp_path / "link.md") and "Not run at this version yet" in real.read_text()
+    assert f"--studies {tmp_path / 's.toml'}" in real.read_text()  # the commands it names find this file
 
 
 def test_a_windowed_claim_and_a_null_without_spread():
@@ -1334,3 +1381,28 @@ def test_a_pooled_rank_test_of_seeds_that_share_their_rods_is_conservative():
                 y += (level[:n] + rng.normal(0.0, 1.0, n)).tolist()
             rejected += kendalltau(x, y).pvalue < 0.05
         assert rejected / 400 < most
+
+
+def test_a_study_time_that_is_no_frame_of_its_runs_stops_the_summary(tmp_path):
+    """Frames every 0.05: a study summarised every 0.04 gave the nearest frame's values under the label
+    0.04, 0.08, ... without a word (the ensemble command refuses such times); the summary now stops,
+    naming the time and the file. Times past a file's last frame are the seeds' that stopped early."""
+    import shutil
+
+    from selfas_graph.studies.summary import _check_frames
+
+    run = tmp_path / "seed_0001.h5"
+    shutil.copyfile(Path(__file__).parent.parent / "data" / "legacy_run_58b30f8.h5", run)
+
+    def study(lines):
+        (tmp_path / "s.toml").write_text(f"[study.a]\nscenario = 'x'\nseeds = 1\nt_end = 0.3\n{lines}\n")
+        return load_studies(tmp_path / "s.toml").study("a")
+
+    _check_frames(study("every = 0.1\ntable_times = [0.25]"), [run])
+    _check_frames(study("every = 0.1"), [run], also=[0.15])
+    with pytest.raises(StudiesError, match=r"study a: t = 0.04 is no frame of seed_0001.h5 \(frames at 0, 0.05, 0.1"):
+        _check_frames(study("every = 0.04"), [run])
+    with pytest.raises(StudiesError, match="t = 0.12 is no frame"):
+        _check_frames(study("every = 0.1"), [run], also=[0.12])
+    short = study("every = 0.1")
+    _check_frames(dataclasses.replace(short, t_end=0.5, every=0.5), [run])  # 0.5 lies past the last frame
