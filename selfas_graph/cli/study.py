@@ -175,7 +175,33 @@ def run(args):
         raise CliError(str(exc)) from None
 
 
+#: the options (argparse destinations) each action reads, besides --studies: another's given is refused
+USED = {
+    "list": set(),
+    "run": {"runs", "jobs", "force", "names"},
+    "summarise": {"runs", "summaries", "figures", "page", "no_figures", "no_movie", "names"},
+    "page": {"summaries", "figures", "page", "check"},
+}
+_DEFAULTS = {
+    "runs": "runs", "jobs": 1, "force": False, "summaries": DEFAULT_SUMMARIES, "figures": None,
+    "page": DEFAULT_PAGE, "check": False, "no_figures": False, "no_movie": False, "names": [],
+}  # fmt: skip
+
+
+def _check_options(args):
+    """An option (or study names) the action does not read is refused by name: it was taken and ignored
+    (``study list --check``, ``study page fig2``)."""
+    for dest, default in _DEFAULTS.items():
+        if getattr(args, dest) != default and dest not in USED[args.action]:
+            users = " and ".join(a for a, used in USED.items() if dest in used)
+            what = "study names are" if dest == "names" else f"--{dest.replace('_', '-')} is"
+            raise CliError(
+                f"{what} read by {users}, not by {args.action}: leave {'them' if dest == 'names' else 'it'} out"
+            )
+
+
 def _run(args):
+    _check_options(args)
     studies = _studies(args)
     if args.figures is None:  # beside the page whose figures they are
         args.figures = str(Path(args.page).parent / FIGURES_BESIDE_PAGE)

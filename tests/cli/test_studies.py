@@ -1406,3 +1406,20 @@ def test_a_study_time_that_is_no_frame_of_its_runs_stops_the_summary(tmp_path):
         _check_frames(study("every = 0.1"), [run], also=[0.12])
     short = study("every = 0.1")
     _check_frames(dataclasses.replace(short, t_end=0.5, every=0.5), [run])  # 0.5 lies past the last frame
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["list", "--check"], "--check is read by page, not by list: leave it out"),
+        (["page", "fig2"], "study names are read by run and summarise, not by page: leave them out"),
+        (["run", "fig2", "--summaries", "x"], "--summaries is read by summarise and page, not by run"),
+        (["summarise", "--jobs", "2"], "--jobs is read by run, not by summarise"),
+    ],
+)
+def test_an_option_the_action_does_not_read_is_refused(argv, words, capsys):
+    """`study list --check` and `study page fig2` took what they never read without a word."""
+    from selfas_graph.cli.main import main
+
+    assert main(["study", *argv]) == 2
+    assert words in capsys.readouterr().err
