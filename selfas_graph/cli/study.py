@@ -56,7 +56,7 @@ def add_arguments(p):
     )
     p.add_argument("--page", default=DEFAULT_PAGE, help=f"the results page (default {DEFAULT_PAGE})")
     p.add_argument("--check", action="store_true", help="page: write nothing; exit 1 if the page is not up to date")
-    p.add_argument("--no-figures", action="store_true", help="summarise: the summary only")
+    p.add_argument("--no-figures", action="store_true", help="summarise: the summary only; page: the page only")
     p.add_argument("--no-movie", action="store_true", help="summarise: no movie of the first seed")
 
 
@@ -180,7 +180,7 @@ USED = {
     "list": set(),
     "run": {"runs", "jobs", "force", "names"},
     "summarise": {"runs", "summaries", "figures", "page", "no_figures", "no_movie", "names"},
-    "page": {"summaries", "figures", "page", "check"},
+    "page": {"summaries", "figures", "page", "check", "no_figures"},
 }
 _DEFAULTS = {
     "runs": "runs", "jobs": 1, "force": False, "summaries": DEFAULT_SUMMARIES, "figures": None,
@@ -360,7 +360,7 @@ def _page(args, studies):
 
     links = Path(os.path.relpath(Path(args.figures).resolve(), page.resolve().parent)).as_posix()  # as the page links
     new, missing = replace_blocks(text, page_blocks(studies, args.summaries, links))
-    if not args.check:
+    if not (args.check or args.no_figures):
         from ..studies.figures import plot_sweep
         from ..studies.page import load_summary
 
