@@ -36,6 +36,16 @@ PERCOLATION_JSON = "percolation.json"
 MOVIE_FRAMES = 150
 
 
+#: the options (argparse destinations) each action reads, besides --studies: another's given is refused
+USED = {
+    "list": set(),
+    "run": {"runs", "jobs", "force", "names"},
+    "summarise": {"runs", "summaries", "figures", "page", "no_figures", "no_movie", "names"},
+    "page": {"summaries", "figures", "page", "check", "no_figures"},
+}
+_OPTIONS = sorted(set().union(*USED.values()) - {"names"})
+
+
 def add_arguments(p):
     p.add_argument("action", choices=("list", "run", "summarise", "page"), help="what to do")
     p.add_argument("names", nargs="*", metavar="NAME", help="studies (run, summarise; default for summarise: all)")
@@ -58,6 +68,7 @@ def add_arguments(p):
     p.add_argument("--check", action="store_true", help="page: write nothing; exit 1 if the page is not up to date")
     p.add_argument("--no-figures", action="store_true", help="summarise: the summary only; page: the page only")
     p.add_argument("--no-movie", action="store_true", help="summarise: no movie of the first seed")
+    p.set_defaults(_defaults={d: p.get_default(d) for d in _OPTIONS})  # what _check_options compares with
 
 
 def _studies(args):
@@ -175,24 +186,12 @@ def run(args):
         raise CliError(str(exc)) from None
 
 
-#: the options (argparse destinations) each action reads, besides --studies: another's given is refused
-USED = {
-    "list": set(),
-    "run": {"runs", "jobs", "force", "names"},
-    "summarise": {"runs", "summaries", "figures", "page", "no_figures", "no_movie", "names"},
-    "page": {"summaries", "figures", "page", "check", "no_figures"},
-}
-_DEFAULTS = {
-    "runs": "runs", "jobs": 1, "force": False, "summaries": DEFAULT_SUMMARIES, "figures": None,
-    "page": DEFAULT_PAGE, "check": False, "no_figures": False, "no_movie": False, "names": [],
-}  # fmt: skip
-
-
 def _check_options(args):
     """An option (or study names) the action does not read is refused by name: it was taken and ignored
-    (``study list --check``, ``study page fig2``)."""
-    for dest, default in _DEFAULTS.items():
-        if getattr(args, dest) != default and dest not in USED[args.action]:
+    (``study list --check``, ``study page fig2``). The options' defaults are the parser's."""
+    given = {d for d in _OPTIONS if getattr(args, d) != args._defaults[d]} | ({"names"} if args.names else set())
+    for dest in sorted(given):
+        if dest not in USED[args.action]:
             users = " and ".join(a for a, used in USED.items() if dest in used)
             what = "study names are" if dest == "names" else f"--{dest.replace('_', '-')} is"
             raise CliError(

@@ -17,7 +17,7 @@ from ..model.circuitlog import CIRCUIT_LOG_DTYPE
 from ..model.events import EVENT_DTYPE, named_events
 from ..model.validate import is_whole_number
 from . import layout
-from .h5md_format import FileInUseError, RunFileError
+from .h5md_format import HDF5_READ_ERRORS, FileInUseError, RunFileError
 
 
 def _pick_frame(path, n, frame, t, times) -> int:
@@ -206,7 +206,7 @@ class RunFile:
         the frames it found then), or ""."""
         try:
             now = int(self.f[layout.TIP_POSITION_STEP].shape[0])
-        except (OSError, RuntimeError, KeyError):
+        except HDF5_READ_ERRORS:
             return ""
         if now <= self._frames:
             return ""

@@ -110,7 +110,7 @@ def paired_difference(setting, default, measure, t, fit_errors=True) -> dict:
         ok &= known_a[ia] & known_b[ib]
         out |= {"k_a": int((ok & act_a[ia]).sum()), "k_b": int((ok & act_b[ib]).sum()), "of": int(ok.sum())}
         if not (out["k_a"] or out["k_b"]):  # no current on either side: nothing to compare, not a 0 = 0
-            ok &= False
+            ok = np.zeros_like(ok)
     if ea is not None and not fit_errors:
         ea, eb = np.zeros_like(ea), np.zeros_like(eb)
     pick = np.where(ok, 0.0, np.nan)  # the pairs kept: NaN elsewhere, which paired_stat leaves out

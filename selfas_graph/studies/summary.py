@@ -25,7 +25,7 @@ from ..analysis.moments import monopole_moment
 from ..analysis.skeleton import structures
 from ..ensemble import FRAME_MEASURES, Measure, seed_path, summarise
 from ..io.atomic import write_text_atomic
-from ..io.h5md import RunFile, RunFileError
+from ..io.h5md import HDF5_READ_ERRORS, RunFile, RunFileError
 from ..provenance import cpu_model, source_commit
 from .spec import StudiesError
 from .stats import MIN_FREE_RODS
@@ -227,7 +227,7 @@ def _check_frames(study, paths, also=()):
         try:
             with RunFile(path) as run:
                 frames = np.asarray(run.time, dtype=float)
-        except (RunFileError, OSError, RuntimeError, KeyError):
+        except (RunFileError, *HDF5_READ_ERRORS):
             continue  # the summary names a file it cannot read
         if not frames.size:
             continue
