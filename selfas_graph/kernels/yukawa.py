@@ -146,13 +146,26 @@ def _yukawa_row_f32(centre, rod_charge, i, start, index, inv_s, core2, rc2, buf)
     # vector with AVX2. One loop doing both ran at the width of its float64 part, 4 lanes. Measured
     # on one core of a Zen 4 (Fig. 2 scene, 1200 and 24 000 rods, interleaved with the float64 sum):
     # 1.86 and 1.58 times faster than float64 for AVX2 (haswell build) against 1.40 and 1.35 with
-    # one loop; the host build (AVX-512) 1.84 and 1.71 against 1.14 and 1.11
+    # one loop; the host build (AVX-512) 1.84 and 1.71 against 1.14 and 1.11.
+    # [perf] The gather reads row i once, writes through 1-D views of buf and takes the entry as
+    # unsigned (entries are positions, never negative): with a signed entry numba adds a
+    # wraparound test to every load, and with AVX-512 the whole sum then took 1.25 times as long
+    # (host build, Zen 4, 24 000 rods; the AVX2 build alike). The same values in buf, so the same
+    # forces bit for bit (docs/performance.md 'The Yukawa sum and the neighbour lists')
+    xi = centre[i, 0]
+    yi = centre[i, 1]
+    zi = centre[i, 2]
+    qi = rod_charge[i]
+    bx = buf[0]
+    by = buf[1]
+    bz = buf[2]
+    bq = buf[3]
     for k in range(m):
-        l = index[s + k]
-        buf[0, k] = np.float32(centre[i, 0] - centre[l, 0])
-        buf[1, k] = np.float32(centre[i, 1] - centre[l, 1])
-        buf[2, k] = np.float32(centre[i, 2] - centre[l, 2])
-        buf[3, k] = np.float32(rod_charge[i] * rod_charge[l])
+        l = np.uint64(index[s + k])
+        bx[k] = np.float32(xi - centre[l, 0])
+        by[k] = np.float32(yi - centre[l, 1])
+        bz[k] = np.float32(zi - centre[l, 2])
+        bq[k] = np.float32(qi * rod_charge[l])
     zero = np.float32(0.0)
     fx = zero
     fy = zero
