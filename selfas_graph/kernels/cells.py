@@ -221,6 +221,18 @@ def max_displacement2(position, reference):
     return m
 
 
+@njit
+def take_rows(source, order, out):
+    """``out[t] = source[order[t]]`` for the rows of an (n, 3) array (the copies in cell order that
+    :func:`.yukawa.yukawa_centres_sorted` reads): numpy's ``source[order]`` took 420 us for 24 000
+    rows in a random order against 32 us here (Zen 4); the same numbers, copied."""
+    for t in range(order.shape[0]):
+        i = order[t]
+        out[t, 0] = source[i, 0]
+        out[t, 1] = source[i, 1]
+        out[t, 2] = source[i, 2]
+
+
 #: cells per search radius along each axis: cells of side ``radius / 2`` and the 5 x 5 x 5 cells
 #: around a point's own (25 contiguous runs) hold 0.58 of the candidates of side ``radius`` and
 #: 3 x 3 x 3 cells; measured on one core, rod-centre lists (radius 6.86) 20-25 % faster to build at

@@ -297,6 +297,35 @@ def test_row_ranges_do_not_change_a_row(state, bounds):
         np.testing.assert_array_equal(blockwise(kernel, shape, blocks), blockwise(kernel, shape, [0, shape[0]]))
 
 
+def test_centres_share_and_cell_order_copies_are_numpy_s_numbers(rng):
+    """The compiled rod centres, the halving of a centre force onto the tips and the copies in cell
+    order give numpy's numbers bit for bit (the runs before them used numpy's), on either build."""
+    from selfas_graph.kernels.cells import take_rows
+
+    x = rng.normal(size=(2 * 501, 3)) * 10.0 ** rng.integers(-3, 4, size=(2 * 501, 1))
+    f = rng.normal(size=(501, 3))
+    order = rng.permutation(501)
+    want_c = 0.5 * (x[0::2] + x[1::2])
+    want_t = np.empty_like(x)
+    want_t[0::2] = 0.5 * f
+    want_t[1::2] = 0.5 * f
+    for build in ("serial", "parallel"):
+        c = np.full((501, 3), np.nan)
+        getattr(kr.rod_centres, build)(x, c)
+        np.testing.assert_array_equal(c.view(np.int64), want_c.view(np.int64))
+        t = np.full_like(x, np.nan)
+        getattr(kr.share_by_mass, build)(f, t)
+        np.testing.assert_array_equal(t.view(np.int64), want_t.view(np.int64))
+    # a slice of the tip rows, as the Yukawa term writes its rows lo:hi
+    t = np.zeros_like(x)
+    kr.share_by_mass(f[100:200], t[200:400])
+    np.testing.assert_array_equal(t[200:400], want_t[200:400])
+    assert not t[:200].any() and not t[400:].any()
+    out = np.full((501, 3), np.nan)
+    take_rows(want_c, order, out)
+    np.testing.assert_array_equal(out, want_c[order])
+
+
 def _rows_kernel_cases(rng):
     """(kernel, arguments) for every O(n) kernel built by ``njit_rows``, on 3000 random tips."""
     from selfas_graph.kernels import external as kx
@@ -341,6 +370,8 @@ def _rows_kernel_cases(rng):
         (kr.bond_acceleration, lambda: (v, x, x + v, True, np.zeros((n, 3)))),
         (kr.bond_length_error, lambda: (x, np.zeros(0))),
         (kr.constrain_bonds, lambda: (x.copy(), v.copy(), True, True, np.zeros(0))),
+        (kr.rod_centres, lambda: (x, np.zeros((n // 2, 3)))),
+        (kr.share_by_mass, lambda: (x[: n // 2], np.zeros((n, 3)))),
         (kf.uniform_force_on_tips, lambda: (q, np.array([0.1, -0.2, 0.5]), np.zeros((n, 3)))),
         (kf.plasma_field, lambda: (x, 0.1, -0.2, 1.5, 7.5, np.zeros((n, 3)))),
         (kf.plasma_force_on_tips, lambda: (x, q, 0.1, -0.2, 1.5, 7.5, np.zeros((n, 3)))),

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...kernels.rigid import share_by_mass  # noqa: F401 (the terms' helper, kept importable here)
 from ...kernels.tree import cell_bounds
 
 
@@ -95,12 +96,6 @@ def fill_cells_shared(blocks, tree, fill, arrays):
     cells = np.arange(tree.start.shape[0])
     for a in arrays:
         blocks.gather_runs(a, cells, bounds)
-
-
-def share_by_mass(centre_force, tip_out):
-    """A force on a rod centre goes half to each tip (equal masses; paper Eqs. 5-6)."""
-    tip_out[0::2] = 0.5 * centre_force
-    tip_out[1::2] = 0.5 * centre_force
 
 
 def kinetic(velocity, tips):

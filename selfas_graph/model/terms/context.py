@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...kernels import currenttree as kct
+from ...kernels.rigid import rod_centres
 from ...parallel import RowBlocks
 from ..neighbours import NeighbourList
 from ..network import RodCurrents
@@ -163,7 +164,8 @@ class EvalContext:
     def centre(self) -> np.ndarray:
         """Rod centres (n_rods, 3) (computed once per binding)."""
         if self._centre is None:
-            self._centre = 0.5 * (self.position[0::2] + self.position[1::2])
+            self._centre = np.empty((self.position.shape[0] // 2, 3))
+            rod_centres(self.position, self._centre)
         return self._centre
 
     def current_tree(self, leaf_size=kct.LEAF_SIZE, order=kct.ORDER):
