@@ -235,6 +235,13 @@ def _main(argv) -> int:
     parser = build_parser()
     args = parse_args(parser, argv)
     try:
+        if world.size > 1 and args.command in READERS:
+            # every rank would run the whole command: the same lines printed once per rank, and
+            # the ranks racing to write the same figure or export
+            raise CliError(
+                f"{args.command} reads run files in one process: run it without mpiexec "
+                f"(under mpiexec, simulate and the bench tools share the work between ranks)"
+            )
         return int(args._run(args) or 0)
     except CliError as exc:
         if world.rank == 0:

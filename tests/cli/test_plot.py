@@ -125,6 +125,18 @@ def test_default_name_and_no_overwrite_without_force(run_file, capsys):
     assert out.read_bytes() == before
 
 
+def test_an_existing_file_of_a_suffix_no_figure_takes_is_refused_for_its_suffix(run_file, tmp_path, capsys):
+    """An existing file whose suffix is not a figure's: the error names the suffix, not --force (which
+    would then be refused for the suffix), and the file is kept."""
+    out = tmp_path / "frames.gsd"
+    out.write_bytes(b"keep me")
+    for extra in ([], ["--force"]):
+        assert main(["plot", str(run_file), "--kind", "density", "-o", str(out), *extra]) == 2
+        err = capsys.readouterr().err
+        assert "gsd" in err and "--force" not in err, err
+    assert out.read_bytes() == b"keep me"
+
+
 def test_missing_file_is_a_clear_error(tmp_path, capsys):
     """A run file that does not exist: exit 2, one line naming the file."""
     missing = tmp_path / "nothere.h5"

@@ -258,3 +258,12 @@ def test_fig2_with_the_current_tree_on_two_and_three_ranks_gives_the_serial_run(
         res = _launch(ranks, [*args, "-o", f"f{ranks}.h5"], tmp_path)
         assert res.returncode == 0, res.stderr
         _assert_same_run(tmp_path / f"f{ranks}.h5", tmp_path / "f1.h5")
+
+
+def test_commands_that_read_run_files_refuse_mpiexec(scene):
+    """``mpiexec -n 2 selfas-graph export/plot/...`` would run the whole command on every rank (lines
+    printed twice, two ranks writing one file): refused, once, and nothing is written."""
+    res = launch(["-m", "selfas_graph.cli.main", "export", "serial.h5", "--format", "gsd", "-o", "twice.gsd"], scene, 2)
+    assert res.returncode == 2
+    assert res.stderr.count("without mpiexec") == 1, res.stderr
+    assert not (scene / "twice.gsd").exists()
