@@ -141,7 +141,8 @@ def _output_path(args, run_path: Path, frame: int) -> Path:
         out = run_path.with_name(f"{run_path.stem}_{args.kind}.png")
     else:
         out = run_path.with_name(f"{run_path.stem}_{args.kind}_frame{frame}.png")
-    plot_format(out)  # first: an unknown suffix is refused with or without --force
+    check_target(out, "output file", force=True, inputs=[run_path], keep_hdf5=True)  # never written
+    plot_format(out)  # before whether it exists: --force would not make an unknown suffix a figure's
     check_target(out, "output file", force=args.force, inputs=[run_path], keep_hdf5=True)
     check_folder(out, "output file")
     return out

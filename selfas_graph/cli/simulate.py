@@ -161,6 +161,11 @@ def _load_resume(args):
             f"give a later end time"
         )
     if not out.exists():
+        if args.output:
+            raise CliError(
+                f"cannot resume into {out}: with --resume, -o names the run file to continue, which must exist "
+                f"(a checkpoint continues its run file; to continue into a new file, copy the run file first)"
+            )
         raise CliError(
             f"cannot resume: the run file {out} of checkpoint {ckpt} does not exist (give the run file with -o)"
         )
@@ -170,7 +175,32 @@ def _load_resume(args):
         raise CliError(str(exc)) from None
     for note in cont.notes:
         print(f"note: {note}", file=sys.stderr)
+    _check_frames_after(out, ckpt, float(snap["time"]), args.force)
     return cont.scenario, snap, out, ckpt, cont.run_id
+
+
+def _check_frames_after(out, ckpt, t_ckpt, force):
+    """The frames of ``out`` after the checkpoint's time ``t_ckpt`` are dropped by the resume and computed
+    again (those of a run stopped between two checkpoints): said in a note. From a checkpoint that is
+    not the one beside the run file (an older copy), refused without ``--force``: the run file, and its
+    own later checkpoint, would be wound back to the copy's time."""
+    try:
+        with RunFile(out) as run:
+            later = [float(t) for t in run.time if float(t) > t_ckpt]
+    except (OSError, RunFileError, KeyError, ValueError):
+        return  # continuation() has read the file; a frame table it cannot show is trimmed by the writer
+    if not later:
+        return
+    frames = (
+        f"{len(later)} frame{'s' if len(later) > 1 else ''} of {out} after t = {t_ckpt:.6g} (to t = {later[-1]:.6g})"
+    )
+    own = checkpoint_path(out)
+    if not (own.exists() and same_file(own, ckpt)) and not force:
+        raise CliError(
+            f"resuming {out} from {ckpt}, not from its own checkpoint {own.name}, drops the {frames} and "
+            f"replaces {own.name}: pass --force to wind the run back to t = {t_ckpt:.6g}, or resume {out}"
+        )
+    print(f"note: the {frames} are dropped and computed again from the checkpoint {ckpt}", file=sys.stderr)
 
 
 def _check_output_name(out: Path, resuming=False):
@@ -235,7 +265,8 @@ def _on_root(fn, share=True):
 
 
 def _prepare(args):
-    """(scenario, snapshot or None, output path, checkpoint path), every input and file checked."""
+    """(scenario, snapshot or None, output path, checkpoint path, run id, checkpoint read or None), every
+    input and file checked; new checkpoints go to the checkpoint path, beside the output."""
     snap = None
     if args.resume:
         scenario, snap, out, read_from, run_id = _load_resume(args)
@@ -292,11 +323,11 @@ def _prepare(args):
                 f"{stale} exists (an earlier run's failed state); pass --force to remove it with the run, or -o "
                 f"to choose another name"
             )
-    return scenario, snap, out, ckpt, run_id
+    return scenario, snap, out, ckpt, run_id, (read_from if snap is not None else None)
 
 
 def run(args):
-    scenario, snap, out, ckpt, run_id = _on_root(lambda: _prepare(args))
+    scenario, snap, out, ckpt, run_id, read_from = _on_root(lambda: _prepare(args))
     p = scenario.params
     try:
         sim = (
@@ -311,13 +342,13 @@ def run(args):
         n_steps = sim.steps_to(p.run.t_end)
     except ValueError as exc:
         raise CliError(f"run.t_end: {exc}") from None
-    plan = _plan(args, sim, snap, ckpt, out, n_steps)
+    plan = _plan(args, sim, snap, read_from, out, n_steps)
     if world.rank == 0:
         _announce(sim, plan)
     if args.dry_run:
-        return _dry_run(sim, snap, ckpt, out, plan)
+        return _dry_run(sim, snap, read_from, out, plan)
 
-    writer = _on_root(lambda: _open_writer(args, sim, scenario, snap, out, ckpt, run_id), share=False)
+    writer = _on_root(lambda: _open_writer(args, sim, scenario, snap, out, read_from, run_id), share=False)
     checkpointer = None
     if world.size > 1:
         # the other ranks take the frames' calls too (their energies are sums over all ranks)

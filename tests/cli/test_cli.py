@@ -363,7 +363,7 @@ def test_an_interrupt_outside_a_run_ends_every_rank(monkeypatch, capsys, rank):
     """A Ctrl-C that reaches the command line outside a run's own signal handling (while the command
     starts) leaves the other ranks waiting in a collective call, where no signal reaches Python: the
     job is ended with MPI_Abort(130), and the one line is printed by rank 0 alone."""
-    import selfas_graph.cli.analyze as analyze
+    import selfas_graph.cli.simulate as simulate
 
     world = _TwoRanks(rank)
     monkeypatch.setattr("selfas_graph.parallel.world", world)
@@ -372,11 +372,11 @@ def test_an_interrupt_outside_a_run_ends_every_rank(monkeypatch, capsys, rank):
     def interrupted(args):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(analyze, "run", interrupted)
+    monkeypatch.setattr(simulate, "run", interrupted)
     with pytest.raises(SystemExit) as exc:
-        main(["analyze", "any.h5"])
+        main(["simulate", "any.toml"])
     assert exc.value.code == world.aborted == 130
-    assert ("selfas-graph analyze: interrupted" in capsys.readouterr().err) is (rank == 0)
+    assert ("selfas-graph simulate: interrupted" in capsys.readouterr().err) is (rank == 0)
 
 
 def test_abort_job_lets_the_last_words_out_then_ends_every_rank(monkeypatch):

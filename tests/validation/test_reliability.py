@@ -510,6 +510,33 @@ def test_a_plain_resume_continues_to_the_end_time_given_on_the_command_line(scen
     assert frame_times(out)[-1] == pytest.approx(0.004)
 
 
+def test_a_resume_from_an_older_copy_of_the_checkpoint_needs_force_and_names_the_file_read(scen, tmp_path, capsys):
+    """``--resume COPY.checkpoint.h5`` continues the run file the copy names: with frames after the
+    copy's time in it, the resume would wind that file (never named) and its own checkpoint back, so
+    it is refused without --force; with --force it says which checkpoint it read."""
+    out = tmp_path / "run.h5"
+    assert simulate(capsys, scen, "-o", out)[0] == 0  # to t = 0.004
+    copy = tmp_path / "copy.checkpoint.h5"
+    shutil.copyfile(checkpoint_path(out), copy)
+    assert simulate(capsys, "--resume", out, "--t-end", "0.008")[0] == 0
+    before = out.read_bytes(), checkpoint_path(out).read_bytes()
+    code, _, err = simulate(capsys, "--resume", copy, "--t-end", "0.01")
+    assert code == 2 and "copy.checkpoint.h5" in err and "--force" in err and "2 frames" in err, err
+    assert (out.read_bytes(), checkpoint_path(out).read_bytes()) == before
+    code, text, err = simulate(capsys, "--resume", copy, "--t-end", "0.01", "--force")
+    assert code == 0, err
+    assert f"from {copy}" in text and "dropped and computed again" in err
+    assert frame_times(out)[-1] == pytest.approx(0.01)
+
+
+def test_a_resume_into_a_run_file_that_does_not_exist_says_what_o_names(scen, tmp_path, capsys):
+    out = tmp_path / "run.h5"
+    assert simulate(capsys, scen, "-o", out)[0] == 0
+    code, _, err = simulate(capsys, "--resume", checkpoint_path(out), "-o", tmp_path / "new.h5")
+    assert code == 2 and "must exist" in err and "copy the run file" in err, err
+    assert not (tmp_path / "new.h5").exists()
+
+
 # ----------------------------------------------------------------------------- I/O errors
 
 BIG = (
