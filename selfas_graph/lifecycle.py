@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ._version import __version__
+from .io import layout
 from .io.checkpoint import CheckpointError, failure_meta, read_checkpoint, write_failure
 from .io.h5md import (
     HDF5_READ_ERRORS,
@@ -367,6 +368,7 @@ class _RunFacts:
     problems: list  # why it cannot be appended to (none: it can)
     status: str
     parameters: dict | None  # parameters_json (None: unreadable)
+    last_row: int | None  # the last step of the per-step rows (-1: none yet; None: a file without them)
 
 
 def _run_file_facts(run_path) -> _RunFacts:
@@ -382,6 +384,7 @@ def _run_file_facts(run_path) -> _RunFacts:
                 problems=appendable_problems(run_file.f),
                 status=run_file.status,
                 parameters=_stored_parameters(run_file),
+                last_row=_last_step_row(run_file.f),
             )
     except RunFileError as exc:
         raise ContinuationError(f"cannot resume into {run_path}: {exc}") from None
@@ -390,6 +393,17 @@ def _run_file_facts(run_path) -> _RunFacts:
         if why is None:
             raise
         raise ContinuationError(f"cannot resume into {run_path}: {why}") from None
+
+
+def _last_step_row(f) -> int | None:
+    """The step of the last per-step row of an open run file (:data:`~.io.layout.BOND_ERROR_PER_STEP`;
+    a run writes one for every step and hands them on before each checkpoint): -1 before any, None for a
+    file without them."""
+    try:
+        steps = f[layout.OBSERVABLES][layout.BOND_ERROR_PER_STEP]["step"]
+        return int(steps[-1]) if steps.shape[0] else -1
+    except (KeyError, OSError, ValueError):
+        return None
 
 
 def _refuse(facts, snap, meta, checkpoint, run_path) -> None:
@@ -420,6 +434,16 @@ def _refuse(facts, snap, meta, checkpoint, run_path) -> None:
     step, steps = int(snap["step"]), facts.steps
     if (len(steps) and steps[0] > step) or (not len(steps) and step != 0):
         raise ContinuationError(f"cannot resume: {run_path} has no frame at or before the checkpoint's step {step}")
+    if step > 0 and facts.last_row is not None and facts.last_row < step:
+        # a run hands its per-step rows to the file before each checkpoint: a file that ends before the
+        # checkpoint's step is an older copy of the run file, or one cut back, and the steps between
+        # would be missing from it for good
+        ends = f"step {facts.last_row}" if facts.last_row >= 0 else "before its first step"
+        raise ContinuationError(
+            f"cannot resume: {run_path} ends at {ends}, its checkpoint {checkpoint} is at step {step}: the "
+            f"steps in between are not in the run file, and a resume would leave that gap in it",
+            "resume the run file its checkpoint was written with, or continue from a checkpoint the file reaches",
+        )
 
 
 def _refuse_other_parameters(facts, scenario, run_path) -> None:

@@ -126,6 +126,18 @@ def _resume_paths(args):
     return checkpoint_path(src), src
 
 
+def _checkpoint_owner(ckpt):
+    """The name of the run file the checkpoint ``ckpt`` continues (its ``run_name``), or None (no such
+    file, not a checkpoint, no name recorded)."""
+    if not ckpt.is_file():
+        return None
+    try:
+        name = read_checkpoint(ckpt)[1].get("run_name")
+    except (CheckpointError, OSError):
+        return None
+    return str(name) if name else None
+
+
 def _finished_at(path):
     """The end time of the finished run in ``path``, or None (no file, not a run file, not finished)."""
     try:
@@ -300,6 +312,13 @@ def _prepare(args):
         refused = not_replaced(out)  # a scene, a checkpoint or an export is not replaced, even with --force
         if refused:
             raise CliError(refused)
+        owner = _checkpoint_owner(ckpt)
+        if owner is not None and owner != out.name and (ckpt.parent / owner).is_file():
+            # run files of other suffixes share the checkpoint's name (run.txt and run.h5: run.checkpoint.h5)
+            raise CliError(
+                f"the checkpoint file {ckpt} beside {out.name} is that of the run file {owner}: this run would "
+                f"replace it, even with --force, and {owner} could no longer be resumed; choose another name with -o"
+            )
         if ckpt.exists() and not args.force:
             ended = _finished_at(out)
             if ended is not None:  # nothing left to continue: only a later end time extends it

@@ -104,10 +104,14 @@ class RunFile:
             fmt = self.f.attrs.get("format")
             self.f.close()
             if isinstance(fmt, (str, bytes)) and "checkpoint" in (fmt.decode() if isinstance(fmt, bytes) else fmt):
-                run = self.path.name.removesuffix(".checkpoint.h5") + ".h5"
+                name = self.path.name
+                if name.endswith(".failure.h5"):
+                    what, run = "the failed state of a run", name.removesuffix(".failure.h5") + ".h5"
+                else:
+                    what, run = "the state to resume a run from", name.removesuffix(".checkpoint.h5") + ".h5"
                 raise RunFileError(
-                    f"{self.path}: a checkpoint (the state to resume a run from), not a run file; give the run "
-                    f"file it belongs to ({run}, beside it)"
+                    f"{self.path}: a checkpoint ({what}), not a run file; give the run file it belongs to "
+                    f"({run}, beside it)"
                 )
             raise RunFileError(
                 f"{self.path}: an HDF5 file, but not a selfas-graph run "

@@ -984,7 +984,7 @@ def test_claims_of_a_slice_of_frames(quick):
     assert all(np.array_equal(part[k], whole[k][1:], equal_nan=True) for k in whole)
 
 
-def test_a_checkpoint_given_for_a_run_file_names_the_run_file(quick):
+def test_a_checkpoint_given_for_a_run_file_names_the_run_file(quick, tmp_path):
     """A checkpoint where a run file is wanted: the error says what it is and which file to give, not the
     seven groups a run file has and it lacks."""
     from selfas_graph.io.h5md import RunFileError
@@ -994,6 +994,11 @@ def test_a_checkpoint_given_for_a_run_file_names_the_run_file(quick):
         RunFileError, match=r"a checkpoint .*, not a run file; give the run file it belongs to \(seed_0002.h5"
     ):
         RunFile(ck)
+    # a run's failed state (the same format) names the run file it failed in, and is not for resuming
+    failed = tmp_path / "seed_0002.failure.h5"
+    shutil.copyfile(ck, failed)
+    with pytest.raises(RunFileError, match=r"the failed state of a run\), not a run file; .*\(seed_0002.h5, beside"):
+        RunFile(failed)
 
 
 def test_the_advice_for_a_seed_run_past_the_end_is_not_force_alone(quick, tmp_path):

@@ -537,6 +537,33 @@ def test_a_resume_into_a_run_file_that_does_not_exist_says_what_o_names(scen, tm
     assert not (tmp_path / "new.h5").exists()
 
 
+def test_a_resume_from_a_checkpoint_ahead_of_its_run_file_is_refused(scen, tmp_path, capsys):
+    """An older copy of the run file restored beside a later checkpoint: the steps between the file's end
+    and the checkpoint are in neither, and a resume used to append after the gap without a word."""
+    out = tmp_path / "run.h5"
+    assert simulate(capsys, scen, "-o", out)[0] == 0  # to t = 0.004
+    older = out.read_bytes()
+    assert simulate(capsys, "--resume", out, "--t-end", "0.008")[0] == 0
+    out.write_bytes(older)  # the run file as it was at t = 0.004, its checkpoint at t = 0.008
+    code, _, err = simulate(capsys, "--resume", out, "--t-end", "0.01")
+    assert code == 2 and "ends at step 4" in err and "step 8" in err, err
+    assert out.read_bytes() == older
+
+
+def test_a_run_does_not_replace_the_checkpoint_of_a_run_file_of_another_suffix(scen, tmp_path, capsys):
+    """run.txt and run.h5 share run.checkpoint.h5: a run into run.h5 used to replace run.txt's checkpoint
+    with --force (and to advise --resume run.h5 without it), so that run.txt could not be resumed."""
+    other = tmp_path / "run.txt"
+    assert simulate(capsys, scen, "-o", other)[0] == 0
+    ckpt = checkpoint_path(other)
+    before = ckpt.read_bytes()
+    for extra in ([], ["--force"]):
+        code, _, err = simulate(capsys, scen, "-o", tmp_path / "run.h5", *extra)
+        assert code == 2 and "run.txt" in err and "-o" in err, err
+    assert ckpt.read_bytes() == before and not (tmp_path / "run.h5").exists()
+    assert simulate(capsys, "--resume", other, "--t-end", "0.006")[0] == 0
+
+
 # ----------------------------------------------------------------------------- I/O errors
 
 BIG = (
