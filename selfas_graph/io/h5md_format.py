@@ -55,9 +55,15 @@ EVENT_FILE_DTYPE = np.dtype(
 )
 
 
+def _unit_string(obj, name, text):
+    """A string attribute of the H5MD units module: scalar, variable-length, ASCII (the module asks this
+    of ``system`` and of every ``unit``; the ``h5md`` group's own strings are fixed-length)."""
+    obj.attrs.create(name, str(text), dtype=h5py.string_dtype("ascii"))
+
+
 def _set_unit(obj, unit):
     if unit is not None:
-        obj.attrs["unit"] = _fixed(unit)
+        _unit_string(obj, "unit", unit)
 
 
 def _charges(group, values, quantity):

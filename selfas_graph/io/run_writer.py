@@ -33,6 +33,7 @@ from .h5md_format import (
     _fixed,
     _growable,
     _set_unit,
+    _unit_string,
     check_room,
     dangling_link,
     in_use,
@@ -131,7 +132,7 @@ class RunWriter(WholeWrites, PendingRows):
         c.attrs["version"] = _fixed(provenance.get("version", "unknown"))
         units = h.create_group(layout.H5MD_UNITS)
         units.attrs["version"] = np.array((1, 0), dtype=np.int32)
-        units.attrs["system"] = _fixed(UNIT_SYSTEM)
+        _unit_string(units, "system", UNIT_SYSTEM)
         # creation order tracked: readers that take the first particles group take the tips
         particles = f.create_group(layout.PARTICLES, track_order=True)
         tips = particles.create_group(layout.TIPS)

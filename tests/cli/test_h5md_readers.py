@@ -36,16 +36,28 @@ def _fixed_ascii(attr_id):
     return isinstance(t, h5py.h5t.TypeStringID) and not t.is_variable_str()
 
 
+def _variable_ascii(attr_id):
+    """A scalar variable-length ASCII string, as the H5MD units module asks of ``system`` and ``unit``."""
+    t = attr_id.get_type()
+    return (
+        isinstance(t, h5py.h5t.TypeStringID)
+        and t.is_variable_str()
+        and t.get_cset() == h5py.h5t.CSET_ASCII
+        and attr_id.shape == ()
+    )
+
+
 def test_layout_follows_h5md_1_1(run_file):
     with h5py.File(run_file, "r") as f:
         assert tuple(f["h5md"].attrs["version"]) == (1, 1)
         for group, names in (
             ("h5md/author", ("name",)),
             ("h5md/creator", ("name", "version")),
-            ("h5md/modules/units", ("system",)),
         ):
             for name in names:  # H5MD 1.1: fixed-length strings
                 assert _fixed_ascii(f[group].attrs.get_id(name)), f"{group}@{name}"
+        assert _variable_ascii(f["h5md/modules/units"].attrs.get_id("system"))  # the units module's own rule
+        assert f["h5md/modules/units"].attrs["system"] == "reduced"
         assert f["h5md/creator"].attrs["name"].decode() == "selfas-graph"
         assert tuple(f["h5md/modules/units"].attrs["version"]) == (1, 0)
         # every subgroup of /particles holds a box; the first one (creation order) is the tips
@@ -64,13 +76,12 @@ def test_layout_follows_h5md_1_1(run_file):
         np.testing.assert_allclose(pos["time"][:], pos["step"][:] * dt, rtol=0, atol=1e-12)  # round-off of t += dt
         np.testing.assert_array_equal(pos["step"][:], np.arange(6) * 20)
         np.testing.assert_allclose(f["observables/dt/value"][:], 20 * dt, rtol=1e-12)
-        # units: fixed-length ASCII strings in the reduced units, none on what MDAnalysis parses
+        # units: variable-length ASCII strings (the units module 1.0) in the reduced units, none on what
+        # MDAnalysis parses
         units = {}
-        f.visititems(
-            lambda name, obj: units.__setitem__(name, obj.attrs["unit"].decode()) if "unit" in obj.attrs else None
-        )
+        f.visititems(lambda name, obj: units.__setitem__(name, obj.attrs["unit"]) if "unit" in obj.attrs else None)
         for name in units:
-            assert _fixed_ascii(f[name].attrs.get_id("unit"))
+            assert _variable_ascii(f[name].attrs.get_id("unit")), name
         assert units["observables/energy/kinetic/value"] == "F_M0 L"
         assert units["observables/energy/kinetic/time"] == "t_0"
         assert units["observables/dt/value"] == "t_0"
