@@ -83,6 +83,7 @@ def frame_topology(run, frame=None, t=None) -> dict:
         "largest_structure": structures[0]["rods"] if structures else 0,
         "short_circuit": bool(topo.has_short_circuit),
         "first_short_circuit": ({"step": int(sc[0]["step"]), "time": float(sc[0]["time"])} if len(sc) else None),
+        "circuit": "total_current" in run.observable_names(),
         "total_current": obs.get("total_current"),
         "effective_resistance": obs.get("effective_resistance"),
         "filament_rods": [{"rod": int(i), "current": float(current[i])} for i in fil],

@@ -23,7 +23,7 @@ COMMANDS = {
     "analyze": ("selfas_graph.cli.analyze", "magnetic moment, fractal dimensions and loops of a saved frame or series"),
     "plot": (
         "selfas_graph.cli.plot",
-        "figures of a saved run: snapshot, density, field, flux, timeline, moment, fractal, skeleton (PNG)",
+        "figures of a saved run: snapshot, density, field, flux, timeline, moment, fractal, skeleton (PNG, PDF or SVG)",
     ),
     "ensemble": ("selfas_graph.cli.ensemble", "run a scenario over many seeds; mean and standard error over them"),
     "study": (

@@ -118,7 +118,12 @@ def add_arguments(p):
     p.add_argument(
         "--z-mext", type=float, help="flux in units of an external dipole's flux 4 pi Z_Mext instead of Phi_0 = 4 pi"
     )
-    p.add_argument("--dpi", type=int, default=None, help=f"resolution of the PNG (default {PNG_DPI}; a movie's 80)")
+    p.add_argument(
+        "--dpi",
+        type=int,
+        default=None,
+        help=f"resolution of a PNG (default {PNG_DPI}; a movie's 80); a PDF or SVG takes none",
+    )
     p.add_argument(
         "--movie",
         metavar="OUT.gif|OUT.mp4",
@@ -142,7 +147,8 @@ def _output_path(args, run_path: Path, frame: int) -> Path:
     else:
         out = run_path.with_name(f"{run_path.stem}_{args.kind}_frame{frame}.png")
     check_target(out, "output file", force=True, inputs=[run_path], keep_hdf5=True)  # never written
-    plot_format(out)  # before whether it exists: --force would not make an unknown suffix a figure's
+    if plot_format(out) != "png" and args.dpi is not None:  # before whether it exists, as the suffix
+        raise CliError(f"--dpi sets a PNG's resolution; {out.name} is drawn in vectors: leave --dpi out")
     check_target(out, "output file", force=args.force, inputs=[run_path], keep_hdf5=True)
     check_folder(out, "output file")
     return out

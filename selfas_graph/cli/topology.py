@@ -42,14 +42,17 @@ def _finite_or_null(obj):
     return obj
 
 
-def _describe(e) -> str:
-    """What the a and b columns of an event row name (docs of selfas_graph.model.events)."""
+def _describe(e, circuit=True) -> str:
+    """What the a and b columns of an event row name (docs of selfas_graph.model.events); ``circuit``:
+    whether the run has one (without, the filaments carry no current)."""
     kind, a, b = e["kind"], e["a"], e["b"]
     if kind in ("tip_contact", "tip_release"):
         return f"a, b = tips (rods {a // 2} and {b // 2})"
     if kind in ("conductor_contact", "conductor_release"):
         return f"a = tip (rod {a // 2}), b = conductor ({ev.CONDUCTOR_NAMES.get(b, str(b))})"
     if kind == "short_circuit":
+        if not circuit:
+            return f"a = rods in filaments joining conductors ({a}; no circuit: no current)"
         text = f"a = rods in current-carrying filaments ({a})"
         if "total_current" in e:
             text += f"; total current {e['total_current']:.6g} J0, {e['rods_in_series']} rods in series"
@@ -96,6 +99,8 @@ def run(args):
         print(json.dumps(_finite_or_null(data), indent=1, allow_nan=False))
         return 0
     r = data["rods"]
+    # the role is topological (a path between two conductors): without a circuit no current flows in it
+    filaments = "current-carrying filaments" if data["circuit"] else "filaments joining conductors (no circuit)"
     lines = [
         f"{data['file']}: frame {data['frame']} of 0..{data['frames'] - 1}, step {data['step']}, t = {data['time']:.6g}"
         + status_note(data["run_status"]),
@@ -107,7 +112,7 @@ def run(args):
             )
             or "none"
         ),
-        f"rods: {r['total']} = {r['filament']} in current-carrying filaments + {r['dead_end']} dead ends + "
+        f"rods: {r['total']} = {r['filament']} in {filaments} + {r['dead_end']} dead ends + "
         f"{r['cluster']} in floating clusters + {r['free']} free",
         f"structures: {len(data['structures'])}, rods joined by tip contacts or touching a conductor alone "
         f"(largest: {counted(data['largest_structure'], 'rod')})",
@@ -131,7 +136,11 @@ def run(args):
         if len(touching) > 20:
             lines.append(f"  ... and {len(touching) - 20} more")
     if data["filament_rods"]:
-        lines.append("\ncurrent-carrying filament rods (current in J0, + from tip a to tip b):")
+        lines.append(
+            "\ncurrent-carrying filament rods (current in J0, + from tip a to tip b):"
+            if data["circuit"]
+            else "\nrods of filaments joining conductors (no circuit: no current):"
+        )
         cells = [f"{d['rod']:>6} {d['current']:+10.4g}" for d in data["filament_rods"]]
         for i in range(0, min(len(cells), 60), 4):
             lines.append("  " + "   ".join(cells[i : i + 4]))
@@ -149,7 +158,7 @@ def run(args):
         lines.append(f"  {'step':>13}  {'t':<14} {'kind':<18} {'a':>7} {'b':>7}  (what a and b are)")
     for e in shown:
         lines.append(
-            f"  step {e['step']:>8}  t = {e['time']:<10.6g} {e['kind']:<18} {e['a']:>7} {e['b']:>7}  {_describe(e)}"
+            f"  step {e['step']:>8}  t = {e['time']:<10.6g} {e['kind']:<18} {e['a']:>7} {e['b']:>7}  {_describe(e, data['circuit'])}"
         )
     print("\n".join(lines))
     return 0

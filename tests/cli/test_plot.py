@@ -137,6 +137,16 @@ def test_an_existing_file_of_a_suffix_no_figure_takes_is_refused_for_its_suffix(
     assert out.read_bytes() == b"keep me"
 
 
+def test_dpi_is_refused_for_a_vector_figure(run_file, tmp_path, capsys):
+    """A PDF or SVG is drawn in vectors (no figure rasterises a part): --dpi would be ignored, so it is
+    refused by name, as every option a figure does not use."""
+    for suffix in (".svg", ".pdf"):
+        out = tmp_path / f"d{suffix}"
+        assert main(["plot", str(run_file), "--kind", "density", "-o", str(out), "--dpi", "300"]) == 2
+        assert "--dpi" in capsys.readouterr().err and not out.exists()
+    assert main(["plot", str(run_file), "--kind", "density", "-o", str(tmp_path / "d.png"), "--dpi", "50"]) == 0
+
+
 def test_missing_file_is_a_clear_error(tmp_path, capsys):
     """A run file that does not exist: exit 2, one line naming the file."""
     missing = tmp_path / "nothere.h5"

@@ -36,10 +36,10 @@ def chain_state():
     return State.from_rods([[0, 0, z0], [0, 0, z0 + 1.03], [0, 0, z0 + 2.11]], [[0, 0, 1.0]] * 3, [1.0] * 3, [0.0] * 3)
 
 
-def write_run(path, contacts=True):
+def write_run(path, contacts=True, circuit=True):
     """Run the chain to T_END and write it as ``simulate`` does; returns the Simulation."""
     state = chain_state()
-    extra = {"circuit": {"delta_J0": DELTA_J0}} if contacts else {}  # a circuit needs contacts
+    extra = {"circuit": {"delta_J0": DELTA_J0}} if contacts and circuit else {}  # a circuit needs contacts
     sim = simulation(
         state,
         forces={"tip_magnetic": {}, "tip_brake": {}, "ambient_brake": {}, "electrodes": {"gap": GAP}},
@@ -95,6 +95,19 @@ def test_topology_text_names_an_open_circuit(chain_run, capsys):
     assert main(["topology", str(path), "--frame", "0"]) == 0
     out = capsys.readouterr().out
     assert "effective resistance between the electrodes: infinite (open: no current-carrying path)" in out
+
+
+def test_without_a_circuit_the_filaments_are_not_called_current_carrying(tmp_path, capsys):
+    """The filament role is topological (a path between two conductors); in a run without a circuit no
+    current flows in it, and the text says so instead of calling the rods current-carrying."""
+    path = tmp_path / "nocircuit.h5"
+    write_run(path, circuit=False)
+    assert main(["topology", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "3 in filaments joining conductors (no circuit)" in out and "current-carrying" not in out
+    assert "total current: n/a (no circuit)" in out
+    assert main(["topology", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["circuit"] is False
 
 
 def test_topology_text_shows_filament_currents_and_events(chain_run, capsys):

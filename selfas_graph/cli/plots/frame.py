@@ -21,6 +21,7 @@ from .style import (
     _num,
     _outside_legend,
     _title,
+    filament_label,
 )
 
 #: above this many rods a snapshot colours the largest structure instead of dead ends (paper Fig. 6)
@@ -63,7 +64,7 @@ def _snapshot(fig, run, frame, args):
         )
         groups += [
             (rest, OTHER_COLOUR, 0.6, other),
-            (fil, FILAMENT_COLOUR, 1.6, "current-carrying filaments"),
+            (fil, FILAMENT_COLOUR, 1.6, filament_label(run)),
             (red, DEAD_END_COLOUR if not large else LARGEST_COLOUR, 1.6, red_label),
         ]
     handles = []
@@ -163,7 +164,7 @@ def _density(fig, run, frame, args):
     curves = [("total", None, TOTAL_COLOUR)]
     if frame.role is not None:
         curves += [
-            ("in current-carrying filaments", frame.role == FILAMENT, FILAMENT_COLOUR),
+            (f"in {filament_label(run)}", frame.role == FILAMENT, FILAMENT_COLOUR),
             ("in the largest structure", frame.largest_mask, LARGEST_COLOUR),
         ]
     for label, mask, colour in curves:
