@@ -30,7 +30,7 @@ CLAIM_KEYS = {
     "largest_structure_rods": "rods in the largest structure",
     "largest_moment_q": "|m_q| of the largest structure, m_q = sum q_k x_k (Z_M0 e L)",
     "largest_moment_q_z": "m_q,z of the largest structure (Z_M0 e L)",
-    "largest_moment_ratio": "|m_q| of the largest structure over the mean single-rod moment (mean |q|)",
+    "largest_moment_ratio": "|m_q| of the largest structure over mean |q| L, the mean moment of a rod of length L",
     "largest_moment_J_z": "m_J,z of the largest structure about the z axis, m_J = 1/2 sum J x_a x x_b (J0 L^2)",
     "moment_J_z": "m_J,z of all rod currents about the z axis (J0 L^2)",
     "unpaired_charge_largest": "sum |q| at the free tips (no tip contact) of the largest structure (Z_M0 e)",

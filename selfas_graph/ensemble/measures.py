@@ -155,7 +155,7 @@ FRAME_MEASURES += [
     )
     for k, u, d, fit in (
         ("largest_structure_rods", "rods", "rods in the largest structure", False),
-        ("largest_moment_ratio", "rod moments", "largest structure's |m_q| over the mean single-rod moment", False),
+        ("largest_moment_ratio", "rod moments", "largest structure's |m_q| over mean |q| L (a rod of length L)", False),
         (
             "fractal_dimension",
             "1",
