@@ -13,6 +13,7 @@ import os
 import stat
 from pathlib import Path
 
+from ..io.checkpoint import CheckpointError, read_checkpoint
 from ..io.h5md_format import dangling_link, in_use, in_use_message, is_hdf5
 from .main import CliError
 
@@ -125,3 +126,22 @@ def status_note(status) -> str:
     if status == "running":
         return " (the run has not finished: it is still running, or was killed; simulate --resume continues it)"
     return f" (the run {status})" if status.startswith("failed") else f" (run status: {status})"
+
+
+def through_link(out: Path) -> Path:
+    """The run file a symbolic link names (the link itself when it names nothing): the file is written
+    through the link, so its checkpoint and failure file go beside the file written, not beside the
+    link (where a checkpoint link would be replaced by a file and the run's own folder keep a stale one)."""
+    return Path(os.path.realpath(out)) if out.is_symlink() and out.exists() else out
+
+
+def checkpoint_owner(ckpt):
+    """The name of the run file the checkpoint ``ckpt`` continues (its ``run_name``), or None (no such
+    file, not a checkpoint, no name recorded)."""
+    if not ckpt.is_file():
+        return None
+    try:
+        name = read_checkpoint(ckpt)[1].get("run_name")
+    except (CheckpointError, OSError):
+        return None
+    return str(name) if name else None

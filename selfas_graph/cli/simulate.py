@@ -57,7 +57,7 @@ from ..model.simulation import Simulation
 from ..model.terms.currents import tree_note, two_trees_note
 from ..parallel import abort_job, fit_threads_to_cores, world
 from .main import EXIT_NUMERICAL, CliError, CliIOError, counted, write_failed
-from .paths import check_folder, check_target, name_max, same_file
+from .paths import check_folder, check_target, checkpoint_owner, name_max, same_file, through_link
 from .progress import Bar, Lines, fmt_time
 
 
@@ -124,18 +124,6 @@ def _resume_paths(args):
             f"integrator.dt) and --force. read_checkpoint reads the file in Python"
         )
     return checkpoint_path(src), src
-
-
-def _checkpoint_owner(ckpt):
-    """The name of the run file the checkpoint ``ckpt`` continues (its ``run_name``), or None (no such
-    file, not a checkpoint, no name recorded)."""
-    if not ckpt.is_file():
-        return None
-    try:
-        name = read_checkpoint(ckpt)[1].get("run_name")
-    except (CheckpointError, OSError):
-        return None
-    return str(name) if name else None
 
 
 def _finished_at(path):
@@ -282,6 +270,7 @@ def _prepare(args):
     snap = None
     if args.resume:
         scenario, snap, out, read_from, run_id = _load_resume(args)
+        out = through_link(out)
         ckpt = checkpoint_path(out)  # new checkpoints go beside the run file continued
         check_target(out, "run file", force=True, resuming=True)
         check_target(ckpt, "checkpoint file", force=True, resuming=True)
@@ -303,7 +292,7 @@ def _prepare(args):
             scenario = load_scenario(args.scenario, overrides=args.overrides, t_end=args.t_end)
         except ScenarioError as exc:
             raise CliError(str(exc)) from None
-        out = Path(args.output) if args.output else scenario.output_path
+        out = through_link(Path(args.output) if args.output else scenario.output_path)
         _check_output_name(out)
         ckpt = checkpoint_path(out)
         _check_files_beside(out, ckpt)
@@ -312,7 +301,7 @@ def _prepare(args):
         refused = not_replaced(out)  # a scene, a checkpoint or an export is not replaced, even with --force
         if refused:
             raise CliError(refused)
-        owner = _checkpoint_owner(ckpt)
+        owner = checkpoint_owner(ckpt)
         if owner is not None and owner != out.name and (ckpt.parent / owner).is_file():
             # run files of other suffixes share the checkpoint's name (run.txt and run.h5: run.checkpoint.h5)
             raise CliError(

@@ -17,6 +17,7 @@ from ..model.operations import stop_status
 from ..model.topology import ROLE_NAMES
 from ..model.validate import is_whole_number
 from . import layout
+from .checkpoint import CheckpointError, checkpoint_path, read_checkpoint
 from .h5md_format import (
     CURRENT,
     EVENT_FILE_DTYPE,
@@ -60,6 +61,19 @@ def _later_rows_message(f, path, step) -> str:
         f"{path} holds {what} after step {step}, which reopening there would remove: give the step the "
         f"simulation is at, RunWriter.reopen(path, sim.state.step), or drop_later=True to remove them"
     )
+
+
+def _drop_replaced_checkpoint(path):
+    """Remove the checkpoint beside a run file just replaced, where it continues that file's replaced run:
+    it could never continue the new one (a resume refuses another run's checkpoint), and beside a file
+    written from Python, which writes none, it would be taken for the file's own."""
+    ckpt = checkpoint_path(path)
+    try:
+        name = read_checkpoint(ckpt)[1].get("run_name")
+    except (CheckpointError, OSError):
+        return
+    if name == path.name:
+        ckpt.unlink(missing_ok=True)
 
 
 class RunWriter(WholeWrites, PendingRows):
@@ -118,9 +132,12 @@ class RunWriter(WholeWrites, PendingRows):
             raise OutputExistsError(in_use_message(self.path, "output file", "overwrite=True"))
         if not self.path.parent.exists():
             raise FileNotFoundError(f"the folder of the output file {self.path} does not exist")
+        replaced = self.path.exists()
         # default (earliest) format on purpose: the "latest" superblock carries a writer flag that a
         # killed run leaves set, after which HDF5 refuses to open the file without h5clear
         self.f = h5py.File(self.path, "w")
+        if replaced:
+            _drop_replaced_checkpoint(self.path)
         f = self.f
         h = f.create_group(layout.H5MD)
         h.attrs["version"] = np.array(H5MD_VERSION, dtype=np.int32)

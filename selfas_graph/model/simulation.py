@@ -29,7 +29,7 @@ from .operations import RunInterrupted, RunSummary
 from .params import Parameters
 from .placement import random_state
 from .state import State
-from .state_checks import check_against
+from .state_checks import check_against, check_live
 from .terms import ForceField
 
 __all__ = ["Simulation", "RunSummary", "RunInterrupted", "NumericalFailure"]
@@ -60,6 +60,8 @@ class Simulation:
     comm : MPI communicator or the serial stub, optional
         Ranks that share the force work (``parallel.world`` under ``mpiexec``; default: a serial run).
         Every rank must then make the same calls; each ends every step with the same state, bit for bit.
+        A run with a writer gives one on every rank: rank 0 the file's, the others
+        ``selfas_graph.io.pending_rows.NullWriter()`` (the frames' energies are sums over the ranks).
     check_state : bool
         Validate ``state`` and work on a copy (:meth:`State.checked`); False adopts it (:meth:`from_snapshot`).
 
@@ -217,6 +219,7 @@ class Simulation:
         if n < 0:
             raise ValueError(f"Simulation.step(n): n is a number of steps >= 0, got {n}")
         refuse_after(self.failure)
+        check_live(self.state)
         if self.observe.energy0 is None:
             self.observe.record_initial_energy()
         done = 0
@@ -307,6 +310,7 @@ class Simulation:
         Returns a :class:`RunSummary`.
         """
         refuse_after(self.failure)
+        check_live(self.state)
         t_end = self.params.run.t_end if t_end is None else t_end
         n_steps = self.steps_to(t_end)
         every = self.frame_steps

@@ -58,3 +58,33 @@ def check_against(params: Parameters, state: State, values: bool = True) -> None
                 f"{rods.rstar:g}; rods start between them"
                 + (f" ({len(beyond)} tips are beyond)" if len(beyond) > 1 else "")
             )
+
+
+def check_live(state: State) -> None:
+    """StateError where the live state, between two steps, is not one the steps leave: a NaN or inf,
+    or a rod whose tips are not its length apart (past the health checks' bond limit). A run that
+    breaks down stops with a diagnosis before either; so they come from changes made from outside, to
+    the arrays ``sim.state.position`` and ``.velocity`` the simulation steps in place, and the message
+    says so rather than blaming the time step or a force (``Simulation.step`` and ``run`` check this)."""
+    from ..kernels.rigid import bond_length_error
+    from .health import BOND_BREAK
+
+    for name in ("position", "velocity"):
+        a = getattr(state, name)
+        if not np.isfinite(a).all():
+            tip = int(np.flatnonzero(~np.isfinite(a).all(axis=1))[0])
+            raise StateError(
+                f"sim.state.{name} holds NaN or inf at tip {tip} (rod {tip // 2}) before the step: the state was "
+                f"changed from outside since the last step (its arrays are the simulation's own); give finite values"
+            )
+    length = state.rod_length if state.rod_length is not None else np.zeros(0)
+    err = bond_length_error(state.position, length)
+    if err >= BOND_BREAK:
+        ell = np.ones(state.n_rods) if state.rod_length is None else state.rod_length
+        gap = np.linalg.norm(state.position[1::2] - state.position[0::2], axis=1)
+        rod = int(np.argmax(np.abs(gap - ell)))
+        raise StateError(
+            f"sim.state.position: the tips of rod {rod} are {gap[rod]:.6g} apart, not its length {ell[rod]:.6g}, "
+            f"before the step: the positions were changed from outside since the last step; move a rod's two "
+            f"tips together (the bonds are rigid)"
+        )

@@ -479,3 +479,24 @@ def test_a_continuation_from_before_the_rows_a_ctrl_c_wrote_is_refused(tmp_path)
     with sg.RunFile(path) as run:
         assert run.step.tolist() == [0, 50, 100, 150, 200]
         assert run.observable("bond_error_per_step")[0].tolist() == list(range(1, 201))
+
+
+def test_a_state_changed_from_outside_between_steps_is_named_before_the_step():
+    """``sim.state.position`` and ``.velocity`` are the arrays the simulation steps in place: a NaN written
+    into them, or one tip moved off its rod, is refused before the next step with what was changed, not
+    reported after it as a numerical failure that blames the time step or a brake."""
+    sim = column()
+    sim.step(5)
+    sim.state.velocity[3] = np.nan
+    with pytest.raises(sg.StateError, match=r"velocity holds NaN or inf at tip 3 \(rod 1\).*changed from outside"):
+        sim.step()
+    with pytest.raises(sg.StateError, match="changed from outside"):
+        sim.run(sim.state.time + 0.01)
+    sim.state.velocity[3] = 0.0
+    saved = sim.state.position[4].copy()
+    sim.state.position[4] = [1e3, 0, 0]
+    with pytest.raises(sg.StateError, match=r"tips of rod 2 are .* apart, not its length 1"):
+        sim.step()
+    sim.state.position[4] = saved
+    sim.step(5)  # nothing was failed or stepped: the simulation goes on
+    assert sim.failure is None and sim.state.step == 10

@@ -836,3 +836,33 @@ def test_no_file_of_a_run_holds_a_nan_and_the_none_markers_come_back(tmp_path):
     for key in snap:
         a, b = np.asarray(snap[key]), np.asarray(back[key])
         assert a.shape == b.shape and (a.dtype.kind != "f" or np.array_equal(a, b, equal_nan=True)), key
+
+
+def test_a_run_file_through_a_symbolic_link_keeps_its_checkpoint_beside_the_file(scen, tmp_path, capsys):
+    """The run file is written through a link; its checkpoint went beside the link (a checkpoint link was
+    replaced by a file), leaving the real folder's checkpoint stale. Both now go beside the file written."""
+    real = tmp_path / "real"
+    real.mkdir()
+    assert simulate(capsys, scen, "-o", real / "r.h5")[0] == 0
+    (tmp_path / "r.h5").symlink_to(real / "r.h5")
+    (tmp_path / "r.checkpoint.h5").symlink_to(real / "r.checkpoint.h5")
+    assert simulate(capsys, "--resume", tmp_path / "r.h5", "--t-end", "0.008")[0] == 0
+    assert (tmp_path / "r.checkpoint.h5").is_symlink()
+    assert read_checkpoint(real / "r.checkpoint.h5")[0]["step"] == 8
+    assert frame_times(real / "r.h5")[-1] == pytest.approx(0.008)
+
+
+def test_replacing_a_run_file_from_python_removes_the_replaced_runs_checkpoint(scen, tmp_path, capsys):
+    """RunWriter(..., overwrite=True) over a run of the command line left that run's checkpoint beside the
+    new file (which a resume then refused as another run's): it goes with the run it continued. A
+    checkpoint of another run file is kept."""
+    import selfas_graph as sg
+
+    out = tmp_path / "run.h5"
+    assert simulate(capsys, scen, "-o", out)[0] == 0
+    other = tmp_path / "other.checkpoint.h5"
+    shutil.copyfile(checkpoint_path(out), other)
+    sim = sg.Simulation.from_scenario(sg.load_scenario(scen))
+    writer = sg.RunWriter.for_simulation(sim, out, overwrite=True)
+    writer.close()
+    assert not checkpoint_path(out).exists() and other.exists()

@@ -85,7 +85,7 @@ def _save_png(fig, out: Path, dpi):
 
 def filament_label(run) -> str:
     """What the rods of the FILAMENT role are called in a figure: current-carrying filaments where the run
-    has a circuit, else filaments that join two conductors (docs/model.md '6. Connectivity graph and
+    has a circuit, else filaments that join two conductors (docs/model.md 'Connectivity graph and
     topology': the role is topological), since no current flows without a circuit."""
     has_circuit = "total_current" in run.observable_names()
     return "current-carrying filaments" if has_circuit else "filaments joining conductors (no circuit)"
