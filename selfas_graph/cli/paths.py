@@ -132,7 +132,10 @@ def through_link(out: Path) -> Path:
     """The run file a symbolic link names (the link itself when it names nothing): the file is written
     through the link, so its checkpoint and failure file go beside the file written, not beside the
     link (where a checkpoint link would be replaced by a file and the run's own folder keep a stale one)."""
-    return Path(os.path.realpath(out)) if out.is_symlink() and out.exists() else out
+    try:
+        return Path(os.path.realpath(out)) if out.is_symlink() and out.exists() else out
+    except OSError:  # a name too long for the file system, a folder that cannot be read: said by the checks after
+        return out
 
 
 def checkpoint_owner(ckpt):
