@@ -85,7 +85,11 @@ def add_arguments(p):
     )
     p.add_argument("--t-end", type=float, help="simulated end time (overrides run.t_end)")
     p.add_argument("--dry-run", action="store_true", help="validate and place the rods, print the plan, write nothing")
-    p.add_argument("--force", action="store_true", help="overwrite an existing output file")
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="overwrite an existing output file; with --resume from a copy of a checkpoint, wind the run file back to it",
+    )
     p.add_argument(
         "--progress",
         choices=("auto", "bar", "lines", "none"),
