@@ -15,6 +15,18 @@ from ..model.graph import DEAD_END, FILAMENT, ROLE_NAMES, ConnectivityGraph
 __all__ = ["frame_topology"]
 
 
+def has_circuit(run) -> bool:
+    """Whether the run solved a circuit (it then stores the total current at its frames)."""
+    return "total_current" in run.observable_names()
+
+
+def filament_words(circuit: bool) -> str:
+    """What the rods of the FILAMENT role are called: current-carrying filaments in a run with a circuit;
+    without one no current flows, and the role is topological (docs/model.md 'Connectivity graph and
+    topology': a path between two conductors)."""
+    return "current-carrying filaments" if circuit else "filaments joining conductors (no circuit)"
+
+
 def frame_topology(run, frame=None, t=None) -> dict:
     """The topology of one saved frame as plain Python data (what ``selfas-graph topology --json`` prints):
     the structures by size with their filament and dead-end rods and the conductors they touch, the rods by
@@ -83,7 +95,7 @@ def frame_topology(run, frame=None, t=None) -> dict:
         "largest_structure": structures[0]["rods"] if structures else 0,
         "short_circuit": bool(topo.has_short_circuit),
         "first_short_circuit": ({"step": int(sc[0]["step"]), "time": float(sc[0]["time"])} if len(sc) else None),
-        "circuit": "total_current" in run.observable_names(),
+        "circuit": has_circuit(run),
         "total_current": obs.get("total_current"),
         "effective_resistance": obs.get("effective_resistance"),
         "filament_rods": [{"rod": int(i), "current": float(current[i])} for i in fil],

@@ -13,7 +13,7 @@ import json
 
 import numpy as np
 
-from ..analysis.frame_topology import frame_topology
+from ..analysis.frame_topology import filament_words, frame_topology
 from ..io.h5md import RunFile, RunFileError
 from ..model import events as ev
 from .main import CliError, add_run_and_frame, counted
@@ -100,7 +100,7 @@ def run(args):
         return 0
     r = data["rods"]
     # the role is topological (a path between two conductors): without a circuit no current flows in it
-    filaments = "current-carrying filaments" if data["circuit"] else "filaments joining conductors (no circuit)"
+    filaments = filament_words(data["circuit"])
     lines = [
         f"{data['file']}: frame {data['frame']} of 0..{data['frames'] - 1}, step {data['step']}, t = {data['time']:.6g}"
         + status_note(data["run_status"]),

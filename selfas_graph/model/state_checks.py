@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..kernels.rigid import bond_length_error
+from .health import BOND_BREAK
 from .params import Parameters
 from .state import State, StateError
 from .validate import MAX_RESISTANCE_SPREAD
@@ -66,9 +68,6 @@ def check_live(state: State) -> None:
     breaks down stops with a diagnosis before either; so they come from changes made from outside, to
     the arrays ``sim.state.position`` and ``.velocity`` the simulation steps in place, and the message
     says so rather than blaming the time step or a force (``Simulation.step`` and ``run`` check this)."""
-    from ..kernels.rigid import bond_length_error
-    from .health import BOND_BREAK
-
     for name in ("position", "velocity"):
         a = getattr(state, name)
         if not np.isfinite(a).all():

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ...analysis.frame_topology import filament_words, has_circuit
 from ...io.atomic import atomic_write
 from ...io.frame import SavedFrame
 from ...io.h5md import RunFile
@@ -84,8 +85,5 @@ def _save_png(fig, out: Path, dpi):
 
 
 def filament_label(run) -> str:
-    """What the rods of the FILAMENT role are called in a figure: current-carrying filaments where the run
-    has a circuit, else filaments that join two conductors (docs/model.md 'Connectivity graph and
-    topology': the role is topological), since no current flows without a circuit."""
-    has_circuit = "total_current" in run.observable_names()
-    return "current-carrying filaments" if has_circuit else "filaments joining conductors (no circuit)"
+    """What a figure calls the rods of the FILAMENT role (:func:`~selfas_graph.analysis.frame_topology.filament_words`)."""
+    return filament_words(has_circuit(run))
